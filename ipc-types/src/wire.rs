@@ -1,0 +1,232 @@
+//! The `#[repr(C)]` payloads. Every field is a fixed-size integer, an `f64`, or an array of
+//! them; there is no implicit padding (reserved fields fill the gaps), so the layout is the same
+//! in Rust, C (`include/mems_ipc.h`) and Python `ctypes`.
+//!
+//! Each type has an explicit iceoryx2 `type_name` carrying a format version: a change of
+//! layout must change the version, so that old and new binaries refuse to connect instead of
+//! misreading each other.
+
+use iceoryx2::prelude::ZeroCopySend;
+use serde::{Deserialize, Serialize};
+
+/// Per-stage timestamps, nanoseconds of `CLOCK_MONOTONIC`, carried on every message so that
+/// any subscriber can compute per-hop latency. A stage that has not touched the message leaves
+/// its field 0.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, ZeroCopySend)]
+#[type_name("mems::Stamps.v1")]
+#[repr(C)]
+pub struct Stamps {
+    /// The time the sensor sampled the data (reconstructed from the output rate, see acquire).
+    pub sample_ns: u64,
+    /// When the acquisition (or replay) process published the raw sample.
+    pub acquired_ns: u64,
+    /// When the calibration process published the corrected sample.
+    pub calibrated_ns: u64,
+    /// When the odometry process published the state.
+    pub odometry_ns: u64,
+}
+
+/// Bits of [`RawImuSample::flags`].
+pub mod raw_flags {
+    /// Samples were lost immediately before this one (see `lost_before`).
+    pub const GAP_BEFORE: u16 = 1 << 0;
+    /// The FIFO overflowed before this sample; the driver reset it.
+    pub const FIFO_OVERFLOW: u16 = 1 << 1;
+    /// At least one axis is at the end of the configured full-scale range.
+    pub const SATURATED: u16 = 1 << 2;
+    /// The sample was repaired (e.g. a corrupted value replaced) before publication.
+    pub const REPAIRED: u16 = 1 << 3;
+    /// `gyro_dps` / `gyro_counts` hold a measurement.
+    pub const GYRO_VALID: u16 = 1 << 4;
+    /// `temp_c` / `temp_counts` hold a measurement.
+    pub const TEMP_VALID: u16 = 1 << 5;
+}
+
+/// One raw IMU sample as the sensor produced it, in the sensor frame and the sensor's units.
+///
+/// Service `mems/imu/raw`. `accel_g` is `accel_counts / LSB-per-g` of the configured range
+/// (see [`crate::units`]) for a live sensor; for recordings that only hold values in g (the
+/// thesis files), `accel_g` is authoritative and the counts are the nearest integers.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize, ZeroCopySend)]
+#[type_name("mems::RawImuSample.v1")]
+#[repr(C)]
+pub struct RawImuSample {
+    /// Per-stage timestamps; `stamps.sample_ns` is the sample's own time.
+    pub stamps: Stamps,
+    /// Publisher sequence number: consecutive, starting at 0, one per sample.
+    pub seq: u64,
+    /// Specific force in g, sensor frame.
+    pub accel_g: [f64; 3],
+    /// Angular rate in deg/s, sensor frame (valid with `raw_flags::GYRO_VALID`).
+    pub gyro_dps: [f64; 3],
+    /// Die temperature in degC (valid with `raw_flags::TEMP_VALID`).
+    pub temp_c: f64,
+    /// Accelerometer output in counts.
+    pub accel_counts: [i16; 3],
+    /// Gyroscope output in counts.
+    pub gyro_counts: [i16; 3],
+    /// TEMP_OUT in counts.
+    pub temp_counts: i16,
+    /// Bits from [`raw_flags`].
+    pub flags: u16,
+    /// Number of sensor samples lost immediately before this one (0 when none).
+    pub lost_before: u32,
+    /// Zero; keeps the layout free of implicit padding.
+    pub reserved: u32,
+}
+
+/// Bits of [`CorrectedImuSample::flags`].
+pub mod corrected_flags {
+    /// The zero-state (rest) detector classified the window containing this sample as rest.
+    pub const ZERO_STATE: u16 = 1 << 0;
+    /// The detector has learned its thresholds (before that, `ZERO_STATE` is never set).
+    pub const DETECTOR_READY: u16 = 1 << 1;
+    /// The bias was refined at rest since the calibration file was loaded.
+    pub const BIAS_REFINED: u16 = 1 << 2;
+}
+
+/// One calibrated sample: sensor frame, SI units.
+///
+/// Service `mems/imu/corrected`. `accel_mps2 = S^-1 (a' - b)` with the calibration `calib_id`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize, ZeroCopySend)]
+#[type_name("mems::CorrectedImuSample.v1")]
+#[repr(C)]
+pub struct CorrectedImuSample {
+    /// Per-stage timestamps copied from the raw sample, with `calibrated_ns` filled in.
+    pub stamps: Stamps,
+    /// Sequence number of the raw sample this was computed from.
+    pub seq: u64,
+    /// Calibrated specific force, m/s^2, sensor frame.
+    pub accel_mps2: [f64; 3],
+    /// Calibrated angular rate, rad/s, sensor frame.
+    pub gyro_rps: [f64; 3],
+    /// Die temperature, degC.
+    pub temp_c: f64,
+    /// Mean specific force over the detector window that decided `ZERO_STATE`, m/s^2.
+    pub zs_mean_mps2: [f64; 3],
+    /// Standard deviation over the same window, m/s^2.
+    pub zs_std_mps2: [f64; 3],
+    /// Identifier of the calibration applied (a hash of the calibration file's parameters).
+    pub calib_id: u64,
+    /// Bits from [`corrected_flags`].
+    pub flags: u16,
+    /// The raw sample's [`raw_flags`], passed through.
+    pub raw_flags: u16,
+    /// Zero; keeps the layout free of implicit padding.
+    pub reserved: u32,
+}
+
+/// Bits of [`OdometryState::flags`].
+pub mod odometry_flags {
+    /// The filter considers the sensor at rest and applied a zero-velocity update.
+    pub const ZERO_VELOCITY: u16 = 1 << 0;
+    /// Gravity alignment is done; before it, position and velocity are held at zero.
+    pub const ALIGNED: u16 = 1 << 1;
+    /// This message revises an earlier state (drift removed after a motion interval ended);
+    /// its `stamps.sample_ns` is the time of the state it replaces.
+    pub const REVISION: u16 = 1 << 2;
+}
+
+/// The odometry estimate at one sample time.
+///
+/// Service `mems/odometry/state`. Position and velocity are in the navigation frame (z up,
+/// origin and heading fixed at alignment); sigmas are 1-sigma per axis.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize, ZeroCopySend)]
+#[type_name("mems::OdometryState.v1")]
+#[repr(C)]
+pub struct OdometryState {
+    /// Per-stage timestamps, with `odometry_ns` filled in.
+    pub stamps: Stamps,
+    /// Sequence number of the raw sample this state was computed from.
+    pub seq: u64,
+    /// Displacement from the alignment point, m, navigation frame.
+    pub position_m: [f64; 3],
+    /// 1-sigma of `position_m`, m.
+    pub position_sigma_m: [f64; 3],
+    /// Velocity, m/s, navigation frame.
+    pub velocity_mps: [f64; 3],
+    /// 1-sigma of `velocity_mps`, m/s.
+    pub velocity_sigma_mps: [f64; 3],
+    /// Gravity's specific-force reaction in the sensor frame, m/s^2 (about (0, 0, +g) when
+    /// the sensor lies level, z up).
+    pub gravity_sensor_mps2: [f64; 3],
+    /// Attitude: unit quaternion (w, x, y, z) rotating sensor-frame vectors into the
+    /// navigation frame.
+    pub attitude_wxyz: [f64; 4],
+    /// Path length travelled since alignment, m.
+    pub distance_m: f64,
+    /// Bits from [`odometry_flags`].
+    pub flags: u16,
+    /// Zero; keeps the layout free of implicit padding.
+    pub reserved16: u16,
+    /// Number of rest intervals seen since alignment.
+    pub rest_count: u32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::mem::{align_of, offset_of, size_of};
+
+    #[test]
+    fn stamps_layout() {
+        assert_eq!(size_of::<Stamps>(), 32);
+        assert_eq!(align_of::<Stamps>(), 8);
+        assert_eq!(offset_of!(Stamps, sample_ns), 0);
+        assert_eq!(offset_of!(Stamps, acquired_ns), 8);
+        assert_eq!(offset_of!(Stamps, calibrated_ns), 16);
+        assert_eq!(offset_of!(Stamps, odometry_ns), 24);
+    }
+
+    #[test]
+    fn raw_layout() {
+        assert_eq!(size_of::<RawImuSample>(), 120);
+        assert_eq!(align_of::<RawImuSample>(), 8);
+        assert_eq!(offset_of!(RawImuSample, stamps), 0);
+        assert_eq!(offset_of!(RawImuSample, seq), 32);
+        assert_eq!(offset_of!(RawImuSample, accel_g), 40);
+        assert_eq!(offset_of!(RawImuSample, gyro_dps), 64);
+        assert_eq!(offset_of!(RawImuSample, temp_c), 88);
+        assert_eq!(offset_of!(RawImuSample, accel_counts), 96);
+        assert_eq!(offset_of!(RawImuSample, gyro_counts), 102);
+        assert_eq!(offset_of!(RawImuSample, temp_counts), 108);
+        assert_eq!(offset_of!(RawImuSample, flags), 110);
+        assert_eq!(offset_of!(RawImuSample, lost_before), 112);
+        assert_eq!(offset_of!(RawImuSample, reserved), 116);
+    }
+
+    #[test]
+    fn corrected_layout() {
+        assert_eq!(size_of::<CorrectedImuSample>(), 160);
+        assert_eq!(align_of::<CorrectedImuSample>(), 8);
+        assert_eq!(offset_of!(CorrectedImuSample, stamps), 0);
+        assert_eq!(offset_of!(CorrectedImuSample, seq), 32);
+        assert_eq!(offset_of!(CorrectedImuSample, accel_mps2), 40);
+        assert_eq!(offset_of!(CorrectedImuSample, gyro_rps), 64);
+        assert_eq!(offset_of!(CorrectedImuSample, temp_c), 88);
+        assert_eq!(offset_of!(CorrectedImuSample, zs_mean_mps2), 96);
+        assert_eq!(offset_of!(CorrectedImuSample, zs_std_mps2), 120);
+        assert_eq!(offset_of!(CorrectedImuSample, calib_id), 144);
+        assert_eq!(offset_of!(CorrectedImuSample, flags), 152);
+        assert_eq!(offset_of!(CorrectedImuSample, raw_flags), 154);
+        assert_eq!(offset_of!(CorrectedImuSample, reserved), 156);
+    }
+
+    #[test]
+    fn odometry_layout() {
+        assert_eq!(size_of::<OdometryState>(), 208);
+        assert_eq!(align_of::<OdometryState>(), 8);
+        assert_eq!(offset_of!(OdometryState, stamps), 0);
+        assert_eq!(offset_of!(OdometryState, seq), 32);
+        assert_eq!(offset_of!(OdometryState, position_m), 40);
+        assert_eq!(offset_of!(OdometryState, position_sigma_m), 64);
+        assert_eq!(offset_of!(OdometryState, velocity_mps), 88);
+        assert_eq!(offset_of!(OdometryState, velocity_sigma_mps), 112);
+        assert_eq!(offset_of!(OdometryState, gravity_sensor_mps2), 136);
+        assert_eq!(offset_of!(OdometryState, attitude_wxyz), 160);
+        assert_eq!(offset_of!(OdometryState, distance_m), 192);
+        assert_eq!(offset_of!(OdometryState, flags), 200);
+        assert_eq!(offset_of!(OdometryState, reserved16), 202);
+        assert_eq!(offset_of!(OdometryState, rest_count), 204);
+    }
+}
