@@ -1,0 +1,95 @@
+/*
+ * mems_ipc.h: the wire format of mems-odometry for C and C++ clients.
+ *
+ * Mirrors ipc-types/src/wire.rs byte for byte (ipc-types/tests/c_layout.rs compiles a program
+ * against this header with gcc and checks every size, alignment and offset against Rust).
+ * Conventions: times are nanoseconds of CLOCK_MONOTONIC; raw samples use the sensor's units
+ * (g, deg/s, degC); corrected samples and odometry use SI units (m/s^2, rad/s, m, m/s).
+ * The iceoryx2 type names below must be used when opening the services from another language.
+ */
+#ifndef MEMS_IPC_H
+#define MEMS_IPC_H
+
+#include <stdint.h>
+
+#define MEMS_SERVICE_RAW "mems/imu/raw"
+#define MEMS_SERVICE_CORRECTED "mems/imu/corrected"
+#define MEMS_SERVICE_ODOMETRY "mems/odometry/state"
+
+#define MEMS_TYPE_NAME_RAW "mems::RawImuSample.v1"
+#define MEMS_TYPE_NAME_CORRECTED "mems::CorrectedImuSample.v1"
+#define MEMS_TYPE_NAME_ODOMETRY "mems::OdometryState.v1"
+
+/* RawImuSample.flags */
+#define MEMS_RAW_GAP_BEFORE (1u << 0)
+#define MEMS_RAW_FIFO_OVERFLOW (1u << 1)
+#define MEMS_RAW_SATURATED (1u << 2)
+#define MEMS_RAW_REPAIRED (1u << 3)
+#define MEMS_RAW_GYRO_VALID (1u << 4)
+#define MEMS_RAW_TEMP_VALID (1u << 5)
+
+/* CorrectedImuSample.flags */
+#define MEMS_CORRECTED_ZERO_STATE (1u << 0)
+#define MEMS_CORRECTED_DETECTOR_READY (1u << 1)
+#define MEMS_CORRECTED_BIAS_REFINED (1u << 2)
+
+/* OdometryState.flags */
+#define MEMS_ODOMETRY_ZERO_VELOCITY (1u << 0)
+#define MEMS_ODOMETRY_ALIGNED (1u << 1)
+#define MEMS_ODOMETRY_REVISION (1u << 2)
+
+/* Per-stage timestamps (ns, CLOCK_MONOTONIC); 0 where a stage has not touched the message. */
+typedef struct mems_stamps {
+    uint64_t sample_ns;
+    uint64_t acquired_ns;
+    uint64_t calibrated_ns;
+    uint64_t odometry_ns;
+} mems_stamps;
+
+/* One raw sample, sensor frame, sensor units. */
+typedef struct mems_raw_imu_sample {
+    mems_stamps stamps;
+    uint64_t seq;
+    double accel_g[3];
+    double gyro_dps[3];
+    double temp_c;
+    int16_t accel_counts[3];
+    int16_t gyro_counts[3];
+    int16_t temp_counts;
+    uint16_t flags;
+    uint32_t lost_before;
+    uint32_t reserved;
+} mems_raw_imu_sample;
+
+/* One calibrated sample, sensor frame, SI units. */
+typedef struct mems_corrected_imu_sample {
+    mems_stamps stamps;
+    uint64_t seq;
+    double accel_mps2[3];
+    double gyro_rps[3];
+    double temp_c;
+    double zs_mean_mps2[3];
+    double zs_std_mps2[3];
+    uint64_t calib_id;
+    uint16_t flags;
+    uint16_t raw_flags;
+    uint32_t reserved;
+} mems_corrected_imu_sample;
+
+/* Odometry state, navigation frame (z up), 1-sigma per axis. */
+typedef struct mems_odometry_state {
+    mems_stamps stamps;
+    uint64_t seq;
+    double position_m[3];
+    double position_sigma_m[3];
+    double velocity_mps[3];
+    double velocity_sigma_mps[3];
+    double gravity_sensor_mps2[3];
+    double attitude_wxyz[4];
+    double distance_m;
+    uint16_t flags;
+    uint16_t reserved16;
+    uint32_t rest_count;
+} mems_odometry_state;
+
+#endif /* MEMS_IPC_H */
