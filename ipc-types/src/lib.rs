@@ -14,6 +14,7 @@
 //! The C header `include/mems_ipc.h` mirrors these types byte for byte; tests pin sizes,
 //! alignments and offsets on both sides.
 
+pub mod clock;
 pub mod service;
 pub mod units;
 mod wire;

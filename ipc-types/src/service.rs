@@ -34,6 +34,19 @@ pub const MAX_SUBSCRIBERS: usize = 16;
 /// Nodes per service.
 pub const MAX_NODES: usize = 32;
 
+/// An iceoryx2 service or port could not be opened; the message names the service and the
+/// iceoryx2 error.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ServiceError(pub String);
+
+impl core::fmt::Display for ServiceError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for ServiceError {}
+
 /// The full service name for `base` (one of [`RAW`], [`CORRECTED`], [`ODOMETRY`]) under a
 /// namespace; an empty namespace gives `base` itself.
 pub fn full_name(namespace: &str, base: &str) -> String {
@@ -57,10 +70,10 @@ pub fn namespace(cli: Option<&str>) -> String {
 pub fn open<T: core::fmt::Debug + ZeroCopySend>(
     node: &Node<ipc::Service>,
     name: &str,
-) -> Result<PortFactory<ipc::Service, T, ()>, Box<dyn std::error::Error>> {
+) -> Result<PortFactory<ipc::Service, T, ()>, ServiceError> {
     let service_name: ServiceName = name
         .try_into()
-        .map_err(|e| format!("invalid service name {name:?}: {e:?}"))?;
+        .map_err(|e| ServiceError(format!("invalid service name {name:?}: {e:?}")))?;
     let service = node
         .service_builder(&service_name)
         .publish_subscribe::<T>()
@@ -71,31 +84,31 @@ pub fn open<T: core::fmt::Debug + ZeroCopySend>(
         .max_subscribers(MAX_SUBSCRIBERS)
         .max_nodes(MAX_NODES)
         .open_or_create()
-        .map_err(|e| format!("cannot open service {name:?}: {e:?}"))?;
+        .map_err(|e| ServiceError(format!("cannot open service {name:?}: {e:?}")))?;
     Ok(service)
 }
 
 /// A lossless publisher on `service`: it retries until every subscriber has room.
 pub fn publisher<T: core::fmt::Debug + ZeroCopySend>(
     service: &PortFactory<ipc::Service, T, ()>,
-) -> Result<Publisher<ipc::Service, T, ()>, Box<dyn std::error::Error>> {
-    Ok(service
+) -> Result<Publisher<ipc::Service, T, ()>, ServiceError> {
+    service
         .publisher_builder()
         .max_loaned_samples(MAX_LOANED)
         .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
         .create()
-        .map_err(|e| format!("cannot create publisher: {e:?}"))?)
+        .map_err(|e| ServiceError(format!("cannot create publisher: {e:?}")))
 }
 
 /// A subscriber on `service` with the full [`SUBSCRIBER_BUFFER`].
 pub fn subscriber<T: core::fmt::Debug + ZeroCopySend>(
     service: &PortFactory<ipc::Service, T, ()>,
-) -> Result<Subscriber<ipc::Service, T, ()>, Box<dyn std::error::Error>> {
-    Ok(service
+) -> Result<Subscriber<ipc::Service, T, ()>, ServiceError> {
+    service
         .subscriber_builder()
         .buffer_size(SUBSCRIBER_BUFFER)
         .create()
-        .map_err(|e| format!("cannot create subscriber: {e:?}"))?)
+        .map_err(|e| ServiceError(format!("cannot create subscriber: {e:?}")))
 }
 
 #[cfg(test)]

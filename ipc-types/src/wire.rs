@@ -163,6 +163,61 @@ pub struct OdometryState {
     pub rest_count: u32,
 }
 
+/// What every message on a service carries, for tools that handle any of them (latency,
+/// loss accounting, recording).
+pub trait Message: Copy + core::fmt::Debug + ZeroCopySend + Serialize + 'static {
+    /// The raw sample sequence number the message derives from.
+    fn seq(&self) -> u64;
+    /// The per-stage timestamps.
+    fn stamps(&self) -> &Stamps;
+    /// When the stage that publishes this message type published it, ns `CLOCK_MONOTONIC`.
+    fn published_ns(&self) -> u64;
+    /// Whether the message re-publishes an earlier sequence number on purpose (a revision);
+    /// loss accounting skips these.
+    fn is_revision(&self) -> bool {
+        false
+    }
+}
+
+impl Message for RawImuSample {
+    fn seq(&self) -> u64 {
+        self.seq
+    }
+    fn stamps(&self) -> &Stamps {
+        &self.stamps
+    }
+    fn published_ns(&self) -> u64 {
+        self.stamps.acquired_ns
+    }
+}
+
+impl Message for CorrectedImuSample {
+    fn seq(&self) -> u64 {
+        self.seq
+    }
+    fn stamps(&self) -> &Stamps {
+        &self.stamps
+    }
+    fn published_ns(&self) -> u64 {
+        self.stamps.calibrated_ns
+    }
+}
+
+impl Message for OdometryState {
+    fn seq(&self) -> u64 {
+        self.seq
+    }
+    fn stamps(&self) -> &Stamps {
+        &self.stamps
+    }
+    fn published_ns(&self) -> u64 {
+        self.stamps.odometry_ns
+    }
+    fn is_revision(&self) -> bool {
+        self.flags & odometry_flags::REVISION != 0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -100,7 +100,10 @@ fn facts() -> Vec<Fact> {
         ("MEMS_RAW_GYRO_VALID", raw_flags::GYRO_VALID),
         ("MEMS_RAW_TEMP_VALID", raw_flags::TEMP_VALID),
         ("MEMS_CORRECTED_ZERO_STATE", corrected_flags::ZERO_STATE),
-        ("MEMS_CORRECTED_DETECTOR_READY", corrected_flags::DETECTOR_READY),
+        (
+            "MEMS_CORRECTED_DETECTOR_READY",
+            corrected_flags::DETECTOR_READY,
+        ),
         ("MEMS_CORRECTED_BIAS_REFINED", corrected_flags::BIAS_REFINED),
         ("MEMS_ODOMETRY_ZERO_VELOCITY", odometry_flags::ZERO_VELOCITY),
         ("MEMS_ODOMETRY_ALIGNED", odometry_flags::ALIGNED),
@@ -125,7 +128,10 @@ fn strings() -> Vec<(&'static str, String)> {
         ("MEMS_SERVICE_RAW", service::RAW.to_string()),
         ("MEMS_SERVICE_CORRECTED", service::CORRECTED.to_string()),
         ("MEMS_SERVICE_ODOMETRY", service::ODOMETRY.to_string()),
-        ("MEMS_TYPE_NAME_RAW", name(unsafe { RawImuSample::type_name() })),
+        (
+            "MEMS_TYPE_NAME_RAW",
+            name(unsafe { RawImuSample::type_name() }),
+        ),
         (
             "MEMS_TYPE_NAME_CORRECTED",
             name(unsafe { CorrectedImuSample::type_name() }),
@@ -145,7 +151,12 @@ fn c_header_matches_rust_layout() {
         "#include <stddef.h>\n#include <stdio.h>\n#include \"mems_ipc.h\"\nint main(void) {\n",
     );
     for fact in &facts {
-        writeln!(program, "    printf(\"%zu\\n\", (size_t)({}));", fact.c_expr).unwrap();
+        writeln!(
+            program,
+            "    printf(\"%zu\\n\", (size_t)({}));",
+            fact.c_expr
+        )
+        .unwrap();
     }
     for (macro_name, _) in &strings {
         writeln!(program, "    printf(\"%s\\n\", {macro_name});").unwrap();
@@ -159,7 +170,9 @@ fn c_header_matches_rust_layout() {
     std::fs::write(&source, &program).unwrap();
     let include = concat!(env!("CARGO_MANIFEST_DIR"), "/include");
     let status = Command::new("gcc")
-        .args(["-std=c11", "-Wall", "-Wextra", "-Werror", "-I", include, "-o"])
+        .args([
+            "-std=c11", "-Wall", "-Wextra", "-Werror", "-I", include, "-o",
+        ])
         .arg(&binary)
         .arg(&source)
         .status()
