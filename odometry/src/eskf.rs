@@ -1,0 +1,435 @@
+//! A 15-state error-state Kalman filter for strapdown inertial navigation with zero-velocity
+//! (ZUPT) and zero-angular-rate (ZARU) updates.
+//!
+//! Frames and conventions:
+//! - navigation frame `n`: z up, gravity `(0, 0, -g)`; origin and heading fixed at alignment;
+//! - sensor frame `s`: the accelerometer's axes;
+//! - `q` rotates sensor-frame vectors into the navigation frame (`v_n = q * v_s`);
+//! - the accelerometer measures specific force `f = q^-1 (a_n - g_n) + b_a + noise`;
+//! - the gyro measures `w = w_true + b_g + noise` (rad/s);
+//! - the attitude error is local: `q_true = q * Exp(dtheta)`.
+//!
+//! Error state, in this order: `dp` (m), `dv` (m/s), `dtheta` (rad), `db_a` (m/s^2),
+//! `db_g` (rad/s). Propagation is first order (Sola, "Quaternion kinematics for the error-state
+//! Kalman filter", 2017, section 5.3 and 7); the nominal state integrates with the trapezoid rule.
+//! Everything lives on the stack (nalgebra static matrices): no allocation per sample.
+//!
+//! Written here rather than taken from a crate: no maintained Rust crate provides an ESKF with
+//! ZUPT for a strapdown IMU; nalgebra does the linear algebra.
+
+use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
+
+/// Error-state dimension.
+pub const N: usize = 15;
+/// Error-state covariance.
+pub type Cov = SMatrix<f64, N, N>;
+type Vec15 = SVector<f64, N>;
+
+const P: usize = 0;
+const V: usize = 3;
+const TH: usize = 6;
+const BA: usize = 9;
+const BG: usize = 12;
+
+/// Noise model of the filter, SI units throughout.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseModel {
+    /// Accelerometer white-noise density (velocity random walk), m/s^2/sqrt(Hz).
+    pub accel_noise_density: f64,
+    /// Gyro white-noise density (angle random walk), rad/s/sqrt(Hz).
+    pub gyro_noise_density: f64,
+    /// Accelerometer bias random-walk density, m/s^3/sqrt(Hz).
+    pub accel_bias_random_walk: f64,
+    /// Gyro bias random-walk density, rad/s^2/sqrt(Hz).
+    pub gyro_bias_random_walk: f64,
+}
+
+/// The nominal (full) navigation state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Nominal {
+    /// Position, m, navigation frame.
+    pub p: Vector3<f64>,
+    /// Velocity, m/s, navigation frame.
+    pub v: Vector3<f64>,
+    /// Attitude, sensor to navigation.
+    pub q: UnitQuaternion<f64>,
+    /// Accelerometer bias, m/s^2, sensor frame.
+    pub b_a: Vector3<f64>,
+    /// Gyro bias, rad/s, sensor frame.
+    pub b_g: Vector3<f64>,
+}
+
+/// One IMU measurement in SI units, sensor frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Imu {
+    /// Specific force, m/s^2.
+    pub f: Vector3<f64>,
+    /// Angular rate, rad/s.
+    pub w: Vector3<f64>,
+}
+
+/// The filter: nominal state, error covariance and the previous measurement.
+#[derive(Debug, Clone)]
+pub struct Eskf {
+    /// Nominal state.
+    pub x: Nominal,
+    /// Error-state covariance.
+    pub cov: Cov,
+    g_n: Vector3<f64>,
+    noise: NoiseModel,
+    last: Imu,
+}
+
+/// Skew-symmetric matrix: `skew(a) * b == a.cross(&b)`.
+pub fn skew(a: &Vector3<f64>) -> Matrix3<f64> {
+    a.cross_matrix()
+}
+
+impl Eskf {
+    /// A filter starting from `x` with covariance `cov`, gravity magnitude `g` (m/s^2), and the
+    /// measurement taken at the start time.
+    pub fn new(x: Nominal, cov: Cov, g: f64, noise: NoiseModel, first: Imu) -> Self {
+        Self {
+            x,
+            cov,
+            g_n: Vector3::new(0.0, 0.0, -g),
+            noise,
+            last: first,
+        }
+    }
+
+    /// Gravity in the navigation frame, m/s^2.
+    pub fn gravity(&self) -> Vector3<f64> {
+        self.g_n
+    }
+
+    /// Advances the state by `dt` seconds to the new measurement `m` (trapezoid rule between the
+    /// previous and the new measurement) and propagates the covariance.
+    pub fn predict(&mut self, m: Imu, dt: f64) {
+        let x0 = self.x;
+        let w0 = self.last.w - x0.b_g;
+        let w1 = m.w - x0.b_g;
+        let w_mid = 0.5 * (w0 + w1);
+        let q1 = x0.q * UnitQuaternion::from_scaled_axis(w_mid * dt);
+        let f0 = self.last.f - x0.b_a;
+        let f1 = m.f - x0.b_a;
+        let a0 = x0.q * f0 + self.g_n;
+        let a1 = q1 * f1 + self.g_n;
+        let v1 = x0.v + 0.5 * (a0 + a1) * dt;
+        self.x.p = x0.p + 0.5 * (x0.v + v1) * dt;
+        self.x.v = v1;
+        self.x.q = q1;
+
+        // Error-state transition at the interval's midpoint, first order in dt.
+        let r_mid = x0.q.slerp(&q1, 0.5).to_rotation_matrix().into_inner();
+        let f_mid = 0.5 * (f0 + f1);
+        let mut fx = Cov::identity();
+        fx.fixed_view_mut::<3, 3>(P, V)
+            .copy_from(&(Matrix3::identity() * dt));
+        fx.fixed_view_mut::<3, 3>(V, TH)
+            .copy_from(&(-r_mid * skew(&f_mid) * dt));
+        fx.fixed_view_mut::<3, 3>(V, BA).copy_from(&(-r_mid * dt));
+        fx.fixed_view_mut::<3, 3>(TH, TH).copy_from(
+            &UnitQuaternion::from_scaled_axis(-w_mid * dt)
+                .to_rotation_matrix()
+                .into_inner(),
+        );
+        fx.fixed_view_mut::<3, 3>(TH, BG)
+            .copy_from(&(-Matrix3::identity() * dt));
+
+        let n = &self.noise;
+        let mut qd = Vec15::zeros();
+        let vel = n.accel_noise_density.powi(2) * dt;
+        let ang = n.gyro_noise_density.powi(2) * dt;
+        let ba = n.accel_bias_random_walk.powi(2) * dt;
+        let bg = n.gyro_bias_random_walk.powi(2) * dt;
+        for i in 0..3 {
+            qd[V + i] = vel;
+            qd[TH + i] = ang;
+            qd[BA + i] = ba;
+            qd[BG + i] = bg;
+        }
+        self.cov = fx * self.cov * fx.transpose() + Cov::from_diagonal(&qd);
+        self.last = m;
+    }
+
+    /// Zero-velocity update: the true velocity is zero, measured with 1-sigma `sigma` (m/s).
+    pub fn zero_velocity(&mut self, sigma: f64) {
+        let mut h = SMatrix::<f64, 3, N>::zeros();
+        h.fixed_view_mut::<3, 3>(0, V)
+            .copy_from(&Matrix3::identity());
+        let residual = -self.x.v;
+        self.update(&h, residual, sigma * sigma);
+    }
+
+    /// Zero-angular-rate update: the body does not rotate, so the last gyro reading measures the
+    /// gyro bias with the per-sample white noise `sigma` (rad/s).
+    pub fn zero_rate(&mut self, sigma: f64) {
+        let mut h = SMatrix::<f64, 3, N>::zeros();
+        h.fixed_view_mut::<3, 3>(0, BG)
+            .copy_from(&Matrix3::identity());
+        let residual = self.last.w - self.x.b_g;
+        self.update(&h, residual, sigma * sigma);
+    }
+
+    /// A linear measurement `z = H dx + noise` with isotropic variance `var`, in Joseph form,
+    /// injected into the nominal state.
+    fn update(&mut self, h: &SMatrix<f64, 3, N>, residual: Vector3<f64>, var: f64) {
+        let s = h * self.cov * h.transpose() + Matrix3::identity() * var;
+        let Some(s_inv) = s.try_inverse() else {
+            return;
+        };
+        let k = self.cov * h.transpose() * s_inv;
+        let dx: Vec15 = k * residual;
+        let i_kh = Cov::identity() - k * h;
+        self.cov =
+            i_kh * self.cov * i_kh.transpose() + k * (Matrix3::identity() * var) * k.transpose();
+        self.cov = 0.5 * (self.cov + self.cov.transpose());
+        self.inject(&dx);
+    }
+
+    fn inject(&mut self, dx: &Vec15) {
+        self.x.p += dx.fixed_rows::<3>(P);
+        self.x.v += dx.fixed_rows::<3>(V);
+        self.x.q *= UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(TH).into_owned());
+        self.x.b_a += dx.fixed_rows::<3>(BA);
+        self.x.b_g += dx.fixed_rows::<3>(BG);
+    }
+
+    /// 1-sigma of position, m, navigation frame.
+    pub fn position_sigma(&self) -> Vector3<f64> {
+        Vector3::new(self.cov[(0, 0)], self.cov[(1, 1)], self.cov[(2, 2)]).map(f64::sqrt)
+    }
+
+    /// 1-sigma of velocity, m/s, navigation frame.
+    pub fn velocity_sigma(&self) -> Vector3<f64> {
+        Vector3::new(self.cov[(3, 3)], self.cov[(4, 4)], self.cov[(5, 5)]).map(f64::sqrt)
+    }
+}
+
+/// Initial state and covariance from a rest interval: `f_mean` and `w_mean` are the mean
+/// specific force (m/s^2) and angular rate (rad/s) over `n` samples at rest, sensor frame.
+///
+/// Roll and pitch come from the direction of `f_mean`; heading is zero. The vertical accelerometer
+/// bias is observable here (|f_mean| against the known `g`) and is estimated; the horizontal bias
+/// is not (it is indistinguishable from tilt), so the covariance correlates tilt and horizontal
+/// bias exactly as the alignment equations do: `dtheta = u x db_a / g` with `u` the measured up
+/// direction. Once the heading changes, later zero-velocity updates separate the two.
+pub fn align(
+    f_mean: Vector3<f64>,
+    w_mean: Vector3<f64>,
+    g: f64,
+    accel_bias_sigma: Vector3<f64>,
+    gyro_bias_sigma_after_rest: Vector3<f64>,
+) -> (Nominal, Cov) {
+    let up = Vector3::z();
+    let u = f_mean.normalize();
+    let q = UnitQuaternion::rotation_between(&u, &up)
+        .unwrap_or_else(|| UnitQuaternion::from_scaled_axis(Vector3::x() * std::f64::consts::PI));
+    // Vertical bias: the part of |f| that is not gravity, along the measured up direction.
+    let b_a = u * (f_mean.norm() - g);
+    let x = Nominal {
+        p: Vector3::zeros(),
+        v: Vector3::zeros(),
+        q,
+        b_a,
+        b_g: w_mean,
+    };
+
+    // Horizontal bias uncertainty (sensor frame), with the vertical component removed: that part
+    // is measured above.
+    let proj = Matrix3::identity() - u * u.transpose();
+    let sigma_ba = Matrix3::from_diagonal(&accel_bias_sigma.map(|s| s * s));
+    let cov_ba = proj * sigma_ba * proj.transpose();
+    // Tilt error follows from the bias error: dtheta = skew(u) * db_a / g (local frame).
+    let j = skew(&u) / g;
+    let mut cov = Cov::zeros();
+    cov.fixed_view_mut::<3, 3>(BA, BA).copy_from(&cov_ba);
+    cov.fixed_view_mut::<3, 3>(TH, TH)
+        .copy_from(&(j * cov_ba * j.transpose()));
+    let cross = j * cov_ba;
+    cov.fixed_view_mut::<3, 3>(TH, BA).copy_from(&cross);
+    cov.fixed_view_mut::<3, 3>(BA, TH)
+        .copy_from(&cross.transpose());
+    // Heading is defined as zero: no uncertainty about the frame we chose, but keep the matrix
+    // positive definite with a tiny variance.
+    cov[(TH + 2, TH + 2)] += 1e-12;
+    cov.fixed_view_mut::<3, 3>(BG, BG)
+        .copy_from(&Matrix3::from_diagonal(
+            &gyro_bias_sigma_after_rest.map(|s| s * s),
+        ));
+    // Velocity and position are exactly zero at rest; a small variance keeps S invertible.
+    for i in 0..6 {
+        cov[(i, i)] = 1e-12;
+    }
+    (x, cov)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    const G: f64 = 9.81;
+
+    fn noise() -> NoiseModel {
+        NoiseModel {
+            accel_noise_density: 300e-6 * G,
+            gyro_noise_density: 0.01_f64.to_radians(),
+            accel_bias_random_walk: 1e-5,
+            gyro_bias_random_walk: 1e-6,
+        }
+    }
+
+    #[test]
+    fn alignment_levels_a_tilted_sensor() {
+        // Sensor tilted 10 deg about x: gravity reaction seen in the sensor frame.
+        let tilt = UnitQuaternion::from_scaled_axis(Vector3::x() * 10f64.to_radians());
+        let f_s = tilt.inverse() * Vector3::new(0.0, 0.0, G + 0.05);
+        let (x, cov) = align(
+            f_s,
+            Vector3::new(0.01, 0.0, 0.0),
+            G,
+            Vector3::repeat(0.005),
+            Vector3::repeat(1e-4),
+        );
+        let up = x.q * f_s;
+        assert_relative_eq!(up.normalize(), Vector3::z(), epsilon = 1e-12);
+        // The 0.05 m/s^2 excess is vertical bias, in the sensor frame along the measured up.
+        assert_relative_eq!(x.q * x.b_a, Vector3::new(0.0, 0.0, 0.05), epsilon = 1e-12);
+        assert_eq!(x.b_g, Vector3::new(0.01, 0.0, 0.0));
+        // Tilt variance is bias variance / g^2 (5 mm/s^2 -> 0.51 mrad).
+        assert_relative_eq!(cov[(TH, TH)].sqrt(), 0.005 / G, max_relative = 0.05);
+    }
+
+    #[test]
+    fn static_integration_with_a_bias_grows_quadratically() {
+        // Level sensor with an (unknown to the filter) 0.01 m/s^2 x bias: after t seconds of
+        // pure prediction the x position error is b t^2 / 2, as the thesis's error model says.
+        let g_s = Vector3::new(0.0, 0.0, G);
+        let bias = Vector3::new(0.01, 0.0, 0.0);
+        let m = Imu {
+            f: g_s + bias,
+            w: Vector3::zeros(),
+        };
+        let (x, cov) = align(
+            g_s,
+            Vector3::zeros(),
+            G,
+            Vector3::repeat(0.005),
+            Vector3::repeat(1e-4),
+        );
+        let mut kf = Eskf::new(x, cov, G, noise(), m);
+        let dt = 0.001;
+        for _ in 0..10_000 {
+            kf.predict(m, dt);
+        }
+        assert_relative_eq!(kf.x.p.x, 0.5 * 0.01 * 100.0, max_relative = 1e-9);
+        assert_relative_eq!(kf.x.v.x, 0.01 * 10.0, max_relative = 1e-9);
+        // The covariance knows about it: the bias-induced 1-sigma at 10 s is about
+        // sigma_b * t^2 / 2 = 0.25 m; tilt-bias correlation cancels part of it.
+        assert!(kf.position_sigma().x > 0.0);
+    }
+
+    #[test]
+    fn zupt_removes_the_velocity_error() {
+        let g_s = Vector3::new(0.0, 0.0, G);
+        let m = Imu {
+            f: g_s + Vector3::new(0.02, -0.01, 0.0),
+            w: Vector3::zeros(),
+        };
+        let (x, cov) = align(
+            g_s,
+            Vector3::zeros(),
+            G,
+            Vector3::repeat(0.005),
+            Vector3::repeat(1e-4),
+        );
+        let mut kf = Eskf::new(x, cov, G, noise(), m);
+        for _ in 0..1000 {
+            kf.predict(m, 0.001);
+        }
+        assert!(kf.x.v.norm() > 0.01);
+        for _ in 0..200 {
+            kf.predict(m, 0.001);
+            kf.zero_velocity(1e-3);
+        }
+        assert!(kf.x.v.norm() < 1e-3, "v = {}", kf.x.v);
+    }
+
+    #[test]
+    fn gyro_integration_follows_a_constant_rate() {
+        let g_s = Vector3::new(0.0, 0.0, G);
+        let rate = Vector3::new(0.0, 0.0, 0.5);
+        let m = Imu { f: g_s, w: rate };
+        let (x, cov) = align(
+            g_s,
+            Vector3::zeros(),
+            G,
+            Vector3::repeat(0.005),
+            Vector3::repeat(1e-4),
+        );
+        let mut kf = Eskf::new(x, cov, G, noise(), m);
+        for _ in 0..2000 {
+            kf.predict(m, 0.001);
+        }
+        let expected = UnitQuaternion::from_scaled_axis(rate * 2.0);
+        assert_relative_eq!(kf.x.q.angle_to(&expected), 0.0, epsilon = 1e-9);
+        // Rotating about the vertical does not move a level sensor.
+        assert!(kf.x.p.norm() < 1e-9);
+    }
+
+    /// The alignment's tilt/bias correlation is what makes a horizontal bias observable after a
+    /// heading change: a level sensor with an unknown bias, aligned, spun 180 deg in place and
+    /// held at rest, must end with the bias estimated (which it cannot be without the turn).
+    #[test]
+    fn heading_change_reveals_the_horizontal_bias() {
+        let bias = Vector3::new(0.03, -0.02, 0.0);
+        let up_s = Vector3::new(0.0, 0.0, G);
+        let dt = 0.002;
+        let mut run = |turn: bool| {
+            let (x, cov) = align(
+                up_s + bias,
+                Vector3::zeros(),
+                G,
+                Vector3::repeat(0.05),
+                Vector3::repeat(1e-4),
+            );
+            let first = Imu {
+                f: up_s + bias,
+                w: Vector3::zeros(),
+            };
+            let mut kf = Eskf::new(x, cov, G, noise(), first);
+            let rate = if turn {
+                std::f64::consts::PI / 2.0
+            } else {
+                0.0
+            };
+            let mut heading = 0.0;
+            for k in 0..3000 {
+                // 2 s of spinning (when turning), then rest; always zero velocity.
+                let w = if k < 1000 { rate } else { 0.0 };
+                heading += w * dt;
+                let r = UnitQuaternion::from_scaled_axis(Vector3::z() * heading);
+                let m = Imu {
+                    f: r.inverse() * up_s + bias,
+                    w: Vector3::new(0.0, 0.0, w),
+                };
+                kf.predict(m, dt);
+                kf.zero_velocity(1e-3);
+            }
+            kf
+        };
+        let turned = run(true);
+        assert!(
+            (turned.x.b_a - bias).norm() < 2e-3,
+            "estimated {} vs {bias}",
+            turned.x.b_a
+        );
+        let still = run(false);
+        assert!(
+            (still.x.b_a - bias).norm() > 0.02,
+            "without a turn the bias stays hidden"
+        );
+    }
+}

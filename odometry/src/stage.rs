@@ -1,0 +1,417 @@
+//! The odometry stage: corrected samples in, odometry states out. No I/O and no allocation per
+//! sample; the live process and the offline runner both drive it, so they agree exactly.
+//!
+//! Life cycle: wait for the first rest interval (the zero-state flag of the calibration stage),
+//! align on `align_s` seconds of it (roll, pitch, gyro bias, vertical accelerometer bias), then
+//! navigate with the error-state filter of [`crate::eskf`], applying zero-velocity and
+//! zero-angular-rate updates while the sample is flagged at rest. When a motion interval ends,
+//! the corrections the updates made are spread back over that interval's states (a cubic
+//! blend that reduces to the thesis's linear velocity-drift model when the filter's position
+//! and velocity corrections agree with it) and republished with the `REVISION` flag.
+
+use crate::eskf::{Eskf, Imu, NoiseModel, align};
+use ipc_types::{CorrectedImuSample, OdometryState, Stamps, corrected_flags, odometry_flags};
+use nalgebra::{UnitQuaternion, Vector3};
+
+/// Configuration of the stage. Noise figures come from the calibration file's noise parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryConfig {
+    /// Local gravity magnitude, m/s^2.
+    pub gravity_mps2: f64,
+    /// Sensor noise model.
+    pub noise: NoiseModel,
+    /// 1-sigma of the accelerometer bias left after calibration (turn-on repeatability),
+    /// m/s^2 per sensor axis.
+    pub accel_bias_sigma_mps2: [f64; 3],
+    /// 1-sigma of the zero-velocity pseudo-measurement, m/s.
+    pub zupt_sigma_mps: f64,
+    /// Rest needed before alignment, s.
+    pub align_s: f64,
+    /// Time after the end of a motion interval over which corrections are gathered before the
+    /// interval is republished, s.
+    pub revision_delay_s: f64,
+    /// Longest motion interval whose history is kept for revision, s (at `max_rate_hz`).
+    pub max_motion_s: f64,
+    /// Highest sample rate the history is sized for, Hz.
+    pub max_rate_hz: f64,
+    /// Republished states per second of motion (the history is decimated to this rate).
+    pub revision_rate_hz: f64,
+}
+
+impl OdometryConfig {
+    /// Defaults for an MPU-9250 after calibration: datasheet noise densities, the thesis's
+    /// measured turn-on repeatability (4.5 / 2.5 / 6.1 mm/s^2), and `gravity_mps2`.
+    pub fn mpu9250(gravity_mps2: f64) -> Self {
+        Self {
+            gravity_mps2,
+            noise: NoiseModel {
+                accel_noise_density: 300e-6 * gravity_mps2,
+                gyro_noise_density: 0.01_f64.to_radians(),
+                accel_bias_random_walk: 1e-4,
+                gyro_bias_random_walk: 1e-5,
+            },
+            accel_bias_sigma_mps2: [4.5e-3, 2.5e-3, 6.1e-3],
+            zupt_sigma_mps: 2e-3,
+            align_s: 1.0,
+            revision_delay_s: 0.2,
+            max_motion_s: 120.0,
+            max_rate_hz: 4000.0,
+            revision_rate_hz: 100.0,
+        }
+    }
+}
+
+/// Input the stage refuses; the message names the sample.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum OdometryError {
+    /// A sample's time is not after the previous one's.
+    #[error("sample seq {seq}: time {t_ns} ns is not after the previous sample's {prev_ns} ns")]
+    TimeNotIncreasing {
+        /// Sequence number of the offending sample.
+        seq: u64,
+        /// Its time.
+        t_ns: u64,
+        /// The previous sample's time.
+        prev_ns: u64,
+    },
+    /// A sample holds NaN or infinity.
+    #[error("sample seq {seq}: field {field} is not finite")]
+    NotFinite {
+        /// Sequence number of the offending sample.
+        seq: u64,
+        /// The field.
+        field: &'static str,
+    },
+}
+
+#[derive(Debug, Clone, Copy)]
+struct HistoryEntry {
+    t_ns: u64,
+    stamps: Stamps,
+    seq: u64,
+    p: Vector3<f64>,
+    v: Vector3<f64>,
+    sigma_p: Vector3<f64>,
+    sigma_v: Vector3<f64>,
+    q: UnitQuaternion<f64>,
+    distance_m: f64,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct AlignSums {
+    n: u64,
+    t0_ns: u64,
+    f: Vector3<f64>,
+    w: Vector3<f64>,
+    w2: Vector3<f64>,
+}
+
+/// What happens to the motion history after a motion interval has ended.
+#[derive(Debug, Clone, Copy)]
+struct PendingRevision {
+    /// Time the motion interval ended (first rest sample), ns.
+    end_ns: u64,
+    /// Sum of the corrections the updates injected since, position and velocity.
+    dp: Vector3<f64>,
+    dv: Vector3<f64>,
+}
+
+/// The odometry state machine.
+pub struct OdometryStage {
+    cfg: OdometryConfig,
+    align: AlignSums,
+    kf: Option<Eskf>,
+    last: Option<(u64, Imu)>,
+    history: Vec<HistoryEntry>,
+    history_overflowed: bool,
+    motion_start_ns: Option<u64>,
+    pending: Option<PendingRevision>,
+    at_rest: bool,
+    rest_count: u32,
+    distance_m: f64,
+    revisions_emitted: u64,
+}
+
+impl OdometryStage {
+    /// A stage with the history buffer allocated up front for `max_motion_s` at
+    /// `revision_rate_hz` (only decimated states are kept).
+    pub fn new(cfg: OdometryConfig) -> Self {
+        let capacity = (cfg.max_motion_s * cfg.revision_rate_hz).ceil() as usize + 1;
+        Self {
+            cfg,
+            align: AlignSums::default(),
+            kf: None,
+            last: None,
+            history: Vec::with_capacity(capacity),
+            history_overflowed: false,
+            motion_start_ns: None,
+            pending: None,
+            at_rest: false,
+            rest_count: 0,
+            distance_m: 0.0,
+            revisions_emitted: 0,
+        }
+    }
+
+    /// Whether alignment is done.
+    pub fn aligned(&self) -> bool {
+        self.kf.is_some()
+    }
+
+    /// Number of republished (revised) states so far.
+    pub fn revisions_emitted(&self) -> u64 {
+        self.revisions_emitted
+    }
+
+    /// The filter, once aligned (for diagnostics and tests).
+    pub fn filter(&self) -> Option<&Eskf> {
+        self.kf.as_ref()
+    }
+
+    /// Processes one sample: emits its state, and any revised states that the end of a motion
+    /// interval made available, through `emit`.
+    pub fn process(
+        &mut self,
+        s: &CorrectedImuSample,
+        emit: &mut impl FnMut(&OdometryState),
+    ) -> Result<(), OdometryError> {
+        check_finite(s)?;
+        let t_ns = s.stamps.sample_ns;
+        let m = Imu {
+            f: Vector3::from(s.accel_mps2),
+            w: Vector3::from(s.gyro_rps),
+        };
+        let rest = s.flags & corrected_flags::ZERO_STATE != 0;
+        let prev = self.last.replace((t_ns, m));
+        if let Some((prev_ns, _)) = prev
+            && t_ns <= prev_ns
+        {
+            self.last = prev;
+            return Err(OdometryError::TimeNotIncreasing {
+                seq: s.seq,
+                t_ns,
+                prev_ns,
+            });
+        }
+
+        let Some(kf) = self.kf.as_mut() else {
+            self.accumulate_alignment(t_ns, &m, rest);
+            emit(&self.unaligned_state(s));
+            return Ok(());
+        };
+
+        let dt = (t_ns - prev.map_or(t_ns, |p| p.0)) as f64 * 1e-9;
+        let p_before = kf.x.p;
+        kf.predict(m, dt);
+        let moved = (kf.x.p - p_before).xy().norm();
+        if rest {
+            let (p0, v0) = (kf.x.p, kf.x.v);
+            kf.zero_velocity(self.cfg.zupt_sigma_mps);
+            let gyro_sigma = self.cfg.noise.gyro_noise_density / dt.sqrt();
+            kf.zero_rate(gyro_sigma);
+            if let Some(pending) = self.pending.as_mut() {
+                pending.dp += kf.x.p - p0;
+                pending.dv += kf.x.v - v0;
+            }
+        } else {
+            self.distance_m += moved;
+        }
+
+        // Motion interval bookkeeping: a rest after motion opens a pending revision; motion
+        // that resumes before the revision delay has passed revises with what was gathered.
+        if rest && !self.at_rest && self.motion_start_ns.is_some() && self.pending.is_none() {
+            self.rest_count += 1;
+            self.pending = Some(PendingRevision {
+                end_ns: t_ns,
+                dp: Vector3::zeros(),
+                dv: Vector3::zeros(),
+            });
+        }
+        if !rest {
+            if let Some(pending) = self.pending {
+                self.republish(pending, emit);
+            }
+            if self.motion_start_ns.is_none() {
+                self.motion_start_ns = Some(prev.map_or(t_ns, |p| p.0));
+                self.history.clear();
+                self.history_overflowed = false;
+            }
+        }
+        self.at_rest = rest;
+
+        let state = self.state(s, rest);
+        if !rest && self.motion_start_ns.is_some() {
+            self.record(&state);
+        }
+        emit(&state);
+
+        if let Some(pending) = self.pending
+            && rest
+            && (t_ns - pending.end_ns) as f64 * 1e-9 >= self.cfg.revision_delay_s
+        {
+            self.republish(pending, emit);
+        }
+        Ok(())
+    }
+
+    fn accumulate_alignment(&mut self, t_ns: u64, m: &Imu, rest: bool) {
+        if !rest {
+            self.align = AlignSums::default();
+            return;
+        }
+        let a = &mut self.align;
+        if a.n == 0 {
+            a.t0_ns = t_ns;
+        }
+        a.n += 1;
+        a.f += m.f;
+        a.w += m.w;
+        a.w2 += m.w.component_mul(&m.w);
+        if (t_ns - a.t0_ns) as f64 * 1e-9 < self.cfg.align_s || a.n < 2 {
+            return;
+        }
+        let n = a.n as f64;
+        let f_mean = a.f / n;
+        let w_mean = a.w / n;
+        // Gyro bias from the rest mean: its uncertainty is the sample std over sqrt(n).
+        let w_var = (a.w2 / n - w_mean.component_mul(&w_mean)).map(|v| v.max(0.0));
+        let w_sigma = (w_var / n).map(f64::sqrt);
+        let (x, cov) = align(
+            f_mean,
+            w_mean,
+            self.cfg.gravity_mps2,
+            Vector3::from(self.cfg.accel_bias_sigma_mps2),
+            w_sigma,
+        );
+        self.kf = Some(Eskf::new(x, cov, self.cfg.gravity_mps2, self.cfg.noise, *m));
+        self.at_rest = true;
+    }
+
+    fn unaligned_state(&self, s: &CorrectedImuSample) -> OdometryState {
+        OdometryState {
+            stamps: s.stamps,
+            seq: s.seq,
+            attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
+            flags: if s.flags & corrected_flags::ZERO_STATE != 0 {
+                odometry_flags::ZERO_VELOCITY
+            } else {
+                0
+            },
+            ..Default::default()
+        }
+    }
+
+    fn state(&self, s: &CorrectedImuSample, rest: bool) -> OdometryState {
+        let kf = self.kf.as_ref().expect("state() is called once aligned");
+        let q = kf.x.q;
+        let g_s = q.inverse() * (-kf.gravity());
+        let mut flags = odometry_flags::ALIGNED;
+        if rest {
+            flags |= odometry_flags::ZERO_VELOCITY;
+        }
+        OdometryState {
+            stamps: s.stamps,
+            seq: s.seq,
+            position_m: kf.x.p.into(),
+            position_sigma_m: kf.position_sigma().into(),
+            velocity_mps: kf.x.v.into(),
+            velocity_sigma_mps: kf.velocity_sigma().into(),
+            gravity_sensor_mps2: g_s.into(),
+            attitude_wxyz: [q.w, q.i, q.j, q.k],
+            distance_m: self.distance_m,
+            flags,
+            reserved16: 0,
+            rest_count: self.rest_count,
+        }
+    }
+
+    /// Keeps a decimated copy of a motion state for later revision.
+    fn record(&mut self, state: &OdometryState) {
+        let period_ns = (1e9 / self.cfg.revision_rate_hz) as u64;
+        let due = self
+            .history
+            .last()
+            .is_none_or(|h| state.stamps.sample_ns >= h.t_ns + period_ns);
+        if !due {
+            return;
+        }
+        if self.history.len() == self.history.capacity() {
+            self.history_overflowed = true;
+            return;
+        }
+        self.history.push(HistoryEntry {
+            t_ns: state.stamps.sample_ns,
+            stamps: state.stamps,
+            seq: state.seq,
+            p: Vector3::from(state.position_m),
+            v: Vector3::from(state.velocity_mps),
+            sigma_p: Vector3::from(state.position_sigma_m),
+            sigma_v: Vector3::from(state.velocity_sigma_mps),
+            q: UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                state.attitude_wxyz[0],
+                state.attitude_wxyz[1],
+                state.attitude_wxyz[2],
+                state.attitude_wxyz[3],
+            )),
+            distance_m: state.distance_m,
+        });
+    }
+
+    /// Spreads the corrections gathered at the start of a rest back over the motion interval
+    /// and emits the revised states.
+    ///
+    /// With `T` the interval length and `s = t - t0`, the position correction is the cubic
+    /// `c(s) = a s^2 + b s^3` with `c(0) = c'(0) = 0`, `c(T) = dp`, `c'(T) = dv`; for a constant
+    /// velocity drift (`dp = dv T / 2`) this is the thesis's linear velocity-error model.
+    fn republish(&mut self, pending: PendingRevision, emit: &mut impl FnMut(&OdometryState)) {
+        self.pending = None;
+        let Some(t0) = self.motion_start_ns.take() else {
+            return;
+        };
+        if self.history_overflowed {
+            self.history.clear();
+            return;
+        }
+        let big_t = (pending.end_ns - t0) as f64 * 1e-9;
+        if big_t <= 0.0 {
+            return;
+        }
+        let (dp, dv) = (pending.dp, pending.dv);
+        let a = (3.0 * dp - dv * big_t) / (big_t * big_t);
+        let b = (dv * big_t - 2.0 * dp) / (big_t * big_t * big_t);
+        let g = self.cfg.gravity_mps2;
+        for h in &self.history {
+            let s = (h.t_ns.saturating_sub(t0)) as f64 * 1e-9;
+            let p = h.p + a * s * s + b * s * s * s;
+            let v = h.v + 2.0 * a * s + 3.0 * b * s * s;
+            let g_s = h.q.inverse() * Vector3::new(0.0, 0.0, g);
+            emit(&OdometryState {
+                stamps: h.stamps,
+                seq: h.seq,
+                position_m: p.into(),
+                position_sigma_m: h.sigma_p.into(),
+                velocity_mps: v.into(),
+                velocity_sigma_mps: h.sigma_v.into(),
+                gravity_sensor_mps2: g_s.into(),
+                attitude_wxyz: [h.q.w, h.q.i, h.q.j, h.q.k],
+                distance_m: h.distance_m,
+                flags: odometry_flags::ALIGNED | odometry_flags::REVISION,
+                reserved16: 0,
+                rest_count: self.rest_count,
+            });
+            self.revisions_emitted += 1;
+        }
+        self.history.clear();
+    }
+}
+
+fn check_finite(s: &CorrectedImuSample) -> Result<(), OdometryError> {
+    let fields: [(&'static str, &[f64]); 2] =
+        [("accel_mps2", &s.accel_mps2), ("gyro_rps", &s.gyro_rps)];
+    for (field, values) in fields {
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err(OdometryError::NotFinite { seq: s.seq, field });
+        }
+    }
+    Ok(())
+}
