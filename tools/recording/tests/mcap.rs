@@ -1,0 +1,412 @@
+//! MCAP recordings: bit-exact round trips, truncated files read up to the cut, clear errors.
+
+mod common;
+
+use std::path::Path;
+
+use common::{any_finite, any_truth, live_samples, sample_bits, tmp, truth_bits};
+use ipc_types::RawImuSample;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use recording::mcap::{Reader, Topic, Writer, read_all};
+use recording::{ErrorKind, Format, Position, Truth};
+use serde::{Deserialize, Serialize};
+use serde_json::{Value, json};
+
+/// Samples with arbitrary finite floats (all bit patterns), to check exactness.
+fn arbitrary_samples(n: usize, seed: u64) -> Vec<RawImuSample> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut samples = live_samples(n, seed);
+    for (i, s) in samples.iter_mut().enumerate() {
+        s.accel_g = [0.0; 3].map(|_| any_finite(&mut rng));
+        s.gyro_dps = [0.0; 3].map(|_| any_finite(&mut rng));
+        s.temp_c = any_finite(&mut rng);
+        s.stamps.acquired_ns = s.stamps.sample_ns + 1000 + i as u64;
+        s.stamps.calibrated_ns = u64::MAX - i as u64;
+        s.seq = 1_000_000 + 3 * i as u64;
+        s.reserved = i as u32;
+    }
+    samples[0].accel_g[0] = -0.0;
+    samples
+}
+
+/// Log time the test writer uses for sample `i` (distinct from the publish time).
+fn log_time(i: usize) -> u64 {
+    7_000_000_000 + 1_000 * i as u64
+}
+
+/// Writes samples (and truth), flushing every `flush_every` samples; returns the file length
+/// after each flush (the byte offset where every message written so far is complete).
+fn write(path: &Path, samples: &[RawImuSample], truth: &[Truth], flush_every: usize) -> Vec<u64> {
+    let mut writer = Writer::create(path).unwrap();
+    let raw = writer.add_channel::<RawImuSample>().unwrap();
+    let truth_channel = writer.add_channel::<Truth>().unwrap();
+    let mut boundaries = Vec::new();
+    for (i, sample) in samples.iter().enumerate() {
+        writer.write(raw, sample, log_time(i)).unwrap();
+        writer
+            .write(truth_channel, &truth[i], log_time(i) + 1)
+            .unwrap();
+        if (i + 1) % flush_every == 0 {
+            writer.flush().unwrap();
+            boundaries.push(std::fs::metadata(path).unwrap().len());
+        }
+    }
+    writer.finish().unwrap();
+    boundaries
+}
+
+#[test]
+fn messages_round_trip_bit_for_bit_with_their_times() {
+    let samples = arbitrary_samples(400, 11);
+    let truth = any_truth(&samples, 12);
+    let path = tmp("roundtrip.mcap");
+    write(&path, &samples, &truth, 64);
+
+    let reader = Reader::open(&path).unwrap();
+    let mut raw_read = 0;
+    for (n, message) in reader.messages().unwrap().enumerate() {
+        let message = message.unwrap();
+        let i = n / 2;
+        assert_eq!(message.index, n as u64 + 1);
+        if n % 2 == 0 {
+            assert_eq!(message.topic, "mems/imu/raw");
+            assert_eq!(message.schema_name, "mems.RawImuSample");
+            assert_eq!(message.encoding, "json");
+            assert_eq!(message.log_time_ns, log_time(i));
+            assert_eq!(message.publish_time_ns, samples[i].stamps.sample_ns);
+            assert!(message.decode::<Truth>().is_none());
+            let sample: RawImuSample = message.decode().unwrap().unwrap();
+            assert_eq!(sample, samples[i]);
+            assert_eq!(sample_bits(&sample), sample_bits(&samples[i]));
+            raw_read += 1;
+        } else {
+            assert_eq!(message.topic, "mems/sim/truth");
+            assert_eq!(message.log_time_ns, log_time(i) + 1);
+            assert_eq!(message.publish_time_ns, truth[i].t_ns);
+            let t: Truth = message.decode().unwrap().unwrap();
+            assert_eq!(truth_bits(&t), truth_bits(&truth[i]));
+            assert_eq!(t, truth[i]);
+        }
+    }
+    assert_eq!(raw_read, samples.len());
+
+    let contents = read_all(&path).unwrap();
+    assert_eq!(contents.truncation, None);
+    assert_eq!(contents.raw, samples);
+    assert_eq!(contents.truth, truth);
+    assert_eq!(contents.other_messages, 0);
+
+    let rec = recording::load_raw(&path).unwrap();
+    assert_eq!(rec.format, Format::Mcap);
+    assert_eq!(rec.samples, samples);
+    assert_eq!(rec.truth.as_deref(), Some(&truth[..]));
+    assert_eq!(rec.truncation, None);
+}
+
+#[test]
+fn truncated_file_yields_every_message_before_the_cut() {
+    let samples = live_samples(300, 21);
+    let truth = any_truth(&samples, 22);
+    let path = tmp("full.mcap");
+    let per_chunk = 25;
+    let boundaries = write(&path, &samples, &truth, per_chunk);
+    let bytes = std::fs::read(&path).unwrap();
+    let data_end = *boundaries.last().unwrap();
+    assert!(
+        data_end < bytes.len() as u64,
+        "summary and footer follow the data"
+    );
+
+    // (cut offset, samples complete before it): at each flush boundary, every sample written
+    // before that flush; halfway to the next boundary (inside the next chunk, whose compressed
+    // messages are far larger than the message indexes that follow it), still only those; in
+    // the summary, all of them.
+    let mut cuts: Vec<(u64, usize)> = vec![(8, 0), (boundaries[0] / 2, 0)];
+    for (k, &boundary) in boundaries.iter().enumerate() {
+        let complete = per_chunk * (k + 1);
+        cuts.push((boundary, complete));
+        if let Some(&next) = boundaries.get(k + 1) {
+            cuts.push(((boundary + next) / 2, complete));
+        }
+    }
+    cuts.push((
+        data_end + (bytes.len() as u64 - data_end) / 2,
+        samples.len(),
+    ));
+
+    for (cut, complete) in cuts {
+        let cut_path = tmp("cut.mcap");
+        std::fs::write(&cut_path, &bytes[..cut as usize]).unwrap();
+        let contents = read_all(&cut_path).unwrap();
+        assert_eq!(contents.raw, samples[..complete], "cut at {cut}");
+        assert_eq!(contents.truth, truth[..complete], "cut at {cut}");
+        let truncation = contents
+            .truncation
+            .expect("a cut file is reported as truncated");
+        assert_eq!(
+            truncation.messages_read,
+            2 * complete as u64,
+            "cut at {cut}"
+        );
+        assert!(!truncation.reason.is_empty());
+
+        // Through load_raw as well, and via the iterator: the last item reports the cut.
+        let rec = recording::load_raw(&cut_path).unwrap();
+        assert_eq!(rec.samples.len(), complete);
+        assert_eq!(rec.truncation.as_ref(), Some(&truncation));
+        let reader = Reader::open(&cut_path).unwrap();
+        let last = reader.messages().unwrap().last().unwrap();
+        let err = last.expect_err("the iterator ends with the truncation");
+        assert!(matches!(err.kind, ErrorKind::Truncated(_)));
+        assert!(
+            err.to_string()
+                .contains(&format!("after {} complete messages", 2 * complete)),
+            "{err}"
+        );
+    }
+}
+
+#[test]
+fn any_cut_yields_a_prefix_bounded_by_the_flushes() {
+    let samples = live_samples(200, 23);
+    let truth = any_truth(&samples, 24);
+    let path = tmp("full_for_cuts.mcap");
+    let per_chunk = 20;
+    let boundaries = write(&path, &samples, &truth, per_chunk);
+    let bytes = std::fs::read(&path).unwrap();
+    for cut in (0..=bytes.len()).step_by(251).chain([bytes.len()]) {
+        let cut_path = tmp("any_cut.mcap");
+        std::fs::write(&cut_path, &bytes[..cut]).unwrap();
+        if cut < 8 {
+            // Not even the magic: not recognisable as MCAP.
+            assert!(read_all(&cut_path).is_err());
+            continue;
+        }
+        let contents = read_all(&cut_path).unwrap();
+        let flushed = boundaries.iter().filter(|&&b| b <= cut as u64).count();
+        let lower = per_chunk * flushed;
+        let upper = (lower + per_chunk).min(samples.len());
+        let n = contents.raw.len();
+        assert!(
+            (lower..=upper).contains(&n),
+            "cut at {cut}: {n} samples, expected {lower}..={upper}"
+        );
+        assert_eq!(contents.raw, samples[..n]);
+        assert_eq!(contents.truth, truth[..contents.truth.len()]);
+        assert_eq!(
+            contents.truncation.is_some(),
+            cut < bytes.len(),
+            "cut at {cut}"
+        );
+    }
+}
+
+#[test]
+fn garbage_files_give_clear_errors_naming_the_file() {
+    let path = tmp("garbage.mcap");
+    std::fs::write(&path, b"\x00\x01garbage, not an MCAP file\xff\xfe").unwrap();
+    let err = read_all(&path).unwrap_err();
+    assert!(matches!(err.kind, ErrorKind::UnknownFormat(_)), "{err}");
+    assert_eq!(
+        err.to_string(),
+        format!(
+            "{}: not a recognised recording: does not start with the MCAP magic bytes",
+            path.display()
+        )
+    );
+    assert!(
+        recording::load_raw(&path)
+            .unwrap_err()
+            .to_string()
+            .starts_with(&path.display().to_string())
+    );
+
+    // The magic followed by garbage: nothing readable, reported as damaged, not silently empty.
+    let mut bytes = b"\x89MCAP0\r\n".to_vec();
+    bytes.extend_from_slice(&[0xAB; 100]);
+    std::fs::write(&path, &bytes).unwrap();
+    let contents = read_all(&path).unwrap();
+    assert!(contents.raw.is_empty());
+    assert_eq!(contents.truncation.unwrap().messages_read, 0);
+
+    let missing = tmp("does_not_exist.mcap");
+    let err = read_all(&missing).unwrap_err();
+    assert!(matches!(err.kind, ErrorKind::Io(_)));
+    assert!(err.to_string().starts_with(&missing.display().to_string()));
+}
+
+#[test]
+fn non_finite_values_are_refused_when_writing() {
+    let path = tmp("nan.mcap");
+    let mut writer = Writer::create(&path).unwrap();
+    let raw = writer.add_channel::<RawImuSample>().unwrap();
+    let mut sample = live_samples(1, 31)[0];
+    sample.gyro_dps[1] = f64::INFINITY;
+    let err = writer.write(raw, &sample, 0).unwrap_err();
+    assert_eq!(err.field.as_deref(), Some("mems/imu/raw"));
+    assert!(err.to_string().contains("NaN or infinity"), "{err}");
+}
+
+#[test]
+fn raw_sample_times_must_increase() {
+    let mut samples = live_samples(3, 41);
+    samples[2].stamps.sample_ns = samples[0].stamps.sample_ns;
+    let path = tmp("backwards.mcap");
+    let mut writer = Writer::create(&path).unwrap();
+    let raw = writer.add_channel::<RawImuSample>().unwrap();
+    for s in &samples {
+        writer.write(raw, s, 0).unwrap();
+    }
+    writer.finish().unwrap();
+    let err = read_all(&path).unwrap_err();
+    assert_eq!(err.position, Some(Position::Message(3)));
+    assert!(matches!(err.kind, ErrorKind::TimeBackwards { .. }), "{err}");
+}
+
+/// A message type defined outside the crate, as later channels (corrected samples, odometry,
+/// hints) will be: implementing `Topic` is all it takes to record it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Hint {
+    t_ns: u64,
+    speed_mps: f64,
+}
+
+impl Topic for Hint {
+    const TOPIC: &'static str = "mems/test/hint";
+    const SCHEMA_NAME: &'static str = "test.Hint";
+
+    fn json_schema() -> Value {
+        json!({
+            "type": "object",
+            "properties": {"t_ns": {"type": "integer"}, "speed_mps": {"type": "number"}},
+        })
+    }
+
+    fn publish_time_ns(&self) -> u64 {
+        self.t_ns
+    }
+
+    fn is_finite(&self) -> bool {
+        self.speed_mps.is_finite()
+    }
+}
+
+#[test]
+fn further_channels_take_one_call_and_are_counted_by_read_all() {
+    let samples = live_samples(4, 51);
+    let path = tmp("extra_channel.mcap");
+    let mut writer = Writer::create(&path).unwrap();
+    let raw = writer.add_channel::<RawImuSample>().unwrap();
+    let hint = writer.add_channel::<Hint>().unwrap();
+    let hints: Vec<Hint> = (0..3)
+        .map(|i| Hint {
+            t_ns: i,
+            speed_mps: 0.1 * i as f64,
+        })
+        .collect();
+    for (s, h) in samples.iter().zip(&hints) {
+        writer.write(raw, s, 5).unwrap();
+        writer.write(hint, h, 5).unwrap();
+    }
+    writer.write(raw, &samples[3], 5).unwrap();
+    writer.finish().unwrap();
+
+    let contents = read_all(&path).unwrap();
+    assert_eq!(contents.raw, samples);
+    assert_eq!(contents.other_messages, 3);
+    let reader = Reader::open(&path).unwrap();
+    let decoded: Vec<Hint> = reader
+        .messages()
+        .unwrap()
+        .filter_map(|m| m.unwrap().decode::<Hint>())
+        .collect::<Result<_, _>>()
+        .unwrap();
+    assert_eq!(decoded, hints);
+}
+
+/// Checks a JSON value against the subset of JSON Schema the crate's schemas use.
+fn conforms(value: &Value, schema: &Value, at: &str) {
+    match schema["type"].as_str().unwrap() {
+        "object" => {
+            let object = value
+                .as_object()
+                .unwrap_or_else(|| panic!("{at}: not an object"));
+            let properties = schema["properties"].as_object().unwrap();
+            let mut names: Vec<&String> = object.keys().collect();
+            let mut declared: Vec<&String> = properties.keys().collect();
+            names.sort();
+            declared.sort();
+            assert_eq!(names, declared, "{at}: fields differ from the schema");
+            let required: Vec<&str> = schema["required"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_str().unwrap())
+                .collect();
+            assert_eq!(
+                required.len(),
+                declared.len(),
+                "{at}: every field is required"
+            );
+            for (name, field) in object {
+                conforms(field, &properties[name], &format!("{at}.{name}"));
+            }
+        }
+        "array" => {
+            let items = value
+                .as_array()
+                .unwrap_or_else(|| panic!("{at}: not an array"));
+            assert_eq!(
+                Some(items.len() as u64),
+                schema["minItems"].as_u64(),
+                "{at}"
+            );
+            assert_eq!(
+                Some(items.len() as u64),
+                schema["maxItems"].as_u64(),
+                "{at}"
+            );
+            for item in items {
+                conforms(item, &schema["items"], at);
+            }
+        }
+        "integer" => {
+            let ok = match (value.as_i64(), value.as_u64()) {
+                (Some(v), _) => {
+                    schema["minimum"].as_i64().is_none_or(|min| v >= min)
+                        && schema["maximum"].as_i64().is_none_or(|max| v <= max)
+                }
+                (None, Some(v)) => schema["maximum"].as_u64().is_some_and(|max| v <= max),
+                _ => false,
+            };
+            assert!(ok, "{at}: {value} is not an integer in the schema's range");
+            assert!(schema["description"].is_string(), "{at}: no description");
+        }
+        "number" => {
+            assert!(value.is_f64(), "{at}: {value} is not a float");
+            assert!(schema["description"].is_string(), "{at}: no description");
+        }
+        "boolean" => assert!(value.is_boolean(), "{at}"),
+        other => panic!("{at}: unexpected schema type {other}"),
+    }
+}
+
+#[test]
+fn schemas_describe_the_json_the_writer_produces() {
+    let mut sample = arbitrary_samples(1, 61)[0];
+    sample.accel_counts = [i16::MIN, i16::MAX, 0];
+    sample.stamps.odometry_ns = u64::MAX;
+    sample.lost_before = u32::MAX;
+    conforms(
+        &serde_json::to_value(sample).unwrap(),
+        &RawImuSample::json_schema(),
+        "RawImuSample",
+    );
+    let truth = any_truth(&[sample], 62)[0];
+    conforms(
+        &serde_json::to_value(truth).unwrap(),
+        &Truth::json_schema(),
+        "Truth",
+    );
+}
