@@ -1,1 +1,16 @@
-//! placeholder
+//! Accelerometer calibration for mems-odometry: the thesis's error models with their
+//! uncertainty, labelled and label-free fitting, static-segment detection, torn-read repair,
+//! calibration files, and the evaluation used by `mems-calibrate` and `mems-eval`.
+//!
+//! Units: models and fits work in g (see [`model`] for why "g" means local gravity); sample
+//! times are nanoseconds, durations seconds (names ending in `_s`); corrected output and
+//! displacement evaluation are in SI (m/s^2, m).
+
+pub mod calibfile;
+pub mod fit;
+pub mod integrate;
+pub mod labelfree;
+pub mod model;
+pub mod repair;
+pub mod segments;
+pub mod window;

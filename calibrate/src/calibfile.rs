@@ -1,0 +1,341 @@
+//! The calibration file (TOML): the model, its parameters and covariance, the local gravity it
+//! refers to, and what it was fitted from.
+//!
+//! Compatibility: every field added after format version 1 must carry `#[serde(default)]` (an
+//! `Option` or a section that defaults to empty), so files written by older versions still load;
+//! unknown keys are ignored, so older readers accept newer files. `format_version` changes only
+//! when a field's *meaning* changes. Sections reserved for later terms ([`NoiseSection`],
+//! [`TemperatureTerms`]) are optional.
+//!
+//! Units: parameters in g (biases) and dimensionless (`S`), see [`crate::model`]; the
+//! covariance in the 12-parameter layout (`param_names`); gravity in m/s^2; temperatures in
+//! degC; residuals in g.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::fit::{CovarianceMode, Weighting};
+use crate::model::{AccelModel, ModelKind, N_PARAMS, PARAM_NAMES, ParamCovariance};
+
+/// Format version written by this code.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// How the parameters were estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FitMethod {
+    /// Labelled linear least squares ([`crate::fit`]).
+    Labelled,
+    /// Label-free Levenberg-Marquardt on `|a| = 1 g` ([`crate::labelfree`]).
+    LabelFree,
+}
+
+/// What the calibration was fitted from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SourceSection {
+    /// The input file, as given on the command line.
+    pub file: String,
+    /// Its kind: "six_position_means", "thesis_csv", "canonical_csv" or "mcap".
+    pub kind: String,
+    /// Number of poses fitted.
+    pub poses: usize,
+    /// Torn-read repairs applied before fitting (raw inputs only).
+    #[serde(default)]
+    pub repaired_samples: usize,
+}
+
+/// Residual statistics of the fit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ResidualSection {
+    /// Root-mean-square residual per axis (labelled) or of the magnitude (label-free, all three
+    /// entries equal), g.
+    pub rms_g: [f64; 3],
+    /// Largest absolute residual, g.
+    pub max_abs_g: f64,
+    /// Degrees of freedom per axis (label-free: the same number three times).
+    pub dof: [usize; 3],
+    /// Weighted sum of squared residuals per axis.
+    pub chi2: [f64; 3],
+    /// Residual per pose, g: `[x, y, z]` (labelled: measured minus predicted) or
+    /// `[|a| - 1, 0, 0]` (label-free).
+    pub per_pose_g: Vec<[f64; 3]>,
+}
+
+/// Noise parameters measured from a session (for later use by the odometry's uncertainty).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct NoiseSection {
+    /// White-noise sigma per sample, g, and the sample rate it refers to.
+    #[serde(default)]
+    pub white_sigma_g: Option<[f64; 3]>,
+    /// Sample rate of `white_sigma_g`, Hz.
+    #[serde(default)]
+    pub sample_rate_hz: Option<f64>,
+}
+
+/// Temperature terms of the model (reserved; empty until a fit estimates them).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct TemperatureTerms {
+    /// Reference temperature of the terms, degC.
+    #[serde(default)]
+    pub reference_c: Option<f64>,
+    /// Bias change per degC, g/degC.
+    #[serde(default)]
+    pub bias_g_per_c: Option<[f64; 3]>,
+}
+
+/// The calibration file's contents.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CalibrationFile {
+    /// File format version ([`FORMAT_VERSION`]).
+    pub format_version: u32,
+    /// Model kind.
+    pub model: ModelKind,
+    /// Estimation method.
+    pub method: FitMethod,
+    /// Weighting of the poses.
+    pub weighting: Weighting,
+    /// How the covariance was obtained.
+    pub covariance_mode: CovarianceMode,
+    /// Local gravity the g units refer to, m/s^2.
+    pub gravity_mps2: f64,
+    /// Bias `b`, g.
+    pub bias_g: [f64; 3],
+    /// `S`, row-major.
+    pub scale: [[f64; 3]; 3],
+    /// Parameter names in covariance order.
+    pub param_names: Vec<String>,
+    /// 12 x 12 parameter covariance, rows in `param_names` order.
+    pub covariance: Vec<Vec<f64>>,
+    /// 1-sigma per parameter (square root of the diagonal).
+    pub sigma: Vec<f64>,
+    /// Die temperature range seen in the fitted data, degC (absent when unknown).
+    #[serde(default)]
+    pub temperature_range_c: Option<[f64; 2]>,
+    /// What was fitted.
+    pub source: SourceSection,
+    /// Residual statistics.
+    pub residuals: ResidualSection,
+    /// Measured noise, when known.
+    #[serde(default)]
+    pub noise: NoiseSection,
+    /// Temperature terms, when fitted.
+    #[serde(default)]
+    pub temperature: TemperatureTerms,
+}
+
+/// Why a calibration file could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibFileError {
+    /// The file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The TOML is malformed or misses a field.
+    #[error("{path}: {source}")]
+    Parse {
+        /// The file.
+        path: String,
+        /// The parser's message (with line and column).
+        source: toml::de::Error,
+    },
+    /// The contents are inconsistent.
+    #[error("{path}: {message}")]
+    Invalid {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+impl CalibrationFile {
+    /// Builds the file contents from a fitted model and its covariance.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        model: &AccelModel,
+        covariance: &ParamCovariance,
+        method: FitMethod,
+        weighting: Weighting,
+        covariance_mode: CovarianceMode,
+        gravity_mps2: f64,
+        source: SourceSection,
+        residuals: ResidualSection,
+    ) -> Self {
+        let s = model.scale();
+        Self {
+            format_version: FORMAT_VERSION,
+            model: model.kind(),
+            method,
+            weighting,
+            covariance_mode,
+            gravity_mps2,
+            bias_g: [model.bias_g().x, model.bias_g().y, model.bias_g().z],
+            scale: std::array::from_fn(|r| std::array::from_fn(|c| s[(r, c)])),
+            param_names: PARAM_NAMES.iter().map(|s| s.to_string()).collect(),
+            covariance: (0..N_PARAMS)
+                .map(|r| (0..N_PARAMS).map(|c| covariance[(r, c)]).collect())
+                .collect(),
+            sigma: (0..N_PARAMS)
+                .map(|k| covariance[(k, k)].max(0.0).sqrt())
+                .collect(),
+            temperature_range_c: None,
+            source,
+            residuals,
+            noise: NoiseSection::default(),
+            temperature: TemperatureTerms::default(),
+        }
+    }
+
+    /// The model described by the file.
+    pub fn accel_model(&self) -> Result<AccelModel, crate::model::ModelError> {
+        let s = nalgebra::Matrix3::from_fn(|r, c| self.scale[r][c]);
+        AccelModel::new(self.model, s, nalgebra::Vector3::from(self.bias_g))
+    }
+
+    /// The parameter covariance as a matrix.
+    pub fn covariance_matrix(&self) -> ParamCovariance {
+        ParamCovariance::from_fn(|r, c| self.covariance[r][c])
+    }
+
+    /// Serialises to TOML text.
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).expect("every field is serialisable")
+    }
+
+    /// Writes the file.
+    pub fn save(&self, path: &Path) -> Result<(), CalibFileError> {
+        std::fs::write(path, self.to_toml()).map_err(|source| CalibFileError::Io {
+            path: path.display().to_string(),
+            source,
+        })
+    }
+
+    /// Reads and checks a file: parses, then checks the version, the covariance shape and that
+    /// the parameters form a valid model of the stated kind.
+    pub fn load(path: &Path) -> Result<Self, CalibFileError> {
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| CalibFileError::Io {
+            path: name.clone(),
+            source,
+        })?;
+        let file: Self = toml::from_str(&text).map_err(|source| CalibFileError::Parse {
+            path: name.clone(),
+            source,
+        })?;
+        let invalid = |message: String| CalibFileError::Invalid {
+            path: name.clone(),
+            message,
+        };
+        if file.format_version > FORMAT_VERSION {
+            return Err(invalid(format!(
+                "format_version {} is newer than this program understands ({FORMAT_VERSION})",
+                file.format_version
+            )));
+        }
+        if file.covariance.len() != N_PARAMS || file.covariance.iter().any(|r| r.len() != N_PARAMS)
+        {
+            return Err(invalid(format!(
+                "covariance must be {N_PARAMS} rows of {N_PARAMS} values"
+            )));
+        }
+        if !(file.gravity_mps2 > 9.7 && file.gravity_mps2 < 9.9) {
+            return Err(invalid(format!(
+                "gravity_mps2 = {} is not a terrestrial gravity",
+                file.gravity_mps2
+            )));
+        }
+        file.accel_model().map_err(|e| invalid(e.to_string()))?;
+        Ok(file)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix3, Vector3};
+
+    fn example() -> CalibrationFile {
+        let s = Matrix3::new(
+            1.0, 0.008, 0.009, -0.006, 1.0004, 0.0106, -0.0102, -0.0044, 1.022,
+        );
+        let m = AccelModel::new(ModelKind::Full, s, Vector3::new(0.0916, 0.0473, -0.2502)).unwrap();
+        let mut cov = ParamCovariance::identity() * 1e-8;
+        cov[(0, 3)] = 2e-9;
+        cov[(3, 0)] = 2e-9;
+        let source = SourceSection {
+            file: "six.csv".into(),
+            kind: "six_position_means".into(),
+            poses: 6,
+            repaired_samples: 0,
+        };
+        let residuals = ResidualSection {
+            rms_g: [1e-3, 2e-3, 3e-3],
+            max_abs_g: 4e-3,
+            dof: [2, 2, 2],
+            chi2: [1e-6, 2e-6, 3e-6],
+            per_pose_g: vec![[1e-3, -1e-3, 0.0]; 6],
+        };
+        CalibrationFile::new(
+            &m,
+            &cov,
+            FitMethod::Labelled,
+            Weighting::Unweighted,
+            CovarianceMode::ResidualScaled,
+            9.797,
+            source,
+            residuals,
+        )
+    }
+
+    #[test]
+    fn round_trips_through_toml() {
+        let f = example();
+        let back: CalibrationFile = toml::from_str(&f.to_toml()).unwrap();
+        assert_eq!(back, f);
+        assert_eq!(back.accel_model().unwrap(), f.accel_model().unwrap());
+        assert_eq!(back.covariance_matrix()[(0, 3)], 2e-9);
+    }
+
+    #[test]
+    fn older_files_without_optional_sections_load_and_unknown_keys_are_ignored() {
+        let mut value: toml::Table = toml::from_str(&example().to_toml()).unwrap();
+        value.remove("noise");
+        value.remove("temperature");
+        value.remove("temperature_range_c");
+        value.insert("future_term".into(), toml::Value::Float(1.0));
+        let text = toml::to_string(&value).unwrap();
+        let back: CalibrationFile = toml::from_str(&text).unwrap();
+        assert_eq!(back.noise, NoiseSection::default());
+        assert_eq!(back.temperature_range_c, None);
+    }
+
+    #[test]
+    fn load_names_the_file_and_the_problem() {
+        let dir = std::env::temp_dir().join(format!("calibfile-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("bad.toml");
+        let mut f = example();
+        f.covariance.pop();
+        std::fs::write(&path, f.to_toml()).unwrap();
+        let err = CalibrationFile::load(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("bad.toml") && err.contains("covariance"),
+            "{err}"
+        );
+        std::fs::write(&path, "model = \"full\"\n").unwrap();
+        let err = CalibrationFile::load(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("bad.toml") && err.contains("missing field"),
+            "{err}"
+        );
+        let good = dir.join("good.toml");
+        example().save(&good).unwrap();
+        assert_eq!(CalibrationFile::load(&good).unwrap(), example());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
