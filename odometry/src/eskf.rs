@@ -387,7 +387,7 @@ mod tests {
         let bias = Vector3::new(0.03, -0.02, 0.0);
         let up_s = Vector3::new(0.0, 0.0, G);
         let dt = 0.002;
-        let mut run = |turn: bool| {
+        let run = |turn: bool| {
             let (x, cov) = align(
                 up_s + bias,
                 Vector3::zeros(),

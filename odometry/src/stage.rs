@@ -194,27 +194,10 @@ impl OdometryStage {
             });
         }
 
-        let Some(kf) = self.kf.as_mut() else {
+        if self.kf.is_none() {
             self.accumulate_alignment(t_ns, &m, rest);
             emit(&self.unaligned_state(s));
             return Ok(());
-        };
-
-        let dt = (t_ns - prev.map_or(t_ns, |p| p.0)) as f64 * 1e-9;
-        let p_before = kf.x.p;
-        kf.predict(m, dt);
-        let moved = (kf.x.p - p_before).xy().norm();
-        if rest {
-            let (p0, v0) = (kf.x.p, kf.x.v);
-            kf.zero_velocity(self.cfg.zupt_sigma_mps);
-            let gyro_sigma = self.cfg.noise.gyro_noise_density / dt.sqrt();
-            kf.zero_rate(gyro_sigma);
-            if let Some(pending) = self.pending.as_mut() {
-                pending.dp += kf.x.p - p0;
-                pending.dv += kf.x.v - v0;
-            }
-        } else {
-            self.distance_m += moved;
         }
 
         // Motion interval bookkeeping: a rest after motion opens a pending revision; motion
@@ -238,6 +221,24 @@ impl OdometryStage {
             }
         }
         self.at_rest = rest;
+
+        let kf = self.kf.as_mut().expect("aligned above");
+        let dt = (t_ns - prev.map_or(t_ns, |p| p.0)) as f64 * 1e-9;
+        let p_before = kf.x.p;
+        kf.predict(m, dt);
+        let moved = (kf.x.p - p_before).xy().norm();
+        if rest {
+            let (p0, v0) = (kf.x.p, kf.x.v);
+            kf.zero_velocity(self.cfg.zupt_sigma_mps);
+            let gyro_sigma = self.cfg.noise.gyro_noise_density / dt.sqrt();
+            kf.zero_rate(gyro_sigma);
+            if let Some(pending) = self.pending.as_mut() {
+                pending.dp += kf.x.p - p0;
+                pending.dv += kf.x.v - v0;
+            }
+        } else {
+            self.distance_m += moved;
+        }
 
         let state = self.state(s, rest);
         if !rest && self.motion_start_ns.is_some() {
