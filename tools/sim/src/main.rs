@@ -1,0 +1,439 @@
+//! `mems-sim`: writes a simulated MPU-9250 session (quantized raw samples plus ground truth) to
+//! the canonical CSV or MCAP. See `mems-sim --help`.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use ipc_types::RawImuSample;
+use ipc_types::units::{AccelRange, GyroRange, STANDARD_GRAVITY_MPS2};
+use mems_sim::SimSensor;
+use mems_sim::adc::quantize_sample;
+use mems_sim::model::SensorModel;
+use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
+use mems_sim::vibration::VibrationModel;
+use nalgebra::{UnitQuaternion, Vector3};
+use recording::Truth;
+
+/// Simulated MPU-9250 sessions with ground truth, written as canonical CSV (truth columns) or
+/// MCAP (truth channel `mems/sim/truth`).
+#[derive(Parser)]
+#[command(name = "mems-sim", version)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// The thesis's six-position session: +z, -z, +y, -y, +x, -x up, rotated in between.
+    SixPosition {
+        #[command(flatten)]
+        poses: PoseArgs,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// N well-spread random orientations, rotated in between.
+    Orientations {
+        /// Number of orientations.
+        #[arg(long)]
+        n: usize,
+        #[command(flatten)]
+        poses: PoseArgs,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// A long static run, lying level (z up) unless tilted.
+    Static {
+        /// Length, s.
+        #[arg(long)]
+        duration: f64,
+        /// Attitude as roll,pitch,yaw in degrees (sensor to navigation frame).
+        #[arg(long, value_name = "R,P,Y", value_parser = parse_triple, default_value = "0,0,0")]
+        attitude_deg: [f64; 3],
+        #[command(flatten)]
+        common: Common,
+    },
+    /// A ground robot's drive: accelerate, cruise, turn, brake, rest 1-30 s, repeat.
+    Drive {
+        /// Length, s.
+        #[arg(long)]
+        duration: f64,
+        /// Vibration level while moving, relative to 0.1 m/s^2 and 0.5 deg/s RMS per axis at
+        /// 1 m/s (0 turns it off).
+        #[arg(long, default_value_t = 1.0)]
+        vibration: f64,
+        /// Turns between the legs of a motion.
+        #[arg(long, value_enum, default_value_t = OnOff::Off)]
+        turns: OnOff,
+        /// In-place turns before half of the motions.
+        #[arg(long, value_enum, default_value_t = OnOff::Off)]
+        in_place_turns: OnOff,
+        /// Rest at the start, s.
+        #[arg(long, default_value_t = 10.0)]
+        initial_rest: f64,
+        /// IMU mounting on the robot as roll,pitch,yaw in degrees (sensor to body frame).
+        #[arg(long, value_name = "R,P,Y", value_parser = parse_triple, default_value = "0,0,0")]
+        mount_deg: [f64; 3],
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Prints a preset's error model as TOML (edit it and pass it back with --model).
+    PrintModel {
+        /// The preset to print.
+        #[arg(long, value_enum, default_value_t = Preset::Calibrated)]
+        preset: Preset,
+    },
+}
+
+/// Options of every scenario.
+#[derive(Args)]
+struct Common {
+    /// Output file: `.csv` (canonical CSV with truth columns) or `.mcap`.
+    #[arg(long)]
+    out: PathBuf,
+    /// Seed of every random choice (scenario, sensor, vibration).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output data rate, Hz.
+    #[arg(long, default_value_t = 1000.0)]
+    rate: f64,
+    /// Error model preset.
+    #[arg(long, value_enum, default_value_t = Preset::Calibrated)]
+    preset: Preset,
+    /// Error model from a TOML file (see `print-model`); replaces --preset.
+    #[arg(long, conflicts_with = "preset")]
+    model: Option<PathBuf>,
+    /// Accelerometer white-noise density, ug/sqrt(Hz), all axes (overrides the model's).
+    #[arg(long)]
+    accel_noise_ug: Option<f64>,
+    /// Gyroscope white-noise density, deg/s/sqrt(Hz), all axes (overrides the model's).
+    #[arg(long)]
+    gyro_noise_dps: Option<f64>,
+    /// Accelerometer full-scale range, g.
+    #[arg(long, value_enum, default_value_t = AccelFullScale::G2)]
+    accel_range: AccelFullScale,
+    /// Gyroscope full-scale range, deg/s.
+    #[arg(long, value_enum, default_value_t = GyroFullScale::Dps250)]
+    gyro_range: GyroFullScale,
+    /// Local gravity, m/s^2.
+    #[arg(long, default_value_t = STANDARD_GRAVITY_MPS2)]
+    gravity: f64,
+}
+
+/// Timing of pose sessions.
+#[derive(Args)]
+struct PoseArgs {
+    /// How long each pose is held, s (default 30 for six-position, 10 for orientations).
+    #[arg(long)]
+    hold: Option<f64>,
+    /// How long each rotation between poses takes, s.
+    #[arg(long, default_value_t = 4.0)]
+    rotate: f64,
+    /// 1-sigma random tilt of each placement, degrees.
+    #[arg(long, default_value_t = 0.0)]
+    tilt_deg: f64,
+}
+
+/// Accelerometer full-scale range on the command line, in g.
+#[derive(Clone, Copy, ValueEnum)]
+enum AccelFullScale {
+    #[value(name = "2")]
+    G2,
+    #[value(name = "4")]
+    G4,
+    #[value(name = "8")]
+    G8,
+    #[value(name = "16")]
+    G16,
+}
+
+/// Gyroscope full-scale range on the command line, in deg/s.
+#[derive(Clone, Copy, ValueEnum)]
+enum GyroFullScale {
+    #[value(name = "250")]
+    Dps250,
+    #[value(name = "500")]
+    Dps500,
+    #[value(name = "1000")]
+    Dps1000,
+    #[value(name = "2000")]
+    Dps2000,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum OnOff {
+    On,
+    Off,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Preset {
+    /// No errors at all.
+    Ideal,
+    /// An uncalibrated part with datasheet-level errors.
+    Datasheet,
+    /// The residual errors after this project's accelerometer calibration.
+    Calibrated,
+}
+
+impl Preset {
+    fn model(self) -> SensorModel {
+        match self {
+            Self::Ideal => SensorModel::ideal(),
+            Self::Datasheet => SensorModel::mpu9250_datasheet(),
+            Self::Calibrated => SensorModel::mpu9250_calibrated(),
+        }
+    }
+}
+
+/// Parses `a,b,c` into three numbers.
+fn parse_triple(s: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<&str> = s.split(',').collect();
+    let [a, b, c] = parts.as_slice() else {
+        return Err(format!("expected three comma-separated numbers, got {s:?}"));
+    };
+    let num = |x: &str| {
+        x.trim()
+            .parse::<f64>()
+            .map_err(|e| format!("{x:?} in {s:?}: {e}"))
+    };
+    Ok([num(a)?, num(b)?, num(c)?])
+}
+
+/// The attitude for roll, pitch, yaw in degrees.
+fn rotation_deg([r, p, y]: [f64; 3]) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_euler_angles(r.to_radians(), p.to_radians(), y.to_radians())
+}
+
+impl Common {
+    /// The error model: the preset or the TOML file, with the noise overrides applied.
+    fn sensor_model(&self) -> Result<SensorModel> {
+        let mut model = match &self.model {
+            Some(path) => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("reading the model file {}", path.display()))?;
+                toml::from_str(&text)
+                    .with_context(|| format!("parsing the model file {}", path.display()))?
+            }
+            None => self.preset.model(),
+        };
+        if let Some(ug) = self.accel_noise_ug {
+            model.accel.noise_density = [ug * 1e-6; 3];
+        }
+        if let Some(dps) = self.gyro_noise_dps {
+            model.gyro.noise_density = [dps; 3];
+        }
+        model.validate().with_context(|| match &self.model {
+            Some(path) => format!("in the model file {}", path.display()),
+            None => "in the model".into(),
+        })?;
+        Ok(model)
+    }
+
+    fn ranges(&self) -> (AccelRange, GyroRange) {
+        let accel = match self.accel_range {
+            AccelFullScale::G2 => AccelRange::G2,
+            AccelFullScale::G4 => AccelRange::G4,
+            AccelFullScale::G8 => AccelRange::G8,
+            AccelFullScale::G16 => AccelRange::G16,
+        };
+        let gyro = match self.gyro_range {
+            GyroFullScale::Dps250 => GyroRange::Dps250,
+            GyroFullScale::Dps500 => GyroRange::Dps500,
+            GyroFullScale::Dps1000 => GyroRange::Dps1000,
+            GyroFullScale::Dps2000 => GyroRange::Dps2000,
+        };
+        (accel, gyro)
+    }
+}
+
+/// Where samples go: MCAP is written as it is produced; the canonical CSV writer takes the
+/// whole session at once.
+enum Sink {
+    Csv {
+        path: PathBuf,
+        samples: Vec<RawImuSample>,
+        truth: Vec<Truth>,
+    },
+    Mcap {
+        writer: Box<recording::mcap::Writer>,
+        raw: recording::mcap::Channel<RawImuSample>,
+        truth: recording::mcap::Channel<Truth>,
+    },
+}
+
+impl Sink {
+    fn create(path: &Path) -> Result<Self> {
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+        match ext.to_ascii_lowercase().as_str() {
+            "csv" => Ok(Self::Csv {
+                path: path.to_path_buf(),
+                samples: Vec::new(),
+                truth: Vec::new(),
+            }),
+            "mcap" => {
+                let mut writer = recording::mcap::Writer::create(path)?;
+                let raw = writer.add_channel()?;
+                let truth = writer.add_channel()?;
+                Ok(Self::Mcap {
+                    writer: Box::new(writer),
+                    raw,
+                    truth,
+                })
+            }
+            _ => bail!(
+                "--out {}: the file name must end in .csv or .mcap",
+                path.display()
+            ),
+        }
+    }
+
+    fn push(&mut self, sample: RawImuSample, truth: Truth) -> Result<()> {
+        match self {
+            Self::Csv {
+                samples, truth: t, ..
+            } => {
+                samples.push(sample);
+                t.push(truth);
+            }
+            Self::Mcap {
+                writer,
+                raw,
+                truth: channel,
+            } => {
+                let time = sample.stamps.sample_ns;
+                writer.write(*raw, &sample, time)?;
+                writer.write(*channel, &truth, time)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn finish(self) -> Result<()> {
+        match self {
+            Self::Csv {
+                path,
+                samples,
+                truth,
+            } => recording::csv::write_raw(&path, &samples, Some(&truth))?,
+            Self::Mcap { writer, .. } => writer.finish()?,
+        }
+        Ok(())
+    }
+}
+
+/// Samples `scenario` from 0 to its duration at the common rate, quantizes, and writes.
+fn simulate(scenario: impl Scenario, vibration: &VibrationModel, common: &Common) -> Result<()> {
+    let rate = common.rate;
+    if !(rate.is_finite() && (1.0..=32_000.0).contains(&rate)) {
+        bail!("--rate {rate}: the output rate must be between 1 and 32000 Hz");
+    }
+    let model = common.sensor_model()?;
+    let (accel_range, gyro_range) = common.ranges();
+    let duration = scenario.duration_s();
+    let count = (duration * rate).floor() as u64 + 1;
+    let mut sim = SimSensor::new(scenario, &model, vibration, common.seed)?;
+    let mut sink = Sink::create(&common.out)?;
+    let (mut distance, mut saturated, mut rest) = (0.0, 0u64, 0u64);
+    let mut last: Option<Vector3<f64>> = None;
+    for k in 0..count {
+        let t_s = k as f64 / rate;
+        let (analog, truth) = sim.sample_with_truth(t_s, rate);
+        let raw = quantize_sample(&analog, accel_range, gyro_range, ns_from_s(t_s), k);
+        let p = Vector3::from(truth.position_m);
+        if let Some(q) = last {
+            distance += (p - q).norm();
+        }
+        last = Some(p);
+        saturated += u64::from(raw.flags & ipc_types::raw_flags::SATURATED != 0);
+        rest += u64::from(truth.at_rest);
+        sink.push(raw, truth)?;
+    }
+    sink.finish()
+        .with_context(|| format!("writing {}", common.out.display()))?;
+    println!(
+        "{}: {count} samples over {duration} s at {rate} Hz, {distance:.3} m travelled, \
+         {:.1}% at rest, {saturated} saturated",
+        common.out.display(),
+        100.0 * rest as f64 / count as f64
+    );
+    Ok(())
+}
+
+fn pose_params(args: &PoseArgs, default_hold: f64, common: &Common) -> PoseParams {
+    PoseParams {
+        rotate_s: args.rotate,
+        gravity_mps2: common.gravity,
+        placement_tilt_std_deg: args.tilt_deg,
+        ..PoseParams::new(args.hold.unwrap_or(default_hold))
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    let still = VibrationModel::moderate(0.0);
+    match cli.command {
+        Command::SixPosition { poses, common } => {
+            let params = pose_params(&poses, 30.0, &common);
+            simulate(
+                PoseSession::six_position(&params, common.seed)?,
+                &still,
+                &common,
+            )
+        }
+        Command::Orientations { n, poses, common } => {
+            let params = pose_params(&poses, 10.0, &common);
+            simulate(
+                PoseSession::orientations(n, &params, common.seed)?,
+                &still,
+                &common,
+            )
+        }
+        Command::Static {
+            duration,
+            attitude_deg,
+            common,
+        } => {
+            let s = PoseSession::static_pose(rotation_deg(attitude_deg), duration, common.gravity)?;
+            simulate(s, &still, &common)
+        }
+        Command::Drive {
+            duration,
+            vibration,
+            turns,
+            in_place_turns,
+            initial_rest,
+            mount_deg,
+            common,
+        } => {
+            let params = DriveParams {
+                initial_rest_s: initial_rest,
+                turns: turns == OnOff::On,
+                in_place_turns: in_place_turns == OnOff::On,
+                mounting: rotation_deg(mount_deg),
+                gravity_mps2: common.gravity,
+                ..DriveParams::new(duration)
+            };
+            if !(vibration.is_finite() && vibration >= 0.0) {
+                bail!("--vibration {vibration}: the level must be finite and >= 0");
+            }
+            let drive = Drive::new(&params, common.seed)?;
+            simulate(drive, &VibrationModel::moderate(vibration), &common)
+        }
+        Command::PrintModel { preset } => {
+            print!("{}", toml::to_string(&preset.model())?);
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("mems-sim: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
