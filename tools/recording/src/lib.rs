@@ -10,6 +10,8 @@
 //! Units follow `ipc-types`: raw samples in g, deg/s and degC in the sensor frame, times in
 //! integer nanoseconds.
 
+#![warn(missing_docs)]
+
 pub mod csv;
 mod error;
 pub mod mcap;
