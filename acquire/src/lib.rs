@@ -1,1 +1,9 @@
-//! placeholder
+//! MPU-9250 acquisition: a small driver over `embedded_hal::i2c::I2c` with FIFO-based burst
+//! reads and sample-time reconstruction ([`driver`]), the register map it is written against
+//! ([`registers`]), a register-level simulated MPU-9250 behind the same trait ([`sim`]), and the
+//! clocks both run on ([`clock`]).
+
+pub mod clock;
+pub mod driver;
+pub mod registers;
+pub mod sim;

@@ -1,0 +1,710 @@
+//! A small MPU-9250 driver over `embedded_hal::i2c::I2c`, written against the register map
+//! RM-MPU-9250A-00 rev 1.6 (see [`crate::registers`]).
+//!
+//! Acquisition goes through the FIFO only, with burst reads only: INT_STATUS (one byte, for
+//! FIFO_OFLOW_INT), FIFO_COUNTH/L (one two-byte transaction), then whole frames from FIFO_R_W in
+//! one transaction. No sample is ever assembled from two transactions, so no sample can be torn.
+//!
+//! The FIFO runs with CONFIG.FIFO_MODE = 1 (a full FIFO drops new data): after an overflow the
+//! oldest frames in the FIFO are still aligned and contiguous with what was read before, so
+//! they are delivered; the FIFO is then reset and the next sample is flagged
+//! (`FIFO_OVERFLOW | GAP_BEFORE`, with the number of samples lost estimated from time). With
+//! FIFO_MODE = 0 an overflow overwrites the oldest bytes and misaligns every frame.
+//!
+//! Register transactions (status, count, configuration) that fail are retried; a FIFO data
+//! read that fails is not (the bytes it clocked out are gone), the FIFO is reset instead and
+//! the gap flagged. Errors that persist through the retries, or a FIFO that stops filling,
+//! re-initialise the device (probe, reset, configure) from [`Mpu9250::read_samples`]; if that
+//! fails too, the call returns the error and the next call tries again.
+//!
+//! Sample times come from the `timing` submodule: reconstructed from the configured output rate and the
+//! FIFO counts, anchored to the caller's clock (`CLOCK_MONOTONIC` in production, a virtual clock
+//! in tests). The steady-state read loop allocates nothing: frames are read into a buffer
+//! inside the driver and decoded into the caller's slice.
+
+mod timing;
+
+use embedded_hal::i2c::{Error as _, ErrorKind, I2c, NoAcknowledgeSource};
+use ipc_types::RawImuSample;
+use ipc_types::raw_flags;
+use ipc_types::units::{AccelRange, GyroRange, is_saturated, temp_c_from_counts};
+
+use crate::clock::Clock;
+use crate::registers as reg;
+use timing::SampleTimer;
+
+/// Digital low-pass filter setting for the gyro/temperature (CONFIG.DLPF_CFG) and the
+/// accelerometer (ACCEL_CONFIG2.A_DLPF_CFG); both get the same value. The names give the gyro
+/// bandwidth; the accelerometer's is 218, 99, 45, 21, 10 and 5 Hz respectively. All of these
+/// run the sensors at a 1 kHz internal rate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Dlpf {
+    /// Gyro 184 Hz, accel 218.1 Hz.
+    Hz184 = 1,
+    /// Gyro 92 Hz, accel 99 Hz.
+    Hz92 = 2,
+    /// Gyro 41 Hz, accel 44.8 Hz.
+    Hz41 = 3,
+    /// Gyro 20 Hz, accel 21.2 Hz.
+    Hz20 = 4,
+    /// Gyro 10 Hz, accel 10.2 Hz.
+    Hz10 = 5,
+    /// Gyro 5 Hz, accel 5.05 Hz.
+    Hz5 = 6,
+}
+
+/// What the FIFO collects and how fast.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutputMode {
+    /// Accelerometer only, 4 kHz, its DLPF bypassed (ACCEL_CONFIG2.accel_fchoice_b = 1,
+    /// 1.13 kHz bandwidth); 6-byte FIFO frames; gyros in standby.
+    Accel4kHz,
+    /// Accelerometer, temperature and gyro through the DLPF at 1 kHz / (1 + `divider`);
+    /// 14-byte FIFO frames.
+    Imu {
+        /// The DLPF setting.
+        dlpf: Dlpf,
+        /// SMPLRT_DIV.
+        divider: u8,
+    },
+}
+
+/// Driver configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Config {
+    /// Accelerometer full scale.
+    pub accel_range: AccelRange,
+    /// Gyro full scale.
+    pub gyro_range: GyroRange,
+    /// FIFO contents and output rate.
+    pub mode: OutputMode,
+    /// In [`OutputMode::Accel4kHz`] (no temperature in the FIFO): read TEMP_OUT this often, ns,
+    /// and attach the latest value to the samples (`TEMP_VALID`); 0 never reads it.
+    pub temp_interval_ns: u64,
+}
+
+impl Default for Config {
+    /// +-2 g, +-250 deg/s, 4 kHz accelerometer-only, temperature every 100 ms.
+    fn default() -> Self {
+        Self {
+            accel_range: AccelRange::G2,
+            gyro_range: GyroRange::Dps250,
+            mode: OutputMode::Accel4kHz,
+            temp_interval_ns: 100_000_000,
+        }
+    }
+}
+
+impl Config {
+    /// Output (FIFO) rate, Hz.
+    pub fn output_rate_hz(&self) -> f64 {
+        match self.mode {
+            OutputMode::Accel4kHz => reg::ACCEL_BYPASS_RATE_HZ,
+            OutputMode::Imu { divider, .. } => {
+                reg::INTERNAL_RATE_DLPF_HZ / (1.0 + f64::from(divider))
+            }
+        }
+    }
+
+    /// Bytes per FIFO frame.
+    pub fn frame_len(&self) -> usize {
+        match self.mode {
+            OutputMode::Accel4kHz => 6,
+            OutputMode::Imu { .. } => reg::SENSOR_DATA_LEN,
+        }
+    }
+
+    /// The configuration registers and their values, in the order they are written: power,
+    /// filters and rate, ranges, FIFO contents, then USER_CTRL (FIFO enabled and reset).
+    pub fn register_values(&self) -> [(u8, u8); 9] {
+        let (pwr2, dlpf_cfg, div, accel_cfg2, fifo_en) = match self.mode {
+            OutputMode::Accel4kHz => (
+                reg::PWR_MGMT_2_DISABLE_GYRO,
+                Dlpf::Hz184 as u8,
+                0,
+                reg::ACCEL_FCHOICE_B,
+                reg::FIFO_EN_ACCEL,
+            ),
+            OutputMode::Imu { dlpf, divider } => (
+                0,
+                dlpf as u8,
+                divider,
+                dlpf as u8,
+                reg::FIFO_EN_ACCEL
+                    | reg::FIFO_EN_TEMP
+                    | reg::FIFO_EN_GYRO_X
+                    | reg::FIFO_EN_GYRO_Y
+                    | reg::FIFO_EN_GYRO_Z,
+            ),
+        };
+        [
+            (reg::PWR_MGMT_1, reg::CLKSEL_AUTO),
+            (reg::PWR_MGMT_2, pwr2),
+            (reg::CONFIG, reg::CONFIG_FIFO_MODE | dlpf_cfg),
+            (reg::SMPLRT_DIV, div),
+            (
+                reg::GYRO_CONFIG,
+                (self.gyro_range as u8) << reg::GYRO_FS_SEL_SHIFT,
+            ),
+            (
+                reg::ACCEL_CONFIG,
+                (self.accel_range as u8) << reg::ACCEL_FS_SEL_SHIFT,
+            ),
+            (reg::ACCEL_CONFIG2, accel_cfg2),
+            (reg::FIFO_EN, fifo_en),
+            (
+                reg::USER_CTRL,
+                reg::USER_CTRL_FIFO_EN | reg::USER_CTRL_FIFO_RST,
+            ),
+        ]
+    }
+}
+
+/// Driver errors. Every variant names the bus (the caller's label, e.g. "/dev/i2c-1" or "sim")
+/// and the device address.
+#[derive(Debug, thiserror::Error)]
+pub enum Error<E: embedded_hal::i2c::Error> {
+    /// Nothing acknowledges the address.
+    #[error(
+        "no device answers at address {address:#04x} on {bus} (is the MPU-9250 connected, and \
+         AD0 wired for this address?): {error:?}"
+    )]
+    Absent {
+        /// Bus label.
+        bus: String,
+        /// 7-bit address.
+        address: u8,
+        /// The error of the last attempt.
+        error: E,
+    },
+    /// A device answers but is not an MPU-9250.
+    #[error(
+        "the device at address {address:#04x} on {bus} is not an MPU-9250: WHO_AM_I (0x75) \
+         reads {found:#04x}, expected {:#04x}",
+        reg::WHO_AM_I_VALUE
+    )]
+    WrongDevice {
+        /// Bus label.
+        bus: String,
+        /// 7-bit address.
+        address: u8,
+        /// The WHO_AM_I value read.
+        found: u8,
+    },
+    /// A transaction kept failing through the retries.
+    #[error("I2C error on {bus} at address {address:#04x} while {during}: {error:?}")]
+    Bus {
+        /// Bus label.
+        bus: String,
+        /// 7-bit address.
+        address: u8,
+        /// What the driver was doing.
+        during: &'static str,
+        /// The error of the last attempt.
+        error: E,
+    },
+    /// A configuration register does not read back what was written.
+    #[error(
+        "register {register:#04x} of the MPU-9250 at address {address:#04x} on {bus} reads \
+         {read:#04x} after writing {wrote:#04x}"
+    )]
+    Verify {
+        /// Bus label.
+        bus: String,
+        /// 7-bit address.
+        address: u8,
+        /// Register address.
+        register: u8,
+        /// Value written.
+        wrote: u8,
+        /// Value read back.
+        read: u8,
+    },
+    /// [`Mpu9250::read_samples`] was called before [`Mpu9250::init`].
+    #[error("the MPU-9250 at address {address:#04x} on {bus} was never initialised")]
+    NotInitialised {
+        /// Bus label.
+        bus: String,
+        /// 7-bit address.
+        address: u8,
+    },
+}
+
+/// Counters of what the driver saw and did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct DriverStats {
+    /// Samples delivered.
+    pub samples: u64,
+    /// Calls of [`Mpu9250::read_samples`] that reached the FIFO.
+    pub reads: u64,
+    /// FIFO overflows seen (INT_STATUS.FIFO_OFLOW_INT).
+    pub overflows: u64,
+    /// Short reads: a FIFO count that is not a whole number of frames (bytes lost, frames
+    /// misaligned), or a FIFO data read that failed part-way.
+    pub short_reads: u64,
+    /// Gaps flagged on delivered samples.
+    pub gaps: u64,
+    /// Samples estimated lost in those gaps.
+    pub lost_samples: u64,
+    /// Failed transactions (each attempt counts).
+    pub bus_errors: u64,
+    /// Transactions retried after a failure.
+    pub retries: u64,
+    /// FIFO resets after an overflow, a short read or a failed FIFO read.
+    pub fifo_resets: u64,
+    /// Times the FIFO stopped filling for longer than the stall timeout.
+    pub stalls: u64,
+    /// Re-initialisations (successful or not) after persistent errors or stalls.
+    pub reinits: u64,
+}
+
+/// Attempts per register transaction (the first plus retries).
+const ATTEMPTS: u32 = 3;
+/// A FIFO_COUNT read that took longer than this, ns (about 120 us of bus time at 400 kHz),
+/// was delayed by the host (preemption, bus contention): its observation of the sample phase
+/// is not used for timing.
+const COUNT_READ_MAX_NS: u64 = 1_000_000;
+/// The FIFO must receive data within this many output periods (and at least
+/// [`STALL_MIN_NS`]) of the last sample, or the device is considered stopped.
+const STALL_PERIODS: f64 = 50.0;
+/// Lower bound of the stall timeout, ns.
+const STALL_MIN_NS: f64 = 50e6;
+
+/// An MPU-9250 on an I2C bus.
+pub struct Mpu9250<I2C: I2c> {
+    i2c: I2C,
+    bus: String,
+    address: u8,
+    config: Option<Config>,
+    needs_init: bool,
+    buf: [u8; reg::FIFO_SIZE],
+    timer: SampleTimer,
+    /// Flags and lost count for the next delivered sample.
+    pending_flags: u16,
+    /// Samples known to be lost (discarded by the driver) before the next delivered sample.
+    pending_discarded: u64,
+    seq: u64,
+    temp_counts: Option<i16>,
+    next_temp_ns: u64,
+    last_data_ns: Option<u64>,
+    stats: DriverStats,
+}
+
+impl<I2C: I2c> Mpu9250<I2C> {
+    /// A driver for the device at `address` on `i2c`; `bus` names the bus in errors (e.g.
+    /// "/dev/i2c-1" or "sim"). Nothing is sent until [`Mpu9250::probe`] or [`Mpu9250::init`].
+    pub fn new(i2c: I2C, bus: impl Into<String>, address: u8) -> Self {
+        Self {
+            i2c,
+            bus: bus.into(),
+            address,
+            config: None,
+            needs_init: true,
+            buf: [0; reg::FIFO_SIZE],
+            timer: SampleTimer::new(1e9 / reg::ACCEL_BYPASS_RATE_HZ),
+            pending_flags: 0,
+            pending_discarded: 0,
+            seq: 0,
+            temp_counts: None,
+            next_temp_ns: 0,
+            last_data_ns: None,
+            stats: DriverStats::default(),
+        }
+    }
+
+    /// The bus label given to [`Mpu9250::new`].
+    pub fn bus_label(&self) -> &str {
+        &self.bus
+    }
+
+    /// The device address.
+    pub fn address(&self) -> u8 {
+        self.address
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> DriverStats {
+        self.stats
+    }
+
+    /// The configuration last applied by [`Mpu9250::init`].
+    pub fn config(&self) -> Option<Config> {
+        self.config
+    }
+
+    /// The bus, e.g. to reach a simulated device's controls.
+    pub fn bus_mut(&mut self) -> &mut I2C {
+        &mut self.i2c
+    }
+
+    /// Gives the bus back.
+    pub fn release(self) -> I2C {
+        self.i2c
+    }
+
+    /// Checks that an MPU-9250 answers: reads WHO_AM_I and expects 0x71.
+    pub fn probe(&mut self) -> Result<(), Error<I2C::Error>> {
+        let mut who = [0u8; 1];
+        let address = self.address;
+        let read = attempt(
+            &mut self.i2c,
+            &mut self.stats,
+            |_| true,
+            |i2c| i2c.write_read(address, &[reg::WHO_AM_I], &mut who),
+        );
+        match read {
+            Err(error) if is_address_nack(error.kind()) => Err(Error::Absent {
+                bus: self.bus.clone(),
+                address,
+                error,
+            }),
+            Err(error) => Err(self.bus_error("reading WHO_AM_I", error)),
+            Ok(()) if who[0] != reg::WHO_AM_I_VALUE => Err(Error::WrongDevice {
+                bus: self.bus.clone(),
+                address,
+                found: who[0],
+            }),
+            Ok(()) => Ok(()),
+        }
+    }
+
+    /// Resets every register to its default (PWR_MGMT_1.H_RESET) and waits the maximum
+    /// start-up time (100 ms) on `clock`.
+    pub fn reset(&mut self, clock: &impl Clock) -> Result<(), Error<I2C::Error>> {
+        self.write_register(reg::PWR_MGMT_1, reg::PWR_MGMT_1_H_RESET, "resetting")?;
+        clock.sleep_ns(reg::STARTUP_MAX_NS);
+        Ok(())
+    }
+
+    /// Probes, resets and configures the device, then starts the FIFO. Sample times start
+    /// afresh (the first sample after this is not flagged; later re-initialisations flag a gap).
+    pub fn init(&mut self, config: Config, clock: &impl Clock) -> Result<(), Error<I2C::Error>> {
+        self.probe()?;
+        self.reset(clock)?;
+        self.probe()?;
+        self.configure(config, clock)?;
+        self.config = Some(config);
+        self.needs_init = false;
+        Ok(())
+    }
+
+    /// Writes and verifies the configuration registers (the FIFO is reset and enabled last).
+    fn configure(&mut self, config: Config, clock: &impl Clock) -> Result<(), Error<I2C::Error>> {
+        let values = config.register_values();
+        for (register, value) in values {
+            self.write_register(register, value, "configuring")?;
+        }
+        for (register, wrote) in values {
+            // FIFO_RST clears itself.
+            let expected = if register == reg::USER_CTRL {
+                wrote & !reg::USER_CTRL_FIFO_RST
+            } else {
+                wrote
+            };
+            let mut read = [0u8; 1];
+            self.read_registers(register, &mut read, "verifying the configuration")?;
+            if read[0] != expected {
+                return Err(Error::Verify {
+                    bus: self.bus.clone(),
+                    address: self.address,
+                    register,
+                    wrote: expected,
+                    read: read[0],
+                });
+            }
+        }
+        self.timer.set_period(1e9 / config.output_rate_hz());
+        self.temp_counts = None;
+        self.next_temp_ns = clock.now_ns();
+        self.last_data_ns = Some(clock.now_ns());
+        Ok(())
+    }
+
+    /// Reads the die temperature (TEMP_OUT_H/L in one transaction), degC.
+    pub fn read_temperature(&mut self) -> Result<f64, Error<I2C::Error>> {
+        Ok(temp_c_from_counts(self.read_temp_counts()?))
+    }
+
+    fn read_temp_counts(&mut self) -> Result<i16, Error<I2C::Error>> {
+        let mut b = [0u8; 2];
+        self.read_registers(reg::TEMP_OUT_H, &mut b, "reading TEMP_OUT")?;
+        Ok(i16::from_be_bytes(b))
+    }
+
+    /// Reads the samples waiting in the FIFO into `out` (at most `out.len()`), oldest first,
+    /// and returns how many. `clock` must be the clock the sample times are wanted on.
+    ///
+    /// Persistent bus errors or a stalled FIFO re-initialise the device here (the next sample
+    /// is flagged `GAP_BEFORE`); the error is returned only if re-initialisation fails, and the
+    /// next call tries again.
+    pub fn read_samples(
+        &mut self,
+        clock: &impl Clock,
+        out: &mut [RawImuSample],
+    ) -> Result<usize, Error<I2C::Error>> {
+        let config = self.config.ok_or_else(|| Error::NotInitialised {
+            bus: self.bus.clone(),
+            address: self.address,
+        })?;
+        if self.needs_init {
+            self.reinit(config, clock)?;
+        }
+        match self.poll(config, clock, out) {
+            Ok(Some(n)) => Ok(n),
+            Ok(None) => {
+                self.stats.stalls += 1;
+                self.reinit(config, clock).map(|()| 0)
+            }
+            Err(_) => self.reinit(config, clock).map(|()| 0),
+        }
+    }
+
+    /// Re-initialises after a failure; the next sample is flagged as following a gap.
+    fn reinit(&mut self, config: Config, clock: &impl Clock) -> Result<(), Error<I2C::Error>> {
+        self.stats.reinits += 1;
+        self.needs_init = true;
+        self.pending_flags |= raw_flags::GAP_BEFORE;
+        self.timer.resync();
+        self.init(config, clock)
+    }
+
+    /// One FIFO read. `Ok(None)` means the FIFO has stalled.
+    fn poll(
+        &mut self,
+        config: Config,
+        clock: &impl Clock,
+        out: &mut [RawImuSample],
+    ) -> Result<Option<usize>, Error<I2C::Error>> {
+        self.stats.reads += 1;
+        let frame = config.frame_len();
+        if config.mode == OutputMode::Accel4kHz
+            && config.temp_interval_ns > 0
+            && clock.now_ns() >= self.next_temp_ns
+        {
+            self.temp_counts = Some(self.read_temp_counts()?);
+            self.next_temp_ns = clock.now_ns() + config.temp_interval_ns;
+        }
+        let mut status = [0u8; 1];
+        self.read_registers(reg::INT_STATUS, &mut status, "reading INT_STATUS")?;
+        let overflow = status[0] & reg::INT_STATUS_FIFO_OFLOW != 0;
+        let mut count_bytes = [0u8; 2];
+        let t_before = clock.now_ns();
+        self.read_registers(reg::FIFO_COUNTH, &mut count_bytes, "reading FIFO_COUNT")?;
+        let t_after = clock.now_ns();
+        let count = usize::from(u16::from_be_bytes(count_bytes) & 0x1FFF).min(reg::FIFO_SIZE);
+        let available = count / frame;
+        let short = count % frame != 0;
+
+        if available == 0 && !overflow && !short {
+            let period = self.timer.period_ns();
+            let stalled = self.last_data_ns.is_some_and(|last| {
+                (t_after.saturating_sub(last)) as f64 > (STALL_PERIODS * period).max(STALL_MIN_NS)
+            });
+            return Ok(if stalled { None } else { Some(0) });
+        }
+        self.last_data_ns = Some(t_after);
+
+        // A count that is not whole frames means bytes were lost: the frames may be misaligned,
+        // so nothing in the FIFO is trusted (unless the FIFO overflowed, where with FIFO_MODE = 1
+        // only the tail is incomplete).
+        let take = if short && !overflow {
+            0
+        } else {
+            available.min(out.len())
+        };
+        let mut delivered = 0;
+        if take > 0 {
+            let bytes = take * frame;
+            // Only an address NACK is retried: after any other failure, the bytes clocked out
+            // before it are gone from the FIFO and the frames can no longer be trusted.
+            let address = self.address;
+            let buf = &mut self.buf[..bytes];
+            let fifo_read = attempt(&mut self.i2c, &mut self.stats, is_address_nack, |i2c| {
+                i2c.write_read(address, &[reg::FIFO_R_W], buf)
+            });
+            match fifo_read {
+                Err(e) if is_address_nack(e.kind()) => {
+                    return Err(self.persistent("reading the FIFO", e));
+                }
+                Err(_) => {
+                    self.stats.short_reads += 1;
+                    self.reset_fifo(available as u64)?;
+                    return Ok(Some(0));
+                }
+                Ok(()) => {}
+            }
+            // The newest sample was produced within one period before the count was latched.
+            let reliable = !overflow && t_after - t_before <= COUNT_READ_MAX_NS;
+            let newest_obs = t_before as f64 - self.timer.period_ns() / 2.0;
+            let a = self.timer.assign(take, available, newest_obs, reliable);
+            for (i, sample) in out[..take].iter_mut().enumerate() {
+                let t = a.first_ns + i as f64 * a.step_ns;
+                *sample = decode(
+                    &config,
+                    &self.buf[i * frame..(i + 1) * frame],
+                    t,
+                    self.temp_counts,
+                );
+                sample.seq = self.seq;
+                self.seq += 1;
+            }
+            // The gap's size: what the times say, at least what the driver discarded, and at
+            // least one sample whenever a gap is known to have happened.
+            let mut lost = a.lost.max(self.pending_discarded);
+            if self.pending_flags & raw_flags::GAP_BEFORE != 0 {
+                lost = lost.max(1);
+            }
+            if lost > 0 {
+                out[0].flags |= self.pending_flags | raw_flags::GAP_BEFORE;
+                out[0].lost_before = u32::try_from(lost).unwrap_or(u32::MAX);
+                self.stats.gaps += 1;
+                self.stats.lost_samples += lost;
+            }
+            self.pending_flags = 0;
+            self.pending_discarded = 0;
+            delivered = take;
+            self.stats.samples += take as u64;
+        }
+        if overflow {
+            self.stats.overflows += 1;
+            self.pending_flags |= raw_flags::FIFO_OVERFLOW | raw_flags::GAP_BEFORE;
+            self.reset_fifo(0)?;
+        } else if short {
+            self.stats.short_reads += 1;
+            self.reset_fifo(available as u64)?;
+        }
+        Ok(Some(delivered))
+    }
+
+    /// Empties the FIFO (keeping it enabled) and clears a stale overflow flag (a full FIFO keeps
+    /// raising it until the reset); `discarded` samples are known lost with it. The next sample
+    /// is flagged as following a gap and re-anchors the sample times.
+    fn reset_fifo(&mut self, discarded: u64) -> Result<(), Error<I2C::Error>> {
+        self.write_register(
+            reg::USER_CTRL,
+            reg::USER_CTRL_FIFO_EN | reg::USER_CTRL_FIFO_RST,
+            "resetting the FIFO",
+        )?;
+        let mut status = [0u8; 1];
+        self.read_registers(reg::INT_STATUS, &mut status, "clearing INT_STATUS")?;
+        self.stats.fifo_resets += 1;
+        self.pending_flags |= raw_flags::GAP_BEFORE;
+        self.pending_discarded += discarded;
+        self.timer.resync();
+        Ok(())
+    }
+
+    /// Writes one register (retried).
+    fn write_register(
+        &mut self,
+        register: u8,
+        value: u8,
+        during: &'static str,
+    ) -> Result<(), Error<I2C::Error>> {
+        let address = self.address;
+        let r = attempt(
+            &mut self.i2c,
+            &mut self.stats,
+            |_| true,
+            |i2c| i2c.write(address, &[register, value]),
+        );
+        r.map_err(|e| self.persistent(during, e))
+    }
+
+    /// Reads consecutive registers from `register` in one transaction (retried).
+    fn read_registers(
+        &mut self,
+        register: u8,
+        buf: &mut [u8],
+        during: &'static str,
+    ) -> Result<(), Error<I2C::Error>> {
+        let address = self.address;
+        let r = attempt(
+            &mut self.i2c,
+            &mut self.stats,
+            |_| true,
+            |i2c| i2c.write_read(address, &[register], buf),
+        );
+        r.map_err(|e| self.persistent(during, e))
+    }
+
+    /// A failure that survived the retries: the device needs re-initialising.
+    fn persistent(&mut self, during: &'static str, error: I2C::Error) -> Error<I2C::Error> {
+        self.needs_init = true;
+        self.bus_error(during, error)
+    }
+
+    fn bus_error(&self, during: &'static str, error: I2C::Error) -> Error<I2C::Error> {
+        Error::Bus {
+            bus: self.bus.clone(),
+            address: self.address,
+            during,
+            error,
+        }
+    }
+}
+
+/// Builds a sample (without `seq`) from one FIFO frame taken at `t_ns`; in accelerometer-only
+/// mode `temp_counts` is the latest TEMP_OUT read, if any.
+fn decode(config: &Config, frame: &[u8], t_ns: f64, temp_counts: Option<i16>) -> RawImuSample {
+    let be = |i: usize| i16::from_be_bytes([frame[2 * i], frame[2 * i + 1]]);
+    let mut s = RawImuSample::default();
+    s.stamps.sample_ns = t_ns.max(0.0).round() as u64;
+    s.accel_counts = [be(0), be(1), be(2)];
+    s.accel_g = s
+        .accel_counts
+        .map(|c| f64::from(c) / config.accel_range.lsb_per_g());
+    let mut saturated = s.accel_counts.iter().any(|&c| is_saturated(c));
+    let temp = match config.mode {
+        OutputMode::Imu { .. } => {
+            s.gyro_counts = [be(4), be(5), be(6)];
+            s.gyro_dps = s
+                .gyro_counts
+                .map(|c| f64::from(c) / config.gyro_range.lsb_per_dps());
+            saturated |= s.gyro_counts.iter().any(|&c| is_saturated(c));
+            s.flags |= raw_flags::GYRO_VALID;
+            Some(be(3))
+        }
+        OutputMode::Accel4kHz => temp_counts,
+    };
+    if let Some(t) = temp {
+        s.temp_counts = t;
+        s.temp_c = temp_c_from_counts(t);
+        s.flags |= raw_flags::TEMP_VALID;
+    }
+    if saturated {
+        s.flags |= raw_flags::SATURATED;
+    }
+    s
+}
+
+/// Whether an error is the address not being acknowledged: nothing was transferred, so any
+/// transaction (even a FIFO read) can be repeated safely.
+fn is_address_nack(kind: ErrorKind) -> bool {
+    kind == ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address)
+}
+
+/// Runs the transaction `f` up to [`ATTEMPTS`] times while it fails with an error that
+/// `retryable` accepts; counts failures and retries in `stats`. Returns the last error.
+fn attempt<I2C: I2c>(
+    i2c: &mut I2C,
+    stats: &mut DriverStats,
+    retryable: impl Fn(ErrorKind) -> bool,
+    mut f: impl FnMut(&mut I2C) -> Result<(), I2C::Error>,
+) -> Result<(), I2C::Error> {
+    let mut tries = 1;
+    loop {
+        match f(i2c) {
+            Ok(()) => return Ok(()),
+            Err(e) => {
+                stats.bus_errors += 1;
+                if tries == ATTEMPTS || !retryable(e.kind()) {
+                    return Err(e);
+                }
+                stats.retries += 1;
+                tries += 1;
+            }
+        }
+    }
+}
