@@ -105,6 +105,31 @@ fn drive_accelerations_integrate_to_truth_velocity_and_position() {
     }
 }
 
+#[test]
+fn drive_positions_are_exact_integrals_of_velocity() {
+    // An independent fine integral of the truth's velocity: composite Simpson at h = 1 ms. Its
+    // error is at most T h^4 max|v''''| / 180; the fastest profile here (a 0.2 m/s change at
+    // 0.5 m/s^2 takes 1.07 s) has |v''''| of order dv (2 pi / T)^4 (8/3) < 1e4 m/s^5, so over
+    // T = 180 s the bound is 1e-8 m: the truth's positions must agree to that.
+    let drive = Drive::new(&drive_params(180.0), 9).unwrap();
+    let h = 1e-3;
+    let mut p = Vector3::zeros();
+    let mut worst = 0.0f64;
+    let v = |t: f64| Vector3::from(drive.truth(t).velocity_mps);
+    let steps = (180.0 / (2.0 * h)) as usize;
+    for k in 0..steps {
+        let t0 = 2.0 * h * k as f64;
+        p += h / 3.0 * (v(t0) + 4.0 * v(t0 + h) + v(t0 + 2.0 * h));
+        worst = worst.max((p - Vector3::from(drive.truth(t0 + 2.0 * h).position_m)).norm());
+    }
+    eprintln!("Simpson vs truth position: {worst:e} m");
+    assert!(
+        worst < 1e-8,
+        "position differs from the integral of velocity by {worst} m"
+    );
+    assert!(p.norm() > 10.0, "the drive went {} m", p.norm());
+}
+
 /// Integrates the truth's sensor-frame angular rate to an attitude (quaternion product with the
 /// rotation of the mean rate over each step) and returns the largest angle to the truth's
 /// attitude, rad, and its tolerance. In these scenarios the rate's direction in the sensor

@@ -17,6 +17,9 @@ use crate::{stream_rng, streams};
 /// profiles whose shortest time scale (a ramp) is well above this.
 const KNOT_S: f64 = 0.25;
 
+/// How many planned motions may overrun the drive's end before planning stops.
+const MAX_MISFITS: u32 = 20;
+
 /// Parameters of a drive. Randomised quantities are drawn uniformly from `[min, max]` ranges.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DriveParams {
@@ -206,12 +209,16 @@ impl Drive {
             steps.push((params.initial_rest_s, 0.0, 0.0, true));
         }
         let mut t = params.initial_rest_s;
-        loop {
+        // Plan motions (each followed by a rest) while they fit; near the end, a few more
+        // draws look for a shorter one that still fits.
+        let mut misfits = 0;
+        while misfits < MAX_MISFITS {
             let mut motion = Self::plan_motion(params, &mut rng);
             motion.push((uniform(&mut rng, params.rest_s), 0.0, 0.0, true));
             let length: f64 = motion.iter().map(|s| s.0).sum();
             if t + length > params.duration_s {
-                break;
+                misfits += 1;
+                continue;
             }
             t += length;
             steps.extend(motion);

@@ -1,0 +1,394 @@
+//! The `mems-sim` binary: every scenario written to CSV and MCAP and read back with the
+//! recording crate, identical to what the library computes; clear errors on bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use ipc_types::RawImuSample;
+use ipc_types::units::{AccelRange, GyroRange, STANDARD_GRAVITY_MPS2};
+use mems_sim::SimSensor;
+use mems_sim::adc::quantize_sample;
+use mems_sim::model::SensorModel;
+use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
+use mems_sim::vibration::VibrationModel;
+use nalgebra::{UnitQuaternion, Vector3};
+use recording::{Format, Truth};
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("mems-sim-cli");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn mems_sim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mems-sim"))
+        .args(args)
+        .output()
+        .expect("running mems-sim")
+}
+
+/// Runs mems-sim and asserts success.
+fn ok(args: &[&str]) {
+    let out = mems_sim(args);
+    assert!(
+        out.status.success(),
+        "mems-sim {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Runs mems-sim, asserts failure, and returns its stderr.
+fn fails(args: &[&str]) -> String {
+    let out = mems_sim(args);
+    assert!(!out.status.success(), "mems-sim {args:?} should fail");
+    String::from_utf8(out.stderr).unwrap()
+}
+
+/// What the library produces for `scenario` with the default (calibrated) model at `rate_hz`.
+fn expected(
+    scenario: impl Scenario,
+    vibration: f64,
+    seed: u64,
+    rate_hz: f64,
+) -> (Vec<RawImuSample>, Vec<Truth>) {
+    let n = (scenario.duration_s() * rate_hz).floor() as u64 + 1;
+    let mut sim = SimSensor::new(
+        scenario,
+        &SensorModel::mpu9250_calibrated(),
+        &VibrationModel::moderate(vibration),
+        seed,
+    )
+    .unwrap();
+    (0..n)
+        .map(|k| {
+            let t_s = k as f64 / rate_hz;
+            let (a, t) = sim.sample_with_truth(t_s, rate_hz);
+            let raw = quantize_sample(&a, AccelRange::G2, GyroRange::Dps250, ns_from_s(t_s), k);
+            (raw, t)
+        })
+        .unzip()
+}
+
+/// Reads `path` back and checks it holds exactly `want` (samples and truth).
+fn check_file(path: &Path, want: &(Vec<RawImuSample>, Vec<Truth>)) {
+    let rec = recording::load_raw(path).unwrap();
+    let truth = rec.truth.expect("the file holds truth");
+    assert_eq!(rec.samples.len(), want.0.len(), "{}", path.display());
+    assert_eq!(truth, want.1, "{}", path.display());
+    if rec.format == Format::Mcap {
+        assert_eq!(rec.samples, want.0);
+    } else {
+        assert_eq!(rec.format, Format::CanonicalCsv);
+        // CSV keeps the values, times and flags (counts and seq are re-derived on reading).
+        for (got, want) in rec.samples.iter().zip(&want.0) {
+            assert_eq!(got.stamps.sample_ns, want.stamps.sample_ns);
+            assert_eq!(got.accel_g, want.accel_g);
+            assert_eq!(got.gyro_dps, want.gyro_dps);
+            assert_eq!(got.temp_c, want.temp_c);
+            assert_eq!(got.flags, want.flags);
+            assert_eq!(got.accel_counts, want.accel_counts);
+        }
+    }
+}
+
+#[test]
+fn six_position_and_orientations_are_written_with_truth() {
+    let params = PoseParams {
+        rotate_s: 1.0,
+        ..PoseParams::new(2.0)
+    };
+    let six = expected(
+        PoseSession::six_position(&params, 4).unwrap(),
+        0.0,
+        4,
+        100.0,
+    );
+    assert_eq!(six.0.len(), (6 * 2 + 5) * 100 + 1);
+    for out in [tmp("six.csv"), tmp("six.mcap")] {
+        let o = out.to_str().unwrap();
+        ok(&[
+            "six-position",
+            "--hold",
+            "2",
+            "--rotate",
+            "1",
+            "--rate",
+            "100",
+            "--seed",
+            "4",
+            "--out",
+            o,
+        ]);
+        check_file(&out, &six);
+    }
+    let params = PoseParams {
+        rotate_s: 1.0,
+        ..PoseParams::new(1.0)
+    };
+    let many = expected(
+        PoseSession::orientations(9, &params, 4).unwrap(),
+        0.0,
+        4,
+        100.0,
+    );
+    let out = tmp("orientations.csv");
+    let o = out.to_str().unwrap();
+    ok(&[
+        "orientations",
+        "--n",
+        "9",
+        "--hold",
+        "1",
+        "--rotate",
+        "1",
+        "--rate",
+        "100",
+        "--seed",
+        "4",
+        "--out",
+        o,
+    ]);
+    check_file(&out, &many);
+}
+
+#[test]
+fn static_run_is_written_with_truth() {
+    let s =
+        PoseSession::static_pose(UnitQuaternion::identity(), 5.0, STANDARD_GRAVITY_MPS2).unwrap();
+    let want = expected(s, 0.0, 2, 200.0);
+    let out = tmp("static.csv");
+    ok(&[
+        "static",
+        "--duration",
+        "5",
+        "--rate",
+        "200",
+        "--seed",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    check_file(&out, &want);
+    assert!(want.1.iter().all(|t| t.at_rest));
+}
+
+#[test]
+fn drive_is_written_and_its_file_truth_integrates_to_its_positions() {
+    let params = DriveParams {
+        turns: true,
+        in_place_turns: true,
+        ..DriveParams::new(90.0)
+    };
+    let want = expected(Drive::new(&params, 6).unwrap(), 0.5, 6, 100.0);
+    for name in ["drive.csv", "drive.mcap"] {
+        let out = tmp(name);
+        ok(&[
+            "drive",
+            "--duration",
+            "90",
+            "--vibration",
+            "0.5",
+            "--turns",
+            "on",
+            "--in-place-turns",
+            "on",
+            "--rate",
+            "100",
+            "--seed",
+            "6",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        check_file(&out, &want);
+    }
+    // The truth read back from the file: trapezoid integration of its accelerations
+    // (R f + g_nav) at the file's rate reproduces its velocities and positions within the rule's
+    // own error, 2 h^2 / 6 max|jerk| and 2 h^2 / 6 max|a| (derived in tests/scenarios.rs).
+    let truth = recording::load_raw(tmp("drive.csv"))
+        .unwrap()
+        .truth
+        .unwrap();
+    let h = 0.01;
+    let a: Vec<Vector3<f64>> = truth
+        .iter()
+        .map(|t| {
+            let [w, x, y, z] = t.attitude_wxyz;
+            let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+            q * Vector3::from(t.specific_force_mps2) - Vector3::new(0.0, 0.0, STANDARD_GRAVITY_MPS2)
+        })
+        .collect();
+    let a_max = a.iter().map(|v| v.norm()).fold(0.0, f64::max);
+    let jerk_max = a
+        .windows(3)
+        .map(|w| ((w[2] - w[0]) / (2.0 * h)).norm())
+        .fold(0.0, f64::max);
+    let (mut v, mut p) = (Vector3::zeros(), Vector3::zeros());
+    let (mut ev, mut ep) = (0.0f64, 0.0f64);
+    for k in 1..truth.len() {
+        let v_next = v + 0.5 * h * (a[k - 1] + a[k]);
+        p += 0.5 * h * (v + v_next);
+        v = v_next;
+        ev = ev.max((v - Vector3::from(truth[k].velocity_mps)).norm());
+        ep = ep.max((p - Vector3::from(truth[k].position_m)).norm());
+    }
+    assert!(ev <= 2.0 * h * h / 6.0 * jerk_max, "velocity error {ev}");
+    assert!(ep <= 2.0 * h * h / 6.0 * a_max, "position error {ep}");
+    let end = Vector3::from(truth.last().unwrap().position_m).norm();
+    assert!(end > 5.0, "the drive went {end} m");
+}
+
+#[test]
+fn ranges_and_models_are_applied() {
+    // +-16 g: every accelerometer value is a whole number of 1/2048 g counts, and the preset
+    // printed as TOML and passed back gives the same file as the preset itself.
+    let model = tmp("datasheet.toml");
+    let printed = mems_sim(&["print-model", "--preset", "datasheet"]);
+    assert!(printed.status.success());
+    let text = String::from_utf8(printed.stdout).unwrap();
+    let parsed: SensorModel = toml::from_str(&text).unwrap();
+    assert_eq!(parsed, SensorModel::mpu9250_datasheet());
+    std::fs::write(&model, &text).unwrap();
+    let (a, b) = (tmp("range-a.mcap"), tmp("range-b.mcap"));
+    let common = [
+        "static",
+        "--duration",
+        "2",
+        "--rate",
+        "50",
+        "--accel-range",
+        "16",
+        "--gyro-range",
+        "2000",
+    ];
+    ok(&[
+        &common[..],
+        &["--preset", "datasheet", "--out", a.to_str().unwrap()],
+    ]
+    .concat());
+    ok(&[
+        &common[..],
+        &[
+            "--model",
+            model.to_str().unwrap(),
+            "--out",
+            b.to_str().unwrap(),
+        ],
+    ]
+    .concat());
+    let ra = recording::load_raw(&a).unwrap();
+    let rb = recording::load_raw(&b).unwrap();
+    assert_eq!(ra.samples, rb.samples);
+    for s in &ra.samples {
+        for i in 0..3 {
+            assert_eq!(s.accel_g[i] * 2048.0, f64::from(s.accel_counts[i]));
+            assert!((s.gyro_dps[i] * 16.4 - f64::from(s.gyro_counts[i])).abs() < 1e-9);
+        }
+    }
+    // The noise override: an ideal model with accelerometer noise only.
+    let noisy = tmp("noisy.csv");
+    ok(&[
+        "static",
+        "--duration",
+        "20",
+        "--rate",
+        "100",
+        "--preset",
+        "ideal",
+        "--accel-noise-ug",
+        "1000",
+        "--out",
+        noisy.to_str().unwrap(),
+    ]);
+    let rec = recording::load_raw(&noisy).unwrap();
+    let x: Vec<f64> = rec.samples.iter().map(|s| s.accel_g[0]).collect();
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    let std = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    // 1000 ug/sqrt(Hz) at 100 Hz: 0.01 g per sample (quantization adds 1/16384/sqrt(12),
+    // negligible); 4-sigma sampling bound on the std.
+    assert!(
+        (std - 0.01).abs() < 4.0 * 0.01 / (2.0 * (n - 1.0)).sqrt(),
+        "std {std}"
+    );
+}
+
+#[test]
+fn bad_input_gets_a_clear_error() {
+    let out = tmp("bad.csv");
+    let o = out.to_str().unwrap();
+    let e = fails(&[
+        "static",
+        "--duration",
+        "1",
+        "--out",
+        tmp("x.txt").to_str().unwrap(),
+    ]);
+    assert!(e.contains(".csv or .mcap"), "{e}");
+    let e = fails(&["orientations", "--n", "0", "--out", o]);
+    assert!(e.contains("`n`"), "{e}");
+    let e = fails(&["drive", "--duration", "60", "--vibration=-1", "--out", o]);
+    assert!(e.contains("--vibration"), "{e}");
+    let e = fails(&[
+        "drive",
+        "--duration",
+        "60",
+        "--initial-rest",
+        "100",
+        "--out",
+        o,
+    ]);
+    assert!(e.contains("initial_rest_s"), "{e}");
+    let e = fails(&["static", "--duration", "1", "--rate", "0", "--out", o]);
+    assert!(e.contains("--rate"), "{e}");
+    let e = fails(&[
+        "static",
+        "--duration",
+        "1",
+        "--out",
+        o,
+        "--model",
+        "/nonexistent/model.toml",
+    ]);
+    assert!(e.contains("/nonexistent/model.toml"), "{e}");
+
+    // A model file with a negative noise density: the error names the file and the field.
+    let model = tmp("negative.toml");
+    let mut m = SensorModel::ideal();
+    m.accel.noise_density[2] = -1.0;
+    std::fs::write(&model, toml::to_string(&m).unwrap()).unwrap();
+    let e = fails(&[
+        "static",
+        "--duration",
+        "1",
+        "--out",
+        o,
+        "--model",
+        model.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains("accel.noise_density[2]") && e.contains("negative.toml"),
+        "{e}"
+    );
+    // A misspelt field: the TOML error names it, with its line.
+    let typo = tmp("typo.toml");
+    std::fs::write(
+        &typo,
+        toml::to_string(&SensorModel::ideal())
+            .unwrap()
+            .replace("noise_density", "noise_densty"),
+    )
+    .unwrap();
+    let e = fails(&[
+        "static",
+        "--duration",
+        "1",
+        "--out",
+        o,
+        "--model",
+        typo.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains("noise_densty") && e.contains("typo.toml") && e.contains("line"),
+        "{e}"
+    );
+}
