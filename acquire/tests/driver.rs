@@ -255,6 +255,7 @@ fn assert_lossless_and_on_time(drv: &mut SimDriver, samples: &[RawImuSample], pe
     // After the loop has settled (the first second), every time is within half a period of the
     // truth and every spacing within 10 % of the period.
     let settle = (1e9 / period_ns) as usize;
+    let (mut worst_err, mut worst_step) = (0.0f64, 0.0f64);
     for (i, s) in samples.iter().enumerate().skip(settle) {
         let truth = true_time(drv, idx[i]) as f64;
         let err = s.stamps.sample_ns as f64 - truth;
@@ -269,7 +270,13 @@ fn assert_lossless_and_on_time(drv: &mut SimDriver, samples: &[RawImuSample], pe
             "seq {}: step {step} ns",
             s.seq
         );
+        worst_err = worst_err.max(err.abs());
+        worst_step = worst_step.max((step - period_ns).abs());
     }
+    println!(
+        "period {period_ns:.0} ns: worst time error {worst_err:.0} ns, worst spacing deviation \
+         {worst_step:.0} ns after the first second"
+    );
 }
 
 #[test]
@@ -567,4 +574,62 @@ fn saturated_samples_are_flagged() {
         "{saturated} of {}",
         samples.len()
     );
+}
+
+/// A bus that silently ignores writes to one register (a stuck register on a faulty part).
+struct IgnoresWritesTo<B> {
+    inner: B,
+    register: u8,
+}
+
+impl<B: embedded_hal::i2c::ErrorType> embedded_hal::i2c::ErrorType for IgnoresWritesTo<B> {
+    type Error = B::Error;
+}
+
+impl<B: embedded_hal::i2c::I2c> embedded_hal::i2c::I2c for IgnoresWritesTo<B> {
+    fn transaction(
+        &mut self,
+        address: u8,
+        operations: &mut [embedded_hal::i2c::Operation<'_>],
+    ) -> Result<(), Self::Error> {
+        use embedded_hal::i2c::Operation;
+        let is_ignored_write =
+            matches!(operations, [Operation::Write([r, _, ..])] if *r == self.register);
+        if is_ignored_write {
+            return Ok(());
+        }
+        self.inner.transaction(address, operations)
+    }
+}
+
+#[test]
+fn a_register_that_does_not_read_back_fails_init_with_a_clear_error() {
+    let sim = noisy_sim(13, 0);
+    let clock = sim.clock().clone();
+    let bus = IgnoresWritesTo {
+        inner: sim,
+        register: reg::ACCEL_CONFIG,
+    };
+    let mut drv = Mpu9250::new(bus, "sim", A);
+    let config = Config {
+        accel_range: AccelRange::G8,
+        ..Config::default()
+    };
+    let err = drv.init(config, &clock).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            Error::Verify {
+                register: 0x1C,
+                wrote: 0x10,
+                read: 0x00,
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    let text = err.to_string();
+    for needle in ["sim", "0x68", "0x1c", "0x10", "0x00"] {
+        assert!(text.contains(needle), "{needle:?} missing from: {text}");
+    }
 }
