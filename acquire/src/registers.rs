@@ -49,16 +49,13 @@ pub const GYRO_FCHOICE_B_MASK: u8 = 0b11;
 pub const ACCEL_CONFIG: u8 = 0x1C;
 /// ACCEL_CONFIG bits `[4:3]`, ACCEL_FS_SEL.
 pub const ACCEL_FS_SEL_SHIFT: u8 = 3;
-/// Mask of a two-bit full-scale selection field, after shifting it down.
-pub const FS_SEL_MASK: u8 = 0b11;
 
-/// Register 29, ACCEL_CONFIG2.
+/// Register 29, ACCEL_CONFIG2. Bits `[2:0]`, A_DLPF_CFG, select the accelerometer low-pass
+/// filter (1 kHz output rate) when accel_fchoice_b is 0.
 pub const ACCEL_CONFIG2: u8 = 0x1D;
 /// ACCEL_CONFIG2 bit 3, accel_fchoice_b: 1 bypasses the accelerometer DLPF; the accelerometer
 /// then outputs at 4 kHz with 1.13 kHz bandwidth (1046 Hz in the product specification).
 pub const ACCEL_FCHOICE_B: u8 = 1 << 3;
-/// ACCEL_CONFIG2 bits `[2:0]`, A_DLPF_CFG: accelerometer low-pass filter (1 kHz output rate).
-pub const A_DLPF_CFG_MASK: u8 = 0b111;
 
 /// Register 35, FIFO_EN: which sensor registers are written into the FIFO at the sample rate.
 /// Data enter the FIFO in register order (register 116): accel (59-64), temperature (65-66),
@@ -108,9 +105,8 @@ pub const PWR_MGMT_1: u8 = 0x6B;
 pub const PWR_MGMT_1_H_RESET: u8 = 1 << 7;
 /// PWR_MGMT_1 bit 6, SLEEP: puts the chip to sleep (no sampling).
 pub const PWR_MGMT_1_SLEEP: u8 = 1 << 6;
-/// PWR_MGMT_1 bits `[2:0]`, CLKSEL.
-pub const PWR_MGMT_1_CLKSEL_MASK: u8 = 0b111;
-/// CLKSEL value 1: the gyro PLL when ready, else the internal oscillator.
+/// PWR_MGMT_1 bits `[2:0]`, CLKSEL, value 1: the gyro PLL when ready, else the internal
+/// oscillator.
 pub const CLKSEL_AUTO: u8 = 1;
 /// Reset value of PWR_MGMT_1.
 pub const PWR_MGMT_1_RESET_VALUE: u8 = 0x01;

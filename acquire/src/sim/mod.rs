@@ -402,19 +402,21 @@ impl<S: SampleSource> SimMpu9250<S> {
         } else {
             FullPolicy::OverwriteOldest
         };
-        // Byte ranges of `internal` in register order, with the FIFO_EN bit selecting each.
+        // Register offsets in `internal` and lengths, in register order, with the FIFO_EN bit
+        // selecting each.
+        let offset = |register: u8| usize::from(register - reg::ACCEL_XOUT_H);
         let parts = [
-            (reg::FIFO_EN_ACCEL, 0..6),
-            (reg::FIFO_EN_TEMP, 6..8),
-            (reg::FIFO_EN_GYRO_X, 8..10),
-            (reg::FIFO_EN_GYRO_Y, 10..12),
-            (reg::FIFO_EN_GYRO_Z, 12..14),
+            (reg::FIFO_EN_ACCEL, offset(reg::ACCEL_XOUT_H), 6),
+            (reg::FIFO_EN_TEMP, offset(reg::TEMP_OUT_H), 2),
+            (reg::FIFO_EN_GYRO_X, offset(reg::GYRO_XOUT_H), 2),
+            (reg::FIFO_EN_GYRO_Y, offset(reg::GYRO_XOUT_H) + 2, 2),
+            (reg::FIFO_EN_GYRO_Z, offset(reg::GYRO_XOUT_H) + 4, 2),
         ];
-        for (bit, range) in parts {
+        for (bit, start, len) in parts {
             if enable & bit == 0 {
                 continue;
             }
-            for i in range {
+            for i in start..start + len {
                 if self.fifo.push(self.internal[i], policy) {
                     self.stats.fifo_bytes_lost += 1;
                     self.regs[usize::from(reg::INT_STATUS)] |= reg::INT_STATUS_FIFO_OFLOW;
