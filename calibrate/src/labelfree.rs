@@ -33,7 +33,7 @@ use crate::model::{AccelModel, ModelError, ModelKind, N_PARAMS, ParamCovariance,
 pub const MIN_POSES: usize = 9;
 
 /// Two poses whose mean readings point within this angle (degrees) count as one orientation.
-pub const DISTINCT_ANGLE_DEG: f64 = 10.0;
+pub const DISTINCT_ANGLE_DEG: f64 = 5.0;
 
 /// Largest accepted condition number of the Jacobian at the solution (parameters in g and
 /// dimensionless have comparable sensitivities, so the unscaled Jacobian is used). Random
@@ -158,9 +158,26 @@ struct MagnitudeProblem<'a> {
     /// Per-pose, per-axis sigma of the mean reading (g); `None` for unweighted.
     sigmas: Option<&'a [Vector3<f64>]>,
     x: SVector<f64, 9>,
+    /// Residuals and Jacobian at `x` (computed together: they share every intermediate).
+    cache: (DVector<f64>, OMatrix<f64, Dyn, U9>),
 }
 
-impl MagnitudeProblem<'_> {
+impl<'a> MagnitudeProblem<'a> {
+    fn new(
+        means: &'a [Vector3<f64>],
+        sigmas: Option<&'a [Vector3<f64>]>,
+        x: SVector<f64, 9>,
+    ) -> Self {
+        let mut p = Self {
+            means,
+            sigmas,
+            x,
+            cache: (DVector::zeros(0), OMatrix::<f64, Dyn, U9>::zeros(0)),
+        };
+        p.cache = p.eval();
+        p
+    }
+
     /// Residual sigma of pose `i` (g): the reading's sigma projected through `u^T T`.
     fn residual_sigma(&self, i: usize, t: &Matrix3<f64>, u: &Vector3<f64>) -> f64 {
         match self.sigmas {
@@ -206,6 +223,7 @@ impl LeastSquaresProblem<f64, Dyn, U9> for MagnitudeProblem<'_> {
 
     fn set_params(&mut self, x: &SVector<f64, 9>) {
         self.x = *x;
+        self.cache = self.eval();
     }
 
     fn params(&self) -> SVector<f64, 9> {
@@ -213,11 +231,11 @@ impl LeastSquaresProblem<f64, Dyn, U9> for MagnitudeProblem<'_> {
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
-        Some(self.eval().0)
+        Some(self.cache.0.clone())
     }
 
     fn jacobian(&self) -> Option<OMatrix<f64, Dyn, U9>> {
-        Some(self.eval().1)
+        Some(self.cache.1.clone())
     }
 }
 
@@ -352,18 +370,10 @@ pub fn fit_label_free(
         for k in [3, 6, 8] {
             nominal[k] = 1.0 / mean_norm;
         }
-        let probe = MagnitudeProblem {
-            means: &means,
-            sigmas: None,
-            x: nominal,
-        };
-        return Err(ill_conditioned(&probe.eval().1).unwrap_or(LabelFreeError::NoEllipsoid));
+        let probe = MagnitudeProblem::new(&means, None, nominal);
+        return Err(ill_conditioned(&probe.cache.1).unwrap_or(LabelFreeError::NoEllipsoid));
     };
-    let problem = MagnitudeProblem {
-        means: &means,
-        sigmas: sigmas.as_deref(),
-        x: start,
-    };
+    let problem = MagnitudeProblem::new(&means, sigmas.as_deref(), start);
     let (problem, report) = LevenbergMarquardt::new()
         .with_patience(200)
         .minimize(problem);
@@ -375,17 +385,12 @@ pub fn fit_label_free(
     }
     // The condition number is judged on the unweighted Jacobian (weights rescale rows, which
     // would make the threshold depend on the noise level).
-    let plain = MagnitudeProblem {
-        means: &means,
-        sigmas: None,
-        x: problem.x,
-    };
-    let j_plain = plain.eval().1;
+    let j_plain = MagnitudeProblem::new(&means, None, problem.x).cache.1;
     if let Some(err) = ill_conditioned(&j_plain) {
         return Err(err);
     }
     let cond_unweighted = condition_number(&j_plain);
-    let (r, j) = problem.eval();
+    let (r, j) = problem.cache;
     let svd = j.svd(false, true);
     let v_t = svd.v_t.expect("requested V^T");
     let m = poses.len();

@@ -7,10 +7,15 @@
 //! displacement evaluation are in SI (m/s^2, m).
 
 pub mod calibfile;
+pub mod drerror;
 pub mod fit;
 pub mod integrate;
 pub mod labelfree;
 pub mod model;
+pub mod plots;
 pub mod repair;
 pub mod segments;
+pub mod session;
+pub mod static_eval;
+pub mod thesis_eval;
 pub mod window;

@@ -343,12 +343,11 @@ mod tests {
         )
         .unwrap();
         let j = m.correction_jacobian(&Vector3::new(0.1, 0.2, 1.0));
-        for k in 0..N_PARAMS {
+        for (k, name) in PARAM_NAMES.iter().enumerate() {
             assert_eq!(
                 j.column(k).norm() == 0.0,
                 !ModelKind::Scale.is_free(k),
-                "{}",
-                PARAM_NAMES[k]
+                "{name}"
             );
         }
         assert_eq!(ModelKind::Bias.n_free(), 3);

@@ -109,7 +109,7 @@ pub fn repair_torn_reads(samples: &mut [RawImuSample], cfg: &TornReadConfig) -> 
     if n < 3 {
         return report;
     }
-    let mut buf = Vec::with_capacity(2 * cfg.half_window);
+    let mut buf = vec![0.0; 2 * cfg.half_window];
     for axis in 0..3 {
         let counts: Vec<f64> = samples
             .iter()
@@ -122,10 +122,20 @@ pub fn repair_torn_reads(samples: &mut [RawImuSample], cfg: &TornReadConfig) -> 
         for k in 0..n {
             let lo = k.saturating_sub(cfg.half_window);
             let hi = (k + cfg.half_window + 1).min(n);
-            buf.clear();
-            buf.extend((lo..hi).filter(|&j| j != k).map(|j| counts[j]));
-            let reference = median(&mut buf);
             let c = counts[k];
+            // The median lies within the neighbours' range: when every neighbour is within the
+            // threshold of c, so is the median, and the sort can be skipped.
+            let mut m = 0;
+            let mut far = false;
+            for &v in counts[lo..k].iter().chain(&counts[k + 1..hi]) {
+                buf[m] = v;
+                m += 1;
+                far |= (v - c).abs() > threshold;
+            }
+            if !far {
+                continue;
+            }
+            let reference = median(&mut buf[..m]);
             let d = c - reference;
             if d.abs() <= threshold {
                 continue;
@@ -185,7 +195,7 @@ mod tests {
                 seq: k as u64,
                 ..Default::default()
             };
-            s.accel_g = [read as f64 / 16384.0, level / 16384.0, 16384.0 / 16384.0];
+            s.accel_g = [read as f64 / 16384.0, level / 16384.0, 1.0];
             out.push(s);
         }
         (out, truth, tears)

@@ -309,8 +309,8 @@ mod tests {
                 "segment too short: {}",
                 seg.duration_s()
             );
-            for i in 0..3 {
-                assert!((seg.mean_g[i] - d[i]).abs() < 5.0 * 0.002 / (seg.n as f64).sqrt());
+            for (i, di) in d.iter().enumerate() {
+                assert!((seg.mean_g[i] - di).abs() < 5.0 * 0.002 / (seg.n as f64).sqrt());
                 assert!((seg.std_g[i] / 0.002 - 1.0).abs() < 0.1);
             }
         }

@@ -1,0 +1,272 @@
+//! `mems-calibrate fit`: fits an accelerometer model to a six-position means file or to the
+//! static segments of a raw recording and writes a calibration file (TOML).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use calibrate::calibfile::{
+    CalibrationFile, FitMethod, NoiseSection, ResidualSection, SourceSection,
+};
+use calibrate::fit::{Pose, Weighting, fit_labelled};
+use calibrate::labelfree::fit_label_free;
+use calibrate::model::{ModelKind, PARAM_NAMES};
+use calibrate::plots::plot_pose_residuals;
+use calibrate::segments::SegmentConfig;
+use calibrate::session::{
+    Input, all_axis_aligned, label_axis_aligned, load_input, poses_from_six, raw_poses,
+};
+use clap::{Parser, Subcommand, ValueEnum};
+
+#[derive(Parser)]
+#[command(
+    name = "mems-calibrate",
+    version,
+    about = "Accelerometer calibration for mems-odometry"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// How poses get their gravity labels.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Labels {
+    /// Six-position files: the file's labels. Raw recordings: the nearest axis of each static
+    /// segment when all are axis aligned, otherwise a label-free fit.
+    Auto,
+    /// Label-free fit on |a| = 1 g (needs at least 9 well-spread orientations).
+    None,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Fit a model and write a calibration file.
+    Fit {
+        /// Six-position means CSV, or a raw recording (canonical CSV, thesis CSV, MCAP).
+        #[arg(long)]
+        input: PathBuf,
+        /// Model: bias (model 1), scale (model 2) or full (model 3).
+        #[arg(long, value_enum)]
+        model: ModelKind,
+        /// Weight poses by 1/sigma^2 of their means (default: unweighted, as the thesis).
+        #[arg(long)]
+        weighted: bool,
+        /// Where labels come from.
+        #[arg(long, value_enum, default_value = "auto")]
+        labels: Labels,
+        /// Local gravity, m/s^2, recorded in the file for converting g to m/s^2.
+        #[arg(long, default_value_t = ipc_types::units::STANDARD_GRAVITY_MPS2)]
+        gravity: f64,
+        /// Output calibration file.
+        #[arg(long)]
+        out: PathBuf,
+        /// Also draw the per-pose residuals to this PNG.
+        #[arg(long)]
+        plot: Option<PathBuf>,
+    },
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("mems-calibrate: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    let Command::Fit {
+        input,
+        model,
+        weighted,
+        labels,
+        gravity,
+        out,
+        plot,
+    } = cli.command;
+    if !(gravity > 9.7 && gravity < 9.9) {
+        bail!("--gravity {gravity} m/s^2 is not a terrestrial gravity (expected 9.7..9.9)");
+    }
+    let weighting = if weighted {
+        Weighting::PoseStd
+    } else {
+        Weighting::Unweighted
+    };
+    let loaded = load_input(&input)?;
+    let mut noise = NoiseSection::default();
+    let mut temperature_range_c = None;
+    let mut repaired_samples = 0;
+    let (poses, label_free) = match &loaded {
+        Input::SixPosition(six) => (poses_from_six(six), labels == Labels::None),
+        Input::Raw(rec) => {
+            let raw = raw_poses(rec, &SegmentConfig::default())?;
+            repaired_samples = raw.repair.total();
+            eprintln!(
+                "{}: {} samples, {} torn reads repaired, {} static segments (noise {:.2e} / {:.2e} / {:.2e} g)",
+                input.display(),
+                raw.samples.len(),
+                repaired_samples,
+                raw.detection.segments.len(),
+                raw.detection.noise_sigma_g[0],
+                raw.detection.noise_sigma_g[1],
+                raw.detection.noise_sigma_g[2]
+            );
+            let dt = median_interval_s(&raw.samples);
+            noise = NoiseSection {
+                white_sigma_g: Some(raw.detection.noise_sigma_g),
+                sample_rate_hz: Some(1.0 / dt),
+            };
+            temperature_range_c = raw
+                .detection
+                .segments
+                .iter()
+                .filter_map(|s| s.temp_range_c)
+                .fold(None, |acc: Option<[f64; 2]>, [lo, hi]| {
+                    Some(match acc {
+                        None => [lo, hi],
+                        Some([a, b]) => [f64::min(a, lo), f64::max(b, hi)],
+                    })
+                });
+            match labels {
+                Labels::None => (label_unlabelled(&raw), true),
+                Labels::Auto if all_axis_aligned(&raw) => {
+                    (label_axis_aligned(&input, &raw)?, false)
+                }
+                Labels::Auto => {
+                    eprintln!(
+                        "{}: the static poses are not all axis aligned; fitting label-free",
+                        input.display()
+                    );
+                    (label_unlabelled(&raw), true)
+                }
+            }
+        }
+    };
+    let source = SourceSection {
+        file: input.display().to_string(),
+        kind: loaded.kind_name().into(),
+        poses: poses.len(),
+        repaired_samples,
+    };
+    let mut file = if label_free {
+        if model != ModelKind::Full {
+            bail!(
+                "label-free fitting estimates the full model (upper-triangular S); use --model full"
+            );
+        }
+        let fit =
+            fit_label_free(&poses, weighting).with_context(|| format!("{}", input.display()))?;
+        let per_pose_g: Vec<[f64; 3]> = fit.residuals_g.iter().map(|r| [*r, 0.0, 0.0]).collect();
+        let rms = (fit.residuals_g.iter().map(|r| r * r).sum::<f64>()
+            / fit.residuals_g.len() as f64)
+            .sqrt();
+        let residuals = ResidualSection {
+            rms_g: [rms; 3],
+            max_abs_g: fit.residuals_g.iter().fold(0.0, |m, r| m.max(r.abs())),
+            dof: [fit.dof; 3],
+            chi2: [fit.chi2; 3],
+            per_pose_g,
+        };
+        eprintln!(
+            "label-free fit: {} poses, {} orientations, Jacobian condition number {:.1}",
+            poses.len(),
+            fit.distinct_orientations,
+            fit.condition
+        );
+        CalibrationFile::new(
+            &fit.model,
+            &fit.covariance,
+            FitMethod::LabelFree,
+            weighting,
+            fit.covariance_mode,
+            gravity,
+            source,
+            residuals,
+        )
+    } else {
+        let fit = fit_labelled(&poses, model, weighting)
+            .with_context(|| format!("{}", input.display()))?;
+        let per_pose_g: Vec<[f64; 3]> = fit.residuals_g.iter().map(|r| [r.x, r.y, r.z]).collect();
+        let residuals = ResidualSection {
+            rms_g: fit.residual_rms_g(),
+            max_abs_g: per_pose_g
+                .iter()
+                .flatten()
+                .fold(0.0, |m: f64, r| m.max(r.abs())),
+            dof: fit.dof,
+            chi2: fit.chi2,
+            per_pose_g,
+        };
+        CalibrationFile::new(
+            &fit.model,
+            &fit.covariance,
+            FitMethod::Labelled,
+            weighting,
+            fit.covariance_mode,
+            gravity,
+            source,
+            residuals,
+        )
+    };
+    file.noise = noise;
+    file.temperature_range_c = temperature_range_c;
+    print_summary(&file);
+    file.save(&out)?;
+    eprintln!("wrote {}", out.display());
+    if let Some(plot) = plot {
+        let title = format!(
+            "{} residuals per pose ({})",
+            file.model,
+            input
+                .file_name()
+                .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+        );
+        plot_pose_residuals(&plot, &title, &file.residuals.per_pose_g)?;
+        eprintln!("wrote {}", plot.display());
+    }
+    Ok(())
+}
+
+/// Poses for a label-free fit (labels unused).
+fn label_unlabelled(raw: &calibrate::session::RawPoses) -> Vec<Pose> {
+    raw.detection
+        .segments
+        .iter()
+        .map(|s| s.to_pose(nalgebra::Vector3::zeros()))
+        .collect()
+}
+
+fn median_interval_s(samples: &[ipc_types::RawImuSample]) -> f64 {
+    let mut d: Vec<u64> = samples
+        .windows(2)
+        .map(|w| w[1].stamps.sample_ns - w[0].stamps.sample_ns)
+        .collect();
+    if d.is_empty() {
+        return f64::NAN;
+    }
+    let mid = d.len() / 2;
+    *d.select_nth_unstable(mid).1 as f64 * 1e-9
+}
+
+fn print_summary(file: &CalibrationFile) {
+    println!(
+        "model {} ({:?}, {:?}, covariance {:?})",
+        file.model, file.method, file.weighting, file.covariance_mode
+    );
+    let p = file.accel_model().map(|m| m.params()).ok();
+    for (k, name) in PARAM_NAMES.iter().enumerate() {
+        if let Some(p) = &p
+            && file.sigma[k] > 0.0
+        {
+            println!("  {name:<5} {:>12.6} +- {:.6}", p[k], file.sigma[k]);
+        }
+    }
+    let r = &file.residuals.rms_g;
+    println!(
+        "  residual rms {:.3e} {:.3e} {:.3e} g over {} poses",
+        r[0], r[1], r[2], file.source.poses
+    );
+}
