@@ -99,3 +99,100 @@ fn mems_eval_thesis_reproduces_table_a2() {
         }
     }
 }
+
+fn run_static(dir: &std::path::Path, extra: &[&str]) -> serde_json::Value {
+    let (six, test) = trial_paths(dir, 1);
+    let out = Command::new(env!("CARGO_BIN_EXE_mems-eval"))
+        .args([
+            "static",
+            "--align-s",
+            "10",
+            "--window-s",
+            "45",
+            "--json",
+            "--six",
+        ])
+        .arg(&six)
+        .arg("--test")
+        .arg(&test)
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+fn vec3(v: &serde_json::Value) -> [f64; 3] {
+    let a = v.as_array().expect("array of 3");
+    assert_eq!(a.len(), 3);
+    std::array::from_fn(|i| a[i].as_f64().unwrap())
+}
+
+/// `mems-eval static --align-s 10 --window-s 45` on trial 1, with the thesis's start-up runs
+/// (recorded before the six-position trials) as earlier data: `best` beats `thesis_full` on
+/// every axis, and its predicted sigma is consistent with the error it achieves: each
+/// |d| / sigma below 3 and sum of (d / sigma)^2 inside the central 99% of chi-square(3)
+/// ([0.072, 12.84]), i.e. neither under- nor over-stated.
+#[test]
+fn static_trial_1_best_beats_thesis_full_with_consistent_sigma() {
+    let Some(dir) = data_dir() else { return };
+    let startup = dir.join("Preliminary-Tests/Start-Up-Shut-Down/Data");
+    let json = run_static(&dir, &["--prior", startup.to_str().unwrap()]);
+    let windows = json["windows"].as_array().unwrap();
+    assert_eq!(
+        windows.len(),
+        1,
+        "a 60 s file holds one 55 s window at step 45 s"
+    );
+    assert_eq!(windows[0]["start_s"].as_f64(), Some(0.0));
+    let full = vec3(&windows[0]["methods"]["thesis_full"]["d"]);
+    let best = vec3(&windows[0]["methods"]["best"]["d"]);
+    let sigma = vec3(&windows[0]["methods"]["best"]["sigma"]);
+    let mut chi2 = 0.0;
+    for i in 0..3 {
+        assert!(
+            best[i].abs() < full[i].abs(),
+            "axis {i}: best {} vs thesis_full {}",
+            best[i],
+            full[i]
+        );
+        let z = best[i] / sigma[i];
+        assert!(z.abs() < 3.0, "axis {i}: d {} sigma {}", best[i], sigma[i]);
+        chi2 += z * z;
+    }
+    assert!((0.072..12.84).contains(&chi2), "chi2 {chi2}");
+    assert_eq!(vec3(&json["rms"]["best"]).map(f64::abs), best.map(f64::abs));
+}
+
+/// Without earlier recordings, `best` still beats `thesis_full` on every axis; the JSON has the
+/// issue's shape. (Its drift term then rests on the alignment interval alone and under-covers
+/// the y axis of this trial: see the crate README.)
+#[test]
+fn static_trial_1_without_earlier_data() {
+    let Some(dir) = data_dir() else { return };
+    let json = run_static(&dir, &[]);
+    let w = &json["windows"][0];
+    let full = vec3(&w["methods"]["thesis_full"]["d"]);
+    let best = vec3(&w["methods"]["best"]["d"]);
+    assert!(
+        vec3(&w["methods"]["best"]["sigma"])
+            .iter()
+            .all(|s| *s > 0.0)
+    );
+    assert!(
+        vec3(&w["methods"]["thesis_full"]["sigma"])
+            .iter()
+            .all(|s| *s > 0.0)
+    );
+    for i in 0..3 {
+        assert!(best[i].abs() < full[i].abs());
+    }
+    assert_eq!(
+        vec3(&json["rms"]["thesis_full"]).map(f64::abs),
+        full.map(f64::abs)
+    );
+}
