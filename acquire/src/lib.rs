@@ -3,6 +3,7 @@
 //! ([`registers`]), a register-level simulated MPU-9250 behind the same trait ([`sim`]), and the
 //! clocks both run on ([`clock`]).
 
+pub mod acquisition;
 pub mod clock;
 pub mod driver;
 pub mod registers;

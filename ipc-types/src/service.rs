@@ -65,6 +65,16 @@ pub fn namespace(cli: Option<&str>) -> String {
         .unwrap_or_default()
 }
 
+/// Creates the iceoryx2 node of a process. iceoryx2's own log is limited to errors unless the
+/// `IOX2_LOG_LEVEL` environment variable says otherwise (its warning that no config file was
+/// loaded is expected: every setting that matters is made explicitly in this module).
+pub fn node() -> Result<Node<ipc::Service>, ServiceError> {
+    set_log_level_from_env_or(LogLevel::Error);
+    NodeBuilder::new()
+        .create::<ipc::Service>()
+        .map_err(|e| ServiceError(format!("cannot create iceoryx2 node: {e:?}")))
+}
+
 /// Opens (or creates) the publish-subscribe service `name` carrying `T`, with the lossless
 /// settings of this module.
 pub fn open<T: core::fmt::Debug + ZeroCopySend>(
@@ -127,7 +137,7 @@ mod tests {
     /// delivered whole, in order, because the service is lossless.
     #[test]
     fn burst_is_delivered_losslessly() {
-        let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+        let node = node().unwrap();
         let name = full_name(&format!("unit-{}", std::process::id()), RAW);
         let service = open::<RawImuSample>(&node, &name).unwrap();
         let subscriber = subscriber(&service).unwrap();

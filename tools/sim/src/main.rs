@@ -10,7 +10,7 @@ use ipc_types::RawImuSample;
 use ipc_types::units::{AccelRange, GyroRange, STANDARD_GRAVITY_MPS2};
 use mems_sim::SimSensor;
 use mems_sim::adc::quantize_sample;
-use mems_sim::model::SensorModel;
+use mems_sim::model::{Preset, SensorModel};
 use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
 use mems_sim::vibration::VibrationModel;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -82,7 +82,7 @@ enum Command {
     /// Prints a preset's error model as TOML (edit it and pass it back with --model).
     PrintModel {
         /// The preset to print.
-        #[arg(long, value_enum, default_value_t = Preset::Calibrated)]
+        #[arg(long, default_value = "calibrated")]
         preset: Preset,
     },
 }
@@ -100,7 +100,7 @@ struct Common {
     #[arg(long, default_value_t = 1000.0)]
     rate: f64,
     /// Error model preset.
-    #[arg(long, value_enum, default_value_t = Preset::Calibrated)]
+    #[arg(long, default_value = "calibrated")]
     preset: Preset,
     /// Error model from a TOML file (see `print-model`); replaces --preset.
     #[arg(long, conflicts_with = "preset")]
@@ -166,26 +166,6 @@ enum GyroFullScale {
 enum OnOff {
     On,
     Off,
-}
-
-#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
-enum Preset {
-    /// No errors at all.
-    Ideal,
-    /// An uncalibrated part with datasheet-level errors.
-    Datasheet,
-    /// The residual errors after this project's accelerometer calibration.
-    Calibrated,
-}
-
-impl Preset {
-    fn model(self) -> SensorModel {
-        match self {
-            Self::Ideal => SensorModel::ideal(),
-            Self::Datasheet => SensorModel::mpu9250_datasheet(),
-            Self::Calibrated => SensorModel::mpu9250_calibrated(),
-        }
-    }
 }
 
 /// Parses `a,b,c` into three numbers.

@@ -643,3 +643,41 @@ impl Sensor {
         }
     }
 }
+
+/// The named error models, as command lines spell them (`ideal`, `datasheet`, `calibrated`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Preset {
+    /// No errors at all ([`SensorModel::ideal`]).
+    Ideal,
+    /// An uncalibrated part with datasheet-level errors ([`SensorModel::mpu9250_datasheet`]).
+    Datasheet,
+    /// The residual errors after this project's accelerometer calibration
+    /// ([`SensorModel::mpu9250_calibrated`]).
+    Calibrated,
+}
+
+impl Preset {
+    /// The preset's error model.
+    pub fn model(self) -> SensorModel {
+        match self {
+            Self::Ideal => SensorModel::ideal(),
+            Self::Datasheet => SensorModel::mpu9250_datasheet(),
+            Self::Calibrated => SensorModel::mpu9250_calibrated(),
+        }
+    }
+}
+
+impl std::str::FromStr for Preset {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "ideal" => Ok(Self::Ideal),
+            "datasheet" => Ok(Self::Datasheet),
+            "calibrated" => Ok(Self::Calibrated),
+            other => Err(format!(
+                "unknown preset {other:?}: expected ideal, datasheet or calibrated"
+            )),
+        }
+    }
+}

@@ -1,9 +1,8 @@
 //! `mems-topic hz|echo SERVICE`: subscribe to a mems service and print its rate, lost and
 //! duplicated sequence numbers and latency (`hz`), or its messages (`echo`).
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
-use iceoryx2::prelude::*;
 use ipc_types::{
     CorrectedImuSample, Message, OdometryState, RawImuSample, clock::monotonic_ns, service,
 };
@@ -62,9 +61,7 @@ fn main() -> Result<()> {
 fn run<T: Message>(args: &Args, echo: bool) -> Result<()> {
     let ns = service::namespace(args.namespace.as_deref());
     let name = service::full_name(&ns, &args.service);
-    let node = NodeBuilder::new()
-        .create::<ipc::Service>()
-        .context("cannot create iceoryx2 node")?;
+    let node = service::node()?;
     let svc = service::open::<T>(&node, &name)?;
     let subscriber = service::subscriber(&svc)?;
 

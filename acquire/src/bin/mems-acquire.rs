@@ -1,0 +1,208 @@
+//! `mems-acquire`: reads an MPU-9250 (simulated by default, or real over Linux I2C) and
+//! publishes every sample on `mems/imu/raw`, losslessly.
+
+use std::time::{Duration, Instant};
+
+use acquire::acquisition::{Acquisition, SourceSpec, config_for_rate};
+use acquire::clock::{Clock, MonotonicClock, SimClock};
+use acquire::driver::Mpu9250;
+use acquire::sim::{SimConfig, SimMpu9250};
+use anyhow::{Context, Result, bail};
+use clap::{Parser, ValueEnum};
+use embedded_hal::i2c::I2c;
+use ipc_types::{RawImuSample, service};
+use mems_sim::SimSensor;
+use mems_sim::model::Preset;
+use mems_sim::scenario::{Drive, DriveParams, PoseSession};
+use mems_sim::vibration::VibrationModel;
+use nalgebra::UnitQuaternion;
+
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    /// `sim` (the simulated MPU-9250, paced in real time) or `i2c:/dev/i2c-N[@0x68]`.
+    #[arg(long, default_value = "sim")]
+    source: SourceSpec,
+    /// Output rate, Hz: 4000 (accelerometer only, DLPF bypassed) or 1000/n (accel + gyro +
+    /// temperature).
+    #[arg(long, default_value_t = 1000)]
+    rate: u32,
+    /// Stop after this many seconds (default: until SIGINT/SIGTERM).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Time between FIFO reads, ms (the 512-byte FIFO holds 21 ms at 4 kHz).
+    #[arg(long, default_value_t = 5.0)]
+    read_interval_ms: f64,
+    /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
+    #[arg(long)]
+    namespace: Option<String>,
+    /// Run the loop under SCHED_FIFO at this priority (1-99).
+    #[arg(long)]
+    sched_fifo: Option<u8>,
+    /// Pin the process to this CPU core.
+    #[arg(long)]
+    cpu: Option<usize>,
+    /// Lock all memory (mlockall) so that no page fault stalls the loop.
+    #[arg(long)]
+    mlock: bool,
+    /// Simulated scenario (sim source only).
+    #[arg(long, value_enum, default_value_t = Scenario::Drive)]
+    scenario: Scenario,
+    /// Simulated sensor's error model (sim source only): ideal, datasheet or calibrated.
+    #[arg(long, default_value = "datasheet")]
+    preset: Preset,
+    /// Seed of the simulated sensor and scenario (sim source only).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Scenario {
+    /// A ground-robot drive with turns, rests and vibration, longer than any run.
+    Drive,
+    /// Lying still, level, z up.
+    Static,
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    realtime_setup(&cli)?;
+    let config = config_for_rate(cli.rate).map_err(anyhow::Error::msg)?;
+    let read_interval_ns = (cli.read_interval_ms * 1e6) as u64;
+    match cli.source.clone() {
+        SourceSpec::Sim => {
+            let clock = SimClock::real_time();
+            let model = cli.preset.model();
+            let g = mems_sim::model::G_MPS2;
+            // Long enough for any run; the drive plans its motions from the seed.
+            let horizon_s = 24.0 * 3600.0;
+            let device_config = SimConfig::default();
+            let address = device_config.address;
+            match cli.scenario {
+                Scenario::Drive => {
+                    let mut params = DriveParams::new(horizon_s);
+                    params.turns = true;
+                    let drive = Drive::new(&params, cli.seed)?;
+                    let sensor =
+                        SimSensor::new(drive, &model, &VibrationModel::moderate(1.0), cli.seed)?;
+                    let device = SimMpu9250::new(sensor, clock.clone(), device_config);
+                    let driver = Mpu9250::new(device, "sim", address);
+                    run(&cli, driver, clock, config, read_interval_ns)
+                }
+                Scenario::Static => {
+                    let pose = PoseSession::static_pose(UnitQuaternion::identity(), horizon_s, g)?;
+                    let sensor =
+                        SimSensor::new(pose, &model, &VibrationModel::moderate(0.0), cli.seed)?;
+                    let device = SimMpu9250::new(sensor, clock.clone(), device_config);
+                    let driver = Mpu9250::new(device, "sim", address);
+                    run(&cli, driver, clock, config, read_interval_ns)
+                }
+            }
+        }
+        SourceSpec::I2c { device, address } => {
+            let bus = linux_embedded_hal::I2cdev::new(&device)
+                .with_context(|| format!("cannot open I2C bus {device}"))?;
+            let driver = Mpu9250::new(bus, device.as_str(), address);
+            run(&cli, driver, MonotonicClock, config, read_interval_ns)
+        }
+    }
+}
+
+/// Applies the real-time options: memory locking, CPU pinning, SCHED_FIFO.
+fn realtime_setup(cli: &Cli) -> Result<()> {
+    if cli.mlock {
+        // SAFETY: mlockall has no memory-safety preconditions.
+        let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
+        if rc != 0 {
+            bail!("mlockall failed: {}", std::io::Error::last_os_error());
+        }
+    }
+    if let Some(cpu) = cli.cpu {
+        let ids = core_affinity::get_core_ids().unwrap_or_default();
+        let Some(id) = ids.into_iter().find(|c| c.id == cpu) else {
+            bail!("cannot pin to CPU {cpu}: no such core");
+        };
+        if !core_affinity::set_for_current(id) {
+            bail!("cannot pin to CPU {cpu}");
+        }
+    }
+    if let Some(priority) = cli.sched_fifo {
+        use thread_priority::{
+            RealtimeThreadSchedulePolicy, ThreadPriority, ThreadPriorityValue,
+            ThreadSchedulePolicy, set_thread_priority_and_policy, thread_native_id,
+        };
+        let value = ThreadPriorityValue::try_from(priority)
+            .map_err(|e| anyhow::anyhow!("bad SCHED_FIFO priority {priority}: {e}"))?;
+        set_thread_priority_and_policy(
+            thread_native_id(),
+            ThreadPriority::Crossplatform(value),
+            ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
+        )
+        .map_err(|e| anyhow::anyhow!("cannot set SCHED_FIFO {priority}: {e:?}"))?;
+    }
+    Ok(())
+}
+
+/// Publishes until the duration is over or SIGINT/SIGTERM arrives; then prints a summary.
+fn run<I2C: I2c, C: Clock>(
+    cli: &Cli,
+    driver: Mpu9250<I2C>,
+    clock: C,
+    config: acquire::driver::Config,
+    read_interval_ns: u64,
+) -> Result<()> {
+    let namespace = service::namespace(cli.namespace.as_deref());
+    let name = service::full_name(&namespace, service::RAW);
+    let node = service::node()?;
+    let raw = service::open::<RawImuSample>(&node, &name)?;
+    let publisher = service::publisher(&raw)?;
+
+    let mut acq = Acquisition::start(driver, clock, config, read_interval_ns)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    eprintln!(
+        "mems-acquire: {} at {} Hz on {name}",
+        acq.driver().bus_label(),
+        config.output_rate_hz()
+    );
+    let start = Instant::now();
+    let deadline = cli.duration.map(Duration::from_secs_f64);
+    let mut publish = |s: &RawImuSample| -> Result<()> {
+        let sample = publisher
+            .loan_uninit()
+            .map_err(|e| anyhow::anyhow!("cannot loan a sample on {name}: {e:?}"))?;
+        sample
+            .write_payload(*s)
+            .send()
+            .map_err(|e| anyhow::anyhow!("cannot send on {name}: {e:?}"))?;
+        Ok(())
+    };
+    loop {
+        let wait_ns = acq.next_read_ns().saturating_sub(acq.clock().now_ns());
+        // node.wait sleeps and returns an error on SIGINT/SIGTERM: the clean way out.
+        if node.wait(Duration::from_nanos(wait_ns)).is_err() {
+            break;
+        }
+        if let Err(e) = acq.read_and_publish(&mut publish)? {
+            eprintln!("mems-acquire: read failed, device re-initialising: {e}");
+        }
+        if deadline.is_some_and(|d| start.elapsed() >= d) {
+            break;
+        }
+    }
+    let stats = acq.stats();
+    let driver = acq.driver().stats();
+    eprintln!(
+        "mems-acquire: published {} samples in {:.1} s; reads {}, failed {}, overflows {}, \
+         gaps {}, lost {}, bus errors {}, re-inits {}",
+        stats.published,
+        start.elapsed().as_secs_f64(),
+        stats.reads,
+        stats.failed_reads,
+        driver.overflows,
+        driver.gaps,
+        driver.lost_samples,
+        driver.bus_errors,
+        driver.reinits
+    );
+    Ok(())
+}
