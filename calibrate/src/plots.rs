@@ -68,8 +68,15 @@ pub fn plot_pose_residuals(
         .configure_mesh()
         .x_desc("pose")
         .y_desc("residual (mg)")
-        .x_labels(n.min(40))
-        .x_label_formatter(&|x| format!("{}", x.floor() as usize + 1))
+        .x_labels(n + 1)
+        .x_label_formatter(&|x| {
+            let k = x.round() as usize;
+            if k < n {
+                format!("{}", k + 1)
+            } else {
+                String::new()
+            }
+        })
         .draw()
         .map_err(|x| e(x.to_string()))?;
     for axis in 0..3 {
@@ -85,6 +92,7 @@ pub fn plot_pose_residuals(
     }
     chart
         .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
         .border_style(BLACK)
         .background_style(WHITE.mix(0.8))
         .draw()

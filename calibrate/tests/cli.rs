@@ -86,6 +86,23 @@ fn fit(input: &Path, extra: &[&str]) -> (Output, PathBuf) {
     (output, out)
 }
 
+/// The file is a PNG of a plausible size.
+fn assert_png(path: &Path) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert_eq!(
+        &bytes[..8],
+        b"\x89PNG\r\n\x1a\n",
+        "{} is not a PNG",
+        path.display()
+    );
+    assert!(
+        bytes.len() > 10_000,
+        "{}: only {} bytes",
+        path.display(),
+        bytes.len()
+    );
+}
+
 /// Each parameter within `k` reported sigmas of the truth (parameters with zero sigma must
 /// match exactly: they are structural).
 fn assert_within(file: &CalibrationFile, truth: &AccelModel, k: f64) {

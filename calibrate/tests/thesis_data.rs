@@ -174,7 +174,12 @@ fn static_trial_1_best_beats_thesis_full_with_consistent_sigma() {
 #[test]
 fn static_trial_1_without_earlier_data() {
     let Some(dir) = data_dir() else { return };
-    let json = run_static(&dir, &[]);
+    let png = std::env::temp_dir().join(format!("calibrate-static-{}.png", std::process::id()));
+    let json = run_static(&dir, &["--plot", png.to_str().unwrap()]);
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[..4], b"\x89PNG");
+    assert!(bytes.len() > 10_000);
+    std::fs::remove_file(&png).unwrap();
     let w = &json["windows"][0];
     let full = vec3(&w["methods"]["thesis_full"]["d"]);
     let best = vec3(&w["methods"]["best"]["d"]);
