@@ -132,12 +132,21 @@ fn assert_within(file: &CalibrationFile, truth: &AccelModel, k: f64) {
 fn six_position_raw_session_auto_labels_and_label_free_refusal() {
     let session = PoseSession::six_position(&PoseParams::new(20.0), 3).unwrap();
     let csv = write_session(session, "six");
-    let (output, toml) = fit(&csv, &["--weighted", "--gravity", "9.80665"]);
+    let png = csv.with_extension("png");
+    let plot = [
+        "--weighted",
+        "--gravity",
+        "9.80665",
+        "--plot",
+        png.to_str().unwrap(),
+    ];
+    let (output, toml) = fit(&csv, &plot);
     assert!(
         output.status.success(),
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
+    assert_png(&png);
     let file = CalibrationFile::load(&toml).unwrap();
     assert_eq!(file.method, FitMethod::Labelled);
     assert_eq!(file.source.poses, 6);
