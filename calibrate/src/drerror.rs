@@ -37,7 +37,8 @@ pub fn rrw_sigma_m(q: f64, align_s: f64, t_s: f64) -> f64 {
 /// Estimate of the rate-random-walk intensity `q` ((m/s^2)^2 per s) from the means of two
 /// consecutive intervals of length `tau_s` with `n1`, `n2` samples of white-noise std
 /// `sigma`: `q = 3 max(0, delta^2 - sigma^2 (1/n1 + 1/n2)) / (2 tau)`. One pair gives a
-/// chi-square(1)-distributed estimate: unbiased, but uncertain by a factor of about 1.4.
+/// chi-square(1)-distributed estimate: unbiased, but with a relative standard deviation of
+/// sqrt(2).
 pub fn rrw_from_halves(delta: f64, sigma: f64, n1: usize, n2: usize, tau_s: f64) -> f64 {
     let white = sigma * sigma * (1.0 / n1 as f64 + 1.0 / n2 as f64);
     1.5 * (delta * delta - white).max(0.0) / tau_s

@@ -28,8 +28,7 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::model::{
-    AccelModel, ModelError, ModelKind, N_PARAMS, PARAM_NAMES, ParamCovariance, ParamVector,
-    scale_index,
+    AccelModel, ModelError, ModelKind, PARAM_NAMES, ParamCovariance, ParamVector, scale_index,
 };
 
 /// One static pose: its gravity label and the statistics of the readings taken in it.
@@ -324,7 +323,6 @@ pub fn fit_labelled(
         .iter()
         .map(|p| p.mean_g - model.measure(&p.truth_g))
         .collect();
-    debug_assert_eq!(params.len(), N_PARAMS);
     Ok(LabelledFit {
         model,
         covariance,

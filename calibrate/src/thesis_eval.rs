@@ -9,7 +9,6 @@
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
-use serde::Serialize;
 
 use crate::fit::{FitError, Weighting, fit_labelled};
 use crate::integrate::DoubleIntegrator;
@@ -66,7 +65,7 @@ pub enum ThesisEvalError {
 }
 
 /// One trial's reproduced displacements, in [`METHODS`] order.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TrialResult {
     /// Trial number (1-3).
     pub trial: usize,

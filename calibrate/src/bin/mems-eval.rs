@@ -134,6 +134,12 @@ fn run(cli: Cli) -> Result<()> {
             progress.set_message("evaluating");
             let report = evaluate_static(&six_data, &test_data, priors, &cfg, &progress)?;
             progress.finish_and_clear();
+            if report.prior_runs == 0 {
+                eprintln!(
+                    "note: no earlier recordings cover this window timing (see --prior): the drift term comes from \
+                     the data before dead reckoning alone (one pair of interval means) and is a weak estimate"
+                );
+            }
             if json {
                 println!("{}", serde_json::to_string_pretty(&report.to_json())?);
             } else {
