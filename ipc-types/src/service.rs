@@ -75,6 +75,26 @@ pub fn node() -> Result<Node<ipc::Service>, ServiceError> {
         .map_err(|e| ServiceError(format!("cannot create iceoryx2 node: {e:?}")))
 }
 
+/// Removes the shared-memory resources of every node whose process died without cleaning up
+/// (a SIGKILLed stage) and returns how many such dead nodes were found. iceoryx2 also does this
+/// when a node is created; supervisors call it right after a child dies.
+pub fn remove_dead_nodes() -> Result<usize, ServiceError> {
+    let mut dead = Vec::new();
+    Node::<ipc::Service>::list(Config::global_config(), |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| ServiceError(format!("cannot list iceoryx2 nodes: {e:?}")))?;
+    let found = dead.len();
+    for view in dead {
+        view.try_remove_stale_resources()
+            .map_err(|e| ServiceError(format!("cannot remove a dead node's resources: {e:?}")))?;
+    }
+    Ok(found)
+}
+
 /// Opens (or creates) the publish-subscribe service `name` carrying `T`, with the lossless
 /// settings of this module.
 pub fn open<T: core::fmt::Debug + ZeroCopySend>(
