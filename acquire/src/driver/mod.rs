@@ -333,6 +333,11 @@ impl<I2C: I2c> Mpu9250<I2C> {
         self.config
     }
 
+    /// The bus (for inspection, e.g. the simulated device's statistics).
+    pub fn i2c(&self) -> &I2C {
+        &self.i2c
+    }
+
     /// The bus, e.g. to reach a simulated device's controls.
     pub fn bus_mut(&mut self) -> &mut I2C {
         &mut self.i2c

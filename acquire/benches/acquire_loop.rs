@@ -1,0 +1,87 @@
+//! Benchmark of the acquisition loop on the simulated MPU-9250 with the 400 kHz I2C timing
+//! model: a virtual clock runs the device for 60 s of sensor time per configuration while the
+//! host measures how much CPU the driver and the loop need.
+//!
+//! `cargo bench -p acquire --bench acquire_loop`
+//!
+//! Reported per configuration: samples/s sustained (in sensor time), bus utilisation (busy time
+//! over elapsed time under the timing model), host CPU per sample (thread CPU time, so the
+//! figure does not depend on what else the machine runs), and drops (samples lost, overflows).
+
+use std::time::Duration;
+
+use acquire::acquisition::{Acquisition, config_for_rate};
+use acquire::clock::{Clock, SimClock};
+use acquire::driver::Mpu9250;
+use acquire::registers as reg;
+use acquire::sim::{SimConfig, SimMpu9250};
+use mems_sim::SimSensor;
+use mems_sim::model::SensorModel;
+use mems_sim::scenario::{Drive, DriveParams};
+use mems_sim::vibration::VibrationModel;
+
+fn thread_cpu() -> Duration {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: a valid, writable timespec; CLOCK_THREAD_CPUTIME_ID is supported on Linux.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    assert_eq!(rc, 0);
+    Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32)
+}
+
+fn run(rate_hz: u32, read_interval_ms: u64, seconds: u64) {
+    let mut params = DriveParams::new(seconds as f64 + 10.0);
+    params.turns = true;
+    let drive = Drive::new(&params, 7).expect("drive");
+    let sensor = SimSensor::new(
+        drive,
+        &SensorModel::mpu9250_datasheet(),
+        &VibrationModel::moderate(1.0),
+        7,
+    )
+    .expect("sensor");
+    let clock = SimClock::new_virtual(1_000_000_000);
+    let device = SimMpu9250::new(sensor, clock.clone(), SimConfig::default());
+    let driver = Mpu9250::new(device, "sim", reg::ADDRESS_AD0_LOW);
+    let interval_ns = read_interval_ms * 1_000_000;
+    let mut acq = Acquisition::start(
+        driver,
+        clock.clone(),
+        config_for_rate(rate_hz).unwrap(),
+        interval_ns,
+    )
+    .expect("start");
+    let t0 = clock.now_ns();
+    let cpu0 = thread_cpu();
+    let mut publish = |_: &ipc_types::RawImuSample| -> Result<(), ()> { Ok(()) };
+    while clock.now_ns() - t0 < seconds * 1_000_000_000 {
+        let due = acq.next_read_ns();
+        clock.advance(due.saturating_sub(clock.now_ns()));
+        acq.read_and_publish(&mut publish).unwrap().expect("read");
+    }
+    let cpu = thread_cpu() - cpu0;
+    let elapsed_s = (clock.now_ns() - t0) as f64 * 1e-9;
+    let stats = acq.stats();
+    let drv = acq.driver().stats();
+    let util = acq.driver().i2c().bus_utilisation();
+    println!(
+        "{rate_hz:>5} Hz, read every {read_interval_ms} ms: {:.1} samples/s sustained over {elapsed_s:.0} s, \
+         bus utilisation {:.1} %, host CPU {:.2} us/sample, lost {}, overflows {}, reads {}",
+        stats.published as f64 / elapsed_s,
+        100.0 * util,
+        cpu.as_secs_f64() * 1e6 / stats.published as f64,
+        drv.lost_samples,
+        drv.overflows,
+        stats.reads,
+    );
+}
+
+fn main() {
+    // `cargo bench` passes --bench; nothing to parse.
+    run(4000, 5, 60);
+    run(4000, 15, 60);
+    run(1000, 5, 60);
+    run(200, 20, 60);
+}
