@@ -1,0 +1,318 @@
+//! Overlapping Allan variance of a rate series (accelerometer or gyro axis), its equivalent
+//! degrees of freedom, and chi-squared confidence intervals.
+//!
+//! For samples `y_0 .. y_{L-1}` taken every `tau0` seconds and a cluster of `m` samples
+//! (`tau = m tau0`), the overlapping Allan variance is
+//! `AVAR(tau) = 1 / (2 n) * sum_k (ybar_{k+m} - ybar_k)^2` over all `n = L - 2m + 1` starting
+//! points `k`, where `ybar_k` is the mean of `y_k .. y_{k+m-1}`. With the cumulative sum `S`
+//! (`S_0 = 0`, `S_{j+1} = S_j + y_j`) each term is `(S_{k+2m} - 2 S_{k+m} + S_k) / m`, so each
+//! cluster time costs O(L). The unit is the series' unit squared; the Allan deviation (ADEV) is
+//! its square root. A record split at long gaps (see [`crate::series`]) pools the terms of all
+//! segments; clusters never straddle a split.
+
+use std::ops::Range;
+
+use serde::{Deserialize, Serialize};
+use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+/// One cluster time of an Allan curve.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AllanPoint {
+    /// Cluster size, samples.
+    pub m: usize,
+    /// Cluster time `m * tau0`, s.
+    pub tau_s: f64,
+    /// Overlapping Allan variance, (series unit)^2.
+    pub avar: f64,
+    /// Number of overlapping differences averaged, all segments together.
+    pub terms: usize,
+}
+
+/// The overlapping Allan variance of one series at log-spaced cluster times.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AllanCurve {
+    /// Sample interval, s.
+    pub tau0_s: f64,
+    /// Samples in each gap-free segment that was analysed.
+    pub segment_lengths: Vec<usize>,
+    /// One entry per cluster size, increasing.
+    pub points: Vec<AllanPoint>,
+}
+
+/// The three noise processes of the rate model, by their frequency-stability names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NoiseKind {
+    /// White rate noise (angle / velocity random walk; "white FM"): AVAR ~ 1/tau.
+    White,
+    /// Flicker rate noise (bias instability; "flicker FM"): AVAR flat.
+    Flicker,
+    /// Random-walk rate noise (rate random walk; "random-walk FM"): AVAR ~ tau.
+    RandomWalk,
+}
+
+/// Samples processed per block: the block's cumulative sums stay in cache while every
+/// cluster size uses them.
+const BLOCK: usize = 8192;
+
+/// Log-spaced cluster sizes, two per octave, from 1 up to `max_m`: 1, 2, 3, 4, 6, 8, 11, 16,
+/// then 23, 32, 46, 64, ... where each size is exactly twice the one two places before it (so
+/// that the covariance integrals of [`crate::fit`] see exact octaves).
+pub fn cluster_sizes(max_m: usize) -> Vec<usize> {
+    let mut sizes = vec![1, 2, 3, 4, 6, 8, 11, 16, 23];
+    let mut i = sizes.len() - 2;
+    while let Some(&base) = sizes.get(i) {
+        let next = base * 2;
+        if next > max_m {
+            break;
+        }
+        sizes.push(next);
+        i += 1;
+    }
+    sizes.retain(|&m| m <= max_m);
+    sizes
+}
+
+/// The largest cluster size analysed for segments of these lengths: a quarter of the longest
+/// segment, so that at least half its samples start a difference.
+pub fn max_cluster(segment_lengths: &[usize]) -> usize {
+    segment_lengths.iter().copied().max().unwrap_or(0) / 4
+}
+
+/// Overlapping Allan variance of `values` (any unit; sampled every `tau0_s` seconds) at
+/// [`cluster_sizes`] up to [`max_cluster`], pooling the given segments (index ranges into
+/// `values`). Cluster sizes no segment can hold are left out.
+pub fn overlapping_avar(values: &[f64], segments: &[Range<usize>], tau0_s: f64) -> AllanCurve {
+    let segment_lengths: Vec<usize> = segments.iter().map(|r| r.len()).collect();
+    let sizes = cluster_sizes(max_cluster(&segment_lengths));
+    let mut sums = vec![0.0; sizes.len()];
+    let mut terms = vec![0usize; sizes.len()];
+    let mut cumulative = Vec::new();
+    for range in segments {
+        let segment = &values[range.clone()];
+        if segment.is_empty() {
+            continue;
+        }
+        // Centre the segment: the differences do not change, the sums stay small.
+        let mean = segment.iter().sum::<f64>() / segment.len() as f64;
+        cumulative.clear();
+        cumulative.reserve(segment.len() + 1);
+        let mut s = 0.0;
+        cumulative.push(s);
+        for &v in segment {
+            s += v - mean;
+            cumulative.push(s);
+        }
+        let len = segment.len();
+        for (i, &m) in sizes.iter().enumerate() {
+            if len >= 2 * m {
+                terms[i] += len - 2 * m + 1;
+            }
+        }
+        let mut start = 0;
+        while start < len {
+            for (i, &m) in sizes.iter().enumerate() {
+                if len < 2 * m {
+                    break;
+                }
+                let n = len - 2 * m + 1;
+                if start >= n {
+                    continue;
+                }
+                let end = (start + BLOCK).min(n);
+                sums[i] += second_difference_energy(&cumulative, m, start, end);
+            }
+            start += BLOCK;
+        }
+    }
+    let points = sizes
+        .iter()
+        .zip(sums.iter().zip(&terms))
+        .filter(|(_, (_, t))| **t > 0)
+        .map(|(&m, (&sum, &t))| AllanPoint {
+            m,
+            tau_s: m as f64 * tau0_s,
+            avar: sum / (2.0 * (m * m) as f64 * t as f64),
+            terms: t,
+        })
+        .collect();
+    AllanCurve {
+        tau0_s,
+        segment_lengths,
+        points,
+    }
+}
+
+/// `sum_{k in start..end} (S[k+2m] - 2 S[k+m] + S[k])^2`, four independent accumulators so
+/// that the compiler can vectorise the loop.
+fn second_difference_energy(s: &[f64], m: usize, start: usize, end: usize) -> f64 {
+    let a = &s[start..end];
+    let b = &s[start + m..end + m];
+    let c = &s[start + 2 * m..end + 2 * m];
+    let (a4, a_rest) = a.as_chunks::<4>();
+    let (b4, b_rest) = b.as_chunks::<4>();
+    let (c4, c_rest) = c.as_chunks::<4>();
+    let mut acc = [0.0f64; 4];
+    for ((x, y), z) in a4.iter().zip(b4).zip(c4) {
+        for lane in 0..4 {
+            let d = z[lane] - 2.0 * y[lane] + x[lane];
+            acc[lane] += d * d;
+        }
+    }
+    let mut total = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    for ((x, y), z) in a_rest.iter().zip(b_rest).zip(c_rest) {
+        let d = z - 2.0 * y + x;
+        total += d * d;
+    }
+    total
+}
+
+/// Equivalent degrees of freedom of the overlapping Allan variance of one segment of `len`
+/// rate samples at cluster size `m`, for a given dominant noise (Howe, Allan & Barnes 1981; as
+/// tabulated in NIST SP 1065 "Handbook of Frequency Stability Analysis", section 5.2, with
+/// `N = len + 1` phase points). At least 1.
+pub fn edf(kind: NoiseKind, m: usize, len: usize) -> f64 {
+    let n = len as f64 + 1.0;
+    let m = m as f64;
+    let value = match kind {
+        NoiseKind::White => {
+            (3.0 * (n - 1.0) / (2.0 * m) - 2.0 * (n - 2.0) / n) * 4.0 * m * m / (4.0 * m * m + 5.0)
+        }
+        NoiseKind::Flicker if m == 1.0 => 2.0 * (n - 2.0).powi(2) / (2.3 * n - 4.9),
+        NoiseKind::Flicker => 5.0 * n * n / (4.0 * m * (n + 3.0 * m)),
+        NoiseKind::RandomWalk => {
+            (n - 2.0) / m * ((n - 1.0).powi(2) - 3.0 * m * (n - 1.0) + 4.0 * m * m)
+                / (n - 3.0).powi(2)
+        }
+    };
+    if value.is_finite() {
+        value.max(1.0)
+    } else {
+        1.0
+    }
+}
+
+/// Equivalent degrees of freedom of an Allan variance pooled over segments (each segment's
+/// estimate weighted by its number of terms; Satterthwaite's approximation). Segments too short
+/// for `m` do not count.
+pub fn pooled_edf(kind: NoiseKind, m: usize, segment_lengths: &[usize]) -> f64 {
+    let (mut weight, mut weighted) = (0.0, 0.0);
+    for &len in segment_lengths.iter().filter(|&&len| len >= 2 * m) {
+        let terms = (len - 2 * m + 1) as f64;
+        weight += terms;
+        weighted += terms * terms / edf(kind, m, len);
+    }
+    if weighted > 0.0 {
+        weight * weight / weighted
+    } else {
+        1.0
+    }
+}
+
+/// Two-sided probability outside a 1-sigma interval, per side.
+const ONE_SIGMA_TAIL: f64 = 0.158_655_253_931_457_05;
+
+/// The 68.27% (1-sigma) confidence interval of an Allan variance estimate `avar` with `edf`
+/// degrees of freedom: `avar * edf / chi2_{0.841}(edf) .. avar * edf / chi2_{0.159}(edf)`.
+/// Returns `(low, high)` in the unit of `avar`.
+pub fn one_sigma_interval(avar: f64, edf: f64) -> (f64, f64) {
+    let chi2 = ChiSquared::new(edf.max(1e-3)).expect("positive degrees of freedom");
+    let low = avar * edf / chi2.inverse_cdf(1.0 - ONE_SIGMA_TAIL);
+    let high = avar * edf / chi2.inverse_cdf(ONE_SIGMA_TAIL);
+    (low, high)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    /// The definition, term by term, with explicit cluster means.
+    fn brute_force(values: &[f64], m: usize) -> (f64, usize) {
+        let mean = |k: usize| values[k..k + m].iter().sum::<f64>() / m as f64;
+        let n = values.len() - 2 * m + 1;
+        let sum: f64 = (0..n).map(|k| (mean(k + m) - mean(k)).powi(2)).sum();
+        (sum, n)
+    }
+
+    #[test]
+    fn matches_the_definition_with_segments() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let values: Vec<f64> = (0..20_000)
+            .map(|i| 3.0 + 1e-4 * i as f64 + Distribution::<f64>::sample(&StandardNormal, &mut rng))
+            .collect();
+        let segments = [0..12_000, 12_000..12_010, 12_010..20_000];
+        let curve = overlapping_avar(&values, &segments, 0.01);
+        assert_eq!(curve.segment_lengths, vec![12_000, 10, 7_990]);
+        let sizes: Vec<usize> = curve.points.iter().map(|p| p.m).collect();
+        assert_eq!(sizes, cluster_sizes(3_000));
+        for p in &curve.points {
+            let (mut sum, mut terms) = (0.0, 0);
+            for r in &segments {
+                if r.len() >= 2 * p.m {
+                    let (s, n) = brute_force(&values[r.clone()], p.m);
+                    sum += s;
+                    terms += n;
+                }
+            }
+            let expected = sum / (2.0 * terms as f64);
+            assert_eq!(p.terms, terms, "m = {}", p.m);
+            assert!(
+                ((p.avar - expected) / expected).abs() < 1e-9,
+                "m = {}: {} vs {expected}",
+                p.m,
+                p.avar
+            );
+            assert!((p.tau_s - p.m as f64 * 0.01).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn cluster_sizes_are_half_octaves() {
+        let sizes = cluster_sizes(1000);
+        assert_eq!(
+            sizes,
+            vec![
+                1, 2, 3, 4, 6, 8, 11, 16, 23, 32, 46, 64, 92, 128, 184, 256, 368, 512, 736
+            ]
+        );
+        for w in sizes[7..].windows(3) {
+            assert_eq!(w[2], 2 * w[0]);
+        }
+        assert_eq!(cluster_sizes(5), vec![1, 2, 3, 4]);
+    }
+
+    #[test]
+    fn edf_limits() {
+        // White noise at m = 1: about 2N/3 (the variance of the mean squared first difference).
+        let e = edf(NoiseKind::White, 1, 30_000);
+        assert!((e / 20_000.0 - 1.0).abs() < 1e-3, "{e}");
+        // Random walk at a quarter of the record: about 2.
+        let e = edf(NoiseKind::RandomWalk, 25_000, 100_000);
+        assert!((e - 2.0).abs() < 0.01, "{e}");
+        // Pooling two equal segments doubles the degrees of freedom.
+        for kind in [NoiseKind::White, NoiseKind::Flicker, NoiseKind::RandomWalk] {
+            let one = edf(kind, 16, 5_000);
+            let two = pooled_edf(kind, 16, &[5_000, 5_000]);
+            assert!((two / one - 2.0).abs() < 1e-12);
+            // A segment too short for m adds nothing.
+            assert_eq!(pooled_edf(kind, 16, &[5_000, 20]), one);
+        }
+    }
+
+    #[test]
+    fn interval_brackets_the_estimate() {
+        let (low, high) = one_sigma_interval(1.0, 10.0);
+        // Independent values: chi2 quantiles for 10 degrees of freedom (0.1587: 5.7287...,
+        // 0.8413: 14.1...).
+        let chi2 = ChiSquared::new(10.0).unwrap();
+        assert!((chi2.cdf(10.0 / low) - 0.841_344_7).abs() < 1e-6);
+        assert!((chi2.cdf(10.0 / high) - 0.158_655_3).abs() < 1e-6);
+        assert!(low < 1.0 && high > 1.0);
+        // Many degrees of freedom: relative half-width about sqrt(2 / edf).
+        let (low, high) = one_sigma_interval(1.0, 20_000.0);
+        assert!(((high - low) / 2.0 / (2.0f64 / 20_000.0).sqrt() - 1.0).abs() < 0.01);
+    }
+}

@@ -1,0 +1,364 @@
+//! From raw samples to the per-axis SI series the Allan analysis reads, and how irregular
+//! sampling is handled.
+//!
+//! The thesis recordings are snapshots of the sensor's output registers polled by a Python loop:
+//! intervals are about 5.5 ms with jitter (never below 0.9x the median, sometimes 1.5-2.5x) and
+//! a few longer gaps (up to 1.36 s). The sensor samples internally at 1 kHz, so each snapshot
+//! is one sensor sample whatever the jitter. The analysis therefore treats the samples of a
+//! gap-free stretch as a uniform series with the stretch's *mean* interval (so that a cluster of
+//! `m` samples spans `m` mean intervals, which is right on average whatever the jitter):
+//! - an interval longer than `gap_factor` median intervals (or a sample flagged
+//!   `GAP_BEFORE` / with `lost_before > 0`) is counted as a gap;
+//! - a gap longer than `split_factor` median intervals splits the record into segments, and
+//!   the Allan variance pools the segments (clusters never straddle a split);
+//! - shorter gaps are bridged: only cluster pairs that contain one see a slightly longer time
+//!   span, which matters only for slow noise at cluster times comparable to the gap, where
+//!   white noise dominates.
+
+use std::ops::Range;
+
+use ipc_types::{RawImuSample, raw_flags};
+use serde::{Deserialize, Serialize};
+
+/// Fewest samples an analysis accepts.
+pub const MIN_SAMPLES: usize = 32;
+
+/// How intervals are classified (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GapPolicy {
+    /// An interval longer than this many median intervals is a gap.
+    pub gap_factor: f64,
+    /// A gap longer than this many median intervals splits the record.
+    pub split_factor: f64,
+}
+
+impl Default for GapPolicy {
+    /// Gaps beyond 2 median intervals, splits beyond 10 (about 55 ms in the thesis files).
+    fn default() -> Self {
+        Self {
+            gap_factor: 2.0,
+            split_factor: 10.0,
+        }
+    }
+}
+
+/// The sampling of a recording as the analysis sees it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Timing {
+    /// Median interval between samples, s.
+    pub median_interval_s: f64,
+    /// Mean interval within segments (bridged gaps included), s: the analysis' `tau0`.
+    pub mean_interval_s: f64,
+    /// Intervals classified as gaps (bridged or splitting).
+    pub gaps: usize,
+    /// Gaps that split the record.
+    pub splits: usize,
+    /// Longest interval, s.
+    pub longest_interval_s: f64,
+    /// Gap-free segments as half-open sample index ranges `[start, end)`.
+    pub segments: Vec<(usize, usize)>,
+    /// Time from the first to the last sample, s.
+    pub duration_s: f64,
+}
+
+impl Timing {
+    /// The segments as ranges.
+    pub fn segment_ranges(&self) -> Vec<Range<usize>> {
+        self.segments.iter().map(|&(a, b)| a..b).collect()
+    }
+
+    /// Length of the longest segment, samples.
+    pub fn longest_segment(&self) -> usize {
+        self.segments.iter().map(|&(a, b)| b - a).max().unwrap_or(0)
+    }
+}
+
+/// Why a recording cannot be analysed.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SeriesError {
+    /// Too few samples.
+    #[error("{found} samples; the Allan analysis needs at least {MIN_SAMPLES}")]
+    TooShort {
+        /// Samples in the recording.
+        found: usize,
+    },
+    /// Sample times do not strictly increase.
+    #[error("sample {index} (seq {seq}): time {t_ns} ns does not follow {previous_ns} ns")]
+    TimeNotIncreasing {
+        /// Index of the offending sample.
+        index: usize,
+        /// Its sequence number.
+        seq: u64,
+        /// Its `stamps.sample_ns`.
+        t_ns: u64,
+        /// The previous sample's `stamps.sample_ns`.
+        previous_ns: u64,
+    },
+    /// A value is NaN or infinite.
+    #[error("sample {index} (seq {seq}): {field} is not finite")]
+    NotFinite {
+        /// Index of the offending sample.
+        index: usize,
+        /// Its sequence number.
+        seq: u64,
+        /// The field, e.g. `accel_g[2]`.
+        field: String,
+    },
+}
+
+/// Classifies the intervals of a recording and finds its gap-free segments.
+pub fn timing(samples: &[RawImuSample], policy: &GapPolicy) -> Result<Timing, SeriesError> {
+    if samples.len() < MIN_SAMPLES {
+        return Err(SeriesError::TooShort {
+            found: samples.len(),
+        });
+    }
+    for (index, pair) in samples.windows(2).enumerate() {
+        let (previous_ns, t_ns) = (pair[0].stamps.sample_ns, pair[1].stamps.sample_ns);
+        if t_ns <= previous_ns {
+            return Err(SeriesError::TimeNotIncreasing {
+                index: index + 1,
+                seq: pair[1].seq,
+                t_ns,
+                previous_ns,
+            });
+        }
+    }
+    let intervals: Vec<f64> = samples
+        .windows(2)
+        .map(|p| (p[1].stamps.sample_ns - p[0].stamps.sample_ns) as f64 * 1e-9)
+        .collect();
+    let mut sorted = intervals.clone();
+    let mid = sorted.len() / 2;
+    let median = *sorted.select_nth_unstable_by(mid, f64::total_cmp).1;
+
+    let mut gaps = 0;
+    let mut splits = 0;
+    let mut segments = Vec::new();
+    let mut start = 0;
+    let (mut inside_time, mut inside_intervals) = (0.0, 0usize);
+    for (k, &dt) in intervals.iter().enumerate() {
+        let next = &samples[k + 1];
+        let flagged = next.flags & raw_flags::GAP_BEFORE != 0 || next.lost_before > 0;
+        let periods = (dt / median).max(if flagged {
+            f64::from(next.lost_before) + 1.0
+        } else {
+            0.0
+        });
+        if flagged || periods > policy.gap_factor {
+            gaps += 1;
+        }
+        if periods > policy.split_factor {
+            splits += 1;
+            segments.push((start, k + 1));
+            start = k + 1;
+        } else {
+            inside_time += dt;
+            inside_intervals += 1;
+        }
+    }
+    segments.push((start, samples.len()));
+    let mean = if inside_intervals > 0 {
+        inside_time / inside_intervals as f64
+    } else {
+        median
+    };
+    let duration_s =
+        (samples[samples.len() - 1].stamps.sample_ns - samples[0].stamps.sample_ns) as f64 * 1e-9;
+    Ok(Timing {
+        median_interval_s: median,
+        mean_interval_s: mean,
+        gaps,
+        splits,
+        longest_interval_s: intervals.iter().copied().fold(0.0, f64::max),
+        segments,
+        duration_s,
+    })
+}
+
+/// Which sensor a channel comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Sensor {
+    /// Accelerometer: specific force, m/s^2.
+    Accel,
+    /// Gyroscope: angular rate, rad/s.
+    Gyro,
+}
+
+impl Sensor {
+    /// The SI unit of the channel's values.
+    pub fn unit(self) -> &'static str {
+        match self {
+            Self::Accel => "m/s^2",
+            Self::Gyro => "rad/s",
+        }
+    }
+}
+
+/// Axis names, index 0..3.
+pub const AXES: [&str; 3] = ["x", "y", "z"];
+
+/// One axis of one sensor as a series in SI units (sensor frame).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Channel {
+    /// The sensor.
+    pub sensor: Sensor,
+    /// 0, 1, 2 for x, y, z.
+    pub axis: usize,
+    /// Values in m/s^2 (accelerometer, g times `gravity_mps2`) or rad/s (gyro).
+    pub values: Vec<f64>,
+}
+
+/// Converts samples to SI channels: accelerometer always, gyro when every sample has
+/// `GYRO_VALID`. `gravity_mps2` converts g to m/s^2. Errors on a non-finite value.
+pub fn channels(samples: &[RawImuSample], gravity_mps2: f64) -> Result<Vec<Channel>, SeriesError> {
+    for (index, s) in samples.iter().enumerate() {
+        let gyro = s.flags & raw_flags::GYRO_VALID != 0;
+        for axis in 0..3 {
+            let bad = if !s.accel_g[axis].is_finite() {
+                Some(format!("accel_g[{axis}]"))
+            } else if gyro && !s.gyro_dps[axis].is_finite() {
+                Some(format!("gyro_dps[{axis}]"))
+            } else {
+                None
+            };
+            if let Some(field) = bad {
+                return Err(SeriesError::NotFinite {
+                    index,
+                    seq: s.seq,
+                    field,
+                });
+            }
+        }
+    }
+    let mut out: Vec<Channel> = (0..3)
+        .map(|axis| Channel {
+            sensor: Sensor::Accel,
+            axis,
+            values: samples
+                .iter()
+                .map(|s| s.accel_g[axis] * gravity_mps2)
+                .collect(),
+        })
+        .collect();
+    if has_gyro(samples) {
+        out.extend((0..3).map(|axis| {
+            Channel {
+                sensor: Sensor::Gyro,
+                axis,
+                values: samples
+                    .iter()
+                    .map(|s| s.gyro_dps[axis].to_radians())
+                    .collect(),
+            }
+        }));
+    }
+    Ok(out)
+}
+
+/// Whether every sample holds a gyro measurement.
+pub fn has_gyro(samples: &[RawImuSample]) -> bool {
+    !samples.is_empty() && samples.iter().all(|s| s.flags & raw_flags::GYRO_VALID != 0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(times_ms: &[f64]) -> Vec<RawImuSample> {
+        times_ms
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| {
+                let mut s = RawImuSample {
+                    seq: i as u64,
+                    ..Default::default()
+                };
+                s.stamps.sample_ns = (t * 1e6).round() as u64;
+                s
+            })
+            .collect()
+    }
+
+    #[test]
+    fn classifies_gaps_and_splits() {
+        // 5 ms sampling with a 12 ms interval (gap, bridged) and a 100 ms one (split).
+        let mut t: Vec<f64> = (0..40).map(|i| i as f64 * 5.0).collect();
+        for v in &mut t[10..] {
+            *v += 7.0;
+        }
+        for v in &mut t[25..] {
+            *v += 95.0;
+        }
+        let timing = timing(&at(&t), &GapPolicy::default()).unwrap();
+        assert!((timing.median_interval_s - 0.005).abs() < 1e-12);
+        assert_eq!(timing.gaps, 2);
+        assert_eq!(timing.splits, 1);
+        assert_eq!(timing.segments, vec![(0, 25), (25, 40)]);
+        // Inside segments: 38 intervals spanning 38 * 5 + 7 ms.
+        assert!((timing.mean_interval_s - (38.0 * 5.0 + 7.0) / 38.0 * 1e-3).abs() < 1e-12);
+        assert!((timing.longest_interval_s - 0.1).abs() < 1e-12);
+        assert!((timing.duration_s - (39.0 * 5.0 + 102.0) * 1e-3).abs() < 1e-12);
+    }
+
+    #[test]
+    fn flagged_losses_count_as_gaps() {
+        let t: Vec<f64> = (0..40).map(|i| i as f64 * 5.0).collect();
+        let mut samples = at(&t);
+        samples[7].flags |= raw_flags::GAP_BEFORE;
+        samples[7].lost_before = 1;
+        samples[30].lost_before = 20;
+        let timing = timing(&samples, &GapPolicy::default()).unwrap();
+        assert_eq!((timing.gaps, timing.splits), (2, 1));
+        assert_eq!(timing.segments, vec![(0, 30), (30, 40)]);
+    }
+
+    #[test]
+    fn rejects_bad_input() {
+        let t: Vec<f64> = (0..40).map(|i| i as f64 * 5.0).collect();
+        let mut samples = at(&t);
+        samples[12].stamps.sample_ns = samples[11].stamps.sample_ns;
+        let err = timing(&samples, &GapPolicy::default()).unwrap_err();
+        assert!(matches!(
+            err,
+            SeriesError::TimeNotIncreasing {
+                index: 12,
+                seq: 12,
+                ..
+            }
+        ));
+        assert_eq!(
+            timing(&samples[..5], &GapPolicy::default()).unwrap_err(),
+            SeriesError::TooShort { found: 5 }
+        );
+        let mut samples = at(&t);
+        samples[3].accel_g[2] = f64::NAN;
+        let err = channels(&samples, 9.8).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "sample 3 (seq 3): accel_g[2] is not finite"
+        );
+    }
+
+    #[test]
+    fn converts_to_si() {
+        let t: Vec<f64> = (0..40).map(|i| i as f64 * 5.0).collect();
+        let mut samples = at(&t);
+        for s in &mut samples {
+            s.accel_g = [0.5, -1.0, 2.0];
+            s.gyro_dps = [180.0, 0.0, -90.0];
+        }
+        let accel_only = channels(&samples, 9.8).unwrap();
+        assert_eq!(accel_only.len(), 3);
+        assert_eq!(accel_only[1].values[0], -9.8);
+        for s in &mut samples {
+            s.flags |= raw_flags::GYRO_VALID;
+        }
+        let all = channels(&samples, 9.8).unwrap();
+        assert_eq!(all.len(), 6);
+        assert_eq!(all[3].sensor, Sensor::Gyro);
+        assert!((all[3].values[5] - std::f64::consts::PI).abs() < 1e-15);
+        assert!((all[5].values[5] + std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+    }
+}
