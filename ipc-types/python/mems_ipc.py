@@ -1,0 +1,149 @@
+"""The mems-odometry wire format for Python clients (ctypes), mirroring ipc-types/src/wire.rs.
+
+Every struct has the same size, alignment and field offsets as the Rust type (checked by
+ipc-types/tests/python_layout.rs) and a ``type_name()`` equal to the Rust ``#[type_name]``, so
+that the iceoryx2 Python package (0.10) connects to the Rust services.
+
+Units: times in ns of CLOCK_MONOTONIC; raw samples in g, deg/s, degC (sensor frame);
+corrected samples in m/s^2 and rad/s (sensor frame); odometry in m and m/s (navigation frame,
+z up), 1-sigma per axis.
+"""
+
+import ctypes
+
+SERVICE_RAW = "mems/imu/raw"
+SERVICE_CORRECTED = "mems/imu/corrected"
+SERVICE_ODOMETRY = "mems/odometry/state"
+
+RAW_GAP_BEFORE = 1 << 0
+RAW_FIFO_OVERFLOW = 1 << 1
+RAW_SATURATED = 1 << 2
+RAW_REPAIRED = 1 << 3
+RAW_GYRO_VALID = 1 << 4
+RAW_TEMP_VALID = 1 << 5
+
+CORRECTED_ZERO_STATE = 1 << 0
+CORRECTED_DETECTOR_READY = 1 << 1
+CORRECTED_BIAS_REFINED = 1 << 2
+
+ODOMETRY_ZERO_VELOCITY = 1 << 0
+ODOMETRY_ALIGNED = 1 << 1
+ODOMETRY_REVISION = 1 << 2
+
+# The lossless service settings of ipc-types/src/service.rs: whichever process creates a
+# service sets them, and an opener may not ask for more, so every language uses the same.
+SUBSCRIBER_BUFFER = 4096
+MAX_PUBLISHERS = 2
+MAX_SUBSCRIBERS = 16
+MAX_NODES = 32
+
+Vec3 = ctypes.c_double * 3
+
+
+def service_name(base, namespace=""):
+    """The full service name for ``base`` under ``namespace`` (as ipc_types::service::full_name)."""
+    ns = namespace.strip("/")
+    return f"{ns}/{base}" if ns else base
+
+
+def open_service(node, name, payload):
+    """Opens (or creates) publish-subscribe service ``name`` carrying ``payload`` with the
+    project's lossless settings (needs the iceoryx2 Python package)."""
+    import iceoryx2 as iox2
+
+    return (
+        node.service_builder(iox2.ServiceName.new(name))
+        .publish_subscribe(payload)
+        .enable_safe_overflow(False)
+        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+        .history_size(0)
+        .max_publishers(MAX_PUBLISHERS)
+        .max_subscribers(MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
+        .open_or_create()
+    )
+
+
+class Stamps(ctypes.Structure):
+    """Per-stage timestamps, ns of CLOCK_MONOTONIC (0 where a stage has not touched it)."""
+
+    _fields_ = [
+        ("sample_ns", ctypes.c_uint64),
+        ("acquired_ns", ctypes.c_uint64),
+        ("calibrated_ns", ctypes.c_uint64),
+        ("odometry_ns", ctypes.c_uint64),
+    ]
+
+    @staticmethod
+    def type_name():
+        return "mems::Stamps.v1"
+
+
+class RawImuSample(ctypes.Structure):
+    """One raw sample (service mems/imu/raw)."""
+
+    _fields_ = [
+        ("stamps", Stamps),
+        ("seq", ctypes.c_uint64),
+        ("accel_g", Vec3),
+        ("gyro_dps", Vec3),
+        ("temp_c", ctypes.c_double),
+        ("accel_counts", ctypes.c_int16 * 3),
+        ("gyro_counts", ctypes.c_int16 * 3),
+        ("temp_counts", ctypes.c_int16),
+        ("flags", ctypes.c_uint16),
+        ("lost_before", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32),
+    ]
+
+    @staticmethod
+    def type_name():
+        return "mems::RawImuSample.v1"
+
+
+class CorrectedImuSample(ctypes.Structure):
+    """One calibrated sample (service mems/imu/corrected)."""
+
+    _fields_ = [
+        ("stamps", Stamps),
+        ("seq", ctypes.c_uint64),
+        ("accel_mps2", Vec3),
+        ("gyro_rps", Vec3),
+        ("temp_c", ctypes.c_double),
+        ("zs_mean_mps2", Vec3),
+        ("zs_std_mps2", Vec3),
+        ("calib_id", ctypes.c_uint64),
+        ("flags", ctypes.c_uint16),
+        ("raw_flags", ctypes.c_uint16),
+        ("reserved", ctypes.c_uint32),
+    ]
+
+    @staticmethod
+    def type_name():
+        return "mems::CorrectedImuSample.v1"
+
+
+class OdometryState(ctypes.Structure):
+    """The odometry estimate (service mems/odometry/state)."""
+
+    _fields_ = [
+        ("stamps", Stamps),
+        ("seq", ctypes.c_uint64),
+        ("position_m", Vec3),
+        ("position_sigma_m", Vec3),
+        ("velocity_mps", Vec3),
+        ("velocity_sigma_mps", Vec3),
+        ("gravity_sensor_mps2", Vec3),
+        ("attitude_wxyz", ctypes.c_double * 4),
+        ("distance_m", ctypes.c_double),
+        ("flags", ctypes.c_uint16),
+        ("reserved16", ctypes.c_uint16),
+        ("rest_count", ctypes.c_uint32),
+    ]
+
+    @staticmethod
+    def type_name():
+        return "mems::OdometryState.v1"
+
+
+ALL_TYPES = [Stamps, RawImuSample, CorrectedImuSample, OdometryState]

@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""Subscribes to a mems-odometry service with the iceoryx2 Python package (0.10) and prints
+each message as one JSON line.
+
+    python3 ipc-types/python/subscribe.py mems/odometry/state [--namespace NS] [--count N]
+
+Exits 0 after --count messages (or on Ctrl-C), 1 if none arrived within --timeout seconds.
+"""
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import iceoryx2 as iox2
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import mems_ipc  # noqa: E402
+
+TYPES = {
+    mems_ipc.SERVICE_RAW: mems_ipc.RawImuSample,
+    mems_ipc.SERVICE_CORRECTED: mems_ipc.CorrectedImuSample,
+    mems_ipc.SERVICE_ODOMETRY: mems_ipc.OdometryState,
+}
+
+
+def to_dict(value):
+    """A ctypes value as plain JSON-able Python data."""
+    if hasattr(value, "_fields_"):
+        return {name: to_dict(getattr(value, name)) for name, _ in value._fields_}
+    if hasattr(value, "_length_"):
+        return [to_dict(v) for v in value]
+    return value
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("service", choices=sorted(TYPES))
+    parser.add_argument("--namespace", default=os.environ.get("MEMS_NAMESPACE", ""))
+    parser.add_argument("--count", type=int, default=0, help="stop after N messages (0: never)")
+    parser.add_argument("--timeout", type=float, default=10.0)
+    args = parser.parse_args()
+
+    iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
+    node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+    name = mems_ipc.service_name(args.service, args.namespace)
+    payload = TYPES[args.service]
+    service = mems_ipc.open_service(node, name, payload)
+    subscriber = service.subscriber_builder().buffer_size(mems_ipc.SUBSCRIBER_BUFFER).create()
+
+    received = 0
+    started = time.monotonic()
+    try:
+        while args.count == 0 or received < args.count:
+            node.wait(iox2.Duration.from_millis(10))
+            while args.count == 0 or received < args.count:
+                sample = subscriber.receive()
+                if sample is None:
+                    break
+                print(json.dumps(to_dict(sample.payload().contents)), flush=True)
+                received += 1
+            if received == 0 and time.monotonic() - started > args.timeout:
+                print(f"no message on {name} within {args.timeout} s", file=sys.stderr)
+                sys.exit(1)
+    except iox2.NodeWaitFailure:
+        pass
+    # Release the ports before exit, or iceoryx2 leaves a segment in /dev/shm.
+    del subscriber
+    del service
+    del node
+
+
+if __name__ == "__main__":
+    main()
