@@ -84,6 +84,14 @@ pub struct TemperatureTerms {
     pub bias_g_per_c: Option<[f64; 3]>,
 }
 
+/// Gyroscope terms (optional: present once a gyroscope calibration estimates them).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct GyroSection {
+    /// Zero-rate bias, deg/s, sensor frame: subtracted from every reading.
+    #[serde(default)]
+    pub bias_dps: Option<[f64; 3]>,
+}
+
 /// The calibration file's contents.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CalibrationFile {
@@ -122,6 +130,9 @@ pub struct CalibrationFile {
     /// Temperature terms, when fitted.
     #[serde(default)]
     pub temperature: TemperatureTerms,
+    /// Gyroscope terms, when calibrated.
+    #[serde(default)]
+    pub gyro: GyroSection,
 }
 
 /// Why a calibration file could not be read or written.
@@ -188,6 +199,7 @@ impl CalibrationFile {
             residuals,
             noise: NoiseSection::default(),
             temperature: TemperatureTerms::default(),
+            gyro: GyroSection::default(),
         }
     }
 
@@ -250,6 +262,24 @@ impl CalibrationFile {
             )));
         }
         file.accel_model().map_err(|e| invalid(e.to_string()))?;
+        let t = &file.temperature;
+        if t.bias_g_per_c.is_some() != t.reference_c.is_some() {
+            return Err(invalid(
+                "temperature: bias_g_per_c and reference_c must be given together".into(),
+            ));
+        }
+        let extra = [
+            ("temperature.reference_c", t.reference_c.map(|r| [r; 3])),
+            ("temperature.bias_g_per_c", t.bias_g_per_c),
+            ("gyro.bias_dps", file.gyro.bias_dps),
+        ];
+        for (name, values) in extra {
+            if let Some(v) = values
+                && v.iter().any(|x| !x.is_finite())
+            {
+                return Err(invalid(format!("{name} must be finite, got {v:?}")));
+            }
+        }
         Ok(file)
     }
 }
@@ -307,11 +337,13 @@ mod tests {
         value.remove("noise");
         value.remove("temperature");
         value.remove("temperature_range_c");
+        value.remove("gyro");
         value.insert("future_term".into(), toml::Value::Float(1.0));
         let text = toml::to_string(&value).unwrap();
         let back: CalibrationFile = toml::from_str(&text).unwrap();
         assert_eq!(back.noise, NoiseSection::default());
         assert_eq!(back.temperature_range_c, None);
+        assert_eq!(back.gyro, GyroSection::default());
     }
 
     #[test]
@@ -331,6 +363,22 @@ mod tests {
         let err = CalibrationFile::load(&path).unwrap_err().to_string();
         assert!(
             err.contains("bad.toml") && err.contains("missing field"),
+            "{err}"
+        );
+        let mut f = example();
+        f.temperature.bias_g_per_c = Some([1e-4, 0.0, 0.0]);
+        std::fs::write(&path, f.to_toml()).unwrap();
+        let err = CalibrationFile::load(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("bad.toml") && err.contains("reference_c"),
+            "{err}"
+        );
+        let mut f = example();
+        f.gyro.bias_dps = Some([0.1, f64::NAN, 0.0]);
+        std::fs::write(&path, f.to_toml()).unwrap();
+        let err = CalibrationFile::load(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("bad.toml") && err.contains("gyro.bias_dps"),
             "{err}"
         );
         let good = dir.join("good.toml");

@@ -16,6 +16,8 @@ pub mod plots;
 pub mod repair;
 pub mod segments;
 pub mod session;
+pub mod stage;
 pub mod static_eval;
 pub mod thesis_eval;
 pub mod window;
+pub mod zero_state;

@@ -1,5 +1,7 @@
 //! `mems-calibrate fit`: fits an accelerometer model to a six-position means file or to the
 //! static segments of a raw recording and writes a calibration file (TOML).
+//! `mems-calibrate serve`: the live calibration process (raw samples in, corrected samples with
+//! the zero-state flag out; see `calibrate::stage`).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -17,6 +19,8 @@ use calibrate::session::{
     Input, all_axis_aligned, label_axis_aligned, load_input, poses_from_six, raw_poses,
 };
 use clap::{Parser, Subcommand, ValueEnum};
+
+mod serve;
 
 #[derive(Parser)]
 #[command(
@@ -65,6 +69,9 @@ enum Command {
         #[arg(long)]
         plot: Option<PathBuf>,
     },
+    /// Subscribe to raw samples, calibrate them, detect rest, refine the bias at rest and
+    /// publish corrected samples, until SIGINT/SIGTERM.
+    Serve(serve::ServeArgs),
 }
 
 fn main() -> ExitCode {
@@ -78,15 +85,30 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<()> {
-    let Command::Fit {
-        input,
-        model,
-        weighted,
-        labels,
-        gravity,
-        out,
-        plot,
-    } = cli.command;
+    match cli.command {
+        Command::Fit {
+            input,
+            model,
+            weighted,
+            labels,
+            gravity,
+            out,
+            plot,
+        } => fit(input, model, weighted, labels, gravity, out, plot),
+        Command::Serve(args) => serve::serve(&args),
+    }
+}
+
+/// `mems-calibrate fit`.
+fn fit(
+    input: PathBuf,
+    model: ModelKind,
+    weighted: bool,
+    labels: Labels,
+    gravity: f64,
+    out: PathBuf,
+    plot: Option<PathBuf>,
+) -> Result<()> {
     if !(gravity > 9.7 && gravity < 9.9) {
         bail!("--gravity {gravity} m/s^2 is not a terrestrial gravity (expected 9.7..9.9)");
     }

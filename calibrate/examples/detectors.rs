@@ -1,0 +1,344 @@
+//! Measures the zero-state detectors on labelled simulated drives: detection rate (fraction of
+//! true-rest samples flagged rest, once the detector is ready) and false alarms (fraction of
+//! moving samples flagged rest: all motion, slow cruise below 0.3 m/s, in-place turns).
+//!
+//! Each seed simulates a ground-robot drive (10 min by default, turns and in-place turns on)
+//! measured by the MPU-9250 as it is after calibration (`SensorModel::mpu9250_calibrated`) at
+//! 1 kHz, quantized like the device, and runs it through the calibration stage (identity
+//! calibration) once per detector variant.
+//!
+//! ```text
+//! cargo run --release -p calibrate --example detectors -- [--seeds 8] [--duration-s 600] [--vibration 1,0] [--json]
+//! ```
+
+use std::time::Instant;
+
+use anyhow::Result;
+use calibrate::calibfile::{CalibrationFile, ResidualSection, SourceSection};
+use calibrate::fit::{CovarianceMode, Weighting};
+use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
+use calibrate::stage::{CalibrationStage, RefineConfig};
+use calibrate::zero_state::{DetectorConfig, DetectorKind, GlrtStatistic};
+use clap::Parser;
+use ipc_types::corrected_flags;
+use ipc_types::units::{AccelRange, GyroRange};
+use mems_sim::model::{G_MPS2, SensorModel};
+use mems_sim::scenario::{Drive, DriveParams, ns_from_s};
+use mems_sim::vibration::VibrationModel;
+use mems_sim::{SimSensor, adc};
+use serde::Serialize;
+
+#[derive(Parser)]
+struct Cli {
+    /// Number of seeds (1..=N).
+    #[arg(long, default_value_t = 8)]
+    seeds: u64,
+    /// Length of each drive, s.
+    #[arg(long, default_value_t = 600.0)]
+    duration_s: f64,
+    /// Vibration levels (1: 0.1 m/s^2 and 0.5 deg/s RMS per axis at 1 m/s).
+    #[arg(long, value_delimiter = ',', default_value = "1,0")]
+    vibration: Vec<f64>,
+    /// Output rate, Hz.
+    #[arg(long, default_value_t = 1000.0)]
+    rate: f64,
+    /// Print JSON instead of a Markdown table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// A detector variant under test.
+struct Variant {
+    name: String,
+    config: DetectorConfig,
+}
+
+fn variants() -> Vec<Variant> {
+    let g = G_MPS2;
+    let mut out = Vec::new();
+    for alpha in [1e-3, 1e-2, 1e-1, 3e-1] {
+        let mut c = DetectorConfig::new(DetectorKind::Yu, g);
+        c.yu.false_alarm = alpha;
+        out.push(Variant {
+            name: format!("yu a={alpha:e}"),
+            config: c,
+        });
+    }
+    for (k, statistic, alpha) in [
+        (10, GlrtStatistic::Split, 1e-3),
+        (10, GlrtStatistic::Combined, 1e-3),
+        (5, GlrtStatistic::Split, 1e-3),
+        (25, GlrtStatistic::Split, 1e-3),
+        (50, GlrtStatistic::Split, 1e-3),
+        (10, GlrtStatistic::Split, 1e-2),
+        (25, GlrtStatistic::Split, 1e-2),
+        (25, GlrtStatistic::Split, 1e-1),
+        (25, GlrtStatistic::Combined, 1e-2),
+    ] {
+        let mut c = DetectorConfig::new(DetectorKind::Glrt, g);
+        c.glrt.window_batches = k;
+        c.glrt.statistic = statistic;
+        c.glrt.false_alarm = alpha;
+        let stat = match statistic {
+            GlrtStatistic::Split => "split",
+            GlrtStatistic::Combined => "combined",
+        };
+        out.push(Variant {
+            name: format!("glrt {stat} K={k} a={alpha:e}"),
+            config: c,
+        });
+    }
+    out
+}
+
+/// Sample counts of one variant: (flagged rest, total) per category.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+struct Counts {
+    rest: [u64; 2],
+    moving: [u64; 2],
+    clearly_moving: [u64; 2],
+    slow_cruise: [u64; 2],
+    in_place_turn: [u64; 2],
+}
+
+impl Counts {
+    fn add(&mut self, o: &Counts) {
+        for (a, b) in [
+            (&mut self.rest, o.rest),
+            (&mut self.moving, o.moving),
+            (&mut self.clearly_moving, o.clearly_moving),
+            (&mut self.slow_cruise, o.slow_cruise),
+            (&mut self.in_place_turn, o.in_place_turn),
+        ] {
+            a[0] += b[0];
+            a[1] += b[1];
+        }
+    }
+}
+
+/// Speed from which a moving sample counts as clearly moving, m/s.
+const CLEAR_SPEED_MPS: f64 = 0.05;
+/// Yaw rate from which a moving sample counts as clearly moving, deg/s.
+const CLEAR_RATE_DPS: f64 = 1.0;
+
+/// What the truth says about one sample.
+#[derive(Clone, Copy)]
+struct Label {
+    rest: bool,
+    clearly_moving: bool,
+    slow_cruise: bool,
+    in_place_turn: bool,
+}
+
+fn identity_calibration() -> CalibrationFile {
+    CalibrationFile::new(
+        &AccelModel::identity(ModelKind::Full),
+        &ParamCovariance::zeros(),
+        calibrate::calibfile::FitMethod::Labelled,
+        Weighting::Unweighted,
+        CovarianceMode::ResidualScaled,
+        G_MPS2,
+        SourceSection {
+            file: "identity".into(),
+            kind: "none".into(),
+            poses: 0,
+            repaired_samples: 0,
+        },
+        ResidualSection {
+            rms_g: [0.0; 3],
+            max_abs_g: 0.0,
+            dof: [0; 3],
+            chi2: [0.0; 3],
+            per_pose_g: Vec::new(),
+        },
+    )
+}
+
+/// Runs one seed at one vibration level through every variant.
+/// What one variant gives on one seed.
+struct SeedResult {
+    counts: Counts,
+    /// Refined gyroscope bias minus the true turn-on bias at the end of the drive, deg/s.
+    gyro_bias_error_dps: [f64; 3],
+    learn_restarts: usize,
+}
+
+fn run_seed(cli: &Cli, seed: u64, vibration: f64, variants: &[Variant]) -> Result<Vec<SeedResult>> {
+    let mut params = DriveParams::new(cli.duration_s);
+    params.turns = true;
+    params.in_place_turns = true;
+    let drive = Drive::new(&params, seed)?;
+    let segments = drive.segments().to_vec();
+    let mut sim = SimSensor::new(
+        drive,
+        &SensorModel::mpu9250_calibrated(),
+        &VibrationModel::moderate(vibration),
+        seed,
+    )?;
+    let calib = identity_calibration();
+    let mut stages: Vec<CalibrationStage> = variants
+        .iter()
+        .map(|v| CalibrationStage::new(&calib, v.config, RefineConfig::default()))
+        .collect::<Result<_, _>>()?;
+    let mut counts = vec![Counts::default(); variants.len()];
+    let n = (cli.duration_s * cli.rate) as u64;
+    let mut labels = std::collections::VecDeque::new();
+    let mut seg = 0;
+    for k in 0..n {
+        let t = k as f64 / cli.rate;
+        let (analog, truth) = sim.sample_with_truth(t, cli.rate);
+        while seg + 1 < segments.len() && segments[seg + 1].start_s <= t {
+            seg += 1;
+        }
+        let s = &segments[seg];
+        let cruise = !s.at_rest && s.speed_change_mps == 0.0 && s.heading_change_rad == 0.0;
+        let spin = !s.at_rest && s.speed0_mps == 0.0 && s.speed_change_mps == 0.0;
+        let speed = truth.velocity_mps[0].hypot(truth.velocity_mps[1]);
+        let rate = truth.angular_rate_rps[2].abs().to_degrees();
+        labels.push_back(Label {
+            rest: truth.at_rest,
+            clearly_moving: speed >= CLEAR_SPEED_MPS || rate >= CLEAR_RATE_DPS,
+            slow_cruise: cruise && s.speed0_mps < 0.3,
+            in_place_turn: spin && s.heading_change_rad != 0.0,
+        });
+        let raw = adc::quantize_sample(&analog, AccelRange::G2, GyroRange::Dps250, ns_from_s(t), k);
+        // Every stage releases the same samples at the same time (whole batches).
+        let mut released = 0;
+        for (stage, c) in stages.iter_mut().zip(counts.iter_mut()) {
+            let mut i = 0;
+            stage.push(&raw, &mut |out| {
+                let label = labels[i];
+                i += 1;
+                let flagged = u64::from(out.flags & corrected_flags::ZERO_STATE != 0);
+                if label.rest {
+                    if out.flags & corrected_flags::DETECTOR_READY != 0 {
+                        c.rest[0] += flagged;
+                        c.rest[1] += 1;
+                    }
+                } else {
+                    c.moving[0] += flagged;
+                    c.moving[1] += 1;
+                    if label.clearly_moving {
+                        c.clearly_moving[0] += flagged;
+                        c.clearly_moving[1] += 1;
+                    }
+                    if label.slow_cruise {
+                        c.slow_cruise[0] += flagged;
+                        c.slow_cruise[1] += 1;
+                    }
+                    if label.in_place_turn {
+                        c.in_place_turn[0] += flagged;
+                        c.in_place_turn[1] += 1;
+                    }
+                }
+            })?;
+            released = i;
+        }
+        labels.drain(..released);
+    }
+    let (_, true_gyro_dps) = sim.sensor().turn_on_bias();
+    Ok(stages
+        .iter()
+        .zip(counts)
+        .map(|(stage, counts)| {
+            let (_, gyro_rps, _) = stage.refinement();
+            SeedResult {
+                counts,
+                gyro_bias_error_dps: std::array::from_fn(|i| {
+                    gyro_rps[i].to_degrees() - true_gyro_dps[i]
+                }),
+                learn_restarts: stage.detector().learn_rejections().0,
+            }
+        })
+        .collect())
+}
+
+#[derive(Serialize)]
+struct Row {
+    vibration: f64,
+    detector: String,
+    detection_rate: f64,
+    false_alarm_moving: f64,
+    false_alarm_clearly_moving: f64,
+    false_alarm_slow_cruise: f64,
+    false_alarm_in_place_turn: f64,
+    counts: Counts,
+    per_seed_slow_cruise: Vec<f64>,
+    gyro_bias_error_rms_dps: f64,
+    learn_restarts: usize,
+}
+
+fn ratio(c: [u64; 2]) -> f64 {
+    if c[1] == 0 {
+        f64::NAN
+    } else {
+        c[0] as f64 / c[1] as f64
+    }
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    let variants = variants();
+    let mut rows = Vec::new();
+    for &vibration in &cli.vibration {
+        let mut total = vec![Counts::default(); variants.len()];
+        let mut per_seed = vec![Vec::new(); variants.len()];
+        let mut gyro_sq = vec![0.0; variants.len()];
+        let mut restarts = vec![0; variants.len()];
+        for seed in 1..=cli.seeds {
+            let start = Instant::now();
+            let results = run_seed(&cli, seed, vibration, &variants)?;
+            for (i, r) in results.iter().enumerate() {
+                total[i].add(&r.counts);
+                per_seed[i].push(ratio(r.counts.slow_cruise));
+                gyro_sq[i] += r.gyro_bias_error_dps.iter().map(|e| e * e).sum::<f64>();
+                restarts[i] += r.learn_restarts;
+            }
+            eprintln!(
+                "vibration {vibration}, seed {seed}: {:.1} s",
+                start.elapsed().as_secs_f64()
+            );
+        }
+        for (i, v) in variants.iter().enumerate() {
+            let c = total[i];
+            rows.push(Row {
+                vibration,
+                detector: v.name.clone(),
+                detection_rate: ratio(c.rest),
+                false_alarm_moving: ratio(c.moving),
+                false_alarm_clearly_moving: ratio(c.clearly_moving),
+                false_alarm_slow_cruise: ratio(c.slow_cruise),
+                false_alarm_in_place_turn: ratio(c.in_place_turn),
+                counts: c,
+                per_seed_slow_cruise: per_seed[i].clone(),
+                gyro_bias_error_rms_dps: (gyro_sq[i] / (3 * cli.seeds) as f64).sqrt(),
+                learn_restarts: restarts[i],
+            });
+        }
+    }
+    if cli.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    println!(
+        "| vibration | detector | detection rate | false alarm: moving | clearly moving | slow cruise < 0.3 m/s | in-place turns | gyro bias error (deg/s RMS) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for r in &rows {
+        println!(
+            "| {} | {} | {:.1}% | {:.2}% | {:.2}% | {:.2}% | {:.2}% | {:.4} |",
+            r.vibration,
+            r.detector,
+            100.0 * r.detection_rate,
+            100.0 * r.false_alarm_moving,
+            100.0 * r.false_alarm_clearly_moving,
+            100.0 * r.false_alarm_slow_cruise,
+            100.0 * r.false_alarm_in_place_turn,
+            r.gyro_bias_error_rms_dps
+        );
+        if r.learn_restarts > 0 {
+            eprintln!("{}: {} learning restarts", r.detector, r.learn_restarts);
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,161 @@
+//! `mems-calibrate serve`: the calibration stage between `mems/imu/raw` and
+//! `mems/imu/corrected`.
+//!
+//! - Every accepted raw sample gives one corrected sample, in order, released with its batch
+//!   (see `calibrate::stage` for the latency); `stamps.calibrated_ns` is `CLOCK_MONOTONIC` at
+//!   publication.
+//! - A refused raw sample (NaN, time not increasing, missing gyroscope) is reported on stderr
+//!   and not published; the service goes on.
+//! - A restarted publisher (sequence numbers starting again) is a new sensor session: the stage
+//!   releases what it holds and starts over (time check, detector learning, refinement). When
+//!   the last publisher is gone, the pending partial batch is released at once.
+//! - SIGINT/SIGTERM (iceoryx2's `node.wait` returns an error): the pending samples are
+//!   released, a summary printed, exit status 0.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, anyhow};
+use calibrate::calibfile::CalibrationFile;
+use calibrate::stage::{CalibrationStage, RefineConfig};
+use calibrate::zero_state::{DetectorConfig, DetectorKind};
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::{PortFactory, ipc};
+use ipc_types::clock::monotonic_ns;
+use ipc_types::{CorrectedImuSample, RawImuSample, service};
+
+/// Refused samples reported one by one before the rest are only counted.
+const REPORTED_REFUSALS: u64 = 10;
+
+/// Options of `mems-calibrate serve`.
+#[derive(clap::Args)]
+pub struct ServeArgs {
+    /// Calibration file (TOML) written by `mems-calibrate fit`.
+    #[arg(long)]
+    calib: PathBuf,
+    /// Zero-state detector: glrt (accelerometer and gyroscope; needs the gyroscope) or yu
+    /// (accelerometer batches of 20, as in the thesis).
+    #[arg(long, value_enum, default_value_t = DetectorKind::Glrt)]
+    detector: DetectorKind,
+    /// Length of the start-up rest the detector learns its thresholds from, s.
+    #[arg(long, default_value_t = 5.0)]
+    learn_s: f64,
+    /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
+    #[arg(long)]
+    namespace: Option<String>,
+}
+
+/// The corrected-sample publisher and the first error it met (the stage's emit callback
+/// cannot return one).
+struct Output<'a> {
+    publisher: &'a Publisher<ipc::Service, CorrectedImuSample, ()>,
+    error: Option<anyhow::Error>,
+}
+
+impl Output<'_> {
+    /// Publishes one corrected sample stamped now (nothing after an error).
+    fn emit(&mut self, sample: &CorrectedImuSample) {
+        if self.error.is_some() {
+            return;
+        }
+        let mut out = *sample;
+        out.stamps.calibrated_ns = monotonic_ns();
+        let sent = self
+            .publisher
+            .loan_uninit()
+            .map_err(|e| anyhow!("cannot loan a corrected sample: {e:?}"))
+            .and_then(|s| {
+                s.write_payload(out)
+                    .send()
+                    .map_err(|e| anyhow!("cannot send a corrected sample: {e:?}"))
+            });
+        if let Err(e) = sent {
+            self.error = Some(e);
+        }
+    }
+
+    /// The error met since the last check, if any.
+    fn check(&mut self) -> Result<()> {
+        self.error.take().map_or(Ok(()), Err)
+    }
+}
+
+/// Runs the service until SIGINT/SIGTERM.
+pub fn serve(args: &ServeArgs) -> Result<()> {
+    let file = CalibrationFile::load(&args.calib)?;
+    if !(args.learn_s > 0.0 && args.learn_s.is_finite()) {
+        anyhow::bail!("--learn-s must be > 0, got {}", args.learn_s);
+    }
+    let mut config = DetectorConfig::new(args.detector, file.gravity_mps2);
+    config.learn.duration_s = args.learn_s;
+    let mut stage = CalibrationStage::new(&file, config, RefineConfig::default())
+        .with_context(|| args.calib.display().to_string())?;
+
+    let ns = service::namespace(args.namespace.as_deref());
+    let raw_name = service::full_name(&ns, service::RAW);
+    let corrected_name = service::full_name(&ns, service::CORRECTED);
+    let node = service::node()?;
+    let raw = service::open::<RawImuSample>(&node, &raw_name)?;
+    let subscriber = service::subscriber(&raw)?;
+    let corrected = service::open::<CorrectedImuSample>(&node, &corrected_name)?;
+    let publisher = service::publisher(&corrected)?;
+    eprintln!(
+        "mems-calibrate serve: {} ({} model, calib_id {:016x}), {} detector, {raw_name} -> {corrected_name}",
+        args.calib.display(),
+        file.model,
+        stage.calib_id(),
+        args.detector.name()
+    );
+
+    let mut refused = 0u64;
+    let mut last_cleanup = Instant::now();
+    let mut out = Output {
+        publisher: &publisher,
+        error: None,
+    };
+    // node.wait sleeps and returns an error on SIGINT/SIGTERM: the clean way out.
+    while node.wait(Duration::from_millis(1)).is_ok() {
+        let mut received = false;
+        while let Some(sample) = subscriber
+            .receive()
+            .map_err(|e| anyhow!("receive on {raw_name}: {e:?}"))?
+        {
+            received = true;
+            if let Err(e) = stage.push(sample.payload(), &mut |s| out.emit(s)) {
+                refused += 1;
+                if refused <= REPORTED_REFUSALS {
+                    eprintln!("mems-calibrate serve: refused: {e}");
+                }
+            }
+        }
+        if !received && stage.pending() > 0 && raw.dynamic_config().number_of_publishers() == 0 {
+            // The stream ended: nothing will complete the partial batch.
+            stage.finish(&mut |s| out.emit(s));
+        }
+        out.check()?;
+        if last_cleanup.elapsed() >= Duration::from_secs(1) {
+            // Subscribers killed without closing their ports would otherwise stay connected.
+            node.try_cleanup_dead_nodes();
+            last_cleanup = Instant::now();
+        }
+    }
+    stage.finish(&mut |s| out.emit(s));
+    out.check()?;
+    let s = stage.stats();
+    let (learn_restarts, _) = stage.detector().learn_rejections();
+    let (accel, gyro, refined) = stage.refinement();
+    eprintln!(
+        "mems-calibrate serve: accepted {}, published {}, at rest {}, refused {refused}, gaps {}, \
+         stream restarts {}, learning restarts {learn_restarts}, detector ready {}, refined {refined} \
+         (accel {:.4?} m/s^2, gyro {:.5?} rad/s)",
+        s.accepted,
+        s.released,
+        s.rest,
+        s.gaps,
+        s.restarts,
+        stage.detector().is_ready(),
+        accel,
+        gyro
+    );
+    Ok(())
+}

@@ -1,0 +1,487 @@
+//! The live calibration stage: raw samples in, corrected samples out, as a state machine with
+//! no I/O and no allocation per sample. `mems-calibrate serve` wraps it around iceoryx2 and
+//! `mems-odometry offline` runs the same code over a recording.
+//!
+//! Per sample (sensor frame):
+//! - accelerometer: `a = S^-1 (a' - b - c (T - T_ref))` in g (the temperature term when the
+//!   calibration file has one), times the file's local gravity -> m/s^2, minus the bias
+//!   refinement (below);
+//! - gyroscope: `(w' - b_file)` deg/s -> rad/s (`b_file` when the file has a gyroscope bias),
+//!   minus the refined gyroscope bias;
+//! - the zero-state verdict of the sample's batch ([`crate::zero_state`]): `ZERO_STATE`,
+//!   `DETECTOR_READY`, and the deciding window's mean (refinement applied) and std;
+//! - `BIAS_REFINED` once a refinement has been made; `calib_id` ([`calib_id`]); stamps, `seq`,
+//!   temperature and the raw flags copied (`stamps.calibrated_ns` is the process wrapper's).
+//!
+//! **Latency.** A sample is released when its batch of [`BATCH_LEN`] samples is complete and
+//! decided: the first sample of a batch waits for 19 more (19 ms at 1 kHz), the last not at
+//! all. Output keeps input order, one corrected sample per accepted raw sample. A gap (lost
+//! samples, a skipped sequence number) or a new stream releases the pending partial batch
+//! without `ZERO_STATE`; [`CalibrationStage::finish`] does the same at the end of a stream.
+//!
+//! **Bias refinement at rest.** At rest the true specific force is gravity's reaction `g u`
+//! (`u` the unknown up direction in the sensor frame) and the true rate is zero. So:
+//! - the gyroscope bias is observable on all three axes (the Earth's rate, at most 0.004 deg/s,
+//!   is absorbed into it, which suits an odometry that neglects it);
+//! - of an accelerometer bias error `e` only the component along gravity is observable from one
+//!   attitude: `|g u + e| - g = e . u + O(|e|^2 / g)`, while the components across gravity are
+//!   indistinguishable from a tilt of `u`. The stage corrects that component only: with rest
+//!   mean `m`, `d += k (|m - d| - g) (m - d) / |m - d|`. At one attitude this is the running
+//!   mean of `|m| - g` along `u`; rests at other attitudes correct other components and leave
+//!   the rest of `d` as it was.
+//!
+//! Both are running means over rest time (the start-up learning interval first) with a prior
+//! of [`RefineConfig::prior_s`] seconds of rest for the file's values and a memory of
+//! [`RefineConfig::memory_s`] (see [`crate::zero_state::rest_gain`]).
+
+use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, raw_flags};
+use nalgebra::Vector3;
+
+use crate::calibfile::CalibrationFile;
+use crate::model::AccelModel;
+use crate::zero_state::{BATCH_LEN, DetectorConfig, Verdict, ZeroStateDetector, batch_duration_s};
+
+/// Settings of the bias refinement.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefineConfig {
+    /// Weight of the calibration file's values, as seconds of rest (1 s of rest at the
+    /// MPU-9250's noise density, 300 ug/sqrt(Hz), measures a bias to about 3 mm/s^2, the
+    /// order of the turn-on repeatability a calibration cannot know).
+    pub prior_s: f64,
+    /// Memory of the running means, seconds of rest.
+    pub memory_s: f64,
+}
+
+impl Default for RefineConfig {
+    /// A prior of 1 s and a memory of 60 s.
+    fn default() -> Self {
+        Self {
+            prior_s: 1.0,
+            memory_s: 60.0,
+        }
+    }
+}
+
+/// Why a raw sample was refused. The sample is not consumed; the stage's state is unchanged.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StageError {
+    /// A field that must be finite is not.
+    #[error("raw sample seq {seq} (t {t_ns} ns): {field} is not finite ({value})")]
+    NotFinite {
+        /// Sequence number of the sample.
+        seq: u64,
+        /// Its sample time, ns.
+        t_ns: u64,
+        /// The field, e.g. `accel_g[2]`.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// The sample time did not increase within a stream.
+    #[error(
+        "raw sample seq {seq}: sample time {t_ns} ns is not after the previous sample's \
+         ({prev_ns} ns, seq {prev_seq})"
+    )]
+    TimeNotIncreasing {
+        /// Sequence number of the sample.
+        seq: u64,
+        /// Its sample time, ns.
+        t_ns: u64,
+        /// Sequence number of the previous sample.
+        prev_seq: u64,
+        /// Its sample time, ns.
+        prev_ns: u64,
+    },
+    /// The detector needs the gyroscope but the sample has none.
+    #[error(
+        "raw sample seq {seq} has no gyroscope measurement (GYRO_VALID clear) but the {detector} \
+         detector needs one: use the yu detector or an acquisition rate with the gyroscope"
+    )]
+    NoGyro {
+        /// Sequence number of the sample.
+        seq: u64,
+        /// The detector's name.
+        detector: &'static str,
+    },
+    /// The calibration has temperature terms but the sample has no temperature.
+    #[error(
+        "raw sample seq {seq} has no temperature (TEMP_VALID clear) but the calibration's \
+         temperature terms need one"
+    )]
+    NoTemperature {
+        /// Sequence number of the sample.
+        seq: u64,
+    },
+}
+
+/// Why a calibration file cannot drive the stage.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("calibration: {0}")]
+pub struct StageSetupError(String);
+
+/// Counters of the stage since it started.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StageStats {
+    /// Raw samples accepted.
+    pub accepted: u64,
+    /// Corrected samples released.
+    pub released: u64,
+    /// Released with `ZERO_STATE`.
+    pub rest: u64,
+    /// Gaps seen (pending samples released undecided).
+    pub gaps: u64,
+    /// New streams seen (sequence number not increasing).
+    pub restarts: u64,
+}
+
+/// The stable identifier of a calibration: 64-bit FNV-1a over the model name and the
+/// little-endian bytes of the local gravity, the 12 parameters, the temperature terms and the
+/// gyroscope bias (absent terms hash as a marker byte). FNV-1a is written out here because
+/// std's `DefaultHasher` may change between Rust releases and the identifier must not.
+pub fn calib_id(file: &CalibrationFile) -> u64 {
+    let mut h = Fnv1a::new();
+    h.bytes(file.model.name().as_bytes());
+    h.f64s(Some(&[file.gravity_mps2]));
+    h.f64s(Some(&file.bias_g));
+    for row in &file.scale {
+        h.f64s(Some(row));
+    }
+    h.f64s(
+        file.temperature
+            .reference_c
+            .as_ref()
+            .map(std::slice::from_ref),
+    );
+    h.f64s(file.temperature.bias_g_per_c.as_ref().map(|v| &v[..]));
+    h.f64s(file.gyro.bias_dps.as_ref().map(|v| &v[..]));
+    h.0
+}
+
+/// 64-bit FNV-1a state.
+struct Fnv1a(u64);
+
+impl Fnv1a {
+    fn new() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+
+    fn bytes(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.0 ^= u64::from(*b);
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+
+    /// A marker byte (0 absent, 1 present), then each value's little-endian bytes.
+    fn f64s(&mut self, xs: Option<&[f64]>) {
+        match xs {
+            None => self.bytes(&[0]),
+            Some(xs) => {
+                self.bytes(&[1]);
+                for x in xs {
+                    self.bytes(&x.to_le_bytes());
+                }
+            }
+        }
+    }
+}
+
+/// The running bias refinement (see the module documentation).
+#[derive(Debug, Clone, Copy)]
+struct Refinement {
+    config: RefineConfig,
+    /// Accelerometer offset subtracted from the output, m/s^2.
+    accel_mps2: Vector3<f64>,
+    /// Gyroscope bias subtracted from the output, rad/s.
+    gyro_rps: Vector3<f64>,
+    /// Rest time refined from, s (the prior included).
+    seen_s: f64,
+    refined: bool,
+}
+
+impl Refinement {
+    fn new(config: RefineConfig) -> Self {
+        Self {
+            config,
+            accel_mps2: Vector3::zeros(),
+            gyro_rps: Vector3::zeros(),
+            seen_s: config.prior_s,
+            refined: false,
+        }
+    }
+
+    /// Refines with a rest mean `accel` (m/s^2, file-corrected) and `gyro` (rad/s) over
+    /// `duration_s`; `gyro` is `None` when the samples carry no gyroscope.
+    fn update(&mut self, accel: [f64; 3], gyro: Option<[f64; 3]>, duration_s: f64, gravity: f64) {
+        let gain = crate::zero_state::rest_gain(duration_s, self.seen_s, self.config.memory_s);
+        self.seen_s += duration_s;
+        let c = Vector3::from(accel) - self.accel_mps2;
+        let magnitude = c.norm();
+        if magnitude > 0.0 {
+            self.accel_mps2 += gain * (magnitude - gravity) * (c / magnitude);
+        }
+        if let Some(g) = gyro {
+            self.gyro_rps += gain * (Vector3::from(g) - self.gyro_rps);
+        }
+        self.refined = true;
+    }
+}
+
+/// The calibration stage (see the module documentation).
+#[derive(Debug, Clone)]
+pub struct CalibrationStage {
+    model: AccelModel,
+    gravity_mps2: f64,
+    temperature: Option<(f64, Vector3<f64>)>,
+    gyro_bias_dps: [f64; 3],
+    calib_id: u64,
+    detector: ZeroStateDetector,
+    refine_config: RefineConfig,
+    refine: Refinement,
+    /// Samples of the current batch, corrected by the file, waiting for its verdict.
+    pending: [CorrectedImuSample; BATCH_LEN],
+    pending_len: usize,
+    /// Whether the pending samples all carry a gyroscope measurement.
+    pending_gyro: bool,
+    last: Option<(u64, u64)>,
+    stats: StageStats,
+}
+
+impl CalibrationStage {
+    /// A stage applying `file` with the zero-state detector `detector` (its local gravity
+    /// should be the file's) and the bias refinement `refine`.
+    pub fn new(
+        file: &CalibrationFile,
+        detector: DetectorConfig,
+        refine: RefineConfig,
+    ) -> Result<Self, StageSetupError> {
+        let model = file
+            .accel_model()
+            .map_err(|e| StageSetupError(e.to_string()))?;
+        let temperature = match (file.temperature.reference_c, file.temperature.bias_g_per_c) {
+            (Some(t), Some(c)) => Some((t, Vector3::from(c))),
+            (None, None) => None,
+            _ => {
+                return Err(StageSetupError(
+                    "temperature: bias_g_per_c and reference_c must be given together".into(),
+                ));
+            }
+        };
+        Ok(Self {
+            model,
+            gravity_mps2: file.gravity_mps2,
+            temperature,
+            gyro_bias_dps: file.gyro.bias_dps.unwrap_or([0.0; 3]),
+            calib_id: calib_id(file),
+            detector: ZeroStateDetector::new(detector),
+            refine_config: refine,
+            refine: Refinement::new(refine),
+            pending: [CorrectedImuSample::default(); BATCH_LEN],
+            pending_len: 0,
+            pending_gyro: true,
+            last: None,
+            stats: StageStats::default(),
+        })
+    }
+
+    /// The identifier written into every output sample.
+    pub fn calib_id(&self) -> u64 {
+        self.calib_id
+    }
+
+    /// The detector (for its state and references).
+    pub fn detector(&self) -> &ZeroStateDetector {
+        &self.detector
+    }
+
+    /// The current refinement: accelerometer offset (m/s^2) and gyroscope bias (rad/s)
+    /// subtracted from the output, and whether any refinement was made.
+    pub fn refinement(&self) -> ([f64; 3], [f64; 3], bool) {
+        let r = &self.refine;
+        (r.accel_mps2.into(), r.gyro_rps.into(), r.refined)
+    }
+
+    /// Counters since the stage was created.
+    pub fn stats(&self) -> StageStats {
+        self.stats
+    }
+
+    /// Number of samples waiting for their batch's verdict.
+    pub fn pending(&self) -> usize {
+        self.pending_len
+    }
+
+    /// Takes one raw sample; emits, in order, every corrected sample whose verdict is now
+    /// known (none, or a whole batch). A sample whose sequence number does not increase starts
+    /// a new stream (a restarted publisher): the pending samples are released, the time check
+    /// and the detector and refinement start over (a new sensor session has a new turn-on
+    /// bias, and a stale gyroscope reference would hold every later window in "motion").
+    pub fn push(
+        &mut self,
+        raw: &RawImuSample,
+        emit: &mut impl FnMut(&CorrectedImuSample),
+    ) -> Result<(), StageError> {
+        let has_gyro = raw.flags & raw_flags::GYRO_VALID != 0;
+        let has_temp = raw.flags & raw_flags::TEMP_VALID != 0;
+        self.check(raw, has_gyro, has_temp)?;
+        match self.last {
+            Some((prev_seq, _)) if raw.seq <= prev_seq => {
+                self.release(None, emit);
+                self.detector.reset();
+                self.refine = Refinement::new(self.refine_config);
+                self.stats.restarts += 1;
+            }
+            Some((prev_seq, prev_ns)) if raw.stamps.sample_ns <= prev_ns => {
+                return Err(StageError::TimeNotIncreasing {
+                    seq: raw.seq,
+                    t_ns: raw.stamps.sample_ns,
+                    prev_seq,
+                    prev_ns,
+                });
+            }
+            Some((prev_seq, _))
+                if raw.seq != prev_seq + 1
+                    || raw.lost_before > 0
+                    || raw.flags & raw_flags::GAP_BEFORE != 0 =>
+            {
+                self.release(None, emit);
+                self.detector.interrupt();
+                self.stats.gaps += 1;
+            }
+            _ => {}
+        }
+        self.last = Some((raw.seq, raw.stamps.sample_ns));
+        self.stats.accepted += 1;
+
+        let mut a_g = Vector3::from(raw.accel_g);
+        if let Some((t_ref, c)) = self.temperature {
+            a_g -= c * (raw.temp_c - t_ref);
+        }
+        let a = self.model.correct(&a_g) * self.gravity_mps2;
+        let w: [f64; 3] = if has_gyro {
+            std::array::from_fn(|i| (raw.gyro_dps[i] - self.gyro_bias_dps[i]).to_radians())
+        } else {
+            [0.0; 3]
+        };
+        self.pending[self.pending_len] = CorrectedImuSample {
+            stamps: raw.stamps,
+            seq: raw.seq,
+            accel_mps2: a.into(),
+            gyro_rps: w,
+            temp_c: raw.temp_c,
+            calib_id: self.calib_id,
+            raw_flags: raw.flags,
+            ..CorrectedImuSample::default()
+        };
+        self.pending_len += 1;
+        self.pending_gyro &= has_gyro;
+        if let Some(verdict) = self.detector.push(raw.stamps.sample_ns, a.into(), w) {
+            self.release(Some(&verdict), emit);
+        }
+        Ok(())
+    }
+
+    /// End of the stream: releases the pending samples without a verdict and drops the
+    /// detector's partial batch (learned references stay). The last sequence number is kept,
+    /// so a later stream that starts again from 0 is still recognised as a new session.
+    pub fn finish(&mut self, emit: &mut impl FnMut(&CorrectedImuSample)) {
+        self.release(None, emit);
+        self.detector.interrupt();
+    }
+
+    /// Validates a sample before anything changes.
+    fn check(&self, raw: &RawImuSample, has_gyro: bool, has_temp: bool) -> Result<(), StageError> {
+        let err = |field, value| StageError::NotFinite {
+            seq: raw.seq,
+            t_ns: raw.stamps.sample_ns,
+            field,
+            value,
+        };
+        const ACCEL: [&str; 3] = ["accel_g[0]", "accel_g[1]", "accel_g[2]"];
+        const GYRO: [&str; 3] = ["gyro_dps[0]", "gyro_dps[1]", "gyro_dps[2]"];
+        for (i, x) in raw.accel_g.iter().enumerate() {
+            if !x.is_finite() {
+                return Err(err(ACCEL[i], *x));
+            }
+        }
+        if has_gyro {
+            for (i, x) in raw.gyro_dps.iter().enumerate() {
+                if !x.is_finite() {
+                    return Err(err(GYRO[i], *x));
+                }
+            }
+        } else if self.detector.config().kind.needs_gyro() {
+            return Err(StageError::NoGyro {
+                seq: raw.seq,
+                detector: self.detector.config().kind.name(),
+            });
+        }
+        if self.temperature.is_some() && !has_temp {
+            return Err(StageError::NoTemperature { seq: raw.seq });
+        }
+        if has_temp && !raw.temp_c.is_finite() {
+            return Err(err("temp_c", raw.temp_c));
+        }
+        Ok(())
+    }
+
+    /// Refines at rest, then emits the pending samples with `verdict` (or undecided).
+    fn release(&mut self, verdict: Option<&Verdict>, emit: &mut impl FnMut(&CorrectedImuSample)) {
+        if let Some(v) = verdict {
+            let gyro = self.pending_gyro.then_some(v.gyro.mean);
+            if let Some(learned) = &v.learned {
+                // The start-up interval was at rest by assumption: the first refinement.
+                let gyro = self.pending_gyro.then_some(learned.gyro_mean_rps);
+                self.refine.update(
+                    learned.accel_mean_mps2,
+                    gyro,
+                    learned.duration_s,
+                    self.gravity_mps2,
+                );
+            } else if v.rest {
+                self.refine.update(
+                    v.accel.mean,
+                    gyro,
+                    batch_duration_s(&v.accel),
+                    self.gravity_mps2,
+                );
+            }
+        }
+        let mut flags = 0;
+        if self.refine.refined {
+            flags |= corrected_flags::BIAS_REFINED;
+        }
+        let (mut zs_mean, mut zs_std) = ([0.0; 3], [0.0; 3]);
+        if let Some(v) = verdict {
+            if v.ready {
+                flags |= corrected_flags::DETECTOR_READY;
+            }
+            if v.rest {
+                flags |= corrected_flags::ZERO_STATE;
+            }
+            zs_mean = std::array::from_fn(|i| v.decided_mean_mps2[i] - self.refine.accel_mps2[i]);
+            zs_std = v.decided_std_mps2;
+        } else if self.detector.is_ready() {
+            flags |= corrected_flags::DETECTOR_READY;
+        }
+        let (da, dw) = (self.refine.accel_mps2, self.refine.gyro_rps);
+        for s in &mut self.pending[..self.pending_len] {
+            for i in 0..3 {
+                s.accel_mps2[i] -= da[i];
+                if s.raw_flags & raw_flags::GYRO_VALID != 0 {
+                    s.gyro_rps[i] -= dw[i];
+                }
+            }
+            s.flags = flags;
+            s.zs_mean_mps2 = zs_mean;
+            s.zs_std_mps2 = zs_std;
+            emit(s);
+        }
+        self.stats.released += self.pending_len as u64;
+        if verdict.is_some_and(|v| v.rest) {
+            self.stats.rest += self.pending_len as u64;
+        }
+        self.pending_len = 0;
+        self.pending_gyro = true;
+    }
+}

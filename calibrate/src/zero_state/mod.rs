@@ -1,0 +1,270 @@
+//! Zero-state (rest) detectors for the live calibration stage: plain state machines that take
+//! one calibrated sample at a time and return a verdict for every completed batch of
+//! [`BATCH_LEN`] samples. No allocation per sample (the GLRT's window ring is allocated once).
+//!
+//! Inputs are calibrated specific force in m/s^2 and angular rate in rad/s, sensor frame, with
+//! strictly increasing sample times in ns. Both detectors:
+//! 1. learn a [`StaticReference`] from the start-up rest ([`learn`]); until then every verdict
+//!    says not ready and not at rest;
+//! 2. then decide each batch at its last sample, so a sample's verdict is known at most
+//!    `BATCH_LEN - 1` samples after it (the calibration stage's latency);
+//! 3. keep their references current from the batches they call rest (running means with a
+//!    memory of `memory_s` seconds of rest, see [`rest_gain`]).
+//!
+//! - [`DetectorKind::Yu`]: Yu et al.'s batches of 20 accelerometer samples ([`yu`]).
+//! - [`DetectorKind::Glrt`]: a generalised-likelihood-ratio test on accelerometer and gyroscope
+//!   over a sliding window of whole batches against the gravity vector and gyroscope bias
+//!   learned at rest ([`glrt`]).
+
+pub mod glrt;
+pub mod learn;
+pub mod yu;
+
+use crate::window::{WindowAccumulator, WindowStats};
+pub use glrt::{GlrtConfig, GlrtStatistic};
+use learn::StaticLearner;
+pub use learn::{LearnConfig, LearnRejection, StaticReference};
+pub use yu::YuConfig;
+
+/// Samples per batch (Yu et al.'s 20).
+pub const BATCH_LEN: usize = 20;
+
+/// Which detector.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DetectorKind {
+    /// Yu et al.: accelerometer batch mean and std against learned thresholds.
+    Yu,
+    /// GLRT on accelerometer and gyroscope against the gravity vector and gyro bias learned
+    /// at rest.
+    Glrt,
+}
+
+impl DetectorKind {
+    /// The name used on command lines.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Yu => "yu",
+            Self::Glrt => "glrt",
+        }
+    }
+
+    /// Whether the detector needs gyroscope samples.
+    pub fn needs_gyro(self) -> bool {
+        matches!(self, Self::Glrt)
+    }
+}
+
+/// Settings of a detector.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DetectorConfig {
+    /// Which detector.
+    pub kind: DetectorKind,
+    /// The start-up learning.
+    pub learn: LearnConfig,
+    /// Memory of the running references, seconds of rest.
+    pub memory_s: f64,
+    /// Yu et al.'s settings.
+    pub yu: YuConfig,
+    /// The GLRT's settings.
+    pub glrt: GlrtConfig,
+}
+
+impl DetectorConfig {
+    /// Defaults for `kind` with local gravity `gravity_mps2`: 5 s learning, 60 s memory, and
+    /// the detector's own defaults ([`YuConfig::default`], [`GlrtConfig::default`]).
+    pub fn new(kind: DetectorKind, gravity_mps2: f64) -> Self {
+        Self {
+            kind,
+            learn: LearnConfig::new(gravity_mps2),
+            memory_s: 60.0,
+            yu: YuConfig::default(),
+            glrt: GlrtConfig::default(),
+        }
+    }
+}
+
+/// The verdict on one completed batch.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Verdict {
+    /// The batch's accelerometer statistics, m/s^2.
+    pub accel: WindowStats,
+    /// The batch's gyroscope statistics, rad/s.
+    pub gyro: WindowStats,
+    /// Whether the detector has learned its thresholds.
+    pub ready: bool,
+    /// Whether the batch is at rest (never before `ready`).
+    pub rest: bool,
+    /// Mean specific force over the window that decided (the batch for Yu, the sliding
+    /// window for the GLRT), m/s^2.
+    pub decided_mean_mps2: [f64; 3],
+    /// Per-axis standard deviation over the same window, m/s^2.
+    pub decided_std_mps2: [f64; 3],
+    /// The reference learned at start-up, on the one verdict whose batch completed learning.
+    pub learned: Option<StaticReference>,
+}
+
+/// The learned decision rule of one detector kind.
+#[derive(Debug, Clone)]
+enum Rule {
+    Yu(yu::YuRule),
+    Glrt(glrt::GlrtRule),
+}
+
+/// A zero-state detector (either kind): batches, start-up learning, decision rule.
+#[derive(Debug, Clone)]
+pub struct ZeroStateDetector {
+    config: DetectorConfig,
+    accel: WindowAccumulator,
+    gyro: WindowAccumulator,
+    learner: StaticLearner,
+    rule: Option<Rule>,
+    rest_s: f64,
+}
+
+/// Gain of a running mean with a memory of `memory_s` seconds of rest, for a batch of
+/// `batch_s` seconds after `seen_s` seconds of rest: `batch_s / min(seen_s + batch_s,
+/// memory_s)`. It is the plain mean of everything seen until the memory fills, then an
+/// exponential forgetting with time constant `memory_s`.
+pub fn rest_gain(batch_s: f64, seen_s: f64, memory_s: f64) -> f64 {
+    batch_s / (seen_s + batch_s).min(memory_s).max(batch_s)
+}
+
+/// The time a batch covers: first to last sample plus one sample period, s.
+pub(crate) fn batch_duration_s(w: &WindowStats) -> f64 {
+    let n = w.n as f64;
+    (w.t_end_ns - w.t_start_ns) as f64 * 1e-9 * n / (n - 1.0)
+}
+
+impl ZeroStateDetector {
+    /// A detector with `config`, not yet learned.
+    ///
+    /// # Panics
+    /// If the false-alarm rate is not in (0, 1), the GLRT window is shorter than one batch or
+    /// the memory is not positive.
+    pub fn new(config: DetectorConfig) -> Self {
+        assert!(
+            config.memory_s > 0.0,
+            "memory_s must be > 0, got {}",
+            config.memory_s
+        );
+        let alpha = match config.kind {
+            DetectorKind::Yu => config.yu.false_alarm,
+            DetectorKind::Glrt => config.glrt.false_alarm,
+        };
+        assert!(
+            alpha > 0.0 && alpha < 1.0,
+            "false-alarm rate must be in (0, 1), got {alpha}"
+        );
+        assert!(
+            config.glrt.window_batches >= 1,
+            "the GLRT window needs at least one batch"
+        );
+        Self {
+            config,
+            accel: WindowAccumulator::new(BATCH_LEN),
+            gyro: WindowAccumulator::new(BATCH_LEN),
+            learner: StaticLearner::new(config.learn),
+            rule: None,
+            rest_s: 0.0,
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &DetectorConfig {
+        &self.config
+    }
+
+    /// Whether the thresholds are learned.
+    pub fn is_ready(&self) -> bool {
+        self.rule.is_some()
+    }
+
+    /// How many start-up learning attempts were discarded, and why the last one was.
+    pub fn learn_rejections(&self) -> (usize, Option<LearnRejection>) {
+        self.learner.rejections()
+    }
+
+    /// The current references: (specific force at rest m/s^2, gyroscope bias rad/s), once
+    /// learned.
+    pub fn references(&self) -> Option<([f64; 3], [f64; 3])> {
+        match self.rule.as_ref()? {
+            Rule::Yu(r) => Some((r.accel_mean_mps2(), r.gyro_mean_rps())),
+            Rule::Glrt(r) => Some((r.accel_mean_mps2(), r.gyro_mean_rps())),
+        }
+    }
+
+    /// Adds one sample at `t_ns`: specific force `accel_mps2` (m/s^2) and angular rate
+    /// `gyro_rps` (rad/s; ignored by Yu's detector), sensor frame. Returns the verdict when
+    /// this sample completes a batch.
+    pub fn push(&mut self, t_ns: u64, accel_mps2: [f64; 3], gyro_rps: [f64; 3]) -> Option<Verdict> {
+        let a = self.accel.push(t_ns, accel_mps2);
+        let g = self.gyro.push(t_ns, gyro_rps);
+        let (Some(accel), Some(gyro)) = (a, g) else {
+            return None;
+        };
+        let mut verdict = Verdict {
+            accel,
+            gyro,
+            decided_mean_mps2: accel.mean,
+            decided_std_mps2: accel.std,
+            ..Verdict::default()
+        };
+        let Some(rule) = self.rule.as_mut() else {
+            if let Some(reference) = self.learner.push(&accel, &gyro) {
+                self.rest_s = reference.duration_s;
+                self.rule = Some(match self.config.kind {
+                    DetectorKind::Yu => Rule::Yu(yu::YuRule::new(&reference, &self.config.yu)),
+                    DetectorKind::Glrt => {
+                        Rule::Glrt(glrt::GlrtRule::new(&reference, &self.config.glrt))
+                    }
+                });
+                verdict.ready = true;
+                verdict.learned = Some(reference);
+            }
+            return Some(verdict);
+        };
+        verdict.ready = true;
+        let decision = match rule {
+            Rule::Yu(r) => r.decide(&accel),
+            Rule::Glrt(r) => r.decide(&accel, &gyro),
+        };
+        verdict.rest = decision.rest;
+        verdict.decided_mean_mps2 = decision.mean_mps2;
+        verdict.decided_std_mps2 = decision.std_mps2;
+        if decision.rest {
+            let batch_s = batch_duration_s(&accel);
+            let gain = rest_gain(batch_s, self.rest_s, self.config.memory_s);
+            self.rest_s += batch_s;
+            match rule {
+                Rule::Yu(r) => r.update(&accel, &gyro, gain),
+                Rule::Glrt(r) => r.update(&accel, &gyro, gain),
+            }
+        }
+        Some(verdict)
+    }
+
+    /// A gap in the data: the partial batch is dropped (its samples get no verdict), the
+    /// GLRT's window is emptied and learning in progress starts again; learned references stay.
+    pub fn interrupt(&mut self) {
+        self.accel.reset();
+        self.gyro.reset();
+        match self.rule.as_mut() {
+            Some(Rule::Glrt(r)) => r.clear_window(),
+            Some(Rule::Yu(_)) => {}
+            None => self.learner.restart(LearnRejection::Interrupted),
+        }
+    }
+
+    /// Forgets everything learned (a new sensor session): back to start-up learning.
+    pub fn reset(&mut self) {
+        *self = Self::new(self.config);
+    }
+}
+
+/// A rule's decision on the latest batch.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Decision {
+    pub rest: bool,
+    pub mean_mps2: [f64; 3],
+    pub std_mps2: [f64; 3],
+}
