@@ -2,8 +2,13 @@
 //! encoding `jsonschema`, which Foxglove and the official MCAP readers understand), in
 //! zstd-compressed chunks.
 //!
-//! Channels: [`ipc_types::service::RAW`] (`mems/imu/raw`, [`RawImuSample`]) and
-//! [`TRUTH_TOPIC`] (`mems/sim/truth`, [`Truth`]). Another message type becomes recordable by
+//! Channels: [`ipc_types::service::RAW`] (`mems/imu/raw`, [`RawImuSample`]),
+//! [`ipc_types::service::CORRECTED`] (`mems/imu/corrected`, [`CorrectedImuSample`]),
+//! [`ipc_types::service::ODOMETRY`] (`mems/odometry/state`, [`OdometryState`]), the pose derived
+//! from each odometry state for Foxglove ([`POSE_TOPIC`], [`PoseInFrame`], schema
+//! `foxglove.PoseInFrame`), the recorder's events ([`EVENTS_TOPIC`], [`RecorderEvent`]) and
+//! [`TRUTH_TOPIC`] (`mems/sim/truth`, [`Truth`]). Topics are the services' base names, without
+//! the namespace they were recorded under. Another message type becomes recordable by
 //! implementing [`Topic`] for it; its channel is then one [`Writer::add_channel`] call.
 //!
 //! Times: each message's `log_time` is chosen by the writer's caller (the recorder uses the
@@ -26,9 +31,9 @@ use std::path::{Path, PathBuf};
 
 use ::mcap::records::MessageHeader;
 use ::mcap::{Compression, MAGIC, MessageStream, WriteOptions};
-use ipc_types::RawImuSample;
-use serde::Serialize;
+use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample};
 use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use crate::error::{Error, ErrorKind, Result};
@@ -159,6 +164,397 @@ impl Topic for Truth {
             .chain(&self.specific_force_mps2)
             .chain(&self.angular_rate_rps);
         values.all(|v| v.is_finite())
+    }
+}
+
+impl Topic for CorrectedImuSample {
+    const TOPIC: &'static str = ipc_types::service::CORRECTED;
+    const SCHEMA_NAME: &'static str = "mems.CorrectedImuSample";
+
+    fn json_schema() -> Value {
+        object(
+            Self::SCHEMA_NAME,
+            "One calibrated sample, sensor frame, SI units (ipc-types CorrectedImuSample).",
+            &[
+                ("stamps", stamps_schema()),
+                ("seq", uint("Sequence number of the raw sample.", u64::MAX)),
+                (
+                    "accel_mps2",
+                    vector(3, number("Calibrated specific force, m/s^2, sensor frame.")),
+                ),
+                (
+                    "gyro_rps",
+                    vector(3, number("Calibrated angular rate, rad/s, sensor frame.")),
+                ),
+                ("temp_c", number("Die temperature, degC.")),
+                (
+                    "zs_mean_mps2",
+                    vector(3, number("Zero-state window mean specific force, m/s^2.")),
+                ),
+                (
+                    "zs_std_mps2",
+                    vector(3, number("Zero-state window standard deviation, m/s^2.")),
+                ),
+                (
+                    "calib_id",
+                    uint("Identifier of the calibration applied.", u64::MAX),
+                ),
+                (
+                    "flags",
+                    uint("ipc-types corrected_flags bits.", u16::MAX.into()),
+                ),
+                (
+                    "raw_flags",
+                    uint("The raw sample's raw_flags bits.", u16::MAX.into()),
+                ),
+                ("reserved", uint("Zero.", u32::MAX.into())),
+            ],
+        )
+    }
+
+    fn publish_time_ns(&self) -> u64 {
+        self.stamps.sample_ns
+    }
+
+    fn is_finite(&self) -> bool {
+        let mut values = self
+            .accel_mps2
+            .iter()
+            .chain(&self.gyro_rps)
+            .chain([&self.temp_c])
+            .chain(&self.zs_mean_mps2)
+            .chain(&self.zs_std_mps2);
+        values.all(|v| v.is_finite())
+    }
+}
+
+impl Topic for OdometryState {
+    const TOPIC: &'static str = ipc_types::service::ODOMETRY;
+    const SCHEMA_NAME: &'static str = "mems.OdometryState";
+
+    fn json_schema() -> Value {
+        object(
+            Self::SCHEMA_NAME,
+            "The odometry estimate at one sample time; navigation frame z-up (ipc-types OdometryState).",
+            &[
+                ("stamps", stamps_schema()),
+                ("seq", uint("Sequence number of the raw sample.", u64::MAX)),
+                (
+                    "position_m",
+                    vector(
+                        3,
+                        number("Displacement from alignment, m, navigation frame."),
+                    ),
+                ),
+                (
+                    "position_sigma_m",
+                    vector(3, number("1-sigma of position_m, m.")),
+                ),
+                (
+                    "velocity_mps",
+                    vector(3, number("Velocity, m/s, navigation frame.")),
+                ),
+                (
+                    "velocity_sigma_mps",
+                    vector(3, number("1-sigma of velocity_mps, m/s.")),
+                ),
+                (
+                    "gravity_sensor_mps2",
+                    vector(
+                        3,
+                        number("Gravity's specific-force reaction, m/s^2, sensor frame."),
+                    ),
+                ),
+                (
+                    "attitude_wxyz",
+                    vector(
+                        4,
+                        number("Unit quaternion (w, x, y, z), sensor to navigation frame."),
+                    ),
+                ),
+                ("distance_m", number("Path length since alignment, m.")),
+                (
+                    "flags",
+                    uint("ipc-types odometry_flags bits.", u16::MAX.into()),
+                ),
+                ("reserved16", uint("Zero.", u16::MAX.into())),
+                (
+                    "rest_count",
+                    uint("Rest intervals since alignment.", u32::MAX.into()),
+                ),
+            ],
+        )
+    }
+
+    /// The sample time of the state; for a revision, the time of the state it replaces.
+    fn publish_time_ns(&self) -> u64 {
+        self.stamps.sample_ns
+    }
+
+    fn is_finite(&self) -> bool {
+        let mut values = self
+            .position_m
+            .iter()
+            .chain(&self.position_sigma_m)
+            .chain(&self.velocity_mps)
+            .chain(&self.velocity_sigma_mps)
+            .chain(&self.gravity_sensor_mps2)
+            .chain(&self.attitude_wxyz)
+            .chain([&self.distance_m]);
+        values.all(|v| v.is_finite())
+    }
+}
+
+/// Topic of the pose derived from each odometry state ([`PoseInFrame`]), for Foxglove.
+pub const POSE_TOPIC: &str = "mems/odometry/pose";
+/// The frame every [`PoseInFrame`] is expressed in: the navigation frame (z up, origin and
+/// heading fixed at alignment).
+pub const NAV_FRAME: &str = "nav";
+
+/// A time as Foxglove's JSON schemas spell it: whole seconds and nanoseconds (here of
+/// `CLOCK_MONOTONIC`, like every time in this project).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FoxgloveTime {
+    /// Whole seconds.
+    pub sec: u64,
+    /// Nanoseconds, 0..=999_999_999.
+    pub nsec: u32,
+}
+
+impl FoxgloveTime {
+    /// Splits integer nanoseconds.
+    pub fn from_ns(ns: u64) -> Self {
+        Self {
+            sec: ns / 1_000_000_000,
+            nsec: (ns % 1_000_000_000) as u32,
+        }
+    }
+
+    /// Back to integer nanoseconds.
+    pub fn to_ns(self) -> u64 {
+        self.sec * 1_000_000_000 + u64::from(self.nsec)
+    }
+}
+
+/// A point or vector, Foxglove's `foxglove.Vector3`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FoxgloveVector3 {
+    /// x component.
+    pub x: f64,
+    /// y component.
+    pub y: f64,
+    /// z component.
+    pub z: f64,
+}
+
+/// A rotation, Foxglove's `foxglove.Quaternion` (note the order x, y, z, w).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FoxgloveQuaternion {
+    /// x (vector part).
+    pub x: f64,
+    /// y (vector part).
+    pub y: f64,
+    /// z (vector part).
+    pub z: f64,
+    /// w (scalar part).
+    pub w: f64,
+}
+
+/// Position and orientation, Foxglove's `foxglove.Pose`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FoxglovePose {
+    /// Position, m.
+    pub position: FoxgloveVector3,
+    /// Orientation (rotates body-frame vectors into the frame named by `frame_id`).
+    pub orientation: FoxgloveQuaternion,
+}
+
+/// The sensor's pose in the navigation frame, in the layout of Foxglove's `foxglove.PoseInFrame`
+/// JSON schema (its optional `message_id` and `lineage` fields are not written), so that
+/// Foxglove's 3D panel and plots understand it. Derived from an [`OdometryState`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PoseInFrame {
+    /// The state's sample time (`stamps.sample_ns`), ns `CLOCK_MONOTONIC`.
+    pub timestamp: FoxgloveTime,
+    /// Always [`NAV_FRAME`].
+    pub frame_id: String,
+    /// `position_m` and `attitude_wxyz` of the state.
+    pub pose: FoxglovePose,
+}
+
+impl PoseInFrame {
+    /// The pose of an odometry state: its position (m, navigation frame) and its attitude
+    /// (sensor to navigation frame), at its sample time.
+    pub fn from_state(state: &OdometryState) -> Self {
+        let [x, y, z] = state.position_m;
+        let [w, qx, qy, qz] = state.attitude_wxyz;
+        Self {
+            timestamp: FoxgloveTime::from_ns(state.stamps.sample_ns),
+            frame_id: NAV_FRAME.to_owned(),
+            pose: FoxglovePose {
+                position: FoxgloveVector3 { x, y, z },
+                orientation: FoxgloveQuaternion {
+                    x: qx,
+                    y: qy,
+                    z: qz,
+                    w,
+                },
+            },
+        }
+    }
+}
+
+impl Topic for PoseInFrame {
+    const TOPIC: &'static str = POSE_TOPIC;
+    const SCHEMA_NAME: &'static str = "foxglove.PoseInFrame";
+
+    fn json_schema() -> Value {
+        let time = object(
+            "time",
+            "Timestamp of pose (CLOCK_MONOTONIC).",
+            &[
+                ("sec", uint("Whole seconds.", u64::MAX)),
+                ("nsec", uint("Nanoseconds.", 999_999_999)),
+            ],
+        );
+        let xyz = |title: &str, description: &str, names: &[&str]| {
+            let fields: Vec<(&str, Value)> = names
+                .iter()
+                .map(|n| (*n, number(&format!("{n} component."))))
+                .collect();
+            object(title, description, &fields)
+        };
+        let pose = object(
+            "foxglove.Pose",
+            "Pose in 3D space.",
+            &[
+                (
+                    "position",
+                    xyz(
+                        "foxglove.Vector3",
+                        "Position, m, navigation frame.",
+                        &["x", "y", "z"],
+                    ),
+                ),
+                (
+                    "orientation",
+                    xyz(
+                        "foxglove.Quaternion",
+                        "Attitude, sensor to navigation frame.",
+                        &["x", "y", "z", "w"],
+                    ),
+                ),
+            ],
+        );
+        object(
+            Self::SCHEMA_NAME,
+            "A timestamped pose for an object or reference frame in 3D space.",
+            &[
+                ("timestamp", time),
+                (
+                    "frame_id",
+                    json!({"type": "string", "description": "Frame of reference for pose position and orientation."}),
+                ),
+                ("pose", pose),
+            ],
+        )
+    }
+
+    fn publish_time_ns(&self) -> u64 {
+        self.timestamp.to_ns()
+    }
+
+    fn is_finite(&self) -> bool {
+        let FoxglovePose {
+            position: p,
+            orientation: q,
+        } = self.pose;
+        [p.x, p.y, p.z, q.x, q.y, q.z, q.w]
+            .iter()
+            .all(|v| v.is_finite())
+    }
+}
+
+/// Topic of the recorder's own events ([`RecorderEvent`]).
+pub const EVENTS_TOPIC: &str = "mems/recorder/events";
+
+/// What a [`RecorderEvent`] reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EventKind {
+    /// Sequence numbers `from_seq..=to_seq` never arrived: they are missing from the recording.
+    Gap,
+    /// The sequence went back: `to_seq` arrived when `from_seq` was expected (a restarted
+    /// publisher that counts from 0 again).
+    SeqReset,
+    /// The service's last publisher went away (`from_seq` = `to_seq` = the last sequence
+    /// number received, `None` if none was).
+    PublisherLost,
+    /// A publisher appeared again after [`EventKind::PublisherLost`] (sequence numbers as there).
+    PublisherBack,
+}
+
+/// An event the recorder noticed on a service, so that a crashed or restarted stage shows in
+/// the recording explicitly.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RecorderEvent {
+    /// What happened.
+    pub kind: EventKind,
+    /// The service's base name (without namespace), e.g. `mems/imu/corrected`.
+    pub service: String,
+    /// First sequence number concerned (see [`EventKind`]).
+    pub from_seq: Option<u64>,
+    /// Last sequence number concerned (see [`EventKind`]).
+    pub to_seq: Option<u64>,
+    /// When the recorder noticed, ns `CLOCK_MONOTONIC`.
+    pub t_ns: u64,
+}
+
+impl Topic for RecorderEvent {
+    const TOPIC: &'static str = EVENTS_TOPIC;
+    const SCHEMA_NAME: &'static str = "mems.RecorderEvent";
+
+    fn json_schema() -> Value {
+        let seq = |what: &str| {
+            json!({
+                "type": ["integer", "null"],
+                "minimum": 0,
+                "maximum": u64::MAX,
+                "description": what,
+            })
+        };
+        object(
+            Self::SCHEMA_NAME,
+            "Something the recorder noticed on a service: lost sequence numbers, a publisher gone or back.",
+            &[
+                (
+                    "kind",
+                    json!({
+                        "type": "string",
+                        "enum": ["gap", "seq_reset", "publisher_lost", "publisher_back"],
+                        "description": "gap: from_seq..=to_seq missing; seq_reset: to_seq arrived when from_seq was expected; publisher_lost/back: from_seq = to_seq = last sequence number received (null if none).",
+                    }),
+                ),
+                (
+                    "service",
+                    json!({"type": "string", "description": "Service base name, e.g. mems/imu/raw."}),
+                ),
+                ("from_seq", seq("First sequence number concerned.")),
+                ("to_seq", seq("Last sequence number concerned.")),
+                (
+                    "t_ns",
+                    uint("When the recorder noticed, ns CLOCK_MONOTONIC.", u64::MAX),
+                ),
+            ],
+        )
+    }
+
+    fn publish_time_ns(&self) -> u64 {
+        self.t_ns
+    }
+
+    fn is_finite(&self) -> bool {
+        true
     }
 }
 
@@ -503,6 +899,14 @@ pub struct Contents {
     pub raw: Vec<RawImuSample>,
     /// Ground-truth records in file order.
     pub truth: Vec<Truth>,
+    /// Corrected samples in file order.
+    pub corrected: Vec<CorrectedImuSample>,
+    /// Odometry states in file order (revisions included, where the odometry stage sent them).
+    pub odometry: Vec<OdometryState>,
+    /// Poses derived from the odometry states, in file order.
+    pub poses: Vec<PoseInFrame>,
+    /// The recorder's events in file order.
+    pub events: Vec<RecorderEvent>,
     /// Number of messages on other topics (not decoded).
     pub other_messages: u64,
     /// Set when the file ends early or is damaged; everything before the cut is above.
@@ -522,8 +926,9 @@ impl Contents {
     }
 }
 
-/// Reads every raw sample and truth record of an MCAP file, up to the cut if the file was
-/// truncated (reported in [`Contents::truncation`], never silently).
+/// Reads every message of the known topics of an MCAP file (raw, truth, corrected, odometry,
+/// pose, events), up to the cut if the file was truncated (reported in
+/// [`Contents::truncation`], never silently).
 ///
 /// Errors if the file is not MCAP, a message does not decode, or raw sample times
 /// (`stamps.sample_ns`) do not strictly increase.
@@ -567,9 +972,276 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
             contents.raw.push(sample);
         } else if let Some(truth) = message.decode::<Truth>() {
             contents.truth.push(truth?);
+        } else if let Some(sample) = message.decode::<CorrectedImuSample>() {
+            contents.corrected.push(sample?);
+        } else if let Some(state) = message.decode::<OdometryState>() {
+            contents.odometry.push(state?);
+        } else if let Some(pose) = message.decode::<PoseInFrame>() {
+            contents.poses.push(pose?);
+        } else if let Some(event) = message.decode::<RecorderEvent>() {
+            contents.events.push(event?);
         } else {
             contents.other_messages += 1;
         }
     }
     Ok(contents)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ipc_types::Stamps;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn stamps(rng: &mut ChaCha8Rng) -> Stamps {
+        Stamps {
+            sample_ns: rng.random(),
+            acquired_ns: rng.random(),
+            calibrated_ns: rng.random(),
+            odometry_ns: rng.random(),
+        }
+    }
+
+    /// Any finite f64 bit pattern (subnormals, -0.0 and extremes included).
+    fn finite(rng: &mut ChaCha8Rng) -> f64 {
+        loop {
+            let v = f64::from_bits(rng.random());
+            if v.is_finite() {
+                return v;
+            }
+        }
+    }
+
+    fn corrected(rng: &mut ChaCha8Rng) -> CorrectedImuSample {
+        CorrectedImuSample {
+            stamps: stamps(rng),
+            seq: rng.random(),
+            accel_mps2: [(); 3].map(|_| finite(rng)),
+            gyro_rps: [(); 3].map(|_| finite(rng)),
+            temp_c: finite(rng),
+            zs_mean_mps2: [(); 3].map(|_| finite(rng)),
+            zs_std_mps2: [(); 3].map(|_| finite(rng)),
+            calib_id: rng.random(),
+            flags: rng.random(),
+            raw_flags: rng.random(),
+            reserved: rng.random(),
+        }
+    }
+
+    fn odometry(rng: &mut ChaCha8Rng) -> OdometryState {
+        OdometryState {
+            stamps: stamps(rng),
+            seq: rng.random(),
+            position_m: [(); 3].map(|_| finite(rng)),
+            position_sigma_m: [(); 3].map(|_| finite(rng)),
+            velocity_mps: [(); 3].map(|_| finite(rng)),
+            velocity_sigma_mps: [(); 3].map(|_| finite(rng)),
+            gravity_sensor_mps2: [(); 3].map(|_| finite(rng)),
+            attitude_wxyz: [(); 4].map(|_| finite(rng)),
+            distance_m: finite(rng),
+            flags: rng.random(),
+            reserved16: rng.random(),
+            rest_count: rng.random(),
+        }
+    }
+
+    fn tmp(name: &str) -> PathBuf {
+        std::env::temp_dir().join(format!("recording-unit-{}-{name}", std::process::id()))
+    }
+
+    /// Every message type the recorder writes reads back bit for bit, each on its own topic.
+    #[test]
+    fn recorder_topics_round_trip_bit_exact() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let corrected: Vec<_> = (0..50).map(|_| corrected(&mut rng)).collect();
+        let odometry: Vec<_> = (0..50).map(|_| odometry(&mut rng)).collect();
+        let poses: Vec<_> = odometry.iter().map(PoseInFrame::from_state).collect();
+        let events = vec![
+            RecorderEvent {
+                kind: EventKind::Gap,
+                service: ipc_types::service::CORRECTED.into(),
+                from_seq: Some(10),
+                to_seq: Some(19),
+                t_ns: 5,
+            },
+            RecorderEvent {
+                kind: EventKind::PublisherLost,
+                service: ipc_types::service::RAW.into(),
+                from_seq: None,
+                to_seq: None,
+                t_ns: u64::MAX,
+            },
+        ];
+        let path = tmp("topics.mcap");
+        let mut writer = Writer::create(&path).unwrap();
+        let c = writer.add_channel::<CorrectedImuSample>().unwrap();
+        let o = writer.add_channel::<OdometryState>().unwrap();
+        let p = writer.add_channel::<PoseInFrame>().unwrap();
+        let e = writer.add_channel::<RecorderEvent>().unwrap();
+        for i in 0..50 {
+            writer.write(c, &corrected[i], i as u64).unwrap();
+            writer.write(o, &odometry[i], i as u64).unwrap();
+            writer.write(p, &poses[i], i as u64).unwrap();
+        }
+        for event in &events {
+            writer.write(e, event, event.t_ns).unwrap();
+        }
+        writer.finish().unwrap();
+
+        let contents = read_all(&path).unwrap();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(contents.corrected.len(), 50);
+        for (a, b) in contents.corrected.iter().zip(&corrected) {
+            assert_eq!(bits(&a.accel_mps2), bits(&b.accel_mps2));
+            assert_eq!(bits(&a.zs_std_mps2), bits(&b.zs_std_mps2));
+        }
+        for (a, b) in contents.odometry.iter().zip(&odometry) {
+            assert_eq!(bits(&a.position_m), bits(&b.position_m));
+            assert_eq!(bits(&a.attitude_wxyz), bits(&b.attitude_wxyz));
+        }
+        // PartialEq on f64 treats -0.0 == 0.0; the bit comparisons above catch that case.
+        assert_eq!(contents.corrected, corrected);
+        assert_eq!(contents.odometry, odometry);
+        assert_eq!(contents.poses, poses);
+        assert_eq!(contents.events, events);
+        assert!(contents.raw.is_empty() && contents.truncation.is_none());
+        assert_eq!(contents.other_messages, 0);
+
+        // publish_time is each message's own time.
+        let reader = Reader::open(&path).unwrap();
+        for m in reader.messages().unwrap() {
+            let m = m.unwrap();
+            let expected = if let Some(s) = m.decode::<CorrectedImuSample>() {
+                s.unwrap().stamps.sample_ns
+            } else if let Some(s) = m.decode::<OdometryState>() {
+                s.unwrap().stamps.sample_ns
+            } else if let Some(s) = m.decode::<PoseInFrame>() {
+                s.unwrap().timestamp.to_ns()
+            } else {
+                m.decode::<RecorderEvent>().unwrap().unwrap().t_ns
+            };
+            assert_eq!(m.publish_time_ns, expected, "{}", m.topic);
+        }
+        std::fs::remove_file(&path).unwrap();
+    }
+
+    /// The pose is the state's position and attitude in Foxglove's JSON layout: quaternion
+    /// reordered from (w, x, y, z) to {x, y, z, w}, time split into sec and nsec.
+    #[test]
+    fn pose_has_foxglove_layout() {
+        let state = OdometryState {
+            stamps: Stamps {
+                sample_ns: 12_345_678_901,
+                ..Stamps::default()
+            },
+            position_m: [1.5, -2.0, 0.25],
+            attitude_wxyz: [0.5, -0.5, 0.5, -0.5],
+            ..OdometryState::default()
+        };
+        let json = serde_json::to_value(PoseInFrame::from_state(&state)).unwrap();
+        assert_eq!(
+            json,
+            json!({
+                "timestamp": {"sec": 12, "nsec": 345_678_901},
+                "frame_id": "nav",
+                "pose": {
+                    "position": {"x": 1.5, "y": -2.0, "z": 0.25},
+                    "orientation": {"x": -0.5, "y": 0.5, "z": -0.5, "w": 0.5},
+                },
+            })
+        );
+    }
+
+    /// Collects, for every object in `schema`, the path and its required property names.
+    fn schema_objects(schema: &Value, at: &str, out: &mut Vec<(String, Vec<String>)>) {
+        if let Some(properties) = schema["properties"].as_object() {
+            let required = schema["required"].as_array().unwrap();
+            let mut names: Vec<String> = required
+                .iter()
+                .map(|r| r.as_str().unwrap().into())
+                .collect();
+            names.sort();
+            out.push((at.to_owned(), names));
+            for (name, sub) in properties {
+                schema_objects(sub, &format!("{at}.{name}"), out);
+            }
+        }
+    }
+
+    /// The same for a JSON value.
+    fn value_objects(value: &Value, at: &str, out: &mut Vec<(String, Vec<String>)>) {
+        if let Some(map) = value.as_object() {
+            let mut names: Vec<String> = map.keys().cloned().collect();
+            names.sort();
+            out.push((at.to_owned(), names));
+            for (name, sub) in map {
+                value_objects(sub, &format!("{at}.{name}"), out);
+            }
+        }
+    }
+
+    fn assert_schema_describes<T: Topic>(message: &T) {
+        let mut from_schema = Vec::new();
+        schema_objects(&T::json_schema(), "", &mut from_schema);
+        let mut from_value = Vec::new();
+        value_objects(&serde_json::to_value(message).unwrap(), "", &mut from_value);
+        from_schema.sort();
+        from_value.sort();
+        assert_eq!(from_schema, from_value, "{}", T::SCHEMA_NAME);
+        assert_eq!(T::json_schema()["title"], T::SCHEMA_NAME);
+    }
+
+    /// Each schema names exactly the fields serde writes, at every nesting level.
+    #[test]
+    fn schemas_describe_the_serialized_messages() {
+        let mut rng = ChaCha8Rng::seed_from_u64(8);
+        let state = odometry(&mut rng);
+        assert_schema_describes(&corrected(&mut rng));
+        assert_schema_describes(&state);
+        assert_schema_describes(&PoseInFrame::from_state(&state));
+        assert_schema_describes(&RecorderEvent {
+            kind: EventKind::SeqReset,
+            service: "s".into(),
+            from_seq: Some(1),
+            to_seq: Some(0),
+            t_ns: 0,
+        });
+    }
+
+    /// Event kinds serialize to the strings the schema's enum lists.
+    #[test]
+    fn event_kinds_match_the_schema_enum() {
+        let kinds = [
+            EventKind::Gap,
+            EventKind::SeqReset,
+            EventKind::PublisherLost,
+            EventKind::PublisherBack,
+        ];
+        let written: Vec<Value> = kinds
+            .iter()
+            .map(|k| serde_json::to_value(k).unwrap())
+            .collect();
+        let schema = RecorderEvent::json_schema();
+        assert_eq!(
+            &written,
+            schema["properties"]["kind"]["enum"].as_array().unwrap()
+        );
+    }
+
+    /// NaN in a corrected sample or an odometry state is refused, naming the topic.
+    #[test]
+    fn non_finite_values_are_refused() {
+        let path = tmp("nan.mcap");
+        let mut writer = Writer::create(&path).unwrap();
+        let o = writer.add_channel::<OdometryState>().unwrap();
+        let state = OdometryState {
+            distance_m: f64::NAN,
+            ..OdometryState::default()
+        };
+        let err = writer.write(o, &state, 0).unwrap_err();
+        assert!(err.to_string().contains("mems/odometry/state"), "{err}");
+        drop(writer);
+        std::fs::remove_file(&path).unwrap();
+    }
 }

@@ -1,0 +1,47 @@
+//! `mems-plot FILE.mcap [--out DIR]`: PNGs of a recording's acceleration, zero-state and
+//! position with its 1-sigma band.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use mems_plot::{Outcome, plot_recording};
+
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    /// The MCAP recording (from mems-record or mems-sim).
+    file: PathBuf,
+    /// Directory for the PNGs (default: the recording's directory).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    let contents = recording::mcap::read_all(&cli.file)?;
+    if let Some(truncation) = &contents.truncation {
+        eprintln!(
+            "mems-plot: warning: {}: {truncation}; plotting what was read",
+            cli.file.display()
+        );
+    }
+    let out = cli.out.unwrap_or_else(|| {
+        cli.file
+            .parent()
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from("."))
+    });
+    let stem = cli
+        .file
+        .file_stem()
+        .context("the recording's path has no file name")?
+        .to_string_lossy();
+    for (figure, outcome) in plot_recording(&contents, &stem, &out)? {
+        match outcome {
+            Outcome::Written(path) => println!("mems-plot: wrote {}", path.display()),
+            Outcome::Skipped(why) => println!("mems-plot: skipped {}: {why}", figure.name()),
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,433 @@
+//! The recorder behind `mems-record`: subscribes to every mems service and writes an MCAP file
+//! through the `recording` crate, with the pose derived from each odometry state for Foxglove
+//! and explicit events for lost sequence numbers and vanished publishers.
+//!
+//! Times: each message's MCAP `log_time` is its receive time, its `publish_time` the message's
+//! own sample time (both ns `CLOCK_MONOTONIC`). The writer's chunk is flushed to the operating
+//! system whenever its oldest message is [`FLUSH_PERIOD`] old, so a killed recorder loses at
+//! most that much; SIGINT and SIGTERM (iceoryx2's signal handler, seen through `Node::wait`)
+//! end the recording cleanly with its summary and footer.
+
+#![warn(missing_docs)]
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::PortFactory as _;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+use ipc_types::clock::monotonic_ns;
+use ipc_types::{CorrectedImuSample, Message, OdometryState, RawImuSample, service};
+use recording::mcap::{Channel, EventKind, PoseInFrame, RecorderEvent, Topic, Writer};
+
+/// Age of the oldest unflushed message at which the recorder closes the current chunk and
+/// hands it to the operating system: the most a killed recorder can lose. Half the 100 ms the
+/// project allows, leaving room for one slow loop iteration.
+pub const FLUSH_PERIOD: Duration = Duration::from_millis(50);
+/// Sleep between polls of the subscribers. Each subscriber buffers one second at 4 kHz
+/// ([`service::SUBSCRIBER_BUFFER`]), far more than arrives in one poll.
+pub const POLL_PERIOD: Duration = Duration::from_millis(1);
+/// Most messages taken from one subscriber per poll, so that flushing and the publisher check
+/// keep their periods while a fast publisher (replay `--max`) keeps the queue full.
+pub const MAX_BATCH: usize = service::SUBSCRIBER_BUFFER;
+/// Period of the publisher check: dead iceoryx2 nodes (a kill -9'd stage) are cleaned up, then
+/// each service's publisher count is compared with the last one.
+pub const PUBLISHER_CHECK_PERIOD: Duration = Duration::from_millis(100);
+
+/// What to record and for how long.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordOptions {
+    /// The MCAP file to write (created or truncated).
+    pub out: PathBuf,
+    /// Namespace prefix of the service names ("" for none); topics in the file are the base names.
+    pub namespace: String,
+    /// Stop after this long; `None` records until SIGINT or SIGTERM.
+    pub duration: Option<Duration>,
+}
+
+/// What was recorded.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordSummary {
+    /// Messages per service (base name) received and written, in subscription order.
+    pub received: Vec<(&'static str, u64)>,
+    /// Events written on [`recording::mcap::EVENTS_TOPIC`].
+    pub events: Vec<RecorderEvent>,
+    /// Wall time from the first poll to the finished file.
+    pub elapsed: Duration,
+    /// Whether SIGINT or SIGTERM ended the recording (rather than `duration`).
+    pub interrupted: bool,
+}
+
+/// Detects lost sequence numbers and vanished publishers on one service. No I/O: feed it what
+/// was received and how many publishers the service has, and write the events it returns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SeqTracker {
+    service: &'static str,
+    last_seq: Option<u64>,
+    had_publisher: bool,
+    lost: bool,
+}
+
+impl SeqTracker {
+    /// A tracker for `service` (its base name), which has seen nothing yet.
+    pub fn new(service: &'static str) -> Self {
+        Self {
+            service,
+            last_seq: None,
+            had_publisher: false,
+            lost: false,
+        }
+    }
+
+    fn event(
+        &self,
+        kind: EventKind,
+        from_seq: Option<u64>,
+        to_seq: Option<u64>,
+        t_ns: u64,
+    ) -> RecorderEvent {
+        RecorderEvent {
+            kind,
+            service: self.service.to_owned(),
+            from_seq,
+            to_seq,
+            t_ns,
+        }
+    }
+
+    /// Accounts for a message with sequence number `seq` received at `t_ns`. Returns
+    /// [`EventKind::PublisherBack`] if the publisher was lost (a message proves it is back,
+    /// whether or not the publisher count has been checked since, provided the lost
+    /// publisher's messages were all taken before [`SeqTracker::publishers`] reported the
+    /// loss), then [`EventKind::Gap`] when
+    /// numbers were skipped or [`EventKind::SeqReset`] when the sequence went back. Revisions
+    /// (which re-publish earlier numbers on purpose) are not checked for gaps. The first message
+    /// only sets the starting point: the recorder may join a running stream.
+    pub fn observe(&mut self, seq: u64, revision: bool, t_ns: u64) -> Vec<RecorderEvent> {
+        let mut events = Vec::new();
+        self.had_publisher = true;
+        if self.lost {
+            self.lost = false;
+            let last = self.last_seq;
+            events.push(self.event(EventKind::PublisherBack, last, last, t_ns));
+        }
+        if revision {
+            return events;
+        }
+        let jump = self.last_seq.and_then(|last| {
+            let expected = last.wrapping_add(1);
+            if seq > expected {
+                Some(self.event(EventKind::Gap, Some(expected), Some(seq - 1), t_ns))
+            } else if seq < expected {
+                Some(self.event(EventKind::SeqReset, Some(expected), Some(seq), t_ns))
+            } else {
+                None
+            }
+        });
+        events.extend(jump);
+        self.last_seq = Some(seq);
+        events
+    }
+
+    /// Accounts for the service's publisher count at `t_ns`: [`EventKind::PublisherLost`] when
+    /// it is 0 after a publisher was seen (counted, or proven by a message),
+    /// [`EventKind::PublisherBack`] when one appears again after that.
+    pub fn publishers(&mut self, count: usize, t_ns: u64) -> Option<RecorderEvent> {
+        let kind = if count == 0 && self.had_publisher && !self.lost {
+            self.lost = true;
+            EventKind::PublisherLost
+        } else if count > 0 && self.lost {
+            self.lost = false;
+            EventKind::PublisherBack
+        } else {
+            self.had_publisher |= count > 0;
+            return None;
+        };
+        Some(self.event(kind, self.last_seq, self.last_seq, t_ns))
+    }
+}
+
+/// A service being recorded, whatever its message type.
+trait Stream {
+    /// Receives and writes what is queued, at most `limit` messages; returns the events
+    /// written.
+    fn drain(&mut self, writer: &mut Writer, limit: usize) -> Result<Vec<RecorderEvent>>;
+    /// Compares the publisher count with the last one; returns the events written (with those
+    /// of the messages drained on the way).
+    fn check_publishers(&mut self, writer: &mut Writer) -> Result<Vec<RecorderEvent>>;
+    /// The service's base name and the messages received so far.
+    fn received(&self) -> (&'static str, u64);
+}
+
+/// Extra messages written for each message of a stream (the pose for odometry states).
+type Derive<T> = Box<dyn FnMut(&mut Writer, &T, u64) -> recording::Result<()>>;
+
+/// One subscribed service and its MCAP channel.
+struct Subscription<T: Topic + Message> {
+    name: String,
+    service: PortFactory<ipc::Service, T, ()>,
+    subscriber: Subscriber<ipc::Service, T, ()>,
+    channel: Channel<T>,
+    events: Channel<RecorderEvent>,
+    tracker: SeqTracker,
+    received: u64,
+    derive: Option<Derive<T>>,
+}
+
+impl<T: Topic + Message> Subscription<T> {
+    /// Subscribes to `T`'s service under `namespace` and adds its channel to `writer`.
+    fn open(
+        node: &Node<ipc::Service>,
+        namespace: &str,
+        writer: &mut Writer,
+        events: Channel<RecorderEvent>,
+    ) -> Result<Self> {
+        let name = service::full_name(namespace, T::TOPIC);
+        let service = service::open::<T>(node, &name)?;
+        let subscriber = service::subscriber(&service)?;
+        Ok(Self {
+            name,
+            service,
+            subscriber,
+            channel: writer.add_channel::<T>()?,
+            events,
+            tracker: SeqTracker::new(T::TOPIC),
+            received: 0,
+            derive: None,
+        })
+    }
+
+    /// Also writes `derive`'s messages for every message received.
+    fn deriving(
+        mut self,
+        derive: impl FnMut(&mut Writer, &T, u64) -> recording::Result<()> + 'static,
+    ) -> Self {
+        self.derive = Some(Box::new(derive));
+        self
+    }
+}
+
+impl<T: Topic + Message> Stream for Subscription<T> {
+    fn drain(&mut self, writer: &mut Writer, limit: usize) -> Result<Vec<RecorderEvent>> {
+        let mut events = Vec::new();
+        for _ in 0..limit {
+            let Some(sample) = self
+                .subscriber
+                .receive()
+                .map_err(|e| anyhow::anyhow!("receive on {}: {e:?}", self.name))?
+            else {
+                break;
+            };
+            let received_ns = monotonic_ns();
+            let message: &T = sample.payload();
+            self.received += 1;
+            for event in self
+                .tracker
+                .observe(message.seq(), message.is_revision(), received_ns)
+            {
+                writer.write(self.events, &event, received_ns)?;
+                events.push(event);
+            }
+            writer.write(self.channel, message, received_ns)?;
+            if let Some(derive) = self.derive.as_mut() {
+                derive(writer, message, received_ns)?;
+            }
+        }
+        Ok(events)
+    }
+
+    fn check_publishers(&mut self, writer: &mut Writer) -> Result<Vec<RecorderEvent>> {
+        let count = self.service.dynamic_config().number_of_publishers();
+        let mut events = Vec::new();
+        if count == 0 {
+            // Whatever the departed publishers sent is queued before they left: take it all
+            // first, so that the loss is recorded after their last message, with its number,
+            // and any later message proves a new publisher.
+            events = self.drain(writer, usize::MAX)?;
+        }
+        let now = monotonic_ns();
+        if let Some(event) = self.tracker.publishers(count, now) {
+            writer.write(self.events, &event, now)?;
+            events.push(event);
+        }
+        Ok(events)
+    }
+
+    fn received(&self) -> (&'static str, u64) {
+        (T::TOPIC, self.received)
+    }
+}
+
+/// Records every service until `options.duration` has passed or SIGINT/SIGTERM arrives, then
+/// finishes the file (summary and footer).
+pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
+    let node_name = NodeName::new("mems-record").context("node name")?;
+    let node = NodeBuilder::new()
+        .name(&node_name)
+        .create::<ipc::Service>()
+        .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+    let mut writer = Writer::create(&options.out)?;
+    let events = writer.add_channel::<RecorderEvent>()?;
+    let pose = writer.add_channel::<PoseInFrame>()?;
+    let ns = options.namespace.as_str();
+    // One line per service; a new service is one more line here.
+    let mut streams: Vec<Box<dyn Stream>> = vec![
+        Box::new(Subscription::<RawImuSample>::open(
+            &node,
+            ns,
+            &mut writer,
+            events,
+        )?),
+        Box::new(Subscription::<CorrectedImuSample>::open(
+            &node,
+            ns,
+            &mut writer,
+            events,
+        )?),
+        Box::new(
+            Subscription::<OdometryState>::open(&node, ns, &mut writer, events)?.deriving(
+                move |w, state, log_ns| w.write(pose, &PoseInFrame::from_state(state), log_ns),
+            ),
+        ),
+    ];
+
+    let start = Instant::now();
+    let mut all_events = Vec::new();
+    let mut oldest_unflushed: Option<Instant> = None;
+    let mut last_check: Option<Instant> = None;
+    let mut interrupted = false;
+    loop {
+        // Err only when SIGINT or SIGTERM arrived (iceoryx2's default signal handling).
+        if node.wait(POLL_PERIOD).is_err() {
+            interrupted = true;
+        }
+        for stream in &mut streams {
+            let (_, before) = stream.received();
+            all_events.extend(stream.drain(&mut writer, MAX_BATCH)?);
+            if stream.received().1 > before {
+                oldest_unflushed.get_or_insert_with(Instant::now);
+            }
+        }
+        if interrupted || options.duration.is_some_and(|d| start.elapsed() >= d) {
+            break;
+        }
+        if last_check.is_none_or(|t| t.elapsed() >= PUBLISHER_CHECK_PERIOD) {
+            last_check = Some(Instant::now());
+            // Removes the resources of kill -9'd nodes, so that their publishers stop counting.
+            node.try_cleanup_dead_nodes();
+            for stream in &mut streams {
+                let (_, before) = stream.received();
+                let events = stream.check_publishers(&mut writer)?;
+                if !events.is_empty() || stream.received().1 > before {
+                    oldest_unflushed.get_or_insert_with(Instant::now);
+                }
+                all_events.extend(events);
+            }
+        }
+        if oldest_unflushed.is_some_and(|t| t.elapsed() >= FLUSH_PERIOD) {
+            writer.flush()?;
+            oldest_unflushed = None;
+        }
+    }
+    writer.finish()?;
+    Ok(RecordSummary {
+        received: streams.iter().map(|s| s.received()).collect(),
+        events: all_events,
+        elapsed: start.elapsed(),
+        interrupted,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kinds(events: &[RecorderEvent]) -> Vec<EventKind> {
+        events.iter().map(|e| e.kind).collect()
+    }
+
+    #[test]
+    fn consecutive_numbers_give_no_event() {
+        let mut t = SeqTracker::new(service::RAW);
+        for seq in 5..100 {
+            assert_eq!(t.observe(seq, false, seq), vec![]);
+        }
+    }
+
+    #[test]
+    fn a_jump_is_a_gap_of_the_missing_numbers() {
+        let mut t = SeqTracker::new(service::CORRECTED);
+        assert_eq!(t.observe(10, false, 1), vec![]);
+        let e = t.observe(14, false, 2);
+        assert_eq!(kinds(&e), [EventKind::Gap]);
+        assert_eq!((e[0].from_seq, e[0].to_seq), (Some(11), Some(13)));
+        assert_eq!((e[0].service.as_str(), e[0].t_ns), (service::CORRECTED, 2));
+        assert_eq!(t.observe(15, false, 3), vec![]);
+    }
+
+    #[test]
+    fn going_back_is_a_reset_and_revisions_are_not_gaps() {
+        let mut t = SeqTracker::new(service::ODOMETRY);
+        t.observe(100, false, 0);
+        assert_eq!(t.observe(40, true, 0), vec![], "a revision of seq 40");
+        assert_eq!(t.observe(101, false, 0), vec![]);
+        let e = t.observe(0, false, 7);
+        assert_eq!(kinds(&e), [EventKind::SeqReset]);
+        assert_eq!((e[0].from_seq, e[0].to_seq), (Some(102), Some(0)));
+        assert_eq!(t.observe(1, false, 8), vec![]);
+    }
+
+    #[test]
+    fn publisher_lost_and_back_are_reported_once_each() {
+        let mut t = SeqTracker::new(service::RAW);
+        assert_eq!(t.publishers(0, 1), None, "no publisher yet: nothing lost");
+        assert_eq!(t.publishers(1, 2), None, "first publisher: not a return");
+        t.observe(7, false, 3);
+        let lost = t.publishers(0, 4).unwrap();
+        assert_eq!(lost.kind, EventKind::PublisherLost);
+        assert_eq!(
+            (lost.from_seq, lost.to_seq, lost.t_ns),
+            (Some(7), Some(7), 4)
+        );
+        assert_eq!(t.publishers(0, 5), None, "still lost: reported once");
+        let back = t.publishers(2, 6).unwrap();
+        assert_eq!(back.kind, EventKind::PublisherBack);
+        assert_eq!((back.from_seq, back.to_seq), (Some(7), Some(7)));
+        assert_eq!(t.publishers(1, 7), None);
+        assert_eq!(t.observe(8, false, 8), vec![], "already reported back");
+    }
+
+    /// A restarted stage's first message arrives before the publisher check notices it: the
+    /// return is reported first, then the numbers it skipped.
+    #[test]
+    fn a_message_after_a_loss_reports_the_return_then_the_gap() {
+        let mut t = SeqTracker::new(service::CORRECTED);
+        t.observe(41, false, 1);
+        t.publishers(0, 2).unwrap();
+        let e = t.observe(60, false, 3);
+        assert_eq!(kinds(&e), [EventKind::PublisherBack, EventKind::Gap]);
+        assert_eq!((e[0].from_seq, e[0].to_seq), (Some(41), Some(41)));
+        assert_eq!((e[1].from_seq, e[1].to_seq), (Some(42), Some(59)));
+        assert_eq!(t.publishers(1, 4), None, "not reported twice");
+    }
+
+    #[test]
+    fn a_message_proves_a_publisher_that_no_count_saw() {
+        let mut t = SeqTracker::new(service::RAW);
+        t.observe(0, false, 1);
+        t.observe(1, false, 2);
+        let lost = t.publishers(0, 3).unwrap();
+        assert_eq!(lost.kind, EventKind::PublisherLost);
+        assert_eq!((lost.from_seq, lost.to_seq), (Some(1), Some(1)));
+    }
+
+    #[test]
+    fn a_publisher_lost_before_any_message_has_no_sequence_number() {
+        let mut t = SeqTracker::new(service::RAW);
+        t.publishers(1, 0);
+        let lost = t.publishers(0, 1).unwrap();
+        assert_eq!((lost.from_seq, lost.to_seq), (None, None));
+    }
+}

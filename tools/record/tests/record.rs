@@ -1,0 +1,285 @@
+//! `mems-record` as a real process: a round trip through `mems-replay`, a SIGKILLed recorder,
+//! a SIGKILLed publisher, and every service recorded with the derived pose.
+
+mod common;
+
+use std::time::Duration;
+
+use common::*;
+use ipc_types::clock::monotonic_ns;
+use ipc_types::service;
+use recording::mcap::{EventKind, Reader, RecorderEvent, Writer, read_all};
+
+const WAIT: Duration = Duration::from_secs(10);
+
+/// Raw sample count in the (possibly still growing) recording at `path`.
+fn raw_in(path: &std::path::Path) -> usize {
+    read_all(path).map_or(0, |c| c.raw.len())
+}
+
+/// Events in the (possibly still growing) recording at `path`.
+fn events_in(path: &std::path::Path) -> Vec<RecorderEvent> {
+    read_all(path).map_or_else(|_| Vec::new(), |c| c.events)
+}
+
+/// A CSV replayed with `mems-replay --max` arrives in the recording complete and bit-exact
+/// (but for `acquired_ns`, the publish time), with no gap; the replay's exit is recorded as a
+/// lost publisher, and SIGTERM finishes the file with its summary.
+#[test]
+fn csv_replayed_at_max_speed_is_recorded_bit_exact() {
+    let ns = namespace("roundtrip");
+    let csv = tmp("roundtrip.csv");
+    let mcap = tmp("roundtrip.mcap");
+    recording::csv::write_raw(&csv, &raw_samples(8000, 0, 4000), None).unwrap();
+    // What the replay publishes: the CSV as the recording crate reads it.
+    let expected = recording::load_raw(&csv).unwrap().samples;
+
+    let recorder = Proc::spawn(
+        &mems_record(),
+        &["--out", mcap.to_str().unwrap(), "--namespace", &ns],
+    );
+    let before_ns = monotonic_ns();
+    let replay = Proc::spawn(
+        &workspace_bin("mems-replay", "mems-replay"),
+        &[
+            csv.to_str().unwrap(),
+            "--max",
+            "--namespace",
+            &ns,
+            "--wait-subscribers",
+            "1",
+            "--wait-timeout",
+            "5",
+        ],
+    );
+    let (status, stdout) = replay.wait(WAIT);
+    let after_ns = monotonic_ns();
+    assert!(status.success(), "mems-replay failed: {stdout}");
+    assert!(stdout.contains("sent 8000 of 8000 samples"), "{stdout}");
+    wait_until(
+        WAIT,
+        "all samples and the lost publisher in the file",
+        || raw_in(&mcap) == 8000 && !events_in(&mcap).is_empty(),
+    );
+    recorder.signal(libc::SIGTERM);
+    let (status, stdout) = recorder.wait(WAIT);
+    assert!(status.success(), "mems-record failed: {stdout}");
+    assert!(stdout.contains("stopped by signal"), "{stdout}");
+
+    let contents = read_all(&mcap).unwrap();
+    assert_eq!(contents.truncation, None, "SIGTERM must finish the file");
+    assert_eq!(contents.raw.len(), expected.len());
+    for (got, want) in contents.raw.iter().zip(&expected) {
+        assert!(same_but_acquired(got, want), "{got:?} != {want:?}");
+    }
+    let acquired: Vec<u64> = contents.raw.iter().map(|s| s.stamps.acquired_ns).collect();
+    assert!(
+        acquired.windows(2).all(|w| w[0] < w[1]),
+        "publish times increase"
+    );
+    assert!(
+        acquired[0] > before_ns && acquired[7999] < after_ns,
+        "stamped at publication"
+    );
+    assert_eq!(
+        contents.events,
+        [RecorderEvent {
+            kind: EventKind::PublisherLost,
+            service: service::RAW.into(),
+            from_seq: Some(7999),
+            to_seq: Some(7999),
+            t_ns: contents.events[0].t_ns,
+        }]
+    );
+    assert!(contents.events[0].t_ns > acquired[7999]);
+
+    // log_time is the receive time (after publication), publish_time the sample time.
+    let reader = Reader::open(&mcap).unwrap();
+    for m in reader.messages().unwrap() {
+        let m = m.unwrap();
+        if let Some(sample) = m.decode::<ipc_types::RawImuSample>() {
+            let sample = sample.unwrap();
+            assert_eq!(m.publish_time_ns, sample.stamps.sample_ns);
+            assert!(
+                m.log_time_ns >= sample.stamps.acquired_ns
+                    && m.log_time_ns < after_ns + 1_000_000_000
+            );
+        }
+    }
+    assert!(!service_exists(&ns, service::RAW), "no service left behind");
+}
+
+/// A recorder killed with SIGKILL leaves a file that reads up to the cut, says it is truncated,
+/// and lost at most the last 100 ms; the killed node's shared memory is cleaned up afterwards.
+#[test]
+fn sigkilled_recorder_loses_at_most_100_ms() {
+    let ns = namespace("sigkill");
+    let csv = tmp("sigkill.csv");
+    let mcap = tmp("sigkill.mcap");
+    // 1 s at 4 kHz: fewer samples than a subscriber buffer, so the replay never blocks on the
+    // dead recorder.
+    recording::csv::write_raw(&csv, &raw_samples(4000, 0, 4000), None).unwrap();
+    let expected = recording::load_raw(&csv).unwrap().samples;
+
+    let recorder = Proc::spawn(
+        &mems_record(),
+        &["--out", mcap.to_str().unwrap(), "--namespace", &ns],
+    );
+    let replay = Proc::spawn(
+        &workspace_bin("mems-replay", "mems-replay"),
+        &[
+            csv.to_str().unwrap(),
+            "--speed",
+            "1",
+            "--namespace",
+            &ns,
+            "--wait-subscribers",
+            "1",
+        ],
+    );
+    wait_until(WAIT, "the first samples in the file", || raw_in(&mcap) > 0);
+    std::thread::sleep(Duration::from_millis(400));
+    let kill_ns = monotonic_ns();
+    recorder.signal(libc::SIGKILL);
+    let (status, _) = recorder.wait(WAIT);
+    assert_eq!(
+        std::os::unix::process::ExitStatusExt::signal(&status),
+        Some(libc::SIGKILL)
+    );
+    let (status, stdout) = replay.wait(WAIT);
+    assert!(status.success(), "mems-replay failed: {stdout}");
+
+    let recording = recording::load_raw(&mcap).unwrap();
+    let truncation = recording
+        .truncation
+        .expect("a killed recorder's file is truncated");
+    assert!(
+        truncation.to_string().contains("ends early"),
+        "{truncation}"
+    );
+    let got = &recording.samples;
+    assert!(
+        !got.is_empty() && got.len() < expected.len(),
+        "{} samples",
+        got.len()
+    );
+    for (g, w) in got.iter().zip(&expected) {
+        assert!(same_but_acquired(g, w), "{g:?} != {w:?}");
+    }
+    let last_ns = got.last().unwrap().stamps.acquired_ns;
+    assert!(
+        kill_ns.saturating_sub(last_ns) <= 100_000_000,
+        "the last recorded sample was published {} ms before the kill",
+        (kill_ns - last_ns) as f64 / 1e6
+    );
+
+    // The dead recorder's node holds the services until someone removes it.
+    let node = node();
+    node.try_cleanup_dead_nodes();
+    drop(node);
+    for base in [service::RAW, service::CORRECTED, service::ODOMETRY] {
+        assert!(
+            !service_exists(&ns, base),
+            "{base} left behind after the cleanup"
+        );
+    }
+}
+
+/// A publisher killed with SIGKILL and replaced by one further along the sequence shows in the
+/// recording as: publisher lost, publisher back, and the gap of the numbers never sent.
+#[test]
+fn sigkilled_publisher_shows_as_lost_back_and_gap() {
+    let ns = namespace("gap");
+    let first = tmp("gap-first.mcap");
+    let second = tmp("gap-second.mcap");
+    let mcap = tmp("gap-recording.mcap");
+    // MCAP keeps sequence numbers as recorded (CSV would number rows from 0).
+    let write = |path: &std::path::Path, samples: &[ipc_types::RawImuSample]| {
+        let mut w = Writer::create(path).unwrap();
+        let raw = w.add_channel::<ipc_types::RawImuSample>().unwrap();
+        for s in samples {
+            w.write(raw, s, s.stamps.sample_ns).unwrap();
+        }
+        w.finish().unwrap();
+    };
+    let second_samples = raw_samples(400, 6000, 4000);
+    write(&first, &raw_samples(4000, 0, 4000));
+    write(&second, &second_samples);
+    let replay_bin = workspace_bin("mems-replay", "mems-replay");
+
+    let recorder = Proc::spawn(
+        &mems_record(),
+        &["--out", mcap.to_str().unwrap(), "--namespace", &ns],
+    );
+    let replay = Proc::spawn(
+        &replay_bin,
+        &[
+            first.to_str().unwrap(),
+            "--namespace",
+            &ns,
+            "--wait-subscribers",
+            "1",
+        ],
+    );
+    wait_until(WAIT, "samples of the first replay", || raw_in(&mcap) >= 400);
+    replay.signal(libc::SIGKILL);
+    let _ = replay.wait(WAIT);
+    wait_until(WAIT, "the lost publisher noticed", || {
+        events_in(&mcap)
+            .iter()
+            .any(|e| e.kind == EventKind::PublisherLost)
+    });
+    let replay = Proc::spawn(
+        &replay_bin,
+        &[
+            second.to_str().unwrap(),
+            "--max",
+            "--namespace",
+            &ns,
+            "--wait-subscribers",
+            "1",
+        ],
+    );
+    let (status, stdout) = replay.wait(WAIT);
+    assert!(status.success(), "second mems-replay failed: {stdout}");
+    wait_until(WAIT, "the second replay's end noticed", || {
+        events_in(&mcap)
+            .iter()
+            .filter(|e| e.kind == EventKind::PublisherLost)
+            .count()
+            == 2
+    });
+    recorder.signal(libc::SIGINT);
+    let (status, stdout) = recorder.wait(WAIT);
+    assert!(status.success(), "mems-record failed: {stdout}");
+
+    let contents = read_all(&mcap).unwrap();
+    assert_eq!(contents.truncation, None);
+    let seqs: Vec<u64> = contents.raw.iter().map(|s| s.seq).collect();
+    let k = *seqs.iter().take_while(|&&s| s < 6000).last().unwrap();
+    let want: Vec<u64> = (0..=k).chain(6000..6400).collect();
+    assert_eq!(
+        seqs, want,
+        "the first replay's prefix, then the second replay"
+    );
+    let summary: Vec<(EventKind, Option<u64>, Option<u64>)> = contents
+        .events
+        .iter()
+        .map(|e| (e.kind, e.from_seq, e.to_seq))
+        .collect();
+    assert_eq!(
+        summary,
+        [
+            (EventKind::PublisherLost, Some(k), Some(k)),
+            (EventKind::PublisherBack, Some(k), Some(k)),
+            (EventKind::Gap, Some(k + 1), Some(5999)),
+            (EventKind::PublisherLost, Some(6399), Some(6399)),
+        ]
+    );
+    assert!(contents.events.iter().all(|e| e.service == service::RAW));
+    assert!(contents.events.windows(2).all(|w| w[0].t_ns <= w[1].t_ns));
+    assert!(
+        !service_exists(&ns, service::RAW),
+        "the killed replay's node was cleaned up"
+    );
+}

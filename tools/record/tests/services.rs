@@ -1,0 +1,239 @@
+//! `mems-record` records every service (raw, corrected, odometry) and derives the Foxglove pose;
+//! the official Python `mcap` reader decodes the file with its JSON schemas.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use common::*;
+use ipc_types::service;
+use ipc_types::{
+    CorrectedImuSample, OdometryState, RawImuSample, Stamps, corrected_flags, odometry_flags,
+};
+use recording::mcap::{PoseInFrame, read_all};
+use serde_json::Value;
+
+const WAIT: Duration = Duration::from_secs(10);
+/// The Python `mcap` version `.ci/run` installs (and these tests were run with).
+const PYTHON_MCAP: &str = "mcap==1.6.0";
+
+/// What the fake stages sent.
+struct Sent {
+    raw: Vec<RawImuSample>,
+    corrected: Vec<CorrectedImuSample>,
+    odometry: Vec<OdometryState>,
+}
+
+/// A corrected sample derived from a raw one (values are arbitrary but distinct per field).
+fn corrected_from(raw: &RawImuSample) -> CorrectedImuSample {
+    let g = 9.80665;
+    CorrectedImuSample {
+        stamps: Stamps {
+            calibrated_ns: raw.stamps.sample_ns + 2_000,
+            ..raw.stamps
+        },
+        seq: raw.seq,
+        accel_mps2: raw.accel_g.map(|a| a * g),
+        gyro_rps: raw.gyro_dps.map(f64::to_radians),
+        temp_c: raw.temp_c,
+        zs_mean_mps2: [0.01, -0.02, g],
+        zs_std_mps2: [0.003, 0.004, 0.005],
+        calib_id: 0xDEAD_BEEF_0123_4567,
+        flags: corrected_flags::DETECTOR_READY
+            | if raw.seq.is_multiple_of(2) {
+                corrected_flags::ZERO_STATE
+            } else {
+                0
+            },
+        raw_flags: raw.flags,
+        reserved: 0,
+    }
+}
+
+/// An odometry state for a corrected sample: a slow turn about z while moving along x.
+fn state_from(c: &CorrectedImuSample, flags: u16) -> OdometryState {
+    let i = c.seq as f64;
+    let half_yaw = 0.001 * i;
+    OdometryState {
+        stamps: Stamps {
+            odometry_ns: c.stamps.calibrated_ns + 3_000,
+            ..c.stamps
+        },
+        seq: c.seq,
+        position_m: [0.01 * i, -0.002 * i, 0.125],
+        position_sigma_m: [0.001 * i, 0.0015 * i, 0.0005],
+        velocity_mps: [0.5, 0.0, -0.0],
+        velocity_sigma_mps: [0.01, 0.01, 0.02],
+        gravity_sensor_mps2: [0.0, 0.0, 9.80665],
+        attitude_wxyz: [half_yaw.cos(), 0.0, 0.0, half_yaw.sin()],
+        distance_m: 0.01 * i,
+        flags: odometry_flags::ALIGNED | flags,
+        reserved16: 0,
+        rest_count: 3,
+    }
+}
+
+/// Runs `mems-record` while this process plays the three stages: `n` samples on each service,
+/// plus one revised odometry state; stops the recorder with SIGTERM once all has arrived.
+fn record_fake_stack(test: &str, n: usize) -> (PathBuf, Sent) {
+    let ns = namespace(test);
+    let mcap = tmp(&format!("{test}.mcap"));
+    let recorder = Proc::spawn(
+        &mems_record(),
+        &["--out", mcap.to_str().unwrap(), "--namespace", &ns],
+    );
+    let node = node();
+    let open = |base: &str| service::full_name(&ns, base);
+    let raw_svc = service::open::<RawImuSample>(&node, &open(service::RAW)).unwrap();
+    let cor_svc = service::open::<CorrectedImuSample>(&node, &open(service::CORRECTED)).unwrap();
+    let odo_svc = service::open::<OdometryState>(&node, &open(service::ODOMETRY)).unwrap();
+    let raw_pub = service::publisher(&raw_svc).unwrap();
+    let cor_pub = service::publisher(&cor_svc).unwrap();
+    let odo_pub = service::publisher(&odo_svc).unwrap();
+    wait_for_subscribers::<RawImuSample>(&node, &ns, service::RAW, 1);
+    wait_for_subscribers::<CorrectedImuSample>(&node, &ns, service::CORRECTED, 1);
+    wait_for_subscribers::<OdometryState>(&node, &ns, service::ODOMETRY, 1);
+
+    let raw = raw_samples(n, 0, 1000);
+    let corrected: Vec<_> = raw.iter().map(corrected_from).collect();
+    let mut odometry: Vec<_> = corrected.iter().map(|c| state_from(c, 0)).collect();
+    // A revision of an earlier state, sent after the others: not a gap, not a reset.
+    odometry.push(state_from(&corrected[n / 4], odometry_flags::REVISION));
+    for s in &raw {
+        raw_pub.send_copy(*s).unwrap();
+    }
+    for s in &corrected {
+        cor_pub.send_copy(*s).unwrap();
+    }
+    for s in &odometry {
+        odo_pub.send_copy(*s).unwrap();
+    }
+    wait_until(WAIT, "every message in the file", || {
+        read_all(&mcap)
+            .is_ok_and(|c| c.raw.len() == n && c.corrected.len() == n && c.odometry.len() == n + 1)
+    });
+    recorder.signal(libc::SIGTERM);
+    let (status, stdout) = recorder.wait(WAIT);
+    assert!(status.success(), "mems-record failed: {stdout}");
+    (
+        mcap,
+        Sent {
+            raw,
+            corrected,
+            odometry,
+        },
+    )
+}
+
+/// Every message of every service arrives exactly as sent, each odometry state (revision
+/// included) has its pose, and a revision is neither a gap nor a reset.
+#[test]
+fn every_service_is_recorded_with_the_pose() {
+    let (mcap, sent) = record_fake_stack("services", 500);
+    let contents = read_all(&mcap).unwrap();
+    assert_eq!(contents.truncation, None);
+    assert_eq!(contents.raw, sent.raw);
+    assert_eq!(contents.corrected, sent.corrected);
+    assert_eq!(contents.odometry, sent.odometry);
+    let poses: Vec<PoseInFrame> = sent.odometry.iter().map(PoseInFrame::from_state).collect();
+    assert_eq!(contents.poses, poses);
+    assert_eq!(contents.events, [], "the publishers stayed: no event");
+    assert_eq!(contents.other_messages, 0);
+}
+
+/// Runs the Python decoder on `mcap`; fails (does not skip) when the `mcap` package is missing.
+fn python_decode(mcap: &Path) -> Value {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/decode_mcap.py");
+    let output = Command::new("python3")
+        .arg(&script)
+        .arg(mcap)
+        .output()
+        .expect("cannot run python3: install Python 3 (CI: .ci/run)");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        output.status.code() != Some(3),
+        "the Python package `mcap` is not installed: run .ci/run (CI installs {PYTHON_MCAP}) \
+         or `python3 -m pip install {PYTHON_MCAP}`\n{stderr}"
+    );
+    assert!(output.status.success(), "decode_mcap.py failed:\n{stderr}");
+    serde_json::from_slice(&output.stdout).unwrap()
+}
+
+/// The official Python reader opens the recording (its summary written by the clean finish),
+/// decodes every message with its channel's JSON schema, and finds what was sent, with
+/// publish_time = the sample time and log_time = the receive time.
+#[test]
+fn python_mcap_reader_decodes_every_channel_with_its_schema() {
+    let n = 120;
+    let start_ns = ipc_types::clock::monotonic_ns();
+    let (mcap, sent) = record_fake_stack("python", n);
+    let end_ns = ipc_types::clock::monotonic_ns();
+    let report = python_decode(&mcap);
+
+    let poses: Vec<PoseInFrame> = sent.odometry.iter().map(PoseInFrame::from_state).collect();
+    let expect: [(&str, &str, Vec<Value>); 5] = [
+        (service::RAW, "mems.RawImuSample", json_values(&sent.raw)),
+        (
+            service::CORRECTED,
+            "mems.CorrectedImuSample",
+            json_values(&sent.corrected),
+        ),
+        (
+            service::ODOMETRY,
+            "mems.OdometryState",
+            json_values(&sent.odometry),
+        ),
+        (
+            "mems/odometry/pose",
+            "foxglove.PoseInFrame",
+            json_values(&poses),
+        ),
+        ("mems/recorder/events", "mems.RecorderEvent", vec![]),
+    ];
+    let channels = report["channels"].as_object().unwrap();
+    assert_eq!(channels.len(), expect.len(), "{channels:?}");
+    for (topic, schema, values) in &expect {
+        let c = &channels[*topic];
+        assert_eq!(c["schema_name"], *schema, "{topic}");
+        assert_eq!(c["schema_encoding"], "jsonschema", "{topic}");
+        assert_eq!(c["message_encoding"], "json", "{topic}");
+        // A channel without messages may be absent from the statistics.
+        assert_eq!(
+            report["summary_counts"][*topic].as_u64().unwrap_or(0),
+            values.len() as u64,
+            "{topic}: the summary's statistics"
+        );
+        let messages = report["messages"][*topic]
+            .as_array()
+            .cloned()
+            .unwrap_or_default();
+        let decoded: Vec<&Value> = messages.iter().map(|m| &m["value"]).collect();
+        // Floats compare exactly: both sides write shortest round-trip decimals.
+        assert_eq!(decoded, values.iter().collect::<Vec<_>>(), "{topic}");
+        for (m, v) in messages.iter().zip(values) {
+            let own_time = match *topic {
+                "mems/odometry/pose" => {
+                    v["timestamp"]["sec"].as_u64().unwrap() * 1_000_000_000
+                        + v["timestamp"]["nsec"].as_u64().unwrap()
+                }
+                _ => v["stamps"]["sample_ns"].as_u64().unwrap(),
+            };
+            assert_eq!(m["publish_time"].as_u64(), Some(own_time), "{topic}");
+            let log = m["log_time"].as_u64().unwrap();
+            assert!(
+                log > start_ns && log < end_ns,
+                "{topic}: log_time {log} is the receive time"
+            );
+        }
+    }
+}
+
+/// Messages as serde JSON values.
+fn json_values<T: serde::Serialize>(messages: &[T]) -> Vec<Value> {
+    messages
+        .iter()
+        .map(|m| serde_json::to_value(m).unwrap())
+        .collect()
+}

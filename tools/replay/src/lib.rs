@@ -1,0 +1,198 @@
+//! The replay loop behind `mems-replay`: publishes recorded raw samples on the raw service as
+//! the acquisition process would, for the pipeline, the latency benchmark and tests.
+//!
+//! Each sample is published with the recorded payload except `stamps.acquired_ns`, which is set
+//! to the publish time (ns `CLOCK_MONOTONIC`, as acquisition stamps it); `seq` and
+//! `stamps.sample_ns` stay as recorded, so that downstream results are reproducible bit for bit.
+//! Pacing follows the recorded sample times against the monotonic clock, scaled by a speed
+//! factor, or is as fast as the subscribers take the samples ([`Pace::Max`]): the lossless
+//! publisher of `ipc_types::service` retries until every subscriber has room, so nothing is lost
+//! either way.
+
+#![warn(missing_docs)]
+
+use std::time::{Duration, Instant};
+
+use iceoryx2::prelude::*;
+use ipc_types::RawImuSample;
+use ipc_types::clock::monotonic_ns;
+use ipc_types::service::{self, ServiceError};
+
+/// How fast to publish.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pace {
+    /// The recorded sample spacing divided by `speed` (1 = real time, 2 = twice as fast).
+    RealTime {
+        /// Speed factor, positive and finite.
+        speed: f64,
+    },
+    /// As fast as the slowest subscriber takes the samples.
+    Max,
+}
+
+/// How to replay.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReplayOptions {
+    /// Pacing.
+    pub pace: Pace,
+    /// Subscribers that must be connected before the first sample is sent (0: start at once).
+    pub wait_subscribers: usize,
+    /// How long to wait for them before giving up with [`ReplayError::NoSubscribers`].
+    pub wait_timeout: Duration,
+}
+
+/// What a replay did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReplaySummary {
+    /// Samples published.
+    pub sent: u64,
+    /// Time from the first publication to the last.
+    pub elapsed: Duration,
+    /// Whether SIGINT or SIGTERM stopped the replay before the last sample.
+    pub interrupted: bool,
+}
+
+impl ReplaySummary {
+    /// Publication rate, samples per second: (sent - 1) / elapsed; 0 with fewer than 2 samples.
+    pub fn rate_hz(&self) -> f64 {
+        let s = self.elapsed.as_secs_f64();
+        if self.sent < 2 || s <= 0.0 {
+            0.0
+        } else {
+            (self.sent - 1) as f64 / s
+        }
+    }
+}
+
+/// Why a replay failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    /// The speed factor is not a positive finite number.
+    #[error("the speed factor must be a positive finite number, got {0}")]
+    BadSpeed(f64),
+    /// The service or publisher could not be opened.
+    #[error(transparent)]
+    Service(#[from] ServiceError),
+    /// Too few subscribers connected within the timeout.
+    #[error(
+        "{service}: only {connected} of {wanted} subscribers connected after {:.1} s",
+        .waited.as_secs_f64()
+    )]
+    NoSubscribers {
+        /// The full service name.
+        service: String,
+        /// Subscribers asked for.
+        wanted: usize,
+        /// Subscribers connected at the timeout.
+        connected: usize,
+        /// How long the replay waited.
+        waited: Duration,
+    },
+    /// iceoryx2 refused to send a sample.
+    #[error("{service}: cannot send the sample with seq {seq}: {message}")]
+    Send {
+        /// The full service name.
+        service: String,
+        /// The sample's sequence number.
+        seq: u64,
+        /// iceoryx2's error.
+        message: String,
+    },
+}
+
+/// How long the publisher stays after the last sample. An iceoryx2 subscriber connects to a
+/// publisher's data on its next `receive` after the publisher appeared; if the publisher leaves
+/// before that, the subscriber never sees what it sent (measured: a 400-sample replay at
+/// `--max` finished in 1 ms and a recorder polling every 1 ms missed all of it). Subscribers
+/// that had connected keep receiving what was sent after the publisher leaves.
+pub const LINGER: Duration = Duration::from_millis(200);
+
+/// Samples between signal checks when no pacing sleep checks for us.
+const SIGNAL_CHECK_EVERY: usize = 256;
+
+/// Publishes `samples` (in order, `stamps.sample_ns` increasing) on the raw service under
+/// `namespace`, from `node`, paced as `options` say. SIGINT or SIGTERM (seen through
+/// `Node::wait`) stops the replay early with [`ReplaySummary::interrupted`] set. Returns
+/// [`LINGER`] after the last sample, so that every subscriber has connected to it.
+pub fn replay(
+    node: &Node<ipc::Service>,
+    namespace: &str,
+    samples: &[RawImuSample],
+    options: &ReplayOptions,
+) -> Result<ReplaySummary, ReplayError> {
+    if let Pace::RealTime { speed } = options.pace
+        && !(speed.is_finite() && speed > 0.0)
+    {
+        return Err(ReplayError::BadSpeed(speed));
+    }
+    let name = service::full_name(namespace, service::RAW);
+    let raw = service::open::<RawImuSample>(node, &name)?;
+    let publisher = service::publisher(&raw)?;
+    let interrupted = |summary: ReplaySummary| ReplaySummary {
+        interrupted: true,
+        ..summary
+    };
+    let mut summary = ReplaySummary {
+        sent: 0,
+        elapsed: Duration::ZERO,
+        interrupted: false,
+    };
+
+    let wait_start = Instant::now();
+    loop {
+        let connected = raw.dynamic_config().number_of_subscribers();
+        if connected >= options.wait_subscribers {
+            break;
+        }
+        if wait_start.elapsed() >= options.wait_timeout {
+            return Err(ReplayError::NoSubscribers {
+                service: name,
+                wanted: options.wait_subscribers,
+                connected,
+                waited: wait_start.elapsed(),
+            });
+        }
+        if node.wait(Duration::from_millis(1)).is_err() {
+            return Ok(interrupted(summary));
+        }
+    }
+
+    let Some(first) = samples.first() else {
+        return Ok(summary);
+    };
+    let t0_ns = first.stamps.sample_ns;
+    let start = Instant::now();
+    for (i, recorded) in samples.iter().enumerate() {
+        let mut checked_signal = false;
+        if let Pace::RealTime { speed } = options.pace {
+            let offset_ns = recorded.stamps.sample_ns.saturating_sub(t0_ns) as f64 / speed;
+            let due = start + Duration::from_nanos(offset_ns.round() as u64);
+            let now = Instant::now();
+            if due > now {
+                if node.wait(due - now).is_err() {
+                    return Ok(interrupted(summary));
+                }
+                checked_signal = true;
+            }
+        }
+        if !checked_signal
+            && i % SIGNAL_CHECK_EVERY == SIGNAL_CHECK_EVERY - 1
+            && node.wait(Duration::ZERO).is_err()
+        {
+            return Ok(interrupted(summary));
+        }
+        let mut sample = *recorded;
+        sample.stamps.acquired_ns = monotonic_ns();
+        publisher.send_copy(sample).map_err(|e| ReplayError::Send {
+            service: name.clone(),
+            seq: sample.seq,
+            message: format!("{e:?}"),
+        })?;
+        summary.sent += 1;
+        summary.elapsed = start.elapsed();
+    }
+    if node.wait(LINGER).is_err() {
+        return Ok(interrupted(summary));
+    }
+    Ok(summary)
+}

@@ -1,0 +1,84 @@
+//! `mems-replay FILE [--speed X | --max] [--namespace NS] [--wait-subscribers N]
+//! [--wait-timeout S]`: publishes a recording's raw samples (MCAP or CSV) on the raw service.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail};
+use clap::Parser;
+use iceoryx2::prelude::*;
+use ipc_types::service;
+use mems_replay::{Pace, ReplayOptions, replay};
+
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    /// The recording: MCAP, the canonical CSV, or a thesis time-series CSV.
+    file: PathBuf,
+    /// Speed factor over the recorded sample times (1 = real time).
+    #[arg(long, default_value_t = 1.0, conflicts_with = "max")]
+    speed: f64,
+    /// As fast as the subscribers take the samples (lossless back-pressure).
+    #[arg(long)]
+    max: bool,
+    /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
+    #[arg(long)]
+    namespace: Option<String>,
+    /// Wait until this many subscribers are connected before the first sample.
+    #[arg(long, default_value_t = 0)]
+    wait_subscribers: usize,
+    /// Give up waiting for subscribers after this many seconds.
+    #[arg(long, default_value_t = 10.0)]
+    wait_timeout: f64,
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    // iceoryx2 warns that it runs without a config file; IOX2_LOG_LEVEL still overrides.
+    set_log_level_from_env_or(LogLevel::Error);
+    if !(cli.wait_timeout.is_finite() && cli.wait_timeout >= 0.0) {
+        bail!(
+            "--wait-timeout must be a non-negative number of seconds, got {}",
+            cli.wait_timeout
+        );
+    }
+    let recording = recording::load_raw(&cli.file)?;
+    if let Some(truncation) = &recording.truncation {
+        eprintln!(
+            "mems-replay: warning: {}: {truncation}; replaying what was read",
+            cli.file.display()
+        );
+    }
+    if recording.samples.is_empty() {
+        bail!("{}: holds no raw samples", cli.file.display());
+    }
+    let options = ReplayOptions {
+        pace: if cli.max {
+            Pace::Max
+        } else {
+            Pace::RealTime { speed: cli.speed }
+        },
+        wait_subscribers: cli.wait_subscribers,
+        wait_timeout: Duration::from_secs_f64(cli.wait_timeout),
+    };
+    let namespace = service::namespace(cli.namespace.as_deref());
+    let node_name = NodeName::new("mems-replay").context("node name")?;
+    let node = NodeBuilder::new()
+        .name(&node_name)
+        .create::<ipc::Service>()
+        .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+    let summary = replay(&node, &namespace, &recording.samples, &options)?;
+    println!(
+        "mems-replay: sent {} of {} samples in {:.3} s ({:.0} samples/s){}",
+        summary.sent,
+        recording.samples.len(),
+        summary.elapsed.as_secs_f64(),
+        summary.rate_hz(),
+        if summary.interrupted {
+            " (stopped by signal)"
+        } else {
+            ""
+        }
+    );
+    Ok(())
+}

@@ -1,0 +1,211 @@
+//! The replay loop against a real subscriber in another thread (its own iceoryx2 node), and the
+//! `mems-replay` command line on bad input.
+
+use std::process::Command;
+use std::thread;
+use std::time::{Duration, Instant};
+
+use iceoryx2::prelude::*;
+use ipc_types::clock::monotonic_ns;
+use ipc_types::{RawImuSample, Stamps, raw_flags, service};
+use mems_replay::{LINGER, Pace, ReplayError, ReplayOptions, replay};
+
+fn namespace(test: &str) -> String {
+    format!("t{}-{test}", std::process::id())
+}
+
+/// `n` samples at `rate_hz` whose every field differs from the defaults.
+fn samples(n: u64, rate_hz: u64) -> Vec<RawImuSample> {
+    (0..n)
+        .map(|i| RawImuSample {
+            stamps: Stamps {
+                sample_ns: 1_000_000_000 + i * (1_000_000_000 / rate_hz),
+                acquired_ns: 17,
+                calibrated_ns: 0,
+                odometry_ns: 0,
+            },
+            seq: 100 + i,
+            accel_g: [0.1 * i as f64, -1.0 / 3.0, 1.0 + 1e-9 * i as f64],
+            gyro_dps: [-250.0, 0.5, f64::MIN_POSITIVE],
+            temp_c: 21.0 + i as f64 / 333.87,
+            accel_counts: [i as i16, -(i as i16), 16384],
+            gyro_counts: [-32768, 65, 0],
+            temp_counts: i as i16,
+            flags: raw_flags::GYRO_VALID | raw_flags::TEMP_VALID,
+            lost_before: (i % 3) as u32,
+            reserved: 0,
+        })
+        .collect()
+}
+
+/// Subscribes in its own thread and node; returns each sample with its receive time once `n`
+/// arrived (or what arrived within 10 s). `stall_every` makes it pause 2 ms every that many
+/// samples, to be slower than the publisher.
+fn subscribe(
+    ns: &str,
+    n: usize,
+    stall_every: Option<usize>,
+) -> thread::JoinHandle<Vec<(RawImuSample, u64)>> {
+    let name = service::full_name(ns, service::RAW);
+    thread::spawn(move || {
+        let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+        let svc = service::open::<RawImuSample>(&node, &name).unwrap();
+        let sub = service::subscriber(&svc).unwrap();
+        let start = Instant::now();
+        let mut got = Vec::new();
+        while got.len() < n && start.elapsed() < Duration::from_secs(10) {
+            while let Some(s) = sub.receive().unwrap() {
+                got.push((*s.payload(), monotonic_ns()));
+                if stall_every.is_some_and(|k| got.len() % k == 0) {
+                    thread::sleep(Duration::from_millis(2));
+                }
+            }
+            thread::sleep(Duration::from_micros(100));
+        }
+        got
+    })
+}
+
+fn run(ns: &str, samples: &[RawImuSample], pace: Pace) -> mems_replay::ReplaySummary {
+    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+    let options = ReplayOptions {
+        pace,
+        wait_subscribers: 1,
+        wait_timeout: Duration::from_secs(5),
+    };
+    replay(&node, ns, samples, &options).unwrap()
+}
+
+/// Payloads arrive as recorded except `acquired_ns`, which is the publish time.
+fn assert_same_but_acquired(got: &[(RawImuSample, u64)], sent: &[RawImuSample]) {
+    assert_eq!(got.len(), sent.len());
+    for ((g, received_ns), s) in got.iter().zip(sent) {
+        let mut expected = *s;
+        expected.stamps.acquired_ns = g.stamps.acquired_ns;
+        assert_eq!(*g, expected);
+        assert_eq!(g.temp_c.to_bits(), s.temp_c.to_bits());
+        assert!(
+            g.stamps.acquired_ns <= *received_ns,
+            "stamped before it was received"
+        );
+    }
+}
+
+/// At speed 2, samples 1 ms apart are published 0.5 ms apart: never early, and on average
+/// within a millisecond of their due time.
+#[test]
+fn real_time_pace_follows_the_sample_times_scaled_by_speed() {
+    let ns = namespace("pace");
+    let sent = samples(400, 1000);
+    let sub = subscribe(&ns, sent.len(), None);
+    let started = Instant::now();
+    let summary = run(&ns, &sent, Pace::RealTime { speed: 2.0 });
+    assert!(
+        started.elapsed() >= LINGER,
+        "the publisher lingers after the last sample"
+    );
+    let got = sub.join().unwrap();
+    assert_same_but_acquired(&got, &sent);
+    assert_eq!(summary.sent, 400);
+    assert!(!summary.interrupted);
+
+    let a0 = got[0].0.stamps.acquired_ns;
+    let mut lateness_ns = Vec::new();
+    for (g, _) in &got {
+        let due = (g.stamps.sample_ns - sent[0].stamps.sample_ns) / 2;
+        let at = g.stamps.acquired_ns - a0;
+        assert!(
+            at + 100_000 >= due,
+            "seq {} published {} us early",
+            g.seq,
+            (due - at) / 1000
+        );
+        lateness_ns.push(at.saturating_sub(due));
+    }
+    let mean_late_us = lateness_ns.iter().sum::<u64>() as f64 / lateness_ns.len() as f64 / 1e3;
+    assert!(
+        mean_late_us < 1000.0,
+        "published {mean_late_us:.0} us late on average"
+    );
+    // 399 intervals of 0.5 ms.
+    let elapsed = summary.elapsed.as_secs_f64();
+    assert!((0.1995..0.25).contains(&elapsed), "took {elapsed} s");
+    assert!((summary.rate_hz() - 399.0 / elapsed).abs() < 1e-6);
+}
+
+/// As fast as possible, with a subscriber slower than the publisher and more samples than its
+/// buffer: nothing is lost, the order is kept, the publisher was held back.
+#[test]
+fn max_pace_is_lossless_with_a_slow_subscriber() {
+    let ns = namespace("max");
+    let n = service::SUBSCRIBER_BUFFER + 2000;
+    let sent = samples(n as u64, 4000);
+    let sub = subscribe(&ns, n, Some(500));
+    let summary = run(&ns, &sent, Pace::Max);
+    let got = sub.join().unwrap();
+    assert_same_but_acquired(&got, &sent);
+    assert_eq!(summary.sent, n as u64);
+    // The last sample fits in the subscriber's queue only once it has taken n - buffer samples,
+    // which costs it a 2 ms stall per 500: the publisher waited at least that long.
+    let stalls = ((n - service::SUBSCRIBER_BUFFER) / 500) as f64 * 0.002;
+    assert!(
+        summary.elapsed.as_secs_f64() >= stalls,
+        "{:?}",
+        summary.elapsed
+    );
+}
+
+#[test]
+fn too_few_subscribers_is_an_error_naming_the_service() {
+    let ns = namespace("nosub");
+    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+    let options = ReplayOptions {
+        pace: Pace::Max,
+        wait_subscribers: 2,
+        wait_timeout: Duration::from_millis(50),
+    };
+    let err = replay(&node, &ns, &samples(3, 100), &options).unwrap_err();
+    assert!(matches!(
+        err,
+        ReplayError::NoSubscribers {
+            connected: 0,
+            wanted: 2,
+            ..
+        }
+    ));
+    let text = err.to_string();
+    assert!(text.contains(&format!("{ns}/mems/imu/raw")), "{text}");
+    assert!(text.contains("only 0 of 2 subscribers"), "{text}");
+}
+
+#[test]
+fn a_speed_that_is_not_positive_is_refused() {
+    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+    for speed in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let options = ReplayOptions {
+            pace: Pace::RealTime { speed },
+            wait_subscribers: 0,
+            wait_timeout: Duration::ZERO,
+        };
+        let err = replay(&node, "unused", &samples(2, 100), &options).unwrap_err();
+        assert!(matches!(err, ReplayError::BadSpeed(_)), "{speed}: {err}");
+    }
+}
+
+/// The command line reports a malformed recording with its file, line and field.
+#[test]
+fn a_bad_csv_line_is_reported_with_file_line_and_field() {
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"));
+    let path = dir.join(format!("replay-bad-{}.csv", std::process::id()));
+    std::fs::write(&path, "t_s,ax_g,ay_g,az_g\n0.0,0,0,1\n0.001,0,x,1\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_mems-replay"))
+        .arg(&path)
+        .args(["--namespace", &namespace("badcsv")])
+        .output()
+        .unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let expected = format!("{}:3: field \"ay_g\"", path.display());
+    assert!(stderr.contains(&expected), "{stderr}");
+}
