@@ -30,33 +30,37 @@
 //!   mean of `|m| - g` along `u`; rests at other attitudes correct other components and leave
 //!   the rest of `d` as it was.
 //!
-//! Both are running means over rest time (the start-up learning interval first) with a prior
-//! of [`RefineConfig::prior_s`] seconds of rest for the file's values and a memory of
-//! [`RefineConfig::memory_s`] (see [`crate::zero_state::rest_gain`]).
+//! Both are running means over rest time (the start-up learning interval first) with a memory
+//! of [`RefineConfig::memory_s`] (see [`crate::zero_state::rest_gain`]); the accelerometer's
+//! starts with a prior of [`RefineConfig::accel_prior_s`] seconds of rest for the file's value.
+//! The gyroscope's has none: a turn-on bias of 0.3-1 deg/s that no file can know is measured to
+//! 0.01 deg/s by one second of rest.
 
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, raw_flags};
 use nalgebra::Vector3;
 
 use crate::calibfile::CalibrationFile;
 use crate::model::AccelModel;
-use crate::zero_state::{BATCH_LEN, DetectorConfig, Verdict, ZeroStateDetector, batch_duration_s};
+use crate::zero_state::{
+    BATCH_LEN, DetectorConfig, Verdict, ZeroStateDetector, batch_duration_s, rest_gain,
+};
 
 /// Settings of the bias refinement.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RefineConfig {
-    /// Weight of the calibration file's values, as seconds of rest (1 s of rest at the
-    /// MPU-9250's noise density, 300 ug/sqrt(Hz), measures a bias to about 3 mm/s^2, the
+    /// Weight of the calibration file's accelerometer bias, as seconds of rest (1 s of rest at
+    /// the MPU-9250's noise density, 300 ug/sqrt(Hz), measures a bias to about 3 mm/s^2, the
     /// order of the turn-on repeatability a calibration cannot know).
-    pub prior_s: f64,
+    pub accel_prior_s: f64,
     /// Memory of the running means, seconds of rest.
     pub memory_s: f64,
 }
 
 impl Default for RefineConfig {
-    /// A prior of 1 s and a memory of 60 s.
+    /// An accelerometer prior of 1 s and a memory of 60 s.
     fn default() -> Self {
         Self {
-            prior_s: 1.0,
+            accel_prior_s: 1.0,
             memory_s: 60.0,
         }
     }
@@ -194,8 +198,10 @@ struct Refinement {
     accel_mps2: Vector3<f64>,
     /// Gyroscope bias subtracted from the output, rad/s.
     gyro_rps: Vector3<f64>,
-    /// Rest time refined from, s (the prior included).
-    seen_s: f64,
+    /// Rest time the accelerometer offset was refined from, s (the prior included).
+    accel_seen_s: f64,
+    /// Rest time the gyroscope bias was refined from, s.
+    gyro_seen_s: f64,
     refined: bool,
 }
 
@@ -205,7 +211,8 @@ impl Refinement {
             config,
             accel_mps2: Vector3::zeros(),
             gyro_rps: Vector3::zeros(),
-            seen_s: config.prior_s,
+            accel_seen_s: config.accel_prior_s,
+            gyro_seen_s: 0.0,
             refined: false,
         }
     }
@@ -213,14 +220,17 @@ impl Refinement {
     /// Refines with a rest mean `accel` (m/s^2, file-corrected) and `gyro` (rad/s) over
     /// `duration_s`; `gyro` is `None` when the samples carry no gyroscope.
     fn update(&mut self, accel: [f64; 3], gyro: Option<[f64; 3]>, duration_s: f64, gravity: f64) {
-        let gain = crate::zero_state::rest_gain(duration_s, self.seen_s, self.config.memory_s);
-        self.seen_s += duration_s;
+        let memory = self.config.memory_s;
+        let gain = rest_gain(duration_s, self.accel_seen_s, memory);
+        self.accel_seen_s += duration_s;
         let c = Vector3::from(accel) - self.accel_mps2;
         let magnitude = c.norm();
         if magnitude > 0.0 {
             self.accel_mps2 += gain * (magnitude - gravity) * (c / magnitude);
         }
         if let Some(g) = gyro {
+            let gain = rest_gain(duration_s, self.gyro_seen_s, memory);
+            self.gyro_seen_s += duration_s;
             self.gyro_rps += gain * (Vector3::from(g) - self.gyro_rps);
         }
         self.refined = true;

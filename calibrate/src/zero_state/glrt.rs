@@ -63,7 +63,7 @@ impl Default for GlrtConfig {
 
 /// One batch's six channels: sample count, means and within-batch sums of squares.
 #[derive(Debug, Clone, Copy, Default)]
-struct BatchSums {
+pub(crate) struct BatchSums {
     n: f64,
     mean: [f64; 6],
     ss: [f64; 6],
@@ -103,8 +103,9 @@ pub(crate) struct GlrtRule {
 }
 
 impl GlrtRule {
-    /// The test from the start-up reference.
-    pub fn new(r: &StaticReference, config: &GlrtConfig) -> Self {
+    /// The test from the start-up reference; `ring` (capacity at least `window_batches`) becomes
+    /// the window, so that learning allocates nothing.
+    pub fn new(r: &StaticReference, config: &GlrtConfig, mut ring: Vec<BatchSums>) -> Self {
         let k = config.window_batches;
         let n = (k * BATCH_LEN) as f64;
         let quantile =
@@ -129,7 +130,11 @@ impl GlrtRule {
             mean_quantile: quantile(6.0, a / 2.0),
             scatter_quantile: quantile(6.0 * (n - 1.0), a / 2.0),
             combined_quantile: quantile(6.0 * n, a),
-            ring: vec![BatchSums::default(); k],
+            ring: {
+                ring.clear();
+                ring.resize(k, BatchSums::default());
+                ring
+            },
             head: 0,
             filled: 0,
         }
@@ -183,6 +188,11 @@ impl GlrtRule {
             self.reference[i] += gain * (accel.mean[i] - self.reference[i]);
             self.reference[i + 3] += gain * (gyro.mean[i] - self.reference[i + 3]);
         }
+    }
+
+    /// Gives the window's storage back (for the next session).
+    pub fn into_ring(self) -> Vec<BatchSums> {
+        self.ring
     }
 
     /// Empties the window (after a gap).

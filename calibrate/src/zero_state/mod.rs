@@ -119,6 +119,8 @@ pub struct ZeroStateDetector {
     learner: StaticLearner,
     rule: Option<Rule>,
     rest_s: f64,
+    /// Storage for the GLRT's window, allocated once and handed to the rule when it is learned.
+    ring: Vec<glrt::BatchSums>,
 }
 
 /// Gain of a running mean with a memory of `memory_s` seconds of rest, for a batch of
@@ -166,6 +168,7 @@ impl ZeroStateDetector {
             learner: StaticLearner::new(config.learn),
             rule: None,
             rest_s: 0.0,
+            ring: Vec::with_capacity(config.glrt.window_batches),
         }
     }
 
@@ -214,9 +217,11 @@ impl ZeroStateDetector {
                 self.rest_s = reference.duration_s;
                 self.rule = Some(match self.config.kind {
                     DetectorKind::Yu => Rule::Yu(yu::YuRule::new(&reference, &self.config.yu)),
-                    DetectorKind::Glrt => {
-                        Rule::Glrt(glrt::GlrtRule::new(&reference, &self.config.glrt))
-                    }
+                    DetectorKind::Glrt => Rule::Glrt(glrt::GlrtRule::new(
+                        &reference,
+                        &self.config.glrt,
+                        std::mem::take(&mut self.ring),
+                    )),
                 });
                 verdict.ready = true;
                 verdict.learned = Some(reference);
@@ -255,9 +260,16 @@ impl ZeroStateDetector {
         }
     }
 
-    /// Forgets everything learned (a new sensor session): back to start-up learning.
+    /// Forgets everything learned (a new sensor session): back to start-up learning. Allocates
+    /// nothing (the window's storage is kept).
     pub fn reset(&mut self) {
-        *self = Self::new(self.config);
+        self.accel.reset();
+        self.gyro.reset();
+        self.learner = StaticLearner::new(self.config.learn);
+        self.rest_s = 0.0;
+        if let Some(Rule::Glrt(rule)) = self.rule.take() {
+            self.ring = rule.into_ring();
+        }
     }
 }
 

@@ -1,0 +1,140 @@
+//! The calibration stage allocates nothing per sample: a counting global allocator sees zero
+//! allocations on this thread while both detectors' stages process a simulated drive (learning,
+//! rest, motion, refinement, a gap, a restarted stream and the end of the stream included).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
+use calibrate::fit::{CovarianceMode, Weighting};
+use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
+use calibrate::stage::{CalibrationStage, RefineConfig};
+use calibrate::zero_state::{DetectorConfig, DetectorKind};
+use ipc_types::RawImuSample;
+use ipc_types::units::{AccelRange, GyroRange};
+use mems_sim::model::{G_MPS2, SensorModel};
+use mems_sim::scenario::{Drive, DriveParams, ns_from_s};
+use mems_sim::vibration::VibrationModel;
+use mems_sim::{SimSensor, adc};
+
+/// Counts allocations made by the current thread, delegating to the system allocator.
+struct Counting;
+
+thread_local! {
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+// SAFETY: every call is forwarded unchanged to `System`; the thread-local counter is a
+// const-initialised `Cell`, which needs no allocation to access.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.with(|c| c.set(c.get() + 1));
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.with(|c| c.set(c.get() + 1));
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+fn allocations() -> u64 {
+    ALLOCATIONS.with(Cell::get)
+}
+
+/// 40 s of a drive with turns (10 s initial rest), quantized like the device.
+fn drive_samples() -> Vec<RawImuSample> {
+    let mut params = DriveParams::new(40.0);
+    params.turns = true;
+    params.in_place_turns = true;
+    let drive = Drive::new(&params, 3).unwrap();
+    let model = SensorModel::mpu9250_calibrated();
+    let mut sim = SimSensor::new(drive, &model, &VibrationModel::moderate(1.0), 3).unwrap();
+    (0..40_000u64)
+        .map(|k| {
+            let t = k as f64 / 1000.0;
+            let analog = sim.sample_with_truth(t, 1000.0).0;
+            adc::quantize_sample(&analog, AccelRange::G2, GyroRange::Dps250, ns_from_s(t), k)
+        })
+        .collect()
+}
+
+#[test]
+fn the_stage_allocates_nothing_per_sample() {
+    // The counter works: a Vec allocates.
+    let before = allocations();
+    let v: Vec<u64> = Vec::with_capacity(4);
+    assert_eq!(allocations() - before, 1);
+    drop(v);
+
+    let mut samples = drive_samples();
+    // A gap: 100 samples lost in the middle of the drive.
+    samples.drain(20_000..20_100);
+    let calib = CalibrationFile::new(
+        &AccelModel::identity(ModelKind::Full),
+        &ParamCovariance::zeros(),
+        FitMethod::Labelled,
+        Weighting::Unweighted,
+        CovarianceMode::ResidualScaled,
+        G_MPS2,
+        SourceSection {
+            file: "identity".into(),
+            kind: "none".into(),
+            poses: 0,
+            repaired_samples: 0,
+        },
+        ResidualSection {
+            rms_g: [0.0; 3],
+            max_abs_g: 0.0,
+            dof: [0; 3],
+            chi2: [0.0; 3],
+            per_pose_g: Vec::new(),
+        },
+    );
+    for kind in [DetectorKind::Yu, DetectorKind::Glrt] {
+        let mut stage = CalibrationStage::new(
+            &calib,
+            DetectorConfig::new(kind, G_MPS2),
+            RefineConfig::default(),
+        )
+        .unwrap();
+        let (mut released, mut rest, mut checksum) = (0u64, 0u64, 0.0);
+        let before = allocations();
+        // The drive, then its first 6 s again: a restarted publisher (seq from 0).
+        for s in samples.iter().chain(&samples[..6000]) {
+            stage
+                .push(s, &mut |c| {
+                    released += 1;
+                    rest += u64::from(c.flags & ipc_types::corrected_flags::ZERO_STATE != 0);
+                    checksum += c.accel_mps2[2];
+                })
+                .unwrap();
+        }
+        stage.finish(&mut |_| released += 1);
+        let allocs = allocations() - before;
+        assert_eq!(
+            allocs,
+            0,
+            "{kind:?}: {allocs} allocations for {} samples",
+            samples.len()
+        );
+        assert_eq!(released, samples.len() as u64 + 6000);
+        // The run went through learning, rest and refinement, the gap and the restart (and
+        // learned again).
+        assert!(stage.detector().is_ready() && stage.refinement().2);
+        assert_eq!(stage.stats().restarts, 1);
+        assert!(rest > 10_000, "{kind:?}: {rest} rest samples");
+        assert_eq!(stage.stats().gaps, 1);
+        assert!(checksum.is_finite());
+    }
+}

@@ -1,0 +1,402 @@
+//! The calibration stage against an independent computation of the correction, its ordering
+//! and latency, bad input, stream restarts and gaps, and the bias refinement at rest.
+
+use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
+use calibrate::fit::{CovarianceMode, Weighting};
+use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
+use calibrate::stage::{CalibrationStage, RefineConfig, StageError, calib_id};
+use calibrate::zero_state::{BATCH_LEN, DetectorConfig, DetectorKind};
+use ipc_types::{CorrectedImuSample, RawImuSample, Stamps, corrected_flags, raw_flags};
+use nalgebra::{Matrix3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+
+const GRAVITY: f64 = 9.797;
+
+/// A full model with a non-trivial S and b, temperature terms and a gyroscope bias.
+fn calibration() -> CalibrationFile {
+    let s = Matrix3::new(
+        1.01, 0.008, 0.009, -0.006, 0.995, 0.011, -0.010, -0.004, 1.022,
+    );
+    let m = AccelModel::new(ModelKind::Full, s, Vector3::new(0.04, -0.035, 0.055)).unwrap();
+    let mut f = CalibrationFile::new(
+        &m,
+        &ParamCovariance::zeros(),
+        FitMethod::Labelled,
+        Weighting::Unweighted,
+        CovarianceMode::ResidualScaled,
+        GRAVITY,
+        SourceSection {
+            file: "test".into(),
+            kind: "six_position_means".into(),
+            poses: 6,
+            repaired_samples: 0,
+        },
+        ResidualSection {
+            rms_g: [0.0; 3],
+            max_abs_g: 0.0,
+            dof: [2; 3],
+            chi2: [0.0; 3],
+            per_pose_g: vec![],
+        },
+    );
+    f.temperature.reference_c = Some(25.0);
+    f.temperature.bias_g_per_c = Some([8e-4, -6e-4, 1.2e-3]);
+    f.gyro.bias_dps = Some([2.0, -1.5, 3.0]);
+    f
+}
+
+fn stage(file: &CalibrationFile, kind: DetectorKind) -> CalibrationStage {
+    CalibrationStage::new(
+        file,
+        DetectorConfig::new(kind, file.gravity_mps2),
+        RefineConfig::default(),
+    )
+    .unwrap()
+}
+
+fn raw(seq: u64, t_ns: u64, accel_g: [f64; 3], gyro_dps: [f64; 3], temp_c: f64) -> RawImuSample {
+    RawImuSample {
+        stamps: Stamps {
+            sample_ns: t_ns,
+            acquired_ns: t_ns + 500,
+            ..Stamps::default()
+        },
+        seq,
+        accel_g,
+        gyro_dps,
+        temp_c,
+        flags: raw_flags::GYRO_VALID | raw_flags::TEMP_VALID,
+        ..RawImuSample::default()
+    }
+}
+
+/// Pushes `samples`, collecting outputs and checking each push succeeds.
+fn run(stage: &mut CalibrationStage, samples: &[RawImuSample]) -> Vec<CorrectedImuSample> {
+    let mut out = Vec::new();
+    for s in samples {
+        stage.push(s, &mut |c| out.push(*c)).unwrap();
+    }
+    out
+}
+
+#[test]
+fn correction_matches_an_independent_computation() {
+    let file = calibration();
+    let mut st = stage(&file, DetectorKind::Glrt);
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let samples: Vec<RawImuSample> = (0..2 * BATCH_LEN as u64)
+        .map(|k| {
+            let a = std::array::from_fn(|_| rng.random_range(-1.5..1.5));
+            let w = std::array::from_fn(|_| rng.random_range(-200.0..200.0));
+            raw(k, 1_000_000 * (k + 1), a, w, rng.random_range(20.0..40.0))
+        })
+        .collect();
+    let out = run(&mut st, &samples);
+    assert_eq!(out.len(), samples.len());
+    // Before any rest the output is the file's correction alone: solve S a = a' - b - c dT
+    // with an LU decomposition (the stage uses the cached inverse).
+    let s = Matrix3::from_fn(|r, c| file.scale[r][c]);
+    let b = Vector3::from(file.bias_g);
+    let c = Vector3::from(file.temperature.bias_g_per_c.unwrap());
+    for (o, r) in out.iter().zip(&samples) {
+        assert_eq!(o.flags & corrected_flags::BIAS_REFINED, 0);
+        let rhs = Vector3::from(r.accel_g) - b - c * (r.temp_c - 25.0);
+        let a = s.lu().solve(&rhs).unwrap() * GRAVITY;
+        for i in 0..3 {
+            assert!((o.accel_mps2[i] - a[i]).abs() < 1e-12, "{o:?}");
+            let w = (r.gyro_dps[i] - file.gyro.bias_dps.unwrap()[i]) * std::f64::consts::PI / 180.0;
+            assert!((o.gyro_rps[i] - w).abs() < 1e-15);
+        }
+        assert_eq!(o.seq, r.seq);
+        assert_eq!(
+            o.stamps, r.stamps,
+            "stamps copied, calibrated_ns left to the process"
+        );
+        assert_eq!(o.temp_c, r.temp_c);
+        assert_eq!(o.raw_flags, r.flags);
+        assert_eq!(o.calib_id, calib_id(&file));
+        assert_eq!(o.flags & corrected_flags::DETECTOR_READY, 0);
+    }
+}
+
+#[test]
+fn samples_leave_in_order_one_to_one_with_their_batch() {
+    let file = calibration();
+    let mut st = stage(&file, DetectorKind::Yu);
+    let mut released = Vec::new();
+    for k in 0..(3 * BATCH_LEN + 7) as u64 {
+        let mut now = Vec::new();
+        st.push(
+            &raw(
+                k,
+                1_000_000 * (k + 1),
+                [0.0, 0.0, 1.05],
+                [2.0, -1.5, 3.0],
+                25.0,
+            ),
+            &mut |c| now.push(c.seq),
+        )
+        .unwrap();
+        // Nothing until a batch completes, then the whole batch (latency BATCH_LEN - 1).
+        if (k + 1) % BATCH_LEN as u64 == 0 {
+            assert_eq!(now, ((k + 1 - BATCH_LEN as u64)..=k).collect::<Vec<_>>());
+        } else {
+            assert!(now.is_empty());
+        }
+        released.extend(now);
+    }
+    assert_eq!(st.pending(), 7);
+    st.finish(&mut |c| released.push(c.seq));
+    assert_eq!(
+        released,
+        (0..(3 * BATCH_LEN + 7) as u64).collect::<Vec<_>>()
+    );
+    assert_eq!(st.stats().accepted, st.stats().released);
+}
+
+#[test]
+fn bad_input_is_refused_with_the_sample_named_and_the_state_unchanged() {
+    let file = calibration();
+    let mut st = stage(&file, DetectorKind::Glrt);
+    let ok = |k: u64| raw(k, 1_000_000 * (k + 1), [0.0, 0.0, 1.0], [0.0; 3], 25.0);
+    run(&mut st, &[ok(0), ok(1)]);
+    let mut nan = ok(2);
+    nan.accel_g[1] = f64::NAN;
+    let e = st
+        .push(&nan, &mut |_| panic!("nothing released"))
+        .unwrap_err();
+    assert!(
+        matches!(
+            e,
+            StageError::NotFinite {
+                seq: 2,
+                field: "accel_g[1]",
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("seq 2") && e.to_string().contains("accel_g[1]"));
+    let mut back = ok(2);
+    back.stamps.sample_ns = 2_000_000; // equal to sample 1's time
+    let e = st.push(&back, &mut |_| {}).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            StageError::TimeNotIncreasing {
+                seq: 2,
+                prev_seq: 1,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let mut no_gyro = ok(2);
+    no_gyro.flags = raw_flags::TEMP_VALID;
+    let e = st.push(&no_gyro, &mut |_| {}).unwrap_err();
+    assert!(
+        e.to_string().contains("glrt") && e.to_string().contains("seq 2"),
+        "{e}"
+    );
+    let mut no_temp = ok(2);
+    no_temp.flags = raw_flags::GYRO_VALID;
+    assert!(matches!(
+        st.push(&no_temp, &mut |_| {}),
+        Err(StageError::NoTemperature { seq: 2 })
+    ));
+    let mut bad_gyro = ok(2);
+    bad_gyro.gyro_dps[2] = f64::INFINITY;
+    assert!(
+        st.push(&bad_gyro, &mut |_| {})
+            .unwrap_err()
+            .to_string()
+            .contains("gyro_dps[2]")
+    );
+    // Nothing changed: the good sample 2 continues the stream without a gap.
+    run(&mut st, &[ok(2)]);
+    assert_eq!(st.stats().accepted, 3);
+    assert_eq!(st.stats().gaps, 0);
+    assert_eq!(st.pending(), 3);
+    // Yu's detector does not need the gyroscope.
+    let mut yu = stage(&file, DetectorKind::Yu);
+    run(&mut yu, &[no_gyro]);
+}
+
+/// Rest samples of the sensor lying still with gravity along `up` (unit, sensor frame), with
+/// the file's errors applied in reverse plus an extra accelerometer bias (m/s^2) and gyroscope
+/// bias (deg/s) the file does not know, white noise at the MPU-9250's densities at 1 kHz.
+fn still(
+    file: &CalibrationFile,
+    up: Vector3<f64>,
+    extra_accel_mps2: Vector3<f64>,
+    extra_gyro_dps: [f64; 3],
+    seconds: f64,
+    seed: u64,
+) -> Vec<RawImuSample> {
+    let model = file.accel_model().unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let na = Normal::new(0.0, 300e-6 * 1000f64.sqrt()).unwrap();
+    let ng = Normal::new(0.0, 0.01 * 1000f64.sqrt()).unwrap();
+    let n = (seconds * 1000.0) as u64;
+    (0..n)
+        .map(|k| {
+            let truth_g = up + extra_accel_mps2 / GRAVITY;
+            let noise = Vector3::from_fn(|_, _| na.sample(&mut rng));
+            let a = model.measure(&truth_g) + noise;
+            let w = std::array::from_fn(|i| {
+                file.gyro.bias_dps.unwrap()[i] + extra_gyro_dps[i] + ng.sample(&mut rng)
+            });
+            raw(k, 1_000_000 * (k + 1), a.into(), w, 25.0)
+        })
+        .collect()
+}
+
+#[test]
+fn refinement_at_rest_corrects_gyro_bias_and_only_the_accelerometer_along_gravity() {
+    let file = calibration();
+    let mut st = stage(&file, DetectorKind::Glrt);
+    // Unknown to the file: 20 mm/s^2 on z (along gravity) and 50 mm/s^2 on x (across it), and
+    // a gyroscope bias of (0.5, -0.3, 0.2) deg/s.
+    let extra = Vector3::new(0.05, 0.0, 0.02);
+    let gyro = [0.5, -0.3, 0.2];
+    let out = run(&mut st, &still(&file, Vector3::z(), extra, gyro, 30.0, 2));
+    let ready = out
+        .iter()
+        .position(|o| o.flags & corrected_flags::DETECTOR_READY != 0)
+        .unwrap();
+    assert_eq!(
+        ready, 4980,
+        "ready with the batch that completes 5 s of learning"
+    );
+    assert!(
+        out[..ready]
+            .iter()
+            .all(|o| o.flags & corrected_flags::BIAS_REFINED == 0)
+    );
+    assert!(
+        out[ready..]
+            .iter()
+            .all(|o| o.flags & corrected_flags::BIAS_REFINED != 0)
+    );
+    let rest = out
+        .iter()
+        .filter(|o| o.flags & corrected_flags::ZERO_STATE != 0)
+        .count();
+    assert!(rest as f64 > 0.9 * (out.len() - ready) as f64, "{rest}");
+    let (accel, gyro_rps, refined) = st.refinement();
+    assert!(refined);
+    // About 30 s of rest at 3 mm/s^2 and 0.01 deg/s per sqrt(s) of rest (plus the prior).
+    assert!((accel[2] - 0.02).abs() < 0.003, "{accel:?}");
+    // Along the measured gravity direction, which the unknown x offset tilts by 0.05 / g rad:
+    // x gets 0.02 * 0.05 / g = 1e-4, not the 0.05 it lacks.
+    let along = 0.02 * 0.05 / GRAVITY;
+    assert!(
+        (accel[0] - along).abs() < 3e-5 && accel[1].abs() < 3e-5,
+        "{accel:?}"
+    );
+    for i in 0..3 {
+        assert!(
+            (gyro_rps[i].to_degrees() - gyro[i]).abs() < 0.01,
+            "{gyro_rps:?}"
+        );
+    }
+    // The output at rest now has |a| = g and zero rate (the x offset stays: it is a tilt).
+    let tail = &out[out.len() - 5000..];
+    let mean = |f: &dyn Fn(&CorrectedImuSample) -> f64| {
+        tail.iter().map(f).sum::<f64>() / tail.len() as f64
+    };
+    let a = Vector3::new(
+        mean(&|o| o.accel_mps2[0]),
+        mean(&|o| o.accel_mps2[1]),
+        mean(&|o| o.accel_mps2[2]),
+    );
+    assert!((a.norm() - GRAVITY).abs() < 0.004, "{a:?}");
+    assert!((a.x - 0.05).abs() < 0.004, "{a:?}");
+    assert!(mean(&|o| o.gyro_rps[0]).abs().to_degrees() < 0.01);
+    // zs_mean is on the refined output's scale.
+    let last = out.last().unwrap();
+    assert!((Vector3::from(last.zs_mean_mps2).norm() - GRAVITY).abs() < 0.01);
+
+    // Resting on another side afterwards corrects that direction's component: y up.
+    let mut second = still(&file, Vector3::y(), extra, gyro, 70.0, 3);
+    for (k, s) in second.iter_mut().enumerate() {
+        s.seq += out.len() as u64;
+        s.stamps.sample_ns = 1_000_000 * (out.len() + k + 1) as u64;
+    }
+    run(&mut st, &second);
+    let (accel, _, _) = st.refinement();
+    // x still unobservable; y's true extra is 0; z's earlier estimate is kept.
+    assert!(accel[0].abs() < 1e-3 && accel[1].abs() < 0.003, "{accel:?}");
+    assert!((accel[2] - 0.02).abs() < 0.003, "{accel:?}");
+}
+
+#[test]
+fn a_restarted_publisher_starts_a_new_session_and_a_gap_releases_the_partial_batch() {
+    let file = calibration();
+    let mut st = stage(&file, DetectorKind::Glrt);
+    let first = still(&file, Vector3::z(), Vector3::zeros(), [0.0; 3], 6.01, 4);
+    let mut out = run(&mut st, &first);
+    assert!(st.detector().is_ready());
+    assert_eq!(st.pending(), 10);
+    // A gap: seq 6011 missing.
+    let mut after_gap = still(&file, Vector3::z(), Vector3::zeros(), [0.0; 3], 0.1, 5);
+    for (k, s) in after_gap.iter_mut().enumerate() {
+        s.seq = 6011 + k as u64;
+        s.stamps.sample_ns = 1_000_000 * (6012 + k as u64);
+    }
+    let released = run(&mut st, &after_gap[..1]);
+    assert_eq!(released.len(), 10, "the partial batch leaves undecided");
+    assert!(
+        released
+            .iter()
+            .all(|o| o.flags & corrected_flags::ZERO_STATE == 0
+                && o.flags & corrected_flags::DETECTOR_READY != 0)
+    );
+    assert_eq!(st.stats().gaps, 1);
+    out.extend(released);
+    out.extend(run(&mut st, &after_gap[1..]));
+    // A new publisher: sequence numbers and sample times start again.
+    let second = still(&file, Vector3::z(), Vector3::zeros(), [0.0; 3], 1.0, 6);
+    let pending_before = st.pending();
+    let released = run(&mut st, &second);
+    assert_eq!(st.stats().restarts, 1);
+    assert!(!st.detector().is_ready(), "learning starts again");
+    assert!(!st.refinement().2, "refinement starts again");
+    assert!(released[..pending_before].iter().all(|o| o.seq >= 6011));
+    assert!(released[pending_before..].iter().all(|o| o.flags == 0));
+    out.extend(released);
+    st.finish(&mut |c| out.push(*c));
+    assert_eq!(out.len(), first.len() + after_gap.len() + second.len());
+}
+
+#[test]
+fn calib_id_is_stable_and_changes_with_every_parameter() {
+    let f = calibration();
+    assert_eq!(calib_id(&f), calib_id(&f.clone()));
+    // Independent of what is not a parameter.
+    let mut g = f.clone();
+    g.source.file = "elsewhere.csv".into();
+    assert_eq!(calib_id(&g), calib_id(&f));
+    let mut variants = Vec::new();
+    let mut g = f.clone();
+    g.bias_g[2] += 1e-9;
+    variants.push(g);
+    let mut g = f.clone();
+    g.scale[1][0] += 1e-9;
+    variants.push(g);
+    let mut g = f.clone();
+    g.gravity_mps2 = 9.80665;
+    variants.push(g);
+    let mut g = f.clone();
+    g.temperature.bias_g_per_c = None;
+    g.temperature.reference_c = None;
+    variants.push(g);
+    let mut g = f.clone();
+    g.gyro.bias_dps = None;
+    variants.push(g);
+    for g in &variants {
+        assert_ne!(calib_id(g), calib_id(&f));
+    }
+}

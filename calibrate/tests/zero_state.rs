@@ -1,0 +1,294 @@
+//! The zero-state detectors on synthetic sessions (white noise of known level, exact
+//! disturbances) and on a short simulated drive with ground truth.
+
+use calibrate::zero_state::{
+    BATCH_LEN, DetectorConfig, DetectorKind, LearnRejection, Verdict, ZeroStateDetector,
+};
+use mems_sim::scenario::{Drive, DriveParams, ns_from_s};
+use mems_sim::vibration::VibrationModel;
+use mems_sim::{SimSensor, adc};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+
+const G: f64 = 9.80665;
+const RATE_HZ: f64 = 1000.0;
+/// Per-sample noise of the synthetic sensor: the MPU-9250's densities at 1 kHz.
+const ACCEL_SIGMA: f64 = 300e-6 * 31.622_776_601_683_793 * G;
+const GYRO_SIGMA: f64 = 0.01 * 31.622_776_601_683_793 * std::f64::consts::PI / 180.0;
+/// Gyroscope bias of the synthetic sensor, rad/s.
+const GYRO_BIAS: [f64; 3] = [0.004, -0.002, 0.006];
+
+/// A synthetic sensor lying level: gravity's reaction plus `extra_accel` (m/s^2), the bias
+/// plus `rate` (rad/s), white noise scaled by `noise_scale`.
+struct Synth {
+    rng: ChaCha8Rng,
+    k: u64,
+}
+
+impl Synth {
+    fn new(seed: u64) -> Self {
+        Self {
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            k: 0,
+        }
+    }
+
+    fn sample(
+        &mut self,
+        extra_accel: [f64; 3],
+        rate: [f64; 3],
+        noise_scale: f64,
+    ) -> (u64, [f64; 3], [f64; 3]) {
+        let na = Normal::new(0.0, ACCEL_SIGMA * noise_scale).unwrap();
+        let ng = Normal::new(0.0, GYRO_SIGMA * noise_scale).unwrap();
+        let up = [0.0, 0.0, G];
+        let a = std::array::from_fn(|i| up[i] + extra_accel[i] + na.sample(&mut self.rng));
+        let w = std::array::from_fn(|i| GYRO_BIAS[i] + rate[i] + ng.sample(&mut self.rng));
+        let t = ns_from_s(self.k as f64 / RATE_HZ);
+        self.k += 1;
+        (t, a, w)
+    }
+
+    /// Feeds `seconds` of samples to `det`; returns the verdicts.
+    fn feed(
+        &mut self,
+        det: &mut ZeroStateDetector,
+        seconds: f64,
+        extra_accel: [f64; 3],
+        rate: [f64; 3],
+        noise_scale: f64,
+    ) -> Vec<Verdict> {
+        let n = (seconds * RATE_HZ).round() as usize;
+        (0..n)
+            .filter_map(|_| {
+                let (t, a, w) = self.sample(extra_accel, rate, noise_scale);
+                det.push(t, a, w)
+            })
+            .collect()
+    }
+}
+
+fn detector(kind: DetectorKind) -> ZeroStateDetector {
+    ZeroStateDetector::new(DetectorConfig::new(kind, G))
+}
+
+fn rest_fraction(v: &[Verdict]) -> f64 {
+    v.iter().filter(|v| v.rest).count() as f64 / v.len() as f64
+}
+
+/// Learns for 5 s of rest; returns the detector (ready) and the generator.
+fn learned(kind: DetectorKind, seed: u64) -> (ZeroStateDetector, Synth) {
+    let mut det = detector(kind);
+    let mut synth = Synth::new(seed);
+    let v = synth.feed(&mut det, 5.0, [0.0; 3], [0.0; 3], 1.0);
+    assert!(det.is_ready(), "{kind:?} not ready after 5 s");
+    assert!(v[..v.len() - 1].iter().all(|v| !v.ready && !v.rest));
+    assert!(v.last().unwrap().ready && v.last().unwrap().learned.is_some());
+    (det, synth)
+}
+
+#[test]
+fn thresholds_are_learned_from_the_start_up_rest() {
+    for kind in [DetectorKind::Yu, DetectorKind::Glrt] {
+        let mut det = detector(kind);
+        let mut synth = Synth::new(1);
+        let verdicts = synth.feed(&mut det, 5.0, [0.0; 3], [0.0; 3], 1.0);
+        // 5 s at 1 kHz = 250 batches; learning completes with the last one.
+        assert_eq!(verdicts.len(), 5000 / BATCH_LEN);
+        let r = verdicts.last().unwrap().learned.expect("learned");
+        assert_eq!(r.batches, 250);
+        assert!((r.duration_s - 5.0).abs() < 1e-9, "{}", r.duration_s);
+        // Pooled std of 250 x 19 dof: relative error about 1/sqrt(2 * 4750) = 1%.
+        for i in 0..3 {
+            assert!(
+                (r.accel_sigma_mps2[i] / ACCEL_SIGMA - 1.0).abs() < 0.04,
+                "{r:?}"
+            );
+            assert!(
+                (r.gyro_sigma_rps[i] / GYRO_SIGMA - 1.0).abs() < 0.04,
+                "{r:?}"
+            );
+            // Means to a few sigma / sqrt(5000).
+            let up = [0.0, 0.0, G][i];
+            assert!((r.accel_mean_mps2[i] - up).abs() < 4.0 * ACCEL_SIGMA / 5000f64.sqrt());
+            assert!((r.gyro_mean_rps[i] - GYRO_BIAS[i]).abs() < 4.0 * GYRO_SIGMA / 5000f64.sqrt());
+            // White noise: batch means scatter as sigma / sqrt(20) (ratio 1 +- 0.1).
+            assert!(r.accel_correlation[i] < 1.35 && r.gyro_correlation[i] < 1.35);
+        }
+        assert!((r.magnitude_mps2 - G).abs() < 0.01);
+        let expect = ACCEL_SIGMA / (BATCH_LEN as f64).sqrt();
+        assert!((r.magnitude_std_mps2 / expect - 1.0).abs() < 0.15, "{r:?}");
+    }
+}
+
+#[test]
+fn rest_is_detected_after_learning() {
+    for kind in [DetectorKind::Yu, DetectorKind::Glrt] {
+        let (mut det, mut synth) = learned(kind, 2);
+        let v = synth.feed(&mut det, 20.0, [0.0; 3], [0.0; 3], 1.0);
+        // The GLRT's window fills first (25 batches), then rest holds at the false-alarm rate.
+        let skip = if kind == DetectorKind::Glrt { 24 } else { 0 };
+        assert!(v[..skip].iter().all(|v| !v.rest && v.ready));
+        let f = rest_fraction(&v[skip..]);
+        assert!(f > 0.97, "{kind:?}: rest fraction {f}");
+    }
+}
+
+#[test]
+fn glrt_false_alarm_rate_at_rest_matches_its_chi_squared_quantile() {
+    for alpha in [1e-2, 1e-1] {
+        let mut config = DetectorConfig::new(DetectorKind::Glrt, G);
+        config.glrt.false_alarm = alpha;
+        let mut det = ZeroStateDetector::new(config);
+        let mut synth = Synth::new(3);
+        synth.feed(&mut det, 5.0, [0.0; 3], [0.0; 3], 1.0);
+        let v = synth.feed(&mut det, 200.0, [0.0; 3], [0.0; 3], 1.0);
+        let missed = 1.0 - rest_fraction(&v[24..]);
+        // Overlapping windows are correlated, so the count is noisier than binomial; the
+        // learned references' own error adds a little to the rate.
+        assert!(
+            missed > 0.4 * alpha && missed < 2.0 * alpha,
+            "alpha {alpha}: missed {missed}"
+        );
+    }
+}
+
+#[test]
+fn vertical_acceleration_and_vibration_are_motion_for_both() {
+    for kind in [DetectorKind::Yu, DetectorKind::Glrt] {
+        let (mut det, mut synth) = learned(kind, 4);
+        let bump = synth.feed(&mut det, 1.0, [0.0, 0.0, 0.3], [0.0; 3], 1.0);
+        assert!(rest_fraction(&bump) < 0.02, "{kind:?} vertical");
+        synth.feed(&mut det, 2.0, [0.0; 3], [0.0; 3], 1.0);
+        let shaking = synth.feed(&mut det, 1.0, [0.0; 3], [0.0; 3], 2.0);
+        assert!(rest_fraction(&shaking) < 0.02, "{kind:?} vibration");
+    }
+}
+
+#[test]
+fn only_the_glrt_sees_horizontal_acceleration_and_in_place_spins() {
+    // Yu's magnitude test: 0.3 m/s^2 across gravity changes |a| by 4.6 mm/s^2, well inside
+    // its tolerance; an in-place spin does not touch the accelerometer at all.
+    let steady = [0.3, 0.0, 0.0];
+    let spin = [0.0, 0.0, 30f64.to_radians()];
+    let (mut yu, mut synth) = learned(DetectorKind::Yu, 5);
+    assert!(rest_fraction(&synth.feed(&mut yu, 2.0, steady, [0.0; 3], 1.0)) > 0.95);
+    assert!(rest_fraction(&synth.feed(&mut yu, 2.0, [0.0; 3], spin, 1.0)) > 0.95);
+    let (mut glrt, mut synth) = learned(DetectorKind::Glrt, 5);
+    assert_eq!(
+        rest_fraction(&synth.feed(&mut glrt, 2.0, steady, [0.0; 3], 1.0)),
+        0.0
+    );
+    assert_eq!(
+        rest_fraction(&synth.feed(&mut glrt, 2.0, [0.0; 3], spin, 1.0)),
+        0.0
+    );
+    // A slow drift of the gyroscope bias (0.02 deg/s, e.g. temperature) is followed at rest.
+    let drift = [0.0, 0.0, 0.02f64.to_radians()];
+    let v = synth.feed(&mut glrt, 30.0, [0.0; 3], drift, 1.0);
+    let f = rest_fraction(&v[v.len() / 2..]);
+    assert!(f > 0.95, "{f} {:?}", glrt.references());
+    let (_, bias) = glrt.references().unwrap();
+    assert!(
+        (bias[2] - GYRO_BIAS[2] - drift[2]).abs() < 0.1 * drift[2],
+        "{bias:?}"
+    );
+}
+
+#[test]
+fn learning_restarts_when_the_sensor_moves_during_it() {
+    for kind in [DetectorKind::Yu, DetectorKind::Glrt] {
+        let mut det = detector(kind);
+        let mut synth = Synth::new(6);
+        // 2 s still, 1 s of turning (the batch means wander), then still.
+        synth.feed(&mut det, 2.0, [0.0; 3], [0.0; 3], 1.0);
+        synth.feed(&mut det, 1.0, [0.0; 3], [0.0, 0.0, 0.5], 1.0);
+        synth.feed(&mut det, 3.0, [0.0; 3], [0.0; 3], 1.0);
+        assert!(!det.is_ready(), "{kind:?} learned from a moving interval");
+        let (restarts, why) = det.learn_rejections();
+        assert_eq!(restarts, 1);
+        assert!(
+            matches!(why, Some(LearnRejection::Unsteady { channel: 5, .. })),
+            "{why:?}"
+        );
+        synth.feed(&mut det, 5.0, [0.0; 3], [0.0; 3], 1.0);
+        assert!(det.is_ready());
+        let (_, bias) = det.references().unwrap();
+        assert!((bias[2] - GYRO_BIAS[2]).abs() < 4.0 * GYRO_SIGMA / 5000f64.sqrt());
+    }
+    // Not gravity (an uncalibrated or wrongly scaled accelerometer): refused.
+    let mut det = detector(DetectorKind::Glrt);
+    let mut synth = Synth::new(7);
+    synth.feed(&mut det, 5.0, [0.0, 0.0, 0.6], [0.0; 3], 1.0);
+    assert!(matches!(
+        det.learn_rejections().1,
+        Some(LearnRejection::Gravity { .. })
+    ));
+}
+
+#[test]
+fn a_gap_empties_the_glrt_window_but_keeps_what_was_learned() {
+    let (mut det, mut synth) = learned(DetectorKind::Glrt, 8);
+    synth.feed(&mut det, 1.0, [0.0; 3], [0.0; 3], 1.0);
+    // Half a batch, then a gap: the partial batch gives no verdict.
+    assert!(
+        synth
+            .feed(&mut det, 0.01, [0.0; 3], [0.0; 3], 1.0)
+            .is_empty()
+    );
+    det.interrupt();
+    let v = synth.feed(&mut det, 5.0, [0.0; 3], [0.0; 3], 1.0);
+    assert!(det.is_ready());
+    assert!(v[..24].iter().all(|v| v.ready && !v.rest));
+    let f = rest_fraction(&v[24..]);
+    assert!(f > 0.95, "{f}");
+}
+
+/// A 3-minute simulated drive with turns and in-place turns at moderate vibration, measured by
+/// the calibrated MPU-9250 model: the GLRT finds the rests and does not call turning or moving
+/// at speed rest.
+#[test]
+fn glrt_on_a_simulated_drive() {
+    let mut params = DriveParams::new(180.0);
+    params.turns = true;
+    params.in_place_turns = true;
+    let drive = Drive::new(&params, 11).unwrap();
+    let model = mems_sim::model::SensorModel::mpu9250_calibrated();
+    let mut sim = SimSensor::new(drive, &model, &VibrationModel::moderate(1.0), 11).unwrap();
+    let mut det = detector(DetectorKind::Glrt);
+    let mut truths = Vec::with_capacity(BATCH_LEN);
+    let (mut rest, mut rest_hit, mut moving_fast, mut moving_fast_hit) = (0, 0, 0, 0);
+    for k in 0..(180.0 * RATE_HZ) as u64 {
+        let t = k as f64 / RATE_HZ;
+        let (analog, truth) = sim.sample_with_truth(t, RATE_HZ);
+        let raw = adc::quantize_sample(
+            &analog,
+            ipc_types::units::AccelRange::G2,
+            ipc_types::units::GyroRange::Dps250,
+            ns_from_s(t),
+            k,
+        );
+        truths.push(truth);
+        let a = raw.accel_g.map(|x| x * G);
+        let w = raw.gyro_dps.map(f64::to_radians);
+        if let Some(v) = det.push(raw.stamps.sample_ns, a, w) {
+            for tr in truths.drain(..) {
+                let speed = tr.velocity_mps[0].hypot(tr.velocity_mps[1]);
+                let turning = tr.angular_rate_rps[2].abs() > 2f64.to_radians();
+                if tr.at_rest && v.ready {
+                    rest += 1;
+                    rest_hit += usize::from(v.rest);
+                }
+                if speed > 0.1 || turning {
+                    moving_fast += 1;
+                    moving_fast_hit += usize::from(v.rest);
+                }
+            }
+        }
+    }
+    let detection = rest_hit as f64 / rest as f64;
+    assert!(detection > 0.95, "detection rate {detection}");
+    assert!(moving_fast > 30_000, "{moving_fast} moving samples");
+    assert_eq!(moving_fast_hit, 0, "rest flagged while moving or turning");
+}
