@@ -71,7 +71,7 @@ fn serve_corrects_every_raw_sample_once_in_order_and_survives_restarts() {
     let cor_sub = service::subscriber(&cor_svc).unwrap();
     let mut raw: Vec<RawImuSample> = Vec::new();
     let mut cor: Vec<CorrectedImuSample> = Vec::new();
-    let mut drain = |raw: &mut Vec<RawImuSample>, cor: &mut Vec<CorrectedImuSample>| {
+    let drain = |raw: &mut Vec<RawImuSample>, cor: &mut Vec<CorrectedImuSample>| {
         while let Some(s) = raw_sub.receive().unwrap() {
             raw.push(*s.payload());
         }
