@@ -50,6 +50,10 @@ pub struct ReplaySummary {
     pub elapsed: Duration,
     /// Whether SIGINT or SIGTERM stopped the replay before the last sample.
     pub interrupted: bool,
+    /// Samples that reached fewer subscribers than [`ReplayOptions::wait_subscribers`]: lost
+    /// for a subscriber that had not connected yet (iceoryx2 queues up to one buffer for it,
+    /// then drops) or that left. 0 in a lossless replay.
+    pub short_deliveries: u64,
 }
 
 impl ReplaySummary {
@@ -107,11 +111,19 @@ pub enum ReplayError {
 /// that had connected keep receiving what was sent after the publisher leaves.
 pub const LINGER: Duration = Duration::from_millis(200);
 
+/// Pause between the subscribers being registered and the first sample. iceoryx2 registers a
+/// subscriber at once, but it connects to a publisher's data only on its next `receive` after
+/// the publisher appeared; until then the publisher queues one subscriber buffer for it and
+/// drops the rest (measured: a release `--max` replay filled the 4096-sample buffer before the
+/// recorder, polling every 1 ms, had connected, and 777 samples were lost).
+pub const SETTLE: Duration = Duration::from_millis(100);
+
 /// Samples between signal checks when no pacing sleep checks for us.
 const SIGNAL_CHECK_EVERY: usize = 256;
 
 /// Publishes `samples` (in order, `stamps.sample_ns` increasing) on the raw service under
-/// `namespace`, from `node`, paced as `options` say. SIGINT or SIGTERM (seen through
+/// `namespace`, from `node`, paced as `options` say; with `wait_subscribers` > 0 it starts
+/// [`SETTLE`] after they are registered and counts samples that reached fewer of them. SIGINT or SIGTERM (seen through
 /// `Node::wait`) stops the replay early with [`ReplaySummary::interrupted`] set. Returns
 /// [`LINGER`] after the last sample, so that every subscriber has connected to it.
 pub fn replay(
@@ -136,6 +148,7 @@ pub fn replay(
         sent: 0,
         elapsed: Duration::ZERO,
         interrupted: false,
+        short_deliveries: 0,
     };
 
     let wait_start = Instant::now();
@@ -155,6 +168,9 @@ pub fn replay(
         if node.wait(Duration::from_millis(1)).is_err() {
             return Ok(interrupted(summary));
         }
+    }
+    if options.wait_subscribers > 0 && node.wait(SETTLE).is_err() {
+        return Ok(interrupted(summary));
     }
 
     let Some(first) = samples.first() else {
@@ -183,11 +199,14 @@ pub fn replay(
         }
         let mut sample = *recorded;
         sample.stamps.acquired_ns = monotonic_ns();
-        publisher.send_copy(sample).map_err(|e| ReplayError::Send {
+        let recipients = publisher.send_copy(sample).map_err(|e| ReplayError::Send {
             service: name.clone(),
             seq: sample.seq,
             message: format!("{e:?}"),
         })?;
+        if recipients < options.wait_subscribers {
+            summary.short_deliveries += 1;
+        }
         summary.sent += 1;
         summary.elapsed = start.elapsed();
     }

@@ -80,5 +80,13 @@ fn main() -> Result<()> {
             ""
         }
     );
+    if summary.short_deliveries > 0 {
+        bail!(
+            "{} samples reached fewer than {} subscribers: lost for a subscriber that had not \
+             connected yet or that left",
+            summary.short_deliveries,
+            options.wait_subscribers
+        );
+    }
     Ok(())
 }

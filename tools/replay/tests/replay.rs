@@ -2,13 +2,14 @@
 //! `mems-replay` command line on bad input.
 
 use std::process::Command;
+use std::sync::mpsc;
 use std::thread;
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
 use ipc_types::clock::monotonic_ns;
 use ipc_types::{RawImuSample, Stamps, raw_flags, service};
-use mems_replay::{LINGER, Pace, ReplayError, ReplayOptions, replay};
+use mems_replay::{LINGER, Pace, ReplayError, ReplayOptions, SETTLE, replay};
 
 fn namespace(test: &str) -> String {
     format!("t{}-{test}", std::process::id())
@@ -108,6 +109,7 @@ fn real_time_pace_follows_the_sample_times_scaled_by_speed() {
     assert_same_but_acquired(&got, &sent);
     assert_eq!(summary.sent, 400);
     assert!(!summary.interrupted);
+    assert_eq!(summary.short_deliveries, 0);
 
     let a0 = got[0].0.stamps.acquired_ns;
     let mut lateness_ns = Vec::new();
@@ -145,6 +147,7 @@ fn max_pace_is_lossless_with_a_slow_subscriber() {
     let got = sub.join().unwrap();
     assert_same_but_acquired(&got, &sent);
     assert_eq!(summary.sent, n as u64);
+    assert_eq!(summary.short_deliveries, 0);
     // The last sample fits in the subscriber's queue only once it has taken n - buffer samples,
     // which costs it a 2 ms stall per 500: the publisher waited at least that long.
     let stalls = ((n - service::SUBSCRIBER_BUFFER) / 500) as f64 * 0.002;
@@ -153,6 +156,46 @@ fn max_pace_is_lossless_with_a_slow_subscriber() {
         "{:?}",
         summary.elapsed
     );
+}
+
+/// A subscriber that does not call `receive` for a while after the publisher appeared is not
+/// connected: iceoryx2 queues one buffer for it and drops the rest. The replay counts exactly
+/// those samples, so the loss is never silent.
+#[test]
+fn samples_dropped_for_an_unconnected_subscriber_are_counted() {
+    let ns = namespace("unconnected");
+    let n = service::SUBSCRIBER_BUFFER + 1500;
+    let sent = samples(n as u64, 4000);
+    let name = service::full_name(&ns, service::RAW);
+    let (ready_tx, ready_rx) = mpsc::channel();
+    // Created before the publisher exists, then silent for longer than the replay's SETTLE but
+    // not past its LINGER (a subscriber that wakes after the publisher left gets nothing).
+    let sub = thread::spawn(move || {
+        let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+        let svc = service::open::<RawImuSample>(&node, &name).unwrap();
+        let sub = service::subscriber(&svc).unwrap();
+        ready_tx.send(()).unwrap();
+        thread::sleep(SETTLE + LINGER / 2);
+        let mut got = Vec::new();
+        let start = Instant::now();
+        while start.elapsed() < Duration::from_millis(300) {
+            while let Some(s) = sub.receive().unwrap() {
+                got.push(s.seq);
+            }
+            thread::sleep(Duration::from_millis(1));
+        }
+        got
+    });
+    ready_rx.recv().unwrap();
+    let summary = run(&ns, &sent, Pace::Max);
+    let got = sub.join().unwrap();
+    assert_eq!(
+        got.len(),
+        service::SUBSCRIBER_BUFFER,
+        "one buffer was queued"
+    );
+    assert_eq!(got, (100..100 + got.len() as u64).collect::<Vec<_>>());
+    assert_eq!(summary.short_deliveries, (n - got.len()) as u64);
 }
 
 #[test]
