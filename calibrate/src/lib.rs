@@ -1,6 +1,8 @@
 //! Accelerometer calibration for mems-odometry: the thesis's error models with their
 //! uncertainty, labelled and label-free fitting, static-segment detection, torn-read repair,
-//! calibration files, and the evaluation used by `mems-calibrate` and `mems-eval`.
+//! calibration files, the evaluation used by `mems-calibrate` and `mems-eval`, and the live
+//! side: zero-state detectors ([`zero_state`]) and the calibration stage ([`stage`]) behind
+//! `mems-calibrate serve`.
 //!
 //! Units: models and fits work in g (see [`model`] for why "g" means local gravity); sample
 //! times are nanoseconds, durations seconds (names ending in `_s`); corrected output and

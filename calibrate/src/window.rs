@@ -1,12 +1,13 @@
-//! Streaming windowed statistics and the rest test built on them: the shared core of the
-//! offline static-segment detector ([`crate::segments`]) and of the live zero-state detector
-//! (Yu et al.: non-overlapping batches of 20 samples, mean and std against thresholds).
+//! Streaming windowed statistics and the rest test built on them. [`WindowAccumulator`] is the
+//! shared core of the offline static-segment detector ([`crate::segments`]) and of the live
+//! zero-state detectors ([`crate::zero_state`]: non-overlapping batches of 20 samples), which
+//! apply their own thresholds learned at start-up.
 //!
 //! [`WindowAccumulator`] takes one 3-axis sample at a time and, every `len` samples, returns the
 //! mean and standard deviation of the window just completed (non-overlapping windows; Welford's
 //! update, no allocation per sample). [`RestCriterion`] decides whether a window is at rest from
-//! its std and from its mean's distance to a reference mean (the previous window's offline, or
-//! a learned static mean live). Values are in whatever unit the caller feeds (g offline).
+//! its std and from its mean's distance to a reference mean (the previous window's, offline).
+//! Values are in whatever unit the caller feeds (g offline, SI live).
 
 use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
 
