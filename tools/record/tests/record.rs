@@ -283,3 +283,36 @@ fn sigkilled_publisher_shows_as_lost_back_and_gap() {
         "the killed replay's node was cleaned up"
     );
 }
+
+/// `--duration` ends the recording by itself with a finished (summarised) file.
+#[test]
+fn duration_ends_the_recording_cleanly() {
+    let ns = namespace("duration");
+    let mcap = tmp("duration.mcap");
+    let started = std::time::Instant::now();
+    let recorder = Proc::spawn(
+        &mems_record(),
+        &[
+            "--out",
+            mcap.to_str().unwrap(),
+            "--namespace",
+            &ns,
+            "--duration",
+            "0.3",
+        ],
+    );
+    let (status, stdout) = recorder.wait(WAIT);
+    assert!(status.success(), "{stdout}");
+    assert!(started.elapsed() >= Duration::from_millis(300));
+    assert!(!stdout.contains("stopped by signal"), "{stdout}");
+    let contents = read_all(&mcap).unwrap();
+    assert_eq!(contents.truncation, None);
+    assert!(contents.raw.is_empty() && contents.events.is_empty());
+
+    let bad = Proc::spawn(
+        &mems_record(),
+        &["--out", mcap.to_str().unwrap(), "--duration", "-1"],
+    );
+    let (status, _) = bad.wait(WAIT);
+    assert!(!status.success(), "a negative duration is refused");
+}
