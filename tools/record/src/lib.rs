@@ -294,36 +294,62 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
     ];
 
     let start = Instant::now();
-    let mut all_events = Vec::new();
+    let mut summary = RecordSummary {
+        received: Vec::new(),
+        events: Vec::new(),
+        elapsed: Duration::ZERO,
+        interrupted: false,
+    };
+    let looped = record_loop(&node, &mut writer, &mut streams, options, &mut summary);
+    // Finish the file even after an error, so that it keeps its summary and footer.
+    let finished = writer.finish();
+    looped?;
+    finished?;
+    summary.received = streams.iter().map(|s| s.received()).collect();
+    summary.elapsed = start.elapsed();
+    Ok(summary)
+}
+
+/// Polls, writes, checks publishers and flushes until the duration has passed or a signal
+/// arrived; records events and `interrupted` in `summary`.
+fn record_loop(
+    node: &Node<ipc::Service>,
+    writer: &mut Writer,
+    streams: &mut [Box<dyn Stream>],
+    options: &RecordOptions,
+    summary: &mut RecordSummary,
+) -> Result<()> {
+    let start = Instant::now();
     let mut oldest_unflushed: Option<Instant> = None;
     let mut last_check: Option<Instant> = None;
-    let mut interrupted = false;
     loop {
         // Err only when SIGINT or SIGTERM arrived (iceoryx2's default signal handling).
         if node.wait(POLL_PERIOD).is_err() {
-            interrupted = true;
+            summary.interrupted = true;
         }
-        for stream in &mut streams {
+        // After a signal this last drain takes everything queued: a queue holds at most
+        // SUBSCRIBER_BUFFER = MAX_BATCH messages.
+        for stream in streams.iter_mut() {
             let (_, before) = stream.received();
-            all_events.extend(stream.drain(&mut writer, MAX_BATCH)?);
+            summary.events.extend(stream.drain(writer, MAX_BATCH)?);
             if stream.received().1 > before {
                 oldest_unflushed.get_or_insert_with(Instant::now);
             }
         }
-        if interrupted || options.duration.is_some_and(|d| start.elapsed() >= d) {
-            break;
+        if summary.interrupted || options.duration.is_some_and(|d| start.elapsed() >= d) {
+            return Ok(());
         }
         if last_check.is_none_or(|t| t.elapsed() >= PUBLISHER_CHECK_PERIOD) {
             last_check = Some(Instant::now());
             // Removes the resources of kill -9'd nodes, so that their publishers stop counting.
             node.try_cleanup_dead_nodes();
-            for stream in &mut streams {
+            for stream in streams.iter_mut() {
                 let (_, before) = stream.received();
-                let events = stream.check_publishers(&mut writer)?;
+                let events = stream.check_publishers(writer)?;
                 if !events.is_empty() || stream.received().1 > before {
                     oldest_unflushed.get_or_insert_with(Instant::now);
                 }
-                all_events.extend(events);
+                summary.events.extend(events);
             }
         }
         if oldest_unflushed.is_some_and(|t| t.elapsed() >= FLUSH_PERIOD) {
@@ -331,13 +357,6 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
             oldest_unflushed = None;
         }
     }
-    writer.finish()?;
-    Ok(RecordSummary {
-        received: streams.iter().map(|s| s.received()).collect(),
-        events: all_events,
-        elapsed: start.elapsed(),
-        interrupted,
-    })
 }
 
 #[cfg(test)]
