@@ -9,8 +9,12 @@
 
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
 
 /// Raw samples from the acquisition (or replay) process: [`crate::RawImuSample`].
 pub const RAW: &str = "mems/imu/raw";
@@ -118,14 +122,54 @@ pub fn open<T: core::fmt::Debug + ZeroCopySend>(
     Ok(service)
 }
 
-/// A lossless publisher on `service`: it retries until every subscriber has room.
+/// How long a publisher waits for one subscriber's full buffer before it gives that sample
+/// up for that subscriber (and counts it, see [`stalled_discards`]).
+pub const STALL_TIMEOUT: Duration = Duration::from_secs(2);
+
+static STALLED_DISCARDS: AtomicU64 = AtomicU64::new(0);
+
+/// Samples this process's publishers gave up delivering to a subscriber that stayed full for
+/// [`STALL_TIMEOUT`] (a SIGKILLed or hung subscriber). Processes report it in their summary.
+pub fn stalled_discards() -> u64 {
+    STALLED_DISCARDS.load(Ordering::Relaxed)
+}
+
+/// A publisher on `service` that retries until every subscriber has room: a slow subscriber
+/// applies back-pressure, nothing is overwritten. A subscriber whose buffer stays full for
+/// [`STALL_TIMEOUT`] (killed with SIGKILL before iceoryx2 noticed, or hung) would block the
+/// pipeline for ever; for it, the sample is discarded, counted and reported on stderr, and
+/// while it stays stalled later samples for it are discarded at once, so the live subscribers
+/// keep their rate. Dead-node cleanup (`remove_dead_nodes`, or any node creation) then removes
+/// its connection.
 pub fn publisher<T: core::fmt::Debug + ZeroCopySend>(
     service: &PortFactory<ipc::Service, T, ()>,
 ) -> Result<Publisher<ipc::Service, T, ()>, ServiceError> {
+    // Receiver port id -> when it was last given up on.
+    let stalled: Mutex<Vec<(u128, Instant)>> = Mutex::new(Vec::new());
+    let handler = move |info: &BackpressureInfo| -> BackpressureAction {
+        let mut stalled = stalled.lock().unwrap_or_else(|e| e.into_inner());
+        let recently = stalled
+            .iter()
+            .any(|(id, at)| *id == info.receiver_port_id && at.elapsed() < STALL_TIMEOUT);
+        if !recently && info.elapsed_time < STALL_TIMEOUT {
+            return BackpressureAction::Retry;
+        }
+        if !recently {
+            eprintln!(
+                "mems: subscriber port {:#x} has not taken a sample for {:?}: discarding for it",
+                info.receiver_port_id, STALL_TIMEOUT
+            );
+        }
+        stalled.retain(|(id, _)| *id != info.receiver_port_id);
+        stalled.push((info.receiver_port_id, Instant::now()));
+        STALLED_DISCARDS.fetch_add(1, Ordering::Relaxed);
+        BackpressureAction::DiscardData
+    };
     service
         .publisher_builder()
         .max_loaned_samples(MAX_LOANED)
         .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
+        .set_backpressure_handler(handler)
         .create()
         .map_err(|e| ServiceError(format!("cannot create publisher: {e:?}")))
 }
@@ -174,5 +218,45 @@ mod tests {
             got.push(s.seq);
         }
         assert_eq!(got, (0..1000).collect::<Vec<_>>());
+    }
+
+    /// A subscriber that never takes its samples (as a SIGKILLed one) stalls the publisher for
+    /// STALL_TIMEOUT once; after that its samples are discarded and counted, and a live
+    /// subscriber receives every sample.
+    #[test]
+    fn a_stalled_subscriber_is_given_up_and_counted() {
+        let node = node().unwrap();
+        let name = full_name(&format!("stall-{}", std::process::id()), RAW);
+        let service = open::<RawImuSample>(&node, &name).unwrap();
+        let stuck = subscriber(&service).unwrap();
+        let live = subscriber(&service).unwrap();
+        let publisher = publisher(&service).unwrap();
+        // A subscriber's side of the connection is established by its first receive: the
+        // stuck one has been receiving, then stops (as one that is killed).
+        assert!(stuck.receive().unwrap().is_none());
+        let extra = 10;
+        let before = stalled_discards();
+        let start = Instant::now();
+        let mut got = 0u64;
+        for seq in 0..(SUBSCRIBER_BUFFER as u64 + extra) {
+            publisher
+                .send_copy(RawImuSample {
+                    seq,
+                    ..Default::default()
+                })
+                .unwrap();
+            while let Some(s) = live.receive().unwrap() {
+                assert_eq!(s.seq, got);
+                got += 1;
+            }
+        }
+        let waited = start.elapsed();
+        assert_eq!(got, SUBSCRIBER_BUFFER as u64 + extra);
+        assert_eq!(stalled_discards() - before, extra);
+        assert!(waited >= STALL_TIMEOUT, "waited {waited:?}");
+        assert!(
+            waited < 2 * STALL_TIMEOUT,
+            "stalled more than once: {waited:?}"
+        );
     }
 }

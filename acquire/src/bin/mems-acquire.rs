@@ -193,7 +193,7 @@ fn run<I2C: I2c, C: Clock>(
     let driver = acq.driver().stats();
     eprintln!(
         "mems-acquire: published {} samples in {:.1} s; reads {}, failed {}, overflows {}, \
-         gaps {}, lost {}, bus errors {}, re-inits {}",
+         gaps {}, lost {}, bus errors {}, re-inits {}; discarded for stalled subscribers {}",
         stats.published,
         start.elapsed().as_secs_f64(),
         stats.reads,
@@ -202,7 +202,8 @@ fn run<I2C: I2c, C: Clock>(
         driver.gaps,
         driver.lost_samples,
         driver.bus_errors,
-        driver.reinits
+        driver.reinits,
+        service::stalled_discards()
     );
     Ok(())
 }
