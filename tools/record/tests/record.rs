@@ -40,7 +40,7 @@ fn csv_replayed_at_max_speed_is_recorded_bit_exact() {
     );
     let before_ns = monotonic_ns();
     let replay = Proc::spawn(
-        &workspace_bin("mems-replay", "mems-replay"),
+        &mems_replay(),
         &[
             csv.to_str().unwrap(),
             "--max",
@@ -126,7 +126,7 @@ fn sigkilled_recorder_loses_at_most_100_ms() {
         &["--out", mcap.to_str().unwrap(), "--namespace", &ns],
     );
     let replay = Proc::spawn(
-        &workspace_bin("mems-replay", "mems-replay"),
+        &mems_replay(),
         &[
             csv.to_str().unwrap(),
             "--speed",
@@ -205,7 +205,7 @@ fn sigkilled_publisher_shows_as_lost_back_and_gap() {
     let second_samples = raw_samples(400, 6000, 4000);
     write(&first, &raw_samples(4000, 0, 4000));
     write(&second, &second_samples);
-    let replay_bin = workspace_bin("mems-replay", "mems-replay");
+    let replay_bin = mems_replay();
 
     let recorder = Proc::spawn(
         &mems_record(),

@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
@@ -26,6 +27,13 @@ pub fn tmp(name: &str) -> PathBuf {
 /// The `mems-record` binary of this package.
 pub fn mems_record() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_mems-record"))
+}
+
+/// The `mems-replay` binary, built once per test binary (see [`workspace_bin`]).
+pub fn mems_replay() -> PathBuf {
+    static PATH: OnceLock<PathBuf> = OnceLock::new();
+    PATH.get_or_init(|| workspace_bin("mems-replay", "mems-replay"))
+        .clone()
 }
 
 /// A binary of another workspace package, built (if stale) with the profile this test was
