@@ -6,10 +6,10 @@
 //! Over a sliding window of the last `window_batches` batches (`N` samples), with references
 //! `mu_c` (specific force at rest, gyroscope bias) and per-sample noise `sigma_c` of the six
 //! channels `c`, and `rho_c` the learned excess scatter of means over white noise (1 for white
-//! noise):
+//! noise), and `delta_c` the tolerance on each reference (its drift between rests):
 //!
 //! ```text
-//! T_mean    = N sum_c (mean_c - mu_c)^2 / (rho_c sigma_c^2)      ~ chi2(6)         at rest
+//! T_mean    = sum_c (mean_c - mu_c)^2 / (rho_c sigma_c^2 / N + delta_c^2) ~ chi2(6) at rest
 //! T_scatter = sum_c sum_k (x_ck - mean_c)^2 / sigma_c^2           ~ chi2(6 (N - 1)) at rest
 //! ```
 //!
@@ -47,16 +47,26 @@ pub struct GlrtConfig {
     pub window_batches: usize,
     /// How mean and scatter are combined.
     pub statistic: GlrtStatistic,
+    /// How far the learned specific force at rest may be off between rests, m/s^2 (1-sigma per
+    /// axis, added to the window mean's variance): an accelerometer bias moves with temperature
+    /// while the robot drives (about 1.5 mg/degC uncompensated), and a reference known better
+    /// than that would call every later rest motion.
+    pub accel_tolerance_mps2: f64,
+    /// The same for the gyroscope bias, rad/s.
+    pub gyro_tolerance_rps: f64,
 }
 
 impl Default for GlrtConfig {
     /// False-alarm rate 1e-2 per window, 25 batches (500 ms at 1 kHz), split statistic: the
-    /// best trade-off measured on simulated drives (docs/detectors.md).
+    /// best trade-off measured on simulated drives (docs/detectors.md); reference tolerances of
+    /// 2 mg (20 mm/s^2) and 0.05 deg/s.
     fn default() -> Self {
         Self {
             false_alarm: 1e-2,
             window_batches: 25,
             statistic: GlrtStatistic::Split,
+            accel_tolerance_mps2: 0.02,
+            gyro_tolerance_rps: 0.05_f64.to_radians(),
         }
     }
 }
@@ -93,6 +103,8 @@ pub(crate) struct GlrtRule {
     reference: [f64; 6],
     inv_var: [f64; 6],
     inv_rho: [f64; 6],
+    /// Variance of each reference's drift between rests (tolerance squared).
+    drift_var: [f64; 6],
     mean_quantile: f64,
     scatter_quantile: f64,
     combined_quantile: f64,
@@ -114,7 +126,10 @@ impl GlrtRule {
         let mut reference = [0.0; 6];
         let mut inv_var = [0.0; 6];
         let mut inv_rho = [0.0; 6];
+        let mut drift_var = [0.0; 6];
         for i in 0..3 {
+            drift_var[i] = config.accel_tolerance_mps2.powi(2);
+            drift_var[i + 3] = config.gyro_tolerance_rps.powi(2);
             reference[i] = r.accel_mean_mps2[i];
             reference[i + 3] = r.gyro_mean_rps[i];
             inv_var[i] = 1.0 / (r.accel_sigma_mps2[i] * r.accel_sigma_mps2[i]);
@@ -127,6 +142,7 @@ impl GlrtRule {
             reference,
             inv_var,
             inv_rho,
+            drift_var,
             mean_quantile: quantile(6.0, a / 2.0),
             scatter_quantile: quantile(6.0 * (n - 1.0), a / 2.0),
             combined_quantile: quantile(6.0 * n, a),
@@ -166,7 +182,10 @@ impl GlrtRule {
         let mut t_scatter = 0.0;
         for c in 0..6 {
             let d = mean[c] - self.reference[c];
-            t_mean += n * d * d * self.inv_var[c] * self.inv_rho[c];
+            // The window mean's variance about the reference: its own noise plus the
+            // reference's drift since it was learned.
+            let var = 1.0 / (n * self.inv_var[c] * self.inv_rho[c]) + self.drift_var[c];
+            t_mean += d * d / var;
             t_scatter += ss[c] * self.inv_var[c];
         }
         let quiet = match self.statistic {

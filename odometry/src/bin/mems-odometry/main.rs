@@ -1,0 +1,65 @@
+//! `mems-odometry`: odometry from calibrated samples, live (`serve`: `mems/imu/corrected` in,
+//! `mems/odometry/state` out) or offline over a raw recording (`offline`: the calibration stage
+//! and the odometry stage in one process, the same code the live processes run).
+
+mod offline;
+mod serve;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Result;
+use calibrate::calibfile::CalibrationFile;
+use calibrate::zero_state::DetectorKind;
+use clap::{Parser, Subcommand};
+use odometry::stage::OdometryConfig;
+
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Subscribe to corrected samples and publish odometry states.
+    Serve(serve::ServeArgs),
+    /// Run calibration and odometry over a raw recording (CSV or MCAP).
+    Offline(offline::OfflineArgs),
+}
+
+/// The odometry configuration a calibration file implies: its local gravity, and the
+/// MPU-9250 defaults for everything the file does not hold yet. `serve` and `offline` both use
+/// this, so that a replayed recording reproduces the live states exactly.
+pub fn odometry_config(file: &CalibrationFile) -> OdometryConfig {
+    OdometryConfig::mpu9250(file.gravity_mps2)
+}
+
+/// Options of the calibration stage shared by `offline` with `mems-calibrate serve`'s defaults.
+#[derive(clap::Args, Clone)]
+pub struct StageArgs {
+    /// Calibration file (TOML) written by `mems-calibrate fit`.
+    #[arg(long)]
+    pub calib: PathBuf,
+    /// Zero-state detector (offline; live, it is `mems-calibrate serve`'s).
+    #[arg(long, value_enum, default_value_t = DetectorKind::Glrt)]
+    pub detector: DetectorKind,
+    /// Start-up rest the detector learns from, s (offline; as `mems-calibrate serve --learn-s`).
+    #[arg(long, default_value_t = 5.0)]
+    pub learn_s: f64,
+}
+
+fn main() -> ExitCode {
+    let result: Result<()> = match Cli::parse().command {
+        Command::Serve(args) => serve::run(args),
+        Command::Offline(args) => offline::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("mems-odometry: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

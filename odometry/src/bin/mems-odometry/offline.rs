@@ -1,0 +1,196 @@
+//! `mems-odometry offline`: the calibration stage and the odometry stage over a raw recording,
+//! in one process, exactly as `mems-calibrate serve` and `mems-odometry serve` run them live.
+//!
+//! Truth comparison (recordings from `mems-sim`): our navigation frame has its origin at the
+//! alignment point and its heading fixed there; the truth's frame is the scenario's. At the first
+//! aligned state the rotation between the two frames' headings is taken from the two attitudes
+//! (its yaw part only: a roll or pitch difference is our own tilt error and stays in the error),
+//! and the truth positions are expressed in our frame relative to the truth position there.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use calibrate::calibfile::CalibrationFile;
+use calibrate::stage::{CalibrationStage, RefineConfig};
+use calibrate::zero_state::DetectorConfig;
+use ipc_types::{CorrectedImuSample, OdometryState, corrected_flags, odometry_flags};
+use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
+use odometry::stage::OdometryStage;
+use recording::Truth;
+use serde_json::json;
+
+/// Options of `mems-odometry offline`.
+#[derive(clap::Args)]
+pub struct OfflineArgs {
+    #[command(flatten)]
+    stage: crate::StageArgs,
+    /// Raw recording: canonical CSV, thesis CSV or MCAP.
+    #[arg(long)]
+    input: PathBuf,
+    /// Integrate without zero-velocity updates after alignment (the rest flags still align).
+    #[arg(long)]
+    no_zupt: bool,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+fn quat(wxyz: [f64; 4]) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_quaternion(Quaternion::new(wxyz[0], wxyz[1], wxyz[2], wxyz[3]))
+}
+
+/// Maps truth positions into our navigation frame once the first aligned state is known.
+struct TruthFrame {
+    origin: Vector3<f64>,
+    to_ours: Rotation3<f64>,
+}
+
+impl TruthFrame {
+    fn new(ours: &OdometryState, truth: &Truth) -> Self {
+        // Rotation taking truth-frame vectors to ours: ours = q_o q_t^-1 truth; its yaw part.
+        let m =
+            (quat(ours.attitude_wxyz) * quat(truth.attitude_wxyz).inverse()).to_rotation_matrix();
+        let yaw = m[(1, 0)].atan2(m[(0, 0)]);
+        Self {
+            origin: Vector3::from(truth.position_m),
+            to_ours: Rotation3::from_axis_angle(&Vector3::z_axis(), yaw),
+        }
+    }
+
+    fn position(&self, truth: &Truth) -> Vector3<f64> {
+        self.to_ours * (Vector3::from(truth.position_m) - self.origin)
+    }
+}
+
+/// Runs the pipeline and prints the result.
+pub fn run(args: OfflineArgs) -> Result<()> {
+    let file = CalibrationFile::load(&args.stage.calib)
+        .with_context(|| format!("cannot load calibration {}", args.stage.calib.display()))?;
+    if !(args.stage.learn_s > 0.0 && args.stage.learn_s.is_finite()) {
+        bail!("--learn-s must be > 0, got {}", args.stage.learn_s);
+    }
+    let recording = recording::load_raw(&args.input)?;
+    if let Some(t) = &recording.truncation {
+        eprintln!("mems-odometry: {}: {t}", args.input.display());
+    }
+    let mut detector = DetectorConfig::new(args.stage.detector, file.gravity_mps2);
+    detector.learn.duration_s = args.stage.learn_s;
+    let mut calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
+        .map_err(|e| anyhow::anyhow!("{}: {e}", args.stage.calib.display()))?;
+    let mut odometry = OdometryStage::new(crate::odometry_config(&file));
+
+    // Truth by sample time (the canonical CSV has one per sample; MCAP a channel).
+    let mut truth: Vec<Truth> = recording.truth.clone().unwrap_or_default();
+    truth.sort_by_key(|t| t.t_ns);
+    let truth_at = |t_ns: u64| -> Option<&Truth> {
+        truth
+            .binary_search_by_key(&t_ns, |t| t.t_ns)
+            .ok()
+            .map(|i| &truth[i])
+    };
+
+    let mut last: Option<OdometryState> = None;
+    let mut frame: Option<TruthFrame> = None;
+    let mut rest_errors = Vec::new();
+    let mut truth_distance = 0.0;
+    let mut prev_truth: Option<Vector3<f64>> = None;
+    let mut error: Option<anyhow::Error> = None;
+    let no_zupt = args.no_zupt;
+    let mut feed = |c: &CorrectedImuSample, odometry: &mut OdometryStage| {
+        if error.is_some() {
+            return;
+        }
+        let mut c = *c;
+        if no_zupt && odometry.aligned() {
+            c.flags &= !corrected_flags::ZERO_STATE;
+        }
+        let mut states: [Option<OdometryState>; 1] = [None];
+        let result = odometry.process(&c, &mut |s: &OdometryState| {
+            if s.flags & odometry_flags::REVISION == 0 {
+                states[0] = Some(*s);
+            }
+        });
+        if let Err(e) = result {
+            error = Some(anyhow::anyhow!("{}: {e}", args.input.display()));
+            return;
+        }
+        let Some(state) = states[0] else { return };
+        if let Some(t) = truth_at(state.stamps.sample_ns) {
+            let p = Vector3::from(t.position_m);
+            if let Some(q) = prev_truth {
+                truth_distance += (p - q).xy().norm();
+            }
+            prev_truth = Some(p);
+            if frame.is_none() && state.flags & odometry_flags::ALIGNED != 0 {
+                frame = Some(TruthFrame::new(&state, t));
+            }
+            let new_rest = last.is_some_and(|l| state.rest_count > l.rest_count);
+            if let (Some(f), true) = (&frame, new_rest) {
+                let e = Vector3::from(state.position_m) - f.position(t);
+                rest_errors.push(json!({
+                    "t_s": state.stamps.sample_ns as f64 * 1e-9,
+                    "error_m": [e.x, e.y, e.z],
+                    "truth_distance_m": truth_distance,
+                }));
+            }
+        }
+        last = Some(state);
+    };
+    for raw in &recording.samples {
+        calibration
+            .push(raw, &mut |c: &CorrectedImuSample| feed(c, &mut odometry))
+            .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
+    }
+    calibration.finish(&mut |c: &CorrectedImuSample| feed(c, &mut odometry));
+    if let Some(e) = error {
+        return Err(e);
+    }
+    let Some(end) = last else {
+        bail!("{}: no samples", args.input.display());
+    };
+    if end.flags & odometry_flags::ALIGNED == 0 {
+        bail!(
+            "{}: never aligned (no rest of {} s was detected)",
+            args.input.display(),
+            args.stage.learn_s
+        );
+    }
+    let truth_error = match (&frame, truth_at(end.stamps.sample_ns)) {
+        (Some(f), Some(t)) => {
+            let e = Vector3::from(end.position_m) - f.position(t);
+            Some([e.x, e.y, e.z])
+        }
+        _ => None,
+    };
+    let result = json!({
+        "end_displacement_m": end.position_m,
+        "sigma_m": end.position_sigma_m,
+        "distance_m": end.distance_m,
+        "truth_error_m": truth_error,
+        "truth_distance_m": truth_error.map(|_| truth_distance),
+        "rest_intervals": rest_errors,
+        "seq": end.seq,
+    });
+    if args.json {
+        println!("{result}");
+    } else {
+        let p = end.position_m;
+        let s = end.position_sigma_m;
+        println!(
+            "end displacement ({:+.4}, {:+.4}, {:+.4}) m +- ({:.4}, {:.4}, {:.4}) m, distance {:.2} m",
+            p[0], p[1], p[2], s[0], s[1], s[2], end.distance_m
+        );
+        if let Some(e) = truth_error {
+            let horizontal = (e[0] * e[0] + e[1] * e[1]).sqrt();
+            println!(
+                "error against truth ({:+.3}, {:+.3}, {:+.3}) m: {:.2} % of {:.1} m travelled",
+                e[0],
+                e[1],
+                e[2],
+                100.0 * horizontal / truth_distance.max(f64::EPSILON),
+                truth_distance
+            );
+        }
+    }
+    Ok(())
+}

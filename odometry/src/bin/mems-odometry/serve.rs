@@ -1,0 +1,92 @@
+//! `mems-odometry serve`: the odometry stage between `mems/imu/corrected` and
+//! `mems/odometry/state`.
+//!
+//! - Every corrected sample gives one state, in order; the end of a motion interval also
+//!   republishes that interval's states with the `REVISION` flag. `stamps.odometry_ns` is
+//!   `CLOCK_MONOTONIC` at publication.
+//! - A refused sample (NaN, time not increasing) is reported on stderr and skipped.
+//! - Sequence numbers that go back mean a new sensor session (a restarted acquire): the stage
+//!   starts over (new alignment).
+//! - SIGINT/SIGTERM (`node.wait` returns an error): a summary, exit status 0.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use calibrate::calibfile::CalibrationFile;
+use ipc_types::clock::monotonic_ns;
+use ipc_types::{CorrectedImuSample, OdometryState, service};
+use odometry::stage::OdometryStage;
+
+/// Options of `mems-odometry serve`.
+#[derive(clap::Args)]
+pub struct ServeArgs {
+    /// Calibration file (TOML): its gravity and noise parameters configure the filter.
+    #[arg(long)]
+    calib: PathBuf,
+    /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
+    #[arg(long)]
+    namespace: Option<String>,
+}
+
+/// Runs until SIGINT/SIGTERM.
+pub fn run(args: ServeArgs) -> Result<()> {
+    let file = CalibrationFile::load(&args.calib)
+        .with_context(|| format!("cannot load calibration {}", args.calib.display()))?;
+    let config = crate::odometry_config(&file);
+    let namespace = service::namespace(args.namespace.as_deref());
+    let node = service::node()?;
+    let corrected = service::open::<CorrectedImuSample>(
+        &node,
+        &service::full_name(&namespace, service::CORRECTED),
+    )?;
+    let odometry =
+        service::open::<OdometryState>(&node, &service::full_name(&namespace, service::ODOMETRY))?;
+    let subscriber = service::subscriber(&corrected)?;
+    let publisher = service::publisher(&odometry)?;
+
+    let mut stage = OdometryStage::new(config);
+    let mut last_seq: Option<u64> = None;
+    let (mut received, mut published, mut refused, mut sessions) = (0u64, 0u64, 0u64, 1u64);
+    let mut send_error: Option<anyhow::Error> = None;
+    // node.wait returns an error on SIGINT/SIGTERM: the clean way out.
+    while node.wait(Duration::from_millis(1)).is_ok() {
+        while let Some(sample) = subscriber.receive()? {
+            let s = *sample.payload();
+            received += 1;
+            if last_seq.is_some_and(|l| s.seq <= l) {
+                // A new sensor session: align again.
+                stage = OdometryStage::new(config);
+                sessions += 1;
+            }
+            last_seq = Some(s.seq);
+            let mut emit = |state: &OdometryState| {
+                if send_error.is_some() {
+                    return;
+                }
+                let mut out = *state;
+                out.stamps.odometry_ns = monotonic_ns();
+                match publisher.loan_uninit() {
+                    Ok(slot) => match slot.write_payload(out).send() {
+                        Ok(_) => published += 1,
+                        Err(e) => send_error = Some(anyhow::anyhow!("cannot send a state: {e:?}")),
+                    },
+                    Err(e) => send_error = Some(anyhow::anyhow!("cannot loan a state: {e:?}")),
+                }
+            };
+            if let Err(e) = stage.process(&s, &mut emit) {
+                refused += 1;
+                eprintln!("mems-odometry: refused: {e}");
+            }
+            if let Some(e) = send_error.take() {
+                return Err(e);
+            }
+        }
+    }
+    eprintln!(
+        "mems-odometry: received {received}, published {published} (revisions included), \
+         refused {refused}, sessions {sessions}, discarded for stalled subscribers {}",
+        service::stalled_discards()
+    );
+    Ok(())
+}
