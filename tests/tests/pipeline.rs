@@ -164,13 +164,11 @@ fn live_pipeline_matches_offline_replay_exactly() {
         last.seq,
         "same last sample"
     );
-    for i in 0..3 {
+    for (axis, (offline, live)) in end.iter().zip(last.position_m).enumerate() {
         assert_eq!(
-            end[i].to_bits(),
-            last.position_m[i].to_bits(),
-            "axis {i}: offline {} vs live {}",
-            end[i],
-            last.position_m[i]
+            offline.to_bits(),
+            live.to_bits(),
+            "axis {axis}: offline {offline} vs live {live}"
         );
     }
     // The robot moved: the comparison is not between two zero vectors.
