@@ -8,12 +8,14 @@ use ipc_types::RawImuSample;
 use ipc_types::units::STANDARD_GRAVITY_MPS2;
 use serde::{Deserialize, Serialize};
 
-use crate::allan::overlapping_avar;
-use crate::fit::{FitError, ModelFit, fit};
-use crate::floor::{measured_static_displacement, static_displacement_sigma};
+use crate::allan::overlapping_avar_consuming;
+use crate::fit::{CovarianceBasis, FitError, ModelFit, fit_with};
+use crate::floor::{detrended_displacement_ns, static_displacement_sigma};
 use crate::params::{AxisNoise, NoiseParams, SensorNoise};
-use crate::repair::{RepairConfig, RepeatReport, TornReport, count_repeats, repair_torn_reads};
-use crate::series::{self, AXES, Channel, GapPolicy, Sensor, SeriesError, Timing};
+use crate::repair::{
+    RepairConfig, RepeatReport, TEAR_COUNTS, TornReport, apply_to_samples, detect_axes,
+};
+use crate::series::{AXES, Channel, Columns, GapPolicy, Sensor, SeriesError, Timing};
 
 /// How to analyse a recording.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -127,25 +129,42 @@ pub fn analyze(
         source_name: source.to_owned(),
         error,
     };
-    let timing = series::timing(samples, &options.gaps).map_err(series_error)?;
-    let repeats = count_repeats(samples);
-    let torn = options
-        .repair
-        .map(|config| repair_torn_reads(samples, &config));
-    let channels = series::channels(samples, options.gravity_mps2).map_err(series_error)?;
-    let fits = fit_channels(&channels, &timing);
-    let mut reports = Vec::with_capacity(channels.len());
-    for (channel, result) in channels.iter().zip(fits) {
+    let mut columns = Columns::new(samples, options.gravity_mps2).map_err(series_error)?;
+    let timing = columns.timing(&options.gaps);
+    let repeats = columns.repeats;
+    let torn = options.repair.map(|config| {
+        let tears = detect_axes(&columns.counts);
+        // The same shifts on the SI columns: g (times gravity) and deg/s (in radians).
+        for (a, axis_tears) in tears.iter().enumerate() {
+            let step = if a < 3 {
+                f64::from(TEAR_COUNTS) / config.accel_lsb_per_g * options.gravity_mps2
+            } else {
+                (f64::from(TEAR_COUNTS) / config.gyro_lsb_per_dps).to_radians()
+            };
+            for &(i, k) in &axis_tears.fixes {
+                columns.values[a][i] -= f64::from(k) * step;
+            }
+        }
+        apply_to_samples(samples, &tears, &config)
+    });
+    let measured_record_m = std::array::from_fn(|axis| {
+        detrended_displacement_ns(&columns.times_ns, &columns.values[axis])
+    });
+    let channels = columns.into_channels();
+    let kinds: Vec<(Sensor, usize)> = channels.iter().map(|c| (c.sensor, c.axis)).collect();
+    let fits = fit_channels(channels, &timing);
+    let mut reports = Vec::with_capacity(kinds.len());
+    for (&(sensor, axis), result) in kinds.iter().zip(fits) {
         let fit = result.map_err(|error| AnalysisError::Fit {
             source_name: source.to_owned(),
-            sensor: channel.sensor,
-            axis: AXES[channel.axis],
+            sensor,
+            axis: AXES[axis],
             error,
         })?;
         reports.push(ChannelReport {
-            sensor: channel.sensor,
-            axis: channel.axis,
-            unit: channel.sensor.unit().to_owned(),
+            sensor,
+            axis,
+            unit: sensor.unit().to_owned(),
             fit,
         });
     }
@@ -185,7 +204,7 @@ pub fn analyze(
         predicted_m: floor_at(options.floor_horizon_s),
         record_s: timing.duration_s,
         predicted_record_m: floor_at(timing.duration_s),
-        measured_record_m: measured_static_displacement(samples, options.gravity_mps2),
+        measured_record_m,
     };
     Ok(Report {
         source: source.to_owned(),
@@ -230,29 +249,40 @@ pub fn join_records(records: &[Vec<RawImuSample>]) -> Vec<RawImuSample> {
     joined
 }
 
-/// Allan curve and fit of every channel, spread over the available cores.
-fn fit_channels(channels: &[Channel], timing: &Timing) -> Vec<Result<ModelFit, FitError>> {
+/// Allan curve and fit of every channel, spread over the available cores (each channel's
+/// values become its cumulative sums; the fits share one covariance basis, every channel having
+/// the same cluster sizes).
+fn fit_channels(channels: Vec<Channel>, timing: &Timing) -> Vec<Result<ModelFit, FitError>> {
     let segments = timing.segment_ranges();
+    let curves = parallel_map(channels, |channel| {
+        overlapping_avar_consuming(channel.values, &segments, timing.mean_interval_s)
+    });
+    let basis = CovarianceBasis::for_curve(&curves[0]);
+    parallel_map(curves.iter().collect(), |curve| fit_with(curve, &basis))
+}
+
+/// `items.into_iter().map(f)` on as many threads as there are cores (at most one per item).
+fn parallel_map<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync) -> Vec<R> {
+    let count = items.len();
     let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<Result<ModelFit, FitError>>>> =
-        Mutex::new(channels.iter().map(|_| None).collect());
+    let inputs: Mutex<Vec<Option<T>>> = Mutex::new(items.into_iter().map(Some).collect());
+    let results: Mutex<Vec<Option<R>>> = Mutex::new((0..count).map(|_| None).collect());
     let workers = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
-        .min(channels.len());
+        .min(count);
     std::thread::scope(|scope| {
         for _ in 0..workers {
             scope.spawn(|| {
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(channel) = channels.get(i) else {
+                    if i >= count {
                         break;
-                    };
-                    let curve =
-                        overlapping_avar(&channel.values, &segments, timing.mean_interval_s);
-                    let result = fit(&curve);
-                    results
-                        .lock()
-                        .expect("no worker panics while holding the lock")[i] = Some(result);
+                    }
+                    let item = inputs.lock().expect("no panics while locked")[i]
+                        .take()
+                        .expect("each item is taken once");
+                    let result = f(item);
+                    results.lock().expect("no panics while locked")[i] = Some(result);
                 }
             });
         }
@@ -261,6 +291,6 @@ fn fit_channels(channels: &[Channel], timing: &Timing) -> Vec<Result<ModelFit, F
         .into_inner()
         .expect("workers finished")
         .into_iter()
-        .map(|r| r.expect("every channel analysed"))
+        .map(|r| r.expect("every item processed"))
         .collect()
 }

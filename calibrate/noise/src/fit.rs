@@ -8,13 +8,13 @@
 //!
 //! The fit is linear in `p = (N^2, B^2, K^2)`: generalised least squares with the covariance
 //! of the Allan variance estimates, constrained to `p >= 0` (exact NNLS by enumerating the
-//! faces of the orthant). The covariance has
-//! - variances `2 AVAR_model^2 / edf`, with the equivalent degrees of freedom of the noise
-//!   that dominates the model at each cluster time (the chi-squared confidence intervals'
-//!   widths), and
-//! - correlations between cluster times from the spectral integrals of [`crate::spectral`]
-//!   (neighbouring cluster times share most of their data: ignoring this would understate the
-//!   parameters' sigmas about twofold).
+//! faces of the orthant). The covariance is that of the model being fitted, for this record's
+//! length and segments ([`crate::covariance`]): its diagonal is `2 AVAR^2 / edf` (the
+//! equivalent degrees of freedom that set the chi-squared confidence intervals), and its
+//! off-diagonal terms carry the correlation of cluster times that share most of their data
+//! (ignoring it would understate the parameters' sigmas about twofold). The first iteration
+//! uses the measured variances with white-noise degrees of freedom (Howe, Allan & Barnes) and
+//! no correlation.
 //!
 //! The model and the covariance are iterated to convergence. The parameters' covariance is
 //! `(X' C^-1 X)^-1`, inflated by the reduced chi-squared when that exceeds 1 (model misfit).
@@ -25,7 +25,7 @@ use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use serde::{Deserialize, Serialize};
 
 use crate::allan::{self, AllanCurve, NoiseKind};
-use crate::spectral;
+use crate::covariance;
 
 /// `2 ln 2 / pi`: the Allan variance of flicker rate noise per `B^2`.
 pub const FLICKER_FACTOR: f64 = 2.0 * std::f64::consts::LN_2 / std::f64::consts::PI;
@@ -157,14 +157,57 @@ pub fn model_avar(p: &[f64; 3], tau_s: f64) -> f64 {
     regressors(tau_s).iter().zip(p).map(|(x, p)| x * p).sum()
 }
 
-/// The least-squares problem in whitened form, and what is needed to rebuild it.
-struct Problem {
+/// The least-squares problem, and what is needed to rebuild its covariance.
+struct Problem<'a> {
     taus: Vec<f64>,
     avars: Vec<f64>,
-    /// Per point: terms in each segment (0 where the segment is too short).
-    segment_terms: Vec<Vec<usize>>,
-    /// Basis-product integrals per pair (i <= j), row-major upper triangle.
-    integrals: Vec<[f64; spectral::PAIRS]>,
+    /// Per point: overlapping differences averaged (all segments).
+    terms: Vec<f64>,
+    basis: &'a CovarianceBasis,
+}
+
+/// The lag sums of [`crate::covariance`] for a grid of cluster sizes, a sample interval and a
+/// set of segment lengths: they do not depend on the noise, so the series analysed on the same
+/// grid (the axes of one recording) share them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CovarianceBasis {
+    sizes: Vec<usize>,
+    tau0_s: f64,
+    segment_lengths: Vec<usize>,
+    /// Per pair (i <= j) of sizes, row-major upper triangle.
+    sums: Vec<[f64; covariance::PAIRS]>,
+}
+
+impl CovarianceBasis {
+    /// The lag sums for the cluster sizes, sample interval and segments of `curve`.
+    pub fn for_curve(curve: &AllanCurve) -> Self {
+        let sizes: Vec<usize> = curve.points.iter().map(|p| p.m).collect();
+        let t = sizes.len();
+        let mut sums = Vec::with_capacity(t * (t + 1) / 2);
+        for i in 0..t {
+            for j in i..t {
+                sums.push(covariance::pair_sums(
+                    sizes[i],
+                    sizes[j],
+                    &curve.segment_lengths,
+                    curve.tau0_s,
+                ));
+            }
+        }
+        Self {
+            sizes,
+            tau0_s: curve.tau0_s,
+            segment_lengths: curve.segment_lengths.clone(),
+            sums,
+        }
+    }
+
+    /// Whether the basis was computed for `curve`'s cluster sizes, interval and segments.
+    pub fn matches(&self, curve: &AllanCurve) -> bool {
+        self.tau0_s == curve.tau0_s
+            && self.segment_lengths == curve.segment_lengths
+            && self.sizes.iter().eq(curve.points.iter().map(|p| &p.m))
+    }
 }
 
 /// A weighted least-squares solution on a subset of the terms.
@@ -175,37 +218,13 @@ struct Solution {
     free: usize,
 }
 
-impl Problem {
-    fn new(curve: &AllanCurve) -> Self {
-        let taus: Vec<f64> = curve.points.iter().map(|p| p.tau_s).collect();
-        let avars = curve.points.iter().map(|p| p.avar).collect();
-        let segment_terms = curve
-            .points
-            .iter()
-            .map(|p| {
-                curve
-                    .segment_lengths
-                    .iter()
-                    .map(|&len| if len >= 2 * p.m { len - 2 * p.m + 1 } else { 0 })
-                    .collect()
-            })
-            .collect();
-        let t = curve.points.len();
-        let mut integrals = Vec::with_capacity(t * (t + 1) / 2);
-        for i in 0..t {
-            for j in i..t {
-                integrals.push(spectral::pair_integrals(
-                    curve.points[i].m,
-                    curve.points[j].m,
-                    curve.tau0_s,
-                ));
-            }
-        }
+impl<'a> Problem<'a> {
+    fn new(curve: &AllanCurve, basis: &'a CovarianceBasis) -> Self {
         Self {
-            taus,
-            avars,
-            segment_terms,
-            integrals,
+            taus: curve.points.iter().map(|p| p.tau_s).collect(),
+            avars: curve.points.iter().map(|p| p.avar).collect(),
+            terms: curve.points.iter().map(|p| p.terms as f64).collect(),
+            basis,
         }
     }
 
@@ -213,47 +232,36 @@ impl Problem {
         self.taus.len()
     }
 
-    /// `int S^2 |H_i|^2 |H_j|^2` for the model `p`.
-    fn spectral_product(&self, i: usize, j: usize, p: &[f64; 3]) -> f64 {
+    /// `Cov(A_i, A_j)` under model `p` (see [`crate::covariance`]).
+    fn covariance(&self, i: usize, j: usize, p: &[f64; 3]) -> f64 {
         let (i, j) = (i.min(j), i.max(j));
         let t = self.len();
         let index = i * t - i * (i + 1) / 2 + j;
-        spectral::PAIR_INDICES
+        let sum: f64 = covariance::PAIR_INDICES
             .iter()
-            .zip(&self.integrals[index])
+            .zip(&self.basis.sums[index])
             .map(|(&(k, l), v)| {
                 let multiplicity = if k == l { 1.0 } else { 2.0 };
                 multiplicity * p[k] * p[l] * v
             })
-            .sum()
+            .sum();
+        sum / (2.0 * self.terms[i] * self.terms[j])
     }
 
-    /// Correlation matrix of the estimates under model `p`.
-    fn correlation(&self, p: &[f64; 3]) -> DMatrix<f64> {
+    /// Standard deviations and correlation matrix of the estimates under model `p`.
+    fn covariance_matrix(&self, p: &[f64; 3]) -> (Vec<f64>, DMatrix<f64>) {
         let t = self.len();
-        let totals: Vec<f64> = self
-            .segment_terms
-            .iter()
-            .map(|s| s.iter().sum::<usize>() as f64)
-            .collect();
-        let diagonal: Vec<f64> = (0..t).map(|i| self.spectral_product(i, i, p)).collect();
-        DMatrix::from_fn(t, t, |i, j| {
+        let sd: Vec<f64> = (0..t).map(|i| self.covariance(i, i, p).sqrt()).collect();
+        let correlation = DMatrix::from_fn(t, t, |i, j| {
             if i == j {
-                return 1.0;
-            }
-            let shared: usize = self.segment_terms[i]
-                .iter()
-                .zip(&self.segment_terms[j])
-                .map(|(a, b)| *a.min(b))
-                .sum();
-            let overlap = shared as f64 / (totals[i] * totals[j]).sqrt();
-            let denominator = (diagonal[i] * diagonal[j]).sqrt();
-            if denominator > 0.0 {
-                (self.spectral_product(i, j, p) / denominator * overlap).clamp(-1.0, 1.0)
+                1.0
+            } else if sd[i] > 0.0 && sd[j] > 0.0 {
+                (self.covariance(i, j, p) / (sd[i] * sd[j])).clamp(-1.0, 1.0)
             } else {
                 0.0
             }
-        })
+        });
+        (sd, correlation)
     }
 
     /// Solves the GLS problem for the terms in `mask` (bit k = term k free) with covariance
@@ -342,6 +350,17 @@ fn dominant(p: &[f64; 3], tau_s: f64) -> NoiseKind {
 
 /// Fits the noise model to an Allan curve (see the module documentation).
 pub fn fit(curve: &AllanCurve) -> Result<ModelFit, FitError> {
+    fit_with(curve, &CovarianceBasis::for_curve(curve))
+}
+
+/// [`fit`] with precomputed integrals (see [`CovarianceBasis`]).
+///
+/// Panics if `basis` was computed for other cluster sizes or another sample interval.
+pub fn fit_with(curve: &AllanCurve, basis: &CovarianceBasis) -> Result<ModelFit, FitError> {
+    assert!(
+        basis.matches(curve),
+        "the covariance basis was computed for other cluster sizes or another sample interval"
+    );
     if curve.points.len() < MIN_POINTS {
         return Err(FitError::TooFewPoints {
             found: curve.points.len(),
@@ -358,18 +377,26 @@ pub fn fit(curve: &AllanCurve) -> Result<ModelFit, FitError> {
             avar: bad.avar,
         });
     }
-    let problem = Problem::new(curve);
+    let problem = Problem::new(curve, basis);
     let t = problem.len();
+    let white_edf: Vec<f64> = curve
+        .points
+        .iter()
+        .map(|point| allan::pooled_edf(NoiseKind::White, point.m, &curve.segment_lengths))
+        .collect();
+    // Equivalent degrees of freedom under model p: 2 AVAR^2 / Var(AVAR estimate), with the
+    // noise that dominates (reported; the white-noise formula where the model is empty).
     let edf_for = |p: &[f64; 3]| -> Vec<(f64, NoiseKind)> {
-        curve
-            .points
-            .iter()
-            .map(|point| {
-                let kind = dominant(p, point.tau_s);
-                (
-                    allan::pooled_edf(kind, point.m, &curve.segment_lengths),
-                    kind,
-                )
+        (0..t)
+            .map(|i| {
+                let model = model_avar(p, problem.taus[i]);
+                let variance = problem.covariance(i, i, p);
+                let edf = if model > 0.0 && variance > 0.0 {
+                    2.0 * model * model / variance
+                } else {
+                    white_edf[i]
+                };
+                (edf, dominant(p, problem.taus[i]))
             })
             .collect()
     };
@@ -378,28 +405,19 @@ pub fn fit(curve: &AllanCurve) -> Result<ModelFit, FitError> {
     let sd: Vec<f64> = curve
         .points
         .iter()
-        .map(|point| {
-            let edf = allan::pooled_edf(NoiseKind::White, point.m, &curve.segment_lengths);
-            point.avar * (2.0 / edf).sqrt()
-        })
+        .zip(&white_edf)
+        .map(|(point, &edf)| point.avar * (2.0 / edf).sqrt())
         .collect();
+    let floor = sd.iter().map(|s| 1e-3 * s).collect::<Vec<f64>>();
     let mut whitening = Problem::whitening(&sd, DMatrix::identity(t, t));
     let mut solution = problem.nnls(&whitening);
     for _ in 0..MAX_ITERATIONS {
         let p = solution.p;
-        let edfs = edf_for(&p);
-        let sd: Vec<f64> = problem
-            .taus
-            .iter()
-            .zip(&problem.avars)
-            .zip(&edfs)
-            .map(|((&tau, &measured), &(edf, _))| {
-                // The model's variance (not the measurement's) avoids weighting low
-                // fluctuations up; a floor keeps a zero model usable.
-                model_avar(&p, tau).max(1e-3 * measured) * (2.0 / edf).sqrt()
-            })
-            .collect();
-        whitening = Problem::whitening(&sd, problem.correlation(&p));
+        // The model's covariance (not the measurement's) avoids weighting low fluctuations
+        // up; a floor keeps a degenerate model usable.
+        let (model_sd, correlation) = problem.covariance_matrix(&p);
+        let sd: Vec<f64> = model_sd.iter().zip(&floor).map(|(s, f)| s.max(*f)).collect();
+        whitening = Problem::whitening(&sd, correlation);
         let next = problem.nnls(&whitening);
         let change = problem
             .taus
@@ -621,7 +639,11 @@ mod tests {
         let p = [4e-6, 1e-6, 1e-7];
         let fit = fit(&model_curve(p, 0.01, 200_000)).unwrap();
         for (fitted, truth) in fit.coefficients.iter().zip(p) {
-            assert!((fitted / truth - 1.0).abs() < 1e-6, "{:?}", fit.coefficients);
+            assert!(
+                (fitted / truth - 1.0).abs() < 1e-6,
+                "{:?}",
+                fit.coefficients
+            );
         }
         assert!(fit.chi2 < 1e-12);
         let (n, _) = fit.white.resolved().unwrap();

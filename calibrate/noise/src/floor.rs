@@ -32,18 +32,29 @@ pub fn static_displacement_sigma(n: f64, b: f64, k: f64, t_s: f64) -> f64 {
 /// given times (which need not be uniform). Needs at least two samples.
 pub fn detrended_displacement(times_s: &[f64], values: &[f64]) -> f64 {
     assert_eq!(times_s.len(), values.len(), "one time per value");
-    assert!(times_s.len() >= 2, "at least two samples");
-    let duration = times_s[times_s.len() - 1] - times_s[0];
-    let area: f64 = times_s
-        .windows(2)
-        .zip(values.windows(2))
-        .map(|(t, v)| 0.5 * (v[0] + v[1]) * (t[1] - t[0]))
+    displacement(|i| times_s[i], values)
+}
+
+/// [`detrended_displacement`] with times in integer nanoseconds (any origin).
+pub fn detrended_displacement_ns(times_ns: &[u64], values: &[f64]) -> f64 {
+    assert_eq!(times_ns.len(), values.len(), "one time per value");
+    let t0 = times_ns[0];
+    displacement(|i| (times_ns[i] - t0) as f64 * 1e-9, values)
+}
+
+/// The work of [`detrended_displacement`], times given by index.
+fn displacement(time: impl Fn(usize) -> f64, values: &[f64]) -> f64 {
+    let n = values.len();
+    assert!(n >= 2, "at least two samples");
+    let duration = time(n - 1) - time(0);
+    let area: f64 = (1..n)
+        .map(|i| 0.5 * (values[i - 1] + values[i]) * (time(i) - time(i - 1)))
         .sum();
     let mean = area / duration;
     let (mut velocity, mut position) = (0.0, 0.0);
-    for (t, v) in times_s.windows(2).zip(values.windows(2)) {
-        let dt = t[1] - t[0];
-        let next = velocity + 0.5 * ((v[0] - mean) + (v[1] - mean)) * dt;
+    for i in 1..n {
+        let dt = time(i) - time(i - 1);
+        let next = velocity + 0.5 * ((values[i - 1] - mean) + (values[i] - mean)) * dt;
         position += 0.5 * (velocity + next) * dt;
         velocity = next;
     }

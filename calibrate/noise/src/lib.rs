@@ -28,7 +28,7 @@ pub mod params;
 pub mod plot;
 pub mod repair;
 pub mod series;
-mod spectral;
+mod covariance;
 pub mod synth;
 
 pub use analysis::{Options, Report, analyze};

@@ -32,6 +32,8 @@
 //! [`count_repeats`] and left in place: it is a zero-order hold of the sensor output, and
 //! removing it would make the sampling irregular.
 
+use std::collections::BTreeMap;
+
 use ipc_types::units::{AccelRange, GyroRange};
 use ipc_types::{RawImuSample, raw_flags};
 use serde::{Deserialize, Serialize};
@@ -84,8 +86,9 @@ pub struct AxisTears {
     pub fixes: Vec<(usize, i32)>,
     /// Robust standard deviation of the samples around their neighbours' median, counts.
     pub noise_counts: f64,
-    /// Distance from the reference beyond which a sample was considered torn, counts.
-    pub threshold_counts: f64,
+    /// Distance from the reference beyond which a sample was considered torn, counts; `None`
+    /// when the axis is too noisy for a tear to be told from noise (see [`MAX_NOISE_COUNTS`]).
+    pub threshold_counts: Option<f64>,
 }
 
 /// What torn-read repair did to one axis.
@@ -95,8 +98,9 @@ pub struct AxisRepair {
     pub repaired: usize,
     /// Robust noise of the axis around its local median, counts.
     pub noise_counts: f64,
-    /// Decision threshold used, counts (see the module documentation).
-    pub threshold_counts: f64,
+    /// Decision threshold used, counts (see the module documentation); `None` when the axis
+    /// was too noisy to repair.
+    pub threshold_counts: Option<f64>,
 }
 
 /// What [`repair_torn_reads`] did to a recording.
@@ -121,44 +125,69 @@ pub struct RepeatReport {
 }
 
 /// Finds torn reads in one axis' counts (see the module documentation). Records shorter than
-/// seven samples have no reference and give no fixes.
+/// thirteen samples have no reference and give no fixes.
 ///
 /// Runs in up to [`MAX_PASSES`] passes: each repairs what it can decide and the next sees the
 /// repaired neighbours, so that an axis with many tears (where up to half of a sample's
-/// neighbours may be torn) converges.
+/// neighbours may be torn) converges. Later passes look only at the previous pass' undecided
+/// candidates and at the neighbourhoods of its repairs: elsewhere no reference changed.
 pub fn detect_tears(counts: &[i16]) -> AxisTears {
-    let mut c: Vec<i32> = counts.iter().map(|&v| i32::from(v)).collect();
-    let n = c.len();
+    let n = counts.len();
     if n < 2 * HALF_WINDOW + 1 {
         return AxisTears::default();
     }
-    let mut shifts = vec![0i32; n];
-    let mut repaired = 0usize;
-    let mut last = PassStatistics::default();
-    for _ in 0..MAX_PASSES {
-        let (fixes, statistics) = tear_pass(&c, repaired);
-        last = statistics;
-        if fixes.is_empty() {
+    let sigma = noise_scale(counts);
+    if sigma > MAX_NOISE_COUNTS {
+        return AxisTears {
+            fixes: Vec::new(),
+            noise_counts: sigma,
+            threshold_counts: None,
+        };
+    }
+    let mut c = counts.to_vec();
+    let mut shifts: BTreeMap<usize, i32> = BTreeMap::new();
+    let mut last = PassStatistics {
+        sigma,
+        threshold: None,
+    };
+    let mut examine: Option<Vec<usize>> = None;
+    for pass_index in 0..MAX_PASSES {
+        // The first pass reuses the noise estimated above; later ones re-estimate it on the
+        // partly repaired samples.
+        let sigma = if pass_index == 0 { sigma } else { noise_scale(&c) };
+        let pass = tear_pass(&c, sigma, shifts.len(), examine.as_deref());
+        last = pass.statistics;
+        if pass.fixes.is_empty() {
             break;
         }
-        for (i, k) in fixes {
-            if shifts[i] == 0 {
-                repaired += 1;
-            }
-            c[i] -= k * TEAR_COUNTS;
-            shifts[i] += k;
+        let mut next = pass.undecided;
+        for (i, k) in pass.fixes {
+            c[i] = shifted(c[i], k);
+            *shifts.entry(i).or_insert(0) += k;
+            next.extend(i.saturating_sub(2 * HALF_WINDOW)..(i + 2 * HALF_WINDOW + 1).min(n));
         }
+        next.sort_unstable();
+        next.dedup();
+        examine = Some(next);
     }
     AxisTears {
-        fixes: shifts
-            .iter()
-            .enumerate()
-            .filter(|(_, k)| **k != 0)
-            .map(|(i, &k)| (i, k))
-            .collect(),
+        fixes: shifts.into_iter().filter(|&(_, k)| k != 0).collect(),
         noise_counts: last.sigma,
         threshold_counts: last.threshold,
     }
+}
+
+/// Robust noise of counts around their neighbours' median, counts: 1.4826 * MAD (a Gaussian
+/// sigma) over a subsample of at most [`NOISE_SUBSAMPLE`] samples.
+fn noise_scale(c: &[i16]) -> f64 {
+    let n = c.len();
+    let stride = n.div_ceil(NOISE_SUBSAMPLE).max(1);
+    let mut deviations: Vec<f64> = (0..n)
+        .step_by(stride)
+        .map(|i| (f64::from(c[i]) - neighbour_median(c, i)).abs())
+        .collect();
+    let mid = deviations.len() / 2;
+    1.4826 * *deviations.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// Passes of [`detect_tears`] at most.
@@ -167,54 +196,35 @@ pub const MAX_PASSES: usize = 4;
 #[derive(Debug, Clone, Copy, Default)]
 struct PassStatistics {
     sigma: f64,
-    threshold: f64,
+    threshold: Option<f64>,
 }
 
-/// One pass over counts `c` of which `repaired` samples were already repaired: the fixes it
-/// decides, and its noise and threshold.
-fn tear_pass(c: &[i32], repaired: usize) -> (Vec<(usize, i32)>, PassStatistics) {
-    let n = c.len();
-    // Candidates: a sample can be >= HALF_TEAR from the median of its neighbours only if at
-    // least HALF_WINDOW of them are that far on the same side. This cheap count (it
-    // vectorises) spares the median for almost every sample of a long record.
-    let mut candidates = Vec::new();
-    let interior = HALF_WINDOW..n - HALF_WINDOW;
-    let mut below = vec![0u8; n];
-    let mut above = vec![0u8; n];
-    for offset in 1..=HALF_WINDOW {
-        for (i, (b, a)) in below[interior.clone()]
-            .iter_mut()
-            .zip(&mut above[interior.clone()])
-            .enumerate()
-        {
-            let i = i + HALF_WINDOW;
-            let v = c[i];
-            for w in [c[i - offset], c[i + offset]] {
-                *b += u8::from(w <= v - HALF_TEAR);
-                *a += u8::from(w >= v + HALF_TEAR);
-            }
-        }
-    }
-    let threshold_count = HALF_WINDOW as u8;
-    for i in 0..n {
-        let edge = !interior.contains(&i);
-        if edge || below[i] >= threshold_count || above[i] >= threshold_count {
-            let d = f64::from(c[i]) - neighbour_median(c, i);
-            if d.abs() >= f64::from(HALF_TEAR) {
-                candidates.push((i, d));
-            }
-        }
-    }
+/// Above this noise (counts, a third of a tear) the wings of torn reads are buried in the core
+/// and no decision is better than leaving the samples alone: such an axis is not repaired.
+pub const MAX_NOISE_COUNTS: f64 = TEAR_COUNTS as f64 / 3.0;
 
-    // Noise scale from a subsample (1.4826 * MAD estimates a Gaussian sigma).
-    let stride = n.div_ceil(NOISE_SUBSAMPLE).max(1);
-    let mut deviations: Vec<f64> = (0..n)
-        .step_by(stride)
-        .map(|i| (f64::from(c[i]) - neighbour_median(c, i)).abs())
-        .collect();
-    let mid = deviations.len() / 2;
-    let mad = *deviations.select_nth_unstable_by(mid, f64::total_cmp).1;
-    let sigma = 1.4826 * mad;
+/// What one pass decided.
+struct Pass {
+    /// `(index, k)` to repair.
+    fixes: Vec<(usize, i32)>,
+    /// Candidates (at least half a tear from their reference) left alone.
+    undecided: Vec<usize>,
+    statistics: PassStatistics,
+}
+
+/// One pass over counts `c` with noise `sigma` (counts), of which `repaired` samples were
+/// already repaired, looking at the samples in `examine` (every sample when `None`).
+fn tear_pass(c: &[i16], sigma: f64, repaired: usize, examine: Option<&[usize]>) -> Pass {
+    let n = c.len();
+    let deviation = |i: usize| f64::from(c[i]) - neighbour_median(c, i);
+    let candidates: Vec<(usize, f64)> = match examine {
+        Some(indices) => indices
+            .iter()
+            .map(|&i| (i, deviation(i)))
+            .filter(|(_, d)| d.abs() >= f64::from(HALF_TEAR))
+            .collect(),
+        None => all_candidates(c),
+    };
 
     // MAP boundary between "core with noise sigma" and "core + k*256" for a tear fraction p
     // (those repaired by earlier passes plus this pass' candidates), biased towards leaving a
@@ -229,35 +239,80 @@ fn tear_pass(c: &[i32], repaired: usize) -> (Vec<(usize, i32)>, PassStatistics) 
     } else {
         half
     };
+    let statistics = PassStatistics {
+        sigma,
+        threshold: Some(threshold),
+    };
     // A torn value keeps the true low byte, and the true value was crossing a high-byte
     // boundary: a value read 256 too high (k > 0) was just below a boundary (low byte near
     // 0xFF), one read 256 too low (k < 0) just above one (low byte near 0x00), whichever byte
     // the reader fetched first. Allow four noise sigmas of motion between the two byte reads.
     let boundary_window = (4.0 * sigma + 8.0).min(half);
 
-    let fixes = candidates
-        .into_iter()
-        .filter(|&(_, d)| d.abs() >= threshold)
-        .map(|(i, d)| (i, (d / f64::from(TEAR_COUNTS)).round() as i32))
-        .filter(|&(i, k)| {
-            let low = f64::from(c[i].rem_euclid(TEAR_COUNTS));
-            match k.signum() {
-                1 => f64::from(TEAR_COUNTS) - low <= boundary_window,
-                -1 => low < boundary_window,
-                _ => false,
+    let mut fixes = Vec::new();
+    let mut undecided = Vec::new();
+    for (i, d) in candidates {
+        let k = (d / f64::from(TEAR_COUNTS)).round() as i32;
+        let low = f64::from(i32::from(c[i]).rem_euclid(TEAR_COUNTS));
+        let consistent = match k.signum() {
+            1 => f64::from(TEAR_COUNTS) - low <= boundary_window,
+            -1 => low < boundary_window,
+            _ => false,
+        };
+        if d.abs() >= threshold && consistent {
+            fixes.push((i, k));
+        } else {
+            undecided.push(i);
+        }
+    }
+    Pass {
+        fixes,
+        undecided,
+        statistics,
+    }
+}
+
+/// The samples at least half a tear from the median of their neighbours, with that deviation.
+///
+/// A sample can be that far from the median only if at least `HALF_WINDOW` of its neighbours
+/// are that far on the same side: this count (a few compares per sample) spares the median
+/// for almost every sample of a long record.
+fn all_candidates(c: &[i16]) -> Vec<(usize, f64)> {
+    let n = c.len();
+    let enough = HALF_WINDOW as u32;
+    let mut candidates = Vec::new();
+    for i in 0..n {
+        let interior = i >= HALF_WINDOW && i + HALF_WINDOW < n;
+        let passes = !interior || {
+            let v = i32::from(c[i]);
+            let window = &c[i - HALF_WINDOW..=i + HALF_WINDOW];
+            let below: u32 = window
+                .iter()
+                .map(|&w| u32::from(i32::from(w) <= v - HALF_TEAR))
+                .sum();
+            let above: u32 = window
+                .iter()
+                .map(|&w| u32::from(i32::from(w) >= v + HALF_TEAR))
+                .sum();
+            below >= enough || above >= enough
+        };
+        if passes {
+            let d = f64::from(c[i]) - neighbour_median(c, i);
+            if d.abs() >= f64::from(HALF_TEAR) {
+                candidates.push((i, d));
             }
-        })
-        .collect();
-    (fixes, PassStatistics { sigma, threshold })
+        }
+    }
+    candidates
 }
 
 /// Median of the `2 * HALF_WINDOW` samples nearest to `i` (the window is shifted inside the
 /// record at its ends), excluding `i` itself. Needs `c.len() > 2 * HALF_WINDOW`.
-fn neighbour_median(c: &[i32], i: usize) -> f64 {
+fn neighbour_median(c: &[i16], i: usize) -> f64 {
     let start = i
         .saturating_sub(HALF_WINDOW)
         .min(c.len() - 1 - 2 * HALF_WINDOW);
-    let mut window = [0i32; 2 * HALF_WINDOW];
+    let mut window = [0i16; 2 * HALF_WINDOW];
     let mut filled = 0;
     for (j, &v) in c[start..=start + 2 * HALF_WINDOW].iter().enumerate() {
         if start + j != i {
@@ -274,43 +329,73 @@ fn neighbour_median(c: &[i32], i: usize) -> f64 {
 /// (deg/s) by the same amount divided by the configured sensitivity, and the sample gets
 /// `raw_flags::REPAIRED`.
 pub fn repair_torn_reads(samples: &mut [RawImuSample], config: &RepairConfig) -> TornReport {
-    let mut touched = vec![false; samples.len()];
-    let mut report = TornReport::default();
-    for axis in 0..3 {
-        let counts: Vec<i16> = samples.iter().map(|s| s.accel_counts[axis]).collect();
-        let tears = detect_tears(&counts);
-        for &(i, k) in &tears.fixes {
-            let s = &mut samples[i];
-            s.accel_counts[axis] = shifted(s.accel_counts[axis], k);
-            s.accel_g[axis] -= f64::from(k * TEAR_COUNTS) / config.accel_lsb_per_g;
-            touched[i] = true;
-        }
-        report.accel[axis] = summary(&tears);
-    }
     let gyro_valid =
         !samples.is_empty() && samples.iter().all(|s| s.flags & raw_flags::GYRO_VALID != 0);
-    if gyro_valid {
-        let mut gyro = [AxisRepair::default(); 3];
-        for (axis, out) in gyro.iter_mut().enumerate() {
-            let counts: Vec<i16> = samples.iter().map(|s| s.gyro_counts[axis]).collect();
-            let tears = detect_tears(&counts);
-            for &(i, k) in &tears.fixes {
-                let s = &mut samples[i];
-                s.gyro_counts[axis] = shifted(s.gyro_counts[axis], k);
-                s.gyro_dps[axis] -= f64::from(k * TEAR_COUNTS) / config.gyro_lsb_per_dps;
-                touched[i] = true;
-            }
-            *out = summary(&tears);
+    let axes = if gyro_valid { 6 } else { 3 };
+    // One pass over the samples (six would be memory-bound on long records).
+    let mut counts: Vec<Vec<i16>> = (0..axes)
+        .map(|_| Vec::with_capacity(samples.len()))
+        .collect();
+    for s in samples.iter() {
+        for (a, column) in counts.iter_mut().enumerate() {
+            column.push(if a < 3 {
+                s.accel_counts[a]
+            } else {
+                s.gyro_counts[a - 3]
+            });
         }
-        report.gyro = Some(gyro);
+    }
+    let tears = detect_axes(&counts);
+    apply_to_samples(samples, &tears, config)
+}
+
+/// [`detect_tears`] on each column (accelerometer x, y, z, then gyro x, y, z if present),
+/// one thread per column.
+pub fn detect_axes(counts: &[Vec<i16>]) -> Vec<AxisTears> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = counts
+            .iter()
+            .map(|c| scope.spawn(move || detect_tears(c)))
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().expect("tear detection does not panic"))
+            .collect()
+    })
+}
+
+/// Applies the tears of [`detect_axes`] (3 accelerometer columns, then 3 gyro columns if
+/// present) to the samples: counts, values (with the configured sensitivities) and
+/// `raw_flags::REPAIRED`.
+pub fn apply_to_samples(
+    samples: &mut [RawImuSample],
+    tears: &[AxisTears],
+    config: &RepairConfig,
+) -> TornReport {
+    let mut touched = vec![false; samples.len()];
+    for (a, axis_tears) in tears.iter().enumerate() {
+        for &(i, k) in &axis_tears.fixes {
+            let s = &mut samples[i];
+            if a < 3 {
+                s.accel_counts[a] = shifted(s.accel_counts[a], k);
+                s.accel_g[a] -= f64::from(k * TEAR_COUNTS) / config.accel_lsb_per_g;
+            } else {
+                s.gyro_counts[a - 3] = shifted(s.gyro_counts[a - 3], k);
+                s.gyro_dps[a - 3] -= f64::from(k * TEAR_COUNTS) / config.gyro_lsb_per_dps;
+            }
+            touched[i] = true;
+        }
     }
     for (s, &t) in samples.iter_mut().zip(&touched) {
         if t {
             s.flags |= raw_flags::REPAIRED;
         }
     }
-    report.samples_repaired = touched.iter().filter(|&&t| t).count();
-    report
+    TornReport {
+        accel: std::array::from_fn(|a| summary(&tears[a])),
+        gyro: (tears.len() == 6).then(|| std::array::from_fn(|a| summary(&tears[3 + a]))),
+        samples_repaired: touched.iter().filter(|&&t| t).count(),
+    }
 }
 
 /// `count - k * 256`, saturated to the 16-bit range.
@@ -326,17 +411,20 @@ fn summary(tears: &AxisTears) -> AxisRepair {
     }
 }
 
+/// Whether `b` repeats `a`: equal accelerometer counts, and equal gyro counts when both have
+/// `GYRO_VALID`.
+pub(crate) fn is_repeat(a: &RawImuSample, b: &RawImuSample) -> bool {
+    let both_gyro = a.flags & b.flags & raw_flags::GYRO_VALID != 0;
+    a.accel_counts == b.accel_counts && (!both_gyro || a.gyro_counts == b.gyro_counts)
+}
+
 /// Counts samples equal on every valid axis (accelerometer counts, and gyro counts when both
 /// samples have `GYRO_VALID`) to the sample before them.
 pub fn count_repeats(samples: &[RawImuSample]) -> RepeatReport {
     let mut report = RepeatReport::default();
     let mut run = 0;
     for pair in samples.windows(2) {
-        let (a, b) = (&pair[0], &pair[1]);
-        let both_gyro = a.flags & b.flags & raw_flags::GYRO_VALID != 0;
-        let same =
-            a.accel_counts == b.accel_counts && (!both_gyro || a.gyro_counts == b.gyro_counts);
-        if same {
+        if is_repeat(&pair[0], &pair[1]) {
             report.repeats += 1;
             run += 1;
             report.longest_run = report.longest_run.max(run);
@@ -454,6 +542,20 @@ mod tests {
         assert!(
             (ratio - 1.0).abs() < 0.04,
             "variance ratio after repair {ratio}"
+        );
+    }
+
+    #[test]
+    fn leaves_a_very_noisy_axis_alone() {
+        // 120 counts of noise: tears (here a quarter of the reads) are buried in the core.
+        let (recorded, _) = torn_record(1024.0, 120.0, 1.0, 20_000, 4);
+        let tears = detect_tears(&recorded);
+        assert!(tears.fixes.is_empty());
+        assert_eq!(tears.threshold_counts, None);
+        assert!(
+            tears.noise_counts > MAX_NOISE_COUNTS,
+            "{}",
+            tears.noise_counts
         );
     }
 

@@ -20,6 +20,11 @@ use std::ops::Range;
 use ipc_types::{RawImuSample, raw_flags};
 use serde::{Deserialize, Serialize};
 
+use crate::repair::{RepeatReport, is_repeat};
+
+/// Intervals the median interval is taken from at most.
+const MEDIAN_SUBSAMPLE: usize = 1 << 20;
+
 /// Fewest samples an analysis accepts.
 pub const MIN_SAMPLES: usize = 32;
 
@@ -45,7 +50,7 @@ impl Default for GapPolicy {
 /// The sampling of a recording as the analysis sees it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Timing {
-    /// Median interval between samples, s.
+    /// Median interval between samples, s (of at most 2^20 evenly spread intervals).
     pub median_interval_s: f64,
     /// Mean interval within segments (bridged gaps included), s: the analysis' `tau0`.
     pub mean_interval_s: f64,
@@ -108,6 +113,18 @@ pub enum SeriesError {
 
 /// Classifies the intervals of a recording and finds its gap-free segments.
 pub fn timing(samples: &[RawImuSample], policy: &GapPolicy) -> Result<Timing, SeriesError> {
+    check_times(samples)?;
+    let times: Vec<u64> = samples.iter().map(|s| s.stamps.sample_ns).collect();
+    let losses: Vec<(usize, u32)> = samples
+        .iter()
+        .enumerate()
+        .filter_map(|(i, s)| loss(s).map(|lost| (i, lost)))
+        .collect();
+    Ok(timing_of(&times, &losses, policy))
+}
+
+/// Errors unless there are enough samples and their times strictly increase.
+fn check_times(samples: &[RawImuSample]) -> Result<(), SeriesError> {
     if samples.len() < MIN_SAMPLES {
         return Err(SeriesError::TooShort {
             found: samples.len(),
@@ -124,28 +141,47 @@ pub fn timing(samples: &[RawImuSample], policy: &GapPolicy) -> Result<Timing, Se
             });
         }
     }
-    let intervals: Vec<f64> = samples
+    Ok(())
+}
+
+/// Samples lost before `s` when it is flagged (`GAP_BEFORE` or `lost_before > 0`).
+fn loss(s: &RawImuSample) -> Option<u32> {
+    (s.flags & raw_flags::GAP_BEFORE != 0 || s.lost_before > 0).then_some(s.lost_before)
+}
+
+/// [`timing`] from strictly increasing times (ns, at least two) and the flagged losses
+/// `(index, samples lost before it)`, sorted by index.
+fn timing_of(times: &[u64], losses: &[(usize, u32)], policy: &GapPolicy) -> Timing {
+    // The median of at most MEDIAN_SUBSAMPLE evenly spread intervals (exact for shorter
+    // records; a long record's sampling does not change along it fast enough to matter).
+    let stride = (times.len() - 1).div_ceil(MEDIAN_SUBSAMPLE).max(1);
+    let mut sorted: Vec<u64> = times
         .windows(2)
-        .map(|p| (p[1].stamps.sample_ns - p[0].stamps.sample_ns) as f64 * 1e-9)
+        .step_by(stride)
+        .map(|p| p[1] - p[0])
         .collect();
-    let mut sorted = intervals.clone();
     let mid = sorted.len() / 2;
-    let median = *sorted.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let median = *sorted.select_nth_unstable(mid).1 as f64 * 1e-9;
 
     let mut gaps = 0;
     let mut splits = 0;
     let mut segments = Vec::new();
     let mut start = 0;
     let (mut inside_time, mut inside_intervals) = (0.0, 0usize);
-    for (k, &dt) in intervals.iter().enumerate() {
-        let next = &samples[k + 1];
-        let flagged = next.flags & raw_flags::GAP_BEFORE != 0 || next.lost_before > 0;
-        let periods = (dt / median).max(if flagged {
-            f64::from(next.lost_before) + 1.0
-        } else {
-            0.0
-        });
-        if flagged || periods > policy.gap_factor {
+    let mut longest: f64 = 0.0;
+    let mut flagged = losses.iter().peekable();
+    for (k, pair) in times.windows(2).enumerate() {
+        let dt = (pair[1] - pair[0]) as f64 * 1e-9;
+        longest = longest.max(dt);
+        let lost = match flagged.peek() {
+            Some(&&(index, lost)) if index == k + 1 => {
+                flagged.next();
+                Some(lost)
+            }
+            _ => None,
+        };
+        let periods = (dt / median).max(lost.map_or(0.0, |l| f64::from(l) + 1.0));
+        if lost.is_some() || periods > policy.gap_factor {
             gaps += 1;
         }
         if periods > policy.split_factor {
@@ -157,23 +193,129 @@ pub fn timing(samples: &[RawImuSample], policy: &GapPolicy) -> Result<Timing, Se
             inside_intervals += 1;
         }
     }
-    segments.push((start, samples.len()));
+    segments.push((start, times.len()));
     let mean = if inside_intervals > 0 {
         inside_time / inside_intervals as f64
     } else {
         median
     };
-    let duration_s =
-        (samples[samples.len() - 1].stamps.sample_ns - samples[0].stamps.sample_ns) as f64 * 1e-9;
-    Ok(Timing {
+    Timing {
         median_interval_s: median,
         mean_interval_s: mean,
         gaps,
         splits,
-        longest_interval_s: intervals.iter().copied().fold(0.0, f64::max),
+        longest_interval_s: longest,
         segments,
-        duration_s,
-    })
+        duration_s: (times[times.len() - 1] - times[0]) as f64 * 1e-9,
+    }
+}
+
+/// A recording split into per-axis columns in one pass (records of millions of samples make
+/// every pass over the samples count).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Columns {
+    /// `stamps.sample_ns` of every sample.
+    pub times_ns: Vec<u64>,
+    /// `(index, samples lost before it)` of the samples flagged `GAP_BEFORE` or with
+    /// `lost_before > 0`.
+    pub losses: Vec<(usize, u32)>,
+    /// Counts per axis: accelerometer x, y, z, then gyro x, y, z when every sample has it.
+    pub counts: Vec<Vec<i16>>,
+    /// The same axes in SI units (m/s^2 with the given gravity, rad/s).
+    pub values: Vec<Vec<f64>>,
+    /// Repeated samples (see [`crate::repair::count_repeats`]).
+    pub repeats: RepeatReport,
+}
+
+impl Columns {
+    /// Splits the samples; errors as [`timing`] and [`channels`] do.
+    pub fn new(samples: &[RawImuSample], gravity_mps2: f64) -> Result<Self, SeriesError> {
+        if samples.len() < MIN_SAMPLES {
+            return Err(SeriesError::TooShort {
+                found: samples.len(),
+            });
+        }
+        // Gyro columns are filled while every sample has the gyro, and dropped at the first
+        // that has not (their memory is then barely touched).
+        let mut gyro = samples[0].flags & raw_flags::GYRO_VALID != 0;
+        let n = samples.len();
+        let axes = if gyro { 6 } else { 3 };
+        let mut columns = Self {
+            times_ns: Vec::with_capacity(n),
+            losses: Vec::new(),
+            counts: (0..axes).map(|_| Vec::with_capacity(n)).collect(),
+            // One spare element: the Allan analysis turns them into cumulative sums in place.
+            values: (0..axes).map(|_| Vec::with_capacity(n + 1)).collect(),
+            repeats: RepeatReport::default(),
+        };
+        let mut run = 0;
+        let mut previous: Option<&RawImuSample> = None;
+        for (index, s) in samples.iter().enumerate() {
+            if let Some(p) = previous
+                && s.stamps.sample_ns <= p.stamps.sample_ns
+            {
+                return Err(SeriesError::TimeNotIncreasing {
+                    index,
+                    seq: s.seq,
+                    t_ns: s.stamps.sample_ns,
+                    previous_ns: p.stamps.sample_ns,
+                });
+            }
+            if let Some(field) = non_finite_field(s) {
+                return Err(SeriesError::NotFinite {
+                    index,
+                    seq: s.seq,
+                    field,
+                });
+            }
+            columns.times_ns.push(s.stamps.sample_ns);
+            if let Some(lost) = loss(s) {
+                columns.losses.push((index, lost));
+            }
+            for a in 0..3 {
+                columns.counts[a].push(s.accel_counts[a]);
+                columns.values[a].push(s.accel_g[a] * gravity_mps2);
+            }
+            if gyro && s.flags & raw_flags::GYRO_VALID == 0 {
+                gyro = false;
+                columns.counts.truncate(3);
+                columns.values.truncate(3);
+            }
+            if gyro {
+                for a in 0..3 {
+                    columns.counts[3 + a].push(s.gyro_counts[a]);
+                    columns.values[3 + a].push(s.gyro_dps[a].to_radians());
+                }
+            }
+            if previous.is_some_and(|p| is_repeat(p, s)) {
+                columns.repeats.repeats += 1;
+                run += 1;
+                columns.repeats.longest_run = columns.repeats.longest_run.max(run);
+            } else {
+                run = 0;
+            }
+            previous = Some(s);
+        }
+        Ok(columns)
+    }
+
+    /// The sampling (see [`timing`]).
+    pub fn timing(&self, policy: &GapPolicy) -> Timing {
+        timing_of(&self.times_ns, &self.losses, policy)
+    }
+
+    /// The SI columns as channels (consumes the columns).
+    pub fn into_channels(self) -> Vec<Channel> {
+        self.values
+            .into_iter()
+            .enumerate()
+            .map(|(k, values)| Channel {
+                sensor: if k < 3 { Sensor::Accel } else { Sensor::Gyro },
+                axis: k % 3,
+                values,
+            })
+            .collect()
+    }
 }
 
 /// Which sensor a channel comes from.
@@ -212,49 +354,62 @@ pub struct Channel {
 
 /// Converts samples to SI channels: accelerometer always, gyro when every sample has
 /// `GYRO_VALID`. `gravity_mps2` converts g to m/s^2. Errors on a non-finite value.
-pub fn channels(samples: &[RawImuSample], gravity_mps2: f64) -> Result<Vec<Channel>, SeriesError> {
-    for (index, s) in samples.iter().enumerate() {
-        let gyro = s.flags & raw_flags::GYRO_VALID != 0;
-        for axis in 0..3 {
-            let bad = if !s.accel_g[axis].is_finite() {
-                Some(format!("accel_g[{axis}]"))
-            } else if gyro && !s.gyro_dps[axis].is_finite() {
-                Some(format!("gyro_dps[{axis}]"))
-            } else {
-                None
-            };
-            if let Some(field) = bad {
-                return Err(SeriesError::NotFinite {
-                    index,
-                    seq: s.seq,
-                    field,
-                });
+pub fn channels(
+    samples: &[RawImuSample],
+    gravity_mps2: f64,
+) -> Result<Vec<Channel>, SeriesError> {
+    check_finite(samples)?;
+    let gyro = has_gyro(samples);
+    let axes = if gyro { 6 } else { 3 };
+    let mut values: Vec<Vec<f64>> = (0..axes).map(|_| Vec::with_capacity(samples.len())).collect();
+    for s in samples {
+        for a in 0..3 {
+            values[a].push(s.accel_g[a] * gravity_mps2);
+        }
+        if gyro {
+            for a in 0..3 {
+                values[3 + a].push(s.gyro_dps[a].to_radians());
             }
         }
     }
-    let mut out: Vec<Channel> = (0..3)
-        .map(|axis| Channel {
-            sensor: Sensor::Accel,
-            axis,
-            values: samples
-                .iter()
-                .map(|s| s.accel_g[axis] * gravity_mps2)
-                .collect(),
+    Ok(values
+        .into_iter()
+        .enumerate()
+        .map(|(k, values)| Channel {
+            sensor: if k < 3 { Sensor::Accel } else { Sensor::Gyro },
+            axis: k % 3,
+            values,
         })
-        .collect();
-    if has_gyro(samples) {
-        out.extend((0..3).map(|axis| {
-            Channel {
-                sensor: Sensor::Gyro,
-                axis,
-                values: samples
-                    .iter()
-                    .map(|s| s.gyro_dps[axis].to_radians())
-                    .collect(),
-            }
-        }));
+        .collect())
+}
+
+/// Errors on the first non-finite accelerometer value, or gyro value of a sample with
+/// `GYRO_VALID`.
+fn check_finite(samples: &[RawImuSample]) -> Result<(), SeriesError> {
+    for (index, s) in samples.iter().enumerate() {
+        if let Some(field) = non_finite_field(s) {
+            return Err(SeriesError::NotFinite {
+                index,
+                seq: s.seq,
+                field,
+            });
+        }
     }
-    Ok(out)
+    Ok(())
+}
+
+/// The first non-finite field of a sample (gyro fields only with `GYRO_VALID`).
+fn non_finite_field(s: &RawImuSample) -> Option<String> {
+    let gyro = s.flags & raw_flags::GYRO_VALID != 0;
+    (0..3).find_map(|axis| {
+        if !s.accel_g[axis].is_finite() {
+            Some(format!("accel_g[{axis}]"))
+        } else if gyro && !s.gyro_dps[axis].is_finite() {
+            Some(format!("gyro_dps[{axis}]"))
+        } else {
+            None
+        }
+    })
 }
 
 /// Whether every sample holds a gyro measurement.
