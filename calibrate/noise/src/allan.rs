@@ -303,7 +303,9 @@ mod tests {
 
     #[test]
     fn vector_kernel_matches_the_portable_one() {
-        let s: Vec<f64> = (0..5000).map(|i| ((i * 7919) % 1013) as f64 * 1e-3).collect();
+        let s: Vec<f64> = (0..5000)
+            .map(|i| ((i * 7919) % 1013) as f64 * 1e-3)
+            .collect();
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             for (m, start, end) in [(1, 0, 4998), (3, 5, 4000), (700, 17, 3500)] {
@@ -313,7 +315,9 @@ mod tests {
             }
         }
         // Either kernel against a plain sum.
-        let plain: f64 = (10..900).map(|k| (s[k + 64] - 2.0 * s[k + 32] + s[k]).powi(2)).sum();
+        let plain: f64 = (10..900)
+            .map(|k| (s[k + 64] - 2.0 * s[k + 32] + s[k]).powi(2))
+            .sum();
         let fast = second_difference_energy(&s, 32, 10, 900);
         assert!((fast / plain - 1.0).abs() < 1e-12);
     }

@@ -416,7 +416,11 @@ pub fn fit_with(curve: &AllanCurve, basis: &CovarianceBasis) -> Result<ModelFit,
         // The model's covariance (not the measurement's) avoids weighting low fluctuations
         // up; a floor keeps a degenerate model usable.
         let (model_sd, correlation) = problem.covariance_matrix(&p);
-        let sd: Vec<f64> = model_sd.iter().zip(&floor).map(|(s, f)| s.max(*f)).collect();
+        let sd: Vec<f64> = model_sd
+            .iter()
+            .zip(&floor)
+            .map(|(s, f)| s.max(*f))
+            .collect();
         whitening = Problem::whitening(&sd, correlation);
         let next = problem.nnls(&whitening);
         let change = problem

@@ -21,6 +21,7 @@
 pub mod allan;
 pub mod analysis;
 pub mod cli;
+mod covariance;
 pub mod fit;
 pub mod floor;
 pub mod kalibr;
@@ -28,7 +29,6 @@ pub mod params;
 pub mod plot;
 pub mod repair;
 pub mod series;
-mod covariance;
 pub mod synth;
 
 pub use analysis::{Options, Report, analyze};

@@ -37,6 +37,7 @@ use std::collections::BTreeMap;
 use ipc_types::units::{AccelRange, GyroRange};
 use ipc_types::{RawImuSample, raw_flags};
 use serde::{Deserialize, Serialize};
+use statrs::function::erf::erfc;
 
 /// Size of a torn-read error, counts: one step of the high byte.
 pub const TEAR_COUNTS: i32 = 256;
@@ -51,8 +52,8 @@ const HALF_TEAR: i32 = TEAR_COUNTS / 2;
 /// near the threshold depend on how close the local level is to a byte boundary, so both kinds
 /// of error follow the slow noise and distort the Allan curve at the reference window's time
 /// scale; a wrong repair does more harm there. On the thesis' 60 pooled start-up runs one nat
-/// gives the smallest misfit of the noise model over the three axes (chi2/dof 1.5, 5.0, 3.4;
-/// with 0: 1.2, 5.0, 10.8; with 3: 3.5, 5.0, 2.2).
+/// gives the smallest misfit of the noise model summed over the three axes (chi2/dof 1.6, 5.1,
+/// 2.4; with 0 nats: 1.2, 5.1, 3.2; with 2: 2.2, 5.1, 2.3; with 3: 3.6, 5.1, 3.2).
 const FALSE_REPAIR_LOG_COST: f64 = 1.0;
 
 /// Samples whose reference is computed exactly to estimate an axis' noise (a subsample of a
@@ -154,7 +155,11 @@ pub fn detect_tears(counts: &[i16]) -> AxisTears {
     for pass_index in 0..MAX_PASSES {
         // The first pass reuses the noise estimated above; later ones re-estimate it on the
         // partly repaired samples.
-        let sigma = if pass_index == 0 { sigma } else { noise_scale(&c) };
+        let sigma = if pass_index == 0 {
+            sigma
+        } else {
+            noise_scale(&c)
+        };
         let pass = tear_pass(&c, sigma, shifts.len(), examine.as_deref());
         last = pass.statistics;
         if pass.fixes.is_empty() {
@@ -226,19 +231,18 @@ fn tear_pass(c: &[i16], sigma: f64, repaired: usize, examine: Option<&[usize]>) 
         None => all_candidates(c),
     };
 
-    // MAP boundary between "core with noise sigma" and "core + k*256" for a tear fraction p
-    // (those repaired by earlier passes plus this pass' candidates), biased towards leaving a
-    // sample alone: torn iff |d| > 128 + sigma^2 (ln((1 - p) / p) + c) / 256 (equal-variance
-    // Gaussians 256 apart, a wrong repair costing e^c times a missed tear).
-    let p = (repaired + candidates.len()) as f64 / n as f64;
+    // MAP boundary between "core with noise sigma" and "core + k*256", biased towards
+    // leaving a sample alone: torn iff |d| > 128 + sigma^2 (ln((1 - p) / p) + c) / 256
+    // (equal-variance Gaussians 256 apart, a wrong repair costing e^c times a missed tear).
+    // The tear fraction p is the excess of samples beyond half a tear over what Gaussian
+    // noise puts there (at least one sample's worth), plus those repaired by earlier passes.
     let half = f64::from(HALF_TEAR);
-    let threshold = if p > 0.0 && p < 0.5 {
-        let log_odds = ((1.0 - p) / p).ln() + FALSE_REPAIR_LOG_COST;
-        (half + sigma * sigma * log_odds / f64::from(TEAR_COUNTS))
-            .clamp(half, f64::from(TEAR_COUNTS) - 1.0)
-    } else {
-        half
-    };
+    let noise_beyond = n as f64 * erfc(half / (sigma * std::f64::consts::SQRT_2));
+    let excess = (candidates.len() as f64 - noise_beyond).max(1.0);
+    let p = ((repaired as f64 + excess) / n as f64).min(0.5);
+    let log_odds = ((1.0 - p) / p).ln() + FALSE_REPAIR_LOG_COST;
+    let threshold = (half + sigma * sigma * log_odds / f64::from(TEAR_COUNTS))
+        .clamp(half, f64::from(TEAR_COUNTS) - 1.0);
     let statistics = PassStatistics {
         sigma,
         threshold: Some(threshold),

@@ -354,22 +354,20 @@ pub struct Channel {
 
 /// Converts samples to SI channels: accelerometer always, gyro when every sample has
 /// `GYRO_VALID`. `gravity_mps2` converts g to m/s^2. Errors on a non-finite value.
-pub fn channels(
-    samples: &[RawImuSample],
-    gravity_mps2: f64,
-) -> Result<Vec<Channel>, SeriesError> {
+pub fn channels(samples: &[RawImuSample], gravity_mps2: f64) -> Result<Vec<Channel>, SeriesError> {
     check_finite(samples)?;
     let gyro = has_gyro(samples);
     let axes = if gyro { 6 } else { 3 };
-    let mut values: Vec<Vec<f64>> = (0..axes).map(|_| Vec::with_capacity(samples.len())).collect();
+    let mut values: Vec<Vec<f64>> = (0..axes)
+        .map(|_| Vec::with_capacity(samples.len()))
+        .collect();
     for s in samples {
-        for a in 0..3 {
-            values[a].push(s.accel_g[a] * gravity_mps2);
-        }
-        if gyro {
-            for a in 0..3 {
-                values[3 + a].push(s.gyro_dps[a].to_radians());
-            }
+        for (a, column) in values.iter_mut().enumerate() {
+            column.push(if a < 3 {
+                s.accel_g[a] * gravity_mps2
+            } else {
+                s.gyro_dps[a - 3].to_radians()
+            });
         }
     }
     Ok(values

@@ -115,7 +115,10 @@ fn fitted_parameters_cover_the_truth_at_the_one_sigma_rate() {
             .filter(|(value, sigma)| (value - truth[k]).abs() <= *sigma)
             .count();
         let rate = inside as f64 / TRIALS as f64;
-        println!("{name}: reference {:.4e}, within 1 sigma in {rate:.3} of {TRIALS}", truth[k]);
+        println!(
+            "{name}: reference {:.4e}, within 1 sigma in {rate:.3} of {TRIALS}",
+            truth[k]
+        );
         assert!(
             (rate - ONE_SIGMA).abs() <= tolerance,
             "{name}: truth within 1 sigma in {rate:.3} of {TRIALS} records, expected \
