@@ -48,25 +48,28 @@ pub struct GlrtConfig {
     /// How mean and scatter are combined.
     pub statistic: GlrtStatistic,
     /// How far the learned specific force at rest may be off between rests, m/s^2 (1-sigma per
-    /// axis, added to the window mean's variance): an accelerometer bias moves with temperature
-    /// while the robot drives (about 1.5 mg/degC uncompensated), and a reference known better
-    /// than that would call every later rest motion.
+    /// axis, added to the window mean's variance). 0 by default: the mean test is what
+    /// separates slow cruising from rest, and any tolerance here costs that (measured in
+    /// docs/detectors.md).
     pub accel_tolerance_mps2: f64,
-    /// The same for the gyroscope bias, rad/s.
+    /// The same for the gyroscope bias, rad/s: an uncompensated gyroscope's bias moves by a few
+    /// hundredths of a deg/s as the part warms up between rests, which is several times the
+    /// window mean's own noise; a reference held tighter than that calls every later rest
+    /// motion.
     pub gyro_tolerance_rps: f64,
 }
 
 impl Default for GlrtConfig {
     /// False-alarm rate 1e-2 per window, 25 batches (500 ms at 1 kHz), split statistic: the
     /// best trade-off measured on simulated drives (docs/detectors.md); reference tolerances of
-    /// 2 mg (20 mm/s^2) and 0.05 deg/s.
+    /// 0 for the accelerometer and 0.02 deg/s for the gyroscope.
     fn default() -> Self {
         Self {
             false_alarm: 1e-2,
             window_batches: 25,
             statistic: GlrtStatistic::Split,
-            accel_tolerance_mps2: 0.02,
-            gyro_tolerance_rps: 0.05_f64.to_radians(),
+            accel_tolerance_mps2: 0.0,
+            gyro_tolerance_rps: 0.02_f64.to_radians(),
         }
     }
 }
