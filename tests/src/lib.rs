@@ -25,6 +25,19 @@ pub fn bin(name: &str) -> PathBuf {
     path
 }
 
+/// Runs binary `name` with `args` to completion (at most 3 minutes), asserts that it
+/// succeeded, and returns its standard output.
+pub fn run_ok(name: &str, args: &[&str]) -> String {
+    let (status, out) = Proc::spawn(name, args).wait(Duration::from_secs(180));
+    assert!(status.success(), "{name} {args:?} failed: {status}");
+    out
+}
+
+/// A path as a command-line argument (test paths are UTF-8).
+pub fn path_arg(p: &std::path::Path) -> &str {
+    p.to_str().expect("UTF-8 path")
+}
+
 /// A namespace for service names that no other test (or stack) on the machine uses.
 pub fn unique_namespace(tag: &str) -> String {
     let nanos = std::time::SystemTime::now()

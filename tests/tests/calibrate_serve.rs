@@ -11,20 +11,10 @@
 //! Needs the binaries: `cargo build -p acquire -p calibrate -p mems-sim -p mems-topic` (or
 //! `cargo test --workspace`, which builds them).
 
-use std::path::Path;
 use std::time::Duration;
 
-use integration_tests::{Proc, unique_namespace};
+use integration_tests::{Proc, path_arg, run_ok, unique_namespace};
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, service};
-
-fn run_ok(name: &str, args: &[&str]) {
-    let (status, _) = Proc::spawn(name, args).wait(Duration::from_secs(120));
-    assert!(status.success(), "{name} {args:?} failed: {status}");
-}
-
-fn arg(p: &Path) -> &str {
-    p.to_str().expect("UTF-8 temp path")
-}
 
 #[test]
 fn serve_corrects_every_raw_sample_once_in_order_and_survives_restarts() {
@@ -44,7 +34,7 @@ fn serve_corrects_every_raw_sample_once_in_order_and_survives_restarts() {
             "--rate",
             "200",
             "--out",
-            arg(&six),
+            path_arg(&six),
         ],
     );
     run_ok(
@@ -52,11 +42,11 @@ fn serve_corrects_every_raw_sample_once_in_order_and_survives_restarts() {
         &[
             "fit",
             "--input",
-            arg(&six),
+            path_arg(&six),
             "--model",
             "full",
             "--out",
-            arg(&calib),
+            path_arg(&calib),
         ],
     );
 
@@ -85,7 +75,7 @@ fn serve_corrects_every_raw_sample_once_in_order_and_survives_restarts() {
         &[
             "serve",
             "--calib",
-            arg(&calib),
+            path_arg(&calib),
             "--namespace",
             &ns,
             "--learn-s",

@@ -6,23 +6,12 @@
 //! captured must agree exactly: the subscriber's final displacement equals the offline end
 //! displacement bit for bit, because both run the same stage code on the same samples.
 
-use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use integration_tests::{Proc, unique_namespace};
+use integration_tests::{Proc, path_arg, run_ok, unique_namespace};
 use ipc_types::{OdometryState, odometry_flags, service};
-
-fn run_ok(name: &str, args: &[&str]) -> String {
-    let (status, out) = Proc::spawn(name, args).wait(Duration::from_secs(180));
-    assert!(status.success(), "{name} {args:?} failed: {status}");
-    out
-}
-
-fn arg(p: &Path) -> &str {
-    p.to_str().expect("UTF-8 temp path")
-}
 
 #[test]
 fn live_pipeline_matches_offline_replay_exactly() {
@@ -43,7 +32,7 @@ fn live_pipeline_matches_offline_replay_exactly() {
             "--rate",
             "200",
             "--out",
-            arg(&six),
+            path_arg(&six),
         ],
     );
     run_ok(
@@ -51,11 +40,11 @@ fn live_pipeline_matches_offline_replay_exactly() {
         &[
             "fit",
             "--input",
-            arg(&six),
+            path_arg(&six),
             "--model",
             "full",
             "--out",
-            arg(&calib),
+            path_arg(&calib),
         ],
     );
 
@@ -86,15 +75,15 @@ fn live_pipeline_matches_offline_replay_exactly() {
     let ns_args = ["--namespace", ns.as_str()];
     let record = Proc::spawn(
         "mems-record",
-        &[&["--out", arg(&rec)][..], &ns_args].concat(),
+        &[&["--out", path_arg(&rec)][..], &ns_args].concat(),
     );
     let odometry = Proc::spawn(
         "mems-odometry",
-        &[&["serve", "--calib", arg(&calib)][..], &ns_args].concat(),
+        &[&["serve", "--calib", path_arg(&calib)][..], &ns_args].concat(),
     );
     let calibrate = Proc::spawn(
         "mems-calibrate",
-        &[&["serve", "--calib", arg(&calib)][..], &ns_args].concat(),
+        &[&["serve", "--calib", path_arg(&calib)][..], &ns_args].concat(),
     );
     std::thread::sleep(Duration::from_millis(1500));
     // 10 s of rest (alignment after the 5 s of detector learning) and then driving.
@@ -146,9 +135,9 @@ fn live_pipeline_matches_offline_replay_exactly() {
         &[
             "offline",
             "--calib",
-            arg(&calib),
+            path_arg(&calib),
             "--input",
-            arg(&rec),
+            path_arg(&rec),
             "--json",
         ],
     );

@@ -4,9 +4,8 @@
 //! without the updates.
 
 use std::path::PathBuf;
-use std::time::Duration;
 
-use integration_tests::{Proc, unique_namespace};
+use integration_tests::{run_ok, unique_namespace};
 
 fn data_dir() -> Option<PathBuf> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -17,12 +16,6 @@ fn data_dir() -> Option<PathBuf> {
         eprintln!("skipping: the thesis data is not at {}", dir.display());
         None
     }
-}
-
-fn run(name: &str, args: &[&str]) -> String {
-    let (status, out) = Proc::spawn(name, args).wait(Duration::from_secs(120));
-    assert!(status.success(), "{name} {args:?} failed: {status}");
-    out
 }
 
 fn end_displacement(calib: &str, input: &str, zupt: bool) -> [f64; 3] {
@@ -39,7 +32,7 @@ fn end_displacement(calib: &str, input: &str, zupt: bool) -> [f64; 3] {
     if !zupt {
         args.push("--no-zupt");
     }
-    let v: serde_json::Value = serde_json::from_str(run("mems-odometry", &args).trim()).unwrap();
+    let v: serde_json::Value = serde_json::from_str(run_ok("mems-odometry", &args).trim()).unwrap();
     std::array::from_fn(|i| v["end_displacement_m"][i].as_f64().unwrap())
 }
 
@@ -53,7 +46,7 @@ fn zero_velocity_updates_hold_the_static_files_under_a_centimetre() {
         let test = data.join(format!("trial_{trial}/six_position_test_data_{trial}.csv"));
         let calib = dir.join(format!("calib_{trial}.toml"));
         let calib = calib.to_str().unwrap();
-        run(
+        run_ok(
             "mems-calibrate",
             &[
                 "fit",
