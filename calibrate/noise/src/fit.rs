@@ -12,7 +12,8 @@
 //! length and segments ([`crate::covariance`]): its diagonal is `2 AVAR^2 / edf` (the
 //! equivalent degrees of freedom that set the chi-squared confidence intervals), and its
 //! off-diagonal terms carry the correlation of cluster times that share most of their data
-//! (ignoring it would understate the parameters' sigmas about twofold). The first iteration
+//! (ignoring it, the Monte Carlo test finds the truth within 1 sigma of N in only 44% of the
+//! records: the sigmas come out about 1.7x too small). The first iteration
 //! uses the measured variances with white-noise degrees of freedom (Howe, Allan & Barnes) and
 //! no correlation.
 //!

@@ -21,7 +21,7 @@
 pub mod allan;
 pub mod analysis;
 pub mod cli;
-mod covariance;
+pub mod covariance;
 pub mod fit;
 pub mod floor;
 pub mod kalibr;
