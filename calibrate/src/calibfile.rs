@@ -73,7 +73,9 @@ pub struct NoiseSection {
     pub sample_rate_hz: Option<f64>,
 }
 
-/// Temperature terms of the model (reserved; empty until a fit estimates them).
+/// Temperature terms of the model (empty until a fit estimates them, e.g. `mems-calibrate
+/// diagnose --out`): with `dT = T_die - reference_c`, the reading is
+/// `a' = (S + diag(scale_per_c) dT) a + b + bias_g_per_c dT` (see [`crate::terms`]).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct TemperatureTerms {
     /// Reference temperature of the terms, degC.
@@ -82,6 +84,38 @@ pub struct TemperatureTerms {
     /// Bias change per degC, g/degC.
     #[serde(default)]
     pub bias_g_per_c: Option<[f64; 3]>,
+    /// Change of the diagonal of `S` per degC, 1/degC.
+    #[serde(default)]
+    pub scale_per_c: Option<[f64; 3]>,
+}
+
+/// Bias terms in the time since power-on `t` (s, from the first sample of a stream): the
+/// reading gains `drift_g_per_s min(t, drift_max_s) + warm_up_g exp(-t / warm_up_time_constant_s)`
+/// (see [`crate::terms`]). The drift is held at its value at `drift_max_s`, the longest time the
+/// fit saw, rather than extrapolated.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct TimeTerms {
+    /// Linear bias drift, g/s.
+    #[serde(default)]
+    pub drift_g_per_s: Option<[f64; 3]>,
+    /// Time since power-on after which the drift term stays constant, s.
+    #[serde(default)]
+    pub drift_max_s: Option<f64>,
+    /// Warm-up transient at power-on, g.
+    #[serde(default)]
+    pub warm_up_g: Option<[f64; 3]>,
+    /// Time constant of the warm-up transient, s.
+    #[serde(default)]
+    pub warm_up_time_constant_s: Option<f64>,
+}
+
+/// Scale nonlinearity: the reading gains `quadratic_g_per_g2 * a_i^2` on each axis `i`, with
+/// `a` the true specific force in g (see [`crate::terms`]).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct NonlinearityTerms {
+    /// Quadratic coefficient per axis, g/g^2.
+    #[serde(default)]
+    pub quadratic_g_per_g2: Option<[f64; 3]>,
 }
 
 /// Gyroscope terms (optional: present once a gyroscope calibration estimates them).
@@ -130,6 +164,12 @@ pub struct CalibrationFile {
     /// Temperature terms, when fitted.
     #[serde(default)]
     pub temperature: TemperatureTerms,
+    /// Terms in the time since power-on, when fitted.
+    #[serde(default)]
+    pub time: TimeTerms,
+    /// Scale nonlinearity, when fitted.
+    #[serde(default)]
+    pub nonlinearity: NonlinearityTerms,
     /// Gyroscope terms, when calibrated.
     #[serde(default)]
     pub gyro: GyroSection,
@@ -199,6 +239,8 @@ impl CalibrationFile {
             residuals,
             noise: NoiseSection::default(),
             temperature: TemperatureTerms::default(),
+            time: TimeTerms::default(),
+            nonlinearity: NonlinearityTerms::default(),
             gyro: GyroSection::default(),
         }
     }
@@ -263,14 +305,22 @@ impl CalibrationFile {
         }
         file.accel_model().map_err(|e| invalid(e.to_string()))?;
         let t = &file.temperature;
-        if t.bias_g_per_c.is_some() != t.reference_c.is_some() {
-            return Err(invalid(
-                "temperature: bias_g_per_c and reference_c must be given together".into(),
-            ));
-        }
+        let time = &file.time;
         let extra = [
             ("temperature.reference_c", t.reference_c.map(|r| [r; 3])),
             ("temperature.bias_g_per_c", t.bias_g_per_c),
+            ("temperature.scale_per_c", t.scale_per_c),
+            ("time.drift_g_per_s", time.drift_g_per_s),
+            ("time.drift_max_s", time.drift_max_s.map(|r| [r; 3])),
+            ("time.warm_up_g", time.warm_up_g),
+            (
+                "time.warm_up_time_constant_s",
+                time.warm_up_time_constant_s.map(|r| [r; 3]),
+            ),
+            (
+                "nonlinearity.quadratic_g_per_g2",
+                file.nonlinearity.quadratic_g_per_g2,
+            ),
             ("gyro.bias_dps", file.gyro.bias_dps),
         ];
         for (name, values) in extra {
@@ -280,6 +330,7 @@ impl CalibrationFile {
                 return Err(invalid(format!("{name} must be finite, got {v:?}")));
             }
         }
+        crate::terms::ReadingTerms::from_file(&file).map_err(|e| invalid(e.to_string()))?;
         Ok(file)
     }
 }

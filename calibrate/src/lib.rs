@@ -9,6 +9,7 @@
 //! displacement evaluation are in SI (m/s^2, m).
 
 pub mod calibfile;
+pub mod diagnose;
 pub mod drerror;
 pub mod fit;
 pub mod integrate;
@@ -20,6 +21,7 @@ pub mod segments;
 pub mod session;
 pub mod stage;
 pub mod static_eval;
+pub mod terms;
 pub mod thesis_eval;
 pub mod window;
 pub mod zero_state;

@@ -1,5 +1,5 @@
 //! PNG plots: per-pose residuals of a fit, and displacement over time per method of
-//! `mems-eval static`.
+//! `mems-eval static` (the diagnosis's plots are in [`crate::diagnose::plots`]).
 
 use std::path::Path;
 use std::sync::Once;
@@ -9,7 +9,7 @@ use plotters::prelude::*;
 use crate::static_eval::StaticEvalReport;
 
 /// Registers DejaVu Sans as plotters' "sans-serif" (the `ab_glyph` backend has no system fonts).
-fn register_font() {
+pub(crate) fn register_font() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
@@ -27,14 +27,14 @@ pub struct PlotError {
     pub message: String,
 }
 
-fn err(path: &Path) -> impl Fn(String) -> PlotError + '_ {
+pub(crate) fn err(path: &Path) -> impl Fn(String) -> PlotError + '_ {
     move |message| PlotError {
         path: path.display().to_string(),
         message,
     }
 }
 
-const AXIS_COLOURS: [RGBColor; 3] = [
+pub(crate) const AXIS_COLOURS: [RGBColor; 3] = [
     RGBColor(200, 40, 40),
     RGBColor(40, 140, 40),
     RGBColor(40, 70, 200),

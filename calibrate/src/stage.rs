@@ -3,8 +3,9 @@
 //! `mems-odometry offline` runs the same code over a recording.
 //!
 //! Per sample (sensor frame):
-//! - accelerometer: `a = S^-1 (a' - b - c (T - T_ref))` in g (the temperature term when the
-//!   calibration file has one), times the file's local gravity -> m/s^2, minus the bias
+//! - accelerometer: `a = S^-1 (a' - b)` in g, with the file's optional temperature, time and
+//!   nonlinearity terms undone first ([`crate::terms`]; the time since power-on is taken from
+//!   the first sample of the stream), times the file's local gravity -> m/s^2, minus the bias
 //!   refinement (below);
 //! - gyroscope: `(w' - b_file)` deg/s -> rad/s (`b_file` when the file has a gyroscope bias),
 //!   minus the refined gyroscope bias;
@@ -41,6 +42,7 @@ use nalgebra::Vector3;
 
 use crate::calibfile::CalibrationFile;
 use crate::model::AccelModel;
+use crate::terms::ReadingTerms;
 use crate::zero_state::{
     BATCH_LEN, DetectorConfig, Verdict, ZeroStateDetector, batch_duration_s, rest_gain,
 };
@@ -139,9 +141,11 @@ pub struct StageStats {
 }
 
 /// The stable identifier of a calibration: 64-bit FNV-1a over the model name and the
-/// little-endian bytes of the local gravity, the 12 parameters, the temperature terms and the
-/// gyroscope bias (absent terms hash as a marker byte). FNV-1a is written out here because
-/// std's `DefaultHasher` may change between Rust releases and the identifier must not.
+/// little-endian bytes of the local gravity, the 12 parameters, the temperature bias terms and
+/// the gyroscope bias (absent terms hash as a marker byte), then, only when any is present (so
+/// that files without them keep their identifier), the temperature scale, time and
+/// nonlinearity terms. FNV-1a is written out here because std's `DefaultHasher` may change
+/// between Rust releases and the identifier must not.
 pub fn calib_id(file: &CalibrationFile) -> u64 {
     let mut h = Fnv1a::new();
     h.bytes(file.model.name().as_bytes());
@@ -158,6 +162,20 @@ pub fn calib_id(file: &CalibrationFile) -> u64 {
     );
     h.f64s(file.temperature.bias_g_per_c.as_ref().map(|v| &v[..]));
     h.f64s(file.gyro.bias_dps.as_ref().map(|v| &v[..]));
+    let time = &file.time;
+    let later: [Option<Vec<f64>>; 6] = [
+        file.temperature.scale_per_c.map(|v| v.to_vec()),
+        time.drift_g_per_s.map(|v| v.to_vec()),
+        time.drift_max_s.map(|v| vec![v]),
+        time.warm_up_g.map(|v| v.to_vec()),
+        time.warm_up_time_constant_s.map(|v| vec![v]),
+        file.nonlinearity.quadratic_g_per_g2.map(|v| v.to_vec()),
+    ];
+    if later.iter().any(Option::is_some) {
+        for term in &later {
+            h.f64s(term.as_deref());
+        }
+    }
     h.0
 }
 
@@ -242,7 +260,9 @@ impl Refinement {
 pub struct CalibrationStage {
     model: AccelModel,
     gravity_mps2: f64,
-    temperature: Option<(f64, Vector3<f64>)>,
+    terms: ReadingTerms,
+    /// Sample time of the first sample of the current stream (power-on for the time terms), ns.
+    stream_start_ns: Option<u64>,
     gyro_bias_dps: [f64; 3],
     calib_id: u64,
     detector: ZeroStateDetector,
@@ -268,19 +288,12 @@ impl CalibrationStage {
         let model = file
             .accel_model()
             .map_err(|e| StageSetupError(e.to_string()))?;
-        let temperature = match (file.temperature.reference_c, file.temperature.bias_g_per_c) {
-            (Some(t), Some(c)) => Some((t, Vector3::from(c))),
-            (None, None) => None,
-            _ => {
-                return Err(StageSetupError(
-                    "temperature: bias_g_per_c and reference_c must be given together".into(),
-                ));
-            }
-        };
+        let terms = ReadingTerms::from_file(file).map_err(|e| StageSetupError(e.to_string()))?;
         Ok(Self {
             model,
             gravity_mps2: file.gravity_mps2,
-            temperature,
+            terms,
+            stream_start_ns: None,
             gyro_bias_dps: file.gyro.bias_dps.unwrap_or([0.0; 3]),
             calib_id: calib_id(file),
             detector: ZeroStateDetector::new(detector),
@@ -339,6 +352,7 @@ impl CalibrationStage {
                 self.release(None, emit);
                 self.detector.reset();
                 self.refine = Refinement::new(self.refine_config);
+                self.stream_start_ns = None;
                 self.stats.restarts += 1;
             }
             Some((prev_seq, prev_ns)) if raw.stamps.sample_ns <= prev_ns => {
@@ -363,11 +377,14 @@ impl CalibrationStage {
         self.last = Some((raw.seq, raw.stamps.sample_ns));
         self.stats.accepted += 1;
 
-        let mut a_g = Vector3::from(raw.accel_g);
-        if let Some((t_ref, c)) = self.temperature {
-            a_g -= c * (raw.temp_c - t_ref);
-        }
-        let a = self.model.correct(&a_g) * self.gravity_mps2;
+        let start_ns = *self.stream_start_ns.get_or_insert(raw.stamps.sample_ns);
+        let t_s = (raw.stamps.sample_ns - start_ns) as f64 * 1e-9;
+        let a = self.terms.correct(
+            &self.model,
+            &Vector3::from(raw.accel_g),
+            has_temp.then_some(raw.temp_c),
+            t_s,
+        ) * self.gravity_mps2;
         let w: [f64; 3] = if has_gyro {
             std::array::from_fn(|i| (raw.gyro_dps[i] - self.gyro_bias_dps[i]).to_radians())
         } else {
@@ -426,7 +443,7 @@ impl CalibrationStage {
                 detector: self.detector.config().kind.name(),
             });
         }
-        if self.temperature.is_some() && !has_temp {
+        if self.terms.needs_temperature() && !has_temp {
             return Err(StageError::NoTemperature { seq: raw.seq });
         }
         if has_temp && !raw.temp_c.is_finite() {

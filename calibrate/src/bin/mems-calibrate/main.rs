@@ -2,6 +2,8 @@
 //! static segments of a raw recording and writes a calibration file (TOML).
 //! `mems-calibrate serve`: the live calibration process (raw samples in, corrected samples with
 //! the zero-state flag out; see `calibrate::stage`).
+//! `mems-calibrate diagnose`: residual diagnosis against candidate effects (see
+//! `calibrate::diagnose`).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -20,6 +22,7 @@ use calibrate::session::{
 };
 use clap::{Parser, Subcommand, ValueEnum};
 
+mod diagnose;
 mod serve;
 
 #[derive(Parser)]
@@ -72,6 +75,9 @@ enum Command {
     /// Subscribe to raw samples, calibrate them, detect rest, refine the bias at rest and
     /// publish corrected samples, until SIGINT/SIGTERM.
     Serve(serve::ServeArgs),
+    /// Fit the baseline, test its held-out residuals against candidate effects, add the one
+    /// that explains them and report the error before and after.
+    Diagnose(diagnose::DiagnoseArgs),
 }
 
 fn main() -> ExitCode {
@@ -96,6 +102,7 @@ fn run(cli: Cli) -> Result<()> {
             plot,
         } => fit(input, model, weighted, labels, gravity, out, plot),
         Command::Serve(args) => serve::serve(&args),
+        Command::Diagnose(args) => diagnose::run(&args),
     }
 }
 
