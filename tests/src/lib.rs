@@ -38,6 +38,42 @@ pub fn path_arg(p: &std::path::Path) -> &str {
     p.to_str().expect("UTF-8 path")
 }
 
+/// Calibrates the simulated datasheet-level MPU-9250 the way a user would: a `mems-sim`
+/// six-position session (power-on `seed`) fitted with model 3 by `mems-calibrate fit`; returns
+/// the calibration file written in `dir`.
+pub fn calibrate_sim_part(dir: &std::path::Path, seed: u64) -> PathBuf {
+    let six = dir.join("six.csv");
+    let calib = dir.join("calib.toml");
+    let seed = seed.to_string();
+    run_ok(
+        "mems-sim",
+        &[
+            "six-position",
+            "--preset",
+            "datasheet",
+            "--seed",
+            &seed,
+            "--rate",
+            "200",
+            "--out",
+            path_arg(&six),
+        ],
+    );
+    run_ok(
+        "mems-calibrate",
+        &[
+            "fit",
+            "--input",
+            path_arg(&six),
+            "--model",
+            "full",
+            "--out",
+            path_arg(&calib),
+        ],
+    );
+    calib
+}
+
 /// A namespace for service names that no other test (or stack) on the machine uses.
 pub fn unique_namespace(tag: &str) -> String {
     let nanos = std::time::SystemTime::now()

@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use integration_tests::{Proc, path_arg, run_ok, unique_namespace};
+use integration_tests::{Proc, calibrate_sim_part, path_arg, run_ok, unique_namespace};
 use ipc_types::{OdometryState, odometry_flags, service};
 
 #[test]
@@ -18,35 +18,8 @@ fn live_pipeline_matches_offline_replay_exactly() {
     let ns = unique_namespace("pipeline");
     let dir = std::env::temp_dir().join(&ns);
     std::fs::create_dir_all(&dir).unwrap();
-    let six = dir.join("six.csv");
-    let calib = dir.join("calib.toml");
+    let calib = calibrate_sim_part(&dir, 1001);
     let rec = dir.join("run.mcap");
-    run_ok(
-        "mems-sim",
-        &[
-            "six-position",
-            "--preset",
-            "datasheet",
-            "--seed",
-            "1001",
-            "--rate",
-            "200",
-            "--out",
-            path_arg(&six),
-        ],
-    );
-    run_ok(
-        "mems-calibrate",
-        &[
-            "fit",
-            "--input",
-            path_arg(&six),
-            "--model",
-            "full",
-            "--out",
-            path_arg(&calib),
-        ],
-    );
 
     // The observer: every odometry state, drained continuously (iceoryx2 ports stay in the
     // thread that made them).
