@@ -20,7 +20,8 @@
 //!
 //! Torn reads that land inside the noise (an axis whose level sits halfway between byte
 //! boundaries, where `A +- 256` is only ~2 sigma from the level) cannot be told apart from noise
-//! sample by sample and are left. Since `A` and `B` are exchangeable, tears are zero-mean in
+//! sample by sample and are left. An axis whose noise exceeds `max_sigma_counts` is left
+//! entirely: where 256 counts is less than a few sigmas, the rule would mostly "repair" noise. Since `A` and `B` are exchangeable, tears are zero-mean in
 //! expectation; repairing them removes variance (the wings), and the small bias that repairing
 //! only the visible ones leaves is constant while the level is, so it cancels in any method that
 //! subtracts a static reference taken from the same data.
@@ -39,6 +40,8 @@ pub struct TornReadConfig {
     pub half_window: usize,
     /// How far (in noise sigmas) the byte boundary may be from the local reference.
     pub boundary_sigmas: f64,
+    /// Axes noisier than this (counts) are not repaired (default: no limit).
+    pub max_sigma_counts: f64,
 }
 
 impl Default for TornReadConfig {
@@ -48,6 +51,7 @@ impl Default for TornReadConfig {
             prior: 0.1,
             half_window: 4,
             boundary_sigmas: 5.0,
+            max_sigma_counts: f64::INFINITY,
         }
     }
 }
@@ -76,12 +80,18 @@ impl RepairReport {
 /// taken about zero, as the differences of a static series have zero median). Independent of
 /// how much of the series is at rest, insensitive to isolated outliers; assumes near-white noise.
 /// Returns 0 for fewer than 2 values.
-pub fn difference_sigma(values: impl Iterator<Item = f64> + Clone) -> f64 {
-    let v: Vec<f64> = values.collect();
-    if v.len() < 2 {
+pub fn difference_sigma(values: impl Iterator<Item = f64>) -> f64 {
+    let mut d: Vec<f64> = Vec::with_capacity(values.size_hint().0);
+    let mut prev: Option<f64> = None;
+    for v in values {
+        if let Some(p) = prev {
+            d.push((v - p).abs());
+        }
+        prev = Some(v);
+    }
+    if d.is_empty() {
         return 0.0;
     }
-    let mut d: Vec<f64> = v.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
     let mid = d.len() / 2;
     let (_, m, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
     1.4826 * *m / std::f64::consts::SQRT_2
@@ -101,22 +111,41 @@ fn median(buf: &mut [f64]) -> f64 {
 /// Detects and undoes torn reads in place (see the module documentation), updating `accel_g`
 /// and `accel_counts` and setting [`raw_flags::REPAIRED`] on changed samples.
 pub fn repair_torn_reads(samples: &mut [RawImuSample], cfg: &TornReadConfig) -> RepairReport {
+    let mut values: Vec<[f64; 3]> = samples.iter().map(|s| s.accel_g).collect();
+    let report = repair_torn_values(&mut values, cfg);
+    if report.total() > 0 {
+        for (s, v) in samples.iter_mut().zip(&values) {
+            if s.accel_g != *v {
+                s.accel_g = *v;
+                s.accel_counts = v.map(|x| ipc_types::units::quantize(x * cfg.lsb_per_g));
+                s.flags |= raw_flags::REPAIRED;
+            }
+        }
+    }
+    report
+}
+
+/// [`repair_torn_reads`] on bare accelerometer values (g, one `[x, y, z]` per sample).
+pub fn repair_torn_values(values: &mut [[f64; 3]], cfg: &TornReadConfig) -> RepairReport {
     let mut report = RepairReport {
-        samples: samples.len(),
+        samples: values.len(),
         ..Default::default()
     };
-    let n = samples.len();
+    let n = values.len();
     if n < 3 {
         return report;
     }
     let mut buf = vec![0.0; 2 * cfg.half_window];
     for axis in 0..3 {
-        let counts: Vec<f64> = samples
+        let counts: Vec<f64> = values
             .iter()
-            .map(|s| (s.accel_g[axis] * cfg.lsb_per_g).round())
+            .map(|s| (s[axis] * cfg.lsb_per_g).round())
             .collect();
         let sigma = difference_sigma(counts.iter().copied()).max(1.0);
         report.noise_counts[axis] = sigma;
+        if sigma > cfg.max_sigma_counts {
+            continue;
+        }
         let sigma_e2 = 1.2 * sigma * sigma;
         let threshold = (65536.0 - 2.0 * sigma_e2 * cfg.prior.ln()) / 512.0;
         for k in 0..n {
@@ -125,16 +154,18 @@ pub fn repair_torn_reads(samples: &mut [RawImuSample], cfg: &TornReadConfig) -> 
             let c = counts[k];
             // The median lies within the neighbours' range: when every neighbour is within the
             // threshold of c, so is the median, and the sort can be skipped.
-            let mut m = 0;
-            let mut far = false;
-            for &v in counts[lo..k].iter().chain(&counts[k + 1..hi]) {
-                buf[m] = v;
-                m += 1;
-                far |= (v - c).abs() > threshold;
-            }
+            let (before, after) = (&counts[lo..k], &counts[k + 1..hi]);
+            let far = before
+                .iter()
+                .chain(after)
+                .fold(0.0f64, |m, v| m.max((v - c).abs()))
+                > threshold;
             if !far {
                 continue;
             }
+            let m = before.len() + after.len();
+            buf[..before.len()].copy_from_slice(before);
+            buf[before.len()..m].copy_from_slice(after);
             let reference = median(&mut buf[..m]);
             let d = c - reference;
             if d.abs() <= threshold {
@@ -145,10 +176,7 @@ pub fn repair_torn_reads(samples: &mut [RawImuSample], cfg: &TornReadConfig) -> 
             if (boundary - reference).abs() > cfg.boundary_sigmas * sigma {
                 continue;
             }
-            let s = &mut samples[k];
-            s.accel_g[axis] = repaired / cfg.lsb_per_g;
-            s.accel_counts[axis] = ipc_types::units::quantize(repaired);
-            s.flags |= raw_flags::REPAIRED;
+            values[k][axis] = repaired / cfg.lsb_per_g;
             report.repaired[axis] += 1;
             if d > 0.0 {
                 report.high[axis] += 1;

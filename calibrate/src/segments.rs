@@ -114,33 +114,81 @@ pub enum SegmentError {
 /// so that noiseless (simulated) data still gives finite thresholds.
 const SIGMA_FLOOR_G: f64 = 1e-5;
 
+/// What the detector reads of a series of samples: sample times (ns), accelerometer values
+/// (g, sensor frame) and die temperatures (degC, when present). Implemented for raw samples;
+/// other holders of the same data (e.g. repaired values beside the original samples) can
+/// implement it to avoid a copy.
+pub trait SampleSeries {
+    /// Number of samples.
+    fn len(&self) -> usize;
+    /// Whether there are no samples.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Sample time of sample `k`, ns.
+    fn t_ns(&self, k: usize) -> u64;
+    /// Accelerometer reading of sample `k`, g.
+    fn accel_g(&self, k: usize) -> [f64; 3];
+    /// Die temperature of sample `k`, degC, when it has one.
+    fn temp_c(&self, k: usize) -> Option<f64>;
+}
+
+impl SampleSeries for [RawImuSample] {
+    fn len(&self) -> usize {
+        <[RawImuSample]>::len(self)
+    }
+
+    fn t_ns(&self, k: usize) -> u64 {
+        self[k].stamps.sample_ns
+    }
+
+    fn accel_g(&self, k: usize) -> [f64; 3] {
+        self[k].accel_g
+    }
+
+    fn temp_c(&self, k: usize) -> Option<f64> {
+        let s = &self[k];
+        (s.flags & ipc_types::raw_flags::TEMP_VALID != 0).then_some(s.temp_c)
+    }
+}
+
 /// Per-sample statistics (mean, std, temperature range) of `samples[start..end]`.
-pub fn segment_stats(samples: &[RawImuSample], start: usize, end: usize) -> StaticSegment {
-    let part = &samples[start..end];
-    let n = part.len();
-    let mean: [f64; 3] =
-        std::array::from_fn(|i| part.iter().map(|s| s.accel_g[i]).sum::<f64>() / n as f64);
+pub fn segment_stats<S: SampleSeries + ?Sized>(
+    samples: &S,
+    start: usize,
+    end: usize,
+) -> StaticSegment {
+    let n = end - start;
+    // One pass: sums about the first value (shifted sums keep the variance accurate).
+    let first = samples.accel_g(start);
+    let mut sum = [0.0; 3];
+    let mut sum2 = [0.0; 3];
+    let mut temp_range_c: Option<[f64; 2]> = None;
+    for k in start..end {
+        let a = samples.accel_g(k);
+        for i in 0..3 {
+            let d = a[i] - first[i];
+            sum[i] += d;
+            sum2[i] += d * d;
+        }
+        if let Some(t) = samples.temp_c(k) {
+            temp_range_c = Some(match temp_range_c {
+                None => [t, t],
+                Some([lo, hi]) => [lo.min(t), hi.max(t)],
+            });
+        }
+    }
+    let nf = n as f64;
+    let mean: [f64; 3] = std::array::from_fn(|i| first[i] + sum[i] / nf);
     let std: [f64; 3] = std::array::from_fn(|i| {
-        let v = part
-            .iter()
-            .map(|s| (s.accel_g[i] - mean[i]).powi(2))
-            .sum::<f64>()
-            / (n.max(2) - 1) as f64;
-        v.sqrt()
-    });
-    let temps = part
-        .iter()
-        .filter(|s| s.flags & ipc_types::raw_flags::TEMP_VALID != 0)
-        .map(|s| s.temp_c);
-    let temp_range_c = temps.fold(None, |acc: Option<[f64; 2]>, t| match acc {
-        None => Some([t, t]),
-        Some([lo, hi]) => Some([lo.min(t), hi.max(t)]),
+        let ss = (sum2[i] - sum[i] * sum[i] / nf).max(0.0);
+        (ss / (n.max(2) - 1) as f64).sqrt()
     });
     StaticSegment {
         start,
         end,
-        t_start_ns: part[0].stamps.sample_ns,
-        t_end_ns: part[n - 1].stamps.sample_ns,
+        t_start_ns: samples.t_ns(start),
+        t_end_ns: samples.t_ns(end - 1),
         n,
         mean_g: mean,
         std_g: std,
@@ -153,19 +201,23 @@ pub fn detect_static_segments(
     samples: &[RawImuSample],
     cfg: &SegmentConfig,
 ) -> Result<Detection, SegmentError> {
+    detect_static_segments_in(samples, cfg)
+}
+
+/// [`detect_static_segments`] on any [`SampleSeries`].
+pub fn detect_static_segments_in<S: SampleSeries + ?Sized>(
+    samples: &S,
+    cfg: &SegmentConfig,
+) -> Result<Detection, SegmentError> {
     let n = samples.len();
     if n < 20 {
         return Err(SegmentError::TooFewSamples(n));
     }
-    if let Some(k) = samples
-        .windows(2)
-        .position(|w| w[1].stamps.sample_ns <= w[0].stamps.sample_ns)
-    {
-        return Err(SegmentError::NonMonotonic(k + 1));
+    if let Some(k) = (1..n).find(|&k| samples.t_ns(k) <= samples.t_ns(k - 1)) {
+        return Err(SegmentError::NonMonotonic(k));
     }
-    let mut dts: Vec<u64> = samples
-        .windows(2)
-        .map(|w| w[1].stamps.sample_ns - w[0].stamps.sample_ns)
+    let mut dts: Vec<u64> = (1..n)
+        .map(|k| samples.t_ns(k) - samples.t_ns(k - 1))
         .collect();
     let mid = dts.len() / 2;
     let median_dt_s = *dts.select_nth_unstable(mid).1 as f64 * 1e-9;
@@ -174,7 +226,7 @@ pub fn detect_static_segments(
         return Err(SegmentError::TooFewSamples(n));
     }
     let noise_sigma_g: [f64; 3] = std::array::from_fn(|i| {
-        difference_sigma(samples.iter().map(|s| s.accel_g[i])).max(SIGMA_FLOOR_G)
+        difference_sigma((0..n).map(|k| samples.accel_g(k)[i])).max(SIGMA_FLOOR_G)
     });
     let criterion = RestCriterion::from_noise(noise_sigma_g, window_len, cfg.alpha);
     let max_gap_ns = (cfg.max_gap_s * 1e9) as u64;
@@ -185,14 +237,15 @@ pub fn detect_static_segments(
     let mut window_start = 0usize;
     let mut prev_mean: Option<[f64; 3]> = None;
     let mut run: Option<(usize, usize, usize)> = None;
-    for (k, s) in samples.iter().enumerate() {
-        if k > 0 && s.stamps.sample_ns - samples[k - 1].stamps.sample_ns > max_gap_ns {
+    for k in 0..n {
+        let t = samples.t_ns(k);
+        if k > 0 && t - samples.t_ns(k - 1) > max_gap_ns {
             acc.reset();
             prev_mean = None;
             window_start = k;
             runs.extend(run.take());
         }
-        let Some(w) = acc.push(s.stamps.sample_ns, s.accel_g) else {
+        let Some(w) = acc.push(t, samples.accel_g(k)) else {
             continue;
         };
         let rest = criterion.is_rest(&w, prev_mean.as_ref());

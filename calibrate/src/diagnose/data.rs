@@ -14,8 +14,10 @@ use ipc_types::{RawImuSample, raw_flags};
 use nalgebra::Vector3;
 
 use crate::fit::Pose;
-use crate::repair::{RepairReport, TornReadConfig, difference_sigma, repair_torn_reads};
-use crate::segments::{SegmentConfig, SegmentError, StaticSegment, detect_static_segments};
+use crate::repair::{RepairReport, TornReadConfig, difference_sigma, repair_torn_values};
+use crate::segments::{
+    SampleSeries, SegmentConfig, SegmentError, StaticSegment, detect_static_segments_in,
+};
 use crate::session::nearest_axis;
 
 /// One input session.
@@ -66,6 +68,10 @@ pub struct DataConfig {
     pub torn: TornReadConfig,
 }
 
+/// Noisiest axis (counts at 16384/g) the torn-read repair is tried on: a tear (256 counts)
+/// must lie at least 4 sigmas from the level to be told from noise.
+pub const MAX_TEAR_SIGMA_COUNTS: f64 = 64.0;
+
 impl Default for DataConfig {
     fn default() -> Self {
         Self {
@@ -75,7 +81,10 @@ impl Default for DataConfig {
             gap_factor: 10.0,
             gap_min_s: 0.05,
             segments: SegmentConfig::default(),
-            torn: TornReadConfig::default(),
+            torn: TornReadConfig {
+                max_sigma_counts: MAX_TEAR_SIGMA_COUNTS,
+                ..TornReadConfig::default()
+            },
         }
     }
 }
@@ -169,6 +178,8 @@ pub(crate) struct RawSession {
     pub temp_c: Option<Vec<f64>>,
     /// Whether each sample repeats the previous one exactly.
     pub repeat: Vec<bool>,
+    /// Per-sample noise per axis over the static segments (g), indexed by [`Fixes::index`].
+    pub sigma: [[f64; 3]; 4],
     /// Sample indices `k` with a gap between samples `k - 1` and `k`.
     pub gap_at: Vec<usize>,
     /// Static segments (found on the repaired samples).
@@ -238,9 +249,13 @@ pub(crate) fn prepare_raw(
     // Repeats are significant when independent white noise would rarely give as many; the
     // noise is measured here without them (they would make it look smaller).
     let distinct: Vec<usize> = (0..n).filter(|&k| !repeat[k]).collect();
-    let rough_sigma: [f64; 3] =
-        std::array::from_fn(|i| difference_sigma(distinct.iter().map(|&k| a_raw[k][i])));
-    let repeats_expected = repeat_probability(&rough_sigma, step_g) * n.saturating_sub(1) as f64;
+    let repeats_expected = if repeats == 0 {
+        0.0
+    } else {
+        let rough_sigma: [f64; 3] =
+            std::array::from_fn(|i| difference_sigma(distinct.iter().map(|&k| a_raw[k][i])));
+        repeat_probability(&rough_sigma, step_g) * n.saturating_sub(1) as f64
+    };
     let repeats_significant = repeats as f64 >= 2.0 * repeats_expected
         && poisson_upper_tail(repeats, repeats_expected) < 1e-6;
 
@@ -251,13 +266,18 @@ pub(crate) fn prepare_raw(
     } else {
         (0..n).collect()
     };
-    let mut work: Vec<RawImuSample> = kept.iter().map(|&k| samples[k]).collect();
-    let torn = repair_torn_reads(&mut work, &cfg.torn);
-    let detection =
-        detect_static_segments(&work, &cfg.segments).map_err(|source| DataError::Segments {
-            name: name.to_string(),
-            source,
-        })?;
+    let mut work_a: Vec<[f64; 3]> = kept.iter().map(|&k| a_raw[k]).collect();
+    let torn = repair_torn_values(&mut work_a, &cfg.torn);
+    let seg_error = |source| DataError::Segments {
+        name: name.to_string(),
+        source,
+    };
+    let work = Kept {
+        samples,
+        kept: &kept,
+        a: &work_a,
+    };
+    let detection = detect_static_segments_in(&work, &cfg.segments).map_err(seg_error)?;
     if detection.segments.is_empty() {
         return Err(DataError::NoRest {
             name: name.to_string(),
@@ -266,7 +286,7 @@ pub(crate) fn prepare_raw(
     }
     let mut a_repaired = a_raw.clone();
     for (j, &k) in kept.iter().enumerate() {
-        a_repaired[k] = work[j].accel_g;
+        a_repaired[k] = work_a[j];
     }
     for k in 1..n {
         if !repeats_significant {
@@ -310,15 +330,44 @@ pub(crate) fn prepare_raw(
         }
     }
 
-    // Noise per axis over the static segments (robust to tears and slow drift).
-    let sigma: [f64; 3] = std::array::from_fn(|i| {
-        let values = detection
-            .segments
-            .iter()
-            .flat_map(|s| work[s.start..s.end].iter().map(move |x| x.accel_g[i]));
-        difference_sigma(values).max(step_g / 12f64.sqrt())
-    });
-    let (outliers, outlier_offset_counts) = offset_outliers(&a_raw, &sigma, lsb);
+    // Noise per axis over the static segments (robust to tears and slow drift), for each
+    // choice of fixes.
+    let mut sigma = [[0.0; 3]; 4];
+    for torn_fix in [false, true] {
+        for dedup in [false, true] {
+            let fixes = Fixes {
+                torn: torn_fix,
+                dedup,
+            };
+            // A fix that changes nothing has the noise of the data without it.
+            let same_as = if torn_fix && torn.total() == 0 {
+                Some(Fixes { torn: false, dedup })
+            } else if dedup && !repeats_significant {
+                Some(Fixes {
+                    torn: torn_fix,
+                    dedup: false,
+                })
+            } else {
+                None
+            };
+            sigma[fixes.index()] = match same_as {
+                Some(other) => sigma[other.index()],
+                None => {
+                    let a = if torn_fix { &a_repaired } else { &a_raw };
+                    std::array::from_fn(|i| {
+                        let values = segments.iter().flat_map(|s| {
+                            (s.start..s.end)
+                                .filter(|&k| !(dedup && repeat[k]))
+                                .map(move |k| a[k][i])
+                        });
+                        difference_sigma(values).max(step_g / 12f64.sqrt())
+                    })
+                }
+            };
+        }
+    }
+    let (outliers, outlier_offset_counts) =
+        offset_outliers(&a_raw, &sigma[Fixes::default().index()], lsb);
 
     let findings = AcquisitionFindings {
         name: name.to_string(),
@@ -342,6 +391,7 @@ pub(crate) fn prepare_raw(
         a_repaired,
         temp_c,
         repeat,
+        sigma,
         gap_at,
         segments,
         findings,
@@ -356,6 +406,31 @@ fn repeat_probability(sigma: &[f64; 3], step_g: f64) -> f64 {
         .iter()
         .map(|s| (step_g / (2.0 * std::f64::consts::PI.sqrt() * s)).min(1.0))
         .product()
+}
+
+/// The samples `kept` of a series with their (repaired) accelerometer values `a`.
+struct Kept<'a> {
+    samples: &'a [RawImuSample],
+    kept: &'a [usize],
+    a: &'a [[f64; 3]],
+}
+
+impl SampleSeries for Kept<'_> {
+    fn len(&self) -> usize {
+        self.kept.len()
+    }
+
+    fn t_ns(&self, k: usize) -> u64 {
+        self.samples[self.kept[k]].stamps.sample_ns
+    }
+
+    fn accel_g(&self, k: usize) -> [f64; 3] {
+        self.a[k]
+    }
+
+    fn temp_c(&self, k: usize) -> Option<f64> {
+        self.samples[..].temp_c(self.kept[k])
+    }
 }
 
 /// `P(X >= k)` for `X ~ Poisson(lambda)`.
@@ -456,6 +531,13 @@ pub(crate) struct Fixes {
     pub dedup: bool,
 }
 
+impl Fixes {
+    /// 0..4, for tables indexed by the choice of fixes.
+    pub fn index(self) -> usize {
+        2 * usize::from(self.torn) + usize::from(self.dedup)
+    }
+}
+
 /// Where labels come from when observations are built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Labelling {
@@ -516,15 +598,7 @@ fn raw_observations(
 ) {
     let a = if fixes.torn { &r.a_repaired } else { &r.a_raw };
     let use_sample = |k: usize| !(fixes.dedup && r.repeat[k]);
-    // Noise per axis from the samples used (robust: median of absolute first differences).
-    let sigma: [f64; 3] = std::array::from_fn(|i| {
-        let values = r.segments.iter().flat_map(|s| {
-            (s.start..s.end)
-                .filter(move |&k| use_sample(k))
-                .map(move |k| a[k][i])
-        });
-        difference_sigma(values).max(r.findings.step_g / 12f64.sqrt())
-    });
+    let sigma = r.sigma[fixes.index()];
     let t0 = r.t_ns[0];
     let block_ns = (cfg.block_s * 1e9) as u64;
     let mut gap_iter = r.gap_at.iter().peekable();

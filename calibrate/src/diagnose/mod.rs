@@ -1045,17 +1045,34 @@ impl Diagnoser<'_> {
         let applied = self.cfg.apply.clone();
         let base_fixes = Self::fixes_of(&applied);
         self.set(base_fixes)?;
-        for fixes in [
-            Fixes {
-                torn: true,
-                ..base_fixes
-            },
-            Fixes {
-                dedup: true,
-                ..base_fixes
-            },
-        ] {
-            self.set(fixes)?;
+        // The observations of each fix the data call for (a fix without findings is not
+        // applicable and needs none).
+        let raw = |f: fn(&AcquisitionFindings) -> bool| {
+            self.sessions.iter().any(|s| match s {
+                Session::Raw(r) => f(&r.findings),
+                Session::Means { .. } => false,
+            })
+        };
+        let needed = [
+            (
+                raw(|a| a.torn.total() > 0),
+                Fixes {
+                    torn: true,
+                    ..base_fixes
+                },
+            ),
+            (
+                raw(|a| a.repeats_significant),
+                Fixes {
+                    dedup: true,
+                    ..base_fixes
+                },
+            ),
+        ];
+        for (need, fixes) in needed {
+            if need {
+                self.set(fixes)?;
+            }
         }
         let base_set = &self.sets[&(base_fixes.torn, base_fixes.dedup)];
         for &e in &applied {
@@ -1085,8 +1102,10 @@ impl Diagnoser<'_> {
             let mut effects = applied.clone();
             effects.push(effect);
             let fixes = Self::fixes_of(&effects);
-            let set = &self.sets[&(fixes.torn, fixes.dedup)];
-            let outcome = self.applicability(effect, set).and_then(|()| {
+            // Applicability depends on the sessions, not on the fixes: judged on the baseline's
+            // observations, so that a fix's observations are only needed when it applies.
+            let outcome = self.applicability(effect, base_set).and_then(|()| {
+                let set = &self.sets[&(fixes.torn, fixes.dedup)];
                 let params = if effect.is_fix() {
                     0
                 } else if self.kind == BaselineKind::LabelFree {
@@ -1448,13 +1467,18 @@ impl Diagnoser<'_> {
                     }
                     for (values, hist) in [(&r.a_raw, &mut h.raw), (&r.a_repaired, &mut h.repaired)]
                     {
-                        for i in 0..3 {
-                            let mean =
-                                values[k0..k1].iter().map(|a| a[i]).sum::<f64>() / (k1 - k0) as f64;
-                            for a in &values[k0..k1] {
-                                let d = (a[i] - mean) * lsb;
-                                let bin = ((d - START) / WIDTH).floor();
-                                if bin >= 0.0 && (bin as usize) < BINS {
+                        let block = &values[k0..k1];
+                        let mut mean = [0.0; 3];
+                        for a in block {
+                            for (m, x) in mean.iter_mut().zip(a) {
+                                *m += x;
+                            }
+                        }
+                        let mean = mean.map(|m| m / block.len() as f64);
+                        for a in block {
+                            for (i, (x, m)) in a.iter().zip(&mean).enumerate() {
+                                let bin = ((x - m) * lsb - START) / WIDTH;
+                                if bin >= 0.0 && bin < BINS as f64 {
                                     hist[i][bin as usize] += 1;
                                 }
                             }
