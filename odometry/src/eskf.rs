@@ -42,6 +42,11 @@ pub struct NoiseModel {
     pub accel_bias_random_walk: f64,
     /// Gyro bias random-walk density, rad/s^2/sqrt(Hz).
     pub gyro_bias_random_walk: f64,
+    /// Low-frequency density of the vehicle's vibration as the accelerometer sees it, per m/s
+    /// of speed: m/s^2/sqrt(Hz) per m/s. Added (in quadrature) to the white noise while moving.
+    pub vibration_accel_density_per_mps: f64,
+    /// The same for the gyro: rad/s/sqrt(Hz) per m/s.
+    pub vibration_gyro_density_per_mps: f64,
 }
 
 /// The nominal (full) navigation state.
@@ -138,9 +143,14 @@ impl Eskf {
             .copy_from(&(-Matrix3::identity() * dt));
 
         let n = &self.noise;
+        let speed = x0.v.norm();
         let mut qd = Vec15::zeros();
-        let vel = n.accel_noise_density.powi(2) * dt;
-        let ang = n.gyro_noise_density.powi(2) * dt;
+        let vel = (n.accel_noise_density.powi(2)
+            + (n.vibration_accel_density_per_mps * speed).powi(2))
+            * dt;
+        let ang = (n.gyro_noise_density.powi(2)
+            + (n.vibration_gyro_density_per_mps * speed).powi(2))
+            * dt;
         let ba = n.accel_bias_random_walk.powi(2) * dt;
         let bg = n.gyro_bias_random_walk.powi(2) * dt;
         for i in 0..3 {
@@ -163,13 +173,29 @@ impl Eskf {
     }
 
     /// Zero-angular-rate update: the body does not rotate, so the last gyro reading measures the
-    /// gyro bias with the per-sample white noise `sigma` (rad/s).
-    pub fn zero_rate(&mut self, sigma: f64) {
+    /// gyro bias with the per-sample white noise `sigma` (rad/s). Skipped, returning `false`,
+    /// when a component of the innovation lies beyond `gate` times its predicted standard
+    /// deviation: the body is rotating after all (an in-place spin flagged as rest), and the
+    /// reading must not become the bias.
+    pub fn zero_rate(&mut self, sigma: f64, gate: f64) -> bool {
         let mut h = SMatrix::<f64, 3, N>::zeros();
         h.fixed_view_mut::<3, 3>(0, BG)
             .copy_from(&Matrix3::identity());
         let residual = self.last.w - self.x.b_g;
+        let predicted_var = self
+            .cov
+            .fixed_view::<3, 3>(BG, BG)
+            .diagonal()
+            .add_scalar(sigma * sigma);
+        if residual
+            .iter()
+            .zip(predicted_var.iter())
+            .any(|(r, v)| r.abs() > gate * v.sqrt())
+        {
+            return false;
+        }
         self.update(&h, residual, sigma * sigma);
+        true
     }
 
     /// A linear measurement `z = H dx + noise` with isotropic variance `var`, in Joseph form,
@@ -278,6 +304,8 @@ mod tests {
             gyro_noise_density: 0.01_f64.to_radians(),
             accel_bias_random_walk: 1e-5,
             gyro_bias_random_walk: 1e-6,
+            vibration_accel_density_per_mps: 0.0,
+            vibration_gyro_density_per_mps: 0.0,
         }
     }
 
@@ -377,6 +405,47 @@ mod tests {
         assert_relative_eq!(kf.x.q.angle_to(&expected), 0.0, epsilon = 1e-9);
         // Rotating about the vertical does not move a level sensor.
         assert!(kf.x.p.norm() < 1e-9);
+    }
+
+    #[test]
+    fn vibration_noise_grows_with_speed() {
+        // The transition does not depend on the velocity, so two filters that differ only in
+        // speed differ after one step by exactly the speed-dependent process noise.
+        let g_s = Vector3::new(0.0, 0.0, G);
+        let m = Imu {
+            f: g_s,
+            w: Vector3::zeros(),
+        };
+        let (x, cov) = align(
+            g_s,
+            Vector3::zeros(),
+            G,
+            Vector3::repeat(0.005),
+            Vector3::repeat(1e-4),
+        );
+        let (k_a, k_g) = (4e-3, 4e-4);
+        let n = NoiseModel {
+            vibration_accel_density_per_mps: k_a,
+            vibration_gyro_density_per_mps: k_g,
+            ..noise()
+        };
+        let dt = 0.01;
+        let step = |speed: f64| {
+            let moving = Nominal {
+                v: Vector3::new(speed, 0.0, 0.0),
+                ..x
+            };
+            let mut kf = Eskf::new(moving, cov, G, n, m);
+            kf.predict(m, dt);
+            kf.cov
+        };
+        let (slow, fast) = (step(0.0), step(2.0));
+        for i in 0..3 {
+            let dv = fast[(V + i, V + i)] - slow[(V + i, V + i)];
+            let dth = fast[(TH + i, TH + i)] - slow[(TH + i, TH + i)];
+            assert_relative_eq!(dv, (k_a * 2.0).powi(2) * dt, max_relative = 1e-9);
+            assert_relative_eq!(dth, (k_g * 2.0).powi(2) * dt, max_relative = 1e-9);
+        }
     }
 
     /// The alignment's tilt/bias correlation is what makes a horizontal bias observable after a

@@ -4,4 +4,5 @@
 //! by the live process and the offline runner.
 
 pub mod eskf;
+pub mod gyrocal;
 pub mod stage;

@@ -11,7 +11,7 @@
 
 use crate::eskf::{Eskf, Imu, NoiseModel, align};
 use ipc_types::{CorrectedImuSample, OdometryState, Stamps, corrected_flags, odometry_flags};
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 /// Configuration of the stage. Noise figures come from the calibration file's noise parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -20,9 +20,22 @@ pub struct OdometryConfig {
     pub gravity_mps2: f64,
     /// Sensor noise model.
     pub noise: NoiseModel,
+    /// Gyro correction `C` applied to every angular rate before the filter (`omega = C w`,
+    /// sensor frame): the inverse of the gyro's scale and misalignment, from
+    /// [`crate::gyrocal::calibrate_gyro`]; identity for an uncalibrated gyro. (The calibration
+    /// stage corrects the accelerometer only, so the gyro's correction is applied here.)
+    pub gyro_correction: Matrix3<f64>,
     /// 1-sigma of the accelerometer bias left after calibration (turn-on repeatability),
     /// m/s^2 per sensor axis.
     pub accel_bias_sigma_mps2: [f64; 3],
+    /// 1-sigma of the accelerometer's residual scale and misalignment after calibration,
+    /// fraction. Under gravity it reads as a bias of about `g` times this on every axis (a
+    /// misalignment of 0.1% puts 10 mm/s^2 of gravity on a horizontal axis), which the
+    /// alignment's bias uncertainty includes.
+    pub accel_residual_scale: f64,
+    /// Zero-angular-rate gate: the gyro bias is updated at rest only while the reading is
+    /// within this many predicted standard deviations of the bias estimate.
+    pub zaru_gate_sigma: f64,
     /// 1-sigma of the zero-velocity pseudo-measurement, m/s.
     pub zupt_sigma_mps: f64,
     /// Rest needed before alignment, s.
@@ -48,9 +61,14 @@ impl OdometryConfig {
                 accel_noise_density: 300e-6 * gravity_mps2,
                 gyro_noise_density: 0.01_f64.to_radians(),
                 accel_bias_random_walk: 1e-4,
-                gyro_bias_random_walk: 1e-5,
+                gyro_bias_random_walk: 1e-6,
+                vibration_accel_density_per_mps: 0.0,
+                vibration_gyro_density_per_mps: 0.0,
             },
+            gyro_correction: Matrix3::identity(),
             accel_bias_sigma_mps2: [4.5e-3, 2.5e-3, 6.1e-3],
+            accel_residual_scale: 1e-3,
+            zaru_gate_sigma: 5.0,
             zupt_sigma_mps: 2e-3,
             align_s: 1.0,
             revision_delay_s: 0.2,
@@ -179,7 +197,7 @@ impl OdometryStage {
         let t_ns = s.stamps.sample_ns;
         let m = Imu {
             f: Vector3::from(s.accel_mps2),
-            w: Vector3::from(s.gyro_rps),
+            w: self.cfg.gyro_correction * Vector3::from(s.gyro_rps),
         };
         let rest = s.flags & corrected_flags::ZERO_STATE != 0;
         let prev = self.last.replace((t_ns, m));
@@ -231,7 +249,7 @@ impl OdometryStage {
             let (p0, v0) = (kf.x.p, kf.x.v);
             kf.zero_velocity(self.cfg.zupt_sigma_mps);
             let gyro_sigma = self.cfg.noise.gyro_noise_density / dt.sqrt();
-            kf.zero_rate(gyro_sigma);
+            kf.zero_rate(gyro_sigma, self.cfg.zaru_gate_sigma);
             if let Some(pending) = self.pending.as_mut() {
                 pending.dp += kf.x.p - p0;
                 pending.dv += kf.x.v - v0;
@@ -277,13 +295,11 @@ impl OdometryStage {
         // Gyro bias from the rest mean: its uncertainty is the sample std over sqrt(n).
         let w_var = (a.w2 / n - w_mean.component_mul(&w_mean)).map(|v| v.max(0.0));
         let w_sigma = (w_var / n).map(f64::sqrt);
-        let (x, cov) = align(
-            f_mean,
-            w_mean,
-            self.cfg.gravity_mps2,
-            Vector3::from(self.cfg.accel_bias_sigma_mps2),
-            w_sigma,
-        );
+        let g = self.cfg.gravity_mps2;
+        let scale_as_bias = g * self.cfg.accel_residual_scale;
+        let bias_sigma =
+            Vector3::from(self.cfg.accel_bias_sigma_mps2).map(|s| s.hypot(scale_as_bias));
+        let (x, cov) = align(f_mean, w_mean, g, bias_sigma, w_sigma);
         self.kf = Some(Eskf::new(x, cov, self.cfg.gravity_mps2, self.cfg.noise, *m));
         self.at_rest = true;
     }
@@ -415,4 +431,41 @@ fn check_finite(s: &CorrectedImuSample) -> Result<(), OdometryError> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn alignment_counts_the_residual_scale_as_bias() {
+        // A level sensor at rest: after alignment the horizontal bias uncertainty is the
+        // turn-on repeatability and g times the residual scale/misalignment, in quadrature.
+        let g = 9.81;
+        let cfg = OdometryConfig::mpu9250(g);
+        let mut stage = OdometryStage::new(cfg);
+        // Stop at the alignment, before any update or propagation changes the covariance.
+        for k in 0.. {
+            if stage.aligned() {
+                break;
+            }
+            let s = CorrectedImuSample {
+                stamps: Stamps {
+                    sample_ns: k * 5_000_000,
+                    ..Default::default()
+                },
+                seq: k,
+                accel_mps2: [0.0, 0.0, g],
+                flags: corrected_flags::ZERO_STATE,
+                ..Default::default()
+            };
+            stage.process(&s, &mut |_| {}).unwrap();
+        }
+        let cov = &stage.filter().expect("aligned").cov;
+        for axis in 0..2 {
+            let want = cfg.accel_bias_sigma_mps2[axis].hypot(g * cfg.accel_residual_scale);
+            assert_relative_eq!(cov[(9 + axis, 9 + axis)].sqrt(), want, max_relative = 1e-6);
+        }
+    }
 }

@@ -1,0 +1,344 @@
+//! Simulated test material shared by the integration tests and the evaluation example: one
+//! powered-on MPU-9250 that first goes through an N-orientation calibration session (held
+//! still in well-spread attitudes, rotated by hand between them) and is then mounted on a
+//! ground robot for a drive. The drive's rest flags are perfect (taken from the drive plan).
+//!
+//! Samples go through the ADC's quantization (+-2 g, +-250 deg/s) and are converted to SI,
+//! as the calibration stage would publish them; the sensor model is the one the odometry
+//! sees after accelerometer calibration (`SensorModel::mpu9250_calibrated`).
+
+#![allow(dead_code)]
+
+use ipc_types::units::{AccelRange, GyroRange};
+use ipc_types::{CorrectedImuSample, Stamps, corrected_flags};
+use mems_sim::SimSensor;
+use mems_sim::adc::quantize_sample;
+use mems_sim::model::{G_MPS2, SensorModel};
+use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
+use mems_sim::vibration::{Vibration, VibrationModel};
+use nalgebra::{Matrix3, Vector3};
+use recording::Truth;
+
+/// Number of attitudes in the calibration session.
+pub const SESSION_POSES: usize = 12;
+/// How long each pose of the session is held, s.
+pub const SESSION_HOLD_S: f64 = 5.0;
+
+/// What to simulate.
+#[derive(Debug, Clone)]
+pub struct Case {
+    /// Drive length, s.
+    pub duration_s: f64,
+    /// Output rate, Hz.
+    pub rate_hz: f64,
+    /// Turns between legs.
+    pub turns: bool,
+    /// In-place turns before half of the motions.
+    pub in_place_turns: bool,
+    /// Vibration level (1: moderate).
+    pub vibration: f64,
+    /// Accelerometer turn-on bias 1-sigma per axis, mg; `None` keeps the calibrated model's
+    /// measured repeatability (4.5 / 2.5 / 6.1 mm/s^2).
+    pub accel_turn_on_mg: Option<f64>,
+    /// Most legs per motion, and the range of leg lengths, s (see `DriveParams`).
+    pub max_legs: u32,
+    /// Length of each constant-speed leg, s.
+    pub leg_s: [f64; 2],
+    /// Replace the simulator's vibration by the same signal without its content below
+    /// [`DC_FREE_CUTOFF_HZ`] (an experiment: see [`Simulation`]).
+    pub vibration_dc_free: bool,
+    /// Turn angles, degrees (the drive's default is 30-120).
+    pub turn_angle_deg: [f64; 2],
+    /// Peak yaw rate of turns, deg/s (the drive's default is 45).
+    pub peak_yaw_rate_dps: f64,
+    /// Error terms switched off (for error budgets), see [`Case::model`].
+    pub off: Vec<String>,
+}
+
+impl Case {
+    /// A straight 10-minute drive at 200 Hz with moderate vibration, with a rest at least every
+    /// 30 s: motions of one or two legs of 2-6 s (at most 28 s from start to stop with a
+    /// turn between the legs). The rest lengths (1-30 s) and everything else are the
+    /// simulator's defaults.
+    pub fn straight() -> Self {
+        Self {
+            max_legs: 2,
+            leg_s: [2.0, 6.0],
+            vibration_dc_free: false,
+            duration_s: 600.0,
+            rate_hz: 200.0,
+            turns: false,
+            in_place_turns: false,
+            vibration: 1.0,
+            accel_turn_on_mg: None,
+            off: Vec::new(),
+            turn_angle_deg: [30.0, 120.0],
+            peak_yaw_rate_dps: 45.0,
+        }
+    }
+
+    /// The sensor model of this case.
+    pub fn model(&self) -> SensorModel {
+        let mut m = SensorModel::mpu9250_calibrated();
+        if let Some(mg) = self.accel_turn_on_mg {
+            m.accel.turn_on_bias_std = [mg * 1e-3; 3];
+        }
+        for term in &self.off {
+            match term.as_str() {
+                "accel-noise" => m.accel.noise_density = [0.0; 3],
+                "gyro-noise" => m.gyro.noise_density = [0.0; 3],
+                "gyro-noise-xy" => m.gyro.noise_density[..2].fill(0.0),
+                "gyro-noise-z" => m.gyro.noise_density[2] = 0.0,
+                "accel-scale" => {
+                    m.accel.scale = [0.0; 3];
+                    m.accel.misalignment = [[0.0; 3]; 3];
+                }
+                "accel-temp" => m.accel.bias_temp_coeff = [0.0; 3],
+                "accel-turn-on" => m.accel.turn_on_bias_std = [0.0; 3],
+                "gyro-turn-on" => m.gyro.turn_on_bias_std = [0.0; 3],
+                "gyro-scale" => {
+                    m.gyro.scale = [0.0; 3];
+                    m.gyro.misalignment = [[0.0; 3]; 3];
+                }
+                "adc" => {}
+                other => panic!("unknown error term `{other}`"),
+            }
+        }
+        m
+    }
+
+    /// The gyro correction a perfect calibration would give, as an independent reference for
+    /// [`odometry::gyrocal::calibrate_gyro`]: the inverse of the gyro model's scale and
+    /// misalignment `(I + diag(s) + M)^-1`, turned into the orthonormal frame closest to the
+    /// accelerometer's axes (the rotation part `I + (M_a - M_a^T) / 2` of the accelerometer's
+    /// residual misalignment).
+    pub fn gyro_correction_reference(&self) -> Matrix3<f64> {
+        let m = self.model();
+        let gyro = Matrix3::identity()
+            + Matrix3::from_fn(|i, k| m.gyro.misalignment[i][k])
+            + Matrix3::from_diagonal(&Vector3::from(m.gyro.scale));
+        let ma = Matrix3::from_fn(|i, k| m.accel.misalignment[i][k]);
+        (Matrix3::identity() + 0.5 * (ma - ma.transpose()))
+            * gyro.try_inverse().expect("an invertible gyro model")
+    }
+
+    /// The vibration the simulated sensor sees (none when it is replaced, see
+    /// [`Case::vibration_dc_free`]).
+    fn sim_vibration(&self) -> VibrationModel {
+        VibrationModel::moderate(if self.vibration_dc_free {
+            0.0
+        } else {
+            self.vibration
+        })
+    }
+
+    /// Low-frequency (below the chassis resonance) density of the simulated vibration per m/s
+    /// of wheel speed: accelerometer in m/s^2/sqrt(Hz), gyro in rad/s/sqrt(Hz). Only the
+    /// chassis resonance reaches low frequencies (the wheel and motor lines average out): its
+    /// unit-variance second-order response has the one-sided density `8 zeta / omega_0` per
+    /// Hz at zero frequency, and it carries 40% of the unit signal's power.
+    pub fn vibration_density_per_mps(&self) -> (f64, f64) {
+        if self.vibration_dc_free {
+            return (0.0, 0.0);
+        }
+        let m = VibrationModel::moderate(self.vibration);
+        let omega0 = std::f64::consts::TAU * m.chassis_hz;
+        let unit = (0.4 * 8.0 * m.chassis_damping / omega0).sqrt();
+        (m.accel_rms_mps2 * unit, m.gyro_rms_dps.to_radians() * unit)
+    }
+
+    /// The drive plan of this case for `seed`.
+    pub fn drive(&self, seed: u64) -> Drive {
+        let mut p = DriveParams::new(self.duration_s);
+        p.turns = self.turns;
+        p.in_place_turns = self.in_place_turns;
+        p.turn_angle_deg = self.turn_angle_deg;
+        p.max_legs = self.max_legs;
+        p.leg_s = self.leg_s;
+        p.peak_yaw_rate_dps = self.peak_yaw_rate_dps;
+        Drive::new(&p, seed).expect("valid drive parameters")
+    }
+}
+
+/// The calibration session followed by the drive, as one scenario for one sensor power-on.
+/// The sensor is moved from the session's last pose onto the robot at `drive_start_s`.
+pub struct SessionThenDrive {
+    session: PoseSession,
+    drive: Drive,
+    drive_start_s: f64,
+}
+
+impl SessionThenDrive {
+    /// Whether the drive plan has the robot at rest at `t_s` seconds into the drive: the
+    /// plan's rest segments. (The truth's own `at_rest` compares the planned speed with zero
+    /// exactly, which rounding can miss after several speed changes.)
+    fn drive_at_rest(&self, t_s: f64) -> bool {
+        let segs = self.drive.segments();
+        let i = segs.partition_point(|s| s.start_s <= t_s).max(1) - 1;
+        segs[i].at_rest
+    }
+}
+
+impl Scenario for SessionThenDrive {
+    fn truth(&self, t_s: f64) -> Truth {
+        if t_s < self.drive_start_s {
+            return self.session.truth(t_s);
+        }
+        let local = t_s - self.drive_start_s;
+        let mut truth = self.drive.truth(local);
+        truth.t_ns = ns_from_s(t_s);
+        truth.at_rest = self.drive_at_rest(local);
+        truth
+    }
+
+    fn duration_s(&self) -> f64 {
+        self.drive_start_s + self.drive.duration_s()
+    }
+
+    fn wheel_speed_mps(&self, t_s: f64) -> f64 {
+        if t_s < self.drive_start_s {
+            0.0
+        } else {
+            self.drive.wheel_speed_mps(t_s - self.drive_start_s)
+        }
+    }
+}
+
+/// One simulated sensor through a session and a drive.
+pub struct Simulation {
+    sim: SimSensor<SessionThenDrive>,
+    rate_hz: f64,
+    drive_start_s: f64,
+    drive_duration_s: f64,
+    seq: u64,
+    quantize: bool,
+    dc_free: Option<DcFreeVibration>,
+}
+
+/// Cut-off of the high-pass that takes the low-frequency content out of the vibration, Hz.
+pub const DC_FREE_CUTOFF_HZ: f64 = 0.2;
+
+/// The simulator's vibration signal (same realisation for the same seed) through a first-order
+/// high-pass: what a chassis that vibrates about a fixed attitude and position would add (its
+/// angle and displacement stay bounded, so rate and acceleration carry no power at zero
+/// frequency). Added after the sensor model rather than before (the 1% gyro scale error on a
+/// 0.5 deg/s disturbance is negligible).
+struct DcFreeVibration {
+    vibration: Vibration,
+    prev_in: [f64; 6],
+    prev_out: [f64; 6],
+}
+
+impl DcFreeVibration {
+    /// The disturbance at `t_s`: accelerometer in m/s^2, gyro in deg/s.
+    fn step(&mut self, t_s: f64, rate_hz: f64, speed_mps: f64) -> [f64; 6] {
+        let (a, g) = self.vibration.step(t_s, rate_hz, speed_mps);
+        let x = [a[0], a[1], a[2], g[0], g[1], g[2]];
+        let alpha = 1.0 / (1.0 + std::f64::consts::TAU * DC_FREE_CUTOFF_HZ / rate_hz);
+        // First-order high-pass (backward-difference discretisation of s / (s + w_c)).
+        for ((out, prev), x) in self.prev_out.iter_mut().zip(&mut self.prev_in).zip(x) {
+            *out = alpha * (*out + x - *prev);
+            *prev = x;
+        }
+        self.prev_out
+    }
+}
+
+impl Simulation {
+    /// Powers on a sensor with the case's model for `seed`, with the case's session and drive.
+    pub fn new(case: &Case, seed: u64) -> Self {
+        let session =
+            PoseSession::orientations(SESSION_POSES, &PoseParams::new(SESSION_HOLD_S), seed)
+                .expect("valid session parameters");
+        let drive_start_s = session.duration_s();
+        let scenario = SessionThenDrive {
+            session,
+            drive: case.drive(seed),
+            drive_start_s,
+        };
+        let sim = SimSensor::new(scenario, &case.model(), &case.sim_vibration(), seed)
+            .expect("valid sensor model");
+        let dc_free = case.vibration_dc_free.then(|| DcFreeVibration {
+            vibration: Vibration::new(&VibrationModel::moderate(case.vibration), seed)
+                .expect("valid vibration model"),
+            prev_in: [0.0; 6],
+            prev_out: [0.0; 6],
+        });
+        Self {
+            sim,
+            rate_hz: case.rate_hz,
+            drive_start_s,
+            drive_duration_s: case.duration_s,
+            seq: 0,
+            quantize: !case.off.iter().any(|t| t == "adc"),
+            dc_free,
+        }
+    }
+
+    /// The powered-on sensor (turn-on biases).
+    pub fn sensor(&self) -> &mems_sim::model::Sensor {
+        self.sim.sensor()
+    }
+
+    fn sample(&mut self, t_s: f64, t0_s: f64) -> (CorrectedImuSample, Truth) {
+        let (mut analog, truth) = self.sim.sample_with_truth(t_s, self.rate_hz);
+        if let Some(v) = self.dc_free.as_mut() {
+            let speed = self.sim.scenario().wheel_speed_mps(t_s);
+            let d = v.step(t_s, self.rate_hz, speed);
+            for i in 0..3 {
+                analog.accel_g[i] += d[i] / G_MPS2;
+                analog.gyro_dps[i] += d[3 + i];
+            }
+        }
+        let sample_ns = ns_from_s(t_s - t0_s);
+        let (accel_g, gyro_dps) = if self.quantize {
+            let raw = quantize_sample(
+                &analog,
+                AccelRange::G2,
+                GyroRange::Dps250,
+                sample_ns,
+                self.seq,
+            );
+            (raw.accel_g, raw.gyro_dps)
+        } else {
+            (analog.accel_g, analog.gyro_dps)
+        };
+        let sample = CorrectedImuSample {
+            stamps: Stamps {
+                sample_ns,
+                ..Default::default()
+            },
+            seq: self.seq,
+            accel_mps2: accel_g.map(|a| a * G_MPS2),
+            gyro_rps: gyro_dps.map(f64::to_radians),
+            temp_c: analog.temp_c,
+            flags: if truth.at_rest {
+                corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY
+            } else {
+                corrected_flags::DETECTOR_READY
+            },
+            ..Default::default()
+        };
+        self.seq += 1;
+        (sample, truth)
+    }
+
+    /// The calibration session's samples, with perfect rest flags.
+    pub fn session(&mut self) -> Vec<CorrectedImuSample> {
+        let n = (self.drive_start_s * self.rate_hz).floor() as u64;
+        (0..n)
+            .map(|k| self.sample(k as f64 / self.rate_hz, 0.0).0)
+            .collect()
+    }
+
+    /// Runs the drive, calling `f` with each sample (times from the drive's start) and the
+    /// truth at it (positions from the drive's start).
+    pub fn drive(&mut self, mut f: impl FnMut(&CorrectedImuSample, &Truth)) {
+        let n = (self.drive_duration_s * self.rate_hz).round() as u64;
+        for k in 0..n {
+            let t = self.drive_start_s + k as f64 / self.rate_hz;
+            let (s, truth) = self.sample(t, self.drive_start_s);
+            f(&s, &truth);
+        }
+    }
+}
