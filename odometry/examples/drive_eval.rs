@@ -6,107 +6,81 @@
 //! (from which the gyro correction is fitted, unless `--gyro-cal none`), then mounts the
 //! sensor on the robot and drives.
 //!
-//! cargo run --release -p odometry --example drive_eval -- [--seeds N] [--rate HZ]
-//!     [--case straight|turns|in-place|vib0|bias20|bias20-straight|all] [--gyro-cal session|none|model]
-//!     [--per-seed]
+//! `cargo run --release -p odometry --example drive_eval -- --help` lists the options; the
+//! tables in docs/odometry.md give the commands that produced them.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
 
+use clap::{Parser, ValueEnum};
 use common::{Case, Simulation};
 use ipc_types::odometry_flags;
 use nalgebra::{Matrix2, Matrix3, Vector2};
 use odometry::gyrocal::{GyroCalConfig, calibrate_gyro};
 use odometry::stage::{OdometryConfig, OdometryStage};
+use statrs::statistics::{Data, Max, Median, OrderStatistics};
 
-#[derive(Clone, Copy, PartialEq)]
+/// Where the gyro correction comes from.
+#[derive(Clone, Copy, PartialEq, ValueEnum)]
 enum GyroCal {
+    /// Fitted to the pose session of the same power-on.
     Session,
+    /// Identity: the gyro's 1% scale and 0.5% misalignment stay.
     None,
-    /// The inverse of the model's true scale/misalignment: a diagnostic upper bound only.
+    /// The simulator's own model, inverted: a diagnostic reference only.
     Model,
 }
 
-struct Args {
-    seeds: u64,
-    rate_hz: f64,
-    cases: Vec<String>,
-    gyro_cal: GyroCal,
-    per_seed: bool,
-    /// Use the simulator's default motions (up to three legs of 2-10 s).
-    sim_default_legs: bool,
-    /// Error terms of the sensor model switched off.
-    off: Vec<String>,
-    /// Configuration overrides, `name=value`.
-    overrides: Vec<(String, f64)>,
+/// A simulated case (everything else as in `Case::straight`).
+#[derive(Clone, Copy, PartialEq, ValueEnum)]
+enum CaseName {
+    /// One straight line.
+    Straight,
+    /// Turns of 30-120 degrees between legs.
+    Turns,
+    /// Turns, and half of the motions start with an in-place turn and a rest.
+    InPlace,
+    /// Turns, no vibration.
+    Vib0,
+    /// Turns, vibration without its content below 0.2 Hz (see `Case::vibration_dc_free`).
+    VibDcFree,
+    /// Straight, accelerometer turn-on bias of 20 mg (1-sigma), configured as such.
+    Bias20Straight,
+    /// Turns, accelerometer turn-on bias of 20 mg (1-sigma), configured as such.
+    Bias20,
 }
 
-fn parse_args() -> Result<Args, String> {
-    let mut a = Args {
-        seeds: 20,
-        rate_hz: 200.0,
-        cases: Vec::new(),
-        gyro_cal: GyroCal::Session,
-        per_seed: false,
-        sim_default_legs: false,
-        overrides: Vec::new(),
-        off: Vec::new(),
-    };
-    let mut it = std::env::args().skip(1);
-    while let Some(arg) = it.next() {
-        let mut value = |name: &str| it.next().ok_or(format!("{name} needs a value"));
-        match arg.as_str() {
-            "--seeds" => {
-                a.seeds = value("--seeds")?
-                    .parse()
-                    .map_err(|e| format!("--seeds: {e}"))?
-            }
-            "--rate" => {
-                a.rate_hz = value("--rate")?
-                    .parse()
-                    .map_err(|e| format!("--rate: {e}"))?
-            }
-            "--case" => a.cases.push(value("--case")?),
-            "--gyro-cal" => {
-                a.gyro_cal = match value("--gyro-cal")?.as_str() {
-                    "session" => GyroCal::Session,
-                    "none" => GyroCal::None,
-                    "model" => GyroCal::Model,
-                    other => return Err(format!("--gyro-cal: unknown `{other}`")),
-                }
-            }
-            "--per-seed" => a.per_seed = true,
-            "--sim-default-legs" => a.sim_default_legs = true,
-            "--off" => a.off.push(value("--off")?),
-            "--set" => {
-                let kv = value("--set")?;
-                let (k, v) = kv
-                    .split_once('=')
-                    .ok_or(format!("--set {kv}: expected name=value"))?;
-                let v: f64 = v.parse().map_err(|e| format!("--set {kv}: {e}"))?;
-                a.overrides.push((k.to_string(), v));
-            }
-            other => return Err(format!("unknown argument `{other}`")),
-        }
-    }
-    if a.cases.is_empty() || a.cases.iter().any(|c| c == "all") {
-        a.cases = [
-            "straight",
-            "turns",
-            "in-place",
-            "vib0",
-            "vib-dc-free",
-            "bias20-straight",
-            "bias20",
-        ]
-        .map(String::from)
-        .to_vec();
-    }
-    Ok(a)
+#[derive(Parser)]
+#[command(about = "Odometry on simulated 10-minute drives with perfect rest flags")]
+struct Args {
+    /// Seeds 0..N per case.
+    #[arg(long, default_value_t = 20)]
+    seeds: u64,
+    /// Output rate, Hz.
+    #[arg(long = "rate", default_value_t = 200.0)]
+    rate_hz: f64,
+    /// Cases to run (repeatable; all when none is given).
+    #[arg(long = "case", value_enum)]
+    cases: Vec<CaseName>,
+    /// Where the gyro correction comes from.
+    #[arg(long, value_enum, default_value_t = GyroCal::Session)]
+    gyro_cal: GyroCal,
+    /// Print every seed's outcome on stderr.
+    #[arg(long)]
+    per_seed: bool,
+    /// Use the simulator's default motions (up to three legs of 2-10 s, up to 50 s between
+    /// rests) instead of at most two legs of 2-6 s (a rest at least every 28 s).
+    #[arg(long)]
+    sim_default_legs: bool,
+    /// Switch off a term of the sensor model (repeatable), for error budgets: accel-noise,
+    /// accel-scale, accel-temp, accel-turn-on, gyro-noise, gyro-noise-xy, gyro-noise-z,
+    /// gyro-turn-on, gyro-scale, adc.
+    #[arg(long)]
+    off: Vec<String>,
 }
 
 /// The simulated case and the stage configuration for a case name.
-fn case(name: &str, args: &Args) -> Result<(Case, OdometryConfig), String> {
+fn case(name: CaseName, args: &Args) -> (Case, OdometryConfig) {
     let mut c = Case::straight();
     c.rate_hz = args.rate_hz;
     if args.sim_default_legs {
@@ -115,34 +89,33 @@ fn case(name: &str, args: &Args) -> Result<(Case, OdometryConfig), String> {
     }
     let mut cfg = OdometryConfig::mpu9250(mems_sim::model::G_MPS2);
     match name {
-        "straight" => {}
-        "turns" => c.turns = true,
-        "in-place" => {
+        CaseName::Straight => {}
+        CaseName::Turns => c.turns = true,
+        CaseName::InPlace => {
             c.turns = true;
             c.in_place_turns = true;
         }
-        "vib0" => {
+        CaseName::Vib0 => {
             c.turns = true;
             c.vibration = 0.0;
         }
-        "vib-dc-free" => {
+        CaseName::VibDcFree => {
             c.turns = true;
             c.vibration_dc_free = true;
         }
-        "bias20" | "bias20-straight" => {
-            c.turns = name == "bias20";
+        CaseName::Bias20Straight | CaseName::Bias20 => {
+            c.turns = name == CaseName::Bias20;
             c.accel_turn_on_mg = Some(20.0);
             // An uncalibrated accelerometer: the configuration says so.
             cfg.accel_bias_sigma_mps2 = [20e-3 * mems_sim::model::G_MPS2; 3];
         }
-        other => return Err(format!("unknown case `{other}`")),
     }
     // The robot's vibration, as a measurement of it would give (see Case).
     let (accel, gyro) = c.vibration_density_per_mps();
     cfg.noise.vibration_accel_density_per_mps = accel;
     cfg.noise.vibration_gyro_density_per_mps = gyro;
     c.off.clone_from(&args.off);
-    Ok((c, cfg))
+    (c, cfg)
 }
 
 /// Result of one drive.
@@ -261,53 +234,33 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, gyro_cal: GyroCal) -> Outco
     }
 }
 
-/// The `p`-quantile (0..1) of sorted values, nearest rank.
-fn quantile(sorted: &[f64], p: f64) -> f64 {
-    let rank = ((p * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
-    sorted[rank - 1]
-}
-
 fn main() {
-    let args = parse_args().unwrap_or_else(|e| {
-        eprintln!("drive_eval: {e}");
-        std::process::exit(2);
-    });
+    let mut args = Args::parse();
+    if args.cases.is_empty() {
+        args.cases = CaseName::value_variants().to_vec();
+    }
     println!(
-        "{} seeds, {} Hz, gyro calibration: {}",
+        "{} seeds, {} Hz, {}, gyro correction: {}",
         args.seeds,
         args.rate_hz,
+        if args.sim_default_legs {
+            "motions of up to three 2-10 s legs"
+        } else {
+            "motions of up to two 2-6 s legs"
+        },
         match args.gyro_cal {
             GyroCal::Session => "from the session",
             GyroCal::None => "none",
-            GyroCal::Model => "model truth (diagnostic)",
+            GyroCal::Model => "the model's (diagnostic)",
         }
     );
     println!(
         "| case | median % | p90 % | max % | end within 1 sigma (per axis) | NEES/2 mean | rest ends within 1 sigma | motion drift RMS revised / forward, m |"
     );
     println!("|---|---|---|---|---|---|---|---|");
-    for name in &args.cases {
-        let (c, cfg) = case(name, &args).unwrap_or_else(|e| {
-            eprintln!("drive_eval: {e}");
-            std::process::exit(2);
-        });
-        let mut cfg = cfg;
-        for (k, v) in &args.overrides {
-            match k.as_str() {
-                "gyro_rw" => cfg.noise.gyro_bias_random_walk = *v,
-                "accel_rw" => cfg.noise.accel_bias_random_walk = *v,
-                "gyro_n" => cfg.noise.gyro_noise_density = *v,
-                "accel_n" => cfg.noise.accel_noise_density = *v,
-                "zupt" => cfg.zupt_sigma_mps = *v,
-                "vib_a" => cfg.noise.vibration_accel_density_per_mps = *v,
-                "vib_g" => cfg.noise.vibration_gyro_density_per_mps = *v,
-                "ba_sigma" => cfg.accel_bias_sigma_mps2 = [*v; 3],
-                other => {
-                    eprintln!("drive_eval: unknown setting `{other}`");
-                    std::process::exit(2);
-                }
-            }
-        }
+    for &name in &args.cases {
+        let (c, cfg) = case(name, &args);
+        let label = name.to_possible_value().expect("no skipped variants");
         let mut pct = Vec::new();
         let (mut covered, mut axes, mut nees, mut rc, mut rn) = (0, 0, 0.0, 0, 0);
         let (mut hist_rev, mut hist_fwd) = (0.0, 0.0);
@@ -316,7 +269,8 @@ fn main() {
             let p = 100.0 * o.error_m.norm() / o.distance_m;
             if args.per_seed {
                 eprintln!(
-                    "{name} seed {seed}: distance {:.1} m, error ({:.3}, {:.3}) m = {p:.2}%, sigma ({:.3}, {:.3}) m, NEES {:.2}, gyro correction error {:.1e}",
+                    "{} seed {seed}: distance {:.1} m, error ({:.3}, {:.3}) m = {p:.2}%, sigma ({:.3}, {:.3}) m, NEES {:.2}, gyro correction error {:.1e}",
+                    label.get_name(),
                     o.distance_m,
                     o.error_m.x,
                     o.error_m.y,
@@ -339,12 +293,13 @@ fn main() {
             rc += o.rest_covered.0;
             rn += o.rest_covered.1;
         }
-        pct.sort_by(f64::total_cmp);
+        let mut pct = Data::new(pct);
         println!(
-            "| {name} | {:.2} | {:.2} | {:.2} | {:.0}% | {:.2} | {:.0}% | {:.2} / {:.2} |",
-            quantile(&pct, 0.5),
-            quantile(&pct, 0.9),
-            pct[pct.len() - 1],
+            "| {} | {:.2} | {:.2} | {:.2} | {:.0}% | {:.2} | {:.0}% | {:.2} / {:.2} |",
+            label.get_name(),
+            pct.median(),
+            pct.quantile(0.9),
+            pct.max(),
             100.0 * covered as f64 / axes as f64,
             nees / (2.0 * args.seeds as f64),
             100.0 * rc as f64 / rn.max(1) as f64,
