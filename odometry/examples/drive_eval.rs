@@ -53,9 +53,12 @@ enum CaseName {
 #[derive(Parser)]
 #[command(about = "Odometry on simulated 10-minute drives with perfect rest flags")]
 struct Args {
-    /// Seeds 0..N per case.
+    /// Number of seeds per case.
     #[arg(long, default_value_t = 20)]
     seeds: u64,
+    /// First seed (seeds run from here on).
+    #[arg(long, default_value_t = 0)]
+    first_seed: u64,
     /// Output rate, Hz.
     #[arg(long = "rate", default_value_t = 200.0)]
     rate_hz: f64,
@@ -240,8 +243,9 @@ fn main() {
         args.cases = CaseName::value_variants().to_vec();
     }
     println!(
-        "{} seeds, {} Hz, {}, gyro correction: {}",
-        args.seeds,
+        "seeds {}-{}, {} Hz, {}, gyro correction: {}",
+        args.first_seed,
+        args.first_seed + args.seeds - 1,
         args.rate_hz,
         if args.sim_default_legs {
             "motions of up to three 2-10 s legs"
@@ -264,7 +268,7 @@ fn main() {
         let mut pct = Vec::new();
         let (mut covered, mut axes, mut nees, mut rc, mut rn) = (0, 0, 0.0, 0, 0);
         let (mut hist_rev, mut hist_fwd) = (0.0, 0.0);
-        for seed in 0..args.seeds {
+        for seed in args.first_seed..args.first_seed + args.seeds {
             let o = run(&c, cfg, seed, args.gyro_cal);
             let p = 100.0 * o.error_m.norm() / o.distance_m;
             if args.per_seed {

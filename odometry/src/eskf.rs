@@ -6,7 +6,8 @@
 //! - sensor frame `s`: the accelerometer's axes;
 //! - `q` rotates sensor-frame vectors into the navigation frame (`v_n = q * v_s`);
 //! - the accelerometer measures specific force `f = q^-1 (a_n - g_n) + b_a + noise`;
-//! - the gyro measures `w = w_true + b_g + noise` (rad/s);
+//! - the gyro measures `w = w_true + b_g + noise` (rad/s), after any scale/misalignment
+//!   correction;
 //! - the attitude error is local: `q_true = q * Exp(dtheta)`.
 //!
 //! Error state, in this order: `dp` (m), `dv` (m/s), `dtheta` (rad), `db_a` (m/s^2),

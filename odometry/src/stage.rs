@@ -3,8 +3,10 @@
 //!
 //! Life cycle: wait for the first rest interval (the zero-state flag of the calibration stage),
 //! align on `align_s` seconds of it (roll, pitch, gyro bias, vertical accelerometer bias), then
-//! navigate with the error-state filter of [`crate::eskf`], applying zero-velocity and
-//! zero-angular-rate updates while the sample is flagged at rest. When a motion interval ends,
+//! navigate with the error-state filter of [`crate::eskf`] on gyro rates corrected by
+//! [`OdometryConfig::gyro_correction`], applying zero-velocity updates while the sample is
+//! flagged at rest, and zero-angular-rate updates too unless the gyro shows rotation (a spin
+//! in place that the rest detector took for rest). When a motion interval ends,
 //! the corrections the updates made are spread back over that interval's states (a cubic
 //! blend that reduces to the thesis's linear velocity-drift model when the filter's position
 //! and velocity corrections agree with it) and republished with the `REVISION` flag.
