@@ -474,3 +474,18 @@ fn label_free_temperature_bias_is_found() {
         true_model_rms(&s.samples, &s.exact, &s.holds),
     );
 }
+
+#[test]
+fn a_cross_axis_product_is_reported_as_unexplained() {
+    // x reads 0.03 a_y a_z (g) more, a the true specific force: a coupling the library lacks
+    // (zero in every axis-aligned pose, so tested on 14 orientations, label-free).
+    let scenario = PoseSession::orientations(14, &PoseParams::new(HOLD_S), 3).unwrap();
+    let s = simulate(Layout::Orientations(14), &base_model(), 3, move |t| {
+        let f = scenario.truth(t).specific_force_mps2;
+        [0.03 * f[1] * f[2] / STANDARD_GRAVITY_MPS2.powi(2), 0.0, 0.0]
+    });
+    let d = run(s.samples);
+    assert_eq!(d.kind, calibrate::diagnose::BaselineKind::LabelFree);
+    assert_eq!(d.selected, None, "{}", summary(&d));
+    assert!(d.unexplained_structure, "{}", summary(&d));
+}

@@ -1,7 +1,8 @@
 //! PNG plots of a diagnosis: held-out residuals against each candidate's regressor (elapsed
 //! time, die temperature, specific force along the axis, orientation class), histograms of the
 //! samples' deviations from their block means (raw and torn-read repaired, log scale) and of
-//! the standardized held-out residuals. Residuals are plotted in mg (1e-3 of the local g).
+//! the standardized held-out residuals. Residuals are plotted in mg (1e-3 of the local g), with
+//! their means in 24 bins along the regressor drawn as lines.
 
 use std::path::{Path, PathBuf};
 
@@ -89,7 +90,7 @@ fn residual_scatter(path: &Path, d: &Diagnosis, r: &Regressor) -> Result<(), Plo
     title
         .titled(
             &format!(
-                "held-out residuals: {} (grey) and {} (colour)",
+                "held-out residuals: {} (grey, binned means black) and {} (colour)",
                 d.baseline.model, d.final_model.model
             ),
             ("sans-serif", 20),
@@ -142,10 +143,40 @@ fn residual_scatter(path: &Path, d: &Diagnosis, r: &Regressor) -> Result<(), Plo
             .map_err(|x| e(x.to_string()))?;
         let colour = AXIS_COLOURS[axis];
         chart
-            .draw_series(fin.iter().map(|&p| Circle::new(p, 2, colour.filled())))
+            .draw_series(
+                fin.iter()
+                    .map(|&p| Circle::new(p, 2, colour.mix(0.5).filled())),
+            )
             .map_err(|x| e(x.to_string()))?;
+        // Binned means show structure smaller than the scatter.
+        for (points, style) in [
+            (&base, BLACK.stroke_width(2)),
+            (&fin, colour.stroke_width(3)),
+        ] {
+            chart
+                .draw_series(LineSeries::new(binned_means(points, x0, x1), style))
+                .map_err(|x| e(x.to_string()))?;
+        }
     }
     root.present().map_err(|x| e(x.to_string()))
+}
+
+/// Means of `points` (x, y) in 24 equal bins of x over `[x0, x1]` (empty bins skipped), at the
+/// bins' mean x.
+fn binned_means(points: &[(f64, f64)], x0: f64, x1: f64) -> Vec<(f64, f64)> {
+    const BINS: usize = 24;
+    let width = ((x1 - x0) / BINS as f64).max(f64::MIN_POSITIVE);
+    let mut acc = [(0.0, 0.0, 0usize); BINS];
+    for &(x, y) in points {
+        let b = (((x - x0) / width) as usize).min(BINS - 1);
+        acc[b].0 += x;
+        acc[b].1 += y;
+        acc[b].2 += 1;
+    }
+    acc.iter()
+        .filter(|a| a.2 > 0)
+        .map(|a| (a.0 / a.2 as f64, a.1 / a.2 as f64))
+        .collect()
 }
 
 fn standardized_histogram(path: &Path, d: &Diagnosis) -> Result<(), PlotError> {

@@ -199,13 +199,29 @@ pub fn report(d: &Diagnosis) -> String {
     let g = d.gravity_mps2;
     let _ = writeln!(s, "baseline: {} ({:?})", d.baseline.model, d.kind);
     let _ = writeln!(s, "validation: {}", d.validation);
+    let sessions = d.acquisition.len();
     for a in &d.acquisition {
+        // Many sessions: one line each only for those with gaps or repeats beyond chance.
+        if sessions > 6 && a.gaps == 0 && !a.repeats_significant {
+            continue;
+        }
+        let offsets: Vec<String> = a
+            .outlier_offset_counts
+            .iter()
+            .map(|o| {
+                if o.is_finite() {
+                    format!("{o:.0}")
+                } else {
+                    "-".into()
+                }
+            })
+            .collect();
         let _ = writeln!(
             s,
             "acquisition {}: {} samples, median interval {:.2} ms; torn reads repaired x/y/z {}/{}/{} \
-             ({} read high); outliers > 5 sigma {}/{}/{} at a median offset of {:.0}/{:.0}/{:.0} \
-             counts; exact repeats {} ({:.1} expected from noise{}); gaps {} (longest interval \
-             {:.3} s, {:.3} s missing)",
+             ({} read high); outliers > 5 sigma {}/{}/{} at a median offset of {} counts; exact \
+             repeats {} ({:.1} expected from noise{}); gaps {} (longest interval {:.3} s, {:.3} s \
+             missing)",
             a.name,
             a.samples,
             a.median_dt_s * 1e3,
@@ -216,9 +232,7 @@ pub fn report(d: &Diagnosis) -> String {
             a.outliers[0],
             a.outliers[1],
             a.outliers[2],
-            a.outlier_offset_counts[0],
-            a.outlier_offset_counts[1],
-            a.outlier_offset_counts[2],
+            offsets.join("/"),
             a.repeats,
             a.repeats_expected,
             if a.repeats_significant {
@@ -231,10 +245,39 @@ pub fn report(d: &Diagnosis) -> String {
             a.gap_time_s,
         );
     }
-    let line = |s: &mut String, name: &str, m: &calibrate::diagnose::ModelScore| {
+    if sessions > 6 {
+        let sum = |f: fn(&calibrate::diagnose::AcquisitionFindings) -> usize| {
+            d.acquisition.iter().map(f).sum::<usize>()
+        };
         let _ = writeln!(
             s,
-            "{name:<9} {:<40} rms {:.5} m/s^2 (expected from noise {:.5}), chi2 {:.1} / {:.1}, p {:.2e}",
+            "acquisition, {sessions} sessions: {} samples; torn reads repaired x/y/z {}/{}/{}; \
+             outliers > 5 sigma x/y/z {}/{}/{}; exact repeats {}; gaps {} in {} sessions \
+             (longest interval {:.3} s)",
+            sum(|a| a.samples),
+            sum(|a| a.torn.repaired[0]),
+            sum(|a| a.torn.repaired[1]),
+            sum(|a| a.torn.repaired[2]),
+            sum(|a| a.outliers[0]),
+            sum(|a| a.outliers[1]),
+            sum(|a| a.outliers[2]),
+            sum(|a| a.repeats),
+            sum(|a| a.gaps),
+            d.acquisition.iter().filter(|a| a.gaps > 0).count(),
+            d.acquisition
+                .iter()
+                .map(|a| a.longest_gap_s)
+                .fold(0.0, f64::max),
+        );
+    }
+    let line = |s: &mut String, name: &str, m: &calibrate::diagnose::ModelScore| {
+        let axes = m.rms_axes_mps2.map_or(String::new(), |a| {
+            format!(" (x {:.5}, y {:.5}, z {:.5})", a[0], a[1], a[2])
+        });
+        let _ = writeln!(
+            s,
+            "{name:<9} {:<40} rms {:.5} m/s^2{axes}; white noise and parameter uncertainty \
+             predict {:.5}; chi2 {:.1} for {:.1} expected, p {:.2e}",
             m.model, m.rms_mps2, m.expected_rms_mps2, m.chi2, m.expected_chi2, m.p_value
         );
     };
