@@ -383,18 +383,57 @@ mod tests {
     }
 
     #[test]
+    fn fitted_terms_round_trip_and_incomplete_ones_are_refused() {
+        let dir = std::env::temp_dir().join(format!("calibfile-terms-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("terms.toml");
+        let mut f = example();
+        f.temperature.reference_c = Some(27.5);
+        f.temperature.scale_per_c = Some([2e-4, -1e-4, 3e-4]);
+        f.time.drift_g_per_s = Some([1e-6, -2e-6, 3e-6]);
+        f.time.drift_max_s = Some(60.0);
+        f.time.warm_up_g = Some([1e-3, 0.0, -2e-3]);
+        f.time.warm_up_time_constant_s = Some(12.0);
+        f.nonlinearity.quadratic_g_per_g2 = Some([0.002, -0.001, 0.003]);
+        f.save(&path).unwrap();
+        assert_eq!(CalibrationFile::load(&path).unwrap(), f);
+        let cases: [(&str, fn(&mut CalibrationFile)); 4] = [
+            ("drift_max_s", |f| f.time.drift_max_s = None),
+            ("warm_up_time_constant_s", |f| {
+                f.time.warm_up_time_constant_s = Some(0.0)
+            }),
+            ("reference_c", |f| f.temperature.reference_c = None),
+            ("nonlinearity.quadratic_g_per_g2", |f| {
+                f.nonlinearity.quadratic_g_per_g2 = Some([f64::NAN, 0.0, 0.0])
+            }),
+        ];
+        for (name, spoil) in cases {
+            let mut g = f.clone();
+            spoil(&mut g);
+            g.save(&path).unwrap();
+            let err = CalibrationFile::load(&path).unwrap_err().to_string();
+            assert!(err.contains("terms.toml") && err.contains(name), "{err}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn older_files_without_optional_sections_load_and_unknown_keys_are_ignored() {
         let mut value: toml::Table = toml::from_str(&example().to_toml()).unwrap();
         value.remove("noise");
         value.remove("temperature");
         value.remove("temperature_range_c");
         value.remove("gyro");
+        value.remove("time");
+        value.remove("nonlinearity");
         value.insert("future_term".into(), toml::Value::Float(1.0));
         let text = toml::to_string(&value).unwrap();
         let back: CalibrationFile = toml::from_str(&text).unwrap();
         assert_eq!(back.noise, NoiseSection::default());
         assert_eq!(back.temperature_range_c, None);
         assert_eq!(back.gyro, GyroSection::default());
+        assert_eq!(back.time, TimeTerms::default());
+        assert_eq!(back.nonlinearity, NonlinearityTerms::default());
     }
 
     #[test]

@@ -262,6 +262,25 @@ mod tests {
     }
 
     #[test]
+    fn axes_noisier_than_the_limit_are_left_alone() {
+        // The same tears under 155 counts of noise (the simulator's 1 kHz output): 256 counts
+        // is 1.7 sigma, so the rule would mostly move noise; with the limit nothing changes.
+        let (mut samples, _, tears) = simulate(1008.0, 155.0, 0.25, 20_000, 5);
+        assert!(tears > 1000);
+        let before = samples.clone();
+        let cfg = TornReadConfig {
+            max_sigma_counts: 80.0,
+            ..TornReadConfig::default()
+        };
+        let r = repair_torn_reads(&mut samples, &cfg);
+        assert_eq!(r.total(), 0);
+        assert!(r.noise_counts[0] > 150.0);
+        assert_eq!(samples, before);
+        // Without the limit the rule does act (and is not to be trusted there).
+        assert!(repair_torn_reads(&mut samples, &TornReadConfig::default()).total() > 0);
+    }
+
+    #[test]
     fn far_from_a_byte_boundary_no_tear_is_possible() {
         // Level in the middle of a byte (128 counts from either boundary), tiny noise: a large
         // outlier there is not a torn read and must be left alone.

@@ -489,3 +489,45 @@ fn a_cross_axis_product_is_reported_as_unexplained() {
     assert_eq!(d.selected, None, "{}", summary(&d));
     assert!(d.unexplained_structure, "{}", summary(&d));
 }
+
+/// Static sessions after power-on, each with its own turn-on bias (3 mg) and the same warm-up.
+fn start_up_sessions(count: u64) -> Vec<(SessionInput, f64)> {
+    let mut model = base_model();
+    model.accel.turn_on_bias_std = [0.003; 3];
+    model.accel.warmup_bias = [0.004, -0.003, 0.005];
+    model.accel.warmup_time_constant_s = 8.0;
+    (0..count)
+        .map(|seed| {
+            let s = simulate(
+                Layout::Static { duration_s: 40.0 },
+                &model,
+                100 + seed,
+                no_extra,
+            );
+            let true_rms = true_model_rms(&s.samples, &s.exact, &s.holds);
+            let input = SessionInput::Raw {
+                name: format!("run {seed}"),
+                samples: s.samples,
+            };
+            (input, true_rms)
+        })
+        .collect()
+}
+
+#[test]
+fn a_warm_up_that_repeats_is_found_with_whole_sessions_held_out() {
+    let runs = start_up_sessions(6);
+    let true_rms = (runs.iter().map(|r| r.1 * r.1).sum::<f64>() / runs.len() as f64).sqrt();
+    let inputs: Vec<SessionInput> = runs.into_iter().map(|r| r.0).collect();
+    let cfg = DiagnoseConfig {
+        gravity_mps2: STANDARD_GRAVITY_MPS2,
+        ..DiagnoseConfig::default()
+    };
+    let d = diagnose(&inputs, &[], &cfg).unwrap();
+    assert!(d.validation.contains("whole sessions"), "{}", d.validation);
+    check(&d, Some(Effect::WarmUp), true_rms);
+    // Calibrating on four runs and testing on the other two finds it as well.
+    let d = diagnose(&inputs[..4], &inputs[4..], &cfg).unwrap();
+    assert!(d.validation.contains("test data"), "{}", d.validation);
+    check(&d, Some(Effect::WarmUp), true_rms);
+}

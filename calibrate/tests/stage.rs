@@ -396,7 +396,89 @@ fn calib_id_is_stable_and_changes_with_every_parameter() {
     let mut g = f.clone();
     g.gyro.bias_dps = None;
     variants.push(g);
-    for g in &variants {
+    let mut g = f.clone();
+    g.temperature.scale_per_c = Some([1e-4, 0.0, 0.0]);
+    variants.push(g);
+    let mut g = f.clone();
+    g.time.drift_g_per_s = Some([1e-6, 0.0, 0.0]);
+    g.time.drift_max_s = Some(60.0);
+    variants.push(g);
+    let mut g = f.clone();
+    g.time.warm_up_g = Some([1e-3, 0.0, 0.0]);
+    g.time.warm_up_time_constant_s = Some(10.0);
+    variants.push(g);
+    let mut g = f.clone();
+    g.nonlinearity.quadratic_g_per_g2 = Some([1e-3, 0.0, 0.0]);
+    variants.push(g);
+    for (k, g) in variants.iter().enumerate() {
         assert_ne!(calib_id(g), calib_id(&f));
+        for h in &variants[..k] {
+            assert_ne!(calib_id(g), calib_id(h));
+        }
+    }
+}
+
+#[test]
+fn every_fitted_term_is_applied_with_the_time_since_the_stream_began() {
+    let mut file = calibration();
+    file.temperature.scale_per_c = Some([2e-3, -1e-3, 1.5e-3]);
+    file.time.drift_g_per_s = Some([0.2, -0.1, 0.3]);
+    file.time.drift_max_s = Some(0.02);
+    file.time.warm_up_g = Some([0.01, 0.02, -0.03]);
+    file.time.warm_up_time_constant_s = Some(0.01);
+    file.nonlinearity.quadratic_g_per_g2 = Some([0.01, -0.008, 0.012]);
+    let mut st = stage(&file, DetectorKind::Yu);
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    // Two streams: the second restarts its sequence numbers 5 s later, so its time since
+    // power-on starts again from 0.
+    let mut samples = Vec::new();
+    for (t0_ns, n) in [
+        (1_000_000_u64, 2 * BATCH_LEN as u64),
+        (5_000_000_000, BATCH_LEN as u64),
+    ] {
+        for k in 0..n {
+            let a = std::array::from_fn(|_| rng.random_range(-1.5..1.5));
+            samples.push(raw(
+                k,
+                t0_ns + 1_000_000 * k,
+                a,
+                [0.0; 3],
+                rng.random_range(20.0..40.0),
+            ));
+        }
+    }
+    let mut out = run(&mut st, &samples);
+    st.finish(&mut |c| out.push(*c));
+    assert_eq!(out.len(), samples.len());
+    let s = Matrix3::from_fn(|r, c| file.scale[r][c]);
+    let b = Vector3::from(file.bias_g);
+    let cb = Vector3::from(file.temperature.bias_g_per_c.unwrap());
+    let cs = Vector3::from(file.temperature.scale_per_c.unwrap());
+    let r = Vector3::from(file.time.drift_g_per_s.unwrap());
+    let w = Vector3::from(file.time.warm_up_g.unwrap());
+    let k = Vector3::from(file.nonlinearity.quadratic_g_per_g2.unwrap());
+    for (o, x) in out.iter().zip(&samples) {
+        let start_ns = if x.stamps.sample_ns >= 5_000_000_000 {
+            5_000_000_000
+        } else {
+            1_000_000
+        };
+        let t = (x.stamps.sample_ns - start_ns) as f64 * 1e-9;
+        let dt = x.temp_c - 25.0;
+        // The output must satisfy the reading model written out here:
+        // a' = (S + diag(c_s) dT) a + b + c_b dT + r min(t, 0.02) + w exp(-t / 0.01) + k a^2.
+        let a = Vector3::from(o.accel_mps2) / GRAVITY;
+        let reading = (s + Matrix3::from_diagonal(&(cs * dt))) * a
+            + b
+            + cb * dt
+            + r * t.min(0.02)
+            + w * (-t / 0.01).exp()
+            + k.component_mul(&a).component_mul(&a);
+        assert!(
+            (reading - Vector3::from(x.accel_g)).norm() < 1e-12,
+            "seq {} t {t}: {reading} vs {:?}",
+            x.seq,
+            x.accel_g
+        );
     }
 }
