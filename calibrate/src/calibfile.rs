@@ -397,7 +397,8 @@ mod tests {
         f.nonlinearity.quadratic_g_per_g2 = Some([0.002, -0.001, 0.003]);
         f.save(&path).unwrap();
         assert_eq!(CalibrationFile::load(&path).unwrap(), f);
-        let cases: [(&str, fn(&mut CalibrationFile)); 4] = [
+        type Spoil = fn(&mut CalibrationFile);
+        let cases: [(&str, Spoil); 4] = [
             ("drift_max_s", |f| f.time.drift_max_s = None),
             ("warm_up_time_constant_s", |f| {
                 f.time.warm_up_time_constant_s = Some(0.0)
