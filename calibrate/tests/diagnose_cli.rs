@@ -9,7 +9,7 @@ use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig};
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use ipc_types::RawImuSample;
-use ipc_types::units::{AccelRange, GyroRange, STANDARD_GRAVITY_MPS2};
+use ipc_types::units::{AccelRange, GyroRange};
 use mems_sim::model::{SensorModel, ThermalModel, TriadModel};
 use mems_sim::scenario::{PoseParams, PoseSession, Scenario};
 use mems_sim::vibration::VibrationModel;
