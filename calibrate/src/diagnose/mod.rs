@@ -1563,7 +1563,7 @@ impl Diagnoser<'_> {
         (out, rank)
     }
 
-    /// Histogram of sample deviations from their block means in the calibration sessions.
+    /// Histogram of sample deviations from their block means in every raw session.
     fn histogram(&self) -> Option<SampleHistogram> {
         const START: f64 = -520.0;
         const WIDTH: f64 = 8.0;
@@ -1577,7 +1577,7 @@ impl Diagnoser<'_> {
         let mut any = false;
         let lsb = self.cfg.data.torn.lsb_per_g;
         let block = (self.cfg.data.block_s * 1e9) as u64;
-        for s in &self.sessions[..self.n_calib] {
+        for s in &self.sessions {
             let Session::Raw(r) = s else { continue };
             any = true;
             for seg in &r.segments {

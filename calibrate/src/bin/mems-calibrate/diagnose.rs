@@ -17,13 +17,13 @@ use indicatif::{ProgressBar, ProgressStyle};
 /// Options of `mems-calibrate diagnose`.
 #[derive(Args)]
 pub struct DiagnoseArgs {
-    /// Calibration data: a six-position means CSV, a raw recording (canonical CSV, thesis CSV,
-    /// MCAP), or a folder of them; repeat for several sessions.
-    #[arg(long, required = true)]
+    /// Calibration data: six-position means CSVs, raw recordings (canonical CSV, thesis CSV,
+    /// MCAP) or folders of them, one session each.
+    #[arg(long, required = true, num_args = 1..)]
     input: Vec<PathBuf>,
     /// Test data (files or folders) for the held-out residuals; without it, held-out folds of
     /// the calibration data are used.
-    #[arg(long)]
+    #[arg(long, num_args = 1..)]
     test: Vec<PathBuf>,
     /// Local gravity, m/s^2, for reporting residuals in m/s^2.
     #[arg(long, default_value_t = ipc_types::units::STANDARD_GRAVITY_MPS2)]
