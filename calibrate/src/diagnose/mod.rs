@@ -330,6 +330,9 @@ pub struct Diagnosis {
     pub acquisition: Vec<AcquisitionFindings>,
     /// The final model fitted on all calibration data.
     pub final_fit: FinalFit,
+    /// The same without the terms a calibration file cannot carry (`reference_tilt`, a
+    /// property of the set-up; `gaps`, steps of one session): what `--out` writes.
+    pub calibration_fit: FinalFit,
     /// Held-out residuals of the baseline.
     pub baseline_points: Vec<ResidualPoint>,
     /// Held-out residuals of the final model.
@@ -1287,6 +1290,18 @@ impl Diagnoser<'_> {
         let fixes = Self::fixes_of(&final_effects);
         let final_set = &self.sets[&(fixes.torn, fixes.dedup)];
         let (final_fit, _) = self.final_fit(final_set, &final_effects);
+        // What a calibration file can carry: not the set-up's label errors nor the steps of
+        // one session's gaps.
+        let sensor_effects: Vec<Effect> = final_effects
+            .iter()
+            .copied()
+            .filter(|e| !matches!(e, Effect::ReferenceTilt | Effect::Gaps))
+            .collect();
+        let calibration_fit = if sensor_effects == final_effects {
+            final_fit.clone()
+        } else {
+            self.final_fit(final_set, &sensor_effects).0
+        };
         let noise_floor_mps2 =
             (final_eval.v.iter().sum::<f64>() / final_eval.v.len().max(1) as f64).sqrt()
                 * self.cfg.gravity_mps2;
@@ -1316,6 +1331,7 @@ impl Diagnoser<'_> {
             unexplained_structure,
             acquisition,
             final_fit,
+            calibration_fit,
             baseline_points,
             final_points,
             histogram,

@@ -388,7 +388,7 @@ pub fn report(d: &Diagnosis) -> String {
 }
 
 fn write_calibration(args: &DiagnoseArgs, d: &Diagnosis, out: &Path) -> Result<()> {
-    let f = &d.final_fit;
+    let f = &d.calibration_fit;
     let mut file = match (d.kind, &f.model, &f.covariance) {
         (BaselineKind::SessionMean, _, _) | (_, None, _) | (_, _, None) => {
             let Some(base) = &args.base else {
@@ -446,11 +446,15 @@ fn write_calibration(args: &DiagnoseArgs, d: &Diagnosis, out: &Path) -> Result<(
             file
         }
     };
-    if f.effects.contains(&Effect::ReferenceTilt) {
+    if d.final_fit.effects.contains(&Effect::ReferenceTilt) {
         eprintln!(
-            "note: reference_tilt describes the calibration set-up (labels off), not the sensor: it is \
-             not written; calibrate label-free from at least 9 orientations instead"
+            "note: reference_tilt describes the calibration set-up (labels off), not the sensor: the \
+             file holds the model fitted without it; calibrate label-free from at least 9 \
+             orientations instead"
         );
+    }
+    if d.final_fit.effects.contains(&Effect::Gaps) {
+        eprintln!("note: the bias steps at gaps belong to one session: not written");
     }
     let t = &f.terms;
     if t.temp_bias_g_per_c.is_some() || t.temp_scale_per_c.is_some() {
