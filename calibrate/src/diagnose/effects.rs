@@ -29,7 +29,7 @@ pub enum Effect {
     /// for each stretch between gaps (3 per gap).
     Gaps,
     /// Torn high/low-byte reads (values off by +-256 counts near a byte boundary), undone by
-    /// [`crate::repair::repair_torn_reads`].
+    /// the torn-read repair (`calibrate::repair`).
     TornReads,
     /// Samples that repeat the previous one exactly more often than noise allows (the driver
     /// read faster than the sensor converts), left out.

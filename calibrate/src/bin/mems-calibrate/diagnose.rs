@@ -35,7 +35,8 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     plot_dir: Option<PathBuf>,
     /// Write the final model (baseline plus the selected effect, fitted on the calibration
-    /// data) as a calibration file.
+    /// data; without reference_tilt and gaps, which are not the sensor's) as a calibration
+    /// file.
     #[arg(long)]
     out: Option<PathBuf>,
     /// With a static baseline (no S, b of its own): the calibration file the fitted terms are
