@@ -15,10 +15,12 @@
 #define MEMS_SERVICE_RAW "mems/imu/raw"
 #define MEMS_SERVICE_CORRECTED "mems/imu/corrected"
 #define MEMS_SERVICE_ODOMETRY "mems/odometry/state"
+#define MEMS_SERVICE_HINT "mems/robot/hint"
 
 #define MEMS_TYPE_NAME_RAW "mems::RawImuSample.v1"
 #define MEMS_TYPE_NAME_CORRECTED "mems::CorrectedImuSample.v1"
-#define MEMS_TYPE_NAME_ODOMETRY "mems::OdometryState.v1"
+#define MEMS_TYPE_NAME_ODOMETRY "mems::OdometryState.v2"
+#define MEMS_TYPE_NAME_HINT "mems::RobotHint.v1"
 
 /* RawImuSample.flags */
 #define MEMS_RAW_GAP_BEFORE (1u << 0)
@@ -37,6 +39,17 @@
 #define MEMS_ODOMETRY_ZERO_VELOCITY (1u << 0)
 #define MEMS_ODOMETRY_ALIGNED (1u << 1)
 #define MEMS_ODOMETRY_REVISION (1u << 2)
+#define MEMS_ODOMETRY_HINT_STATIONARY (1u << 3)
+#define MEMS_ODOMETRY_HINT_SPEED (1u << 4)
+#define MEMS_ODOMETRY_HINT_STALE (1u << 5)
+#define MEMS_ODOMETRY_HINT_DISAGREE (1u << 6)
+
+/* RobotHint.flags */
+#define MEMS_HINT_STATIONARY (1u << 0)
+#define MEMS_HINT_SOURCE_COMMANDED (1u << 1)
+#define MEMS_HINT_SOURCE_ENCODERS (1u << 2)
+#define MEMS_HINT_SPEED_VALID (1u << 3)
+#define MEMS_HINT_YAW_RATE_VALID (1u << 4)
 
 /* Per-stage timestamps (ns, CLOCK_MONOTONIC); 0 where a stage has not touched the message. */
 typedef struct mems_stamps {
@@ -90,6 +103,22 @@ typedef struct mems_odometry_state {
     uint16_t flags;
     uint16_t reserved16;
     uint32_t rest_count;
+    uint32_t hints_applied;
+    uint32_t hint_disagreements;
 } mems_odometry_state;
+
+/* A robot controller's hint. stamps.sample_ns: the time it describes (CLOCK_MONOTONIC);
+ * stamps.acquired_ns: when it was published. Body frame x forward, y left, z up. */
+typedef struct mems_robot_hint {
+    mems_stamps stamps;
+    uint64_t seq;
+    double forward_speed_mps;
+    double forward_speed_sigma_mps;
+    double yaw_rate_rps;
+    double yaw_rate_sigma_rps;
+    uint16_t flags;
+    uint16_t reserved16;
+    uint32_t reserved;
+} mems_robot_hint;
 
 #endif /* MEMS_IPC_H */

@@ -14,6 +14,7 @@ import ctypes
 SERVICE_RAW = "mems/imu/raw"
 SERVICE_CORRECTED = "mems/imu/corrected"
 SERVICE_ODOMETRY = "mems/odometry/state"
+SERVICE_HINT = "mems/robot/hint"
 
 RAW_GAP_BEFORE = 1 << 0
 RAW_FIFO_OVERFLOW = 1 << 1
@@ -29,6 +30,16 @@ CORRECTED_BIAS_REFINED = 1 << 2
 ODOMETRY_ZERO_VELOCITY = 1 << 0
 ODOMETRY_ALIGNED = 1 << 1
 ODOMETRY_REVISION = 1 << 2
+ODOMETRY_HINT_STATIONARY = 1 << 3
+ODOMETRY_HINT_SPEED = 1 << 4
+ODOMETRY_HINT_STALE = 1 << 5
+ODOMETRY_HINT_DISAGREE = 1 << 6
+
+HINT_STATIONARY = 1 << 0
+HINT_SOURCE_COMMANDED = 1 << 1
+HINT_SOURCE_ENCODERS = 1 << 2
+HINT_SPEED_VALID = 1 << 3
+HINT_YAW_RATE_VALID = 1 << 4
 
 # The lossless service settings of ipc-types/src/service.rs: whichever process creates a
 # service sets them, and an opener may not ask for more, so every language uses the same.
@@ -139,11 +150,35 @@ class OdometryState(ctypes.Structure):
         ("flags", ctypes.c_uint16),
         ("reserved16", ctypes.c_uint16),
         ("rest_count", ctypes.c_uint32),
+        ("hints_applied", ctypes.c_uint32),
+        ("hint_disagreements", ctypes.c_uint32),
     ]
 
     @staticmethod
     def type_name():
-        return "mems::OdometryState.v1"
+        return "mems::OdometryState.v2"
 
 
-ALL_TYPES = [Stamps, RawImuSample, CorrectedImuSample, OdometryState]
+class RobotHint(ctypes.Structure):
+    """A robot controller's hint (service mems/robot/hint). ``stamps.sample_ns``: the time it
+    describes (CLOCK_MONOTONIC ns, the IMU samples' clock); ``stamps.acquired_ns``: when it was
+    published. Body frame x forward, y left, z up."""
+
+    _fields_ = [
+        ("stamps", Stamps),
+        ("seq", ctypes.c_uint64),
+        ("forward_speed_mps", ctypes.c_double),
+        ("forward_speed_sigma_mps", ctypes.c_double),
+        ("yaw_rate_rps", ctypes.c_double),
+        ("yaw_rate_sigma_rps", ctypes.c_double),
+        ("flags", ctypes.c_uint16),
+        ("reserved16", ctypes.c_uint16),
+        ("reserved", ctypes.c_uint32),
+    ]
+
+    @staticmethod
+    def type_name():
+        return "mems::RobotHint.v1"
+
+
+ALL_TYPES = [Stamps, RawImuSample, CorrectedImuSample, OdometryState, RobotHint]

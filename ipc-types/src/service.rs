@@ -22,6 +22,10 @@ pub const RAW: &str = "mems/imu/raw";
 pub const CORRECTED: &str = "mems/imu/corrected";
 /// Odometry state: [`crate::OdometryState`].
 pub const ODOMETRY: &str = "mems/odometry/state";
+/// Rest and speed hints from the robot's own controller: [`crate::RobotHint`]. Controllers
+/// should publish them without blocking (their control loop must not wait for the odometry):
+/// see [`hint_publisher`].
+pub const HINT: &str = "mems/robot/hint";
 
 /// Environment variable holding a namespace prefix for every service name (tests, and two
 /// stacks on one machine). Every binary also takes `--namespace`, which wins over it.
@@ -172,6 +176,21 @@ pub fn publisher<T: core::fmt::Debug + ZeroCopySend>(
         .set_backpressure_handler(handler)
         .create()
         .map_err(|e| ServiceError(format!("cannot create publisher: {e:?}")))
+}
+
+/// A publisher for a robot controller's hints ([`HINT`]): it never blocks. A subscriber whose
+/// buffer is full (an odometry process that hangs) misses the hint; the odometry treats a
+/// missing hint as a stale one and falls back to the IMU alone, which is safe, whereas a
+/// control loop that waited on the odometry would not be.
+pub fn hint_publisher<T: core::fmt::Debug + ZeroCopySend>(
+    service: &PortFactory<ipc::Service, T, ()>,
+) -> Result<Publisher<ipc::Service, T, ()>, ServiceError> {
+    service
+        .publisher_builder()
+        .max_loaned_samples(MAX_LOANED)
+        .backpressure_strategy(BackpressureStrategy::DiscardData)
+        .create()
+        .map_err(|e| ServiceError(format!("cannot create hint publisher: {e:?}")))
 }
 
 /// A subscriber on `service` with the full [`SUBSCRIBER_BUFFER`].

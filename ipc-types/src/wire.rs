@@ -125,6 +125,17 @@ pub mod odometry_flags {
     /// This message revises an earlier state (drift removed after a motion interval ended);
     /// its `stamps.sample_ns` is the time of the state it replaces.
     pub const REVISION: u16 = 1 << 2;
+    /// A fresh robot hint says the robot is stationary at this sample (applied as a
+    /// zero-velocity update).
+    pub const HINT_STATIONARY: u16 = 1 << 3;
+    /// A fresh robot speed hint constrained the velocity at this sample.
+    pub const HINT_SPEED: u16 = 1 << 4;
+    /// Hints have been received, but the newest is older than the configured maximum age:
+    /// the filter runs on the IMU alone.
+    pub const HINT_STALE: u16 = 1 << 5;
+    /// The fresh hint and the IMU's own zero-state detector disagree at this sample (one says
+    /// rest, the other motion).
+    pub const HINT_DISAGREE: u16 = 1 << 6;
 }
 
 /// The odometry estimate at one sample time.
@@ -132,7 +143,7 @@ pub mod odometry_flags {
 /// Service `mems/odometry/state`. Position and velocity are in the navigation frame (z up,
 /// origin and heading fixed at alignment); sigmas are 1-sigma per axis.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize, ZeroCopySend)]
-#[type_name("mems::OdometryState.v1")]
+#[type_name("mems::OdometryState.v2")]
 #[repr(C)]
 pub struct OdometryState {
     /// Per-stage timestamps, with `odometry_ns` filled in.
@@ -161,6 +172,58 @@ pub struct OdometryState {
     pub reserved16: u16,
     /// Number of rest intervals seen since alignment.
     pub rest_count: u32,
+    /// Robot hints applied since alignment (stationary and speed updates).
+    pub hints_applied: u32,
+    /// Samples since alignment at which a fresh hint and the IMU detector disagreed (see
+    /// [`odometry_flags::HINT_DISAGREE`]).
+    pub hint_disagreements: u32,
+}
+
+/// Bits of [`RobotHint::flags`].
+pub mod hint_flags {
+    /// The robot is stationary (its wheels do not turn). Without this bit the hint says it
+    /// moves or says nothing about rest (see the source bits).
+    pub const STATIONARY: u16 = 1 << 0;
+    /// The stationary state comes from the controller's command (zero velocity commanded).
+    pub const SOURCE_COMMANDED: u16 = 1 << 1;
+    /// The stationary state comes from the wheel encoders (zero measured speed).
+    pub const SOURCE_ENCODERS: u16 = 1 << 2;
+    /// `forward_speed_mps` and its sigma hold a measurement.
+    pub const SPEED_VALID: u16 = 1 << 3;
+    /// `yaw_rate_rps` and its sigma hold a measurement.
+    pub const YAW_RATE_VALID: u16 = 1 << 4;
+}
+
+/// What the robot's own controller knows about its motion, published for the odometry.
+///
+/// Service `mems/robot/hint`. `stamps.sample_ns` is the time the hint describes, on the IMU
+/// samples' clock (`CLOCK_MONOTONIC`, ns); `stamps.acquired_ns` is when the controller
+/// published it; the other stamps are 0. The robot body frame is x forward, y left, z up
+/// (REP 103); the rotation from the IMU's sensor frame to it is configuration of the odometry
+/// process. A hint with neither source bit says nothing about rest.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize, ZeroCopySend)]
+#[type_name("mems::RobotHint.v1")]
+#[repr(C)]
+pub struct RobotHint {
+    /// `sample_ns`: the time the hint describes; `acquired_ns`: when it was published.
+    pub stamps: Stamps,
+    /// The hint publisher's own sequence number: consecutive, starting at 0.
+    pub seq: u64,
+    /// Forward speed along body x, m/s (valid with [`hint_flags::SPEED_VALID`]).
+    pub forward_speed_mps: f64,
+    /// 1-sigma of `forward_speed_mps`, m/s.
+    pub forward_speed_sigma_mps: f64,
+    /// Yaw rate about body z (counter-clockwise positive seen from above), rad/s (valid
+    /// with [`hint_flags::YAW_RATE_VALID`]).
+    pub yaw_rate_rps: f64,
+    /// 1-sigma of `yaw_rate_rps`, rad/s.
+    pub yaw_rate_sigma_rps: f64,
+    /// Bits from [`hint_flags`].
+    pub flags: u16,
+    /// Zero; keeps the layout free of implicit padding.
+    pub reserved16: u16,
+    /// Zero; keeps the layout free of implicit padding.
+    pub reserved: u32,
 }
 
 /// What every message on a service carries, for tools that handle any of them (latency,
@@ -218,6 +281,18 @@ impl Message for OdometryState {
     }
 }
 
+impl Message for RobotHint {
+    fn seq(&self) -> u64 {
+        self.seq
+    }
+    fn stamps(&self) -> &Stamps {
+        &self.stamps
+    }
+    fn published_ns(&self) -> u64 {
+        self.stamps.acquired_ns
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -269,7 +344,7 @@ mod tests {
 
     #[test]
     fn odometry_layout() {
-        assert_eq!(size_of::<OdometryState>(), 208);
+        assert_eq!(size_of::<OdometryState>(), 216);
         assert_eq!(align_of::<OdometryState>(), 8);
         assert_eq!(offset_of!(OdometryState, stamps), 0);
         assert_eq!(offset_of!(OdometryState, seq), 32);
@@ -283,5 +358,22 @@ mod tests {
         assert_eq!(offset_of!(OdometryState, flags), 200);
         assert_eq!(offset_of!(OdometryState, reserved16), 202);
         assert_eq!(offset_of!(OdometryState, rest_count), 204);
+        assert_eq!(offset_of!(OdometryState, hints_applied), 208);
+        assert_eq!(offset_of!(OdometryState, hint_disagreements), 212);
+    }
+
+    #[test]
+    fn hint_layout() {
+        assert_eq!(size_of::<RobotHint>(), 80);
+        assert_eq!(align_of::<RobotHint>(), 8);
+        assert_eq!(offset_of!(RobotHint, stamps), 0);
+        assert_eq!(offset_of!(RobotHint, seq), 32);
+        assert_eq!(offset_of!(RobotHint, forward_speed_mps), 40);
+        assert_eq!(offset_of!(RobotHint, forward_speed_sigma_mps), 48);
+        assert_eq!(offset_of!(RobotHint, yaw_rate_rps), 56);
+        assert_eq!(offset_of!(RobotHint, yaw_rate_sigma_rps), 64);
+        assert_eq!(offset_of!(RobotHint, flags), 72);
+        assert_eq!(offset_of!(RobotHint, reserved16), 74);
+        assert_eq!(offset_of!(RobotHint, reserved), 76);
     }
 }

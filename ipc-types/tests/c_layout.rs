@@ -3,8 +3,8 @@
 
 use core::mem::{align_of, offset_of, size_of};
 use ipc_types::{
-    CorrectedImuSample, OdometryState, RawImuSample, Stamps, corrected_flags, odometry_flags,
-    raw_flags, service,
+    CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps, corrected_flags,
+    hint_flags, odometry_flags, raw_flags, service,
 };
 use std::fmt::Write as _;
 use std::process::Command;
@@ -89,10 +89,28 @@ fn facts() -> Vec<Fact> {
             distance_m,
             flags,
             reserved16,
-            rest_count
+            rest_count,
+            hints_applied,
+            hint_disagreements
         ]
     );
-    let flags: [(&str, u16); 12] = [
+    layout_facts!(
+        f,
+        RobotHint,
+        "mems_robot_hint",
+        [
+            stamps,
+            seq,
+            forward_speed_mps,
+            forward_speed_sigma_mps,
+            yaw_rate_rps,
+            yaw_rate_sigma_rps,
+            flags,
+            reserved16,
+            reserved
+        ]
+    );
+    let flags: [(&str, u16); 21] = [
         ("MEMS_RAW_GAP_BEFORE", raw_flags::GAP_BEFORE),
         ("MEMS_RAW_FIFO_OVERFLOW", raw_flags::FIFO_OVERFLOW),
         ("MEMS_RAW_SATURATED", raw_flags::SATURATED),
@@ -108,6 +126,18 @@ fn facts() -> Vec<Fact> {
         ("MEMS_ODOMETRY_ZERO_VELOCITY", odometry_flags::ZERO_VELOCITY),
         ("MEMS_ODOMETRY_ALIGNED", odometry_flags::ALIGNED),
         ("MEMS_ODOMETRY_REVISION", odometry_flags::REVISION),
+        (
+            "MEMS_ODOMETRY_HINT_STATIONARY",
+            odometry_flags::HINT_STATIONARY,
+        ),
+        ("MEMS_ODOMETRY_HINT_SPEED", odometry_flags::HINT_SPEED),
+        ("MEMS_ODOMETRY_HINT_STALE", odometry_flags::HINT_STALE),
+        ("MEMS_ODOMETRY_HINT_DISAGREE", odometry_flags::HINT_DISAGREE),
+        ("MEMS_HINT_STATIONARY", hint_flags::STATIONARY),
+        ("MEMS_HINT_SOURCE_COMMANDED", hint_flags::SOURCE_COMMANDED),
+        ("MEMS_HINT_SOURCE_ENCODERS", hint_flags::SOURCE_ENCODERS),
+        ("MEMS_HINT_SPEED_VALID", hint_flags::SPEED_VALID),
+        ("MEMS_HINT_YAW_RATE_VALID", hint_flags::YAW_RATE_VALID),
     ];
     for (name, value) in flags {
         f.push(Fact {
@@ -122,12 +152,13 @@ fn facts() -> Vec<Fact> {
 fn strings() -> Vec<(&'static str, String)> {
     use iceoryx2::prelude::ZeroCopySend;
     let name = |n: &str| n.to_string();
-    // SAFETY (all three calls): the derived `type_name` only returns the static string given
+    // SAFETY (every call): the derived `type_name` only returns the static string given
     // by `#[type_name]`; it is unsafe because implementations must keep it stable.
     vec![
         ("MEMS_SERVICE_RAW", service::RAW.to_string()),
         ("MEMS_SERVICE_CORRECTED", service::CORRECTED.to_string()),
         ("MEMS_SERVICE_ODOMETRY", service::ODOMETRY.to_string()),
+        ("MEMS_SERVICE_HINT", service::HINT.to_string()),
         (
             "MEMS_TYPE_NAME_RAW",
             name(unsafe { RawImuSample::type_name() }),
@@ -139,6 +170,10 @@ fn strings() -> Vec<(&'static str, String)> {
         (
             "MEMS_TYPE_NAME_ODOMETRY",
             name(unsafe { OdometryState::type_name() }),
+        ),
+        (
+            "MEMS_TYPE_NAME_HINT",
+            name(unsafe { RobotHint::type_name() }),
         ),
     ]
 }

@@ -3,7 +3,7 @@
 
 use core::mem::{align_of, offset_of, size_of};
 use iceoryx2::prelude::ZeroCopySend;
-use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, Stamps};
+use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps};
 use std::process::Command;
 
 /// `name size align type_name field:offset ...` for one type, as the Python script prints it.
@@ -74,7 +74,24 @@ fn python_ctypes_match_rust_layout() {
                 distance_m,
                 flags,
                 reserved16,
-                rest_count
+                rest_count,
+                hints_applied,
+                hint_disagreements
+            ]
+        ),
+        rust_line!(
+            RobotHint,
+            "RobotHint",
+            [
+                stamps,
+                seq,
+                forward_speed_mps,
+                forward_speed_sigma_mps,
+                yaw_rate_rps,
+                yaw_rate_sigma_rps,
+                flags,
+                reserved16,
+                reserved
             ]
         ),
     ];

@@ -341,6 +341,8 @@ impl OdometryStage {
             flags,
             reserved16: 0,
             rest_count: self.rest_count,
+            hints_applied: 0,
+            hint_disagreements: 0,
         }
     }
 
@@ -417,6 +419,8 @@ impl OdometryStage {
                 flags: odometry_flags::ALIGNED | odometry_flags::REVISION,
                 reserved16: 0,
                 rest_count: self.rest_count,
+                hints_applied: 0,
+                hint_disagreements: 0,
             });
             self.revisions_emitted += 1;
         }

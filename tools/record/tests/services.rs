@@ -72,6 +72,8 @@ fn state_from(c: &CorrectedImuSample, flags: u16) -> OdometryState {
         flags: odometry_flags::ALIGNED | flags,
         reserved16: 0,
         rest_count: 3,
+        hints_applied: c.seq as u32 / 10,
+        hint_disagreements: 1,
     }
 }
 

@@ -282,6 +282,17 @@ impl Topic for OdometryState {
                     "rest_count",
                     uint("Rest intervals since alignment.", u32::MAX.into()),
                 ),
+                (
+                    "hints_applied",
+                    uint("Robot hints applied since alignment.", u32::MAX.into()),
+                ),
+                (
+                    "hint_disagreements",
+                    uint(
+                        "Samples at which a fresh robot hint and the IMU detector disagreed.",
+                        u32::MAX.into(),
+                    ),
+                ),
             ],
         )
     }
@@ -1043,6 +1054,8 @@ mod tests {
             flags: rng.random(),
             reserved16: rng.random(),
             rest_count: rng.random(),
+            hints_applied: rng.random(),
+            hint_disagreements: rng.random(),
         }
     }
 
