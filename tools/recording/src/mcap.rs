@@ -4,7 +4,8 @@
 //!
 //! Channels: [`ipc_types::service::RAW`] (`mems/imu/raw`, [`RawImuSample`]),
 //! [`ipc_types::service::CORRECTED`] (`mems/imu/corrected`, [`CorrectedImuSample`]),
-//! [`ipc_types::service::ODOMETRY`] (`mems/odometry/state`, [`OdometryState`]), the pose derived
+//! [`ipc_types::service::ODOMETRY`] (`mems/odometry/state`, [`OdometryState`]),
+//! [`ipc_types::service::HINT`] (`mems/robot/hint`, [`RobotHint`]), the pose derived
 //! from each odometry state for Foxglove ([`POSE_TOPIC`], [`PoseInFrame`], schema
 //! `foxglove.PoseInFrame`), the recorder's events ([`EVENTS_TOPIC`], [`RecorderEvent`]) and
 //! [`TRUTH_TOPIC`] (`mems/sim/truth`, [`Truth`]). Topics are the services' base names, without
@@ -31,7 +32,7 @@ use std::path::{Path, PathBuf};
 
 use ::mcap::records::MessageHeader;
 use ::mcap::{Compression, MAGIC, MessageStream, WriteOptions};
-use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample};
+use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
@@ -313,6 +314,62 @@ impl Topic for OdometryState {
             .chain(&self.attitude_wxyz)
             .chain([&self.distance_m]);
         values.all(|v| v.is_finite())
+    }
+}
+
+impl Topic for RobotHint {
+    const TOPIC: &'static str = ipc_types::service::HINT;
+    const SCHEMA_NAME: &'static str = "mems.RobotHint";
+
+    fn json_schema() -> Value {
+        object(
+            Self::SCHEMA_NAME,
+            "A rest/speed hint from the robot's controller; body frame x forward, y left, z up (ipc-types RobotHint).",
+            &[
+                ("stamps", stamps_schema()),
+                (
+                    "seq",
+                    uint("The hint publisher's sequence number, from 0.", u64::MAX),
+                ),
+                (
+                    "forward_speed_mps",
+                    number("Forward speed along body x, m/s (valid with SPEED_VALID)."),
+                ),
+                (
+                    "forward_speed_sigma_mps",
+                    number("1-sigma of forward_speed_mps, m/s."),
+                ),
+                (
+                    "yaw_rate_rps",
+                    number(
+                        "Yaw rate about body z, rad/s, counter-clockwise positive (valid with YAW_RATE_VALID).",
+                    ),
+                ),
+                (
+                    "yaw_rate_sigma_rps",
+                    number("1-sigma of yaw_rate_rps, rad/s."),
+                ),
+                ("flags", uint("ipc-types hint_flags bits.", u16::MAX.into())),
+                ("reserved16", uint("Zero.", u16::MAX.into())),
+                ("reserved", uint("Zero.", u32::MAX.into())),
+            ],
+        )
+    }
+
+    /// The time the hint describes (`stamps.sample_ns`, on the IMU samples' clock).
+    fn publish_time_ns(&self) -> u64 {
+        self.stamps.sample_ns
+    }
+
+    fn is_finite(&self) -> bool {
+        [
+            self.forward_speed_mps,
+            self.forward_speed_sigma_mps,
+            self.yaw_rate_rps,
+            self.yaw_rate_sigma_rps,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
     }
 }
 
@@ -914,6 +971,8 @@ pub struct Contents {
     pub corrected: Vec<CorrectedImuSample>,
     /// Odometry states in file order (revisions included, where the odometry stage sent them).
     pub odometry: Vec<OdometryState>,
+    /// Robot hints in file order.
+    pub hints: Vec<RobotHint>,
     /// Poses derived from the odometry states, in file order.
     pub poses: Vec<PoseInFrame>,
     /// The recorder's events in file order.
@@ -938,7 +997,7 @@ impl Contents {
 }
 
 /// Reads every message of the known topics of an MCAP file (raw, truth, corrected, odometry,
-/// pose, events), up to the cut if the file was truncated (reported in
+/// robot hints, pose, events), up to the cut if the file was truncated (reported in
 /// [`Contents::truncation`], never silently).
 ///
 /// Errors if the file is not MCAP, a message does not decode, or raw sample times
@@ -987,6 +1046,8 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
             contents.corrected.push(sample?);
         } else if let Some(state) = message.decode::<OdometryState>() {
             contents.odometry.push(state?);
+        } else if let Some(hint) = message.decode::<RobotHint>() {
+            contents.hints.push(hint?);
         } else if let Some(pose) = message.decode::<PoseInFrame>() {
             contents.poses.push(pose?);
         } else if let Some(event) = message.decode::<RecorderEvent>() {
@@ -1059,6 +1120,20 @@ mod tests {
         }
     }
 
+    fn hint(rng: &mut ChaCha8Rng) -> RobotHint {
+        RobotHint {
+            stamps: stamps(rng),
+            seq: rng.random(),
+            forward_speed_mps: finite(rng),
+            forward_speed_sigma_mps: finite(rng),
+            yaw_rate_rps: finite(rng),
+            yaw_rate_sigma_rps: finite(rng),
+            flags: rng.random(),
+            reserved16: rng.random(),
+            reserved: rng.random(),
+        }
+    }
+
     fn tmp(name: &str) -> PathBuf {
         std::env::temp_dir().join(format!("recording-unit-{}-{name}", std::process::id()))
     }
@@ -1070,6 +1145,7 @@ mod tests {
         let corrected: Vec<_> = (0..50).map(|_| corrected(&mut rng)).collect();
         let odometry: Vec<_> = (0..50).map(|_| odometry(&mut rng)).collect();
         let poses: Vec<_> = odometry.iter().map(PoseInFrame::from_state).collect();
+        let hints: Vec<_> = (0..50).map(|_| hint(&mut rng)).collect();
         let events = vec![
             RecorderEvent {
                 kind: EventKind::Gap,
@@ -1092,10 +1168,12 @@ mod tests {
         let o = writer.add_channel::<OdometryState>().unwrap();
         let p = writer.add_channel::<PoseInFrame>().unwrap();
         let e = writer.add_channel::<RecorderEvent>().unwrap();
+        let h = writer.add_channel::<RobotHint>().unwrap();
         for i in 0..50 {
             writer.write(c, &corrected[i], i as u64).unwrap();
             writer.write(o, &odometry[i], i as u64).unwrap();
             writer.write(p, &poses[i], i as u64).unwrap();
+            writer.write(h, &hints[i], i as u64).unwrap();
         }
         for event in &events {
             writer.write(e, event, event.t_ns).unwrap();
@@ -1113,9 +1191,22 @@ mod tests {
             assert_eq!(bits(&a.position_m), bits(&b.position_m));
             assert_eq!(bits(&a.attitude_wxyz), bits(&b.attitude_wxyz));
         }
+        assert_eq!(contents.hints.len(), 50);
+        for (a, b) in contents.hints.iter().zip(&hints) {
+            let fields = |x: &RobotHint| {
+                bits(&[
+                    x.forward_speed_mps,
+                    x.forward_speed_sigma_mps,
+                    x.yaw_rate_rps,
+                    x.yaw_rate_sigma_rps,
+                ])
+            };
+            assert_eq!(fields(a), fields(b));
+        }
         // PartialEq on f64 treats -0.0 == 0.0; the bit comparisons above catch that case.
         assert_eq!(contents.corrected, corrected);
         assert_eq!(contents.odometry, odometry);
+        assert_eq!(contents.hints, hints);
         assert_eq!(contents.poses, poses);
         assert_eq!(contents.events, events);
         assert!(contents.raw.is_empty() && contents.truncation.is_none());
@@ -1131,6 +1222,8 @@ mod tests {
                 s.unwrap().stamps.sample_ns
             } else if let Some(s) = m.decode::<PoseInFrame>() {
                 s.unwrap().timestamp.to_ns()
+            } else if let Some(s) = m.decode::<RobotHint>() {
+                s.unwrap().stamps.sample_ns
             } else {
                 m.decode::<RecorderEvent>().unwrap().unwrap().t_ns
             };
@@ -1213,6 +1306,7 @@ mod tests {
         assert_schema_describes(&corrected(&mut rng));
         assert_schema_describes(&state);
         assert_schema_describes(&PoseInFrame::from_state(&state));
+        assert_schema_describes(&hint(&mut rng));
         assert_schema_describes(&RecorderEvent {
             kind: EventKind::SeqReset,
             service: "s".into(),
@@ -1254,6 +1348,13 @@ mod tests {
         };
         let err = writer.write(o, &state, 0).unwrap_err();
         assert!(err.to_string().contains("mems/odometry/state"), "{err}");
+        let h = writer.add_channel::<RobotHint>().unwrap();
+        let hint = RobotHint {
+            forward_speed_sigma_mps: f64::INFINITY,
+            ..RobotHint::default()
+        };
+        let err = writer.write(h, &hint, 0).unwrap_err();
+        assert!(err.to_string().contains("mems/robot/hint"), "{err}");
         drop(writer);
         std::fs::remove_file(&path).unwrap();
     }
