@@ -4,8 +4,8 @@
 //! Compatibility: every field added after format version 1 must carry `#[serde(default)]` (an
 //! `Option` or a section that defaults to empty), so files written by older versions still load;
 //! unknown keys are ignored, so older readers accept newer files. `format_version` changes only
-//! when a field's *meaning* changes. Sections reserved for later terms ([`NoiseSection`],
-//! [`TemperatureTerms`]) are optional.
+//! when a field's *meaning* changes. Optional sections ([`NoiseSection`], [`TemperatureTerms`],
+//! ...) may be absent.
 //!
 //! Units: parameters in g (biases) and dimensionless (`S`), see [`crate::model`]; the
 //! covariance in the 12-parameter layout (`param_names`); gravity in m/s^2; temperatures in
@@ -62,15 +62,35 @@ pub struct ResidualSection {
     pub per_pose_g: Vec<[f64; 3]>,
 }
 
-/// Noise parameters measured from a session (for later use by the odometry's uncertainty).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct NoiseSection {
-    /// White-noise sigma per sample, g, and the sample rate it refers to.
-    #[serde(default)]
-    pub white_sigma_g: Option<[f64; 3]>,
-    /// Sample rate of `white_sigma_g`, Hz.
-    #[serde(default)]
-    pub sample_rate_hz: Option<f64>,
+/// The `[noise]` table: the sensor's noise parameters from an Allan analysis of a static
+/// recording (`mems-calibrate allan --into`), per axis in SI units with their 1-sigma (see
+/// [`noise::params`]). The one source of truth for the zero-state detectors' noise levels, the
+/// odometry filter's noise model and `mems-eval static`'s uncertainty propagation.
+pub type NoiseSection = noise::NoiseParams;
+
+/// Keys of the `[noise]` table written by format-1 files before the Allan analysis existed (a
+/// per-sample sigma from static-segment detection); such a table is read as "no noise
+/// parameters".
+const LEGACY_NOISE_KEYS: [&str; 2] = ["white_sigma_g", "sample_rate_hz"];
+
+/// Reads the `[noise]` table: absent, empty or legacy-only means `None`; anything else must be
+/// a complete [`NoiseSection`] (values are checked by [`CalibrationFile::load`]).
+fn deserialize_noise<'de, D>(deserializer: D) -> Result<Option<NoiseSection>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+{
+    use serde::de::Error as _;
+    let table = toml::Table::deserialize(deserializer)?;
+    if table
+        .keys()
+        .all(|k| LEGACY_NOISE_KEYS.contains(&k.as_str()))
+    {
+        return Ok(None);
+    }
+    toml::Value::Table(table)
+        .try_into::<NoiseSection>()
+        .map(Some)
+        .map_err(|e| D::Error::custom(format!("[noise]: {}", e.message())))
 }
 
 /// Temperature terms of the model (empty until a fit estimates them, e.g. `mems-calibrate
@@ -158,9 +178,13 @@ pub struct CalibrationFile {
     pub source: SourceSection,
     /// Residual statistics.
     pub residuals: ResidualSection,
-    /// Measured noise, when known.
-    #[serde(default)]
-    pub noise: NoiseSection,
+    /// Noise parameters (the `[noise]` table), when an Allan analysis has been stored.
+    #[serde(
+        default,
+        deserialize_with = "deserialize_noise",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub noise: Option<NoiseSection>,
     /// Temperature terms, when fitted.
     #[serde(default)]
     pub temperature: TemperatureTerms,
@@ -237,7 +261,7 @@ impl CalibrationFile {
             temperature_range_c: None,
             source,
             residuals,
-            noise: NoiseSection::default(),
+            noise: None,
             temperature: TemperatureTerms::default(),
             time: TimeTerms::default(),
             nonlinearity: NonlinearityTerms::default(),
@@ -331,6 +355,11 @@ impl CalibrationFile {
             }
         }
         crate::terms::ReadingTerms::from_file(&file).map_err(|e| invalid(e.to_string()))?;
+        if let Some(noise) = &file.noise {
+            noise
+                .validate()
+                .map_err(|e| invalid(format!("noise.{}: {}", e.field, e.problem)))?;
+        }
         Ok(file)
     }
 }
@@ -430,7 +459,7 @@ mod tests {
         value.insert("future_term".into(), toml::Value::Float(1.0));
         let text = toml::to_string(&value).unwrap();
         let back: CalibrationFile = toml::from_str(&text).unwrap();
-        assert_eq!(back.noise, NoiseSection::default());
+        assert_eq!(back.noise, None);
         assert_eq!(back.temperature_range_c, None);
         assert_eq!(back.gyro, GyroSection::default());
         assert_eq!(back.time, TimeTerms::default());

@@ -25,3 +25,7 @@ pub mod terms;
 pub mod thesis_eval;
 pub mod window;
 pub mod zero_state;
+
+/// The noise crate (Allan deviation, [`noise::NoiseParams`]), re-exported for the crates that
+/// read a calibration file's `[noise]` table.
+pub use noise;

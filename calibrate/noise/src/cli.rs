@@ -1,4 +1,5 @@
-//! The `mems-calibrate allan` command: arguments and entry point.
+//! The `mems-calibrate allan` command's analysis: arguments and entry point (the calibration
+//! file update, `--into`, is `mems-calibrate`'s).
 
 use std::fmt::Write as _;
 use std::io::Write;
@@ -32,9 +33,10 @@ pub struct Args {
     /// Write the noise parameters (the calibration file's `[noise]` table) as TOML here.
     #[arg(long, value_name = "OUT.toml")]
     pub toml: Option<PathBuf>,
-    /// Gravity converting g to m/s^2 (the thesis used 9.797).
-    #[arg(long, value_name = "M_S2", default_value_t = STANDARD_GRAVITY_MPS2)]
-    pub gravity: f64,
+    /// Gravity converting g to m/s^2 (the thesis used 9.797); default: standard gravity, or
+    /// the gravity of the calibration file the parameters are stored into.
+    #[arg(long, value_name = "M_S2")]
+    pub gravity: Option<f64>,
     /// An interval longer than this many median intervals is a gap.
     #[arg(long, default_value_t = GapPolicy::default().gap_factor)]
     pub gap_factor: f64,
@@ -59,10 +61,15 @@ pub struct Args {
 }
 
 impl Args {
+    /// The gravity used, m/s^2: `--gravity`, else standard gravity.
+    pub fn gravity_mps2(&self) -> f64 {
+        self.gravity.unwrap_or(STANDARD_GRAVITY_MPS2)
+    }
+
     /// The analysis options these arguments select; errors on values that make no sense.
     pub fn options(&self) -> Result<Options> {
         let positive = [
-            ("--gravity", self.gravity),
+            ("--gravity", self.gravity_mps2()),
             ("--floor-s", self.floor_s),
             ("--accel-lsb-per-g", self.accel_lsb_per_g),
             ("--gyro-lsb-per-dps", self.gyro_lsb_per_dps),
@@ -80,7 +87,7 @@ impl Args {
             self.split_factor
         );
         Ok(Options {
-            gravity_mps2: self.gravity,
+            gravity_mps2: self.gravity_mps2(),
             gaps: GapPolicy {
                 gap_factor: self.gap_factor,
                 split_factor: self.split_factor,

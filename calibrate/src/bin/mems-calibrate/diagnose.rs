@@ -3,9 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use calibrate::calibfile::{
-    CalibrationFile, FitMethod, NoiseSection, ResidualSection, SourceSection,
-};
+use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
 use calibrate::diagnose::{
     BaselineKind, CandidateStatus, DiagnoseConfig, Diagnosis, Effect, SessionInput, diagnose, plots,
 };
@@ -443,7 +441,6 @@ fn write_calibration(args: &DiagnoseArgs, d: &Diagnosis, out: &Path) -> Result<(
                 residuals,
             );
             file.temperature_range_c = f.temperature_range_c;
-            file.noise = NoiseSection::default();
             file
         }
     };

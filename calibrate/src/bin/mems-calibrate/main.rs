@@ -4,14 +4,14 @@
 //! the zero-state flag out; see `calibrate::stage`).
 //! `mems-calibrate diagnose`: residual diagnosis against candidate effects (see
 //! `calibrate::diagnose`).
+//! `mems-calibrate allan`: Allan deviation and noise parameters of a static recording (see the
+//! `noise` crate), optionally stored as a calibration file's `[noise]` table.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use calibrate::calibfile::{
-    CalibrationFile, FitMethod, NoiseSection, ResidualSection, SourceSection,
-};
+use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
 use calibrate::fit::{Pose, Weighting, fit_labelled};
 use calibrate::labelfree::fit_label_free;
 use calibrate::model::{ModelKind, PARAM_NAMES};
@@ -78,6 +78,21 @@ enum Command {
     /// Fit the baseline, test its held-out residuals against candidate effects, add the one
     /// that explains them and report the error before and after.
     Diagnose(diagnose::DiagnoseArgs),
+    /// Allan deviation of a static recording and its noise parameters (white noise, bias
+    /// instability, rate random walk per axis, 1-sigma); optionally stored into a calibration
+    /// file's [noise] table, exported for Kalibr and plotted.
+    Allan(AllanArgs),
+}
+
+/// `mems-calibrate allan`: the analysis's arguments plus where to store the parameters.
+#[derive(clap::Args)]
+struct AllanArgs {
+    #[command(flatten)]
+    analysis: calibrate::noise::Args,
+    /// Store the fitted noise parameters as the [noise] table of this calibration file
+    /// (replacing any; the rest of the file is kept). --gravity defaults to the file's.
+    #[arg(long, value_name = "CALIB.toml")]
+    into: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -103,7 +118,39 @@ fn run(cli: Cli) -> Result<()> {
         } => fit(input, model, weighted, labels, gravity, out, plot),
         Command::Serve(args) => serve::serve(&args),
         Command::Diagnose(args) => diagnose::run(&args),
+        Command::Allan(args) => allan(args),
     }
+}
+
+/// `mems-calibrate allan`.
+fn allan(mut args: AllanArgs) -> Result<()> {
+    // Read the calibration file first, so that a bad one fails before the analysis.
+    let mut calib = match &args.into {
+        Some(path) => Some(CalibrationFile::load(path)?),
+        None => None,
+    };
+    if let Some(file) = &calib {
+        match args.analysis.gravity {
+            None => args.analysis.gravity = Some(file.gravity_mps2),
+            Some(g) if g != file.gravity_mps2 => bail!(
+                "--gravity {g} m/s^2 differs from the gravity of {} ({} m/s^2): the noise \
+                 parameters must use the file's gravity (leave --gravity out)",
+                args.into
+                    .as_ref()
+                    .map_or(String::new(), |p| p.display().to_string()),
+                file.gravity_mps2
+            ),
+            Some(_) => {}
+        }
+    }
+    let stdout = std::io::stdout();
+    let report = calibrate::noise::cli::run_allan_to(&args.analysis, &mut stdout.lock())?;
+    if let (Some(path), Some(file)) = (&args.into, calib.as_mut()) {
+        file.noise = Some(report.params);
+        file.save(path)?;
+        eprintln!("wrote the noise parameters into {} [noise]", path.display());
+    }
+    Ok(())
 }
 
 /// `mems-calibrate fit`.
@@ -125,7 +172,6 @@ fn fit(
         Weighting::Unweighted
     };
     let loaded = load_input(&input)?;
-    let mut noise = NoiseSection::default();
     let mut temperature_range_c = None;
     let mut repaired_samples = 0;
     let (poses, label_free) = match &loaded {
@@ -143,11 +189,6 @@ fn fit(
                 raw.detection.noise_sigma_g[1],
                 raw.detection.noise_sigma_g[2]
             );
-            let dt = median_interval_s(&raw.samples);
-            noise = NoiseSection {
-                white_sigma_g: Some(raw.detection.noise_sigma_g),
-                sample_rate_hz: Some(1.0 / dt),
-            };
             temperature_range_c = raw
                 .detection
                 .segments
@@ -240,7 +281,6 @@ fn fit(
             residuals,
         )
     };
-    file.noise = noise;
     file.temperature_range_c = temperature_range_c;
     print_summary(&file);
     file.save(&out)?;
@@ -266,18 +306,6 @@ fn label_unlabelled(raw: &calibrate::session::RawPoses) -> Vec<Pose> {
         .iter()
         .map(|s| s.to_pose(nalgebra::Vector3::zeros()))
         .collect()
-}
-
-fn median_interval_s(samples: &[ipc_types::RawImuSample]) -> f64 {
-    let mut d: Vec<u64> = samples
-        .windows(2)
-        .map(|w| w[1].stamps.sample_ns - w[0].stamps.sample_ns)
-        .collect();
-    if d.is_empty() {
-        return f64::NAN;
-    }
-    let mid = d.len() / 2;
-    *d.select_nth_unstable(mid).1 as f64 * 1e-9
 }
 
 fn print_summary(file: &CalibrationFile) {
