@@ -1,5 +1,6 @@
-//! A 15-state error-state Kalman filter for strapdown inertial navigation with zero-velocity
-//! (ZUPT) and zero-angular-rate (ZARU) updates.
+//! A 16-state error-state Kalman filter for strapdown inertial navigation with zero-velocity
+//! (ZUPT) and zero-angular-rate (ZARU) updates, and body-frame velocity updates from a robot's
+//! wheel speed (with the wheel speed's scale error as a state).
 //!
 //! Frames and conventions:
 //! - navigation frame `n`: z up, gravity `(0, 0, -g)`; origin and heading fixed at alignment;
@@ -11,7 +12,9 @@
 //! - the attitude error is local: `q_true = q * Exp(dtheta)`.
 //!
 //! Error state, in this order: `dp` (m), `dv` (m/s), `dtheta` (rad), `db_a` (m/s^2),
-//! `db_g` (rad/s). Propagation is first order (Sola, "Quaternion kinematics for the error-state
+//! `db_g` (rad/s), `dk` (the wheel-speed scale error, a fraction: a speed source reads
+//! `(1 + k)` times the true forward speed). `k` is constant (no process noise) and only
+//! speed updates touch it; without them it keeps its prior. Propagation is first order (Sola, "Quaternion kinematics for the error-state
 //! Kalman filter", 2017, section 5.3 and 7); the nominal state integrates with the trapezoid rule.
 //! Everything lives on the stack (nalgebra static matrices): no allocation per sample.
 //!
@@ -21,16 +24,18 @@
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 
 /// Error-state dimension.
-pub const N: usize = 15;
+pub const N: usize = 16;
 /// Error-state covariance.
 pub type Cov = SMatrix<f64, N, N>;
-type Vec15 = SVector<f64, N>;
+type VecN = SVector<f64, N>;
 
 const P: usize = 0;
 const V: usize = 3;
 const TH: usize = 6;
 const BA: usize = 9;
 const BG: usize = 12;
+/// Index of the wheel-speed scale error in the error state.
+pub const KS: usize = 15;
 
 /// Noise model of the filter, SI units throughout.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -63,6 +68,8 @@ pub struct Nominal {
     pub b_a: Vector3<f64>,
     /// Gyro bias, rad/s, sensor frame.
     pub b_g: Vector3<f64>,
+    /// Scale error of the wheel-speed source, fraction (it reads `(1 + k)` times the truth).
+    pub k: f64,
 }
 
 /// One IMU measurement in SI units, sensor frame.
@@ -145,7 +152,7 @@ impl Eskf {
 
         let n = &self.noise;
         let speed = x0.v.norm();
-        let mut qd = Vec15::zeros();
+        let mut qd = VecN::zeros();
         let vel = (n.accel_noise_density.powi(2)
             + (n.vibration_accel_density_per_mps * speed).powi(2))
             * dt;
@@ -170,7 +177,7 @@ impl Eskf {
         h.fixed_view_mut::<3, 3>(0, V)
             .copy_from(&Matrix3::identity());
         let residual = -self.x.v;
-        self.update(&h, residual, sigma * sigma);
+        self.update_iso(&h, residual, sigma * sigma);
     }
 
     /// Zero-angular-rate update: the body does not rotate, so the last gyro reading measures the
@@ -195,32 +202,75 @@ impl Eskf {
         {
             return false;
         }
-        self.update(&h, residual, sigma * sigma);
+        self.update_iso(&h, residual, sigma * sigma);
         true
+    }
+
+    /// The velocity in the robot's body frame, m/s: `R_bs q^-1 v`, with `r_bs` rotating
+    /// sensor-frame vectors into the body frame (x forward, y left, z up).
+    pub fn body_velocity(&self, r_bs: &Matrix3<f64>) -> Vector3<f64> {
+        r_bs * self.x.q.inverse_transform_vector(&self.x.v)
+    }
+
+    /// Body-frame velocity update from a wheel-speed source: the measurement is
+    /// `z = ((1 + k) v_b.x, v_b.y, v_b.z)` with `v_b` the [`Self::body_velocity`], 1-sigma
+    /// `sigma` per component (m/s). `residual` is `z` minus its prediction, computed by the
+    /// caller (who may take the prediction at the measurement's own time). The Jacobian is
+    /// evaluated at the current state: `dv_b = R_bs R^T dv + R_bs [R^T v]x dtheta` and the
+    /// forward row also has `v_b.x` for `dk`. Returns the change of [`Self::body_velocity`]
+    /// (before scale) the update made, m/s.
+    pub fn body_velocity_update(
+        &mut self,
+        r_bs: &Matrix3<f64>,
+        residual: Vector3<f64>,
+        sigma: Vector3<f64>,
+    ) -> Vector3<f64> {
+        let before = self.body_velocity(r_bs);
+        let r_t = self.x.q.to_rotation_matrix().into_inner().transpose();
+        let a = r_bs * r_t;
+        let b = r_bs * skew(&(r_t * self.x.v));
+        let mut h = SMatrix::<f64, 3, N>::zeros();
+        h.fixed_view_mut::<3, 3>(0, V).copy_from(&a);
+        h.fixed_view_mut::<3, 3>(0, TH).copy_from(&b);
+        // The forward row reads (1 + k) v_b.x.
+        let scale = 1.0 + self.x.k;
+        for c in 0..N {
+            h[(0, c)] *= scale;
+        }
+        h[(0, KS)] = before.x;
+        let var = Matrix3::from_diagonal(&sigma.component_mul(&sigma));
+        self.update(&h, residual, &var);
+        self.body_velocity(r_bs) - before
     }
 
     /// A linear measurement `z = H dx + noise` with isotropic variance `var`, in Joseph form,
     /// injected into the nominal state.
-    fn update(&mut self, h: &SMatrix<f64, 3, N>, residual: Vector3<f64>, var: f64) {
-        let s = h * self.cov * h.transpose() + Matrix3::identity() * var;
+    fn update_iso(&mut self, h: &SMatrix<f64, 3, N>, residual: Vector3<f64>, var: f64) {
+        self.update(h, residual, &(Matrix3::identity() * var));
+    }
+
+    /// A linear measurement `z = H dx + noise` with noise covariance `r`, in Joseph form,
+    /// injected into the nominal state.
+    fn update(&mut self, h: &SMatrix<f64, 3, N>, residual: Vector3<f64>, r: &Matrix3<f64>) {
+        let s = h * self.cov * h.transpose() + r;
         let Some(s_inv) = s.try_inverse() else {
             return;
         };
         let k = self.cov * h.transpose() * s_inv;
-        let dx: Vec15 = k * residual;
+        let dx: VecN = k * residual;
         let i_kh = Cov::identity() - k * h;
-        self.cov =
-            i_kh * self.cov * i_kh.transpose() + k * (Matrix3::identity() * var) * k.transpose();
+        self.cov = i_kh * self.cov * i_kh.transpose() + k * r * k.transpose();
         self.cov = 0.5 * (self.cov + self.cov.transpose());
         self.inject(&dx);
     }
 
-    fn inject(&mut self, dx: &Vec15) {
+    fn inject(&mut self, dx: &VecN) {
         self.x.p += dx.fixed_rows::<3>(P);
         self.x.v += dx.fixed_rows::<3>(V);
         self.x.q *= UnitQuaternion::from_scaled_axis(dx.fixed_rows::<3>(TH).into_owned());
         self.x.b_a += dx.fixed_rows::<3>(BA);
         self.x.b_g += dx.fixed_rows::<3>(BG);
+        self.x.k += dx[KS];
     }
 
     /// 1-sigma of position, m, navigation frame.
@@ -261,6 +311,7 @@ pub fn align(
         q,
         b_a,
         b_g: w_mean,
+        k: 0.0,
     };
 
     // Horizontal bias uncertainty (sensor frame), with the vertical component removed: that part
@@ -285,6 +336,8 @@ pub fn align(
         .copy_from(&Matrix3::from_diagonal(
             &gyro_bias_sigma_after_rest.map(|s| s * s),
         ));
+    // The wheel-speed scale error keeps variance 0 here (no speed source is known to the
+    // alignment); a user of speed updates sets its prior at `cov[(KS, KS)]`.
     // Velocity and position are exactly zero at rest; a small variance keeps S invertible.
     for i in 0..6 {
         cov[(i, i)] = 1e-12;

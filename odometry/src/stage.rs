@@ -10,9 +10,33 @@
 //! the corrections the updates made are spread back over that interval's states (a cubic
 //! blend that reduces to the thesis's linear velocity-drift model when the filter's position
 //! and velocity corrections agree with it) and republished with the `REVISION` flag.
+//!
+//! **Robot hints** ([`OdometryStage::hint`], see [`crate::hints`] for frames, times and
+//! configuration). Each sample uses the newest hint delivered by its time:
+//! - while that hint is fresh (younger than [`HintConfig::max_age_s`]) and has a rest source,
+//!   it decides rest instead of the IMU's zero-state flag: stationary gives the zero-velocity
+//!   (and gated zero-rate) updates and `HINT_STATIONARY`, moving gives none. The IMU detector's
+//!   flag is still read: where it disagrees (once it is ready), the sample is flagged
+//!   `HINT_DISAGREE` and counted in `hint_disagreements`;
+//! - a speed hint, once delivered, is a body-frame velocity measurement (forward speed times
+//!   the filter's scale state `1 + k`, and zero lateral and vertical velocity: the
+//!   non-holonomic constraint of a wheeled robot) taken at the hint's own time: the prediction
+//!   is the body velocity at that time plus every correction the filter has made since
+//!   (a per-sample ring of the body velocity minus the corrections), so latency does not bias
+//!   it. Flagged `HINT_SPEED`;
+//! - once hints have been used and the newest is older than the maximum age, the stage runs on
+//!   the IMU alone (its zero-state flag) and flags `HINT_STALE`; there is a state for every
+//!   sample either way.
 
-use crate::eskf::{Eskf, Imu, NoiseModel, align};
-use ipc_types::{CorrectedImuSample, OdometryState, Stamps, corrected_flags, odometry_flags};
+use crate::eskf::{Eskf, Imu, KS, NoiseModel, align};
+use crate::hints::{
+    HintConfig, HintConfigError, HintError, HintStats, MountingEstimator, Ring, check_hint,
+    has_rest_source, usable_from_ns,
+};
+use ipc_types::{
+    CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
+    odometry_flags,
+};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 /// Configuration of the stage. Noise figures come from the calibration file's noise parameters.
@@ -136,9 +160,101 @@ struct PendingRevision {
     dv: Vector3<f64>,
 }
 
+/// One sample's body velocity minus the corrections made up to it (see the module docs).
+#[derive(Debug, Clone, Copy, Default)]
+struct BodyVelocity {
+    t_ns: u64,
+    uncorrected: Vector3<f64>,
+}
+
+/// What the hints did at the current sample.
+#[derive(Debug, Clone, Copy, Default)]
+struct HintSample {
+    flags: u16,
+}
+
+/// Hint state of the stage.
+struct Hints {
+    cfg: HintConfig,
+    delivery_ns: u64,
+    max_age_ns: u64,
+    /// Hints waiting for their delivery time, in arrival order.
+    waiting: Ring<RobotHint>,
+    /// The newest delivered hint.
+    newest: Option<RobotHint>,
+    /// The newest delivered speed hint not yet applied.
+    speed: Option<RobotHint>,
+    /// Sequence number of the last hint counted as applied for its rest decision.
+    newest_used: Option<u64>,
+    /// Sensor-to-body rotation `R_bs`, once known.
+    r_bs: Option<Matrix3<f64>>,
+    estimator: MountingEstimator,
+    /// Body velocity minus corrections, one per sample since the mounting is known.
+    history: Ring<BodyVelocity>,
+    /// Sum of the body-velocity changes every update has made since the mounting is known,
+    /// m/s.
+    corrections: Vector3<f64>,
+    applied: u32,
+    disagreements: u32,
+    stats: HintStats,
+}
+
+impl Hints {
+    /// The body velocity minus corrections at `t_ns`, interpolated between the stored samples
+    /// around it (the newest one for a time after it); `None` when `t_ns` is older than the
+    /// history.
+    fn uncorrected_at(&self, t_ns: u64) -> Option<Vector3<f64>> {
+        let mut newer: Option<&BodyVelocity> = None;
+        for i in 0..self.history.len() {
+            let e = self.history.newest(i)?;
+            if e.t_ns <= t_ns {
+                return Some(match newer {
+                    None => e.uncorrected,
+                    Some(n) => {
+                        let f = (t_ns - e.t_ns) as f64 / (n.t_ns - e.t_ns) as f64;
+                        e.uncorrected + (n.uncorrected - e.uncorrected) * f
+                    }
+                });
+            }
+            newer = Some(e);
+        }
+        None
+    }
+
+    /// Applies a speed hint as a body-velocity measurement at the hint's time; `false` when it
+    /// cannot be (mounting unknown, or the hint stale at `t_ns` or older than the velocity
+    /// history).
+    fn apply_speed(&mut self, kf: &mut Eskf, h: &RobotHint, t_ns: u64) -> bool {
+        let Some(r_bs) = self.r_bs else {
+            return false;
+        };
+        if t_ns.saturating_sub(h.stamps.sample_ns) > self.max_age_ns {
+            return false;
+        }
+        let Some(then) = self.uncorrected_at(h.stamps.sample_ns) else {
+            return false;
+        };
+        // The body velocity the filter now believes it had at the hint's time.
+        let predicted = then + self.corrections;
+        let residual = Vector3::new(
+            h.forward_speed_mps - (1.0 + kf.x.k) * predicted.x,
+            -predicted.y,
+            -predicted.z,
+        );
+        let nh = self.cfg.nonholonomic_sigma_mps;
+        kf.body_velocity_update(
+            &r_bs,
+            residual,
+            Vector3::new(h.forward_speed_sigma_mps, nh, nh),
+        );
+        true
+    }
+}
+
 /// The odometry state machine.
 pub struct OdometryStage {
     cfg: OdometryConfig,
+    hints: Hints,
     align: AlignSums,
     kf: Option<Eskf>,
     last: Option<(u64, Imu)>,
@@ -154,11 +270,37 @@ pub struct OdometryStage {
 
 impl OdometryStage {
     /// A stage with the history buffer allocated up front for `max_motion_s` at
-    /// `revision_rate_hz` (only decimated states are kept).
+    /// `revision_rate_hz` (only decimated states are kept), and the default hint
+    /// configuration ([`HintConfig::default`]: the IMU mounted aligned with the body).
     pub fn new(cfg: OdometryConfig) -> Self {
+        Self::with_hints(cfg, HintConfig::default())
+            .expect("the default hint configuration is valid")
+    }
+
+    /// A stage with the hint configuration `hints`; its velocity history holds `max_age_s` at
+    /// `max_rate_hz`, allocated here.
+    pub fn with_hints(cfg: OdometryConfig, hints: HintConfig) -> Result<Self, HintConfigError> {
+        hints.validate()?;
         let capacity = (cfg.max_motion_s * cfg.revision_rate_hz).ceil() as usize + 1;
-        Self {
+        let velocity_capacity = (hints.max_age_s * cfg.max_rate_hz).ceil() as usize + 2;
+        Ok(Self {
             cfg,
+            hints: Hints {
+                cfg: hints,
+                delivery_ns: (hints.delivery_s * 1e9).round() as u64,
+                max_age_ns: (hints.max_age_s * 1e9).round() as u64,
+                waiting: Ring::new(hints.capacity),
+                newest: None,
+                speed: None,
+                newest_used: None,
+                r_bs: hints.mounting.map(|q| q.to_rotation_matrix().into_inner()),
+                estimator: MountingEstimator::default(),
+                history: Ring::new(velocity_capacity),
+                corrections: Vector3::zeros(),
+                applied: 0,
+                disagreements: 0,
+                stats: HintStats::default(),
+            },
             align: AlignSums::default(),
             kf: None,
             last: None,
@@ -170,7 +312,32 @@ impl OdometryStage {
             rest_count: 0,
             distance_m: 0.0,
             revisions_emitted: 0,
+        })
+    }
+
+    /// Takes a robot hint. It waits (in a buffer allocated up front) until a sample taken at
+    /// least [`HintConfig::delivery_s`] after its publication, which then uses it. A refused
+    /// hint changes nothing.
+    pub fn hint(&mut self, h: &RobotHint) -> Result<(), HintError> {
+        check_hint(h)?;
+        self.hints.stats.received += 1;
+        if self.hints.waiting.push(*h).is_some() {
+            self.hints.stats.overflowed += 1;
         }
+        Ok(())
+    }
+
+    /// Counters of the hints seen so far.
+    pub fn hint_stats(&self) -> HintStats {
+        self.hints.stats
+    }
+
+    /// The IMU-to-body mounting (sensor to body), configured or estimated; `None` while it is
+    /// being estimated.
+    pub fn mounting(&self) -> Option<UnitQuaternion<f64>> {
+        self.hints.r_bs.map(|r| {
+            UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r))
+        })
     }
 
     /// Whether alignment is done.
@@ -201,7 +368,7 @@ impl OdometryStage {
             f: Vector3::from(s.accel_mps2),
             w: self.cfg.gyro_correction * Vector3::from(s.gyro_rps),
         };
-        let rest = s.flags & corrected_flags::ZERO_STATE != 0;
+        let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
         let prev = self.last.replace((t_ns, m));
         if let Some((prev_ns, _)) = prev
             && t_ns <= prev_ns
@@ -214,10 +381,40 @@ impl OdometryStage {
             });
         }
 
+        // Hints delivered by this sample's time; the newest fresh one with a rest source
+        // decides rest.
+        self.deliver_hints(t_ns);
+        let fresh = self
+            .hints
+            .newest
+            .filter(|h| t_ns.saturating_sub(h.stamps.sample_ns) <= self.hints.max_age_ns);
+        let hint_rest = fresh
+            .filter(has_rest_source)
+            .map(|h| h.flags & hint_flags::STATIONARY != 0);
+        let rest = hint_rest.unwrap_or(imu_rest);
+        let mut hs = HintSample::default();
+        if self.hints.newest.is_some() && fresh.is_none() {
+            hs.flags |= odometry_flags::HINT_STALE;
+        }
+        if hint_rest == Some(true) {
+            hs.flags |= odometry_flags::HINT_STATIONARY;
+        }
+        let detector_ready = s.flags & corrected_flags::DETECTOR_READY != 0;
+        if hint_rest.is_some_and(|h| detector_ready && h != imu_rest) {
+            hs.flags |= odometry_flags::HINT_DISAGREE;
+        }
+
         if self.kf.is_none() {
             self.accumulate_alignment(t_ns, &m, rest);
-            emit(&self.unaligned_state(s));
+            emit(&self.unaligned_state(s, rest, hs));
             return Ok(());
+        }
+        if hs.flags & odometry_flags::HINT_DISAGREE != 0 {
+            self.hints.disagreements += 1;
+        }
+        if hint_rest.is_some() && fresh.is_some_and(|h| self.hints.newest_used != Some(h.seq)) {
+            self.hints.newest_used = fresh.map(|h| h.seq);
+            self.hints.applied += 1;
         }
 
         // Motion interval bookkeeping: a rest after motion opens a pending revision; motion
@@ -247,6 +444,14 @@ impl OdometryStage {
         let p_before = kf.x.p;
         kf.predict(m, dt);
         let moved = (kf.x.p - p_before).xy().norm();
+        let hints = &mut self.hints;
+        let body_before = hints.r_bs.map(|r| kf.body_velocity(&r));
+        if let Some(v_b) = body_before {
+            hints.history.push(BodyVelocity {
+                t_ns,
+                uncorrected: v_b - hints.corrections,
+            });
+        }
         if rest {
             let (p0, v0) = (kf.x.p, kf.x.v);
             kf.zero_velocity(self.cfg.zupt_sigma_mps);
@@ -256,11 +461,25 @@ impl OdometryStage {
                 pending.dp += kf.x.p - p0;
                 pending.dv += kf.x.v - v0;
             }
+            // A stationary robot's speed hint says nothing the zero-velocity update did not.
+            hints.speed = None;
         } else {
             self.distance_m += moved;
+            if let Some(h) = hints.speed.take() {
+                if hints.apply_speed(kf, &h, t_ns) {
+                    hs.flags |= odometry_flags::HINT_SPEED;
+                    hints.applied += 1;
+                    hints.stats.speed_updates += 1;
+                } else {
+                    hints.stats.speed_skipped += 1;
+                }
+            }
+        }
+        if let (Some(r), Some(before)) = (hints.r_bs, body_before) {
+            hints.corrections += kf.body_velocity(&r) - before;
         }
 
-        let state = self.state(s, rest);
+        let state = self.state(s, rest, hs);
         if !rest && self.motion_start_ns.is_some() {
             self.record(&state);
         }
@@ -273,6 +492,33 @@ impl OdometryStage {
             self.republish(pending, emit);
         }
         Ok(())
+    }
+
+    /// Moves the hints delivered by `t_ns` out of the waiting buffer: the newest becomes the
+    /// current hint, and the newest speed hint among them waits for the update.
+    fn deliver_hints(&mut self, t_ns: u64) {
+        let hints = &mut self.hints;
+        while let Some(h) = hints.waiting.front().copied() {
+            if usable_from_ns(&h, hints.delivery_ns) > t_ns {
+                break;
+            }
+            hints.waiting.pop();
+            if hints
+                .newest
+                .is_some_and(|n| h.stamps.sample_ns <= n.stamps.sample_ns)
+            {
+                hints.stats.out_of_order += 1;
+                continue;
+            }
+            hints.stats.consumed += 1;
+            hints.newest = Some(h);
+            if h.flags & hint_flags::SPEED_VALID != 0 {
+                if hints.speed.is_some() {
+                    hints.stats.speed_skipped += 1;
+                }
+                hints.speed = Some(h);
+            }
+        }
     }
 
     fn accumulate_alignment(&mut self, t_ns: u64, m: &Imu, rest: bool) {
@@ -301,30 +547,32 @@ impl OdometryStage {
         let scale_as_bias = g * self.cfg.accel_residual_scale;
         let bias_sigma =
             Vector3::from(self.cfg.accel_bias_sigma_mps2).map(|s| s.hypot(scale_as_bias));
-        let (x, cov) = align(f_mean, w_mean, g, bias_sigma, w_sigma);
+        let (x, mut cov) = align(f_mean, w_mean, g, bias_sigma, w_sigma);
+        cov[(KS, KS)] = self.hints.cfg.speed_scale_sigma.powi(2);
         self.kf = Some(Eskf::new(x, cov, self.cfg.gravity_mps2, self.cfg.noise, *m));
         self.at_rest = true;
     }
 
-    fn unaligned_state(&self, s: &CorrectedImuSample) -> OdometryState {
+    fn unaligned_state(&self, s: &CorrectedImuSample, rest: bool, hs: HintSample) -> OdometryState {
         OdometryState {
             stamps: s.stamps,
             seq: s.seq,
             attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
-            flags: if s.flags & corrected_flags::ZERO_STATE != 0 {
-                odometry_flags::ZERO_VELOCITY
-            } else {
-                0
-            },
+            flags: hs.flags
+                | if rest {
+                    odometry_flags::ZERO_VELOCITY
+                } else {
+                    0
+                },
             ..Default::default()
         }
     }
 
-    fn state(&self, s: &CorrectedImuSample, rest: bool) -> OdometryState {
+    fn state(&self, s: &CorrectedImuSample, rest: bool, hs: HintSample) -> OdometryState {
         let kf = self.kf.as_ref().expect("state() is called once aligned");
         let q = kf.x.q;
         let g_s = q.inverse() * (-kf.gravity());
-        let mut flags = odometry_flags::ALIGNED;
+        let mut flags = odometry_flags::ALIGNED | hs.flags;
         if rest {
             flags |= odometry_flags::ZERO_VELOCITY;
         }
@@ -341,8 +589,8 @@ impl OdometryStage {
             flags,
             reserved16: 0,
             rest_count: self.rest_count,
-            hints_applied: 0,
-            hint_disagreements: 0,
+            hints_applied: self.hints.applied,
+            hint_disagreements: self.hints.disagreements,
         }
     }
 
@@ -401,10 +649,19 @@ impl OdometryStage {
         let a = (3.0 * dp - dv * big_t) / (big_t * big_t);
         let b = (dv * big_t - 2.0 * dp) / (big_t * big_t * big_t);
         let g = self.cfg.gravity_mps2;
-        for h in &self.history {
+        let estimating = self.hints.r_bs.is_none();
+        for (i, h) in self.history.iter().enumerate() {
             let s = (h.t_ns.saturating_sub(t0)) as f64 * 1e-9;
             let p = h.p + a * s * s + b * s * s * s;
             let v = h.v + 2.0 * a * s + 3.0 * b * s * s;
+            if estimating {
+                // The revised velocity in the sensor frame, held until the next stored state.
+                let next_ns = self.history.get(i + 1).map_or(pending.end_ns, |n| n.t_ns);
+                let dt = next_ns.saturating_sub(h.t_ns) as f64 * 1e-9;
+                self.hints
+                    .estimator
+                    .add(&h.q.inverse_transform_vector(&v), dt);
+            }
             let g_s = h.q.inverse() * Vector3::new(0.0, 0.0, g);
             emit(&OdometryState {
                 stamps: h.stamps,
@@ -419,12 +676,21 @@ impl OdometryStage {
                 flags: odometry_flags::ALIGNED | odometry_flags::REVISION,
                 reserved16: 0,
                 rest_count: self.rest_count,
-                hints_applied: 0,
-                hint_disagreements: 0,
+                hints_applied: self.hints.applied,
+                hint_disagreements: self.hints.disagreements,
             });
             self.revisions_emitted += 1;
         }
         self.history.clear();
+        if estimating && self.hints.estimator.path_m() >= self.hints.cfg.mounting_min_path_m {
+            let kf = self.kf.as_ref().expect("revisions happen once aligned");
+            let up_s = kf.x.q.inverse_transform_vector(&Vector3::z());
+            if let Some(q) = self.hints.estimator.mounting(&up_s) {
+                self.hints.r_bs = Some(q.to_rotation_matrix().into_inner());
+                self.hints.history.clear();
+                self.hints.corrections = Vector3::zeros();
+            }
+        }
     }
 }
 

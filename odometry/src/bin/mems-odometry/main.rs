@@ -7,6 +7,7 @@ mod serve;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Once;
 
 use anyhow::Result;
 use calibrate::calibfile::CalibrationFile;
@@ -29,11 +30,17 @@ enum Command {
     Offline(offline::OfflineArgs),
 }
 
-/// The odometry configuration a calibration file implies: its local gravity, and the
-/// MPU-9250 defaults for everything the file does not hold yet. `serve` and `offline` both use
-/// this, so that a replayed recording reproduces the live states exactly.
+/// The odometry configuration a calibration file implies ([`odometry::config::from_calibration`]:
+/// its local gravity and `[noise]` table, the MPU-9250 defaults for every figure it lacks; the
+/// defaulted figures are named once on stderr). `serve` and `offline` both use this, so that a
+/// replayed recording reproduces the live states exactly.
 pub fn odometry_config(file: &CalibrationFile) -> OdometryConfig {
-    OdometryConfig::mpu9250(file.gravity_mps2)
+    static NOTE: Once = Once::new();
+    let calibrated = odometry::config::from_calibration(file);
+    if let Some(note) = calibrated.defaults_note() {
+        NOTE.call_once(|| eprintln!("mems-odometry: {note}"));
+    }
+    calibrated.config
 }
 
 /// Options of the calibration stage shared by `offline` with `mems-calibrate serve`'s defaults.

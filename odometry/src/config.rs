@@ -1,0 +1,278 @@
+//! The odometry configuration a calibration file implies: its local gravity and the noise
+//! model from its `[noise]` table (`mems-calibrate allan --into`, see docs/noise.md), with the
+//! MPU-9250 defaults of [`OdometryConfig::mpu9250`] for every figure the file does not hold.
+//!
+//! Mapping (units as in [`crate::eskf::NoiseModel`]: accelerometer m/s^2, gyro rad/s):
+//! - white noise density `N` -> `noise.accel_noise_density` / `noise.gyro_noise_density`;
+//! - rate random walk `K` -> `noise.accel_bias_random_walk` / `noise.gyro_bias_random_walk`;
+//! - accelerometer bias instability `B` (per axis) -> added in quadrature to
+//!   `accel_bias_sigma_mps2`: the filter has no flicker state, and a bias that wanders by about
+//!   `B` around its value widens the prior on the bias it starts from after alignment.
+//!
+//! The filter holds one density per sensor, so the largest of the three axes' is used (as in
+//! the Kalibr export): conservative for the quieter axes. Only resolved terms are used; an
+//! unresolved term (a 2-sigma upper limit in the table) falls back to the default, capped at
+//! that upper limit. Accelerometer figures are rescaled from the table's gravity to the file's
+//! (they are g times the gravity used).
+
+use calibrate::calibfile::CalibrationFile;
+use calibrate::noise::params::{AxisNoise, Estimate, SensorNoise};
+
+use crate::stage::OdometryConfig;
+
+/// An odometry configuration and the noise figures in it that are defaults.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibratedConfig {
+    /// The configuration.
+    pub config: OdometryConfig,
+    /// The figures taken from [`OdometryConfig::mpu9250`] because the file does not resolve
+    /// them (names as in the `[noise]` table, e.g. `accel.random_walk`); empty when the table
+    /// gave every one.
+    pub defaulted: Vec<&'static str>,
+}
+
+impl CalibratedConfig {
+    /// A one-line note naming the defaulted figures, `None` when there are none.
+    pub fn defaults_note(&self) -> Option<String> {
+        (!self.defaulted.is_empty()).then(|| {
+            format!(
+                "no resolved {} in the calibration file's [noise] table: using the MPU-9250 defaults \
+                 for them (run mems-calibrate allan --into on a static recording)",
+                self.defaulted.join(", ")
+            )
+        })
+    }
+}
+
+/// The largest resolved value of one term over the three axes, if any axis resolves it, and
+/// the largest upper limit of the axes that do not.
+fn largest(
+    sensor: &SensorNoise,
+    term: fn(&AxisNoise) -> Option<Estimate>,
+    limit: fn(&AxisNoise) -> Option<f64>,
+) -> (Option<f64>, Option<f64>) {
+    let resolved = sensor
+        .axes()
+        .iter()
+        .filter_map(|a| term(a).map(|e| e.value))
+        .reduce(f64::max);
+    let limit = sensor
+        .axes()
+        .iter()
+        .filter(|a| term(a).is_none())
+        .filter_map(|a| limit(a))
+        .reduce(f64::max);
+    (resolved, limit)
+}
+
+/// The configuration for `file` (see the module documentation), with the defaults it used.
+pub fn from_calibration(file: &CalibrationFile) -> CalibratedConfig {
+    let mut config = OdometryConfig::mpu9250(file.gravity_mps2);
+    let mut defaulted = Vec::new();
+    let Some(noise) = &file.noise else {
+        return CalibratedConfig {
+            config,
+            defaulted: vec![
+                "accel.white_noise_density",
+                "accel.bias_instability",
+                "accel.random_walk",
+                "gyro.white_noise_density",
+                "gyro.random_walk",
+            ],
+        };
+    };
+    let accel_scale = file.gravity_mps2 / noise.gravity_mps2;
+    // Resolved value, else the default capped at the record's upper limit.
+    let mut pick =
+        |name: &'static str, (value, limit): (Option<f64>, Option<f64>), default: f64| {
+            value.unwrap_or_else(|| {
+                defaulted.push(name);
+                limit.map_or(default, |l| default.min(l))
+            })
+        };
+    let white = |a: &AxisNoise| a.white_noise_density;
+    let white_limit = |a: &AxisNoise| a.upper_limits.white_noise_density;
+    let walk = |a: &AxisNoise| a.random_walk;
+    let walk_limit = |a: &AxisNoise| a.upper_limits.random_walk;
+    let scaled = |(v, l): (Option<f64>, Option<f64>)| {
+        (v.map(|v| v * accel_scale), l.map(|l| l * accel_scale))
+    };
+
+    let n = &mut config.noise;
+    n.accel_noise_density = pick(
+        "accel.white_noise_density",
+        scaled(largest(&noise.accel, white, white_limit)),
+        n.accel_noise_density,
+    );
+    n.accel_bias_random_walk = pick(
+        "accel.random_walk",
+        scaled(largest(&noise.accel, walk, walk_limit)),
+        n.accel_bias_random_walk,
+    );
+    let (gyro_white, gyro_walk) = match &noise.gyro {
+        Some(g) => (largest(g, white, white_limit), largest(g, walk, walk_limit)),
+        None => ((None, None), (None, None)),
+    };
+    n.gyro_noise_density = pick("gyro.white_noise_density", gyro_white, n.gyro_noise_density);
+    n.gyro_bias_random_walk = pick("gyro.random_walk", gyro_walk, n.gyro_bias_random_walk);
+
+    let mut any_instability = false;
+    for (sigma, axis) in config
+        .accel_bias_sigma_mps2
+        .iter_mut()
+        .zip(noise.accel.axes())
+    {
+        if let Some(b) = axis.bias_instability {
+            any_instability = true;
+            *sigma = sigma.hypot(b.value * accel_scale);
+        }
+    }
+    if !any_instability {
+        defaulted.push("accel.bias_instability");
+    }
+    CalibratedConfig { config, defaulted }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use calibrate::noise::params::{NoiseParams, UpperLimits};
+
+    fn estimate(value: f64) -> Option<Estimate> {
+        Some(Estimate {
+            value,
+            sigma: value / 10.0,
+        })
+    }
+
+    fn axis(n: f64, b: Option<f64>, k: Option<f64>, k_limit: Option<f64>) -> AxisNoise {
+        AxisNoise {
+            white_noise_density: estimate(n),
+            bias_instability: b.and_then(estimate),
+            random_walk: k.and_then(estimate),
+            upper_limits: UpperLimits {
+                random_walk: k_limit,
+                ..Default::default()
+            },
+        }
+    }
+
+    fn file_with(gravity: f64, noise: Option<NoiseParams>) -> CalibrationFile {
+        use calibrate::calibfile::{FitMethod, ResidualSection, SourceSection};
+        use calibrate::fit::{CovarianceMode, Weighting};
+        use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
+        let model = AccelModel::new(
+            ModelKind::Bias,
+            nalgebra::Matrix3::identity(),
+            nalgebra::Vector3::new(0.01, -0.02, 0.03),
+        )
+        .unwrap();
+        let mut file = CalibrationFile::new(
+            &model,
+            &(ParamCovariance::identity() * 1e-8),
+            FitMethod::Labelled,
+            Weighting::Unweighted,
+            CovarianceMode::ResidualScaled,
+            gravity,
+            SourceSection {
+                file: "six.csv".into(),
+                kind: "six_position_means".into(),
+                poses: 6,
+                repaired_samples: 0,
+            },
+            ResidualSection {
+                rms_g: [1e-3; 3],
+                max_abs_g: 2e-3,
+                dof: [5; 3],
+                chi2: [1e-6; 3],
+                per_pose_g: vec![[0.0; 3]; 6],
+            },
+        );
+        file.noise = noise;
+        file
+    }
+
+    fn params(gravity: f64, gyro: bool) -> NoiseParams {
+        NoiseParams {
+            source: "static.csv".into(),
+            sample_rate_hz: 200.0,
+            record_length_s: 600.0,
+            samples: 120_000,
+            gravity_mps2: gravity,
+            accel: SensorNoise {
+                unit: "m/s^2".into(),
+                x: axis(1.5e-3, Some(1.1e-3), None, Some(3e-5)),
+                y: axis(1.4e-3, None, None, Some(2e-5)),
+                z: axis(2.6e-3, Some(0.9e-3), None, Some(4e-5)),
+            },
+            gyro: gyro.then(|| SensorNoise {
+                unit: "rad/s".into(),
+                x: axis(1.7e-4, None, Some(2e-6), None),
+                y: axis(1.9e-4, None, Some(3e-6), None),
+                z: axis(1.8e-4, None, None, Some(1e-5)),
+            }),
+        }
+    }
+
+    #[test]
+    fn without_a_noise_table_every_figure_is_the_default_and_named() {
+        let c = from_calibration(&file_with(9.797, None));
+        assert_eq!(c.config, OdometryConfig::mpu9250(9.797));
+        assert_eq!(c.defaulted.len(), 5);
+        let note = c.defaults_note().unwrap();
+        for name in &c.defaulted {
+            assert!(note.contains(name), "{note}");
+        }
+    }
+
+    #[test]
+    fn resolved_terms_are_used_and_unresolved_ones_capped_at_their_limit() {
+        // The table converted g with 9.81; the file's gravity is 9.797.
+        let scale = 9.797 / 9.81;
+        let c = from_calibration(&file_with(9.797, Some(params(9.81, true))));
+        let d = OdometryConfig::mpu9250(9.797);
+        let n = &c.config.noise;
+        assert_eq!(n.accel_noise_density, 2.6e-3 * scale);
+        // K unresolved on every axis: the default 1e-4 exceeds the largest 2-sigma limit.
+        assert_eq!(n.accel_bias_random_walk, 4e-5 * scale);
+        assert_eq!(n.gyro_noise_density, 1.9e-4);
+        assert_eq!(n.gyro_bias_random_walk, 3e-6);
+        let b = c.config.accel_bias_sigma_mps2;
+        let expected = [
+            (d.accel_bias_sigma_mps2[0].powi(2) + (1.1e-3 * scale).powi(2)).sqrt(),
+            d.accel_bias_sigma_mps2[1],
+            (d.accel_bias_sigma_mps2[2].powi(2) + (0.9e-3 * scale).powi(2)).sqrt(),
+        ];
+        for i in 0..3 {
+            assert!((b[i] - expected[i]).abs() < 1e-15, "{b:?} {expected:?}");
+        }
+        assert_eq!(c.defaulted, vec!["accel.random_walk"]);
+        // Everything that is not a noise figure stays the default.
+        let mut same = c.config;
+        same.noise = d.noise;
+        same.accel_bias_sigma_mps2 = d.accel_bias_sigma_mps2;
+        assert_eq!(same, d);
+    }
+
+    #[test]
+    fn an_accelerometer_only_table_leaves_the_gyro_at_its_defaults() {
+        let c = from_calibration(&file_with(9.797, Some(params(9.797, false))));
+        let d = OdometryConfig::mpu9250(9.797);
+        assert_eq!(
+            c.config.noise.gyro_noise_density,
+            d.noise.gyro_noise_density
+        );
+        assert_eq!(
+            c.config.noise.gyro_bias_random_walk,
+            d.noise.gyro_bias_random_walk
+        );
+        assert_eq!(
+            c.defaulted,
+            vec![
+                "accel.random_walk",
+                "gyro.white_noise_density",
+                "gyro.random_walk"
+            ]
+        );
+    }
+}

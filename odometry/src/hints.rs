@@ -1,0 +1,430 @@
+//! Robot hints (`mems/robot/hint`, [`RobotHint`]) for the odometry stage: their configuration,
+//! validation, the fixed-capacity buffers the stage keeps them in, and the IMU-to-body mounting
+//! estimated from the first drive.
+//!
+//! Frames: the robot body frame `b` is x forward, y left, z up (REP 103); the IMU's sensor
+//! frame `s` is the accelerometer's axes. The mounting `R_bs` rotates sensor-frame vectors
+//! into the body frame (`v_b = R_bs v_s`), and the IMU sits at the body origin (no lever arm:
+//! a lever arm `r` would add `omega x r` to the body velocity during turns, which the
+//! non-holonomic constraint's 1-sigma has to cover).
+//!
+//! Times: a hint's `stamps.sample_ns` is the time it describes and `stamps.acquired_ns` when
+//! the controller published it, both ns `CLOCK_MONOTONIC` like the IMU samples. The stage uses
+//! a hint for the samples taken at least [`HintConfig::delivery_s`] after its publication (its
+//! time of publication when `acquired_ns` is 0), whatever the order in which hints and samples
+//! reach it: so a live run and a replay of the same recording make the same decisions, as long
+//! as a hint reaches the odometry process within `delivery_s` of its publication (plus the
+//! calibration stage's own latency, by which every sample arrives late).
+
+use ipc_types::{RobotHint, hint_flags};
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+
+/// How the odometry stage uses robot hints.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HintConfig {
+    /// A hint older than this (sample time minus the hint's `sample_ns`) is stale: the stage
+    /// falls back to the IMU alone and flags `HINT_STALE`, s.
+    pub max_age_s: f64,
+    /// A hint is used by samples taken at least this long after it was published, s (see the
+    /// module documentation).
+    pub delivery_s: f64,
+    /// IMU-to-body mounting: rotates sensor-frame vectors into the body frame. `None`:
+    /// estimated from the first drive ([`MountingEstimator`]); speed hints are only used once
+    /// it is known (stationary hints need no mounting).
+    pub mounting: Option<UnitQuaternion<f64>>,
+    /// Path length of forward driving the mounting estimate gathers before it is used, m.
+    pub mounting_min_path_m: f64,
+    /// 1-sigma of the non-holonomic constraint (zero lateral and vertical body velocity), m/s;
+    /// a large value (say 100) switches it off in effect.
+    pub nonholonomic_sigma_mps: f64,
+    /// 1-sigma of the speed source's scale error (wheel radius, encoder calibration), fraction:
+    /// the prior of the filter's scale state. The hints' own sigma is the per-hint (white)
+    /// part only, since a scale error is common to all of them.
+    pub speed_scale_sigma: f64,
+    /// Hints that can wait for their delivery time at once; when full, the oldest waiting hint
+    /// is dropped (and counted in [`HintStats::overflowed`]).
+    pub capacity: usize,
+}
+
+impl Default for HintConfig {
+    /// Stale after 0.25 s (12 periods of a 50 Hz controller), delivery 5 ms, the IMU mounted
+    /// aligned with the body, 3 m of forward driving for an estimated mounting, a
+    /// non-holonomic 1-sigma of 0.02 m/s, a speed scale 1-sigma of 2%, 256 waiting hints.
+    fn default() -> Self {
+        Self {
+            max_age_s: 0.25,
+            delivery_s: 0.005,
+            mounting: Some(UnitQuaternion::identity()),
+            mounting_min_path_m: 3.0,
+            nonholonomic_sigma_mps: 0.02,
+            speed_scale_sigma: 0.02,
+            capacity: 256,
+        }
+    }
+}
+
+/// A configuration the stage cannot run with; the message names the field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("hint configuration `{field}`: {reason}")]
+pub struct HintConfigError {
+    /// The field, e.g. `max_age_s`.
+    pub field: &'static str,
+    /// What is wrong with it.
+    pub reason: String,
+}
+
+impl HintConfig {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), HintConfigError> {
+        let positive = |field: &'static str, x: f64| {
+            if x.is_finite() && x > 0.0 {
+                Ok(())
+            } else {
+                Err(HintConfigError {
+                    field,
+                    reason: format!("must be finite and > 0, got {x}"),
+                })
+            }
+        };
+        positive("max_age_s", self.max_age_s)?;
+        if !(self.delivery_s.is_finite() && self.delivery_s >= 0.0) {
+            return Err(HintConfigError {
+                field: "delivery_s",
+                reason: format!("must be finite and >= 0, got {}", self.delivery_s),
+            });
+        }
+        positive("mounting_min_path_m", self.mounting_min_path_m)?;
+        positive("nonholonomic_sigma_mps", self.nonholonomic_sigma_mps)?;
+        positive("speed_scale_sigma", self.speed_scale_sigma)?;
+        if self.capacity == 0 {
+            return Err(HintConfigError {
+                field: "capacity",
+                reason: "must be >= 1".into(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// A hint the stage refuses; the message names the hint and the field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum HintError {
+    /// A field the flags declare valid is NaN or infinite.
+    #[error("robot hint seq {seq}: {field} is not finite ({value})")]
+    NotFinite {
+        /// The hint's sequence number.
+        seq: u64,
+        /// The field.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A 1-sigma that is not > 0.
+    #[error("robot hint seq {seq}: {field} must be > 0, got {value}")]
+    BadSigma {
+        /// The hint's sequence number.
+        seq: u64,
+        /// The field.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// The hint carries no time.
+    #[error("robot hint seq {seq}: stamps.sample_ns is 0 (the time the hint describes)")]
+    NoTime {
+        /// The hint's sequence number.
+        seq: u64,
+    },
+}
+
+/// Checks the fields a hint's flags declare valid.
+pub fn check_hint(h: &RobotHint) -> Result<(), HintError> {
+    if h.stamps.sample_ns == 0 {
+        return Err(HintError::NoTime { seq: h.seq });
+    }
+    let pairs = [
+        (
+            hint_flags::SPEED_VALID,
+            ("forward_speed_mps", h.forward_speed_mps),
+            ("forward_speed_sigma_mps", h.forward_speed_sigma_mps),
+        ),
+        (
+            hint_flags::YAW_RATE_VALID,
+            ("yaw_rate_rps", h.yaw_rate_rps),
+            ("yaw_rate_sigma_rps", h.yaw_rate_sigma_rps),
+        ),
+    ];
+    for (flag, (field, value), (sigma_field, sigma)) in pairs {
+        if h.flags & flag == 0 {
+            continue;
+        }
+        for (field, value) in [(field, value), (sigma_field, sigma)] {
+            if !value.is_finite() {
+                return Err(HintError::NotFinite {
+                    seq: h.seq,
+                    field,
+                    value,
+                });
+            }
+        }
+        if sigma <= 0.0 {
+            return Err(HintError::BadSigma {
+                seq: h.seq,
+                field: sigma_field,
+                value: sigma,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The time from which samples may use a hint, ns: its publication (or its own time when it
+/// carries none) plus the delivery allowance.
+pub fn usable_from_ns(h: &RobotHint, delivery_ns: u64) -> u64 {
+    let published = if h.stamps.acquired_ns == 0 {
+        h.stamps.sample_ns
+    } else {
+        h.stamps.acquired_ns
+    };
+    published.saturating_add(delivery_ns)
+}
+
+/// Whether the hint says anything about rest (a stationary source bit is set).
+pub fn has_rest_source(h: &RobotHint) -> bool {
+    h.flags & (hint_flags::SOURCE_COMMANDED | hint_flags::SOURCE_ENCODERS) != 0
+}
+
+/// Counters of the hints a stage has seen.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct HintStats {
+    /// Hints accepted by `OdometryStage::hint`.
+    pub received: u64,
+    /// Hints that reached their delivery time and became the newest hint.
+    pub consumed: u64,
+    /// Hints skipped because a hint describing a later time had already been consumed.
+    pub out_of_order: u64,
+    /// Waiting hints dropped because the buffer was full.
+    pub overflowed: u64,
+    /// Speed updates applied.
+    pub speed_updates: u64,
+    /// Speed hints not applied because they were older than the velocity history (or the
+    /// filter was not aligned, or the mounting not yet known).
+    pub speed_skipped: u64,
+}
+
+/// A first-in first-out ring of `Copy` values with its storage allocated once.
+///
+/// Hand-written rather than `VecDeque` so that a full ring overwrites its oldest entry
+/// instead of growing (`VecDeque::push_back` reallocates).
+#[derive(Debug, Clone)]
+pub struct Ring<T> {
+    buf: Vec<T>,
+    head: usize,
+    len: usize,
+}
+
+impl<T: Copy + Default> Ring<T> {
+    /// A ring holding at most `capacity` values (at least 1).
+    pub fn new(capacity: usize) -> Self {
+        Self {
+            buf: vec![T::default(); capacity.max(1)],
+            head: 0,
+            len: 0,
+        }
+    }
+
+    /// Number of values held.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the ring is empty.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Appends `v`; when full, the oldest value is overwritten and returned.
+    pub fn push(&mut self, v: T) -> Option<T> {
+        let cap = self.buf.len();
+        if self.len == cap {
+            let old = self.buf[self.head];
+            self.buf[self.head] = v;
+            self.head = (self.head + 1) % cap;
+            return Some(old);
+        }
+        self.buf[(self.head + self.len) % cap] = v;
+        self.len += 1;
+        None
+    }
+
+    /// The oldest value.
+    pub fn front(&self) -> Option<&T> {
+        (self.len > 0).then(|| &self.buf[self.head])
+    }
+
+    /// Removes and returns the oldest value.
+    pub fn pop(&mut self) -> Option<T> {
+        let v = *self.front()?;
+        self.head = (self.head + 1) % self.buf.len();
+        self.len -= 1;
+        Some(v)
+    }
+
+    /// The `i`-th newest value (0 is the newest).
+    pub fn newest(&self, i: usize) -> Option<&T> {
+        (i < self.len).then(|| &self.buf[(self.head + self.len - 1 - i) % self.buf.len()])
+    }
+
+    /// Removes every value.
+    pub fn clear(&mut self) {
+        self.head = 0;
+        self.len = 0;
+    }
+}
+
+/// The mounting `R_bs` (sensor to body) from the body's forward and up directions expressed
+/// in the sensor frame: body z is `up_s`, body x is `forward_s` with its component along
+/// `up_s` removed, body y completes a right-handed frame. `None` when `forward_s` is (nearly)
+/// parallel to `up_s` or either is zero.
+pub fn mounting_from(forward_s: &Vector3<f64>, up_s: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
+    let z = up_s.try_normalize(1e-12)?;
+    let x = (forward_s - z * z.dot(forward_s)).try_normalize(1e-9 * forward_s.norm())?;
+    let y = z.cross(&x);
+    // Rows of R_bs are the body axes in the sensor frame.
+    let r = Matrix3::from_rows(&[x.transpose(), y.transpose(), z.transpose()]);
+    Some(UnitQuaternion::from_rotation_matrix(
+        &Rotation3::from_matrix_unchecked(r),
+    ))
+}
+
+/// Estimates the IMU-to-body mounting from the first drive.
+///
+/// Method: a wheeled robot that does not slip moves along its body x axis, so its velocity in
+/// the sensor frame is always along the body's forward axis expressed in the sensor frame,
+/// whatever it turns: `v_s = R_bs^T (v, 0, 0)`. The sum of `q^-1 v_n dt` over forward driving
+/// (the sensor-frame displacement) therefore points along body x in the sensor frame; body z
+/// is the gravity-up direction at rest (the floor is level). The stage feeds it each motion's
+/// velocities after their revision at the following rest (the zero-velocity updates have then
+/// removed most of the velocity drift), and uses the result once [`HintConfig::
+/// mounting_min_path_m`] of path has been gathered. It assumes the robot drives forward until
+/// then; a reversing leg would point the estimate backwards.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct MountingEstimator {
+    /// Sensor-frame displacement gathered, m.
+    sum_s: Vector3<f64>,
+    /// Path length gathered, m.
+    path_m: f64,
+}
+
+impl MountingEstimator {
+    /// Adds a velocity `v_s` (m/s, sensor frame) held for `dt_s` seconds.
+    pub fn add(&mut self, v_s: &Vector3<f64>, dt_s: f64) {
+        self.sum_s += v_s * dt_s;
+        self.path_m += v_s.norm() * dt_s;
+    }
+
+    /// Path length gathered so far, m.
+    pub fn path_m(&self) -> f64 {
+        self.path_m
+    }
+
+    /// The mounting, from the displacement so far and the up direction `up_s` (sensor frame).
+    pub fn mounting(&self, up_s: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
+        mounting_from(&self.sum_s, up_s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn mounting_from_axes_recovers_a_rotation() {
+        let r_bs = UnitQuaternion::from_euler_angles(0.05, -0.03, 1.2);
+        let r_sb = r_bs.inverse();
+        let forward_s = r_sb * Vector3::x() * 7.0 + r_sb * Vector3::z() * 0.3;
+        let up_s = r_sb * Vector3::z();
+        let got = mounting_from(&forward_s, &up_s).unwrap();
+        assert_relative_eq!(got.angle_to(&r_bs), 0.0, epsilon = 1e-12);
+        assert!(mounting_from(&up_s, &up_s).is_none());
+        assert!(mounting_from(&Vector3::zeros(), &up_s).is_none());
+    }
+
+    #[test]
+    fn ring_overwrites_its_oldest_value_when_full() {
+        let mut r = Ring::<u32>::new(3);
+        assert!(r.is_empty() && r.front().is_none());
+        for v in 1..=3 {
+            assert_eq!(r.push(v), None);
+        }
+        assert_eq!(r.push(4), Some(1));
+        assert_eq!(
+            (r.len(), r.front(), r.newest(0), r.newest(2)),
+            (3, Some(&2), Some(&4), Some(&2))
+        );
+        assert_eq!(r.newest(3), None);
+        assert_eq!(r.pop(), Some(2));
+        assert_eq!(r.pop(), Some(3));
+        r.push(5);
+        assert_eq!((r.pop(), r.pop(), r.pop()), (Some(4), Some(5), None));
+    }
+
+    #[test]
+    fn bad_hints_are_refused_naming_the_field() {
+        let ok = RobotHint {
+            stamps: ipc_types::Stamps {
+                sample_ns: 1,
+                ..Default::default()
+            },
+            seq: 4,
+            flags: hint_flags::SPEED_VALID,
+            forward_speed_mps: 0.5,
+            forward_speed_sigma_mps: 0.01,
+            ..Default::default()
+        };
+        assert_eq!(check_hint(&ok), Ok(()));
+        let nan = RobotHint {
+            forward_speed_mps: f64::NAN,
+            ..ok
+        };
+        assert!(
+            check_hint(&nan)
+                .unwrap_err()
+                .to_string()
+                .contains("seq 4: forward_speed_mps")
+        );
+        let zero_sigma = RobotHint {
+            forward_speed_sigma_mps: 0.0,
+            ..ok
+        };
+        assert!(matches!(
+            check_hint(&zero_sigma),
+            Err(HintError::BadSigma {
+                field: "forward_speed_sigma_mps",
+                ..
+            })
+        ));
+        // Fields the flags do not declare valid are not checked.
+        let unflagged = RobotHint {
+            flags: 0,
+            forward_speed_mps: f64::NAN,
+            ..ok
+        };
+        assert_eq!(check_hint(&unflagged), Ok(()));
+        let timeless = RobotHint {
+            stamps: ipc_types::Stamps::default(),
+            ..ok
+        };
+        assert_eq!(check_hint(&timeless), Err(HintError::NoTime { seq: 4 }));
+    }
+
+    #[test]
+    fn delivery_counts_from_publication() {
+        let mut h = RobotHint::default();
+        h.stamps.sample_ns = 1_000;
+        assert_eq!(usable_from_ns(&h, 5), 1_005);
+        h.stamps.acquired_ns = 3_000;
+        assert_eq!(usable_from_ns(&h, 5), 3_005);
+    }
+}
