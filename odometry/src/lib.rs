@@ -7,7 +7,6 @@
 //! Measured accuracy on simulated drives: docs/odometry.md.
 
 pub mod config;
-pub mod config;
 pub mod eskf;
 pub mod gyrocal;
 pub mod hints;
