@@ -7,10 +7,24 @@
 //! limited: 30% of its power a sinusoid at the wheel's rotation frequency, 30% a sinusoid at
 //! the motor's (gear ratio times higher), both with phases following the wheel's rotation, and
 //! 40% a chassis resonance excited by the floor (white noise through a damped second-order
-//! resonator). The level is isotropic (the same RMS on every axis), so the mounting of the
-//! sensor does not change it.
+//! band-pass resonator). The level is isotropic (the same RMS on every axis), so the mounting
+//! of the sensor does not change it.
+//!
+//! No power at zero frequency, by design: a vibration moves the sensor about its pose, so its
+//! time integral (a velocity for the accelerometer, an angle for the gyroscope) must stay
+//! bounded instead of drifting like a random walk.
+//! - The chassis term is the band-pass resonance `H(z) = (1 - z^-1) / (1 - a1 z^-1 - a2 z^-2)`
+//!   of white noise: the zero at `z = 1` removes the DC exactly, and its running sum is the
+//!   difference of two values of a stationary process, so it stays bounded.
+//! - The sinusoids are `v sin(k (theta - theta0) + psi)` with wheel speed `v`, wheel angle
+//!   `theta` (`theta' = v / r`), `k` 1 (wheel) or the gear ratio (motor), `theta0` the wheel
+//!   angle when the wheels start turning and `psi` = +-pi/2 drawn per channel: the integral
+//!   over time is `(r / k) (cos psi - cos(k (theta - theta0) + psi))`, which starts at 0 and,
+//!   because `cos psi = 0`, oscillates about 0 with amplitude `r / k`. (At a stop it ends
+//!   wherever the wheel is: a bounded, zero-mean velocity residue, at most `sqrt(0.6) * level
+//!   * r` per motion, which a rest's zero-velocity update removes.)
 
-use std::f64::consts::TAU;
+use std::f64::consts::{FRAC_PI_2, TAU};
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -94,7 +108,8 @@ impl VibrationModel {
 }
 
 /// Coefficients of the discretised chassis resonance at one sample rate:
-/// `x_k = a1 x_(k-1) + a2 x_(k-2) + e_std w_k` with unit stationary variance.
+/// `x_k = a1 x_(k-1) + a2 x_(k-2) + e_std (w_k - w_(k-1))` with unit stationary variance (a
+/// band-pass: the zero at `z = 1` removes the DC).
 #[derive(Clone, Copy)]
 struct Resonator {
     rate_hz: f64,
@@ -105,8 +120,11 @@ struct Resonator {
 
 impl Resonator {
     /// Poles of the continuous resonance mapped to the sample rate (`z = exp(s dt)`), and the
-    /// drive std that gives unit variance: an AR(2) process has variance
-    /// `e^2 (1 - a2) / ((1 + a2) ((1 - a2)^2 - a1^2))`.
+    /// drive std that gives unit variance. The output is the first difference `y_k - y_(k-1)`
+    /// of the AR(2) process `y` driven by `e w` (filters commute), so its variance is
+    /// `2 (g0 - g1)` with the AR(2) autocovariances `g0 = e^2 (1 - a2) / ((1 + a2) ((1 - a2)^2 -
+    /// a1^2))` and `g1 = a1 g0 / (1 - a2)`, which simplifies to `2 e^2 / ((1 + a2) (1 - a2 +
+    /// a1))`.
     fn new(model: &VibrationModel, rate_hz: f64) -> Self {
         let dt = 1.0 / rate_hz;
         let w0 = TAU * model.chassis_hz;
@@ -114,7 +132,7 @@ impl Resonator {
         let r = (-z * w0 * dt).exp();
         let theta = w0 * (1.0 - z * z).sqrt() * dt;
         let (a1, a2) = (2.0 * r * theta.cos(), -r * r);
-        let var_per_drive = (1.0 - a2) / ((1.0 + a2) * ((1.0 - a2).powi(2) - a1 * a1));
+        let var_per_drive = 2.0 / ((1.0 + a2) * (1.0 - a2 + a1));
         Self {
             rate_hz,
             a1,
@@ -128,11 +146,15 @@ impl Resonator {
 pub struct Vibration {
     model: VibrationModel,
     last_t_s: f64,
+    /// Wheel rotation angle since the start of the current motion, rad (0 while stopped).
     wheel_angle_rad: f64,
-    /// Phase offsets of the wheel and motor sinusoids per channel (accel x, y, z, gyro x, y, z).
+    /// Phase offsets (+-pi/2) of the wheel and motor sinusoids per channel (accel x, y, z,
+    /// gyro x, y, z): see the module documentation for why they are not uniform.
     phases: [[f64; 2]; 6],
     /// Last two resonator outputs per channel.
     chassis: [[f64; 2]; 6],
+    /// Last resonator input (white-noise draw) per channel, for the resonator's zero at DC.
+    last_drive: [f64; 6],
     resonator: Option<Resonator>,
     rng: ChaCha8Rng,
 }
@@ -142,13 +164,22 @@ impl Vibration {
     pub fn new(model: &VibrationModel, seed: u64) -> Result<Self, ModelError> {
         model.validate()?;
         let mut rng = stream_rng(seed, streams::VIBRATION);
-        let phases = std::array::from_fn(|_| std::array::from_fn(|_| rng.random_range(0.0..TAU)));
+        let phases = std::array::from_fn(|_| {
+            std::array::from_fn(|_| {
+                if rng.random_bool(0.5) {
+                    FRAC_PI_2
+                } else {
+                    -FRAC_PI_2
+                }
+            })
+        });
         Ok(Self {
             model: model.clone(),
             last_t_s: 0.0,
             wheel_angle_rad: 0.0,
             phases,
             chassis: [[0.0; 2]; 6],
+            last_drive: [0.0; 6],
             resonator: None,
             rng,
         })
@@ -163,7 +194,12 @@ impl Vibration {
         }
         let dt = (t_s - self.last_t_s).max(0.0);
         self.last_t_s = t_s;
-        self.wheel_angle_rad += wheel_speed_mps / self.model.wheel_radius_m * dt;
+        if wheel_speed_mps == 0.0 {
+            // Stopped: the next motion's sinusoids start from their zero-velocity phase.
+            self.wheel_angle_rad = 0.0;
+        } else {
+            self.wheel_angle_rad += wheel_speed_mps / self.model.wheel_radius_m * dt;
+        }
         let res = match self.resonator {
             Some(r) if r.rate_hz == rate_hz => r,
             _ => *self.resonator.insert(Resonator::new(&self.model, rate_hz)),
@@ -172,7 +208,8 @@ impl Vibration {
         for (ch, out) in unit.iter_mut().enumerate() {
             let [x1, x2] = self.chassis[ch];
             let w: f64 = self.rng.sample(StandardNormal);
-            let x = res.a1 * x1 + res.a2 * x2 + res.e_std * w;
+            let x = res.a1 * x1 + res.a2 * x2 + res.e_std * (w - self.last_drive[ch]);
+            self.last_drive[ch] = w;
             self.chassis[ch] = [x, x1];
             let [pw, pm] = self.phases[ch];
             let wheel = (self.wheel_angle_rad + pw).sin();

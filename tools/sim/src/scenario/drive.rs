@@ -39,6 +39,11 @@ pub struct DriveParams {
     /// Each motion has between 1 and this many legs; between legs the robot turns (when
     /// `turns` is on) and changes to the next leg's speed.
     pub max_legs: u32,
+    /// Longest motion between two rests, s: the planner drops further legs and shortens the
+    /// last one so that acceleration, legs, turns, speed changes and braking fit, so the robot
+    /// rests at least this often. Must allow the shortest motion (accelerating to the top
+    /// cruise speed, the shortest leg, braking) and, with `in_place_turns`, the widest turn.
+    pub max_motion_s: f64,
     /// Whether the robot turns between legs (otherwise it drives along one straight line).
     pub turns: bool,
     /// Magnitude of each turn (random sign), degrees.
@@ -58,10 +63,10 @@ pub struct DriveParams {
 }
 
 impl DriveParams {
-    /// A drive of `duration_s` seconds: 10 s initial rest, rests of 1-30 s, cruise 0.2-1 m/s
-    /// at up to 0.5 m/s^2, legs of 2-10 s (up to 3 per motion), no turns, turns (when switched
-    /// on) of 30-120 degrees at up to 45 deg/s, no in-place turns, 0.3 m track, IMU mounted
-    /// aligned with the body, standard gravity.
+    /// A drive of `duration_s` seconds: 10 s initial rest, rests of 1-30 s, motions of at most
+    /// 30 s between them, cruise 0.2-1 m/s at up to 0.5 m/s^2, legs of 2-10 s (up to 3 per
+    /// motion), no turns, turns (when switched on) of 30-120 degrees at up to 45 deg/s, no
+    /// in-place turns, 0.3 m track, IMU mounted aligned with the body, standard gravity.
     pub fn new(duration_s: f64) -> Self {
         Self {
             duration_s,
@@ -71,6 +76,7 @@ impl DriveParams {
             peak_accel_mps2: 0.5,
             leg_s: [2.0, 10.0],
             max_legs: 3,
+            max_motion_s: 30.0,
             turns: false,
             turn_angle_deg: [30.0, 120.0],
             peak_yaw_rate_dps: 45.0,
@@ -102,6 +108,29 @@ impl DriveParams {
         }
         check_range("turn_angle_deg", self.turn_angle_deg)?;
         check_positive("peak_yaw_rate_dps", self.peak_yaw_rate_dps)?;
+        check_positive("max_motion_s", self.max_motion_s)?;
+        let shortest =
+            2.0 * RAMP_PEAK * self.cruise_speed_mps[1] / self.peak_accel_mps2 + self.leg_s[0];
+        if shortest > self.max_motion_s {
+            return Err(ScenarioError {
+                field: "max_motion_s".into(),
+                reason: format!(
+                    "{} s is shorter than the shortest motion at the top cruise speed \
+                     ({shortest} s: accelerate, shortest leg, brake)",
+                    self.max_motion_s
+                ),
+            });
+        }
+        let widest_turn = RAMP_PEAK * self.turn_angle_deg[1] / self.peak_yaw_rate_dps;
+        if self.in_place_turns && widest_turn > self.max_motion_s {
+            return Err(ScenarioError {
+                field: "max_motion_s".into(),
+                reason: format!(
+                    "{} s is shorter than the widest in-place turn ({widest_turn} s)",
+                    self.max_motion_s
+                ),
+            });
+        }
         let w = self.track_width_m;
         if !(w.is_finite() && w >= 0.0) {
             return Err(ScenarioError {
@@ -196,8 +225,30 @@ pub struct Drive {
     params: DriveParams,
 }
 
-/// What a motion plan step changes: (duration s, speed change m/s, heading change rad, rest).
-type Step = (f64, f64, f64, bool);
+/// One step of a drive's plan.
+#[derive(Debug, Clone, Copy)]
+struct Step {
+    /// Length, s (> 0: zero-length steps are never planned).
+    duration_s: f64,
+    /// Forward speed at the end of the step, m/s: the plan carries absolute speeds, so that a
+    /// braking step ends at exactly 0 whatever the speed changes before it.
+    speed_after_mps: f64,
+    /// Change of heading over the step, rad.
+    heading_change_rad: f64,
+    /// Whether the step is a rest.
+    at_rest: bool,
+}
+
+impl Step {
+    fn rest(duration_s: f64) -> Self {
+        Self {
+            duration_s,
+            speed_after_mps: 0.0,
+            heading_change_rad: 0.0,
+            at_rest: true,
+        }
+    }
+}
 
 impl Drive {
     /// Generates a drive from `params` and `seed`.
@@ -206,7 +257,7 @@ impl Drive {
         let mut rng = stream_rng(seed, streams::DRIVE_PLAN);
         let mut steps: Vec<Step> = Vec::new();
         if params.initial_rest_s > 0.0 {
-            steps.push((params.initial_rest_s, 0.0, 0.0, true));
+            steps.push(Step::rest(params.initial_rest_s));
         }
         let mut t = params.initial_rest_s;
         // Plan motions (each followed by a rest) while they fit; near the end, a few more
@@ -214,8 +265,8 @@ impl Drive {
         let mut misfits = 0;
         while misfits < MAX_MISFITS {
             let mut motion = Self::plan_motion(params, &mut rng);
-            motion.push((uniform(&mut rng, params.rest_s), 0.0, 0.0, true));
-            let length: f64 = motion.iter().map(|s| s.0).sum();
+            motion.push(Step::rest(uniform(&mut rng, params.rest_s)));
+            let length: f64 = motion.iter().map(|s| s.duration_s).sum();
             if t + length > params.duration_s {
                 misfits += 1;
                 continue;
@@ -226,28 +277,28 @@ impl Drive {
         // The final rest fills up to the planned duration.
         let remaining = params.duration_s - t;
         match steps.last_mut() {
-            Some(last) if last.3 => last.0 += remaining,
-            _ => steps.push((remaining, 0.0, 0.0, true)),
+            Some(last) if last.at_rest => last.duration_s += remaining,
+            _ => steps.push(Step::rest(remaining)),
         }
 
         let mut segments = Vec::with_capacity(steps.len());
         let (mut start, mut speed, mut heading, mut pos) = (0.0, 0.0, 0.0, [0.0, 0.0]);
-        for (duration_s, dv, dpsi, at_rest) in steps {
+        for step in steps {
             let mut seg = DriveSegment {
                 start_s: start,
-                duration_s,
+                duration_s: step.duration_s,
                 speed0_mps: speed,
-                speed_change_mps: dv,
+                speed_change_mps: step.speed_after_mps - speed,
                 heading0_rad: heading,
-                heading_change_rad: dpsi,
-                at_rest,
+                heading_change_rad: step.heading_change_rad,
+                at_rest: step.at_rest,
                 knots: Vec::new(),
             };
             seg.integrate_knots(pos);
-            pos = seg.position(duration_s);
-            start += duration_s;
-            speed += dv;
-            heading += dpsi;
+            pos = seg.position(step.duration_s);
+            start += step.duration_s;
+            speed = step.speed_after_mps;
+            heading += step.heading_change_rad;
             segments.push(seg);
         }
         Ok(Self {
@@ -257,35 +308,64 @@ impl Drive {
     }
 
     /// One motion: optional in-place turn and rest, acceleration, legs with turns and speed
-    /// changes between them, braking.
+    /// changes between them, braking. The part after the optional rest lasts at most
+    /// `max_motion_s`: a further leg is added only if it fits with at least the shortest leg
+    /// and the braking, and the last leg is shortened to fit.
     fn plan_motion(p: &DriveParams, rng: &mut ChaCha8Rng) -> Vec<Step> {
         let peak_yaw = p.peak_yaw_rate_dps.to_radians();
-        let turn = |rng: &mut ChaCha8Rng| {
+        let turn = |rng: &mut ChaCha8Rng, speed: f64| {
             let angle = uniform(rng, p.turn_angle_deg).to_radians();
             let signed = if rng.random_bool(0.5) { angle } else { -angle };
-            (RAMP_PEAK * angle / peak_yaw, 0.0, signed, false)
+            Step {
+                duration_s: RAMP_PEAK * angle / peak_yaw,
+                speed_after_mps: speed,
+                heading_change_rad: signed,
+                at_rest: false,
+            }
         };
-        let speed_change = |dv: f64| (RAMP_PEAK * dv.abs() / p.peak_accel_mps2, dv, 0.0, false);
+        let change_s = |from: f64, to: f64| RAMP_PEAK * (to - from).abs() / p.peak_accel_mps2;
+        let speed_change = |from: f64, to: f64| Step {
+            duration_s: change_s(from, to),
+            speed_after_mps: to,
+            heading_change_rad: 0.0,
+            at_rest: false,
+        };
         let mut steps = Vec::new();
         if p.in_place_turns && rng.random_bool(0.5) {
-            steps.push(turn(rng));
-            steps.push((uniform(rng, p.rest_s), 0.0, 0.0, true));
+            steps.push(turn(rng, 0.0));
+            steps.push(Step::rest(uniform(rng, p.rest_s)));
         }
         let mut speed = uniform(rng, p.cruise_speed_mps);
-        steps.push(speed_change(speed));
+        steps.push(speed_change(0.0, speed));
+        let mut used = change_s(0.0, speed);
         let legs = rng.random_range(1..=p.max_legs);
         for leg in 0..legs {
             if leg > 0 {
-                if p.turns {
-                    steps.push(turn(rng));
-                }
+                let turned = p.turns.then(|| turn(rng, speed));
                 let next = uniform(rng, p.cruise_speed_mps);
-                steps.push(speed_change(next - speed));
+                let between = turned.map_or(0.0, |s| s.duration_s) + change_s(speed, next);
+                if used + between + p.leg_s[0] + change_s(next, 0.0) > p.max_motion_s {
+                    break;
+                }
+                steps.extend(turned);
+                // Equal speeds need no change (a zero-length step would divide by zero).
+                if next != speed {
+                    steps.push(speed_change(speed, next));
+                }
+                used += between;
                 speed = next;
             }
-            steps.push((uniform(rng, p.leg_s), 0.0, 0.0, false));
+            let room = p.max_motion_s - used - change_s(speed, 0.0);
+            let leg_s = uniform(rng, p.leg_s).min(room);
+            steps.push(Step {
+                duration_s: leg_s,
+                speed_after_mps: speed,
+                heading_change_rad: 0.0,
+                at_rest: false,
+            });
+            used += leg_s;
         }
-        steps.push(speed_change(-speed));
+        steps.push(speed_change(speed, 0.0));
         steps
     }
 
@@ -339,8 +419,9 @@ impl Scenario for Drive {
             accel: Vector3::new(dv * cos - v * dpsi * sin, dv * sin + v * dpsi * cos, 0.0),
             attitude: body * self.params.mounting,
             rate: Vector3::new(0.0, 0.0, dpsi),
-            // Rest segments, and the instants where a motion starts or ends.
-            at_rest: v == 0.0 && dpsi == 0.0,
+            // Rest segments (where speed and yaw rate are exactly zero by construction), and
+            // the instants where a motion starts or ends.
+            at_rest: seg.at_rest || (v == 0.0 && dpsi == 0.0),
         }
         .truth(t_s, self.params.gravity_mps2)
     }
