@@ -216,7 +216,7 @@ impl DriveSegment {
 /// A ground robot's drive on a flat, level floor, generated from a seed: an initial rest, then
 /// motions separated by rests. A motion optionally starts with an in-place turn and a rest,
 /// then accelerates to a cruise speed, drives 1 to `max_legs` legs (turning and changing speed
-/// between legs) and brakes to a stop. Every speed and heading change follows a squared
+/// between legs) and brakes to a stop, all within `max_motion_s`. Every speed and heading change follows a squared
 /// raised-cosine rate profile, so acceleration and yaw rate are continuous with three
 /// continuous derivatives.
 #[derive(Debug, Clone)]
