@@ -147,3 +147,148 @@ impl Drop for Proc {
         }
     }
 }
+
+/// Polls `condition` every 20 ms until it holds; panics naming `what` after `timeout`.
+pub fn wait_until(timeout: Duration, what: &str, mut condition: impl FnMut() -> bool) {
+    let start = Instant::now();
+    while !condition() {
+        assert!(
+            start.elapsed() < timeout,
+            "timed out after {timeout:?} waiting for {what}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The child processes of `pid` as (pid, executable file name), from
+/// `/proc/PID/task/PID/children` and each child's `/proc/CHILD/cmdline`.
+pub fn children(pid: u32) -> Vec<(u32, String)> {
+    let list =
+        std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children")).unwrap_or_default();
+    list.split_whitespace()
+        .filter_map(|c| c.parse::<u32>().ok())
+        .filter_map(|c| {
+            let cmdline = std::fs::read(format!("/proc/{c}/cmdline")).ok()?;
+            let exe = cmdline.split(|&b| b == 0).next()?;
+            let exe = std::path::Path::new(std::str::from_utf8(exe).ok()?);
+            Some((c, exe.file_name()?.to_str()?.to_string()))
+        })
+        .collect()
+}
+
+/// The pid of `pid`'s child running executable `name`, if there is exactly one.
+pub fn child_named(pid: u32, name: &str) -> Option<u32> {
+    let found: Vec<u32> = children(pid)
+        .into_iter()
+        .filter(|(_, exe)| exe == name)
+        .map(|(c, _)| c)
+        .collect();
+    (found.len() == 1).then(|| found[0])
+}
+
+/// What iceoryx2 keeps on disk for one node: its id (the name of its directory under
+/// `<root>/nodes`) and the ids of its ports (the `*.port_tag` files in that directory, which
+/// also name the `/dev/shm` segments of the ports' data and connections).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeFootprint {
+    /// The node's unique id, as its directory is named.
+    pub id: u128,
+    /// The ids of the node's ports, as they appear in file names.
+    pub port_ids: Vec<String>,
+}
+
+/// iceoryx2's directory of node records (`<root_path>/nodes` of the global config).
+pub fn iceoryx_nodes_dir() -> PathBuf {
+    use iceoryx2::prelude::Config;
+    PathBuf::from(Config::global_config().global.root_path().to_string()).join("nodes")
+}
+
+/// The iceoryx2 nodes (alive or dead) whose process is `pid`, with their ports.
+pub fn nodes_of(pid: u32) -> Vec<NodeFootprint> {
+    use iceoryx2::identifiers::UniqueNodeId;
+    use iceoryx2::node::{NodeDetails, NodeState, NodeView};
+    use iceoryx2::prelude::*;
+    set_log_level_from_env_or(LogLevel::Error);
+    let mut ids = Vec::new();
+    Node::<ipc::Service>::list(Config::global_config(), |state| {
+        let view: Option<(&UniqueNodeId, &Option<NodeDetails>)> = match &state {
+            NodeState::Alive(v) => Some((v.id(), v.details())),
+            NodeState::Dead(v) => Some((v.id(), v.details())),
+            _ => None,
+        };
+        if let Some((id, Some(details))) = view
+            && details.process_id().value() as u32 == pid
+        {
+            ids.push(id.value());
+        }
+        CallbackProgression::Continue
+    })
+    .expect("list iceoryx2 nodes");
+    ids.into_iter()
+        .map(|id| {
+            let dir = iceoryx_nodes_dir().join(id.to_string());
+            let port_ids = std::fs::read_dir(&dir)
+                .map(|entries| {
+                    entries
+                        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+                        .filter_map(|f| {
+                            Some(
+                                f.strip_suffix(".port_tag")?
+                                    .trim_start_matches("iox2_")
+                                    .into(),
+                            )
+                        })
+                        .collect()
+                })
+                .unwrap_or_default();
+            NodeFootprint { id, port_ids }
+        })
+        .collect()
+}
+
+/// Files left behind by `node`: its directory under [`iceoryx_nodes_dir`], its monitor files
+/// there, and every `/dev/shm` segment whose name carries one of its port ids.
+pub fn leftovers(node: &NodeFootprint) -> Vec<PathBuf> {
+    let mut found = Vec::new();
+    let id = node.id.to_string();
+    let scan = |dir: &std::path::Path, hit: &dyn Fn(&str) -> bool, found: &mut Vec<PathBuf>| {
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            for e in entries.flatten() {
+                if e.file_name().to_str().is_some_and(hit) {
+                    found.push(e.path());
+                }
+            }
+        }
+    };
+    scan(&iceoryx_nodes_dir(), &|f| f.contains(&id), &mut found);
+    scan(
+        std::path::Path::new("/dev/shm"),
+        &|f| f.starts_with("iox2_") && node.port_ids.iter().any(|p| f.contains(p.as_str())),
+        &mut found,
+    );
+    found
+}
+
+/// Whether the publish-subscribe service `base` under `namespace` still exists anywhere.
+pub fn service_exists(namespace: &str, base: &str) -> bool {
+    use iceoryx2::prelude::*;
+    let name: ServiceName = ipc_types::service::full_name(namespace, base)
+        .as_str()
+        .try_into()
+        .expect("valid service name");
+    ipc::Service::does_exist(
+        &name,
+        Config::global_config(),
+        MessagingPattern::PublishSubscribe,
+    )
+    .expect("iceoryx2 service lookup")
+}
+
+/// The sequence numbers missing from `seqs` (ascending, from its first to its last) as
+/// inclusive ranges.
+pub fn missing_ranges(seqs: &[u64]) -> Vec<(u64, u64)> {
+    seqs.windows(2)
+        .filter(|w| w[1] > w[0] + 1)
+        .map(|w| (w[0] + 1, w[1] - 1))
+        .collect()
+}

@@ -38,9 +38,10 @@ struct Cli {
     /// simulated part from a simulated six-position session when it is not given.
     #[arg(long)]
     calib: Option<PathBuf>,
-    /// Zero-state detector of the calibration stage.
-    #[arg(long, default_value = "glrt")]
-    detector: String,
+    /// Zero-state detector of the calibration stage (default: `glrt`, which needs the
+    /// gyroscope; `yu` above 1000 Hz, where the sensor runs accelerometer-only).
+    #[arg(long)]
+    detector: Option<String>,
     /// Seed of the simulated sensor and its drive.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -150,7 +151,9 @@ fn main() -> Result<()> {
             "--calib".into(),
             calib,
             "--detector".into(),
-            cli.detector.clone(),
+            cli.detector
+                .clone()
+                .unwrap_or_else(|| if cli.rate > 1000 { "yu" } else { "glrt" }.into()),
         ],
     ));
     specs.push(spec(
@@ -246,12 +249,13 @@ fn main() -> Result<()> {
         .collect::<Vec<_>>();
     supervisor.shutdown(Duration::from_secs(3));
     let _ = std::fs::remove_dir_all(&work);
-    eprintln!(
+    // The summary goes to stdout (the live status is on stderr), for scripts and tests.
+    println!(
         "mems-stack: stopped after {:.1} s; restarts: {}",
         start.elapsed().as_secs_f64(),
         restarts.join(", ")
     );
-    eprintln!(
+    println!(
         "{}",
         status_line(
             &raw_stats,
