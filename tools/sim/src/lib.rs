@@ -8,9 +8,11 @@
 //! - [`scenario`]: six-position, N-orientation, static and ground-robot drive scenarios with
 //!   exact truth.
 //! - [`vibration`]: the speed-dependent vibration of a driven robot.
+//! - [`hints`]: the robot controller's rest and speed hints during a drive.
 //! - [`SimSensor`]: a scenario measured by a powered-on sensor, a [`SampleSource`].
 
 pub mod adc;
+pub mod hints;
 pub mod model;
 pub mod scenario;
 pub mod vibration;
@@ -55,6 +57,8 @@ pub(crate) mod streams {
     pub const DRIVE_PLAN: u64 = 3;
     /// Vibration phases and noise.
     pub const VIBRATION: u64 = 4;
+    /// Robot hints: encoder scale error, noise, latency and losses.
+    pub const HINTS: u64 = 5;
 }
 
 /// A ChaCha8 generator for stream `stream` of `seed` (see [`streams`] and the model's streams).

@@ -6,10 +6,11 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use ipc_types::RawImuSample;
 use ipc_types::units::{AccelRange, GyroRange, STANDARD_GRAVITY_MPS2};
+use ipc_types::{RawImuSample, RobotHint};
 use mems_sim::SimSensor;
 use mems_sim::adc::quantize_sample;
+use mems_sim::hints::{HintParams, RestSource, drive_hints};
 use mems_sim::model::{Preset, SensorModel};
 use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
 use mems_sim::vibration::VibrationModel;
@@ -77,6 +78,8 @@ enum Command {
         #[arg(long, value_name = "R,P,Y", value_parser = parse_triple, default_value = "0,0,0")]
         mount_deg: [f64; 3],
         #[command(flatten)]
+        hints: HintArgs,
+        #[command(flatten)]
         common: Common,
     },
     /// Prints a preset's error model as TOML (edit it and pass it back with --model).
@@ -120,6 +123,55 @@ struct Common {
     /// Local gravity, m/s^2.
     #[arg(long, default_value_t = STANDARD_GRAVITY_MPS2)]
     gravity: f64,
+}
+
+/// The robot controller's hints during a drive (MCAP topic `mems/robot/hint`, see
+/// `mems_sim::hints`).
+#[derive(Args)]
+struct HintArgs {
+    /// Emit robot hints with this source of the stationary flag (MCAP output only).
+    #[arg(long, value_enum, default_value_t = HintSource::Off)]
+    hints: HintSource,
+    /// Hints per second.
+    #[arg(long, default_value_t = 50.0)]
+    hint_rate: f64,
+    /// Fraction of hints lost independently.
+    #[arg(long, default_value_t = 0.02)]
+    hint_drop: f64,
+    /// Loss bursts (0.2-2 s each) per minute.
+    #[arg(long, default_value_t = 0.5)]
+    hint_bursts_per_min: f64,
+    /// Publication latency range after the encoder window, ms.
+    #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "5,30")]
+    hint_latency_ms: [f64; 2],
+    /// How long a velocity command precedes the motion (commanded source), ms.
+    #[arg(long, default_value_t = 75.0)]
+    hint_command_lead_ms: f64,
+}
+
+/// Source of the hints' stationary flag on the command line.
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum HintSource {
+    /// No hints.
+    Off,
+    /// The controller's velocity command (leads the motion).
+    Commanded,
+    /// The wheel encoders (no tick in the window).
+    Encoders,
+}
+
+/// Parses `a,b` into two numbers.
+fn parse_pair(s: &str) -> Result<[f64; 2], String> {
+    let parts: Vec<&str> = s.split(',').collect();
+    let [a, b] = parts.as_slice() else {
+        return Err(format!("expected two comma-separated numbers, got {s:?}"));
+    };
+    let num = |x: &str| {
+        x.trim()
+            .parse::<f64>()
+            .map_err(|e| format!("{x:?} in {s:?}: {e}"))
+    };
+    Ok([num(a)?, num(b)?])
 }
 
 /// Timing of pose sessions.
@@ -241,13 +293,18 @@ enum Sink {
         writer: Box<recording::mcap::Writer>,
         raw: recording::mcap::Channel<RawImuSample>,
         truth: recording::mcap::Channel<Truth>,
+        hint: Option<recording::mcap::Channel<RobotHint>>,
     },
 }
 
 impl Sink {
-    fn create(path: &Path) -> Result<Self> {
+    fn create(path: &Path, hints: bool) -> Result<Self> {
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
         match ext.to_ascii_lowercase().as_str() {
+            "csv" if hints => bail!(
+                "--out {}: robot hints need an .mcap output (the canonical CSV has no hint columns)",
+                path.display()
+            ),
             "csv" => Ok(Self::Csv {
                 path: path.to_path_buf(),
                 samples: Vec::new(),
@@ -257,10 +314,16 @@ impl Sink {
                 let mut writer = recording::mcap::Writer::create(path)?;
                 let raw = writer.add_channel()?;
                 let truth = writer.add_channel()?;
+                let hint = if hints {
+                    Some(writer.add_channel()?)
+                } else {
+                    None
+                };
                 Ok(Self::Mcap {
                     writer: Box::new(writer),
                     raw,
                     truth,
+                    hint,
                 })
             }
             _ => bail!(
@@ -282,11 +345,25 @@ impl Sink {
                 writer,
                 raw,
                 truth: channel,
+                ..
             } => {
                 let time = sample.stamps.sample_ns;
                 writer.write(*raw, &sample, time)?;
                 writer.write(*channel, &truth, time)?;
             }
+        }
+        Ok(())
+    }
+
+    /// Writes a robot hint at its publication time (MCAP only; `create` refuses hints for CSV).
+    fn push_hint(&mut self, h: &RobotHint) -> Result<()> {
+        if let Self::Mcap {
+            writer,
+            hint: Some(channel),
+            ..
+        } = self
+        {
+            writer.write(*channel, h, h.stamps.acquired_ns)?;
         }
         Ok(())
     }
@@ -304,8 +381,14 @@ impl Sink {
     }
 }
 
-/// Samples `scenario` from 0 to its duration at the common rate, quantizes, and writes.
-fn simulate(scenario: impl Scenario, vibration: &VibrationModel, common: &Common) -> Result<()> {
+/// Samples `scenario` from 0 to its duration at the common rate, quantizes, and writes, with
+/// `hints` interleaved by publication time.
+fn simulate(
+    scenario: impl Scenario,
+    vibration: &VibrationModel,
+    common: &Common,
+    hints: &[RobotHint],
+) -> Result<()> {
     let rate = common.rate;
     if !(rate.is_finite() && (1.0..=32_000.0).contains(&rate)) {
         bail!("--rate {rate}: the output rate must be between 1 and 32000 Hz");
@@ -315,7 +398,8 @@ fn simulate(scenario: impl Scenario, vibration: &VibrationModel, common: &Common
     let duration = scenario.duration_s();
     let count = (duration * rate).floor() as u64 + 1;
     let mut sim = SimSensor::new(scenario, &model, vibration, common.seed)?;
-    let mut sink = Sink::create(&common.out)?;
+    let mut sink = Sink::create(&common.out, !hints.is_empty())?;
+    let mut next_hint = 0;
     let (mut distance, mut saturated, mut rest) = (0.0, 0u64, 0u64);
     let mut last: Option<Vector3<f64>> = None;
     for k in 0..count {
@@ -329,7 +413,16 @@ fn simulate(scenario: impl Scenario, vibration: &VibrationModel, common: &Common
         last = Some(p);
         saturated += u64::from(raw.flags & ipc_types::raw_flags::SATURATED != 0);
         rest += u64::from(truth.at_rest);
+        while let Some(h) = hints.get(next_hint)
+            && h.stamps.acquired_ns <= raw.stamps.sample_ns
+        {
+            sink.push_hint(h)?;
+            next_hint += 1;
+        }
         sink.push(raw, truth)?;
+    }
+    for h in &hints[next_hint..] {
+        sink.push_hint(h)?;
     }
     sink.finish()
         .with_context(|| format!("writing {}", common.out.display()))?;
@@ -360,6 +453,7 @@ fn run(cli: Cli) -> Result<()> {
                 PoseSession::six_position(&params, common.seed)?,
                 &still,
                 &common,
+                &[],
             )
         }
         Command::Orientations { n, poses, common } => {
@@ -368,6 +462,7 @@ fn run(cli: Cli) -> Result<()> {
                 PoseSession::orientations(n, &params, common.seed)?,
                 &still,
                 &common,
+                &[],
             )
         }
         Command::Static {
@@ -376,7 +471,7 @@ fn run(cli: Cli) -> Result<()> {
             common,
         } => {
             let s = PoseSession::static_pose(rotation_deg(attitude_deg), duration, common.gravity)?;
-            simulate(s, &still, &common)
+            simulate(s, &still, &common, &[])
         }
         Command::Drive {
             duration,
@@ -385,6 +480,7 @@ fn run(cli: Cli) -> Result<()> {
             in_place_turns,
             initial_rest,
             mount_deg,
+            hints,
             common,
         } => {
             let params = DriveParams {
@@ -399,7 +495,40 @@ fn run(cli: Cli) -> Result<()> {
                 bail!("--vibration {vibration}: the level must be finite and >= 0");
             }
             let drive = Drive::new(&params, common.seed)?;
-            simulate(drive, &VibrationModel::moderate(vibration), &common)
+            let stream = match hints.hints {
+                HintSource::Off => None,
+                HintSource::Commanded | HintSource::Encoders => {
+                    let source = if hints.hints == HintSource::Commanded {
+                        RestSource::Commanded
+                    } else {
+                        RestSource::Encoders
+                    };
+                    let p = HintParams {
+                        rate_hz: hints.hint_rate,
+                        drop_fraction: hints.hint_drop,
+                        bursts_per_min: hints.hint_bursts_per_min,
+                        latency_s: hints.hint_latency_ms.map(|ms| ms * 1e-3),
+                        command_lead_s: hints.hint_command_lead_ms * 1e-3,
+                        ..HintParams::new(source)
+                    };
+                    Some(drive_hints(&drive, &p, common.seed, 0.0)?)
+                }
+            };
+            if let Some(s) = &stream {
+                println!(
+                    "robot hints: {} published, {} lost, encoder scale error {:+.2}%",
+                    s.hints.len() + s.lost,
+                    s.lost,
+                    100.0 * s.speed_scale
+                );
+            }
+            let hint_list = stream.map(|s| s.hints).unwrap_or_default();
+            simulate(
+                drive,
+                &VibrationModel::moderate(vibration),
+                &common,
+                &hint_list,
+            )
         }
         Command::PrintModel { preset } => {
             print!("{}", toml::to_string(&preset.model())?);
