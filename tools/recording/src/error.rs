@@ -82,6 +82,22 @@ pub enum ErrorKind {
         /// The repeated time, ns.
         t_ns: u64,
     },
+    /// An MCAP file holds several raw acquisition sessions where one was expected.
+    #[error(
+        "the raw stream holds {sessions} acquisition sessions: at raw sample {index} (from 0) \
+         the sequence number restarts ({previous_seq} -> {seq}); read the sessions with \
+         recording::mcap::read_all (Contents::raw_sessions)"
+    )]
+    SeveralSessions {
+        /// Number of sessions.
+        sessions: usize,
+        /// Index among the raw samples of the second session's first sample.
+        index: usize,
+        /// Sequence number of the sample before it.
+        previous_seq: u64,
+        /// Its sequence number.
+        seq: u64,
+    },
     /// A header names a column the format does not define.
     #[error("unknown column (known columns: {known})")]
     UnknownColumn {

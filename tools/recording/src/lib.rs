@@ -58,11 +58,12 @@ pub struct Recording {
 
 /// Opens a raw time-series recording of any supported kind: MCAP (by its magic bytes), the
 /// canonical CSV (a header naming `t_s`), or a thesis time-series CSV (its header on the first
-/// line, or a title line and then its header).
+/// line, or a title line and then its header). An MCAP file whose raw stream restarts (several
+/// acquisition sessions) is refused naming the restart; [`mcap::read_all`] reads every session.
 pub fn load_raw(path: impl AsRef<Path>) -> Result<Recording> {
     let path = path.as_ref();
     if mcap::has_magic(path)? {
-        return mcap::read_all(path).map(|contents| contents.into_recording(path));
+        return mcap::read_all(path)?.into_recording(path);
     }
     let mut rows = text::Rows::open(path)?;
     let Some((line, first)) = rows.next_row()? else {

@@ -965,6 +965,12 @@ impl Recorded<'_> {
 pub struct Contents {
     /// Raw samples in file order, exactly as recorded.
     pub raw: Vec<RawImuSample>,
+    /// The acquisition sessions in `raw`, as index ranges in file order (none when `raw` is
+    /// empty). A session ends where the sequence number does not increase: the publisher was
+    /// restarted and counts from 0 again (an acquire restarted inside one recording, or two
+    /// replays recorded into one file); its sample times may start over. Within a session,
+    /// sample times strictly increase.
+    pub raw_sessions: Vec<std::ops::Range<usize>>,
     /// Ground-truth records in file order.
     pub truth: Vec<Truth>,
     /// Corrected samples in file order.
@@ -984,15 +990,33 @@ pub struct Contents {
 }
 
 impl Contents {
-    /// The raw samples and truth as a [`Recording`] of `path`.
-    pub(crate) fn into_recording(self, path: &Path) -> Recording {
-        Recording {
+    /// The raw samples of session `index` of [`Contents::raw_sessions`].
+    ///
+    /// Panics if there is no such session.
+    pub fn raw_session(&self, index: usize) -> &[RawImuSample] {
+        &self.raw[self.raw_sessions[index].clone()]
+    }
+
+    /// The raw samples and truth as a [`Recording`] of `path`. Errors with
+    /// [`ErrorKind::SeveralSessions`] if the raw stream restarts: a [`Recording`] is one
+    /// session, in time order.
+    pub(crate) fn into_recording(self, path: &Path) -> Result<Recording> {
+        if let Some(second) = self.raw_sessions.get(1) {
+            let kind = ErrorKind::SeveralSessions {
+                sessions: self.raw_sessions.len(),
+                index: second.start,
+                previous_seq: self.raw[second.start - 1].seq,
+                seq: self.raw[second.start].seq,
+            };
+            return Err(Error::file(path, kind));
+        }
+        Ok(Recording {
             source: path.to_path_buf(),
             format: Format::Mcap,
             samples: self.raw,
             truth: (!self.truth.is_empty()).then_some(self.truth),
             truncation: self.truncation,
-        }
+        })
     }
 }
 
@@ -1000,8 +1024,9 @@ impl Contents {
 /// robot hints, pose, events), up to the cut if the file was truncated (reported in
 /// [`Contents::truncation`], never silently).
 ///
-/// Errors if the file is not MCAP, a message does not decode, or raw sample times
-/// (`stamps.sample_ns`) do not strictly increase.
+/// Raw samples are split into acquisition sessions where their sequence number restarts
+/// ([`Contents::raw_sessions`]). Errors if the file is not MCAP, a message does not decode, or
+/// raw sample times (`stamps.sample_ns`) do not strictly increase within a session.
 pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
     let reader = Reader::open(path)?;
     let mut contents = Contents::default();
@@ -1019,7 +1044,11 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
         };
         if let Some(sample) = message.decode::<RawImuSample>() {
             let sample = sample?;
-            if let Some(previous) = contents.raw.last() {
+            let restart = contents.raw.last().is_none_or(|p| sample.seq <= p.seq);
+            if restart {
+                let start = contents.raw.len();
+                contents.raw_sessions.push(start..start);
+            } else if let Some(previous) = contents.raw.last() {
                 let previous_ns = previous.stamps.sample_ns;
                 let t_ns = sample.stamps.sample_ns;
                 let kind = if t_ns < previous_ns {
@@ -1040,6 +1069,9 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
                 }
             }
             contents.raw.push(sample);
+            if let Some(session) = contents.raw_sessions.last_mut() {
+                session.end = contents.raw.len();
+            }
         } else if let Some(truth) = message.decode::<Truth>() {
             contents.truth.push(truth?);
         } else if let Some(sample) = message.decode::<CorrectedImuSample>() {

@@ -264,6 +264,64 @@ fn raw_sample_times_must_increase() {
     assert!(matches!(err.kind, ErrorKind::TimeBackwards { .. }), "{err}");
 }
 
+/// A raw stream that restarts inside one file (a replay recorded twice, whose times start
+/// over; then a restarted acquisition, whose times go on) is split into its sessions, each
+/// read back bit for bit; `load_raw`, which returns one time-ordered session, refuses the file
+/// naming the first restart.
+#[test]
+fn restarted_raw_streams_are_split_into_sessions() {
+    let first = live_samples(300, 51);
+    let second = live_samples(200, 52); // seq from 0 again, times from the same origin
+    let mut third = live_samples(100, 53);
+    let last_ns = second.last().unwrap().stamps.sample_ns;
+    for s in &mut third {
+        s.stamps.sample_ns += last_ns; // later than everything before: a live restart
+    }
+    assert!(second[0].stamps.sample_ns < first.last().unwrap().stamps.sample_ns);
+    let path = tmp("sessions.mcap");
+    let mut writer = Writer::create(&path).unwrap();
+    let raw = writer.add_channel::<RawImuSample>().unwrap();
+    for s in first.iter().chain(&second).chain(&third) {
+        writer.write(raw, s, s.stamps.sample_ns).unwrap();
+    }
+    writer.finish().unwrap();
+
+    let contents = read_all(&path).unwrap();
+    assert_eq!(contents.raw_sessions, [0..300, 300..500, 500..600]);
+    for (i, want) in [&first, &second, &third].into_iter().enumerate() {
+        let got = contents.raw_session(i);
+        assert_eq!(got.len(), want.len());
+        for (g, w) in got.iter().zip(want.iter()) {
+            assert_eq!(sample_bits(g), sample_bits(w));
+        }
+    }
+
+    let err = recording::load_raw(&path).unwrap_err();
+    assert!(
+        matches!(
+            err.kind,
+            ErrorKind::SeveralSessions {
+                sessions: 3,
+                index: 300,
+                previous_seq: 299,
+                seq: 0
+            }
+        ),
+        "{err}"
+    );
+    let message = err.to_string();
+    assert!(
+        message.contains("sessions.mcap") && message.contains("299 -> 0"),
+        "{message}"
+    );
+
+    // One session: no split, and load_raw accepts it.
+    let path = tmp("one-session.mcap");
+    write(&path, &first, &any_truth(&first, 1), 100);
+    assert_eq!(read_all(&path).unwrap().raw_sessions, [0..300]);
+    assert_eq!(recording::load_raw(&path).unwrap().samples.len(), 300);
+}
+
 /// A message type defined outside the crate, as later channels (corrected samples, odometry,
 /// hints) will be: implementing `Topic` is all it takes to record it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
