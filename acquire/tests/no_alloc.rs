@@ -1,48 +1,67 @@
-//! The steady-state read loop (driver on the simulated device) allocates nothing: a counting
-//! global allocator sees zero allocations on this thread over thousands of reads.
+//! The steady-state loops allocate nothing from the system allocator. The global allocator here
+//! is the one `mems-acquire` installs, [`acquire::pool::BlockPool`], wrapped in a counter of the
+//! calls the current thread makes and of those that reach the system allocator (their result is
+//! not a pool block). The driver's read loop makes no allocation call at all; the publishing
+//! loop makes exactly one per sample, inside iceoryx2's loan, and the pool serves every one.
 
 mod common;
 
-use std::alloc::{GlobalAlloc, Layout, System};
+use std::alloc::{GlobalAlloc, Layout};
 use std::cell::Cell;
 
 use acquire::driver::{Config, Dlpf, Mpu9250, OutputMode};
+use acquire::pool::BlockPool;
 use acquire::registers as reg;
 use ipc_types::RawImuSample;
 
-/// Counts allocations made by the current thread, delegating to the system allocator.
-struct Counting;
+/// The pool of `mems-acquire`'s size, counting this thread's calls.
+struct Counting(BlockPool<4096>);
 
 thread_local! {
+    /// Allocation calls (alloc, realloc) made by this thread.
     static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+    /// Of those, the ones the system allocator served.
+    static SYSTEM: Cell<u64> = const { Cell::new(0) };
 }
 
-// SAFETY: every call is forwarded unchanged to `System`; the thread-local counter is a
-// const-initialised `Cell`, which needs no allocation to access.
+impl Counting {
+    fn count(&self, result: *mut u8) {
+        ALLOCATIONS.with(|c| c.set(c.get() + 1));
+        if !self.0.contains(result) {
+            SYSTEM.with(|c| c.set(c.get() + 1));
+        }
+    }
+}
+
+// SAFETY: every call is forwarded unchanged to the pool; the thread-local counters are
+// const-initialised `Cell`s, which need no allocation to access.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.with(|c| c.set(c.get() + 1));
         // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
+        let p = unsafe { self.0.alloc(layout) };
+        self.count(p);
+        p
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
+        unsafe { self.0.dealloc(ptr, layout) }
     }
 
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.with(|c| c.set(c.get() + 1));
         // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
+        let p = unsafe { self.0.realloc(ptr, layout, new_size) };
+        self.count(p);
+        p
     }
 }
 
 #[global_allocator]
-static ALLOCATOR: Counting = Counting;
+static ALLOCATOR: Counting = Counting(BlockPool::new());
 
-fn allocations() -> u64 {
-    ALLOCATIONS.with(Cell::get)
+/// (allocation calls, of which served by the system allocator) so far on this thread.
+fn allocations() -> (u64, u64) {
+    (ALLOCATIONS.with(Cell::get), SYSTEM.with(Cell::get))
 }
 
 /// Runs `reads` reads 5 ms apart after a warm-up; returns (allocations, samples) of the
@@ -60,18 +79,20 @@ fn measure(config: Config, reads: usize) -> (u64, usize) {
     for _ in 0..100 {
         read(&mut drv);
     }
-    let before = allocations();
+    let before = allocations().0;
     let samples: usize = (0..reads).map(|_| read(&mut drv)).sum();
-    (allocations() - before, samples)
+    (allocations().0 - before, samples)
 }
 
 #[test]
 fn steady_state_reads_allocate_nothing() {
-    // The counter works: a Vec allocates.
+    // The counters work: a small Vec takes a pool block, a large one goes to the system.
     let before = allocations();
-    let v: Vec<u64> = Vec::with_capacity(4);
-    assert_eq!(allocations() - before, 1);
-    drop(v);
+    let small: Vec<u64> = Vec::with_capacity(4);
+    assert_eq!(allocations(), (before.0 + 1, before.1));
+    let large: Vec<u64> = Vec::with_capacity(1000);
+    assert_eq!(allocations(), (before.0 + 2, before.1 + 1));
+    drop((small, large));
 
     let (allocs, samples) = measure(Config::default(), 2000);
     assert!(samples >= 39_000, "{samples} samples");
@@ -97,12 +118,13 @@ fn steady_state_reads_allocate_nothing() {
 /// The hot loop of `mems-acquire`: FIFO read, numbering, stamping and publication on a real
 /// iceoryx2 service, with a subscriber draining it in the same thread.
 ///
-/// Our part allocates nothing. iceoryx2 0.10 allocates exactly one small block per loaned sample
-/// (`Publisher::loan_uninit` creates the sample's `ChunkMutSharedState` with `Arc::new`); the
-/// test pins that count, so it fails if our loop, the driver or the subscriber side ever
-/// allocate, or if iceoryx2 starts allocating more.
+/// Our part makes no allocation call. iceoryx2 0.10 makes exactly one per loaned sample
+/// (`Publisher::loan_uninit` creates the sample's `ChunkMutSharedState` with `Rc::new`, freed
+/// when the sample is sent); the pool serves every one of them, so in steady state nothing
+/// reaches the system allocator: 0 per sample. The test also pins the one call per loan, so it
+/// fails if our loop, the driver or the subscriber side ever allocate.
 #[test]
-fn publishing_loop_allocates_only_iceoryx2s_loan() {
+fn publishing_loop_reaches_the_system_allocator_zero_times_per_sample() {
     use acquire::acquisition::{Acquisition, config_for_rate};
     use ipc_types::service;
 
@@ -122,15 +144,15 @@ fn publishing_loop_allocates_only_iceoryx2s_loan() {
     let publisher = service::publisher(&raw).unwrap();
     let subscriber = service::subscriber(&raw).unwrap();
 
-    // Counts allocations made while loaning, and everywhere else, separately.
+    // Counts the allocation calls made while loaning, and everywhere else, separately.
     let mut in_loan = 0u64;
     let mut received = 0u64;
     let step = |acq: &mut Acquisition<_, _>, in_loan: &mut u64, received: &mut u64| {
         clock.advance(5_000_000);
         let mut publish = |s: &RawImuSample| -> Result<(), String> {
-            let before = allocations();
+            let before = allocations().0;
             let sample = publisher.loan_uninit().map_err(|e| format!("{e:?}"))?;
-            *in_loan += allocations() - before;
+            *in_loan += allocations().0 - before;
             sample
                 .write_payload(*s)
                 .send()
@@ -152,7 +174,10 @@ fn publishing_loop_allocates_only_iceoryx2s_loan() {
     for _ in 0..2000 {
         step(&mut acq, &mut in_loan, &mut received);
     }
-    let total = allocations() - before;
+    let (calls, system) = {
+        let now = allocations();
+        (now.0 - before.0, now.1 - before.1)
+    };
     let samples = acq.stats().published - published_before;
     assert!(samples >= 39_000, "{samples} samples");
     assert_eq!(
@@ -160,6 +185,18 @@ fn publishing_loop_allocates_only_iceoryx2s_loan() {
         acq.stats().published,
         "every sample received, in order"
     );
-    assert_eq!(total - in_loan, 0, "allocations outside iceoryx2's loan");
-    assert_eq!(in_loan, samples, "iceoryx2 0.10 allocates one Arc per loan");
+    assert_eq!(
+        system, 0,
+        "{system} calls reached the system allocator for {samples} samples"
+    );
+    assert_eq!(
+        calls - in_loan,
+        0,
+        "allocation calls outside iceoryx2's loan"
+    );
+    assert_eq!(
+        in_loan, samples,
+        "iceoryx2 0.10 allocates one block per loan"
+    );
+    assert_eq!(ALLOCATOR.0.fallbacks(), 0, "the pool never ran empty");
 }
