@@ -78,7 +78,9 @@ fn evaluation_throughput() {
         gravity_mps2: 9.797,
     };
     let t = median_time(20, || {
-        black_box(evaluate_static(&six, &test, Vec::new(), &cfg, &ProgressBar::hidden()).unwrap());
+        black_box(
+            evaluate_static(&six, &test, Vec::new(), None, &cfg, &ProgressBar::hidden()).unwrap(),
+        );
     });
     println!(
         "mems-eval static on trial 1 ({n} samples, 5 windows): {:.2} ms, {:.1} M samples/s",

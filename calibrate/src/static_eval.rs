@@ -21,11 +21,17 @@
 //!   Its sigma: white noise over the dead-reckoning part + the alignment mean's white-noise
 //!   error + bias drift + the warm-up term's own uncertainty.
 //!
-//! Bias drift (see [`crate::drerror`]) is measured from data before the window: with earlier
-//! static recordings (`priors`, e.g. the thesis's start-up runs), as the excess of the spread of
-//! their `best` displacements (same window timing) over what white noise and alignment explain;
-//! without them, from the test file's own data before the dead-reckoning part, as a
-//! rate-random-walk intensity from the two halves of that data (a single-pair estimate, weak).
+//! Bias drift (see [`crate::drerror`]) comes from data before the window: with earlier static
+//! recordings (`priors`, e.g. the thesis's start-up runs), as the excess of the spread of their
+//! `best` displacements (same window timing) over what white noise and alignment explain;
+//! without them, from the noise parameters: the bias instability `B` (flicker, referenced to
+//! the alignment mean: [`crate::drerror::flicker_sigma_m`]) and rate random walk `K`
+//! ([`crate::drerror::rrw_sigma_m`]) of a calibration file's `[noise]` table when one is given
+//! (the one source of truth), else of an Allan analysis ([`noise::analyze`]) of the test file's
+//! own data before the dead-reckoning part. Unresolved terms count at their 2-sigma upper limit
+//! ([`noise::params::AxisNoise::values_or_limits`]): a 10 s rest cannot resolve them, so that
+//! sigma is conservative. The sensor axes' variances are rotated into the navigation frame
+//! (axes independent).
 
 use std::path::PathBuf;
 
@@ -34,12 +40,13 @@ use nalgebra::{Matrix3, Rotation3, Vector3};
 use recording::Recording;
 use recording::thesis::SixPosition;
 
-use crate::drerror::{bias_sigma_m, rrw_from_halves, rrw_sigma_m, white_sigma_m};
+use crate::drerror::{bias_sigma_m, flicker_sigma_m, rrw_sigma_m, white_sigma_m};
 use crate::fit::{FitError, Weighting, fit_labelled};
 use crate::integrate::DoubleIntegrator;
 use crate::model::{AccelModel, ModelKind};
 use crate::repair::{RepairReport, TornReadConfig, repair_torn_reads};
 use crate::session::poses_from_six;
+use noise::NoiseParams;
 
 /// Settings of the evaluation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -81,6 +88,9 @@ pub enum StaticEvalError {
     /// A setting is out of range.
     #[error("invalid setting: {0}")]
     Config(String),
+    /// The Allan analysis of the rest before a window failed.
+    #[error("noise analysis: {0}")]
+    Noise(String),
 }
 
 /// One method's result in one window.
@@ -144,6 +154,19 @@ pub struct StaticEvalReport {
     /// Earlier recordings that contributed to the drift and warm-up terms (per window, the
     /// smallest count).
     pub prior_runs: usize,
+    /// Where the drift term of windows without earlier recordings came from.
+    pub drift_source: DriftSource,
+}
+
+/// Where the bias drift term comes from when no earlier recordings cover a window.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DriftSource {
+    /// Every window had earlier recordings.
+    Priors,
+    /// The given noise parameters (a calibration file's `[noise]` table), from this source.
+    NoiseTable(String),
+    /// An Allan analysis of the test file's data before each dead-reckoning part.
+    OwnRest,
 }
 
 impl StaticEvalReport {
@@ -173,13 +196,19 @@ impl StaticEvalReport {
     pub fn to_text(&self, cfg: &StaticEvalConfig) -> String {
         let f3 = |v: [f64; 3]| format!("[{:>8.3} {:>8.3} {:>8.3}]", v[0], v[1], v[2]);
         let mut out = format!(
-            "static dead reckoning: align {} s, window {} s, step {} s, g = {} m/s^2; torn reads repaired x/y/z: {:?}; earlier recordings used: {}\n",
+            "static dead reckoning: align {} s, window {} s, step {} s, g = {} m/s^2; torn reads repaired x/y/z: {:?}; earlier recordings used: {}; drift without them: {}\n",
             cfg.align_s,
             cfg.window_s,
             cfg.step_s,
             cfg.gravity_mps2,
             self.repair.repaired,
-            self.prior_runs
+            self.prior_runs,
+            match &self.drift_source {
+                DriftSource::Priors => "not needed".to_owned(),
+                DriftSource::NoiseTable(source) => format!("noise parameters of {source}"),
+                DriftSource::OwnRest =>
+                    "Allan analysis of the rest before each window (upper limits)".to_owned(),
+            }
         );
         for w in &self.windows {
             out.push_str(&format!("window start {:.1} s\n", w.start_s));
@@ -316,8 +345,6 @@ struct BestRaw {
     align: [f64; 3],
     /// Alignment rotation (sensor to navigation frame).
     rot: M3,
-    /// Per-sample noise std in the navigation frame, m/s^2.
-    sigma: [f64; 3],
 }
 
 /// [`BestRaw`] for the window starting at `start`; `None` if the window does not fit.
@@ -353,7 +380,6 @@ fn best_raw(series: &Series, start: f64, cfg: &StaticEvalConfig) -> Option<BestR
         white: std::array::from_fn(|i| white_sigma_m(sigma[i], dt, t_dr)),
         align: std::array::from_fn(|i| bias_sigma_m(sigma[i] / (n_align as f64).sqrt(), t_dr)),
         rot,
-        sigma,
     })
 }
 
@@ -426,35 +452,59 @@ fn prior_terms(priors: &[Series], start: f64, cfg: &StaticEvalConfig) -> Option<
     })
 }
 
-/// Drift 1-sigma (m) from the test file's own data before the dead-reckoning part, per axis in
-/// the navigation frame (see the module documentation).
-fn own_drift(
-    series: &Series,
-    before: f64,
-    best: &BestRaw,
-    cfg: &StaticEvalConfig,
-    t_dr: f64,
-) -> [f64; 3] {
-    let half = before / 2.0;
-    let r1 = series.range(0.0, half);
-    let r2 = series.range(half, before);
-    if r1.len() < 10 || r2.len() < 10 {
-        return [0.0; 3];
-    }
-    let (m1, _, n1) = mean_std(series.a[r1].iter().map(|a| mat_vec(&best.rot, a)));
-    let (m2, _, n2) = mean_std(series.a[r2].iter().map(|a| mat_vec(&best.rot, a)));
+/// Drift 1-sigma (m) per navigation axis implied by noise parameters: bias instability and
+/// rate random walk of each sensor axis (values or 2-sigma upper limits), referenced to the
+/// alignment mean and integrated over `t_dr`, rotated by `rot` (sensor to navigation frame).
+fn noise_drift(params: &NoiseParams, rot: &M3, cfg: &StaticEvalConfig, t_dr: f64) -> [f64; 3] {
+    // The table's m/s^2 are g times its gravity; this evaluation's are g times cfg's.
+    let scale = cfg.gravity_mps2 / params.gravity_mps2;
+    let sensor_var: [f64; 3] = std::array::from_fn(|j| {
+        let [_, b, k] = params.accel.axes()[j].values_or_limits();
+        flicker_sigma_m(b * scale, cfg.align_s, t_dr).powi(2)
+            + rrw_sigma_m((k * scale).powi(2), cfg.align_s, t_dr).powi(2)
+    });
     std::array::from_fn(|i| {
-        let q = rrw_from_halves(m2[i] - m1[i], best.sigma[i], n1, n2, half);
-        rrw_sigma_m(q, cfg.align_s, t_dr)
+        (0..3)
+            .map(|j| rot[i][j] * rot[i][j] * sensor_var[j])
+            .sum::<f64>()
+            .sqrt()
     })
 }
 
+/// Noise parameters of the test file's own samples before `before_s` (s after its first
+/// sample), from the Allan analysis `mems-calibrate allan` runs.
+fn own_rest_noise(
+    test: &Recording,
+    before_s: f64,
+    gravity_mps2: f64,
+) -> Result<NoiseParams, StaticEvalError> {
+    let t0 = test.samples.first().map_or(0, |s| s.stamps.sample_ns);
+    let end_ns = t0 + (before_s * 1e9) as u64;
+    let mut rest: Vec<ipc_types::RawImuSample> = test
+        .samples
+        .iter()
+        .take_while(|s| s.stamps.sample_ns < end_ns)
+        .copied()
+        .collect();
+    let source = format!("{} (first {before_s} s)", test.source.display());
+    let options = noise::Options {
+        gravity_mps2,
+        ..noise::Options::default()
+    };
+    noise::analyze(&mut rest, &source, &options)
+        .map(|report| report.params)
+        .map_err(|e| StaticEvalError::Noise(e.to_string()))
+}
+
 /// Runs the evaluation (see the module documentation). `priors` are earlier static
-/// recordings of the same sensor (consumed: repaired in place); `progress` is advanced once per prior and per window.
+/// recordings of the same sensor (consumed: repaired in place); `noise` the sensor's noise
+/// parameters (a calibration file's `[noise]` table), for windows without priors;
+/// `progress` is advanced once per prior and per window.
 pub fn evaluate_static(
     six: &SixPosition,
     test: &Recording,
     priors: Vec<Recording>,
+    noise: Option<&NoiseParams>,
     cfg: &StaticEvalConfig,
     progress: &ProgressBar,
 ) -> Result<StaticEvalReport, StaticEvalError> {
@@ -499,6 +549,7 @@ pub fn evaluate_static(
     let n_windows = ((series.duration() - needed) / cfg.step_s).floor() as usize + 1;
     let mut windows = Vec::with_capacity(n_windows);
     let mut prior_runs = usize::MAX;
+    let mut drift_source = DriftSource::Priors;
     for w in 0..n_windows {
         let start = w as f64 * cfg.step_s;
         let Some(best) = best_raw(&series, start, cfg) else {
@@ -522,11 +573,23 @@ pub fn evaluate_static(
                     .collect::<Vec<_>>();
                 (p.drift, p.warmup_sigma, traj)
             }
-            None => (
-                own_drift(&series, start + cfg.align_s, &best, cfg, t_dr),
-                [0.0; 3],
-                best.trajectory.clone(),
-            ),
+            None => {
+                let params = match noise {
+                    Some(p) => {
+                        drift_source = DriftSource::NoiseTable(p.source.clone());
+                        p.clone()
+                    }
+                    None => {
+                        drift_source = DriftSource::OwnRest;
+                        own_rest_noise(test, start + cfg.align_s, g)?
+                    }
+                };
+                (
+                    noise_drift(&params, &best.rot, cfg, t_dr),
+                    [0.0; 3],
+                    best.trajectory.clone(),
+                )
+            }
         };
         let d_best = trajectory.last().map_or(best.d, |p| p.1);
         let best_terms = SigmaTerms {
@@ -590,5 +653,6 @@ pub fn evaluate_static(
         } else {
             prior_runs
         },
+        drift_source,
     })
 }

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use ipc_types::units::STANDARD_GRAVITY_MPS2;
 
-use crate::analysis::{Options, Report, analyze};
+use crate::analysis::{Options, Report, analyze, join_records};
 use crate::fit::Term;
 use crate::repair::RepairConfig;
 use crate::series::{AXES, GapPolicy, Sensor};
@@ -18,9 +18,11 @@ use crate::{kalibr, plot};
 /// intervals, and the fitted white noise, bias instability and rate random walk per axis.
 #[derive(Debug, Clone, PartialEq, clap::Args)]
 pub struct Args {
-    /// Static recording: canonical CSV, thesis CSV or MCAP.
-    #[arg(long, value_name = "STATIC_REC")]
-    pub input: PathBuf,
+    /// Static recording: canonical CSV, thesis CSV or MCAP. Several files, or folders (their
+    /// .csv and .mcap files, sorted), are pooled: each a segment of one analysis (records of
+    /// the same sensor at rest, e.g. repeated start-up runs).
+    #[arg(long, value_name = "STATIC_REC", num_args = 1.., required = true)]
+    pub input: Vec<PathBuf>,
     /// Print the full report as JSON instead of the text summary.
     #[arg(long)]
     pub json: bool,
@@ -110,9 +112,23 @@ pub fn run_allan(args: &Args) -> Result<()> {
 /// Runs the command, printing to `out`; returns the report.
 pub fn run_allan_to(args: &Args, out: &mut impl Write) -> Result<Report> {
     let options = args.options()?;
-    let mut recording = recording::load_raw(&args.input)?;
-    let source = args.input.display().to_string();
-    let report = analyze(&mut recording.samples, &source, &options)?;
+    let files = expand_inputs(&args.input)?;
+    let source = args
+        .input
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let mut samples = if let [file] = files.as_slice() {
+        recording::load_raw(file)?.samples
+    } else {
+        let records = files
+            .iter()
+            .map(|f| recording::load_raw(f).map(|r| r.samples))
+            .collect::<Result<Vec<_>, _>>()?;
+        join_records(&records)
+    };
+    let report = analyze(&mut samples, &source, &options)?;
     if args.json {
         serde_json::to_writer_pretty(&mut *out, &report).context("writing the JSON report")?;
         writeln!(out)?;
@@ -128,13 +144,39 @@ pub fn run_allan_to(args: &Args, out: &mut impl Write) -> Result<Report> {
         std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(path) = &args.plot {
-        let title = args
-            .input
-            .file_name()
-            .map_or_else(|| source.clone(), |n| n.to_string_lossy().into_owned());
+        let title = match args.input.as_slice() {
+            [one] => one
+                .file_name()
+                .map_or_else(|| source.clone(), |n| n.to_string_lossy().into_owned()),
+            _ => format!("{} records pooled", files.len()),
+        };
         plot::write_png(path, &title, &report.channels)?;
     }
     Ok(report)
+}
+
+/// The files named, plus the `.csv` and `.mcap` files of the folders named (sorted).
+fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for input in inputs {
+        if input.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(input)
+                .with_context(|| format!("reading the folder {}", input.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| matches!(p.extension().and_then(|e| e.to_str()), Some("csv" | "mcap")))
+                .collect();
+            anyhow::ensure!(
+                !found.is_empty(),
+                "{}: no .csv or .mcap recordings in this folder",
+                input.display()
+            );
+            found.sort();
+            files.extend(found);
+        } else {
+            files.push(input.clone());
+        }
+    }
+    Ok(files)
 }
 
 fn term_text(term: &Term) -> String {

@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use calibrate::static_eval::{StaticEvalConfig, evaluate_static};
+use calibrate::calibfile::CalibrationFile;
+use calibrate::static_eval::{DriftSource, StaticEvalConfig, evaluate_static};
 use calibrate::{plots, thesis_eval};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -59,6 +60,11 @@ enum Command {
         /// before the test, for the drift and warm-up terms (e.g. the thesis's start-up runs).
         #[arg(long)]
         prior: Vec<PathBuf>,
+        /// Calibration file whose [noise] table (mems-calibrate allan --into) gives the bias
+        /// instability and rate random walk of the drift term for windows without earlier
+        /// recordings (default: an Allan analysis of the test file's rest before each window).
+        #[arg(long, value_name = "CALIB.toml")]
+        noise: Option<PathBuf>,
         /// Print JSON instead of a table.
         #[arg(long)]
         json: bool,
@@ -103,9 +109,19 @@ fn run(cli: Cli) -> Result<()> {
             step_s,
             gravity,
             prior,
+            noise,
             json,
             plot,
         } => {
+            let noise = match &noise {
+                Some(path) => Some(CalibrationFile::load(path)?.noise.with_context(|| {
+                    format!(
+                        "{}: no [noise] table (run mems-calibrate allan --into)",
+                        path.display()
+                    )
+                })?),
+                None => None,
+            };
             let cfg = StaticEvalConfig {
                 align_s,
                 window_s,
@@ -132,12 +148,20 @@ fn run(cli: Cli) -> Result<()> {
             progress.set_position(0);
             progress.set_length(priors.len() as u64 + 1);
             progress.set_message("evaluating");
-            let report = evaluate_static(&six_data, &test_data, priors, &cfg, &progress)?;
+            let report = evaluate_static(
+                &six_data,
+                &test_data,
+                priors,
+                noise.as_ref(),
+                &cfg,
+                &progress,
+            )?;
             progress.finish_and_clear();
-            if report.prior_runs == 0 {
+            if report.drift_source == DriftSource::OwnRest {
                 eprintln!(
-                    "note: no earlier recordings cover this window timing (see --prior): the drift term comes from \
-                     the data before dead reckoning alone (one pair of interval means) and is a weak estimate"
+                    "note: neither earlier recordings (--prior) nor noise parameters (--noise) cover a window: its \
+                     drift term comes from an Allan analysis of the rest before it, whose unresolved bias \
+                     instability and random walk count at their upper limits (a conservative sigma)"
                 );
             }
             if json {
