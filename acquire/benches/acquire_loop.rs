@@ -10,7 +10,7 @@
 
 use std::time::Duration;
 
-use acquire::acquisition::{Acquisition, config_for_rate};
+use acquire::acquisition::{Acquisition, config_for_rate, default_read_interval_ns};
 use acquire::clock::{Clock, SimClock};
 use acquire::driver::Mpu9250;
 use acquire::registers as reg;
@@ -31,7 +31,9 @@ fn thread_cpu() -> Duration {
     Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32)
 }
 
-fn run(rate_hz: u32, read_interval_ms: u64, seconds: u64) {
+/// Runs `seconds` of sensor time at `rate_hz`, reading every `read_interval_ms` (default: the
+/// loop's default for the rate).
+fn run(rate_hz: u32, read_interval_ms: Option<f64>, seconds: u64) {
     let mut params = DriveParams::new(seconds as f64 + 10.0);
     params.turns = true;
     let drive = Drive::new(&params, 7).expect("drive");
@@ -45,14 +47,10 @@ fn run(rate_hz: u32, read_interval_ms: u64, seconds: u64) {
     let clock = SimClock::new_virtual(1_000_000_000);
     let device = SimMpu9250::new(sensor, clock.clone(), SimConfig::default());
     let driver = Mpu9250::new(device, "sim", reg::ADDRESS_AD0_LOW);
-    let interval_ns = read_interval_ms * 1_000_000;
-    let mut acq = Acquisition::start(
-        driver,
-        clock.clone(),
-        config_for_rate(rate_hz).unwrap(),
-        interval_ns,
-    )
-    .expect("start");
+    let config = config_for_rate(rate_hz).unwrap();
+    let interval_ns =
+        read_interval_ms.map_or_else(|| default_read_interval_ns(&config), |ms| (ms * 1e6) as u64);
+    let mut acq = Acquisition::start(driver, clock.clone(), config, interval_ns).expect("start");
     let t0 = clock.now_ns();
     let cpu0 = thread_cpu();
     let mut publish = |_: &ipc_types::RawImuSample| -> Result<(), ()> { Ok(()) };
@@ -67,8 +65,9 @@ fn run(rate_hz: u32, read_interval_ms: u64, seconds: u64) {
     let drv = acq.driver().stats();
     let util = acq.driver().i2c().bus_utilisation();
     println!(
-        "{rate_hz:>5} Hz, read every {read_interval_ms} ms: {:.1} samples/s sustained over {elapsed_s:.0} s, \
+        "{rate_hz:>5} Hz, read every {:.2} ms: {:.1} samples/s sustained over {elapsed_s:.0} s, \
          bus utilisation {:.1} %, host CPU {:.2} us/sample, lost {}, overflows {}, reads {}",
+        interval_ns as f64 * 1e-6,
         stats.published as f64 / elapsed_s,
         100.0 * util,
         cpu.as_secs_f64() * 1e6 / stats.published as f64,
@@ -80,8 +79,9 @@ fn run(rate_hz: u32, read_interval_ms: u64, seconds: u64) {
 
 fn main() {
     // `cargo bench` passes --bench; nothing to parse.
-    run(4000, 5, 60);
-    run(4000, 15, 60);
-    run(1000, 5, 60);
-    run(200, 20, 60);
+    run(4000, None, 60);
+    run(4000, Some(5.0), 60);
+    run(4000, Some(15.0), 60);
+    run(1000, None, 60);
+    run(200, Some(20.0), 60);
 }

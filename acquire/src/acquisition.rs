@@ -3,6 +3,7 @@
 //! `mems-acquire` binary wraps it with iceoryx2; tests drive it with a virtual clock.
 
 use embedded_hal::i2c::I2c;
+use hdrhistogram::Histogram;
 use ipc_types::RawImuSample;
 
 use crate::clock::Clock;
@@ -84,6 +85,16 @@ pub fn config_for_rate(rate_hz: u32) -> Result<driver::Config, String> {
     })
 }
 
+/// The default time between FIFO reads for `config`, ns: an eighth of the time the FIFO takes
+/// to fill (2.7 ms at 4 kHz accelerometer-only, 4.6 ms at 1 kHz with 14-byte frames). A read
+/// that starts up to seven eighths of the fill time late still finds room in the FIFO, while
+/// each read still moves several frames (the fixed cost of a read, INT_STATUS and FIFO_COUNT,
+/// is about 0.2 ms of bus time at 400 kHz).
+pub fn default_read_interval_ns(config: &driver::Config) -> u64 {
+    let frames = reg::FIFO_SIZE / config.frame_len();
+    (frames as f64 / config.output_rate_hz() * 1e9 / 8.0) as u64
+}
+
 /// Counters of the acquisition loop.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct LoopStats {
@@ -93,6 +104,8 @@ pub struct LoopStats {
     pub reads: u64,
     /// Reads that returned an error (the driver re-initialises and the loop carries on).
     pub failed_reads: u64,
+    /// The latest any read started after its due time, ns (see [`Acquisition::lateness`]).
+    pub max_late_ns: u64,
 }
 
 /// The acquisition loop's state: the driver, the clock, and a buffer allocated once.
@@ -104,11 +117,13 @@ pub struct Acquisition<I2C: I2c, C: Clock> {
     read_interval_ns: u64,
     next_read_ns: u64,
     stats: LoopStats,
+    lateness: Histogram<u64>,
 }
 
 impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
     /// Probes and configures the device and prepares the loop; reads are `read_interval_ns`
-    /// apart (it must leave the FIFO room: 512 bytes last 21 ms at 4 kHz accelerometer-only).
+    /// apart (it must leave the FIFO room: 512 bytes last 21 ms at 4 kHz accelerometer-only;
+    /// see [`default_read_interval_ns`]).
     pub fn start(
         mut driver: Mpu9250<I2C>,
         clock: C,
@@ -126,6 +141,9 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
             read_interval_ns,
             next_read_ns,
             stats: LoopStats::default(),
+            // 1 ns to 100 s at 2 significant digits: allocated here, never resized.
+            lateness: Histogram::new_with_bounds(1, 100_000_000_000, 2)
+                .expect("valid histogram bounds"),
         })
     }
 
@@ -149,6 +167,12 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
         self.stats
     }
 
+    /// How late each read started after its due time, ns (recorded from 1 ns): the wake-up
+    /// latency of the loop, the figure that decides whether the FIFO overflows.
+    pub fn lateness(&self) -> &Histogram<u64> {
+        &self.lateness
+    }
+
     /// Reads the FIFO now and publishes every sample it held through `publish`, with `seq`
     /// consecutive from 0 and `stamps.acquired_ns` set just before publication. A read error is
     /// counted and returned after the driver has tried to re-initialise; the loop may carry on.
@@ -159,8 +183,12 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
     ) -> Result<Result<usize, driver::Error<I2C::Error>>, E> {
         self.stats.reads += 1;
         let due = self.next_read_ns;
+        let now = self.clock.now_ns();
+        let late = now.saturating_sub(due);
+        self.lateness.saturating_record(late.max(1));
+        self.stats.max_late_ns = self.stats.max_late_ns.max(late);
         // Keep the read grid; after a long stall, start again from now rather than bursting.
-        self.next_read_ns = (due + self.read_interval_ns).max(self.clock.now_ns());
+        self.next_read_ns = (due + self.read_interval_ns).max(now);
         let n = match self.driver.read_samples(&self.clock, &mut self.buffer) {
             Ok(n) => n,
             Err(e) => {
@@ -182,6 +210,64 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::clock::SimClock;
+    use crate::sim::{SimConfig, SimMpu9250};
+    use mems_sim::{AnalogSample, SampleSource};
+
+    /// A part lying still, level.
+    struct Still;
+
+    impl SampleSource for Still {
+        fn sample(&mut self, _t_s: f64, _rate_hz: f64) -> AnalogSample {
+            AnalogSample {
+                accel_g: [0.0, 0.0, 1.0],
+                ..AnalogSample::default()
+            }
+        }
+    }
+
+    /// Runs 400 reads at 4 kHz with the default interval on a virtual clock, the 200th one
+    /// starting `late_ns` after its due time; returns the loop and driver counters.
+    fn run_with_one_late_read(late_ns: u64) -> (LoopStats, driver::DriverStats, u64) {
+        let clock = SimClock::new_virtual(1_000_000_000);
+        let device = SimMpu9250::new(Still, clock.clone(), SimConfig::default());
+        let drv = Mpu9250::new(device, "sim", reg::ADDRESS_AD0_LOW);
+        let config = config_for_rate(4000).unwrap();
+        let interval = default_read_interval_ns(&config);
+        let mut acq = Acquisition::start(drv, clock.clone(), config, interval).unwrap();
+        let mut publish = |_: &RawImuSample| Ok::<(), ()>(());
+        for k in 0..400 {
+            let late = if k == 200 { late_ns } else { 0 };
+            clock.sleep_until(acq.next_read_ns() + late);
+            acq.read_and_publish(&mut publish).unwrap().unwrap();
+        }
+        (acq.stats(), acq.driver().stats(), acq.lateness().len())
+    }
+
+    #[test]
+    fn the_default_interval_leaves_seven_eighths_of_the_fifo_for_lateness() {
+        // 512 bytes of 6-byte frames: 85 samples, 21.25 ms at 4 kHz; an eighth is 2.656 ms.
+        let fill_ns = 85.0 * 250_000.0;
+        let config = config_for_rate(4000).unwrap();
+        assert_eq!(default_read_interval_ns(&config), (fill_ns / 8.0) as u64);
+        // 1 kHz, 14-byte frames: 36 samples, 36 ms; an eighth is 4.5 ms.
+        assert_eq!(
+            default_read_interval_ns(&config_for_rate(1000).unwrap()),
+            4_500_000
+        );
+        // A read half a millisecond short of 7/8 of the fill time late finds room ...
+        let late = (fill_ns * 7.0 / 8.0) as u64 - 500_000;
+        let (stats, drv, recorded) = run_with_one_late_read(late);
+        assert_eq!((drv.overflows, drv.lost_samples), (0, 0));
+        assert!(drv.max_fifo_bytes > 480, "{} bytes", drv.max_fifo_bytes);
+        assert_eq!(stats.max_late_ns, late);
+        assert_eq!(recorded, 400, "every read's lateness is recorded");
+        // ... one a whole fill time late overflows, and the loss is counted and flagged.
+        let (_, drv, _) = run_with_one_late_read(fill_ns as u64);
+        assert_eq!(drv.overflows, 1);
+        assert!(drv.lost_samples > 0);
+        assert_eq!(drv.max_fifo_bytes, 512);
+    }
 
     #[test]
     fn parses_sources() {

@@ -8,7 +8,6 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::Duration;
 
 /// A monotonic time source that can also let time pass.
 pub trait Clock {
@@ -38,13 +37,32 @@ impl Clock for MonotonicClock {
     }
 }
 
+/// Sleeps until `CLOCK_MONOTONIC` reads `deadline_ns`, with an absolute-deadline
+/// `clock_nanosleep`: unlike a relative sleep computed from an earlier reading, a preemption
+/// between reading the clock and going to sleep does not push the wake-up later. Signals
+/// (EINTR) resume the same deadline.
 fn sleep_until_monotonic(deadline_ns: u64) {
+    let deadline = libc::timespec {
+        tv_sec: (deadline_ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (deadline_ns % 1_000_000_000) as libc::c_long,
+    };
     loop {
-        let now = ipc_types::clock::monotonic_ns();
-        if now >= deadline_ns {
-            return;
+        // SAFETY: `deadline` is a valid timespec (tv_nsec < 1e9); with TIMER_ABSTIME the
+        // remaining-time pointer is unused and may be null.
+        let rc = unsafe {
+            libc::clock_nanosleep(
+                libc::CLOCK_MONOTONIC,
+                libc::TIMER_ABSTIME,
+                &deadline,
+                std::ptr::null_mut(),
+            )
+        };
+        match rc {
+            0 => return,
+            libc::EINTR => continue,
+            // Only EINVAL remains (an invalid timespec, which the construction rules out).
+            other => panic!("clock_nanosleep(CLOCK_MONOTONIC, {deadline_ns} ns): error {other}"),
         }
-        std::thread::sleep(Duration::from_nanos(deadline_ns - now));
     }
 }
 

@@ -3,7 +3,7 @@
 
 use std::time::{Duration, Instant};
 
-use acquire::acquisition::{Acquisition, SourceSpec, config_for_rate};
+use acquire::acquisition::{Acquisition, SourceSpec, config_for_rate, default_read_interval_ns};
 use acquire::clock::{Clock, MonotonicClock, SimClock};
 use acquire::driver::Mpu9250;
 use acquire::pool::BlockPool;
@@ -38,9 +38,10 @@ struct Cli {
     /// Stop after this many seconds (default: until SIGINT/SIGTERM).
     #[arg(long)]
     duration: Option<f64>,
-    /// Time between FIFO reads, ms (the 512-byte FIFO holds 21 ms at 4 kHz).
-    #[arg(long, default_value_t = 5.0)]
-    read_interval_ms: f64,
+    /// Time between FIFO reads, ms (the 512-byte FIFO holds 21 ms at 4 kHz). Default: an
+    /// eighth of the FIFO's fill time (2.7 ms at 4 kHz, 4.6 ms at 1 kHz).
+    #[arg(long)]
+    read_interval_ms: Option<f64>,
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
@@ -76,7 +77,11 @@ fn main() -> Result<()> {
     let cli = Cli::parse();
     realtime_setup(&cli)?;
     let config = config_for_rate(cli.rate).map_err(anyhow::Error::msg)?;
-    let read_interval_ns = (cli.read_interval_ms * 1e6) as u64;
+    let read_interval_ns = match cli.read_interval_ms {
+        Some(ms) if ms.is_finite() && ms > 0.0 => (ms * 1e6) as u64,
+        Some(ms) => bail!("--read-interval-ms must be > 0, got {ms}"),
+        None => default_read_interval_ns(&config),
+    };
     match cli.source.clone() {
         SourceSpec::Sim => {
             let clock = SimClock::real_time();
@@ -168,9 +173,10 @@ fn run<I2C: I2c, C: Clock>(
     let mut acq = Acquisition::start(driver, clock, config, read_interval_ns)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     eprintln!(
-        "mems-acquire: {} at {} Hz on {name}",
+        "mems-acquire: {} at {} Hz on {name}, reading every {:.2} ms",
         acq.driver().bus_label(),
-        config.output_rate_hz()
+        config.output_rate_hz(),
+        read_interval_ns as f64 * 1e-6
     );
     let start = Instant::now();
     let deadline = cli.duration.map(Duration::from_secs_f64);
@@ -185,9 +191,11 @@ fn run<I2C: I2c, C: Clock>(
         Ok(())
     };
     loop {
-        let wait_ns = acq.next_read_ns().saturating_sub(acq.clock().now_ns());
-        // node.wait sleeps and returns an error on SIGINT/SIGTERM: the clean way out.
-        if node.wait(Duration::from_nanos(wait_ns)).is_err() {
+        // An absolute-deadline sleep (a relative one would add any preemption between reading
+        // the clock and sleeping); then node.wait(0) returns an error once SIGINT/SIGTERM has
+        // arrived: the clean way out.
+        acq.clock().sleep_until(acq.next_read_ns());
+        if node.wait(Duration::ZERO).is_err() {
             break;
         }
         if let Err(e) = acq.read_and_publish(&mut publish)? {
@@ -199,6 +207,17 @@ fn run<I2C: I2c, C: Clock>(
     }
     let stats = acq.stats();
     let driver = acq.driver().stats();
+    let late = acq.lateness();
+    let us = |q: f64| late.value_at_quantile(q) as f64 * 1e-3;
+    eprintln!(
+        "mems-acquire: read lateness p50 {:.0} us, p99 {:.0} us, p99.9 {:.0} us, max {:.0} us; \
+         fullest FIFO {} of 512 bytes",
+        us(0.5),
+        us(0.99),
+        us(0.999),
+        stats.max_late_ns as f64 * 1e-3,
+        driver.max_fifo_bytes
+    );
     eprintln!(
         "mems-acquire: published {} samples in {:.1} s; reads {}, failed {}, overflows {}, \
          gaps {}, lost {}, bus errors {}, re-inits {}; discarded for stalled subscribers {}; \

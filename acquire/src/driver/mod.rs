@@ -257,6 +257,9 @@ pub struct DriverStats {
     pub stalls: u64,
     /// Re-initialisations (successful or not) after persistent errors or stalls.
     pub reinits: u64,
+    /// The largest FIFO_COUNT read, bytes (512 is a full FIFO): how close the reads came to an
+    /// overflow.
+    pub max_fifo_bytes: u64,
 }
 
 /// Attempts per register transaction (the first plus retries).
@@ -498,6 +501,7 @@ impl<I2C: I2c> Mpu9250<I2C> {
         self.read_registers(reg::FIFO_COUNTH, &mut count_bytes, "reading FIFO_COUNT")?;
         let t_after = clock.now_ns();
         let count = usize::from(u16::from_be_bytes(count_bytes) & 0x1FFF).min(reg::FIFO_SIZE);
+        self.stats.max_fifo_bytes = self.stats.max_fifo_bytes.max(count as u64);
         let available = count / frame;
         let short = count % frame != 0;
 
