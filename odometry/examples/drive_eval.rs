@@ -1,10 +1,14 @@
-//! Evaluation of the odometry stage on simulated 10-minute ground-robot drives with perfect
-//! rest flags: per case, the end position error as % of distance travelled (median, p90) over
-//! many seeds, and how well the reported 1-sigma covers it.
+//! Evaluation of the odometry stage on simulated 10-minute ground-robot drives: per case, the
+//! end position error as % of distance travelled (median, p90) over many seeds, and how well
+//! the reported 1-sigma covers it.
 //!
 //! Each seed powers on one simulated MPU-9250, runs an N-orientation calibration session
 //! (from which the gyro correction is fitted, unless `--gyro-cal none`), then mounts the
-//! sensor on the robot and drives.
+//! sensor on the robot and drives. Rest flags are perfect (the drive plan's) or, with
+//! `--rest imu`, the live calibration stage's zero-state detector on the raw samples (as
+//! `mems-calibrate serve` runs it with its defaults). `--hints` adds the robot controller's
+//! hints (`mems_sim::hints`), fed to the stage by publication time as `mems-odometry serve`
+//! receives them.
 //!
 //! `cargo run --release -p odometry --example drive_eval -- --help` lists the options; the
 //! tables in docs/odometry.md give the commands that produced them.
@@ -12,11 +16,17 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
+use std::collections::VecDeque;
+
+use calibrate::stage::{CalibrationStage, RefineConfig};
+use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use clap::{Parser, ValueEnum};
-use common::{Case, Simulation};
-use ipc_types::odometry_flags;
+use common::{Case, Simulation, identity_calibration};
+use ipc_types::{CorrectedImuSample, RobotHint, odometry_flags};
+use mems_sim::hints::{HintParams, RestSource};
 use nalgebra::{Matrix2, Matrix3, Vector2};
 use odometry::gyrocal::{GyroCalConfig, calibrate_gyro};
+use odometry::hints::HintConfig;
 use odometry::stage::{OdometryConfig, OdometryStage};
 use statrs::statistics::{Data, Max, Median, OrderStatistics};
 
@@ -29,6 +39,37 @@ enum GyroCal {
     None,
     /// The simulator's own model, inverted: a diagnostic reference only.
     Model,
+}
+
+/// Where the rest flags come from.
+#[derive(Clone, Copy, PartialEq, ValueEnum)]
+enum Rest {
+    /// The drive plan's rest segments.
+    Perfect,
+    /// The calibration stage's zero-state detector (GLRT, live defaults) on the raw samples.
+    Imu,
+}
+
+/// Which robot hints the stage gets.
+#[derive(Clone, Copy, PartialEq, ValueEnum)]
+enum Hints {
+    /// None: the IMU alone.
+    None,
+    /// Every hint the controller publishes (no losses).
+    All,
+    /// The simulator's default losses: 2% independently and a 0.2-2 s burst every 2 min.
+    Realistic,
+    /// Half of the hints lost independently, and the default bursts.
+    Half,
+}
+
+/// Source of the hints' stationary flag.
+#[derive(Clone, Copy, PartialEq, ValueEnum)]
+enum HintRest {
+    /// Wheel encoders (no tick in the window).
+    Encoders,
+    /// The controller's command (leads the motion by 75 ms).
+    Commanded,
 }
 
 /// A simulated case (everything else as in `Case::straight`).
@@ -51,7 +92,7 @@ enum CaseName {
 }
 
 #[derive(Parser)]
-#[command(about = "Odometry on simulated 10-minute drives with perfect rest flags")]
+#[command(about = "Odometry on simulated 10-minute drives")]
 struct Args {
     /// Number of seeds per case.
     #[arg(long, default_value_t = 20)]
@@ -80,6 +121,25 @@ struct Args {
     /// gyro-turn-on, gyro-scale, adc.
     #[arg(long)]
     off: Vec<String>,
+    /// Where the rest flags come from.
+    #[arg(long, value_enum, default_value_t = Rest::Perfect)]
+    rest: Rest,
+    /// Robot hints given to the stage.
+    #[arg(long, value_enum, default_value_t = Hints::None)]
+    hints: Hints,
+    /// Source of the hints' stationary flag.
+    #[arg(long, value_enum, default_value_t = HintRest::Encoders)]
+    hint_rest: HintRest,
+    /// Estimate the IMU-to-body mounting from the first drive instead of configuring it.
+    #[arg(long)]
+    estimate_mounting: bool,
+    /// Smooth floor: no vibration (for every case).
+    #[arg(long)]
+    smooth: bool,
+    /// With `--rest imu`: add the calibration stage's refined gyro bias back to its output
+    /// (a diagnostic: the odometry then sees the gyro as if the stage did not refine it).
+    #[arg(long)]
+    undo_gyro_refinement: bool,
 }
 
 /// The simulated case and the stage configuration for a case name.
@@ -113,6 +173,9 @@ fn case(name: CaseName, args: &Args) -> (Case, OdometryConfig) {
             cfg.accel_bias_sigma_mps2 = [20e-3 * mems_sim::model::G_MPS2; 3];
         }
     }
+    if args.smooth {
+        c.vibration = 0.0;
+    }
     // The robot's vibration, as a measurement of it would give (see Case).
     let (accel, gyro) = c.vibration_density_per_mps();
     cfg.noise.vibration_accel_density_per_mps = accel;
@@ -134,9 +197,39 @@ struct Outcome {
     /// RMS horizontal error of the revised history and of the forward states it replaces,
     /// each relative to the error at the start of its motion, m.
     history_rms_m: (f64, f64),
+    /// Speed updates applied, samples where hint and detector disagreed, samples flagged
+    /// stale.
+    hint_counts: (u64, u32, u64),
+    /// Wheel-speed scale: the filter's estimate minus the simulated encoder's, and the
+    /// filter's 1-sigma of it.
+    scale_error: f64,
+    scale_sigma: f64,
+    /// Angle between the estimated (or configured) mounting and the true one, degrees.
+    mounting_error_deg: f64,
 }
 
-fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, gyro_cal: GyroCal) -> Outcome {
+/// The hint stream of a seed for the options, or none.
+fn hint_stream(c: &Case, seed: u64, args: &Args) -> (Vec<RobotHint>, f64) {
+    let source = match args.hint_rest {
+        HintRest::Encoders => RestSource::Encoders,
+        HintRest::Commanded => RestSource::Commanded,
+    };
+    let mut p = HintParams::new(source);
+    match args.hints {
+        Hints::None => return (Vec::new(), 0.0),
+        Hints::All => {
+            p.drop_fraction = 0.0;
+            p.bursts_per_min = 0.0;
+        }
+        Hints::Realistic => {}
+        Hints::Half => p.drop_fraction = 0.5,
+    }
+    let s = c.hints(seed, &p);
+    (s.hints, s.speed_scale)
+}
+
+fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
+    let gyro_cal = args.gyro_cal;
     let mut sim = Simulation::new(c, seed);
     let session = sim.session();
     let model_correction = c.gyro_correction_reference();
@@ -151,7 +244,18 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, gyro_cal: GyroCal) -> Outco
         }
         GyroCal::Model => model_correction,
     };
-    let mut stage = OdometryStage::new(cfg);
+    let hint_cfg = HintConfig {
+        mounting: if args.estimate_mounting {
+            None
+        } else {
+            Some(nalgebra::UnitQuaternion::identity())
+        },
+        ..HintConfig::default()
+    };
+    let mut stage = OdometryStage::with_hints(cfg, hint_cfg).expect("valid hint configuration");
+    let (hints, true_scale) = hint_stream(c, seed, args);
+    let mut next_hint = 0;
+    let mut stale = 0u64;
     let mut distance_m = 0.0;
     let mut prev_truth: Option<[f64; 3]> = None;
     let mut last = None;
@@ -167,7 +271,8 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, gyro_cal: GyroCal) -> Outco
     // Sequence numbers where motions start: the history of a motion is scored relative to the
     // error at its start, which the revision leaves as it is.
     let mut motion_starts: Vec<u64> = Vec::new();
-    sim.drive(|s, truth| {
+    // One corrected sample and the truth at it, in order.
+    let mut step = |s: &CorrectedImuSample, truth: &recording::Truth, stage: &mut OdometryStage| {
         first_seq.get_or_insert(s.seq);
         truth_xy.push([truth.position_m[0], truth.position_m[1]]);
         if let Some(p) = prev_truth {
@@ -184,6 +289,7 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, gyro_cal: GyroCal) -> Outco
             })
             .expect("valid samples");
         let o = last.expect("a state per sample");
+        stale += u64::from(o.flags & odometry_flags::HINT_STALE != 0);
         forward_xy.push([o.position_m[0], o.position_m[1]]);
         if was_rest && !truth.at_rest {
             motion_starts.push(s.seq);
@@ -198,7 +304,55 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, gyro_cal: GyroCal) -> Outco
         }
         was_rest = truth.at_rest;
         end_truth = Some(*truth);
-    });
+    };
+    // Hints published by a sample's time reach the stage before it (as in the live process).
+    let mut feed_hints = |t_ns: u64, stage: &mut OdometryStage| {
+        while let Some(h) = hints.get(next_hint)
+            && h.stamps.acquired_ns <= t_ns
+        {
+            stage.hint(h).expect("valid simulated hints");
+            next_hint += 1;
+        }
+    };
+    match args.rest {
+        Rest::Perfect => sim.drive(|s, truth| {
+            feed_hints(s.stamps.sample_ns, &mut stage);
+            step(s, truth, &mut stage);
+        }),
+        Rest::Imu => {
+            let mut detector = DetectorConfig::new(DetectorKind::Glrt, mems_sim::model::G_MPS2);
+            detector.learn.duration_s = 5.0;
+            let mut calibration =
+                CalibrationStage::new(&identity_calibration(), detector, RefineConfig::default())
+                    .expect("identity calibration");
+            // The calibration stage releases whole batches: truths wait for their samples.
+            let mut truths: VecDeque<recording::Truth> = VecDeque::new();
+            let mut batch: Vec<CorrectedImuSample> = Vec::new();
+            sim.drive_raw(|raw, truth| {
+                truths.push_back(*truth);
+                feed_hints(raw.stamps.sample_ns, &mut stage);
+                calibration
+                    .push(raw, &mut |c| batch.push(*c))
+                    .expect("valid raw samples");
+                // The batch was corrected with the refinement as it stands after the push.
+                let (_, gyro_refined, _) = calibration.refinement();
+                for c in batch.iter_mut() {
+                    if args.undo_gyro_refinement {
+                        for (w, b) in c.gyro_rps.iter_mut().zip(gyro_refined) {
+                            *w += b;
+                        }
+                    }
+                    let t = truths.pop_front().expect("a truth per sample");
+                    step(c, &t, &mut stage);
+                }
+                batch.clear();
+            });
+            calibration.finish(&mut |c| {
+                let t = truths.pop_front().expect("a truth per sample");
+                step(c, &t, &mut stage);
+            });
+        }
+    }
     let o = last.expect("states");
     let truth = end_truth.expect("truth");
     let first_seq = first_seq.expect("samples");
@@ -226,7 +380,20 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, gyro_cal: GyroCal) -> Outco
         .fixed_view::<2, 2>(0, 0)
         .into_owned();
     let nees = error_m.dot(&(cov.try_inverse().expect("positive definite") * error_m));
+    let h = stage.hint_stats();
+    let kf = stage.filter().expect("aligned");
+    let true_mounting = c.drive(seed).params().mounting;
     Outcome {
+        hint_counts: (h.speed_updates, o.hint_disagreements, stale),
+        scale_error: if hints.is_empty() {
+            f64::NAN
+        } else {
+            kf.x.k - true_scale
+        },
+        scale_sigma: kf.cov[(odometry::eskf::KS, odometry::eskf::KS)].sqrt(),
+        mounting_error_deg: stage
+            .mounting()
+            .map_or(f64::NAN, |m| m.angle_to(&true_mounting).to_degrees()),
         distance_m,
         error_m,
         sigma_m: Vector2::new(o.position_sigma_m[0], o.position_sigma_m[1]),
@@ -243,7 +410,7 @@ fn main() {
         args.cases = CaseName::value_variants().to_vec();
     }
     println!(
-        "seeds {}-{}, {} Hz, {}, gyro correction: {}",
+        "seeds {}-{}, {} Hz, {}, gyro correction: {}, rest flags: {}, hints: {}{}{}",
         args.first_seed,
         args.first_seed + args.seeds - 1,
         args.rate_hz,
@@ -256,6 +423,22 @@ fn main() {
             GyroCal::Session => "from the session",
             GyroCal::None => "none",
             GyroCal::Model => "the model's (diagnostic)",
+        },
+        match args.rest {
+            Rest::Perfect => "perfect",
+            Rest::Imu => "IMU detector (GLRT)",
+        },
+        args.hints.to_possible_value().expect("named").get_name(),
+        match (args.hints, args.hint_rest) {
+            (Hints::None, _) => "",
+            (_, HintRest::Encoders) => " (stationary from encoders)",
+            (_, HintRest::Commanded) => " (stationary commanded)",
+        },
+        match (args.smooth, args.estimate_mounting) {
+            (false, false) => "",
+            (true, false) => ", smooth floor",
+            (false, true) => ", mounting estimated",
+            (true, true) => ", smooth floor, mounting estimated",
         }
     );
     println!(
@@ -268,12 +451,14 @@ fn main() {
         let mut pct = Vec::new();
         let (mut covered, mut axes, mut nees, mut rc, mut rn) = (0, 0, 0.0, 0, 0);
         let (mut hist_rev, mut hist_fwd) = (0.0, 0.0);
+        let mut hint_totals = (0u64, 0u64, 0u64);
+        let (mut scale_se, mut mounting_max) = (0.0, 0.0f64);
         for seed in args.first_seed..args.first_seed + args.seeds {
-            let o = run(&c, cfg, seed, args.gyro_cal);
+            let o = run(&c, cfg, seed, &args);
             let p = 100.0 * o.error_m.norm() / o.distance_m;
             if args.per_seed {
                 eprintln!(
-                    "{} seed {seed}: distance {:.1} m, error ({:.3}, {:.3}) m = {p:.2}%, sigma ({:.3}, {:.3}) m, NEES {:.2}, gyro correction error {:.1e}",
+                    "{} seed {seed}: distance {:.1} m, error ({:.3}, {:.3}) m = {p:.2}%, sigma ({:.3}, {:.3}) m, NEES {:.2}, gyro correction error {:.1e}, speed updates {}, disagreements {}, stale samples {}, scale error {:+.2}% (sigma {:.2}%), mounting error {:.2} deg",
                     label.get_name(),
                     o.distance_m,
                     o.error_m.x,
@@ -281,8 +466,23 @@ fn main() {
                     o.sigma_m.x,
                     o.sigma_m.y,
                     o.nees,
-                    o.gyro_cal_error
+                    o.gyro_cal_error,
+                    o.hint_counts.0,
+                    o.hint_counts.1,
+                    o.hint_counts.2,
+                    100.0 * o.scale_error,
+                    100.0 * o.scale_sigma,
+                    o.mounting_error_deg
                 );
+            }
+            hint_totals.0 += o.hint_counts.0;
+            hint_totals.1 += u64::from(o.hint_counts.1);
+            hint_totals.2 += o.hint_counts.2;
+            if o.scale_error.is_finite() {
+                scale_se += o.scale_error.powi(2);
+            }
+            if o.mounting_error_deg.is_finite() {
+                mounting_max = mounting_max.max(o.mounting_error_deg);
             }
             pct.push(p);
             for i in 0..2 {
@@ -310,5 +510,17 @@ fn main() {
             (hist_rev / args.seeds as f64).sqrt(),
             (hist_fwd / args.seeds as f64).sqrt(),
         );
+        if args.hints != Hints::None {
+            let n = args.seeds as f64;
+            eprintln!(
+                "  {}: per drive {:.0} speed updates, {:.0} samples of hint/detector disagreement, {:.0} samples stale; scale error RMS {:.2}%; mounting error max {:.3} deg",
+                label.get_name(),
+                hint_totals.0 as f64 / n,
+                hint_totals.1 as f64 / n,
+                hint_totals.2 as f64 / n,
+                100.0 * (scale_se / n).sqrt(),
+                mounting_max
+            );
+        }
     }
 }

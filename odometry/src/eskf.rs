@@ -180,6 +180,14 @@ impl Eskf {
         self.update_iso(&h, residual, sigma * sigma);
     }
 
+    /// Whether the velocity is consistent with rest: every component within `gate` standard
+    /// deviations of zero, the standard deviation combining the velocity's own with a
+    /// zero-velocity measurement's 1-sigma `sigma` (m/s).
+    pub fn velocity_consistent_with_zero(&self, sigma: f64, gate: f64) -> bool {
+        (0..3)
+            .all(|i| self.x.v[i].abs() <= gate * (self.cov[(V + i, V + i)] + sigma * sigma).sqrt())
+    }
+
     /// Zero-angular-rate update: the body does not rotate, so the last gyro reading measures the
     /// gyro bias with the per-sample white noise `sigma` (rad/s). Skipped, returning `false`,
     /// when a component of the innovation lies beyond `gate` times its predicted standard

@@ -41,6 +41,9 @@ pub struct HintConfig {
     /// the prior of the filter's scale state. The hints' own sigma is the per-hint (white)
     /// part only, since a scale error is common to all of them.
     pub speed_scale_sigma: f64,
+    /// After hints went stale, the IMU's rest flag gives a zero-velocity update only while
+    /// the filter's velocity is within this many standard deviations of zero.
+    pub fallback_zupt_gate_sigma: f64,
     /// Hints that can wait for their delivery time at once; when full, the oldest waiting hint
     /// is dropped (and counted in [`HintStats::overflowed`]).
     pub capacity: usize,
@@ -49,7 +52,8 @@ pub struct HintConfig {
 impl Default for HintConfig {
     /// Stale after 0.25 s (12 periods of a 50 Hz controller), delivery 5 ms, the IMU mounted
     /// aligned with the body, 3 m of forward driving for an estimated mounting, a
-    /// non-holonomic 1-sigma of 0.02 m/s, a speed scale 1-sigma of 2%, 256 waiting hints.
+    /// non-holonomic 1-sigma of 0.02 m/s, a speed scale 1-sigma of 2%, a fallback rest gate
+    /// of 5 sigma, 256 waiting hints.
     fn default() -> Self {
         Self {
             max_age_s: 0.25,
@@ -58,6 +62,7 @@ impl Default for HintConfig {
             mounting_min_path_m: 3.0,
             nonholonomic_sigma_mps: 0.02,
             speed_scale_sigma: 0.02,
+            fallback_zupt_gate_sigma: 5.0,
             capacity: 256,
         }
     }
@@ -96,6 +101,7 @@ impl HintConfig {
         positive("mounting_min_path_m", self.mounting_min_path_m)?;
         positive("nonholonomic_sigma_mps", self.nonholonomic_sigma_mps)?;
         positive("speed_scale_sigma", self.speed_scale_sigma)?;
+        positive("fallback_zupt_gate_sigma", self.fallback_zupt_gate_sigma)?;
         if self.capacity == 0 {
             return Err(HintConfigError {
                 field: "capacity",

@@ -26,7 +26,10 @@
 //!   it. Flagged `HINT_SPEED`;
 //! - once hints have been used and the newest is older than the maximum age, the stage runs on
 //!   the IMU alone (its zero-state flag) and flags `HINT_STALE`; there is a state for every
-//!   sample either way.
+//!   sample either way. In that fallback a rest flag is only taken when the filter's velocity
+//!   is within [`HintConfig::fallback_zupt_gate_sigma`] standard deviations of zero: on a
+//!   smooth floor the IMU's detector takes cruising for rest, and a robot the hints saw
+//!   cruising a moment ago has not stopped unless its integrated velocity says so.
 
 use crate::eskf::{Eskf, Imu, KS, NoiseModel, align};
 use crate::hints::{
@@ -391,9 +394,9 @@ impl OdometryStage {
         let hint_rest = fresh
             .filter(has_rest_source)
             .map(|h| h.flags & hint_flags::STATIONARY != 0);
-        let rest = hint_rest.unwrap_or(imu_rest);
         let mut hs = HintSample::default();
-        if self.hints.newest.is_some() && fresh.is_none() {
+        let stale = self.hints.newest.is_some() && fresh.is_none();
+        if stale {
             hs.flags |= odometry_flags::HINT_STALE;
         }
         if hint_rest == Some(true) {
@@ -404,11 +407,28 @@ impl OdometryStage {
             hs.flags |= odometry_flags::HINT_DISAGREE;
         }
 
-        if self.kf.is_none() {
+        let Some(kf) = self.kf.as_mut() else {
+            let rest = hint_rest.unwrap_or(imu_rest);
             self.accumulate_alignment(t_ns, &m, rest);
             emit(&self.unaligned_state(s, rest, hs));
             return Ok(());
-        }
+        };
+        let dt = (t_ns - prev.map_or(t_ns, |p| p.0)) as f64 * 1e-9;
+        let p_before = kf.x.p;
+        kf.predict(m, dt);
+        let moved = (kf.x.p - p_before).xy().norm();
+        // The IMU's rest flag decides without a fresh hint; after hints went stale, only when
+        // the velocity is consistent with rest (a detector that takes cruising for rest must not
+        // stop a robot the hints have just seen moving).
+        let rest = match hint_rest {
+            Some(r) => r,
+            None if stale && imu_rest => kf.velocity_consistent_with_zero(
+                self.cfg.zupt_sigma_mps,
+                self.hints.cfg.fallback_zupt_gate_sigma,
+            ),
+            None => imu_rest,
+        };
+
         if hs.flags & odometry_flags::HINT_DISAGREE != 0 {
             self.hints.disagreements += 1;
         }
@@ -440,10 +460,6 @@ impl OdometryStage {
         self.at_rest = rest;
 
         let kf = self.kf.as_mut().expect("aligned above");
-        let dt = (t_ns - prev.map_or(t_ns, |p| p.0)) as f64 * 1e-9;
-        let p_before = kf.x.p;
-        kf.predict(m, dt);
-        let moved = (kf.x.p - p_before).xy().norm();
         let hints = &mut self.hints;
         let body_before = hints.r_bs.map(|r| kf.body_velocity(&r));
         if let Some(v_b) = body_before {

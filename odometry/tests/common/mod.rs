@@ -5,14 +5,21 @@
 //!
 //! Samples go through the ADC's quantization (+-2 g, +-250 deg/s) and are converted to SI,
 //! as the calibration stage would publish them; the sensor model is the one the odometry
-//! sees after accelerometer calibration (`SensorModel::mpu9250_calibrated`).
+//! sees after accelerometer calibration (`SensorModel::mpu9250_calibrated`). The raw samples
+//! can be had instead, for the live calibration stage's own rest detection
+//! ([`Simulation::drive_raw`], [`identity_calibration`]), and the robot controller's hints for
+//! the drive ([`Case::hints`]).
 
 #![allow(dead_code)]
 
+use calibrate::calibfile::{CalibrationFile, ResidualSection, SourceSection};
+use calibrate::fit::{CovarianceMode, Weighting};
+use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
 use ipc_types::units::{AccelRange, GyroRange};
-use ipc_types::{CorrectedImuSample, Stamps, corrected_flags};
+use ipc_types::{CorrectedImuSample, RawImuSample, Stamps, corrected_flags};
 use mems_sim::SimSensor;
 use mems_sim::adc::quantize_sample;
+use mems_sim::hints::{HintParams, HintStream, drive_hints};
 use mems_sim::model::{G_MPS2, SensorModel};
 use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
 use mems_sim::vibration::{Vibration, VibrationModel};
@@ -160,6 +167,41 @@ impl Case {
     }
 }
 
+impl Case {
+    /// The robot controller's hints during this case's drive for `seed` (times from the
+    /// drive's start, like [`Simulation::drive`]'s samples).
+    pub fn hints(&self, seed: u64, params: &HintParams) -> HintStream {
+        drive_hints(&self.drive(seed), params, seed, 0.0).expect("valid hint parameters")
+    }
+}
+
+/// An identity accelerometer calibration at standard gravity: the simulated sensor
+/// (`SensorModel::mpu9250_calibrated`) is already what a calibration leaves, so the live
+/// calibration stage only has to convert units, detect rest and refine the biases.
+pub fn identity_calibration() -> CalibrationFile {
+    CalibrationFile::new(
+        &AccelModel::identity(ModelKind::Full),
+        &ParamCovariance::zeros(),
+        calibrate::calibfile::FitMethod::Labelled,
+        Weighting::Unweighted,
+        CovarianceMode::ResidualScaled,
+        G_MPS2,
+        SourceSection {
+            file: "identity".into(),
+            kind: "none".into(),
+            poses: 0,
+            repaired_samples: 0,
+        },
+        ResidualSection {
+            rms_g: [0.0; 3],
+            max_abs_g: 0.0,
+            dof: [0; 3],
+            chi2: [0.0; 3],
+            per_pose_g: Vec::new(),
+        },
+    )
+}
+
 /// The calibration session followed by the drive, as one scenario for one sensor power-on.
 /// The sensor is moved from the session's last pose onto the robot at `drive_start_s`.
 pub struct SessionThenDrive {
@@ -280,7 +322,9 @@ impl Simulation {
         self.sim.sensor()
     }
 
-    fn sample(&mut self, t_s: f64, t0_s: f64) -> (CorrectedImuSample, Truth) {
+    /// The quantized raw sample (sensor units, time from `t0_s`), the same sample converted
+    /// to SI with perfect rest flags, and the truth at `t_s`.
+    fn sample_both(&mut self, t_s: f64, t0_s: f64) -> (RawImuSample, CorrectedImuSample, Truth) {
         let (mut analog, truth) = self.sim.sample_with_truth(t_s, self.rate_hz);
         if let Some(v) = self.dc_free.as_mut() {
             let speed = self.sim.scenario().wheel_speed_mps(t_s);
@@ -291,26 +335,25 @@ impl Simulation {
             }
         }
         let sample_ns = ns_from_s(t_s - t0_s);
-        let (accel_g, gyro_dps) = if self.quantize {
-            let raw = quantize_sample(
-                &analog,
-                AccelRange::G2,
-                GyroRange::Dps250,
-                sample_ns,
-                self.seq,
-            );
-            (raw.accel_g, raw.gyro_dps)
-        } else {
-            (analog.accel_g, analog.gyro_dps)
-        };
+        let mut raw = quantize_sample(
+            &analog,
+            AccelRange::G2,
+            GyroRange::Dps250,
+            sample_ns,
+            self.seq,
+        );
+        if !self.quantize {
+            raw.accel_g = analog.accel_g;
+            raw.gyro_dps = analog.gyro_dps;
+        }
         let sample = CorrectedImuSample {
             stamps: Stamps {
                 sample_ns,
                 ..Default::default()
             },
             seq: self.seq,
-            accel_mps2: accel_g.map(|a| a * G_MPS2),
-            gyro_rps: gyro_dps.map(f64::to_radians),
+            accel_mps2: raw.accel_g.map(|a| a * G_MPS2),
+            gyro_rps: raw.gyro_dps.map(f64::to_radians),
             temp_c: analog.temp_c,
             flags: if truth.at_rest {
                 corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY
@@ -320,6 +363,11 @@ impl Simulation {
             ..Default::default()
         };
         self.seq += 1;
+        (raw, sample, truth)
+    }
+
+    fn sample(&mut self, t_s: f64, t0_s: f64) -> (CorrectedImuSample, Truth) {
+        let (_, sample, truth) = self.sample_both(t_s, t0_s);
         (sample, truth)
     }
 
@@ -339,6 +387,17 @@ impl Simulation {
             let t = self.drive_start_s + k as f64 / self.rate_hz;
             let (s, truth) = self.sample(t, self.drive_start_s);
             f(&s, &truth);
+        }
+    }
+
+    /// Runs the drive like [`Simulation::drive`], but gives the quantized raw samples (sensor
+    /// units, as the acquisition publishes them) instead of the corrected ones.
+    pub fn drive_raw(&mut self, mut f: impl FnMut(&RawImuSample, &Truth)) {
+        let n = (self.drive_duration_s * self.rate_hz).round() as u64;
+        for k in 0..n {
+            let t = self.drive_start_s + k as f64 / self.rate_hz;
+            let (raw, _, truth) = self.sample_both(t, self.drive_start_s);
+            f(&raw, &truth);
         }
     }
 }

@@ -12,8 +12,8 @@
 //!   1-sigma is the per-hint part only (quantisation, the difference of two floor errors:
 //!   `tick / (window sqrt(6))`, and slip), since the scale error is common to every hint;
 //! - **yaw rate**: the true yaw rate at the midpoint plus white noise of `yaw_rate_noise_rps`;
-//! - **stationary**, from one of two sources: `encoders` (no tick in the window: the robot may
-//!   creep by less than a tick) or `commanded` (the controller's command, which leads the
+//! - **stationary**, from one of two sources: `encoders` (no tick over the last
+//!   `stationary_window_s`: the robot may creep by less than a tick in that time) or `commanded` (the controller's command, which leads the
 //!   physical motion by `command_lead_s`: it says "moving" that long before the robot starts
 //!   and "stationary" that long before it stops).
 //!
@@ -59,6 +59,9 @@ pub struct HintParams {
     pub burst_s: [f64; 2],
     /// Wheel travel per encoder tick, m.
     pub tick_m: f64,
+    /// The encoders call the robot stationary when no tick was counted for this long, s (at
+    /// least one window).
+    pub stationary_window_s: f64,
     /// 1-sigma of the encoder's scale error (drawn once per seed), fraction.
     pub speed_scale_sigma: f64,
     /// Slip noise, 1-sigma as a fraction of the speed, per hint.
@@ -69,7 +72,8 @@ pub struct HintParams {
 
 impl HintParams {
     /// A 50 Hz controller with encoder rest detection: 1024 ticks per revolution of a 0.1 m
-    /// wheel (0.31 mm per tick, so 15 mm/s per tick and window), encoder scale error 1.5%
+    /// wheel (0.31 mm per tick, so 15 mm/s per tick and window), stationary after 0.1 s
+    /// without a tick (below 3 mm/s), encoder scale error 1.5%
     /// (1-sigma), slip noise 0.5% of speed, yaw rate noise 0.5 deg/s, a command lead of 75 ms,
     /// latency 5-30 ms, 2% of hints lost and one loss burst of 0.2-2 s every two minutes.
     pub fn new(rest_source: RestSource) -> Self {
@@ -82,6 +86,7 @@ impl HintParams {
             bursts_per_min: 0.5,
             burst_s: [0.2, 2.0],
             tick_m: std::f64::consts::PI * 0.1 / 1024.0,
+            stationary_window_s: 0.1,
             speed_scale_sigma: 0.015,
             speed_noise_fraction: 0.005,
             yaw_rate_noise_rps: 0.5_f64.to_radians(),
@@ -121,6 +126,7 @@ impl HintParams {
         }
         for (field, x) in [
             ("command_lead_s", self.command_lead_s),
+            ("stationary_window_s", self.stationary_window_s),
             ("bursts_per_min", self.bursts_per_min),
             ("speed_scale_sigma", self.speed_scale_sigma),
             ("speed_noise_fraction", self.speed_noise_fraction),
@@ -208,6 +214,9 @@ pub fn drive_hints(
     let mut hints = Vec::with_capacity(count as usize);
     let (mut path, mut ticks_prev, mut published_prev, mut lost) = (0.0, 0i64, 0u64, 0usize);
     let tick_believed = params.tick_m * (1.0 + speed_scale);
+    // Windows since the last tick.
+    let still_windows = ((params.stationary_window_s / window).round() as u64).max(1);
+    let mut since_tick = u64::MAX;
     let quantisation_sigma = params.tick_m / (window * 6f64.sqrt());
     for k in 1..=count {
         let (a, b) = ((k - 1) as f64 * window, k as f64 * window);
@@ -215,6 +224,11 @@ pub fn drive_hints(
         let ticks = (path / params.tick_m).floor() as i64;
         let counted = ticks - ticks_prev;
         ticks_prev = ticks;
+        since_tick = if counted == 0 {
+            since_tick.saturating_add(1)
+        } else {
+            0
+        };
         let mid = 0.5 * (a + b);
         let (v_true, yaw_rate) = drive.body_motion(mid);
         let slip = params.speed_noise_fraction * v_true.abs();
@@ -224,7 +238,7 @@ pub fn drive_hints(
             counted as f64 * tick_believed / window + slip * unit.sample(&mut rng)
         };
         let stationary = match params.rest_source {
-            RestSource::Encoders => counted == 0,
+            RestSource::Encoders => since_tick >= still_windows,
             RestSource::Commanded => plan_at_rest(drive, mid + params.command_lead_s),
         };
         let mut flags = hint_flags::SPEED_VALID
@@ -289,7 +303,7 @@ mod tests {
     }
 
     /// Speeds match the truth within the quantisation and the drawn scale error, and the
-    /// encoder's stationary flag is set exactly where no tick was counted.
+    /// encoder's stationary flag is set exactly where no tick was counted for 0.1 s.
     #[test]
     fn encoder_speeds_follow_the_truth_with_their_scale_error() {
         let d = drive(3);
@@ -299,6 +313,8 @@ mod tests {
         p.speed_noise_fraction = 0.0;
         let s = drive_hints(&d, &p, 3, 0.0).unwrap();
         assert_eq!(s.lost, 0);
+        // The robot starts at rest: as if no tick had been counted for ever.
+        let mut zero_run = u64::MAX;
         assert_eq!(s.hints.len(), 120 * 50);
         let window = 0.02;
         let q = p.tick_m / window;
@@ -313,7 +329,12 @@ mod tests {
                 h.forward_speed_mps
             );
             let stationary = h.flags & hint_flags::STATIONARY != 0;
-            assert_eq!(stationary, h.forward_speed_mps == 0.0);
+            zero_run = if h.forward_speed_mps == 0.0 {
+                zero_run.saturating_add(1)
+            } else {
+                0
+            };
+            assert_eq!(stationary, zero_run >= 5, "t {mid}");
             if stationary {
                 assert!(
                     mean_true < q * (1.0 + 1e-9),

@@ -1,7 +1,9 @@
-//! `mems-odometry`: odometry from calibrated samples, live (`serve`: `mems/imu/corrected` in,
-//! `mems/odometry/state` out) or offline over a raw recording (`offline`: the calibration stage
-//! and the odometry stage in one process, the same code the live processes run).
+//! `mems-odometry`: odometry from calibrated samples, live (`serve`: `mems/imu/corrected` and
+//! `mems/robot/hint` in, `mems/odometry/state` out) or offline over a raw recording (`offline`:
+//! the calibration stage and the odometry stage in one process, the same code the live
+//! processes run, with the recording's robot hints).
 
+mod hint_args;
 mod offline;
 mod serve;
 

@@ -1,5 +1,8 @@
 //! `mems-odometry offline`: the calibration stage and the odometry stage over a raw recording,
 //! in one process, exactly as `mems-calibrate serve` and `mems-odometry serve` run them live.
+//! An MCAP recording's robot hints (topic `mems/robot/hint`) go to the odometry stage in
+//! publication order, each before the first raw sample taken after its publication (the
+//! stage's own delivery rule decides which samples use it), unless `--no-hints`.
 //!
 //! Truth comparison (recordings from `mems-sim`): our navigation frame has its origin at the
 //! alignment point and its heading fixed there; the truth's frame is the scenario's. At the first
@@ -13,7 +16,7 @@ use anyhow::{Context, Result, bail};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig};
 use calibrate::zero_state::DetectorConfig;
-use ipc_types::{CorrectedImuSample, OdometryState, corrected_flags, odometry_flags};
+use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags};
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
 use odometry::stage::OdometryStage;
 use recording::Truth;
@@ -33,6 +36,11 @@ pub struct OfflineArgs {
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
+    /// Ignore the recording's robot hints (IMU only).
+    #[arg(long)]
+    no_hints: bool,
+    #[command(flatten)]
+    hints: crate::hint_args::HintArgs,
 }
 
 fn quat(wxyz: [f64; 4]) -> UnitQuaternion<f64> {
@@ -77,7 +85,21 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     detector.learn.duration_s = args.stage.learn_s;
     let mut calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.stage.calib.display()))?;
-    let mut odometry = OdometryStage::new(crate::odometry_config(&file));
+    let mut odometry =
+        OdometryStage::with_hints(crate::odometry_config(&file), args.hints.config()?)
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let is_mcap = args
+        .input
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    let mut hints: Vec<RobotHint> = if is_mcap && !args.no_hints {
+        recording::mcap::read_all(&args.input)?.hints
+    } else {
+        Vec::new()
+    };
+    // Publication order (the order a live subscriber receives them in).
+    hints.sort_by_key(|h| h.stamps.acquired_ns);
+    let mut next_hint = 0;
 
     // Truth by sample time (the canonical CSV has one per sample; MCAP a channel).
     let mut truth: Vec<Truth> = recording.truth.clone().unwrap_or_default();
@@ -137,6 +159,14 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         last = Some(state);
     };
     for raw in &recording.samples {
+        while let Some(h) = hints.get(next_hint)
+            && h.stamps.acquired_ns <= raw.stamps.sample_ns
+        {
+            odometry
+                .hint(h)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
+            next_hint += 1;
+        }
         calibration
             .push(raw, &mut |c: &CorrectedImuSample| feed(c, &mut odometry))
             .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
@@ -170,6 +200,12 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         "truth_distance_m": truth_error.map(|_| truth_distance),
         "rest_intervals": rest_errors,
         "seq": end.seq,
+        "hints": {
+            "in_recording": hints.len(),
+            "applied": end.hints_applied,
+            "disagreements": end.hint_disagreements,
+            "speed_updates": odometry.hint_stats().speed_updates,
+        },
     });
     if args.json {
         println!("{result}");

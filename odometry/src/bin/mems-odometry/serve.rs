@@ -1,6 +1,11 @@
 //! `mems-odometry serve`: the odometry stage between `mems/imu/corrected` and
-//! `mems/odometry/state`.
+//! `mems/odometry/state`, with the robot's hints from `mems/robot/hint` when a controller
+//! publishes them.
 //!
+//! - Hints are handed to the stage as they arrive, before each sample (the stage uses a hint
+//!   for the samples taken at least `--hint-delivery-ms` after its publication, so the states
+//!   do not depend on how hints and samples interleave, and a replay gives the same states).
+//!   A refused hint (NaN, no time) is reported on stderr and skipped.
 //! - Every corrected sample gives one state, in order; the end of a motion interval also
 //!   republishes that interval's states with the `REVISION` flag. `stamps.odometry_ns` is
 //!   `CLOCK_MONOTONIC` at publication.
@@ -15,7 +20,7 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
 use ipc_types::clock::monotonic_ns;
-use ipc_types::{CorrectedImuSample, OdometryState, service};
+use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, service};
 use odometry::stage::OdometryStage;
 
 /// Options of `mems-odometry serve`.
@@ -27,6 +32,8 @@ pub struct ServeArgs {
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
+    #[command(flatten)]
+    hints: crate::hint_args::HintArgs,
 }
 
 /// Runs until SIGINT/SIGTERM.
@@ -34,6 +41,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
     let file = CalibrationFile::load(&args.calib)
         .with_context(|| format!("cannot load calibration {}", args.calib.display()))?;
     let config = crate::odometry_config(&file);
+    let hint_config = args.hints.config()?;
     let namespace = service::namespace(args.namespace.as_deref());
     let node = service::node()?;
     let corrected = service::open::<CorrectedImuSample>(
@@ -42,21 +50,37 @@ pub fn run(args: ServeArgs) -> Result<()> {
     )?;
     let odometry =
         service::open::<OdometryState>(&node, &service::full_name(&namespace, service::ODOMETRY))?;
+    let hint_service =
+        service::open::<RobotHint>(&node, &service::full_name(&namespace, service::HINT))?;
     let subscriber = service::subscriber(&corrected)?;
+    let hint_subscriber = service::subscriber(&hint_service)?;
     let publisher = service::publisher(&odometry)?;
 
-    let mut stage = OdometryStage::new(config);
+    let new_stage = || OdometryStage::with_hints(config, hint_config);
+    let mut stage = new_stage()?;
+    let (mut hints_received, mut hints_refused) = (0u64, 0u64);
     let mut last_seq: Option<u64> = None;
     let (mut received, mut published, mut refused, mut sessions) = (0u64, 0u64, 0u64, 1u64);
     let mut send_error: Option<anyhow::Error> = None;
     // node.wait returns an error on SIGINT/SIGTERM: the clean way out.
     while node.wait(Duration::from_millis(1)).is_ok() {
-        while let Some(sample) = subscriber.receive()? {
+        loop {
+            // Every hint that has arrived goes in before the next sample.
+            while let Some(hint) = hint_subscriber.receive()? {
+                hints_received += 1;
+                if let Err(e) = stage.hint(hint.payload()) {
+                    hints_refused += 1;
+                    eprintln!("mems-odometry: refused: {e}");
+                }
+            }
+            let Some(sample) = subscriber.receive()? else {
+                break;
+            };
             let s = *sample.payload();
             received += 1;
             if last_seq.is_some_and(|l| s.seq <= l) {
                 // A new sensor session: align again.
-                stage = OdometryStage::new(config);
+                stage = new_stage()?;
                 sessions += 1;
             }
             last_seq = Some(s.seq);
@@ -83,10 +107,13 @@ pub fn run(args: ServeArgs) -> Result<()> {
             }
         }
     }
+    let h = stage.hint_stats();
     eprintln!(
         "mems-odometry: received {received}, published {published} (revisions included), \
-         refused {refused}, sessions {sessions}, discarded for stalled subscribers {}",
-        service::stalled_discards()
+         refused {refused}, sessions {sessions}, discarded for stalled subscribers {}; hints \
+         received {hints_received}, refused {hints_refused}, speed updates {} (this session)",
+        service::stalled_discards(),
+        h.speed_updates
     );
     Ok(())
 }

@@ -1,0 +1,62 @@
+//! Command-line options for robot hints, shared by `serve` and `offline`.
+
+use anyhow::{Result, bail};
+use nalgebra::UnitQuaternion;
+use odometry::hints::HintConfig;
+
+/// How the odometry uses robot hints (`mems/robot/hint`).
+#[derive(clap::Args, Clone)]
+pub struct HintArgs {
+    /// A hint older than this is stale and the odometry falls back to the IMU alone, s.
+    #[arg(long, default_value_t = 0.25)]
+    pub hint_max_age_s: f64,
+    /// A hint is used by samples taken at least this long after its publication, ms.
+    #[arg(long, default_value_t = 5.0)]
+    pub hint_delivery_ms: f64,
+    /// IMU mounting on the robot: `R,P,Y` in degrees (roll, pitch, yaw of the rotation from
+    /// the sensor frame to the body frame, x forward, y left, z up), or `estimate` (from the
+    /// first 3 m of forward driving; speed hints are used once it is known).
+    #[arg(long, default_value = "0,0,0")]
+    pub mount: String,
+    /// 1-sigma of the zero lateral and vertical body velocity (non-holonomic constraint), m/s.
+    #[arg(long, default_value_t = 0.02)]
+    pub nonholonomic_sigma: f64,
+    /// 1-sigma of the wheel-speed scale error (prior of the filter's scale state), fraction.
+    #[arg(long, default_value_t = 0.02)]
+    pub speed_scale_sigma: f64,
+}
+
+impl HintArgs {
+    /// The stage's hint configuration; an error names the option.
+    pub fn config(&self) -> Result<HintConfig> {
+        let mounting = if self.mount.trim() == "estimate" {
+            None
+        } else {
+            let parts: Vec<&str> = self.mount.split(',').collect();
+            let [r, p, y] = parts.as_slice() else {
+                bail!(
+                    "--mount {:?}: expected `estimate` or three comma-separated angles R,P,Y in degrees",
+                    self.mount
+                );
+            };
+            let mut angles = [0.0; 3];
+            for (a, text) in angles.iter_mut().zip([r, p, y]) {
+                *a = text.trim().parse::<f64>().map_err(|e| {
+                    anyhow::anyhow!("--mount {:?}: {text:?} is not a number: {e}", self.mount)
+                })?;
+            }
+            let [r, p, y] = angles.map(f64::to_radians);
+            Some(UnitQuaternion::from_euler_angles(r, p, y))
+        };
+        let config = HintConfig {
+            max_age_s: self.hint_max_age_s,
+            delivery_s: self.hint_delivery_ms * 1e-3,
+            mounting,
+            nonholonomic_sigma_mps: self.nonholonomic_sigma,
+            speed_scale_sigma: self.speed_scale_sigma,
+            ..HintConfig::default()
+        };
+        config.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+        Ok(config)
+    }
+}
