@@ -19,7 +19,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use ipc_types::clock::monotonic_ns;
-use ipc_types::{CorrectedImuSample, Message, OdometryState, RawImuSample, service};
+use ipc_types::{CorrectedImuSample, Message, OdometryState, RawImuSample, RobotHint, service};
 use recording::mcap::{Channel, EventKind, PoseInFrame, RecorderEvent, Topic, Writer};
 
 /// Age of the oldest unflushed message at which the recorder closes the current chunk and
@@ -291,6 +291,14 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
                 move |w, state, log_ns| w.write(pose, &PoseInFrame::from_state(state), log_ns),
             ),
         ),
+        // Hints from the robot's controller (published without back-pressure: a hint the
+        // recorder could not take shows as a gap event).
+        Box::new(Subscription::<RobotHint>::open(
+            &node,
+            ns,
+            &mut writer,
+            events,
+        )?),
     ];
 
     let start = Instant::now();

@@ -1,4 +1,5 @@
-//! `mems-record` records every service (raw, corrected, odometry) and derives the Foxglove pose;
+//! `mems-record` records every service (raw, corrected, odometry, robot hints) and derives the
+//! Foxglove pose;
 //! the official Python `mcap` reader decodes the file with its JSON schemas.
 
 mod common;
@@ -10,7 +11,8 @@ use std::time::Duration;
 use common::*;
 use ipc_types::service;
 use ipc_types::{
-    CorrectedImuSample, OdometryState, RawImuSample, Stamps, corrected_flags, odometry_flags,
+    CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps, corrected_flags,
+    hint_flags, odometry_flags,
 };
 use recording::mcap::{PoseInFrame, read_all};
 use serde_json::Value;
@@ -24,6 +26,33 @@ struct Sent {
     raw: Vec<RawImuSample>,
     corrected: Vec<CorrectedImuSample>,
     odometry: Vec<OdometryState>,
+    hints: Vec<RobotHint>,
+}
+
+/// A controller's hint every 10th raw sample: stationary (commanded) or moving at a speed.
+fn hint_for(raw: &RawImuSample, seq: u64) -> RobotHint {
+    let stationary = seq.is_multiple_of(3);
+    RobotHint {
+        stamps: Stamps {
+            sample_ns: raw.stamps.sample_ns,
+            acquired_ns: raw.stamps.sample_ns + 1_500,
+            ..Stamps::default()
+        },
+        seq,
+        forward_speed_mps: if stationary { 0.0 } else { 0.25 * seq as f64 },
+        forward_speed_sigma_mps: 0.02,
+        yaw_rate_rps: -0.125,
+        yaw_rate_sigma_rps: 0.01,
+        flags: hint_flags::SPEED_VALID
+            | hint_flags::YAW_RATE_VALID
+            | if stationary {
+                hint_flags::STATIONARY | hint_flags::SOURCE_COMMANDED
+            } else {
+                0
+            },
+        reserved16: 0,
+        reserved: 0,
+    }
 }
 
 /// A corrected sample derived from a raw one (values are arbitrary but distinct per field).
@@ -77,8 +106,9 @@ fn state_from(c: &CorrectedImuSample, flags: u16) -> OdometryState {
     }
 }
 
-/// Runs `mems-record` while this process plays the three stages: `n` samples on each service,
-/// plus one revised odometry state; stops the recorder with SIGTERM once all has arrived.
+/// Runs `mems-record` while this process plays the three stages and a robot controller: `n`
+/// samples on each service, plus one revised odometry state and a hint every 10th sample; stops
+/// the recorder with SIGTERM once all has arrived.
 fn record_fake_stack(test: &str, n: usize) -> (PathBuf, Sent) {
     let ns = namespace(test);
     let mcap = tmp(&format!("{test}.mcap"));
@@ -94,9 +124,12 @@ fn record_fake_stack(test: &str, n: usize) -> (PathBuf, Sent) {
     let raw_pub = service::publisher(&raw_svc).unwrap();
     let cor_pub = service::publisher(&cor_svc).unwrap();
     let odo_pub = service::publisher(&odo_svc).unwrap();
+    let hint_svc = service::open::<RobotHint>(&node, &open(service::HINT)).unwrap();
+    let hint_pub = service::hint_publisher(&hint_svc).unwrap();
     wait_for_subscribers::<RawImuSample>(&node, &ns, service::RAW, 1);
     wait_for_subscribers::<CorrectedImuSample>(&node, &ns, service::CORRECTED, 1);
     wait_for_subscribers::<OdometryState>(&node, &ns, service::ODOMETRY, 1);
+    wait_for_subscribers::<RobotHint>(&node, &ns, service::HINT, 1);
 
     let raw = raw_samples(n, 0, 1000);
     let corrected: Vec<_> = raw.iter().map(corrected_from).collect();
@@ -112,9 +145,22 @@ fn record_fake_stack(test: &str, n: usize) -> (PathBuf, Sent) {
     for s in &odometry {
         odo_pub.send_copy(*s).unwrap();
     }
+    let hints: Vec<RobotHint> = raw
+        .iter()
+        .step_by(10)
+        .zip(0..)
+        .map(|(r, seq)| hint_for(r, seq))
+        .collect();
+    for h in &hints {
+        hint_pub.send_copy(*h).unwrap();
+    }
     wait_until(WAIT, "every message in the file", || {
-        read_all(&mcap)
-            .is_ok_and(|c| c.raw.len() == n && c.corrected.len() == n && c.odometry.len() == n + 1)
+        read_all(&mcap).is_ok_and(|c| {
+            c.raw.len() == n
+                && c.corrected.len() == n
+                && c.odometry.len() == n + 1
+                && c.hints.len() == hints.len()
+        })
     });
     recorder.signal(libc::SIGTERM);
     let (status, stdout) = recorder.wait(WAIT);
@@ -125,6 +171,7 @@ fn record_fake_stack(test: &str, n: usize) -> (PathBuf, Sent) {
             raw,
             corrected,
             odometry,
+            hints,
         },
     )
 }
@@ -139,6 +186,7 @@ fn every_service_is_recorded_with_the_pose() {
     assert_eq!(contents.raw, sent.raw);
     assert_eq!(contents.corrected, sent.corrected);
     assert_eq!(contents.odometry, sent.odometry);
+    assert_eq!(contents.hints, sent.hints);
     let poses: Vec<PoseInFrame> = sent.odometry.iter().map(PoseInFrame::from_state).collect();
     assert_eq!(contents.poses, poses);
     assert_eq!(contents.events, [], "the publishers stayed: no event");
@@ -175,7 +223,7 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
     let report = python_decode(&mcap);
 
     let poses: Vec<PoseInFrame> = sent.odometry.iter().map(PoseInFrame::from_state).collect();
-    let expect: [(&str, &str, Vec<Value>); 5] = [
+    let expect: [(&str, &str, Vec<Value>); 6] = [
         (service::RAW, "mems.RawImuSample", json_values(&sent.raw)),
         (
             service::CORRECTED,
@@ -192,6 +240,7 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
             "foxglove.PoseInFrame",
             json_values(&poses),
         ),
+        (service::HINT, "mems.RobotHint", json_values(&sent.hints)),
         ("mems/recorder/events", "mems.RecorderEvent", vec![]),
     ];
     let channels = report["channels"].as_object().unwrap();

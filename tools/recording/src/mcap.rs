@@ -820,7 +820,7 @@ impl fmt::Display for Truncation {
 }
 
 /// Whether the file starts with the MCAP magic bytes.
-pub(crate) fn has_magic(path: &Path) -> Result<bool> {
+pub fn has_magic(path: &Path) -> Result<bool> {
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
     let mut start = Vec::with_capacity(MAGIC.len());
     file.by_ref()

@@ -7,16 +7,24 @@
 //! Pacing follows the recorded sample times against the monotonic clock, scaled by a speed
 //! factor, or is as fast as the subscribers take the samples ([`Pace::Max`]): the lossless
 //! publisher of `ipc_types::service` retries until every subscriber has room, so nothing is lost
-//! either way.
+//! either way. Where the sample times start over (a recording of several acquisition sessions),
+//! pacing starts over with them.
+//!
+//! Recorded robot hints are published on the hint service as the robot's controller would:
+//! with `ipc_types::service::hint_publisher` (never blocking), exactly as recorded (both
+//! stamps kept, since the odometry judges a hint's age and delivery by them), each at its
+//! place in time among the raw samples: before the first raw sample whose `sample_ns` is not
+//! earlier than the hint's publication time `stamps.acquired_ns` (hints published after the
+//! last raw sample are not replayed: no sample would use them).
 
 #![warn(missing_docs)]
 
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
-use ipc_types::RawImuSample;
 use ipc_types::clock::monotonic_ns;
 use ipc_types::service::{self, ServiceError};
+use ipc_types::{RawImuSample, RobotHint};
 
 /// How fast to publish.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,6 +54,8 @@ pub struct ReplayOptions {
 pub struct ReplaySummary {
     /// Samples published.
     pub sent: u64,
+    /// Robot hints published.
+    pub hints_sent: u64,
     /// Time from the first publication to the last.
     pub elapsed: Duration,
     /// Whether SIGINT or SIGTERM stopped the replay before the last sample.
@@ -121,8 +131,10 @@ pub const SETTLE: Duration = Duration::from_millis(100);
 /// Samples between signal checks when no pacing sleep checks for us.
 const SIGNAL_CHECK_EVERY: usize = 256;
 
-/// Publishes `samples` (in order, `stamps.sample_ns` increasing) on the raw service under
-/// `namespace`, from `node`, paced as `options` say; with `wait_subscribers` > 0 it starts
+/// Publishes `samples` (in order, `stamps.sample_ns` increasing within each session) on the raw
+/// service under `namespace`, from `node`, and `hints` (in order of publication,
+/// `stamps.acquired_ns`) on the hint service among them (see the module documentation), paced
+/// as `options` say; with `wait_subscribers` > 0 it starts
 /// [`SETTLE`] after they are registered and counts samples that reached fewer of them. SIGINT or SIGTERM (seen through
 /// `Node::wait`) stops the replay early with [`ReplaySummary::interrupted`] set. Returns
 /// [`LINGER`] after the last sample, so that every subscriber has connected to it.
@@ -130,6 +142,7 @@ pub fn replay(
     node: &Node<ipc::Service>,
     namespace: &str,
     samples: &[RawImuSample],
+    hints: &[RobotHint],
     options: &ReplayOptions,
 ) -> Result<ReplaySummary, ReplayError> {
     if let Pace::RealTime { speed } = options.pace
@@ -140,12 +153,22 @@ pub fn replay(
     let name = service::full_name(namespace, service::RAW);
     let raw = service::open::<RawImuSample>(node, &name)?;
     let publisher = service::publisher(&raw)?;
+    // The hint service is only opened when there are hints to publish.
+    let hint_port = if hints.is_empty() {
+        None
+    } else {
+        let hint_name = service::full_name(namespace, service::HINT);
+        let hint_service = service::open::<RobotHint>(node, &hint_name)?;
+        let hint_publisher = service::hint_publisher(&hint_service)?;
+        Some((hint_name, hint_service, hint_publisher))
+    };
     let interrupted = |summary: ReplaySummary| ReplaySummary {
         interrupted: true,
         ..summary
     };
     let mut summary = ReplaySummary {
         sent: 0,
+        hints_sent: 0,
         elapsed: Duration::ZERO,
         interrupted: false,
         short_deliveries: 0,
@@ -176,13 +199,21 @@ pub fn replay(
     let Some(first) = samples.first() else {
         return Ok(summary);
     };
-    let t0_ns = first.stamps.sample_ns;
-    let start = Instant::now();
+    // Pacing anchor: a sample time and when it was due; moved where sample times start over.
+    let (mut anchor_ns, mut anchor) = (first.stamps.sample_ns, Instant::now());
+    let mut previous_ns = anchor_ns;
+    let start = anchor;
+    let mut next_hint = 0;
     for (i, recorded) in samples.iter().enumerate() {
+        let t_ns = recorded.stamps.sample_ns;
+        if t_ns < previous_ns {
+            (anchor_ns, anchor) = (t_ns, Instant::now());
+        }
+        previous_ns = t_ns;
         let mut checked_signal = false;
         if let Pace::RealTime { speed } = options.pace {
-            let offset_ns = recorded.stamps.sample_ns.saturating_sub(t0_ns) as f64 / speed;
-            let due = start + Duration::from_nanos(offset_ns.round() as u64);
+            let offset_ns = t_ns.saturating_sub(anchor_ns) as f64 / speed;
+            let due = anchor + Duration::from_nanos(offset_ns.round() as u64);
             let now = Instant::now();
             if due > now {
                 if node.wait(due - now).is_err() {
@@ -196,6 +227,21 @@ pub fn replay(
             && node.wait(Duration::ZERO).is_err()
         {
             return Ok(interrupted(summary));
+        }
+        if let Some((hint_name, _, hint_publisher)) = &hint_port {
+            while let Some(hint) = hints.get(next_hint)
+                && hint.stamps.acquired_ns <= t_ns
+            {
+                hint_publisher
+                    .send_copy(*hint)
+                    .map_err(|e| ReplayError::Send {
+                        service: hint_name.clone(),
+                        seq: hint.seq,
+                        message: format!("{e:?}"),
+                    })?;
+                next_hint += 1;
+                summary.hints_sent += 1;
+            }
         }
         let mut sample = *recorded;
         sample.stamps.acquired_ns = monotonic_ns();

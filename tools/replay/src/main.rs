@@ -1,5 +1,6 @@
 //! `mems-replay FILE [--speed X | --max] [--namespace NS] [--wait-subscribers N]
-//! [--wait-timeout S]`: publishes a recording's raw samples (MCAP or CSV) on the raw service.
+//! [--wait-timeout S]`: publishes a recording's raw samples (MCAP or CSV) on the raw service,
+//! and an MCAP recording's robot hints on the hint service.
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -42,14 +43,28 @@ fn main() -> Result<()> {
             cli.wait_timeout
         );
     }
-    let recording = recording::load_raw(&cli.file)?;
-    if let Some(truncation) = &recording.truncation {
+    // MCAP: every acquisition session in order, and the robot hints; CSV: raw samples only.
+    let (samples, hints, truncation) = if recording::mcap::has_magic(&cli.file)? {
+        let contents = recording::mcap::read_all(&cli.file)?;
+        if contents.raw_sessions.len() > 1 {
+            eprintln!(
+                "mems-replay: {}: {} acquisition sessions, replayed in order",
+                cli.file.display(),
+                contents.raw_sessions.len()
+            );
+        }
+        (contents.raw, contents.hints, contents.truncation)
+    } else {
+        let recording = recording::load_raw(&cli.file)?;
+        (recording.samples, Vec::new(), recording.truncation)
+    };
+    if let Some(truncation) = &truncation {
         eprintln!(
             "mems-replay: warning: {}: {truncation}; replaying what was read",
             cli.file.display()
         );
     }
-    if recording.samples.is_empty() {
+    if samples.is_empty() {
         bail!("{}: holds no raw samples", cli.file.display());
     }
     let options = ReplayOptions {
@@ -67,11 +82,13 @@ fn main() -> Result<()> {
         .name(&node_name)
         .create::<ipc::Service>()
         .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
-    let summary = replay(&node, &namespace, &recording.samples, &options)?;
+    let summary = replay(&node, &namespace, &samples, &hints, &options)?;
     println!(
-        "mems-replay: sent {} of {} samples in {:.3} s ({:.0} samples/s){}",
+        "mems-replay: sent {} of {} samples and {} of {} hints in {:.3} s ({:.0} samples/s){}",
         summary.sent,
-        recording.samples.len(),
+        samples.len(),
+        summary.hints_sent,
+        hints.len(),
         summary.elapsed.as_secs_f64(),
         summary.rate_hz(),
         if summary.interrupted {

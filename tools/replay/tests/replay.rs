@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
 use ipc_types::clock::monotonic_ns;
-use ipc_types::{RawImuSample, Stamps, raw_flags, service};
+use ipc_types::{RawImuSample, RobotHint, Stamps, hint_flags, raw_flags, service};
 use mems_replay::{LINGER, Pace, ReplayError, ReplayOptions, SETTLE, replay};
 
 fn namespace(test: &str) -> String {
@@ -74,7 +74,7 @@ fn run(ns: &str, samples: &[RawImuSample], pace: Pace) -> mems_replay::ReplaySum
         wait_subscribers: 1,
         wait_timeout: Duration::from_secs(5),
     };
-    replay(&node, ns, samples, &options).unwrap()
+    replay(&node, ns, samples, &[], &options).unwrap()
 }
 
 /// Payloads arrive as recorded except `acquired_ns`, which is the publish time.
@@ -158,6 +158,78 @@ fn max_pace_is_lossless_with_a_slow_subscriber() {
     );
 }
 
+/// Recorded hints are published exactly as recorded (both stamps kept), each just before the
+/// first raw sample taken at or after its publication time; a hint published after the last
+/// sample is not replayed. Samples 50 ms apart at real-time pace leave no doubt about the order
+/// in which a subscriber polling every 0.1 ms sees them.
+#[test]
+fn hints_are_published_as_recorded_among_the_raw_samples_in_time_order() {
+    let ns = namespace("hints");
+    let sent = samples(20, 20);
+    let t = |i: usize| sent[i].stamps.sample_ns;
+    // Published 1 ms after sample 2, exactly at sample 5, 30 ms after sample 5, after the last.
+    let hint_times = [t(2) + 1_000_000, t(5), t(5) + 30_000_000, t(19) + 1];
+    let hints: Vec<RobotHint> = hint_times
+        .iter()
+        .zip(0..)
+        .map(|(&acquired_ns, seq)| RobotHint {
+            stamps: Stamps {
+                sample_ns: acquired_ns - 4_000_000,
+                acquired_ns,
+                ..Stamps::default()
+            },
+            seq,
+            forward_speed_mps: 0.5 + seq as f64,
+            forward_speed_sigma_mps: 0.02,
+            flags: hint_flags::SPEED_VALID,
+            ..RobotHint::default()
+        })
+        .collect();
+    // Raw samples received before each hint.
+    let expected_before = [3, 5, 6];
+
+    let (raw_name, hint_name) = (
+        service::full_name(&ns, service::RAW),
+        service::full_name(&ns, service::HINT),
+    );
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let sub = thread::spawn(move || {
+        let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+        let raw_svc = service::open::<RawImuSample>(&node, &raw_name).unwrap();
+        let hint_svc = service::open::<RobotHint>(&node, &hint_name).unwrap();
+        let raw = service::subscriber(&raw_svc).unwrap();
+        let hint = service::subscriber(&hint_svc).unwrap();
+        ready_tx.send(()).unwrap();
+        let (mut raw_count, mut got) = (0, Vec::new());
+        let start = Instant::now();
+        while raw_count < 20 && start.elapsed() < Duration::from_secs(10) {
+            while let Some(h) = hint.receive().unwrap() {
+                got.push((*h.payload(), raw_count));
+            }
+            while raw.receive().unwrap().is_some() {
+                raw_count += 1;
+            }
+            thread::sleep(Duration::from_micros(100));
+        }
+        (raw_count, got)
+    });
+    ready_rx.recv().unwrap();
+    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+    let options = ReplayOptions {
+        pace: Pace::RealTime { speed: 1.0 },
+        wait_subscribers: 1,
+        wait_timeout: Duration::from_secs(5),
+    };
+    let summary = replay(&node, &ns, &sent, &hints, &options).unwrap();
+    let (raw_count, got) = sub.join().unwrap();
+    assert_eq!((summary.sent, summary.hints_sent), (20, 3));
+    assert_eq!(raw_count, 20);
+    let received: Vec<RobotHint> = got.iter().map(|(h, _)| *h).collect();
+    assert_eq!(received, hints[..3], "as recorded, stamps included");
+    let before: Vec<usize> = got.iter().map(|(_, n)| *n).collect();
+    assert_eq!(before, expected_before);
+}
+
 /// A subscriber that does not call `receive` for a while after the publisher appeared is not
 /// connected: iceoryx2 queues one buffer for it and drops the rest. The replay counts exactly
 /// those samples, so the loss is never silent.
@@ -207,7 +279,7 @@ fn too_few_subscribers_is_an_error_naming_the_service() {
         wait_subscribers: 2,
         wait_timeout: Duration::from_millis(50),
     };
-    let err = replay(&node, &ns, &samples(3, 100), &options).unwrap_err();
+    let err = replay(&node, &ns, &samples(3, 100), &[], &options).unwrap_err();
     assert!(matches!(
         err,
         ReplayError::NoSubscribers {
@@ -230,7 +302,7 @@ fn a_speed_that_is_not_positive_is_refused() {
             wait_subscribers: 0,
             wait_timeout: Duration::ZERO,
         };
-        let err = replay(&node, "unused", &samples(2, 100), &options).unwrap_err();
+        let err = replay(&node, "unused", &samples(2, 100), &[], &options).unwrap_err();
         assert!(matches!(err, ReplayError::BadSpeed(_)), "{speed}: {err}");
     }
 }
