@@ -147,12 +147,11 @@ pub fn analyze(
         }
         apply_to_samples(samples, &tears, &config)
     });
-    let measured_record_m = std::array::from_fn(|axis| {
-        detrended_displacement_ns(&columns.times_ns, &columns.values[axis])
-    });
+    let times_ns = std::mem::take(&mut columns.times_ns);
     let channels = columns.into_channels();
     let kinds: Vec<(Sensor, usize)> = channels.iter().map(|c| (c.sensor, c.axis)).collect();
-    let fits = fit_channels(channels, &timing);
+    let (fits, displacements) = fit_channels(channels, &timing, &times_ns);
+    let measured_record_m = std::array::from_fn(|axis| displacements[axis].unwrap_or(0.0));
     let mut reports = Vec::with_capacity(kinds.len());
     for (&(sensor, axis), result) in kinds.iter().zip(fits) {
         let fit = result.map_err(|error| AnalysisError::Fit {
@@ -249,16 +248,26 @@ pub fn join_records(records: &[Vec<RawImuSample>]) -> Vec<RawImuSample> {
     joined
 }
 
+/// Per channel: the fit, and the detrended displacement of accelerometer channels.
+type ChannelResults = (Vec<Result<ModelFit, FitError>>, Vec<Option<f64>>);
+
 /// Allan curve and fit of every channel, spread over the available cores (each channel's
 /// values become its cumulative sums; the fits share one covariance basis, every channel having
-/// the same cluster sizes).
-fn fit_channels(channels: Vec<Channel>, timing: &Timing) -> Vec<Result<ModelFit, FitError>> {
+/// the same cluster sizes), and each accelerometer channel's detrended displacement (see
+/// [`crate::floor`]; `None` for the gyro), computed first on the same thread.
+fn fit_channels(channels: Vec<Channel>, timing: &Timing, times_ns: &[u64]) -> ChannelResults {
     let segments = timing.segment_ranges();
-    let curves = parallel_map(channels, |channel| {
-        overlapping_avar_consuming(channel.values, &segments, timing.mean_interval_s)
-    });
+    let (curves, displacements): (Vec<_>, Vec<_>) = parallel_map(channels, |channel| {
+        let displacement = (channel.sensor == Sensor::Accel)
+            .then(|| detrended_displacement_ns(times_ns, &channel.values));
+        let curve = overlapping_avar_consuming(channel.values, &segments, timing.mean_interval_s);
+        (curve, displacement)
+    })
+    .into_iter()
+    .unzip();
     let basis = CovarianceBasis::for_curve(&curves[0]);
-    parallel_map(curves.iter().collect(), |curve| fit_with(curve, &basis))
+    let fits = parallel_map(curves.iter().collect(), |curve| fit_with(curve, &basis));
+    (fits, displacements)
 }
 
 /// `items.into_iter().map(f)` on as many threads as there are cores (at most one per item).

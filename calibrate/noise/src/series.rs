@@ -235,68 +235,65 @@ impl Columns {
                 found: samples.len(),
             });
         }
-        // Gyro columns are filled while every sample has the gyro, and dropped at the first
-        // that has not (their memory is then barely touched).
-        let mut gyro = samples[0].flags & raw_flags::GYRO_VALID != 0;
+        // The gyro columns are filled on a second thread (fresh memory costs page faults, which
+        // then run on both cores), and dropped when a sample lacks the gyro.
         let n = samples.len();
-        let axes = if gyro { 6 } else { 3 };
-        let mut columns = Self {
-            times_ns: Vec::with_capacity(n),
-            losses: Vec::new(),
-            counts: (0..axes).map(|_| Vec::with_capacity(n)).collect(),
-            // One spare element: the Allan analysis turns them into cumulative sums in place.
-            values: (0..axes).map(|_| Vec::with_capacity(n + 1)).collect(),
-            repeats: RepeatReport::default(),
-        };
-        let mut run = 0;
-        let mut previous: Option<&RawImuSample> = None;
-        for (index, s) in samples.iter().enumerate() {
-            if let Some(p) = previous
-                && s.stamps.sample_ns <= p.stamps.sample_ns
-            {
-                return Err(SeriesError::TimeNotIncreasing {
-                    index,
-                    seq: s.seq,
-                    t_ns: s.stamps.sample_ns,
-                    previous_ns: p.stamps.sample_ns,
-                });
-            }
-            if let Some(field) = non_finite_field(s) {
-                return Err(SeriesError::NotFinite {
-                    index,
-                    seq: s.seq,
-                    field,
-                });
-            }
-            columns.times_ns.push(s.stamps.sample_ns);
-            if let Some(lost) = loss(s) {
-                columns.losses.push((index, lost));
-            }
-            for a in 0..3 {
-                columns.counts[a].push(s.accel_counts[a]);
-                columns.values[a].push(s.accel_g[a] * gravity_mps2);
-            }
-            if gyro && s.flags & raw_flags::GYRO_VALID == 0 {
-                gyro = false;
-                columns.counts.truncate(3);
-                columns.values.truncate(3);
-            }
-            if gyro {
-                for a in 0..3 {
-                    columns.counts[3 + a].push(s.gyro_counts[a]);
-                    columns.values[3 + a].push(s.gyro_dps[a].to_radians());
+        let with_gyro = samples[0].flags & raw_flags::GYRO_VALID != 0;
+        std::thread::scope(|scope| {
+            let gyro = with_gyro.then(|| scope.spawn(|| gyro_columns(samples)));
+            let mut columns = Self {
+                times_ns: Vec::with_capacity(n),
+                losses: Vec::new(),
+                counts: (0..3).map(|_| Vec::with_capacity(n)).collect(),
+                // One spare element: the Allan analysis turns them into cumulative sums in place.
+                values: (0..3).map(|_| Vec::with_capacity(n + 1)).collect(),
+                repeats: RepeatReport::default(),
+            };
+            let mut run = 0;
+            let mut previous: Option<&RawImuSample> = None;
+            for (index, s) in samples.iter().enumerate() {
+                if let Some(p) = previous
+                    && s.stamps.sample_ns <= p.stamps.sample_ns
+                {
+                    return Err(SeriesError::TimeNotIncreasing {
+                        index,
+                        seq: s.seq,
+                        t_ns: s.stamps.sample_ns,
+                        previous_ns: p.stamps.sample_ns,
+                    });
                 }
+                if let Some(field) = non_finite_field(s) {
+                    return Err(SeriesError::NotFinite {
+                        index,
+                        seq: s.seq,
+                        field,
+                    });
+                }
+                columns.times_ns.push(s.stamps.sample_ns);
+                if let Some(lost) = loss(s) {
+                    columns.losses.push((index, lost));
+                }
+                for a in 0..3 {
+                    columns.counts[a].push(s.accel_counts[a]);
+                    columns.values[a].push(s.accel_g[a] * gravity_mps2);
+                }
+                if previous.is_some_and(|p| is_repeat(p, s)) {
+                    columns.repeats.repeats += 1;
+                    run += 1;
+                    columns.repeats.longest_run = columns.repeats.longest_run.max(run);
+                } else {
+                    run = 0;
+                }
+                previous = Some(s);
             }
-            if previous.is_some_and(|p| is_repeat(p, s)) {
-                columns.repeats.repeats += 1;
-                run += 1;
-                columns.repeats.longest_run = columns.repeats.longest_run.max(run);
-            } else {
-                run = 0;
+            if let Some((counts, values)) =
+                gyro.and_then(|h| h.join().expect("the gyro columns do not panic"))
+            {
+                columns.counts.extend(counts);
+                columns.values.extend(values);
             }
-            previous = Some(s);
-        }
-        Ok(columns)
+            Ok(columns)
+        })
     }
 
     /// The sampling (see [`timing`]).
@@ -316,6 +313,26 @@ impl Columns {
             })
             .collect()
     }
+}
+
+/// Counts and SI values per axis.
+type AxisColumns = (Vec<Vec<i16>>, Vec<Vec<f64>>);
+
+/// The gyro's counts and values (rad/s) per axis, or `None` when a sample lacks the gyro.
+fn gyro_columns(samples: &[RawImuSample]) -> Option<AxisColumns> {
+    let n = samples.len();
+    let mut counts: Vec<Vec<i16>> = (0..3).map(|_| Vec::with_capacity(n)).collect();
+    let mut values: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(n + 1)).collect();
+    for s in samples {
+        if s.flags & raw_flags::GYRO_VALID == 0 {
+            return None;
+        }
+        for a in 0..3 {
+            counts[a].push(s.gyro_counts[a]);
+            values[a].push(s.gyro_dps[a].to_radians());
+        }
+    }
+    Some((counts, values))
 }
 
 /// Which sensor a channel comes from.
