@@ -208,7 +208,9 @@ fn run<I2C: I2c, C: Clock>(
     let stats = acq.stats();
     let driver = acq.driver().stats();
     let late = acq.lateness();
-    let us = |q: f64| late.value_at_quantile(q) as f64 * 1e-3;
+    // The histogram reports a bucket's upper end (2 significant digits): never above the
+    // exact maximum.
+    let us = |q: f64| late.value_at_quantile(q).min(stats.max_late_ns.max(1)) as f64 * 1e-3;
     eprintln!(
         "mems-acquire: read lateness p50 {:.0} us, p99 {:.0} us, p99.9 {:.0} us, max {:.0} us; \
          fullest FIFO {} of 512 bytes",
