@@ -352,7 +352,8 @@ mod tests {
             })
             .collect();
         for (values, kind) in [(&white, NoiseKind::White), (&walk, NoiseKind::RandomWalk)] {
-            let curve = overlapping_avar(values, &[0..values.len()], 1.0);
+            let whole = std::iter::once(0..values.len()).collect::<Vec<_>>();
+            let curve = overlapping_avar(values, &whole, 1.0);
             // Cluster means from a plain prefix sum (fast enough for every starting point).
             let prefix: Vec<f64> = std::iter::once(0.0)
                 .chain(values.iter().scan(0.0, |acc, v| {
