@@ -104,6 +104,20 @@ impl Proc {
         }
     }
 
+    /// Starts `command` (stdout captured, stderr inherited); `name` is for messages.
+    pub fn start(name: &str, mut command: Command) -> Self {
+        let child = command
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap_or_else(|e| panic!("cannot start {name}: {e}"));
+        Self {
+            name: name.to_string(),
+            child: Some(child),
+        }
+    }
+
     /// The process id.
     pub fn pid(&self) -> u32 {
         self.child.as_ref().expect("running").id()
@@ -119,14 +133,19 @@ impl Proc {
     /// Waits up to `timeout` for the process to exit and returns its status and stdout.
     pub fn wait(mut self, timeout: Duration) -> (ExitStatus, String) {
         let mut child = self.child.take().expect("running");
+        // Read while it runs: a child that fills the pipe (64 KiB) would block for ever.
+        let stdout = child.stdout.take().map(|mut stdout| {
+            std::thread::spawn(move || {
+                use std::io::Read;
+                let mut out = String::new();
+                stdout.read_to_string(&mut out).expect("read stdout");
+                out
+            })
+        });
         let start = Instant::now();
         loop {
             if let Some(status) = child.try_wait().expect("try_wait") {
-                let mut out = String::new();
-                if let Some(mut stdout) = child.stdout.take() {
-                    use std::io::Read;
-                    stdout.read_to_string(&mut out).expect("read stdout");
-                }
+                let out = stdout.map_or_else(String::new, |r| r.join().expect("stdout reader"));
                 return (status, out);
             }
             if start.elapsed() > timeout {
@@ -291,4 +310,56 @@ pub fn missing_ranges(seqs: &[u64]) -> Vec<(u64, u64)> {
         .filter(|w| w[1] > w[0] + 1)
         .map(|w| (w[0] + 1, w[1] - 1))
         .collect()
+}
+
+/// The path of example `name` of workspace package `package`, built first (cargo builds only
+/// the tested package's targets) in the profile of the running test.
+pub fn example(package: &str, name: &str) -> PathBuf {
+    let exe = std::env::current_exe().expect("current test executable");
+    let profile_dir = exe
+        .parent()
+        .and_then(|deps| deps.parent())
+        .expect("test executable lives in target/<profile>/deps");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let mut build = Command::new(cargo);
+    build.args(["build", "--quiet", "-p", package, "--example", name]);
+    if profile_dir.file_name().is_some_and(|n| n == "release") {
+        build.arg("--release");
+    }
+    let status = build.status().expect("cannot run cargo");
+    assert!(
+        status.success(),
+        "cargo build -p {package} --example {name} failed"
+    );
+    let path = profile_dir.join("examples").join(name);
+    assert!(path.is_file(), "{} was not built", path.display());
+    path
+}
+
+/// The workspace's root directory (where `ipc-types/python/` lives).
+pub fn workspace_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ sits in the workspace root")
+        .to_path_buf()
+}
+
+/// Whether `python3` can import the iceoryx2 Python package. When it cannot, the tests that
+/// need it print why, loudly, and skip; `.ci/run` installs it.
+pub fn python_iceoryx2() -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", "import iceoryx2"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        eprintln!(
+            "\n********************************************************************\n\
+             SKIPPED: python3 cannot import the iceoryx2 Python package (0.10).\n\
+             Install it: python3 -m pip install 'iceoryx2==0.10.*' (.ci/run does).\n\
+             ********************************************************************\n"
+        );
+    }
+    ok
 }
