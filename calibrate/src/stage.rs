@@ -44,7 +44,7 @@ use crate::calibfile::CalibrationFile;
 use crate::model::AccelModel;
 use crate::terms::ReadingTerms;
 use crate::zero_state::{
-    BATCH_LEN, DetectorConfig, Verdict, ZeroStateDetector, batch_duration_s, rest_gain,
+    BATCH_LEN, DetectorConfig, NoiseFloor, Verdict, ZeroStateDetector, batch_duration_s, rest_gain,
 };
 
 /// Settings of the bias refinement.
@@ -279,12 +279,19 @@ pub struct CalibrationStage {
 
 impl CalibrationStage {
     /// A stage applying `file` with the zero-state detector `detector` (its local gravity
-    /// should be the file's) and the bias refinement `refine`.
+    /// should be the file's; without a noise floor of its own it gets the file's `[noise]`
+    /// table as one) and the bias refinement `refine`.
     pub fn new(
         file: &CalibrationFile,
-        detector: DetectorConfig,
+        mut detector: DetectorConfig,
         refine: RefineConfig,
     ) -> Result<Self, StageSetupError> {
+        if detector.noise.is_none() {
+            detector.noise = file
+                .noise
+                .as_ref()
+                .map(|p| NoiseFloor::from_params(p, file.gravity_mps2));
+        }
         let model = file
             .accel_model()
             .map_err(|e| StageSetupError(e.to_string()))?;

@@ -11,6 +11,7 @@ use calibrate::calibfile::{
 use calibrate::fit::{CovarianceMode, Weighting};
 use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
 use calibrate::noise::synth::{NoiseModel, static_samples};
+use calibrate::zero_state::{DetectorConfig, DetectorKind, NoiseFloor};
 use nalgebra::{Matrix3, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -135,6 +136,17 @@ fn allan_into_stores_the_fitted_parameters_in_the_noise_table() {
             );
         }
     }
+    // The calibration stage hands the table to its zero-state detector as the noise floor.
+    let stage = calibrate::stage::CalibrationStage::new(
+        &stored,
+        DetectorConfig::new(DetectorKind::Glrt, GRAVITY),
+        calibrate::stage::RefineConfig::default(),
+    )
+    .unwrap();
+    let floor = stage.detector().config().noise.expect("a noise floor");
+    assert_eq!(floor, NoiseFloor::from_params(&noise, GRAVITY));
+    let n = noise.accel.x.white_noise_density.unwrap().value;
+    assert!((floor.accel_sigma_mps2[0].unwrap() - n * 200f64.sqrt()).abs() < 1e-12);
     // Nothing else in the file changed.
     let mut without = stored.clone();
     without.noise = None;

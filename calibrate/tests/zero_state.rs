@@ -2,7 +2,7 @@
 //! disturbances) and on a short simulated drive with ground truth.
 
 use calibrate::zero_state::{
-    BATCH_LEN, DetectorConfig, DetectorKind, LearnRejection, Verdict, ZeroStateDetector,
+    BATCH_LEN, DetectorConfig, DetectorKind, LearnRejection, NoiseFloor, Verdict, ZeroStateDetector,
 };
 use mems_sim::scenario::{Drive, DriveParams, ns_from_s};
 use mems_sim::vibration::VibrationModel;
@@ -291,4 +291,80 @@ fn glrt_on_a_simulated_drive() {
     assert!(detection > 0.95, "detection rate {detection}");
     assert!(moving_fast > 30_000, "{moving_fast} moving samples");
     assert_eq!(moving_fast_hit, 0, "rest flagged while moving or turning");
+}
+
+/// Noise parameters whose accelerometer and gyro white noise is `scale` times the synthetic
+/// sensor's, as measured at `rate_hz` (per-sample sigma = N sqrt(rate)).
+fn noise_params(scale: f64, rate_hz: f64) -> calibrate::noise::NoiseParams {
+    use calibrate::noise::params::{AxisNoise, Estimate, NoiseParams, SensorNoise};
+    let axis = |sigma: f64| AxisNoise {
+        white_noise_density: Some(Estimate {
+            value: scale * sigma / rate_hz.sqrt(),
+            sigma: 1e-3 * sigma,
+        }),
+        ..Default::default()
+    };
+    let sensor = |unit: &str, sigma: f64| SensorNoise {
+        unit: unit.into(),
+        x: axis(sigma),
+        y: axis(sigma),
+        z: axis(sigma),
+    };
+    NoiseParams {
+        source: "static.csv".into(),
+        sample_rate_hz: rate_hz,
+        record_length_s: 600.0,
+        samples: 600_000,
+        gravity_mps2: G,
+        accel: sensor("m/s^2", ACCEL_SIGMA),
+        gyro: Some(sensor("rad/s", GYRO_SIGMA)),
+    }
+}
+
+/// The calibration file's noise parameters raise learned noise levels that came out lower
+/// than the sensor's (here the table says 1.8 times the learned noise): the later rest, at the
+/// table's noise, is then called rest, which the learned levels alone call motion. A table
+/// measured at another rate, or one below the learned levels, changes nothing.
+#[test]
+fn noise_parameters_are_a_floor_for_the_learned_levels() {
+    for kind in [DetectorKind::Yu, DetectorKind::Glrt] {
+        let run = |floor: Option<NoiseFloor>| {
+            let mut config = DetectorConfig::new(kind, G);
+            config.noise = floor;
+            let mut det = ZeroStateDetector::new(config);
+            let mut synth = Synth::new(9);
+            let learned = synth.feed(&mut det, 5.0, [0.0; 3], [0.0; 3], 1.0);
+            let reference = learned.last().unwrap().learned.expect("learned");
+            let rest = synth.feed(&mut det, 10.0, [0.0; 3], [0.0; 3], 1.8);
+            (reference, rest_fraction(&rest[25..]))
+        };
+        let (plain, plain_rest) = run(None);
+        let floor = NoiseFloor::from_params(&noise_params(1.8, RATE_HZ), G);
+        let (raised, raised_rest) = run(Some(floor));
+        for i in 0..3 {
+            assert!((raised.accel_sigma_mps2[i] / (1.8 * ACCEL_SIGMA) - 1.0).abs() < 1e-12);
+            assert!((raised.gyro_sigma_rps[i] / (1.8 * GYRO_SIGMA) - 1.0).abs() < 1e-12);
+            // The scatter of the batch means stays as learned.
+            let learned = plain.accel_correlation[i] * plain.accel_sigma_mps2[i].powi(2);
+            let kept = raised.accel_correlation[i] * raised.accel_sigma_mps2[i].powi(2);
+            assert!(kept >= learned * (1.0 - 1e-12));
+            assert_eq!(raised.accel_mean_mps2[i], plain.accel_mean_mps2[i]);
+        }
+        assert!(
+            plain_rest < 0.2,
+            "{kind:?}: learned levels only: {plain_rest}"
+        );
+        assert!(raised_rest > 0.9, "{kind:?}: with the floor: {raised_rest}");
+
+        // Measured at 200 Hz: not applicable to a 1 kHz stream.
+        let (other_rate, _) = run(Some(NoiseFloor::from_params(&noise_params(1.8, 200.0), G)));
+        assert_eq!(other_rate, plain);
+        // Below the learned levels: the learned levels stay.
+        let (quieter, _) = run(Some(NoiseFloor::from_params(
+            &noise_params(0.5, RATE_HZ),
+            G,
+        )));
+        assert_eq!(quieter.accel_sigma_mps2, plain.accel_sigma_mps2);
+        assert_eq!(quieter.gyro_sigma_rps, plain.gyro_sigma_rps);
+    }
 }

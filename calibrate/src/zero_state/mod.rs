@@ -11,6 +11,14 @@
 //! 3. keep their references current from the batches they call rest (running means with a
 //!    memory of `memory_s` seconds of rest, see [`rest_gain`]).
 //!
+//! With the calibration file's noise parameters ([`NoiseFloor`], set by the calibration stage
+//! from the `[noise]` table), the learned per-sample noise of each channel is raised to the
+//! sensor's measured noise where it came out lower: a few seconds of learning can catch a
+//! quiet stretch, and thresholds set on it call later rests motion. Noisier learned levels
+//! (torn reads, a vibrating mount) are kept; the learned means, and learning itself, are
+//! unchanged. Both detectors' thresholds (the GLRT's sigmas, Yu's std thresholds and magnitude
+//! tolerance) follow.
+//!
 //! - [`DetectorKind::Yu`]: Yu et al.'s batches of 20 accelerometer samples ([`yu`]).
 //! - [`DetectorKind::Glrt`]: a generalised-likelihood-ratio test on accelerometer and gyroscope
 //!   over a sliding window of whole batches against the gravity vector and gyroscope bias
@@ -54,6 +62,81 @@ impl DetectorKind {
     }
 }
 
+/// The sensor's per-sample white noise from the noise parameters, as a floor for the learned
+/// levels (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseFloor {
+    /// Sample rate the levels refer to, Hz: they are applied only to a stream within 10% of it
+    /// (a density measured at one rate, aliasing and filtering included, does not give the
+    /// per-sample noise at another).
+    pub sample_rate_hz: f64,
+    /// Accelerometer per-sample sigma per axis, m/s^2 (`None`: not resolved).
+    pub accel_sigma_mps2: [Option<f64>; 3],
+    /// Gyroscope per-sample sigma per axis, rad/s (`None`: not resolved or no gyro).
+    pub gyro_sigma_rps: [Option<f64>; 3],
+}
+
+impl NoiseFloor {
+    /// The per-sample sigmas `N sqrt(rate)` (Kalibr's discrete-time convention) of the
+    /// resolved white noise densities of `params`; accelerometer values converted to the
+    /// gravity `gravity_mps2` the detector works in.
+    pub fn from_params(params: &noise::NoiseParams, gravity_mps2: f64) -> Self {
+        let root_rate = params.sample_rate_hz.sqrt();
+        let scale = gravity_mps2 / params.gravity_mps2;
+        let sigmas = |sensor: Option<&noise::params::SensorNoise>, scale: f64| {
+            let axes = sensor.map(|s| s.axes());
+            std::array::from_fn(|i| {
+                axes.and_then(|a| a[i].white_noise_density)
+                    .map(|n| n.value * root_rate * scale)
+            })
+        };
+        Self {
+            sample_rate_hz: params.sample_rate_hz,
+            accel_sigma_mps2: sigmas(Some(&params.accel), scale),
+            gyro_sigma_rps: sigmas(params.gyro.as_ref(), 1.0),
+        }
+    }
+
+    /// `reference` with each channel's noise raised to the floor where it is lower, when the
+    /// stream's rate (from the learned batches) is within 10% of the floor's; the scatter of
+    /// the batch means (`correlation sigma^2`) is kept as learned.
+    pub fn apply(&self, mut reference: StaticReference) -> StaticReference {
+        let rate = (reference.batches * BATCH_LEN) as f64 / reference.duration_s;
+        if (rate / self.sample_rate_hz - 1.0).abs() > 0.1 {
+            return reference;
+        }
+        let raise = |sigma: &mut f64, correlation: &mut f64, floor: Option<f64>| {
+            if let Some(f) = floor
+                && f > *sigma
+            {
+                *correlation = (*correlation * *sigma * *sigma / (f * f)).max(1.0);
+                *sigma = f;
+            }
+        };
+        for i in 0..3 {
+            raise(
+                &mut reference.accel_sigma_mps2[i],
+                &mut reference.accel_correlation[i],
+                self.accel_sigma_mps2[i],
+            );
+            raise(
+                &mut reference.gyro_sigma_rps[i],
+                &mut reference.gyro_correlation[i],
+                self.gyro_sigma_rps[i],
+            );
+        }
+        // The batch magnitude's white-noise scatter along the learned gravity direction.
+        let m = learn::norm(&reference.accel_mean_mps2);
+        let along: f64 = (0..3)
+            .map(|i| (reference.accel_mean_mps2[i] / m * reference.accel_sigma_mps2[i]).powi(2))
+            .sum();
+        reference.magnitude_std_mps2 = reference
+            .magnitude_std_mps2
+            .max((along / BATCH_LEN as f64).sqrt());
+        reference
+    }
+}
+
 /// Settings of a detector.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DetectorConfig {
@@ -67,11 +150,14 @@ pub struct DetectorConfig {
     pub yu: YuConfig,
     /// The GLRT's settings.
     pub glrt: GlrtConfig,
+    /// The sensor's noise from the calibration file, a floor for the learned levels.
+    pub noise: Option<NoiseFloor>,
 }
 
 impl DetectorConfig {
-    /// Defaults for `kind` with local gravity `gravity_mps2`: 5 s learning, 60 s memory, and
-    /// the detector's own defaults ([`YuConfig::default`], [`GlrtConfig::default`]).
+    /// Defaults for `kind` with local gravity `gravity_mps2`: 5 s learning, 60 s memory, the
+    /// detector's own defaults ([`YuConfig::default`], [`GlrtConfig::default`]) and no noise
+    /// floor (the calibration stage sets it from the calibration file).
     pub fn new(kind: DetectorKind, gravity_mps2: f64) -> Self {
         Self {
             kind,
@@ -79,6 +165,7 @@ impl DetectorConfig {
             memory_s: 60.0,
             yu: YuConfig::default(),
             glrt: GlrtConfig::default(),
+            noise: None,
         }
     }
 }
@@ -213,7 +300,8 @@ impl ZeroStateDetector {
             ..Verdict::default()
         };
         let Some(rule) = self.rule.as_mut() else {
-            if let Some(reference) = self.learner.push(&accel, &gyro) {
+            if let Some(learned) = self.learner.push(&accel, &gyro) {
+                let reference = self.config.noise.map_or(learned, |f| f.apply(learned));
                 self.rest_s = reference.duration_s;
                 self.rule = Some(match self.config.kind {
                     DetectorKind::Yu => Rule::Yu(yu::YuRule::new(&reference, &self.config.yu)),
