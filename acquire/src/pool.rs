@@ -1,6 +1,8 @@
-//! A bounded, lock-free pool of small fixed-size blocks for use as a global allocator: requests
-//! of at most [`BLOCK_SIZE`] bytes and alignment come from the pool, everything else (and any
-//! small request while the pool is empty) from the system allocator.
+//! A bounded, lock-free pool of small fixed-size blocks for use as a global allocator: once
+//! [armed](BlockPool::arm), requests of at most [`BLOCK_SIZE`] bytes and alignment come from the
+//! pool; everything else, any small request while the pool is empty, and everything before it is
+//! armed come from the system allocator. Start-up (which may keep thousands of small blocks, such
+//! as a simulated drive's plan) thus leaves the whole pool to the hot loop.
 //!
 //! Why `mems-acquire` needs it: iceoryx2 0.10 allocates one small block per published sample
 //! (`Publisher::loan_uninit`, and `send_copy` and the slice loans through it, wrap the loan's
@@ -28,7 +30,7 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::UnsafeCell;
-use std::sync::atomic::{AtomicU32, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 
 /// Size and alignment of every pool block, bytes (one cache line; iceoryx2 0.10's per-loan
 /// shared state is 48 bytes).
@@ -55,6 +57,8 @@ pub struct BlockPool<const N: usize> {
     fresh: AtomicUsize,
     /// Small requests that found the pool empty and went to the system allocator.
     fallbacks: AtomicU64,
+    /// Whether small requests are served from the pool yet.
+    armed: AtomicBool,
 }
 
 // SAFETY: the storage is only reached through raw pointers to whole blocks, and a block is
@@ -70,7 +74,7 @@ impl<const N: usize> Default for BlockPool<N> {
 }
 
 impl<const N: usize> BlockPool<N> {
-    /// An untouched pool of `N` blocks (usable in a `static`).
+    /// An untouched, unarmed pool of `N` blocks (usable in a `static`).
     pub const fn new() -> Self {
         assert!(N < u32::MAX as usize, "BlockPool: N must be below 2^32 - 1");
         Self {
@@ -79,7 +83,15 @@ impl<const N: usize> BlockPool<N> {
             head: AtomicU64::new(0),
             fresh: AtomicUsize::new(0),
             fallbacks: AtomicU64::new(0),
+            armed: AtomicBool::new(false),
         }
+    }
+
+    /// From now on, serves small requests from the pool (call it when start-up is over, just
+    /// before the hot loop). Blocks already handed out by the system allocator are still freed
+    /// there: frees are routed by address.
+    pub fn arm(&self) {
+        self.armed.store(true, Ordering::Relaxed);
     }
 
     /// Whether `ptr` is a block of this pool (anything else came from the system allocator).
@@ -92,6 +104,13 @@ impl<const N: usize> BlockPool<N> {
     /// instead, since start-up.
     pub fn fallbacks(&self) -> u64 {
         self.fallbacks.load(Ordering::Relaxed)
+    }
+
+    /// The most blocks that were ever in use at once (a block is taken from the never-used
+    /// tail only when no freed one is available): how much of the pool start-up and the loop
+    /// need.
+    pub fn peak_blocks(&self) -> usize {
+        self.fresh.load(Ordering::Relaxed).min(N)
     }
 
     /// Whether a request with `layout` is served from the pool (when it has a free block).
@@ -160,7 +179,7 @@ impl<const N: usize> BlockPool<N> {
 // system block never enters the pool and a pool block never reaches `System`.
 unsafe impl<const N: usize> GlobalAlloc for BlockPool<N> {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if Self::fits(layout) {
+        if Self::fits(layout) && self.armed.load(Ordering::Relaxed) {
             if let Some(index) = self.pop() {
                 return self.block_ptr(index);
             }
@@ -228,6 +247,10 @@ mod tests {
     #[test]
     fn small_requests_come_from_the_pool_and_others_from_the_system() {
         let pool = Box::new(BlockPool::<8>::new());
+        // Unarmed, everything goes to the system allocator.
+        let before = alloc(&pool, layout(8, 8));
+        assert!(!pool.contains(before));
+        pool.arm();
         for (size, align) in [(1, 1), (48, 8), (64, 16), (64, 64), (3, 2)] {
             let p = alloc(&pool, layout(size, align));
             assert!(pool.contains(p), "({size}, {align})");
@@ -240,13 +263,24 @@ mod tests {
             // SAFETY: allocated above with this layout.
             unsafe { pool.dealloc(p, layout(size, align)) };
         }
-        assert_eq!(pool.fallbacks(), 0);
+        // A system block allocated before arming is freed by the system allocator.
+        // SAFETY: allocated above with this layout.
+        unsafe { pool.dealloc(before, layout(8, 8)) };
+        assert_eq!((pool.fallbacks(), pool.peak_blocks()), (0, 1));
     }
 
     #[test]
     fn blocks_are_distinct_and_an_empty_pool_falls_back() {
         let pool = Box::new(BlockPool::<16>::new());
+        pool.arm();
         let l = layout(64, 8);
+        // Reuse does not raise the peak: one block taken and freed ten times is one block.
+        for _ in 0..10 {
+            let p = alloc(&pool, l);
+            // SAFETY: allocated just above with `l`.
+            unsafe { pool.dealloc(p, l) };
+        }
+        assert_eq!(pool.peak_blocks(), 1);
         let blocks: Vec<*mut u8> = (0..16).map(|_| alloc(&pool, l)).collect();
         // Each block is whole and separate: fill each with its own pattern, then check all.
         for (i, p) in blocks.iter().enumerate() {
@@ -259,6 +293,7 @@ mod tests {
             let bytes = unsafe { std::slice::from_raw_parts(*p, 64) };
             assert!(bytes.iter().all(|b| *b == i as u8), "block {i} overwritten");
         }
+        assert_eq!(pool.peak_blocks(), 16);
         let extra = alloc(&pool, l);
         assert!(!pool.contains(extra));
         assert_eq!(pool.fallbacks(), 1);
@@ -279,6 +314,7 @@ mod tests {
     #[test]
     fn realloc_keeps_data_and_moves_out_of_the_pool_when_too_big() {
         let pool = Box::new(BlockPool::<4>::new());
+        pool.arm();
         let l = layout(16, 8);
         let p = alloc(&pool, l);
         let data: Vec<u8> = (0..16).collect();
@@ -313,6 +349,7 @@ mod tests {
     fn blocks_freed_on_other_threads_are_reused_and_never_shared() {
         const BLOCKS: usize = 64;
         let pool: &'static BlockPool<BLOCKS> = Box::leak(Box::new(BlockPool::new()));
+        pool.arm();
         let l = layout(64, 64);
         // Pointers travel between threads as addresses.
         let (tx, rx) = mpsc::sync_channel::<usize>(16);

@@ -14,8 +14,9 @@ use acquire::pool::BlockPool;
 use acquire::registers as reg;
 use ipc_types::RawImuSample;
 
-/// The pool of `mems-acquire`'s size, counting this thread's calls.
-struct Counting(BlockPool<4096>);
+/// The pool of `mems-acquire`'s size, counting this thread's calls. Armed (as `mems-acquire`
+/// arms it before its loop) at the start of each test.
+struct Counting(BlockPool<1024>);
 
 thread_local! {
     /// Allocation calls (alloc, realloc) made by this thread.
@@ -86,6 +87,7 @@ fn measure(config: Config, reads: usize) -> (u64, usize) {
 
 #[test]
 fn steady_state_reads_allocate_nothing() {
+    ALLOCATOR.0.arm();
     // The counters work: a small Vec takes a pool block, a large one goes to the system.
     let before = allocations();
     let small: Vec<u64> = Vec::with_capacity(4);
@@ -128,6 +130,7 @@ fn publishing_loop_reaches_the_system_allocator_zero_times_per_sample() {
     use acquire::acquisition::{Acquisition, config_for_rate};
     use ipc_types::service;
 
+    ALLOCATOR.0.arm();
     let sim = common::noisy_sim(2, 0);
     let clock = sim.clock().clone();
     let driver = Mpu9250::new(sim, "sim", reg::ADDRESS_AD0_LOW);
@@ -199,4 +202,8 @@ fn publishing_loop_reaches_the_system_allocator_zero_times_per_sample() {
         "iceoryx2 0.10 allocates one block per loan"
     );
     assert_eq!(ALLOCATOR.0.fallbacks(), 0, "the pool never ran empty");
+    eprintln!(
+        "pool peak use: {} of 1024 blocks",
+        ALLOCATOR.0.peak_blocks()
+    );
 }
