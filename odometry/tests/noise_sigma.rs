@@ -119,7 +119,9 @@ fn run(config: OdometryConfig) -> (OdometryState, f64) {
             },
             seq: k,
             accel_mps2: [0.0, 0.0, G],
-            flags: if rest { corrected_flags::ZERO_STATE } else { 0 },
+            // The calibration stage's detector has learned (ready) throughout.
+            flags: corrected_flags::DETECTOR_READY
+                | if rest { corrected_flags::ZERO_STATE } else { 0 },
             ..Default::default()
         };
         stage.process(&sample, &mut |s| last = Some(*s)).unwrap();
