@@ -133,6 +133,10 @@ struct Args {
     /// Estimate the IMU-to-body mounting from the first drive instead of configuring it.
     #[arg(long)]
     estimate_mounting: bool,
+    /// The IMU's mounting on the simulated robot: yaw about the body's z axis, degrees
+    /// (configured as such unless `--estimate-mounting`).
+    #[arg(long, default_value_t = 0.0)]
+    mount_yaw_deg: f64,
     /// Smooth floor: no vibration (for every case).
     #[arg(long)]
     smooth: bool,
@@ -176,6 +180,10 @@ fn case(name: CaseName, args: &Args) -> (Case, OdometryConfig) {
     if args.smooth {
         c.vibration = 0.0;
     }
+    c.mounting = nalgebra::UnitQuaternion::from_axis_angle(
+        &nalgebra::Vector3::z_axis(),
+        args.mount_yaw_deg.to_radians(),
+    );
     // The robot's vibration, as a measurement of it would give (see Case).
     let (accel, gyro) = c.vibration_density_per_mps();
     cfg.noise.vibration_accel_density_per_mps = accel;
@@ -248,7 +256,7 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
         mounting: if args.estimate_mounting {
             None
         } else {
-            Some(nalgebra::UnitQuaternion::identity())
+            Some(c.mounting)
         },
         ..HintConfig::default()
     };
@@ -271,8 +279,18 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
     // Sequence numbers where motions start: the history of a motion is scored relative to the
     // error at its start, which the revision leaves as it is.
     let mut motion_starts: Vec<u64> = Vec::new();
+    // Our navigation frame's heading is the sensor's at alignment: with the IMU yawed by
+    // `mount_yaw_deg` on the robot (level), that is the truth frame turned by the same yaw.
+    let to_ours = nalgebra::Rotation3::from_axis_angle(
+        &nalgebra::Vector3::z_axis(),
+        -args.mount_yaw_deg.to_radians(),
+    );
     // One corrected sample and the truth at it, in order.
     let mut step = |s: &CorrectedImuSample, truth: &recording::Truth, stage: &mut OdometryStage| {
+        let truth = &recording::Truth {
+            position_m: (to_ours * nalgebra::Vector3::from(truth.position_m)).into(),
+            ..*truth
+        };
         first_seq.get_or_insert(s.seq);
         truth_xy.push([truth.position_m[0], truth.position_m[1]]);
         if let Some(p) = prev_truth {

@@ -1,8 +1,9 @@
 //! The odometry stage: corrected samples in, odometry states out. No I/O and no allocation per
 //! sample; the live process and the offline runner both drive it, so they agree exactly.
 //!
-//! Life cycle: wait for the first rest interval (the zero-state flag of the calibration stage),
-//! align on `align_s` seconds of it (roll, pitch, gyro bias, vertical accelerometer bias), then
+//! Life cycle: wait for the first rest interval (the zero-state flag of the calibration stage,
+//! or a stationary robot hint, once the calibration stage's detector is ready), align on
+//! `align_s` seconds of it (roll, pitch, gyro bias, vertical accelerometer bias), then
 //! navigate with the error-state filter of [`crate::eskf`] on gyro rates corrected by
 //! [`OdometryConfig::gyro_correction`], applying zero-velocity updates while the sample is
 //! flagged at rest, and zero-angular-rate updates too unless the gyro shows rotation (a spin
@@ -409,7 +410,12 @@ impl OdometryStage {
 
         let Some(kf) = self.kf.as_mut() else {
             let rest = hint_rest.unwrap_or(imu_rest);
-            self.accumulate_alignment(t_ns, &m, rest);
+            // A stationary hint aligns only once the calibration stage has learned its
+            // references (its zero-state flag never comes earlier): until then the stage's gyro
+            // output still carries the turn-on bias it is about to subtract, and a filter
+            // aligned on it would take that step for rotation.
+            let ready = detector_ready || hint_rest.is_none();
+            self.accumulate_alignment(t_ns, &m, rest && ready);
             emit(&self.unaligned_state(s, rest, hs));
             return Ok(());
         };

@@ -1,6 +1,7 @@
 //! The stage allocates nothing per sample: a counting global allocator sees zero allocations
 //! on this thread while it aligns, navigates, applies zero-velocity updates and republishes
-//! revised motion histories over a simulated drive with turns.
+//! revised motion histories over a simulated drive with turns, and while it takes robot hints
+//! (stationary and speed updates, losses and a stale spell) and estimates the mounting.
 
 mod common;
 
@@ -8,8 +9,10 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
 use common::{Case, Simulation};
-use ipc_types::{CorrectedImuSample, odometry_flags};
+use ipc_types::{CorrectedImuSample, RobotHint, odometry_flags};
+use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
+use odometry::hints::HintConfig;
 use odometry::stage::{OdometryConfig, OdometryStage};
 
 /// Counts allocations made by the current thread, delegating to the system allocator.
@@ -84,4 +87,51 @@ fn processing_samples_allocates_nothing() {
     // The run exercised every path: a state per sample, and revised histories.
     assert_eq!(live, samples.len() as u64);
     assert!(stage.aligned() && revised > 100, "{revised} revised states");
+}
+
+#[test]
+fn taking_hints_allocates_nothing() {
+    let c = Case {
+        duration_s: 60.0,
+        rate_hz: 50.0,
+        turns: true,
+        ..Case::straight()
+    };
+    let mut sim = Simulation::new(&c, 3);
+    sim.session();
+    let mut samples: Vec<CorrectedImuSample> = Vec::new();
+    sim.drive(|s, _| samples.push(*s));
+    let mut p = HintParams::new(RestSource::Encoders);
+    p.drop_fraction = 0.3;
+    // Hints stop for 5 s in the middle (stale), then resume.
+    let hints: Vec<RobotHint> = c
+        .hints(3, &p)
+        .hints
+        .into_iter()
+        .filter(|h| !(30_000_000_000..35_000_000_000).contains(&h.stamps.acquired_ns))
+        .collect();
+    let estimate = HintConfig {
+        mounting: None,
+        ..HintConfig::default()
+    };
+    let mut stage = OdometryStage::with_hints(OdometryConfig::mpu9250(G_MPS2), estimate).unwrap();
+
+    let (mut stale, mut next) = (0u64, 0);
+    let before = allocations();
+    for s in &samples {
+        while next < hints.len() && hints[next].stamps.acquired_ns <= s.stamps.sample_ns {
+            stage.hint(&hints[next]).unwrap();
+            next += 1;
+        }
+        stage
+            .process(s, &mut |o| {
+                stale += u64::from(o.flags & odometry_flags::HINT_STALE != 0);
+            })
+            .unwrap();
+    }
+    let during = allocations() - before;
+    assert_eq!(during, 0, "{during} allocations");
+    let h = stage.hint_stats();
+    assert!(h.speed_updates > 100 && stale > 0, "{h:?}, {stale} stale");
+    assert!(stage.mounting().is_some(), "the mounting was estimated");
 }

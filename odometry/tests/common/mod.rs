@@ -60,6 +60,10 @@ pub struct Case {
     pub peak_yaw_rate_dps: f64,
     /// Error terms switched off (for error budgets), see [`Case::model`].
     pub off: Vec<String>,
+    /// IMU mounting on the robot, sensor to body (the drive's default is the identity).
+    pub mounting: nalgebra::UnitQuaternion<f64>,
+    /// Longest motion between two rests, s (see `DriveParams::max_motion_s`).
+    pub max_motion_s: f64,
 }
 
 impl Case {
@@ -81,6 +85,8 @@ impl Case {
             off: Vec::new(),
             turn_angle_deg: [30.0, 120.0],
             peak_yaw_rate_dps: 45.0,
+            mounting: nalgebra::UnitQuaternion::identity(),
+            max_motion_s: DriveParams::new(600.0).max_motion_s,
         }
     }
 
@@ -163,6 +169,8 @@ impl Case {
         p.max_legs = self.max_legs;
         p.leg_s = self.leg_s;
         p.peak_yaw_rate_dps = self.peak_yaw_rate_dps;
+        p.mounting = self.mounting;
+        p.max_motion_s = self.max_motion_s;
         Drive::new(&p, seed).expect("valid drive parameters")
     }
 }
