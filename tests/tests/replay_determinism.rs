@@ -1,9 +1,11 @@
 //! Replaying a recorded live run through real processes reproduces it bit for bit.
 //!
 //! Live: `mems-acquire` (simulated MPU-9250, datasheet preset, a drive that starts with 10 s of
-//! rest) -> `mems-calibrate serve` -> `mems-odometry serve`, recorded by `mems-record`.
-//! Replay, in a second namespace: `mems-replay LIVE.mcap --max` -> `mems-calibrate serve` ->
-//! `mems-odometry serve`, with the same calibration file, recorded by a second `mems-record`.
+//! rest) -> `mems-calibrate serve` -> `mems-odometry serve`, recorded by `mems-record`, with a
+//! robot controller (the `publish_hints` example) saying "stationary" for the first 6 s.
+//! Replay, in a second namespace: `mems-replay LIVE.mcap --max` (raw samples and the recorded
+//! hints) -> `mems-calibrate serve` -> `mems-odometry serve`, with the same calibration file,
+//! recorded by a second `mems-record`.
 //!
 //! Every corrected sample and every odometry state (revisions included) of the replay equals
 //! the live one field for field, floats compared bit for bit, except the wall-clock stamps:
@@ -13,7 +15,9 @@
 
 use std::time::Duration;
 
-use integration_tests::{Proc, calibrate_sim_part, path_arg, unique_namespace};
+use std::process::Command;
+
+use integration_tests::{Proc, calibrate_sim_part, example, path_arg, unique_namespace};
 use ipc_types::{CorrectedImuSample, OdometryState, Stamps};
 use recording::mcap::{Contents, read_all};
 
@@ -102,6 +106,7 @@ fn state_bits(s: &OdometryState) -> (Stamps, Vec<u64>, Vec<u64>) {
 #[test]
 fn replay_through_the_processes_reproduces_the_live_run_bit_for_bit() {
     let ns = unique_namespace("determinism");
+    let controller = example("ipc-types", "publish_hints");
     let replay_ns = format!("{ns}-replay");
     let dir = std::env::temp_dir().join(&ns);
     std::fs::create_dir_all(&dir).unwrap();
@@ -113,6 +118,11 @@ fn replay_through_the_processes_reproduces_the_live_run_bit_for_bit() {
     // The live run: 12 s of the drive (10 s of rest for the alignment, then driving).
     let live = stages(&ns, calib, path_arg(&live_rec));
     std::thread::sleep(Duration::from_millis(1000));
+    let mut hints = Command::new(controller);
+    hints
+        .args(["6", "0"])
+        .env(ipc_types::service::NAMESPACE_ENV, &ns);
+    let hints = Proc::start("publish_hints", hints);
     let (status, _) = Proc::spawn(
         "mems-acquire",
         &[
@@ -128,6 +138,8 @@ fn replay_through_the_processes_reproduces_the_live_run_bit_for_bit() {
     )
     .wait(Duration::from_secs(60));
     assert!(status.success(), "mems-acquire failed: {status}");
+    let (status, _) = hints.wait(Duration::from_secs(20));
+    assert!(status.success(), "publish_hints failed: {status}");
     let live = stop(live, &live_rec);
 
     // The replay, as fast as the stages take it (calibration and recorder subscribe to raw).
@@ -146,6 +158,15 @@ fn replay_through_the_processes_reproduces_the_live_run_bit_for_bit() {
     .wait(Duration::from_secs(60));
     assert!(status.success(), "mems-replay failed: {status}: {out}");
     let replayed = stop(replay, &replay_rec);
+
+    // The hints are replayed exactly as recorded.
+    assert!(
+        live.hints.len() > 200,
+        "{} hints recorded",
+        live.hints.len()
+    );
+    assert_eq!(replayed.hints, live.hints);
+    assert!(live.odometry.iter().any(|s| s.hints_applied > 0));
 
     // The raw input is the same (the replay re-stamps only acquired_ns).
     assert!(live.raw.len() > 11_000, "{} raw samples", live.raw.len());
