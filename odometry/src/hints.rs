@@ -213,8 +213,8 @@ pub struct HintStats {
     pub overflowed: u64,
     /// Speed updates applied.
     pub speed_updates: u64,
-    /// Speed hints not applied because they were older than the velocity history (or the
-    /// filter was not aligned, or the mounting not yet known).
+    /// Speed hints not applied: stale or older than the velocity history when their sample
+    /// came, the mounting not yet known, or more than eight delivered at one sample.
     pub speed_skipped: u64,
 }
 

@@ -164,6 +164,10 @@ struct PendingRevision {
     dv: Vector3<f64>,
 }
 
+/// Speed hints that can wait for the next sample's update (more arrive at once only at sample
+/// rates below the hint rate).
+const SPEED_QUEUE: usize = 8;
+
 /// One sample's body velocity minus the corrections made up to it (see the module docs).
 #[derive(Debug, Clone, Copy, Default)]
 struct BodyVelocity {
@@ -186,8 +190,9 @@ struct Hints {
     waiting: Ring<RobotHint>,
     /// The newest delivered hint.
     newest: Option<RobotHint>,
-    /// The newest delivered speed hint not yet applied.
-    speed: Option<RobotHint>,
+    /// Delivered speed hints not yet applied, oldest first (several can be delivered at one
+    /// sample when their latencies differ).
+    speed: Ring<RobotHint>,
     /// Sequence number of the last hint counted as applied for its rest decision.
     newest_used: Option<u64>,
     /// Sensor-to-body rotation `R_bs`, once known.
@@ -295,7 +300,7 @@ impl OdometryStage {
                 max_age_ns: (hints.max_age_s * 1e9).round() as u64,
                 waiting: Ring::new(hints.capacity),
                 newest: None,
-                speed: None,
+                speed: Ring::new(SPEED_QUEUE),
                 newest_used: None,
                 r_bs: hints.mounting.map(|q| q.to_rotation_matrix().into_inner()),
                 estimator: MountingEstimator::default(),
@@ -484,10 +489,10 @@ impl OdometryStage {
                 pending.dv += kf.x.v - v0;
             }
             // A stationary robot's speed hint says nothing the zero-velocity update did not.
-            hints.speed = None;
+            hints.speed.clear();
         } else {
             self.distance_m += moved;
-            if let Some(h) = hints.speed.take() {
+            while let Some(h) = hints.speed.pop() {
                 if hints.apply_speed(kf, &h, t_ns) {
                     hs.flags |= odometry_flags::HINT_SPEED;
                     hints.applied += 1;
@@ -517,7 +522,7 @@ impl OdometryStage {
     }
 
     /// Moves the hints delivered by `t_ns` out of the waiting buffer: the newest becomes the
-    /// current hint, and the newest speed hint among them waits for the update.
+    /// current hint, and the speed hints among them wait for the update.
     fn deliver_hints(&mut self, t_ns: u64) {
         let hints = &mut self.hints;
         while let Some(h) = hints.waiting.front().copied() {
@@ -534,11 +539,8 @@ impl OdometryStage {
             }
             hints.stats.consumed += 1;
             hints.newest = Some(h);
-            if h.flags & hint_flags::SPEED_VALID != 0 {
-                if hints.speed.is_some() {
-                    hints.stats.speed_skipped += 1;
-                }
-                hints.speed = Some(h);
+            if h.flags & hint_flags::SPEED_VALID != 0 && hints.speed.push(h).is_some() {
+                hints.stats.speed_skipped += 1;
             }
         }
     }

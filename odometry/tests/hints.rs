@@ -205,7 +205,12 @@ fn speed_hints_bound_the_drift_of_long_cruises() {
         .iter()
         .filter(|o| o.flags & odometry_flags::HINT_SPEED != 0)
         .count() as u64;
-    assert_eq!(speed_flagged, stats.speed_updates);
+    // Every flagged sample had at least one update; two hints can become usable at one
+    // sample (their latencies differ), a third hardly.
+    assert!(
+        speed_flagged <= stats.speed_updates && 2 * speed_flagged >= stats.speed_updates,
+        "{speed_flagged} flagged, {stats:?}"
+    );
     // The scale state learned the encoder's scale error.
     let k = with_hints.stage.filter().unwrap().x.k;
     assert!(

@@ -2,10 +2,12 @@
 //! `mems/odometry/state`, with the robot's hints from `mems/robot/hint` when a controller
 //! publishes them.
 //!
-//! - Hints are handed to the stage as they arrive, before each sample (the stage uses a hint
-//!   for the samples taken at least `--hint-delivery-ms` after its publication, so the states
-//!   do not depend on how hints and samples interleave, and a replay gives the same states).
-//!   A refused hint (NaN, no time) is reported on stderr and skipped.
+//! - Before each sample, the hints published (`stamps.acquired_ns`) by its time are handed to
+//!   the stage in arrival order; the stage uses a hint for the samples taken at least
+//!   `--hint-delivery-ms` after its publication, so the states do not depend on how hints and
+//!   samples interleave in transport, and a replay gives the same states. A hint published
+//!   after the sample waits in the subscriber's queue. A refused hint (NaN, no time) is
+//!   reported on stderr and skipped.
 //! - Every corrected sample gives one state, in order; the end of a motion interval also
 //!   republishes that interval's states with the `REVISION` flag. `stamps.odometry_ns` is
 //!   `CLOCK_MONOTONIC` at publication.
@@ -21,6 +23,7 @@ use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
 use ipc_types::clock::monotonic_ns;
 use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, service};
+use odometry::hints::usable_from_ns;
 use odometry::stage::OdometryStage;
 
 /// Options of `mems-odometry serve`.
@@ -59,23 +62,36 @@ pub fn run(args: ServeArgs) -> Result<()> {
     let new_stage = || OdometryStage::with_hints(config, hint_config);
     let mut stage = new_stage()?;
     let (mut hints_received, mut hints_refused) = (0u64, 0u64);
+    let mut held: Option<RobotHint> = None;
     let mut last_seq: Option<u64> = None;
     let (mut received, mut published, mut refused, mut sessions) = (0u64, 0u64, 0u64, 1u64);
     let mut send_error: Option<anyhow::Error> = None;
     // node.wait returns an error on SIGINT/SIGTERM: the clean way out.
     while node.wait(Duration::from_millis(1)).is_ok() {
         loop {
-            // Every hint that has arrived goes in before the next sample.
-            while let Some(hint) = hint_subscriber.receive()? {
-                hints_received += 1;
-                if let Err(e) = stage.hint(hint.payload()) {
-                    hints_refused += 1;
-                    eprintln!("mems-odometry: refused: {e}");
-                }
-            }
             let Some(sample) = subscriber.receive()? else {
                 break;
             };
+            // The hints published by this sample's time go in before it, in publication order;
+            // a later one waits (held) for the samples to catch up, so that hints running ahead
+            // of the samples (a replay at full speed) do not pile up in the stage.
+            let t_ns = sample.payload().stamps.sample_ns;
+            loop {
+                if held.is_none() {
+                    held = hint_subscriber.receive()?.map(|h| *h.payload());
+                }
+                match held {
+                    Some(h) if usable_from_ns(&h, 0) <= t_ns => {
+                        held = None;
+                        hints_received += 1;
+                        if let Err(e) = stage.hint(&h) {
+                            hints_refused += 1;
+                            eprintln!("mems-odometry: refused: {e}");
+                        }
+                    }
+                    _ => break,
+                }
+            }
             let s = *sample.payload();
             received += 1;
             if last_seq.is_some_and(|l| s.seq <= l) {
@@ -111,9 +127,9 @@ pub fn run(args: ServeArgs) -> Result<()> {
     eprintln!(
         "mems-odometry: received {received}, published {published} (revisions included), \
          refused {refused}, sessions {sessions}, discarded for stalled subscribers {}; hints \
-         received {hints_received}, refused {hints_refused}, speed updates {} (this session)",
+         received {hints_received}, refused {hints_refused}, this session: {:?}",
         service::stalled_discards(),
-        h.speed_updates
+        h
     );
     Ok(())
 }
