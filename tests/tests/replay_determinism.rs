@@ -2,7 +2,8 @@
 //!
 //! Live: `mems-acquire` (simulated MPU-9250, datasheet preset, a drive that starts with 10 s of
 //! rest) -> `mems-calibrate serve` -> `mems-odometry serve`, recorded by `mems-record`, with a
-//! robot controller (the `publish_hints` example) saying "stationary" for the first 6 s.
+//! robot controller (the `publish_hints` example) saying "stationary" for the first 9.5 s (the
+//! drive rests for 10 s; the odometry aligns after about 6, and counts hints from then on).
 //! Replay, in a second namespace: `mems-replay LIVE.mcap --max` (raw samples and the recorded
 //! hints) -> `mems-calibrate serve` -> `mems-odometry serve`, with the same calibration file,
 //! recorded by a second `mems-record`.
