@@ -135,6 +135,32 @@ fn real_time_pace_follows_the_sample_times_scaled_by_speed() {
     assert!((summary.rate_hz() - 399.0 / elapsed).abs() < 1e-6);
 }
 
+/// Two sessions whose sample times start over (two replays in one recording): pacing starts
+/// over with the second, which is published at the recorded spacing, not all at once.
+#[test]
+fn real_time_pace_starts_over_with_a_new_session() {
+    let ns = namespace("sessions");
+    let first = samples(200, 1000);
+    let mut second = samples(200, 1000);
+    for s in &mut second {
+        s.seq -= 100; // counts from 0 again
+    }
+    let sent: Vec<RawImuSample> = first.iter().chain(&second).copied().collect();
+    let sub = subscribe(&ns, sent.len(), None);
+    let summary = run(&ns, &sent, Pace::RealTime { speed: 1.0 });
+    let got = sub.join().unwrap();
+    assert_same_but_acquired(&got, &sent);
+    // Each session spans 199 ms; the second starts when the first has ended.
+    let published = |i: usize| got[i].0.stamps.acquired_ns;
+    let second_span_ms = (published(399) - published(200)) as f64 / 1e6;
+    assert!(
+        (199.0..230.0).contains(&second_span_ms),
+        "second session spans {second_span_ms} ms"
+    );
+    let elapsed = summary.elapsed.as_secs_f64();
+    assert!((0.398..0.45).contains(&elapsed), "took {elapsed} s");
+}
+
 /// As fast as possible, with a subscriber slower than the publisher and more samples than its
 /// buffer: nothing is lost, the order is kept, the publisher was held back.
 #[test]
