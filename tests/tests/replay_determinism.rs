@@ -2,7 +2,7 @@
 //!
 //! Live: `mems-acquire` (simulated MPU-9250, datasheet preset, a drive that starts with 10 s of
 //! rest) -> `mems-calibrate serve` -> `mems-odometry serve`, recorded by `mems-record`, with a
-//! robot controller (the `publish_hints` example) saying "stationary" for the first 9.5 s (the
+//! robot controller (the `publish_hints` example) saying "stationary" for the first 9 s (the
 //! drive rests for 10 s; the odometry aligns after about 6, and counts hints from then on).
 //! Replay, in a second namespace: `mems-replay LIVE.mcap --max` (raw samples and the recorded
 //! hints) -> `mems-calibrate serve` -> `mems-odometry serve`, with the same calibration file,
@@ -119,12 +119,7 @@ fn replay_through_the_processes_reproduces_the_live_run_bit_for_bit() {
     // The live run: 12 s of the drive (10 s of rest for the alignment, then driving).
     let live = stages(&ns, calib, path_arg(&live_rec));
     std::thread::sleep(Duration::from_millis(1000));
-    let mut hints = Command::new(controller);
-    hints
-        .args(["6", "0"])
-        .env(ipc_types::service::NAMESPACE_ENV, &ns);
-    let hints = Proc::start("publish_hints", hints);
-    let (status, _) = Proc::spawn(
+    let acquire = Proc::spawn(
         "mems-acquire",
         &[
             "--rate",
@@ -136,8 +131,16 @@ fn replay_through_the_processes_reproduces_the_live_run_bit_for_bit() {
             "--namespace",
             &ns,
         ],
-    )
-    .wait(Duration::from_secs(60));
+    );
+    // The controller starts with the acquisition and says "stationary" for 9 s of wall time:
+    // the drive's first 9 s minus acquire's start-up, which covers the alignment (about 6 s of
+    // sample time) even on a loaded machine, and never reaches the drive's motion at 10 s.
+    let mut hints = Command::new(controller);
+    hints
+        .args(["9", "0"])
+        .env(ipc_types::service::NAMESPACE_ENV, &ns);
+    let hints = Proc::start("publish_hints", hints);
+    let (status, _) = acquire.wait(Duration::from_secs(60));
     assert!(status.success(), "mems-acquire failed: {status}");
     let (status, _) = hints.wait(Duration::from_secs(20));
     assert!(status.success(), "publish_hints failed: {status}");
