@@ -174,9 +174,11 @@ fn max_pace_is_lossless_with_a_slow_subscriber() {
     assert_same_but_acquired(&got, &sent);
     assert_eq!(summary.sent, n as u64);
     assert_eq!(summary.short_deliveries, 0);
-    // The last sample fits in the subscriber's queue only once it has taken n - buffer samples,
-    // which costs it a 2 ms stall per 500: the publisher waited at least that long.
-    let stalls = ((n - service::SUBSCRIBER_BUFFER) / 500) as f64 * 0.002;
+    // The last sample fits in the subscriber's queue only once it has taken n - buffer samples
+    // (2000), and it stalls 2 ms after every 500 it takes: the stalls after 500, 1000 and 1500
+    // come before that point (the one after 2000 does not delay the publisher), so the
+    // publisher waited at least 3 x 2 ms.
+    let stalls = ((n - service::SUBSCRIBER_BUFFER) / 500 - 1) as f64 * 0.002;
     assert!(
         summary.elapsed.as_secs_f64() >= stalls,
         "{:?}",
