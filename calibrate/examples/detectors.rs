@@ -14,9 +14,7 @@
 use std::time::Instant;
 
 use anyhow::Result;
-use calibrate::calibfile::{CalibrationFile, ResidualSection, SourceSection};
-use calibrate::fit::{CovarianceMode, Weighting};
-use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
+use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig};
 use calibrate::zero_state::{DetectorConfig, DetectorKind, GlrtStatistic};
 use clap::Parser;
@@ -131,27 +129,7 @@ struct Label {
 }
 
 fn identity_calibration() -> CalibrationFile {
-    CalibrationFile::new(
-        &AccelModel::identity(ModelKind::Full),
-        &ParamCovariance::zeros(),
-        calibrate::calibfile::FitMethod::Labelled,
-        Weighting::Unweighted,
-        CovarianceMode::ResidualScaled,
-        G_MPS2,
-        SourceSection {
-            file: "identity".into(),
-            kind: "none".into(),
-            poses: 0,
-            repaired_samples: 0,
-        },
-        ResidualSection {
-            rms_g: [0.0; 3],
-            max_abs_g: 0.0,
-            dof: [0; 3],
-            chi2: [0.0; 3],
-            per_pose_g: Vec::new(),
-        },
-    )
+    CalibrationFile::identity(G_MPS2)
 }
 
 /// Runs one seed at one vibration level through every variant.

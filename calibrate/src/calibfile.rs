@@ -269,6 +269,34 @@ impl CalibrationFile {
         }
     }
 
+    /// An identity model-3 calibration (S = I, b = 0, zero covariance, no fit behind it) at
+    /// local gravity `gravity_mps2` (m/s^2): for a sensor whose output is already calibrated,
+    /// such as the simulator's calibrated part, so that the live stage only converts units,
+    /// detects rest and refines the biases.
+    pub fn identity(gravity_mps2: f64) -> Self {
+        Self::new(
+            &AccelModel::identity(ModelKind::Full),
+            &ParamCovariance::zeros(),
+            FitMethod::Labelled,
+            Weighting::Unweighted,
+            CovarianceMode::ResidualScaled,
+            gravity_mps2,
+            SourceSection {
+                file: "identity".into(),
+                kind: "none".into(),
+                poses: 0,
+                repaired_samples: 0,
+            },
+            ResidualSection {
+                rms_g: [0.0; 3],
+                max_abs_g: 0.0,
+                dof: [0; 3],
+                chi2: [0.0; 3],
+                per_pose_g: Vec::new(),
+            },
+        )
+    }
+
     /// The model described by the file.
     pub fn accel_model(&self) -> Result<AccelModel, crate::model::ModelError> {
         let s = nalgebra::Matrix3::from_fn(|r, c| self.scale[r][c]);
@@ -368,6 +396,20 @@ impl CalibrationFile {
 mod tests {
     use super::*;
     use nalgebra::{Matrix3, Vector3};
+
+    /// The identity file round-trips through TOML and its model leaves a reading unchanged.
+    #[test]
+    fn identity_file_leaves_readings_unchanged() {
+        let file = CalibrationFile::identity(9.797);
+        assert_eq!(file.gravity_mps2, 9.797);
+        assert!(file.sigma.iter().all(|&s| s == 0.0));
+        let path = std::env::temp_dir().join(format!("identity-{}.toml", std::process::id()));
+        file.save(&path).unwrap();
+        let back = CalibrationFile::load(&path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        let reading = Vector3::new(0.01, -0.98, 0.2);
+        assert_eq!(back.accel_model().unwrap().correct(&reading), reading);
+    }
 
     fn example() -> CalibrationFile {
         let s = Matrix3::new(

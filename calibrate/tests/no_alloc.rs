@@ -5,9 +5,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
-use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
-use calibrate::fit::{CovarianceMode, Weighting};
-use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
+use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig};
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use ipc_types::RawImuSample;
@@ -80,27 +78,7 @@ fn the_stage_allocates_nothing_per_sample() {
     let mut samples = drive_samples();
     // A gap: 100 samples lost in the middle of the drive.
     samples.drain(20_000..20_100);
-    let calib = CalibrationFile::new(
-        &AccelModel::identity(ModelKind::Full),
-        &ParamCovariance::zeros(),
-        FitMethod::Labelled,
-        Weighting::Unweighted,
-        CovarianceMode::ResidualScaled,
-        G_MPS2,
-        SourceSection {
-            file: "identity".into(),
-            kind: "none".into(),
-            poses: 0,
-            repaired_samples: 0,
-        },
-        ResidualSection {
-            rms_g: [0.0; 3],
-            max_abs_g: 0.0,
-            dof: [0; 3],
-            chi2: [0.0; 3],
-            per_pose_g: Vec::new(),
-        },
-    );
+    let calib = CalibrationFile::identity(G_MPS2);
     for kind in [DetectorKind::Yu, DetectorKind::Glrt] {
         let mut stage = CalibrationStage::new(
             &calib,

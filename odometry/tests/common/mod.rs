@@ -12,9 +12,7 @@
 
 #![allow(dead_code)]
 
-use calibrate::calibfile::{CalibrationFile, ResidualSection, SourceSection};
-use calibrate::fit::{CovarianceMode, Weighting};
-use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
+use calibrate::calibfile::CalibrationFile;
 use ipc_types::units::{AccelRange, GyroRange};
 use ipc_types::{CorrectedImuSample, RawImuSample, Stamps, corrected_flags};
 use mems_sim::SimSensor;
@@ -187,27 +185,7 @@ impl Case {
 /// (`SensorModel::mpu9250_calibrated`) is already what a calibration leaves, so the live
 /// calibration stage only has to convert units, detect rest and refine the biases.
 pub fn identity_calibration() -> CalibrationFile {
-    CalibrationFile::new(
-        &AccelModel::identity(ModelKind::Full),
-        &ParamCovariance::zeros(),
-        calibrate::calibfile::FitMethod::Labelled,
-        Weighting::Unweighted,
-        CovarianceMode::ResidualScaled,
-        G_MPS2,
-        SourceSection {
-            file: "identity".into(),
-            kind: "none".into(),
-            poses: 0,
-            repaired_samples: 0,
-        },
-        ResidualSection {
-            rms_g: [0.0; 3],
-            max_abs_g: 0.0,
-            dof: [0; 3],
-            chi2: [0.0; 3],
-            per_pose_g: Vec::new(),
-        },
-    )
+    CalibrationFile::identity(G_MPS2)
 }
 
 /// The calibration session followed by the drive, as one scenario for one sensor power-on.
