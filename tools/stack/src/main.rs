@@ -48,6 +48,40 @@ struct Cli {
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
+    /// Run the acquisition loop under SCHED_FIFO at this priority (1-99), as `mems-acquire
+    /// --sched-fifo`. Needs CAP_SYS_NICE or an RLIMIT_RTPRIO of at least PRIO: where it is
+    /// refused, acquire fails at start-up and the stack stops with its error.
+    #[arg(long, value_name = "PRIO", value_parser = clap::value_parser!(u8).range(1..=99))]
+    sched_fifo: Option<u8>,
+    /// Pin the acquisition process to this CPU core, as `mems-acquire --cpu`.
+    #[arg(long, value_name = "N")]
+    cpu: Option<usize>,
+    /// Lock the acquisition process's memory (mlockall), as `mems-acquire --mlock`.
+    #[arg(long)]
+    mlock: bool,
+}
+
+/// `mems-acquire`'s arguments for `cli` (the namespace is added by the caller): the source,
+/// rate and seed, and the real-time options passed through. Every restart uses the same.
+fn acquire_args(cli: &Cli) -> Vec<String> {
+    let mut args = vec![
+        "--source".into(),
+        cli.source.clone(),
+        "--rate".into(),
+        cli.rate.to_string(),
+        "--seed".into(),
+        cli.seed.to_string(),
+    ];
+    if let Some(priority) = cli.sched_fifo {
+        args.extend(["--sched-fifo".into(), priority.to_string()]);
+    }
+    if let Some(cpu) = cli.cpu {
+        args.extend(["--cpu".into(), cpu.to_string()]);
+    }
+    if cli.mlock {
+        args.push("--mlock".into());
+    }
+    args
 }
 
 /// The directory holding this executable, where the other `mems-*` binaries are built.
@@ -156,18 +190,7 @@ fn main() -> Result<()> {
                 .unwrap_or_else(|| if cli.rate > 1000 { "yu" } else { "glrt" }.into()),
         ],
     ));
-    specs.push(spec(
-        "acquire",
-        "mems-acquire",
-        vec![
-            "--source".into(),
-            cli.source.clone(),
-            "--rate".into(),
-            cli.rate.to_string(),
-            "--seed".into(),
-            cli.seed.to_string(),
-        ],
-    ));
+    specs.push(spec("acquire", "mems-acquire", acquire_args(&cli)));
 
     let node = service::node()?;
     let raw = service::open::<RawImuSample>(&node, &service::full_name(&namespace, service::RAW))?;
@@ -191,6 +214,7 @@ fn main() -> Result<()> {
     let mut last_status = Instant::now();
     let tty = std::io::stderr().is_terminal();
     let deadline = cli.duration.map(Duration::from_secs_f64);
+    let mut gave_up: Option<String> = None;
 
     // node.wait returns an error on SIGINT/SIGTERM: the clean way out.
     while node.wait(Duration::from_millis(20)).is_ok() {
@@ -218,7 +242,20 @@ fn main() -> Result<()> {
                 Event::Restarted { name, count } => {
                     eprintln!("mems-stack: {name} restarted ({count} so far)");
                 }
+                Event::GaveUp { name, status } => {
+                    let why = format!(
+                        "{name} exited within {:?} of starting {} times in a row (last: \
+                         {status}); not restarting it: see its error above",
+                        supervisor::FAST_EXIT,
+                        supervisor::MAX_FAST_EXITS
+                    );
+                    eprintln!("mems-stack: {why}; stopping the stack");
+                    gave_up.get_or_insert(why);
+                }
             }
+        }
+        if gave_up.is_some() {
+            break;
         }
         if last_status.elapsed() >= Duration::from_secs(1) {
             let line = status_line(
@@ -265,7 +302,10 @@ fn main() -> Result<()> {
             last_state.as_ref()
         )
     );
-    Ok(())
+    match gave_up {
+        Some(why) => bail!("{why}"),
+        None => Ok(()),
+    }
 }
 
 fn observe<T: Message>(stats: &mut TopicStats, m: &T) {
@@ -310,4 +350,57 @@ fn status_line(
         if zero_state { "at rest" } else { "moving" },
         position
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn acquire_args_for(args: &[&str]) -> Vec<String> {
+        let cli =
+            Cli::try_parse_from(std::iter::once("mems-stack").chain(args.iter().copied())).unwrap();
+        acquire_args(&cli)
+    }
+
+    /// `flag`'s value in `args`, `None` when absent.
+    fn value<'a>(args: &'a [String], flag: &str) -> Option<&'a str> {
+        let i = args.iter().position(|a| a == flag)?;
+        Some(args.get(i + 1).expect("flag has a value").as_str())
+    }
+
+    #[test]
+    fn real_time_options_are_passed_to_acquire() {
+        let args = acquire_args_for(&[
+            "--rate",
+            "4000",
+            "--sched-fifo",
+            "50",
+            "--cpu",
+            "1",
+            "--mlock",
+        ]);
+        assert_eq!(value(&args, "--sched-fifo"), Some("50"));
+        assert_eq!(value(&args, "--cpu"), Some("1"));
+        assert_eq!(value(&args, "--rate"), Some("4000"));
+        assert!(args.iter().any(|a| a == "--mlock"), "{args:?}");
+    }
+
+    #[test]
+    fn without_real_time_options_acquire_gets_none() {
+        let args = acquire_args_for(&[]);
+        for flag in ["--sched-fifo", "--cpu", "--mlock"] {
+            assert!(!args.iter().any(|a| a == flag), "{flag} in {args:?}");
+        }
+        assert_eq!(value(&args, "--source"), Some("sim"));
+    }
+
+    #[test]
+    fn a_priority_outside_1_to_99_is_refused_by_the_stack_itself() {
+        for bad in ["0", "100"] {
+            let err = Cli::try_parse_from(["mems-stack", "--sched-fifo", bad])
+                .err()
+                .unwrap_or_else(|| panic!("--sched-fifo {bad} accepted"));
+            assert!(err.to_string().contains("--sched-fifo"), "{err}");
+        }
+    }
 }

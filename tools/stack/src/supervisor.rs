@@ -1,6 +1,8 @@
 //! Supervision of the stack's child processes: start in pipeline order, restart a child that
-//! dies (with back-off), clean up what a killed child left in shared memory, and stop
-//! everything in source-first order so that downstream stages drain what is in flight.
+//! dies (with back-off), clean up what a killed child left in shared memory, give up on a child
+//! that keeps failing right after it starts (a configuration error, such as SCHED_FIFO refused,
+//! that no restart can fix), and stop everything in source-first order so that downstream
+//! stages drain what is in flight.
 
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -23,6 +25,8 @@ struct Supervised {
     child: Option<Child>,
     started: Instant,
     restarts: u32,
+    /// Consecutive exits within [`FAST_EXIT`] of starting.
+    fast_exits: u32,
     backoff: Duration,
     restart_at: Option<Instant>,
 }
@@ -35,6 +39,14 @@ pub enum Event {
         /// The child's name.
         name: String,
         /// How it ended (exit code or signal).
+        status: String,
+    },
+    /// A child exited within [`FAST_EXIT`] of starting [`MAX_FAST_EXITS`] times in a row: it is
+    /// not restarted again.
+    GaveUp {
+        /// The child's name.
+        name: String,
+        /// How its last run ended (exit code or signal).
         status: String,
     },
     /// A child was started again.
@@ -55,6 +67,12 @@ const INITIAL_BACKOFF: Duration = Duration::from_millis(200);
 const MAX_BACKOFF: Duration = Duration::from_secs(5);
 /// A child that ran this long is considered healthy again: its back-off resets.
 const HEALTHY_AFTER: Duration = Duration::from_secs(10);
+/// An exit this soon after starting counts as a failure to start (a child that ran longer and
+/// then crashed is restarted however often that happens).
+pub const FAST_EXIT: Duration = Duration::from_secs(2);
+/// Consecutive fast exits after which a child is given up on. With the back-off of 0.2 s and
+/// 0.4 s between them, a child that cannot start is given up on within about 5 s.
+pub const MAX_FAST_EXITS: u32 = 3;
 
 fn spawn(spec: &ChildSpec) -> std::io::Result<Child> {
     Command::new(&spec.program)
@@ -94,6 +112,7 @@ impl Supervisor {
                 child: Some(child),
                 started: Instant::now(),
                 restarts: 0,
+                fast_exits: 0,
                 backoff: INITIAL_BACKOFF,
                 restart_at: None,
             });
@@ -110,7 +129,9 @@ impl Supervisor {
     }
 
     /// Reaps children that exited, cleans up after them, and restarts those whose back-off
-    /// has passed. Returns what happened.
+    /// has passed; a child that exited within [`FAST_EXIT`] of starting [`MAX_FAST_EXITS`]
+    /// times in a row is given up on instead ([`Event::GaveUp`], never restarted). Returns what
+    /// happened.
     pub fn poll(&mut self) -> Vec<Event> {
         let mut events = Vec::new();
         let mut any_died = false;
@@ -120,15 +141,19 @@ impl Supervisor {
             {
                 c.child = None;
                 any_died = true;
-                if c.started.elapsed() >= HEALTHY_AFTER {
+                let ran = c.started.elapsed();
+                if ran >= HEALTHY_AFTER {
                     c.backoff = INITIAL_BACKOFF;
+                }
+                c.fast_exits = if ran < FAST_EXIT { c.fast_exits + 1 } else { 0 };
+                let (name, status) = (c.spec.name.clone(), describe(status));
+                if c.fast_exits >= MAX_FAST_EXITS {
+                    events.push(Event::GaveUp { name, status });
+                    continue;
                 }
                 c.restart_at = Some(Instant::now() + c.backoff);
                 c.backoff = (c.backoff * 2).min(MAX_BACKOFF);
-                events.push(Event::Exited {
-                    name: c.spec.name.clone(),
-                    status: describe(status),
-                });
+                events.push(Event::Exited { name, status });
             }
         }
         if any_died && let Err(e) = ipc_types::service::remove_dead_nodes() {
@@ -190,5 +215,89 @@ impl Supervisor {
         if let Err(e) = ipc_types::service::remove_dead_nodes() {
             eprintln!("mems-stack: {e}");
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Polls until `done` says so or `limit` passes, collecting every event.
+    fn poll_until(
+        s: &mut Supervisor,
+        limit: Duration,
+        done: impl Fn(&[Event]) -> bool,
+    ) -> Vec<Event> {
+        let start = Instant::now();
+        let mut events = Vec::new();
+        while start.elapsed() < limit && !done(&events) {
+            events.extend(s.poll());
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        events
+    }
+
+    fn shell(name: &str, script: &str) -> ChildSpec {
+        ChildSpec {
+            name: name.into(),
+            program: "/bin/sh".into(),
+            args: vec!["-c".into(), script.into()],
+        }
+    }
+
+    #[test]
+    fn a_child_that_fails_at_once_every_time_is_given_up_after_three_tries() {
+        let mut s = Supervisor::start(vec![shell("broken", "exit 3")]).unwrap();
+        let events = poll_until(&mut s, Duration::from_secs(8), |e| {
+            e.iter().any(|e| matches!(e, Event::GaveUp { .. }))
+        });
+        let exited = |status: &str| Event::Exited {
+            name: "broken".into(),
+            status: status.into(),
+        };
+        let restarted = |count| Event::Restarted {
+            name: "broken".into(),
+            count,
+        };
+        assert_eq!(
+            events,
+            vec![
+                exited("exit code 3"),
+                restarted(1),
+                exited("exit code 3"),
+                restarted(2),
+                Event::GaveUp {
+                    name: "broken".into(),
+                    status: "exit code 3".into()
+                },
+            ]
+        );
+        // Given up means never started again, however long the back-off would have been.
+        let later = poll_until(&mut s, MAX_BACKOFF + Duration::from_millis(500), |_| false);
+        assert!(later.is_empty(), "{later:?}");
+        assert_eq!(s.restarts(), vec![("broken", 2)]);
+        s.shutdown(Duration::from_secs(1));
+    }
+
+    #[test]
+    fn a_healthy_peer_keeps_running_while_another_child_is_given_up() {
+        let mut s = Supervisor::start(vec![
+            shell("healthy", "sleep 30"),
+            shell("broken", "exit 1"),
+        ])
+        .unwrap();
+        let events = poll_until(&mut s, Duration::from_secs(8), |e| {
+            e.iter().any(|e| matches!(e, Event::GaveUp { .. }))
+        });
+        assert!(
+            events.iter().all(|e| !format!("{e:?}").contains("healthy")),
+            "{events:?}"
+        );
+        assert!(
+            s.children[0].child.is_some(),
+            "the healthy child still runs"
+        );
+        assert_eq!(s.restarts(), vec![("healthy", 0), ("broken", 2)]);
+        s.shutdown(Duration::from_secs(1));
     }
 }
