@@ -9,7 +9,11 @@
 //!
 //! ```text
 //! cargo run --release -p calibrate --example detectors -- [--seeds 8] [--duration-s 600] [--vibration 1,0] [--json]
+//! cargo run --release -p calibrate --example detectors -- --rate 4000 --no-gyro   # the MPU-9250 at 4 kHz
 //! ```
+//!
+//! With `--no-gyro` the samples carry no gyroscope (`GYRO_VALID` clear), as the MPU-9250's
+//! accelerometer-only 4 kHz mode; the variants are then Yu's and the accelerometer-only GLRT's.
 
 use std::time::Instant;
 
@@ -18,8 +22,8 @@ use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig};
 use calibrate::zero_state::{DetectorConfig, DetectorKind, GlrtStatistic};
 use clap::Parser;
-use ipc_types::corrected_flags;
 use ipc_types::units::{AccelRange, GyroRange};
+use ipc_types::{corrected_flags, raw_flags};
 use mems_sim::model::{G_MPS2, SensorModel};
 use mems_sim::scenario::{Drive, DriveParams, ns_from_s};
 use mems_sim::vibration::VibrationModel;
@@ -43,6 +47,9 @@ struct Cli {
     /// Print JSON instead of a Markdown table.
     #[arg(long)]
     json: bool,
+    /// Samples without the gyroscope (accelerometer-only mode): Yu and glrt-accel variants.
+    #[arg(long)]
+    no_gyro: bool,
 }
 
 /// A detector variant under test.
@@ -51,7 +58,7 @@ struct Variant {
     config: DetectorConfig,
 }
 
-fn variants() -> Vec<Variant> {
+fn variants(no_gyro: bool) -> Vec<Variant> {
     let g = G_MPS2;
     let mut out = Vec::new();
     for alpha in [1e-3, 1e-2, 1e-1, 3e-1] {
@@ -61,6 +68,25 @@ fn variants() -> Vec<Variant> {
             name: format!("yu a={alpha:e}"),
             config: c,
         });
+    }
+    if no_gyro {
+        for (k, alpha) in [
+            (25, 1e-2),
+            (50, 1e-2),
+            (100, 1e-3),
+            (100, 1e-2),
+            (100, 1e-1),
+            (200, 1e-2),
+        ] {
+            let mut c = DetectorConfig::new(DetectorKind::GlrtAccel, g);
+            c.glrt.window_batches = k;
+            c.glrt.false_alarm = alpha;
+            out.push(Variant {
+                name: format!("glrt-accel split K={k} a={alpha:e}"),
+                config: c,
+            });
+        }
+        return out;
     }
     for (k, statistic, alpha) in [
         (10, GlrtStatistic::Split, 1e-3),
@@ -179,7 +205,13 @@ fn run_seed(cli: &Cli, seed: u64, vibration: f64, variants: &[Variant]) -> Resul
             slow_cruise: cruise && s.speed0_mps < 0.3,
             in_place_turn: spin && s.heading_change_rad != 0.0,
         });
-        let raw = adc::quantize_sample(&analog, AccelRange::G2, GyroRange::Dps250, ns_from_s(t), k);
+        let mut raw =
+            adc::quantize_sample(&analog, AccelRange::G2, GyroRange::Dps250, ns_from_s(t), k);
+        if cli.no_gyro {
+            raw.flags &= !raw_flags::GYRO_VALID;
+            raw.gyro_dps = [0.0; 3];
+            raw.gyro_counts = [0; 3];
+        }
         // Every stage releases the same samples at the same time (whole batches).
         let mut released = 0;
         for (stage, c) in stages.iter_mut().zip(counts.iter_mut()) {
@@ -256,7 +288,7 @@ fn ratio(c: [u64; 2]) -> f64 {
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
-    let variants = variants();
+    let variants = variants(cli.no_gyro);
     let mut rows = Vec::new();
     for &vibration in &cli.vibration {
         let mut total = vec![Counts::default(); variants.len()];
@@ -304,7 +336,7 @@ fn main() -> Result<()> {
     println!("|---|---|---|---|---|---|---|---|");
     for r in &rows {
         println!(
-            "| {} | {} | {:.1}% | {:.2}% | {:.2}% | {:.2}% | {:.2}% | {:.4} |",
+            "| {} | {} | {:.1}% | {:.2}% | {:.2}% | {:.2}% | {:.2}% | {} |",
             r.vibration,
             r.detector,
             100.0 * r.detection_rate,
@@ -312,7 +344,11 @@ fn main() -> Result<()> {
             100.0 * r.false_alarm_clearly_moving,
             100.0 * r.false_alarm_slow_cruise,
             100.0 * r.false_alarm_in_place_turn,
-            r.gyro_bias_error_rms_dps
+            if cli.no_gyro {
+                "n/a (no gyro)".to_string()
+            } else {
+                format!("{:.4}", r.gyro_bias_error_rms_dps)
+            }
         );
         if r.learn_restarts > 0 {
             eprintln!("{}: {} learning restarts", r.detector, r.learn_restarts);

@@ -101,7 +101,7 @@ pub enum StageError {
     /// The detector needs the gyroscope but the sample has none.
     #[error(
         "raw sample seq {seq} has no gyroscope measurement (GYRO_VALID clear) but the {detector} \
-         detector needs one: use the yu detector or an acquisition rate with the gyroscope"
+         detector needs one: use the glrt-accel detector or an acquisition rate with the gyroscope"
     )]
     NoGyro {
         /// Sequence number of the sample.

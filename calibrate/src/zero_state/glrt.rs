@@ -19,6 +19,11 @@
 //! - [`GlrtStatistic::Combined`]: SHOE's single sum `T_mean + T_scatter ~ chi2(6 N)` against
 //!   its `1 - a` quantile, which dilutes the 6 mean degrees of freedom among `6 N`.
 //!
+//! **Accelerometer only** ([`super::DetectorKind::GlrtAccel`], for a sensor run without its
+//! gyroscope, as the MPU-9250 at 4 kHz): the same test on the three accelerometer channels,
+//! `chi2(3)` and `chi2(3 (N - 1))`. It still sees acceleration and tilt against the learned
+//! gravity vector and vibration in the scatter, but not a rotation about gravity.
+//!
 //! `a` is the configured false-alarm rate per window at rest. The noise levels stay as learned
 //! at start-up (a part's noise density does not drift); the gravity vector and gyroscope bias
 //! are kept current as running means over rest batches (temperature moves them).
@@ -103,6 +108,8 @@ impl BatchSums {
 #[derive(Debug, Clone)]
 pub(crate) struct GlrtRule {
     statistic: GlrtStatistic,
+    /// Channels tested: 6 (accelerometer and gyroscope) or 3 (accelerometer only).
+    channels: usize,
     reference: [f64; 6],
     inv_var: [f64; 6],
     inv_rho: [f64; 6],
@@ -119,8 +126,15 @@ pub(crate) struct GlrtRule {
 
 impl GlrtRule {
     /// The test from the start-up reference; `ring` (capacity at least `window_batches`) becomes
-    /// the window, so that learning allocates nothing.
-    pub fn new(r: &StaticReference, config: &GlrtConfig, mut ring: Vec<BatchSums>) -> Self {
+    /// the window, so that learning allocates nothing. `accel_only` leaves the gyroscope out.
+    pub fn new(
+        r: &StaticReference,
+        config: &GlrtConfig,
+        mut ring: Vec<BatchSums>,
+        accel_only: bool,
+    ) -> Self {
+        let channels = if accel_only { 3 } else { 6 };
+        let dof = channels as f64;
         let k = config.window_batches;
         let n = (k * BATCH_LEN) as f64;
         let quantile =
@@ -142,13 +156,14 @@ impl GlrtRule {
         }
         Self {
             statistic: config.statistic,
+            channels,
             reference,
             inv_var,
             inv_rho,
             drift_var,
-            mean_quantile: quantile(6.0, a / 2.0),
-            scatter_quantile: quantile(6.0 * (n - 1.0), a / 2.0),
-            combined_quantile: quantile(6.0 * n, a),
+            mean_quantile: quantile(dof, a / 2.0),
+            scatter_quantile: quantile(dof * (n - 1.0), a / 2.0),
+            combined_quantile: quantile(dof * n, a),
             ring: {
                 ring.clear();
                 ring.resize(k, BatchSums::default());
@@ -183,7 +198,7 @@ impl GlrtRule {
         }
         let mut t_mean = 0.0;
         let mut t_scatter = 0.0;
-        for c in 0..6 {
+        for c in 0..self.channels {
             let d = mean[c] - self.reference[c];
             // The window mean's variance about the reference: its own noise plus the
             // reference's drift since it was learned.

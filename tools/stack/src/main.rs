@@ -39,7 +39,8 @@ struct Cli {
     #[arg(long)]
     calib: Option<PathBuf>,
     /// Zero-state detector of the calibration stage (default: `glrt`, which needs the
-    /// gyroscope; `yu` above 1000 Hz, where the sensor runs accelerometer-only).
+    /// gyroscope; above 1000 Hz, where the sensor runs accelerometer-only, `glrt-accel` over a
+    /// 0.5 s window). `yu` is the thesis's detector.
     #[arg(long)]
     detector: Option<String>,
     /// Seed of the simulated sensor and its drive.
@@ -59,6 +60,31 @@ struct Cli {
     /// Lock the acquisition process's memory (mlockall), as `mems-acquire --mlock`.
     #[arg(long)]
     mlock: bool,
+}
+
+/// Window of the accelerometer-only GLRT, s: 0.5 s, as the GLRT's default at 1 kHz (measured
+/// at 4 kHz in docs/detectors.md).
+const ACCEL_GLRT_WINDOW_S: f64 = 0.5;
+
+/// `mems-calibrate serve`'s detector arguments for `cli`: the one asked for, else the GLRT, on
+/// the accelerometer alone over [`ACCEL_GLRT_WINDOW_S`] above 1000 Hz (no gyroscope there).
+fn detector_args(cli: &Cli) -> Vec<String> {
+    match &cli.detector {
+        Some(d) => vec!["--detector".into(), d.clone()],
+        None if cli.rate > 1000 => {
+            // Batches of 20 samples (calibrate::zero_state::BATCH_LEN).
+            let batches = (ACCEL_GLRT_WINDOW_S * f64::from(cli.rate) / 20.0)
+                .round()
+                .max(1.0);
+            vec![
+                "--detector".into(),
+                "glrt-accel".into(),
+                "--glrt-window".into(),
+                batches.to_string(),
+            ]
+        }
+        None => vec!["--detector".into(), "glrt".into()],
+    }
 }
 
 /// `mems-acquire`'s arguments for `cli` (the namespace is added by the caller): the source,
@@ -180,15 +206,10 @@ fn main() -> Result<()> {
     specs.push(spec(
         "calibrate",
         "mems-calibrate",
-        vec![
-            "serve".into(),
-            "--calib".into(),
-            calib,
-            "--detector".into(),
-            cli.detector
-                .clone()
-                .unwrap_or_else(|| if cli.rate > 1000 { "yu" } else { "glrt" }.into()),
-        ],
+        ["serve".into(), "--calib".into(), calib]
+            .into_iter()
+            .chain(detector_args(&cli))
+            .collect(),
     ));
     specs.push(spec("acquire", "mems-acquire", acquire_args(&cli)));
 
@@ -392,6 +413,25 @@ mod tests {
             assert!(!args.iter().any(|a| a == flag), "{flag} in {args:?}");
         }
         assert_eq!(value(&args, "--source"), Some("sim"));
+    }
+
+    #[test]
+    fn the_detector_needs_no_gyro_above_1_khz() {
+        let detector = |args: &[&str]| {
+            let cli =
+                Cli::try_parse_from(std::iter::once("mems-stack").chain(args.iter().copied()))
+                    .unwrap();
+            detector_args(&cli)
+        };
+        // 4 kHz is accelerometer-only: the accelerometer GLRT over 0.5 s = 100 batches of 20.
+        let at_4k = detector(&["--rate", "4000"]);
+        assert_eq!(value(&at_4k, "--detector"), Some("glrt-accel"));
+        assert_eq!(value(&at_4k, "--glrt-window"), Some("100"));
+        let at_1k = detector(&["--rate", "1000"]);
+        assert_eq!(value(&at_1k, "--detector"), Some("glrt"));
+        assert_eq!(value(&at_1k, "--glrt-window"), None);
+        let asked = detector(&["--rate", "4000", "--detector", "yu"]);
+        assert_eq!(asked, vec!["--detector".to_string(), "yu".to_string()]);
     }
 
     #[test]

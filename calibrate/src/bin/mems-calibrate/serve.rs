@@ -33,10 +33,15 @@ pub struct ServeArgs {
     /// Calibration file (TOML) written by `mems-calibrate fit`.
     #[arg(long)]
     calib: PathBuf,
-    /// Zero-state detector: glrt (accelerometer and gyroscope; needs the gyroscope) or yu
-    /// (accelerometer batches of 20, as in the thesis).
+    /// Zero-state detector: glrt (accelerometer and gyroscope; needs the gyroscope),
+    /// glrt-accel (the same on the accelerometer alone, for a sensor run without its gyroscope)
+    /// or yu (accelerometer batches of 20, as in the thesis).
     #[arg(long, value_enum, default_value_t = DetectorKind::Glrt)]
     detector: DetectorKind,
+    /// The GLRT's window, in batches of 20 samples (default 25: 0.5 s at 1 kHz; 100 is 0.5 s
+    /// at 4 kHz).
+    #[arg(long, value_name = "BATCHES", value_parser = clap::value_parser!(u32).range(1..))]
+    glrt_window: Option<u32>,
     /// Length of the start-up rest the detector learns its thresholds from, s.
     #[arg(long, default_value_t = 5.0)]
     learn_s: f64,
@@ -88,6 +93,9 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
     }
     let mut config = DetectorConfig::new(args.detector, file.gravity_mps2);
     config.learn.duration_s = args.learn_s;
+    if let Some(k) = args.glrt_window {
+        config.glrt.window_batches = k as usize;
+    }
     let mut stage = CalibrationStage::new(&file, config, RefineConfig::default())
         .with_context(|| args.calib.display().to_string())?;
 
