@@ -43,6 +43,7 @@
 #define MEMS_ODOMETRY_HINT_SPEED (1u << 4)
 #define MEMS_ODOMETRY_HINT_STALE (1u << 5)
 #define MEMS_ODOMETRY_HINT_DISAGREE (1u << 6)
+#define MEMS_ODOMETRY_NO_GYRO (1u << 7)
 
 /* RobotHint.flags */
 #define MEMS_HINT_STATIONARY (1u << 0)

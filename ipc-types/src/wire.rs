@@ -136,6 +136,10 @@ pub mod odometry_flags {
     /// The fresh hint and the IMU's own zero-state detector disagree at this sample (one says
     /// rest, the other motion).
     pub const HINT_DISAGREE: u16 = 1 << 6;
+    /// The sample has no gyroscope measurement (an accelerometer-only mode, such as the
+    /// MPU-9250 at 4 kHz): the attitude cannot be tracked, so the filter neither aligns nor
+    /// navigates; `ALIGNED` is clear and position and velocity are not estimated (zero).
+    pub const NO_GYRO: u16 = 1 << 7;
 }
 
 /// The odometry estimate at one sample time.

@@ -117,3 +117,44 @@ for t in mems_ipc.ALL_TYPES:
     let lines: Vec<&str> = stdout.lines().collect();
     assert_eq!(lines, expected);
 }
+
+#[test]
+fn python_odometry_flags_match_rust() {
+    use ipc_types::odometry_flags as f;
+    let expected = [
+        ("ODOMETRY_ZERO_VELOCITY", f::ZERO_VELOCITY),
+        ("ODOMETRY_ALIGNED", f::ALIGNED),
+        ("ODOMETRY_REVISION", f::REVISION),
+        ("ODOMETRY_HINT_STATIONARY", f::HINT_STATIONARY),
+        ("ODOMETRY_HINT_SPEED", f::HINT_SPEED),
+        ("ODOMETRY_HINT_STALE", f::HINT_STALE),
+        ("ODOMETRY_HINT_DISAGREE", f::HINT_DISAGREE),
+        ("ODOMETRY_NO_GYRO", f::NO_GYRO),
+    ];
+    // Every ODOMETRY_* constant the module defines, so that one Rust lacks is caught too.
+    let script = r#"
+import sys
+sys.path.insert(0, sys.argv[1])
+import mems_ipc
+for name in sorted(dir(mems_ipc)):
+    if name.startswith("ODOMETRY_") and isinstance(getattr(mems_ipc, name), int):
+        print(name, getattr(mems_ipc, name))
+"#;
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/python");
+    let out = Command::new("python3")
+        .args(["-c", script, dir])
+        .output()
+        .expect("python3 must be installed");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut expected: Vec<String> = expected
+        .iter()
+        .map(|(name, value)| format!("{name} {value}"))
+        .collect();
+    expected.sort();
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(stdout.lines().collect::<Vec<_>>(), expected);
+}

@@ -346,6 +346,8 @@ impl Simulation {
             } else {
                 corrected_flags::DETECTOR_READY
             },
+            // Passed through, as the calibration stage does (the gyroscope is valid).
+            raw_flags: raw.flags,
             ..Default::default()
         };
         self.seq += 1;

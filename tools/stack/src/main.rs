@@ -24,8 +24,8 @@ struct Cli {
     /// `sim` (the simulated MPU-9250) or `i2c:/dev/i2c-N[@0x68]`.
     #[arg(long, default_value = "sim")]
     source: String,
-    /// Output rate of the sensor, Hz (1000/n with gyro; 4000 is accelerometer-only and gives
-    /// the odometry no gyro).
+    /// Output rate of the sensor, Hz (1000/n with gyro; 4000 is accelerometer-only: the
+    /// odometry then estimates no position and the status line says so).
     #[arg(long, default_value_t = 1000)]
     rate: u32,
     /// Record every topic to this MCAP file.
@@ -348,6 +348,9 @@ fn status_line(
 ) -> String {
     let (r, c, o) = (raw.report(), cor.report(), odo.report());
     let position = match state {
+        Some(s) if s.flags & odometry_flags::NO_GYRO != 0 => {
+            "no position: the sensor runs without its gyroscope at this rate".to_string()
+        }
         Some(s) if s.flags & odometry_flags::ALIGNED != 0 => format!(
             "pos ({:+.2}, {:+.2}, {:+.2}) m +- ({:.2}, {:.2}, {:.2})",
             s.position_m[0],
@@ -432,6 +435,24 @@ mod tests {
         assert_eq!(value(&at_1k, "--glrt-window"), None);
         let asked = detector(&["--rate", "4000", "--detector", "yu"]);
         assert_eq!(asked, vec!["--detector".to_string(), "yu".to_string()]);
+    }
+
+    #[test]
+    fn the_status_line_shows_no_position_without_gyro() {
+        let stats = TopicStats::new();
+        let line = |flags| {
+            let state = OdometryState {
+                flags,
+                position_m: [1.5, -2.0, 0.0],
+                ..OdometryState::default()
+            };
+            status_line(&stats, &stats, &stats, true, Some(&state))
+        };
+        let aligned = line(odometry_flags::ALIGNED);
+        assert!(aligned.contains("pos (+1.50, -2.00, +0.00) m"), "{aligned}");
+        let no_gyro = line(odometry_flags::NO_GYRO);
+        assert!(no_gyro.contains("no position"), "{no_gyro}");
+        assert!(!no_gyro.contains("pos ("), "{no_gyro}");
     }
 
     #[test]

@@ -78,6 +78,23 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         bail!("--learn-s must be > 0, got {}", args.stage.learn_s);
     }
     let recording = recording::load_raw(&args.input)?;
+    // Without a gyroscope nothing tracks the attitude. Offline keeps navigating (static
+    // recordings such as the thesis's, accelerometer-only, are dead-reckoned at a fixed
+    // attitude), but says what that position is worth.
+    if let Some(r) = recording
+        .samples
+        .iter()
+        .find(|r| r.flags & ipc_types::raw_flags::GYRO_VALID == 0)
+    {
+        eprintln!(
+            "mems-odometry: {}: sample seq {} has no gyroscope (GYRO_VALID clear); the attitude \
+             is held at its alignment, so the position is meaningful only if the sensor never \
+             rotated (a static recording). mems-odometry serve publishes no position for such \
+             samples (NO_GYRO)",
+            args.input.display(),
+            r.seq
+        );
+    }
     if let Some(t) = &recording.truncation {
         eprintln!("mems-odometry: {}: {t}", args.input.display());
     }

@@ -12,6 +12,10 @@
 //!   republishes that interval's states with the `REVISION` flag. `stamps.odometry_ns` is
 //!   `CLOCK_MONOTONIC` at publication.
 //! - A refused sample (NaN, time not increasing) is reported on stderr and skipped.
+//! - Samples without a gyroscope (`raw_flags::GYRO_VALID` clear: an accelerometer-only sensor
+//!   mode, the MPU-9250 at 4 kHz) cannot be navigated, since nothing tracks the attitude: each
+//!   gets a state flagged `NO_GYRO`, never `ALIGNED`, with no position or velocity (zero), and
+//!   does not reach the stage; the first one is reported once on stderr.
 //! - Sequence numbers that go back mean a new sensor session (a restarted acquire): the stage
 //!   starts over (new alignment).
 //! - SIGINT/SIGTERM (`node.wait` returns an error): a summary, exit status 0.
@@ -22,7 +26,7 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
 use ipc_types::clock::monotonic_ns;
-use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, service};
+use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, odometry_flags, raw_flags, service};
 use odometry::hints::usable_from_ns;
 use odometry::stage::OdometryStage;
 
@@ -66,6 +70,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
     let mut last_seq: Option<u64> = None;
     let (mut received, mut published, mut refused, mut sessions) = (0u64, 0u64, 0u64, 1u64);
     let mut send_error: Option<anyhow::Error> = None;
+    let mut warned_no_gyro = false;
     // node.wait returns an error on SIGINT/SIGTERM: the clean way out.
     while node.wait(Duration::from_millis(1)).is_ok() {
         loop {
@@ -94,6 +99,17 @@ pub fn run(args: ServeArgs) -> Result<()> {
             }
             let s = *sample.payload();
             received += 1;
+            let no_gyro = s.raw_flags & raw_flags::GYRO_VALID == 0;
+            if no_gyro && !warned_no_gyro {
+                warned_no_gyro = true;
+                eprintln!(
+                    "mems-odometry: sample seq {} has no gyroscope (GYRO_VALID clear: an \
+                     accelerometer-only sensor mode, such as the MPU-9250 at 4 kHz); without it \
+                     the attitude cannot be tracked, so no position is estimated: states carry \
+                     NO_GYRO and never ALIGNED. Run the sensor at 1000 Hz or below for odometry",
+                    s.seq
+                );
+            }
             if last_seq.is_some_and(|l| s.seq <= l) {
                 // A new sensor session: align again.
                 stage = new_stage()?;
@@ -114,7 +130,15 @@ pub fn run(args: ServeArgs) -> Result<()> {
                     Err(e) => send_error = Some(anyhow::anyhow!("cannot loan a state: {e:?}")),
                 }
             };
-            if let Err(e) = stage.process(&s, &mut emit) {
+            if no_gyro {
+                emit(&OdometryState {
+                    stamps: s.stamps,
+                    seq: s.seq,
+                    attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
+                    flags: odometry_flags::NO_GYRO,
+                    ..OdometryState::default()
+                });
+            } else if let Err(e) = stage.process(&s, &mut emit) {
                 refused += 1;
                 eprintln!("mems-odometry: refused: {e}");
             }
