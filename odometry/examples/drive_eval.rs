@@ -22,7 +22,7 @@ use calibrate::stage::{CalibrationStage, RefineConfig};
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use clap::{Parser, ValueEnum};
 use common::{Case, Simulation, identity_calibration};
-use ipc_types::{CorrectedImuSample, RobotHint, odometry_flags};
+use ipc_types::{CorrectedImuSample, RobotHint, corrected_flags, odometry_flags};
 use mems_sim::hints::{HintParams, RestSource};
 use nalgebra::{Matrix2, Matrix3, Vector2};
 use odometry::gyrocal::{GyroCalConfig, calibrate_gyro};
@@ -214,6 +214,97 @@ struct Outcome {
     scale_sigma: f64,
     /// Angle between the estimated (or configured) mounting and the true one, degrees.
     mounting_error_deg: f64,
+    /// The rest flags the stage got, scored against the drive's truth.
+    flags: FlagScore,
+    /// Time of the alignment, s.
+    aligned_at_s: f64,
+}
+
+/// Rest flags against the truth: what the zero-velocity updates of wrong flags cost.
+#[derive(Default, Clone, Copy)]
+struct FlagScore {
+    /// Samples at rest, and how many of them were flagged rest.
+    rest: (u64, u64),
+    /// Samples moving, and how many of them were flagged rest (false rest).
+    moving: (u64, u64),
+    /// False-rest runs (maximal runs of moving samples flagged rest), by where they end: within
+    /// 1 s of the motion's start, within 1 s of its end, or in between.
+    runs: [u64; 3],
+    /// Sum over false-rest runs of the truth speed at the run's last sample times the motion
+    /// time left after it, m: the distance a zero-velocity update at that speed would cut if
+    /// nothing repaired it, by the same three places.
+    cut_m: [f64; 3],
+    /// Rests with no sample flagged, and the longest of them, s.
+    missed_rests: (u64, f64),
+    /// Longest time between two flagged rests, s.
+    longest_unflagged_s: f64,
+}
+
+impl FlagScore {
+    /// Scores `flags` (rest flag, truth at rest, truth speed m/s, time s) per sample.
+    fn new(samples: &[(bool, bool, f64, f64)]) -> Self {
+        let mut f = Self::default();
+        let mut i = 0;
+        while i < samples.len() {
+            let (_, at_rest, ..) = samples[i];
+            let end = samples[i..]
+                .iter()
+                .position(|s| s.1 != at_rest)
+                .map_or(samples.len(), |k| i + k);
+            let seg = &samples[i..end];
+            let flagged = seg.iter().filter(|s| s.0).count() as u64;
+            let n = seg.len() as u64;
+            if at_rest {
+                f.rest.0 += n;
+                f.rest.1 += flagged;
+                if flagged == 0 && i > 0 {
+                    f.missed_rests.0 += 1;
+                    f.missed_rests.1 = f.missed_rests.1.max(seg[seg.len() - 1].3 - seg[0].3);
+                }
+            } else {
+                f.moving.0 += n;
+                f.moving.1 += flagged;
+                let (t0, t1) = (seg[0].3, seg[seg.len() - 1].3);
+                for (k, s) in seg.iter().enumerate() {
+                    let last_of_run = s.0 && seg.get(k + 1).is_none_or(|n| !n.0);
+                    if last_of_run {
+                        let place = if s.3 - t0 < 1.0 {
+                            0
+                        } else if t1 - s.3 < 1.0 {
+                            1
+                        } else {
+                            2
+                        };
+                        f.runs[place] += 1;
+                        f.cut_m[place] += s.2 * (t1 - s.3);
+                    }
+                }
+            }
+            i = end;
+        }
+        let mut last_flag = None;
+        for s in samples.iter().filter(|s| s.0) {
+            if let Some(t) = last_flag {
+                f.longest_unflagged_s = f.longest_unflagged_s.max(s.3 - t);
+            }
+            last_flag = Some(s.3);
+        }
+        f
+    }
+
+    fn add(&mut self, o: &Self) {
+        self.rest.0 += o.rest.0;
+        self.rest.1 += o.rest.1;
+        self.moving.0 += o.moving.0;
+        self.moving.1 += o.moving.1;
+        for i in 0..3 {
+            self.runs[i] += o.runs[i];
+            self.cut_m[i] += o.cut_m[i];
+        }
+        self.missed_rests.0 += o.missed_rests.0;
+        self.missed_rests.1 = self.missed_rests.1.max(o.missed_rests.1);
+        self.longest_unflagged_s = self.longest_unflagged_s.max(o.longest_unflagged_s);
+    }
 }
 
 /// The hint stream of a seed for the options, or none.
@@ -279,24 +370,21 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
     // Sequence numbers where motions start: the history of a motion is scored relative to the
     // error at its start, which the revision leaves as it is.
     let mut motion_starts: Vec<u64> = Vec::new();
-    // Our navigation frame's heading is the sensor's at alignment: with the IMU yawed by
-    // `mount_yaw_deg` on the robot (level), that is the truth frame turned by the same yaw.
-    let to_ours = nalgebra::Rotation3::from_axis_angle(
-        &nalgebra::Vector3::z_axis(),
-        -args.mount_yaw_deg.to_radians(),
+    // Per sample: rest flag given to the stage, truth at rest, truth speed m/s, time s.
+    let mut flag_log: Vec<(bool, bool, f64, f64)> = Vec::new();
+    // Our navigation frame starts at the sensor's position at alignment, with its heading (the
+    // yaw of its attitude) then: the truth is expressed in that frame. Before alignment the
+    // truth frame is turned by the mounting yaw (the sensor's heading at the start).
+    let mut to_ours = (
+        nalgebra::Vector3::zeros(),
+        nalgebra::Rotation3::from_axis_angle(
+            &nalgebra::Vector3::z_axis(),
+            -args.mount_yaw_deg.to_radians(),
+        ),
     );
+    let mut aligned_at = None;
     // One corrected sample and the truth at it, in order.
     let mut step = |s: &CorrectedImuSample, truth: &recording::Truth, stage: &mut OdometryStage| {
-        let truth = &recording::Truth {
-            position_m: (to_ours * nalgebra::Vector3::from(truth.position_m)).into(),
-            ..*truth
-        };
-        first_seq.get_or_insert(s.seq);
-        truth_xy.push([truth.position_m[0], truth.position_m[1]]);
-        if let Some(p) = prev_truth {
-            distance_m += (truth.position_m[0] - p[0]).hypot(truth.position_m[1] - p[1]);
-        }
-        prev_truth = Some(truth.position_m);
         stage
             .process(s, &mut |o| {
                 if o.flags & odometry_flags::REVISION == 0 {
@@ -306,6 +394,45 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
                 }
             })
             .expect("valid samples");
+        // (Again if the alignment was withdrawn with the rest it stood on.)
+        let aligned = last.is_some_and(|o| o.flags & odometry_flags::ALIGNED != 0);
+        if !aligned {
+            aligned_at = None;
+        }
+        if aligned_at.is_none() && aligned {
+            let [w, x, y, z] = truth.attitude_wxyz;
+            let q =
+                nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+            to_ours = (
+                nalgebra::Vector3::from(truth.position_m),
+                nalgebra::Rotation3::from_axis_angle(
+                    &nalgebra::Vector3::z_axis(),
+                    -q.euler_angles().2,
+                ),
+            );
+            aligned_at = Some(s.stamps.sample_ns as f64 * 1e-9);
+        }
+        // Distance from the truth itself (the frame changes at alignment), from alignment on.
+        if let Some(p) = prev_truth
+            && aligned_at.is_some()
+        {
+            distance_m += (truth.position_m[0] - p[0]).hypot(truth.position_m[1] - p[1]);
+        }
+        prev_truth = Some(truth.position_m);
+        let truth = &recording::Truth {
+            position_m: (to_ours.1 * (nalgebra::Vector3::from(truth.position_m) - to_ours.0))
+                .into(),
+            ..*truth
+        };
+        first_seq.get_or_insert(s.seq);
+        let v = truth.velocity_mps;
+        flag_log.push((
+            s.flags & corrected_flags::ZERO_STATE != 0,
+            truth.at_rest,
+            (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
+            s.stamps.sample_ns as f64 * 1e-9,
+        ));
+        truth_xy.push([truth.position_m[0], truth.position_m[1]]);
         let o = last.expect("a state per sample");
         stale += u64::from(o.flags & odometry_flags::HINT_STALE != 0);
         forward_xy.push([o.position_m[0], o.position_m[1]]);
@@ -419,6 +546,8 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
         rest_covered,
         gyro_cal_error,
         history_rms_m,
+        flags: FlagScore::new(&flag_log),
+        aligned_at_s: aligned_at.expect("aligned"),
     }
 }
 
@@ -470,6 +599,7 @@ fn main() {
         let (mut covered, mut axes, mut nees, mut rc, mut rn) = (0, 0, 0.0, 0, 0);
         let (mut hist_rev, mut hist_fwd) = (0.0, 0.0);
         let mut hint_totals = (0u64, 0u64, 0u64);
+        let mut flags = FlagScore::default();
         let (mut scale_se, mut mounting_max) = (0.0, 0.0f64);
         for seed in args.first_seed..args.first_seed + args.seeds {
             let o = run(&c, cfg, seed, &args);
@@ -491,6 +621,17 @@ fn main() {
                     100.0 * o.scale_error,
                     100.0 * o.scale_sigma,
                     o.mounting_error_deg
+                );
+            }
+            flags.add(&o.flags);
+            if args.per_seed && args.rest == Rest::Imu {
+                eprintln!(
+                    "  seed {seed}: aligned at {:.1} s, rests missed {} (longest {:.1} s), longest between flagged rests {:.1} s, false-rest runs {:?}",
+                    o.aligned_at_s,
+                    o.flags.missed_rests.0,
+                    o.flags.missed_rests.1,
+                    o.flags.longest_unflagged_s,
+                    o.flags.runs
                 );
             }
             hint_totals.0 += o.hint_counts.0;
@@ -528,6 +669,24 @@ fn main() {
             (hist_rev / args.seeds as f64).sqrt(),
             (hist_fwd / args.seeds as f64).sqrt(),
         );
+        if args.rest == Rest::Imu {
+            let n = args.seeds as f64;
+            eprintln!(
+                "  {}: rest flagged {:.1}% of rest, {:.2}% of motion; false-rest runs per drive ending at a motion's start / end / in between: {:.1} / {:.1} / {:.1}, speed x motion left after them {:.2} / {:.2} / {:.2} m; rests missed per drive {:.1} (longest {:.1} s), longest time between flagged rests {:.1} s",
+                label.get_name(),
+                100.0 * flags.rest.1 as f64 / flags.rest.0.max(1) as f64,
+                100.0 * flags.moving.1 as f64 / flags.moving.0.max(1) as f64,
+                flags.runs[0] as f64 / n,
+                flags.runs[1] as f64 / n,
+                flags.runs[2] as f64 / n,
+                flags.cut_m[0] / n,
+                flags.cut_m[1] / n,
+                flags.cut_m[2] / n,
+                flags.missed_rests.0 as f64 / n,
+                flags.missed_rests.1,
+                flags.longest_unflagged_s,
+            );
+        }
         if args.hints != Hints::None {
             let n = args.seeds as f64;
             eprintln!(

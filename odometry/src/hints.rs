@@ -222,11 +222,28 @@ pub struct HintStats {
 ///
 /// Hand-written rather than `VecDeque` so that a full ring overwrites its oldest entry
 /// instead of growing (`VecDeque::push_back` reallocates).
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct Ring<T> {
     buf: Vec<T>,
     head: usize,
     len: usize,
+}
+
+impl<T: Copy> Clone for Ring<T> {
+    fn clone(&self) -> Self {
+        Self {
+            buf: self.buf.clone(),
+            head: self.head,
+            len: self.len,
+        }
+    }
+
+    /// Copies `other` into this ring's storage: no allocation when the capacities are equal.
+    fn clone_from(&mut self, other: &Self) {
+        self.buf.clone_from(&other.buf);
+        self.head = other.head;
+        self.len = other.len;
+    }
 }
 
 impl<T: Copy + Default> Ring<T> {
@@ -285,6 +302,22 @@ impl<T: Copy + Default> Ring<T> {
     pub fn clear(&mut self) {
         self.head = 0;
         self.len = 0;
+    }
+
+    /// The `i`-th oldest value (0 is the oldest).
+    pub fn oldest(&self, i: usize) -> Option<&T> {
+        (i < self.len).then(|| &self.buf[(self.head + i) % self.buf.len()])
+    }
+
+    /// The `i`-th oldest value, to change it in place (0 is the oldest).
+    pub fn oldest_mut(&mut self, i: usize) -> Option<&mut T> {
+        let cap = self.buf.len();
+        (i < self.len).then(|| &mut self.buf[(self.head + i) % cap])
+    }
+
+    /// Whether the ring holds as many values as it can.
+    pub fn is_full(&self) -> bool {
+        self.len == self.buf.len()
     }
 }
 

@@ -10,4 +10,5 @@ pub mod config;
 pub mod eskf;
 pub mod gyrocal;
 pub mod hints;
+mod navigator;
 pub mod stage;

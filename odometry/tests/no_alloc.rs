@@ -84,9 +84,11 @@ fn processing_samples_allocates_nothing() {
         "{during} allocations over {} samples",
         samples.len()
     );
-    // The run exercised every path: a state per sample, and revised histories.
+    // The run exercised every path: a state per sample, revised histories, and rest flags
+    // withdrawn in hindsight at every start (the lagging navigator copied into the live one).
     assert_eq!(live, samples.len() as u64);
     assert!(stage.aligned() && revised > 100, "{revised} revised states");
+    assert!(stage.withdrawn_rest_samples() > 0);
 }
 
 #[test]

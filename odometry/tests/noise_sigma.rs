@@ -100,16 +100,19 @@ fn write_calibration(dir: &Path, name: &str, noise: Option<NoiseParams>) -> Path
 }
 
 /// Runs the stage over the rest-then-motion stream; returns the last state and the time from
-/// the last sample flagged at rest to the last sample, s.
+/// the last zero-velocity update that stands (the last rest flag at least the rest hindsight
+/// before the first motion sample; the later ones are withdrawn) to the last sample, s.
 fn run(config: OdometryConfig) -> (OdometryState, f64) {
     let mut stage = OdometryStage::new(config);
     let mut last = None;
     let n = ((REST_S + MOTION_S) * RATE) as u64;
+    let first_motion_ns = (REST_S * 1e9) as u64;
+    let hindsight_ns = (config.rest_hindsight_s * 1e9) as u64;
     let mut last_rest_ns = 0;
     for k in 0..n {
         let t_ns = k * (1e9 / RATE) as u64;
         let rest = (k as f64) < REST_S * RATE;
-        if rest {
+        if rest && t_ns + hindsight_ns <= first_motion_ns {
             last_rest_ns = t_ns;
         }
         let sample = CorrectedImuSample {
@@ -148,7 +151,8 @@ fn position_sigma_follows_the_white_noise_density_in_the_calibration_file() {
     let (s1, t) = run(quiet.config);
     let (s2, t2) = run(noisy.config);
     assert_eq!(t, t2);
-    assert!((t - MOTION_S).abs() < 0.1, "{t}");
+    let hindsight = quiet.config.rest_hindsight_s;
+    assert!((t - MOTION_S - hindsight).abs() < 0.1, "{t}");
     // Velocity random walk of density N integrated to position over T: N^2 T^3 / 3.
     let expected = (n2 * n2 - n1 * n1) * t.powi(3) / 3.0;
     for axis in 0..3 {

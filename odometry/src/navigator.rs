@@ -1,0 +1,616 @@
+//! The navigator: the odometry stage's filter-driving state machine for one stream of inputs
+//! (alignment, prediction, rest and hint updates, motion-interval revisions). The public
+//! [`crate::stage::OdometryStage`] validates the inputs and runs two navigators, one on the
+//! newest inputs and one lagging behind by the rest hindsight; this module holds what each of
+//! them does. The module documentation of [`crate::stage`] describes the behaviour.
+
+use crate::eskf::{Eskf, Imu, KS, align};
+use crate::hints::{
+    HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
+};
+use crate::stage::OdometryConfig;
+use ipc_types::{
+    CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
+    odometry_flags,
+};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+
+#[derive(Debug, Clone, Copy)]
+struct HistoryEntry {
+    t_ns: u64,
+    stamps: Stamps,
+    seq: u64,
+    p: Vector3<f64>,
+    v: Vector3<f64>,
+    sigma_p: Vector3<f64>,
+    sigma_v: Vector3<f64>,
+    q: UnitQuaternion<f64>,
+    distance_m: f64,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct AlignSums {
+    n: u64,
+    t0_ns: u64,
+    f: Vector3<f64>,
+    w: Vector3<f64>,
+    w2: Vector3<f64>,
+}
+
+/// What happens to the motion history after a motion interval has ended.
+#[derive(Debug, Clone, Copy)]
+struct PendingRevision {
+    /// Time the motion interval ended (first rest sample), ns.
+    end_ns: u64,
+    /// Sum of the corrections the updates injected since, position and velocity.
+    dp: Vector3<f64>,
+    dv: Vector3<f64>,
+}
+
+/// Speed hints that can wait for the next sample's update (more arrive at once only at sample
+/// rates below the hint rate).
+const SPEED_QUEUE: usize = 8;
+
+/// One sample's body velocity minus the corrections made up to it (see the module docs).
+#[derive(Debug, Clone, Copy, Default)]
+struct BodyVelocity {
+    t_ns: u64,
+    uncorrected: Vector3<f64>,
+}
+
+/// What the hints did at the current sample.
+#[derive(Debug, Clone, Copy, Default)]
+struct HintSample {
+    flags: u16,
+}
+
+/// Hint state of the stage.
+struct Hints {
+    cfg: HintConfig,
+    delivery_ns: u64,
+    max_age_ns: u64,
+    /// Hints waiting for their delivery time, in arrival order.
+    waiting: Ring<RobotHint>,
+    /// The newest delivered hint.
+    newest: Option<RobotHint>,
+    /// Delivered speed hints not yet applied, oldest first (several can be delivered at one
+    /// sample when their latencies differ).
+    speed: Ring<RobotHint>,
+    /// Sequence number of the last hint counted as applied for its rest decision.
+    newest_used: Option<u64>,
+    /// Sensor-to-body rotation `R_bs`, once known.
+    r_bs: Option<Matrix3<f64>>,
+    estimator: MountingEstimator,
+    /// Body velocity minus corrections, one per sample since the mounting is known.
+    history: Ring<BodyVelocity>,
+    /// Sum of the body-velocity changes every update has made since the mounting is known,
+    /// m/s.
+    corrections: Vector3<f64>,
+    applied: u32,
+    disagreements: u32,
+    stats: HintStats,
+}
+
+impl Hints {
+    /// Makes this a copy of `other`, reusing the rings' storage (see [`Navigator::copy_from`]).
+    fn copy_from(&mut self, other: &Self) {
+        self.cfg = other.cfg;
+        self.delivery_ns = other.delivery_ns;
+        self.max_age_ns = other.max_age_ns;
+        self.waiting.clone_from(&other.waiting);
+        self.newest = other.newest;
+        self.speed.clone_from(&other.speed);
+        self.newest_used = other.newest_used;
+        self.r_bs = other.r_bs;
+        self.estimator = other.estimator;
+        self.history.clone_from(&other.history);
+        self.corrections = other.corrections;
+        self.applied = other.applied;
+        self.disagreements = other.disagreements;
+        self.stats = other.stats;
+    }
+
+    /// The body velocity minus corrections at `t_ns`, interpolated between the stored samples
+    /// around it (the newest one for a time after it); `None` when `t_ns` is older than the
+    /// history.
+    fn uncorrected_at(&self, t_ns: u64) -> Option<Vector3<f64>> {
+        let mut newer: Option<&BodyVelocity> = None;
+        for i in 0..self.history.len() {
+            let e = self.history.newest(i)?;
+            if e.t_ns <= t_ns {
+                return Some(match newer {
+                    None => e.uncorrected,
+                    Some(n) => {
+                        let f = (t_ns - e.t_ns) as f64 / (n.t_ns - e.t_ns) as f64;
+                        e.uncorrected + (n.uncorrected - e.uncorrected) * f
+                    }
+                });
+            }
+            newer = Some(e);
+        }
+        None
+    }
+
+    /// Applies a speed hint as a body-velocity measurement at the hint's time; `false` when it
+    /// cannot be (mounting unknown, or the hint stale at `t_ns` or older than the velocity
+    /// history).
+    fn apply_speed(&mut self, kf: &mut Eskf, h: &RobotHint, t_ns: u64) -> bool {
+        let Some(r_bs) = self.r_bs else {
+            return false;
+        };
+        if t_ns.saturating_sub(h.stamps.sample_ns) > self.max_age_ns {
+            return false;
+        }
+        let Some(then) = self.uncorrected_at(h.stamps.sample_ns) else {
+            return false;
+        };
+        // The body velocity the filter now believes it had at the hint's time.
+        let predicted = then + self.corrections;
+        let residual = Vector3::new(
+            h.forward_speed_mps - (1.0 + kf.x.k) * predicted.x,
+            -predicted.y,
+            -predicted.z,
+        );
+        let nh = self.cfg.nonholonomic_sigma_mps;
+        kf.body_velocity_update(
+            &r_bs,
+            residual,
+            Vector3::new(h.forward_speed_sigma_mps, nh, nh),
+        );
+        true
+    }
+}
+
+/// The odometry state machine for one stream of inputs. Its storage is allocated once, in
+/// [`Navigator::new`]; [`Navigator::copy_from`] copies another navigator into it without
+/// allocating.
+pub(crate) struct Navigator {
+    cfg: OdometryConfig,
+    hints: Hints,
+    align: AlignSums,
+    kf: Option<Eskf>,
+    last: Option<(u64, Imu)>,
+    history: Vec<HistoryEntry>,
+    history_overflowed: bool,
+    motion_start_ns: Option<u64>,
+    pending: Option<PendingRevision>,
+    at_rest: bool,
+    rest_count: u32,
+    distance_m: f64,
+    /// Whether the last sample's rest decision was the IMU's zero-state flag (no fresh hint
+    /// with a rest source).
+    imu_decided: bool,
+}
+
+impl Navigator {
+    /// A navigator with the (validated) hint configuration `hints`. Allocated here: the
+    /// motion history for `max_motion_s` at `revision_rate_hz` (only decimated states are
+    /// kept), and the velocity history for the hints' `max_age_s` at `max_rate_hz`.
+    pub fn new(cfg: OdometryConfig, hints: HintConfig) -> Self {
+        let capacity = (cfg.max_motion_s * cfg.revision_rate_hz).ceil() as usize + 1;
+        let velocity_capacity = (hints.max_age_s * cfg.max_rate_hz).ceil() as usize + 2;
+        Self {
+            cfg,
+            hints: Hints {
+                cfg: hints,
+                delivery_ns: (hints.delivery_s * 1e9).round() as u64,
+                max_age_ns: (hints.max_age_s * 1e9).round() as u64,
+                waiting: Ring::new(hints.capacity),
+                newest: None,
+                speed: Ring::new(SPEED_QUEUE),
+                newest_used: None,
+                r_bs: hints.mounting.map(|q| q.to_rotation_matrix().into_inner()),
+                estimator: MountingEstimator::default(),
+                history: Ring::new(velocity_capacity),
+                corrections: Vector3::zeros(),
+                applied: 0,
+                disagreements: 0,
+                stats: HintStats::default(),
+            },
+            align: AlignSums::default(),
+            kf: None,
+            last: None,
+            history: Vec::with_capacity(capacity),
+            history_overflowed: false,
+            motion_start_ns: None,
+            pending: None,
+            at_rest: false,
+            rest_count: 0,
+            distance_m: 0.0,
+            imu_decided: true,
+        }
+    }
+
+    /// Makes this navigator a copy of `other` (built with the same configuration), reusing
+    /// its own storage: nothing is allocated.
+    pub fn copy_from(&mut self, other: &Self) {
+        self.cfg = other.cfg;
+        self.hints.copy_from(&other.hints);
+        self.align = other.align;
+        self.kf.clone_from(&other.kf);
+        self.last = other.last;
+        self.history.clone_from(&other.history);
+        self.history_overflowed = other.history_overflowed;
+        self.motion_start_ns = other.motion_start_ns;
+        self.pending = other.pending;
+        self.at_rest = other.at_rest;
+        self.rest_count = other.rest_count;
+        self.distance_m = other.distance_m;
+        self.imu_decided = other.imu_decided;
+    }
+
+    /// Takes a (checked) robot hint. It waits (in a buffer allocated up front) until a sample
+    /// taken at least [`HintConfig::delivery_s`] after its publication, which then uses it.
+    pub fn hint(&mut self, h: &RobotHint) {
+        self.hints.stats.received += 1;
+        if self.hints.waiting.push(*h).is_some() {
+            self.hints.stats.overflowed += 1;
+        }
+    }
+
+    /// Counters of the hints seen so far.
+    pub fn hint_stats(&self) -> HintStats {
+        self.hints.stats
+    }
+
+    /// The IMU-to-body mounting (sensor to body), configured or estimated; `None` while it is
+    /// being estimated.
+    pub fn mounting(&self) -> Option<UnitQuaternion<f64>> {
+        self.hints.r_bs.map(|r| {
+            UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r))
+        })
+    }
+
+    /// Whether alignment is done.
+    pub fn aligned(&self) -> bool {
+        self.kf.is_some()
+    }
+
+    /// Whether the last sample's rest decision was the IMU's zero-state flag (no fresh hint
+    /// with a rest source decided it).
+    pub fn imu_decided(&self) -> bool {
+        self.imu_decided
+    }
+
+    /// The filter, once aligned (for diagnostics and tests).
+    pub fn filter(&self) -> Option<&Eskf> {
+        self.kf.as_ref()
+    }
+
+    /// Processes one (checked: finite, later than the previous) sample: emits its state, and
+    /// any revised states that the end of a motion interval made available, through `emit`.
+    pub fn process(&mut self, s: &CorrectedImuSample, emit: &mut impl FnMut(&OdometryState)) {
+        let t_ns = s.stamps.sample_ns;
+        let m = Imu {
+            f: Vector3::from(s.accel_mps2),
+            w: self.cfg.gyro_correction * Vector3::from(s.gyro_rps),
+        };
+        let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
+        let prev = self.last.replace((t_ns, m));
+
+        // Hints delivered by this sample's time; the newest fresh one with a rest source
+        // decides rest.
+        self.deliver_hints(t_ns);
+        let fresh = self
+            .hints
+            .newest
+            .filter(|h| t_ns.saturating_sub(h.stamps.sample_ns) <= self.hints.max_age_ns);
+        let hint_rest = fresh
+            .filter(has_rest_source)
+            .map(|h| h.flags & hint_flags::STATIONARY != 0);
+        self.imu_decided = hint_rest.is_none();
+        let mut hs = HintSample::default();
+        let stale = self.hints.newest.is_some() && fresh.is_none();
+        if stale {
+            hs.flags |= odometry_flags::HINT_STALE;
+        }
+        if hint_rest == Some(true) {
+            hs.flags |= odometry_flags::HINT_STATIONARY;
+        }
+        let detector_ready = s.flags & corrected_flags::DETECTOR_READY != 0;
+        if hint_rest.is_some_and(|h| detector_ready && h != imu_rest) {
+            hs.flags |= odometry_flags::HINT_DISAGREE;
+        }
+
+        let Some(kf) = self.kf.as_mut() else {
+            let rest = hint_rest.unwrap_or(imu_rest);
+            // A stationary hint aligns only once the calibration stage has learned its
+            // references (its zero-state flag never comes earlier): until then the stage's gyro
+            // output still carries the turn-on bias it is about to subtract, and a filter
+            // aligned on it would take that step for rotation.
+            let ready = detector_ready || hint_rest.is_none();
+            self.accumulate_alignment(t_ns, &m, rest && ready);
+            emit(&self.unaligned_state(s, rest, hs));
+            return;
+        };
+        let dt = (t_ns - prev.map_or(t_ns, |p| p.0)) as f64 * 1e-9;
+        let p_before = kf.x.p;
+        kf.predict(m, dt);
+        let moved = (kf.x.p - p_before).xy().norm();
+        // The IMU's rest flag decides without a fresh hint; after hints went stale, only when
+        // the velocity is consistent with rest (a detector that takes cruising for rest must not
+        // stop a robot the hints have just seen moving).
+        let rest = match hint_rest {
+            Some(r) => r,
+            None if stale && imu_rest => kf.velocity_consistent_with_zero(
+                self.cfg.zupt_sigma_mps,
+                self.hints.cfg.fallback_zupt_gate_sigma,
+            ),
+            None => imu_rest,
+        };
+
+        if hs.flags & odometry_flags::HINT_DISAGREE != 0 {
+            self.hints.disagreements += 1;
+        }
+        if hint_rest.is_some() && fresh.is_some_and(|h| self.hints.newest_used != Some(h.seq)) {
+            self.hints.newest_used = fresh.map(|h| h.seq);
+            self.hints.applied += 1;
+        }
+
+        // Motion interval bookkeeping: a rest after motion opens a pending revision; motion
+        // that resumes before the revision delay has passed revises with what was gathered.
+        if rest && !self.at_rest && self.motion_start_ns.is_some() && self.pending.is_none() {
+            self.rest_count += 1;
+            self.pending = Some(PendingRevision {
+                end_ns: t_ns,
+                dp: Vector3::zeros(),
+                dv: Vector3::zeros(),
+            });
+        }
+        if !rest {
+            if let Some(pending) = self.pending {
+                self.republish(pending, emit);
+            }
+            if self.motion_start_ns.is_none() {
+                self.motion_start_ns = Some(prev.map_or(t_ns, |p| p.0));
+                self.history.clear();
+                self.history_overflowed = false;
+            }
+        }
+        self.at_rest = rest;
+
+        let kf = self.kf.as_mut().expect("aligned above");
+        let hints = &mut self.hints;
+        let body_before = hints.r_bs.map(|r| kf.body_velocity(&r));
+        if let Some(v_b) = body_before {
+            hints.history.push(BodyVelocity {
+                t_ns,
+                uncorrected: v_b - hints.corrections,
+            });
+        }
+        if rest {
+            let (p0, v0) = (kf.x.p, kf.x.v);
+            kf.zero_velocity(self.cfg.zupt_sigma_mps);
+            let gyro_sigma = self.cfg.noise.gyro_noise_density / dt.sqrt();
+            kf.zero_rate(gyro_sigma, self.cfg.zaru_gate_sigma);
+            if let Some(pending) = self.pending.as_mut() {
+                pending.dp += kf.x.p - p0;
+                pending.dv += kf.x.v - v0;
+            }
+            // A stationary robot's speed hint says nothing the zero-velocity update did not.
+            hints.speed.clear();
+        } else {
+            self.distance_m += moved;
+            while let Some(h) = hints.speed.pop() {
+                if hints.apply_speed(kf, &h, t_ns) {
+                    hs.flags |= odometry_flags::HINT_SPEED;
+                    hints.applied += 1;
+                    hints.stats.speed_updates += 1;
+                } else {
+                    hints.stats.speed_skipped += 1;
+                }
+            }
+        }
+        if let (Some(r), Some(before)) = (hints.r_bs, body_before) {
+            hints.corrections += kf.body_velocity(&r) - before;
+        }
+
+        let state = self.state(s, rest, hs);
+        if !rest && self.motion_start_ns.is_some() {
+            self.record(&state);
+        }
+        emit(&state);
+
+        if let Some(pending) = self.pending
+            && rest
+            && (t_ns - pending.end_ns) as f64 * 1e-9 >= self.cfg.revision_delay_s
+        {
+            self.republish(pending, emit);
+        }
+    }
+
+    /// Moves the hints delivered by `t_ns` out of the waiting buffer: the newest becomes the
+    /// current hint, and the speed hints among them wait for the update.
+    fn deliver_hints(&mut self, t_ns: u64) {
+        let hints = &mut self.hints;
+        while let Some(h) = hints.waiting.front().copied() {
+            if usable_from_ns(&h, hints.delivery_ns) > t_ns {
+                break;
+            }
+            hints.waiting.pop();
+            if hints
+                .newest
+                .is_some_and(|n| h.stamps.sample_ns <= n.stamps.sample_ns)
+            {
+                hints.stats.out_of_order += 1;
+                continue;
+            }
+            hints.stats.consumed += 1;
+            hints.newest = Some(h);
+            if h.flags & hint_flags::SPEED_VALID != 0 && hints.speed.push(h).is_some() {
+                hints.stats.speed_skipped += 1;
+            }
+        }
+    }
+
+    fn accumulate_alignment(&mut self, t_ns: u64, m: &Imu, rest: bool) {
+        if !rest {
+            self.align = AlignSums::default();
+            return;
+        }
+        let a = &mut self.align;
+        if a.n == 0 {
+            a.t0_ns = t_ns;
+        }
+        a.n += 1;
+        a.f += m.f;
+        a.w += m.w;
+        a.w2 += m.w.component_mul(&m.w);
+        if (t_ns - a.t0_ns) as f64 * 1e-9 < self.cfg.align_s || a.n < 2 {
+            return;
+        }
+        let n = a.n as f64;
+        let f_mean = a.f / n;
+        let w_mean = a.w / n;
+        // Gyro bias from the rest mean: its uncertainty is the sample std over sqrt(n).
+        let w_var = (a.w2 / n - w_mean.component_mul(&w_mean)).map(|v| v.max(0.0));
+        let w_sigma = (w_var / n).map(f64::sqrt);
+        let g = self.cfg.gravity_mps2;
+        let scale_as_bias = g * self.cfg.accel_residual_scale;
+        let bias_sigma =
+            Vector3::from(self.cfg.accel_bias_sigma_mps2).map(|s| s.hypot(scale_as_bias));
+        let (x, mut cov) = align(f_mean, w_mean, g, bias_sigma, w_sigma);
+        cov[(KS, KS)] = self.hints.cfg.speed_scale_sigma.powi(2);
+        self.kf = Some(Eskf::new(x, cov, self.cfg.gravity_mps2, self.cfg.noise, *m));
+        self.at_rest = true;
+    }
+
+    fn unaligned_state(&self, s: &CorrectedImuSample, rest: bool, hs: HintSample) -> OdometryState {
+        OdometryState {
+            stamps: s.stamps,
+            seq: s.seq,
+            attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
+            flags: hs.flags
+                | if rest {
+                    odometry_flags::ZERO_VELOCITY
+                } else {
+                    0
+                },
+            ..Default::default()
+        }
+    }
+
+    fn state(&self, s: &CorrectedImuSample, rest: bool, hs: HintSample) -> OdometryState {
+        let kf = self.kf.as_ref().expect("state() is called once aligned");
+        let q = kf.x.q;
+        let g_s = q.inverse() * (-kf.gravity());
+        let mut flags = odometry_flags::ALIGNED | hs.flags;
+        if rest {
+            flags |= odometry_flags::ZERO_VELOCITY;
+        }
+        OdometryState {
+            stamps: s.stamps,
+            seq: s.seq,
+            position_m: kf.x.p.into(),
+            position_sigma_m: kf.position_sigma().into(),
+            velocity_mps: kf.x.v.into(),
+            velocity_sigma_mps: kf.velocity_sigma().into(),
+            gravity_sensor_mps2: g_s.into(),
+            attitude_wxyz: [q.w, q.i, q.j, q.k],
+            distance_m: self.distance_m,
+            flags,
+            reserved16: 0,
+            rest_count: self.rest_count,
+            hints_applied: self.hints.applied,
+            hint_disagreements: self.hints.disagreements,
+        }
+    }
+
+    /// Keeps a decimated copy of a motion state for later revision.
+    fn record(&mut self, state: &OdometryState) {
+        let period_ns = (1e9 / self.cfg.revision_rate_hz) as u64;
+        let due = self
+            .history
+            .last()
+            .is_none_or(|h| state.stamps.sample_ns >= h.t_ns + period_ns);
+        if !due {
+            return;
+        }
+        if self.history.len() == self.history.capacity() {
+            self.history_overflowed = true;
+            return;
+        }
+        self.history.push(HistoryEntry {
+            t_ns: state.stamps.sample_ns,
+            stamps: state.stamps,
+            seq: state.seq,
+            p: Vector3::from(state.position_m),
+            v: Vector3::from(state.velocity_mps),
+            sigma_p: Vector3::from(state.position_sigma_m),
+            sigma_v: Vector3::from(state.velocity_sigma_mps),
+            q: UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                state.attitude_wxyz[0],
+                state.attitude_wxyz[1],
+                state.attitude_wxyz[2],
+                state.attitude_wxyz[3],
+            )),
+            distance_m: state.distance_m,
+        });
+    }
+
+    /// Spreads the corrections gathered at the start of a rest back over the motion interval
+    /// and emits the revised states.
+    ///
+    /// With `T` the interval length and `s = t - t0`, the position correction is the cubic
+    /// `c(s) = a s^2 + b s^3` with `c(0) = c'(0) = 0`, `c(T) = dp`, `c'(T) = dv`; for a constant
+    /// velocity drift (`dp = dv T / 2`) this is the thesis's linear velocity-error model.
+    fn republish(&mut self, pending: PendingRevision, emit: &mut impl FnMut(&OdometryState)) {
+        self.pending = None;
+        let Some(t0) = self.motion_start_ns.take() else {
+            return;
+        };
+        if self.history_overflowed {
+            self.history.clear();
+            return;
+        }
+        let big_t = (pending.end_ns - t0) as f64 * 1e-9;
+        if big_t <= 0.0 {
+            return;
+        }
+        let (dp, dv) = (pending.dp, pending.dv);
+        let a = (3.0 * dp - dv * big_t) / (big_t * big_t);
+        let b = (dv * big_t - 2.0 * dp) / (big_t * big_t * big_t);
+        let g = self.cfg.gravity_mps2;
+        let estimating = self.hints.r_bs.is_none();
+        for (i, h) in self.history.iter().enumerate() {
+            let s = (h.t_ns.saturating_sub(t0)) as f64 * 1e-9;
+            let p = h.p + a * s * s + b * s * s * s;
+            let v = h.v + 2.0 * a * s + 3.0 * b * s * s;
+            if estimating {
+                // The revised velocity in the sensor frame, held until the next stored state.
+                let next_ns = self.history.get(i + 1).map_or(pending.end_ns, |n| n.t_ns);
+                let dt = next_ns.saturating_sub(h.t_ns) as f64 * 1e-9;
+                self.hints
+                    .estimator
+                    .add(&h.q.inverse_transform_vector(&v), dt);
+            }
+            let g_s = h.q.inverse() * Vector3::new(0.0, 0.0, g);
+            emit(&OdometryState {
+                stamps: h.stamps,
+                seq: h.seq,
+                position_m: p.into(),
+                position_sigma_m: h.sigma_p.into(),
+                velocity_mps: v.into(),
+                velocity_sigma_mps: h.sigma_v.into(),
+                gravity_sensor_mps2: g_s.into(),
+                attitude_wxyz: [h.q.w, h.q.i, h.q.j, h.q.k],
+                distance_m: h.distance_m,
+                flags: odometry_flags::ALIGNED | odometry_flags::REVISION,
+                reserved16: 0,
+                rest_count: self.rest_count,
+                hints_applied: self.hints.applied,
+                hint_disagreements: self.hints.disagreements,
+            });
+        }
+        self.history.clear();
+        if estimating && self.hints.estimator.path_m() >= self.hints.cfg.mounting_min_path_m {
+            let kf = self.kf.as_ref().expect("revisions happen once aligned");
+            let up_s = kf.x.q.inverse_transform_vector(&Vector3::z());
+            if let Some(q) = self.hints.estimator.mounting(&up_s) {
+                self.hints.r_bs = Some(q.to_rotation_matrix().into_inner());
+                self.hints.history.clear();
+                self.hints.corrections = Vector3::zeros();
+            }
+        }
+    }
+}
