@@ -1,0 +1,91 @@
+//! Cost of the odometry stage per sample, and the longest single sample (a rest withdrawn in
+//! hindsight replays the last `rest_hindsight_s` of inputs within one call). Plain timing (no
+//! harness): `cargo bench -p odometry --bench stage`.
+//!
+//! Input: a simulated 10-minute drive with turns at 1 kHz (the live pipeline's rate), its rest
+//! flags from the calibration stage's zero-state detector (GLRT, the live defaults) on the raw
+//! samples, so the withdrawals happen where the live pipeline has them. The corrected samples
+//! are computed first; only `OdometryStage::process` is timed, per call, into a histogram.
+
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use std::hint::black_box;
+use std::time::Instant;
+
+use calibrate::stage::{CalibrationStage, RefineConfig};
+use calibrate::zero_state::{DetectorConfig, DetectorKind};
+use common::{Case, Simulation, identity_calibration};
+use hdrhistogram::Histogram;
+use ipc_types::CorrectedImuSample;
+use mems_sim::model::G_MPS2;
+use odometry::stage::{OdometryConfig, OdometryStage};
+
+fn corrected_drive() -> Vec<CorrectedImuSample> {
+    let c = Case {
+        rate_hz: 1000.0,
+        turns: true,
+        ..Case::straight()
+    };
+    let mut sim = Simulation::new(&c, 1);
+    sim.session();
+    let mut detector = DetectorConfig::new(DetectorKind::Glrt, G_MPS2);
+    detector.learn.duration_s = 5.0;
+    let mut calibration =
+        CalibrationStage::new(&identity_calibration(), detector, RefineConfig::default())
+            .expect("identity calibration");
+    let mut out = Vec::new();
+    sim.drive_raw(|raw, _| {
+        calibration
+            .push(raw, &mut |c| out.push(*c))
+            .expect("valid raw samples");
+    });
+    calibration.finish(&mut |c| out.push(*c));
+    out
+}
+
+fn run(label: &str, cfg: OdometryConfig, samples: &[CorrectedImuSample]) {
+    let mut stage = OdometryStage::new(cfg);
+    let mut hist = Histogram::<u64>::new_with_bounds(1, 1_000_000_000, 3).expect("bounds");
+    let mut states = 0u64;
+    let start = Instant::now();
+    for s in samples {
+        let t0 = Instant::now();
+        stage
+            .process(s, &mut |o| {
+                black_box(o);
+                states += 1;
+            })
+            .expect("valid samples");
+        hist.record(t0.elapsed().as_nanos().max(1) as u64)
+            .expect("within bounds");
+    }
+    let total = start.elapsed();
+    println!(
+        "{label}: {} samples, {states} states ({} revised), {} rest flags withdrawn; mean {:.2} us/sample (wall incl. timing), p50 {:.1} us, p99 {:.1} us, p99.9 {:.1} us, max {:.0} us",
+        samples.len(),
+        stage.revisions_emitted(),
+        stage.withdrawn_rest_samples(),
+        total.as_secs_f64() * 1e6 / samples.len() as f64,
+        hist.value_at_quantile(0.5) as f64 / 1e3,
+        hist.value_at_quantile(0.99) as f64 / 1e3,
+        hist.value_at_quantile(0.999) as f64 / 1e3,
+        hist.max() as f64 / 1e3,
+    );
+}
+
+fn main() {
+    let samples = corrected_drive();
+    let cfg = OdometryConfig::mpu9250(G_MPS2);
+    for _ in 0..2 {
+        run("hindsight 0.5 s (default)", cfg, &samples);
+        run(
+            "no hindsight",
+            OdometryConfig {
+                rest_hindsight_s: 0.0,
+                ..cfg
+            },
+            &samples,
+        );
+    }
+}
