@@ -140,6 +140,10 @@ struct Args {
     /// Smooth floor: no vibration (for every case).
     #[arg(long)]
     smooth: bool,
+    /// The stage's rest hindsight, s (`OdometryConfig::rest_hindsight_s`; default: the
+    /// configuration's, 0.5 s).
+    #[arg(long)]
+    rest_hindsight_s: Option<f64>,
     /// With `--rest imu`: add the calibration stage's refined gyro bias back to its output
     /// (a diagnostic: the odometry then sees the gyro as if the stage did not refine it).
     #[arg(long)]
@@ -189,6 +193,9 @@ fn case(name: CaseName, args: &Args) -> (Case, OdometryConfig) {
     cfg.noise.vibration_accel_density_per_mps = accel;
     cfg.noise.vibration_gyro_density_per_mps = gyro;
     c.off.clone_from(&args.off);
+    if let Some(h) = args.rest_hindsight_s {
+        cfg.rest_hindsight_s = h;
+    }
     (c, cfg)
 }
 
@@ -557,7 +564,7 @@ fn main() {
         args.cases = CaseName::value_variants().to_vec();
     }
     println!(
-        "seeds {}-{}, {} Hz, {}, gyro correction: {}, rest flags: {}, hints: {}{}{}",
+        "seeds {}-{}, {} Hz, {}, gyro correction: {}, rest flags: {} (hindsight {} s), hints: {}{}{}",
         args.first_seed,
         args.first_seed + args.seeds - 1,
         args.rate_hz,
@@ -575,6 +582,8 @@ fn main() {
             Rest::Perfect => "perfect",
             Rest::Imu => "IMU detector (GLRT)",
         },
+        args.rest_hindsight_s
+            .unwrap_or(OdometryConfig::mpu9250(mems_sim::model::G_MPS2).rest_hindsight_s),
         args.hints.to_possible_value().expect("named").get_name(),
         match (args.hints, args.hint_rest) {
             (Hints::None, _) => "",
