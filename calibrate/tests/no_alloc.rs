@@ -2,9 +2,7 @@
 //! allocations on this thread while both detectors' stages process a simulated drive (learning,
 //! rest, motion, refinement, a gap, a restarted stream and the end of the stream included).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
+use alloc_count::allocations;
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig};
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
@@ -15,40 +13,8 @@ use mems_sim::scenario::{Drive, DriveParams, ns_from_s};
 use mems_sim::vibration::VibrationModel;
 use mems_sim::{SimSensor, adc};
 
-/// Counts allocations made by the current thread, delegating to the system allocator.
-struct Counting;
-
-thread_local! {
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-// SAFETY: every call is forwarded unchanged to `System`; the thread-local counter is a
-// const-initialised `Cell`, which needs no allocation to access.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.with(|c| c.set(c.get() + 1));
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.with(|c| c.set(c.get() + 1));
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static ALLOCATOR: Counting = Counting;
-
-fn allocations() -> u64 {
-    ALLOCATIONS.with(Cell::get)
-}
+static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
 
 /// 40 s of a drive with turns (10 s initial rest), quantized like the device.
 fn drive_samples() -> Vec<RawImuSample> {
