@@ -229,7 +229,9 @@ fn main() -> Result<()> {
     eprintln!("mems-stack: running (namespace {namespace:?}); Ctrl-C stops");
     let (mut raw_stats, mut cor_stats, mut odo_stats) =
         (TopicStats::new(), TopicStats::new(), TopicStats::new());
-    let mut zero_state = false;
+    // The calibration stage's rest verdict on the newest sample; `None` until its detector has
+    // learned (no verdict yet).
+    let mut zero_state: Option<bool> = None;
     let mut last_state: Option<OdometryState> = None;
     let start = Instant::now();
     let mut last_status = Instant::now();
@@ -244,7 +246,8 @@ fn main() -> Result<()> {
         }
         while let Some(s) = corrected_sub.receive()? {
             observe(&mut cor_stats, s.payload());
-            zero_state = s.flags & corrected_flags::ZERO_STATE != 0;
+            zero_state = (s.flags & corrected_flags::DETECTOR_READY != 0)
+                .then_some(s.flags & corrected_flags::ZERO_STATE != 0);
         }
         while let Some(s) = odometry_sub.receive()? {
             observe(&mut odo_stats, s.payload());
@@ -339,11 +342,13 @@ fn observe<T: Message>(stats: &mut TopicStats, m: &T) {
     );
 }
 
+/// The status line: rate and losses per topic, the rest verdict of the newest corrected
+/// sample, and the newest live odometry state's position (or why there is none).
 fn status_line(
     raw: &TopicStats,
     cor: &TopicStats,
     odo: &TopicStats,
-    zero_state: bool,
+    zero_state: Option<bool>,
     state: Option<&OdometryState>,
 ) -> String {
     let (r, c, o) = (raw.report(), cor.report(), odo.report());
@@ -371,7 +376,11 @@ fn status_line(
         c.lost,
         o.rate_hz,
         o.lost,
-        if zero_state { "at rest" } else { "moving" },
+        match zero_state {
+            None => "rest detector learning",
+            Some(true) => "at rest",
+            Some(false) => "moving",
+        },
         position
     )
 }
@@ -446,13 +455,19 @@ mod tests {
                 position_m: [1.5, -2.0, 0.0],
                 ..OdometryState::default()
             };
-            status_line(&stats, &stats, &stats, true, Some(&state))
+            status_line(&stats, &stats, &stats, Some(true), Some(&state))
         };
         let aligned = line(odometry_flags::ALIGNED);
         assert!(aligned.contains("pos (+1.50, -2.00, +0.00) m"), "{aligned}");
         let no_gyro = line(odometry_flags::NO_GYRO);
         assert!(no_gyro.contains("no position"), "{no_gyro}");
         assert!(!no_gyro.contains("pos ("), "{no_gyro}");
+        let learning = status_line(&stats, &stats, &stats, None, None);
+        assert!(learning.contains("rest detector learning"), "{learning}");
+        assert!(
+            !learning.contains("at rest") && !learning.contains("moving"),
+            "{learning}"
+        );
     }
 
     #[test]
