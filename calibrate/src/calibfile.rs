@@ -144,6 +144,14 @@ pub struct GyroSection {
     /// Zero-rate bias, deg/s, sensor frame: subtracted from every reading.
     #[serde(default)]
     pub bias_dps: Option<[f64; 3]>,
+    /// Scale and misalignment correction `C`, row-major, dimensionless: the angular rate is
+    /// `omega = C w` with `w` the bias-free reading, sensor frame (as
+    /// `odometry::stage::OdometryConfig::gyro_correction`; `mems-odometry gyrocal --into`).
+    #[serde(default)]
+    pub correction: Option<[[f64; 3]; 3]>,
+    /// 1-sigma of each entry of `correction`, row-major, dimensionless.
+    #[serde(default)]
+    pub correction_sigma: Option<[[f64; 3]; 3]>,
 }
 
 /// The calibration file's contents.
@@ -382,6 +390,22 @@ impl CalibrationFile {
                 return Err(invalid(format!("{name} must be finite, got {v:?}")));
             }
         }
+        let matrices = [
+            ("gyro.correction", file.gyro.correction, "finite", f64::MIN),
+            (
+                "gyro.correction_sigma",
+                file.gyro.correction_sigma,
+                "finite and >= 0",
+                0.0,
+            ),
+        ];
+        for (name, rows, what, min) in matrices {
+            if let Some(m) = rows
+                && m.iter().flatten().any(|x| !(x.is_finite() && *x >= min))
+            {
+                return Err(invalid(format!("{name} must be {what}, got {m:?}")));
+            }
+        }
         crate::terms::ReadingTerms::from_file(&file).map_err(|e| invalid(e.to_string()))?;
         if let Some(noise) = &file.noise {
             noise
@@ -485,6 +509,64 @@ mod tests {
             g.save(&path).unwrap();
             let err = CalibrationFile::load(&path).unwrap_err().to_string();
             assert!(err.contains("terms.toml") && err.contains(name), "{err}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_gyro_correction_round_trips_and_is_checked_on_load() {
+        let dir = std::env::temp_dir().join(format!("calibfile-gyro-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("gyro.toml");
+        let mut f = example();
+        f.gyro.bias_dps = Some([0.5, -0.2, 0.1]);
+        f.gyro.correction = Some([
+            [0.99, -0.005, 0.005],
+            [0.005, 1.01, -0.005],
+            [-0.005, 0.005, 0.99],
+        ]);
+        f.gyro.correction_sigma = Some([[1e-4, 2e-4, 3e-4]; 3]);
+        f.save(&path).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let table: toml::Table = toml::from_str(&text).unwrap();
+        assert_eq!(
+            table["gyro"]["correction"][1][1].as_float(),
+            Some(1.01),
+            "row-major under [gyro]: {text}"
+        );
+        assert_eq!(CalibrationFile::load(&path).unwrap(), f);
+
+        // A [gyro] table written before the correction existed (bias only) loads without one.
+        let mut older = table.clone();
+        let gyro = older["gyro"].as_table_mut().unwrap();
+        gyro.remove("correction");
+        gyro.remove("correction_sigma");
+        std::fs::write(&path, toml::to_string(&older).unwrap()).unwrap();
+        let back = CalibrationFile::load(&path).unwrap();
+        assert_eq!(back.gyro.bias_dps, f.gyro.bias_dps);
+        assert_eq!(
+            (back.gyro.correction, back.gyro.correction_sigma),
+            (None, None)
+        );
+
+        type Spoil = fn(&mut CalibrationFile);
+        let cases: [(&str, Spoil); 3] = [
+            ("gyro.correction must be finite", |f| {
+                f.gyro.correction.as_mut().unwrap()[2][0] = f64::INFINITY
+            }),
+            ("gyro.correction_sigma must be finite and >= 0", |f| {
+                f.gyro.correction_sigma.as_mut().unwrap()[0][1] = f64::NAN
+            }),
+            ("gyro.correction_sigma must be finite and >= 0", |f| {
+                f.gyro.correction_sigma.as_mut().unwrap()[1][2] = -1e-4
+            }),
+        ];
+        for (message, spoil) in cases {
+            let mut g = f.clone();
+            spoil(&mut g);
+            g.save(&path).unwrap();
+            let err = CalibrationFile::load(&path).unwrap_err().to_string();
+            assert!(err.contains("gyro.toml") && err.contains(message), "{err}");
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -1,6 +1,8 @@
-//! The odometry configuration a calibration file implies: its local gravity and the noise
-//! model from its `[noise]` table (`mems-calibrate allan --into`, see docs/noise.md), with the
-//! MPU-9250 defaults of [`OdometryConfig::mpu9250`] for every figure the file does not hold.
+//! The odometry configuration a calibration file implies: its local gravity, the gyro's scale
+//! and misalignment correction from its `[gyro]` table (`mems-odometry gyrocal --into`, the
+//! identity when absent) and the noise model from its `[noise]` table (`mems-calibrate allan
+//! --into`, see docs/noise.md), with the MPU-9250 defaults of [`OdometryConfig::mpu9250`] for
+//! every figure the file does not hold.
 //!
 //! Mapping (units as in [`crate::eskf::NoiseModel`]: accelerometer m/s^2, gyro rad/s):
 //! - white noise density `N` -> `noise.accel_noise_density` / `noise.gyro_noise_density`;
@@ -17,6 +19,7 @@
 
 use calibrate::calibfile::CalibrationFile;
 use calibrate::noise::params::{AxisNoise, Estimate, SensorNoise};
+use nalgebra::Matrix3;
 
 use crate::stage::OdometryConfig;
 
@@ -29,18 +32,29 @@ pub struct CalibratedConfig {
     /// them (names as in the `[noise]` table, e.g. `accel.random_walk`); empty when the table
     /// gave every one.
     pub defaulted: Vec<&'static str>,
+    /// Whether the file has no `[gyro]` correction, so that the gyro runs uncalibrated (the
+    /// identity correction).
+    pub gyro_uncalibrated: bool,
 }
 
 impl CalibratedConfig {
-    /// A one-line note naming the defaulted figures, `None` when there are none.
+    /// A one-line note naming the defaulted figures and an uncalibrated gyro, `None` when
+    /// there are none.
     pub fn defaults_note(&self) -> Option<String> {
-        (!self.defaulted.is_empty()).then(|| {
+        let gyro = self.gyro_uncalibrated.then(|| {
+            "no gyro.correction in the calibration file's [gyro] table: the gyro's scale and \
+             misalignment are uncalibrated (run mems-odometry gyrocal --into on a pose session)"
+                .to_string()
+        });
+        let noise = (!self.defaulted.is_empty()).then(|| {
             format!(
                 "no resolved {} in the calibration file's [noise] table: using the MPU-9250 defaults \
                  for them (run mems-calibrate allan --into on a static recording)",
                 self.defaulted.join(", ")
             )
-        })
+        });
+        let notes: Vec<String> = gyro.into_iter().chain(noise).collect();
+        (!notes.is_empty()).then(|| notes.join("; "))
     }
 }
 
@@ -68,10 +82,15 @@ fn largest(
 /// The configuration for `file` (see the module documentation), with the defaults it used.
 pub fn from_calibration(file: &CalibrationFile) -> CalibratedConfig {
     let mut config = OdometryConfig::mpu9250(file.gravity_mps2);
+    if let Some(c) = file.gyro.correction {
+        config.gyro_correction = Matrix3::from_fn(|r, k| c[r][k]);
+    }
+    let gyro_uncalibrated = file.gyro.correction.is_none();
     let mut defaulted = Vec::new();
     let Some(noise) = &file.noise else {
         return CalibratedConfig {
             config,
+            gyro_uncalibrated,
             defaulted: vec![
                 "accel.white_noise_density",
                 "accel.bias_instability",
@@ -130,7 +149,11 @@ pub fn from_calibration(file: &CalibrationFile) -> CalibratedConfig {
     if !any_instability {
         defaulted.push("accel.bias_instability");
     }
-    CalibratedConfig { config, defaulted }
+    CalibratedConfig {
+        config,
+        defaulted,
+        gyro_uncalibrated,
+    }
 }
 
 #[cfg(test)]
@@ -219,10 +242,54 @@ mod tests {
         let c = from_calibration(&file_with(9.797, None));
         assert_eq!(c.config, OdometryConfig::mpu9250(9.797));
         assert_eq!(c.defaulted.len(), 5);
+        assert!(c.gyro_uncalibrated);
         let note = c.defaults_note().unwrap();
         for name in &c.defaulted {
             assert!(note.contains(name), "{note}");
         }
+        assert!(
+            note.contains("gyro.correction") && note.contains("mems-odometry gyrocal"),
+            "{note}"
+        );
+    }
+
+    #[test]
+    fn the_files_gyro_correction_is_used_and_its_absence_named() {
+        let c = [
+            [0.99, 0.004, -0.006],
+            [-0.005, 1.012, 0.003],
+            [0.007, -0.002, 0.985],
+        ];
+        let mut file = file_with(9.797, Some(params(9.797, true)));
+        file.gyro.correction = Some(c);
+        let with = from_calibration(&file);
+        assert!(!with.gyro_uncalibrated);
+        for (r, row) in c.iter().enumerate() {
+            for (k, value) in row.iter().enumerate() {
+                assert_eq!(with.config.gyro_correction[(r, k)], *value);
+            }
+        }
+        let note = with.defaults_note().unwrap();
+        assert!(
+            !note.contains("gyro.correction") && note.contains("accel.random_walk"),
+            "{note}"
+        );
+
+        // The same file without it: the identity, named in the note with the noise defaults,
+        // and nothing else changes.
+        file.gyro.correction = None;
+        let without = from_calibration(&file);
+        assert!(without.gyro_uncalibrated);
+        assert_eq!(without.config.gyro_correction, Matrix3::identity());
+        let note = without.defaults_note().unwrap();
+        assert!(
+            note.contains("no gyro.correction") && note.contains("accel.random_walk"),
+            "{note}"
+        );
+        let mut same = with.config;
+        same.gyro_correction = Matrix3::identity();
+        assert_eq!(same, without.config);
+        assert_eq!(with.defaulted, without.defaulted);
     }
 
     #[test]
