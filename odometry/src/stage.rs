@@ -77,6 +77,9 @@ pub struct OdometryConfig {
     /// How long the IMU's rest flag must be followed by rest for its zero-velocity update to
     /// stand, s (see the module documentation); 0 (or less) takes every flag as it comes.
     pub rest_hindsight_s: f64,
+    /// Shortest run of motion flags that withdraws the rest flags before it, s: a shorter one
+    /// (a bump, a glitch, a detector's false alarm on a static sensor) leaves them standing.
+    pub motion_confirm_s: f64,
 }
 
 impl OdometryConfig {
@@ -104,6 +107,7 @@ impl OdometryConfig {
             max_rate_hz: 4000.0,
             revision_rate_hz: 100.0,
             rest_hindsight_s: 0.5,
+            motion_confirm_s: 0.5,
         }
     }
 }
@@ -134,7 +138,12 @@ pub enum OdometryError {
 /// One input of the stage, kept in arrival order until the lagging navigator has taken it.
 #[derive(Debug, Clone, Copy)]
 enum Input {
-    Sample(CorrectedImuSample),
+    /// A sample whose `ZERO_STATE` flag is the one in force (the detector's, or cleared when
+    /// withdrawn), and the detector's own flag.
+    Sample {
+        s: CorrectedImuSample,
+        imu_rest: bool,
+    },
     Hint(RobotHint),
 }
 
@@ -145,11 +154,17 @@ impl Default for Input {
     }
 }
 
-/// The navigator that lags the rest hindsight behind, and the inputs it has not taken yet.
+/// The navigator that lags behind by the hindsight and the confirmation time, and the inputs
+/// it has not taken yet.
 struct Hindsight {
+    /// [`OdometryConfig::rest_hindsight_s`], ns.
     lag_ns: u64,
+    /// [`OdometryConfig::motion_confirm_s`], ns.
+    confirm_ns: u64,
     lagged: Navigator,
     journal: Ring<Input>,
+    /// Samples the lagging navigator took with their rest flag withdrawn.
+    withdrawn: u64,
 }
 
 impl Hindsight {
@@ -159,30 +174,82 @@ impl Hindsight {
         if self.journal.is_full()
             && let Some(old) = self.journal.pop()
         {
-            feed(&mut self.lagged, &old, &mut |_| {});
+            self.take(&old);
         }
         self.journal.push(input);
     }
 
     /// Gives the lagging navigator every input up to the last sample at least the hindsight
-    /// older than `t_ns` (their rest flags are final by now).
+    /// plus the confirmation time older than `t_ns` (their rest flags are final by now).
     fn catch_up(&mut self, t_ns: u64) {
         while let Some(input) = self.journal.front().copied() {
-            if let Input::Sample(s) = input
-                && s.stamps.sample_ns + self.lag_ns > t_ns
+            if let Input::Sample { s, .. } = input
+                && s.stamps.sample_ns + self.lag_ns + self.confirm_ns > t_ns
             {
                 break;
             }
             self.journal.pop();
-            feed(&mut self.lagged, &input, &mut |_| {});
+            self.take(&input);
         }
+    }
+
+    fn take(&mut self, input: &Input) {
+        if let Input::Sample { s, imu_rest } = input
+            && *imu_rest
+            && s.flags & corrected_flags::ZERO_STATE == 0
+        {
+            self.withdrawn += 1;
+        }
+        feed(&mut self.lagged, input, &mut |_| {});
+    }
+
+    /// Sets the flag in force of every sample in the journal by the rule (module docs): a
+    /// detector rest flag stands unless a motion that lasts at least the confirmation time (or
+    /// is still going on) starts within the hindsight after it. Returns whether any changed.
+    fn resolve(&mut self) -> bool {
+        let mut changed = false;
+        // Backwards: the start of the nearest later confirmed motion, the time of the first
+        // rest sample after the motion run being crossed (None: it runs to the newest sample),
+        // and whether a motion run is being crossed.
+        let mut confirmed_start: Option<u64> = None;
+        let mut run_end: Option<u64> = None;
+        let mut in_run = false;
+        let mut run_start = 0u64;
+        for i in (0..self.journal.len()).rev() {
+            let Some(Input::Sample { s, imu_rest }) = self.journal.oldest_mut(i) else {
+                continue;
+            };
+            let t = s.stamps.sample_ns;
+            if !*imu_rest {
+                in_run = true;
+                run_start = t;
+                continue;
+            }
+            if in_run {
+                // The run crossed started at `run_start` and ended before `run_end`.
+                in_run = false;
+                if run_end.is_none_or(|end| end - run_start >= self.confirm_ns) {
+                    confirmed_start = Some(run_start);
+                }
+            }
+            run_end = Some(t);
+            let rest = confirmed_start.is_none_or(|m| m - t >= self.lag_ns);
+            let flags = if rest {
+                s.flags | corrected_flags::ZERO_STATE
+            } else {
+                s.flags & !corrected_flags::ZERO_STATE
+            };
+            changed |= flags != s.flags;
+            s.flags = flags;
+        }
+        changed
     }
 }
 
 /// Gives one input to a navigator.
 fn feed(nav: &mut Navigator, input: &Input, emit: &mut impl FnMut(&OdometryState)) {
     match input {
-        Input::Sample(s) => nav.process(s, emit),
+        Input::Sample { s, .. } => nav.process(s, emit),
         Input::Hint(h) => nav.hint(h),
     }
 }
@@ -197,14 +264,13 @@ pub struct OdometryStage {
     /// The previous sample's IMU zero-state flag.
     imu_rest: bool,
     revisions_emitted: u64,
-    withdrawn: u64,
 }
 
 impl OdometryStage {
     /// A stage with the default hint configuration ([`HintConfig::default`]: the IMU mounted
     /// aligned with the body). Its storage is allocated here: the motion history for
     /// `max_motion_s` at `revision_rate_hz` (only decimated states are kept), and the inputs of
-    /// `rest_hindsight_s` at `max_rate_hz`.
+    /// `rest_hindsight_s + motion_confirm_s` at `max_rate_hz`.
     pub fn new(cfg: OdometryConfig) -> Self {
         Self::with_hints(cfg, HintConfig::default())
             .expect("the default hint configuration is valid")
@@ -215,10 +281,15 @@ impl OdometryStage {
     pub fn with_hints(cfg: OdometryConfig, hints: HintConfig) -> Result<Self, HintConfigError> {
         hints.validate()?;
         let lag_s = cfg.rest_hindsight_s.max(0.0);
+        let confirm_s = cfg.motion_confirm_s.max(0.0);
         let hindsight = (lag_s > 0.0).then(|| Hindsight {
             lag_ns: (lag_s * 1e9).round() as u64,
+            confirm_ns: (confirm_s * 1e9).round() as u64,
             lagged: Navigator::new(cfg, hints),
-            journal: Ring::new((lag_s * cfg.max_rate_hz).ceil() as usize + hints.capacity + 2),
+            journal: Ring::new(
+                ((lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize + hints.capacity + 2,
+            ),
+            withdrawn: 0,
         });
         Ok(Self {
             live: Navigator::new(cfg, hints),
@@ -226,7 +297,6 @@ impl OdometryStage {
             last_ns: None,
             imu_rest: false,
             revisions_emitted: 0,
-            withdrawn: 0,
         })
     }
 
@@ -263,9 +333,18 @@ impl OdometryStage {
         self.revisions_emitted
     }
 
-    /// Number of samples whose rest flag was withdrawn in hindsight so far.
+    /// Number of samples whose rest flag stands withdrawn in hindsight so far (those still
+    /// within the hindsight may yet be reinstated).
     pub fn withdrawn_rest_samples(&self) -> u64 {
-        self.withdrawn
+        self.hindsight.as_ref().map_or(0, |hs| {
+            let pending = (0..hs.journal.len())
+                .filter(|&i| {
+                    matches!(hs.journal.oldest(i), Some(Input::Sample { s, imu_rest: true })
+                        if s.flags & corrected_flags::ZERO_STATE == 0)
+                })
+                .count() as u64;
+            hs.withdrawn + pending
+        })
     }
 
     /// The filter, once aligned (for diagnostics and tests).
@@ -274,8 +353,8 @@ impl OdometryStage {
     }
 
     /// Processes one sample: emits its state, and any revised states (a motion interval's
-    /// drift removed, or rest flags withdrawn in hindsight), through `emit`. A refused sample
-    /// changes nothing.
+    /// drift removed, or rest flags withdrawn or reinstated in hindsight), through `emit`. A
+    /// refused sample changes nothing.
     pub fn process(
         &mut self,
         s: &CorrectedImuSample,
@@ -294,7 +373,8 @@ impl OdometryStage {
         }
         self.last_ns = Some(t_ns);
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
-        let motion_after_imu_rest = self.imu_rest && !imu_rest && self.live.imu_decided();
+        // Rest decided by a fresh hint is not the detector's to withdraw.
+        let imu_transition = imu_rest != self.imu_rest && self.live.imu_decided();
         self.imu_rest = imu_rest;
         let revisions = &mut self.revisions_emitted;
         let mut counted = |o: &OdometryState| {
@@ -307,24 +387,16 @@ impl OdometryStage {
             self.live.process(s, &mut counted);
             return Ok(());
         };
-        hs.keep(Input::Sample(*s));
+        hs.keep(Input::Sample { s: *s, imu_rest });
         hs.catch_up(t_ns);
-        if !motion_after_imu_rest {
+        if !(imu_transition && hs.resolve()) {
             self.live.process(s, &mut counted);
             return Ok(());
         }
-        // Motion within the hindsight of these rest flags: withdraw them, and navigate again
-        // from the lagging navigator, republishing every state but this sample's.
-        let n = hs.journal.len();
-        for i in 0..n {
-            if let Some(Input::Sample(x)) = hs.journal.oldest_mut(i)
-                && x.flags & corrected_flags::ZERO_STATE != 0
-            {
-                x.flags &= !corrected_flags::ZERO_STATE;
-                self.withdrawn += 1;
-            }
-        }
+        // Flags in force changed: navigate again from the lagging navigator, republishing
+        // every state but this sample's.
         self.live.copy_from(&hs.lagged);
+        let n = hs.journal.len();
         for i in 0..n {
             let input = *hs.journal.oldest(i).expect("i < len");
             if i + 1 == n {
