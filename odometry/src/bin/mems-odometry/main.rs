@@ -1,8 +1,10 @@
 //! `mems-odometry`: odometry from calibrated samples, live (`serve`: `mems/imu/corrected` and
 //! `mems/robot/hint` in, `mems/odometry/state` out) or offline over a raw recording (`offline`:
 //! the calibration stage and the odometry stage in one process, the same code the live
-//! processes run, with the recording's robot hints).
+//! processes run, with the recording's robot hints). `gyrocal` fits the gyro's scale and
+//! misalignment correction from a recorded pose session into the calibration file.
 
+mod gyrocal;
 mod hint_args;
 mod offline;
 mod serve;
@@ -30,11 +32,15 @@ enum Command {
     Serve(serve::ServeArgs),
     /// Run calibration and odometry over a raw recording (CSV or MCAP).
     Offline(offline::OfflineArgs),
+    /// Fit the gyro's scale and misalignment correction from a recorded pose session and
+    /// optionally store it in the calibration file's [gyro] table.
+    Gyrocal(gyrocal::GyroCalArgs),
 }
 
 /// The odometry configuration a calibration file implies ([`odometry::config::from_calibration`]:
-/// its local gravity and `[noise]` table, the MPU-9250 defaults for every figure it lacks; the
-/// defaulted figures are named once on stderr). `serve` and `offline` both use this, so that a
+/// its local gravity, `[gyro]` correction and `[noise]` table, the identity correction and the
+/// MPU-9250 defaults for what it lacks; an uncalibrated gyro and the defaulted figures are named
+/// once on stderr). `serve` and `offline` both use this, so that a
 /// replayed recording reproduces the live states exactly.
 pub fn odometry_config(file: &CalibrationFile) -> OdometryConfig {
     static NOTE: Once = Once::new();
@@ -63,6 +69,7 @@ fn main() -> ExitCode {
     let result: Result<()> = match Cli::parse().command {
         Command::Serve(args) => serve::run(args),
         Command::Offline(args) => offline::run(args),
+        Command::Gyrocal(args) => gyrocal::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

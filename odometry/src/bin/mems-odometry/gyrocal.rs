@@ -1,0 +1,196 @@
+//! `mems-odometry gyrocal`: fits the gyro's scale and misalignment correction from a recorded
+//! pose session (static orientations with rotations in between, e.g. `mems-sim orientations`)
+//! and optionally stores it in the calibration file's `[gyro]` table, where `serve` and
+//! `offline` read it (`odometry::config::from_calibration`).
+//!
+//! The raw session goes through the calibration stage with the file, exactly as `offline` and
+//! `mems-calibrate serve` run it: the accelerometer corrected by the file's model, the gyro's
+//! bias refined at rest, and the zero-state detector's flags marking the static poses. The
+//! corrected samples go to [`odometry::gyrocal::calibrate_gyro`]; its correction `C` gives
+//! `omega = C w` (w the bias-free reading, rad/s) in the orthonormal frame closest to the
+//! corrected accelerometer's axes, which is why it belongs with the accelerometer calibration
+//! it was fitted through (`--into` refuses a file with a different one).
+//!
+//! The stage's GLRT is set up for a pose session rather than a robot on a floor: its test of
+//! the accelerometer's window mean against the gravity vector learned at start-up is left out
+//! (each pose holds another attitude), so rest is the gyro's mean at its bias and a small
+//! scatter of both sensors, over a window of [`POSE_WINDOW_S`]. A fit whose largest 1-sigma
+//! exceeds [`MAX_SIGMA`] is refused (poses that are not static, rotations missed).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use calibrate::calibfile::CalibrationFile;
+use calibrate::stage::{CalibrationStage, RefineConfig, calib_id};
+use calibrate::zero_state::{BATCH_LEN, DetectorConfig};
+use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, raw_flags};
+use nalgebra::Matrix3;
+use odometry::gyrocal::{GyroCalConfig, calibrate_gyro};
+use serde_json::json;
+
+/// Options of `mems-odometry gyrocal`.
+#[derive(clap::Args)]
+pub struct GyroCalArgs {
+    #[command(flatten)]
+    stage: crate::StageArgs,
+    /// Raw pose session (canonical CSV, thesis CSV or MCAP): at least 9 static poses of 2 s or
+    /// more, with rotations about varied axes between them, starting at rest for `--learn-s`.
+    #[arg(long)]
+    input: PathBuf,
+    /// Store the correction and its 1-sigma in this calibration file's [gyro] table (the rest
+    /// of the file is kept). It must hold the same accelerometer calibration as --calib (the
+    /// same file, usually).
+    #[arg(long, value_name = "CALIB.toml")]
+    into: Option<PathBuf>,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The GLRT's tolerance on the accelerometer's mean at rest, m/s^2: each pose holds another
+/// attitude, so the mean is left free (this exceeds any change of the specific force between
+/// poses, 2 g, many times over) and rest is the gyro's mean at its bias and a small scatter
+/// of both sensors over the window.
+const POSE_ACCEL_TOLERANCE_MPS2: f64 = 1e3;
+
+/// Length of the GLRT's window, s: long enough that the gyro's window mean resolves a slow
+/// start of a rotation, short against a pose's hold.
+const POSE_WINDOW_S: f64 = 1.0;
+
+/// The GLRT's window in batches of [`BATCH_LEN`] samples for [`POSE_WINDOW_S`] at the
+/// session's mean sample rate (at least one batch).
+fn window_batches(samples: &[RawImuSample]) -> usize {
+    let (Some(first), Some(last)) = (samples.first(), samples.last()) else {
+        return 1;
+    };
+    let span_s = last.stamps.sample_ns.saturating_sub(first.stamps.sample_ns) as f64 * 1e-9;
+    let rate_hz = (samples.len() - 1) as f64 / span_s.max(f64::MIN_POSITIVE);
+    ((POSE_WINDOW_S * rate_hz / BATCH_LEN as f64).round() as usize).max(1)
+}
+
+/// Largest 1-sigma of an entry of the correction that is accepted (dimensionless): a fifth of
+/// the MPU-9250's 1% scale error, so that a stored correction always improves on none.
+const MAX_SIGMA: f64 = 2e-3;
+
+/// A 3x3 matrix as row-major arrays (the calibration file's and the JSON's layout).
+fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    std::array::from_fn(|r| std::array::from_fn(|k| m[(r, k)]))
+}
+
+/// Fits the correction, prints it and stores it when asked.
+pub fn run(args: GyroCalArgs) -> Result<()> {
+    let calib_path = &args.stage.calib;
+    let file = CalibrationFile::load(calib_path)
+        .with_context(|| format!("cannot load calibration {}", calib_path.display()))?;
+    if !(args.stage.learn_s > 0.0 && args.stage.learn_s.is_finite()) {
+        bail!("--learn-s must be > 0, got {}", args.stage.learn_s);
+    }
+    // Read the target first, so that a bad one fails before the fit.
+    let mut target = match &args.into {
+        Some(path) => {
+            let target = CalibrationFile::load(path)
+                .with_context(|| format!("cannot load calibration {}", path.display()))?;
+            if calib_id(&target) != calib_id(&file) {
+                bail!(
+                    "{} holds a different calibration than {} (calib_id {:016x} vs {:016x}): the \
+                     gyro correction is fitted through --calib's accelerometer calibration and \
+                     belongs in that file",
+                    path.display(),
+                    calib_path.display(),
+                    calib_id(&target),
+                    calib_id(&file)
+                );
+            }
+            Some(target)
+        }
+        None => None,
+    };
+
+    let recording = recording::load_raw(&args.input)?;
+    if let Some(r) = recording
+        .samples
+        .iter()
+        .find(|r| r.flags & raw_flags::GYRO_VALID == 0)
+    {
+        bail!(
+            "{}: sample seq {} has no gyroscope (GYRO_VALID clear): a gyro calibration needs \
+             gyro readings (record the session at a rate with the gyroscope)",
+            args.input.display(),
+            r.seq
+        );
+    }
+    if let Some(t) = &recording.truncation {
+        eprintln!("mems-odometry: {}: {t}", args.input.display());
+    }
+    let mut detector = DetectorConfig::new(args.stage.detector, file.gravity_mps2);
+    detector.learn.duration_s = args.stage.learn_s;
+    detector.glrt.accel_tolerance_mps2 = POSE_ACCEL_TOLERANCE_MPS2;
+    detector.glrt.window_batches = window_batches(&recording.samples);
+    let mut stage = CalibrationStage::new(&file, detector, RefineConfig::default())
+        .map_err(|e| anyhow::anyhow!("{}: {e}", calib_path.display()))?;
+    let mut corrected: Vec<CorrectedImuSample> = Vec::with_capacity(recording.samples.len());
+    for raw in &recording.samples {
+        stage
+            .push(raw, &mut |c: &CorrectedImuSample| corrected.push(*c))
+            .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
+    }
+    stage.finish(&mut |c: &CorrectedImuSample| corrected.push(*c));
+    let rest = corrected
+        .iter()
+        .filter(|c| c.flags & corrected_flags::ZERO_STATE != 0)
+        .count();
+
+    let cal =
+        calibrate_gyro(&corrected, &GyroCalConfig::new(file.gravity_mps2)).with_context(|| {
+            format!(
+                "{}: {} of {} samples flagged at rest by the {} detector",
+                args.input.display(),
+                rest,
+                corrected.len(),
+                args.stage.detector.name()
+            )
+        })?;
+    let (c, sigma) = (rows(&cal.correction), rows(&cal.correction_sigma));
+    if args.json {
+        let result = json!({
+            "correction": c,
+            "correction_sigma": sigma,
+            "poses": cal.poses,
+            "residual_rms": cal.residual_rms,
+            "accel_bias_mps2": [cal.accel_bias_mps2.x, cal.accel_bias_mps2.y, cal.accel_bias_mps2.z],
+        });
+        println!("{result}");
+    } else {
+        println!(
+            "gyro correction C (omega = C w, sensor frame) from {} static poses of {}, residual \
+             RMS {:.2e}:",
+            cal.poses,
+            args.input.display(),
+            cal.residual_rms
+        );
+        for (row, s) in c.iter().zip(&sigma) {
+            println!(
+                "  [{:+.6} {:+.6} {:+.6}]  +- [{:.1e} {:.1e} {:.1e}]",
+                row[0], row[1], row[2], s[0], s[1], s[2]
+            );
+        }
+    }
+    let largest = cal.correction_sigma.max();
+    if largest > MAX_SIGMA {
+        bail!(
+            "{}: the fit is too uncertain to use (largest 1-sigma {largest:.1e} > {MAX_SIGMA:e}): \
+             check that the session holds each pose still and that the {} detector's rest flags \
+             ({rest} of {} samples) mark the poses",
+            args.input.display(),
+            args.stage.detector.name(),
+            corrected.len()
+        );
+    }
+    if let (Some(path), Some(target)) = (&args.into, target.as_mut()) {
+        target.gyro.correction = Some(c);
+        target.gyro.correction_sigma = Some(sigma);
+        target.save(path)?;
+        eprintln!("wrote the gyro correction into {} [gyro]", path.display());
+    }
+    Ok(())
+}
