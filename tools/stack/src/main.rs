@@ -35,7 +35,7 @@ struct Cli {
     #[arg(long)]
     duration: Option<f64>,
     /// Calibration file. Required for a real sensor; for `sim` the stack calibrates the
-    /// simulated part from a simulated six-position session when it is not given.
+    /// simulated part from simulated six-position and orientation sessions when it is not given.
     #[arg(long)]
     calib: Option<PathBuf>,
     /// Zero-state detector of the calibration stage (default: `glrt`, which needs the
@@ -133,7 +133,8 @@ fn run_step(program: &Path, args: &[&str]) -> Result<()> {
 
 /// Calibrates the simulated part: a six-position session of the same simulated MPU-9250
 /// (datasheet-level errors, a different power-on than the live run, so the turn-on bias is not
-/// known exactly), fitted with model 3.
+/// known exactly), fitted with model 3; then the gyro's scale and misalignment from a session of
+/// 16 orientations (`mems-odometry gyrocal`: the six positions are too few poses for it).
 fn calibrate_sim(bins: &Path, work: &Path, seed: u64) -> Result<PathBuf> {
     let six = work.join("six-position.csv");
     let calib = work.join("calib.toml");
@@ -162,6 +163,39 @@ fn calibrate_sim(bins: &Path, work: &Path, seed: u64) -> Result<PathBuf> {
             "full",
             "--out",
             calib.to_str().context("temporary path is not UTF-8")?,
+        ],
+    )?;
+    let orientations = work.join("orientations.csv");
+    let orientations = orientations
+        .to_str()
+        .context("temporary path is not UTF-8")?;
+    let calib_str = calib.to_str().context("temporary path is not UTF-8")?;
+    run_step(
+        &bins.join("mems-sim"),
+        &[
+            "orientations",
+            "--n",
+            "16",
+            "--preset",
+            "datasheet",
+            "--seed",
+            &seed,
+            "--rate",
+            "200",
+            "--out",
+            orientations,
+        ],
+    )?;
+    run_step(
+        &bins.join("mems-odometry"),
+        &[
+            "gyrocal",
+            "--input",
+            orientations,
+            "--calib",
+            calib_str,
+            "--into",
+            calib_str,
         ],
     )?;
     Ok(calib)
