@@ -3,8 +3,8 @@
 //! and optionally stores it in the calibration file's `[gyro]` table, where `serve` and
 //! `offline` read it (`odometry::config::from_calibration`).
 //!
-//! The raw session goes through the calibration stage with the file, exactly as `offline` and
-//! `mems-calibrate serve` run it: the accelerometer corrected by the file's model, the gyro's
+//! The raw session goes through the calibration stage with the file (the code `offline` and
+//! `mems-calibrate serve` run): the accelerometer corrected by the file's model, the gyro's
 //! bias refined at rest, and the zero-state detector's flags marking the static poses. The
 //! corrected samples go to [`odometry::gyrocal::calibrate_gyro`]; its correction `C` gives
 //! `omega = C w` (w the bias-free reading, rad/s) in the orthonormal frame closest to the
