@@ -39,6 +39,12 @@ pub struct OfflineArgs {
     /// Ignore the recording's robot hints (IMU only).
     #[arg(long)]
     no_hints: bool,
+    /// Repair torn high/low-byte reads first (`calibrate::repair`): for recordings made by a
+    /// logger that read the two bytes of an axis in separate transactions, such as the
+    /// thesis's (docs/diagnosis.md). Our driver never tears a read, so live and offline agree
+    /// only without it.
+    #[arg(long)]
+    repair_torn_reads: bool,
     #[command(flatten)]
     hints: crate::hint_args::HintArgs,
 }
@@ -77,7 +83,20 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     if !(args.stage.learn_s > 0.0 && args.stage.learn_s.is_finite()) {
         bail!("--learn-s must be > 0, got {}", args.stage.learn_s);
     }
-    let recording = recording::load_raw(&args.input)?;
+    let mut recording = recording::load_raw(&args.input)?;
+    if args.repair_torn_reads {
+        let report = calibrate::repair::repair_torn_reads(
+            &mut recording.samples,
+            &calibrate::repair::TornReadConfig::default(),
+        );
+        eprintln!(
+            "mems-odometry: {}: repaired {} torn reads (x, y, z: {:?}) in {} samples",
+            args.input.display(),
+            report.total(),
+            report.repaired,
+            report.samples
+        );
+    }
     // Without a gyroscope nothing tracks the attitude. Offline keeps navigating (static
     // recordings such as the thesis's, accelerometer-only, are dead-reckoned at a fixed
     // attitude), but says what that position is worth.
