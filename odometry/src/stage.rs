@@ -31,6 +31,28 @@
 //!   is within [`HintConfig::fallback_zupt_gate_sigma`] standard deviations of zero: on a
 //!   smooth floor the IMU's detector takes cruising for rest, and a robot the hints saw
 //!   cruising a moment ago has not stopped unless its integrated velocity says so.
+//!
+//! **Rest in hindsight.** The calibration stage's detector decides over a window that still
+//! holds the rest before a motion, so it flags the first fraction of a second of a gentle start
+//! as rest; a zero-velocity update there cuts the speed the robot has already gained, and the
+//! distance of the whole motion with it (measured in docs/odometry.md). So a rest flag counts
+//! only in hindsight: it stands unless a confirmed motion starts within
+//! [`OdometryConfig::rest_hindsight_s`] after it. When the IMU's flag turns from rest to
+//! motion, the flags of the last `rest_hindsight_s` are withdrawn and those samples are
+//! navigated again as motion. A run of motion flags shorter than
+//! [`OdometryConfig::motion_confirm_s`] that is followed by `rest_hindsight_s` of rest flags
+//! is not a confirmed motion (a bump, or a false alarm on a sensor at rest, which would
+//! otherwise cost every such rest its last updates): once that rest has passed, the flags it
+//! withdrew are reinstated and the samples navigated again as rest. Runs closer together than
+//! the hindsight confirm each other (a gentle start flickers). Samples navigated again are
+//! republished with the `REVISION` flag; the forward state is never delayed.
+//!
+//! For that the stage runs two navigators (module `navigator`): one on every input, whose
+//! states it emits, and one lagging `2 rest_hindsight_s + motion_confirm_s` behind on inputs
+//! whose flags are final. A change of the flags in force copies the lagging one into the live
+//! one and replays the inputs in between (kept, in arrival order, in a ring allocated up
+//! front), so the output is what one pass with the final flags gives. Rest decided by a fresh
+//! robot hint is not withdrawn (the controller knows).
 
 use crate::eskf::{Eskf, NoiseModel};
 use crate::hints::{HintConfig, HintConfigError, HintError, HintStats, Ring, check_hint};
@@ -78,7 +100,8 @@ pub struct OdometryConfig {
     /// stand, s (see the module documentation); 0 (or less) takes every flag as it comes.
     pub rest_hindsight_s: f64,
     /// Shortest run of motion flags that withdraws the rest flags before it, s: a shorter one
-    /// (a bump, a glitch, a detector's false alarm on a static sensor) leaves them standing.
+    /// followed by `rest_hindsight_s` of rest (a bump, a glitch, a detector's false alarm on a
+    /// static sensor) leaves them standing.
     pub motion_confirm_s: f64,
 }
 
@@ -154,8 +177,8 @@ impl Default for Input {
     }
 }
 
-/// The navigator that lags behind by the hindsight and the confirmation time, and the inputs
-/// it has not taken yet.
+/// The navigator that lags behind by as long as flags can change (twice the hindsight plus the
+/// confirmation time), and the inputs it has not taken yet.
 struct Hindsight {
     /// [`OdometryConfig::rest_hindsight_s`], ns.
     lag_ns: u64,
@@ -179,12 +202,13 @@ impl Hindsight {
         self.journal.push(input);
     }
 
-    /// Gives the lagging navigator every input up to the last sample at least the hindsight
-    /// plus the confirmation time older than `t_ns` (their rest flags are final by now).
+    /// Gives the lagging navigator every input up to the last sample whose rest flag is final
+    /// at `t_ns`: a motion starting within the hindsight after it is confirmed or not at the
+    /// latest the confirmation time plus the hindsight after its start.
     fn catch_up(&mut self, t_ns: u64) {
         while let Some(input) = self.journal.front().copied() {
             if let Input::Sample { s, .. } = input
-                && s.stamps.sample_ns + self.lag_ns + self.confirm_ns > t_ns
+                && s.stamps.sample_ns + 2 * self.lag_ns + self.confirm_ns > t_ns
             {
                 break;
             }
@@ -204,14 +228,19 @@ impl Hindsight {
     }
 
     /// Sets the flag in force of every sample in the journal by the rule (module docs): a
-    /// detector rest flag stands unless a motion that lasts at least the confirmation time (or
-    /// is still going on) starts within the hindsight after it. Returns whether any changed.
+    /// detector rest flag stands unless a confirmed motion starts within the hindsight after
+    /// it. A run of motion flags is confirmed unless it lasts less than the confirmation time
+    /// and is followed by at least the hindsight of rest flags (so a run still going on, or
+    /// one whose rest after it is younger than the hindsight, counts as confirmed for now).
+    /// Returns whether any flag changed.
     fn resolve(&mut self) -> bool {
         let mut changed = false;
-        // Backwards: the start of the nearest later confirmed motion, the time of the first
-        // rest sample after the motion run being crossed (None: it runs to the newest sample),
-        // and whether a motion run is being crossed.
+        // Backwards: the newest sample's time, the start of the nearest later confirmed run
+        // and of the nearest later run, the time of the first rest sample after the run being
+        // crossed (None: it runs to the newest sample), and whether a run is being crossed.
+        let mut newest: Option<u64> = None;
         let mut confirmed_start: Option<u64> = None;
+        let mut later_start: Option<u64> = None;
         let mut run_end: Option<u64> = None;
         let mut in_run = false;
         let mut run_start = 0u64;
@@ -220,6 +249,7 @@ impl Hindsight {
                 continue;
             };
             let t = s.stamps.sample_ns;
+            let newest = *newest.get_or_insert(t);
             if !*imu_rest {
                 in_run = true;
                 run_start = t;
@@ -228,9 +258,14 @@ impl Hindsight {
             if in_run {
                 // The run crossed started at `run_start` and ended before `run_end`.
                 in_run = false;
-                if run_end.is_none_or(|end| end - run_start >= self.confirm_ns) {
+                let confirmed = run_end.is_none_or(|end| {
+                    end - run_start >= self.confirm_ns
+                        || later_start.unwrap_or(newest) - end < self.lag_ns
+                });
+                if confirmed {
                     confirmed_start = Some(run_start);
                 }
+                later_start = Some(run_start);
             }
             run_end = Some(t);
             let rest = confirmed_start.is_none_or(|m| m - t >= self.lag_ns);
@@ -263,6 +298,11 @@ pub struct OdometryStage {
     last_ns: Option<u64>,
     /// The previous sample's IMU zero-state flag.
     imu_rest: bool,
+    /// Start of the current run of IMU motion flags, ns.
+    motion_since_ns: u64,
+    /// When a short run of motion flags that ended is followed by the hindsight of rest (its
+    /// withdrawals are then undone), ns.
+    reinstate_at_ns: Option<u64>,
     revisions_emitted: u64,
 }
 
@@ -270,7 +310,7 @@ impl OdometryStage {
     /// A stage with the default hint configuration ([`HintConfig::default`]: the IMU mounted
     /// aligned with the body). Its storage is allocated here: the motion history for
     /// `max_motion_s` at `revision_rate_hz` (only decimated states are kept), and the inputs of
-    /// `rest_hindsight_s + motion_confirm_s` at `max_rate_hz`.
+    /// `2 rest_hindsight_s + motion_confirm_s` at `max_rate_hz`.
     pub fn new(cfg: OdometryConfig) -> Self {
         Self::with_hints(cfg, HintConfig::default())
             .expect("the default hint configuration is valid")
@@ -287,7 +327,7 @@ impl OdometryStage {
             confirm_ns: (confirm_s * 1e9).round() as u64,
             lagged: Navigator::new(cfg, hints),
             journal: Ring::new(
-                ((lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize + hints.capacity + 2,
+                ((2.0 * lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize + hints.capacity + 2,
             ),
             withdrawn: 0,
         });
@@ -296,6 +336,8 @@ impl OdometryStage {
             hindsight,
             last_ns: None,
             imu_rest: false,
+            motion_since_ns: 0,
+            reinstate_at_ns: None,
             revisions_emitted: 0,
         })
     }
@@ -326,6 +368,14 @@ impl OdometryStage {
     /// Whether alignment is done.
     pub fn aligned(&self) -> bool {
         self.live.aligned()
+    }
+
+    fn lag_ns(&self) -> u64 {
+        self.hindsight.as_ref().map_or(0, |hs| hs.lag_ns)
+    }
+
+    fn confirm_ns(&self) -> u64 {
+        self.hindsight.as_ref().map_or(0, |hs| hs.confirm_ns)
     }
 
     /// Number of republished (revised) states so far.
@@ -375,6 +425,20 @@ impl OdometryStage {
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
         // Rest decided by a fresh hint is not the detector's to withdraw.
         let imu_transition = imu_rest != self.imu_rest && self.live.imu_decided();
+        if imu_rest != self.imu_rest {
+            if imu_rest {
+                // A run that ends short is undone once the hindsight of rest follows it.
+                self.reinstate_at_ns = (t_ns - self.motion_since_ns < self.confirm_ns())
+                    .then_some(t_ns + self.lag_ns());
+            } else {
+                self.motion_since_ns = t_ns;
+                self.reinstate_at_ns = None;
+            }
+        }
+        let reinstate = self.reinstate_at_ns.is_some_and(|r| t_ns >= r);
+        if reinstate {
+            self.reinstate_at_ns = None;
+        }
         self.imu_rest = imu_rest;
         let revisions = &mut self.revisions_emitted;
         let mut counted = |o: &OdometryState| {
@@ -389,7 +453,7 @@ impl OdometryStage {
         };
         hs.keep(Input::Sample { s: *s, imu_rest });
         hs.catch_up(t_ns);
-        if !(imu_transition && hs.resolve()) {
+        if !((imu_transition || reinstate) && hs.resolve()) {
             self.live.process(s, &mut counted);
             return Ok(());
         }

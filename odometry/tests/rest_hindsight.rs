@@ -53,9 +53,10 @@ fn late_flagged_drive() -> Vec<CorrectedImuSample> {
     samples
 }
 
-/// The rule done offline, with the whole stream known: every rest flag cleared that a run of
-/// motion flags lasting at least `confirm_s` (or running to the end) follows within
-/// `hindsight_s`.
+/// The rule done offline, with the whole stream known: every rest flag cleared that a
+/// confirmed run of motion flags follows within `hindsight_s`. A run is confirmed unless it
+/// lasts less than `confirm_s` and at least `hindsight_s` of rest flags follow it (up to the
+/// next run, or to the last sample).
 fn withdrawn_offline(
     samples: &[CorrectedImuSample],
     hindsight_s: f64,
@@ -66,8 +67,8 @@ fn withdrawn_offline(
         (confirm_s * 1e9).round() as u64,
     );
     let rest = |s: &CorrectedImuSample| s.flags & corrected_flags::ZERO_STATE != 0;
-    // Start times of the confirmed motion runs, in order.
-    let mut starts = Vec::new();
+    // Every motion run: its start, and the first rest sample after it (None: to the end).
+    let mut runs: Vec<(u64, Option<u64>)> = Vec::new();
     let mut i = 0;
     while i < samples.len() {
         if rest(&samples[i]) {
@@ -78,12 +79,24 @@ fn withdrawn_offline(
             .iter()
             .position(rest)
             .map_or(samples.len(), |k| i + k);
-        let start = samples[i].stamps.sample_ns;
-        if j == samples.len() || samples[j].stamps.sample_ns - start >= confirm_ns {
-            starts.push(start);
-        }
+        runs.push((
+            samples[i].stamps.sample_ns,
+            samples.get(j).map(|s| s.stamps.sample_ns),
+        ));
         i = j;
     }
+    let last_ns = samples.last().map_or(0, |s| s.stamps.sample_ns);
+    let starts: Vec<u64> = runs
+        .iter()
+        .enumerate()
+        .filter(|(k, (start, end))| {
+            end.is_none_or(|e| {
+                let rest_until = runs.get(k + 1).map_or(last_ns, |r| r.0);
+                e - start >= confirm_ns || rest_until - e < lag_ns
+            })
+        })
+        .map(|(_, (start, _))| *start)
+        .collect();
     samples
         .iter()
         .map(|s| {
@@ -155,14 +168,18 @@ fn the_live_withdrawal_equals_the_offline_one() {
 #[test]
 fn short_false_alarms_at_rest_withdraw_nothing() {
     // 60 s at rest at 200 Hz (noise-free level sensor with a small bias, so a withdrawn update
-    // would show), the detector flagging motion for one 0.1 s batch every 5 s, and a real
-    // motion flag run of 1 s at 40 s that does withdraw.
+    // would show), the detector flagging motion for one 0.1 s batch every 5 s; a real motion
+    // flag run of 1 s at 40 s, and a flickering one at 50 s (three runs of 0.1 s, 0.2 s apart,
+    // which confirm each other but for the last), both of which withdraw.
     let g = G_MPS2;
     let samples: Vec<CorrectedImuSample> = (0..12_000u64)
         .map(|k| {
             let t = k as f64 / 200.0;
             let glitch = t > 5.0 && t % 5.0 < 0.1;
-            let moving = (40.0..41.0).contains(&t);
+            let flicker = [50.0, 50.3, 50.6]
+                .iter()
+                .any(|&s| (s..s + 0.1).contains(&t));
+            let moving = (40.0..41.0).contains(&t) || flicker;
             CorrectedImuSample {
                 stamps: ipc_types::Stamps {
                     sample_ns: k * 5_000_000,
@@ -187,8 +204,9 @@ fn short_false_alarms_at_rest_withdraw_nothing() {
         .zip(&offline_flags)
         .filter(|(a, b)| a.flags != b.flags)
         .count() as u64;
-    // Only the samples less than 0.5 s before the real motion, t in (39.5, 40) s: 99.
-    assert_eq!(withdrawn, 99);
+    // Only the rest samples less than 0.5 s before the real motion, t in (39.5, 40) s (99),
+    // and before the flicker's first two runs, t in (49.5, 50.3) s (99 + 40).
+    assert_eq!(withdrawn, 99 + 99 + 40);
     let (live, stage) = run(cfg, &samples);
     assert_eq!(stage.withdrawn_rest_samples(), withdrawn);
     let no_hindsight = OdometryConfig {
