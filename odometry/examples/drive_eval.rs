@@ -477,8 +477,10 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
             if let Some(mg) = c.accel_turn_on_mg {
                 // An uncalibrated part: the start-up learning accepts a gravity magnitude off
                 // by up to 5 sigma of the bias on every axis (the default 5% refuses some).
-                detector.learn.max_gravity_error =
-                    detector.learn.max_gravity_error.max(5.0 * 3f64.sqrt() * mg * 1e-3);
+                detector.learn.max_gravity_error = detector
+                    .learn
+                    .max_gravity_error
+                    .max(5.0 * 3f64.sqrt() * mg * 1e-3);
             }
             let mut calibration =
                 CalibrationStage::new(&identity_calibration(), detector, RefineConfig::default())
