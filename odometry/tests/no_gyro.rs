@@ -4,9 +4,13 @@
 //! stderr. The same samples with the gyroscope are navigated (the control that shows the input
 //! would give a position).
 
+mod common;
+
 use std::io::Read;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+use common::{unique_namespace, wait_until};
 
 use iceoryx2::port::update_connections::UpdateConnections as _;
 use iceoryx2::service::port_factory::PortFactory as _;
@@ -41,23 +45,9 @@ fn samples(gyro: bool) -> Vec<CorrectedImuSample> {
         .collect()
 }
 
-fn wait_until(timeout: Duration, what: &str, mut condition: impl FnMut() -> bool) {
-    let start = Instant::now();
-    while !condition() {
-        assert!(start.elapsed() < timeout, "timed out waiting for {what}");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
 /// Runs `mems-odometry serve` on `samples`; returns its live states and its stderr.
 fn serve(tag: &str, samples: &[CorrectedImuSample]) -> (Vec<OdometryState>, String) {
-    let namespace = format!(
-        "test-{tag}-{}-{}",
-        std::process::id(),
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.subsec_nanos())
-    );
+    let namespace = unique_namespace(tag);
     let dir = std::env::temp_dir().join(&namespace);
     std::fs::create_dir_all(&dir).unwrap();
     let calib = dir.join("calib.toml");

@@ -11,7 +11,7 @@ mod common;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{Case, Simulation, identity_calibration};
+use common::{Case, Simulation, identity_calibration, unique_namespace, wait_until};
 use iceoryx2::port::update_connections::UpdateConnections as _;
 use iceoryx2::service::port_factory::PortFactory as _;
 use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, odometry_flags, service};
@@ -32,23 +32,9 @@ impl Drop for Serve {
     }
 }
 
-fn wait_until(timeout: Duration, what: &str, mut condition: impl FnMut() -> bool) {
-    let start = Instant::now();
-    while !condition() {
-        assert!(start.elapsed() < timeout, "timed out waiting for {what}");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
 #[test]
 fn serve_falls_back_when_hints_stop_and_resumes_without_a_gap() {
-    let namespace = format!(
-        "test-stale-hints-{}-{}",
-        std::process::id(),
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.subsec_nanos())
-    );
+    let namespace = unique_namespace("stale-hints");
     let dir = std::env::temp_dir().join(&namespace);
     std::fs::create_dir_all(&dir).unwrap();
     let calib = dir.join("calib.toml");
