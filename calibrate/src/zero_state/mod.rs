@@ -161,14 +161,20 @@ pub struct DetectorConfig {
 }
 
 impl DetectorConfig {
-    /// Defaults for `kind` with local gravity `gravity_mps2`: 5 s learning, 60 s memory, the
+    /// Defaults for `kind` with local gravity `gravity_mps2`: 5 s learning, 20 s memory, the
     /// detector's own defaults ([`YuConfig::default`], [`GlrtConfig::default`]) and no noise
     /// floor (the calibration stage sets it from the calibration file).
+    ///
+    /// The memory is short because the references must follow an uncompensated part's
+    /// temperature drift from rest to rest: with 60 s, a datasheet-level part's specific force
+    /// at rest drifted away from the lagging reference after 3 minutes of driving, no rest was
+    /// found again, and the odometry diverged (docs/detectors.md). 20 s of rest still averages
+    /// the reference to a third of the window mean's noise at 200 Hz.
     pub fn new(kind: DetectorKind, gravity_mps2: f64) -> Self {
         Self {
             kind,
             learn: LearnConfig::new(gravity_mps2),
-            memory_s: 60.0,
+            memory_s: 20.0,
             yu: YuConfig::default(),
             glrt: GlrtConfig::default(),
             noise: None,
