@@ -45,7 +45,7 @@
 //! otherwise cost every such rest its last updates): once that rest has passed, the flags it
 //! withdrew are reinstated and the samples navigated again as rest. Runs closer together than
 //! the hindsight confirm each other (a gentle start flickers). Samples navigated again are
-//! republished with the `REVISION` flag; the forward state is never delayed.
+//! republished with the `REVISION` flag; the forward state never waits for the hindsight.
 //!
 //! For that the stage runs two navigators (module `navigator`): one on every input, whose
 //! states it emits, and one lagging `2 rest_hindsight_s + motion_confirm_s` behind on inputs
