@@ -22,7 +22,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig, calib_id};
-use calibrate::zero_state::{BATCH_LEN, DetectorConfig};
+use calibrate::zero_state::BATCH_LEN;
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, raw_flags};
 use nalgebra::Matrix3;
 use odometry::gyrocal::{GyroCalConfig, calibrate_gyro};
@@ -80,11 +80,7 @@ fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
 /// Fits the correction, prints it and stores it when asked.
 pub fn run(args: GyroCalArgs) -> Result<()> {
     let calib_path = &args.stage.calib;
-    let file = CalibrationFile::load(calib_path)
-        .with_context(|| format!("cannot load calibration {}", calib_path.display()))?;
-    if !(args.stage.learn_s > 0.0 && args.stage.learn_s.is_finite()) {
-        bail!("--learn-s must be > 0, got {}", args.stage.learn_s);
-    }
+    let (file, mut detector) = args.stage.load()?;
     // Read the target first, so that a bad one fails before the fit.
     let mut target = match &args.into {
         Some(path) => {
@@ -106,7 +102,7 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
         None => None,
     };
 
-    let recording = recording::load_raw(&args.input)?;
+    let recording = crate::load_recording(&args.input)?;
     if let Some(r) = recording
         .samples
         .iter()
@@ -119,11 +115,6 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
             r.seq
         );
     }
-    if let Some(t) = &recording.truncation {
-        eprintln!("mems-odometry: {}: {t}", args.input.display());
-    }
-    let mut detector = DetectorConfig::new(args.stage.detector, file.gravity_mps2);
-    detector.learn.duration_s = args.stage.learn_s;
     detector.glrt.accel_tolerance_mps2 = POSE_ACCEL_TOLERANCE_MPS2;
     detector.glrt.window_batches = window_batches(&recording.samples);
     let mut stage = CalibrationStage::new(&file, detector, RefineConfig::default())

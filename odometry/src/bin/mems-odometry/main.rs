@@ -9,13 +9,13 @@ mod hint_args;
 mod offline;
 mod serve;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Once;
 
-use anyhow::Result;
+use anyhow::{Context, Result, bail};
 use calibrate::calibfile::CalibrationFile;
-use calibrate::zero_state::DetectorKind;
+use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use clap::{Parser, Subcommand};
 use odometry::stage::OdometryConfig;
 
@@ -63,6 +63,32 @@ pub struct StageArgs {
     /// Start-up rest the detector learns from, s (offline; as `mems-calibrate serve --learn-s`).
     #[arg(long, default_value_t = 5.0)]
     pub learn_s: f64,
+}
+
+impl StageArgs {
+    /// The calibration file and the detector settings these options give (the detector's
+    /// defaults for the file's gravity, learning for `learn_s`); refuses a `learn_s` that is
+    /// not positive and finite.
+    pub fn load(&self) -> Result<(CalibrationFile, DetectorConfig)> {
+        let file = CalibrationFile::load(&self.calib)
+            .with_context(|| format!("cannot load calibration {}", self.calib.display()))?;
+        if !(self.learn_s > 0.0 && self.learn_s.is_finite()) {
+            bail!("--learn-s must be > 0, got {}", self.learn_s);
+        }
+        let mut detector = DetectorConfig::new(self.detector, file.gravity_mps2);
+        detector.learn.duration_s = self.learn_s;
+        Ok((file, detector))
+    }
+}
+
+/// Reads a raw recording (CSV or MCAP); a truncated one is read up to the cut, which is
+/// reported on stderr.
+pub fn load_recording(path: &Path) -> Result<recording::Recording> {
+    let recording = recording::load_raw(path)?;
+    if let Some(t) = &recording.truncation {
+        eprintln!("mems-odometry: {}: {t}", path.display());
+    }
+    Ok(recording)
 }
 
 fn main() -> ExitCode {

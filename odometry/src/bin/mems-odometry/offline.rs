@@ -12,10 +12,8 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
-use calibrate::calibfile::CalibrationFile;
+use anyhow::{Result, bail};
 use calibrate::stage::{CalibrationStage, RefineConfig};
-use calibrate::zero_state::DetectorConfig;
 use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags};
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
 use odometry::stage::OdometryStage;
@@ -78,12 +76,8 @@ impl TruthFrame {
 
 /// Runs the pipeline and prints the result.
 pub fn run(args: OfflineArgs) -> Result<()> {
-    let file = CalibrationFile::load(&args.stage.calib)
-        .with_context(|| format!("cannot load calibration {}", args.stage.calib.display()))?;
-    if !(args.stage.learn_s > 0.0 && args.stage.learn_s.is_finite()) {
-        bail!("--learn-s must be > 0, got {}", args.stage.learn_s);
-    }
-    let mut recording = recording::load_raw(&args.input)?;
+    let (file, detector) = args.stage.load()?;
+    let mut recording = crate::load_recording(&args.input)?;
     if args.repair_torn_reads {
         let report = calibrate::repair::repair_torn_reads(
             &mut recording.samples,
@@ -114,11 +108,6 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             r.seq
         );
     }
-    if let Some(t) = &recording.truncation {
-        eprintln!("mems-odometry: {}: {t}", args.input.display());
-    }
-    let mut detector = DetectorConfig::new(args.stage.detector, file.gravity_mps2);
-    detector.learn.duration_s = args.stage.learn_s;
     let mut calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.stage.calib.display()))?;
     let mut odometry =
