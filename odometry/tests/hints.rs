@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{Case, Simulation};
+use common::{Case, Simulation, run_with_hints};
 use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags};
 use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
@@ -34,39 +34,6 @@ fn simulate(c: &Case, seed: u64) -> (Vec<CorrectedImuSample>, Vec<Truth>, Odomet
         truth.push(*t);
     });
     (samples, truth, cfg)
-}
-
-/// What a run produced: the forward state of every sample, in order.
-struct Run {
-    states: Vec<OdometryState>,
-    stage: OdometryStage,
-}
-
-/// Runs the stage over `samples`, handing it each hint once the sample time reaches its
-/// publication (as the live process receives them).
-fn run(
-    cfg: OdometryConfig,
-    hint_cfg: HintConfig,
-    samples: &[CorrectedImuSample],
-    hints: &[RobotHint],
-) -> Run {
-    let mut stage = OdometryStage::with_hints(cfg, hint_cfg).unwrap();
-    let mut states = Vec::with_capacity(samples.len());
-    let mut next = 0;
-    for s in samples {
-        while next < hints.len() && hints[next].stamps.acquired_ns <= s.stamps.sample_ns {
-            stage.hint(&hints[next]).unwrap();
-            next += 1;
-        }
-        stage
-            .process(s, &mut |o| {
-                if o.flags & odometry_flags::REVISION == 0 {
-                    states.push(*o);
-                }
-            })
-            .unwrap();
-    }
-    Run { states, stage }
 }
 
 /// Horizontal end error against the truth, m. The navigation frame's heading is fixed at
@@ -138,8 +105,8 @@ fn stationary_hints_give_the_zero_velocity_updates_a_blind_detector_misses() {
         }
     }
     let hints = rest_only(&c.hints(11, &no_losses(RestSource::Encoders)).hints);
-    let imu_only = run(cfg, HintConfig::default(), &samples, &[]);
-    let with_hints = run(cfg, HintConfig::default(), &samples, &hints);
+    let imu_only = run_with_hints(cfg, HintConfig::default(), &samples, &[]);
+    let with_hints = run_with_hints(cfg, HintConfig::default(), &samples, &hints);
     let d = distance(&truth);
     let (e_imu, e_hints) = (
         end_error(&imu_only.states, &truth),
@@ -186,8 +153,8 @@ fn speed_hints_bound_the_drift_of_long_cruises() {
     };
     let (samples, truth, cfg) = simulate(&c, 4);
     let hints = c.hints(4, &no_losses(RestSource::Encoders));
-    let imu_only = run(cfg, HintConfig::default(), &samples, &[]);
-    let with_hints = run(cfg, HintConfig::default(), &samples, &hints.hints);
+    let imu_only = run_with_hints(cfg, HintConfig::default(), &samples, &[]);
+    let with_hints = run_with_hints(cfg, HintConfig::default(), &samples, &hints.hints);
     let d = distance(&truth);
     let (e_imu, e_hints) = (
         end_error(&imu_only.states, &truth),
@@ -239,7 +206,7 @@ fn stale_hints_fall_back_to_the_imu_without_a_gap() {
         .filter(|h| !(gap_from..gap_to).contains(&h.stamps.acquired_ns))
         .collect();
     let hint_cfg = HintConfig::default();
-    let r = run(cfg, hint_cfg, &samples, &hints);
+    let r = run_with_hints(cfg, hint_cfg, &samples, &hints);
     assert_eq!(r.states.len(), samples.len());
     let delivery = (hint_cfg.delivery_s * 1e9) as u64;
     let max_age = (hint_cfg.max_age_s * 1e9) as u64;
@@ -312,12 +279,12 @@ fn the_mounting_is_estimated_from_the_first_drive() {
         mounting: None,
         ..HintConfig::default()
     };
-    let r = run(cfg, estimate, &samples, &hints);
+    let r = run_with_hints(cfg, estimate, &samples, &hints);
     let got = r.stage.mounting().expect("estimated");
     let error_deg = got.angle_to(&mounting).to_degrees();
     assert!(error_deg < 0.3, "mounting off by {error_deg} deg");
     assert!(r.stage.hint_stats().speed_updates > 500);
-    let wrong = run(cfg, HintConfig::default(), &samples, &hints);
+    let wrong = run_with_hints(cfg, HintConfig::default(), &samples, &hints);
     let (e, e_wrong) = (
         end_error(&r.states, &truth),
         end_error(&wrong.states, &truth),
@@ -345,7 +312,7 @@ fn states_do_not_depend_on_how_hints_and_samples_interleave() {
         capacity: hints.len(),
         ..HintConfig::default()
     };
-    let just_in_time = run(cfg, hint_cfg, &samples, &hints);
+    let just_in_time = run_with_hints(cfg, hint_cfg, &samples, &hints);
     let mut stage = OdometryStage::with_hints(cfg, hint_cfg).unwrap();
     for h in &hints {
         stage.hint(h).unwrap();
@@ -398,7 +365,7 @@ fn stationary_hints_align_only_once_the_detector_is_ready() {
         }
     }
     let hints = rest_only(&c.hints(3, &no_losses(RestSource::Encoders)).hints);
-    let r = run(cfg, HintConfig::default(), &samples, &hints);
+    let r = run_with_hints(cfg, HintConfig::default(), &samples, &hints);
     let first_aligned = r
         .states
         .iter()

@@ -7,7 +7,7 @@ mod common;
 
 use alloc_count::allocations;
 use common::{Case, Simulation};
-use ipc_types::{CorrectedImuSample, RobotHint, odometry_flags};
+use ipc_types::{RobotHint, odometry_flags};
 use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
 use odometry::hints::HintConfig;
@@ -26,8 +26,7 @@ fn processing_samples_allocates_nothing() {
     };
     let mut sim = Simulation::new(&c, 2);
     sim.session();
-    let mut samples: Vec<CorrectedImuSample> = Vec::new();
-    sim.drive(|s, _| samples.push(*s));
+    let samples = sim.drive_samples();
     let mut stage = OdometryStage::new(OdometryConfig::mpu9250(G_MPS2));
 
     let (mut live, mut revised) = (0u64, 0u64);
@@ -67,8 +66,7 @@ fn taking_hints_allocates_nothing() {
     };
     let mut sim = Simulation::new(&c, 3);
     sim.session();
-    let mut samples: Vec<CorrectedImuSample> = Vec::new();
-    sim.drive(|s, _| samples.push(*s));
+    let samples = sim.drive_samples();
     let mut p = HintParams::new(RestSource::Encoders);
     p.drop_fraction = 0.3;
     // Hints stop for 5 s in the middle (stale), then resume.

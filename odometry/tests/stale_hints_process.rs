@@ -11,14 +11,16 @@ mod common;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{Case, Simulation, identity_calibration, unique_namespace, wait_until};
+use common::{
+    Case, Simulation, identity_calibration, run_with_hints, unique_namespace, wait_until,
+};
 use iceoryx2::port::update_connections::UpdateConnections as _;
 use iceoryx2::service::port_factory::PortFactory as _;
 use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, odometry_flags, service};
 use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
 use odometry::hints::HintConfig;
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::stage::OdometryConfig;
 
 /// The serve process, killed when the test ends (unless it was stopped cleanly).
 struct Serve(Option<Child>);
@@ -50,8 +52,7 @@ fn serve_falls_back_when_hints_stop_and_resumes_without_a_gap() {
     };
     let mut sim = Simulation::new(&c, 5);
     sim.session();
-    let mut samples: Vec<CorrectedImuSample> = Vec::new();
-    sim.drive(|s, _| samples.push(*s));
+    let samples = sim.drive_samples();
     let mut p = HintParams::new(RestSource::Encoders);
     p.drop_fraction = 0.0;
     p.bursts_per_min = 0.0;
@@ -149,23 +150,13 @@ fn serve_falls_back_when_hints_stop_and_resumes_without_a_gap() {
         assert_eq!(o.seq, s.seq);
     }
     // The same stage in this process, fed the same way, gives the same states bit for bit.
-    let mut stage =
-        OdometryStage::with_hints(OdometryConfig::mpu9250(G_MPS2), HintConfig::default()).unwrap();
-    let mut local = Vec::new();
-    let mut next = 0;
-    for s in &samples {
-        while next < hints.len() && hints[next].stamps.acquired_ns <= s.stamps.sample_ns {
-            stage.hint(&hints[next]).unwrap();
-            next += 1;
-        }
-        stage
-            .process(s, &mut |o| {
-                if o.flags & odometry_flags::REVISION == 0 {
-                    local.push(*o);
-                }
-            })
-            .unwrap();
-    }
+    let local = run_with_hints(
+        OdometryConfig::mpu9250(G_MPS2),
+        HintConfig::default(),
+        &samples,
+        &hints,
+    )
+    .states;
     for (a, b) in states.iter().zip(&local) {
         let mut a = *a;
         a.stamps.odometry_ns = 0;

@@ -14,7 +14,10 @@
 
 use calibrate::calibfile::CalibrationFile;
 use ipc_types::units::{AccelRange, GyroRange};
-use ipc_types::{CorrectedImuSample, RawImuSample, Stamps, corrected_flags};
+use ipc_types::{
+    CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps, corrected_flags,
+    odometry_flags,
+};
 use mems_sim::SimSensor;
 use mems_sim::adc::quantize_sample;
 use mems_sim::hints::{HintParams, HintStream, drive_hints};
@@ -22,6 +25,8 @@ use mems_sim::model::{G_MPS2, SensorModel};
 use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
 use mems_sim::vibration::{Vibration, VibrationModel};
 use nalgebra::{Matrix3, Vector3};
+use odometry::hints::HintConfig;
+use odometry::stage::{OdometryConfig, OdometryStage};
 use recording::Truth;
 
 /// Number of attitudes in the calibration session.
@@ -378,6 +383,13 @@ impl Simulation {
         }
     }
 
+    /// The drive's samples, in order (the truth left out).
+    pub fn drive_samples(&mut self) -> Vec<CorrectedImuSample> {
+        let mut samples = Vec::new();
+        self.drive(|s, _| samples.push(*s));
+        samples
+    }
+
     /// Runs the drive like [`Simulation::drive`], but gives the quantized raw samples (sensor
     /// units, as the acquisition publishes them) instead of the corrected ones.
     pub fn drive_raw(&mut self, mut f: impl FnMut(&RawImuSample, &Truth)) {
@@ -409,4 +421,38 @@ pub fn unique_namespace(tag: &str) -> String {
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.subsec_nanos())
     )
+}
+
+/// What a run of the stage produced: the forward state of every sample, in order, and the
+/// stage.
+pub struct Run {
+    pub states: Vec<OdometryState>,
+    pub stage: OdometryStage,
+}
+
+/// Runs the stage over `samples`, handing it each hint once the sample time reaches its
+/// publication (as the live process receives them).
+pub fn run_with_hints(
+    cfg: OdometryConfig,
+    hint_cfg: HintConfig,
+    samples: &[CorrectedImuSample],
+    hints: &[RobotHint],
+) -> Run {
+    let mut stage = OdometryStage::with_hints(cfg, hint_cfg).unwrap();
+    let mut states = Vec::with_capacity(samples.len());
+    let mut next = 0;
+    for s in samples {
+        while next < hints.len() && hints[next].stamps.acquired_ns <= s.stamps.sample_ns {
+            stage.hint(&hints[next]).unwrap();
+            next += 1;
+        }
+        stage
+            .process(s, &mut |o| {
+                if o.flags & odometry_flags::REVISION == 0 {
+                    states.push(*o);
+                }
+            })
+            .unwrap();
+    }
+    Run { states, stage }
 }
