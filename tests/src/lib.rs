@@ -38,17 +38,20 @@ pub fn path_arg(p: &std::path::Path) -> &str {
     p.to_str().expect("UTF-8 path")
 }
 
-/// Calibrates the simulated datasheet-level MPU-9250 the way a user would: a `mems-sim`
-/// six-position session (power-on `seed`) fitted with model 3 by `mems-calibrate fit`; returns
-/// the calibration file written in `dir`.
+/// Calibrates the simulated datasheet-level MPU-9250 the way a user would, and as `mems-stack`
+/// does: a `mems-sim` six-position session (power-on `seed`) fitted with model 3 by
+/// `mems-calibrate fit`, then the gyro's scale and misalignment from a 16-orientation session
+/// of the same power-on by `mems-odometry gyrocal --into`; returns the calibration file written
+/// in `dir`.
 pub fn calibrate_sim_part(dir: &std::path::Path, seed: u64) -> PathBuf {
-    let six = dir.join("six.csv");
-    let calib = dir.join("calib.toml");
+    let (six, poses, calib) = (
+        dir.join("six.csv"),
+        dir.join("poses.csv"),
+        dir.join("calib.toml"),
+    );
     let seed = seed.to_string();
-    run_ok(
-        "mems-sim",
-        &[
-            "six-position",
+    let session = |kind: &[&str], out: &std::path::Path| {
+        let common = [
             "--preset",
             "datasheet",
             "--seed",
@@ -56,9 +59,16 @@ pub fn calibrate_sim_part(dir: &std::path::Path, seed: u64) -> PathBuf {
             "--rate",
             "200",
             "--out",
-            path_arg(&six),
-        ],
-    );
+        ];
+        let args: Vec<&str> = kind
+            .iter()
+            .chain(&common)
+            .copied()
+            .chain([path_arg(out)])
+            .collect();
+        run_ok("mems-sim", &args);
+    };
+    session(&["six-position"], &six);
     run_ok(
         "mems-calibrate",
         &[
@@ -68,6 +78,19 @@ pub fn calibrate_sim_part(dir: &std::path::Path, seed: u64) -> PathBuf {
             "--model",
             "full",
             "--out",
+            path_arg(&calib),
+        ],
+    );
+    session(&["orientations", "--n", "16"], &poses);
+    run_ok(
+        "mems-odometry",
+        &[
+            "gyrocal",
+            "--input",
+            path_arg(&poses),
+            "--calib",
+            path_arg(&calib),
+            "--into",
             path_arg(&calib),
         ],
     );

@@ -1,77 +1,47 @@
 //! A datasheet-level simulated part (uncompensated temperature drift, the part `mems-stack`
-//! simulates) calibrated as `mems-stack` calibrates it (six-position fit, then the gyro from 16
-//! orientations), then driven for 10 minutes with turns and run through `mems-odometry offline`:
+//! simulates) calibrated as `mems-stack` calibrates it ([`calibrate_sim_part`]: six-position
+//! fit, then the gyro from 16 orientations), then driven for 10 minutes with turns and run through `mems-odometry offline`:
 //! the zero-state detector keeps finding rest to the end of the drive, and the end error stays
 //! a few percent of the distance. With a 60 s reference memory the detector's reference lagged
 //! the self-heating drift, no rest was found after 173 s and the position diverged to tens of
 //! kilometres (docs/detectors.md).
 
-use integration_tests::{run_ok, unique_namespace};
+use integration_tests::{calibrate_sim_part, path_arg, run_ok, unique_namespace};
 
 #[test]
 fn the_detector_follows_the_temperature_drift_of_an_uncompensated_part() {
     let dir = std::env::temp_dir().join(unique_namespace("datasheet-drive"));
     std::fs::create_dir_all(&dir).unwrap();
-    let path = |name: &str| dir.join(name).to_str().unwrap().to_owned();
-    let (six, calib, poses, drive) = (
-        path("six.csv"),
-        path("calib.toml"),
-        path("poses.csv"),
-        path("drive.mcap"),
-    );
-    let sim = |args: &[&str]| run_ok("mems-sim", args);
-    sim(&[
-        "six-position",
-        "--preset",
-        "datasheet",
-        "--seed",
-        "1001",
-        "--rate",
-        "200",
-        "--out",
-        &six,
-    ]);
+    let calib = calibrate_sim_part(&dir, 1001);
+    let (calib, drive) = (path_arg(&calib), dir.join("drive.mcap"));
     run_ok(
-        "mems-calibrate",
-        &["fit", "--input", &six, "--model", "full", "--out", &calib],
-    );
-    sim(&[
-        "orientations",
-        "--n",
-        "16",
-        "--preset",
-        "datasheet",
-        "--seed",
-        "2001",
-        "--rate",
-        "200",
-        "--out",
-        &poses,
-    ]);
-    run_ok(
-        "mems-odometry",
+        "mems-sim",
         &[
-            "gyrocal", "--input", &poses, "--calib", &calib, "--into", &calib,
+            "drive",
+            "--duration",
+            "600",
+            "--turns",
+            "on",
+            "--preset",
+            "datasheet",
+            "--rate",
+            "200",
+            "--seed",
+            "1",
+            "--out",
+            path_arg(&drive),
         ],
     );
-    sim(&[
-        "drive",
-        "--duration",
-        "600",
-        "--turns",
-        "on",
-        "--preset",
-        "datasheet",
-        "--rate",
-        "200",
-        "--seed",
-        "1",
-        "--out",
-        &drive,
-    ]);
     let out = run_ok(
         "mems-odometry",
-        &["offline", "--calib", &calib, "--input", &drive, "--json"],
+        &[
+            "offline",
+            "--calib",
+            calib,
+            "--input",
+            path_arg(&drive),
+            "--json",
+        ],
     );
     let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
     let last_rest_s = v["rest_intervals"]
