@@ -136,13 +136,19 @@ fn run_step(program: &Path, args: &[&str]) -> Result<()> {
 /// known exactly), fitted with model 3; then the gyro's scale and misalignment from a session of
 /// 16 orientations (`mems-odometry gyrocal`: the six positions are too few poses for it).
 fn calibrate_sim(bins: &Path, work: &Path, seed: u64) -> Result<PathBuf> {
-    let six = work.join("six-position.csv");
+    let utf8 = |p: &Path| -> Result<String> {
+        Ok(p.to_str()
+            .context("temporary path is not UTF-8")?
+            .to_owned())
+    };
+    let six = utf8(&work.join("six-position.csv"))?;
+    let poses = utf8(&work.join("orientations.csv"))?;
     let calib = work.join("calib.toml");
+    let calib_str = utf8(&calib)?;
     let seed = (seed + 1000).to_string();
-    run_step(
-        &bins.join("mems-sim"),
-        &[
-            "six-position",
+    // Both sessions of the same simulated power-on, at 200 Hz.
+    let session = |kind: &[&str], out: &str| {
+        let common = [
             "--preset",
             "datasheet",
             "--seed",
@@ -150,52 +156,22 @@ fn calibrate_sim(bins: &Path, work: &Path, seed: u64) -> Result<PathBuf> {
             "--rate",
             "200",
             "--out",
-            six.to_str().context("temporary path is not UTF-8")?,
-        ],
-    )?;
+        ];
+        let args: Vec<&str> = kind.iter().chain(&common).copied().chain([out]).collect();
+        run_step(&bins.join("mems-sim"), &args)
+    };
+    session(&["six-position"], &six)?;
     run_step(
         &bins.join("mems-calibrate"),
         &[
-            "fit",
-            "--input",
-            six.to_str().context("temporary path is not UTF-8")?,
-            "--model",
-            "full",
-            "--out",
-            calib.to_str().context("temporary path is not UTF-8")?,
+            "fit", "--input", &six, "--model", "full", "--out", &calib_str,
         ],
     )?;
-    let orientations = work.join("orientations.csv");
-    let orientations = orientations
-        .to_str()
-        .context("temporary path is not UTF-8")?;
-    let calib_str = calib.to_str().context("temporary path is not UTF-8")?;
-    run_step(
-        &bins.join("mems-sim"),
-        &[
-            "orientations",
-            "--n",
-            "16",
-            "--preset",
-            "datasheet",
-            "--seed",
-            &seed,
-            "--rate",
-            "200",
-            "--out",
-            orientations,
-        ],
-    )?;
+    session(&["orientations", "--n", "16"], &poses)?;
     run_step(
         &bins.join("mems-odometry"),
         &[
-            "gyrocal",
-            "--input",
-            orientations,
-            "--calib",
-            calib_str,
-            "--into",
-            calib_str,
+            "gyrocal", "--input", &poses, "--calib", &calib_str, "--into", &calib_str,
         ],
     )?;
     Ok(calib)
