@@ -188,9 +188,34 @@ struct Hindsight {
     journal: Ring<Input>,
     /// Samples the lagging navigator took with their rest flag withdrawn.
     withdrawn: u64,
+    /// Start of the current run of IMU motion flags, ns.
+    motion_since_ns: u64,
+    /// When the hindsight of rest will have followed a short run of motion flags that ended
+    /// (its withdrawals are then undone), ns.
+    reinstate_at_ns: Option<u64>,
 }
 
 impl Hindsight {
+    /// Follows the runs of IMU motion flags (`flipped`: the flag changed at this sample, now
+    /// `imu_rest`); whether, at `t_ns`, a short run that ended has been followed by the
+    /// hindsight of rest, so that its withdrawals are to be undone.
+    fn reinstatement_due(&mut self, t_ns: u64, imu_rest: bool, flipped: bool) -> bool {
+        if flipped {
+            if imu_rest {
+                self.reinstate_at_ns =
+                    (t_ns - self.motion_since_ns < self.confirm_ns).then_some(t_ns + self.lag_ns);
+            } else {
+                self.motion_since_ns = t_ns;
+                self.reinstate_at_ns = None;
+            }
+        }
+        let due = self.reinstate_at_ns.is_some_and(|r| t_ns >= r);
+        if due {
+            self.reinstate_at_ns = None;
+        }
+        due
+    }
+
     /// Keeps `input`; when the journal is full (a sample rate above `max_rate_hz`), the oldest
     /// input goes to the lagging navigator early, with its flags as they stand.
     fn keep(&mut self, input: Input) {
@@ -298,11 +323,6 @@ pub struct OdometryStage {
     last_ns: Option<u64>,
     /// The previous sample's IMU zero-state flag.
     imu_rest: bool,
-    /// Start of the current run of IMU motion flags, ns.
-    motion_since_ns: u64,
-    /// When a short run of motion flags that ended is followed by the hindsight of rest (its
-    /// withdrawals are then undone), ns.
-    reinstate_at_ns: Option<u64>,
     revisions_emitted: u64,
 }
 
@@ -330,14 +350,14 @@ impl OdometryStage {
                 ((2.0 * lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize + hints.capacity + 2,
             ),
             withdrawn: 0,
+            motion_since_ns: 0,
+            reinstate_at_ns: None,
         });
         Ok(Self {
             live: Navigator::new(cfg, hints),
             hindsight,
             last_ns: None,
             imu_rest: false,
-            motion_since_ns: 0,
-            reinstate_at_ns: None,
             revisions_emitted: 0,
         })
     }
@@ -368,14 +388,6 @@ impl OdometryStage {
     /// Whether alignment is done.
     pub fn aligned(&self) -> bool {
         self.live.aligned()
-    }
-
-    fn lag_ns(&self) -> u64 {
-        self.hindsight.as_ref().map_or(0, |hs| hs.lag_ns)
-    }
-
-    fn confirm_ns(&self) -> u64 {
-        self.hindsight.as_ref().map_or(0, |hs| hs.confirm_ns)
     }
 
     /// Number of republished (revised) states so far.
@@ -423,22 +435,9 @@ impl OdometryStage {
         }
         self.last_ns = Some(t_ns);
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
+        let flipped = imu_rest != self.imu_rest;
         // Rest decided by a fresh hint is not the detector's to withdraw.
-        let imu_transition = imu_rest != self.imu_rest && self.live.imu_decided();
-        if imu_rest != self.imu_rest {
-            if imu_rest {
-                // A run that ends short is undone once the hindsight of rest follows it.
-                self.reinstate_at_ns = (t_ns - self.motion_since_ns < self.confirm_ns())
-                    .then_some(t_ns + self.lag_ns());
-            } else {
-                self.motion_since_ns = t_ns;
-                self.reinstate_at_ns = None;
-            }
-        }
-        let reinstate = self.reinstate_at_ns.is_some_and(|r| t_ns >= r);
-        if reinstate {
-            self.reinstate_at_ns = None;
-        }
+        let imu_transition = flipped && self.live.imu_decided();
         self.imu_rest = imu_rest;
         let revisions = &mut self.revisions_emitted;
         let mut counted = |o: &OdometryState| {
@@ -451,6 +450,7 @@ impl OdometryStage {
             self.live.process(s, &mut counted);
             return Ok(());
         };
+        let reinstate = hs.reinstatement_due(t_ns, imu_rest, flipped);
         hs.keep(Input::Sample { s: *s, imu_rest });
         hs.catch_up(t_ns);
         if !((imu_transition || reinstate) && hs.resolve()) {
