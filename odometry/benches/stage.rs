@@ -13,9 +13,7 @@ mod common;
 use std::hint::black_box;
 use std::time::Instant;
 
-use calibrate::stage::{CalibrationStage, RefineConfig};
-use calibrate::zero_state::{DetectorConfig, DetectorKind};
-use common::{Case, Simulation, identity_calibration};
+use common::{Case, Simulation, live_calibration_stage, live_detector};
 use hdrhistogram::Histogram;
 use ipc_types::CorrectedImuSample;
 use mems_sim::model::G_MPS2;
@@ -29,11 +27,7 @@ fn corrected_drive() -> Vec<CorrectedImuSample> {
     };
     let mut sim = Simulation::new(&c, 1);
     sim.session();
-    let mut detector = DetectorConfig::new(DetectorKind::Glrt, G_MPS2);
-    detector.learn.duration_s = 5.0;
-    let mut calibration =
-        CalibrationStage::new(&identity_calibration(), detector, RefineConfig::default())
-            .expect("identity calibration");
+    let mut calibration = live_calibration_stage(live_detector());
     let mut out = Vec::new();
     sim.drive_raw(|raw, _| {
         calibration

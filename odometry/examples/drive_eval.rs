@@ -18,10 +18,8 @@ mod common;
 
 use std::collections::VecDeque;
 
-use calibrate::stage::{CalibrationStage, RefineConfig};
-use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use clap::{Parser, ValueEnum};
-use common::{Case, Simulation, identity_calibration};
+use common::{Case, Simulation, live_calibration_stage, live_detector};
 use ipc_types::{CorrectedImuSample, RobotHint, corrected_flags, odometry_flags};
 use mems_sim::hints::{HintParams, RestSource};
 use nalgebra::{Matrix2, Matrix3, Vector2};
@@ -472,8 +470,7 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
             step(s, truth, &mut stage);
         }),
         Rest::Imu => {
-            let mut detector = DetectorConfig::new(DetectorKind::Glrt, mems_sim::model::G_MPS2);
-            detector.learn.duration_s = 5.0;
+            let mut detector = live_detector();
             if let Some(mg) = c.accel_turn_on_mg {
                 // An uncalibrated part: the start-up learning accepts a gravity magnitude off
                 // by up to 5 sigma of the bias on every axis (the default 5% refuses some).
@@ -482,9 +479,7 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
                     .max_gravity_error
                     .max(5.0 * 3f64.sqrt() * mg * 1e-3);
             }
-            let mut calibration =
-                CalibrationStage::new(&identity_calibration(), detector, RefineConfig::default())
-                    .expect("identity calibration");
+            let mut calibration = live_calibration_stage(detector);
             // The calibration stage releases whole batches: truths wait for their samples.
             let mut truths: VecDeque<recording::Truth> = VecDeque::new();
             let mut batch: Vec<CorrectedImuSample> = Vec::new();

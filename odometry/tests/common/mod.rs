@@ -13,6 +13,8 @@
 #![allow(dead_code)]
 
 use calibrate::calibfile::CalibrationFile;
+use calibrate::stage::{CalibrationStage, RefineConfig};
+use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use ipc_types::units::{AccelRange, GyroRange};
 use ipc_types::{
     CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps, corrected_flags,
@@ -455,4 +457,19 @@ pub fn run_with_hints(
             .unwrap();
     }
     Run { states, stage }
+}
+
+/// The zero-state detector the live calibration stage runs (`mems-calibrate serve`'s GLRT
+/// defaults) with 5 s of start-up learning, for the simulated sensor's gravity.
+pub fn live_detector() -> DetectorConfig {
+    let mut detector = DetectorConfig::new(DetectorKind::Glrt, G_MPS2);
+    detector.learn.duration_s = 5.0;
+    detector
+}
+
+/// The calibration stage as the live pipeline runs it on the simulated raw samples: the
+/// identity calibration ([`identity_calibration`]), `detector`, and the default refinement.
+pub fn live_calibration_stage(detector: DetectorConfig) -> CalibrationStage {
+    CalibrationStage::new(&identity_calibration(), detector, RefineConfig::default())
+        .expect("identity calibration")
 }
