@@ -103,17 +103,7 @@ for t in mems_ipc.ALL_TYPES:
     fields = " ".join(f"{n}:{getattr(t, n).offset}" for n, _ in t._fields_)
     print(t.__name__, ctypes.sizeof(t), ctypes.alignment(t), t.type_name(), fields)
 "#;
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/python");
-    let out = Command::new("python3")
-        .args(["-c", script, dir])
-        .output()
-        .expect("python3 must be installed");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let stdout = String::from_utf8(out.stdout).unwrap();
+    let stdout = run_python(script);
     let lines: Vec<&str> = stdout.lines().collect();
     assert_eq!(lines, expected);
 }
@@ -140,6 +130,18 @@ for name in sorted(dir(mems_ipc)):
     if name.startswith("ODOMETRY_") and isinstance(getattr(mems_ipc, name), int):
         print(name, getattr(mems_ipc, name))
 "#;
+    let stdout = run_python(script);
+    let mut expected: Vec<String> = expected
+        .iter()
+        .map(|(name, value)| format!("{name} {value}"))
+        .collect();
+    expected.sort();
+    assert_eq!(stdout.lines().collect::<Vec<_>>(), expected);
+}
+
+/// Runs `script` with python3, the package's `python/` directory as its first argument; its
+/// standard output.
+fn run_python(script: &str) -> String {
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/python");
     let out = Command::new("python3")
         .args(["-c", script, dir])
@@ -150,11 +152,5 @@ for name in sorted(dir(mems_ipc)):
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let mut expected: Vec<String> = expected
-        .iter()
-        .map(|(name, value)| format!("{name} {value}"))
-        .collect();
-    expected.sort();
-    let stdout = String::from_utf8(out.stdout).unwrap();
-    assert_eq!(stdout.lines().collect::<Vec<_>>(), expected);
+    String::from_utf8(out.stdout).unwrap()
 }
