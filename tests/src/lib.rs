@@ -114,17 +114,9 @@ pub struct Proc {
 impl Proc {
     /// Starts binary `name` with `args`, stdout captured, stderr inherited.
     pub fn spawn(name: &str, args: &[&str]) -> Self {
-        let child = Command::new(bin(name))
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .unwrap_or_else(|e| panic!("cannot start {name}: {e}"));
-        Self {
-            name: name.to_string(),
-            child: Some(child),
-        }
+        let mut command = Command::new(bin(name));
+        command.args(args);
+        Self::start(name, command)
     }
 
     /// Starts `command` (stdout captured, stderr inherited); `name` is for messages.
