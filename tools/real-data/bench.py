@@ -219,7 +219,8 @@ def main():
                 continue
             side = json.loads(side_path.read_text())
             row["sidecar"] = side
-            out, err, cmd, stderr = run_one(binary, calib, csv, side.get("extra_args", []), args.timeout)
+            extra = rec.get("extra_args", side.get("extra_args", []))
+            out, err, cmd, stderr = run_one(binary, calib, csv, extra, args.timeout)
             row["command"] = cmd
             row["stderr"] = stderr
             if err:

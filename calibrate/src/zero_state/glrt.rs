@@ -10,8 +10,12 @@
 //!
 //! ```text
 //! T_mean    = sum_c (mean_c - mu_c)^2 / (rho_c sigma_c^2 / N + delta_c^2) ~ chi2(6) at rest
-//! T_scatter = sum_c sum_k (x_ck - mean_c)^2 / sigma_c^2           ~ chi2(6 (N - 1)) at rest
+//! T_scatter = sum_c (W_c + B_c / rho_c) / sigma_c^2                ~ chi2(6 (N - 1)) at rest
 //! ```
+//!
+//! where `W_c` is the window's within-batch sum of squares and `B_c` its between-batch part
+//! (`sum_b n_b (mean_bc - mean_c)^2`): noise correlated by the sensor's own filter scatters the
+//! batch means `rho_c` times more than white noise, which is not motion.
 //!
 //! - [`GlrtStatistic::Split`] (default): rest iff each is below its `1 - a/2` chi-squared
 //!   quantile. The mean part (6 degrees of freedom) is what catches steady acceleration, turns
@@ -189,11 +193,12 @@ impl GlrtRule {
                 *m += b.n * bm / n;
             }
         }
-        let mut ss = [0.0; 6];
+        let (mut within, mut between) = ([0.0; 6], [0.0; 6]);
         for b in &self.ring[..self.filled] {
-            for (c, s) in ss.iter_mut().enumerate() {
+            for c in 0..6 {
                 let d = b.mean[c] - mean[c];
-                *s += b.ss[c] + b.n * d * d;
+                within[c] += b.ss[c];
+                between[c] += b.n * d * d;
             }
         }
         let mut t_mean = 0.0;
@@ -204,7 +209,7 @@ impl GlrtRule {
             // reference's drift since it was learned.
             let var = 1.0 / (n * self.inv_var[c] * self.inv_rho[c]) + self.drift_var[c];
             t_mean += d * d / var;
-            t_scatter += ss[c] * self.inv_var[c];
+            t_scatter += (within[c] + between[c] * self.inv_rho[c]) * self.inv_var[c];
         }
         let quiet = match self.statistic {
             GlrtStatistic::Split => {
@@ -215,7 +220,7 @@ impl GlrtRule {
         Decision {
             rest: quiet && self.filled == k,
             mean_mps2: [mean[0], mean[1], mean[2]],
-            std_mps2: std::array::from_fn(|i| (ss[i] / (n - 1.0)).sqrt()),
+            std_mps2: std::array::from_fn(|i| ((within[i] + between[i]) / (n - 1.0)).sqrt()),
         }
     }
 

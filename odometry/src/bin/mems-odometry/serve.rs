@@ -39,6 +39,9 @@ pub struct ServeArgs {
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
+    /// Motion profile (its rest handling; the detector is `mems-calibrate serve`'s).
+    #[arg(long, value_enum, default_value_t)]
+    profile: odometry::profile::Profile,
     #[command(flatten)]
     hints: crate::hint_args::HintArgs,
 }
@@ -47,7 +50,7 @@ pub struct ServeArgs {
 pub fn run(args: ServeArgs) -> Result<()> {
     let file = CalibrationFile::load(&args.calib)
         .with_context(|| format!("cannot load calibration {}", args.calib.display()))?;
-    let config = crate::odometry_config(&file);
+    let config = args.profile.odometry(crate::odometry_config(&file));
     let hint_config = args.hints.config()?;
     let namespace = service::namespace(args.namespace.as_deref());
     let node = service::node()?;
