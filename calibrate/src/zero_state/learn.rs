@@ -19,10 +19,18 @@
 //!   alarm for independent means, `max_batch_correlation` allows noise correlated across batch
 //!   boundaries).
 //!
+//!   Before either, no batch mean may lie more than [`MAX_OUTLIER_SIGMA`] robust standard
+//!   deviations (1.4826 times the median absolute deviation, at least the white-noise scatter
+//!   `sigma / sqrt(n)`) from their median: one batch of a turn is not noise, however the rest
+//!   of the window looks.
+//!
 //! The learned `correlation` of a channel (how much more a window mean scatters than white
 //! noise of `sigma` would make it, used by the detectors' thresholds) is `R` for a white-like
 //! channel and `R (1 + 2 max(0, 1 - V))` otherwise (the lag-1 correlation of the batch means
-//! carried to the longer window). A sensor that cruises steadily on a smooth floor, or turns at
+//! carried to the longer window). Correlated samples also make a batch's within-batch sum of
+//! squares scatter more than `chi2(n - 1)`: its effective degrees of freedom, `2 E[ss]^2 /
+//! var(ss)` over the learned batches (at most `n - 1`), go with the reference for the GLRT's
+//! scatter test. A sensor that cruises steadily on a smooth floor, or turns at
 //! a constant rate about gravity, passes every check: no accelerometer or gyroscope test can
 //! tell that from rest.
 
@@ -44,6 +52,9 @@ pub const MAX_RATE_HZ: f64 = 8000.0;
 
 /// Standard normal quantile of the steadiness test's false alarm (1e-3, one-sided).
 const STEADY_Z: f64 = 3.09;
+
+/// Largest distance of a batch mean from the window's median, robust standard deviations.
+pub const MAX_OUTLIER_SIGMA: f64 = 6.0;
 
 /// Settings of the learning.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -94,6 +105,11 @@ pub struct StaticReference {
     pub accel_correlation: [f64; 3],
     /// The same for the gyroscope axes.
     pub gyro_correlation: [f64; 3],
+    /// Effective degrees of freedom of one batch's within-batch sum of squares per
+    /// accelerometer axis (`n - 1` for white noise, fewer for correlated samples).
+    pub accel_batch_dof: [f64; 3],
+    /// The same for the gyroscope axes.
+    pub gyro_batch_dof: [f64; 3],
     /// Mean of the batch means' magnitudes, m/s^2.
     pub magnitude_mps2: f64,
     /// Standard deviation of the batch means' magnitudes, m/s^2.
@@ -126,6 +142,13 @@ pub enum LearnRejection {
         /// The smallest `V` steady noise passes with.
         limit: f64,
     },
+    /// A batch mean of channel `channel` lies far from the others (a jolt, a short turn).
+    Outlier {
+        /// The channel.
+        channel: usize,
+        /// Its distance from the median, robust standard deviations.
+        sigmas: f64,
+    },
     /// A gap in the data interrupted learning.
     Interrupted,
 }
@@ -152,6 +175,12 @@ impl std::fmt::Display for LearnRejection {
                  {limit:.2})",
                 CHANNELS[*channel]
             ),
+            Self::Outlier { channel, sigmas } => write!(
+                f,
+                "{} not steady: a batch mean lies {sigmas:.1} robust standard deviations from \
+                 the others (at most {MAX_OUTLIER_SIGMA})",
+                CHANNELS[*channel]
+            ),
             Self::Interrupted => write!(f, "a gap in the data interrupted learning"),
         }
     }
@@ -175,6 +204,8 @@ struct Batch {
 pub struct StaticLearner {
     config: LearnConfig,
     ring: Vec<Batch>,
+    /// Scratch for the medians, as long as the ring.
+    scratch: Vec<f64>,
     head: usize,
     len: usize,
     refused: usize,
@@ -188,6 +219,7 @@ impl StaticLearner {
         Self {
             config,
             ring: vec![Batch::default(); capacity.max(2) + 1],
+            scratch: vec![0.0; capacity.max(2) + 1],
             head: 0,
             len: 0,
             refused: 0,
@@ -268,10 +300,31 @@ impl StaticLearner {
         ((last.t_end_ns - first.t_start_ns) as f64 + period_ns) * 1e-9
     }
 
-    fn finish(&self) -> Result<StaticReference, LearnRejection> {
+    /// The largest distance of channel `c`'s batch means from their median, in robust
+    /// standard deviations (1.4826 MAD, at least `white_scatter`).
+    fn outlier_sigmas(&mut self, c: usize, white_scatter: f64) -> f64 {
         let k = self.len;
-        let batches = || (0..k).map(|i| self.batch(i));
-        let magnitudes = || batches().map(|b| norm(&[b.mean[0], b.mean[1], b.mean[2]]));
+        for i in 0..k {
+            self.scratch[i] = self.batch(i).mean[c];
+        }
+        let values = &mut self.scratch[..k];
+        let median = *values.select_nth_unstable_by(k / 2, f64::total_cmp).1;
+        for v in values.iter_mut() {
+            *v = (*v - median).abs();
+        }
+        let largest = values.iter().copied().fold(0.0, f64::max);
+        let mad = *values.select_nth_unstable_by(k / 2, f64::total_cmp).1;
+        largest / (1.4826 * mad).max(white_scatter)
+    }
+
+    fn finish(&mut self) -> Result<StaticReference, LearnRejection> {
+        let k = self.len;
+        let magnitudes = || {
+            (0..k).map(|i| {
+                let m = &self.batch(i).mean;
+                norm(&[m[0], m[1], m[2]])
+            })
+        };
         let magnitude = magnitudes().sum::<f64>() / k as f64;
         let g = self.config.gravity_mps2;
         if (magnitude - g).abs() > self.config.max_gravity_error * g {
@@ -282,41 +335,18 @@ impl StaticLearner {
         let magnitude_var =
             magnitudes().map(|m| (m - magnitude).powi(2)).sum::<f64>() / (k as f64 - 1.0);
         let n = self.batch(k - 1).n as f64;
-        let limit = 1.0 - STEADY_Z / (k as f64).sqrt() - self.config.max_batch_correlation;
+        let sigma: [f64; 6] = std::array::from_fn(|c| self.sigma(c));
+        for (c, s) in sigma.iter().enumerate() {
+            let sigmas = self.outlier_sigmas(c, s / n.sqrt());
+            if sigmas > MAX_OUTLIER_SIGMA {
+                return Err(LearnRejection::Outlier { channel: c, sigmas });
+            }
+        }
         let mut mean = [0.0; 6];
-        let mut sigma = [0.0; 6];
         let mut correlation = [1.0; 6];
+        let mut batch_dof = [n - 1.0; 6];
         for c in 0..6 {
-            let floor = if c < 3 {
-                ACCEL_SIGMA_FLOOR_MPS2
-            } else {
-                GYRO_SIGMA_FLOOR_RPS
-            };
-            let (ss, dof) =
-                batches().fold((0.0, 0.0), |(s, d), b| (s + b.ss[c], d + b.n as f64 - 1.0));
-            sigma[c] = (ss / dof).sqrt().max(floor);
-            mean[c] = batches().map(|b| b.mean[c]).sum::<f64>() / k as f64;
-            let scatter = batches()
-                .map(|b| (b.mean[c] - mean[c]).powi(2))
-                .sum::<f64>();
-            let ratio = scatter / (k as f64 - 1.0) * n / (sigma[c] * sigma[c]);
-            if ratio <= self.config.max_correlation {
-                correlation[c] = ratio.max(1.0);
-                continue;
-            }
-            let successive = (1..k)
-                .map(|i| (self.batch(i).mean[c] - self.batch(i - 1).mean[c]).powi(2))
-                .sum::<f64>();
-            let von_neumann = successive / (2.0 * scatter);
-            if von_neumann < limit {
-                return Err(LearnRejection::Unsteady {
-                    channel: c,
-                    ratio,
-                    von_neumann,
-                    limit,
-                });
-            }
-            correlation[c] = ratio * (1.0 + 2.0 * (1.0 - von_neumann).max(0.0));
+            (mean[c], correlation[c], batch_dof[c]) = self.channel(c, sigma[c])?;
         }
         let part = |a: &[f64; 6], off: usize| [a[off], a[off + 1], a[off + 2]];
         Ok(StaticReference {
@@ -326,12 +356,65 @@ impl StaticLearner {
             gyro_sigma_rps: part(&sigma, 3),
             accel_correlation: part(&correlation, 0),
             gyro_correlation: part(&correlation, 3),
+            accel_batch_dof: part(&batch_dof, 0),
+            gyro_batch_dof: part(&batch_dof, 3),
             magnitude_mps2: magnitude,
             magnitude_std_mps2: magnitude_var.sqrt(),
             batches: k,
             duration_s: self.covered_s(0),
             t_start_ns: self.batch(0).t_start_ns,
         })
+    }
+
+    /// Channel `c`'s per-sample noise: the pooled within-batch standard deviation, at least
+    /// the quantization floor.
+    fn sigma(&self, c: usize) -> f64 {
+        let floor = if c < 3 {
+            ACCEL_SIGMA_FLOOR_MPS2
+        } else {
+            GYRO_SIGMA_FLOOR_RPS
+        };
+        let (ss, dof) = (0..self.len)
+            .map(|i| self.batch(i))
+            .fold((0.0, 0.0), |(s, d), b| (s + b.ss[c], d + b.n as f64 - 1.0));
+        (ss / dof).sqrt().max(floor)
+    }
+
+    /// Channel `c`'s mean, correlation and batch degrees of freedom, or why it is not steady
+    /// (see the module documentation); `sigma` is its per-sample noise.
+    fn channel(&self, c: usize, sigma: f64) -> Result<(f64, f64, f64), LearnRejection> {
+        let k = self.len;
+        let kf = k as f64;
+        let batches = || (0..k).map(|i| self.batch(i));
+        let n = self.batch(k - 1).n as f64;
+        let mean_ss = batches().map(|b| b.ss[c]).sum::<f64>() / kf;
+        let var_ss = batches().map(|b| (b.ss[c] - mean_ss).powi(2)).sum::<f64>() / (kf - 1.0);
+        let batch_dof = if var_ss > 0.0 {
+            (2.0 * mean_ss * mean_ss / var_ss).clamp(1.0, n - 1.0)
+        } else {
+            n - 1.0
+        };
+        let mean = batches().map(|b| b.mean[c]).sum::<f64>() / kf;
+        let scatter = batches().map(|b| (b.mean[c] - mean).powi(2)).sum::<f64>();
+        let ratio = scatter / (kf - 1.0) * n / (sigma * sigma);
+        if ratio <= self.config.max_correlation {
+            return Ok((mean, ratio.max(1.0), batch_dof));
+        }
+        let successive = (1..k)
+            .map(|i| (self.batch(i).mean[c] - self.batch(i - 1).mean[c]).powi(2))
+            .sum::<f64>();
+        let von_neumann = successive / (2.0 * scatter);
+        let limit = 1.0 - STEADY_Z / kf.sqrt() - self.config.max_batch_correlation;
+        if von_neumann < limit {
+            return Err(LearnRejection::Unsteady {
+                channel: c,
+                ratio,
+                von_neumann,
+                limit,
+            });
+        }
+        let correlation = ratio * (1.0 + 2.0 * (1.0 - von_neumann).max(0.0));
+        Ok((mean, correlation, batch_dof))
     }
 }
 

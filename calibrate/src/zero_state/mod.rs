@@ -381,7 +381,8 @@ impl ZeroStateDetector {
         self.gyro.reset();
         match self.rule.as_mut() {
             Some(Rule::Glrt(r)) => r.clear_window(),
-            Some(Rule::Yu(_) | Rule::Shoe(_)) => {}
+            Some(Rule::Shoe(r)) => r.clear(),
+            Some(Rule::Yu(_)) => {}
             None => self.learner.restart(),
         }
     }
@@ -395,7 +396,10 @@ impl ZeroStateDetector {
         self.rest_s = 0.0;
         match self.rule.take() {
             Some(Rule::Glrt(rule)) => self.ring = rule.into_ring(),
-            shoe @ Some(Rule::Shoe(_)) => self.rule = shoe,
+            Some(Rule::Shoe(mut rule)) => {
+                rule.clear();
+                self.rule = Some(Rule::Shoe(rule));
+            }
             Some(Rule::Yu(_)) | None => {}
         }
     }

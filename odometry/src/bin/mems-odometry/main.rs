@@ -72,6 +72,12 @@ pub struct StageArgs {
     /// Motion profile: the detector and rest handling for the platform.
     #[arg(long, value_enum, default_value_t = Profile::Vehicle)]
     pub profile: Profile,
+    /// SHOE detector: the fixed threshold (default OpenShoe's 3e4).
+    #[arg(long)]
+    pub shoe_gamma: Option<f64>,
+    /// SHOE detector: the adaptive threshold's factor on the recent minimum (0: fixed).
+    #[arg(long)]
+    pub shoe_factor: Option<f64>,
 }
 
 impl StageArgs {
@@ -94,6 +100,18 @@ impl StageArgs {
         let mut detector = self.profile.detector(file.gravity_mps2);
         if let Some(kind) = self.detector {
             detector.kind = kind;
+        }
+        if let Some(gamma) = self.shoe_gamma {
+            if !(gamma > 0.0 && gamma.is_finite()) {
+                bail!("--shoe-gamma must be > 0, got {gamma}");
+            }
+            detector.shoe.gamma = gamma;
+        }
+        if let Some(factor) = self.shoe_factor {
+            if !(factor >= 0.0 && factor.is_finite()) {
+                bail!("--shoe-factor must be >= 0, got {factor}");
+            }
+            detector.shoe.adaptive_factor = factor;
         }
         if let Some(learn_s) = self.learn_s {
             if !(learn_s > 0.0 && learn_s.is_finite()) {
