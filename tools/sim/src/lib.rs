@@ -10,10 +10,13 @@
 //! - [`scenario`]: six-position, N-orientation, static and ground-robot drive scenarios with
 //!   exact truth.
 //! - [`vibration`]: the speed-dependent vibration of a driven robot.
+//! - [`defects`]: the defects of real logs (repeated rows, host timestamp jitter and
+//!   quantisation, a start in motion).
 //! - [`hints`]: the robot controller's rest and speed hints during a drive.
 //! - [`SimSensor`]: a scenario measured by a powered-on sensor, a [`SampleSource`].
 
 pub mod adc;
+pub mod defects;
 pub mod dlpf;
 pub mod hints;
 pub mod model;
@@ -86,6 +89,8 @@ pub(crate) mod streams {
     pub const VIBRATION: u64 = 4;
     /// Robot hints: encoder scale error, noise, latency and losses.
     pub const HINTS: u64 = 5;
+    /// A logger's defects: repeats and timestamp jitter.
+    pub const LOG_DEFECTS: u64 = 6;
 }
 
 /// A ChaCha8 generator for stream `stream` of `seed` (see [`streams`] and the model's streams).
@@ -208,12 +213,12 @@ impl<S: Scenario> SimSensor<S> {
             let truth = self.scenario.truth(t.max(0.0));
             let (accel_g, gyro_dps) = self.input(&truth, t, run.tick_hz);
             let c = &run.grid.config;
-            if run.next % run.accel_every == 0 {
+            if run.next.is_multiple_of(run.accel_every) {
                 let rate = c.accel.internal_rate_hz * run.grid.clock_scale;
                 let y = self.sensor.measure_accel(t.max(0.0), rate, accel_g);
                 run.accel_out = run.accel.step(y);
             }
-            if run.next % run.gyro_every == 0 {
+            if run.next.is_multiple_of(run.gyro_every) {
                 let rate = c.gyro.internal_rate_hz * run.grid.clock_scale;
                 let y = self.sensor.measure_gyro(t.max(0.0), rate, gyro_dps);
                 run.gyro_out = run.gyro.step(y);
