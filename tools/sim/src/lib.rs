@@ -7,8 +7,8 @@
 //!   the part's internal rate ([`SimSensor::set_dlpf`] applies them).
 //! - [`model`]: the error model (bias, scale, misalignment, nonlinearity, noise, temperature,
 //!   warm-up, turn-on repeatability, random walk, bias instability) and its presets.
-//! - [`scenario`]: six-position, N-orientation, static and ground-robot drive scenarios with
-//!   exact truth.
+//! - [`scenario`]: six-position, N-orientation, static, ground-robot drive and foot-mounted
+//!   walk scenarios with exact truth.
 //! - [`vibration`]: the speed-dependent vibration of a driven robot.
 //! - [`defects`]: the defects of real logs (repeated rows, host timestamp jitter and
 //!   quantisation, a start in motion).
@@ -91,6 +91,10 @@ pub(crate) mod streams {
     pub const HINTS: u64 = 5;
     /// A logger's defects: repeats and timestamp jitter.
     pub const LOG_DEFECTS: u64 = 6;
+    /// The plan of a walk: stance times and swing speeds.
+    pub const WALK_PLAN: u64 = 7;
+    /// A walker's tremor phases.
+    pub const WALK_TREMOR: u64 = 8;
 }
 
 /// A ChaCha8 generator for stream `stream` of `seed` (see [`streams`] and the model's streams).
@@ -195,10 +199,13 @@ impl<S: Scenario> SimSensor<S> {
         let (vib_accel, vib_gyro) =
             self.vibration
                 .step(t_s, rate_hz, self.scenario.wheel_speed_mps(t_s));
-        let accel_g =
-            std::array::from_fn(|i| (truth.specific_force_mps2[i] + vib_accel[i]) / G_MPS2);
-        let gyro_dps =
-            std::array::from_fn(|i| truth.angular_rate_rps[i].to_degrees() + vib_gyro[i]);
+        let (dist_accel, dist_gyro) = self.scenario.disturbance(t_s);
+        let accel_g = std::array::from_fn(|i| {
+            (truth.specific_force_mps2[i] + vib_accel[i] + dist_accel[i]) / G_MPS2
+        });
+        let gyro_dps = std::array::from_fn(|i| {
+            truth.angular_rate_rps[i].to_degrees() + vib_gyro[i] + dist_gyro[i]
+        });
         (accel_g, gyro_dps)
     }
 

@@ -13,7 +13,9 @@ use mems_sim::defects::{LogDefects, Logger, peak_speed_time};
 use mems_sim::dlpf::DlpfConfig;
 use mems_sim::hints::{HintParams, RestSource, drive_hints};
 use mems_sim::model::{Preset, SensorModel};
-use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
+use mems_sim::scenario::{
+    Drive, DriveParams, PoseParams, PoseSession, Scenario, Walk, WalkParams, ns_from_s,
+};
 use mems_sim::vibration::VibrationModel;
 use mems_sim::{DlpfGrid, SimSensor};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -81,6 +83,33 @@ enum Command {
         mount_deg: [f64; 3],
         #[command(flatten)]
         hints: HintArgs,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// A pedestrian with the IMU on a foot, walking laps of a rectangle: stance 0.2-0.5 s,
+    /// swing of one stride at 4-5 m/s peak foot speed, heel strikes, tremor in stance.
+    Walk {
+        /// Laps of the rectangle.
+        #[arg(long, default_value_t = 1)]
+        laps: u32,
+        /// Sides of the rectangle, m.
+        #[arg(long, value_name = "X,Y", value_parser = parse_pair, default_value = "12,6")]
+        rectangle: [f64; 2],
+        /// Stride length range, m.
+        #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "1.0,1.6")]
+        stride: [f64; 2],
+        /// Still stance range, s.
+        #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "0.2,0.5")]
+        stance: [f64; 2],
+        /// Peak foot speed range, m/s.
+        #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "4,5")]
+        peak_speed: [f64; 2],
+        /// Standing still at the start, s.
+        #[arg(long, default_value_t = 10.0)]
+        initial_rest: f64,
+        /// Tremor level in stance (1: about 0.05 m/s^2 and 0.3 deg/s RMS; 0: none).
+        #[arg(long, default_value_t = 1.0)]
+        tremor: f64,
         #[command(flatten)]
         common: Common,
     },
@@ -746,6 +775,28 @@ fn run(cli: Cli) -> Result<()> {
                 &common,
                 &hint_list,
             )
+        }
+        Command::Walk {
+            laps,
+            rectangle,
+            stride,
+            stance,
+            peak_speed,
+            initial_rest,
+            tremor,
+            common,
+        } => {
+            let params = WalkParams {
+                rectangle_m: rectangle,
+                stride_m: stride,
+                stance_s: stance,
+                peak_speed_mps: peak_speed,
+                initial_rest_s: initial_rest,
+                tremor,
+                gravity_mps2: common.gravity,
+                ..WalkParams::new(laps)
+            };
+            simulate(Walk::new(&params, common.seed)?, &still, &common, &[])
         }
         Command::PrintModel { preset } => {
             print!("{}", toml::to_string(&preset.model())?);

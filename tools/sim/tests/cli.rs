@@ -510,3 +510,47 @@ fn log_defects_and_a_start_in_motion_are_written() {
             .all(|x| (x * 1000.0 - (x * 1000.0).round()).abs() < 1e-6)
     );
 }
+
+#[test]
+fn walk_is_written_with_truth_that_closes_the_loop() {
+    use mems_sim::scenario::{Walk, WalkParams};
+    let out = tmp("walk.csv");
+    let out_s = out.to_str().unwrap();
+    ok(&[
+        "walk",
+        "--laps",
+        "1",
+        "--rate",
+        "200",
+        "--initial-rest",
+        "2",
+        "--accel-range",
+        "16",
+        "--gyro-range",
+        "2000",
+        "--out",
+        out_s,
+    ]);
+    let rec = recording::load_raw(&out).unwrap();
+    let truth = rec.truth.expect("the file holds truth");
+    let params = WalkParams {
+        initial_rest_s: 2.0,
+        ..WalkParams::new(1)
+    };
+    let walk = Walk::new(&params, 1).unwrap();
+    assert_eq!(
+        truth.len(),
+        (walk.duration_s() * 200.0).floor() as usize + 1
+    );
+    for (k, t) in truth.iter().enumerate().step_by(97) {
+        assert_eq!(*t, walk.truth(k as f64 / 200.0), "row {k}");
+    }
+    assert!(truth[0].at_rest && truth.last().unwrap().at_rest);
+    let end = Vector3::from(truth.last().unwrap().position_m);
+    assert!(end.norm() < 1e-9, "the walk ends {end:?} from its start");
+    assert!(
+        rec.samples
+            .iter()
+            .all(|s| s.flags & ipc_types::raw_flags::SATURATED == 0)
+    );
+}
