@@ -625,6 +625,17 @@ fn simulate(
         bail!("--start-at {start_s}: the scenario ends at {duration} s");
     }
     let defects = common.log_defects();
+    let is_mcap = common
+        .out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    if defects.any() && is_mcap {
+        bail!(
+            "--out {}: a logger's defects (--repeat-fraction, --jitter-ms, --quantum-ms) can repeat \
+             timestamps, which MCAP recordings refuse; write a .csv",
+            common.out.display()
+        );
+    }
     let mut logger = defects
         .any()
         .then(|| Logger::new(&defects, rate, common.seed))

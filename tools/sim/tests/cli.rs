@@ -482,6 +482,18 @@ fn log_defects_and_a_start_in_motion_are_written() {
         "--out",
         out_s,
     ]);
+    // MCAP recordings need strictly increasing times: refused up front.
+    let mcap = tmp("defects.mcap");
+    let e = fails(&[
+        "static",
+        "--duration",
+        "1",
+        "--quantum-ms",
+        "1",
+        "--out",
+        mcap.to_str().unwrap(),
+    ]);
+    assert!(e.contains("write a .csv"), "{e}");
     // Equal timestamps: the canonical reader refuses the file, naming the time column.
     let e = recording::load_raw(&out).unwrap_err().to_string();
     assert!(e.contains("t_s"), "{e}");
