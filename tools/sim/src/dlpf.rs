@@ -4,13 +4,16 @@
 //! # The settings
 //!
 //! Bandwidths (-3 dB), delays and internal rates from the register map RM-MPU-9250A-00,
-//! section 4.6 (register 26, CONFIG: the DLPF_CFG table, gyroscope columns, selected when
+//! section 4.5 (register 26, CONFIG: the DLPF_CFG table, gyroscope columns, selected when
 //! GYRO_CONFIG.FCHOICE_B = 0b00; FCHOICE_B = 0bx1 and 0b10 bypass it at 32 kHz) and section
 //! 4.8 (register 29, ACCEL_CONFIG2: the A_DLPF_CFG table; accel_fchoice_b = 1 bypasses it at
-//! 4 kHz). The same numbers are carried by the public `mpu9250` Rust crate's configuration
-//! documentation (`GyroTempDataRate`, `Dlpf`, "page 13 of the register map"). Revisions of the
-//! register map differ in the accelerometer rows; these are the rows our driver's documentation
-//! (`acquire::driver::Dlpf`) already quotes.
+//! 4 kHz). Every gyroscope row and every A_DLPF_CFG row below is also carried by the public
+//! `mpu9250` Rust crate's configuration documentation (`GyroTempDataRate`, `Dlpf`, citing
+//! "page 13 of the register map"), and the accelerometer bandwidths by our driver's
+//! documentation (`acquire::driver::Dlpf`). The bypassed accelerometer's 1.13 kHz bandwidth
+//! is the one public MPU-9250 drivers quote in their comments; its 0.75 ms delay could not be
+//! checked against a public copy (the `mpu9250` crate gives 1046 Hz and 0.503 ms for that
+//! mode, so revisions of the map may differ there).
 //!
 //! | DLPF_CFG | gyro BW, Hz | gyro delay, ms | gyro rate | A_DLPF_CFG | accel BW, Hz | accel delay, ms |
 //! |---|---|---|---|---|---|---|
