@@ -95,7 +95,10 @@ fn feed(
 #[test]
 fn a_rest_with_filter_correlated_noise_is_learned_and_called_rest() {
     let expected = expected_ratio(BATCH);
-    assert!(expected > 5.0, "the test needs strongly correlated noise: {expected}");
+    assert!(
+        expected > 5.0,
+        "the test needs strongly correlated noise: {expected}"
+    );
     for seed in 0..3 {
         let mut det = ZeroStateDetector::new(DetectorConfig::new(DetectorKind::Glrt, G));
         let mut noise = Coloured::new(seed);
@@ -129,7 +132,10 @@ fn the_learned_correlation_matches_the_filters_closed_form() {
     // The learned correlation is the ratio times (1 + 2 r_b), r_b the batch means' lag-1
     // correlation (0.2-0.3 here): within [0.8, 2] of the closed-form ratio.
     for c in r.accel_correlation.iter().chain(&r.gyro_correlation) {
-        assert!(*c > 0.8 * expected && *c < 2.0 * expected, "{c} vs {expected}");
+        assert!(
+            *c > 0.8 * expected && *c < 2.0 * expected,
+            "{c} vs {expected}"
+        );
     }
 }
 
@@ -201,9 +207,15 @@ fn gait(stance_s: f64, stance_rate: f64) -> (f64, f64) {
 fn shoe_finds_stances_of_a_slow_and_of_a_brisk_gait() {
     // A still foot (T near the noise): the fixed threshold.
     let (stance, swing) = gait(0.4, 0.0);
-    assert!(stance > 0.9 && swing < 0.02, "still stance {stance}, swing {swing}");
+    assert!(
+        stance > 0.9 && swing < 0.02,
+        "still stance {stance}, swing {swing}"
+    );
     // A foot rolling over at 25 deg/s during a 0.25 s stance: T about 6e4, above OpenShoe's
     // fixed 3e4; the adaptive threshold (3 x the quietest window of the last 2 s) finds it.
     let (stance, swing) = gait(0.25, 25_f64.to_radians());
-    assert!(stance > 0.9 && swing < 0.02, "brisk stance {stance}, swing {swing}");
+    assert!(
+        stance > 0.9 && swing < 0.02,
+        "brisk stance {stance}, swing {swing}"
+    );
 }

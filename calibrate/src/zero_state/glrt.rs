@@ -224,8 +224,8 @@ impl GlrtRule {
             // reference's drift since it was learned.
             let var = 1.0 / (n * self.inv_var[c] * self.inv_rho[c]) + self.drift_var[c];
             t_mean += d * d / var;
-            t_scatter += (within[c] * self.dof_factor[c] + between[c] * self.inv_rho[c])
-                * self.inv_var[c];
+            t_scatter +=
+                (within[c] * self.dof_factor[c] + between[c] * self.inv_rho[c]) * self.inv_var[c];
         }
         let quiet = match self.statistic {
             GlrtStatistic::Split => {

@@ -73,11 +73,15 @@ pub struct LearnConfig {
     /// correlation time is a good part of a batch: an MPU-9250 at 1 kHz with its 20 Hz DLPF
     /// gives about 0.3).
     pub max_batch_correlation: f64,
+    /// Largest ratio of a channel's learned per-sample noise to the sensor's measured white
+    /// noise (the calibration file's `[noise]` table, when it has one for this rate): a window
+    /// that noisy is a vehicle cruising with its vibration, not a rest.
+    pub max_noise_ratio: f64,
 }
 
 impl LearnConfig {
     /// Defaults: 5 s, 5% of gravity (a calibrated sensor is within 0.5%), correlation 3 (white
-    /// noise gives 1 +- 0.1 over 250 batches), batch-mean correlation 0.35.
+    /// noise gives 1 +- 0.1 over 250 batches), batch-mean correlation 0.35, noise ratio 1.5.
     pub fn new(gravity_mps2: f64) -> Self {
         Self {
             duration_s: 5.0,
@@ -85,6 +89,7 @@ impl LearnConfig {
             max_gravity_error: 0.05,
             max_correlation: 3.0,
             max_batch_correlation: 0.35,
+            max_noise_ratio: 1.5,
         }
     }
 }
@@ -149,6 +154,15 @@ pub enum LearnRejection {
         /// Its distance from the median, robust standard deviations.
         sigmas: f64,
     },
+    /// Channel `channel` is noisier than the sensor's measured noise allows for a rest.
+    TooNoisy {
+        /// The channel.
+        channel: usize,
+        /// Its learned noise over the measured noise.
+        ratio: f64,
+        /// The largest ratio allowed.
+        limit: f64,
+    },
     /// A gap in the data interrupted learning.
     Interrupted,
 }
@@ -181,6 +195,16 @@ impl std::fmt::Display for LearnRejection {
                  the others (at most {MAX_OUTLIER_SIGMA})",
                 CHANNELS[*channel]
             ),
+            Self::TooNoisy {
+                channel,
+                ratio,
+                limit,
+            } => write!(
+                f,
+                "{} is {ratio:.2}x as noisy as the sensor's measured noise (a rest is at most \
+                 {limit}x): vibration of a moving vehicle",
+                CHANNELS[*channel]
+            ),
             Self::Interrupted => write!(f, "a gap in the data interrupted learning"),
         }
     }
@@ -203,6 +227,8 @@ struct Batch {
 #[derive(Debug, Clone)]
 pub struct StaticLearner {
     config: LearnConfig,
+    /// The sensor's measured noise, the ceiling's reference.
+    noise: Option<super::NoiseFloor>,
     ring: Vec<Batch>,
     /// Scratch for the medians, as long as the ring.
     scratch: Vec<f64>,
@@ -213,11 +239,13 @@ pub struct StaticLearner {
 }
 
 impl StaticLearner {
-    /// A learner with `config`.
-    pub fn new(config: LearnConfig) -> Self {
+    /// A learner with `config`; with the sensor's measured `noise`, windows noisier than
+    /// `config.max_noise_ratio` times it are refused.
+    pub fn new(config: LearnConfig, noise: Option<super::NoiseFloor>) -> Self {
         let capacity = (config.duration_s * MAX_RATE_HZ / super::BATCH_LEN as f64).ceil() as usize;
         Self {
             config,
+            noise,
             ring: vec![Batch::default(); capacity.max(2) + 1],
             scratch: vec![0.0; capacity.max(2) + 1],
             head: 0,
@@ -336,6 +364,7 @@ impl StaticLearner {
             magnitudes().map(|m| (m - magnitude).powi(2)).sum::<f64>() / (k as f64 - 1.0);
         let n = self.batch(k - 1).n as f64;
         let sigma: [f64; 6] = std::array::from_fn(|c| self.sigma(c));
+        self.check_noise(&sigma, k as f64 * n / self.covered_s(0))?;
         for (c, s) in sigma.iter().enumerate() {
             let sigmas = self.outlier_sigmas(c, s / n.sqrt());
             if sigmas > MAX_OUTLIER_SIGMA {
@@ -364,6 +393,31 @@ impl StaticLearner {
             duration_s: self.covered_s(0),
             t_start_ns: self.batch(0).t_start_ns,
         })
+    }
+
+    /// Refuses learned noise `sigma` above the ceiling, when the measured noise is known for a
+    /// stream at `rate_hz` (within 10%, as [`super::NoiseFloor::apply`]).
+    fn check_noise(&self, sigma: &[f64; 6], rate_hz: f64) -> Result<(), LearnRejection> {
+        let Some(noise) = &self.noise else {
+            return Ok(());
+        };
+        if (rate_hz / noise.sample_rate_hz - 1.0).abs() > 0.1 {
+            return Ok(());
+        }
+        let measured = noise.accel_sigma_mps2.iter().chain(&noise.gyro_sigma_rps);
+        let limit = self.config.max_noise_ratio;
+        for (c, (s, m)) in sigma.iter().zip(measured).enumerate() {
+            if let Some(m) = m
+                && *s > limit * m
+            {
+                return Err(LearnRejection::TooNoisy {
+                    channel: c,
+                    ratio: s / m,
+                    limit,
+                });
+            }
+        }
+        Ok(())
     }
 
     /// Channel `c`'s per-sample noise: the pooled within-batch standard deviation, at least

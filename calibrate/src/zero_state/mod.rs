@@ -282,7 +282,7 @@ impl ZeroStateDetector {
             config,
             accel: WindowAccumulator::new(window),
             gyro: WindowAccumulator::new(window),
-            learner: StaticLearner::new(config.learn),
+            learner: StaticLearner::new(config.learn, config.noise),
             rule: shoe
                 .then(|| Rule::Shoe(shoe::ShoeRule::new(config.shoe, config.learn.gravity_mps2))),
             rest_s: 0.0,

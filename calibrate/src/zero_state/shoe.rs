@@ -116,7 +116,10 @@ impl ShoeRule {
             .take_while(|&(t_ns, _)| t_ns >= since)
             .map(|(_, t)| t)
             .fold(f64::INFINITY, f64::min);
-        let threshold = self.config.gamma.max(self.config.adaptive_factor * recent_min);
+        let threshold = self
+            .config
+            .gamma
+            .max(self.config.adaptive_factor * recent_min);
         Decision {
             rest: t <= threshold,
             mean_mps2: accel.mean,

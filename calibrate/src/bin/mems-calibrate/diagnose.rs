@@ -2,13 +2,13 @@
 
 use std::path::{Path, PathBuf};
 
-use calibrate::segments::SegmentConfig;
 use anyhow::{Context, Result, bail};
 use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
 use calibrate::diagnose::{
     BaselineKind, CandidateStatus, DiagnoseConfig, Diagnosis, Effect, SessionInput, diagnose, plots,
 };
 use calibrate::fit::{CovarianceMode, Weighting};
+use calibrate::segments::SegmentConfig;
 use calibrate::session::{Input, load_input, poses_from_six};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
