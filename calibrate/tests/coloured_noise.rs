@@ -116,11 +116,9 @@ fn the_learned_correlation_matches_the_filters_closed_form() {
     let expected = expected_ratio(BATCH);
     let mut det = ZeroStateDetector::new(DetectorConfig::new(DetectorKind::Glrt, G));
     let mut noise = Coloured::new(7);
-    let mut k = 0;
     let mut learned = None;
-    for _ in 0..(6.0 * RATE_HZ) as usize {
+    for k in 0..(6.0 * RATE_HZ) as usize {
         let t = k as f64 / RATE_HZ;
-        k += 1;
         let n = noise.next(1.0);
         let a = [0.02 * n[0], 0.02 * n[1], G + 0.02 * n[2]];
         let w = [0.003 * n[3], 0.003 * n[4], 0.003 * n[5]];

@@ -213,6 +213,9 @@ pub struct Verdict {
 
 /// The learned decision rule of one detector kind.
 #[derive(Debug, Clone)]
+// One rule per detector, set once at learning and never moved on the hot path; boxing the
+// large variant would allocate when the detector learns.
+#[allow(clippy::large_enum_variant)]
 enum Rule {
     Yu(yu::YuRule),
     Glrt(glrt::GlrtRule),
