@@ -303,11 +303,23 @@ fn a_real_log_s_repeated_rows_and_times_are_repaired_and_counted() {
     // median, 10 ms, is the nominal period the non-increasing times are rebuilt from.
     let times: Vec<u64> = rec.samples.iter().map(|s| s.stamps.sample_ns).collect();
     let p = rec.repairs.period_ns;
-    assert_eq!(times, [0, 10_000_000, 10_000_000 + p, 10_000_000 + 2 * p, 40_000_000]);
+    assert_eq!(
+        times,
+        [
+            0,
+            10_000_000,
+            10_000_000 + p,
+            10_000_000 + 2 * p,
+            40_000_000
+        ]
+    );
     assert_eq!(p, 10_000_000);
     let ay: Vec<f64> = rec.samples.iter().map(|s| s.accel_g[1]).collect();
     assert_eq!(ay, [0.0, 0.01, 0.02, 0.03, 0.04]);
-    assert_eq!(rec.samples.iter().map(|s| s.seq).collect::<Vec<_>>(), [0, 1, 2, 3, 4]);
+    assert_eq!(
+        rec.samples.iter().map(|s| s.seq).collect::<Vec<_>>(),
+        [0, 1, 2, 3, 4]
+    );
 
     // A step back of more than a second is not jitter: refused even when repairing.
     std::fs::write(&path, "t_s,ax_g,ay_g,az_g\n5.0,0,0,1\n3.5,0,0.1,1\n").unwrap();
