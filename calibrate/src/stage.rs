@@ -31,7 +31,9 @@
 //!   mean of `|m| - g` along `u`; rests at other attitudes correct other components and leave
 //!   the rest of `d` as it was.
 //!
-//! Both are running means over rest time (the start-up learning interval first) with a memory
+//! Only a detector whose rest means still refines ([`crate::zero_state::DetectorKind::rest_is_still`]:
+//! not SHOE, whose stances roll). Both are running means over rest time (the learning interval
+//! first) with a memory
 //! of [`RefineConfig::memory_s`] (see [`crate::zero_state::rest_gain`]); the accelerometer's
 //! starts with a prior of [`RefineConfig::accel_prior_s`] seconds of rest for the file's value.
 //! The gyroscope's has none: a turn-on bias of 0.3-1 deg/s that no file can know is measured to
@@ -472,7 +474,7 @@ impl CalibrationStage {
                     learned.duration_s,
                     self.gravity_mps2,
                 );
-            } else if v.rest {
+            } else if v.rest && self.detector.config().kind.rest_is_still() {
                 self.refine.update(
                     v.accel.mean,
                     gyro,

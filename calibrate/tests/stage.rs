@@ -482,3 +482,38 @@ fn every_fitted_term_is_applied_with_the_time_since_the_stream_began() {
         );
     }
 }
+
+/// A SHOE stance is a foot with zero velocity, not a still sensor: it rolls at several deg/s.
+/// Its rest flags reach the output, but nothing is refined from them (with the GLRT, the same
+/// still sensor refines the gyro bias: `refinement_at_rest_corrects_gyro_bias_...`).
+#[test]
+fn shoe_stances_are_rest_but_refine_nothing() {
+    let file = calibration();
+    let mut st = stage(&file, DetectorKind::Shoe);
+    // Rolling at 6 deg/s about y: inside SHOE's 17 deg/s, far from the file's bias.
+    let out = run(
+        &mut st,
+        &still(
+            &file,
+            Vector3::z(),
+            Vector3::zeros(),
+            [0.0, 6.0, 0.0],
+            2.0,
+            5,
+        ),
+    );
+    let rest = out
+        .iter()
+        .filter(|c| c.flags & corrected_flags::ZERO_STATE != 0)
+        .count();
+    assert!(
+        rest as f64 > 0.9 * out.len() as f64,
+        "{rest} of {}",
+        out.len()
+    );
+    let (accel, gyro, refined) = st.refinement();
+    assert!(
+        !refined && accel == [0.0; 3] && gyro == [0.0; 3],
+        "{gyro:?}"
+    );
+}

@@ -68,6 +68,14 @@ impl DetectorKind {
         }
     }
 
+    /// Whether its rest means still, as the bias refinement at rest assumes: the learned
+    /// detectors test against the sensor's noise, while a SHOE stance admits a foot that rolls
+    /// over at tens of deg/s (refining the gyro bias there took the real walks of
+    /// docs/real-data.md from 0.2-0.6 % to 1-2 % of the distance).
+    pub fn rest_is_still(self) -> bool {
+        !matches!(self, Self::Shoe)
+    }
+
     /// Whether the detector needs gyroscope samples.
     pub fn needs_gyro(self) -> bool {
         matches!(self, Self::Glrt | Self::Shoe)
