@@ -16,8 +16,15 @@ pub const READ_BUFFER: usize = reg::FIFO_SIZE / 6 + 1;
 /// Where the samples come from, as given on the command line.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum SourceSpec {
-    /// The simulated MPU-9250, paced in real time.
+    /// The simulated MPU-9250 on a simulated 400 kHz I2C bus, paced in real time.
     Sim,
+    /// The simulated MPU-9250 on simulated SPI (1 MHz registers, 20 MHz data).
+    SimSpi,
+    /// A real MPU-9250 on a Linux spidev device.
+    Spi {
+        /// Device, e.g. `/dev/spidev0.0`.
+        device: String,
+    },
     /// A real MPU-9250 on a Linux I2C bus.
     I2c {
         /// Bus device, e.g. `/dev/i2c-1`.
@@ -30,14 +37,26 @@ pub enum SourceSpec {
 impl std::str::FromStr for SourceSpec {
     type Err = String;
 
-    /// Parses `sim` or `i2c:/dev/i2c-N[@0xNN]` (address default 0x68).
+    /// Parses `sim`, `sim-spi`, `spi:/dev/spidevB.C` or `i2c:/dev/i2c-N[@0xNN]` (address
+    /// default 0x68).
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        if s == "sim" {
-            return Ok(Self::Sim);
+        match s {
+            "sim" => return Ok(Self::Sim),
+            "sim-spi" => return Ok(Self::SimSpi),
+            _ => {}
+        }
+        if let Some(device) = s.strip_prefix("spi:") {
+            if device.is_empty() {
+                return Err(format!("no SPI device in {s:?}"));
+            }
+            return Ok(Self::Spi {
+                device: device.to_string(),
+            });
         }
         let Some(rest) = s.strip_prefix("i2c:") else {
             return Err(format!(
-                "unknown source {s:?}: expected `sim` or `i2c:/dev/i2c-N[@0x68]`"
+                "unknown source {s:?}: expected `sim`, `sim-spi`, `spi:/dev/spidevB.C` or \
+                 `i2c:/dev/i2c-N[@0x68]`"
             ));
         };
         let (device, address) = match rest.split_once('@') {
@@ -86,13 +105,13 @@ pub fn config_for_rate(rate_hz: u32) -> Result<driver::Config, String> {
 }
 
 /// The default time between FIFO reads for `config`, ns: an eighth of the time the FIFO takes
-/// to fill (2.7 ms at 4 kHz accelerometer-only, 4.6 ms at 1 kHz with 14-byte frames). A read
-/// that starts up to seven eighths of the fill time late still finds room in the FIFO, while
-/// each read still moves several frames (the fixed cost of a read, INT_STATUS and FIFO_COUNT,
-/// is about 0.2 ms of bus time at 400 kHz).
+/// to fill (1.3 ms at 4 kHz accelerometer-only, whose FIFO fills with 8000 frames/s; 4.5 ms
+/// at 1 kHz with 14-byte frames). A read that starts up to seven eighths of the fill time late
+/// still finds room in the FIFO, while each read still moves several frames (the fixed cost of
+/// a read, INT_STATUS and FIFO_COUNT, is about 0.2 ms of bus time at 400 kHz I2C).
 pub fn default_read_interval_ns(config: &driver::Config) -> u64 {
     let frames = reg::FIFO_SIZE / config.frame_len();
-    (frames as f64 / config.output_rate_hz() * 1e9 / 8.0) as u64
+    (frames as f64 / config.fifo_rate_hz() * 1e9 / 8.0) as u64
 }
 
 /// Counters of the acquisition loop.
@@ -106,6 +125,12 @@ pub struct LoopStats {
     pub failed_reads: u64,
     /// The latest any read started after its due time, ns (see [`Acquisition::lateness`]).
     pub max_late_ns: u64,
+    /// The range over all reads of acquisition time minus the sample time of the newest
+    /// sample with the filter delay added back (when it was written to the FIFO), ns: how far
+    /// the sample times stray from the acquisition clock. The truth lies between the read's
+    /// duration and that plus one period; negative means a sample time ahead of acquisition.
+    /// `None` before the first sample.
+    pub newest_lag_ns: Option<(i64, i64)>,
 }
 
 /// The acquisition loop's state: the driver, the clock, and a buffer allocated once.
@@ -196,12 +221,18 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
                 return Ok(Err(e));
             }
         };
+        let delay = self.driver.config().map_or(0, |c| c.filter_delay_ns());
         for sample in &mut self.buffer[..n] {
             sample.seq = self.next_seq;
             self.next_seq += 1;
             sample.stamps.acquired_ns = self.clock.now_ns();
             publish(sample)?;
             self.stats.published += 1;
+        }
+        if let Some(newest) = self.buffer[..n].last() {
+            let lag = newest.stamps.acquired_ns as i64 - (newest.stamps.sample_ns + delay) as i64;
+            let (lo, hi) = self.stats.newest_lag_ns.unwrap_or((lag, lag));
+            self.stats.newest_lag_ns = Some((lo.min(lag), hi.max(lag)));
         }
         Ok(Ok(n))
     }
@@ -226,12 +257,13 @@ mod tests {
         }
     }
 
-    /// Runs 400 reads at 4 kHz with the default interval on a virtual clock, the 200th one
-    /// starting `late_ns` after its due time; returns the loop and driver counters.
+    /// Runs 400 reads at 4 kHz over simulated SPI with the default interval on a virtual
+    /// clock, the 200th one starting `late_ns` after its due time; returns the loop and driver
+    /// counters.
     fn run_with_one_late_read(late_ns: u64) -> (LoopStats, driver::DriverStats, u64) {
         let clock = SimClock::new_virtual(1_000_000_000);
         let device = SimMpu9250::new(Still, clock.clone(), SimConfig::default());
-        let drv = Mpu9250::new(device, "sim", reg::ADDRESS_AD0_LOW);
+        let drv = Mpu9250::new_spi(device, "sim-spi");
         let config = config_for_rate(4000).unwrap();
         let interval = default_read_interval_ns(&config);
         let mut acq = Acquisition::start(drv, clock.clone(), config, interval).unwrap();
@@ -246,8 +278,9 @@ mod tests {
 
     #[test]
     fn the_default_interval_leaves_seven_eighths_of_the_fifo_for_lateness() {
-        // 512 bytes of 6-byte frames: 85 samples, 21.25 ms at 4 kHz; an eighth is 2.656 ms.
-        let fill_ns = 85.0 * 250_000.0;
+        // 512 bytes of 6-byte frames: 85 frames, 10.6 ms at the 8 kHz sample rate; an eighth
+        // is 1.33 ms.
+        let fill_ns = 85.0 * 125_000.0;
         let config = config_for_rate(4000).unwrap();
         assert_eq!(default_read_interval_ns(&config), (fill_ns / 8.0) as u64);
         // 1 kHz, 14-byte frames: 36 samples, 36 ms; an eighth is 4.5 ms.
@@ -255,8 +288,8 @@ mod tests {
             default_read_interval_ns(&config_for_rate(1000).unwrap()),
             4_500_000
         );
-        // A read half a millisecond short of 7/8 of the fill time late finds room ...
-        let late = (fill_ns * 7.0 / 8.0) as u64 - 500_000;
+        // A read a quarter millisecond short of 7/8 of the fill time late finds room ...
+        let late = (fill_ns * 7.0 / 8.0) as u64 - 250_000;
         let (stats, drv, recorded) = run_with_one_late_read(late);
         assert_eq!((drv.overflows, drv.lost_samples), (0, 0));
         assert!(drv.max_fifo_bytes > 480, "{} bytes", drv.max_fifo_bytes);
@@ -267,6 +300,37 @@ mod tests {
         assert_eq!(drv.overflows, 1);
         assert!(drv.lost_samples > 0);
         assert_eq!(drv.max_fifo_bytes, 512);
+    }
+
+    #[test]
+    fn accel_4khz_is_refused_over_i2c_with_the_bus_arithmetic() {
+        let clock = SimClock::new_virtual(0);
+        let device = SimMpu9250::new(Still, clock.clone(), SimConfig::default());
+        let drv = Mpu9250::new(device, "sim", reg::ADDRESS_AD0_LOW);
+        let config = config_for_rate(4000).unwrap();
+        let Err(err) = Acquisition::start(drv, clock.clone(), config, 1_000_000) else {
+            panic!("4 kHz over I2C was accepted");
+        };
+        let text = err.to_string();
+        for needle in [
+            "sim",
+            "400 kHz I2C",
+            "8000 frames/s",
+            "432 kHz",
+            "108 %",
+            "SPI",
+        ] {
+            assert!(text.contains(needle), "{needle:?} missing from: {text}");
+        }
+        // Nothing was sent to the part.
+        let device = SimMpu9250::new(Still, clock.clone(), SimConfig::default());
+        let mut drv = Mpu9250::new(device, "sim", reg::ADDRESS_AD0_LOW);
+        assert!(drv.init(config, &clock).is_err());
+        assert_eq!(drv.bus_mut().stats().transactions, 0);
+        // 1 kHz with gyro over I2C: 14 B x 9 clocks x 1000/s = 31.5 % of the bus.
+        let share = driver::BusKind::I2C_FAST_MODE.data_share(&config_for_rate(1000).unwrap());
+        assert!((share - 0.315).abs() < 1e-12, "{share}");
+        assert!(drv.init(config_for_rate(1000).unwrap(), &clock).is_ok());
     }
 
     #[test]
@@ -286,7 +350,20 @@ mod tests {
                 address: 0x69
             })
         );
-        for bad in ["spi:0", "i2c:", "i2c:/dev/i2c-1@zz", "i2c:/dev/i2c-1@0x80"] {
+        assert_eq!("sim-spi".parse(), Ok(SourceSpec::SimSpi));
+        assert_eq!(
+            "spi:/dev/spidev0.0".parse(),
+            Ok(SourceSpec::Spi {
+                device: "/dev/spidev0.0".into()
+            })
+        );
+        for bad in [
+            "spi:",
+            "sim2",
+            "i2c:",
+            "i2c:/dev/i2c-1@zz",
+            "i2c:/dev/i2c-1@0x80",
+        ] {
             assert!(bad.parse::<SourceSpec>().is_err(), "{bad}");
         }
     }
