@@ -125,12 +125,15 @@ pub struct LoopStats {
     pub failed_reads: u64,
     /// The latest any read started after its due time, ns (see [`Acquisition::lateness`]).
     pub max_late_ns: u64,
-    /// The range over all reads of acquisition time minus the sample time of the newest
-    /// sample with the filter delay added back (when it was written to the FIFO), ns: how far
-    /// the sample times stray from the acquisition clock. The truth lies between the read's
-    /// duration and that plus one period; negative means a sample time ahead of acquisition.
+    /// How far the sample times strayed from the acquisition clock, ns: over all reads, the
+    /// most the newest sample's FIFO time (sample time plus filter delay) was after its
+    /// acquisition time, and the most it was before the read's start minus one FIFO period.
+    /// The newest sample was written within one period before the FIFO count was read, which
+    /// happens between those two instants (however long the host takes), so both are at most
+    /// 0 for correct times; positive values are timing errors. Reads that found the FIFO
+    /// overflowed are left out (its newest frames were dropped, so its newest sample is old).
     /// `None` before the first sample.
-    pub newest_lag_ns: Option<(i64, i64)>,
+    pub sample_time_excursion_ns: Option<(i64, i64)>,
 }
 
 /// The acquisition loop's state: the driver, the clock, and a buffer allocated once.
@@ -214,6 +217,7 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
         self.stats.max_late_ns = self.stats.max_late_ns.max(late);
         // Keep the read grid; after a long stall, start again from now rather than bursting.
         self.next_read_ns = (due + self.read_interval_ns).max(now);
+        let overflows = self.driver.stats().overflows;
         let n = match self.driver.read_samples(&self.clock, &mut self.buffer) {
             Ok(n) => n,
             Err(e) => {
@@ -221,7 +225,9 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
                 return Ok(Err(e));
             }
         };
-        let delay = self.driver.config().map_or(0, |c| c.filter_delay_ns());
+        let (delay, period) = self.driver.config().map_or((0, 0), |c| {
+            (c.filter_delay_ns(), (1e9 / c.fifo_rate_hz()) as i64)
+        });
         for sample in &mut self.buffer[..n] {
             sample.seq = self.next_seq;
             self.next_seq += 1;
@@ -229,10 +235,16 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
             publish(sample)?;
             self.stats.published += 1;
         }
-        if let Some(newest) = self.buffer[..n].last() {
-            let lag = newest.stamps.acquired_ns as i64 - (newest.stamps.sample_ns + delay) as i64;
-            let (lo, hi) = self.stats.newest_lag_ns.unwrap_or((lag, lag));
-            self.stats.newest_lag_ns = Some((lo.min(lag), hi.max(lag)));
+        let newest = self.buffer[..n].last();
+        if let Some(newest) = newest.filter(|_| self.driver.stats().overflows == overflows) {
+            let written = (newest.stamps.sample_ns + delay) as i64;
+            let ahead = written - newest.stamps.acquired_ns as i64;
+            let behind = now as i64 - period - written;
+            let (a, b) = self
+                .stats
+                .sample_time_excursion_ns
+                .unwrap_or((i64::MIN, i64::MIN));
+            self.stats.sample_time_excursion_ns = Some((a.max(ahead), b.max(behind)));
         }
         Ok(Ok(n))
     }

@@ -262,13 +262,13 @@ fn run<I2C: I2c, C: Clock>(
         stats.max_late_ns as f64 * 1e-3,
         driver.max_fifo_bytes
     );
-    if let Some((lo, hi)) = stats.newest_lag_ns {
+    if let Some((ahead, behind)) = stats.sample_time_excursion_ns {
         eprintln!(
-            "mems-acquire: acquisition minus (sample time + filter delay) of each read's newest \
-             sample: {:.3} to {:.3} ms; duplicates dropped {}, settling frames dropped {}, \
-             pair mismatches {}",
-            lo as f64 * 1e-6,
-            hi as f64 * 1e-6,
+            "mems-acquire: newest sample's FIFO time at most {:.3} ms after its acquisition and \
+             {:.3} ms before its read's start minus a period (<= 0: on the clock); duplicates \
+             dropped {}, settling frames dropped {}, pair mismatches {}",
+            ahead as f64 * 1e-6,
+            behind as f64 * 1e-6,
             driver.duplicates,
             driver.settling_discarded,
             driver.pair_mismatches

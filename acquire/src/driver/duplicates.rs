@@ -21,6 +21,9 @@ pub(crate) struct Pairing {
     held: Option<[u8; FRAME]>,
     /// Whether the phase is known (false after a FIFO reset).
     in_phase: bool,
+    /// The held frame may itself be a lone second copy (the phase was guessed from fewer than
+    /// three frames): a different next frame is then a new sample, not a mismatch.
+    tentative: bool,
 }
 
 impl Pairing {
@@ -28,13 +31,19 @@ impl Pairing {
     pub(crate) fn reset(&mut self) {
         self.held = None;
         self.in_phase = false;
+        self.tentative = false;
     }
 
     /// Goes through `frames` (whole 6-byte frames, oldest first) and calls `keep` with the
-    /// index of each frame that is a new sample. Returns the index of the first frame that
-    /// should have repeated its predecessor and does not; the frames from there on are not
-    /// looked at.
-    pub(crate) fn select(&mut self, frames: &[u8], mut keep: impl FnMut(usize)) -> Option<usize> {
+    /// index of each frame that is a new sample, and whether it is a lone second copy (its
+    /// first copy was written one frame earlier, before a FIFO reset). Returns the index of
+    /// the first frame that should have repeated its predecessor and does not; the frames from
+    /// there on are not looked at.
+    pub(crate) fn select(
+        &mut self,
+        frames: &[u8],
+        mut keep: impl FnMut(usize, bool),
+    ) -> Option<usize> {
         let n = frames.len() / FRAME;
         let frame = |i: usize| -> [u8; FRAME] {
             let mut f = [0; FRAME];
@@ -42,7 +51,10 @@ impl Pairing {
             f
         };
         let mut start = 0;
-        if !self.in_phase && n > 0 {
+        if !self.in_phase && n > 0 && n < 3 {
+            self.in_phase = true;
+            self.tentative = true;
+        } else if !self.in_phase && n > 0 {
             self.in_phase = true;
             let equal_at = |offset: usize| {
                 (offset..n.saturating_sub(1))
@@ -50,22 +62,28 @@ impl Pairing {
                     .filter(|&i| frame(i) == frame(i + 1))
                     .count()
             };
-            if n >= 3 && equal_at(1) > equal_at(0) {
+            if equal_at(1) > equal_at(0) {
                 // Frame 0 is the second copy of a sample whose first copy was reset away.
-                keep(0);
+                keep(0, true);
                 start = 1;
             }
         }
         for i in start..n {
             let f = frame(i);
             match self.held.take() {
-                Some(first) if first == f => {}
+                Some(first) if first == f => self.tentative = false,
+                Some(_) if self.tentative => {
+                    // The held frame was a lone second copy; this one starts a sample.
+                    self.tentative = false;
+                    keep(i, false);
+                    self.held = Some(f);
+                }
                 Some(_) => {
                     self.reset();
                     return Some(i);
                 }
                 None => {
-                    keep(i);
+                    keep(i, false);
                     self.held = Some(f);
                 }
             }
@@ -84,7 +102,7 @@ mod tests {
 
     fn kept(p: &mut Pairing, values: &[u8]) -> (Vec<usize>, Option<usize>) {
         let mut k = Vec::new();
-        let bad = p.select(&frames(values), |i| k.push(i));
+        let bad = p.select(&frames(values), |i, _| k.push(i));
         (k, bad)
     }
 
@@ -105,5 +123,19 @@ mod tests {
         assert_eq!(kept(&mut p, &[1, 1, 2, 9, 3, 3]), (vec![0, 2], Some(3)));
         // After the mismatch the phase is found again.
         assert_eq!(kept(&mut p, &[7, 8, 8, 9, 9]), (vec![0, 1, 3], None));
+    }
+
+    #[test]
+    fn fewer_than_three_frames_after_a_reset_never_make_a_mismatch() {
+        // A lone second copy, then the next sample's first copy, in a read of two.
+        let mut p = Pairing::default();
+        assert_eq!(kept(&mut p, &[1, 2]), (vec![0, 1], None));
+        assert_eq!(kept(&mut p, &[2, 3, 3]), (vec![1], None));
+        // A first copy and its repetition.
+        let mut p = Pairing::default();
+        assert_eq!(kept(&mut p, &[1]), (vec![0], None));
+        assert_eq!(kept(&mut p, &[1, 2, 2]), (vec![1], None));
+        // Once the phase is known, a differing second copy is a mismatch again.
+        assert_eq!(kept(&mut p, &[3, 4]), (vec![0], Some(1)));
     }
 }

@@ -754,22 +754,24 @@ impl<I2C: I2c> Mpu9250<I2C> {
         let temp = self.temp_counts;
         let buf = &self.buf[..take * frame];
         let mut n = 0;
-        let mut emit = |i: usize| {
-            let t = a.first_ns + i as f64 * a.step_ns - delay;
+        // Frame `i`, stamped `back` frames earlier (a lone second copy: its first copy was
+        // written one frame before).
+        let mut emit = |i: usize, back: usize| {
+            let t = a.first_ns + (i as f64 - back as f64) * a.step_ns - delay;
             out[n] = decode(config, &buf[i * frame..(i + 1) * frame], t, temp);
             n += 1;
         };
         let mismatch = if config.frames_per_sample() == 2 {
             let mut kept = 0u64;
-            let bad = self.pairing.select(&buf[skip * frame..], |i| {
+            let bad = self.pairing.select(&buf[skip * frame..], |i, lone| {
                 kept += 1;
-                emit(skip + i);
+                emit(skip + i, usize::from(lone));
             });
             let looked_at = bad.unwrap_or(take - skip) as u64;
             self.stats.duplicates += looked_at - kept;
             bad.map(|i| skip + i)
         } else {
-            (skip..take).for_each(&mut emit);
+            (skip..take).for_each(|i| emit(i, 0));
             None
         };
         (n, mismatch)
