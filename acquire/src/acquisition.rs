@@ -34,6 +34,24 @@ pub enum SourceSpec {
     },
 }
 
+impl SourceSpec {
+    /// The bus this source's part is read over.
+    pub fn bus_kind(&self) -> driver::BusKind {
+        match self {
+            Self::Sim | Self::I2c { .. } => driver::BusKind::I2C_FAST_MODE,
+            Self::SimSpi | Self::Spi { .. } => driver::BusKind::SPI_20MHZ,
+        }
+    }
+
+    /// Checks that `rate_hz` is a supported rate and that this source's bus can carry it;
+    /// the error says why not (with the bus arithmetic) and what to use instead.
+    pub fn check_rate(&self, rate_hz: u32) -> Result<driver::Config, String> {
+        let config = config_for_rate(rate_hz)?;
+        self.bus_kind().check(&config)?;
+        Ok(config)
+    }
+}
+
 impl std::str::FromStr for SourceSpec {
     type Err = String;
 
