@@ -632,12 +632,16 @@ impl<I2C: I2c> Mpu9250<I2C> {
         }
         let mut status = [0u8; 1];
         self.read_registers(reg::INT_STATUS, &mut status, "reading INT_STATUS")?;
-        let overflow = status[0] & reg::INT_STATUS_FIFO_OFLOW != 0;
+        let mut overflow = status[0] & reg::INT_STATUS_FIFO_OFLOW != 0;
         let mut count_bytes = [0u8; 2];
         let t_before = clock.now_ns();
         self.read_registers(reg::FIFO_COUNTH, &mut count_bytes, "reading FIFO_COUNT")?;
         let t_after = clock.now_ns();
         let count = usize::from(u16::from_be_bytes(count_bytes) & 0x1FFF).min(reg::FIFO_SIZE);
+        // A full FIFO has overflowed, or is about to, even if it filled after INT_STATUS was
+        // read (neither frame size divides 512, so a full FIFO holds part of a frame): with
+        // FIFO_MODE = 1 its oldest whole frames are intact and are delivered.
+        overflow |= count == reg::FIFO_SIZE;
         self.stats.max_fifo_bytes = self.stats.max_fifo_bytes.max(count as u64);
         let available = count / frame;
         let short = count % frame != 0;

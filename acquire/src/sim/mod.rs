@@ -10,8 +10,9 @@
 //!   each byte pops the FIFO (an empty FIFO repeats the last byte popped). Writes to read-only
 //!   registers (data, INT_STATUS, FIFO_COUNT, WHO_AM_I) and to FIFO_R_W are ignored.
 //! - PWR_MGMT_1: H_RESET restores every register's reset value, empties the FIFO and makes the
-//!   device unresponsive for [`SimConfig::startup_ns`]; SLEEP stops sampling. PWR_MGMT_2 is
-//!   stored but its standby bits are not modelled (disabled axes keep sampling).
+//!   device unresponsive for [`SimConfig::startup_ns`]; SLEEP stops sampling. PWR_MGMT_2's
+//!   standby bits only start the gyro start-up transient when cleared (disabled axes keep
+//!   sampling).
 //! - Sample rate (the rate of the data registers and of FIFO writes; RM-MPU-9250A-00 register
 //!   25: "the FIFO ... [is] written at the Sample Rate", and register 35): with the gyro DLPF
 //!   on (GYRO_CONFIG.FCHOICE_B = 0 and DLPF_CFG 1-6), 1 kHz / (1 + SMPLRT_DIV); otherwise
