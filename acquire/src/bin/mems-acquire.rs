@@ -42,8 +42,8 @@ struct Cli {
     /// Stop after this many seconds (default: until SIGINT/SIGTERM).
     #[arg(long)]
     duration: Option<f64>,
-    /// Time between FIFO reads, ms (the 512-byte FIFO holds 21 ms at 4 kHz). Default: an
-    /// eighth of the FIFO's fill time (2.7 ms at 4 kHz, 4.6 ms at 1 kHz).
+    /// Time between FIFO reads, ms (the 512-byte FIFO holds 10.6 ms at 4 kHz, 36 ms at
+    /// 1 kHz). Default: an eighth of the FIFO's fill time (1.33 ms at 4 kHz, 4.5 ms at 1 kHz).
     #[arg(long)]
     read_interval_ms: Option<f64>,
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).

@@ -510,7 +510,6 @@ impl<I2C: I2c> Mpu9250<I2C> {
         if config.gyros_on() {
             clock.sleep_ns(reg::GYRO_SETTLE_NS);
         }
-        self.config = Some(config);
         self.start_fifo(config)?;
         let fifo = [
             (reg::FIFO_EN, config.fifo_channels()),
@@ -547,8 +546,9 @@ impl<I2C: I2c> Mpu9250<I2C> {
 
     /// Empties and (re)starts the FIFO in the Linux driver's order (inv_mpu_ring.c
     /// `inv_reset_fifo`): channels off (FIFO_EN = 0), FIFO off, FIFO_RST, FIFO on, channels on.
-    /// Writing FIFO_RST with the channels on would let a frame being written straddle the
-    /// reset. The first frames after a start with the gyros on are dropped (settling).
+    /// The register map does not say what a reset does to a frame being written; with the
+    /// channels off none is. The first frame after a start with the gyros on is dropped
+    /// (settling).
     fn start_fifo(&mut self, config: Config) -> Result<(), Error<I2C::Error>> {
         let base = self.user_ctrl();
         let steps = [
