@@ -1,9 +1,13 @@
 //! A small MPU-9250 driver over `embedded_hal::i2c::I2c`, written against the register map
 //! RM-MPU-9250A-00 rev 1.6 (see [`crate::registers`]).
 //!
-//! Acquisition goes through the FIFO only, with burst reads only: INT_STATUS (one byte, for
-//! FIFO_OFLOW_INT), FIFO_COUNTH/L (one two-byte transaction), then whole frames from FIFO_R_W in
-//! one transaction. No sample is ever assembled from two transactions, so no sample can be torn.
+//! Acquisition goes through the FIFO only, with burst reads only: FIFO_COUNTH/L (one two-byte
+//! transaction), whole frames from FIFO_R_W in one transaction, then INT_STATUS (one byte, for
+//! FIFO_OFLOW_INT). No sample is ever assembled from two transactions, so no sample can be
+//! torn. Reading INT_STATUS last attributes every overflow to the poll it happened in: one
+//! before the count shows as a full FIFO (512 bytes), one after it as the flag, and then the
+//! partial frame the overflow left behind the frames just read is dropped with the rest of the
+//! FIFO instead of misaligning the next read.
 //!
 //! The FIFO runs with CONFIG.FIFO_MODE = 1 (a full FIFO drops new data): after an overflow the
 //! oldest frames in the FIFO are still aligned and contiguous with what was read before, so
@@ -630,23 +634,20 @@ impl<I2C: I2c> Mpu9250<I2C> {
             self.temp_counts = Some(self.read_temp_counts()?);
             self.next_temp_ns = clock.now_ns() + config.temp_interval_ns;
         }
-        let mut status = [0u8; 1];
-        self.read_registers(reg::INT_STATUS, &mut status, "reading INT_STATUS")?;
-        let mut overflow = status[0] & reg::INT_STATUS_FIFO_OFLOW != 0;
         let mut count_bytes = [0u8; 2];
         let t_before = clock.now_ns();
         self.read_registers(reg::FIFO_COUNTH, &mut count_bytes, "reading FIFO_COUNT")?;
         let t_after = clock.now_ns();
         let count = usize::from(u16::from_be_bytes(count_bytes) & 0x1FFF).min(reg::FIFO_SIZE);
-        // A full FIFO has overflowed, or is about to, even if it filled after INT_STATUS was
-        // read (neither frame size divides 512, so a full FIFO holds part of a frame): with
-        // FIFO_MODE = 1 its oldest whole frames are intact and are delivered.
-        overflow |= count == reg::FIFO_SIZE;
+        // A full FIFO has overflowed (neither frame size divides 512, so a full FIFO ends in
+        // part of a frame): with FIFO_MODE = 1 its oldest whole frames are intact and are
+        // delivered, then it is reset.
+        let full = count == reg::FIFO_SIZE;
         self.stats.max_fifo_bytes = self.stats.max_fifo_bytes.max(count as u64);
         let available = count / frame;
         let short = count % frame != 0;
 
-        if available == 0 && !overflow && !short {
+        if available == 0 && !full && !short {
             let period = self.timer.period_ns();
             let stalled = self.last_data_ns.is_some_and(|last| {
                 (t_after.saturating_sub(last)) as f64 > (STALL_PERIODS * period).max(STALL_MIN_NS)
@@ -656,9 +657,9 @@ impl<I2C: I2c> Mpu9250<I2C> {
         self.last_data_ns = Some(t_after);
 
         // A count that is not whole frames means bytes were lost: the frames may be misaligned,
-        // so nothing in the FIFO is trusted (unless the FIFO overflowed, where with FIFO_MODE = 1
+        // so nothing in the FIFO is trusted (unless the FIFO is full, where with FIFO_MODE = 1
         // only the tail is incomplete).
-        let take = if short && !overflow {
+        let take = if short && !full {
             0
         } else {
             available.min(out.len())
@@ -686,18 +687,21 @@ impl<I2C: I2c> Mpu9250<I2C> {
                 Ok(()) => {}
             }
             // The newest sample was produced within one period before the count was latched.
-            let reliable = !overflow && t_after - t_before <= COUNT_READ_MAX_NS;
+            let reliable = !full && t_after - t_before <= COUNT_READ_MAX_NS;
             let newest_obs = t_before as f64 - self.timer.period_ns() / 2.0;
             let a = self.timer.assign(take, available, newest_obs, reliable);
             let fps = config.frames_per_sample() as u64;
-            let (n, mismatch) = self.decode_frames(&config, take, &a, out);
+            let (n, skipped, mismatch) = self.decode_frames(&config, take, &a, out);
             for sample in &mut out[..n] {
                 sample.seq = self.seq;
                 self.seq += 1;
             }
             // The gap's size: what the times say, at least what the driver discarded, and at
             // least one sample whenever a gap is known to have happened.
-            let mut lost = (a.lost as f64 / fps as f64).round() as u64;
+            // Settling frames dropped after a FIFO reset are part of the gap.
+            let gap = self.pending_flags & raw_flags::GAP_BEFORE != 0;
+            let dropped = if gap { skipped as u64 } else { 0 };
+            let mut lost = ((a.lost + dropped) as f64 / fps as f64).round() as u64;
             lost = lost.max(self.pending_discarded);
             if self.pending_flags & raw_flags::GAP_BEFORE != 0 {
                 lost = lost.max(1);
@@ -727,6 +731,13 @@ impl<I2C: I2c> Mpu9250<I2C> {
                 return Ok(Some(delivered));
             }
         }
+        // INT_STATUS after the data: FIFO_OFLOW_INT covers the time since the last poll read it.
+        // An overflow before this poll's count left the FIFO full (nothing was read since);
+        // one after it, while this poll ran, left a partial frame behind the frames just read,
+        // which would misalign every later frame: the rest of the FIFO is dropped.
+        let mut status = [0u8; 1];
+        self.read_registers(reg::INT_STATUS, &mut status, "reading INT_STATUS")?;
+        let overflow = full || status[0] & reg::INT_STATUS_FIFO_OFLOW != 0;
         let fps = config.frames_per_sample();
         if overflow {
             self.stats.overflows += 1;
@@ -741,15 +752,15 @@ impl<I2C: I2c> Mpu9250<I2C> {
 
     /// Decodes the first `take` frames of the read buffer into `out`, timed by `a` and moved
     /// back by the filter delay: drops the frames still settling, and in the 4 kHz mode the
-    /// repeated ones. Returns the samples written and, if a repeated frame did not match, its
-    /// index.
+    /// repeated ones. Returns the samples written, the settling frames dropped and, if a
+    /// repeated frame did not match, its index.
     fn decode_frames(
         &mut self,
         config: &Config,
         take: usize,
         a: &timing::Assignment,
         out: &mut [RawImuSample],
-    ) -> (usize, Option<usize>) {
+    ) -> (usize, usize, Option<usize>) {
         let frame = config.frame_len();
         let skip = self.skip_frames.min(take);
         self.skip_frames -= skip;
@@ -778,7 +789,7 @@ impl<I2C: I2c> Mpu9250<I2C> {
             (skip..take).for_each(|i| emit(i, 0));
             None
         };
-        (n, mismatch)
+        (n, skip, mismatch)
     }
 
     /// Empties the FIFO (keeping it enabled) and clears a stale overflow flag (a full FIFO keeps
