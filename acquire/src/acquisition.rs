@@ -16,8 +16,15 @@ pub const READ_BUFFER: usize = reg::FIFO_SIZE / 6 + 1;
 /// Where the samples come from, as given on the command line.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum SourceSpec {
-    /// The simulated MPU-9250, paced in real time.
+    /// The simulated MPU-9250 on a simulated 400 kHz I2C bus, paced in real time.
     Sim,
+    /// The simulated MPU-9250 on simulated SPI (1 MHz registers, 20 MHz data).
+    SimSpi,
+    /// A real MPU-9250 on a Linux spidev device.
+    Spi {
+        /// Device, e.g. `/dev/spidev0.0`.
+        device: String,
+    },
     /// A real MPU-9250 on a Linux I2C bus.
     I2c {
         /// Bus device, e.g. `/dev/i2c-1`.
@@ -27,17 +34,47 @@ pub enum SourceSpec {
     },
 }
 
+impl SourceSpec {
+    /// The bus this source's part is read over.
+    pub fn bus_kind(&self) -> driver::BusKind {
+        match self {
+            Self::Sim | Self::I2c { .. } => driver::BusKind::I2C_FAST_MODE,
+            Self::SimSpi | Self::Spi { .. } => driver::BusKind::SPI_20MHZ,
+        }
+    }
+
+    /// Checks that `rate_hz` is a supported rate and that this source's bus can carry it;
+    /// the error says why not (with the bus arithmetic) and what to use instead.
+    pub fn check_rate(&self, rate_hz: u32) -> Result<driver::Config, String> {
+        let config = config_for_rate(rate_hz)?;
+        self.bus_kind().check(&config)?;
+        Ok(config)
+    }
+}
+
 impl std::str::FromStr for SourceSpec {
     type Err = String;
 
-    /// Parses `sim` or `i2c:/dev/i2c-N[@0xNN]` (address default 0x68).
+    /// Parses `sim`, `sim-spi`, `spi:/dev/spidevB.C` or `i2c:/dev/i2c-N[@0xNN]` (address
+    /// default 0x68).
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        if s == "sim" {
-            return Ok(Self::Sim);
+        match s {
+            "sim" => return Ok(Self::Sim),
+            "sim-spi" => return Ok(Self::SimSpi),
+            _ => {}
+        }
+        if let Some(device) = s.strip_prefix("spi:") {
+            if device.is_empty() {
+                return Err(format!("no SPI device in {s:?}"));
+            }
+            return Ok(Self::Spi {
+                device: device.to_string(),
+            });
         }
         let Some(rest) = s.strip_prefix("i2c:") else {
             return Err(format!(
-                "unknown source {s:?}: expected `sim` or `i2c:/dev/i2c-N[@0x68]`"
+                "unknown source {s:?}: expected `sim`, `sim-spi`, `spi:/dev/spidevB.C` or \
+                 `i2c:/dev/i2c-N[@0x68]`"
             ));
         };
         let (device, address) = match rest.split_once('@') {
@@ -86,13 +123,13 @@ pub fn config_for_rate(rate_hz: u32) -> Result<driver::Config, String> {
 }
 
 /// The default time between FIFO reads for `config`, ns: an eighth of the time the FIFO takes
-/// to fill (2.7 ms at 4 kHz accelerometer-only, 4.6 ms at 1 kHz with 14-byte frames). A read
-/// that starts up to seven eighths of the fill time late still finds room in the FIFO, while
-/// each read still moves several frames (the fixed cost of a read, INT_STATUS and FIFO_COUNT,
-/// is about 0.2 ms of bus time at 400 kHz).
+/// to fill (1.3 ms at 4 kHz accelerometer-only, whose FIFO fills with 8000 frames/s; 4.5 ms
+/// at 1 kHz with 14-byte frames). A read that starts up to seven eighths of the fill time late
+/// still finds room in the FIFO, while each read still moves several frames (the fixed cost of
+/// a read, INT_STATUS and FIFO_COUNT, is about 0.2 ms of bus time at 400 kHz I2C).
 pub fn default_read_interval_ns(config: &driver::Config) -> u64 {
     let frames = reg::FIFO_SIZE / config.frame_len();
-    (frames as f64 / config.output_rate_hz() * 1e9 / 8.0) as u64
+    (frames as f64 / config.fifo_rate_hz() * 1e9 / 8.0) as u64
 }
 
 /// Counters of the acquisition loop.
@@ -106,6 +143,15 @@ pub struct LoopStats {
     pub failed_reads: u64,
     /// The latest any read started after its due time, ns (see [`Acquisition::lateness`]).
     pub max_late_ns: u64,
+    /// How far the sample times strayed from the acquisition clock, ns: over all reads, the
+    /// most the newest sample's FIFO time (sample time plus filter delay) was after its
+    /// acquisition time, and the most it was before the read's start minus one FIFO period.
+    /// The newest sample was written within one period before the FIFO count was read, which
+    /// happens between those two instants (however long the host takes), so both are at most
+    /// 0 for correct times; positive values are timing errors. Reads that found the FIFO
+    /// overflowed are left out (its newest frames were dropped, so its newest sample is old).
+    /// `None` before the first sample.
+    pub sample_time_excursion_ns: Option<(i64, i64)>,
 }
 
 /// The acquisition loop's state: the driver, the clock, and a buffer allocated once.
@@ -122,7 +168,8 @@ pub struct Acquisition<I2C: I2c, C: Clock> {
 
 impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
     /// Probes and configures the device and prepares the loop; reads are `read_interval_ns`
-    /// apart (it must leave the FIFO room: 512 bytes last 21 ms at 4 kHz accelerometer-only;
+    /// apart (it must leave the FIFO room: 512 bytes last 10.6 ms at 4 kHz accelerometer-only,
+    /// whose FIFO takes 8000 frames/s, and 36 ms at 1 kHz;
     /// see [`default_read_interval_ns`]).
     pub fn start(
         mut driver: Mpu9250<I2C>,
@@ -189,6 +236,7 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
         self.stats.max_late_ns = self.stats.max_late_ns.max(late);
         // Keep the read grid; after a long stall, start again from now rather than bursting.
         self.next_read_ns = (due + self.read_interval_ns).max(now);
+        let overflows = self.driver.stats().overflows;
         let n = match self.driver.read_samples(&self.clock, &mut self.buffer) {
             Ok(n) => n,
             Err(e) => {
@@ -196,12 +244,26 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
                 return Ok(Err(e));
             }
         };
+        let (delay, period) = self.driver.config().map_or((0, 0), |c| {
+            (c.filter_delay_ns(), (1e9 / c.fifo_rate_hz()) as i64)
+        });
         for sample in &mut self.buffer[..n] {
             sample.seq = self.next_seq;
             self.next_seq += 1;
             sample.stamps.acquired_ns = self.clock.now_ns();
             publish(sample)?;
             self.stats.published += 1;
+        }
+        let newest = self.buffer[..n].last();
+        if let Some(newest) = newest.filter(|_| self.driver.stats().overflows == overflows) {
+            let written = (newest.stamps.sample_ns + delay) as i64;
+            let ahead = written - newest.stamps.acquired_ns as i64;
+            let behind = now as i64 - period - written;
+            let (a, b) = self
+                .stats
+                .sample_time_excursion_ns
+                .unwrap_or((i64::MIN, i64::MIN));
+            self.stats.sample_time_excursion_ns = Some((a.max(ahead), b.max(behind)));
         }
         Ok(Ok(n))
     }
@@ -226,12 +288,13 @@ mod tests {
         }
     }
 
-    /// Runs 400 reads at 4 kHz with the default interval on a virtual clock, the 200th one
-    /// starting `late_ns` after its due time; returns the loop and driver counters.
+    /// Runs 400 reads at 4 kHz over simulated SPI with the default interval on a virtual
+    /// clock, the 200th one starting `late_ns` after its due time; returns the loop and driver
+    /// counters.
     fn run_with_one_late_read(late_ns: u64) -> (LoopStats, driver::DriverStats, u64) {
         let clock = SimClock::new_virtual(1_000_000_000);
         let device = SimMpu9250::new(Still, clock.clone(), SimConfig::default());
-        let drv = Mpu9250::new(device, "sim", reg::ADDRESS_AD0_LOW);
+        let drv = Mpu9250::new_spi(device, "sim-spi");
         let config = config_for_rate(4000).unwrap();
         let interval = default_read_interval_ns(&config);
         let mut acq = Acquisition::start(drv, clock.clone(), config, interval).unwrap();
@@ -246,8 +309,9 @@ mod tests {
 
     #[test]
     fn the_default_interval_leaves_seven_eighths_of_the_fifo_for_lateness() {
-        // 512 bytes of 6-byte frames: 85 samples, 21.25 ms at 4 kHz; an eighth is 2.656 ms.
-        let fill_ns = 85.0 * 250_000.0;
+        // 512 bytes of 6-byte frames: 85 frames, 10.6 ms at the 8 kHz sample rate; an eighth
+        // is 1.33 ms.
+        let fill_ns = 85.0 * 125_000.0;
         let config = config_for_rate(4000).unwrap();
         assert_eq!(default_read_interval_ns(&config), (fill_ns / 8.0) as u64);
         // 1 kHz, 14-byte frames: 36 samples, 36 ms; an eighth is 4.5 ms.
@@ -255,8 +319,8 @@ mod tests {
             default_read_interval_ns(&config_for_rate(1000).unwrap()),
             4_500_000
         );
-        // A read half a millisecond short of 7/8 of the fill time late finds room ...
-        let late = (fill_ns * 7.0 / 8.0) as u64 - 500_000;
+        // A read a quarter millisecond short of 7/8 of the fill time late finds room ...
+        let late = (fill_ns * 7.0 / 8.0) as u64 - 250_000;
         let (stats, drv, recorded) = run_with_one_late_read(late);
         assert_eq!((drv.overflows, drv.lost_samples), (0, 0));
         assert!(drv.max_fifo_bytes > 480, "{} bytes", drv.max_fifo_bytes);
@@ -267,6 +331,37 @@ mod tests {
         assert_eq!(drv.overflows, 1);
         assert!(drv.lost_samples > 0);
         assert_eq!(drv.max_fifo_bytes, 512);
+    }
+
+    #[test]
+    fn accel_4khz_is_refused_over_i2c_with_the_bus_arithmetic() {
+        let clock = SimClock::new_virtual(0);
+        let device = SimMpu9250::new(Still, clock.clone(), SimConfig::default());
+        let drv = Mpu9250::new(device, "sim", reg::ADDRESS_AD0_LOW);
+        let config = config_for_rate(4000).unwrap();
+        let Err(err) = Acquisition::start(drv, clock.clone(), config, 1_000_000) else {
+            panic!("4 kHz over I2C was accepted");
+        };
+        let text = err.to_string();
+        for needle in [
+            "sim",
+            "400 kHz I2C",
+            "8000 frames/s",
+            "432 kHz",
+            "108 %",
+            "SPI",
+        ] {
+            assert!(text.contains(needle), "{needle:?} missing from: {text}");
+        }
+        // Nothing was sent to the part.
+        let device = SimMpu9250::new(Still, clock.clone(), SimConfig::default());
+        let mut drv = Mpu9250::new(device, "sim", reg::ADDRESS_AD0_LOW);
+        assert!(drv.init(config, &clock).is_err());
+        assert_eq!(drv.bus_mut().stats().transactions, 0);
+        // 1 kHz with gyro over I2C: 14 B x 9 clocks x 1000/s = 31.5 % of the bus.
+        let share = driver::BusKind::I2C_FAST_MODE.data_share(&config_for_rate(1000).unwrap());
+        assert!((share - 0.315).abs() < 1e-12, "{share}");
+        assert!(drv.init(config_for_rate(1000).unwrap(), &clock).is_ok());
     }
 
     #[test]
@@ -286,7 +381,20 @@ mod tests {
                 address: 0x69
             })
         );
-        for bad in ["spi:0", "i2c:", "i2c:/dev/i2c-1@zz", "i2c:/dev/i2c-1@0x80"] {
+        assert_eq!("sim-spi".parse(), Ok(SourceSpec::SimSpi));
+        assert_eq!(
+            "spi:/dev/spidev0.0".parse(),
+            Ok(SourceSpec::Spi {
+                device: "/dev/spidev0.0".into()
+            })
+        );
+        for bad in [
+            "spi:",
+            "sim2",
+            "i2c:",
+            "i2c:/dev/i2c-1@zz",
+            "i2c:/dev/i2c-1@0x80",
+        ] {
             assert!(bad.parse::<SourceSpec>().is_err(), "{bad}");
         }
     }

@@ -1,6 +1,7 @@
 //! MPU-9250 acquisition: a small driver over `embedded_hal::i2c::I2c` with FIFO-based burst
-//! reads and sample-time reconstruction ([`driver`]), the register map it is written against
-//! ([`registers`]), a register-level simulated MPU-9250 behind the same trait ([`sim`]), and the
+//! reads and sample-time reconstruction ([`driver`]), the same register transactions over SPI
+//! ([`spi`]), the register map it is written against ([`registers`]), a register-level
+//! simulated MPU-9250 behind the same traits ([`sim`]), and the
 //! clocks both run on ([`clock`]); the acquisition loop ([`acquisition`]) and the small-block
 //! pool `mems-acquire` allocates from ([`pool`]).
 
@@ -10,3 +11,4 @@ pub mod driver;
 pub mod pool;
 pub mod registers;
 pub mod sim;
+pub mod spi;

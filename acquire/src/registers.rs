@@ -6,15 +6,24 @@
 //! map's section titles do. Only the registers this project touches are listed; the
 //! magnetometer (AK8963) and the auxiliary I2C master are not used.
 //!
-//! All registers reset to 0x00 except PWR_MGMT_1 (0x01) and WHO_AM_I (0x71).
+//! All registers reset to 0x00 except PWR_MGMT_1 (0x01) and WHO_AM_I (0x71 on an MPU-9250).
 
 /// I2C address with the AD0 pin low (PS-MPU-9250A-01: 7-bit address 1101000).
 pub const ADDRESS_AD0_LOW: u8 = 0x68;
 /// I2C address with the AD0 pin high (7-bit address 1101001).
 pub const ADDRESS_AD0_HIGH: u8 = 0x69;
 
-/// The value WHO_AM_I (register 117) reads on an MPU-9250.
+/// The value WHO_AM_I (register 117) reads on an MPU-9250 (RM-MPU-9250A-00 register 117).
 pub const WHO_AM_I_VALUE: u8 = 0x71;
+/// The parts sold as (or on boards sold as) MPU-9250 that share its accelerometer, gyro and
+/// FIFO register map, with their WHO_AM_I values: the MPU-6500 (the MPU-9250 without the
+/// magnetometer), the MPU-9250 and the MPU-9255. The Linux driver accepts all three
+/// (drivers/iio/imu/inv_mpu6050/inv_mpu_iio.h, `INV_MPU6500_WHOAMI_VALUE`,
+/// `INV_MPU9250_WHOAMI_VALUE`, `INV_MPU9255_WHOAMI_VALUE`, checked in inv_mpu_core.c
+/// `inv_check_and_setup_chip`), and so does ArduPilot (AP_InertialSensor_Invensense.cpp,
+/// `_check_whoami`).
+pub const WHO_AM_I_PARTS: [(u8, &str); 3] =
+    [(0x70, "MPU-6500"), (0x71, "MPU-9250"), (0x73, "MPU-9255")];
 
 /// Size of the FIFO in bytes (register 116; PS-MPU-9250A-01 section 4.17).
 pub const FIFO_SIZE: usize = 512;
@@ -24,6 +33,12 @@ pub const FIFO_SIZE: usize = 512;
 pub const STARTUP_MAX_NS: u64 = 100_000_000;
 /// The same start-up time, typical value, ns.
 pub const STARTUP_TYPICAL_NS: u64 = 11_000_000;
+/// Gyro start-up time from sleep, typical, ns (PS-MPU-9250A-01 section 3.1, table 1).
+pub const GYRO_STARTUP_TYPICAL_NS: u64 = 35_000_000;
+/// How long the driver lets the gyros settle after configuring them, ns: the Linux driver's
+/// value for this family (inv_mpu_iio.h, `INV_MPU6500_GYRO_STARTUP_TIME`, 70 ms), twice the
+/// datasheet's typical start-up time.
+pub const GYRO_SETTLE_NS: u64 = 70_000_000;
 
 /// Register 25, SMPLRT_DIV: SAMPLE_RATE = INTERNAL_SAMPLE_RATE / (1 + SMPLRT_DIV), effective
 /// only with the gyro DLPF enabled (FCHOICE_B = 0b00 and 0 < DLPF_CFG < 7), where the internal
@@ -94,6 +109,9 @@ pub const SENSOR_DATA_LEN: usize = 14;
 
 /// Register 106, USER_CTRL.
 pub const USER_CTRL: u8 = 0x6A;
+/// USER_CTRL bit 4, I2C_IF_DIS: disables the I2C interface (set when using SPI, so that the
+/// part never switches into I2C mode; PS-MPU-9250A-01 section 7.1, page 32).
+pub const USER_CTRL_I2C_IF_DIS: u8 = 1 << 4;
 /// USER_CTRL bit 6, FIFO_EN: enables FIFO operation.
 pub const USER_CTRL_FIFO_EN: u8 = 1 << 6;
 /// USER_CTRL bit 2, FIFO_RST: resets the FIFO; clears itself.
@@ -126,10 +144,38 @@ pub const FIFO_R_W: u8 = 0x74;
 /// Register 117, WHO_AM_I.
 pub const WHO_AM_I: u8 = 0x75;
 
+/// Whether `register` may be read over SPI at 20 MHz: the interrupt status, the sensor data
+/// registers, and the FIFO count and data registers (PS-MPU-9250A-01 section 3.4: 20 MHz for
+/// reading sensor and interrupt registers, 1 MHz for everything else).
+pub fn spi_fast_readable(register: u8) -> bool {
+    register == INT_STATUS
+        || (ACCEL_XOUT_H..ACCEL_XOUT_H + SENSOR_DATA_LEN as u8).contains(&register)
+        || (FIFO_COUNTH..=FIFO_R_W).contains(&register)
+}
+
+/// CONFIG.DLPF_CFG = 0: gyro 250 Hz bandwidth, 8 kHz internal sample rate (register 26 table).
+pub const DLPF_CFG_8KHZ: u8 = 0;
+
+/// Gyro and temperature DLPF delay by CONFIG.DLPF_CFG (0-7) with FCHOICE_B = 0, ns
+/// (RM-MPU-9250A-00 register 26 table, "Delay (ms)" of the gyroscope).
+pub const GYRO_DLPF_DELAY_NS: [u64; 8] = [
+    970_000, 2_900_000, 3_900_000, 5_900_000, 9_900_000, 17_850_000, 33_480_000, 170_000,
+];
+/// Accelerometer DLPF delay by ACCEL_CONFIG2.A_DLPF_CFG (0-7) with accel_fchoice_b = 0, ns
+/// (RM-MPU-9250A-00 register 29 table, "Delay (ms)").
+pub const ACCEL_DLPF_DELAY_NS: [u64; 8] = [
+    1_880_000, 1_880_000, 2_880_000, 4_880_000, 8_870_000, 16_830_000, 32_480_000, 1_380_000,
+];
+/// Accelerometer delay with its DLPF bypassed (accel_fchoice_b = 1, 1.13 kHz bandwidth), ns
+/// (RM-MPU-9250A-00 register 29 table).
+pub const ACCEL_BYPASS_DELAY_NS: u64 = 750_000;
+
 /// Internal sample rate with the gyro DLPF enabled (DLPF_CFG 1-6), Hz (register 25).
 pub const INTERNAL_RATE_DLPF_HZ: f64 = 1000.0;
 /// Internal sample rate with the gyro DLPF off (DLPF_CFG 0 or 7: 8 kHz; FCHOICE_B != 0:
 /// 32 kHz, which this project never uses and the simulation treats as 8 kHz), Hz.
 pub const INTERNAL_RATE_NO_DLPF_HZ: f64 = 8000.0;
-/// Accelerometer output rate with accel_fchoice_b = 1, Hz (register 29).
+/// Accelerometer output rate with accel_fchoice_b = 1, Hz (register 29). The FIFO is still
+/// written at the sample rate (register 25), so all of these samples reach it only at an
+/// 8 kHz sample rate, each twice.
 pub const ACCEL_BYPASS_RATE_HZ: f64 = 4000.0;

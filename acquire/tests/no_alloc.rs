@@ -67,15 +67,29 @@ fn allocations() -> (u64, u64) {
 
 /// Runs `reads` reads 5 ms apart after a warm-up; returns (allocations, samples) of the
 /// measured part.
+/// The 4 kHz accelerometer mode runs over simulated SPI, the others over simulated I2C.
 fn measure(config: Config, reads: usize) -> (u64, usize) {
     let sim = common::noisy_sim(1, 0);
     let clock = sim.clock().clone();
-    let mut drv = Mpu9250::new(sim, "sim", reg::ADDRESS_AD0_LOW);
-    drv.init(config, &clock).unwrap();
+    if config.mode == OutputMode::Accel4kHz {
+        measure_on(Mpu9250::new_spi(sim, "sim-spi"), &clock, config, reads)
+    } else {
+        let drv = Mpu9250::new(sim, "sim", reg::ADDRESS_AD0_LOW);
+        measure_on(drv, &clock, config, reads)
+    }
+}
+
+fn measure_on<B: embedded_hal::i2c::I2c>(
+    mut drv: Mpu9250<B>,
+    clock: &acquire::clock::SimClock,
+    config: Config,
+    reads: usize,
+) -> (u64, usize) {
+    drv.init(config, clock).unwrap();
     let mut buf = [RawImuSample::default(); 128];
-    let mut read = |drv: &mut Mpu9250<_>| {
+    let mut read = |drv: &mut Mpu9250<B>| {
         clock.advance(5_000_000);
-        drv.read_samples(&clock, &mut buf).unwrap()
+        drv.read_samples(clock, &mut buf).unwrap()
     };
     for _ in 0..100 {
         read(&mut drv);
@@ -133,7 +147,7 @@ fn publishing_loop_reaches_the_system_allocator_zero_times_per_sample() {
     ALLOCATOR.0.arm();
     let sim = common::noisy_sim(2, 0);
     let clock = sim.clock().clone();
-    let driver = Mpu9250::new(sim, "sim", reg::ADDRESS_AD0_LOW);
+    let driver = Mpu9250::new_spi(sim, "sim-spi");
     let mut acq = Acquisition::start(
         driver,
         clock.clone(),

@@ -7,6 +7,7 @@ mod common;
 use acquire::clock::{Clock, SimClock};
 use acquire::registers as reg;
 use acquire::sim::{BusTiming, Fault, SimConfig, SimMpu9250};
+use acquire::spi::SpiRegisters;
 use common::{be16, noisy_sim, produced, read_regs, write_reg};
 use embedded_hal::i2c::{ErrorKind, I2c, NoAcknowledgeSource};
 use ipc_types::units::{TEMP_LSB_PER_DEGC, temp_c_from_counts, temp_counts_from_c};
@@ -20,7 +21,9 @@ use nalgebra::UnitQuaternion;
 const A: u8 = reg::ADDRESS_AD0_LOW;
 
 /// Starts the FIFO with raw register writes: reset, wake, the given rate/filter registers and
-/// FIFO contents, FIFO_MODE as given.
+/// FIFO contents, FIFO_MODE as given. The sample rate (and FIFO rate) is 1 kHz, also with the
+/// accelerometer at 4 kHz (accel_fchoice_b): then every fourth accelerometer sample reaches
+/// the FIFO.
 fn start_fifo<B: I2c>(
     bus: &mut B,
     clock: &SimClock,
@@ -179,7 +182,9 @@ fn fifo_data_match_the_sensor_model_at_1khz_accel_temp_gyro() {
 fn fifo_data_match_the_sensor_model_at_4khz_accel_only() {
     let (sensor, accel_mean_g, _) = static_sensor();
     let clock = SimClock::new_virtual(0);
-    let mut dev = SimMpu9250::new(sensor, clock.clone(), SimConfig::default());
+    let sim = SimMpu9250::new(sensor, clock.clone(), SimConfig::default());
+    // 48 kB/s of FIFO data: over SPI (a 400 kHz I2C bus cannot carry them).
+    let mut dev = SpiRegisters::new(sim);
     start_fifo(
         &mut dev,
         &clock,
@@ -187,10 +192,29 @@ fn fifo_data_match_the_sensor_model_at_4khz_accel_only() {
         reg::FIFO_EN_ACCEL,
         reg::CONFIG_FIFO_MODE,
     );
-    let n = 40_000;
-    let (frames, elapsed) = collect_frames(&mut dev, &clock, 6, n, 5_000_000);
+    // DLPF_CFG = 0: an 8 kHz sample rate, so every 4 kHz accelerometer sample reaches the FIFO,
+    // each twice in a row.
+    write_reg(&mut dev, A, reg::CONFIG, reg::CONFIG_FIFO_MODE);
+    write_reg(
+        &mut dev,
+        A,
+        reg::USER_CTRL,
+        reg::USER_CTRL_FIFO_EN | reg::USER_CTRL_FIFO_RST,
+    );
+    let n = 80_000;
+    let (all, elapsed) = collect_frames(&mut dev, &clock, 6, n, 5_000_000);
     let rate = n as f64 / (elapsed as f64 * 1e-9);
-    assert!((rate - 4000.0).abs() < 4000.0 * 0.01, "rate {rate} Hz");
+    assert!((rate - 8000.0).abs() < 8000.0 * 0.01, "FIFO rate {rate} Hz");
+    let phase = usize::from(all[0] != all[1]);
+    let frames: Vec<Vec<u8>> = all[phase..]
+        .chunks_exact(2)
+        .map(|pair| {
+            assert_eq!(pair[0], pair[1], "every sample is written twice");
+            pair[0].clone()
+        })
+        .collect();
+    assert!(frames.windows(2).filter(|w| w[0] == w[1]).count() < 10);
+    assert_eq!(dev.inner().stats().spi_overspeed, 0);
     let sigma = 300e-6 * 4000f64.sqrt() * 16384.0;
     for (axis, mean_g) in accel_mean_g.iter().enumerate() {
         let a: Vec<f64> = frames
@@ -254,7 +278,7 @@ fn overwrite_mode_keeps_the_newest_bytes_and_misaligns_frames() {
         0,
     );
     let first_index = dev.samples_produced();
-    clock.advance(50_000_000); // 200 samples of 6 bytes: 1200 bytes into 512
+    clock.advance(200_000_000); // 200 samples of 6 bytes: 1200 bytes into 512
     // Stop FIFO writes (samples due so far are written first), keeping the contents.
     write_reg(&mut dev, A, reg::USER_CTRL, 0);
     let last = dev.samples_produced() - 1;
@@ -303,7 +327,7 @@ fn drop_mode_keeps_the_oldest_bytes() {
         reg::CONFIG_FIFO_MODE,
     );
     let first_index = dev.samples_produced();
-    clock.advance(50_000_000);
+    clock.advance(100_000_000); // 100 samples of 6 bytes into 512
     let mut fifo = [0u8; reg::FIFO_SIZE + 3];
     read_regs(&mut dev, A, reg::FIFO_R_W, &mut fifo);
     for (i, frame) in fifo[..510].chunks(6).enumerate() {
@@ -335,12 +359,12 @@ fn fifo_count_low_byte_is_latched_by_the_high_byte() {
         reg::FIFO_EN_ACCEL,
         reg::CONFIG_FIFO_MODE,
     );
-    clock.advance(10_000_000); // 40 samples, 240 bytes
+    clock.advance(40_000_000); // 40 samples, 240 bytes
     let mut c = [0u8; 2];
     read_regs(&mut dev, A, reg::FIFO_COUNTH, &mut c);
     let latched = u16::from_be_bytes(c);
     assert_eq!(usize::from(latched), dev.fifo_len());
-    clock.advance(10_000_000); // 40 more samples
+    clock.advance(40_000_000); // 40 more samples
     read_regs(&mut dev, A, reg::FIFO_COUNTL, &mut c[1..]);
     assert_eq!(
         c[1], latched as u8,
@@ -369,8 +393,18 @@ fn output_rate_follows_the_rate_registers() {
     write_reg(&mut dev, A, reg::SMPLRT_DIV, 4); // / 5
     assert_eq!(rate_over_one_second(&mut dev), 200);
     assert_eq!(dev.output_rate_hz(), Some(200.0));
+    // The accelerometer at 4 kHz: the FIFO and data registers still update at the sample
+    // rate, each time with a new accelerometer sample (every 20th).
     write_reg(&mut dev, A, reg::ACCEL_CONFIG2, reg::ACCEL_FCHOICE_B);
-    assert_eq!(rate_over_one_second(&mut dev), 4000);
+    assert_eq!(rate_over_one_second(&mut dev), 200);
+    assert_eq!(dev.output_rate_hz(), Some(200.0));
+    // At the 8 kHz sample rate every accelerometer sample is written twice: 8000 ticks, 4000
+    // distinct samples.
+    write_reg(&mut dev, A, reg::CONFIG, 0);
+    let ticks = dev.sample_ticks();
+    // (A one-second window catches 8000 or 8001 ticks of the restarted grid.)
+    assert!((4000..=4001).contains(&rate_over_one_second(&mut dev)));
+    assert!((8000..=8001).contains(&(dev.sample_ticks() - ticks)));
     write_reg(&mut dev, A, reg::PWR_MGMT_1, reg::PWR_MGMT_1_SLEEP);
     assert_eq!(rate_over_one_second(&mut dev), 0);
     assert_eq!(dev.output_rate_hz(), None);
@@ -387,6 +421,18 @@ fn output_rate_follows_the_rate_registers() {
     clock.advance(1_000_000_000);
     write_reg(&mut fast, A, reg::SMPLRT_DIV, 0);
     assert_eq!(fast.samples_produced() - before, 4040);
+    // And one 8 % slow, as the internal oscillator may be.
+    let clock = SimClock::new_virtual(0);
+    let config = SimConfig {
+        rate_error_ppm: -80_000.0,
+        ..SimConfig::default()
+    };
+    let mut slow = SimMpu9250::new(common::NoisySource::new(1), clock.clone(), config);
+    write_reg(&mut slow, A, reg::CONFIG, 1);
+    let before = slow.samples_produced();
+    clock.advance(1_000_000_000);
+    write_reg(&mut slow, A, reg::SMPLRT_DIV, 0);
+    assert_eq!(slow.samples_produced() - before, 920);
 }
 
 #[test]

@@ -1,5 +1,6 @@
 //! Real processes over real iceoryx2 services: `mems-acquire` on the simulated sensor at
-//! 4 kHz with `mems-topic hz` subscribed. Every sequence number must arrive exactly once and
+//! 4 kHz (over simulated SPI: a 400 kHz I2C bus cannot carry it) with `mems-topic hz`
+//! subscribed. Every sequence number must arrive exactly once and
 //! the sample times must be monotonic at the configured period.
 
 use integration_tests::{Proc, unique_namespace};
@@ -24,7 +25,16 @@ fn acquire_at_4khz_loses_nothing() {
     std::thread::sleep(Duration::from_millis(500));
     let acquire = Proc::spawn(
         "mems-acquire",
-        &["--namespace", &ns, "--rate", "4000", "--duration", "4"],
+        &[
+            "--namespace",
+            &ns,
+            "--source",
+            "sim-spi",
+            "--rate",
+            "4000",
+            "--duration",
+            "4",
+        ],
     );
     let (status, _) = acquire.wait(Duration::from_secs(20));
     assert!(status.success(), "mems-acquire failed: {status}");

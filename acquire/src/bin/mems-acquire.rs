@@ -1,4 +1,4 @@
-//! `mems-acquire`: reads an MPU-9250 (simulated by default, or real over Linux I2C) and
+//! `mems-acquire`: reads an MPU-9250 (simulated by default, or real over Linux I2C or SPI) and
 //! publishes every sample on `mems/imu/raw`, losslessly.
 
 use std::time::{Duration, Instant};
@@ -8,14 +8,15 @@ use acquire::clock::{Clock, MonotonicClock, SimClock};
 use acquire::driver::Mpu9250;
 use acquire::pool::BlockPool;
 use acquire::sim::{SimConfig, SimMpu9250};
+use acquire::spi::SpiRegisters;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 use embedded_hal::i2c::I2c;
 use ipc_types::{RawImuSample, service};
-use mems_sim::SimSensor;
 use mems_sim::model::Preset;
 use mems_sim::scenario::{Drive, DriveParams, PoseSession};
 use mems_sim::vibration::VibrationModel;
+use mems_sim::{SampleSource, SimSensor};
 use nalgebra::UnitQuaternion;
 
 /// Small blocks come from a bounded lock-free pool once the loop starts: iceoryx2 0.10
@@ -30,18 +31,19 @@ static ALLOCATOR: BlockPool<1024> = BlockPool::new();
 #[derive(Parser)]
 #[command(version, about)]
 struct Cli {
-    /// `sim` (the simulated MPU-9250, paced in real time) or `i2c:/dev/i2c-N[@0x68]`.
+    /// `sim` (the simulated MPU-9250 on a simulated 400 kHz I2C bus, paced in real time),
+    /// `sim-spi` (the same on simulated SPI), `i2c:/dev/i2c-N[@0x68]` or `spi:/dev/spidevB.C`.
     #[arg(long, default_value = "sim")]
     source: SourceSpec,
-    /// Output rate, Hz: 4000 (accelerometer only, DLPF bypassed) or 1000/n (accel + gyro +
-    /// temperature).
+    /// Output rate, Hz: 4000 (accelerometer only, DLPF bypassed; SPI only: its FIFO data need
+    /// 108 % of a 400 kHz I2C bus) or 1000/n (accel + gyro + temperature).
     #[arg(long, default_value_t = 1000)]
     rate: u32,
     /// Stop after this many seconds (default: until SIGINT/SIGTERM).
     #[arg(long)]
     duration: Option<f64>,
-    /// Time between FIFO reads, ms (the 512-byte FIFO holds 21 ms at 4 kHz). Default: an
-    /// eighth of the FIFO's fill time (2.7 ms at 4 kHz, 4.6 ms at 1 kHz).
+    /// Time between FIFO reads, ms (the 512-byte FIFO holds 10.6 ms at 4 kHz, 36 ms at
+    /// 1 kHz). Default: an eighth of the FIFO's fill time (1.33 ms at 4 kHz, 4.5 ms at 1 kHz).
     #[arg(long)]
     read_interval_ms: Option<f64>,
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
@@ -65,6 +67,10 @@ struct Cli {
     /// Seed of the simulated sensor and scenario (sim source only).
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Error of the simulated part's sample clock, ppm (positive: fast). The internal
+    /// oscillator may be off by up to +-10 % (100000 ppm) over temperature (sim sources only).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    sim_clock_ppm: f64,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -85,14 +91,11 @@ fn main() -> Result<()> {
         None => default_read_interval_ns(&config),
     };
     match cli.source.clone() {
-        SourceSpec::Sim => {
-            let clock = SimClock::real_time();
+        SourceSpec::Sim | SourceSpec::SimSpi => {
             let model = cli.preset.model();
             let g = mems_sim::model::G_MPS2;
             // Long enough for any run; the drive plans its motions from the seed.
             let horizon_s = 24.0 * 3600.0;
-            let device_config = SimConfig::default();
-            let address = device_config.address;
             match cli.scenario {
                 Scenario::Drive => {
                     let mut params = DriveParams::new(horizon_s);
@@ -100,17 +103,13 @@ fn main() -> Result<()> {
                     let drive = Drive::new(&params, cli.seed)?;
                     let sensor =
                         SimSensor::new(drive, &model, &VibrationModel::moderate(1.0), cli.seed)?;
-                    let device = SimMpu9250::new(sensor, clock.clone(), device_config);
-                    let driver = Mpu9250::new(device, "sim", address);
-                    run(&cli, driver, clock, config, read_interval_ns)
+                    run_sim(&cli, sensor, config, read_interval_ns)
                 }
                 Scenario::Static => {
                     let pose = PoseSession::static_pose(UnitQuaternion::identity(), horizon_s, g)?;
                     let sensor =
                         SimSensor::new(pose, &model, &VibrationModel::moderate(0.0), cli.seed)?;
-                    let device = SimMpu9250::new(sensor, clock.clone(), device_config);
-                    let driver = Mpu9250::new(device, "sim", address);
-                    run(&cli, driver, clock, config, read_interval_ns)
+                    run_sim(&cli, sensor, config, read_interval_ns)
                 }
             }
         }
@@ -120,6 +119,44 @@ fn main() -> Result<()> {
             let driver = Mpu9250::new(bus, device.as_str(), address);
             run(&cli, driver, MonotonicClock, config, read_interval_ns)
         }
+        SourceSpec::Spi { device } => {
+            let mut spi = linux_embedded_hal::SpidevDevice::open(&device)
+                .with_context(|| format!("cannot open SPI device {device}"))?;
+            // Mode 3 (clock idle high, data latched on the rising edge; PS-MPU-9250A-01
+            // section 7.5), 8-bit words.
+            let options = linux_embedded_hal::spidev::SpidevOptions::new()
+                .bits_per_word(8)
+                .mode(linux_embedded_hal::spidev::SpiModeFlags::SPI_MODE_3)
+                .max_speed_hz(acquire::spi::REGISTER_CLOCK_HZ)
+                .build();
+            spi.configure(&options)
+                .with_context(|| format!("cannot configure SPI device {device}"))?;
+            let driver = Mpu9250::new_spi(spi, device.as_str());
+            run(&cli, driver, MonotonicClock, config, read_interval_ns)
+        }
+    }
+}
+
+/// Runs the simulated part on `sensor`, on the simulated I2C bus or SPI as the source says.
+fn run_sim<S: SampleSource>(
+    cli: &Cli,
+    sensor: S,
+    config: acquire::driver::Config,
+    read_interval_ns: u64,
+) -> Result<()> {
+    let clock = SimClock::real_time();
+    let device_config = SimConfig {
+        rate_error_ppm: cli.sim_clock_ppm,
+        ..SimConfig::default()
+    };
+    let address = device_config.address;
+    let device = SimMpu9250::new(sensor, clock.clone(), device_config);
+    if cli.source == SourceSpec::SimSpi {
+        let driver: Mpu9250<SpiRegisters<_>> = Mpu9250::new_spi(device, "sim-spi");
+        run(cli, driver, clock, config, read_interval_ns)
+    } else {
+        let driver = Mpu9250::new(device, "sim", address);
+        run(cli, driver, clock, config, read_interval_ns)
     }
 }
 
@@ -175,8 +212,9 @@ fn run<I2C: I2c, C: Clock>(
     let mut acq = Acquisition::start(driver, clock, config, read_interval_ns)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     eprintln!(
-        "mems-acquire: {} at {} Hz on {name}, reading every {:.2} ms",
+        "mems-acquire: {} ({}) at {} Hz on {name}, reading every {:.2} ms",
         acq.driver().bus_label(),
+        acq.driver().part().unwrap_or("?"),
         config.output_rate_hz(),
         read_interval_ns as f64 * 1e-6
     );
@@ -224,6 +262,18 @@ fn run<I2C: I2c, C: Clock>(
         stats.max_late_ns as f64 * 1e-3,
         driver.max_fifo_bytes
     );
+    if let Some((ahead, behind)) = stats.sample_time_excursion_ns {
+        eprintln!(
+            "mems-acquire: newest sample's FIFO time at most {:.3} ms after its acquisition and \
+             {:.3} ms before its read's start minus a period (<= 0: on the clock); duplicates \
+             dropped {}, settling frames dropped {}, pair mismatches {}",
+            ahead as f64 * 1e-6,
+            behind as f64 * 1e-6,
+            driver.duplicates,
+            driver.settling_discarded,
+            driver.pair_mismatches
+        );
+    }
     eprintln!(
         "mems-acquire: published {} samples in {:.1} s; reads {}, failed {}, overflows {}, \
          gaps {}, lost {}, bus errors {}, re-inits {}; discarded for stalled subscribers {}; \

@@ -1,9 +1,13 @@
 //! A small MPU-9250 driver over `embedded_hal::i2c::I2c`, written against the register map
 //! RM-MPU-9250A-00 rev 1.6 (see [`crate::registers`]).
 //!
-//! Acquisition goes through the FIFO only, with burst reads only: INT_STATUS (one byte, for
-//! FIFO_OFLOW_INT), FIFO_COUNTH/L (one two-byte transaction), then whole frames from FIFO_R_W in
-//! one transaction. No sample is ever assembled from two transactions, so no sample can be torn.
+//! Acquisition goes through the FIFO only, with burst reads only: FIFO_COUNTH/L (one two-byte
+//! transaction), whole frames from FIFO_R_W in one transaction, then INT_STATUS (one byte, for
+//! FIFO_OFLOW_INT). No sample is ever assembled from two transactions, so no sample can be
+//! torn. Reading INT_STATUS last attributes every overflow to the poll it happened in: one
+//! before the count shows as a full FIFO (512 bytes), one after it as the flag, and then the
+//! partial frame the overflow left behind the frames just read is dropped with the rest of the
+//! FIFO instead of misaligning the next read.
 //!
 //! The FIFO runs with CONFIG.FIFO_MODE = 1 (a full FIFO drops new data): after an overflow the
 //! oldest frames in the FIFO are still aligned and contiguous with what was read before, so
@@ -17,12 +21,31 @@
 //! re-initialise the device (probe, reset, configure) from [`Mpu9250::read_samples`]; if that
 //! fails too, the call returns the error and the next call tries again.
 //!
-//! Sample times come from the `timing` submodule: reconstructed from the configured output rate and the
-//! FIFO counts, anchored to the caller's clock (`CLOCK_MONOTONIC` in production, a virtual clock
-//! in tests). The steady-state read loop allocates nothing: frames are read into a buffer
-//! inside the driver and decoded into the caller's slice.
+//! Sample times come from the `timing` submodule: reconstructed from the FIFO counts with a
+//! continuously measured sample period, anchored to the caller's clock (`CLOCK_MONOTONIC` in
+//! production, a virtual clock in tests), then moved back by the configured low-pass filter's
+//! delay, so that a sample's time is when the motion it shows happened. The steady-state read
+//! loop allocates nothing: frames are read into a buffer inside the driver and decoded into
+//! the caller's slice.
+//!
+//! Start-up follows the Linux driver (drivers/iio/imu/inv_mpu6050/): WHO_AM_I accepts the
+//! MPU-6500, MPU-9250 and MPU-9255; after H_RESET the driver waits the start-up time; after
+//! configuring the gyros it lets them settle ([`reg::GYRO_SETTLE_NS`], inv_mpu_core.c
+//! `inv_mpu6050_set_power_itg` / `inv_mpu6050_switch_engine` sleep for the start-up time) and
+//! drops the first FIFO sample with gyro data (inv_mpu_ring.c `inv_mpu6050_read_fifo` skips
+//! `st->skip_samples`); the FIFO is reset with its channels disabled first (inv_mpu_ring.c
+//! `inv_reset_fifo`: FIFO_EN = 0, USER_CTRL without FIFO_EN, FIFO_RST, FIFO_EN, channels).
+//!
+//! The driver speaks embedded-hal's `I2c`; over SPI it runs on [`crate::spi::SpiRegisters`],
+//! which maps the same register transactions to SPI frames. It knows what its bus can carry
+//! ([`BusKind`]) and refuses a configuration whose FIFO data the bus cannot move.
 
+mod bus;
+mod duplicates;
 mod timing;
+
+pub use bus::{BusKind, MAX_DATA_SHARE};
+use duplicates::Pairing;
 
 use embedded_hal::i2c::{Error as _, ErrorKind, I2c, NoAcknowledgeSource};
 use ipc_types::RawImuSample;
@@ -58,7 +81,9 @@ pub enum Dlpf {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum OutputMode {
     /// Accelerometer only, 4 kHz, its DLPF bypassed (ACCEL_CONFIG2.accel_fchoice_b = 1,
-    /// 1.13 kHz bandwidth); 6-byte FIFO frames; gyros in standby.
+    /// 1.13 kHz bandwidth); gyros in standby. The FIFO is written at the 8 kHz sample rate
+    /// (CONFIG.DLPF_CFG = 0, as ArduPilot's fast sampling), 6-byte frames, each accelerometer
+    /// sample twice; the driver delivers each once. 48 kB/s: SPI only (see [`BusKind`]).
     Accel4kHz,
     /// Accelerometer, temperature and gyro through the DLPF at 1 kHz / (1 + `divider`);
     /// 14-byte FIFO frames.
@@ -97,12 +122,58 @@ impl Default for Config {
 }
 
 impl Config {
-    /// Output (FIFO) rate, Hz.
+    /// Output rate (distinct samples delivered), Hz.
     pub fn output_rate_hz(&self) -> f64 {
         match self.mode {
             OutputMode::Accel4kHz => reg::ACCEL_BYPASS_RATE_HZ,
             OutputMode::Imu { divider, .. } => {
                 reg::INTERNAL_RATE_DLPF_HZ / (1.0 + f64::from(divider))
+            }
+        }
+    }
+
+    /// The sample rate (FIFO frames written per second), Hz.
+    pub fn fifo_rate_hz(&self) -> f64 {
+        match self.mode {
+            OutputMode::Accel4kHz => reg::INTERNAL_RATE_NO_DLPF_HZ,
+            OutputMode::Imu { .. } => self.output_rate_hz(),
+        }
+    }
+
+    /// FIFO frames per delivered sample (2 in the 4 kHz accelerometer mode, else 1).
+    pub fn frames_per_sample(&self) -> usize {
+        match self.mode {
+            OutputMode::Accel4kHz => 2,
+            OutputMode::Imu { .. } => 1,
+        }
+    }
+
+    /// The low-pass filter's delay, ns, by which sample times are moved back: the gyro's
+    /// (CONFIG.DLPF_CFG table) with the gyro on, else the accelerometer's. With the gyro on,
+    /// the accelerometer's own delay is 1.0 ms shorter at every DLPF setting (register 26 and
+    /// 29 tables), so its samples are stamped 1.0 ms early.
+    pub fn filter_delay_ns(&self) -> u64 {
+        match self.mode {
+            OutputMode::Accel4kHz => reg::ACCEL_BYPASS_DELAY_NS,
+            OutputMode::Imu { dlpf, .. } => reg::GYRO_DLPF_DELAY_NS[dlpf as usize],
+        }
+    }
+
+    /// Whether the gyros run (and their data are in the FIFO).
+    pub fn gyros_on(&self) -> bool {
+        matches!(self.mode, OutputMode::Imu { .. })
+    }
+
+    /// The FIFO_EN (register 35) channels.
+    pub fn fifo_channels(&self) -> u8 {
+        match self.mode {
+            OutputMode::Accel4kHz => reg::FIFO_EN_ACCEL,
+            OutputMode::Imu { .. } => {
+                reg::FIFO_EN_ACCEL
+                    | reg::FIFO_EN_TEMP
+                    | reg::FIFO_EN_GYRO_X
+                    | reg::FIFO_EN_GYRO_Y
+                    | reg::FIFO_EN_GYRO_Z
             }
         }
     }
@@ -116,27 +187,16 @@ impl Config {
     }
 
     /// The configuration registers and their values, in the order they are written: power,
-    /// filters and rate, ranges, FIFO contents, then USER_CTRL (FIFO enabled and reset).
-    pub fn register_values(&self) -> [(u8, u8); 9] {
-        let (pwr2, dlpf_cfg, div, accel_cfg2, fifo_en) = match self.mode {
+    /// filters and rate, ranges. The FIFO is started after them (see [`Mpu9250::init`]).
+    pub fn register_values(&self) -> [(u8, u8); 7] {
+        let (pwr2, dlpf_cfg, div, accel_cfg2) = match self.mode {
             OutputMode::Accel4kHz => (
                 reg::PWR_MGMT_2_DISABLE_GYRO,
-                Dlpf::Hz184 as u8,
+                reg::DLPF_CFG_8KHZ,
                 0,
                 reg::ACCEL_FCHOICE_B,
-                reg::FIFO_EN_ACCEL,
             ),
-            OutputMode::Imu { dlpf, divider } => (
-                0,
-                dlpf as u8,
-                divider,
-                dlpf as u8,
-                reg::FIFO_EN_ACCEL
-                    | reg::FIFO_EN_TEMP
-                    | reg::FIFO_EN_GYRO_X
-                    | reg::FIFO_EN_GYRO_Y
-                    | reg::FIFO_EN_GYRO_Z,
-            ),
+            OutputMode::Imu { dlpf, divider } => (0, dlpf as u8, divider, dlpf as u8),
         };
         [
             (reg::PWR_MGMT_1, reg::CLKSEL_AUTO),
@@ -152,11 +212,6 @@ impl Config {
                 (self.accel_range as u8) << reg::ACCEL_FS_SEL_SHIFT,
             ),
             (reg::ACCEL_CONFIG2, accel_cfg2),
-            (reg::FIFO_EN, fifo_en),
-            (
-                reg::USER_CTRL,
-                reg::USER_CTRL_FIFO_EN | reg::USER_CTRL_FIFO_RST,
-            ),
         ]
     }
 }
@@ -178,11 +233,10 @@ pub enum Error<E: embedded_hal::i2c::Error> {
         /// The error of the last attempt.
         error: E,
     },
-    /// A device answers but is not an MPU-9250.
+    /// A device answers but is not an MPU-9250 or a part with its register map.
     #[error(
         "the device at address {address:#04x} on {bus} is not an MPU-9250: WHO_AM_I (0x75) \
-         reads {found:#04x}, expected {:#04x}",
-        reg::WHO_AM_I_VALUE
+         reads {found:#04x}, expected 0x71 (MPU-9250), 0x73 (MPU-9255) or 0x70 (MPU-6500)"
     )]
     WrongDevice {
         /// Bus label.
@@ -220,6 +274,14 @@ pub enum Error<E: embedded_hal::i2c::Error> {
         wrote: u8,
         /// Value read back.
         read: u8,
+    },
+    /// The bus cannot carry the configuration's FIFO data.
+    #[error("{bus}: {message}")]
+    Infeasible {
+        /// Bus label.
+        bus: String,
+        /// What the configuration needs and the bus has.
+        message: String,
     },
     /// [`Mpu9250::read_samples`] was called before [`Mpu9250::init`].
     #[error("the MPU-9250 at address {address:#04x} on {bus} was never initialised")]
@@ -260,6 +322,13 @@ pub struct DriverStats {
     /// The largest FIFO_COUNT read, bytes (512 is a full FIFO): how close the reads came to an
     /// overflow.
     pub max_fifo_bytes: u64,
+    /// Repeated frames recognised and not delivered (4 kHz accelerometer mode).
+    pub duplicates: u64,
+    /// Frames that should have repeated the one before and did not (corrupt or misaligned;
+    /// the FIFO is reset and the gap flagged).
+    pub pair_mismatches: u64,
+    /// Frames dropped after a FIFO start because the gyros were still settling.
+    pub settling_discarded: u64,
 }
 
 /// Attempts per register transaction (the first plus retries).
@@ -274,11 +343,16 @@ const STALL_PERIODS: f64 = 50.0;
 /// Lower bound of the stall timeout, ns.
 const STALL_MIN_NS: f64 = 50e6;
 
-/// An MPU-9250 on an I2C bus.
+/// An MPU-9250 on an I2C bus (or on SPI through [`crate::spi::SpiRegisters`]).
 pub struct Mpu9250<I2C: I2c> {
     i2c: I2C,
     bus: String,
+    bus_kind: BusKind,
     address: u8,
+    part: Option<&'static str>,
+    pairing: Pairing,
+    /// FIFO frames still to drop after a FIFO start (gyro settling).
+    skip_frames: usize,
     config: Option<Config>,
     needs_init: bool,
     buf: [u8; reg::FIFO_SIZE],
@@ -301,7 +375,11 @@ impl<I2C: I2c> Mpu9250<I2C> {
         Self {
             i2c,
             bus: bus.into(),
+            bus_kind: BusKind::I2C_FAST_MODE,
             address,
+            part: None,
+            pairing: Pairing::default(),
+            skip_frames: 0,
             config: None,
             needs_init: true,
             buf: [0; reg::FIFO_SIZE],
@@ -314,6 +392,23 @@ impl<I2C: I2c> Mpu9250<I2C> {
             last_data_ns: None,
             stats: DriverStats::default(),
         }
+    }
+
+    /// Declares the bus the driver talks over (default: I2C at 400 kHz); [`Mpu9250::init`]
+    /// refuses configurations it cannot carry, and on SPI the I2C interface is disabled.
+    pub fn with_bus_kind(mut self, kind: BusKind) -> Self {
+        self.bus_kind = kind;
+        self
+    }
+
+    /// The bus the driver talks over.
+    pub fn bus_kind(&self) -> BusKind {
+        self.bus_kind
+    }
+
+    /// The part WHO_AM_I identified ("MPU-9250", "MPU-9255" or "MPU-6500"), once probed.
+    pub fn part(&self) -> Option<&'static str> {
+        self.part
     }
 
     /// The bus label given to [`Mpu9250::new`].
@@ -351,7 +446,8 @@ impl<I2C: I2c> Mpu9250<I2C> {
         self.i2c
     }
 
-    /// Checks that an MPU-9250 answers: reads WHO_AM_I and expects 0x71.
+    /// Checks that an MPU-9250 answers: reads WHO_AM_I and accepts the parts of
+    /// [`reg::WHO_AM_I_PARTS`].
     pub fn probe(&mut self) -> Result<(), Error<I2C::Error>> {
         let mut who = [0u8; 1];
         let address = self.address;
@@ -368,12 +464,17 @@ impl<I2C: I2c> Mpu9250<I2C> {
                 error,
             }),
             Err(error) => Err(self.bus_error("reading WHO_AM_I", error)),
-            Ok(()) if who[0] != reg::WHO_AM_I_VALUE => Err(Error::WrongDevice {
-                bus: self.bus.clone(),
-                address,
-                found: who[0],
-            }),
-            Ok(()) => Ok(()),
+            Ok(()) => match reg::WHO_AM_I_PARTS.iter().find(|(id, _)| *id == who[0]) {
+                Some((_, part)) => {
+                    self.part = Some(part);
+                    Ok(())
+                }
+                None => Err(Error::WrongDevice {
+                    bus: self.bus.clone(),
+                    address,
+                    found: who[0],
+                }),
+            },
         }
     }
 
@@ -388,6 +489,12 @@ impl<I2C: I2c> Mpu9250<I2C> {
     /// Probes, resets and configures the device, then starts the FIFO. Sample times start
     /// afresh (the first sample after this is not flagged; later re-initialisations flag a gap).
     pub fn init(&mut self, config: Config, clock: &impl Clock) -> Result<(), Error<I2C::Error>> {
+        self.bus_kind
+            .check(&config)
+            .map_err(|message| Error::Infeasible {
+                bus: self.bus.clone(),
+                message,
+            })?;
         self.probe()?;
         self.reset(clock)?;
         self.probe()?;
@@ -397,19 +504,22 @@ impl<I2C: I2c> Mpu9250<I2C> {
         Ok(())
     }
 
-    /// Writes and verifies the configuration registers (the FIFO is reset and enabled last).
+    /// Writes and verifies the configuration registers, lets the gyros settle, then starts
+    /// the FIFO (its first gyro sample is dropped).
     fn configure(&mut self, config: Config, clock: &impl Clock) -> Result<(), Error<I2C::Error>> {
         let values = config.register_values();
         for (register, value) in values {
             self.write_register(register, value, "configuring")?;
         }
-        for (register, wrote) in values {
-            // FIFO_RST clears itself.
-            let expected = if register == reg::USER_CTRL {
-                wrote & !reg::USER_CTRL_FIFO_RST
-            } else {
-                wrote
-            };
+        if config.gyros_on() {
+            clock.sleep_ns(reg::GYRO_SETTLE_NS);
+        }
+        self.start_fifo(config)?;
+        let fifo = [
+            (reg::FIFO_EN, config.fifo_channels()),
+            (reg::USER_CTRL, self.user_ctrl() | reg::USER_CTRL_FIFO_EN),
+        ];
+        for (register, expected) in values.into_iter().chain(fifo) {
             let mut read = [0u8; 1];
             self.read_registers(register, &mut read, "verifying the configuration")?;
             if read[0] != expected {
@@ -422,10 +532,41 @@ impl<I2C: I2c> Mpu9250<I2C> {
                 });
             }
         }
-        self.timer.set_period(1e9 / config.output_rate_hz());
+        self.timer.set_period(1e9 / config.fifo_rate_hz());
         self.temp_counts = None;
         self.next_temp_ns = clock.now_ns();
         self.last_data_ns = Some(clock.now_ns());
+        Ok(())
+    }
+
+    /// USER_CTRL's bits besides the FIFO's: I2C_IF_DIS on SPI.
+    fn user_ctrl(&self) -> u8 {
+        if self.bus_kind.is_spi() {
+            reg::USER_CTRL_I2C_IF_DIS
+        } else {
+            0
+        }
+    }
+
+    /// Empties and (re)starts the FIFO in the Linux driver's order (inv_mpu_ring.c
+    /// `inv_reset_fifo`): channels off (FIFO_EN = 0), FIFO off, FIFO_RST, FIFO on, channels on.
+    /// The register map does not say what a reset does to a frame being written; with the
+    /// channels off none is. The first frame after a start with the gyros on is dropped
+    /// (settling).
+    fn start_fifo(&mut self, config: Config) -> Result<(), Error<I2C::Error>> {
+        let base = self.user_ctrl();
+        let steps = [
+            (reg::FIFO_EN, 0),
+            (reg::USER_CTRL, base),
+            (reg::USER_CTRL, base | reg::USER_CTRL_FIFO_RST),
+            (reg::USER_CTRL, base | reg::USER_CTRL_FIFO_EN),
+            (reg::FIFO_EN, config.fifo_channels()),
+        ];
+        for (register, value) in steps {
+            self.write_register(register, value, "resetting the FIFO")?;
+        }
+        self.pairing.reset();
+        self.skip_frames = if config.gyros_on() { 1 } else { 0 };
         Ok(())
     }
 
@@ -493,19 +634,20 @@ impl<I2C: I2c> Mpu9250<I2C> {
             self.temp_counts = Some(self.read_temp_counts()?);
             self.next_temp_ns = clock.now_ns() + config.temp_interval_ns;
         }
-        let mut status = [0u8; 1];
-        self.read_registers(reg::INT_STATUS, &mut status, "reading INT_STATUS")?;
-        let overflow = status[0] & reg::INT_STATUS_FIFO_OFLOW != 0;
         let mut count_bytes = [0u8; 2];
         let t_before = clock.now_ns();
         self.read_registers(reg::FIFO_COUNTH, &mut count_bytes, "reading FIFO_COUNT")?;
         let t_after = clock.now_ns();
         let count = usize::from(u16::from_be_bytes(count_bytes) & 0x1FFF).min(reg::FIFO_SIZE);
+        // A full FIFO has overflowed (neither frame size divides 512, so a full FIFO ends in
+        // part of a frame): with FIFO_MODE = 1 its oldest whole frames are intact and are
+        // delivered, then it is reset.
+        let full = count == reg::FIFO_SIZE;
         self.stats.max_fifo_bytes = self.stats.max_fifo_bytes.max(count as u64);
         let available = count / frame;
         let short = count % frame != 0;
 
-        if available == 0 && !overflow && !short {
+        if available == 0 && !full && !short {
             let period = self.timer.period_ns();
             let stalled = self.last_data_ns.is_some_and(|last| {
                 (t_after.saturating_sub(last)) as f64 > (STALL_PERIODS * period).max(STALL_MIN_NS)
@@ -515,9 +657,9 @@ impl<I2C: I2c> Mpu9250<I2C> {
         self.last_data_ns = Some(t_after);
 
         // A count that is not whole frames means bytes were lost: the frames may be misaligned,
-        // so nothing in the FIFO is trusted (unless the FIFO overflowed, where with FIFO_MODE = 1
+        // so nothing in the FIFO is trusted (unless the FIFO is full, where with FIFO_MODE = 1
         // only the tail is incomplete).
-        let take = if short && !overflow {
+        let take = if short && !full {
             0
         } else {
             available.min(out.len())
@@ -538,63 +680,123 @@ impl<I2C: I2c> Mpu9250<I2C> {
                 }
                 Err(_) => {
                     self.stats.short_reads += 1;
-                    self.reset_fifo(available as u64)?;
+                    let lost = available / config.frames_per_sample();
+                    self.reset_fifo(config, lost as u64)?;
                     return Ok(Some(0));
                 }
                 Ok(()) => {}
             }
             // The newest sample was produced within one period before the count was latched.
-            let reliable = !overflow && t_after - t_before <= COUNT_READ_MAX_NS;
+            let reliable = !full && t_after - t_before <= COUNT_READ_MAX_NS;
             let newest_obs = t_before as f64 - self.timer.period_ns() / 2.0;
             let a = self.timer.assign(take, available, newest_obs, reliable);
-            for (i, sample) in out[..take].iter_mut().enumerate() {
-                let t = a.first_ns + i as f64 * a.step_ns;
-                *sample = decode(
-                    &config,
-                    &self.buf[i * frame..(i + 1) * frame],
-                    t,
-                    self.temp_counts,
-                );
+            let fps = config.frames_per_sample() as u64;
+            let (n, skipped, mismatch) = self.decode_frames(&config, take, &a, out);
+            for sample in &mut out[..n] {
                 sample.seq = self.seq;
                 self.seq += 1;
             }
             // The gap's size: what the times say, at least what the driver discarded, and at
             // least one sample whenever a gap is known to have happened.
-            let mut lost = a.lost.max(self.pending_discarded);
+            // Settling frames dropped after a FIFO reset are part of the gap.
+            let gap = self.pending_flags & raw_flags::GAP_BEFORE != 0;
+            let dropped = if gap { skipped as u64 } else { 0 };
+            let mut lost = ((a.lost + dropped) as f64 / fps as f64).round() as u64;
+            lost = lost.max(self.pending_discarded);
             if self.pending_flags & raw_flags::GAP_BEFORE != 0 {
                 lost = lost.max(1);
             }
-            if lost > 0 {
-                out[0].flags |= self.pending_flags | raw_flags::GAP_BEFORE;
-                out[0].lost_before = u32::try_from(lost).unwrap_or(u32::MAX);
-                self.stats.gaps += 1;
-                self.stats.lost_samples += lost;
+            if n > 0 {
+                if lost > 0 {
+                    out[0].flags |= self.pending_flags | raw_flags::GAP_BEFORE;
+                    out[0].lost_before = u32::try_from(lost).unwrap_or(u32::MAX);
+                    self.stats.gaps += 1;
+                    self.stats.lost_samples += lost;
+                }
+                self.pending_flags = 0;
+                self.pending_discarded = 0;
+            } else {
+                // Nothing delivered (a settling or repeated frame only): the gap is carried
+                // to the next sample.
+                self.pending_discarded = lost;
             }
-            self.pending_flags = 0;
-            self.pending_discarded = 0;
-            delivered = take;
-            self.stats.samples += take as u64;
+            delivered = n;
+            self.stats.samples += n as u64;
+            if let Some(bad) = mismatch {
+                // The frames from the mismatch on cannot be trusted: drop them and what is
+                // left in the FIFO.
+                self.stats.pair_mismatches += 1;
+                let dropped = (available - bad) as u64 / fps;
+                self.reset_fifo(config, dropped)?;
+                return Ok(Some(delivered));
+            }
         }
+        // INT_STATUS after the data: FIFO_OFLOW_INT covers the time since the last poll read it.
+        // An overflow before this poll's count left the FIFO full (nothing was read since);
+        // one after it, while this poll ran, left a partial frame behind the frames just read,
+        // which would misalign every later frame: the rest of the FIFO is dropped.
+        let mut status = [0u8; 1];
+        self.read_registers(reg::INT_STATUS, &mut status, "reading INT_STATUS")?;
+        let overflow = full || status[0] & reg::INT_STATUS_FIFO_OFLOW != 0;
+        let fps = config.frames_per_sample();
         if overflow {
             self.stats.overflows += 1;
             self.pending_flags |= raw_flags::FIFO_OVERFLOW | raw_flags::GAP_BEFORE;
-            self.reset_fifo(0)?;
+            self.reset_fifo(config, 0)?;
         } else if short {
             self.stats.short_reads += 1;
-            self.reset_fifo(available as u64)?;
+            self.reset_fifo(config, (available / fps) as u64)?;
         }
         Ok(Some(delivered))
+    }
+
+    /// Decodes the first `take` frames of the read buffer into `out`, timed by `a` and moved
+    /// back by the filter delay: drops the frames still settling, and in the 4 kHz mode the
+    /// repeated ones. Returns the samples written, the settling frames dropped and, if a
+    /// repeated frame did not match, its index.
+    fn decode_frames(
+        &mut self,
+        config: &Config,
+        take: usize,
+        a: &timing::Assignment,
+        out: &mut [RawImuSample],
+    ) -> (usize, usize, Option<usize>) {
+        let frame = config.frame_len();
+        let skip = self.skip_frames.min(take);
+        self.skip_frames -= skip;
+        self.stats.settling_discarded += skip as u64;
+        let delay = config.filter_delay_ns() as f64;
+        let temp = self.temp_counts;
+        let buf = &self.buf[..take * frame];
+        let mut n = 0;
+        // Frame `i`, stamped `back` frames earlier (a lone second copy: its first copy was
+        // written one frame before).
+        let mut emit = |i: usize, back: usize| {
+            let t = a.first_ns + (i as f64 - back as f64) * a.step_ns - delay;
+            out[n] = decode(config, &buf[i * frame..(i + 1) * frame], t, temp);
+            n += 1;
+        };
+        let mismatch = if config.frames_per_sample() == 2 {
+            let mut kept = 0u64;
+            let bad = self.pairing.select(&buf[skip * frame..], |i, lone| {
+                kept += 1;
+                emit(skip + i, usize::from(lone));
+            });
+            let looked_at = bad.unwrap_or(take - skip) as u64;
+            self.stats.duplicates += looked_at - kept;
+            bad.map(|i| skip + i)
+        } else {
+            (skip..take).for_each(|i| emit(i, 0));
+            None
+        };
+        (n, skip, mismatch)
     }
 
     /// Empties the FIFO (keeping it enabled) and clears a stale overflow flag (a full FIFO keeps
     /// raising it until the reset); `discarded` samples are known lost with it. The next sample
     /// is flagged as following a gap and re-anchors the sample times.
-    fn reset_fifo(&mut self, discarded: u64) -> Result<(), Error<I2C::Error>> {
-        self.write_register(
-            reg::USER_CTRL,
-            reg::USER_CTRL_FIFO_EN | reg::USER_CTRL_FIFO_RST,
-            "resetting the FIFO",
-        )?;
+    fn reset_fifo(&mut self, config: Config, discarded: u64) -> Result<(), Error<I2C::Error>> {
+        self.start_fifo(config)?;
         let mut status = [0u8; 1];
         self.read_registers(reg::INT_STATUS, &mut status, "clearing INT_STATUS")?;
         self.stats.fifo_resets += 1;

@@ -10,14 +10,25 @@
 //!   each byte pops the FIFO (an empty FIFO repeats the last byte popped). Writes to read-only
 //!   registers (data, INT_STATUS, FIFO_COUNT, WHO_AM_I) and to FIFO_R_W are ignored.
 //! - PWR_MGMT_1: H_RESET restores every register's reset value, empties the FIFO and makes the
-//!   device unresponsive for [`SimConfig::startup_ns`]; SLEEP stops sampling. PWR_MGMT_2 is
-//!   stored but its standby bits are not modelled (disabled axes keep sampling).
-//! - Output rate (the rate of the data registers and of FIFO writes): 4 kHz when
-//!   ACCEL_CONFIG2.accel_fchoice_b = 1 (SMPLRT_DIV ignored; the register map leaves the FIFO
-//!   pacing of this mode unspecified and the model writes one frame per accelerometer sample);
-//!   otherwise, with the gyro DLPF on (GYRO_CONFIG.FCHOICE_B = 0 and DLPF_CFG 1-6),
-//!   1 kHz / (1 + SMPLRT_DIV); otherwise 8 kHz. The device's clock can be off by
-//!   [`SimConfig::rate_error_ppm`]. Changing the rate restarts the sample grid at the write.
+//!   device unresponsive for [`SimConfig::startup_ns`]; SLEEP stops sampling. PWR_MGMT_2's
+//!   standby bits only start the gyro start-up transient when cleared (disabled axes keep
+//!   sampling).
+//! - Sample rate (the rate of the data registers and of FIFO writes; RM-MPU-9250A-00 register
+//!   25: "the FIFO ... [is] written at the Sample Rate", and register 35): with the gyro DLPF
+//!   on (GYRO_CONFIG.FCHOICE_B = 0 and DLPF_CFG 1-6), 1 kHz / (1 + SMPLRT_DIV); otherwise
+//!   8 kHz. With ACCEL_CONFIG2.accel_fchoice_b = 1 the accelerometer itself samples at 4 kHz
+//!   (register 29) on the same clock: a FIFO write carries the latest accelerometer sample, so
+//!   at an 8 kHz sample rate every accelerometer sample is written twice (PX4's
+//!   `MPU9250::ProcessAccel` in src/drivers/imu/invensense/mpu9250: "accel data is doubled in
+//!   FIFO"), and at 1 kHz only every fourth reaches the FIFO. The device's clock can be off by
+//!   [`SimConfig::rate_error_ppm`] (the internal oscillator varies by +-10 % over temperature,
+//!   PS-MPU-9250A-01 section 3.4). Changing the rate restarts the sample grid at the write.
+//! - Gyro start-up: for [`SimConfig::gyro_startup_ns`] after the gyros start (the end of an
+//!   H_RESET, SLEEP cleared, or their PWR_MGMT_2 standby bits cleared) the gyro outputs carry
+//!   [`SimConfig::gyro_startup_offset_dps`] (PS-MPU-9250A-01 table 1: gyro start-up time 35 ms
+//!   typical).
+//! - Register writes are logged with their times ([`SimMpu9250::write_log`]), so tests can
+//!   check the order and timing of a driver's writes.
 //! - DLPF (with [`SimConfig::model_dlpf`]): the filters CONFIG.DLPF_CFG with
 //!   GYRO_CONFIG.FCHOICE_B and ACCEL_CONFIG2 (accel_fchoice_b, A_DLPF_CFG) select, at the
 //!   internal rates the register map gives (`mems_sim::dlpf`), are handed to the
@@ -38,12 +49,14 @@
 //!   the FIFO. Reading FIFO_COUNTH latches the count that FIFO_COUNTL then returns.
 //! - INT_STATUS: FIFO_OFLOW_INT and RAW_DATA_RDY_INT, cleared when read.
 //! - Time: a [`SimClock`]. Each transaction takes its duration under an I2C [`BusTiming`]
-//!   model: the clock advances by it (virtual) or the call sleeps until it has passed
-//!   (real-time pacing). Samples due before a transaction starts are produced when it starts.
+//!   model, or on SPI (the [`spi`] submodule) an [`SpiTiming`] model: the clock advances by it
+//!   (virtual) or the call sleeps until it has passed (real-time pacing). Samples due before a
+//!   transaction starts are produced when it starts.
 //! - Faults: NACKs and bus errors on chosen transactions or at random from a seed, a wrong
 //!   WHO_AM_I value, an absent device; see [`Fault`].
 
 mod fifo;
+pub mod spi;
 
 use std::collections::{BTreeMap, VecDeque};
 
@@ -57,6 +70,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::clock::{Clock, SimClock};
 use crate::registers as reg;
 use fifo::{Fifo, FullPolicy};
+pub use spi::SpiTiming;
 
 /// Timing model of an I2C bus: every START, repeated START and STOP condition counts as one SCL
 /// period, every byte as nine (eight bits and the acknowledge bit), and each transaction ends
@@ -135,6 +149,12 @@ pub struct SimConfig {
     /// Whether the sample source applies the DLPF the registers select (the source must model
     /// it, see `SampleSource::set_dlpf`).
     pub model_dlpf: bool,
+    /// How long the gyro outputs are off after the gyros start, ns.
+    pub gyro_startup_ns: u64,
+    /// The gyro outputs' offset during start-up, deg/s, on every axis.
+    pub gyro_startup_offset_dps: f64,
+    /// The SPI timing model (when the device is used through its SPI interface).
+    pub spi: SpiTiming,
 }
 
 impl Default for SimConfig {
@@ -147,11 +167,16 @@ impl Default for SimConfig {
             startup_ns: reg::STARTUP_TYPICAL_NS,
             history_len: 0,
             model_dlpf: mems_sim::dlpf::MODEL_BY_DEFAULT,
+            gyro_startup_ns: reg::GYRO_STARTUP_TYPICAL_NS,
+            gyro_startup_offset_dps: 20.0,
+            spi: SpiTiming::DATASHEET,
         }
     }
 }
 
 /// One output sample as the device produced it (what the data registers held, in counts).
+/// With the accelerometer at 4 kHz and an 8 kHz sample rate, a sample is recorded once, when
+/// it first reaches the data registers and the FIFO; its repetition is not a new sample.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ProducedSample {
     /// Index of the sample since the device was created, from 0.
@@ -179,6 +204,20 @@ pub struct BusStats {
     pub busy_ns: u64,
     /// Bytes lost to FIFO overflow (overwritten or dropped).
     pub fifo_bytes_lost: u64,
+    /// SPI transactions clocked faster than the datasheet allows for the registers they
+    /// touch (1 MHz for all registers, 20 MHz for sensor and interrupt registers).
+    pub spi_overspeed: u64,
+}
+
+/// One register write as the device saw it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RegisterWrite {
+    /// When the write happened, ns of the device's clock.
+    pub t_ns: u64,
+    /// Register address.
+    pub register: u8,
+    /// Value written.
+    pub value: u8,
 }
 
 /// The simulated MPU-9250; see the module documentation for what it models.
@@ -202,6 +241,15 @@ pub struct SimMpu9250<S: SampleSource> {
     grid_k: u64,
     grid_period_ns: f64,
     produced: u64,
+    /// Sample-rate ticks since the device was created (new and repeated samples).
+    ticks: u64,
+    /// The accelerometer sample (index on the current grid) the data registers hold, in the
+    /// 4 kHz accelerometer mode.
+    accel_held: Option<u64>,
+    /// When the gyros last started, ns.
+    gyro_started_ns: u64,
+    writes: Vec<RegisterWrite>,
+    spi_clock_hz: f64,
     history: VecDeque<ProducedSample>,
     stats: BusStats,
     scheduled_faults: BTreeMap<u64, Fault>,
@@ -233,6 +281,11 @@ impl<S: SampleSource> SimMpu9250<S> {
             grid_k: 1,
             grid_period_ns: 0.0,
             produced: 0,
+            ticks: 0,
+            accel_held: None,
+            gyro_started_ns: 0,
+            writes: Vec::with_capacity(WRITE_LOG_LEN),
+            spi_clock_hz: 1e6,
             history,
             stats: BusStats::default(),
             scheduled_faults: BTreeMap::new(),
@@ -241,6 +294,7 @@ impl<S: SampleSource> SimMpu9250<S> {
         };
         sim.hardware_reset(now);
         sim.responsive_from_ns = now;
+        sim.gyro_started_ns = now.saturating_sub(sim.config.gyro_startup_ns);
         sim.restart_grid(now);
         sim
     }
@@ -308,9 +362,27 @@ impl<S: SampleSource> SimMpu9250<S> {
         &self.history
     }
 
-    /// Number of samples produced since the device was created.
+    /// The register writes since the device was created or the log was cleared, oldest first
+    /// (the first 4096).
+    pub fn write_log(&self) -> &[RegisterWrite] {
+        &self.writes
+    }
+
+    /// Empties the register write log.
+    pub fn clear_write_log(&mut self) {
+        self.writes.clear();
+    }
+
+    /// Number of distinct samples produced since the device was created (a sample the FIFO
+    /// receives twice counts once).
     pub fn samples_produced(&self) -> u64 {
         self.produced
+    }
+
+    /// Number of sample-rate ticks (data register updates and FIFO writes) since the device
+    /// was created.
+    pub fn sample_ticks(&self) -> u64 {
+        self.ticks
     }
 
     /// Bus counters.
@@ -339,7 +411,7 @@ impl<S: SampleSource> SimMpu9250<S> {
             if due > now_ns {
                 return;
             }
-            self.produce(due);
+            self.produce(due, self.grid_k);
             self.grid_k += 1;
         }
     }
@@ -348,6 +420,7 @@ impl<S: SampleSource> SimMpu9250<S> {
     fn restart_grid(&mut self, now_ns: u64) {
         self.grid_start_ns = now_ns;
         self.grid_k = 1;
+        self.accel_held = None;
         self.grid_period_ns = self.output_rate_hz().map_or(0.0, |hz| 1e9 / hz);
         self.sync_dlpf();
     }
@@ -381,11 +454,8 @@ impl<S: SampleSource> SimMpu9250<S> {
         }
     }
 
-    /// The output rate the registers select, Hz, before the clock error.
+    /// The sample rate the registers select, Hz, before the clock error.
     fn nominal_rate_hz(&self) -> f64 {
-        if self.regs[usize::from(reg::ACCEL_CONFIG2)] & reg::ACCEL_FCHOICE_B != 0 {
-            return reg::ACCEL_BYPASS_RATE_HZ;
-        }
         let dlpf_cfg = self.regs[usize::from(reg::CONFIG)] & reg::CONFIG_DLPF_CFG_MASK;
         let fchoice_b = self.regs[usize::from(reg::GYRO_CONFIG)] & reg::GYRO_FCHOICE_B_MASK;
         if fchoice_b == 0 && (1..=6).contains(&dlpf_cfg) {
@@ -396,9 +466,29 @@ impl<S: SampleSource> SimMpu9250<S> {
         }
     }
 
-    /// Takes one sample at `t_ns`: data registers, INT_STATUS, FIFO, history.
-    fn produce(&mut self, t_ns: u64) {
-        let rate_hz = self.output_rate_hz().unwrap_or(0.0);
+    /// Whether the accelerometer runs at 4 kHz with its DLPF bypassed (accel_fchoice_b = 1).
+    fn accel_bypassed(&self) -> bool {
+        self.regs[usize::from(reg::ACCEL_CONFIG2)] & reg::ACCEL_FCHOICE_B != 0
+    }
+
+    /// Tick `k` of the sample grid at `t_ns`: a new sample, or, when the 4 kHz accelerometer
+    /// has not produced one since the last tick, the held one again.
+    fn produce(&mut self, t_ns: u64, k: u64) {
+        self.ticks += 1;
+        let mut rate_hz = self.output_rate_hz().unwrap_or(0.0);
+        if self.accel_bypassed() {
+            // Both run on the device clock: tick k (from 1) carries accelerometer sample
+            // floor((k - 1) * 4000 / sample rate) of the grid.
+            let ratio = reg::ACCEL_BYPASS_RATE_HZ / self.nominal_rate_hz();
+            let n = ((k - 1) as f64 * ratio).floor() as u64;
+            if self.accel_held == Some(n) {
+                self.regs[usize::from(reg::INT_STATUS)] |= reg::INT_STATUS_RAW_DATA_RDY;
+                self.write_fifo_frame();
+                return;
+            }
+            self.accel_held = Some(n);
+            rate_hz = reg::ACCEL_BYPASS_RATE_HZ * (1.0 + self.config.rate_error_ppm * 1e-6);
+        }
         let t_s = (t_ns - self.created_ns) as f64 * 1e-9;
         let analog = self.source.sample(t_s, rate_hz);
         let accel_range = AccelRange::from_bits(
@@ -410,9 +500,14 @@ impl<S: SampleSource> SimMpu9250<S> {
         let accel = analog
             .accel_g
             .map(|g| quantize(g * accel_range.lsb_per_g()));
+        let transient = if t_ns < self.gyro_started_ns + self.config.gyro_startup_ns {
+            self.config.gyro_startup_offset_dps
+        } else {
+            0.0
+        };
         let gyro = analog
             .gyro_dps
-            .map(|w| quantize(w * gyro_range.lsb_per_dps()));
+            .map(|w| quantize((w + transient) * gyro_range.lsb_per_dps()));
         let temp = temp_counts_from_c(analog.temp_c);
         for (i, v) in accel.iter().chain([&temp]).chain(gyro.iter()).enumerate() {
             self.internal[2 * i..2 * i + 2].copy_from_slice(&v.to_be_bytes());
@@ -478,12 +573,28 @@ impl<S: SampleSource> SimMpu9250<S> {
         self.fifo_count_latch = 0;
         self.pointer = 0;
         self.responsive_from_ns = now_ns + self.config.startup_ns;
+        self.gyro_started_ns = self.responsive_from_ns;
         self.restart_grid(self.responsive_from_ns);
+    }
+
+    /// Whether the gyros run: awake and not all in standby.
+    fn gyros_running(&self) -> bool {
+        self.regs[usize::from(reg::PWR_MGMT_1)] & reg::PWR_MGMT_1_SLEEP == 0
+            && self.regs[usize::from(reg::PWR_MGMT_2)] & reg::PWR_MGMT_2_DISABLE_GYRO
+                != reg::PWR_MGMT_2_DISABLE_GYRO
     }
 
     /// A register write from the bus at `now_ns`.
     fn write_register(&mut self, register: u8, value: u8, now_ns: u64) {
+        if self.writes.len() < WRITE_LOG_LEN {
+            self.writes.push(RegisterWrite {
+                t_ns: now_ns,
+                register,
+                value,
+            });
+        }
         let rate_before = self.output_rate_hz();
+        let gyros_before = self.gyros_running();
         match register {
             reg::PWR_MGMT_1 if value & reg::PWR_MGMT_1_H_RESET != 0 => {
                 self.hardware_reset(now_ns);
@@ -507,6 +618,9 @@ impl<S: SampleSource> SimMpu9250<S> {
             self.restart_grid(now_ns);
         } else {
             self.sync_dlpf();
+        }
+        if self.gyros_running() && !gyros_before {
+            self.gyro_started_ns = now_ns;
         }
     }
 
@@ -591,6 +705,30 @@ impl<S: SampleSource> SimMpu9250<S> {
     }
 }
 
+/// Register writes the log keeps (allocated once).
+const WRITE_LOG_LEN: usize = 4096;
+
+impl<S: SampleSource> SimMpu9250<S> {
+    /// Starts a transaction now: numbers it, draws its fault, produces the samples due.
+    fn begin_transaction(&mut self) -> (u64, Option<Fault>) {
+        let start = self.clock.now_ns();
+        let index = self.stats.transactions;
+        self.stats.transactions += 1;
+        let fault = self.fault_for(index);
+        self.catch_up(start);
+        (start, fault)
+    }
+
+    /// Ends a transaction that started at `start_ns` and took `duration_ns`.
+    fn end_transaction(&mut self, start_ns: u64, duration_ns: u64, failed: bool) {
+        if failed {
+            self.stats.errors += 1;
+        }
+        self.stats.busy_ns += duration_ns;
+        self.clock.sleep_until(start_ns + duration_ns);
+    }
+}
+
 /// Whether `register` is one of the sensor data registers 59-72.
 fn is_data_register(register: u8) -> bool {
     (reg::ACCEL_XOUT_H..reg::ACCEL_XOUT_H + reg::SENSOR_DATA_LEN as u8).contains(&register)
@@ -606,11 +744,7 @@ impl<S: SampleSource> I2c for SimMpu9250<S> {
         address: u8,
         operations: &mut [Operation<'_>],
     ) -> Result<(), Self::Error> {
-        let start = self.clock.now_ns();
-        let index = self.stats.transactions;
-        self.stats.transactions += 1;
-        let fault = self.fault_for(index);
-        self.catch_up(start);
+        let (start, fault) = self.begin_transaction();
         let address_nack = address != self.config.address
             || !self.present
             || start < self.responsive_from_ns
@@ -624,12 +758,8 @@ impl<S: SampleSource> I2c for SimMpu9250<S> {
             let (periods, result) = self.run_operations(operations, fault, start);
             (2 + periods, result)
         };
-        if result.is_err() {
-            self.stats.errors += 1;
-        }
         let duration = self.config.timing.duration_ns(periods);
-        self.stats.busy_ns += duration;
-        self.clock.sleep_until(start + duration);
+        self.end_transaction(start, duration, result.is_err());
         result
     }
 }

@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use acquire::acquisition::SourceSpec;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use ipc_types::{
@@ -21,11 +22,12 @@ use supervisor::{ChildSpec, Event, Supervisor};
 #[derive(Parser)]
 #[command(version, about)]
 struct Cli {
-    /// `sim` (the simulated MPU-9250) or `i2c:/dev/i2c-N[@0x68]`.
+    /// `sim` (the simulated MPU-9250 on simulated I2C), `sim-spi` (the same on simulated SPI),
+    /// `i2c:/dev/i2c-N[@0x68]` or `spi:/dev/spidevB.C`.
     #[arg(long, default_value = "sim")]
     source: String,
-    /// Output rate of the sensor, Hz (1000/n with gyro; 4000 is accelerometer-only: the
-    /// odometry then estimates no position and the status line says so).
+    /// Output rate of the sensor, Hz (1000/n with gyro; 4000 is accelerometer-only and needs
+    /// SPI: the odometry then estimates no position and the status line says so).
     #[arg(long, default_value_t = 1000)]
     rate: u32,
     /// Record every topic to this MCAP file.
@@ -85,6 +87,16 @@ fn detector_args(cli: &Cli) -> Vec<String> {
         }
         None => vec!["--detector".into(), "glrt".into()],
     }
+}
+
+/// Refuses, before anything starts, a source that cannot be parsed or a rate its bus cannot
+/// carry (acquire's own check, with its arithmetic: 4 kHz needs SPI).
+fn check_source(cli: &Cli) -> Result<()> {
+    let source: SourceSpec = cli.source.parse().map_err(anyhow::Error::msg)?;
+    source
+        .check_rate(cli.rate)
+        .map_err(|e| anyhow::anyhow!("--source {} --rate {}: {e}", cli.source, cli.rate))?;
+    Ok(())
 }
 
 /// `mems-acquire`'s arguments for `cli` (the namespace is added by the caller): the source,
@@ -179,13 +191,14 @@ fn calibrate_sim(bins: &Path, work: &Path, seed: u64) -> Result<PathBuf> {
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
+    check_source(&cli)?;
     let namespace = service::namespace(cli.namespace.as_deref());
     let bins = bin_dir()?;
     let work = std::env::temp_dir().join(format!("mems-stack-{}", std::process::id()));
     std::fs::create_dir_all(&work).with_context(|| format!("cannot create {}", work.display()))?;
     let calib = match (&cli.calib, cli.source.as_str()) {
         (Some(c), _) => c.clone(),
-        (None, "sim") => calibrate_sim(&bins, &work, cli.seed)?,
+        (None, "sim" | "sim-spi") => calibrate_sim(&bins, &work, cli.seed)?,
         (None, other) => bail!("--calib is required for source {other}"),
     };
     let calib = calib
@@ -426,6 +439,31 @@ mod tests {
         assert_eq!(value(&args, "--cpu"), Some("1"));
         assert_eq!(value(&args, "--rate"), Some("4000"));
         assert!(args.iter().any(|a| a == "--mlock"), "{args:?}");
+    }
+
+    #[test]
+    fn rates_the_bus_cannot_carry_are_refused_before_start() {
+        let check = |args: &[&str]| {
+            let cli =
+                Cli::try_parse_from(std::iter::once("mems-stack").chain(args.iter().copied()))
+                    .unwrap();
+            check_source(&cli).map_err(|e| e.to_string())
+        };
+        let err = check(&["--rate", "4000"]).unwrap_err();
+        for needle in [
+            "--source sim --rate 4000",
+            "400 kHz I2C",
+            "108 %",
+            "sim-spi",
+        ] {
+            assert!(err.contains(needle), "{needle:?} missing from: {err}");
+        }
+        assert!(check(&["--rate", "4000", "--source", "i2c:/dev/i2c-1"]).is_err());
+        check(&["--rate", "4000", "--source", "sim-spi"]).unwrap();
+        check(&["--rate", "4000", "--source", "spi:/dev/spidev0.0"]).unwrap();
+        check(&["--rate", "1000"]).unwrap();
+        assert!(check(&["--rate", "3000", "--source", "sim-spi"]).is_err());
+        assert!(check(&["--source", "usb"]).is_err());
     }
 
     #[test]
