@@ -34,7 +34,8 @@ fn still_sensor() -> SimSensor<PoseSession> {
     SimSensor::new(pose, &model, &VibrationModel::moderate(0.0), 8).unwrap()
 }
 
-/// `n` samples the driver reads with `config` from a part with or without its DLPF modelled.
+/// `n` samples the driver reads with `config` from a part with or without its DLPF modelled,
+/// over I2C, or over SPI for the 4 kHz mode (I2C cannot carry it).
 fn read(config: Config, model_dlpf: bool, n: usize) -> Vec<RawImuSample> {
     let clock = SimClock::new_virtual(1_000_000_000);
     let sim = SimMpu9250::new(
@@ -45,13 +46,31 @@ fn read(config: Config, model_dlpf: bool, n: usize) -> Vec<RawImuSample> {
             ..SimConfig::default()
         },
     );
-    let mut drv = Mpu9250::new(sim, "sim", reg::ADDRESS_AD0_LOW);
-    drv.init(config, &clock).expect("init");
+    if config.mode == OutputMode::Accel4kHz {
+        drain(Mpu9250::new_spi(sim, "sim-spi"), config, &clock, n)
+    } else {
+        drain(
+            Mpu9250::new(sim, "sim", reg::ADDRESS_AD0_LOW),
+            config,
+            &clock,
+            n,
+        )
+    }
+}
+
+/// Initialises `drv` with `config` and reads `n` samples every 5 ms of `clock`.
+fn drain<B: embedded_hal::i2c::I2c>(
+    mut drv: Mpu9250<B>,
+    config: Config,
+    clock: &SimClock,
+    n: usize,
+) -> Vec<RawImuSample> {
+    drv.init(config, clock).expect("init");
     let mut buf = [RawImuSample::default(); 128];
     let mut out = Vec::with_capacity(n + 128);
     while out.len() < n {
         clock.sleep_until(clock.now_ns() + 5_000_000);
-        let got = drv.read_samples(&clock, &mut buf).expect("read_samples");
+        let got = drv.read_samples(clock, &mut buf).expect("read_samples");
         out.extend_from_slice(&buf[..got]);
     }
     out.truncate(n);

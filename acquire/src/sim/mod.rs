@@ -422,13 +422,13 @@ impl<S: SampleSource> SimMpu9250<S> {
         self.grid_k = 1;
         self.accel_held = None;
         self.grid_period_ns = self.output_rate_hz().map_or(0.0, |hz| 1e9 / hz);
-        self.sync_dlpf();
+        self.sync_dlpf(now_ns, true);
     }
 
-    /// Hands the source the DLPF the registers select, on an internal grid starting at the
-    /// output grid's start, when it differs from the one it has (with
-    /// [`SimConfig::model_dlpf`]).
-    fn sync_dlpf(&mut self) {
+    /// Hands the source the DLPF the registers select, on an internal grid starting at
+    /// `start_ns` (an output tick, never before a sample already produced), when its filters
+    /// differ from the ones it has or `new_grid` (with [`SimConfig::model_dlpf`]).
+    fn sync_dlpf(&mut self, start_ns: u64, new_grid: bool) {
         if !self.config.model_dlpf {
             return;
         }
@@ -445,10 +445,10 @@ impl<S: SampleSource> SimMpu9250<S> {
                     r(reg::CONFIG) & reg::CONFIG_DLPF_CFG_MASK,
                 ),
             },
-            start_s: self.grid_start_ns.saturating_sub(self.created_ns) as f64 * 1e-9,
+            start_s: start_ns.saturating_sub(self.created_ns) as f64 * 1e-9,
             clock_scale: 1.0 + self.config.rate_error_ppm * 1e-6,
         };
-        if self.dlpf != Some(grid) {
+        if new_grid || self.dlpf.map(|d| d.config) != Some(grid.config) {
             self.source.set_dlpf(Some(grid));
             self.dlpf = Some(grid);
         }
@@ -617,7 +617,10 @@ impl<S: SampleSource> SimMpu9250<S> {
         if self.output_rate_hz() != rate_before {
             self.restart_grid(now_ns);
         } else {
-            self.sync_dlpf();
+            // The same grid: a new filter starts at the last tick produced on it.
+            let last_tick_ns = self.grid_start_ns
+                + (self.grid_k.saturating_sub(1) as f64 * self.grid_period_ns).round() as u64;
+            self.sync_dlpf(last_tick_ns, false);
         }
         if self.gyros_running() && !gyros_before {
             self.gyro_started_ns = now_ns;
