@@ -282,7 +282,25 @@ pub fn write_raw(
     truth: Option<&[Truth]>,
 ) -> Result<()> {
     let path = path.as_ref();
-    validate_for_writing(path, samples, truth)?;
+    validate_for_writing(path, samples, truth, true)?;
+    write_rows(path, samples, truth)
+}
+
+/// [`write_raw`] for a logger's CSV: times need only not decrease (a logger that repeats
+/// rows or stamps with a coarse host clock), which the strict reader refuses and
+/// [`crate::LogPolicy::Repair`] reads.
+pub fn write_log(
+    path: impl AsRef<Path>,
+    samples: &[RawImuSample],
+    truth: Option<&[Truth]>,
+) -> Result<()> {
+    let path = path.as_ref();
+    validate_for_writing(path, samples, truth, false)?;
+    write_rows(path, samples, truth)
+}
+
+/// Writes validated samples and truth.
+fn write_rows(path: &Path, samples: &[RawImuSample], truth: Option<&[Truth]>) -> Result<()> {
     let gyro = samples.iter().any(|s| s.flags & raw_flags::GYRO_VALID != 0);
     let temp = samples.iter().any(|s| s.flags & raw_flags::TEMP_VALID != 0);
 
@@ -337,10 +355,12 @@ pub fn write_raw(
 }
 
 /// Checks what [`write_raw`] would otherwise write into a file it cannot read back.
+/// With `strict`, times must strictly increase; without, they must not decrease.
 fn validate_for_writing(
     path: &Path,
     samples: &[RawImuSample],
     truth: Option<&[Truth]>,
+    strict: bool,
 ) -> Result<()> {
     // Line numbers the rows would have: the header is line 1.
     let fail = |i: usize, field: &str, message: String| {
@@ -358,12 +378,14 @@ fn validate_for_writing(
     }
     for (i, sample) in samples.iter().enumerate() {
         let t_ns = sample.stamps.sample_ns;
-        if i > 0 && t_ns <= samples[i - 1].stamps.sample_ns {
-            return Err(fail(
-                i,
-                TIME,
-                format!("sample {i}: times must strictly increase"),
-            ));
+        let previous = (i > 0).then(|| samples[i - 1].stamps.sample_ns);
+        if previous.is_some_and(|p| t_ns < p || (strict && t_ns == p)) {
+            let rule = if strict {
+                "strictly increase"
+            } else {
+                "not decrease"
+            };
+            return Err(fail(i, TIME, format!("sample {i}: times must {rule}")));
         }
         let mut values = sample
             .accel_g

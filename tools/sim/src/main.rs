@@ -535,7 +535,7 @@ impl Sink {
                 if increasing {
                     recording::csv::write_raw(&path, &samples, Some(&truth))?
                 } else {
-                    write_log_csv(&path, &samples, &truth)?;
+                    recording::csv::write_log(&path, &samples, Some(&truth))?;
                     println!(
                         "{}: timestamps repeat, so this is a logger's CSV (the canonical \
                          columns, times non-decreasing), not the canonical CSV",
@@ -547,55 +547,6 @@ impl Sink {
         }
         Ok(())
     }
-}
-
-/// Writes rows whose times may repeat (a logger's CSV) with the canonical CSV's columns: time,
-/// accelerometer, gyroscope, temperature, flags, lost_before and the truth columns.
-fn write_log_csv(path: &Path, samples: &[RawImuSample], truth: &[Truth]) -> Result<()> {
-    use std::io::Write;
-    let file =
-        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut out = std::io::BufWriter::new(file);
-    let mut header = vec![
-        "t_s",
-        "ax_g",
-        "ay_g",
-        "az_g",
-        "gx_dps",
-        "gy_dps",
-        "gz_dps",
-        "temp_c",
-        "flags",
-        "lost_before",
-    ];
-    header.extend(recording::csv::TRUTH_COLUMNS);
-    writeln!(out, "{}", header.join(","))?;
-    for (s, t) in samples.iter().zip(truth) {
-        let ns = s.stamps.sample_ns;
-        let mut row = vec![format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000)];
-        row.extend(
-            s.accel_g
-                .iter()
-                .chain(&s.gyro_dps)
-                .chain([&s.temp_c])
-                .map(f64::to_string),
-        );
-        row.push(s.flags.to_string());
-        row.push(s.lost_before.to_string());
-        row.extend(
-            t.position_m
-                .iter()
-                .chain(&t.velocity_mps)
-                .chain(&t.attitude_wxyz)
-                .chain(&t.specific_force_mps2)
-                .chain(&t.angular_rate_rps)
-                .map(f64::to_string),
-        );
-        row.push(u8::from(t.at_rest).to_string());
-        writeln!(out, "{}", row.join(","))?;
-    }
-    out.flush()?;
-    Ok(())
 }
 
 /// Samples `scenario` from 0 to its duration at the common rate, quantizes, and writes, with
