@@ -337,6 +337,9 @@ const ATTEMPTS: u32 = 3;
 /// was delayed by the host (preemption, bus contention): its observation of the sample phase
 /// is not used for timing.
 const COUNT_READ_MAX_NS: u64 = 1_000_000;
+/// FIFO_COUNT reads tried for a prompt observation when the one the sample times would be
+/// anchored on was delayed.
+const ANCHOR_COUNT_ATTEMPTS: u32 = 3;
 /// The FIFO must receive data within this many output periods (and at least
 /// [`STALL_MIN_NS`]) of the last sample, or the device is considered stopped.
 const STALL_PERIODS: f64 = 50.0;
@@ -666,6 +669,17 @@ impl<I2C: I2c> Mpu9250<I2C> {
         };
         let mut delivered = 0;
         if take > 0 {
+            // The observation for the times: this poll's count, or, when that was delayed and
+            // the times are to be anchored on it, a prompt count taken before any frame is read.
+            let mut obs = (t_before, available);
+            let mut reliable = !full && t_after - t_before <= COUNT_READ_MAX_NS;
+            if !reliable
+                && !full
+                && self.timer.anchoring()
+                && let Some(again) = self.observe_count(clock, frame)?
+            {
+                (obs, reliable) = (again, true);
+            }
             let bytes = take * frame;
             // Only an address NACK is retried: after any other failure, the bytes clocked out
             // before it are gone from the FIFO and the frames can no longer be trusted.
@@ -687,9 +701,8 @@ impl<I2C: I2c> Mpu9250<I2C> {
                 Ok(()) => {}
             }
             // The newest sample was produced within one period before the count was latched.
-            let reliable = !full && t_after - t_before <= COUNT_READ_MAX_NS;
-            let newest_obs = t_before as f64 - self.timer.period_ns() / 2.0;
-            let a = self.timer.assign(take, available, newest_obs, reliable);
+            let newest_obs = obs.0 as f64 - self.timer.period_ns() / 2.0;
+            let a = self.timer.assign(take, obs.1, newest_obs, reliable);
             let fps = config.frames_per_sample() as u64;
             let (n, skipped, mismatch) = self.decode_frames(&config, take, &a, out);
             for sample in &mut out[..n] {
@@ -748,6 +761,35 @@ impl<I2C: I2c> Mpu9250<I2C> {
             self.reset_fifo(config, (available / fps) as u64)?;
         }
         Ok(Some(delivered))
+    }
+
+    /// Reads FIFO_COUNT again for an observation to anchor the sample times on, when the read
+    /// that counted the frames just taken was delayed (the times of a whole stream follow
+    /// from its anchor, and one taken late would start them early and later show a gap that
+    /// never happened). Returns the count's time and the whole frames it found, from the
+    /// first of [`ANCHOR_COUNT_ATTEMPTS`] reads that was prompt and found neither a full FIFO
+    /// nor a partial frame; `None` if none was. FIFO_COUNT is the number of bytes the FIFO
+    /// holds (RM-MPU-9250A-00 registers 114-115), so until frames are read it only grows, and
+    /// the frames counted first are still the oldest.
+    fn observe_count(
+        &mut self,
+        clock: &impl Clock,
+        frame: usize,
+    ) -> Result<Option<(u64, usize)>, Error<I2C::Error>> {
+        let mut count_bytes = [0u8; 2];
+        for _ in 0..ANCHOR_COUNT_ATTEMPTS {
+            let t_before = clock.now_ns();
+            self.read_registers(reg::FIFO_COUNTH, &mut count_bytes, "reading FIFO_COUNT")?;
+            let t_after = clock.now_ns();
+            let count = usize::from(u16::from_be_bytes(count_bytes) & 0x1FFF);
+            if t_after - t_before <= COUNT_READ_MAX_NS
+                && count < reg::FIFO_SIZE
+                && count % frame == 0
+            {
+                return Ok(Some((t_before, count / frame)));
+            }
+        }
+        Ok(None)
     }
 
     /// Decodes the first `take` frames of the read buffer into `out`, timed by `a` and moved

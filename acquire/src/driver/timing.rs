@@ -23,7 +23,8 @@
 //! percent of the period.
 //!
 //! Observations taken when the count read itself took unusually long (the thread was
-//! preempted) are not used. Between two reads the FIFO cannot lose data without the driver
+//! preempted) are not used; the driver re-reads the count for a prompt one when such an
+//! observation would be the anchor ([`SampleTimer::anchoring`]). Between two reads the FIFO cannot lose data without the driver
 //! knowing (overflow is flagged), so an observation far from the prediction is treated as an
 //! outlier (e.g. the device stopped, so its newest sample is old) and does not move the times;
 //! only when several consecutive observations agree on it does the loop re-anchor. A known gap
@@ -113,6 +114,12 @@ impl SampleTimer {
     /// Marks a discontinuity: the next read re-anchors on its observation.
     pub(crate) fn resync(&mut self) {
         self.synced = false;
+    }
+
+    /// Whether the next read anchors the times on its observation (a new stream, or after a
+    /// gap or a period change).
+    pub(crate) fn anchoring(&self) -> bool {
+        !self.synced
     }
 
     /// The current period estimate, ns.
