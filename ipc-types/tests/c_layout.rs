@@ -70,7 +70,7 @@ fn facts() -> Vec<Fact> {
             calib_id,
             flags,
             raw_flags,
-            reserved
+            settles
         ]
     );
     layout_facts!(
@@ -123,6 +123,7 @@ fn facts() -> Vec<Fact> {
             corrected_flags::DETECTOR_READY,
         ),
         ("MEMS_CORRECTED_BIAS_REFINED", corrected_flags::BIAS_REFINED),
+        ("MEMS_CORRECTED_PROVISIONAL", corrected_flags::PROVISIONAL),
         ("MEMS_ODOMETRY_ZERO_VELOCITY", odometry_flags::ZERO_VELOCITY),
         ("MEMS_ODOMETRY_ALIGNED", odometry_flags::ALIGNED),
         ("MEMS_ODOMETRY_REVISION", odometry_flags::REVISION),

@@ -34,7 +34,7 @@ fn corrected_drive() -> Vec<CorrectedImuSample> {
             .push(raw, &mut |c| out.push(*c))
             .expect("valid raw samples");
     });
-    calibration.finish(&mut |c| out.push(*c));
+    calibration.finish();
     out
 }
 

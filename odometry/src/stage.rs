@@ -47,6 +47,17 @@
 //! the hindsight confirm each other (a gentle start flickers). Samples navigated again are
 //! republished with the `REVISION` flag; the forward state never waits for the hindsight.
 //!
+//! **Provisional flags.** The calibration stage emits each sample at once, before its batch is
+//! decided, with the latest verdict carried over (`PROVISIONAL`); the batch's last sample
+//! settles the samples before it (`settles`). Each sample's state is computed and emitted in
+//! the call that takes it, by a navigator running on the flags as they stand. Everything
+//! above (hindsight, motion-end revisions) runs on settled flags only, one batch behind, in a
+//! second navigator, after the live state is emitted: where its state for a settled sample
+//! differs from the one emitted, it is republished with `REVISION` and the live navigator
+//! continues from the settled one. So the final history (the last state emitted for each
+//! sample) is that of a stage fed final flags, and only the live state of a batch whose
+//! verdict changed (the start and end of a rest, 20 samples at most) ran on the previous one.
+//!
 //! For that the stage runs two navigators (module `navigator`): one on every input, whose
 //! states it emits, and one lagging `2 rest_hindsight_s + motion_confirm_s` behind on inputs
 //! whose flags are final. A change of the flags in force copies the lagging one into the live
@@ -314,16 +325,37 @@ fn feed(nav: &mut Navigator, input: &Input, emit: &mut impl FnMut(&OdometryState
     }
 }
 
+/// Provisional samples the stage holds until their batch is settled: more than the two
+/// batches a calibration stage can leave unsettled (a batch cut by a gap, then a new one).
+const UNSETTLED: usize = 64;
+
+/// A provisional sample and the live state emitted for it.
+#[derive(Debug, Clone, Copy, Default)]
+struct Unsettled {
+    s: CorrectedImuSample,
+    state: OdometryState,
+}
+
 /// The odometry state machine (see the module documentation).
 pub struct OdometryStage {
-    /// The navigator on every input: its states are the ones emitted.
+    /// The navigator on every sample as it arrives, flags as they stand: the live states.
+    ahead: Navigator,
+    /// Everything on settled flags.
+    settled: Settled,
+    /// Provisional samples not settled yet, oldest first.
+    unsettled: Ring<Unsettled>,
+    last_ns: Option<u64>,
+    revisions_emitted: u64,
+}
+
+/// The stage on settled flags: hindsight and the navigator whose states are final.
+struct Settled {
+    /// The navigator on every settled input.
     live: Navigator,
     /// `None` without hindsight.
     hindsight: Option<Hindsight>,
-    last_ns: Option<u64>,
     /// The previous sample's IMU zero-state flag.
     imu_rest: bool,
-    revisions_emitted: u64,
 }
 
 impl OdometryStage {
@@ -354,10 +386,14 @@ impl OdometryStage {
             reinstate_at_ns: None,
         });
         Ok(Self {
-            live: Navigator::new(cfg, hints),
-            hindsight,
+            ahead: Navigator::new(cfg, hints),
+            settled: Settled {
+                live: Navigator::new(cfg, hints),
+                hindsight,
+                imu_rest: false,
+            },
+            unsettled: Ring::new(UNSETTLED),
             last_ns: None,
-            imu_rest: false,
             revisions_emitted: 0,
         })
     }
@@ -367,27 +403,28 @@ impl OdometryStage {
     /// hint changes nothing.
     pub fn hint(&mut self, h: &RobotHint) -> Result<(), HintError> {
         check_hint(h)?;
-        if let Some(hs) = self.hindsight.as_mut() {
+        if let Some(hs) = self.settled.hindsight.as_mut() {
             hs.keep(Input::Hint(*h));
         }
-        self.live.hint(h);
+        self.settled.live.hint(h);
+        self.ahead.hint(h);
         Ok(())
     }
 
     /// Counters of the hints seen so far.
     pub fn hint_stats(&self) -> HintStats {
-        self.live.hint_stats()
+        self.ahead.hint_stats()
     }
 
     /// The IMU-to-body mounting (sensor to body), configured or estimated; `None` while it is
     /// being estimated.
     pub fn mounting(&self) -> Option<UnitQuaternion<f64>> {
-        self.live.mounting()
+        self.ahead.mounting()
     }
 
     /// Whether alignment is done.
     pub fn aligned(&self) -> bool {
-        self.live.aligned()
+        self.ahead.aligned()
     }
 
     /// Number of republished (revised) states so far.
@@ -398,7 +435,7 @@ impl OdometryStage {
     /// Number of samples whose rest flag stands withdrawn in hindsight so far (those still
     /// within the hindsight may yet be reinstated).
     pub fn withdrawn_rest_samples(&self) -> u64 {
-        self.hindsight.as_ref().map_or(0, |hs| {
+        self.settled.hindsight.as_ref().map_or(0, |hs| {
             let pending = (0..hs.journal.len())
                 .filter(|&i| {
                     matches!(hs.journal.oldest(i), Some(Input::Sample { s, imu_rest: true })
@@ -411,11 +448,12 @@ impl OdometryStage {
 
     /// The filter, once aligned (for diagnostics and tests).
     pub fn filter(&self) -> Option<&Eskf> {
-        self.live.filter()
+        self.ahead.filter()
     }
 
-    /// Processes one sample: emits its state, and any revised states (a motion interval's
-    /// drift removed, or rest flags withdrawn or reinstated in hindsight), through `emit`. A
+    /// Processes one sample: emits its state first, then any revised states (a motion
+    /// interval's drift removed, rest flags withdrawn or reinstated in hindsight, a batch's
+    /// verdict that changed the states navigated on its provisional flags), through `emit`. A
     /// refused sample changes nothing.
     pub fn process(
         &mut self,
@@ -434,28 +472,91 @@ impl OdometryStage {
             });
         }
         self.last_ns = Some(t_ns);
+        let mut state = OdometryState::default();
+        // Its motion-end revisions come again, on settled flags, from the settled navigator.
+        self.ahead.process(s, &mut |o| {
+            if o.flags & odometry_flags::REVISION == 0 {
+                state = *o;
+            }
+        });
+        emit(&state);
+        let sample = Unsettled { s: *s, state };
+        if s.flags & corrected_flags::PROVISIONAL != 0 {
+            if let Some(old) = self.unsettled.push(sample) {
+                // Never settled in time: final as it stands.
+                self.settle(&old, emit);
+            }
+            return Ok(());
+        }
+        // Older samples than those `s` settles were cut from their batch: final as they are.
+        let settles = (s.settles as usize).min(self.unsettled.len());
+        let mut diverged = false;
+        while self.unsettled.len() > settles {
+            let old = self.unsettled.pop().expect("len > settles");
+            diverged |= self.settle(&old, emit);
+        }
+        const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
+        while let Some(mut u) = self.unsettled.pop() {
+            let flags =
+                (u.s.flags & !(VERDICT | corrected_flags::PROVISIONAL)) | (s.flags & VERDICT);
+            diverged |= flags & VERDICT != u.s.flags & VERDICT;
+            u.s.flags = flags;
+            u.s.zs_mean_mps2 = s.zs_mean_mps2;
+            u.s.zs_std_mps2 = s.zs_std_mps2;
+            diverged |= self.settle(&u, emit);
+        }
+        diverged |= self.settle(&sample, emit);
+        if diverged {
+            self.ahead.copy_from(&self.settled.live);
+        }
+        Ok(())
+    }
+
+    /// Runs one sample with its final flags through the settled stage; republishes (as
+    /// `REVISION`) its state where it differs from the live one, and every revision. Returns
+    /// whether the settled navigator departed from the live one.
+    fn settle(&mut self, u: &Unsettled, emit: &mut impl FnMut(&OdometryState)) -> bool {
+        let revisions = &mut self.revisions_emitted;
+        let mut differs = false;
+        let replayed = self.settled.process(&u.s, &mut |o| {
+            let o = if o.flags & odometry_flags::REVISION != 0 {
+                *o
+            } else if *o != u.state {
+                differs = true;
+                OdometryState {
+                    flags: o.flags | odometry_flags::REVISION,
+                    ..*o
+                }
+            } else {
+                return;
+            };
+            *revisions += 1;
+            emit(&o);
+        });
+        differs || replayed
+    }
+}
+
+impl Settled {
+    /// Processes one (checked) sample with settled flags: emits its state and any revised
+    /// states. Returns whether a change of the flags in force navigated the journal again.
+    fn process(&mut self, s: &CorrectedImuSample, emit: &mut impl FnMut(&OdometryState)) -> bool {
+        let t_ns = s.stamps.sample_ns;
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
         let flipped = imu_rest != self.imu_rest;
         // Rest decided by a fresh hint is not the detector's to withdraw.
         let imu_transition = flipped && self.live.imu_decided();
         self.imu_rest = imu_rest;
-        let revisions = &mut self.revisions_emitted;
-        let mut counted = |o: &OdometryState| {
-            if o.flags & odometry_flags::REVISION != 0 {
-                *revisions += 1;
-            }
-            emit(o);
-        };
         let Some(hs) = self.hindsight.as_mut() else {
-            self.live.process(s, &mut counted);
-            return Ok(());
+            self.live.process(s, emit);
+            return false;
         };
         let reinstate = hs.reinstatement_due(t_ns, imu_rest, flipped);
         hs.keep(Input::Sample { s: *s, imu_rest });
         hs.catch_up(t_ns);
         if !((imu_transition || reinstate) && hs.resolve()) {
-            self.live.process(s, &mut counted);
-            return Ok(());
+            self.live.process(s, emit);
+            return false;
         }
         // Flags in force changed: navigate again from the lagging navigator, republishing
         // every state but this sample's.
@@ -464,17 +565,17 @@ impl OdometryStage {
         for i in 0..n {
             let input = *hs.journal.oldest(i).expect("i < len");
             if i + 1 == n {
-                feed(&mut self.live, &input, &mut counted);
+                feed(&mut self.live, &input, emit);
             } else {
                 feed(&mut self.live, &input, &mut |o| {
-                    counted(&OdometryState {
+                    emit(&OdometryState {
                         flags: o.flags | odometry_flags::REVISION,
                         ..*o
                     })
                 });
             }
         }
-        Ok(())
+        true
     }
 }
 

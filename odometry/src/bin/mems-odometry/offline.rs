@@ -196,7 +196,7 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             .push(raw, &mut |c: &CorrectedImuSample| feed(c, &mut odometry))
             .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
     }
-    calibration.finish(&mut |c: &CorrectedImuSample| feed(c, &mut odometry));
+    calibration.finish();
     if let Some(e) = error {
         return Err(e);
     }
