@@ -48,6 +48,20 @@ impl Default for SegmentConfig {
     }
 }
 
+impl SegmentConfig {
+    /// The defaults with the shortest segment kept `min_duration_s` (s): windows of a quarter
+    /// of it (at most the default 0.5 s), so that a segment still spans the trimmed windows
+    /// and two more. Multi-position protocols (imu_tk, Tedaldi et al.) hold each pose 1-4 s.
+    pub fn with_min_duration(min_duration_s: f64) -> Self {
+        let default = Self::default();
+        Self {
+            window_s: (min_duration_s / 4.0).min(default.window_s),
+            min_duration_s,
+            ..default
+        }
+    }
+}
+
 /// One interval at rest.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StaticSegment {

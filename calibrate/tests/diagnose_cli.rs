@@ -47,6 +47,12 @@ fn assert_png(path: &Path) {
 /// A six-position session whose bias follows the die temperature (1.5, -1, 2 mg/degC) while
 /// the die warms by self-heating and the room cools.
 fn temperature_session() -> (Vec<RawImuSample>, Vec<Truth>, Vec<(f64, f64)>) {
+    temperature_poses(PoseSession::six_position(&PoseParams::new(20.0), 11).unwrap())
+}
+
+/// `session` measured by a part whose bias follows the die temperature (see
+/// [`temperature_session`]).
+fn temperature_poses(session: PoseSession) -> (Vec<RawImuSample>, Vec<Truth>, Vec<(f64, f64)>) {
     let mut model = SensorModel::ideal();
     model.accel = TriadModel {
         bias: [0.04, -0.035, 0.055],
@@ -62,8 +68,9 @@ fn temperature_session() -> (Vec<RawImuSample>, Vec<Truth>, Vec<(f64, f64)>) {
         self_heating_time_constant_s: 40.0,
         reference_c: 25.0,
     };
-    let session = PoseSession::six_position(&PoseParams::new(20.0), 11).unwrap();
-    let holds = (0..6).map(|i| session.hold_interval_s(i)).collect();
+    let holds = (0..session.poses().len())
+        .map(|i| session.hold_interval_s(i))
+        .collect();
     let n = (session.duration_s() * RATE_HZ) as usize;
     let mut sim = SimSensor::new(session, &model, &VibrationModel::moderate(0.0), 11).unwrap();
     let (samples, truth) = (0..n)
@@ -206,6 +213,37 @@ fn simulated_session_json_plots_and_a_calibration_file_the_stage_applies() {
         with_terms < 0.2 * without && with_terms < 2e-3,
         "stage error {with_terms} m/s^2 with the term, {without} without"
     );
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// A multi-position protocol's short poses (imu_tk, Tedaldi et al.: 1-4 s each): 20
+/// orientations held 2 s. The default 5 s segments find none; `--min-segment-s 1` finds them
+/// and the temperature effect with them.
+#[test]
+fn short_poses_need_and_get_a_shorter_segment_minimum() {
+    let session = PoseSession::orientations(20, &PoseParams::new(2.0), 12).unwrap();
+    let (samples, truth, _) = temperature_poses(session);
+    let d = dir("short-poses");
+    let csv = d.join("session.csv");
+    recording::csv::write_raw(&csv, &samples, Some(&truth)).unwrap();
+    let o = diagnose(&["--input", csv.to_str().unwrap(), "--json"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("static segment"),
+        "{err}"
+    );
+    let o = diagnose(&[
+        "--input",
+        csv.to_str().unwrap(),
+        "--gravity",
+        "9.80665",
+        "--min-segment-s",
+        "1",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(json["selected_effect"], "temperature_bias", "{json}");
     std::fs::remove_dir_all(&d).unwrap();
 }
 

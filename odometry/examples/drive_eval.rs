@@ -138,6 +138,10 @@ struct Args {
     /// Smooth floor: no vibration (for every case).
     #[arg(long)]
     smooth: bool,
+    /// The part's digital low-pass filter, DLPF_CFG and A_DLPF_CFG both (1: 184 Hz gyro /
+    /// 218 Hz accel, our driver's; 3: 41 / 45 Hz; 4: 20 / 21 Hz); none: white samples.
+    #[arg(long)]
+    dlpf_cfg: Option<u8>,
     /// The stage's rest hindsight, s (`OdometryConfig::rest_hindsight_s`; default: the
     /// configuration's, 0.5 s).
     #[arg(long)]
@@ -152,6 +156,7 @@ struct Args {
 fn case(name: CaseName, args: &Args) -> (Case, OdometryConfig) {
     let mut c = Case::straight();
     c.rate_hz = args.rate_hz;
+    c.dlpf = args.dlpf_cfg.map(mems_sim::dlpf::DlpfConfig::both);
     if args.sim_default_legs {
         c.max_legs = 3;
         c.leg_s = [2.0, 10.0];

@@ -11,4 +11,5 @@ pub mod eskf;
 pub mod gyrocal;
 pub mod hints;
 mod navigator;
+pub mod profile;
 pub mod stage;

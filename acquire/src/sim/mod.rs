@@ -18,9 +18,14 @@
 //!   otherwise, with the gyro DLPF on (GYRO_CONFIG.FCHOICE_B = 0 and DLPF_CFG 1-6),
 //!   1 kHz / (1 + SMPLRT_DIV); otherwise 8 kHz. The device's clock can be off by
 //!   [`SimConfig::rate_error_ppm`]. Changing the rate restarts the sample grid at the write.
-//!   The DLPF itself is not modelled: samples are what the [`SampleSource`] returns for the
-//!   output rate, quantized and saturated at the configured full scale (ACCEL_FS_SEL,
-//!   GYRO_FS_SEL), temperature by the datasheet formula.
+//! - DLPF (with [`SimConfig::model_dlpf`]): the filters CONFIG.DLPF_CFG with
+//!   GYRO_CONFIG.FCHOICE_B and ACCEL_CONFIG2 (accel_fchoice_b, A_DLPF_CFG) select, at the
+//!   internal rates the register map gives (`mems_sim::dlpf`), are handed to the
+//!   [`SampleSource`] on an internal grid aligned with the output grid, so each output sample
+//!   is the filter output at that instant. Without it, samples are what the source returns for
+//!   the output rate (white noise at that rate). Either way they are quantized and saturated
+//!   at the configured full scale (ACCEL_FS_SEL, GYRO_FS_SEL), temperature by the datasheet
+//!   formula.
 //! - Data registers (59-72) and shadow registers: the internal set updates at the output rate;
 //!   the user-facing set copies it when a transaction starts (the bus is idle between
 //!   transactions), so one burst read is a consistent snapshot while high and low bytes read in
@@ -44,7 +49,8 @@ use std::collections::{BTreeMap, VecDeque};
 
 use embedded_hal::i2c::{ErrorKind, ErrorType, I2c, NoAcknowledgeSource, Operation};
 use ipc_types::units::{AccelRange, GyroRange, quantize, temp_counts_from_c};
-use mems_sim::SampleSource;
+use mems_sim::dlpf::{self, DlpfConfig};
+use mems_sim::{DlpfGrid, SampleSource};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -126,6 +132,9 @@ pub struct SimConfig {
     /// Number of most recent produced samples kept for inspection (0 keeps none); the buffer
     /// is allocated once, up front.
     pub history_len: usize,
+    /// Whether the sample source applies the DLPF the registers select (the source must model
+    /// it, see `SampleSource::set_dlpf`).
+    pub model_dlpf: bool,
 }
 
 impl Default for SimConfig {
@@ -137,6 +146,7 @@ impl Default for SimConfig {
             rate_error_ppm: 0.0,
             startup_ns: reg::STARTUP_TYPICAL_NS,
             history_len: 0,
+            model_dlpf: mems_sim::dlpf::MODEL_BY_DEFAULT,
         }
     }
 }
@@ -196,6 +206,8 @@ pub struct SimMpu9250<S: SampleSource> {
     stats: BusStats,
     scheduled_faults: BTreeMap<u64, Fault>,
     random_faults: Option<(f64, Fault, ChaCha8Rng)>,
+    /// The DLPF last handed to the source.
+    dlpf: Option<DlpfGrid>,
 }
 
 impl<S: SampleSource> SimMpu9250<S> {
@@ -225,6 +237,7 @@ impl<S: SampleSource> SimMpu9250<S> {
             stats: BusStats::default(),
             scheduled_faults: BTreeMap::new(),
             random_faults: None,
+            dlpf: None,
         };
         sim.hardware_reset(now);
         sim.responsive_from_ns = now;
@@ -336,6 +349,36 @@ impl<S: SampleSource> SimMpu9250<S> {
         self.grid_start_ns = now_ns;
         self.grid_k = 1;
         self.grid_period_ns = self.output_rate_hz().map_or(0.0, |hz| 1e9 / hz);
+        self.sync_dlpf();
+    }
+
+    /// Hands the source the DLPF the registers select, on an internal grid starting at the
+    /// output grid's start, when it differs from the one it has (with
+    /// [`SimConfig::model_dlpf`]).
+    fn sync_dlpf(&mut self) {
+        if !self.config.model_dlpf {
+            return;
+        }
+        let r = |register: u8| self.regs[usize::from(register)];
+        let accel_config2 = r(reg::ACCEL_CONFIG2);
+        let grid = DlpfGrid {
+            config: DlpfConfig {
+                accel: dlpf::accel_setting(
+                    accel_config2 & reg::ACCEL_FCHOICE_B != 0,
+                    accel_config2 & 0b111, // A_DLPF_CFG, bits [2:0]
+                ),
+                gyro: dlpf::gyro_setting(
+                    r(reg::GYRO_CONFIG) & reg::GYRO_FCHOICE_B_MASK,
+                    r(reg::CONFIG) & reg::CONFIG_DLPF_CFG_MASK,
+                ),
+            },
+            start_s: self.grid_start_ns.saturating_sub(self.created_ns) as f64 * 1e-9,
+            clock_scale: 1.0 + self.config.rate_error_ppm * 1e-6,
+        };
+        if self.dlpf != Some(grid) {
+            self.source.set_dlpf(Some(grid));
+            self.dlpf = Some(grid);
+        }
     }
 
     /// The output rate the registers select, Hz, before the clock error.
@@ -462,6 +505,8 @@ impl<S: SampleSource> SimMpu9250<S> {
         }
         if self.output_rate_hz() != rate_before {
             self.restart_grid(now_ns);
+        } else {
+            self.sync_dlpf();
         }
     }
 

@@ -10,8 +10,14 @@
 //!
 //! ```text
 //! T_mean    = sum_c (mean_c - mu_c)^2 / (rho_c sigma_c^2 / N + delta_c^2) ~ chi2(6) at rest
-//! T_scatter = sum_c sum_k (x_ck - mean_c)^2 / sigma_c^2           ~ chi2(6 (N - 1)) at rest
+//! T_scatter = sum_c (W_c d_c / (n - 1) + B_c / rho_c) / sigma_c^2  ~ chi2(sum_c K d_c + K - 1)
 //! ```
+//!
+//! where `W_c` is the window's within-batch sum of squares and `B_c` its between-batch part
+//! (`sum_b n_b (mean_bc - mean_c)^2`): noise correlated by the sensor's own filter scatters the
+//! batch means `rho_c` times more than white noise, which is not motion; it also leaves each
+//! batch's within sum of squares fewer effective degrees of freedom `d_c` than `n - 1` (`K`
+//! batches of `n` samples; `d_c = n - 1` for white noise, both learned at rest).
 //!
 //! - [`GlrtStatistic::Split`] (default): rest iff each is below its `1 - a/2` chi-squared
 //!   quantile. The mean part (6 degrees of freedom) is what catches steady acceleration, turns
@@ -113,6 +119,8 @@ pub(crate) struct GlrtRule {
     reference: [f64; 6],
     inv_var: [f64; 6],
     inv_rho: [f64; 6],
+    /// Effective over nominal degrees of freedom of a batch's within sum of squares.
+    dof_factor: [f64; 6],
     /// Variance of each reference's drift between rests (tolerance squared).
     drift_var: [f64; 6],
     mean_quantile: f64,
@@ -144,7 +152,11 @@ impl GlrtRule {
         let mut inv_var = [0.0; 6];
         let mut inv_rho = [0.0; 6];
         let mut drift_var = [0.0; 6];
+        let mut dof_factor = [1.0; 6];
+        let nominal = (BATCH_LEN - 1) as f64;
         for i in 0..3 {
+            dof_factor[i] = r.accel_batch_dof[i] / nominal;
+            dof_factor[i + 3] = r.gyro_batch_dof[i] / nominal;
             drift_var[i] = config.accel_tolerance_mps2.powi(2);
             drift_var[i + 3] = config.gyro_tolerance_rps.powi(2);
             reference[i] = r.accel_mean_mps2[i];
@@ -160,9 +172,16 @@ impl GlrtRule {
             reference,
             inv_var,
             inv_rho,
+            dof_factor,
             drift_var,
             mean_quantile: quantile(dof, a / 2.0),
-            scatter_quantile: quantile(dof * (n - 1.0), a / 2.0),
+            scatter_quantile: quantile(
+                dof_factor[..channels]
+                    .iter()
+                    .map(|f| k as f64 * f * nominal + k as f64 - 1.0)
+                    .sum(),
+                a / 2.0,
+            ),
             combined_quantile: quantile(dof * n, a),
             ring: {
                 ring.clear();
@@ -189,11 +208,12 @@ impl GlrtRule {
                 *m += b.n * bm / n;
             }
         }
-        let mut ss = [0.0; 6];
+        let (mut within, mut between) = ([0.0; 6], [0.0; 6]);
         for b in &self.ring[..self.filled] {
-            for (c, s) in ss.iter_mut().enumerate() {
+            for c in 0..6 {
                 let d = b.mean[c] - mean[c];
-                *s += b.ss[c] + b.n * d * d;
+                within[c] += b.ss[c];
+                between[c] += b.n * d * d;
             }
         }
         let mut t_mean = 0.0;
@@ -204,7 +224,8 @@ impl GlrtRule {
             // reference's drift since it was learned.
             let var = 1.0 / (n * self.inv_var[c] * self.inv_rho[c]) + self.drift_var[c];
             t_mean += d * d / var;
-            t_scatter += ss[c] * self.inv_var[c];
+            t_scatter +=
+                (within[c] * self.dof_factor[c] + between[c] * self.inv_rho[c]) * self.inv_var[c];
         }
         let quiet = match self.statistic {
             GlrtStatistic::Split => {
@@ -215,7 +236,7 @@ impl GlrtRule {
         Decision {
             rest: quiet && self.filled == k,
             mean_mps2: [mean[0], mean[1], mean[2]],
-            std_mps2: std::array::from_fn(|i| (ss[i] / (n - 1.0)).sqrt()),
+            std_mps2: std::array::from_fn(|i| ((within[i] + between[i]) / (n - 1.0)).sqrt()),
         }
     }
 

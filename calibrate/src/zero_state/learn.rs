@@ -1,13 +1,38 @@
-//! The static reference both detectors learn from the start-up rest: per-channel means and
-//! noise of the accelerometer (m/s^2) and gyroscope (rad/s), sensor frame, from whole batches.
+//! The static reference both detectors learn from the first rest in the data: per-channel means
+//! and noise of the accelerometer (m/s^2) and gyroscope (rad/s), sensor frame, from whole
+//! batches.
 //!
-//! The learner assumes the sensor is still while it learns and checks what it can: the mean
-//! specific force must have the magnitude of local gravity (within `max_gravity_error`), and the
-//! batch means must scatter no more than `max_correlation` times what the within-batch noise
-//! predicts (`var(batch mean) n / sigma^2`, 1 for white noise; a moving sensor's changing
-//! acceleration, turn rate and the wheel-frequency part of its vibration raise it). When a check
-//! fails, learning starts again from the next batch. A sensor that cruises steadily on a smooth
-//! floor passes both checks: no accelerometer or gyroscope test can tell that from rest.
+//! The learner slides a window of the last `duration_s` seconds of batches over the stream and
+//! takes the first window that passes its checks, so a recording that starts in motion is
+//! learned from its first rest of that length. The checks:
+//! - the mean specific force must have the magnitude of local gravity (within
+//!   `max_gravity_error`);
+//! - the batch means must be *steady*. Their scatter against what the within-batch noise
+//!   predicts, `R = var(batch mean) n / sigma^2`, is 1 for white noise. A real sensor's own
+//!   low-pass filter (the MPU-9250's DLPF, other IMUs' internal filters) correlates successive
+//!   samples and raises `R` well above 1 at rest: that alone is not motion. What motion adds is
+//!   variation that is slow against a batch, so successive batch means follow each other. A
+//!   channel passes when `R <= max_correlation` (white-like), or when the von Neumann ratio of
+//!   its batch means, `V = sum (m_i+1 - m_i)^2 / (2 sum (m_i - m)^2)` (1 for independent means,
+//!   `1 - r` for means with lag-1 correlation `r`, near 0 for a trend), is at least
+//!   `1 - 3.09 / sqrt(k) - max_batch_correlation` (`k` batches; 3.09 sigma is a 1e-3 false
+//!   alarm for independent means, `max_batch_correlation` allows noise correlated across batch
+//!   boundaries).
+//!
+//!   Before either, no batch mean may lie more than [`MAX_OUTLIER_SIGMA`] robust standard
+//!   deviations (1.4826 times the median absolute deviation, at least the white-noise scatter
+//!   `sigma / sqrt(n)`) from their median: one batch of a turn is not noise, however the rest
+//!   of the window looks.
+//!
+//! The learned `correlation` of a channel (how much more a window mean scatters than white
+//! noise of `sigma` would make it, used by the detectors' thresholds) is `R` for a white-like
+//! channel and `R (1 + 2 max(0, 1 - V))` otherwise (the lag-1 correlation of the batch means
+//! carried to the longer window). Correlated samples also make a batch's within-batch sum of
+//! squares scatter more than `chi2(n - 1)`: its effective degrees of freedom, `2 E[ss]^2 /
+//! var(ss)` over the learned batches (at most `n - 1`), go with the reference for the GLRT's
+//! scatter test. A sensor that cruises steadily on a smooth floor, or turns at
+//! a constant rate about gravity, passes every check: no accelerometer or gyroscope test can
+//! tell that from rest.
 
 use crate::window::WindowStats;
 
@@ -22,38 +47,57 @@ pub const ACCEL_SIGMA_FLOOR_MPS2: f64 =
 pub const GYRO_SIGMA_FLOOR_RPS: f64 =
     (1.0 / 131.0) * (std::f64::consts::PI / 180.0) / 3.464_101_615_137_754_6;
 
-/// Settings of the start-up learning.
+/// Highest sample rate the learning window is sized for, Hz (the MPU-9250's gyro at 8 kHz).
+pub const MAX_RATE_HZ: f64 = 8000.0;
+
+/// Standard normal quantile of the steadiness test's false alarm (1e-3, one-sided).
+const STEADY_Z: f64 = 3.09;
+
+/// Largest distance of a batch mean from the window's median, robust standard deviations.
+pub const MAX_OUTLIER_SIGMA: f64 = 6.0;
+
+/// Settings of the learning.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LearnConfig {
-    /// Length of the initial static interval, s.
+    /// Length of the static interval learned from, s.
     pub duration_s: f64,
     /// Local gravity, m/s^2 (from the calibration file).
     pub gravity_mps2: f64,
     /// Largest relative difference between the learned specific force's magnitude and local
     /// gravity.
     pub max_gravity_error: f64,
-    /// Largest ratio between the scatter of the batch means and what the within-batch noise
-    /// predicts (per channel).
+    /// Largest ratio `R` a channel passes with unconditionally (white-like noise); above it,
+    /// the channel must pass the von Neumann steadiness test.
     pub max_correlation: f64,
+    /// Lag-1 correlation of successive batch means that steady noise may have (a filter whose
+    /// correlation time is a good part of a batch: an MPU-9250 at 1 kHz with its 20 Hz DLPF
+    /// gives about 0.3).
+    pub max_batch_correlation: f64,
+    /// Largest ratio of a channel's learned per-sample noise to the sensor's measured white
+    /// noise (the calibration file's `[noise]` table, when it has one for this rate): a window
+    /// that noisy is a vehicle cruising with its vibration, not a rest.
+    pub max_noise_ratio: f64,
 }
 
 impl LearnConfig {
     /// Defaults: 5 s, 5% of gravity (a calibrated sensor is within 0.5%), correlation 3 (white
-    /// noise gives 1 +- 0.1 over 250 batches; low-pass filtered sensor noise a little more).
+    /// noise gives 1 +- 0.1 over 250 batches), batch-mean correlation 0.35, noise ratio 1.5.
     pub fn new(gravity_mps2: f64) -> Self {
         Self {
             duration_s: 5.0,
             gravity_mps2,
             max_gravity_error: 0.05,
             max_correlation: 3.0,
+            max_batch_correlation: 0.35,
+            max_noise_ratio: 1.5,
         }
     }
 }
 
-/// What the start-up rest taught: the references and noise of the six channels.
+/// What the rest taught: the references and noise of the six channels.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StaticReference {
-    /// Mean specific force, m/s^2, sensor frame (gravity's reaction at the start-up attitude).
+    /// Mean specific force, m/s^2, sensor frame (gravity's reaction at the rest's attitude).
     pub accel_mean_mps2: [f64; 3],
     /// Mean angular rate, rad/s (the gyroscope bias left after calibration).
     pub gyro_mean_rps: [f64; 3],
@@ -61,11 +105,16 @@ pub struct StaticReference {
     pub accel_sigma_mps2: [f64; 3],
     /// Per-sample noise, rad/s.
     pub gyro_sigma_rps: [f64; 3],
-    /// `var(batch mean) n / sigma^2` per accelerometer axis, at least 1: how much more a mean
-    /// scatters than white noise of `sigma` would make it (sample correlation).
+    /// How much more a window mean scatters than white noise of `sigma` would make it, per
+    /// accelerometer axis, at least 1 (see the module documentation).
     pub accel_correlation: [f64; 3],
     /// The same for the gyroscope axes.
     pub gyro_correlation: [f64; 3],
+    /// Effective degrees of freedom of one batch's within-batch sum of squares per
+    /// accelerometer axis (`n - 1` for white noise, fewer for correlated samples).
+    pub accel_batch_dof: [f64; 3],
+    /// The same for the gyroscope axes.
+    pub gyro_batch_dof: [f64; 3],
     /// Mean of the batch means' magnitudes, m/s^2.
     pub magnitude_mps2: f64,
     /// Standard deviation of the batch means' magnitudes, m/s^2.
@@ -74,9 +123,11 @@ pub struct StaticReference {
     pub batches: usize,
     /// Length of the learned interval, s.
     pub duration_s: f64,
+    /// Time of the learned interval's first sample, ns.
+    pub t_start_ns: u64,
 }
 
-/// Why a learning attempt was discarded.
+/// Why a learning window was refused.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum LearnRejection {
     /// The mean specific force's magnitude is not local gravity (m/s^2).
@@ -84,145 +135,247 @@ pub enum LearnRejection {
         /// Learned magnitude, m/s^2.
         magnitude_mps2: f64,
     },
-    /// Batch means scatter more than noise explains on channel `channel` (0-2 accelerometer
-    /// x, y, z; 3-5 gyroscope x, y, z).
+    /// The batch means of channel `channel` (0-2 accelerometer x, y, z; 3-5 gyroscope x, y,
+    /// z) scatter more than white noise and follow each other as motion does.
     Unsteady {
         /// The channel.
         channel: usize,
-        /// Its ratio `var(batch mean) n / sigma^2`.
+        /// Its ratio `R = var(batch mean) n / sigma^2`.
         ratio: f64,
+        /// Its batch means' von Neumann ratio `V`.
+        von_neumann: f64,
+        /// The smallest `V` steady noise passes with.
+        limit: f64,
+    },
+    /// A batch mean of channel `channel` lies far from the others (a jolt, a short turn).
+    Outlier {
+        /// The channel.
+        channel: usize,
+        /// Its distance from the median, robust standard deviations.
+        sigmas: f64,
+    },
+    /// Channel `channel` is noisier than the sensor's measured noise allows for a rest.
+    TooNoisy {
+        /// The channel.
+        channel: usize,
+        /// Its learned noise over the measured noise.
+        ratio: f64,
+        /// The largest ratio allowed.
+        limit: f64,
     },
     /// A gap in the data interrupted learning.
     Interrupted,
 }
 
-/// Running sums of one channel over the learning interval.
-#[derive(Debug, Clone, Copy, Default)]
-struct ChannelSums {
-    /// Welford mean and M2 of the batch means.
-    mean_of_means: f64,
-    m2_of_means: f64,
-    /// Sum of within-batch squared deviations and of their degrees of freedom.
-    within_ss: f64,
-    within_dof: f64,
+impl std::fmt::Display for LearnRejection {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        const CHANNELS: [&str; 6] = [
+            "accel x", "accel y", "accel z", "gyro x", "gyro y", "gyro z",
+        ];
+        match self {
+            Self::Gravity { magnitude_mps2 } => write!(
+                f,
+                "mean specific force {magnitude_mps2:.4} m/s^2 is not local gravity"
+            ),
+            Self::Unsteady {
+                channel,
+                ratio,
+                von_neumann,
+                limit,
+            } => write!(
+                f,
+                "{} not steady: its batch means scatter {ratio:.1}x what white noise gives and \
+                 follow each other (von Neumann ratio {von_neumann:.2}, steady noise >= \
+                 {limit:.2})",
+                CHANNELS[*channel]
+            ),
+            Self::Outlier { channel, sigmas } => write!(
+                f,
+                "{} not steady: a batch mean lies {sigmas:.1} robust standard deviations from \
+                 the others (at most {MAX_OUTLIER_SIGMA})",
+                CHANNELS[*channel]
+            ),
+            Self::TooNoisy {
+                channel,
+                ratio,
+                limit,
+            } => write!(
+                f,
+                "{} is {ratio:.2}x as noisy as the sensor's measured noise (a rest is at most \
+                 {limit}x): vibration of a moving vehicle",
+                CHANNELS[*channel]
+            ),
+            Self::Interrupted => write!(f, "a gap in the data interrupted learning"),
+        }
+    }
 }
 
-/// Accumulates whole batches of the start-up rest into a [`StaticReference`].
+/// One batch as the learner keeps it.
+#[derive(Debug, Clone, Copy, Default)]
+struct Batch {
+    t_start_ns: u64,
+    t_end_ns: u64,
+    n: usize,
+    mean: [f64; 6],
+    /// Within-batch sums of squared deviations.
+    ss: [f64; 6],
+}
+
+/// Slides a window of whole batches over the stream and learns a [`StaticReference`] from the
+/// first one that passes the checks (see the module documentation). Its ring is allocated once,
+/// in [`StaticLearner::new`], for [`MAX_RATE_HZ`].
 #[derive(Debug, Clone)]
 pub struct StaticLearner {
     config: LearnConfig,
-    channels: [ChannelSums; 6],
-    magnitude_mean: f64,
-    magnitude_m2: f64,
-    batches: usize,
-    batch_len: usize,
-    t_start_ns: u64,
-    restarts: usize,
+    /// The sensor's measured noise, the ceiling's reference.
+    noise: Option<super::NoiseFloor>,
+    ring: Vec<Batch>,
+    /// Scratch for the medians, as long as the ring.
+    scratch: Vec<f64>,
+    head: usize,
+    len: usize,
+    refused: usize,
     last_rejection: Option<LearnRejection>,
 }
 
 impl StaticLearner {
-    /// A learner with `config`.
-    pub fn new(config: LearnConfig) -> Self {
+    /// A learner with `config`; with the sensor's measured `noise`, windows noisier than
+    /// `config.max_noise_ratio` times it are refused.
+    pub fn new(config: LearnConfig, noise: Option<super::NoiseFloor>) -> Self {
+        let capacity = (config.duration_s * MAX_RATE_HZ / super::BATCH_LEN as f64).ceil() as usize;
         Self {
             config,
-            channels: [ChannelSums::default(); 6],
-            magnitude_mean: 0.0,
-            magnitude_m2: 0.0,
-            batches: 0,
-            batch_len: 0,
-            t_start_ns: 0,
-            restarts: 0,
+            noise,
+            ring: vec![Batch::default(); capacity.max(2) + 1],
+            scratch: vec![0.0; capacity.max(2) + 1],
+            head: 0,
+            len: 0,
+            refused: 0,
             last_rejection: None,
         }
     }
 
-    /// Discards what was accumulated; `why` is recorded when an attempt was under way.
-    pub fn restart(&mut self, why: LearnRejection) {
-        if self.batches > 0 {
-            self.restarts += 1;
-            self.last_rejection = Some(why);
+    /// Discards the window (a gap in the data, the end of a stream). Recorded as the reason
+    /// only when batches were held and no window was refused for a reason of its own.
+    pub fn restart(&mut self) {
+        if self.len > 0 && self.last_rejection.is_none() {
+            self.last_rejection = Some(LearnRejection::Interrupted);
         }
-        let config = self.config;
-        let (restarts, last) = (self.restarts, self.last_rejection);
-        *self = Self::new(config);
-        self.restarts = restarts;
-        self.last_rejection = last;
+        self.len = 0;
     }
 
-    /// How many learning attempts were discarded, and why the last one was.
+    /// Forgets everything (a new sensor session), keeping the ring's storage.
+    pub fn clear(&mut self) {
+        self.len = 0;
+        self.refused = 0;
+        self.last_rejection = None;
+    }
+
+    /// How many learning windows were refused, and why the last one was.
     pub fn rejections(&self) -> (usize, Option<LearnRejection>) {
-        (self.restarts, self.last_rejection)
+        (self.refused, self.last_rejection)
+    }
+
+    /// The `i`-th batch of the window, oldest first.
+    fn batch(&self, i: usize) -> &Batch {
+        let cap = self.ring.len();
+        &self.ring[(self.head + cap - self.len + i) % cap]
     }
 
     /// Adds one batch (accelerometer in m/s^2, gyroscope in rad/s, same samples); returns the
-    /// reference once the batches cover the learning interval and pass the checks (a failed
-    /// check restarts learning).
+    /// reference once the window covers the learning interval and passes the checks.
     pub fn push(&mut self, accel: &WindowStats, gyro: &WindowStats) -> Option<StaticReference> {
-        if self.batches == 0 {
-            self.t_start_ns = accel.t_start_ns;
-            self.batch_len = accel.n;
-        }
-        self.batches += 1;
-        let k = self.batches as f64;
         let n = accel.n as f64;
-        for (c, sums) in self.channels.iter_mut().enumerate() {
-            let (mean, std) = if c < 3 {
-                (accel.mean[c], accel.std[c])
-            } else {
-                (gyro.mean[c - 3], gyro.std[c - 3])
-            };
-            let delta = mean - sums.mean_of_means;
-            sums.mean_of_means += delta / k;
-            sums.m2_of_means += delta * (mean - sums.mean_of_means);
-            sums.within_ss += std * std * (n - 1.0);
-            sums.within_dof += n - 1.0;
+        let mut b = Batch {
+            t_start_ns: accel.t_start_ns,
+            t_end_ns: accel.t_end_ns,
+            n: accel.n,
+            ..Batch::default()
+        };
+        for c in 0..3 {
+            b.mean[c] = accel.mean[c];
+            b.mean[c + 3] = gyro.mean[c];
+            b.ss[c] = accel.std[c] * accel.std[c] * (n - 1.0);
+            b.ss[c + 3] = gyro.std[c] * gyro.std[c] * (n - 1.0);
         }
-        let magnitude = norm(&accel.mean);
-        let delta = magnitude - self.magnitude_mean;
-        self.magnitude_mean += delta / k;
-        self.magnitude_m2 += delta * (magnitude - self.magnitude_mean);
-
-        // The interval covered: first to last sample plus one sample period.
-        let period_ns = (accel.t_end_ns - accel.t_start_ns) as f64 / (n - 1.0).max(1.0);
-        let covered_s = ((accel.t_end_ns - self.t_start_ns) as f64 + period_ns) * 1e-9;
-        if covered_s < self.config.duration_s || self.batches < 2 {
+        let cap = self.ring.len();
+        self.ring[self.head] = b;
+        self.head = (self.head + 1) % cap;
+        self.len = (self.len + 1).min(cap);
+        // Keep the shortest suffix of batches that covers the learning interval.
+        while self.len > 2 && self.covered_s(1) >= self.config.duration_s {
+            self.len -= 1;
+        }
+        if self.len < 2 || self.covered_s(0) < self.config.duration_s {
             return None;
         }
-        match self.finish(covered_s) {
+        match self.finish() {
             Ok(reference) => Some(reference),
             Err(why) => {
-                self.restart(why);
+                self.refused += 1;
+                self.last_rejection = Some(why);
                 None
             }
         }
     }
 
-    fn finish(&self, covered_s: f64) -> Result<StaticReference, LearnRejection> {
+    /// The interval the window covers without its `skip` oldest batches: first to last sample
+    /// plus one sample period, s.
+    fn covered_s(&self, skip: usize) -> f64 {
+        let first = self.batch(skip);
+        let last = self.batch(self.len - 1);
+        let period_ns = (last.t_end_ns - last.t_start_ns) as f64 / (last.n as f64 - 1.0).max(1.0);
+        ((last.t_end_ns - first.t_start_ns) as f64 + period_ns) * 1e-9
+    }
+
+    /// The largest distance of channel `c`'s batch means from their median, in robust
+    /// standard deviations (1.4826 MAD, at least `white_scatter`).
+    fn outlier_sigmas(&mut self, c: usize, white_scatter: f64) -> f64 {
+        let k = self.len;
+        for i in 0..k {
+            self.scratch[i] = self.batch(i).mean[c];
+        }
+        let values = &mut self.scratch[..k];
+        let median = *values.select_nth_unstable_by(k / 2, f64::total_cmp).1;
+        for v in values.iter_mut() {
+            *v = (*v - median).abs();
+        }
+        let largest = values.iter().copied().fold(0.0, f64::max);
+        let mad = *values.select_nth_unstable_by(k / 2, f64::total_cmp).1;
+        largest / (1.4826 * mad).max(white_scatter)
+    }
+
+    fn finish(&mut self) -> Result<StaticReference, LearnRejection> {
+        let k = self.len;
+        let magnitudes = || {
+            (0..k).map(|i| {
+                let m = &self.batch(i).mean;
+                norm(&[m[0], m[1], m[2]])
+            })
+        };
+        let magnitude = magnitudes().sum::<f64>() / k as f64;
         let g = self.config.gravity_mps2;
-        if (self.magnitude_mean - g).abs() > self.config.max_gravity_error * g {
+        if (magnitude - g).abs() > self.config.max_gravity_error * g {
             return Err(LearnRejection::Gravity {
-                magnitude_mps2: self.magnitude_mean,
+                magnitude_mps2: magnitude,
             });
         }
-        let k = self.batches as f64;
-        let n = self.batch_len as f64;
-        let mut mean = [0.0; 6];
-        let mut sigma = [0.0; 6];
-        let mut correlation = [1.0; 6];
-        for (c, sums) in self.channels.iter().enumerate() {
-            let floor = if c < 3 {
-                ACCEL_SIGMA_FLOOR_MPS2
-            } else {
-                GYRO_SIGMA_FLOOR_RPS
-            };
-            mean[c] = sums.mean_of_means;
-            sigma[c] = (sums.within_ss / sums.within_dof).sqrt().max(floor);
-            let ratio = sums.m2_of_means / (k - 1.0) * n / (sigma[c] * sigma[c]);
-            if ratio > self.config.max_correlation {
-                return Err(LearnRejection::Unsteady { channel: c, ratio });
+        let magnitude_var =
+            magnitudes().map(|m| (m - magnitude).powi(2)).sum::<f64>() / (k as f64 - 1.0);
+        let n = self.batch(k - 1).n as f64;
+        let sigma: [f64; 6] = std::array::from_fn(|c| self.sigma(c));
+        self.check_noise(&sigma, k as f64 * n / self.covered_s(0))?;
+        for (c, s) in sigma.iter().enumerate() {
+            let sigmas = self.outlier_sigmas(c, s / n.sqrt());
+            if sigmas > MAX_OUTLIER_SIGMA {
+                return Err(LearnRejection::Outlier { channel: c, sigmas });
             }
-            correlation[c] = ratio.max(1.0);
+        }
+        let mut mean = [0.0; 6];
+        let mut correlation = [1.0; 6];
+        let mut batch_dof = [n - 1.0; 6];
+        for c in 0..6 {
+            (mean[c], correlation[c], batch_dof[c]) = self.channel(c, sigma[c])?;
         }
         let part = |a: &[f64; 6], off: usize| [a[off], a[off + 1], a[off + 2]];
         Ok(StaticReference {
@@ -232,11 +385,90 @@ impl StaticLearner {
             gyro_sigma_rps: part(&sigma, 3),
             accel_correlation: part(&correlation, 0),
             gyro_correlation: part(&correlation, 3),
-            magnitude_mps2: self.magnitude_mean,
-            magnitude_std_mps2: (self.magnitude_m2 / (k - 1.0)).sqrt(),
-            batches: self.batches,
-            duration_s: covered_s,
+            accel_batch_dof: part(&batch_dof, 0),
+            gyro_batch_dof: part(&batch_dof, 3),
+            magnitude_mps2: magnitude,
+            magnitude_std_mps2: magnitude_var.sqrt(),
+            batches: k,
+            duration_s: self.covered_s(0),
+            t_start_ns: self.batch(0).t_start_ns,
         })
+    }
+
+    /// Refuses learned noise `sigma` above the ceiling, when the measured noise is known for a
+    /// stream at `rate_hz` (within 10%, as [`super::NoiseFloor::apply`]).
+    fn check_noise(&self, sigma: &[f64; 6], rate_hz: f64) -> Result<(), LearnRejection> {
+        let Some(noise) = &self.noise else {
+            return Ok(());
+        };
+        if (rate_hz / noise.sample_rate_hz - 1.0).abs() > 0.1 {
+            return Ok(());
+        }
+        let measured = noise.accel_sigma_mps2.iter().chain(&noise.gyro_sigma_rps);
+        let limit = self.config.max_noise_ratio;
+        for (c, (s, m)) in sigma.iter().zip(measured).enumerate() {
+            if let Some(m) = m
+                && *s > limit * m
+            {
+                return Err(LearnRejection::TooNoisy {
+                    channel: c,
+                    ratio: s / m,
+                    limit,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Channel `c`'s per-sample noise: the pooled within-batch standard deviation, at least
+    /// the quantization floor.
+    fn sigma(&self, c: usize) -> f64 {
+        let floor = if c < 3 {
+            ACCEL_SIGMA_FLOOR_MPS2
+        } else {
+            GYRO_SIGMA_FLOOR_RPS
+        };
+        let (ss, dof) = (0..self.len)
+            .map(|i| self.batch(i))
+            .fold((0.0, 0.0), |(s, d), b| (s + b.ss[c], d + b.n as f64 - 1.0));
+        (ss / dof).sqrt().max(floor)
+    }
+
+    /// Channel `c`'s mean, correlation and batch degrees of freedom, or why it is not steady
+    /// (see the module documentation); `sigma` is its per-sample noise.
+    fn channel(&self, c: usize, sigma: f64) -> Result<(f64, f64, f64), LearnRejection> {
+        let k = self.len;
+        let kf = k as f64;
+        let batches = || (0..k).map(|i| self.batch(i));
+        let n = self.batch(k - 1).n as f64;
+        let mean_ss = batches().map(|b| b.ss[c]).sum::<f64>() / kf;
+        let var_ss = batches().map(|b| (b.ss[c] - mean_ss).powi(2)).sum::<f64>() / (kf - 1.0);
+        let batch_dof = if var_ss > 0.0 {
+            (2.0 * mean_ss * mean_ss / var_ss).clamp(1.0, n - 1.0)
+        } else {
+            n - 1.0
+        };
+        let mean = batches().map(|b| b.mean[c]).sum::<f64>() / kf;
+        let scatter = batches().map(|b| (b.mean[c] - mean).powi(2)).sum::<f64>();
+        let ratio = scatter / (kf - 1.0) * n / (sigma * sigma);
+        if ratio <= self.config.max_correlation {
+            return Ok((mean, ratio.max(1.0), batch_dof));
+        }
+        let successive = (1..k)
+            .map(|i| (self.batch(i).mean[c] - self.batch(i - 1).mean[c]).powi(2))
+            .sum::<f64>();
+        let von_neumann = successive / (2.0 * scatter);
+        let limit = 1.0 - STEADY_Z / kf.sqrt() - self.config.max_batch_correlation;
+        if von_neumann < limit {
+            return Err(LearnRejection::Unsteady {
+                channel: c,
+                ratio,
+                von_neumann,
+                limit,
+            });
+        }
+        let correlation = ratio * (1.0 + 2.0 * (1.0 - von_neumann).max(0.0));
+        Ok((mean, correlation, batch_dof))
     }
 }
 

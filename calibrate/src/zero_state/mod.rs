@@ -4,8 +4,9 @@
 //!
 //! Inputs are calibrated specific force in m/s^2 and angular rate in rad/s, sensor frame, with
 //! strictly increasing sample times in ns. Both detectors:
-//! 1. learn a [`StaticReference`] from the start-up rest ([`learn`]); until then every verdict
-//!    says not ready and not at rest;
+//! 1. learn a [`StaticReference`] from the first rest in the data ([`learn`]: a sliding window
+//!    of `learn.duration_s`, noise correlated by the sensor's own filter accepted); until then
+//!    every verdict says not ready and not at rest;
 //! 2. then decide each batch at its last sample, so a sample's verdict is known at most
 //!    `BATCH_LEN - 1` samples after it (the calibration stage's latency);
 //! 3. keep their references current from the batches they call rest (running means with a
@@ -29,12 +30,14 @@
 
 pub mod glrt;
 pub mod learn;
+pub mod shoe;
 pub mod yu;
 
 use crate::window::{WindowAccumulator, WindowStats};
 pub use glrt::{GlrtConfig, GlrtStatistic};
 use learn::StaticLearner;
 pub use learn::{LearnConfig, LearnRejection, StaticReference};
+pub use shoe::ShoeConfig;
 pub use yu::YuConfig;
 
 /// Samples per batch (Yu et al.'s 20).
@@ -50,6 +53,8 @@ pub enum DetectorKind {
     Glrt,
     /// The GLRT on the accelerometer alone, against the gravity vector learned at rest.
     GlrtAccel,
+    /// SHOE (Skog et al.): stance of a foot-mounted sensor, against fixed scales, no learning.
+    Shoe,
 }
 
 impl DetectorKind {
@@ -59,12 +64,13 @@ impl DetectorKind {
             Self::Yu => "yu",
             Self::Glrt => "glrt",
             Self::GlrtAccel => "glrt-accel",
+            Self::Shoe => "shoe",
         }
     }
 
     /// Whether the detector needs gyroscope samples.
     pub fn needs_gyro(self) -> bool {
-        matches!(self, Self::Glrt)
+        matches!(self, Self::Glrt | Self::Shoe)
     }
 }
 
@@ -156,6 +162,8 @@ pub struct DetectorConfig {
     pub yu: YuConfig,
     /// The GLRT's settings.
     pub glrt: GlrtConfig,
+    /// SHOE's settings.
+    pub shoe: ShoeConfig,
     /// The sensor's noise from the calibration file, a floor for the learned levels.
     pub noise: Option<NoiseFloor>,
 }
@@ -177,6 +185,7 @@ impl DetectorConfig {
             memory_s: 20.0,
             yu: YuConfig::default(),
             glrt: GlrtConfig::default(),
+            shoe: ShoeConfig::default(),
             noise: None,
         }
     }
@@ -204,9 +213,13 @@ pub struct Verdict {
 
 /// The learned decision rule of one detector kind.
 #[derive(Debug, Clone)]
+// One rule per detector, set once at learning and never moved on the hot path; boxing the
+// large variant would allocate when the detector learns.
+#[allow(clippy::large_enum_variant)]
 enum Rule {
     Yu(yu::YuRule),
     Glrt(glrt::GlrtRule),
+    Shoe(shoe::ShoeRule),
 }
 
 /// A zero-state detector (either kind): batches, start-up learning, decision rule.
@@ -240,8 +253,8 @@ impl ZeroStateDetector {
     /// A detector with `config`, not yet learned.
     ///
     /// # Panics
-    /// If the false-alarm rate is not in (0, 1), the GLRT window is shorter than one batch or
-    /// the memory is not positive.
+    /// If the false-alarm rate is not in (0, 1), the GLRT window is shorter than one batch, the
+    /// SHOE window is not 2..=[`BATCH_LEN`] samples or the memory is not positive.
     pub fn new(config: DetectorConfig) -> Self {
         assert!(
             config.memory_s > 0.0,
@@ -250,11 +263,19 @@ impl ZeroStateDetector {
         );
         let alpha = match config.kind {
             DetectorKind::Yu => config.yu.false_alarm,
-            DetectorKind::Glrt | DetectorKind::GlrtAccel => config.glrt.false_alarm,
+            DetectorKind::Glrt | DetectorKind::GlrtAccel | DetectorKind::Shoe => {
+                config.glrt.false_alarm
+            }
         };
         assert!(
             alpha > 0.0 && alpha < 1.0,
             "false-alarm rate must be in (0, 1), got {alpha}"
+        );
+        let shoe = config.kind == DetectorKind::Shoe;
+        let window = if shoe { config.shoe.window } else { BATCH_LEN };
+        assert!(
+            (2..=BATCH_LEN).contains(&window),
+            "the SHOE window must be 2..={BATCH_LEN} samples, got {window}"
         );
         assert!(
             config.glrt.window_batches >= 1,
@@ -262,10 +283,11 @@ impl ZeroStateDetector {
         );
         Self {
             config,
-            accel: WindowAccumulator::new(BATCH_LEN),
-            gyro: WindowAccumulator::new(BATCH_LEN),
-            learner: StaticLearner::new(config.learn),
-            rule: None,
+            accel: WindowAccumulator::new(window),
+            gyro: WindowAccumulator::new(window),
+            learner: StaticLearner::new(config.learn, config.noise),
+            rule: shoe
+                .then(|| Rule::Shoe(shoe::ShoeRule::new(config.shoe, config.learn.gravity_mps2))),
             rest_s: 0.0,
             ring: Vec::with_capacity(config.glrt.window_batches),
         }
@@ -292,6 +314,7 @@ impl ZeroStateDetector {
         match self.rule.as_ref()? {
             Rule::Yu(r) => Some((r.accel_mean_mps2(), r.gyro_mean_rps())),
             Rule::Glrt(r) => Some((r.accel_mean_mps2(), r.gyro_mean_rps())),
+            Rule::Shoe(_) => None,
         }
     }
 
@@ -325,6 +348,7 @@ impl ZeroStateDetector {
                             kind == DetectorKind::GlrtAccel,
                         ))
                     }
+                    DetectorKind::Shoe => unreachable!("SHOE is ready from the start"),
                 });
                 verdict.ready = true;
                 verdict.learned = Some(reference);
@@ -335,6 +359,7 @@ impl ZeroStateDetector {
         let decision = match rule {
             Rule::Yu(r) => r.decide(&accel),
             Rule::Glrt(r) => r.decide(&accel, &gyro),
+            Rule::Shoe(r) => r.decide(&accel, &gyro),
         };
         verdict.rest = decision.rest;
         verdict.decided_mean_mps2 = decision.mean_mps2;
@@ -346,6 +371,7 @@ impl ZeroStateDetector {
             match rule {
                 Rule::Yu(r) => r.update(&accel, &gyro, gain),
                 Rule::Glrt(r) => r.update(&accel, &gyro, gain),
+                Rule::Shoe(_) => {}
             }
         }
         Some(verdict)
@@ -358,8 +384,9 @@ impl ZeroStateDetector {
         self.gyro.reset();
         match self.rule.as_mut() {
             Some(Rule::Glrt(r)) => r.clear_window(),
+            Some(Rule::Shoe(r)) => r.clear(),
             Some(Rule::Yu(_)) => {}
-            None => self.learner.restart(LearnRejection::Interrupted),
+            None => self.learner.restart(),
         }
     }
 
@@ -368,10 +395,15 @@ impl ZeroStateDetector {
     pub fn reset(&mut self) {
         self.accel.reset();
         self.gyro.reset();
-        self.learner = StaticLearner::new(self.config.learn);
+        self.learner.clear();
         self.rest_s = 0.0;
-        if let Some(Rule::Glrt(rule)) = self.rule.take() {
-            self.ring = rule.into_ring();
+        match self.rule.take() {
+            Some(Rule::Glrt(rule)) => self.ring = rule.into_ring(),
+            Some(Rule::Shoe(mut rule)) => {
+                rule.clear();
+                self.rule = Some(Rule::Shoe(rule));
+            }
+            Some(Rule::Yu(_)) | None => {}
         }
     }
 }

@@ -69,6 +69,8 @@ pub struct Case {
     pub mounting: nalgebra::UnitQuaternion<f64>,
     /// Longest motion between two rests, s (see `DriveParams::max_motion_s`).
     pub max_motion_s: f64,
+    /// The part's digital low-pass filters (`None`: white samples).
+    pub dlpf: Option<mems_sim::dlpf::DlpfConfig>,
 }
 
 impl Case {
@@ -92,6 +94,7 @@ impl Case {
             peak_yaw_rate_dps: 45.0,
             mounting: nalgebra::UnitQuaternion::identity(),
             max_motion_s: DriveParams::new(600.0).max_motion_s,
+            dlpf: None,
         }
     }
 
@@ -291,8 +294,13 @@ impl Simulation {
             drive: case.drive(seed),
             drive_start_s,
         };
-        let sim = SimSensor::new(scenario, &case.model(), &case.sim_vibration(), seed)
+        let mut sim = SimSensor::new(scenario, &case.model(), &case.sim_vibration(), seed)
             .expect("valid sensor model");
+        sim.set_dlpf(case.dlpf.map(|config| mems_sim::DlpfGrid {
+            config,
+            start_s: 0.0,
+            clock_scale: 1.0,
+        }));
         let dc_free = case.vibration_dc_free.then(|| DcFreeVibration {
             vibration: Vibration::new(&VibrationModel::moderate(case.vibration), seed)
                 .expect("valid vibration model"),

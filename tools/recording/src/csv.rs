@@ -30,7 +30,7 @@ use ipc_types::{RawImuSample, raw_flags};
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::text::{self, Row, Rows, SampleBuilder};
-use crate::{Format, Recording, Truth};
+use crate::{Format, LogPolicy, Recording, Truth};
 
 /// Names of the ground-truth columns, in the order the writer puts them.
 pub const TRUTH_COLUMNS: [&str; 17] = [
@@ -139,11 +139,12 @@ pub(crate) fn read_body(
     rows: &mut Rows,
     header_line: u64,
     header: &::csv::StringRecord,
+    policy: LogPolicy,
 ) -> Result<Recording> {
     let path = rows.path().to_path_buf();
     let layout = Layout::parse(&path, header_line, header)?;
     let columns: Vec<&str> = layout.names.iter().map(String::as_str).collect();
-    let mut samples = SampleBuilder::new();
+    let mut samples = SampleBuilder::new(policy);
     let mut truth = layout.truth.map(|_| Vec::new());
     while let Some((line, row)) = rows.next_row()? {
         text::check_width(&path, line, row, &columns)?;
@@ -203,6 +204,9 @@ pub(crate) fn read_body(
             flags,
             lost_before,
         };
+        if !samples.push(&path, line, time_column, parsed)? {
+            continue;
+        }
         if let (Some(idx), Some(truth)) = (layout.truth, truth.as_mut()) {
             let v = |k: usize| number(idx[k]);
             let (rest_column, rest_text) = cell(idx[16]);
@@ -227,14 +231,15 @@ pub(crate) fn read_body(
                 at_rest,
             });
         }
-        samples.push(&path, line, time_column, parsed)?;
     }
+    let (samples, repairs) = samples.finish(&path, truth.as_mut())?;
     Ok(Recording {
         source: path,
         format: Format::CanonicalCsv,
-        samples: samples.finish(),
+        samples,
         truth,
         truncation: None,
+        repairs,
     })
 }
 
@@ -258,7 +263,7 @@ pub fn read_raw(path: impl AsRef<Path>) -> Result<Recording> {
         return Err(Error::line(path, line, None, kind));
     }
     let header = header.clone();
-    read_body(&mut rows, line, &header)
+    read_body(&mut rows, line, &header, LogPolicy::Strict)
 }
 
 /// Writes samples (and optionally their ground truth, one per sample) as canonical CSV.

@@ -2,7 +2,8 @@
 //! files. Every reader reports malformed input with the file, line and field.
 //!
 //! - [`load_raw`] opens any raw time series (canonical CSV, a thesis time-series CSV, or MCAP)
-//!   by sniffing its first bytes and header.
+//!   by sniffing its first bytes and header; [`load_raw_with`] can repair the defects of real
+//!   logs in the text formats ([`LogPolicy`]).
 //! - [`csv`]: the canonical CSV ([`csv::read_raw`], [`csv::write_raw`]).
 //! - [`mcap`]: MCAP recordings ([`mcap::Writer`], [`mcap::Reader`], [`mcap::read_all`]).
 //! - [`thesis`]: the thesis's six-position means ([`load_six_position`]) and fitted parameters.
@@ -54,6 +55,62 @@ pub struct Recording {
     pub truth: Option<Vec<Truth>>,
     /// Set when an MCAP file ends early (a killed recorder): what was read up to the cut.
     pub truncation: Option<mcap::Truncation>,
+    /// What [`LogPolicy::Repair`] changed (all zero when reading strictly).
+    pub repairs: LogRepairs,
+}
+
+/// How the text readers treat the defects of real logs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LogPolicy {
+    /// Refuse a row whose time does not increase, naming its line.
+    #[default]
+    Strict,
+    /// Repair what a logger commonly does to a sensor's stream:
+    /// - a row whose values (accelerometer, gyroscope, temperature) equal the previous row's
+    ///   exactly is a repeat (a logger that polls faster than the sensor) and is dropped: real
+    ///   noise of a few counts makes two genuine successive samples equal on every channel
+    ///   very unlikely (an accelerometer-only log of a quiet, coarsely quantised sensor is the
+    ///   exception, and loses such samples);
+    /// - a new sample whose time is equal to or before the previous one's (host timestamps
+    ///   quantised or jittered) gets the previous time plus the nominal period, the median of
+    ///   the recording's positive time steps;
+    /// - a step back of more than [`MAX_TIME_REPAIR_S`] is not jitter and is refused, naming its
+    ///   line.
+    Repair,
+}
+
+/// Largest step back in time [`LogPolicy::Repair`] rebuilds, s.
+pub const MAX_TIME_REPAIR_S: f64 = 1.0;
+
+/// What [`LogPolicy::Repair`] changed in a recording.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LogRepairs {
+    /// Rows dropped as exact repeats of the previous one.
+    pub repeats_dropped: u64,
+    /// Samples whose time was rebuilt from the nominal period.
+    pub times_rebuilt: u64,
+    /// The nominal period used, ns (0 when nothing was rebuilt).
+    pub period_ns: u64,
+}
+
+impl LogRepairs {
+    /// Whether anything was changed.
+    pub fn any(&self) -> bool {
+        self.repeats_dropped > 0 || self.times_rebuilt > 0
+    }
+}
+
+impl std::fmt::Display for LogRepairs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "dropped {} rows repeating the previous row's values; rebuilt {} sample times that \
+             did not increase, from the nominal period {:.3} ms",
+            self.repeats_dropped,
+            self.times_rebuilt,
+            self.period_ns as f64 * 1e-6
+        )
+    }
 }
 
 /// Opens a raw time-series recording of any supported kind: MCAP (by its magic bytes), the
@@ -61,6 +118,12 @@ pub struct Recording {
 /// line, or a title line and then its header). An MCAP file whose raw stream restarts (several
 /// acquisition sessions) is refused naming the restart; [`mcap::read_all`] reads every session.
 pub fn load_raw(path: impl AsRef<Path>) -> Result<Recording> {
+    load_raw_with(path, LogPolicy::Strict)
+}
+
+/// [`load_raw`] with `policy` for the text formats (MCAP recordings are our own recorder's,
+/// strictly ordered, and always read strictly).
+pub fn load_raw_with(path: impl AsRef<Path>, policy: LogPolicy) -> Result<Recording> {
     let path = path.as_ref();
     if mcap::has_magic(path)? {
         return mcap::read_all(path)?.into_recording(path);
@@ -72,15 +135,15 @@ pub fn load_raw(path: impl AsRef<Path>) -> Result<Recording> {
     };
     if csv::is_canonical_header(first) {
         let header = first.clone();
-        return csv::read_body(&mut rows, line, &header);
+        return csv::read_body(&mut rows, line, &header, policy);
     }
     if thesis::is_series_header(first) {
-        return thesis::read_series_body(&mut rows);
+        return thesis::read_series_body(&mut rows, policy);
     }
     let first: Vec<String> = first.iter().map(str::to_owned).collect();
     match rows.next_row()? {
         Some((_, second)) if thesis::is_series_header(second) => {
-            thesis::read_series_body(&mut rows)
+            thesis::read_series_body(&mut rows, policy)
         }
         _ => {
             let kind = ErrorKind::UnknownFormat(format!(

@@ -1022,6 +1022,7 @@ impl Contents {
             samples: self.raw,
             truth: (!self.truth.is_empty()).then_some(self.truth),
             truncation: self.truncation,
+            repairs: crate::LogRepairs::default(),
         })
     }
 }

@@ -11,6 +11,7 @@ use ipc_types::units::{self, AccelRange, GyroRange};
 use ipc_types::{RawImuSample, Stamps, raw_flags};
 
 use crate::error::{Error, ErrorKind, Result};
+use crate::{LogPolicy, LogRepairs, Truth};
 
 /// Reads a CSV file row by row. Lines starting with `#` are comments and blank lines are
 /// skipped; fields are trimmed; rows may have any number of fields (the callers check widths
@@ -176,9 +177,12 @@ pub(crate) fn parse_seconds(path: &Path, line: u64, column: &str, text: &str) ->
 }
 
 /// Builds the raw samples of a recording from rows in sensor units, numbering them and
-/// enforcing strictly increasing time.
+/// enforcing strictly increasing time, or repairing a real log's repeats and times
+/// ([`LogPolicy`]).
 pub(crate) struct SampleBuilder {
     samples: Vec<RawImuSample>,
+    policy: LogPolicy,
+    repeats_dropped: u64,
 }
 
 /// One row of a raw recording in sensor units, before counts are derived.
@@ -198,14 +202,17 @@ pub(crate) struct Row {
 }
 
 impl SampleBuilder {
-    /// An empty recording.
-    pub(crate) fn new() -> Self {
+    /// An empty recording read with `policy`.
+    pub(crate) fn new(policy: LogPolicy) -> Self {
         Self {
             samples: Vec::new(),
+            policy,
+            repeats_dropped: 0,
         }
     }
 
-    /// Appends a row read from `line` of `path` (the line is used for errors only).
+    /// Appends a row read from `line` of `path` (the line is used for errors only); `false`
+    /// when [`LogPolicy::Repair`] dropped it as a repeat.
     ///
     /// Counts are derived from the values at the ranges the thesis and the defaults use:
     /// accel at +-2 g (16384 counts/g), gyro at +-250 deg/s (131 counts/(deg/s)), temperature
@@ -217,19 +224,26 @@ impl SampleBuilder {
         line: u64,
         time_column: &str,
         row: Row,
-    ) -> Result<()> {
+    ) -> Result<bool> {
         if let Some(previous) = self.samples.last() {
             let previous_ns = previous.stamps.sample_ns;
-            let kind = if row.t_ns < previous_ns {
-                Some(ErrorKind::TimeBackwards {
-                    t_ns: row.t_ns,
-                    previous_ns,
-                })
-            } else if row.t_ns == previous_ns {
-                Some(ErrorKind::DuplicateTime { t_ns: row.t_ns })
-            } else {
-                None
-            };
+            let repair = self.policy == LogPolicy::Repair;
+            if repair && is_repeat(previous, &row) {
+                self.repeats_dropped += 1;
+                return Ok(false);
+            }
+            let max_back_ns = (crate::MAX_TIME_REPAIR_S * 1e9) as u64;
+            let kind =
+                if row.t_ns < previous_ns && (!repair || previous_ns - row.t_ns > max_back_ns) {
+                    Some(ErrorKind::TimeBackwards {
+                        t_ns: row.t_ns,
+                        previous_ns,
+                    })
+                } else if row.t_ns == previous_ns && !repair {
+                    Some(ErrorKind::DuplicateTime { t_ns: row.t_ns })
+                } else {
+                    None
+                };
             if let Some(kind) = kind {
                 return Err(Error::line(path, line, Some(time_column), kind));
             }
@@ -280,11 +294,63 @@ impl SampleBuilder {
             lost_before: row.lost_before,
             reserved: 0,
         });
-        Ok(())
+        Ok(true)
     }
 
-    /// The finished samples.
-    pub(crate) fn finish(self) -> Vec<RawImuSample> {
-        self.samples
+    /// The finished samples and what was repaired: times that did not increase are rebuilt
+    /// from the nominal period (the median positive step), in the samples and in `truth` (one
+    /// per sample) alike.
+    pub(crate) fn finish(
+        mut self,
+        path: &Path,
+        truth: Option<&mut Vec<Truth>>,
+    ) -> Result<(Vec<RawImuSample>, LogRepairs)> {
+        let mut repairs = LogRepairs {
+            repeats_dropped: self.repeats_dropped,
+            ..LogRepairs::default()
+        };
+        let times: Vec<u64> = self.samples.iter().map(|s| s.stamps.sample_ns).collect();
+        if times.windows(2).all(|w| w[1] > w[0]) {
+            return Ok((self.samples, repairs));
+        }
+        let mut steps: Vec<u64> = times
+            .windows(2)
+            .filter(|w| w[1] > w[0])
+            .map(|w| w[1] - w[0])
+            .collect();
+        if steps.is_empty() {
+            let kind = ErrorKind::Invalid(
+                "no two samples have increasing times: no sample rate to rebuild them from".into(),
+            );
+            return Err(Error::file(path, kind));
+        }
+        let mid = steps.len() / 2;
+        repairs.period_ns = *steps.select_nth_unstable(mid).1;
+        let mut truth = truth;
+        for i in 1..self.samples.len() {
+            let previous = self.samples[i - 1].stamps.sample_ns;
+            if self.samples[i].stamps.sample_ns <= previous {
+                let t_ns = previous + repairs.period_ns;
+                self.samples[i].stamps.sample_ns = t_ns;
+                if let Some(truth) = truth.as_deref_mut() {
+                    truth[i].t_ns = t_ns;
+                }
+                repairs.times_rebuilt += 1;
+            }
+        }
+        Ok((self.samples, repairs))
     }
+}
+
+/// Whether `row` holds exactly the values of `previous` (a repeated read).
+fn is_repeat(previous: &RawImuSample, row: &Row) -> bool {
+    let gyro_same = match row.gyro_dps {
+        Some(g) => previous.flags & raw_flags::GYRO_VALID != 0 && g == previous.gyro_dps,
+        None => previous.flags & raw_flags::GYRO_VALID == 0,
+    };
+    let temp_same = match row.temp_c {
+        Some(t) => previous.flags & raw_flags::TEMP_VALID != 0 && t == previous.temp_c,
+        None => previous.flags & raw_flags::TEMP_VALID == 0,
+    };
+    row.accel_g == previous.accel_g && gyro_same && temp_same
 }

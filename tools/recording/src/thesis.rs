@@ -19,7 +19,7 @@ use ::csv::StringRecord;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::text::{self, Row, Rows, SampleBuilder};
-use crate::{Format, Recording};
+use crate::{Format, LogPolicy, Recording};
 
 /// One orientation of a six-position session: 30 s at rest, averaged.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -200,9 +200,9 @@ pub(crate) fn is_series_header(row: &StringRecord) -> bool {
 }
 
 /// Reads the rows after a time-series header into a recording (accelerometer only).
-pub(crate) fn read_series_body(rows: &mut Rows) -> Result<Recording> {
+pub(crate) fn read_series_body(rows: &mut Rows, policy: LogPolicy) -> Result<Recording> {
     let path = rows.path().to_path_buf();
-    let mut samples = SampleBuilder::new();
+    let mut samples = SampleBuilder::new(policy);
     while let Some((line, row)) = rows.next_row()? {
         text::check_width(&path, line, row, &SERIES_COLUMNS)?;
         let t_ns = text::parse_seconds(&path, line, SERIES_COLUMNS[0], &row[0])?;
@@ -220,12 +220,14 @@ pub(crate) fn read_series_body(rows: &mut Rows) -> Result<Recording> {
         };
         samples.push(&path, line, SERIES_COLUMNS[0], parsed)?;
     }
+    let (samples, repairs) = samples.finish(&path, None)?;
     Ok(Recording {
         source: path,
         format: Format::ThesisCsv,
-        samples: samples.finish(),
+        samples,
         truth: None,
         truncation: None,
+        repairs,
     })
 }
 

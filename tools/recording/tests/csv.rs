@@ -272,3 +272,57 @@ fn writer_refuses_what_it_could_not_read_back() {
     let err = recording::csv::write_raw(&path, &samples, None).unwrap_err();
     assert_eq!(err.field.as_deref(), Some("t_s"));
 }
+
+#[test]
+fn a_real_log_s_repeated_rows_and_times_are_repaired_and_counted() {
+    let path = tmp("real_log.csv");
+    // Rows 2 and 5 repeat their predecessors' values (a logger polling faster than the
+    // sensor), row 4 repeats a time with new values (host timestamps quantised), row 6 steps
+    // back in time by 2 ms (jitter).
+    std::fs::write(
+        &path,
+        "t_s,ax_g,ay_g,az_g,gx_dps,gy_dps,gz_dps\n\
+         0.000,0,0,1,0.1,0,0\n\
+         0.010,0,0,1,0.1,0,0\n\
+         0.010,0,0.01,1,0.1,0,0\n\
+         0.010,0,0.02,1,0.1,0,0\n\
+         0.020,0,0.02,1,0.1,0,0\n\
+         0.018,0,0.03,1,0.1,0,0\n\
+         0.040,0,0.04,1,0.1,0,0\n",
+    )
+    .unwrap();
+    // Read strictly, the repeated time is refused naming its line.
+    let err = recording::load_raw(&path).unwrap_err();
+    assert!(matches!(err.kind, ErrorKind::DuplicateTime { .. }), "{err}");
+    assert!(matches!(err.position, Some(Position::Line(4))), "{err}");
+
+    let rec = recording::load_raw_with(&path, recording::LogPolicy::Repair).unwrap();
+    assert_eq!(rec.repairs.repeats_dropped, 2);
+    assert_eq!(rec.repairs.times_rebuilt, 2);
+    // Kept rows' times 0, 10, 10, 18, 40 ms: the positive steps are 10, 8 and 22 ms, whose
+    // median, 10 ms, is the nominal period the non-increasing times are rebuilt from.
+    let times: Vec<u64> = rec.samples.iter().map(|s| s.stamps.sample_ns).collect();
+    let p = rec.repairs.period_ns;
+    assert_eq!(
+        times,
+        [
+            0,
+            10_000_000,
+            10_000_000 + p,
+            10_000_000 + 2 * p,
+            40_000_000
+        ]
+    );
+    assert_eq!(p, 10_000_000);
+    let ay: Vec<f64> = rec.samples.iter().map(|s| s.accel_g[1]).collect();
+    assert_eq!(ay, [0.0, 0.01, 0.02, 0.03, 0.04]);
+    assert_eq!(
+        rec.samples.iter().map(|s| s.seq).collect::<Vec<_>>(),
+        [0, 1, 2, 3, 4]
+    );
+
+    // A step back of more than a second is not jitter: refused even when repairing.
+    std::fs::write(&path, "t_s,ax_g,ay_g,az_g\n5.0,0,0,1\n3.5,0,0.1,1\n").unwrap();
+    let err = recording::load_raw_with(&path, recording::LogPolicy::Repair).unwrap_err();
+    assert!(matches!(err.kind, ErrorKind::TimeBackwards { .. }), "{err}");
+}

@@ -8,12 +8,16 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use ipc_types::units::{AccelRange, GyroRange, STANDARD_GRAVITY_MPS2};
 use ipc_types::{RawImuSample, RobotHint};
-use mems_sim::SimSensor;
 use mems_sim::adc::quantize_sample;
+use mems_sim::defects::{LogDefects, Logger, peak_speed_time};
+use mems_sim::dlpf::DlpfConfig;
 use mems_sim::hints::{HintParams, RestSource, drive_hints};
 use mems_sim::model::{Preset, SensorModel};
-use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
+use mems_sim::scenario::{
+    Drive, DriveParams, PoseParams, PoseSession, Scenario, Walk, WalkParams, ns_from_s,
+};
 use mems_sim::vibration::VibrationModel;
+use mems_sim::{DlpfGrid, SimSensor};
 use nalgebra::{UnitQuaternion, Vector3};
 use recording::Truth;
 
@@ -82,6 +86,33 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// A pedestrian with the IMU on a foot, walking laps of a rectangle: stance 0.2-0.5 s,
+    /// swing of one stride at 4-5 m/s peak foot speed, heel strikes, tremor in stance.
+    Walk {
+        /// Laps of the rectangle.
+        #[arg(long, default_value_t = 1)]
+        laps: u32,
+        /// Sides of the rectangle, m.
+        #[arg(long, value_name = "X,Y", value_parser = parse_pair, default_value = "12,6")]
+        rectangle: [f64; 2],
+        /// Stride length range, m.
+        #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "1.0,1.6")]
+        stride: [f64; 2],
+        /// Still stance range, s.
+        #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "0.2,0.5")]
+        stance: [f64; 2],
+        /// Peak foot speed range, m/s.
+        #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "4,5")]
+        peak_speed: [f64; 2],
+        /// Standing still at the start, s.
+        #[arg(long, default_value_t = 10.0)]
+        initial_rest: f64,
+        /// Tremor level in stance (1: about 0.05 m/s^2 and 0.3 deg/s RMS; 0: none).
+        #[arg(long, default_value_t = 1.0)]
+        tremor: f64,
+        #[command(flatten)]
+        common: Common,
+    },
     /// Prints a preset's error model as TOML (edit it and pass it back with --model).
     PrintModel {
         /// The preset to print.
@@ -123,6 +154,87 @@ struct Common {
     /// Local gravity, m/s^2.
     #[arg(long, default_value_t = STANDARD_GRAVITY_MPS2)]
     gravity: f64,
+    /// Digital low-pass filter: `off` (white noise at the output rate), `driver` (what our
+    /// driver configures for --rate: DLPF_CFG = A_DLPF_CFG = 1 at 1000/n Hz, the accelerometer
+    /// bypassed at 4000 Hz), or the gyro bandwidth in Hz of DLPF_CFG 0-7 (250, 184, 92, 41, 20,
+    /// 10, 5, 3600; the accelerometer gets the same A_DLPF_CFG).
+    #[arg(long, default_value = if mems_sim::dlpf::MODEL_BY_DEFAULT { "driver" } else { "off" })]
+    dlpf: DlpfChoice,
+    /// The recording starts this late into the scenario: seconds, or `motion` (at the highest
+    /// speed of the first motion: a start in motion, no rest before it).
+    #[arg(long, default_value = "0")]
+    start_at: StartAt,
+    #[command(flatten)]
+    log: LogArgs,
+}
+
+/// The defects of a real logger (see `mems_sim::defects`).
+#[derive(Args)]
+struct LogArgs {
+    /// Fraction of rows followed by an exact repeat (a logger polling faster than the sensor).
+    #[arg(long, default_value_t = 0.0)]
+    repeat_fraction: f64,
+    /// Repeats carry their original's timestamp (otherwise the time of the second poll).
+    #[arg(long)]
+    repeat_same_time: bool,
+    /// Host timestamp jitter, ms (Gaussian standard deviation).
+    #[arg(long, default_value_t = 0.0)]
+    jitter_ms: f64,
+    /// Host timestamp quantum, ms (0: none), e.g. 1 for a millisecond clock.
+    #[arg(long, default_value_t = 0.0)]
+    quantum_ms: f64,
+}
+
+/// The `--dlpf` choice.
+#[derive(Clone, Copy, PartialEq)]
+enum DlpfChoice {
+    Off,
+    Driver,
+    /// DLPF_CFG = A_DLPF_CFG = this.
+    Cfg(u8),
+}
+
+impl std::str::FromStr for DlpfChoice {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "off" => return Ok(Self::Off),
+            "driver" => return Ok(Self::Driver),
+            _ => {}
+        }
+        mems_sim::dlpf::GYRO_DLPF
+            .iter()
+            .position(|g| g.bandwidth_hz.to_string() == s)
+            .map(|cfg| Self::Cfg(cfg as u8))
+            .ok_or_else(|| {
+                format!(
+                    "unknown DLPF {s:?}: expected off, driver or a gyro bandwidth (250, 184, 92, \
+                     41, 20, 10, 5, 3600)"
+                )
+            })
+    }
+}
+
+/// The `--start-at` choice.
+#[derive(Clone, Copy, PartialEq)]
+enum StartAt {
+    Seconds(f64),
+    Motion,
+}
+
+impl std::str::FromStr for StartAt {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if s == "motion" {
+            return Ok(Self::Motion);
+        }
+        match s.parse::<f64>() {
+            Ok(x) if x.is_finite() && x >= 0.0 => Ok(Self::Seconds(x)),
+            _ => Err(format!("expected seconds >= 0 or `motion`, got {s:?}")),
+        }
+    }
 }
 
 /// The robot controller's hints during a drive (MCAP topic `mems/robot/hint`, see
@@ -264,6 +376,48 @@ impl Common {
         Ok(model)
     }
 
+    /// The DLPF for the output rate, checked against it: the output rate must be the internal
+    /// rate divided by 1 + SMPLRT_DIV (0-255) where the register map allows a divider, and the
+    /// internal rate itself where it does not (DLPF_CFG 0 and 7, the 4 kHz accelerometer).
+    fn dlpf_config(&self) -> Result<Option<DlpfConfig>> {
+        let config = match self.dlpf {
+            DlpfChoice::Off => return Ok(None),
+            DlpfChoice::Driver => DlpfConfig::driver(self.rate),
+            DlpfChoice::Cfg(cfg) => DlpfConfig::both(cfg),
+        };
+        let fast = config.fast_rate_hz();
+        let divided = fast == 1000.0;
+        let n = fast / self.rate;
+        let ok = if divided {
+            n.fract() == 0.0 && (1.0..=256.0).contains(&n)
+        } else {
+            n == 1.0
+        };
+        if !ok {
+            let allowed = if divided {
+                "1000/n Hz (n = 1..256)".to_string()
+            } else {
+                format!("{fast} Hz")
+            };
+            bail!(
+                "--rate {}: with this --dlpf the part samples at {fast} Hz internally and can \
+                 output {allowed}",
+                self.rate
+            );
+        }
+        Ok(Some(config))
+    }
+
+    /// The logger's defects from the command line.
+    fn log_defects(&self) -> LogDefects {
+        LogDefects {
+            repeat_fraction: self.log.repeat_fraction,
+            repeat_same_time: self.log.repeat_same_time,
+            jitter_std_s: self.log.jitter_ms * 1e-3,
+            quantum_s: self.log.quantum_ms * 1e-3,
+        }
+    }
+
     fn ranges(&self) -> (AccelRange, GyroRange) {
         let accel = match self.accel_range {
             AccelFullScale::G2 => AccelRange::G2,
@@ -374,11 +528,74 @@ impl Sink {
                 path,
                 samples,
                 truth,
-            } => recording::csv::write_raw(&path, &samples, Some(&truth))?,
+            } => {
+                let increasing = samples
+                    .windows(2)
+                    .all(|w| w[1].stamps.sample_ns > w[0].stamps.sample_ns);
+                if increasing {
+                    recording::csv::write_raw(&path, &samples, Some(&truth))?
+                } else {
+                    write_log_csv(&path, &samples, &truth)?;
+                    println!(
+                        "{}: timestamps repeat, so this is a logger's CSV (the canonical \
+                         columns, times non-decreasing), not the canonical CSV",
+                        path.display()
+                    );
+                }
+            }
             Self::Mcap { writer, .. } => writer.finish()?,
         }
         Ok(())
     }
+}
+
+/// Writes rows whose times may repeat (a logger's CSV) with the canonical CSV's columns: time,
+/// accelerometer, gyroscope, temperature, flags, lost_before and the truth columns.
+fn write_log_csv(path: &Path, samples: &[RawImuSample], truth: &[Truth]) -> Result<()> {
+    use std::io::Write;
+    let file =
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut out = std::io::BufWriter::new(file);
+    let mut header = vec![
+        "t_s",
+        "ax_g",
+        "ay_g",
+        "az_g",
+        "gx_dps",
+        "gy_dps",
+        "gz_dps",
+        "temp_c",
+        "flags",
+        "lost_before",
+    ];
+    header.extend(recording::csv::TRUTH_COLUMNS);
+    writeln!(out, "{}", header.join(","))?;
+    for (s, t) in samples.iter().zip(truth) {
+        let ns = s.stamps.sample_ns;
+        let mut row = vec![format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000)];
+        row.extend(
+            s.accel_g
+                .iter()
+                .chain(&s.gyro_dps)
+                .chain([&s.temp_c])
+                .map(f64::to_string),
+        );
+        row.push(s.flags.to_string());
+        row.push(s.lost_before.to_string());
+        row.extend(
+            t.position_m
+                .iter()
+                .chain(&t.velocity_mps)
+                .chain(&t.attitude_wxyz)
+                .chain(&t.specific_force_mps2)
+                .chain(&t.angular_rate_rps)
+                .map(f64::to_string),
+        );
+        row.push(u8::from(t.at_rest).to_string());
+        writeln!(out, "{}", row.join(","))?;
+    }
+    out.flush()?;
+    Ok(())
 }
 
 /// Samples `scenario` from 0 to its duration at the common rate, quantizes, and writes, with
@@ -394,15 +611,47 @@ fn simulate(
         bail!("--rate {rate}: the output rate must be between 1 and 32000 Hz");
     }
     let model = common.sensor_model()?;
+    let dlpf = common.dlpf_config()?;
     let (accel_range, gyro_range) = common.ranges();
     let duration = scenario.duration_s();
     let count = (duration * rate).floor() as u64 + 1;
+    let start_s = match common.start_at {
+        StartAt::Seconds(s) => s,
+        StartAt::Motion => peak_speed_time(&scenario, rate)
+            .context("--start-at motion: the scenario never moves")?,
+    };
+    let first = (start_s * rate).ceil() as u64;
+    if first >= count {
+        bail!("--start-at {start_s}: the scenario ends at {duration} s");
+    }
+    let defects = common.log_defects();
+    let is_mcap = common
+        .out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    if defects.any() && is_mcap {
+        bail!(
+            "--out {}: a logger's defects (--repeat-fraction, --jitter-ms, --quantum-ms) can repeat \
+             timestamps, which MCAP recordings refuse; write a .csv",
+            common.out.display()
+        );
+    }
+    let mut logger = defects
+        .any()
+        .then(|| Logger::new(&defects, rate, common.seed))
+        .transpose()?;
     let mut sim = SimSensor::new(scenario, &model, vibration, common.seed)?;
+    sim.set_dlpf(dlpf.map(|config| DlpfGrid {
+        config,
+        start_s: 0.0,
+        clock_scale: 1.0,
+    }));
     let mut sink = Sink::create(&common.out, !hints.is_empty())?;
     let mut next_hint = 0;
-    let (mut distance, mut saturated, mut rest) = (0.0, 0u64, 0u64);
+    let (mut distance, mut saturated, mut rest, mut rows) = (0.0, 0u64, 0u64, 0u64);
     let mut last: Option<Vector3<f64>> = None;
-    for k in 0..count {
+    let mut logged = Vec::with_capacity(2);
+    for k in first..count {
         let t_s = k as f64 / rate;
         let (analog, truth) = sim.sample_with_truth(t_s, rate);
         let raw = quantize_sample(&analog, accel_range, gyro_range, ns_from_s(t_s), k);
@@ -419,16 +668,24 @@ fn simulate(
             sink.push_hint(h)?;
             next_hint += 1;
         }
-        sink.push(raw, truth)?;
+        match logger.as_mut() {
+            Some(l) => l.log(raw, truth, |s, t| logged.push((s, t))),
+            None => logged.push((raw, truth)),
+        }
+        for (s, t) in logged.drain(..) {
+            sink.push(s, t)?;
+            rows += 1;
+        }
     }
+    let count = count - first;
     for h in &hints[next_hint..] {
         sink.push_hint(h)?;
     }
     sink.finish()
         .with_context(|| format!("writing {}", common.out.display()))?;
     println!(
-        "{}: {count} samples over {duration} s at {rate} Hz, {distance:.3} m travelled, \
-         {:.1}% at rest, {saturated} saturated",
+        "{}: {count} samples ({rows} rows) from {start_s} s to {duration} s at {rate} Hz, \
+         {distance:.3} m travelled, {:.1}% at rest, {saturated} saturated",
         common.out.display(),
         100.0 * rest as f64 / count as f64
     );
@@ -529,6 +786,28 @@ fn run(cli: Cli) -> Result<()> {
                 &common,
                 &hint_list,
             )
+        }
+        Command::Walk {
+            laps,
+            rectangle,
+            stride,
+            stance,
+            peak_speed,
+            initial_rest,
+            tremor,
+            common,
+        } => {
+            let params = WalkParams {
+                rectangle_m: rectangle,
+                stride_m: stride,
+                stance_s: stance,
+                peak_speed_mps: peak_speed,
+                initial_rest_s: initial_rest,
+                tremor,
+                gravity_mps2: common.gravity,
+                ..WalkParams::new(laps)
+            };
+            simulate(Walk::new(&params, common.seed)?, &still, &common, &[])
         }
         Command::PrintModel { preset } => {
             print!("{}", toml::to_string(&preset.model())?);

@@ -16,8 +16,11 @@
 //!
 //! White-noise convention (the one Allan-deviation analysis and Kalibr use): a noise density
 //! `N` (unit/sqrt(Hz)) gives a per-sample standard deviation `N * sqrt(rate_hz)` at output rate
-//! `rate_hz`, so that the Allan deviation of the output is `N / sqrt(tau)`. The simulated part
-//! has no anti-aliasing filter: the whole density reaches the samples at any output rate.
+//! `rate_hz`, so that the Allan deviation of the output is `N / sqrt(tau)`. Without a DLPF the
+//! whole density reaches the samples at any output rate; with one ([`crate::dlpf`], applied by
+//! [`crate::SimSensor::set_dlpf`]) the noise is drawn at the internal rate and filtered, which
+//! keeps the low-frequency density (and the long-cluster Allan deviation) and correlates
+//! successive samples.
 //!
 //! Everything random is drawn from ChaCha8 streams of one seed, one stream per term and triad,
 //! so that switching one term on or off does not change the realisation of the others.
@@ -477,6 +480,8 @@ struct GaussMarkov {
 /// A powered-on triad: its parameters and the state of its random processes.
 struct TriadState {
     params: TriadModel,
+    /// Time of the previous measurement, s (the random processes advance from it).
+    last_t_s: f64,
     misalignment: Matrix3<f64>,
     turn_on_bias: [f64; 3],
     random_walk: [f64; 3],
@@ -526,6 +531,7 @@ impl TriadState {
         let m = &params.misalignment;
         Self {
             params: params.clone(),
+            last_t_s: 0.0,
             misalignment: Matrix3::from_fn(|i, j| m[i][j]),
             turn_on_bias,
             random_walk: [0.0; 3],
@@ -536,9 +542,19 @@ impl TriadState {
         }
     }
 
-    /// Advances the random processes by `dt_s` and returns the measurement of input `u` at time
-    /// `t_s` with temperature offset `d_temp` from the reference.
-    fn measure(&mut self, t_s: f64, dt_s: f64, rate_hz: f64, d_temp: f64, u: [f64; 3]) -> [f64; 3] {
+    /// Advances the random processes to `t_s` and returns the measurement of input `u` at that
+    /// time with temperature offset `d_temp` from the reference.
+    ///
+    /// # Panics
+    /// If `t_s` is earlier than the previous measurement's time (a caller bug).
+    fn measure(&mut self, t_s: f64, rate_hz: f64, d_temp: f64, u: [f64; 3]) -> [f64; 3] {
+        assert!(
+            t_s >= self.last_t_s,
+            "Sensor::measure: time went backwards ({t_s} s after {} s)",
+            self.last_t_s
+        );
+        let dt_s = t_s - self.last_t_s;
+        self.last_t_s = t_s;
         let p = &self.params;
         if dt_s > 0.0 {
             if p.bias_random_walk.iter().any(|k| *k != 0.0) {
@@ -593,7 +609,6 @@ pub struct Sensor {
     thermal: ThermalModel,
     accel: TriadState,
     gyro: TriadState,
-    last_t_s: f64,
 }
 
 impl Sensor {
@@ -605,7 +620,6 @@ impl Sensor {
             thermal: model.thermal.clone(),
             accel: TriadState::power_on(&model.accel, seed, &ACCEL_STREAMS),
             gyro: TriadState::power_on(&model.gyro, seed, &GYRO_STREAMS),
-            last_t_s: 0.0,
         })
     }
 
@@ -627,20 +641,30 @@ impl Sensor {
         accel_g: [f64; 3],
         gyro_dps: [f64; 3],
     ) -> AnalogSample {
-        assert!(
-            t_s >= self.last_t_s,
-            "Sensor::measure: time went backwards ({t_s} s after {} s)",
-            self.last_t_s
-        );
-        let dt_s = t_s - self.last_t_s;
-        self.last_t_s = t_s;
-        let temp_c = self.thermal.die_temp_c(t_s);
-        let d_temp = temp_c - self.thermal.reference_c;
         AnalogSample {
-            accel_g: self.accel.measure(t_s, dt_s, rate_hz, d_temp, accel_g),
-            gyro_dps: self.gyro.measure(t_s, dt_s, rate_hz, d_temp, gyro_dps),
-            temp_c,
+            accel_g: self.measure_accel(t_s, rate_hz, accel_g),
+            gyro_dps: self.measure_gyro(t_s, rate_hz, gyro_dps),
+            temp_c: self.die_temp_c(t_s),
         }
+    }
+
+    /// The accelerometer alone (g) at `t_s` and sample rate `rate_hz`, for a part whose
+    /// triads sample at different rates (see [`Self::measure`]).
+    pub fn measure_accel(&mut self, t_s: f64, rate_hz: f64, accel_g: [f64; 3]) -> [f64; 3] {
+        let d_temp = self.die_temp_c(t_s) - self.thermal.reference_c;
+        self.accel.measure(t_s, rate_hz, d_temp, accel_g)
+    }
+
+    /// The gyroscope alone (deg/s) at `t_s` and sample rate `rate_hz` (see
+    /// [`Self::measure_accel`]).
+    pub fn measure_gyro(&mut self, t_s: f64, rate_hz: f64, gyro_dps: [f64; 3]) -> [f64; 3] {
+        let d_temp = self.die_temp_c(t_s) - self.thermal.reference_c;
+        self.gyro.measure(t_s, rate_hz, d_temp, gyro_dps)
+    }
+
+    /// The die temperature at `t_s`, degC.
+    pub fn die_temp_c(&self, t_s: f64) -> f64 {
+        self.thermal.die_temp_c(t_s)
     }
 }
 

@@ -392,3 +392,177 @@ fn bad_input_gets_a_clear_error() {
         "{e}"
     );
 }
+
+/// Lag-1 autocorrelation of `x`.
+fn lag1(x: &[f64]) -> f64 {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    let var = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
+    x.windows(2)
+        .map(|w| (w[0] - mean) * (w[1] - mean))
+        .sum::<f64>()
+        / var
+}
+
+#[test]
+fn dlpf_option_correlates_the_samples_and_checks_the_rate() {
+    // DLPF_CFG = 4 (gyro 20 Hz) at 100 Hz output: lag-1 autocorrelation (1 + p) p^9 / 2 with
+    // p = (1 - K) / (1 + K), K = tan(pi 20 / 1000); off: white.
+    let k = (std::f64::consts::PI * 20.0 / 1000.0).tan();
+    let p = (1.0 - k) / (1.0 + k);
+    let want = (1.0 + p) * p.powi(9) / 2.0;
+    for (dlpf, want) in [("20", want), ("off", 0.0)] {
+        let out = tmp(&format!("dlpf-{dlpf}.csv"));
+        let out_s = out.to_str().unwrap();
+        ok(&[
+            "static",
+            "--duration",
+            "300",
+            "--rate",
+            "100",
+            "--dlpf",
+            dlpf,
+            "--out",
+            out_s,
+        ]);
+        let rec = recording::load_raw(&out).unwrap();
+        let n = rec.samples.len() as f64;
+        for axis in 0..3 {
+            let g: Vec<f64> = rec.samples.iter().map(|s| s.gyro_dps[axis]).collect();
+            let r1 = lag1(&g);
+            let se = (2.0 * (1.0 + want) / (1.0 - want) / n).sqrt();
+            assert!(
+                (r1 - want).abs() < 5.0 * se,
+                "--dlpf {dlpf} gyro {axis}: lag-1 {r1}, closed form {want}"
+            );
+        }
+    }
+    let out = tmp("dlpf-bad.csv");
+    let out_s = out.to_str().unwrap();
+    for (dlpf, rate, says) in [
+        ("184", "4000", "1000/n Hz"),
+        ("driver", "300", "1000/n Hz"),
+        ("250", "1000", "8000 Hz"),
+    ] {
+        let e = fails(&[
+            "static",
+            "--duration",
+            "1",
+            "--rate",
+            rate,
+            "--dlpf",
+            dlpf,
+            "--out",
+            out_s,
+        ]);
+        assert!(e.contains("--rate") && e.contains(says), "{e}");
+    }
+    assert!(
+        fails(&["static", "--duration", "1", "--dlpf", "93", "--out", out_s])
+            .contains("unknown DLPF")
+    );
+}
+
+#[test]
+fn log_defects_and_a_start_in_motion_are_written() {
+    let out = tmp("defects.csv");
+    let out_s = out.to_str().unwrap();
+    ok(&[
+        "drive",
+        "--duration",
+        "60",
+        "--rate",
+        "2000",
+        "--start-at",
+        "motion",
+        "--quantum-ms",
+        "1",
+        "--repeat-fraction",
+        "0.1",
+        "--out",
+        out_s,
+    ]);
+    // MCAP recordings need strictly increasing times: refused up front.
+    let mcap = tmp("defects.mcap");
+    let e = fails(&[
+        "static",
+        "--duration",
+        "1",
+        "--quantum-ms",
+        "1",
+        "--out",
+        mcap.to_str().unwrap(),
+    ]);
+    assert!(e.contains("write a .csv"), "{e}");
+    // Equal timestamps: the canonical reader refuses the file, naming the time column.
+    let e = recording::load_raw(&out).unwrap_err().to_string();
+    assert!(e.contains("t_s"), "{e}");
+    let text = std::fs::read_to_string(&out).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    // The recording starts moving: the first row is not at rest and has speed.
+    let first = &rows[0];
+    assert_eq!(first[col("truth_rest")], 0.0);
+    let speed = first[col("truth_vx_mps")].hypot(first[col("truth_vy_mps")]);
+    assert!(speed > 0.1, "first row's speed {speed} m/s");
+    let t: Vec<f64> = rows.iter().map(|r| r[col("t_s")]).collect();
+    assert!(t.windows(2).all(|w| w[1] >= w[0]));
+    let equal = t.windows(2).filter(|w| w[1] == w[0]).count();
+    assert!(
+        equal > rows.len() / 2,
+        "{equal} equal times of {}",
+        rows.len()
+    );
+    assert!(
+        t.iter()
+            .all(|x| (x * 1000.0 - (x * 1000.0).round()).abs() < 1e-6)
+    );
+}
+
+#[test]
+fn walk_is_written_with_truth_that_closes_the_loop() {
+    use mems_sim::scenario::{Walk, WalkParams};
+    let out = tmp("walk.csv");
+    let out_s = out.to_str().unwrap();
+    ok(&[
+        "walk",
+        "--laps",
+        "1",
+        "--rate",
+        "200",
+        "--initial-rest",
+        "2",
+        "--accel-range",
+        "16",
+        "--gyro-range",
+        "2000",
+        "--out",
+        out_s,
+    ]);
+    let rec = recording::load_raw(&out).unwrap();
+    let truth = rec.truth.expect("the file holds truth");
+    let params = WalkParams {
+        initial_rest_s: 2.0,
+        ..WalkParams::new(1)
+    };
+    let walk = Walk::new(&params, 1).unwrap();
+    assert_eq!(
+        truth.len(),
+        (walk.duration_s() * 200.0).floor() as usize + 1
+    );
+    for (k, t) in truth.iter().enumerate().step_by(97) {
+        assert_eq!(*t, walk.truth(k as f64 / 200.0), "row {k}");
+    }
+    assert!(truth[0].at_rest && truth.last().unwrap().at_rest);
+    let end = Vector3::from(truth.last().unwrap().position_m);
+    assert!(end.norm() < 1e-9, "the walk ends {end:?} from its start");
+    assert!(
+        rec.samples
+            .iter()
+            .all(|s| s.flags & ipc_types::raw_flags::SATURATED == 0)
+    );
+}

@@ -8,6 +8,7 @@ use calibrate::diagnose::{
     BaselineKind, CandidateStatus, DiagnoseConfig, Diagnosis, Effect, SessionInput, diagnose, plots,
 };
 use calibrate::fit::{CovarianceMode, Weighting};
+use calibrate::segments::SegmentConfig;
 use calibrate::session::{Input, load_input, poses_from_six};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -47,6 +48,9 @@ pub struct DiagnoseArgs {
     /// Block length, s.
     #[arg(long, default_value_t = 1.0)]
     block_s: f64,
+    /// Shortest static segment (pose) used, s; windows of a quarter of it (at most 0.5 s).
+    #[arg(long, default_value_t = 5.0)]
+    min_segment_s: f64,
     /// Validation folds when no test data is given.
     #[arg(long, default_value_t = 5)]
     folds: usize,
@@ -164,6 +168,10 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         ..DiagnoseConfig::default()
     };
     cfg.data.block_s = args.block_s;
+    if !(args.min_segment_s > 0.0 && args.min_segment_s.is_finite()) {
+        bail!("--min-segment-s must be > 0, got {}", args.min_segment_s);
+    }
+    cfg.data.segments = SegmentConfig::with_min_duration(args.min_segment_s);
     cfg.data.folds = args.folds;
     cfg.data.pose_samples = args.pose_samples;
     let d = diagnose(&calib, &test, &cfg)?;

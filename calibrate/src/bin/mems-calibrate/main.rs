@@ -46,32 +46,40 @@ enum Labels {
     None,
 }
 
+/// Options of `mems-calibrate fit`.
+#[derive(clap::Args)]
+struct FitArgs {
+    /// Six-position means CSV, or a raw recording (canonical CSV, thesis CSV, MCAP).
+    #[arg(long)]
+    input: PathBuf,
+    /// Model: bias (model 1), scale (model 2) or full (model 3).
+    #[arg(long, value_enum)]
+    model: ModelKind,
+    /// Weight poses by 1/sigma^2 of their means (default: unweighted, as the thesis).
+    #[arg(long)]
+    weighted: bool,
+    /// Where labels come from.
+    #[arg(long, value_enum, default_value = "auto")]
+    labels: Labels,
+    /// Local gravity, m/s^2, recorded in the file for converting g to m/s^2.
+    #[arg(long, default_value_t = ipc_types::units::STANDARD_GRAVITY_MPS2)]
+    gravity: f64,
+    /// Output calibration file.
+    #[arg(long)]
+    out: PathBuf,
+    /// Also draw the per-pose residuals to this PNG.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Shortest static segment (pose) of a raw recording used, s; windows of a quarter of
+    /// it (at most 0.5 s).
+    #[arg(long, default_value_t = 5.0)]
+    min_segment_s: f64,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Fit a model and write a calibration file.
-    Fit {
-        /// Six-position means CSV, or a raw recording (canonical CSV, thesis CSV, MCAP).
-        #[arg(long)]
-        input: PathBuf,
-        /// Model: bias (model 1), scale (model 2) or full (model 3).
-        #[arg(long, value_enum)]
-        model: ModelKind,
-        /// Weight poses by 1/sigma^2 of their means (default: unweighted, as the thesis).
-        #[arg(long)]
-        weighted: bool,
-        /// Where labels come from.
-        #[arg(long, value_enum, default_value = "auto")]
-        labels: Labels,
-        /// Local gravity, m/s^2, recorded in the file for converting g to m/s^2.
-        #[arg(long, default_value_t = ipc_types::units::STANDARD_GRAVITY_MPS2)]
-        gravity: f64,
-        /// Output calibration file.
-        #[arg(long)]
-        out: PathBuf,
-        /// Also draw the per-pose residuals to this PNG.
-        #[arg(long)]
-        plot: Option<PathBuf>,
-    },
+    Fit(FitArgs),
     /// Subscribe to raw samples, calibrate them, detect rest, refine the bias at rest and
     /// publish corrected samples, until SIGINT/SIGTERM.
     Serve(serve::ServeArgs),
@@ -107,15 +115,7 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Fit {
-            input,
-            model,
-            weighted,
-            labels,
-            gravity,
-            out,
-            plot,
-        } => fit(input, model, weighted, labels, gravity, out, plot),
+        Command::Fit(args) => fit(args),
         Command::Serve(args) => serve::serve(&args),
         Command::Diagnose(args) => diagnose::run(&args),
         Command::Allan(args) => allan(args),
@@ -154,15 +154,20 @@ fn allan(mut args: AllanArgs) -> Result<()> {
 }
 
 /// `mems-calibrate fit`.
-fn fit(
-    input: PathBuf,
-    model: ModelKind,
-    weighted: bool,
-    labels: Labels,
-    gravity: f64,
-    out: PathBuf,
-    plot: Option<PathBuf>,
-) -> Result<()> {
+fn fit(args: FitArgs) -> Result<()> {
+    let FitArgs {
+        input,
+        model,
+        weighted,
+        labels,
+        gravity,
+        out,
+        plot,
+        min_segment_s,
+    } = args;
+    if !(min_segment_s > 0.0 && min_segment_s.is_finite()) {
+        bail!("--min-segment-s must be > 0, got {min_segment_s}");
+    }
     if !(gravity > 9.7 && gravity < 9.9) {
         bail!("--gravity {gravity} m/s^2 is not a terrestrial gravity (expected 9.7..9.9)");
     }
@@ -177,7 +182,7 @@ fn fit(
     let (poses, label_free) = match &loaded {
         Input::SixPosition(six) => (poses_from_six(six), labels == Labels::None),
         Input::Raw(rec) => {
-            let raw = raw_poses(rec, &SegmentConfig::default())?;
+            let raw = raw_poses(rec, &SegmentConfig::with_min_duration(min_segment_s))?;
             repaired_samples = raw.repair.total();
             eprintln!(
                 "{}: {} samples, {} torn reads repaired, {} static segments (noise {:.2e} / {:.2e} / {:.2e} g)",

@@ -79,7 +79,11 @@ fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
 
 /// Fits the correction, prints it and stores it when asked.
 pub fn run(args: GyroCalArgs) -> Result<()> {
-    let calib_path = &args.stage.calib;
+    let Some(calib_path) = &args.stage.calib else {
+        bail!(
+            "gyrocal needs --calib: the correction is fitted through that accelerometer calibration"
+        );
+    };
     let (file, mut detector) = args.stage.load()?;
     // Read the target first, so that a bad one fails before the fit.
     let mut target = match &args.into {
@@ -102,7 +106,7 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
         None => None,
     };
 
-    let recording = crate::load_recording(&args.input)?;
+    let recording = crate::load_recording(&args.input, recording::LogPolicy::Strict)?;
     if let Some(r) = recording
         .samples
         .iter()
@@ -143,7 +147,7 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
                 args.input.display(),
                 rest,
                 corrected.len(),
-                args.stage.detector.name()
+                detector.kind.name()
             )
         })?;
     let (c, sigma) = (rows(&cal.correction), rows(&cal.correction_sigma));
@@ -178,7 +182,7 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
              check that the session holds each pose still and that the {} detector's rest flags \
              ({rest} of {} samples) mark the poses",
             args.input.display(),
-            args.stage.detector.name(),
+            detector.kind.name(),
             corrected.len()
         );
     }

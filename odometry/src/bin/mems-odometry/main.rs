@@ -17,7 +17,9 @@ use anyhow::{Context, Result, bail};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use clap::{Parser, Subcommand};
+use odometry::profile::Profile;
 use odometry::stage::OdometryConfig;
+use recording::LogPolicy;
 
 #[derive(Parser)]
 #[command(version, about)]
@@ -54,39 +56,94 @@ pub fn odometry_config(file: &CalibrationFile) -> OdometryConfig {
 /// Options of the calibration stage shared by `offline` with `mems-calibrate serve`'s defaults.
 #[derive(clap::Args, Clone)]
 pub struct StageArgs {
-    /// Calibration file (TOML) written by `mems-calibrate fit`.
+    /// Calibration file (TOML) written by `mems-calibrate fit`. Without it (offline), the
+    /// identity calibration at standard gravity and the MPU-9250's datasheet noise: for a part
+    /// calibrated at the factory or a first look at a recording.
     #[arg(long)]
-    pub calib: PathBuf,
-    /// Zero-state detector (offline; live, it is `mems-calibrate serve`'s).
-    #[arg(long, value_enum, default_value_t = DetectorKind::Glrt)]
-    pub detector: DetectorKind,
-    /// Start-up rest the detector learns from, s (offline; as `mems-calibrate serve --learn-s`).
-    #[arg(long, default_value_t = 5.0)]
-    pub learn_s: f64,
+    pub calib: Option<PathBuf>,
+    /// Zero-state detector (offline; live, it is `mems-calibrate serve`'s). Default: the
+    /// profile's.
+    #[arg(long, value_enum)]
+    pub detector: Option<DetectorKind>,
+    /// Rest the detector learns from, s (offline; as `mems-calibrate serve --learn-s`): the
+    /// first rest of this length anywhere in the data. Default: the profile's.
+    #[arg(long)]
+    pub learn_s: Option<f64>,
+    /// Motion profile: the detector and rest handling for the platform.
+    #[arg(long, value_enum, default_value_t = Profile::Vehicle)]
+    pub profile: Profile,
+    /// SHOE detector: the fixed threshold (default OpenShoe's 3e4).
+    #[arg(long)]
+    pub shoe_gamma: Option<f64>,
+    /// SHOE detector: the adaptive threshold's factor on the recent minimum (0: fixed).
+    #[arg(long)]
+    pub shoe_factor: Option<f64>,
 }
 
 impl StageArgs {
-    /// The calibration file and the detector settings these options give (the detector's
-    /// defaults for the file's gravity, learning for `learn_s`); refuses a `learn_s` that is
-    /// not positive and finite.
+    /// The calibration file (or the identity when none is given, said once on stderr) and the
+    /// detector settings these options give; refuses a `learn_s` that is not positive and
+    /// finite.
     pub fn load(&self) -> Result<(CalibrationFile, DetectorConfig)> {
-        let file = CalibrationFile::load(&self.calib)
-            .with_context(|| format!("cannot load calibration {}", self.calib.display()))?;
-        if !(self.learn_s > 0.0 && self.learn_s.is_finite()) {
-            bail!("--learn-s must be > 0, got {}", self.learn_s);
+        let file = match &self.calib {
+            Some(path) => CalibrationFile::load(path)
+                .with_context(|| format!("cannot load calibration {}", path.display()))?,
+            None => {
+                eprintln!(
+                    "mems-odometry: no --calib: the identity calibration at standard gravity \
+                     ({} m/s^2) and the MPU-9250's datasheet noise",
+                    ipc_types::units::STANDARD_GRAVITY_MPS2
+                );
+                CalibrationFile::identity(ipc_types::units::STANDARD_GRAVITY_MPS2)
+            }
+        };
+        let mut detector = self.profile.detector(file.gravity_mps2);
+        if let Some(kind) = self.detector {
+            detector.kind = kind;
         }
-        let mut detector = DetectorConfig::new(self.detector, file.gravity_mps2);
-        detector.learn.duration_s = self.learn_s;
+        if let Some(gamma) = self.shoe_gamma {
+            if !(gamma > 0.0 && gamma.is_finite()) {
+                bail!("--shoe-gamma must be > 0, got {gamma}");
+            }
+            detector.shoe.gamma = gamma;
+        }
+        if let Some(factor) = self.shoe_factor {
+            if !(factor >= 0.0 && factor.is_finite()) {
+                bail!("--shoe-factor must be >= 0, got {factor}");
+            }
+            detector.shoe.adaptive_factor = factor;
+        }
+        if let Some(learn_s) = self.learn_s {
+            if !(learn_s > 0.0 && learn_s.is_finite()) {
+                bail!("--learn-s must be > 0, got {learn_s}");
+            }
+            detector.learn.duration_s = learn_s;
+        }
         Ok((file, detector))
+    }
+
+    /// What `--calib` names, for messages.
+    pub fn calib_name(&self) -> String {
+        self.calib.as_ref().map_or_else(
+            || "the identity calibration".into(),
+            |p| p.display().to_string(),
+        )
     }
 }
 
-/// Reads a raw recording (CSV or MCAP); a truncated one is read up to the cut, which is
-/// reported on stderr.
-pub fn load_recording(path: &Path) -> Result<recording::Recording> {
-    let recording = recording::load_raw(path)?;
+/// Reads a raw recording (CSV or MCAP); a truncated one is read up to the cut, and what
+/// `policy` repaired is counted, both reported on stderr.
+pub fn load_recording(path: &Path, policy: LogPolicy) -> Result<recording::Recording> {
+    let recording = recording::load_raw_with(path, policy)?;
     if let Some(t) = &recording.truncation {
         eprintln!("mems-odometry: {}: {t}", path.display());
+    }
+    if recording.repairs.any() {
+        eprintln!(
+            "mems-odometry: warning: {}: {} (--strict-time refuses such a file)",
+            path.display(),
+            recording.repairs
+        );
     }
     Ok(recording)
 }

@@ -37,6 +37,10 @@ pub struct OfflineArgs {
     /// Ignore the recording's robot hints (IMU only).
     #[arg(long)]
     no_hints: bool,
+    /// Refuse a text recording whose times do not strictly increase, instead of dropping
+    /// exact repeats and rebuilding such times from the nominal rate (`recording::LogPolicy`).
+    #[arg(long)]
+    strict_time: bool,
     /// Repair torn high/low-byte reads first (`calibrate::repair`): for recordings made by a
     /// logger that read the two bytes of an axis in separate transactions, such as the
     /// thesis's (docs/diagnosis.md). Our driver never tears a read, so live and offline agree
@@ -77,7 +81,12 @@ impl TruthFrame {
 /// Runs the pipeline and prints the result.
 pub fn run(args: OfflineArgs) -> Result<()> {
     let (file, detector) = args.stage.load()?;
-    let mut recording = crate::load_recording(&args.input)?;
+    let policy = if args.strict_time {
+        recording::LogPolicy::Strict
+    } else {
+        recording::LogPolicy::Repair
+    };
+    let mut recording = crate::load_recording(&args.input, policy)?;
     if args.repair_torn_reads {
         let report = calibrate::repair::repair_torn_reads(
             &mut recording.samples,
@@ -109,10 +118,10 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         );
     }
     let mut calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
-        .map_err(|e| anyhow::anyhow!("{}: {e}", args.stage.calib.display()))?;
-    let mut odometry =
-        OdometryStage::with_hints(crate::odometry_config(&file), args.hints.config()?)
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        .map_err(|e| anyhow::anyhow!("{}: {e}", args.stage.calib_name()))?;
+    let config = args.stage.profile.odometry(crate::odometry_config(&file));
+    let mut odometry = OdometryStage::with_hints(config, args.hints.config()?)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
     let is_mcap = args
         .input
         .extension()
@@ -137,6 +146,8 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     };
 
     let mut last: Option<OdometryState> = None;
+    let mut aligned_ns: Option<u64> = None;
+    let mut rests = Vec::new();
     let mut frame: Option<TruthFrame> = None;
     let mut rest_errors = Vec::new();
     let mut truth_distance = 0.0;
@@ -162,6 +173,16 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             return;
         }
         let Some(state) = states[0] else { return };
+        if aligned_ns.is_none() && state.flags & odometry_flags::ALIGNED != 0 {
+            aligned_ns = Some(state.stamps.sample_ns);
+        }
+        if last.is_some_and(|l| state.rest_count > l.rest_count) {
+            rests.push(json!({
+                "t_s": state.stamps.sample_ns as f64 * 1e-9,
+                "position_m": state.position_m,
+                "sigma_m": state.position_sigma_m,
+            }));
+        }
         if let Some(t) = truth_at(state.stamps.sample_ns) {
             let p = Vector3::from(t.position_m);
             if let Some(q) = prev_truth {
@@ -205,11 +226,18 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     };
     if end.flags & odometry_flags::ALIGNED == 0 {
         bail!(
-            "{}: never aligned (no rest of {} s was detected)",
+            "{}: never aligned: {}",
             args.input.display(),
-            args.stage.learn_s
+            why_never_aligned(&calibration, detector.learn.duration_s)
         );
     }
+    let first_ns = recording.samples.first().map_or(0, |s| s.stamps.sample_ns);
+    let aligned_at_s = aligned_ns.map_or(0.0, |t| (t - first_ns) as f64 * 1e-9);
+    eprintln!(
+        "mems-odometry: aligned {aligned_at_s:.2} s into the recording (at its first rest of \
+         {} s); the position counts from there",
+        config.align_s
+    );
     let truth_error = match (&frame, truth_at(end.stamps.sample_ns)) {
         (Some(f), Some(t)) => {
             let e = Vector3::from(end.position_m) - f.position(t);
@@ -224,6 +252,12 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         "truth_error_m": truth_error,
         "truth_distance_m": truth_error.map(|_| truth_distance),
         "rest_intervals": rest_errors,
+        "aligned_at_s": aligned_at_s,
+        "rests": rests,
+        "log_repairs": {
+            "repeats_dropped": recording.repairs.repeats_dropped,
+            "times_rebuilt": recording.repairs.times_rebuilt,
+        },
         "seq": end.seq,
         "hints": {
             "in_recording": hints.len(),
@@ -254,4 +288,29 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Why the odometry never aligned: the detector never learned (with the learner's last
+/// refusal), or it never flagged rest after it did.
+fn why_never_aligned(calibration: &CalibrationStage, learn_s: f64) -> String {
+    let detector = calibration.detector();
+    let kind = detector.config().kind.name();
+    if detector.is_ready() {
+        return format!(
+            "the {kind} detector flagged no rest long enough to align on after it was ready \
+             ({} samples flagged rest in all)",
+            calibration.stats().rest
+        );
+    }
+    match detector.learn_rejections() {
+        (0, _) => format!(
+            "the {kind} detector found no {learn_s} s of data to learn its rest from (a shorter \
+             --learn-s, or --profile pedestrian for a foot-mounted sensor)"
+        ),
+        (n, why) => format!(
+            "the {kind} detector refused all {n} windows of {learn_s} s it could learn its rest \
+             from; the last because {}",
+            why.map_or_else(|| "of a gap".into(), |w| w.to_string())
+        ),
+    }
 }

@@ -48,6 +48,9 @@ pub struct ServeArgs {
     /// until the calibration stage's event wakes the process.
     #[arg(long)]
     spin: bool,
+    /// Motion profile (its rest handling; the detector is `mems-calibrate serve`'s).
+    #[arg(long, value_enum, default_value_t)]
+    profile: odometry::profile::Profile,
     #[command(flatten)]
     hints: crate::hint_args::HintArgs,
 }
@@ -60,7 +63,7 @@ const TICK: Duration = Duration::from_millis(100);
 pub fn run(args: ServeArgs) -> Result<()> {
     let file = CalibrationFile::load(&args.calib)
         .with_context(|| format!("cannot load calibration {}", args.calib.display()))?;
-    let config = crate::odometry_config(&file);
+    let config = args.profile.odometry(crate::odometry_config(&file));
     let hint_config = args.hints.config()?;
     let namespace = service::namespace(args.namespace.as_deref());
     let node = service::node()?;

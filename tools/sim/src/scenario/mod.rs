@@ -10,9 +10,11 @@
 
 mod drive;
 mod pose;
+mod walk;
 
 pub use drive::{Drive, DriveParams, DriveSegment};
 pub use pose::{PoseParams, PoseSession};
+pub use walk::{Walk, WalkParams};
 
 use nalgebra::{UnitQuaternion, Vector3};
 use recording::Truth;
@@ -66,6 +68,12 @@ pub trait Scenario {
     /// Mean ground speed of the driven wheels at `t_s`, m/s: what sets the level of the motor
     /// and wheel vibration (0 when nothing is driven).
     fn wheel_speed_mps(&self, t_s: f64) -> f64;
+
+    /// What the sensor sees at `t_s` beyond the truth's motion (e.g. a walker's tremor):
+    /// specific force in m/s^2 and angular rate in deg/s, sensor frame. None by default.
+    fn disturbance(&self, _t_s: f64) -> ([f64; 3], [f64; 3]) {
+        ([0.0; 3], [0.0; 3])
+    }
 }
 
 /// Nanoseconds from seconds, rounded (the conversion every sample and truth time uses).

@@ -1,0 +1,42 @@
+//! Motion profiles: the rest detector and the rest handling that suit a platform. A wheeled
+//! robot or vehicle rests for seconds between motions, vibrates while it moves and starts
+//! gently; a foot rests for 0.2-0.5 s at every step and is not quite still while it does.
+
+use calibrate::zero_state::{DetectorConfig, DetectorKind};
+
+use crate::stage::OdometryConfig;
+
+/// A platform's motion profile.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Profile {
+    /// Wheeled robot or vehicle: the GLRT against the references learned at rest (5 s), rest
+    /// flags taken in hindsight (a gentle start is flagged rest by a window that still holds
+    /// the rest before it).
+    #[default]
+    Vehicle,
+    /// Foot-mounted sensor: the SHOE stance detector (no learning, 5-sample windows), every
+    /// stance flag taken as it comes, alignment on half a second of standing.
+    Pedestrian,
+}
+
+impl Profile {
+    /// The zero-state detector settings for local gravity `gravity_mps2`.
+    pub fn detector(self, gravity_mps2: f64) -> DetectorConfig {
+        match self {
+            Self::Vehicle => DetectorConfig::new(DetectorKind::Glrt, gravity_mps2),
+            Self::Pedestrian => DetectorConfig::new(DetectorKind::Shoe, gravity_mps2),
+        }
+    }
+
+    /// `config` with this profile's rest handling.
+    pub fn odometry(self, mut config: OdometryConfig) -> OdometryConfig {
+        if self == Self::Pedestrian {
+            // SHOE's windows are 5 samples: no window holds the rest into a step, so there
+            // is nothing to withdraw, and a stance is shorter than any confirmation.
+            config.rest_hindsight_s = 0.0;
+            config.motion_confirm_s = 0.0;
+            config.align_s = 0.5;
+        }
+        config
+    }
+}

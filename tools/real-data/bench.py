@@ -1,0 +1,246 @@
+#!/usr/bin/env python3
+"""Runs `mems-odometry offline` on every converted real-data recording and prints a table.
+
+Reads tools/real-data/corpus.json for the recording list and, from the data directory
+(default $MEMS_REAL_DATA or /work/real-data, written by convert.py), each recording's ID.csv and
+sidecar ID.json (truth, distance, extra arguments). One run per recording; a run that fails
+(non-zero exit, no JSON) gets a row with its error message and the next one runs.
+
+Figures (horizontal plane, metres; our navigation frame has z up, origin and heading fixed at
+alignment):
+- end error: |e| with e = estimated end displacement minus true end displacement. A closed loop
+  ends where it started (truth 0 in every frame). For truths known only as a distance from the
+  start in a frame whose heading is not ours (footprints, GNSS), |e| lies in
+  [ | |p| - |t| |, |p| + |t| ] with p our end displacement and t the truth's; the table prints
+  that interval.
+- % of distance: end error over the true distance (our own estimated distance, marked *, where
+  the source publishes none).
+- 1-sigma: sqrt((sx^2 + sy^2) / 2) of the reported position sigma (per-axis rms).
+- covered: error <= r68 = 1.515 * sqrt((sx^2 + sy^2) / 2), the radius holding 68 % of a circular
+  2-D Gaussian with that per-axis sigma (r = sigma sqrt(-2 ln 0.32) = 1.5096 sigma; 1.515 is
+  that figure rounded up). With an interval: yes if its upper end is covered, no if its lower
+  end is not, `?` otherwise.
+
+Usage: bench.py [--bin PATH] [--calib TOML] [--data DIR] [--only ID ...] [--json] [--timeout S]
+"""
+
+import argparse
+import json
+import math
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent.parent
+R68_FACTOR = 1.515
+
+
+def identity_calibration(gravity_mps2=9.80665):
+    """An identity accelerometer calibration file (bias 0, S = I, zero covariance) in the
+    format of calibrate/src/calibfile.rs, for recordings that come with no calibration."""
+    zeros12 = "[" + ", ".join(["0.0"] * 12) + "]"
+    return "\n".join([
+        "format_version = 1",
+        'model = "full"',
+        'method = "labelled"',
+        'weighting = "unweighted"',
+        'covariance_mode = "residual_scaled"',
+        f"gravity_mps2 = {gravity_mps2}",
+        "bias_g = [0.0, 0.0, 0.0]",
+        "scale = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]",
+        'param_names = ["b_x", "b_y", "b_z", "S_xx", "S_xy", "S_xz", "S_yx", "S_yy", "S_yz", "S_zx", "S_zy", "S_zz"]',
+        "covariance = [" + ", ".join([zeros12] * 12) + "]",
+        "sigma = " + zeros12,
+        "",
+        "[source]",
+        'file = "identity (tools/real-data/bench.py)"',
+        'kind = "none"',
+        "poses = 0",
+        "",
+        "[residuals]",
+        "rms_g = [0.0, 0.0, 0.0]",
+        "max_abs_g = 0.0",
+        "dof = [0, 0, 0]",
+        "chi2 = [0.0, 0.0, 0.0]",
+        "per_pose_g = []",
+        "",
+    ])
+
+
+def failure_message(stderr, code):
+    """The error line of a failed run: the last non-empty stderr line (notes such as the
+    defaulted-noise message come first, the error last), or the exit code."""
+    lines = [l.strip() for l in stderr.splitlines() if l.strip()]
+    return lines[-1] if lines else f"exit code {code}, no message"
+
+
+def run_one(binary, calib, csv, extra, timeout):
+    cmd = [str(binary), "offline", "--calib", str(calib), "--input", str(csv), "--json", *extra]
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None, f"timed out after {timeout} s", cmd, ""
+    if proc.returncode != 0:
+        return None, failure_message(proc.stderr, proc.returncode), cmd, proc.stderr
+    for line in reversed(proc.stdout.splitlines()):
+        if line.startswith("{"):
+            try:
+                return json.loads(line), None, cmd, proc.stderr
+            except json.JSONDecodeError as e:
+                return None, f"unreadable JSON output: {e}", cmd, proc.stderr
+    return None, "no JSON line on stdout", cmd, proc.stderr
+
+
+def evaluate(side, out):
+    """The row's figures from the sidecar (truth) and the odometry's JSON."""
+    p = out["end_displacement_m"]
+    s = out["sigma_m"]
+    sigma_h = math.sqrt((s[0] ** 2 + s[1] ** 2) / 2)
+    r68 = R68_FACTOR * sigma_h
+    truth = side["truth"]
+    t_vec = truth.get("end_displacement_m")
+    if truth.get("frame") in ("any", "nav") and t_vec is not None:
+        err = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
+        lo = hi = err
+    else:
+        t = truth["end_distance_m"]
+        ours = math.hypot(p[0], p[1])
+        lo, hi = abs(ours - t), ours + t
+    if hi <= r68:
+        covered = "yes"
+    elif lo > r68:
+        covered = "no"
+    else:
+        covered = "?"
+    distance = side.get("distance_m")
+    ours_distance = distance is None
+    if ours_distance:
+        distance = out.get("distance_m")
+    pct = (lambda e: 100.0 * e / distance if distance else None)
+    return {
+        "end_displacement_m": p,
+        "sigma_m": s,
+        "estimated_distance_m": out.get("distance_m"),
+        "error_m": [lo, hi],
+        "distance_m": distance,
+        "distance_is_estimate": ours_distance,
+        "pct_of_distance": [pct(lo), pct(hi)],
+        "sigma_h_m": sigma_h,
+        "r68_m": r68,
+        "covered": covered,
+    }
+
+
+def fmt_range(lo, hi, digits):
+    if lo is None:
+        return "-"
+    if abs(hi - lo) < 10 ** -digits:
+        return f"{lo:.{digits}f}"
+    return f"{lo:.{digits}f} - {hi:.{digits}f}"
+
+
+def table(rows):
+    head = ["recording", "IMU", "platform", "duration (s)", "distance (m)", "end error (m)",
+            "% of distance", "1-sigma (m)", "r68 (m)", "covered", "authors' result"]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        side = r.get("sidecar") or {}
+        conv = side.get("conversion", {})
+        base = [r["id"], side.get("imu", "-").split(" (")[0], side.get("platform", "-"),
+                f"{conv['duration_s']:.1f}" if conv else "-"]
+        if r.get("error"):
+            dist = side.get("distance_m")
+            base.append(f"{dist:.1f}" if dist else "-")
+            out.append("| " + " | ".join(base + [f"failed: {r['error']}", "", "", "", "",
+                                                side.get("authors_result") or "-"]) + " |")
+            continue
+        e = r["result"]
+        dist = f"{e['distance_m']:.1f}" + ("*" if e["distance_is_estimate"] else "")
+        pct = e["pct_of_distance"]
+        out.append("| " + " | ".join(base + [
+            dist, fmt_range(*e["error_m"], 3),
+            fmt_range(pct[0], pct[1], 2) if pct[0] is not None else "-",
+            f"{e['sigma_h_m']:.3f}", f"{e['r68_m']:.3f}", e["covered"],
+            side.get("authors_result") or "-"]) + " |")
+    return "\n".join(out)
+
+
+def summary(rows):
+    done = [r for r in rows if not r.get("error")]
+    covered = sum(1 for r in done if r["result"]["covered"] == "yes")
+    undecided = sum(1 for r in done if r["result"]["covered"] == "?")
+    loops = [r["result"]["pct_of_distance"][1] for r in done
+             if r["sidecar"]["platform"] == "foot" and r["sidecar"]["truth"]["kind"] == "closed_loop"]
+    foot = [r["result"]["pct_of_distance"] for r in done if r["sidecar"]["platform"] == "foot"]
+    lines = [
+        f"positions produced: {len(done)} of {len(rows)}",
+        f"1-sigma covers the error (r68): {covered} of {len(rows)} ({undecided} undecided: truth known as a distance only)",
+    ]
+    if loops:
+        lines.append(f"median end error over the foot-mounted closed loops: {statistics.median(loops):.2f} % of distance ({len(loops)} runs)")
+    if foot:
+        lines.append(f"median over all foot-mounted runs, upper end of the interval: {statistics.median(p[1] for p in foot):.2f} % ({len(foot)} runs)")
+    return lines
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--bin", default=str(REPO / "target" / "release" / "mems-odometry"), help="mems-odometry binary")
+    p.add_argument("--calib", help="calibration TOML for every run (default: an identity calibration written to a temporary file)")
+    p.add_argument("--data", default=os.environ.get("MEMS_REAL_DATA", "/work/real-data"), help="converted data (default $MEMS_REAL_DATA or /work/real-data)")
+    p.add_argument("--only", action="append", metavar="ID", help="run only this recording (repeatable)")
+    p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
+    p.add_argument("--timeout", type=float, default=900.0, help="per-run limit, s")
+    args = p.parse_args()
+
+    binary = Path(args.bin)
+    if not binary.is_file():
+        sys.exit(f"bench.py: {binary}: no such binary (build it: cargo build --release -p odometry)")
+    corpus = json.loads((HERE / "corpus.json").read_text())
+    data = Path(args.data)
+    with tempfile.TemporaryDirectory() as tmp:
+        calib = Path(args.calib) if args.calib else Path(tmp) / "identity.toml"
+        if not args.calib:
+            calib.write_text(identity_calibration())
+        rows = []
+        for rec in corpus["recordings"]:
+            if args.only and rec["id"] not in args.only:
+                continue
+            row = {"id": rec["id"]}
+            side_path = data / f"{rec['id']}.json"
+            csv = data / f"{rec['id']}.csv"
+            if not side_path.is_file() or not csv.is_file():
+                row["error"] = f"not converted: no {side_path} (run convert.py)"
+                rows.append(row)
+                continue
+            side = json.loads(side_path.read_text())
+            row["sidecar"] = side
+            extra = rec.get("extra_args", side.get("extra_args", []))
+            out, err, cmd, stderr = run_one(binary, calib, csv, extra, args.timeout)
+            row["command"] = cmd
+            row["stderr"] = stderr
+            if err:
+                row["error"] = err
+            else:
+                row["odometry"] = out
+                row["result"] = evaluate(side, out)
+            rows.append(row)
+            if not args.json:
+                print(f"{rec['id']}: {'failed: ' + err if err else 'done'}", file=sys.stderr)
+    if args.json:
+        json.dump({"rows": rows, "summary": summary(rows)}, sys.stdout, indent=1)
+        print()
+    else:
+        print(table(rows))
+        print()
+        for line in summary(rows):
+            print(line)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,573 @@
+#!/usr/bin/env python3
+"""Converts the real-data corpus (corpus.json) to the canonical CSV plus a sidecar JSON.
+
+Each source is a public GitHub repository fetched as a bare git snapshot (the search tool's
+`fetch`, or `git clone --bare`); files are read with `git show COMMIT:PATH`, so the working
+copy does not matter and the commit named in corpus.json is the one converted.
+
+Output, per recording, in the output directory (default $MEMS_REAL_DATA or /work/real-data):
+  ID.csv   canonical CSV (tools/recording/src/csv.rs): t_s, ax_g, ay_g, az_g (specific force, g,
+           sensor frame), gx_dps, gy_dps, gz_dps (angular rate, deg/s, sensor frame);
+  ID.json  sidecar: source, licence, IMU, platform, truth, distance, the authors' result, the
+           benchmark's extra arguments, and what the conversion saw (repeated rows, gaps, ...).
+
+Rows are converted as published: repeated rows, equal or irregular timestamps are kept (the
+odometry must cope with them) and counted in the sidecar. Only rows that are not samples are
+dropped (an Xsens DOT export's all-zero placeholder before the first packet), and the sidecar
+says so. Python standard library only (MAT-files are read by the small level-5 reader below,
+because numpy/scipy are not a dependency of this repository).
+
+Usage:
+  convert.py [--git-dir SOURCE=DIR ...] [--mirrors DIR] [--out DIR] [--only ID ...]
+  convert.py --self-test
+"""
+
+import argparse
+import json
+import math
+import os
+import statistics
+import struct
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+
+G0 = 9.80665  # standard gravity, m/s^2 per g (the canonical CSV's g)
+DEG = 180.0 / math.pi
+HERE = Path(__file__).resolve().parent
+WGS84_A = 6378137.0
+WGS84_E2 = 6.69437999014e-3
+
+
+class ConvertError(Exception):
+    """A malformed input: names the file, the line (1-based) and the field where known."""
+
+    def __init__(self, where, line, field, message):
+        parts = [str(where)]
+        if line is not None:
+            parts.append(f"line {line}")
+        if field is not None:
+            parts.append(f"field {field!r}")
+        super().__init__(": ".join(parts) + ": " + message)
+
+
+def number(text, where, line, field):
+    """A finite float from a CSV cell, or a ConvertError naming the cell."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise ConvertError(where, line, field, f"{text.strip()!r} is not a number") from None
+    if not math.isfinite(value):
+        raise ConvertError(where, line, field, f"{text.strip()!r} is not finite")
+    return value
+
+
+# ---------------------------------------------------------------------------------------------
+# MAT-file level 5 (MATLAB 5.0 format, "MAT-File Format", MathWorks, 2013; sections 1-3):
+# a 128-byte header, then data elements of (type u32, byte count u32, data padded to 8 bytes),
+# a small element packing type and count in one u32; miCOMPRESSED (15) elements hold zlib
+# streams of further elements; miMATRIX (14) holds array flags, dimensions, name and the real
+# part. Only numeric and logical arrays are decoded (all this corpus needs).
+
+MAT_TYPES = {1: "b", 2: "B", 3: "h", 4: "H", 5: "i", 6: "I", 7: "f", 9: "d", 12: "q", 13: "Q"}
+MI_MATRIX, MI_COMPRESSED = 14, 15
+NUMERIC_CLASSES = set(range(6, 16))
+
+
+def _mat_elements(buf, pos, end, where):
+    while pos + 8 <= end:
+        kind, size = struct.unpack_from("<II", buf, pos)
+        if kind >> 16:  # small data element: size in the upper half, data in the tag's 2nd word
+            yield kind & 0xFFFF, buf[pos + 4 : pos + 4 + (kind >> 16)]
+            pos += 8
+            continue
+        if pos + 8 + size > end:
+            raise ConvertError(where, None, None, f"MAT element at byte {pos} runs past the end")
+        yield kind, buf[pos + 8 : pos + 8 + size]
+        pos += 8 + size + ((-size) % 8 if kind != MI_COMPRESSED else 0)
+
+
+def _mat_array(data, where):
+    subs = list(_mat_elements(data, 0, len(data), where))
+    if len(subs) < 3:
+        raise ConvertError(where, None, None, "MAT array without flags, dimensions and name")
+    cls = struct.unpack_from("<I", subs[0][1])[0] & 0xFF
+    dims = struct.unpack("<%di" % (len(subs[1][1]) // 4), subs[1][1])
+    name = subs[2][1].decode("latin-1")
+    if cls not in NUMERIC_CLASSES or len(subs) < 4:
+        return name, dims, None
+    kind, raw = subs[3]
+    code = MAT_TYPES.get(kind)
+    if code is None:
+        raise ConvertError(where, None, name, f"MAT data type {kind} is not supported")
+    values = struct.unpack("<%d%s" % (len(raw) // struct.calcsize(code), code), raw)
+    return name, dims, values
+
+
+def read_mat(buf, where):
+    """The numeric arrays of a level-5 MAT-file: {name: (dims, column-major values)}."""
+    if len(buf) < 128 or not buf.startswith(b"MATLAB 5.0 MAT-file"):
+        raise ConvertError(where, None, None, "not a MATLAB 5.0 MAT-file (v7.3/HDF5 is not read)")
+    if buf[126:128] != b"IM":
+        raise ConvertError(where, None, None, "big-endian MAT-files are not read")
+    arrays = {}
+
+    def walk(b, pos, end):
+        for kind, data in _mat_elements(b, pos, end, where):
+            if kind == MI_COMPRESSED:
+                try:
+                    inner = zlib.decompress(data)
+                except zlib.error as e:
+                    raise ConvertError(where, None, None, f"corrupt compressed element: {e}")
+                walk(inner, 0, len(inner))
+            elif kind == MI_MATRIX:
+                name, dims, values = _mat_array(data, where)
+                arrays[name] = (dims, values)
+
+    walk(buf, 128, len(buf))
+    return arrays
+
+
+def mat_matrix(arrays, name, where):
+    """Array `name` as a list of rows (MAT stores columns first)."""
+    if name not in arrays or arrays[name][1] is None:
+        raise ConvertError(where, None, name, "numeric array missing")
+    dims, values = arrays[name]
+    rows, cols = dims[0], dims[1]
+    return [[values[c * rows + r] for c in range(cols)] for r in range(rows)]
+
+
+# ---------------------------------------------------------------------------------------------
+# Source formats. Each parser takes (text or bytes, where) and returns (samples, notes) with
+# samples as (t_s, ax_g, ay_g, az_g, gx_dps, gy_dps, gz_dps) in file order.
+
+
+def _lines(text):
+    return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+
+
+def _header_index(header, wanted, where, line):
+    index = {}
+    for key, name in wanted.items():
+        found = [i for i, h in enumerate(header) if h.strip() == name or h.strip().endswith(":" + name)]
+        if len(found) != 1:
+            raise ConvertError(where, line, name, f"column {'missing' if not found else 'repeated'} in the header")
+        index[key] = found[0]
+    return index
+
+
+def _rows(lines, first, where, width):
+    """(line number, cells) of the data rows from index `first`; a short row is an error."""
+    for i in range(first, len(lines)):
+        if not lines[i].strip():
+            continue
+        cells = lines[i].split(",")
+        if len(cells) < width:
+            raise ConvertError(where, i + 1, None, f"{len(cells)} fields, expected at least {width}")
+        yield i + 1, cells
+
+
+def parse_xio_csv(text, where):
+    """x-io NGIMU CSV: time s, gyroscope deg/s, accelerometer g (already our units)."""
+    lines = _lines(text)
+    header = lines[0].split(",")
+    names = {
+        "t": "Time (s)",
+        "gx": "Gyroscope X (deg/s)", "gy": "Gyroscope Y (deg/s)", "gz": "Gyroscope Z (deg/s)",
+        "ax": "Accelerometer X (g)", "ay": "Accelerometer Y (g)", "az": "Accelerometer Z (g)",
+    }
+    idx = _header_index(header, names, where, 1)
+    out = []
+    for ln, cells in _rows(lines, 1, where, len(header)):
+        v = {k: number(cells[i], where, ln, names[k]) for k, i in idx.items()}
+        out.append((v["t"], v["ax"], v["ay"], v["az"], v["gx"], v["gy"], v["gz"]))
+    return out, ["units as published: g and deg/s; time column as published"]
+
+
+def parse_openshoe_txt(text, where, rate_hz):
+    """OpenShoe: f x,y,z m/s^2 then omega x,y,z rad/s per line, no time (t = i / rate)."""
+    out = []
+    n = 0
+    for i, line in enumerate(_lines(text)):
+        if not line.strip():
+            continue
+        cells = line.split(",")
+        if len(cells) != 6:
+            raise ConvertError(where, i + 1, None, f"{len(cells)} fields, expected 6")
+        f = [number(c, where, i + 1, f"column {k + 1}") for k, c in enumerate(cells)]
+        out.append((n / rate_hz, f[0] / G0, f[1] / G0, f[2] / G0, f[3] * DEG, f[4] * DEG, f[5] * DEG))
+        n += 1
+    return out, [f"no time column: t_s = sample index / {rate_hz} Hz (the authors' Ts)",
+                 "m/s^2 -> g (/9.80665), rad/s -> deg/s"]
+
+
+def parse_sensorconnect_csv(text, where):
+    """MicroStrain SensorConnect CSV: Time s, scaledAccel g, scaledGyro rad/s."""
+    lines = _lines(text)
+    header = lines[0].split(",")
+    names = {
+        "t": "Time",
+        "ax": "scaledAccelX", "ay": "scaledAccelY", "az": "scaledAccelZ",
+        "gx": "scaledGyroX", "gy": "scaledGyroY", "gz": "scaledGyroZ",
+    }
+    idx = _header_index(header, names, where, 1)
+    out = []
+    for ln, cells in _rows(lines, 1, where, len(header)):
+        v = {k: number(cells[i], where, ln, names[k]) for k, i in idx.items()}
+        out.append((v["t"], v["ax"], v["ay"], v["az"], v["gx"] * DEG, v["gy"] * DEG, v["gz"] * DEG))
+    return out, ["scaledAccel already in g; scaledGyro rad/s -> deg/s; time column as published"]
+
+
+def parse_xsens_dot_csv(text, where):
+    """Xsens DOT export: SampleTimeFine us (u32), Acc m/s^2, Gyr deg/s."""
+    lines = _lines(text)
+    first = 1 if lines and lines[0].strip().startswith("sep=") else 0
+    header = [h.strip() for h in lines[first].split(",")]
+    names = {
+        "n": "PacketCounter", "t": "SampleTimeFine",
+        "ax": "Acc_X", "ay": "Acc_Y", "az": "Acc_Z", "gx": "Gyr_X", "gy": "Gyr_Y", "gz": "Gyr_Z",
+    }
+    idx = _header_index(header, names, where, first + 1)
+    width = max(idx.values()) + 1
+    out, notes = [], ["Acc m/s^2 -> g (/9.80665); Gyr already deg/s; t_s from SampleTimeFine (us, 32-bit, unwrapped)"]
+    t0 = prev = None
+    wraps = 0
+    for ln, cells in _rows(lines, first + 1, where, width):
+        v = {k: number(cells[i], where, ln, names[k]) for k, i in idx.items()}
+        values = [v[k] for k in ("ax", "ay", "az", "gx", "gy", "gz")]
+        if not out and t0 is None and all(x == 0.0 for x in values):
+            notes.append(f"dropped line {ln}: all-zero placeholder row (PacketCounter {int(v['n'])}) before the first packet")
+            continue
+        stamp = int(v["t"])
+        if prev is not None and stamp < prev and prev - stamp > 2**31:
+            wraps += 1
+        prev = stamp
+        stamp += wraps * 2**32
+        if t0 is None:
+            t0 = stamp
+        out.append(((stamp - t0) * 1e-6, v["ax"] / G0, v["ay"] / G0, v["az"] / G0, v["gx"], v["gy"], v["gz"]))
+    if wraps:
+        notes.append(f"SampleTimeFine wrapped {wraps} time(s)")
+    return out, notes
+
+
+# ---------------------------------------------------------------------------------------------
+# Truth.
+
+
+def gcp_truth(buf, where):
+    """Footprint ground control points: end distance from the start and the walked length."""
+    arrays = read_mat(buf, where)
+    ok = mat_matrix(arrays, "GCP_exist_and_correct", where)[0][0]
+    if not ok:
+        raise ConvertError(where, None, "GCP_exist_and_correct", "the authors mark these GCP as missing or wrong")
+    gcp = mat_matrix(arrays, "GCP_meters", where)
+    if len(gcp) < 2 or len(gcp[0]) != 2:
+        raise ConvertError(where, None, "GCP_meters", f"expected N x 2 with N >= 2, got {len(gcp)} x {len(gcp[0]) if gcp else 0}")
+    walked = sum(math.dist(a, b) for a, b in zip(gcp, gcp[1:]))
+    end = [gcp[-1][0] - gcp[0][0], gcp[-1][1] - gcp[0][1]]
+    return {
+        "kind": "gcp",
+        "frame": "unknown_heading",
+        "end_displacement_m": None,
+        "end_distance_m": math.hypot(*end),
+        "end_displacement_gcp_frame_m": end,
+        "footprints": len(gcp),
+        "tile_edge_m": mat_matrix(arrays, "tile_edge_length", where)[0][0],
+        "source": "GCP_meters: the last footprint relative to the first; the GCP frame's heading (and handedness) is not the odometry's, so only the distance is a truth",
+    }, walked
+
+
+def gnss_truth(text, where):
+    """RTK GNSS log: the last fix relative to the first (local east/north) and the track length."""
+    lines = _lines(text)
+    header = lines[0].split(",")
+    idx = _header_index(header, {"lat": "Lat_GNSS", "lon": "Long_GNSS"}, where, 1)
+    fixes = []
+    for ln, cells in _rows(lines, 1, where, len(header)):
+        fixes.append((number(cells[idx["lat"]], where, ln, "Lat_GNSS"), number(cells[idx["lon"]], where, ln, "Long_GNSS")))
+    if len(fixes) < 2:
+        raise ConvertError(where, None, None, "fewer than two fixes")
+    lat0 = math.radians(fixes[0][0])
+    # Meridian and prime-vertical radii of curvature (WGS-84) at the first fix: a local
+    # east/north tangent plane, exact to well under 1 cm over the few hundred metres here.
+    s2 = math.sin(lat0) ** 2
+    r_n = WGS84_A * (1 - WGS84_E2) / (1 - WGS84_E2 * s2) ** 1.5
+    r_e = WGS84_A / math.sqrt(1 - WGS84_E2 * s2)
+
+    def enu(fix):
+        return (math.radians(fix[1] - fixes[0][1]) * r_e * math.cos(lat0), math.radians(fix[0] - fixes[0][0]) * r_n)
+
+    points = [enu(f) for f in fixes]
+    # Track length over points at least 0.5 m apart, so that fix noise at standstill
+    # (1e-7 degree steps) does not add length.
+    walked, last = 0.0, points[0]
+    for p in points[1:]:
+        step = math.dist(p, last)
+        if step >= 0.5:
+            walked += step
+            last = p
+    end = list(points[-1])
+    return {
+        "kind": "gnss_endpoints",
+        "frame": "unknown_heading",
+        "end_displacement_m": None,
+        "end_distance_m": math.hypot(*end),
+        "end_displacement_enu_m": end,
+        "fixes": len(fixes),
+        "source": "GNSS.csv: last fix minus first fix (east, north); the odometry's heading is fixed at its alignment, not north, so only the distance is a truth",
+    }, walked
+
+
+# ---------------------------------------------------------------------------------------------
+# Conversion driver.
+
+
+def git_show(git_dir, commit, path):
+    proc = subprocess.run(["git", "--git-dir", str(git_dir), "show", f"{commit}:{path}"], capture_output=True)
+    if proc.returncode != 0:
+        msg = proc.stderr.decode(errors="replace").strip().splitlines()
+        raise ConvertError(f"{git_dir} {commit}:{path}", None, None, (msg[0] if msg else "git show failed") +
+                           " (fetch the repository again, or check the commit in corpus.json)")
+    return proc.stdout
+
+
+def sample_stats(samples, rate_hz):
+    """What the odometry will meet in the time column and the rows, and the start-up rest."""
+    times = [s[0] for s in samples]
+    steps = [b - a for a, b in zip(times, times[1:])]
+    nominal = 1.0 / rate_hz
+    repeated_rows = sum(1 for a, b in zip(samples, samples[1:]) if a == b)
+    first_motion = next((s[0] for s in samples
+                         if abs(math.sqrt(s[1] ** 2 + s[2] ** 2 + s[3] ** 2) - 1.0) > 0.1
+                         or math.sqrt(s[4] ** 2 + s[5] ** 2 + s[6] ** 2) > 20.0), None)
+    return {
+        "samples": len(samples),
+        "duration_s": times[-1] - times[0] if times else 0.0,
+        "median_step_s": statistics.median(steps) if steps else None,
+        "equal_timestamps": sum(1 for d in steps if d == 0),
+        "backward_timestamps": sum(1 for d in steps if d < 0),
+        "gaps_over_1.5_steps": sum(1 for d in steps if d > 1.5 * nominal),
+        "repeated_rows": repeated_rows,
+        "first_motion_s": first_motion,
+        "first_motion_rule": "first sample with | |f| - 1 g | > 0.1 g or |w| > 20 deg/s",
+    }
+
+
+def write_csv(path, samples, comments):
+    with open(path, "w", encoding="utf-8") as f:
+        for c in comments:
+            f.write(f"# {c}\n")
+        f.write("t_s,ax_g,ay_g,az_g,gx_dps,gy_dps,gz_dps\n")
+        for s in samples:
+            f.write("%.9f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n" % s)
+
+
+def convert_recording(rec, source, git_dir, out_dir):
+    commit = source["commit"]
+    fmt = source["format"]
+    paths = rec["paths"]
+    loc = f"{source['repo']}@{commit}:{paths[0]}"
+    raw = git_show(git_dir, commit, paths[0])
+    where = loc
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise ConvertError(where, None, None, f"not UTF-8 text: {e}") from None
+    truth = dict(rec["truth"])
+    distance = rec.get("distance_m")
+    distance_source = rec.get("distance_source")
+    if fmt == "xio_csv":
+        samples, notes = parse_xio_csv(text, where)
+    elif fmt == "openshoe_txt":
+        samples, notes = parse_openshoe_txt(text, where, rec["rate_hz"])
+    elif fmt == "sensorconnect_csv":
+        samples, notes = parse_sensorconnect_csv(text, where)
+        mat_where = f"{source['repo']}@{commit}:{paths[1]}"
+        truth, distance = gcp_truth(git_show(git_dir, commit, paths[1]), mat_where)
+    elif fmt == "xsens_dot_csv":
+        samples, notes = parse_xsens_dot_csv(text, where)
+        gnss_where = f"{source['repo']}@{commit}:{paths[1]}"
+        gnss = git_show(git_dir, commit, paths[1]).decode("utf-8-sig")
+        truth, distance = gnss_truth(gnss, gnss_where)
+    else:
+        raise ConvertError("corpus.json", None, rec["id"], f"unknown format {fmt!r}")
+    if not samples:
+        raise ConvertError(where, None, None, "no samples")
+    if truth.get("kind") == "closed_loop":
+        truth.setdefault("end_distance_m", 0.0)
+    stats = sample_stats(samples, rec["rate_hz"])
+    csv_path = out_dir / f"{rec['id']}.csv"
+    write_csv(csv_path, samples, [
+        f"{rec['id']}: converted by tools/real-data/convert.py",
+        f"source: {source['repo']}@{commit}: {', '.join(paths)}",
+        f"licence: {source['licence']}",
+        f"imu: {source['imu']}; platform: {rec['platform']}",
+    ])
+    sidecar = {
+        "id": rec["id"],
+        "csv": csv_path.name,
+        "source": {"repo": source["repo"], "commit": commit, "paths": paths},
+        "licence": source["licence"],
+        "imu": source["imu"],
+        "platform": rec["platform"],
+        "rate_hz": rec["rate_hz"],
+        "truth": truth,
+        "distance_m": distance,
+        "distance_source": distance_source,
+        "authors_result": rec.get("authors_result"),
+        "authors_citation": source.get("authors_citation"),
+        "extra_args": rec.get("extra_args", []),
+        "source_format": source.get("format_note"),
+        "conversion": {"notes": notes, **stats},
+    }
+    with open(out_dir / f"{rec['id']}.json", "w", encoding="utf-8") as f:
+        json.dump(sidecar, f, indent=2)
+        f.write("\n")
+    return sidecar
+
+
+def default_git_dir(repo, mirrors):
+    owner, name = repo.split("/")
+    return Path(mirrors) / f"{owner}+{name}" / "repo"
+
+
+def convert_all(args):
+    corpus = json.loads((HERE / "corpus.json").read_text())
+    overrides = {}
+    for item in args.git_dir or []:
+        key, sep, value = item.partition("=")
+        if not sep:
+            sys.exit(f"convert.py: --git-dir {item!r}: expected SOURCE=DIR")
+        overrides[key] = Path(value)
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    failures = 0
+    for rec in corpus["recordings"]:
+        if args.only and rec["id"] not in args.only:
+            continue
+        source = corpus["sources"][rec["source"]]
+        git_dir = overrides.get(rec["source"]) or default_git_dir(source["repo"], args.mirrors)
+        try:
+            side = convert_recording(rec, source, git_dir, out_dir)
+        except (ConvertError, OSError) as e:
+            failures += 1
+            print(f"convert.py: {rec['id']}: {e}", file=sys.stderr)
+            continue
+        c = side["conversion"]
+        print(f"{rec['id']}: {c['samples']} samples, {c['duration_s']:.1f} s, "
+              f"{c['repeated_rows']} repeated rows, {c['equal_timestamps']} equal timestamps -> {out_dir / side['csv']}")
+    return 1 if failures else 0
+
+
+# ---------------------------------------------------------------------------------------------
+# Self-test: every source format on a tiny inline sample, and malformed input naming the line.
+
+
+def _mat_bytes(arrays, compress):
+    """A level-5 MAT-file holding double arrays {name: (rows, cols, column-major values)}."""
+    def element(kind, data):
+        return struct.pack("<II", kind, len(data)) + data + b"\0" * ((-len(data)) % 8)
+
+    body = b""
+    for name, (rows, cols, values) in arrays.items():
+        matrix = (element(6, struct.pack("<II", 6, 0)) + element(5, struct.pack("<ii", rows, cols))
+                  + element(1, name.encode()) + element(9, struct.pack("<%dd" % len(values), *values)))
+        item = element(MI_MATRIX, matrix)
+        if compress:
+            z = zlib.compress(item)
+            item = struct.pack("<II", MI_COMPRESSED, len(z)) + z
+        body += item
+    header = b"MATLAB 5.0 MAT-file, self-test".ljust(116) + b"\0" * 8 + struct.pack("<H", 0x0100) + b"IM"
+    return header + body
+
+
+def self_test():
+    def close(a, b, tol=1e-9):
+        assert abs(a - b) <= tol * max(1.0, abs(b)), (a, b)
+
+    def expect_error(fn, *needles):
+        try:
+            fn()
+        except ConvertError as e:
+            for n in needles:
+                assert n in str(e), (str(e), n)
+            return
+        raise AssertionError("no error raised")
+
+    xio = ("Time (s),Gyroscope X (deg/s),Gyroscope Y (deg/s),Gyroscope Z (deg/s),Accelerometer X (g),"
+           "Accelerometer Y (g),Accelerometer Z (g)\n0,1,2,3,0.1,0.2,0.9\n0.0025,1,2,3,0.1,0.2,0.9\n"
+           "0.0025,1,2,3,0.1,0.2,0.9\n")
+    s, _ = parse_xio_csv(xio, "x.csv")
+    assert s[0] == (0.0, 0.1, 0.2, 0.9, 1.0, 2.0, 3.0) and s[1] == s[2]
+    st = sample_stats(s, 400)
+    assert st["repeated_rows"] == 1 and st["equal_timestamps"] == 1
+    expect_error(lambda: parse_xio_csv(xio.replace("0.0025,1,2,3,0.1,0.2,0.9\n0.0025", "0.0025,1,2,x,0.1,0.2,0.9\n0.0025", 1), "x.csv"),
+                 "x.csv", "line 3", "Gyroscope Z (deg/s)", "'x' is not a number")
+
+    s, _ = parse_openshoe_txt("0,0,-9.80665,3.14159265358979,0,0\n0,0,-9.80665,0,0,0\n", "o.txt", 820)
+    close(s[0][3], -1.0)
+    close(s[0][4], 180.0, 1e-6)
+    close(s[1][0], 1 / 820)
+    expect_error(lambda: parse_openshoe_txt("1,2,3\n", "o.txt", 820), "o.txt", "line 1", "3 fields, expected 6")
+
+    sc = ("Time,inertial-1:scaledAccelX,inertial-1:scaledAccelY,inertial-1:scaledAccelZ,inertial-1:scaledGyroX,"
+          "inertial-1:scaledGyroY,inertial-1:scaledGyroZ\n0,0.1,0.2,-0.97,0.0174532925199433,0,0\n0.005,0.1,0.2,-0.97,0,0,0\n")
+    s, _ = parse_sensorconnect_csv(sc, "s.csv")
+    close(s[0][4], 1.0)
+    close(s[1][0], 0.005)
+    assert s[0][3] == -0.97
+    expect_error(lambda: parse_sensorconnect_csv(sc.replace("scaledGyroZ", "scaledMagZ"), "s.csv"), "s.csv", "line 1", "scaledGyroZ", "missing")
+
+    dot = ("sep=,\nPacketCounter,SampleTimeFine,Euler_X,Euler_Y,Euler_Z,Acc_X,Acc_Y,Acc_Z,Gyr_X,Gyr_Y,Gyr_Z,\n"
+           "0, 4294960000, 0, 0, 0, 0, 0, 0, 0, 0, 0, \n"
+           "1, 4294962000, 1, 2, 3, 0, 0, 9.80665, 0.5, 0, 0, \n"
+           "2, 3037, 1, 2, 3, 0, 0, 9.80665, 0.5, 0, 0, \n")
+    s, notes = parse_xsens_dot_csv(dot, "d.csv")
+    assert len(s) == 2 and any("dropped line 3" in n for n in notes), notes
+    close(s[0][3], 1.0)
+    close(s[1][0], 8333e-6)
+    expect_error(lambda: parse_xsens_dot_csv(dot.replace("2, 3037, 1", "2, 3037"), "d.csv"), "d.csv", "line 5")
+
+    for compress in (False, True):
+        mat = _mat_bytes({"GCP_exist_and_correct": (1, 1, [1.0]),
+                          "GCP_meters": (3, 2, [0.0, 3.0, 3.0, 0.0, 0.0, 4.0]),
+                          "tile_edge_length": (1, 1, [0.4])}, compress)
+        truth, walked = gcp_truth(mat, "g.mat")
+        close(truth["end_distance_m"], 5.0)
+        close(walked, 7.0)
+    bad = _mat_bytes({"GCP_exist_and_correct": (1, 1, [0.0]), "GCP_meters": (1, 2, [0.0, 0.0])}, True)
+    expect_error(lambda: gcp_truth(bad, "g.mat"), "g.mat", "GCP_exist_and_correct")
+    expect_error(lambda: read_mat(b"MATLAB 7.3 MAT-file" + b"\0" * 200, "h.mat"), "h.mat", "not a MATLAB 5.0")
+
+    # 0.001 degree of latitude north: an independent figure for the local tangent plane, the
+    # length of a degree of latitude 111132.954 - 559.822 cos(2 phi) + 1.175 cos(4 phi) m
+    # (the standard WGS-84 series), 111131.779 m at 45 N.
+    gnss = "Timestamp,Lat_GNSS,Long_GNSS\n0,45.0,10.0\n0.1,45.001,10.0\n0.2,45.001,10.0\n"
+    truth, walked = gnss_truth(gnss, "n.csv")
+    close(truth["end_distance_m"], 0.001 * (111132.954 - 1.175), 1e-6)
+    close(walked, truth["end_distance_m"])
+    expect_error(lambda: gnss_truth(gnss + "0.3,north,10\n", "n.csv"), "n.csv", "line 5", "Lat_GNSS")
+    print("convert.py self-test: ok (xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv, MAT v5 GCP, GNSS)")
+    return 0
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--git-dir", action="append", metavar="SOURCE=DIR",
+                   help="bare git dir of a corpus source (default: MIRRORS/owner+name/repo)")
+    p.add_argument("--mirrors", default=os.environ.get("MEMS_MIRRORS", "/work/.mirror"),
+                   help="where fetched snapshots live (default $MEMS_MIRRORS or /work/.mirror)")
+    p.add_argument("--out", default=os.environ.get("MEMS_REAL_DATA", "/work/real-data"),
+                   help="output directory (default $MEMS_REAL_DATA or /work/real-data)")
+    p.add_argument("--only", action="append", metavar="ID", help="convert only this recording (repeatable)")
+    p.add_argument("--self-test", action="store_true", help="run the built-in format tests and exit")
+    args = p.parse_args()
+    if args.self_test:
+        return self_test()
+    return convert_all(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
