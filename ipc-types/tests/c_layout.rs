@@ -110,7 +110,7 @@ fn facts() -> Vec<Fact> {
             reserved
         ]
     );
-    let flags: [(&str, u16); 22] = [
+    let flags: [(&str, u16); 23] = [
         ("MEMS_RAW_GAP_BEFORE", raw_flags::GAP_BEFORE),
         ("MEMS_RAW_FIFO_OVERFLOW", raw_flags::FIFO_OVERFLOW),
         ("MEMS_RAW_SATURATED", raw_flags::SATURATED),

@@ -16,8 +16,6 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use std::collections::VecDeque;
-
 use clap::{Parser, ValueEnum};
 use common::{Case, Simulation, live_calibration_stage, live_detector};
 use ipc_types::{CorrectedImuSample, RobotHint, corrected_flags, odometry_flags};
