@@ -145,10 +145,11 @@ impl<T: core::fmt::Debug + ZeroCopySend + Copy + 'static> Output<T> {
     /// The input is done: notifies what was sent since its first sample, and returns the
     /// error met since the last call, if any.
     pub fn end_of_input(&mut self) -> Result<(), ServiceError> {
-        if self.unnotified && self.error.is_none() {
-            if let Err(e) = self.waker.notify() {
-                self.error = Some(e);
-            }
+        if self.unnotified
+            && self.error.is_none()
+            && let Err(e) = self.waker.notify()
+        {
+            self.error = Some(e);
         }
         self.notified = false;
         self.unnotified = false;

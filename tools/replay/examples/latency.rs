@@ -413,10 +413,11 @@ fn pipeline(
                     h.record(ns.max(1))?;
                 }
             }
-            if !replay_out.is_finished() && replay_cpu.1.elapsed() > Duration::from_millis(100) {
-                if let Ok(c) = cpu_s(replay_pid) {
-                    replay_cpu = (c, Instant::now());
-                }
+            if !replay_out.is_finished()
+                && replay_cpu.1.elapsed() > Duration::from_millis(100)
+                && let Ok(c) = cpu_s(replay_pid)
+            {
+                replay_cpu = (c, Instant::now());
             }
             if replay_out.is_finished() && cpu1.is_none() {
                 let mut now: Vec<f64> = stages
