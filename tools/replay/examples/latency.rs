@@ -705,10 +705,19 @@ fn main() -> Result<()> {
     let t = pipeline(&bins, Path::new(&long), calib_path, 1000, true, false)?;
     println!(
         "## Throughput, `mems-replay --max` through calibrate and odometry (plain)\n\n\
-         {} states at {:.0} states/s at the subscriber; {}\n",
-        t.states, t.rate_hz, t.replay_line
+         {} states at {:.0} states/s at the subscriber; {}\n\n\
+         CPU over the replay (% of one core): {}\n",
+        t.states,
+        t.rate_hz,
+        t.replay_line,
+        t.cpu
+            .iter()
+            .map(|(n, p)| format!("{n} {p:.1}%"))
+            .collect::<Vec<_>>()
+            .join(", ")
     );
     put("throughput_states_per_s", json!(t.rate_hz.round()));
+    cpu.insert("throughput".into(), cpu_json(&t.cpu));
 
     // The pinned runs last: SCHED_FIFO and pinning of this process's threads stay for good.
     println!(
