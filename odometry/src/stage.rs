@@ -62,7 +62,12 @@
 //! states it emits, and one lagging `2 rest_hindsight_s + motion_confirm_s` behind on inputs
 //! whose flags are final. A change of the flags in force copies the lagging one into the live
 //! one and replays the inputs in between (kept, in arrival order, in a ring allocated up
-//! front), so the output is what one pass with the final flags gives. Rest decided by a fresh
+//! front), so the output is what one pass with the final flags gives. The replay is spread
+//! over calls, at most [`REPLAY_PER_CALL`] inputs per call, so that no call holds up the
+//! samples behind it for long: meanwhile the live navigator goes on with the flags it had (its
+//! states are republished by the replay), and when the replay has caught up it takes the
+//! replay's state. [`OdometryStage::finish`] completes a replay still under way at the end of
+//! the stream. Rest decided by a fresh
 //! robot hint is not withdrawn (the controller knows).
 
 use crate::eskf::{Eskf, NoiseModel};
@@ -197,6 +202,12 @@ struct Hindsight {
     confirm_ns: u64,
     lagged: Navigator,
     journal: Ring<Input>,
+    /// The navigator replaying the journal after a change of the flags in force, from the
+    /// lagging navigator's state, a bounded number of inputs per call.
+    redo: Navigator,
+    /// How many of the journal's inputs (from its oldest) `redo` has taken; `None` when no
+    /// replay is under way.
+    redo_pos: Option<usize>,
     /// Samples the lagging navigator took with their rest flag withdrawn.
     withdrawn: u64,
     /// Start of the current run of IMU motion flags, ns.
@@ -229,27 +240,70 @@ impl Hindsight {
 
     /// Keeps `input`; when the journal is full (a sample rate above `max_rate_hz`), the oldest
     /// input goes to the lagging navigator early, with its flags as they stand.
-    fn keep(&mut self, input: Input) {
-        if self.journal.is_full()
-            && let Some(old) = self.journal.pop()
-        {
-            self.take(&old);
+    fn keep(&mut self, input: Input, emit: &mut impl FnMut(&OdometryState)) {
+        if self.journal.is_full() {
+            self.pop_front(emit);
         }
         self.journal.push(input);
+    }
+
+    /// Gives the journal's oldest input to the lagging navigator; a replay under way takes it
+    /// first if it has not yet (so that every state it changes is republished).
+    fn pop_front(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        if self.redo_pos == Some(0) {
+            self.redo_step(emit);
+        }
+        if let Some(input) = self.journal.pop() {
+            if let Some(p) = self.redo_pos.as_mut() {
+                *p -= 1;
+            }
+            self.take(&input);
+        }
+    }
+
+    /// The replay takes its next journal input, its states republished as `REVISION`.
+    fn redo_step(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        let Some(p) = self.redo_pos else { return };
+        let Some(input) = self.journal.oldest(p).copied() else {
+            return;
+        };
+        feed(&mut self.redo, &input, &mut |o| {
+            emit(&OdometryState {
+                flags: o.flags | odometry_flags::REVISION,
+                ..*o
+            })
+        });
+        self.redo_pos = Some(p + 1);
+    }
+
+    /// Advances the replay by at most `*budget` inputs (counted down); whether it has caught
+    /// up with the newest input (then `redo` holds the final state and the replay is over).
+    fn redo_advance(&mut self, budget: &mut usize, emit: &mut impl FnMut(&OdometryState)) -> bool {
+        while let Some(p) = self.redo_pos {
+            if p >= self.journal.len() {
+                self.redo_pos = None;
+                return true;
+            }
+            if *budget == 0 {
+                return false;
+            }
+            *budget -= 1;
+            self.redo_step(emit);
+        }
+        false
     }
 
     /// Gives the lagging navigator every input up to the last sample whose rest flag is final
     /// at `t_ns`: a motion starting within the hindsight after it is confirmed or not at the
     /// latest the confirmation time plus the hindsight after its start.
-    fn catch_up(&mut self, t_ns: u64) {
+    fn catch_up(&mut self, t_ns: u64, emit: &mut impl FnMut(&OdometryState)) {
         while let Some(input) = self.journal.front().copied() {
             if let Input::Sample { s, .. } = input
                 && s.stamps.sample_ns + 2 * self.lag_ns + self.confirm_ns > t_ns
             {
                 break;
             }
-            self.journal.pop();
-            self.take(&input);
+            self.pop_front(emit);
         }
     }
 
@@ -325,6 +379,11 @@ fn feed(nav: &mut Navigator, input: &Input, emit: &mut impl FnMut(&OdometryState
     }
 }
 
+/// Most journal inputs a replay after a change of the flags in force navigates again in one
+/// call of [`OdometryStage::process`] (a replay needs up to `2 rest_hindsight_s +
+/// motion_confirm_s` of inputs, 1 500 at 1 kHz, 6 000 at 4 kHz).
+pub const REPLAY_PER_CALL: usize = 64;
+
 /// Provisional samples the stage holds until their batch is settled: more than the two
 /// batches a calibration stage can leave unsettled (a batch cut by a gap, then a new one).
 const UNSETTLED: usize = 64;
@@ -378,6 +437,8 @@ impl OdometryStage {
             lag_ns: (lag_s * 1e9).round() as u64,
             confirm_ns: (confirm_s * 1e9).round() as u64,
             lagged: Navigator::new(cfg, hints),
+            redo: Navigator::new(cfg, hints),
+            redo_pos: None,
             journal: Ring::new(
                 ((2.0 * lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize + hints.capacity + 2,
             ),
@@ -404,7 +465,9 @@ impl OdometryStage {
     pub fn hint(&mut self, h: &RobotHint) -> Result<(), HintError> {
         check_hint(h)?;
         if let Some(hs) = self.settled.hindsight.as_mut() {
-            hs.keep(Input::Hint(*h));
+            // Only above `max_rate_hz` does this push an input out of the journal; a replay
+            // that had not taken it then does not republish its state.
+            hs.keep(Input::Hint(*h), &mut |_| {});
         }
         self.settled.live.hint(h);
         self.ahead.hint(h);
@@ -472,6 +535,8 @@ impl OdometryStage {
             });
         }
         self.last_ns = Some(t_ns);
+        let mut budget = REPLAY_PER_CALL;
+        let budget = &mut budget;
         let mut state = OdometryState::default();
         // Its motion-end revisions come again, on settled flags, from the settled navigator.
         self.ahead.process(s, &mut |o| {
@@ -484,7 +549,7 @@ impl OdometryStage {
         if s.flags & corrected_flags::PROVISIONAL != 0 {
             if let Some(old) = self.unsettled.push(sample) {
                 // Never settled in time: final as it stands.
-                self.settle(&old, emit);
+                self.settle(&old, budget, emit);
             }
             return Ok(());
         }
@@ -493,7 +558,7 @@ impl OdometryStage {
         let mut diverged = false;
         while self.unsettled.len() > settles {
             let old = self.unsettled.pop().expect("len > settles");
-            diverged |= self.settle(&old, emit);
+            diverged |= self.settle(&old, budget, emit);
         }
         const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
         while let Some(mut u) = self.unsettled.pop() {
@@ -503,22 +568,41 @@ impl OdometryStage {
             u.s.flags = flags;
             u.s.zs_mean_mps2 = s.zs_mean_mps2;
             u.s.zs_std_mps2 = s.zs_std_mps2;
-            diverged |= self.settle(&u, emit);
+            diverged |= self.settle(&u, budget, emit);
         }
-        diverged |= self.settle(&sample, emit);
+        diverged |= self.settle(&sample, budget, emit);
         if diverged {
             self.ahead.copy_from(&self.settled.live);
         }
         Ok(())
     }
 
+    /// End of the stream: completes a replay under way (see [`REPLAY_PER_CALL`]), so that the
+    /// last state emitted for every sample is final. Samples still provisional keep the state
+    /// emitted for them (their flags stand, as [`calibrate::stage::Settler::finish`] leaves
+    /// them). The stage can take more samples afterwards.
+    pub fn finish(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        let revisions = &mut self.revisions_emitted;
+        if self.settled.finish(&mut |o| {
+            *revisions += 1;
+            emit(o);
+        }) {
+            self.ahead.copy_from(&self.settled.live);
+        }
+    }
+
     /// Runs one sample with its final flags through the settled stage; republishes (as
     /// `REVISION`) its state where it differs from the live one, and every revision. Returns
     /// whether the settled navigator departed from the live one.
-    fn settle(&mut self, u: &Unsettled, emit: &mut impl FnMut(&OdometryState)) -> bool {
+    fn settle(
+        &mut self,
+        u: &Unsettled,
+        budget: &mut usize,
+        emit: &mut impl FnMut(&OdometryState),
+    ) -> bool {
         let revisions = &mut self.revisions_emitted;
         let mut differs = false;
-        let replayed = self.settled.process(&u.s, &mut |o| {
+        let replayed = self.settled.process(&u.s, budget, &mut |o| {
             let o = if o.flags & odometry_flags::REVISION != 0 {
                 *o
             } else if *o != u.state {
@@ -540,7 +624,12 @@ impl OdometryStage {
 impl Settled {
     /// Processes one (checked) sample with settled flags: emits its state and any revised
     /// states. Returns whether a change of the flags in force navigated the journal again.
-    fn process(&mut self, s: &CorrectedImuSample, emit: &mut impl FnMut(&OdometryState)) -> bool {
+    fn process(
+        &mut self,
+        s: &CorrectedImuSample,
+        budget: &mut usize,
+        emit: &mut impl FnMut(&OdometryState),
+    ) -> bool {
         let t_ns = s.stamps.sample_ns;
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
         let flipped = imu_rest != self.imu_rest;
@@ -552,29 +641,42 @@ impl Settled {
             return false;
         };
         let reinstate = hs.reinstatement_due(t_ns, imu_rest, flipped);
-        hs.keep(Input::Sample { s: *s, imu_rest });
-        hs.catch_up(t_ns);
-        if !((imu_transition || reinstate) && hs.resolve()) {
+        hs.keep(Input::Sample { s: *s, imu_rest }, emit);
+        hs.catch_up(t_ns, emit);
+        if (imu_transition || reinstate) && hs.resolve() {
+            // Flags in force changed: navigate the journal again from the lagging navigator
+            // (starting over if a replay was under way).
+            hs.redo.copy_from(&hs.lagged);
+            hs.redo_pos = Some(0);
+        }
+        if hs.redo_pos.is_none() {
             self.live.process(s, emit);
             return false;
         }
-        // Flags in force changed: navigate again from the lagging navigator, republishing
-        // every state but this sample's.
-        self.live.copy_from(&hs.lagged);
-        let n = hs.journal.len();
-        for i in 0..n {
-            let input = *hs.journal.oldest(i).expect("i < len");
-            if i + 1 == n {
-                feed(&mut self.live, &input, emit);
-            } else {
-                feed(&mut self.live, &input, &mut |o| {
-                    emit(&OdometryState {
-                        flags: o.flags | odometry_flags::REVISION,
-                        ..*o
-                    })
-                });
+        // While a replay is under way the live navigator runs on the flags it had: its states
+        // go out (the replay republishes them), its motion-end revisions do not.
+        self.live.process(s, &mut |o| {
+            if o.flags & odometry_flags::REVISION == 0 {
+                emit(o);
             }
+        });
+        if hs.redo_advance(budget, emit) {
+            self.live.copy_from(&hs.redo);
+            return true;
         }
+        false
+    }
+
+    /// Completes a replay under way; whether there was one.
+    fn finish(&mut self, emit: &mut impl FnMut(&OdometryState)) -> bool {
+        let Some(hs) = self.hindsight.as_mut() else {
+            return false;
+        };
+        let mut unbounded = usize::MAX;
+        if hs.redo_pos.is_none() || !hs.redo_advance(&mut unbounded, emit) {
+            return false;
+        }
+        self.live.copy_from(&hs.redo);
         true
     }
 }

@@ -82,6 +82,7 @@ fn history_on_provisional_flags_equals_one_pass_on_final_flags() {
     for s in &samples {
         live_stage.process(s, &mut |o| live.take(o)).unwrap();
     }
+    live_stage.finish(&mut |o| live.take(o));
 
     let mut settler = Settler::default();
     let mut settled = Vec::with_capacity(samples.len());
@@ -105,6 +106,7 @@ fn history_on_provisional_flags_equals_one_pass_on_final_flags() {
     for s in &settled {
         final_stage.process(s, &mut |o| reference.take(o)).unwrap();
     }
+    final_stage.finish(&mut |o| reference.take(o));
 
     assert!(live_stage.aligned());
     assert_eq!(live.last.len(), samples.len());

@@ -218,6 +218,8 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
     }
     calibration.finish();
+    // As `mems-odometry serve` at its end: revisions only, which this report does not use.
+    odometry.finish(&mut |_| {});
     if let Some(e) = error {
         return Err(e);
     }

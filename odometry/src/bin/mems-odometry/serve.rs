@@ -133,18 +133,17 @@ pub fn run(args: ServeArgs) -> Result<()> {
                 );
             }
             if last_seq.is_some_and(|l| s.seq <= l) {
-                // A new sensor session: align again.
+                // A new sensor session: the old one's revisions are completed, then align
+                // again.
+                stage.finish(&mut |state| send(&mut out, state));
+                out.end_of_input()?;
                 stage = new_stage()?;
                 sessions += 1;
             }
             last_seq = Some(s.seq);
             // The live state is published (and its subscribers woken) before any revision
             // work the stage does after it.
-            let mut emit = |state: &OdometryState| {
-                let mut state = *state;
-                state.stamps.odometry_ns = monotonic_ns();
-                out.send(state);
-            };
+            let mut emit = |state: &OdometryState| send(&mut out, state);
             if no_gyro {
                 emit(&OdometryState {
                     stamps: s.stamps,
@@ -162,6 +161,10 @@ pub fn run(args: ServeArgs) -> Result<()> {
         Ok(ControlFlow::Continue(any))
     };
     wake::serve_loop(&node, &[listener], TICK, step)?;
+    // A replay of the hindsight still under way is completed (as offline at the end of a
+    // recording).
+    stage.finish(&mut |state| send(&mut out, state));
+    out.end_of_input()?;
     let published = out.sent();
     let h = stage.hint_stats();
     eprintln!(
@@ -172,4 +175,11 @@ pub fn run(args: ServeArgs) -> Result<()> {
         h
     );
     Ok(())
+}
+
+/// Publishes `state`, stamped with the time it leaves the process.
+fn send(out: &mut Output<OdometryState>, state: &OdometryState) {
+    let mut state = *state;
+    state.stamps.odometry_ns = monotonic_ns();
+    out.send(state);
 }
