@@ -1,6 +1,6 @@
 //! Cost of the odometry stage per sample, and the longest single sample (a rest withdrawn in
-//! hindsight replays the last `rest_hindsight_s` of inputs within one call). Plain timing (no
-//! harness): `cargo bench -p odometry --bench stage`.
+//! hindsight replays up to `2 rest_hindsight_s + motion_confirm_s` of inputs, spread over
+//! calls). Plain timing (no harness): `cargo bench -p odometry --bench stage`.
 //!
 //! Input: a simulated 10-minute drive with turns at 1 kHz (the live pipeline's rate), its rest
 //! flags from the calibration stage's zero-state detector (GLRT, the live defaults) on the raw
