@@ -19,7 +19,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use calibrate::calibfile::CalibrationFile;
-use calibrate::stage::{CalibrationStage, RefineConfig};
+use calibrate::stage::{CalibrationStage, RefineConfig, Settler};
 use calibrate::zero_state::{DetectorConfig, DetectorKind, GlrtStatistic};
 use clap::Parser;
 use ipc_types::units::{AccelRange, GyroRange};
@@ -184,6 +184,8 @@ fn run_seed(cli: &Cli, seed: u64, vibration: f64, variants: &[Variant]) -> Resul
         .iter()
         .map(|v| CalibrationStage::new(&calib, v.config, RefineConfig::default()))
         .collect::<Result<_, _>>()?;
+    // The detectors are scored on every sample's final verdict.
+    let mut settlers = vec![Settler::default(); variants.len()];
     let mut counts = vec![Counts::default(); variants.len()];
     let n = (cli.duration_s * cli.rate) as u64;
     let mut labels = std::collections::VecDeque::new();
@@ -212,35 +214,37 @@ fn run_seed(cli: &Cli, seed: u64, vibration: f64, variants: &[Variant]) -> Resul
             raw.gyro_dps = [0.0; 3];
             raw.gyro_counts = [0; 3];
         }
-        // Every stage releases the same samples at the same time (whole batches).
+        // Every stage settles the same samples at the same time (whole batches).
         let mut released = 0;
-        for (stage, c) in stages.iter_mut().zip(counts.iter_mut()) {
+        for ((stage, c), settler) in stages.iter_mut().zip(counts.iter_mut()).zip(&mut settlers) {
             let mut i = 0;
             stage.push(&raw, &mut |out| {
-                let label = labels[i];
-                i += 1;
-                let flagged = u64::from(out.flags & corrected_flags::ZERO_STATE != 0);
-                if label.rest {
-                    if out.flags & corrected_flags::DETECTOR_READY != 0 {
-                        c.rest[0] += flagged;
-                        c.rest[1] += 1;
+                settler.push(out, &mut |out| {
+                    let label = labels[i];
+                    i += 1;
+                    let flagged = u64::from(out.flags & corrected_flags::ZERO_STATE != 0);
+                    if label.rest {
+                        if out.flags & corrected_flags::DETECTOR_READY != 0 {
+                            c.rest[0] += flagged;
+                            c.rest[1] += 1;
+                        }
+                    } else {
+                        c.moving[0] += flagged;
+                        c.moving[1] += 1;
+                        if label.clearly_moving {
+                            c.clearly_moving[0] += flagged;
+                            c.clearly_moving[1] += 1;
+                        }
+                        if label.slow_cruise {
+                            c.slow_cruise[0] += flagged;
+                            c.slow_cruise[1] += 1;
+                        }
+                        if label.in_place_turn {
+                            c.in_place_turn[0] += flagged;
+                            c.in_place_turn[1] += 1;
+                        }
                     }
-                } else {
-                    c.moving[0] += flagged;
-                    c.moving[1] += 1;
-                    if label.clearly_moving {
-                        c.clearly_moving[0] += flagged;
-                        c.clearly_moving[1] += 1;
-                    }
-                    if label.slow_cruise {
-                        c.slow_cruise[0] += flagged;
-                        c.slow_cruise[1] += 1;
-                    }
-                    if label.in_place_turn {
-                        c.in_place_turn[0] += flagged;
-                        c.in_place_turn[1] += 1;
-                    }
-                }
+                })
             })?;
             released = i;
         }

@@ -9,16 +9,25 @@
 //!   refinement (below);
 //! - gyroscope: `(w' - b_file)` deg/s -> rad/s (`b_file` when the file has a gyroscope bias),
 //!   minus the refined gyroscope bias;
-//! - the zero-state verdict of the sample's batch ([`crate::zero_state`]): `ZERO_STATE`,
-//!   `DETECTOR_READY`, and the deciding window's mean (refinement applied) and std;
+//! - the zero-state verdict ([`crate::zero_state`]): `ZERO_STATE`, `DETECTOR_READY`, and the
+//!   deciding window's mean (refinement applied) and std (see **Latency** for when it is the
+//!   sample's own batch's);
 //! - `BIAS_REFINED` once a refinement has been made; `calib_id` ([`calib_id`]); stamps, `seq`,
 //!   temperature and the raw flags copied (`stamps.calibrated_ns` is the process wrapper's).
 //!
-//! **Latency.** A sample is released when its batch of [`BATCH_LEN`] samples is complete and
-//! decided: the first sample of a batch waits for 19 more (19 ms at 1 kHz), the last not at
-//! all. Output keeps input order, one corrected sample per accepted raw sample. A gap (lost
-//! samples, a skipped sequence number) or a new stream releases the pending partial batch
-//! without `ZERO_STATE`; [`CalibrationStage::finish`] does the same at the end of a stream.
+//! **Latency.** Every corrected sample is emitted in the call that took its raw sample: output
+//! keeps input order, one corrected sample per accepted raw sample, none held back. The
+//! detector decides a batch of [`BATCH_LEN`] samples at its last sample, so the samples before
+//! it leave with the latest verdict carried over and `PROVISIONAL` set; the batch's last sample
+//! carries the batch's verdict and `settles = n`, the number of provisional samples before it
+//! that the verdict is for ([`ipc_types::CorrectedImuSample::settles`]). A consumer that needs
+//! final flags waits for the settling sample ([`Settler`] does that; the odometry stage
+//! navigates on the provisional flags and revises what changed). A gap (lost samples, a skipped
+//! sequence number), a new stream or the end of the stream leaves the partial batch's samples
+//! unsettled: their provisional flags stand.
+//!
+//! The bias refinement (below) subtracted from a sample is the one in force when it arrives,
+//! so the refinement a batch at rest makes applies from the next sample on.
 //!
 //! **Bias refinement at rest.** At rest the true specific force is gravity's reaction `g u`
 //! (`u` the unknown up direction in the sensor frame) and the true rate is zero. So:
@@ -132,11 +141,11 @@ pub struct StageSetupError(String);
 pub struct StageStats {
     /// Raw samples accepted.
     pub accepted: u64,
-    /// Corrected samples released.
+    /// Corrected samples emitted.
     pub released: u64,
-    /// Released with `ZERO_STATE`.
+    /// Samples whose batch was decided at rest.
     pub rest: u64,
-    /// Gaps seen (pending samples released undecided).
+    /// Gaps seen (the partial batch's samples stay unsettled).
     pub gaps: u64,
     /// New streams seen (sequence number not increasing).
     pub restarts: u64,
@@ -270,11 +279,12 @@ pub struct CalibrationStage {
     detector: ZeroStateDetector,
     refine_config: RefineConfig,
     refine: Refinement,
-    /// Samples of the current batch, corrected by the file, waiting for its verdict.
-    pending: [CorrectedImuSample; BATCH_LEN],
-    pending_len: usize,
-    /// Whether the pending samples all carry a gyroscope measurement.
-    pending_gyro: bool,
+    /// Samples emitted in the current batch (all but the newest provisional).
+    batch_len: usize,
+    /// Whether the batch's samples all carry a gyroscope measurement.
+    batch_gyro: bool,
+    /// The latest verdict's flags and `zs_*` fields, carried over to provisional samples.
+    carried: Carried,
     last: Option<(u64, u64)>,
     stats: StageStats,
 }
@@ -308,9 +318,9 @@ impl CalibrationStage {
             detector: ZeroStateDetector::new(detector),
             refine_config: refine,
             refine: Refinement::new(refine),
-            pending: [CorrectedImuSample::default(); BATCH_LEN],
-            pending_len: 0,
-            pending_gyro: true,
+            batch_len: 0,
+            batch_gyro: true,
+            carried: Carried::default(),
             last: None,
             stats: StageStats::default(),
         })
@@ -338,16 +348,17 @@ impl CalibrationStage {
         self.stats
     }
 
-    /// Number of samples waiting for their batch's verdict.
-    pub fn pending(&self) -> usize {
-        self.pending_len
+    /// Number of provisional samples emitted in the current batch, which its verdict will
+    /// settle.
+    pub fn unsettled(&self) -> usize {
+        self.batch_len
     }
 
-    /// Takes one raw sample; emits, in order, every corrected sample whose verdict is now
-    /// known (none, or a whole batch). A sample whose sequence number does not increase starts
-    /// a new stream (a restarted publisher): the pending samples are released, the time check
-    /// and the detector and refinement start over (a new sensor session has a new turn-on
-    /// bias, and a stale gyroscope reference would hold every later window in "motion").
+    /// Takes one raw sample and emits its corrected sample (see the module documentation for
+    /// its flags). A sample whose sequence number does not increase starts a new stream (a
+    /// restarted publisher): the time check and the detector and refinement start over (a new
+    /// sensor session has a new turn-on bias, and a stale gyroscope reference would hold every
+    /// later window in "motion").
     pub fn push(
         &mut self,
         raw: &RawImuSample,
@@ -358,7 +369,8 @@ impl CalibrationStage {
         self.check(raw, has_gyro, has_temp)?;
         match self.last {
             Some((prev_seq, _)) if raw.seq <= prev_seq => {
-                self.release(None, emit);
+                self.cut_batch();
+                self.carried = Carried::default();
                 self.detector.reset();
                 self.refine = Refinement::new(self.refine_config);
                 self.stream_start_ns = None;
@@ -377,7 +389,7 @@ impl CalibrationStage {
                     || raw.lost_before > 0
                     || raw.flags & raw_flags::GAP_BEFORE != 0 =>
             {
-                self.release(None, emit);
+                self.cut_batch();
                 self.detector.interrupt();
                 self.stats.gaps += 1;
             }
@@ -399,30 +411,56 @@ impl CalibrationStage {
         } else {
             [0.0; 3]
         };
-        self.pending[self.pending_len] = CorrectedImuSample {
+        let (da, dw) = (self.refine.accel_mps2, self.refine.gyro_rps);
+        let mut out = CorrectedImuSample {
             stamps: raw.stamps,
             seq: raw.seq,
-            accel_mps2: a.into(),
-            gyro_rps: w,
+            accel_mps2: std::array::from_fn(|i| a[i] - da[i]),
+            gyro_rps: if has_gyro {
+                std::array::from_fn(|i| w[i] - dw[i])
+            } else {
+                w
+            },
             temp_c: raw.temp_c,
             calib_id: self.calib_id,
             raw_flags: raw.flags,
             ..CorrectedImuSample::default()
         };
-        self.pending_len += 1;
-        self.pending_gyro &= has_gyro;
-        if let Some(verdict) = self.detector.push(raw.stamps.sample_ns, a.into(), w) {
-            self.release(Some(&verdict), emit);
+        self.batch_gyro &= has_gyro;
+        let provisional = match self.detector.push(raw.stamps.sample_ns, a.into(), w) {
+            Some(verdict) => {
+                self.decide(&verdict);
+                out.settles = self.batch_len as u32;
+                self.stats.rest += u64::from(verdict.rest) * (self.batch_len as u64 + 1);
+                self.cut_batch();
+                false
+            }
+            None => {
+                self.batch_len += 1;
+                true
+            }
+        };
+        self.carried.apply(&mut out, self.refine.refined);
+        if provisional {
+            out.flags |= corrected_flags::PROVISIONAL;
         }
+        self.stats.released += 1;
+        emit(&out);
         Ok(())
     }
 
-    /// End of the stream: releases the pending samples without a verdict and drops the
-    /// detector's partial batch (learned references stay). The last sequence number is kept,
-    /// so a later stream that starts again from 0 is still recognised as a new session.
-    pub fn finish(&mut self, emit: &mut impl FnMut(&CorrectedImuSample)) {
-        self.release(None, emit);
+    /// End of the stream: the detector's partial batch is dropped (its samples stay unsettled;
+    /// learned references stay). The last sequence number is kept, so a later stream that
+    /// starts again from 0 is still recognised as a new session.
+    pub fn finish(&mut self) {
+        self.cut_batch();
         self.detector.interrupt();
+    }
+
+    /// Starts a new batch.
+    fn cut_batch(&mut self) {
+        self.batch_len = 0;
+        self.batch_gyro = true;
     }
 
     /// Validates a sample before anything changes.
@@ -461,63 +499,121 @@ impl CalibrationStage {
         Ok(())
     }
 
-    /// Refines at rest, then emits the pending samples with `verdict` (or undecided).
-    fn release(&mut self, verdict: Option<&Verdict>, emit: &mut impl FnMut(&CorrectedImuSample)) {
-        if let Some(v) = verdict {
-            let gyro = self.pending_gyro.then_some(v.gyro.mean);
-            if let Some(learned) = &v.learned {
-                // The start-up interval was at rest by assumption: the first refinement.
-                let gyro = self.pending_gyro.then_some(learned.gyro_mean_rps);
-                self.refine.update(
-                    learned.accel_mean_mps2,
-                    gyro,
-                    learned.duration_s,
-                    self.gravity_mps2,
-                );
-            } else if v.rest && self.detector.config().kind.rest_is_still() {
-                self.refine.update(
-                    v.accel.mean,
-                    gyro,
-                    batch_duration_s(&v.accel),
-                    self.gravity_mps2,
-                );
-            }
+    /// Refines at rest with the batch's `verdict` and carries the verdict over.
+    fn decide(&mut self, v: &Verdict) {
+        let gyro = self.batch_gyro.then_some(v.gyro.mean);
+        if let Some(learned) = &v.learned {
+            // The start-up interval was at rest by assumption: the first refinement.
+            let gyro = self.batch_gyro.then_some(learned.gyro_mean_rps);
+            self.refine.update(
+                learned.accel_mean_mps2,
+                gyro,
+                learned.duration_s,
+                self.gravity_mps2,
+            );
+        } else if v.rest && self.detector.config().kind.rest_is_still() {
+            self.refine.update(
+                v.accel.mean,
+                gyro,
+                batch_duration_s(&v.accel),
+                self.gravity_mps2,
+            );
         }
+        self.carried = Carried {
+            ready: v.ready,
+            rest: v.rest,
+            zs_mean_mps2: std::array::from_fn(|i| {
+                v.decided_mean_mps2[i] - self.refine.accel_mps2[i]
+            }),
+            zs_std_mps2: v.decided_std_mps2,
+        };
+    }
+}
+
+/// The latest verdict as it is written into samples.
+#[derive(Debug, Clone, Copy, Default)]
+struct Carried {
+    ready: bool,
+    rest: bool,
+    zs_mean_mps2: [f64; 3],
+    zs_std_mps2: [f64; 3],
+}
+
+impl Carried {
+    /// Writes the verdict's flags (and `BIAS_REFINED` when `refined`) and window statistics.
+    fn apply(&self, s: &mut CorrectedImuSample, refined: bool) {
         let mut flags = 0;
-        if self.refine.refined {
+        if refined {
             flags |= corrected_flags::BIAS_REFINED;
         }
-        let (mut zs_mean, mut zs_std) = ([0.0; 3], [0.0; 3]);
-        if let Some(v) = verdict {
-            if v.ready {
-                flags |= corrected_flags::DETECTOR_READY;
-            }
-            if v.rest {
-                flags |= corrected_flags::ZERO_STATE;
-            }
-            zs_mean = std::array::from_fn(|i| v.decided_mean_mps2[i] - self.refine.accel_mps2[i]);
-            zs_std = v.decided_std_mps2;
-        } else if self.detector.is_ready() {
+        if self.ready {
             flags |= corrected_flags::DETECTOR_READY;
         }
-        let (da, dw) = (self.refine.accel_mps2, self.refine.gyro_rps);
-        for s in &mut self.pending[..self.pending_len] {
-            for i in 0..3 {
-                s.accel_mps2[i] -= da[i];
-                if s.raw_flags & raw_flags::GYRO_VALID != 0 {
-                    s.gyro_rps[i] -= dw[i];
-                }
+        if self.rest {
+            flags |= corrected_flags::ZERO_STATE;
+        }
+        s.flags = flags;
+        s.zs_mean_mps2 = self.zs_mean_mps2;
+        s.zs_std_mps2 = self.zs_std_mps2;
+    }
+}
+
+/// Holds provisional corrected samples back until their verdict is known and emits them with
+/// their final flags, in order: for consumers that need every sample's own batch verdict (the
+/// detector evaluations, the gyroscope calibration) rather than the earliest sample. Storage
+/// for two batches is allocated once; should more samples stay unsettled (not possible with a
+/// [`CalibrationStage`]'s output), the oldest is emitted as it is.
+#[derive(Debug, Clone)]
+pub struct Settler {
+    held: [CorrectedImuSample; 2 * BATCH_LEN],
+    len: usize,
+}
+
+impl Default for Settler {
+    fn default() -> Self {
+        Self {
+            held: [CorrectedImuSample::default(); 2 * BATCH_LEN],
+            len: 0,
+        }
+    }
+}
+
+impl Settler {
+    /// Takes the next sample of a calibration stage's output; emits every sample whose flags
+    /// are now final.
+    pub fn push(&mut self, s: &CorrectedImuSample, emit: &mut impl FnMut(&CorrectedImuSample)) {
+        if s.flags & corrected_flags::PROVISIONAL != 0 {
+            if self.len == self.held.len() {
+                emit(&self.held[0]);
+                self.held.copy_within(1.., 0);
+                self.len -= 1;
             }
-            s.flags = flags;
-            s.zs_mean_mps2 = zs_mean;
-            s.zs_std_mps2 = zs_std;
-            emit(s);
+            self.held[self.len] = *s;
+            self.len += 1;
+            return;
         }
-        self.stats.released += self.pending_len as u64;
-        if verdict.is_some_and(|v| v.rest) {
-            self.stats.rest += self.pending_len as u64;
+        let settled = (s.settles as usize).min(self.len);
+        // Samples older than those settled were cut from their batch: final as they are.
+        let cut = self.len - settled;
+        for h in &self.held[..cut] {
+            emit(h);
         }
-        self.pending_len = 0;
-        self.pending_gyro = true;
+        const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
+        for h in &mut self.held[cut..self.len] {
+            h.flags = (h.flags & !(VERDICT | corrected_flags::PROVISIONAL)) | (s.flags & VERDICT);
+            h.zs_mean_mps2 = s.zs_mean_mps2;
+            h.zs_std_mps2 = s.zs_std_mps2;
+            emit(h);
+        }
+        self.len = 0;
+        emit(s);
+    }
+
+    /// End of the stream: the samples held are final as they are.
+    pub fn finish(&mut self, emit: &mut impl FnMut(&CorrectedImuSample)) {
+        for h in &self.held[..self.len] {
+            emit(h);
+        }
+        self.len = 0;
     }
 }

@@ -9,7 +9,7 @@
 //! most of the motion and still finds the rests.
 
 use calibrate::calibfile::CalibrationFile;
-use calibrate::stage::{CalibrationStage, RefineConfig, StageError};
+use calibrate::stage::{CalibrationStage, RefineConfig, Settler, StageError};
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use ipc_types::units::{AccelRange, GyroRange};
 use ipc_types::{RawImuSample, corrected_flags, raw_flags};
@@ -45,6 +45,8 @@ fn run(configs: &[DetectorConfig]) -> Vec<[u64; 4]> {
         .map(|c| CalibrationStage::new(&calib, *c, RefineConfig::default()).unwrap())
         .collect();
     let mut counts = vec![[0u64; 4]; configs.len()];
+    // Scored on every sample's final verdict.
+    let mut settlers = vec![Settler::default(); configs.len()];
     // Truth per sample, (at rest, clearly moving), until its corrected sample is released.
     let mut labels = std::collections::VecDeque::new();
     for k in 0..(DURATION_S * RATE_HZ) as u64 {
@@ -61,20 +63,22 @@ fn run(configs: &[DetectorConfig]) -> Vec<[u64; 4]> {
             k,
         ));
         let mut released = 0;
-        for (stage, c) in stages.iter_mut().zip(counts.iter_mut()) {
+        for ((stage, c), settler) in stages.iter_mut().zip(counts.iter_mut()).zip(&mut settlers) {
             let mut i = 0;
             stage
                 .push(&raw, &mut |out| {
-                    let (rest, clearly_moving) = labels[i];
-                    i += 1;
-                    let flagged = u64::from(out.flags & corrected_flags::ZERO_STATE != 0);
-                    if rest && out.flags & corrected_flags::DETECTOR_READY != 0 {
-                        c[0] += flagged;
-                        c[1] += 1;
-                    } else if clearly_moving {
-                        c[2] += flagged;
-                        c[3] += 1;
-                    }
+                    settler.push(out, &mut |out| {
+                        let (rest, clearly_moving) = labels[i];
+                        i += 1;
+                        let flagged = u64::from(out.flags & corrected_flags::ZERO_STATE != 0);
+                        if rest && out.flags & corrected_flags::DETECTOR_READY != 0 {
+                            c[0] += flagged;
+                            c[1] += 1;
+                        } else if clearly_moving {
+                            c[2] += flagged;
+                            c[3] += 1;
+                        }
+                    })
                 })
                 .unwrap();
             released = i;

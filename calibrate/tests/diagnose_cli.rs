@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use calibrate::calibfile::CalibrationFile;
-use calibrate::stage::{CalibrationStage, RefineConfig};
+use calibrate::stage::{CalibrationStage, RefineConfig, Settler};
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use ipc_types::RawImuSample;
 use ipc_types::units::{AccelRange, GyroRange};
@@ -104,10 +104,14 @@ fn stage_error(
     )
     .unwrap();
     let mut out = Vec::new();
+    let mut settler = Settler::default();
     for s in samples {
-        stage.push(s, &mut |c| out.push(*c)).unwrap();
+        stage
+            .push(s, &mut |c| settler.push(c, &mut |c| out.push(*c)))
+            .unwrap();
     }
-    stage.finish(&mut |c| out.push(*c));
+    stage.finish();
+    settler.finish(&mut |c| out.push(*c));
     let mut ss = 0.0;
     let mut count = 0;
     for &(t0, t1) in holds {

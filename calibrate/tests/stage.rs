@@ -4,7 +4,7 @@
 use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
 use calibrate::fit::{CovarianceMode, Weighting};
 use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
-use calibrate::stage::{CalibrationStage, RefineConfig, StageError, calib_id};
+use calibrate::stage::{CalibrationStage, RefineConfig, Settler, StageError, calib_id};
 use calibrate::zero_state::{BATCH_LEN, DetectorConfig, DetectorKind};
 use ipc_types::{CorrectedImuSample, RawImuSample, Stamps, corrected_flags, raw_flags};
 use nalgebra::{Matrix3, Vector3};
@@ -81,6 +81,19 @@ fn run(stage: &mut CalibrationStage, samples: &[RawImuSample]) -> Vec<CorrectedI
     out
 }
 
+/// [`run`], with every sample's final flags (a [`Settler`] behind the stage).
+fn run_settled(stage: &mut CalibrationStage, samples: &[RawImuSample]) -> Vec<CorrectedImuSample> {
+    let mut settler = Settler::default();
+    let mut out = Vec::new();
+    for s in samples {
+        stage
+            .push(s, &mut |c| settler.push(c, &mut |c| out.push(*c)))
+            .unwrap();
+    }
+    settler.finish(&mut |c| out.push(*c));
+    out
+}
+
 #[test]
 fn correction_matches_an_independent_computation() {
     let file = calibration();
@@ -122,7 +135,7 @@ fn correction_matches_an_independent_computation() {
 }
 
 #[test]
-fn samples_leave_in_order_one_to_one_with_their_batch() {
+fn each_sample_leaves_at_once_and_its_batch_end_settles_it() {
     let file = calibration();
     let mut st = stage(&file, DetectorKind::Yu);
     let mut released = Vec::new();
@@ -136,19 +149,21 @@ fn samples_leave_in_order_one_to_one_with_their_batch() {
                 [2.0, -1.5, 3.0],
                 25.0,
             ),
-            &mut |c| now.push(c.seq),
+            &mut |c| now.push((c.seq, c.flags, c.settles)),
         )
         .unwrap();
-        // Nothing until a batch completes, then the whole batch (latency BATCH_LEN - 1).
-        if (k + 1) % BATCH_LEN as u64 == 0 {
-            assert_eq!(now, ((k + 1 - BATCH_LEN as u64)..=k).collect::<Vec<_>>());
-        } else {
-            assert!(now.is_empty());
-        }
-        released.extend(now);
+        // Each sample in the call that takes it; the batch's last settles the others.
+        let batch_end = (k + 1) % BATCH_LEN as u64 == 0;
+        assert_eq!(now.len(), 1);
+        let (seq, flags, settles) = now[0];
+        assert_eq!(seq, k);
+        assert_eq!(flags & corrected_flags::PROVISIONAL == 0, batch_end);
+        assert_eq!(settles, if batch_end { BATCH_LEN as u32 - 1 } else { 0 });
+        released.push(seq);
     }
-    assert_eq!(st.pending(), 7);
-    st.finish(&mut |c| released.push(c.seq));
+    assert_eq!(st.unsettled(), 7);
+    st.finish();
+    assert_eq!(st.unsettled(), 0);
     assert_eq!(
         released,
         (0..(3 * BATCH_LEN + 7) as u64).collect::<Vec<_>>()
@@ -218,7 +233,7 @@ fn bad_input_is_refused_with_the_sample_named_and_the_state_unchanged() {
     run(&mut st, &[ok(2)]);
     assert_eq!(st.stats().accepted, 3);
     assert_eq!(st.stats().gaps, 0);
-    assert_eq!(st.pending(), 3);
+    assert_eq!(st.unsettled(), 3);
     // Yu's detector does not need the gyroscope.
     let mut yu = stage(&file, DetectorKind::Yu);
     run(&mut yu, &[no_gyro]);
@@ -261,7 +276,7 @@ fn refinement_at_rest_corrects_gyro_bias_and_only_the_accelerometer_along_gravit
     // a gyroscope bias of (0.5, -0.3, 0.2) deg/s.
     let extra = Vector3::new(0.05, 0.0, 0.02);
     let gyro = [0.5, -0.3, 0.2];
-    let out = run(&mut st, &still(&file, Vector3::z(), extra, gyro, 30.0, 2));
+    let out = run_settled(&mut st, &still(&file, Vector3::z(), extra, gyro, 30.0, 2));
     let ready = out
         .iter()
         .position(|o| o.flags & corrected_flags::DETECTOR_READY != 0)
@@ -270,13 +285,15 @@ fn refinement_at_rest_corrects_gyro_bias_and_only_the_accelerometer_along_gravit
         ready, 4980,
         "ready with the batch that completes 5 s of learning"
     );
+    // The refinement applies from the sample that completes learning on.
+    let refined = ready + BATCH_LEN - 1;
     assert!(
-        out[..ready]
+        out[..refined]
             .iter()
             .all(|o| o.flags & corrected_flags::BIAS_REFINED == 0)
     );
     assert!(
-        out[ready..]
+        out[refined..]
             .iter()
             .all(|o| o.flags & corrected_flags::BIAS_REFINED != 0)
     );
@@ -333,41 +350,57 @@ fn refinement_at_rest_corrects_gyro_bias_and_only_the_accelerometer_along_gravit
 }
 
 #[test]
-fn a_restarted_publisher_starts_a_new_session_and_a_gap_releases_the_partial_batch() {
+fn a_restarted_publisher_starts_a_new_session_and_a_gap_leaves_the_partial_batch_unsettled() {
     let file = calibration();
     let mut st = stage(&file, DetectorKind::Glrt);
     let first = still(&file, Vector3::z(), Vector3::zeros(), [0.0; 3], 6.01, 4);
     let mut out = run(&mut st, &first);
     assert!(st.detector().is_ready());
-    assert_eq!(st.pending(), 10);
+    assert_eq!(st.unsettled(), 10);
     // A gap: seq 6011 missing.
     let mut after_gap = still(&file, Vector3::z(), Vector3::zeros(), [0.0; 3], 0.1, 5);
     for (k, s) in after_gap.iter_mut().enumerate() {
         s.seq = 6011 + k as u64;
         s.stamps.sample_ns = 1_000_000 * (6012 + k as u64);
     }
-    let released = run(&mut st, &after_gap[..1]);
-    assert_eq!(released.len(), 10, "the partial batch leaves undecided");
+    let released = run(&mut st, &after_gap[..BATCH_LEN]);
+    assert_eq!(st.stats().gaps, 1);
+    // The batch after the gap starts afresh: its last sample settles it alone.
+    assert_eq!(released.len(), BATCH_LEN);
     assert!(
-        released
+        released[..BATCH_LEN - 1]
             .iter()
-            .all(|o| o.flags & corrected_flags::ZERO_STATE == 0
+            .all(|o| o.flags & corrected_flags::PROVISIONAL != 0)
+    );
+    assert_eq!(released[BATCH_LEN - 1].settles, BATCH_LEN as u32 - 1);
+    // The 10 samples before the gap are never settled: their carried rest verdict stands.
+    let mut settled = Vec::new();
+    let mut settler = Settler::default();
+    for o in out.iter().chain(&released) {
+        settler.push(o, &mut |o| settled.push(*o));
+    }
+    assert_eq!(settled.len(), out.len() + BATCH_LEN);
+    assert!(
+        settled[out.len() - 10..out.len()]
+            .iter()
+            .all(|o| o.flags & corrected_flags::PROVISIONAL != 0
                 && o.flags & corrected_flags::DETECTOR_READY != 0)
     );
-    assert_eq!(st.stats().gaps, 1);
     out.extend(released);
-    out.extend(run(&mut st, &after_gap[1..]));
+    out.extend(run(&mut st, &after_gap[BATCH_LEN..]));
     // A new publisher: sequence numbers and sample times start again.
     let second = still(&file, Vector3::z(), Vector3::zeros(), [0.0; 3], 1.0, 6);
-    let pending_before = st.pending();
     let released = run(&mut st, &second);
     assert_eq!(st.stats().restarts, 1);
     assert!(!st.detector().is_ready(), "learning starts again");
     assert!(!st.refinement().2, "refinement starts again");
-    assert!(released[..pending_before].iter().all(|o| o.seq >= 6011));
-    assert!(released[pending_before..].iter().all(|o| o.flags == 0));
+    assert!(
+        released
+            .iter()
+            .all(|o| o.flags & !corrected_flags::PROVISIONAL == 0)
+    );
     out.extend(released);
-    st.finish(&mut |c| out.push(*c));
+    st.finish();
     assert_eq!(out.len(), first.len() + after_gap.len() + second.len());
 }
 
@@ -447,8 +480,8 @@ fn every_fitted_term_is_applied_with_the_time_since_the_stream_began() {
             ));
         }
     }
-    let mut out = run(&mut st, &samples);
-    st.finish(&mut |c| out.push(*c));
+    let out = run(&mut st, &samples);
+    st.finish();
     assert_eq!(out.len(), samples.len());
     let s = Matrix3::from_fn(|r, c| file.scale[r][c]);
     let b = Vector3::from(file.bias_g);

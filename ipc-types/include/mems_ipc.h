@@ -34,6 +34,7 @@
 #define MEMS_CORRECTED_ZERO_STATE (1u << 0)
 #define MEMS_CORRECTED_DETECTOR_READY (1u << 1)
 #define MEMS_CORRECTED_BIAS_REFINED (1u << 2)
+#define MEMS_CORRECTED_PROVISIONAL (1u << 3)
 
 /* OdometryState.flags */
 #define MEMS_ODOMETRY_ZERO_VELOCITY (1u << 0)
@@ -87,7 +88,7 @@ typedef struct mems_corrected_imu_sample {
     uint64_t calib_id;
     uint16_t flags;
     uint16_t raw_flags;
-    uint32_t reserved;
+    uint32_t settles; /* provisional samples before this one that it settles */
 } mems_corrected_imu_sample;
 
 /* Odometry state, navigation frame (z up), 1-sigma per axis. */

@@ -26,6 +26,7 @@ RAW_TEMP_VALID = 1 << 5
 CORRECTED_ZERO_STATE = 1 << 0
 CORRECTED_DETECTOR_READY = 1 << 1
 CORRECTED_BIAS_REFINED = 1 << 2
+CORRECTED_PROVISIONAL = 1 << 3
 
 ODOMETRY_ZERO_VELOCITY = 1 << 0
 ODOMETRY_ALIGNED = 1 << 1
@@ -127,7 +128,7 @@ class CorrectedImuSample(ctypes.Structure):
         ("calib_id", ctypes.c_uint64),
         ("flags", ctypes.c_uint16),
         ("raw_flags", ctypes.c_uint16),
-        ("reserved", ctypes.c_uint32),
+        ("settles", ctypes.c_uint32),
     ]
 
     @staticmethod

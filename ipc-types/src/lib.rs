@@ -17,6 +17,7 @@
 pub mod clock;
 pub mod service;
 pub mod units;
+pub mod wake;
 mod wire;
 
 pub use wire::*;

@@ -83,6 +83,12 @@ pub mod corrected_flags {
     pub const DETECTOR_READY: u16 = 1 << 1;
     /// The bias was refined at rest since the calibration file was loaded.
     pub const BIAS_REFINED: u16 = 1 << 2;
+    /// The sample's batch is not decided yet: `ZERO_STATE`, `DETECTOR_READY` and the
+    /// `zs_*` fields are the latest verdict's, carried over. A later sample of the same batch
+    /// settles it (see [`super::CorrectedImuSample::settles`]); a sample that no later sample
+    /// settles (its batch was cut by a gap, a new stream or the end of the stream) keeps these
+    /// flags as final.
+    pub const PROVISIONAL: u16 = 1 << 3;
 }
 
 /// One calibrated sample: sensor frame, SI units.
@@ -112,8 +118,13 @@ pub struct CorrectedImuSample {
     pub flags: u16,
     /// The raw sample's [`raw_flags`], passed through.
     pub raw_flags: u16,
-    /// Zero; keeps the layout free of implicit padding.
-    pub reserved: u32,
+    /// How many samples immediately before this one (all [`corrected_flags::PROVISIONAL`])
+    /// this sample's verdict settles: their final `ZERO_STATE`, `DETECTOR_READY`, `zs_mean_mps2`
+    /// and `zs_std_mps2` are this sample's. Zero on a provisional sample. (A recording made
+    /// before samples were released provisionally holds zero here and no provisional flags:
+    /// every flag final.)
+    #[serde(alias = "reserved")]
+    pub settles: u32,
 }
 
 /// Bits of [`OdometryState::flags`].
@@ -343,7 +354,7 @@ mod tests {
         assert_eq!(offset_of!(CorrectedImuSample, calib_id), 144);
         assert_eq!(offset_of!(CorrectedImuSample, flags), 152);
         assert_eq!(offset_of!(CorrectedImuSample, raw_flags), 154);
-        assert_eq!(offset_of!(CorrectedImuSample, reserved), 156);
+        assert_eq!(offset_of!(CorrectedImuSample, settles), 156);
     }
 
     #[test]

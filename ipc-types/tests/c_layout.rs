@@ -70,7 +70,7 @@ fn facts() -> Vec<Fact> {
             calib_id,
             flags,
             raw_flags,
-            reserved
+            settles
         ]
     );
     layout_facts!(
@@ -110,7 +110,7 @@ fn facts() -> Vec<Fact> {
             reserved
         ]
     );
-    let flags: [(&str, u16); 22] = [
+    let flags: [(&str, u16); 23] = [
         ("MEMS_RAW_GAP_BEFORE", raw_flags::GAP_BEFORE),
         ("MEMS_RAW_FIFO_OVERFLOW", raw_flags::FIFO_OVERFLOW),
         ("MEMS_RAW_SATURATED", raw_flags::SATURATED),
@@ -123,6 +123,7 @@ fn facts() -> Vec<Fact> {
             corrected_flags::DETECTOR_READY,
         ),
         ("MEMS_CORRECTED_BIAS_REFINED", corrected_flags::BIAS_REFINED),
+        ("MEMS_CORRECTED_PROVISIONAL", corrected_flags::PROVISIONAL),
         ("MEMS_ODOMETRY_ZERO_VELOCITY", odometry_flags::ZERO_VELOCITY),
         ("MEMS_ODOMETRY_ALIGNED", odometry_flags::ALIGNED),
         ("MEMS_ODOMETRY_REVISION", odometry_flags::REVISION),

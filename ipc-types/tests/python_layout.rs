@@ -56,7 +56,7 @@ fn python_ctypes_match_rust_layout() {
                 calib_id,
                 flags,
                 raw_flags,
-                reserved
+                settles
             ]
         ),
         rust_line!(

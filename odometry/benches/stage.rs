@@ -1,11 +1,14 @@
 //! Cost of the odometry stage per sample, and the longest single sample (a rest withdrawn in
-//! hindsight replays the last `rest_hindsight_s` of inputs within one call). Plain timing (no
-//! harness): `cargo bench -p odometry --bench stage`.
+//! hindsight replays up to `2 rest_hindsight_s + motion_confirm_s` of inputs, spread over
+//! calls). Plain timing (no harness): `cargo bench -p odometry --bench stage`.
 //!
 //! Input: a simulated 10-minute drive with turns at 1 kHz (the live pipeline's rate), its rest
 //! flags from the calibration stage's zero-state detector (GLRT, the live defaults) on the raw
 //! samples, so the withdrawals happen where the live pipeline has them. The corrected samples
 //! are computed first; only `OdometryStage::process` is timed, per call, into a histogram.
+//! Each configuration runs on the calibration stage's output as it leaves it (provisional
+//! flags, settled one batch later) and on the same output with its final flags (through a
+//! `Settler`), which shows what navigating on provisional flags costs.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -13,6 +16,7 @@ mod common;
 use std::hint::black_box;
 use std::time::Instant;
 
+use calibrate::stage::Settler;
 use common::{Case, Simulation, live_calibration_stage, live_detector};
 use hdrhistogram::Histogram;
 use ipc_types::CorrectedImuSample;
@@ -34,7 +38,7 @@ fn corrected_drive() -> Vec<CorrectedImuSample> {
             .push(raw, &mut |c| out.push(*c))
             .expect("valid raw samples");
     });
-    calibration.finish(&mut |c| out.push(*c));
+    calibration.finish();
     out
 }
 
@@ -68,18 +72,37 @@ fn run(label: &str, cfg: OdometryConfig, samples: &[CorrectedImuSample]) {
     );
 }
 
+/// `samples` with their final flags: held by a `Settler` until their batch is decided.
+fn settled(samples: &[CorrectedImuSample]) -> Vec<CorrectedImuSample> {
+    let mut settler = Settler::default();
+    let mut out = Vec::with_capacity(samples.len());
+    for s in samples {
+        settler.push(s, &mut |s| out.push(*s));
+    }
+    settler.finish(&mut |s| out.push(*s));
+    out
+}
+
 fn main() {
-    let samples = corrected_drive();
+    let provisional = corrected_drive();
+    let final_flags = settled(&provisional);
     let cfg = OdometryConfig::mpu9250(G_MPS2);
+    let no_hindsight = OdometryConfig {
+        rest_hindsight_s: 0.0,
+        ..cfg
+    };
     for _ in 0..2 {
-        run("hindsight 0.5 s (default)", cfg, &samples);
         run(
-            "no hindsight",
-            OdometryConfig {
-                rest_hindsight_s: 0.0,
-                ..cfg
-            },
-            &samples,
+            "hindsight 0.5 s (default), provisional flags",
+            cfg,
+            &provisional,
         );
+        run("hindsight 0.5 s (default), final flags", cfg, &final_flags);
+        run(
+            "no hindsight, provisional flags",
+            no_hindsight,
+            &provisional,
+        );
+        run("no hindsight, final flags", no_hindsight, &final_flags);
     }
 }

@@ -16,8 +16,6 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use std::collections::VecDeque;
-
 use clap::{Parser, ValueEnum};
 use common::{Case, Simulation, live_calibration_stage, live_detector};
 use ipc_types::{CorrectedImuSample, RobotHint, corrected_flags, odometry_flags};
@@ -485,32 +483,25 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
                     .max(5.0 * 3f64.sqrt() * mg * 1e-3);
             }
             let mut calibration = live_calibration_stage(detector);
-            // The calibration stage releases whole batches: truths wait for their samples.
-            let mut truths: VecDeque<recording::Truth> = VecDeque::new();
-            let mut batch: Vec<CorrectedImuSample> = Vec::new();
+            // Each sample leaves the calibration stage in the call that takes it.
             sim.drive_raw(|raw, truth| {
-                truths.push_back(*truth);
                 feed_hints(raw.stamps.sample_ns, &mut stage);
-                calibration
-                    .push(raw, &mut |c| batch.push(*c))
-                    .expect("valid raw samples");
-                // The batch was corrected with the refinement as it stands after the push.
+                // The refinement in force when the sample arrives is the one it was corrected
+                // with.
                 let (_, gyro_refined, _) = calibration.refinement();
-                for c in batch.iter_mut() {
-                    if args.undo_gyro_refinement {
-                        for (w, b) in c.gyro_rps.iter_mut().zip(gyro_refined) {
-                            *w += b;
+                calibration
+                    .push(raw, &mut |c| {
+                        let mut c = *c;
+                        if args.undo_gyro_refinement {
+                            for (w, b) in c.gyro_rps.iter_mut().zip(gyro_refined) {
+                                *w += b;
+                            }
                         }
-                    }
-                    let t = truths.pop_front().expect("a truth per sample");
-                    step(c, &t, &mut stage);
-                }
-                batch.clear();
+                        step(&c, truth, &mut stage);
+                    })
+                    .expect("valid raw samples");
             });
-            calibration.finish(&mut |c| {
-                let t = truths.pop_front().expect("a truth per sample");
-                step(c, &t, &mut stage);
-            });
+            calibration.finish();
         }
     }
     let o = last.expect("states");

@@ -47,11 +47,27 @@
 //! the hindsight confirm each other (a gentle start flickers). Samples navigated again are
 //! republished with the `REVISION` flag; the forward state never waits for the hindsight.
 //!
+//! **Provisional flags.** The calibration stage emits each sample at once, before its batch is
+//! decided, with the latest verdict carried over (`PROVISIONAL`); the batch's last sample
+//! settles the samples before it (`settles`). Each sample's state is computed and emitted in
+//! the call that takes it, by a navigator running on the flags as they stand. Everything
+//! above (hindsight, motion-end revisions) runs on settled flags only, one batch behind, in a
+//! second navigator, after the live state is emitted: where its state for a settled sample
+//! differs from the one emitted, it is republished with `REVISION` and the live navigator
+//! continues from the settled one. So the final history (the last state emitted for each
+//! sample) is that of a stage fed final flags, and only the live state of a batch whose
+//! verdict changed (the start and end of a rest, 20 samples at most) ran on the previous one.
+//!
 //! For that the stage runs two navigators (module `navigator`): one on every input, whose
 //! states it emits, and one lagging `2 rest_hindsight_s + motion_confirm_s` behind on inputs
 //! whose flags are final. A change of the flags in force copies the lagging one into the live
 //! one and replays the inputs in between (kept, in arrival order, in a ring allocated up
-//! front), so the output is what one pass with the final flags gives. Rest decided by a fresh
+//! front), so the output is what one pass with the final flags gives. The replay is spread
+//! over calls, at most [`REPLAY_PER_CALL`] inputs per call, so that no call holds up the
+//! samples behind it for long: meanwhile the live navigator goes on with the flags it had (its
+//! states are republished by the replay), and when the replay has caught up it takes the
+//! replay's state. [`OdometryStage::finish`] completes a replay still under way at the end of
+//! the stream. Rest decided by a fresh
 //! robot hint is not withdrawn (the controller knows).
 
 use crate::eskf::{Eskf, NoiseModel};
@@ -186,6 +202,12 @@ struct Hindsight {
     confirm_ns: u64,
     lagged: Navigator,
     journal: Ring<Input>,
+    /// The navigator replaying the journal after a change of the flags in force, from the
+    /// lagging navigator's state, a bounded number of inputs per call.
+    redo: Navigator,
+    /// How many of the journal's inputs (from its oldest) `redo` has taken; `None` when no
+    /// replay is under way.
+    redo_pos: Option<usize>,
     /// Samples the lagging navigator took with their rest flag withdrawn.
     withdrawn: u64,
     /// Start of the current run of IMU motion flags, ns.
@@ -218,27 +240,70 @@ impl Hindsight {
 
     /// Keeps `input`; when the journal is full (a sample rate above `max_rate_hz`), the oldest
     /// input goes to the lagging navigator early, with its flags as they stand.
-    fn keep(&mut self, input: Input) {
-        if self.journal.is_full()
-            && let Some(old) = self.journal.pop()
-        {
-            self.take(&old);
+    fn keep(&mut self, input: Input, emit: &mut impl FnMut(&OdometryState)) {
+        if self.journal.is_full() {
+            self.pop_front(emit);
         }
         self.journal.push(input);
+    }
+
+    /// Gives the journal's oldest input to the lagging navigator; a replay under way takes it
+    /// first if it has not yet (so that every state it changes is republished).
+    fn pop_front(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        if self.redo_pos == Some(0) {
+            self.redo_step(emit);
+        }
+        if let Some(input) = self.journal.pop() {
+            if let Some(p) = self.redo_pos.as_mut() {
+                *p -= 1;
+            }
+            self.take(&input);
+        }
+    }
+
+    /// The replay takes its next journal input, its states republished as `REVISION`.
+    fn redo_step(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        let Some(p) = self.redo_pos else { return };
+        let Some(input) = self.journal.oldest(p).copied() else {
+            return;
+        };
+        feed(&mut self.redo, &input, &mut |o| {
+            emit(&OdometryState {
+                flags: o.flags | odometry_flags::REVISION,
+                ..*o
+            })
+        });
+        self.redo_pos = Some(p + 1);
+    }
+
+    /// Advances the replay by at most `*budget` inputs (counted down); whether it has caught
+    /// up with the newest input (then `redo` holds the final state and the replay is over).
+    fn redo_advance(&mut self, budget: &mut usize, emit: &mut impl FnMut(&OdometryState)) -> bool {
+        while let Some(p) = self.redo_pos {
+            if p >= self.journal.len() {
+                self.redo_pos = None;
+                return true;
+            }
+            if *budget == 0 {
+                return false;
+            }
+            *budget -= 1;
+            self.redo_step(emit);
+        }
+        false
     }
 
     /// Gives the lagging navigator every input up to the last sample whose rest flag is final
     /// at `t_ns`: a motion starting within the hindsight after it is confirmed or not at the
     /// latest the confirmation time plus the hindsight after its start.
-    fn catch_up(&mut self, t_ns: u64) {
+    fn catch_up(&mut self, t_ns: u64, emit: &mut impl FnMut(&OdometryState)) {
         while let Some(input) = self.journal.front().copied() {
             if let Input::Sample { s, .. } = input
                 && s.stamps.sample_ns + 2 * self.lag_ns + self.confirm_ns > t_ns
             {
                 break;
             }
-            self.journal.pop();
-            self.take(&input);
+            self.pop_front(emit);
         }
     }
 
@@ -314,16 +379,42 @@ fn feed(nav: &mut Navigator, input: &Input, emit: &mut impl FnMut(&OdometryState
     }
 }
 
+/// Most journal inputs a replay after a change of the flags in force navigates again in one
+/// call of [`OdometryStage::process`] (a replay needs up to `2 rest_hindsight_s +
+/// motion_confirm_s` of inputs, 1 500 at 1 kHz, 6 000 at 4 kHz).
+pub const REPLAY_PER_CALL: usize = 64;
+
+/// Provisional samples the stage holds until their batch is settled: more than the two
+/// batches a calibration stage can leave unsettled (a batch cut by a gap, then a new one).
+const UNSETTLED: usize = 64;
+
+/// A provisional sample and the live state emitted for it.
+#[derive(Debug, Clone, Copy, Default)]
+struct Unsettled {
+    s: CorrectedImuSample,
+    state: OdometryState,
+}
+
 /// The odometry state machine (see the module documentation).
 pub struct OdometryStage {
-    /// The navigator on every input: its states are the ones emitted.
+    /// The navigator on every sample as it arrives, flags as they stand: the live states.
+    ahead: Navigator,
+    /// Everything on settled flags.
+    settled: Settled,
+    /// Provisional samples not settled yet, oldest first.
+    unsettled: Ring<Unsettled>,
+    last_ns: Option<u64>,
+    revisions_emitted: u64,
+}
+
+/// The stage on settled flags: hindsight and the navigator whose states are final.
+struct Settled {
+    /// The navigator on every settled input.
     live: Navigator,
     /// `None` without hindsight.
     hindsight: Option<Hindsight>,
-    last_ns: Option<u64>,
     /// The previous sample's IMU zero-state flag.
     imu_rest: bool,
-    revisions_emitted: u64,
 }
 
 impl OdometryStage {
@@ -346,6 +437,8 @@ impl OdometryStage {
             lag_ns: (lag_s * 1e9).round() as u64,
             confirm_ns: (confirm_s * 1e9).round() as u64,
             lagged: Navigator::new(cfg, hints),
+            redo: Navigator::new(cfg, hints),
+            redo_pos: None,
             journal: Ring::new(
                 ((2.0 * lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize + hints.capacity + 2,
             ),
@@ -354,10 +447,14 @@ impl OdometryStage {
             reinstate_at_ns: None,
         });
         Ok(Self {
-            live: Navigator::new(cfg, hints),
-            hindsight,
+            ahead: Navigator::new(cfg, hints),
+            settled: Settled {
+                live: Navigator::new(cfg, hints),
+                hindsight,
+                imu_rest: false,
+            },
+            unsettled: Ring::new(UNSETTLED),
             last_ns: None,
-            imu_rest: false,
             revisions_emitted: 0,
         })
     }
@@ -367,27 +464,30 @@ impl OdometryStage {
     /// hint changes nothing.
     pub fn hint(&mut self, h: &RobotHint) -> Result<(), HintError> {
         check_hint(h)?;
-        if let Some(hs) = self.hindsight.as_mut() {
-            hs.keep(Input::Hint(*h));
+        if let Some(hs) = self.settled.hindsight.as_mut() {
+            // Only above `max_rate_hz` does this push an input out of the journal; a replay
+            // that had not taken it then does not republish its state.
+            hs.keep(Input::Hint(*h), &mut |_| {});
         }
-        self.live.hint(h);
+        self.settled.live.hint(h);
+        self.ahead.hint(h);
         Ok(())
     }
 
     /// Counters of the hints seen so far.
     pub fn hint_stats(&self) -> HintStats {
-        self.live.hint_stats()
+        self.ahead.hint_stats()
     }
 
     /// The IMU-to-body mounting (sensor to body), configured or estimated; `None` while it is
     /// being estimated.
     pub fn mounting(&self) -> Option<UnitQuaternion<f64>> {
-        self.live.mounting()
+        self.ahead.mounting()
     }
 
     /// Whether alignment is done.
     pub fn aligned(&self) -> bool {
-        self.live.aligned()
+        self.ahead.aligned()
     }
 
     /// Number of republished (revised) states so far.
@@ -398,7 +498,7 @@ impl OdometryStage {
     /// Number of samples whose rest flag stands withdrawn in hindsight so far (those still
     /// within the hindsight may yet be reinstated).
     pub fn withdrawn_rest_samples(&self) -> u64 {
-        self.hindsight.as_ref().map_or(0, |hs| {
+        self.settled.hindsight.as_ref().map_or(0, |hs| {
             let pending = (0..hs.journal.len())
                 .filter(|&i| {
                     matches!(hs.journal.oldest(i), Some(Input::Sample { s, imu_rest: true })
@@ -411,11 +511,12 @@ impl OdometryStage {
 
     /// The filter, once aligned (for diagnostics and tests).
     pub fn filter(&self) -> Option<&Eskf> {
-        self.live.filter()
+        self.ahead.filter()
     }
 
-    /// Processes one sample: emits its state, and any revised states (a motion interval's
-    /// drift removed, or rest flags withdrawn or reinstated in hindsight), through `emit`. A
+    /// Processes one sample: emits its state first, then any revised states (a motion
+    /// interval's drift removed, rest flags withdrawn or reinstated in hindsight, a batch's
+    /// verdict that changed the states navigated on its provisional flags), through `emit`. A
     /// refused sample changes nothing.
     pub fn process(
         &mut self,
@@ -434,47 +535,149 @@ impl OdometryStage {
             });
         }
         self.last_ns = Some(t_ns);
+        let mut budget = REPLAY_PER_CALL;
+        let budget = &mut budget;
+        let mut state = OdometryState::default();
+        // Its motion-end revisions come again, on settled flags, from the settled navigator.
+        self.ahead.process(s, &mut |o| {
+            if o.flags & odometry_flags::REVISION == 0 {
+                state = *o;
+            }
+        });
+        emit(&state);
+        let sample = Unsettled { s: *s, state };
+        if s.flags & corrected_flags::PROVISIONAL != 0 {
+            if let Some(old) = self.unsettled.push(sample) {
+                // Never settled in time: final as it stands.
+                self.settle(&old, budget, emit);
+            }
+            return Ok(());
+        }
+        // Older samples than those `s` settles were cut from their batch: final as they are.
+        let settles = (s.settles as usize).min(self.unsettled.len());
+        let mut diverged = false;
+        while self.unsettled.len() > settles {
+            let old = self.unsettled.pop().expect("len > settles");
+            diverged |= self.settle(&old, budget, emit);
+        }
+        const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
+        while let Some(mut u) = self.unsettled.pop() {
+            let flags =
+                (u.s.flags & !(VERDICT | corrected_flags::PROVISIONAL)) | (s.flags & VERDICT);
+            diverged |= flags & VERDICT != u.s.flags & VERDICT;
+            u.s.flags = flags;
+            u.s.zs_mean_mps2 = s.zs_mean_mps2;
+            u.s.zs_std_mps2 = s.zs_std_mps2;
+            diverged |= self.settle(&u, budget, emit);
+        }
+        diverged |= self.settle(&sample, budget, emit);
+        if diverged {
+            self.ahead.copy_from(&self.settled.live);
+        }
+        Ok(())
+    }
+
+    /// End of the stream: completes a replay under way (see [`REPLAY_PER_CALL`]), so that the
+    /// last state emitted for every sample is final. Samples still provisional keep the state
+    /// emitted for them (their flags stand, as [`calibrate::stage::Settler::finish`] leaves
+    /// them). The stage can take more samples afterwards.
+    pub fn finish(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        let revisions = &mut self.revisions_emitted;
+        if self.settled.finish(&mut |o| {
+            *revisions += 1;
+            emit(o);
+        }) {
+            self.ahead.copy_from(&self.settled.live);
+        }
+    }
+
+    /// Runs one sample with its final flags through the settled stage; republishes (as
+    /// `REVISION`) its state where it differs from the live one, and every revision. Returns
+    /// whether the settled navigator departed from the live one.
+    fn settle(
+        &mut self,
+        u: &Unsettled,
+        budget: &mut usize,
+        emit: &mut impl FnMut(&OdometryState),
+    ) -> bool {
+        let revisions = &mut self.revisions_emitted;
+        let mut differs = false;
+        let replayed = self.settled.process(&u.s, budget, &mut |o| {
+            let o = if o.flags & odometry_flags::REVISION != 0 {
+                *o
+            } else if *o != u.state {
+                differs = true;
+                OdometryState {
+                    flags: o.flags | odometry_flags::REVISION,
+                    ..*o
+                }
+            } else {
+                return;
+            };
+            *revisions += 1;
+            emit(&o);
+        });
+        differs || replayed
+    }
+}
+
+impl Settled {
+    /// Processes one (checked) sample with settled flags: emits its state and any revised
+    /// states. Returns whether a change of the flags in force navigated the journal again.
+    fn process(
+        &mut self,
+        s: &CorrectedImuSample,
+        budget: &mut usize,
+        emit: &mut impl FnMut(&OdometryState),
+    ) -> bool {
+        let t_ns = s.stamps.sample_ns;
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
         let flipped = imu_rest != self.imu_rest;
         // Rest decided by a fresh hint is not the detector's to withdraw.
         let imu_transition = flipped && self.live.imu_decided();
         self.imu_rest = imu_rest;
-        let revisions = &mut self.revisions_emitted;
-        let mut counted = |o: &OdometryState| {
-            if o.flags & odometry_flags::REVISION != 0 {
-                *revisions += 1;
-            }
-            emit(o);
-        };
         let Some(hs) = self.hindsight.as_mut() else {
-            self.live.process(s, &mut counted);
-            return Ok(());
+            self.live.process(s, emit);
+            return false;
         };
         let reinstate = hs.reinstatement_due(t_ns, imu_rest, flipped);
-        hs.keep(Input::Sample { s: *s, imu_rest });
-        hs.catch_up(t_ns);
-        if !((imu_transition || reinstate) && hs.resolve()) {
-            self.live.process(s, &mut counted);
-            return Ok(());
+        hs.keep(Input::Sample { s: *s, imu_rest }, emit);
+        hs.catch_up(t_ns, emit);
+        if (imu_transition || reinstate) && hs.resolve() {
+            // Flags in force changed: navigate the journal again from the lagging navigator
+            // (starting over if a replay was under way).
+            hs.redo.copy_from(&hs.lagged);
+            hs.redo_pos = Some(0);
         }
-        // Flags in force changed: navigate again from the lagging navigator, republishing
-        // every state but this sample's.
-        self.live.copy_from(&hs.lagged);
-        let n = hs.journal.len();
-        for i in 0..n {
-            let input = *hs.journal.oldest(i).expect("i < len");
-            if i + 1 == n {
-                feed(&mut self.live, &input, &mut counted);
-            } else {
-                feed(&mut self.live, &input, &mut |o| {
-                    counted(&OdometryState {
-                        flags: o.flags | odometry_flags::REVISION,
-                        ..*o
-                    })
-                });
+        if hs.redo_pos.is_none() {
+            self.live.process(s, emit);
+            return false;
+        }
+        // While a replay is under way the live navigator runs on the flags it had: its states
+        // go out (the replay republishes them), its motion-end revisions do not.
+        self.live.process(s, &mut |o| {
+            if o.flags & odometry_flags::REVISION == 0 {
+                emit(o);
             }
+        });
+        if hs.redo_advance(budget, emit) {
+            self.live.copy_from(&hs.redo);
+            return true;
         }
-        Ok(())
+        false
+    }
+
+    /// Completes a replay under way; whether there was one.
+    fn finish(&mut self, emit: &mut impl FnMut(&OdometryState)) -> bool {
+        let Some(hs) = self.hindsight.as_mut() else {
+            return false;
+        };
+        let mut unbounded = usize::MAX;
+        if hs.redo_pos.is_none() || !hs.redo_advance(&mut unbounded, emit) {
+            return false;
+        }
+        self.live.copy_from(&hs.redo);
+        true
     }
 }
 

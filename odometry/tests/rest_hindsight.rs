@@ -125,6 +125,9 @@ fn run(
             })
             .unwrap();
     }
+    stage.finish(&mut |o| {
+        latest.insert(o.seq, *o);
+    });
     (latest, stage)
 }
 

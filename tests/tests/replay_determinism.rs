@@ -75,7 +75,7 @@ fn corrected_bits(s: &CorrectedImuSample) -> (Stamps, Vec<u64>, [u64; 3]) {
     let ints = [
         s.seq,
         s.calib_id,
-        (u64::from(s.flags) << 48) | (u64::from(s.raw_flags) << 32) | u64::from(s.reserved),
+        (u64::from(s.flags) << 48) | (u64::from(s.raw_flags) << 32) | u64::from(s.settles),
     ];
     (data_time(&s.stamps), floats, ints)
 }

@@ -208,6 +208,8 @@ fn run<I2C: I2c, C: Clock>(
     let node = service::node()?;
     let raw = service::open::<RawImuSample>(&node, &name)?;
     let publisher = service::publisher(&raw)?;
+    // Wakes the subscribers after each send (they sleep on the event service).
+    let waker = ipc_types::wake::Waker::new(&node, &name)?;
 
     let mut acq = Acquisition::start(driver, clock, config, read_interval_ns)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -228,6 +230,7 @@ fn run<I2C: I2c, C: Clock>(
             .write_payload(*s)
             .send()
             .map_err(|e| anyhow::anyhow!("cannot send on {name}: {e:?}"))?;
+        waker.notify()?;
         Ok(())
     };
     // Start-up is over: from here on small blocks come from the pool.

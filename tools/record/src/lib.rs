@@ -10,6 +10,7 @@
 
 #![warn(missing_docs)]
 
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -19,6 +20,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use ipc_types::clock::monotonic_ns;
+use ipc_types::wake::{self, Exit, WaitMode};
 use ipc_types::{CorrectedImuSample, Message, OdometryState, RawImuSample, RobotHint, service};
 use recording::mcap::{Channel, EventKind, PoseInFrame, RecorderEvent, Topic, Writer};
 
@@ -26,9 +28,9 @@ use recording::mcap::{Channel, EventKind, PoseInFrame, RecorderEvent, Topic, Wri
 /// hands it to the operating system: the most a killed recorder can lose. Half the 100 ms the
 /// project allows, leaving room for one slow loop iteration.
 pub const FLUSH_PERIOD: Duration = Duration::from_millis(50);
-/// Sleep between polls of the subscribers. Each subscriber buffers one second at 4 kHz
-/// ([`service::SUBSCRIBER_BUFFER`]), far more than arrives in one poll.
-pub const POLL_PERIOD: Duration = Duration::from_millis(1);
+/// Longest sleep without a notification (the flush and the publisher check run on it). Each
+/// subscriber buffers one second at 4 kHz ([`service::SUBSCRIBER_BUFFER`]).
+pub const POLL_PERIOD: Duration = Duration::from_millis(25);
 /// Most messages taken from one subscriber per poll, so that flushing and the publisher check
 /// keep their periods while a fast publisher (replay `--max`) keeps the queue full.
 pub const MAX_BATCH: usize = service::SUBSCRIBER_BUFFER;
@@ -159,6 +161,8 @@ trait Stream {
     fn check_publishers(&mut self, writer: &mut Writer) -> Result<Vec<RecorderEvent>>;
     /// The service's base name and the messages received so far.
     fn received(&self) -> (&'static str, u64);
+    /// The full service name.
+    fn name(&self) -> &str;
 }
 
 /// Extra messages written for each message of a stream (the pose for odometry states).
@@ -255,6 +259,10 @@ impl<T: Topic + Message> Stream for Subscription<T> {
         Ok(events)
     }
 
+    fn name(&self) -> &str {
+        &self.name
+    }
+
     fn received(&self) -> (&'static str, u64) {
         (T::TOPIC, self.received)
     }
@@ -318,8 +326,10 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
     Ok(summary)
 }
 
-/// Polls, writes, checks publishers and flushes until the duration has passed or a signal
-/// arrived; records events and `interrupted` in `summary`.
+/// Drains, writes, checks publishers and flushes until the duration has passed or a signal
+/// arrived; records events and `interrupted` in `summary`. Sleeps on the services' events
+/// (their publishers notify after each send), waking at least every [`POLL_PERIOD`] for the
+/// flush and the publisher check.
 fn record_loop(
     node: &Node<ipc::Service>,
     writer: &mut Writer,
@@ -330,22 +340,16 @@ fn record_loop(
     let start = Instant::now();
     let mut oldest_unflushed: Option<Instant> = None;
     let mut last_check: Option<Instant> = None;
-    loop {
-        // Err only when SIGINT or SIGTERM arrived (iceoryx2's default signal handling).
-        if node.wait(POLL_PERIOD).is_err() {
-            summary.interrupted = true;
+    let listeners = streams
+        .iter()
+        .map(|s| wake::listener(node, s.name(), WaitMode::Event))
+        .collect::<Result<Vec<_>, _>>()?;
+    let exit = wake::serve_loop(node, &listeners, POLL_PERIOD, || -> Result<_> {
+        if drain(writer, streams, summary)? {
+            oldest_unflushed.get_or_insert_with(Instant::now);
         }
-        // After a signal this last drain takes everything queued: a queue holds at most
-        // SUBSCRIBER_BUFFER = MAX_BATCH messages.
-        for stream in streams.iter_mut() {
-            let (_, before) = stream.received();
-            summary.events.extend(stream.drain(writer, MAX_BATCH)?);
-            if stream.received().1 > before {
-                oldest_unflushed.get_or_insert_with(Instant::now);
-            }
-        }
-        if summary.interrupted || options.duration.is_some_and(|d| start.elapsed() >= d) {
-            return Ok(());
+        if options.duration.is_some_and(|d| start.elapsed() >= d) {
+            return Ok(ControlFlow::Break(()));
         }
         if last_check.is_none_or(|t| t.elapsed() >= PUBLISHER_CHECK_PERIOD) {
             last_check = Some(Instant::now());
@@ -364,7 +368,30 @@ fn record_loop(
             writer.flush()?;
             oldest_unflushed = None;
         }
+        Ok(ControlFlow::Continue(false))
+    })?;
+    if exit == Exit::Signal {
+        summary.interrupted = true;
+        // After a signal this last drain takes everything queued: a queue holds at most
+        // SUBSCRIBER_BUFFER = MAX_BATCH messages.
+        drain(writer, streams, summary)?;
     }
+    Ok(())
+}
+
+/// Takes up to [`MAX_BATCH`] messages from each stream; whether any came.
+fn drain(
+    writer: &mut Writer,
+    streams: &mut [Box<dyn Stream>],
+    summary: &mut RecordSummary,
+) -> Result<bool> {
+    let mut any = false;
+    for stream in streams.iter_mut() {
+        let (_, before) = stream.received();
+        summary.events.extend(stream.drain(writer, MAX_BATCH)?);
+        any |= stream.received().1 > before;
+    }
+    Ok(any)
 }
 
 #[cfg(test)]

@@ -77,7 +77,7 @@ fn corrected_from(raw: &RawImuSample) -> CorrectedImuSample {
                 0
             },
         raw_flags: raw.flags,
-        reserved: 0,
+        settles: 0,
     }
 }
 

@@ -208,7 +208,13 @@ impl Topic for CorrectedImuSample {
                     "raw_flags",
                     uint("The raw sample's raw_flags bits.", u16::MAX.into()),
                 ),
-                ("reserved", uint("Zero.", u32::MAX.into())),
+                (
+                    "settles",
+                    uint(
+                        "Provisional samples before this one whose verdict it settles.",
+                        u32::MAX.into(),
+                    ),
+                ),
             ],
         )
     }
@@ -1130,7 +1136,7 @@ mod tests {
             calib_id: rng.random(),
             flags: rng.random(),
             raw_flags: rng.random(),
-            reserved: rng.random(),
+            settles: rng.random(),
         }
     }
 

@@ -1,27 +1,29 @@
-//! Latency and throughput benchmark of the live pipeline, with real processes:
+//! Latency, CPU and throughput benchmark of the live pipeline, with real processes:
 //! `mems-replay` -> `mems-calibrate serve` -> `mems-odometry serve` -> this process's
-//! subscriber, and the bare iceoryx2 hop between two processes with the same service settings.
+//! subscriber, against bare iceoryx2 hops between processes with the same service settings and
+//! the same event-driven waiting (a publisher notifies the service's event after each send; a
+//! subscriber sleeps in a WaitSet on its listener).
 //!
 //! ```sh
-//! cargo build --release --workspace
-//! cargo run --release -p mems-replay --example latency [-- --seconds 20]
+//! cargo build --release -p mems-replay -p mems-calibrate ... (the workspace binaries)
+//! cargo run --release -p mems-replay --example latency [-- --seconds 30] [--json]
 //! ```
 //!
-//! Measures, each as an hdrhistogram of nanoseconds (reported in us):
-//! - the bare hop: a publisher (this process) sends a raw sample every 1 ms with its publish time
-//!   in `stamps.acquired_ns`; a subscriber process polls as the stages do (`node.wait(1 ms)`,
-//!   then drains) and records receive time - publish time. Once plain, once with the publisher
-//!   pinned to CPU 0 and the subscriber to CPU 1, both SCHED_FIFO (publisher 40, subscriber
-//!   50), falling back to pinning alone (and saying so) where SCHED_FIFO is not permitted;
-//! - the pipeline, replaying a simulated 1 kHz drive at real time: per hop from the stamps every
-//!   state carries (replay publish -> calibrate publish, which includes the calibration stage's
-//!   20-sample batch; calibrate -> odometry publish; odometry -> this subscriber) and end to end.
-//!   Once plain, once with every process under `taskset`/`chrt -f` (replay and subscriber on
-//!   CPU 0, the stages on CPU 1);
-//! - throughput: a longer drive replayed with `--max` through both stages, in states per second
-//!   at the subscriber.
+//! Measures, each as an hdrhistogram of nanoseconds (reported in us), at 1 kHz and 4 kHz:
+//! - the bare hop: a publisher thread here sends a raw sample per period with its publish time
+//!   in `stamps.acquired_ns`; a subscriber process records receive time - publish time;
+//! - three bare hops in a chain: publisher -> relay process -> relay process -> subscriber
+//!   process (the pipeline's shape without its stages);
+//! - the pipeline, replaying a simulated drive of the part it calibrated (so the odometry
+//!   aligns: checked) at real time: per hop from the stamps every state carries and end to end,
+//!   over the live (non-revision) states that are aligned (at rest and moving, both counted);
+//! - each process's CPU use over the run (utime + stime from /proc), and of the stages idle;
+//! - plain, and pinned with SCHED_FIFO (publisher/replay and the last subscriber on CPU 0, the
+//!   relays/stages on CPU 1), at 1 kHz;
+//! - throughput: a drive replayed with `--max` through both stages.
 //!
-//! Every time is `CLOCK_MONOTONIC` on one machine, so differences between processes are valid.
+//! With `--json` the last line is a JSON object of the headline figures. Every time is
+//! `CLOCK_MONOTONIC` on one machine, so differences between processes are valid.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -31,10 +33,16 @@ use anyhow::{Context, Result, bail};
 use hdrhistogram::Histogram;
 use iceoryx2::service::port_factory::PortFactory as _;
 use ipc_types::clock::monotonic_ns;
+use ipc_types::wake::{self, Output, WaitMode};
 use ipc_types::{OdometryState, RawImuSample, Stamps, odometry_flags, service};
+use serde_json::{Value, json};
+use std::ops::ControlFlow;
 
-/// Samples per second of the hop benchmark's publisher (the stack's usual rate).
-const HOP_RATE_HZ: u64 = 1000;
+/// Warm-up of the pipeline's drive: the calibration stage learns for `LEARN_S`, the odometry
+/// aligns on the next second of rest; the states timed are the aligned ones after it.
+const LEARN_S: &str = "2";
+/// Rest at the start of the drive, s.
+const INITIAL_REST_S: u64 = 4;
 
 /// One latency distribution.
 fn histogram() -> Histogram<u64> {
@@ -43,15 +51,17 @@ fn histogram() -> Histogram<u64> {
 
 /// `p50 / p99 / p99.9 / max` in us, and the count.
 fn row(h: &Histogram<u64>) -> String {
-    let us = |q: f64| h.value_at_quantile(q) as f64 / 1000.0;
+    let [p50, p99, p999, max] = quantiles(h);
     format!(
-        "| {:.1} | {:.1} | {:.1} | {:.1} | {} |",
-        us(0.5),
-        us(0.99),
-        us(0.999),
-        h.max() as f64 / 1000.0,
+        "| {p50:.1} | {p99:.1} | {p999:.1} | {max:.1} | {} |",
         h.len()
     )
+}
+
+/// p50, p99, p99.9 and max in us.
+fn quantiles(h: &Histogram<u64>) -> [f64; 4] {
+    let us = |q: f64| h.value_at_quantile(q) as f64 / 1000.0;
+    [us(0.5), us(0.99), us(0.999), h.max() as f64 / 1000.0]
 }
 
 /// Pins the calling thread to `cpu` and, if `priority` is given, makes it SCHED_FIFO. Returns a
@@ -82,67 +92,122 @@ fn realtime(cpu: usize, priority: Option<u8>) -> Result<Option<String>> {
     .map(|e| format!("SCHED_FIFO {priority} refused ({e:?}): pinned only")))
 }
 
-/// The hop benchmark's subscriber process: receives `n` samples on the raw service of `ns`,
-/// polling as the stages do, and prints `p50 p99 p99.9 max count` in ns on stdout.
-fn hop_subscriber(ns: &str, n: usize, pinned: bool) -> Result<()> {
-    if pinned && let Some(note) = realtime(1, Some(50))? {
-        eprintln!("hop subscriber: {note}");
+/// A chain's receiving end (child process): relays `n` raw samples from service `input` to
+/// `output` (keeping `acquired_ns`), or, with `output` "-", records receive time - publish
+/// time and prints the histogram serialised as `p50 p99 p999 max count` (ns) on stdout.
+fn chain_child(input: &str, output: &str, n: u64, cpu: Option<usize>) -> Result<()> {
+    if let Some(cpu) = cpu
+        && let Some(note) = realtime(cpu, Some(50))?
+    {
+        eprintln!("chain: {note}");
     }
     let node = service::node()?;
-    let svc = service::open::<RawImuSample>(&node, &service::full_name(ns, service::RAW))?;
+    let svc = service::open::<RawImuSample>(&node, input)?;
     let sub = service::subscriber(&svc)?;
+    let listener = wake::listener(&node, input, WaitMode::Event)?;
+    let mut out = if output == "-" {
+        None
+    } else {
+        let svc = service::open::<RawImuSample>(&node, output)?;
+        Some(Output::new(&node, &svc, output)?)
+    };
     let mut h = histogram();
+    let mut got = 0u64;
     let start = Instant::now();
-    while h.len() < n as u64 && start.elapsed() < Duration::from_secs(120) {
-        if node.wait(Duration::from_millis(1)).is_err() {
-            break;
-        }
-        while let Some(s) = sub.receive()? {
-            h.record(monotonic_ns().saturating_sub(s.stamps.acquired_ns).max(1))?;
-        }
+    wake::serve_loop(
+        &node,
+        &[listener],
+        Duration::from_millis(100),
+        || -> Result<_> {
+            let mut any = false;
+            while let Some(s) = sub.receive()? {
+                any = true;
+                got += 1;
+                match out.as_mut() {
+                    Some(o) => {
+                        o.send(*s.payload());
+                        o.end_of_input()?;
+                    }
+                    None => h.record(monotonic_ns().saturating_sub(s.stamps.acquired_ns).max(1))?,
+                }
+            }
+            let done = got >= n || start.elapsed() > Duration::from_secs(300);
+            Ok(if done {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(any)
+            })
+        },
+    )?;
+    if out.is_none() {
+        println!(
+            "{} {} {} {} {}",
+            h.value_at_quantile(0.5),
+            h.value_at_quantile(0.99),
+            h.value_at_quantile(0.999),
+            h.max(),
+            h.len()
+        );
+    } else {
+        // Let the next process take the last samples before the ports close.
+        std::thread::sleep(Duration::from_millis(300));
     }
-    println!(
-        "{} {} {} {} {}",
-        h.value_at_quantile(0.5),
-        h.value_at_quantile(0.99),
-        h.value_at_quantile(0.999),
-        h.max(),
-        h.len()
-    );
     Ok(())
 }
 
-/// Runs the bare hop for `seconds` (publisher here, subscriber in a child process).
-fn hop(bench: &Path, seconds: u64, pinned: bool) -> Result<String> {
-    let ns = format!("latency-hop-{}-{pinned}", std::process::id());
-    let n = (seconds * HOP_RATE_HZ) as usize;
-    let child = Command::new(bench)
-        .args(["hop-subscriber", &ns, &n.to_string(), &pinned.to_string()])
-        .stdout(Stdio::piped())
-        .spawn()
-        .context("cannot start the hop subscriber")?;
-    let publisher_thread = std::thread::spawn(move || -> Result<Option<String>> {
-        let note = if pinned { realtime(0, Some(40))? } else { None };
+/// `hops` bare event-driven hops in a chain at `rate_hz` for `seconds`: the publisher is a
+/// thread here, the relays and the subscriber child processes. Returns p50, p99, p99.9, max
+/// (us) and the count at the subscriber.
+fn chain(bench: &Path, hops: usize, rate_hz: u64, seconds: u64, pinned: bool) -> Result<[f64; 5]> {
+    let id = format!(
+        "latency-chain-{}-{hops}-{rate_hz}-{pinned}",
+        std::process::id()
+    );
+    let names: Vec<String> = (0..=hops).map(|k| format!("{id}/s{k}")).collect();
+    let n = seconds * rate_hz;
+    let mut children = Vec::new();
+    for k in 0..hops {
+        let output = if k + 1 == hops {
+            "-"
+        } else {
+            names[k + 1].as_str()
+        };
+        // Relays on CPU 1, the subscriber with the publisher on CPU 0 (as the pipeline).
+        let cpu = if k + 1 == hops { "0" } else { "1" };
+        children.push(
+            Command::new(bench)
+                .args(["chain", &names[k], output, &n.to_string()])
+                .arg(if pinned { cpu } else { "-" })
+                .stdout(Stdio::piped())
+                .spawn()
+                .context("cannot start a chain process")?,
+        );
+    }
+    let first = names[0].clone();
+    let publisher = std::thread::spawn(move || -> Result<()> {
+        if pinned && let Some(note) = realtime(0, Some(40))? {
+            eprintln!("chain publisher: {note}");
+        }
         let node = service::node()?;
-        let svc = service::open::<RawImuSample>(&node, &service::full_name(&ns, service::RAW))?;
-        let publisher = service::publisher(&svc)?;
+        let svc = service::open::<RawImuSample>(&node, &first)?;
+        let mut out = Output::new(&node, &svc, &first)?;
         let wait = Instant::now();
         while svc.dynamic_config().number_of_subscribers() < 1 {
             if wait.elapsed() > Duration::from_secs(20) {
-                bail!("the hop subscriber did not connect");
+                bail!("the chain did not connect");
             }
             std::thread::sleep(Duration::from_millis(1));
         }
-        std::thread::sleep(Duration::from_millis(200));
-        let period = Duration::from_nanos(1_000_000_000 / HOP_RATE_HZ);
+        std::thread::sleep(Duration::from_millis(500));
+        let period = Duration::from_nanos(1_000_000_000 / rate_hz);
         let start = Instant::now();
-        for seq in 0..n as u64 {
+        for seq in 0..n {
             let due = start + period * seq as u32;
             if let Some(d) = due.checked_duration_since(Instant::now()) {
                 std::thread::sleep(d);
             }
             let now = monotonic_ns();
-            publisher.send_copy(RawImuSample {
+            out.send(RawImuSample {
                 stamps: Stamps {
                     sample_ns: now,
                     acquired_ns: now,
@@ -150,36 +215,29 @@ fn hop(bench: &Path, seconds: u64, pinned: bool) -> Result<String> {
                 },
                 seq,
                 ..RawImuSample::default()
-            })?;
+            });
+            out.end_of_input()?;
         }
-        std::thread::sleep(Duration::from_millis(300));
-        Ok(note)
+        std::thread::sleep(Duration::from_millis(500));
+        Ok(())
     });
-    let output = child.wait_with_output()?;
-    let note = publisher_thread.join().expect("publisher thread")?;
-    if !output.status.success() {
-        bail!("hop subscriber failed: {}", output.status);
+    let mut outputs = Vec::new();
+    for c in children {
+        outputs.push(c.wait_with_output()?);
     }
-    let v: Vec<f64> = String::from_utf8_lossy(&output.stdout)
+    publisher.join().expect("publisher thread")?;
+    let last = outputs.last().expect("one hop at least");
+    if outputs.iter().any(|o| !o.status.success()) {
+        bail!("a chain process failed");
+    }
+    let v: Vec<f64> = String::from_utf8_lossy(&last.stdout)
         .split_whitespace()
         .map(|x| x.parse::<f64>())
         .collect::<Result<_, _>>()?;
     let [p50, p99, p999, max, count] = v[..] else {
-        bail!("hop subscriber printed {v:?}");
+        bail!("chain subscriber printed {v:?}");
     };
-    Ok(format!(
-        "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {count} |{}",
-        if pinned {
-            "pinned (CPU 0 -> 1), SCHED_FIFO 40/50"
-        } else {
-            "plain"
-        },
-        p50 / 1000.0,
-        p99 / 1000.0,
-        p999 / 1000.0,
-        max / 1000.0,
-        note.map_or(String::new(), |n| format!(" {n}"))
-    ))
+    Ok([p50 / 1e3, p99 / 1e3, p999 / 1e3, max / 1e3, count])
 }
 
 /// Runs a workspace binary to completion.
@@ -208,12 +266,40 @@ fn command(bins: &Path, name: &str, rt: Option<(usize, u8)>) -> Command {
     }
 }
 
-/// Per-hop and end-to-end latency of the pipeline, and its rate at the subscriber.
+/// CPU time (user + system) of process `pid` so far, s.
+fn cpu_s(pid: u32) -> Result<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))?;
+    // Fields after the command name (which may hold spaces): state is field 3, utime 14.
+    let rest = &stat[stat.rfind(')').context("malformed /proc stat")? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    // SAFETY: sysconf has no preconditions.
+    let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
+    Ok((f[11].parse::<f64>()? + f[12].parse::<f64>()?) / tick)
+}
+
+/// Per-hop and end-to-end latency of the pipeline, its rate at the subscriber, and its
+/// processes' CPU use.
 struct PipelineRun {
     hops: [Histogram<u64>; 4],
+    /// Live states timed: aligned and at rest, aligned and moving.
+    rest: u64,
+    moving: u64,
+    /// States not timed (before alignment, or NO_GYRO).
+    untimed: u64,
     states: u64,
     rate_hz: f64,
     replay_line: String,
+    /// Percent of one core per process over the replay.
+    cpu: Vec<(String, f64)>,
+}
+
+/// The stages' options for a drive at `rate_hz`: the 4 kHz MPU-9250 has no gyroscope.
+fn stage_args(rate_hz: u64) -> Vec<&'static str> {
+    if rate_hz > 1000 {
+        vec!["--detector", "glrt-accel", "--glrt-window", "100"]
+    } else {
+        vec![]
+    }
 }
 
 /// Replays `recording` (`--speed 1` or `--max`) through calibrate and odometry processes and
@@ -222,19 +308,21 @@ fn pipeline(
     bins: &Path,
     recording: &Path,
     calib: &Path,
+    rate_hz: u64,
     max: bool,
     pinned: bool,
 ) -> Result<PipelineRun> {
-    let ns = format!("latency-pipe-{}-{max}-{pinned}", std::process::id());
+    let ns = format!(
+        "latency-pipe-{}-{rate_hz}-{max}-{pinned}",
+        std::process::id()
+    );
     let rt_stage = pinned.then_some((1, 50));
     let rt_replay = pinned.then_some((0, 40));
-    let note = if pinned { realtime(0, Some(45))? } else { None };
-    if let Some(note) = note {
-        eprintln!("pipeline subscriber: {note}");
-    }
     let node = service::node()?;
-    let svc = service::open::<OdometryState>(&node, &service::full_name(&ns, service::ODOMETRY))?;
+    let name = service::full_name(&ns, service::ODOMETRY);
+    let svc = service::open::<OdometryState>(&node, &name)?;
     let sub = service::subscriber(&svc)?;
+    let listener = wake::listener(&node, &name, WaitMode::Event)?;
     let calib = calib.to_str().context("calibration path is not UTF-8")?;
     let spawn = |name: &str, args: &[&str], rt| -> Result<Child> {
         command(bins, name, rt)
@@ -245,9 +333,17 @@ fn pipeline(
             .spawn()
             .with_context(|| format!("cannot start {name}"))
     };
+    let mut calibrate_args = vec!["serve", "--calib", calib, "--learn-s", LEARN_S];
+    calibrate_args.extend(stage_args(rate_hz));
     let mut stages = vec![
-        spawn("mems-odometry", &["serve", "--calib", calib], rt_stage)?,
-        spawn("mems-calibrate", &["serve", "--calib", calib], rt_stage)?,
+        (
+            "mems-odometry",
+            spawn("mems-odometry", &["serve", "--calib", calib], rt_stage)?,
+        ),
+        (
+            "mems-calibrate",
+            spawn("mems-calibrate", &calibrate_args, rt_stage)?,
+        ),
     ];
     std::thread::sleep(Duration::from_millis(1500));
     let pace = if max { "--max" } else { "--speed" };
@@ -265,36 +361,84 @@ fn pipeline(
         .stderr(Stdio::null())
         .spawn()
         .context("cannot start mems-replay")?;
+    let replay_pid = replay.id();
+    let cpu0: Vec<f64> = stages
+        .iter()
+        .map(|(_, c)| cpu_s(c.id()))
+        .chain([cpu_s(replay_pid)])
+        .collect::<Result<_>>()?;
+    let t0 = Instant::now();
     let replay_out = std::thread::spawn(move || replay.wait_with_output());
 
     let mut hops = [histogram(), histogram(), histogram(), histogram()];
     let (mut first, mut last, mut states) = (None, 0u64, 0u64);
+    let (mut rest, mut moving, mut untimed) = (0u64, 0u64, 0u64);
     let mut idle_since = Instant::now();
-    while !(replay_out.is_finished() && idle_since.elapsed() > Duration::from_millis(1500)) {
-        node.wait(Duration::from_millis(1))
-            .map_err(|e| anyhow::anyhow!("interrupted: {e:?}"))?;
-        while let Some(s) = sub.receive()? {
-            let now = monotonic_ns();
-            idle_since = Instant::now();
-            if s.flags & odometry_flags::REVISION != 0 {
-                continue;
+    let mut cpu1: Option<(Vec<f64>, f64)> = None;
+    // The replay's CPU time, read while it runs (its /proc entry goes when it is reaped).
+    let mut replay_cpu = (cpu0[2], Instant::now());
+    wake::serve_loop(
+        &node,
+        &[listener],
+        Duration::from_millis(20),
+        || -> Result<_> {
+            let mut any = false;
+            while let Some(s) = sub.receive()? {
+                any = true;
+                let now = monotonic_ns();
+                idle_since = Instant::now();
+                if s.flags & odometry_flags::REVISION != 0 {
+                    continue;
+                }
+                first.get_or_insert(now);
+                last = now;
+                states += 1;
+                let aligned = s.flags & odometry_flags::ALIGNED != 0;
+                if !aligned && !max {
+                    untimed += 1;
+                    continue;
+                }
+                if s.flags & odometry_flags::ZERO_VELOCITY != 0 {
+                    rest += 1;
+                } else {
+                    moving += 1;
+                }
+                let st = s.stamps;
+                for (h, ns) in hops.iter_mut().zip([
+                    st.calibrated_ns.saturating_sub(st.acquired_ns),
+                    st.odometry_ns.saturating_sub(st.calibrated_ns),
+                    now.saturating_sub(st.odometry_ns),
+                    now.saturating_sub(st.acquired_ns),
+                ]) {
+                    h.record(ns.max(1))?;
+                }
             }
-            let st = s.stamps;
-            for (h, ns) in hops.iter_mut().zip([
-                st.calibrated_ns.saturating_sub(st.acquired_ns),
-                st.odometry_ns.saturating_sub(st.calibrated_ns),
-                now.saturating_sub(st.odometry_ns),
-                now.saturating_sub(st.acquired_ns),
-            ]) {
-                h.record(ns.max(1))?;
+            if !replay_out.is_finished()
+                && replay_cpu.1.elapsed() > Duration::from_millis(100)
+                && let Ok(c) = cpu_s(replay_pid)
+            {
+                replay_cpu = (c, Instant::now());
             }
-            first.get_or_insert(now);
-            last = now;
-            states += 1;
-        }
-    }
+            if replay_out.is_finished() && cpu1.is_none() {
+                let mut now: Vec<f64> = stages
+                    .iter()
+                    .map(|(_, c)| cpu_s(c.id()))
+                    .collect::<Result<_>>()?;
+                now.push(replay_cpu.0);
+                cpu1 = Some((now, t0.elapsed().as_secs_f64()));
+            }
+            let done =
+                replay_out.is_finished() && idle_since.elapsed() > Duration::from_millis(1500);
+            Ok(if done {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(any)
+            })
+        },
+    )?;
     let out = replay_out.join().expect("replay waiter")?;
-    for stage in &mut stages {
+    let (cpu1, span) = cpu1.context("the replay did not finish")?;
+    for (_, stage) in &mut stages {
         // SAFETY: kill(2) on our own child; no memory is involved.
         unsafe { libc::kill(stage.id() as i32, libc::SIGTERM) };
         stage.wait()?;
@@ -302,9 +446,18 @@ fn pipeline(
     if !out.status.success() {
         bail!("mems-replay failed: {}", out.status);
     }
+    let names = ["mems-odometry", "mems-calibrate", "mems-replay"];
+    let cpu = names
+        .iter()
+        .zip(cpu0.iter().zip(&cpu1))
+        .map(|(n, (a, b))| (n.to_string(), 100.0 * (b - a) / span))
+        .collect();
     let span_s = first.map_or(0.0, |f| (last - f) as f64 * 1e-9);
     Ok(PipelineRun {
         hops,
+        rest,
+        moving,
+        untimed,
         states,
         rate_hz: if span_s > 0.0 {
             (states - 1) as f64 / span_s
@@ -312,22 +465,106 @@ fn pipeline(
             0.0
         },
         replay_line: String::from_utf8_lossy(&out.stdout).trim().to_owned(),
+        cpu,
     })
+}
+
+/// CPU use of the two stages with no input for `seconds`, percent of a core.
+fn idle_cpu(bins: &Path, calib: &Path, seconds: u64) -> Result<Vec<(String, f64)>> {
+    let ns = format!("latency-idle-{}", std::process::id());
+    let calib = calib.to_str().context("calibration path is not UTF-8")?;
+    let mut out = Vec::new();
+    let mut children = Vec::new();
+    for (name, args) in [
+        ("mems-calibrate", vec!["serve", "--calib", calib]),
+        ("mems-odometry", vec!["serve", "--calib", calib]),
+    ] {
+        let c = Command::new(bins.join(name))
+            .args(&args)
+            .args(["--namespace", &ns])
+            .stderr(Stdio::null())
+            .spawn()?;
+        children.push((name, c));
+    }
+    // Start-up (loading, allocating) is not idling.
+    std::thread::sleep(Duration::from_secs(1));
+    let before: Vec<f64> = children
+        .iter()
+        .map(|(_, c)| cpu_s(c.id()))
+        .collect::<Result<_>>()?;
+    std::thread::sleep(Duration::from_secs(seconds));
+    for ((name, c), b) in children.iter_mut().zip(before) {
+        out.push((
+            name.to_string(),
+            100.0 * (cpu_s(c.id())? - b) / seconds as f64,
+        ));
+        // SAFETY: kill(2) on our own child; no memory is involved.
+        unsafe { libc::kill(c.id() as i32, libc::SIGTERM) };
+        c.wait()?;
+    }
+    Ok(out)
+}
+
+/// Prints one pipeline run as a markdown table.
+fn print_pipeline(title: &str, run: &PipelineRun) {
+    let names = [
+        "replay -> calibrate",
+        "calibrate -> odometry",
+        "odometry -> subscriber",
+        "end to end (replay -> subscriber)",
+    ];
+    println!(
+        "## {title}\n\n{} live states, {} timed: aligned at rest {}, aligned moving {} \
+         (not timed: {} before alignment); {}\n",
+        run.states,
+        run.rest + run.moving,
+        run.rest,
+        run.moving,
+        run.untimed,
+        run.replay_line
+    );
+    println!("| hop | p50 us | p99 us | p99.9 us | max us | states |");
+    println!("| --- | --- | --- | --- | --- | --- |");
+    for (name, h) in names.iter().zip(&run.hops) {
+        println!("| {name} {}", row(h));
+    }
+    let cpu: Vec<String> = run
+        .cpu
+        .iter()
+        .map(|(n, p)| format!("{n} {p:.1}%"))
+        .collect();
+    println!(
+        "\nCPU over the replay (% of one core): {}\n",
+        cpu.join(", ")
+    );
+}
+
+fn cpu_json(cpu: &[(String, f64)]) -> Value {
+    Value::Object(
+        cpu.iter()
+            .map(|(n, p)| (n.clone(), json!((p * 10.0).round() / 10.0)))
+            .collect(),
+    )
 }
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    if args.get(1).map(String::as_str) == Some("hop-subscriber") {
-        let [_, _, ns, n, pinned] = &args[..] else {
-            bail!("usage: latency hop-subscriber NS N PINNED");
+    if args.get(1).map(String::as_str) == Some("chain") {
+        let [_, _, input, output, n, cpu] = &args[..] else {
+            bail!("usage: latency chain IN OUT|- N CPU|-");
         };
-        return hop_subscriber(ns, n.parse()?, pinned.parse()?);
+        return chain_child(input, output, n.parse()?, cpu.parse().ok());
     }
-    let seconds: u64 = match (args.get(1).map(String::as_str), args.get(2)) {
-        (Some("--seconds"), Some(s)) => s.parse()?,
-        (None, _) => 20,
-        _ => bail!("usage: latency [--seconds S]"),
-    };
+    let mut seconds: u64 = 20;
+    let mut as_json = false;
+    let mut it = args.iter().skip(1);
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--seconds" => seconds = it.next().context("--seconds needs a value")?.parse()?,
+            "--json" => as_json = true,
+            _ => bail!("usage: latency [--seconds S] [--json]"),
+        }
+    }
     let bench = std::env::current_exe()?;
     // target/<profile>/examples/latency -> target/<profile>
     let bins: PathBuf = bench
@@ -338,43 +575,47 @@ fn main() -> Result<()> {
     let work = std::env::temp_dir().join(format!("mems-latency-{}", std::process::id()));
     std::fs::create_dir_all(&work)?;
     let path = |name: &str| work.join(name).to_string_lossy().into_owned();
-    let (drive, long, six, calib) = (
+    let (drive, drive4k, long, six, calib) = (
         path("drive.mcap"),
+        path("drive4k.mcap"),
         path("long.mcap"),
         path("six.csv"),
         path("calib.toml"),
     );
     eprintln!("latency: simulating the recordings and calibrating ...");
-    let secs = seconds.to_string();
-    // Two seconds of rest, then driving: the odometry aligns and then works on motion.
-    let rest = ["--initial-rest", "2"];
+    // One part (preset and seed) for the calibration and every drive: the odometry aligns.
+    let part = ["--preset", "datasheet", "--seed", "1"];
+    let rest = INITIAL_REST_S.to_string();
+    let sim_drive = |out: &str, secs: u64, rate: &str| -> Result<String> {
+        let secs = (secs + INITIAL_REST_S).to_string();
+        run(
+            &bins,
+            "mems-sim",
+            &[
+                &[
+                    "drive",
+                    "--duration",
+                    &secs,
+                    "--rate",
+                    rate,
+                    "--initial-rest",
+                    &rest,
+                ][..],
+                &part,
+                &["--out", out],
+            ]
+            .concat(),
+        )
+    };
+    // The drive plan drops a motion that does not fit: at least 20 s hold a drive and a rest.
+    let drive_s = seconds.max(20);
+    sim_drive(&drive, drive_s, "1000")?;
+    sim_drive(&drive4k, seconds, "4000")?;
+    sim_drive(&long, seconds * 6, "1000")?;
     run(
         &bins,
         "mems-sim",
-        &[&["drive", "--duration", &secs, "--out", &drive][..], &rest].concat(),
-    )?;
-    let long_secs = (seconds * 6).to_string();
-    run(
-        &bins,
-        "mems-sim",
-        &[
-            &["drive", "--duration", &long_secs, "--out", &long][..],
-            &rest,
-        ]
-        .concat(),
-    )?;
-    run(
-        &bins,
-        "mems-sim",
-        &[
-            "six-position",
-            "--preset",
-            "datasheet",
-            "--rate",
-            "200",
-            "--out",
-            &six,
-        ],
+        &[&["six-position", "--rate", "200", "--out", &six][..], &part].concat(),
     )?;
     run(
         &bins,
@@ -382,57 +623,142 @@ fn main() -> Result<()> {
         &["fit", "--input", &six, "--model", "full", "--out", &calib],
     )?;
 
-    eprintln!("latency: bare iceoryx2 hop ...");
-    let hop_plain = hop(&bench, seconds / 2, false)?;
-    let hop_pinned = hop(&bench, seconds / 2, true)?;
-
-    println!("## Bare iceoryx2 hop, 1 kHz, lossless settings, subscriber polls every 1 ms\n");
+    let mut j = serde_json::Map::new();
+    let mut put = |k: &str, v: Value| {
+        j.insert(k.to_string(), v);
+    };
+    println!("## Bare iceoryx2 hops, event-driven, lossless settings\n");
     println!("| run | p50 us | p99 us | p99.9 us | max us | samples |");
     println!("| --- | --- | --- | --- | --- | --- |");
-    println!("{hop_plain}\n{hop_pinned}\n");
-
-    let names = [
-        "replay -> calibrate (incl. 20-sample batch)",
-        "calibrate -> odometry",
-        "odometry -> subscriber",
-        "end to end (replay -> subscriber)",
-    ];
-    // The pinned run last: it pins and raises this (the subscriber's) thread for good.
-    for pinned in [false, true] {
-        if pinned {
-            throughput(&bins, Path::new(&long), Path::new(&calib))?;
-        }
-        eprintln!("latency: pipeline at real time (pinned {pinned}) ...");
-        let run = pipeline(&bins, Path::new(&drive), Path::new(&calib), false, pinned)?;
+    let bare = |label: &str, hops, rate, pinned| -> Result<[f64; 5]> {
+        eprintln!("latency: {label} ...");
+        let r = chain(&bench, hops, rate, seconds, pinned)?;
         println!(
-            "## Pipeline at real time, {} ({} states; {})\n",
-            if pinned {
-                "replay and subscriber on CPU 0, stages on CPU 1, all SCHED_FIFO"
-            } else {
-                "plain"
-            },
-            run.states,
-            run.replay_line
+            "| {label} | {:.1} | {:.1} | {:.1} | {:.1} | {} |",
+            r[0], r[1], r[2], r[3], r[4]
         );
-        println!("| hop | p50 us | p99 us | p99.9 us | max us | states |");
-        println!("| --- | --- | --- | --- | --- | --- |");
-        for (name, h) in names.iter().zip(&run.hops) {
-            println!("| {name} {}", row(h));
-        }
-        println!();
-    }
-    std::fs::remove_dir_all(&work)?;
-    Ok(())
-}
+        Ok(r)
+    };
+    let hop1 = bare("one hop, 1 kHz, plain", 1, 1000, false)?;
+    let chain3 = bare("three hops, 1 kHz, plain", 3, 1000, false)?;
+    let chain3_4k = bare("three hops, 4 kHz, plain", 3, 4000, false)?;
+    println!();
+    put("bare_hop_p99_us", json!(hop1[1]));
+    put("bare_chain3_p50_us", json!(chain3[0]));
+    put("bare_chain3_p99_us", json!(chain3[1]));
+    put("bare_chain3_p999_us", json!(chain3[2]));
+    put("bare_chain3_4k_p99_us", json!(chain3_4k[1]));
 
-/// Throughput: `recording` replayed with `--max` through both stages, unpinned.
-fn throughput(bins: &Path, recording: &Path, calib: &Path) -> Result<()> {
+    let calib_path = Path::new(&calib);
+    eprintln!("latency: pipeline at 1 kHz, plain ...");
+    let p = pipeline(&bins, Path::new(&drive), calib_path, 1000, false, false)?;
+    print_pipeline("Pipeline at 1 kHz, real time, plain", &p);
+    if p.rest == 0 || p.moving == 0 {
+        bail!(
+            "the timed states must be aligned at rest and moving: {} at rest, {} moving",
+            p.rest,
+            p.moving
+        );
+    }
+    let [p50, p99, p999, max] = quantiles(&p.hops[3]);
+    put("pipeline_p50_us", json!(p50));
+    put("pipeline_p99_us", json!(p99));
+    put("pipeline_p999_us", json!(p999));
+    put("pipeline_max_us", json!(max));
+    put(
+        "pipeline_hop_p99_us",
+        json!(
+            p.hops[..3]
+                .iter()
+                .map(|h| quantiles(h)[1])
+                .collect::<Vec<_>>()
+        ),
+    );
+    put("timed_states_aligned_rest", json!(p.rest));
+    put("timed_states_aligned_moving", json!(p.moving));
+    let mut cpu = serde_json::Map::new();
+    cpu.insert("1kHz".into(), cpu_json(&p.cpu));
+
+    eprintln!("latency: pipeline at 4 kHz, plain ...");
+    let p4 = pipeline(&bins, Path::new(&drive4k), calib_path, 4000, false, false)?;
+    print_pipeline(
+        "Pipeline at 4 kHz (accelerometer only: states NO_GYRO), real time, plain",
+        &p4,
+    );
+    let [_, p4_99, p4_999, _] = quantiles(&p4.hops[3]);
+    put("pipeline_4k_p99_us", json!(p4_99));
+    put("pipeline_4k_p999_us", json!(p4_999));
+    cpu.insert("4kHz".into(), cpu_json(&p4.cpu));
+
+    eprintln!("latency: idle stages ...");
+    let idle = idle_cpu(&bins, calib_path, 5)?;
+    println!(
+        "Idle stages, no input for 5 s (% of one core): {}\n",
+        idle.iter()
+            .map(|(n, p)| format!("{n} {p:.2}%"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    cpu.insert("idle".into(), cpu_json(&idle));
+
     eprintln!("latency: throughput with --max ...");
-    let run = pipeline(bins, recording, calib, true, false)?;
+    let t = pipeline(&bins, Path::new(&long), calib_path, 1000, true, false)?;
     println!(
         "## Throughput, `mems-replay --max` through calibrate and odometry (plain)\n\n\
-         {} states at {:.0} states/s at the subscriber; {}\n",
-        run.states, run.rate_hz, run.replay_line
+         {} states at {:.0} states/s at the subscriber; {}\n\n\
+         CPU over the replay (% of one core): {}\n",
+        t.states,
+        t.rate_hz,
+        t.replay_line,
+        t.cpu
+            .iter()
+            .map(|(n, p)| format!("{n} {p:.1}%"))
+            .collect::<Vec<_>>()
+            .join(", ")
     );
+    put("throughput_states_per_s", json!(t.rate_hz.round()));
+    cpu.insert("throughput".into(), cpu_json(&t.cpu));
+
+    // The pinned runs last: SCHED_FIFO and pinning of this process's threads stay for good.
+    println!(
+        "## Pinned (CPU 0: publisher/replay and subscriber; CPU 1: relays/stages), SCHED_FIFO\n"
+    );
+    println!("| run | p50 us | p99 us | p99.9 us | max us | samples |");
+    println!("| --- | --- | --- | --- | --- | --- |");
+    let pinned_chain3 = bare("three hops, 1 kHz, pinned", 3, 1000, true)?;
+    println!();
+    put("pinned_bare_chain3_p99_us", json!(pinned_chain3[1]));
+    if let Some(note) = realtime(0, Some(45))? {
+        eprintln!("pipeline subscriber: {note}");
+    }
+    eprintln!("latency: pipeline at 1 kHz, pinned ...");
+    let pp = pipeline(&bins, Path::new(&drive), calib_path, 1000, false, true)?;
+    print_pipeline("Pipeline at 1 kHz, real time, pinned, SCHED_FIFO", &pp);
+    let [pp50, pp99, pp999, ppmax] = quantiles(&pp.hops[3]);
+    put("pinned_pipeline_p50_us", json!(pp50));
+    put("pinned_pipeline_p99_us", json!(pp99));
+    put("pinned_pipeline_p999_us", json!(pp999));
+    put("pinned_pipeline_max_us", json!(ppmax));
+    cpu.insert("1kHz_pinned".into(), cpu_json(&pp.cpu));
+    put("cpu_percent_per_process", Value::Object(cpu));
+    let ratio = p99 / chain3[1];
+    let pinned_ratio = pp99 / pinned_chain3[1];
+    put(
+        "pipeline_over_chain3_p99",
+        json!((ratio * 100.0).round() / 100.0),
+    );
+    put(
+        "pinned_pipeline_over_chain3_p99",
+        json!((pinned_ratio * 100.0).round() / 100.0),
+    );
+    println!(
+        "Pipeline p99 / three bare hops' p99 in the same run: plain {ratio:.2}, pinned \
+         {pinned_ratio:.2}; the timed states were aligned ({} at rest, {} moving)\n",
+        p.rest, p.moving
+    );
+    std::fs::remove_dir_all(&work)?;
+    if as_json {
+        println!("{}", Value::Object(j));
+    }
     Ok(())
 }

@@ -153,6 +153,8 @@ pub fn replay(
     let name = service::full_name(namespace, service::RAW);
     let raw = service::open::<RawImuSample>(node, &name)?;
     let publisher = service::publisher(&raw)?;
+    // Wakes the subscribers after each send (they sleep on the event service).
+    let waker = ipc_types::wake::Waker::new(node, &name)?;
     // The hint service is only opened when there are hints to publish.
     let hint_port = if hints.is_empty() {
         None
@@ -249,6 +251,11 @@ pub fn replay(
             service: name.clone(),
             seq: sample.seq,
             message: format!("{e:?}"),
+        })?;
+        waker.notify().map_err(|e| ReplayError::Send {
+            service: name.clone(),
+            seq: sample.seq,
+            message: e.to_string(),
         })?;
         if recipients < options.wait_subscribers {
             summary.short_deliveries += 1;

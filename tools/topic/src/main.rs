@@ -3,10 +3,12 @@
 
 use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
+use ipc_types::wake::{self, WaitMode};
 use ipc_types::{
     CorrectedImuSample, Message, OdometryState, RawImuSample, clock::monotonic_ns, service,
 };
 use mems_topic::TopicStats;
+use std::ops::ControlFlow;
 use std::time::{Duration, Instant};
 
 #[derive(Parser)]
@@ -69,47 +71,57 @@ fn run<T: Message>(args: &Args, echo: bool) -> Result<()> {
     let deadline = args.duration.map(Duration::from_secs_f64);
     let mut stats = TopicStats::new();
     let mut last_print = Instant::now();
-    // node.wait returns an error on SIGINT/SIGTERM: print the summary and exit cleanly.
-    while node.wait(Duration::from_millis(1)).is_ok() {
-        while let Some(sample) = subscriber
-            .receive()
-            .map_err(|e| anyhow::anyhow!("receive on {name}: {e:?}"))?
-        {
-            let msg: &T = sample.payload();
-            let now = monotonic_ns();
-            stats.observe(
-                msg.seq(),
-                msg.stamps().sample_ns,
-                msg.published_ns(),
-                now,
-                msg.is_revision(),
-            );
-            if echo {
-                if args.json {
-                    println!("{}", serde_json::to_string(msg)?);
-                } else {
-                    println!("{msg:?}");
+    // Sleeps until the publisher's event (or a 100 ms tick for the report and the deadline);
+    // returns on SIGINT/SIGTERM: print the summary and exit cleanly.
+    let listener = wake::listener(&node, &name, WaitMode::Event)?;
+    wake::serve_loop(
+        &node,
+        &[listener],
+        Duration::from_millis(100),
+        || -> Result<_> {
+            let mut any = false;
+            while let Some(sample) = subscriber
+                .receive()
+                .map_err(|e| anyhow::anyhow!("receive on {name}: {e:?}"))?
+            {
+                any = true;
+                let msg: &T = sample.payload();
+                let now = monotonic_ns();
+                stats.observe(
+                    msg.seq(),
+                    msg.stamps().sample_ns,
+                    msg.published_ns(),
+                    now,
+                    msg.is_revision(),
+                );
+                if echo {
+                    if args.json {
+                        println!("{}", serde_json::to_string(msg)?);
+                    } else {
+                        println!("{msg:?}");
+                    }
                 }
             }
-        }
-        if !echo && !args.json && last_print.elapsed() >= Duration::from_secs(1) {
-            let r = stats.report();
-            println!(
-                "{name}: {:.1} Hz, received {}, lost {}, duplicated {}, latency p50 {:.0} us p99 {:.0} us max {:.0} us",
-                r.rate_hz,
-                r.received,
-                r.lost,
-                r.duplicated,
-                r.latency_us.p50,
-                r.latency_us.p99,
-                r.latency_us.max
-            );
-            last_print = Instant::now();
-        }
-        if deadline.is_some_and(|d| start.elapsed() >= d) {
-            break;
-        }
-    }
+            if !echo && !args.json && last_print.elapsed() >= Duration::from_secs(1) {
+                let r = stats.report();
+                println!(
+                    "{name}: {:.1} Hz, received {}, lost {}, duplicated {}, latency p50 {:.0} us p99 {:.0} us max {:.0} us",
+                    r.rate_hz,
+                    r.received,
+                    r.lost,
+                    r.duplicated,
+                    r.latency_us.p50,
+                    r.latency_us.p99,
+                    r.latency_us.max
+                );
+                last_print = Instant::now();
+            }
+            if deadline.is_some_and(|d| start.elapsed() >= d) {
+                return Ok(ControlFlow::Break(()));
+            }
+            Ok(ControlFlow::Continue(any))
+        },
+    )?;
     if !echo {
         let r = stats.report();
         if args.json {

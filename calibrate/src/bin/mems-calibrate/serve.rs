@@ -1,16 +1,16 @@
 //! `mems-calibrate serve`: the calibration stage between `mems/imu/raw` and
 //! `mems/imu/corrected`.
 //!
-//! - Every accepted raw sample gives one corrected sample, in order, released with its batch
-//!   (see `calibrate::stage` for the latency); `stamps.calibrated_ns` is `CLOCK_MONOTONIC` at
-//!   publication.
+//! - Every accepted raw sample gives one corrected sample, in order, published as soon as it is
+//!   received (its batch's zero-state verdict may come with a later sample: see
+//!   `calibrate::stage`); `stamps.calibrated_ns` is `CLOCK_MONOTONIC` at publication. The
+//!   process sleeps on the raw service's event (the publisher notifies it after each send) and
+//!   notifies `mems/imu/corrected`'s after each of its own; `--spin` polls instead.
 //! - A refused raw sample (NaN, time not increasing, missing gyroscope) is reported on stderr
 //!   and not published; the service goes on.
 //! - A restarted publisher (sequence numbers starting again) is a new sensor session: the stage
-//!   releases what it holds and starts over (time check, detector learning, refinement). When
-//!   the last publisher is gone, the pending partial batch is released at once.
-//! - SIGINT/SIGTERM (iceoryx2's `node.wait` returns an error): the pending samples are
-//!   released, a summary printed, exit status 0.
+//!   starts over (time check, detector learning, refinement).
+//! - SIGINT/SIGTERM: a summary, exit status 0.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -19,13 +19,17 @@ use anyhow::{Context, Result, anyhow};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig};
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
-use iceoryx2::port::publisher::Publisher;
-use iceoryx2::prelude::{PortFactory, ipc};
 use ipc_types::clock::monotonic_ns;
+use ipc_types::wake::{self, Output, WaitMode};
 use ipc_types::{CorrectedImuSample, RawImuSample, service};
+use std::ops::ControlFlow;
 
 /// Refused samples reported one by one before the rest are only counted.
 const REPORTED_REFUSALS: u64 = 10;
+
+/// Longest sleep without a notification: a publisher that does not notify (an older tool) is
+/// still served, with this latency.
+const TICK: Duration = Duration::from_millis(100);
 
 /// Options of `mems-calibrate serve`.
 #[derive(clap::Args)]
@@ -48,41 +52,10 @@ pub struct ServeArgs {
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
-}
-
-/// The corrected-sample publisher and the first error it met (the stage's emit callback
-/// cannot return one).
-struct Output<'a> {
-    publisher: &'a Publisher<ipc::Service, CorrectedImuSample, ()>,
-    error: Option<anyhow::Error>,
-}
-
-impl Output<'_> {
-    /// Publishes one corrected sample stamped now (nothing after an error).
-    fn emit(&mut self, sample: &CorrectedImuSample) {
-        if self.error.is_some() {
-            return;
-        }
-        let mut out = *sample;
-        out.stamps.calibrated_ns = monotonic_ns();
-        let sent = self
-            .publisher
-            .loan_uninit()
-            .map_err(|e| anyhow!("cannot loan a corrected sample: {e:?}"))
-            .and_then(|s| {
-                s.write_payload(out)
-                    .send()
-                    .map_err(|e| anyhow!("cannot send a corrected sample: {e:?}"))
-            });
-        if let Err(e) = sent {
-            self.error = Some(e);
-        }
-    }
-
-    /// The error met since the last check, if any.
-    fn check(&mut self) -> Result<()> {
-        self.error.take().map_or(Ok(()), Err)
-    }
+    /// Poll for raw samples without sleeping (for a core of its own) instead of sleeping until
+    /// the publisher's event wakes the process.
+    #[arg(long)]
+    spin: bool,
 }
 
 /// Runs the service until SIGINT/SIGTERM.
@@ -105,50 +78,55 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
     let node = service::node()?;
     let raw = service::open::<RawImuSample>(&node, &raw_name)?;
     let subscriber = service::subscriber(&raw)?;
+    let mode = if args.spin {
+        WaitMode::Spin
+    } else {
+        WaitMode::Event
+    };
+    let listener = wake::listener(&node, &raw_name, mode)?;
     let corrected = service::open::<CorrectedImuSample>(&node, &corrected_name)?;
-    let publisher = service::publisher(&corrected)?;
+    let mut out = Output::new(&node, &corrected, &corrected_name)?;
     eprintln!(
-        "mems-calibrate serve: {} ({} model, calib_id {:016x}), {} detector, {raw_name} -> {corrected_name}",
+        "mems-calibrate serve: {} ({} model, calib_id {:016x}), {} detector, {raw_name} -> {corrected_name}{}",
         args.calib.display(),
         file.model,
         stage.calib_id(),
-        args.detector.name()
+        args.detector.name(),
+        if args.spin { ", spinning" } else { "" }
     );
 
     let mut refused = 0u64;
     let mut last_cleanup = Instant::now();
-    let mut out = Output {
-        publisher: &publisher,
-        error: None,
-    };
-    // node.wait sleeps and returns an error on SIGINT/SIGTERM: the clean way out.
-    while node.wait(Duration::from_millis(1)).is_ok() {
+    let step = || -> Result<ControlFlow<(), bool>> {
         let mut received = false;
         while let Some(sample) = subscriber
             .receive()
             .map_err(|e| anyhow!("receive on {raw_name}: {e:?}"))?
         {
             received = true;
-            if let Err(e) = stage.push(sample.payload(), &mut |s| out.emit(s)) {
+            let pushed = stage.push(sample.payload(), &mut |s| {
+                let mut s = *s;
+                s.stamps.calibrated_ns = monotonic_ns();
+                out.send(s);
+            });
+            drop(sample);
+            if let Err(e) = pushed {
                 refused += 1;
                 if refused <= REPORTED_REFUSALS {
                     eprintln!("mems-calibrate serve: refused: {e}");
                 }
             }
+            out.end_of_input()?;
         }
-        if !received && stage.pending() > 0 && raw.dynamic_config().number_of_publishers() == 0 {
-            // The stream ended: nothing will complete the partial batch.
-            stage.finish(&mut |s| out.emit(s));
-        }
-        out.check()?;
         if last_cleanup.elapsed() >= Duration::from_secs(1) {
             // Subscribers killed without closing their ports would otherwise stay connected.
             node.try_cleanup_dead_nodes();
             last_cleanup = Instant::now();
         }
-    }
-    stage.finish(&mut |s| out.emit(s));
-    out.check()?;
+        Ok(ControlFlow::Continue(received))
+    };
+    wake::serve_loop(&node, &[listener], TICK, step)?;
+    stage.finish();
     let s = stage.stats();
     let (learn_restarts, _) = stage.detector().learn_rejections();
     let (accel, gyro, refined) = stage.refinement();

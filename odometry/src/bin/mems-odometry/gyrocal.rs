@@ -21,7 +21,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use calibrate::calibfile::CalibrationFile;
-use calibrate::stage::{CalibrationStage, RefineConfig, calib_id};
+use calibrate::stage::{CalibrationStage, RefineConfig, Settler, calib_id};
 use calibrate::zero_state::BATCH_LEN;
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, raw_flags};
 use nalgebra::Matrix3;
@@ -124,12 +124,17 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
     let mut stage = CalibrationStage::new(&file, detector, RefineConfig::default())
         .map_err(|e| anyhow::anyhow!("{}: {e}", calib_path.display()))?;
     let mut corrected: Vec<CorrectedImuSample> = Vec::with_capacity(recording.samples.len());
+    // The calibration's rest intervals need every sample's final zero-state verdict.
+    let mut settler = Settler::default();
     for raw in &recording.samples {
         stage
-            .push(raw, &mut |c: &CorrectedImuSample| corrected.push(*c))
+            .push(raw, &mut |c: &CorrectedImuSample| {
+                settler.push(c, &mut |c| corrected.push(*c))
+            })
             .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
     }
-    stage.finish(&mut |c: &CorrectedImuSample| corrected.push(*c));
+    stage.finish();
+    settler.finish(&mut |c| corrected.push(*c));
     let rest = corrected
         .iter()
         .filter(|c| c.flags & corrected_flags::ZERO_STATE != 0)

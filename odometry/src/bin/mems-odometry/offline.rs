@@ -217,7 +217,9 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             .push(raw, &mut |c: &CorrectedImuSample| feed(c, &mut odometry))
             .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
     }
-    calibration.finish(&mut |c: &CorrectedImuSample| feed(c, &mut odometry));
+    calibration.finish();
+    // As `mems-odometry serve` at its end: revisions only, which this report does not use.
+    odometry.finish(&mut |_| {});
     if let Some(e) = error {
         return Err(e);
     }

@@ -18,14 +18,19 @@
 //!   does not reach the stage; the first one is reported once on stderr.
 //! - Sequence numbers that go back mean a new sensor session (a restarted acquire): the stage
 //!   starts over (new alignment).
-//! - SIGINT/SIGTERM (`node.wait` returns an error): a summary, exit status 0.
+//! - The process sleeps on the corrected service's event (its publisher notifies it after each
+//!   send) and notifies `mems/odometry/state`'s: the live state at once, a sample's revisions
+//!   together after them. `--spin` polls instead.
+//! - SIGINT/SIGTERM: a summary, exit status 0.
 
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
 use ipc_types::clock::monotonic_ns;
+use ipc_types::wake::{self, Output, WaitMode};
 use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, odometry_flags, raw_flags, service};
 use odometry::hints::usable_from_ns;
 use odometry::stage::OdometryStage;
@@ -39,12 +44,20 @@ pub struct ServeArgs {
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
+    /// Poll for corrected samples without sleeping (for a core of its own) instead of sleeping
+    /// until the calibration stage's event wakes the process.
+    #[arg(long)]
+    spin: bool,
     /// Motion profile (its rest handling; the detector is `mems-calibrate serve`'s).
     #[arg(long, value_enum, default_value_t)]
     profile: odometry::profile::Profile,
     #[command(flatten)]
     hints: crate::hint_args::HintArgs,
 }
+
+/// Longest sleep without a notification: a publisher that does not notify (an older tool) is
+/// still served, with this latency.
+const TICK: Duration = Duration::from_millis(100);
 
 /// Runs until SIGINT/SIGTERM.
 pub fn run(args: ServeArgs) -> Result<()> {
@@ -62,34 +75,41 @@ pub fn run(args: ServeArgs) -> Result<()> {
         service::open::<OdometryState>(&node, &service::full_name(&namespace, service::ODOMETRY))?;
     let hint_service =
         service::open::<RobotHint>(&node, &service::full_name(&namespace, service::HINT))?;
+    let corrected_name = service::full_name(&namespace, service::CORRECTED);
+    let odometry_name = service::full_name(&namespace, service::ODOMETRY);
     let subscriber = service::subscriber(&corrected)?;
     let hint_subscriber = service::subscriber(&hint_service)?;
-    let publisher = service::publisher(&odometry)?;
+    let mode = if args.spin {
+        WaitMode::Spin
+    } else {
+        WaitMode::Event
+    };
+    // Hints are taken before the samples they precede: only samples wake the process.
+    let listener = wake::listener(&node, &corrected_name, mode)?;
+    let mut out = Output::new(&node, &odometry, &odometry_name)?;
 
     let new_stage = || OdometryStage::with_hints(config, hint_config);
     let mut stage = new_stage()?;
     let (mut hints_received, mut hints_refused) = (0u64, 0u64);
     let mut held: Option<RobotHint> = None;
     let mut last_seq: Option<u64> = None;
-    let (mut received, mut published, mut refused, mut sessions) = (0u64, 0u64, 0u64, 1u64);
-    let mut send_error: Option<anyhow::Error> = None;
+    let (mut received, mut refused, mut sessions) = (0u64, 0u64, 1u64);
     let mut warned_no_gyro = false;
-    // node.wait returns an error on SIGINT/SIGTERM: the clean way out.
-    while node.wait(Duration::from_millis(1)).is_ok() {
-        loop {
-            let Some(sample) = subscriber.receive()? else {
-                break;
-            };
+    let step = || -> Result<ControlFlow<(), bool>> {
+        let mut any = false;
+        while let Some(sample) = subscriber.receive()? {
+            any = true;
+            let s = *sample.payload();
+            drop(sample);
             // The hints published by this sample's time go in before it, in publication order;
             // a later one waits (held) for the samples to catch up, so that hints running ahead
             // of the samples (a replay at full speed) do not pile up in the stage.
-            let t_ns = sample.payload().stamps.sample_ns;
             loop {
                 if held.is_none() {
                     held = hint_subscriber.receive()?.map(|h| *h.payload());
                 }
                 match held {
-                    Some(h) if usable_from_ns(&h, 0) <= t_ns => {
+                    Some(h) if usable_from_ns(&h, 0) <= s.stamps.sample_ns => {
                         held = None;
                         hints_received += 1;
                         if let Err(e) = stage.hint(&h) {
@@ -100,7 +120,6 @@ pub fn run(args: ServeArgs) -> Result<()> {
                     _ => break,
                 }
             }
-            let s = *sample.payload();
             received += 1;
             let no_gyro = s.raw_flags & raw_flags::GYRO_VALID == 0;
             if no_gyro && !warned_no_gyro {
@@ -114,25 +133,17 @@ pub fn run(args: ServeArgs) -> Result<()> {
                 );
             }
             if last_seq.is_some_and(|l| s.seq <= l) {
-                // A new sensor session: align again.
+                // A new sensor session: the old one's revisions are completed, then align
+                // again.
+                stage.finish(&mut |state| send(&mut out, state));
+                out.end_of_input()?;
                 stage = new_stage()?;
                 sessions += 1;
             }
             last_seq = Some(s.seq);
-            let mut emit = |state: &OdometryState| {
-                if send_error.is_some() {
-                    return;
-                }
-                let mut out = *state;
-                out.stamps.odometry_ns = monotonic_ns();
-                match publisher.loan_uninit() {
-                    Ok(slot) => match slot.write_payload(out).send() {
-                        Ok(_) => published += 1,
-                        Err(e) => send_error = Some(anyhow::anyhow!("cannot send a state: {e:?}")),
-                    },
-                    Err(e) => send_error = Some(anyhow::anyhow!("cannot loan a state: {e:?}")),
-                }
-            };
+            // The live state is published (and its subscribers woken) before any revision
+            // work the stage does after it.
+            let mut emit = |state: &OdometryState| send(&mut out, state);
             if no_gyro {
                 emit(&OdometryState {
                     stamps: s.stamps,
@@ -145,11 +156,16 @@ pub fn run(args: ServeArgs) -> Result<()> {
                 refused += 1;
                 eprintln!("mems-odometry: refused: {e}");
             }
-            if let Some(e) = send_error.take() {
-                return Err(e);
-            }
+            out.end_of_input()?;
         }
-    }
+        Ok(ControlFlow::Continue(any))
+    };
+    wake::serve_loop(&node, &[listener], TICK, step)?;
+    // A replay of the hindsight still under way is completed (as offline at the end of a
+    // recording).
+    stage.finish(&mut |state| send(&mut out, state));
+    out.end_of_input()?;
+    let published = out.sent();
     let h = stage.hint_stats();
     eprintln!(
         "mems-odometry: received {received}, published {published} (revisions included), \
@@ -159,4 +175,11 @@ pub fn run(args: ServeArgs) -> Result<()> {
         h
     );
     Ok(())
+}
+
+/// Publishes `state`, stamped with the time it leaves the process.
+fn send(out: &mut Output<OdometryState>, state: &OdometryState) {
+    let mut state = *state;
+    state.stamps.odometry_ns = monotonic_ns();
+    out.send(state);
 }

@@ -1,0 +1,269 @@
+//! Event-driven waking: every data service has an iceoryx2 event service of the same name.
+//! A publisher notifies it after each send ([`Waker`]); a subscribing process sleeps in a
+//! WaitSet on its listener until a notification (or its periodic tick) arrives, then drains its
+//! subscribers ([`serve_loop`]). An idle process makes no system call and uses no CPU between
+//! ticks; a notification that arrives between the last drain and the wait wakes the next wait
+//! at once (iceoryx2's listener counts notifications), so no sample waits for a tick.
+//!
+//! [`WaitMode::Spin`] polls instead, for a process pinned to an isolated core: no listener is
+//! created (a notifier without listeners costs no system call) and the loop never sleeps.
+
+use core::ops::ControlFlow;
+use core::time::Duration;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+
+use crate::service::{MAX_NODES, MAX_SUBSCRIBERS, ServiceError};
+
+/// Notifiers per event service: the data service's publishers and the robot controllers that
+/// publish hints.
+pub const MAX_NOTIFIERS: usize = 8;
+
+/// How a process waits for input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum WaitMode {
+    /// Sleep on the input's event service until a publisher notifies it.
+    #[default]
+    Event,
+    /// Poll without sleeping (for a core of its own: `--spin`).
+    Spin,
+}
+
+/// Opens (or creates) the event service that goes with the data service `name`.
+pub fn open_event(
+    node: &Node<ipc::Service>,
+    name: &str,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, ServiceError> {
+    let service_name: ServiceName = name
+        .try_into()
+        .map_err(|e| ServiceError(format!("invalid service name {name:?}: {e:?}")))?;
+    node.service_builder(&service_name)
+        .event()
+        .max_notifiers(MAX_NOTIFIERS)
+        .max_listeners(MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
+        .open_or_create()
+        .map_err(|e| ServiceError(format!("cannot open event service {name:?}: {e:?}")))
+}
+
+/// The notifier a publisher on the data service `name` wakes its subscribers with.
+pub struct Waker {
+    notifier: Notifier<ipc::Service>,
+    name: String,
+}
+
+impl Waker {
+    /// A notifier on the event service of the data service `name`.
+    pub fn new(node: &Node<ipc::Service>, name: &str) -> Result<Self, ServiceError> {
+        let notifier = open_event(node, name)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| ServiceError(format!("cannot create notifier on {name:?}: {e:?}")))?;
+        Ok(Self {
+            notifier,
+            name: name.to_string(),
+        })
+    }
+
+    /// Wakes every listener of the service; call it after the sends of one input.
+    pub fn notify(&self) -> Result<(), ServiceError> {
+        self.notifier
+            .notify()
+            .map(|_| ())
+            .map_err(|e| ServiceError(format!("cannot notify {:?}: {e:?}", self.name)))
+    }
+}
+
+/// A publisher that wakes its subscribers: the first sample sent for an input is notified at
+/// once (the live output reaches its subscribers without waiting for the rest), the others
+/// together by [`Output::end_of_input`]. A send error is kept (a stage's emit callback cannot
+/// return one) and returned by [`Output::end_of_input`]; nothing is sent after it.
+pub struct Output<T: core::fmt::Debug + ZeroCopySend + 'static> {
+    publisher: Publisher<ipc::Service, T, ()>,
+    waker: Waker,
+    error: Option<ServiceError>,
+    /// Whether the current input's first sample was notified.
+    notified: bool,
+    /// Samples sent since the last notification.
+    unnotified: bool,
+    sent: u64,
+}
+
+impl<T: core::fmt::Debug + ZeroCopySend + Copy + 'static> Output<T> {
+    /// The lossless publisher of [`crate::service::publisher`] on the data service `name`
+    /// (opened in `service`) with its [`Waker`].
+    pub fn new(
+        node: &Node<ipc::Service>,
+        service: &iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+            ipc::Service,
+            T,
+            (),
+        >,
+        name: &str,
+    ) -> Result<Self, ServiceError> {
+        Ok(Self {
+            publisher: crate::service::publisher(service)?,
+            waker: Waker::new(node, name)?,
+            error: None,
+            notified: false,
+            unnotified: false,
+            sent: 0,
+        })
+    }
+
+    /// Sends `value` (nothing after an error).
+    pub fn send(&mut self, value: T) {
+        if self.error.is_some() {
+            return;
+        }
+        let sent = self
+            .publisher
+            .loan_uninit()
+            .map_err(|e| ServiceError(format!("cannot loan a sample: {e:?}")))
+            .and_then(|s| {
+                s.write_payload(value)
+                    .send()
+                    .map_err(|e| ServiceError(format!("cannot send a sample: {e:?}")))
+            });
+        if let Err(e) = sent {
+            self.error = Some(e);
+            return;
+        }
+        self.sent += 1;
+        if self.notified {
+            self.unnotified = true;
+        } else if let Err(e) = self.waker.notify() {
+            self.error = Some(e);
+        } else {
+            self.notified = true;
+        }
+    }
+
+    /// The input is done: notifies what was sent since its first sample, and returns the
+    /// error met since the last call, if any.
+    pub fn end_of_input(&mut self) -> Result<(), ServiceError> {
+        if self.unnotified
+            && self.error.is_none()
+            && let Err(e) = self.waker.notify()
+        {
+            self.error = Some(e);
+        }
+        self.notified = false;
+        self.unnotified = false;
+        self.error.take().map_or(Ok(()), Err)
+    }
+
+    /// Samples sent so far.
+    pub fn sent(&self) -> u64 {
+        self.sent
+    }
+
+    /// The publisher (for its service's state).
+    pub fn publisher(&self) -> &Publisher<ipc::Service, T, ()> {
+        &self.publisher
+    }
+}
+
+/// A listener on the event service of the data service `name` (none in [`WaitMode::Spin`]).
+pub fn listener(
+    node: &Node<ipc::Service>,
+    name: &str,
+    mode: WaitMode,
+) -> Result<Option<Listener<ipc::Service>>, ServiceError> {
+    if mode == WaitMode::Spin {
+        return Ok(None);
+    }
+    open_event(node, name)?
+        .listener_builder()
+        .create()
+        .map(Some)
+        .map_err(|e| ServiceError(format!("cannot create listener on {name:?}: {e:?}")))
+}
+
+/// Empty polls between two checks for SIGINT/SIGTERM in [`WaitMode::Spin`].
+const SPIN_SIGNAL_CHECK: u32 = 4096;
+
+/// Why [`serve_loop`] returned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Exit {
+    /// SIGINT or SIGTERM arrived.
+    Signal,
+    /// The step broke the loop.
+    Done,
+}
+
+/// Calls `step` whenever input may have arrived on one of `listeners` (at once at the start,
+/// then after every notification), and at least every `tick`, until SIGINT/SIGTERM or `step`
+/// breaks. `step` drains its subscribers and returns whether it found anything
+/// (`Continue(true)`): without listeners ([`WaitMode::Spin`]) it is called in a loop that never
+/// sleeps. Allocates nothing per wake-up once running.
+pub fn serve_loop<E: From<ServiceError>>(
+    node: &Node<ipc::Service>,
+    listeners: &[Option<Listener<ipc::Service>>],
+    tick: Duration,
+    mut step: impl FnMut() -> Result<ControlFlow<(), bool>, E>,
+) -> Result<Exit, E> {
+    let listeners: Vec<&Listener<ipc::Service>> = listeners.iter().flatten().collect();
+    if listeners.is_empty() {
+        return spin(node, tick, step);
+    }
+    let err = |what: &str, e: &dyn core::fmt::Debug| ServiceError(format!("{what}: {e:?}"));
+    let waitset = WaitSetBuilder::new()
+        .create::<ipc::Service>()
+        .map_err(|e| err("cannot create a WaitSet", &e))?;
+    let _guards = listeners
+        .iter()
+        .map(|l| waitset.attach_notification(*l))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| err("cannot attach a listener to the WaitSet", &e))?;
+    let _tick = waitset
+        .attach_interval(tick)
+        .map_err(|e| err("cannot attach the tick to the WaitSet", &e))?;
+    loop {
+        // Consume the notifications first: a sample sent after this is notified again.
+        for l in &listeners {
+            l.try_wait(|_| {})
+                .map_err(|e| err("cannot read a listener", &e))?;
+        }
+        if step()?.is_break() {
+            return Ok(Exit::Done);
+        }
+        match waitset
+            .wait_and_process_once(|_| CallbackProgression::Continue)
+            .map_err(|e| err("WaitSet", &e))?
+        {
+            WaitSetRunResult::Interrupt | WaitSetRunResult::TerminationRequest => {
+                return Ok(Exit::Signal);
+            }
+            WaitSetRunResult::StopRequest | WaitSetRunResult::AllEventsHandled => {}
+        }
+    }
+}
+
+/// [`serve_loop`] without listeners: polls `step` without sleeping.
+fn spin<E: From<ServiceError>>(
+    node: &Node<ipc::Service>,
+    tick: Duration,
+    mut step: impl FnMut() -> Result<ControlFlow<(), bool>, E>,
+) -> Result<Exit, E> {
+    let mut idle = 0u32;
+    let mut last_tick = std::time::Instant::now();
+    loop {
+        match step()? {
+            ControlFlow::Break(()) => return Ok(Exit::Done),
+            ControlFlow::Continue(true) => idle = 0,
+            ControlFlow::Continue(false) => idle += 1,
+        }
+        if idle >= SPIN_SIGNAL_CHECK || last_tick.elapsed() >= tick {
+            idle = 0;
+            last_tick = std::time::Instant::now();
+            // Returns an error once SIGINT/SIGTERM was received.
+            if node.wait(Duration::ZERO).is_err() {
+                return Ok(Exit::Signal);
+            }
+        }
+    }
+}
