@@ -378,7 +378,7 @@ impl Navigator {
                 uncorrected: v_b - hints.corrections,
             });
         }
-        if rest {
+        if rest && self.cfg.rest_updates {
             let (p0, v0) = (kf.x.p, kf.x.v);
             kf.zero_velocity(self.cfg.zupt_sigma_mps);
             let gyro_sigma = self.cfg.noise.gyro_noise_density / dt.sqrt();

@@ -119,6 +119,10 @@ pub struct OdometryConfig {
     /// followed by `rest_hindsight_s` of rest (a bump, a glitch, a detector's false alarm on a
     /// static sensor) leaves them standing.
     pub motion_confirm_s: f64,
+    /// Whether rest flags, once aligned, give zero-velocity and zero-rate updates (`false`: a
+    /// diagnostic that integrates freely after alignment, as `mems-odometry offline
+    /// --no-zupt`).
+    pub rest_updates: bool,
 }
 
 impl OdometryConfig {
@@ -147,6 +151,7 @@ impl OdometryConfig {
             revision_rate_hz: 100.0,
             rest_hindsight_s: 0.5,
             motion_confirm_s: 0.5,
+            rest_updates: true,
         }
     }
 }

@@ -14,7 +14,7 @@ use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 use calibrate::stage::{CalibrationStage, RefineConfig};
-use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags};
+use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, odometry_flags};
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
 use odometry::stage::OdometryStage;
 use recording::Truth;
@@ -119,7 +119,8 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     }
     let mut calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.stage.calib_name()))?;
-    let config = args.stage.profile.odometry(crate::odometry_config(&file));
+    let mut config = args.stage.profile.odometry(crate::odometry_config(&file));
+    config.rest_updates = !args.no_zupt;
     let mut odometry = OdometryStage::with_hints(config, args.hints.config()?)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let is_mcap = args
@@ -153,15 +154,11 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     let mut truth_distance = 0.0;
     let mut prev_truth: Option<Vector3<f64>> = None;
     let mut error: Option<anyhow::Error> = None;
-    let no_zupt = args.no_zupt;
     let mut feed = |c: &CorrectedImuSample, odometry: &mut OdometryStage| {
         if error.is_some() {
             return;
         }
-        let mut c = *c;
-        if no_zupt && odometry.aligned() {
-            c.flags &= !corrected_flags::ZERO_STATE;
-        }
+        let c = *c;
         let mut states: [Option<OdometryState>; 1] = [None];
         let result = odometry.process(&c, &mut |s: &OdometryState| {
             if s.flags & odometry_flags::REVISION == 0 {
