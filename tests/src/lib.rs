@@ -5,6 +5,26 @@ use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
+/// `mems-topic hz mems/imu/raw --json` in namespace `ns` for `seconds`, given half a second to
+/// subscribe before it returns, so that a publisher started next is seen from its first
+/// sample.
+pub fn raw_topic_hz(ns: &str, seconds: &str) -> Proc {
+    let topic = Proc::spawn(
+        "mems-topic",
+        &[
+            "hz",
+            "mems/imu/raw",
+            "--namespace",
+            ns,
+            "--duration",
+            seconds,
+            "--json",
+        ],
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    topic
+}
+
 /// The path of workspace binary `name`, built in the same profile as the running test.
 ///
 /// `cargo test --workspace` builds every binary of a package that has integration tests before

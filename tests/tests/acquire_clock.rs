@@ -3,7 +3,7 @@
 //! lost, duplicated or flagged as a gap, the sample times must follow the part's true period,
 //! and acquire's own summary must show the sample times within 2 ms of the acquisition clock.
 
-use integration_tests::{Proc, bin, unique_namespace};
+use integration_tests::{bin, raw_topic_hz, unique_namespace};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -21,19 +21,7 @@ fn number_after(text: &str, label: &str) -> f64 {
 
 fn run(ppm: i64) {
     let ns = unique_namespace("acqclock");
-    let topic = Proc::spawn(
-        "mems-topic",
-        &[
-            "hz",
-            "mems/imu/raw",
-            "--namespace",
-            &ns,
-            "--duration",
-            "6",
-            "--json",
-        ],
-    );
-    std::thread::sleep(Duration::from_millis(500));
+    let topic = raw_topic_hz(&ns, "6");
     let acquire = Command::new(bin("mems-acquire"))
         .args(["--namespace", &ns, "--rate", "1000", "--duration", "4"])
         .arg(format!("--sim-clock-ppm={ppm}"))

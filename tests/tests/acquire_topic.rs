@@ -16,26 +16,14 @@
 //! same load then left 5 runs of 5 without an overflow, 4000.02-4000.06 Hz. Needs
 //! CAP_SYS_NICE or RLIMIT_RTPRIO >= 50: where refused, acquire exits at start-up saying so.
 
-use integration_tests::{Proc, unique_namespace};
+use integration_tests::{Proc, raw_topic_hz, unique_namespace};
 use std::time::Duration;
 
 #[test]
 fn acquire_at_4khz_loses_nothing() {
     let ns = unique_namespace("acq4k");
     // The subscriber first, so that it sees sample 0; it outlives the publisher.
-    let topic = Proc::spawn(
-        "mems-topic",
-        &[
-            "hz",
-            "mems/imu/raw",
-            "--namespace",
-            &ns,
-            "--duration",
-            "6",
-            "--json",
-        ],
-    );
-    std::thread::sleep(Duration::from_millis(500));
+    let topic = raw_topic_hz(&ns, "6");
     let acquire = Proc::spawn(
         "mems-acquire",
         &[
