@@ -72,8 +72,9 @@ pub enum LogPolicy {
     ///   very unlikely (an accelerometer-only log of a quiet, coarsely quantised sensor is the
     ///   exception, and loses such samples);
     /// - a new sample whose time is equal to or before the previous one's (host timestamps
-    ///   quantised or jittered) gets the previous time plus the nominal period, the median of
-    ///   the recording's positive time steps;
+    ///   quantised or jittered) gets the previous time plus the nominal period: the median,
+    ///   over consecutive distinct times, of their step divided by the rows between them (a
+    ///   clock quantised to twice the period steps two periods every two rows);
     /// - a step back of more than [`MAX_TIME_REPAIR_S`] is not jitter and is refused, naming its
     ///   line.
     Repair,
@@ -105,11 +106,17 @@ impl std::fmt::Display for LogRepairs {
         write!(
             f,
             "dropped {} rows repeating the previous row's values; rebuilt {} sample times that \
-             did not increase, from the nominal period {:.3} ms",
-            self.repeats_dropped,
-            self.times_rebuilt,
-            self.period_ns as f64 * 1e-6
-        )
+             did not increase",
+            self.repeats_dropped, self.times_rebuilt
+        )?;
+        if self.times_rebuilt > 0 {
+            write!(
+                f,
+                ", from the nominal period {:.3} ms",
+                self.period_ns as f64 * 1e-6
+            )?;
+        }
+        Ok(())
     }
 }
 

@@ -298,8 +298,8 @@ impl SampleBuilder {
     }
 
     /// The finished samples and what was repaired: times that did not increase are rebuilt
-    /// from the nominal period (the median positive step), in the samples and in `truth` (one
-    /// per sample) alike.
+    /// from the nominal period (the median, over consecutive distinct times, of their step per
+    /// row), in the samples and in `truth` (one per sample) alike.
     pub(crate) fn finish(
         mut self,
         path: &Path,
@@ -313,11 +313,17 @@ impl SampleBuilder {
         if times.windows(2).all(|w| w[1] > w[0]) {
             return Ok((self.samples, repairs));
         }
-        let mut steps: Vec<u64> = times
-            .windows(2)
-            .filter(|w| w[1] > w[0])
-            .map(|w| w[1] - w[0])
-            .collect();
+        // The period between consecutive distinct times, per row: a host clock quantised to
+        // twice the sample period stamps two rows alike and then steps two periods, so the
+        // plain median step would be twice the period.
+        let mut steps: Vec<f64> = Vec::new();
+        let mut last = (0usize, times[0]);
+        for (i, &t) in times.iter().enumerate().skip(1) {
+            if t > last.1 {
+                steps.push((t - last.1) as f64 / (i - last.0) as f64);
+                last = (i, t);
+            }
+        }
         if steps.is_empty() {
             let kind = ErrorKind::Invalid(
                 "no two samples have increasing times: no sample rate to rebuild them from".into(),
@@ -325,7 +331,7 @@ impl SampleBuilder {
             return Err(Error::file(path, kind));
         }
         let mid = steps.len() / 2;
-        repairs.period_ns = *steps.select_nth_unstable(mid).1;
+        repairs.period_ns = steps.select_nth_unstable_by(mid, f64::total_cmp).1.round() as u64;
         let mut truth = truth;
         for i in 1..self.samples.len() {
             let previous = self.samples[i - 1].stamps.sample_ns;

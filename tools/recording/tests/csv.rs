@@ -299,8 +299,9 @@ fn a_real_log_s_repeated_rows_and_times_are_repaired_and_counted() {
     let rec = recording::load_raw_with(&path, recording::LogPolicy::Repair).unwrap();
     assert_eq!(rec.repairs.repeats_dropped, 2);
     assert_eq!(rec.repairs.times_rebuilt, 2);
-    // Kept rows' times 0, 10, 10, 18, 40 ms: the positive steps are 10, 8 and 22 ms, whose
-    // median, 10 ms, is the nominal period the non-increasing times are rebuilt from.
+    // Kept rows' times 0, 10, 10, 18, 40 ms: between distinct times the steps per row are 10,
+    // 4 (8 ms over two rows) and 22 ms, whose median, 10 ms, is the nominal period the
+    // non-increasing times are rebuilt from.
     let times: Vec<u64> = rec.samples.iter().map(|s| s.stamps.sample_ns).collect();
     let p = rec.repairs.period_ns;
     assert_eq!(
@@ -320,6 +321,17 @@ fn a_real_log_s_repeated_rows_and_times_are_repaired_and_counted() {
         rec.samples.iter().map(|s| s.seq).collect::<Vec<_>>(),
         [0, 1, 2, 3, 4]
     );
+
+    // A host clock quantised to twice the sample period: two rows per stamp, the period is the
+    // step per row (1 ms), not the step (2 ms).
+    let quantised: String = (0..6)
+        .map(|k| format!("{}.{:03},0,{},1\n", 0, 2 * (k / 2), k))
+        .collect();
+    std::fs::write(&path, format!("t_s,ax_g,ay_g,az_g\n{quantised}")).unwrap();
+    let rec = recording::load_raw_with(&path, recording::LogPolicy::Repair).unwrap();
+    let times: Vec<u64> = rec.samples.iter().map(|s| s.stamps.sample_ns).collect();
+    assert_eq!(rec.repairs.period_ns, 1_000_000);
+    assert_eq!(times, (0..6).map(|k| k * 1_000_000).collect::<Vec<u64>>());
 
     // A step back of more than a second is not jitter: refused even when repairing.
     std::fs::write(&path, "t_s,ax_g,ay_g,az_g\n5.0,0,0,1\n3.5,0,0.1,1\n").unwrap();
