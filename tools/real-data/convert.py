@@ -168,20 +168,25 @@ def _rows(lines, first, where, width):
         yield i + 1, cells
 
 
-def parse_xio_csv(text, where):
-    """x-io NGIMU CSV: time s, gyroscope deg/s, accelerometer g (already our units)."""
+def _named_rows(text, where, names):
+    """The rows of a CSV whose first line is its header, as {key: number} for `names` (key ->
+    column name)."""
     lines = _lines(text)
     header = lines[0].split(",")
+    idx = _header_index(header, names, where, 1)
+    for ln, cells in _rows(lines, 1, where, len(header)):
+        yield {k: number(cells[i], where, ln, names[k]) for k, i in idx.items()}
+
+
+def parse_xio_csv(text, where):
+    """x-io NGIMU CSV: time s, gyroscope deg/s, accelerometer g (already our units)."""
     names = {
         "t": "Time (s)",
         "gx": "Gyroscope X (deg/s)", "gy": "Gyroscope Y (deg/s)", "gz": "Gyroscope Z (deg/s)",
         "ax": "Accelerometer X (g)", "ay": "Accelerometer Y (g)", "az": "Accelerometer Z (g)",
     }
-    idx = _header_index(header, names, where, 1)
-    out = []
-    for ln, cells in _rows(lines, 1, where, len(header)):
-        v = {k: number(cells[i], where, ln, names[k]) for k, i in idx.items()}
-        out.append((v["t"], v["ax"], v["ay"], v["az"], v["gx"], v["gy"], v["gz"]))
+    out = [(v["t"], v["ax"], v["ay"], v["az"], v["gx"], v["gy"], v["gz"])
+           for v in _named_rows(text, where, names)]
     return out, ["units as published: g and deg/s; time column as published"]
 
 
@@ -204,18 +209,13 @@ def parse_openshoe_txt(text, where, rate_hz):
 
 def parse_sensorconnect_csv(text, where):
     """MicroStrain SensorConnect CSV: Time s, scaledAccel g, scaledGyro rad/s."""
-    lines = _lines(text)
-    header = lines[0].split(",")
     names = {
         "t": "Time",
         "ax": "scaledAccelX", "ay": "scaledAccelY", "az": "scaledAccelZ",
         "gx": "scaledGyroX", "gy": "scaledGyroY", "gz": "scaledGyroZ",
     }
-    idx = _header_index(header, names, where, 1)
-    out = []
-    for ln, cells in _rows(lines, 1, where, len(header)):
-        v = {k: number(cells[i], where, ln, names[k]) for k, i in idx.items()}
-        out.append((v["t"], v["ax"], v["ay"], v["az"], v["gx"] * DEG, v["gy"] * DEG, v["gz"] * DEG))
+    out = [(v["t"], v["ax"], v["ay"], v["az"], v["gx"] * DEG, v["gy"] * DEG, v["gz"] * DEG)
+           for v in _named_rows(text, where, names)]
     return out, ["scaledAccel already in g; scaledGyro rad/s -> deg/s; time column as published"]
 
 
