@@ -173,7 +173,8 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         if aligned_ns.is_none() && state.flags & odometry_flags::ALIGNED != 0 {
             aligned_ns = Some(state.stamps.sample_ns);
         }
-        if last.is_some_and(|l| state.rest_count > l.rest_count) {
+        let new_rest = last.is_some_and(|l| state.rest_count > l.rest_count);
+        if new_rest {
             rests.push(json!({
                 "t_s": state.stamps.sample_ns as f64 * 1e-9,
                 "position_m": state.position_m,
@@ -189,7 +190,6 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             if frame.is_none() && state.flags & odometry_flags::ALIGNED != 0 {
                 frame = Some(TruthFrame::new(&state, t));
             }
-            let new_rest = last.is_some_and(|l| state.rest_count > l.rest_count);
             if let (Some(f), true) = (&frame, new_rest) {
                 let e = Vector3::from(state.position_m) - f.position(t);
                 rest_errors.push(json!({
