@@ -341,15 +341,18 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
     let session = sim.session();
     let model_correction = c.gyro_correction_reference();
     let mut gyro_cal_error = f64::NAN;
-    cfg.gyro_correction = match gyro_cal {
-        GyroCal::None => Matrix3::identity(),
+    match gyro_cal {
+        GyroCal::None => cfg.gyro_correction = Matrix3::identity(),
         GyroCal::Session => {
             let cal = calibrate_gyro(&session, &GyroCalConfig::new(mems_sim::model::G_MPS2))
                 .expect("the simulated session calibrates the gyro");
             gyro_cal_error = (cal.correction - model_correction).abs().max();
-            cal.correction
+            cfg = cfg.with_gyro_calibration(&cal);
         }
-        GyroCal::Model => model_correction,
+        GyroCal::Model => {
+            cfg.gyro_correction = model_correction;
+            cfg.gyro_correction_sigma = Matrix3::zeros();
+        }
     };
     let hint_cfg = HintConfig {
         mounting: if args.estimate_mounting {

@@ -84,6 +84,10 @@ pub fn from_calibration(file: &CalibrationFile) -> CalibratedConfig {
     let mut config = OdometryConfig::mpu9250(file.gravity_mps2);
     if let Some(c) = file.gyro.correction {
         config.gyro_correction = Matrix3::from_fn(|r, k| c[r][k]);
+        // A correction without its sigma keeps the datasheet's: nothing says it is better.
+        if let Some(s) = file.gyro.correction_sigma {
+            config.gyro_correction_sigma = Matrix3::from_fn(|r, k| s[r][k]);
+        }
     }
     let gyro_uncalibrated = file.gyro.correction.is_none();
     let mut defaulted = Vec::new();
@@ -262,6 +266,7 @@ mod tests {
         ];
         let mut file = file_with(9.797, Some(params(9.797, true)));
         file.gyro.correction = Some(c);
+        file.gyro.correction_sigma = Some([[1e-4, 2e-4, 3e-4]; 3]);
         let with = from_calibration(&file);
         assert!(!with.gyro_uncalibrated);
         for (r, row) in c.iter().enumerate() {
@@ -278,6 +283,7 @@ mod tests {
         // The same file without it: the identity, named in the note with the noise defaults,
         // and nothing else changes.
         file.gyro.correction = None;
+        file.gyro.correction_sigma = None;
         let without = from_calibration(&file);
         assert!(without.gyro_uncalibrated);
         assert_eq!(without.config.gyro_correction, Matrix3::identity());
@@ -286,8 +292,10 @@ mod tests {
             note.contains("no gyro.correction") && note.contains("accel.random_walk"),
             "{note}"
         );
+        assert_eq!(with.config.gyro_correction_sigma[(0, 2)], 3e-4);
         let mut same = with.config;
         same.gyro_correction = Matrix3::identity();
+        same.gyro_correction_sigma = without.config.gyro_correction_sigma;
         assert_eq!(same, without.config);
         assert_eq!(with.defaulted, without.defaulted);
     }

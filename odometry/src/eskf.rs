@@ -18,6 +18,15 @@
 //! Kalman filter", 2017, section 5.3 and 7); the nominal state integrates with the trapezoid rule.
 //! Everything lives on the stack (nalgebra static matrices): no allocation per sample.
 //!
+//! Systematic errors the filter does not estimate, the residual scale and misalignment of the
+//! gyro and the accelerometer, are carried as *consider* parameters (Schmidt's consider
+//! covariance; Gelb, "Applied Optimal Estimation", 1974, section 7.2, sensitivity of a filter
+//! to unmodelled errors): the filter's gain ignores them, so the estimate is the same, but the
+//! error state's sensitivity `M = d(dx)/d(e)` to them is propagated with the same transition
+//! and the same gains, and the reported 1-sigma is that of `P + M diag(sigma_e^2) M^T`. A
+//! foot or a turning robot rotates through hundreds of degrees, and a 1 % gyro scale error is
+//! 1 % of every turn in heading: white noise alone says nothing of it.
+//!
 //! Written here rather than taken from a crate: no maintained Rust crate provides an ESKF with
 //! ZUPT for a strapdown IMU; nalgebra does the linear algebra.
 
@@ -28,6 +37,11 @@ pub const N: usize = 16;
 /// Error-state covariance.
 pub type Cov = SMatrix<f64, N, N>;
 type VecN = SVector<f64, N>;
+/// Number of consider parameters: the 9 entries of the gyro's residual error matrix, then the
+/// 9 of the accelerometer's, row-major.
+pub const NC: usize = 18;
+/// Sensitivity of the error state to the consider parameters.
+type Sensitivity = SMatrix<f64, N, NC>;
 
 const P: usize = 0;
 const V: usize = 3;
@@ -53,6 +67,20 @@ pub struct NoiseModel {
     pub vibration_accel_density_per_mps: f64,
     /// The same for the gyro: rad/s/sqrt(Hz) per m/s.
     pub vibration_gyro_density_per_mps: f64,
+}
+
+/// The systematic sensor errors the filter reports but does not estimate (see the module
+/// documentation): 1-sigma of each entry of the residual error matrix `E`, a fraction, with
+/// row the corrected axis and column the raw axis. The gyro's corrected rate is `(I + E_g)`
+/// times the true rate; the accelerometer's specific force is `(I + E_a)` times the true one.
+/// At alignment `E_a` reads as an accelerometer bias, which the alignment's bias sigma already
+/// holds, so only its effect on the change of specific force since alignment is added here.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ConsiderModel {
+    /// 1-sigma of each entry of `E_g`, fraction.
+    pub gyro: Matrix3<f64>,
+    /// 1-sigma of each entry of `E_a`, fraction.
+    pub accel: Matrix3<f64>,
 }
 
 /// The nominal (full) navigation state.
@@ -91,6 +119,12 @@ pub struct Eskf {
     g_n: Vector3<f64>,
     noise: NoiseModel,
     last: Imu,
+    /// `d(dx)/d(e)` for the consider parameters `e`.
+    sens: Sensitivity,
+    /// Their variances, in the order of [`NC`].
+    consider_var: SVector<f64, NC>,
+    /// The bias-corrected specific force at alignment, m/s^2, sensor frame.
+    f_align: Vector3<f64>,
 }
 
 /// Skew-symmetric matrix: `skew(a) * b == a.cross(&b)`.
@@ -108,7 +142,25 @@ impl Eskf {
             g_n: Vector3::new(0.0, 0.0, -g),
             noise,
             last: first,
+            sens: Sensitivity::zeros(),
+            consider_var: SVector::zeros(),
+            f_align: first.f - x.b_a,
         }
+    }
+
+    /// The filter with the consider parameters of `model` (none by default), the specific
+    /// force at alignment being `f_align` (m/s^2, sensor frame, before bias correction).
+    pub fn with_consider(mut self, model: ConsiderModel, f_align: Vector3<f64>) -> Self {
+        let sq = |m: &Matrix3<f64>| m.transpose().map(|s| s * s);
+        for (i, v) in sq(&model.gyro)
+            .iter()
+            .chain(sq(&model.accel).iter())
+            .enumerate()
+        {
+            self.consider_var[i] = *v;
+        }
+        self.f_align = f_align - self.x.b_a;
+        self
     }
 
     /// Gravity in the navigation frame, m/s^2.
@@ -168,7 +220,40 @@ impl Eskf {
             qd[BG + i] = bg;
         }
         self.cov = fx * self.cov * fx.transpose() + Cov::from_diagonal(&qd);
+        self.propagate_sensitivity(&fx, &w_mid, &(f_mid - self.f_align), &r_mid, dt);
         self.last = m;
+    }
+
+    /// `M <- F M + B`, with `F`'s sparse blocks written out (this runs every sample) and `B` the
+    /// error rates the consider parameters drive: `-E_g w` on the attitude error and
+    /// `-R E_a (f - f_align)` on the velocity error, over `dt`.
+    fn propagate_sensitivity(
+        &mut self,
+        fx: &Cov,
+        w: &Vector3<f64>,
+        df: &Vector3<f64>,
+        r: &Matrix3<f64>,
+        dt: f64,
+    ) {
+        let m = &mut self.sens;
+        let v = m.fixed_rows::<3>(V).into_owned();
+        let th = m.fixed_rows::<3>(TH).into_owned();
+        let ba = m.fixed_rows::<3>(BA).into_owned();
+        let bg = m.fixed_rows::<3>(BG).into_owned();
+        let mut new_v = v + fx.fixed_view::<3, 3>(V, TH) * th + fx.fixed_view::<3, 3>(V, BA) * ba;
+        let mut new_th = fx.fixed_view::<3, 3>(TH, TH) * th - bg * dt;
+        for j in 0..3 {
+            for k in 0..3 {
+                new_th[(j, 3 * j + k)] -= w[k] * dt;
+                for i in 0..3 {
+                    new_v[(i, 9 + 3 * j + k)] -= r[(i, j)] * df[k] * dt;
+                }
+            }
+        }
+        let p = m.fixed_rows::<3>(P) + v * dt;
+        m.fixed_rows_mut::<3>(P).copy_from(&p);
+        m.fixed_rows_mut::<3>(V).copy_from(&new_v);
+        m.fixed_rows_mut::<3>(TH).copy_from(&new_th);
     }
 
     /// Zero-velocity update: the true velocity is zero, measured with 1-sigma `sigma` (m/s).
@@ -269,6 +354,7 @@ impl Eskf {
         let i_kh = Cov::identity() - k * h;
         self.cov = i_kh * self.cov * i_kh.transpose() + k * r * k.transpose();
         self.cov = 0.5 * (self.cov + self.cov.transpose());
+        self.sens -= k * (h * self.sens);
         self.inject(&dx);
     }
 
@@ -281,14 +367,25 @@ impl Eskf {
         self.x.k += dx[KS];
     }
 
-    /// 1-sigma of position, m, navigation frame.
-    pub fn position_sigma(&self) -> Vector3<f64> {
-        Vector3::new(self.cov[(0, 0)], self.cov[(1, 1)], self.cov[(2, 2)]).map(f64::sqrt)
+    /// Variance of error-state component `i` from the consider parameters alone.
+    fn consider_variance(&self, i: usize) -> f64 {
+        self.sens
+            .row(i)
+            .iter()
+            .zip(self.consider_var.iter())
+            .map(|(m, var)| m * m * var)
+            .sum()
     }
 
-    /// 1-sigma of velocity, m/s, navigation frame.
+    /// 1-sigma of position, m, navigation frame: the filter's covariance and the consider
+    /// parameters' share.
+    pub fn position_sigma(&self) -> Vector3<f64> {
+        Vector3::from_fn(|i, _| (self.cov[(P + i, P + i)] + self.consider_variance(P + i)).sqrt())
+    }
+
+    /// 1-sigma of velocity, m/s, navigation frame, as [`Self::position_sigma`].
     pub fn velocity_sigma(&self) -> Vector3<f64> {
-        Vector3::new(self.cov[(3, 3)], self.cov[(4, 4)], self.cov[(5, 5)]).map(f64::sqrt)
+        Vector3::from_fn(|i, _| (self.cov[(V + i, V + i)] + self.consider_variance(V + i)).sqrt())
     }
 }
 
@@ -508,6 +605,60 @@ mod tests {
             assert_relative_eq!(dv, (k_a * 2.0).powi(2) * dt, max_relative = 1e-9);
             assert_relative_eq!(dth, (k_g * 2.0).powi(2) * dt, max_relative = 1e-9);
         }
+    }
+
+    /// The consider sensitivity against an independent computation: the same trajectory
+    /// integrated twice by the nonlinear filter, once from exact readings and once with one
+    /// reading scaled by `1 + eps`. Their position difference is the error that entry causes,
+    /// and the first-order sensitivity must predict it (dx = true - nominal = M e).
+    #[test]
+    fn consider_sensitivity_predicts_a_scale_errors_effect() {
+        let g_s = Vector3::new(0.0, 0.0, G);
+        let eps = 1e-3;
+        let dt = 0.005;
+        // 2 s of yawing at 0.8 rad/s while the specific force pushes 1 m/s^2 along sensor x.
+        let reading = |k: usize| Imu {
+            f: g_s + Vector3::new(if k < 400 { 1.0 } else { 0.0 }, 0.0, 0.0),
+            w: Vector3::new(0.0, 0.0, if k < 400 { 0.8 } else { 0.0 }),
+        };
+        let run = |scale: &dyn Fn(Imu) -> Imu| {
+            let (x, cov) = align(
+                g_s,
+                Vector3::zeros(),
+                G,
+                Vector3::repeat(0.005),
+                Vector3::repeat(1e-4),
+            );
+            let model = ConsiderModel {
+                gyro: Matrix3::repeat(0.01),
+                accel: Matrix3::repeat(0.01),
+            };
+            let mut kf = Eskf::new(x, cov, G, noise(), scale(reading(0))).with_consider(model, g_s);
+            for k in 1..600 {
+                kf.predict(scale(reading(k)), dt);
+            }
+            kf
+        };
+        let exact = run(&|m| m);
+        // Gyro z scale (entry (2, 2), consider index 8).
+        let gyro = run(&|m: Imu| Imu {
+            w: m.w * (1.0 + eps),
+            ..m
+        });
+        let predicted = exact.sens.fixed_view::<3, 1>(P, 8) * eps;
+        assert_relative_eq!(exact.x.p - gyro.x.p, predicted, max_relative = 0.02);
+        assert!(predicted.norm() > 1e-3, "{predicted}");
+        // Accelerometer x scale (entry (0, 0), consider index 9): only the change of specific
+        // force since alignment counts, and gravity lies along z.
+        let accel = run(&|m: Imu| Imu {
+            f: Vector3::new(m.f.x * (1.0 + eps), m.f.y, m.f.z),
+            ..m
+        });
+        let predicted = exact.sens.fixed_view::<3, 1>(P, 9) * eps;
+        assert_relative_eq!(exact.x.p - accel.x.p, predicted, max_relative = 0.02);
+        assert!(predicted.norm() > 1e-3, "{predicted}");
+        // The reported sigma holds the consider share: at 1 % per entry, well above eps's.
+        assert!(exact.position_sigma().x > 10.0 * predicted.x.abs());
     }
 
     /// The alignment's tilt/bias correlation is what makes a horizontal bias observable after a

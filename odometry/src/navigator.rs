@@ -4,7 +4,7 @@
 //! newest inputs and one lagging behind by the rest hindsight; this module holds what each of
 //! them does. The module documentation of [`crate::stage`] describes the behaviour.
 
-use crate::eskf::{Eskf, Imu, KS, align};
+use crate::eskf::{ConsiderModel, Eskf, Imu, KS, align};
 use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
@@ -471,7 +471,14 @@ impl Navigator {
             Vector3::from(self.cfg.accel_bias_sigma_mps2).map(|s| s.hypot(scale_as_bias));
         let (x, mut cov) = align(f_mean, w_mean, g, bias_sigma, w_sigma);
         cov[(KS, KS)] = self.hints.cfg.speed_scale_sigma.powi(2);
-        self.kf = Some(Eskf::new(x, cov, self.cfg.gravity_mps2, self.cfg.noise, *m));
+        let consider = ConsiderModel {
+            gyro: self.cfg.gyro_correction_sigma,
+            accel: Matrix3::repeat(self.cfg.accel_residual_scale),
+        };
+        self.kf = Some(
+            Eskf::new(x, cov, self.cfg.gravity_mps2, self.cfg.noise, *m)
+                .with_consider(consider, f_mean),
+        );
         self.at_rest = true;
     }
 

@@ -88,13 +88,19 @@ pub struct OdometryConfig {
     /// [`crate::gyrocal::calibrate_gyro`]; identity for an uncalibrated gyro. (The calibration
     /// stage corrects the accelerometer only, so the gyro's correction is applied here.)
     pub gyro_correction: Matrix3<f64>,
+    /// 1-sigma of each entry of the corrected gyro's residual scale and misalignment error,
+    /// fraction (row: corrected axis, column: raw axis). The filter does not estimate it; it
+    /// widens the reported 1-sigma as the body turns (`eskf::ConsiderModel`). For a fitted
+    /// correction, the fit's own sigma ([`Self::with_gyro_calibration`]).
+    pub gyro_correction_sigma: Matrix3<f64>,
     /// 1-sigma of the accelerometer bias left after calibration (turn-on repeatability),
     /// m/s^2 per sensor axis.
     pub accel_bias_sigma_mps2: [f64; 3],
     /// 1-sigma of the accelerometer's residual scale and misalignment after calibration,
     /// fraction. Under gravity it reads as a bias of about `g` times this on every axis (a
     /// misalignment of 0.1% puts 10 mm/s^2 of gravity on a horizontal axis), which the
-    /// alignment's bias uncertainty includes.
+    /// alignment's bias uncertainty includes; its effect on the specific force's changes
+    /// since alignment widens the reported 1-sigma (`eskf::ConsiderModel`).
     pub accel_residual_scale: f64,
     /// Zero-angular-rate gate: the gyro bias is updated at rest only while the reading is
     /// within this many predicted standard deviations of the bias estimate.
@@ -140,6 +146,7 @@ impl OdometryConfig {
                 vibration_gyro_density_per_mps: 0.0,
             },
             gyro_correction: Matrix3::identity(),
+            gyro_correction_sigma: datasheet_gyro_error_sigma(),
             accel_bias_sigma_mps2: [4.5e-3, 2.5e-3, 6.1e-3],
             accel_residual_scale: 1e-3,
             zaru_gate_sigma: 5.0,
@@ -154,6 +161,24 @@ impl OdometryConfig {
             rest_updates: true,
         }
     }
+
+    /// `self` with the gyro correction fitted by [`crate::gyrocal::calibrate_gyro`] and its
+    /// 1-sigma.
+    pub fn with_gyro_calibration(mut self, cal: &crate::gyrocal::GyroCalibration) -> Self {
+        self.gyro_correction = cal.correction;
+        self.gyro_correction_sigma = cal.correction_sigma;
+        self
+    }
+}
+
+/// 1-sigma of an uncalibrated MPU-9250 gyro's scale and cross-axis errors: the product
+/// specification (PS-MPU-9250A-01 rev. 1.1, table 1, "Gyroscope Specifications") gives a
+/// sensitivity scale factor tolerance of +-3 % and a cross-axis sensitivity of +-2 %. With no
+/// distribution stated, a bound `a` is taken as uniform, sigma `a / sqrt(3)` (GUM, JCGM
+/// 100:2008, 4.3.7): 1.7 % on the diagonal, 1.2 % off it.
+pub fn datasheet_gyro_error_sigma() -> Matrix3<f64> {
+    let (scale, cross) = (0.03 / 3f64.sqrt(), 0.02 / 3f64.sqrt());
+    Matrix3::from_fn(|r, c| if r == c { scale } else { cross })
 }
 
 /// Input the stage refuses; the message names the sample.

@@ -21,10 +21,10 @@ use recording::Truth;
 fn simulate(c: &Case, seed: u64) -> (Vec<CorrectedImuSample>, Vec<Truth>, OdometryConfig) {
     let mut sim = Simulation::new(c, seed);
     let session = sim.session();
-    let mut cfg = OdometryConfig::mpu9250(G_MPS2);
-    cfg.gyro_correction = calibrate_gyro(&session, &GyroCalConfig::new(G_MPS2))
-        .expect("the session calibrates the gyro")
-        .correction;
+    let mut cfg = OdometryConfig::mpu9250(G_MPS2).with_gyro_calibration(
+        &calibrate_gyro(&session, &GyroCalConfig::new(G_MPS2))
+            .expect("the session calibrates the gyro"),
+    );
     let (accel, gyro) = c.vibration_density_per_mps();
     cfg.noise.vibration_accel_density_per_mps = accel;
     cfg.noise.vibration_gyro_density_per_mps = gyro;

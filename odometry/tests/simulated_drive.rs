@@ -18,9 +18,8 @@ fn drive(c: &Case, seed: u64) -> (OdometryState, recording::Truth, f64) {
     let mut sim = Simulation::new(c, seed);
     let session = sim.session();
     let mut cfg = OdometryConfig::mpu9250(G_MPS2);
-    cfg.gyro_correction = calibrate_gyro(&session, &GyroCalConfig::new(G_MPS2))
-        .unwrap()
-        .correction;
+    cfg =
+        cfg.with_gyro_calibration(&calibrate_gyro(&session, &GyroCalConfig::new(G_MPS2)).unwrap());
     let (accel, gyro) = c.vibration_density_per_mps();
     cfg.noise.vibration_accel_density_per_mps = accel;
     cfg.noise.vibration_gyro_density_per_mps = gyro;

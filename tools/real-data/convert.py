@@ -267,6 +267,7 @@ def gcp_truth(buf, where):
         raise ConvertError(where, None, "GCP_meters", f"expected N x 2 with N >= 2, got {len(gcp)} x {len(gcp[0]) if gcp else 0}")
     walked = sum(math.dist(a, b) for a, b in zip(gcp, gcp[1:]))
     end = [gcp[-1][0] - gcp[0][0], gcp[-1][1] - gcp[0][1]]
+    footprints = [[x - gcp[0][0], y - gcp[0][1]] for x, y in gcp]
     return {
         "kind": "gcp",
         "frame": "unknown_heading",
@@ -274,8 +275,9 @@ def gcp_truth(buf, where):
         "end_distance_m": math.hypot(*end),
         "end_displacement_gcp_frame_m": end,
         "footprints": len(gcp),
+        "footprints_m": footprints,
         "tile_edge_m": mat_matrix(arrays, "tile_edge_length", where)[0][0],
-        "source": "GCP_meters: the last footprint relative to the first; the GCP frame's heading (and handedness) is not the odometry's, so only the distance is a truth",
+        "source": "GCP_meters: every footprint relative to the first (footprints_m) and the last one (end_*); the GCP frame's heading is not the odometry's: bench.py turns it onto ours at the third footprint, as the authors do (own_data.py, strideAlign = 3), or uses only the end's distance. The GCP y axis is the authors' flipped one (own_data.py negates it to match their z-down INS frame), which makes it a proper rotation of our z-up frame",
     }, walked
 
 
@@ -537,6 +539,8 @@ def self_test():
         truth, walked = gcp_truth(mat, "g.mat")
         close(truth["end_distance_m"], 5.0)
         close(walked, 7.0)
+        if truth["footprints_m"] != [[0.0, 0.0], [3.0, 0.0], [3.0, 4.0]]:
+            raise AssertionError(f"footprints_m {truth['footprints_m']}")
     bad = _mat_bytes({"GCP_exist_and_correct": (1, 1, [0.0]), "GCP_meters": (1, 2, [0.0, 0.0])}, True)
     expect_error(lambda: gcp_truth(bad, "g.mat"), "g.mat", "GCP_exist_and_correct")
     expect_error(lambda: read_mat(b"MATLAB 7.3 MAT-file" + b"\0" * 200, "h.mat"), "h.mat", "not a MATLAB 5.0")
