@@ -45,6 +45,7 @@
 #define MEMS_ODOMETRY_HINT_STALE (1u << 5)
 #define MEMS_ODOMETRY_HINT_DISAGREE (1u << 6)
 #define MEMS_ODOMETRY_NO_GYRO (1u << 7)
+#define MEMS_ODOMETRY_GAP_BEFORE (1u << 8)
 
 /* RobotHint.flags */
 #define MEMS_HINT_STATIONARY (1u << 0)

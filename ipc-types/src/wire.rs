@@ -151,6 +151,10 @@ pub mod odometry_flags {
     /// MPU-9250 at 4 kHz): the attitude cannot be tracked, so the filter neither aligns nor
     /// navigates; `ALIGNED` is clear and position and velocity are not estimated (zero).
     pub const NO_GYRO: u16 = 1 << 7;
+    /// Samples were missing before this one (the raw stream flagged a gap, or the sequence
+    /// skipped): the filter predicted across the gap and widened its 1-sigma for the motion
+    /// the platform could have made in it (`manoeuvre_accel_mps2`, `manoeuvre_rate_rps`).
+    pub const GAP_BEFORE: u16 = 1 << 8;
 }
 
 /// The odometry estimate at one sample time.

@@ -110,7 +110,7 @@ fn facts() -> Vec<Fact> {
             reserved
         ]
     );
-    let flags: [(&str, u16); 23] = [
+    let flags: [(&str, u16); 24] = [
         ("MEMS_RAW_GAP_BEFORE", raw_flags::GAP_BEFORE),
         ("MEMS_RAW_FIFO_OVERFLOW", raw_flags::FIFO_OVERFLOW),
         ("MEMS_RAW_SATURATED", raw_flags::SATURATED),
@@ -135,6 +135,7 @@ fn facts() -> Vec<Fact> {
         ("MEMS_ODOMETRY_HINT_STALE", odometry_flags::HINT_STALE),
         ("MEMS_ODOMETRY_HINT_DISAGREE", odometry_flags::HINT_DISAGREE),
         ("MEMS_ODOMETRY_NO_GYRO", odometry_flags::NO_GYRO),
+        ("MEMS_ODOMETRY_GAP_BEFORE", odometry_flags::GAP_BEFORE),
         ("MEMS_HINT_STATIONARY", hint_flags::STATIONARY),
         ("MEMS_HINT_SOURCE_COMMANDED", hint_flags::SOURCE_COMMANDED),
         ("MEMS_HINT_SOURCE_ENCODERS", hint_flags::SOURCE_ENCODERS),

@@ -120,6 +120,7 @@ fn python_odometry_flags_match_rust() {
         ("ODOMETRY_HINT_STALE", f::HINT_STALE),
         ("ODOMETRY_HINT_DISAGREE", f::HINT_DISAGREE),
         ("ODOMETRY_NO_GYRO", f::NO_GYRO),
+        ("ODOMETRY_GAP_BEFORE", f::GAP_BEFORE),
     ];
     // Every ODOMETRY_* constant the module defines, so that one Rust lacks is caught too.
     let script = r#"

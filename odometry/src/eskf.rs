@@ -256,6 +256,29 @@ impl Eskf {
         m.fixed_rows_mut::<3>(TH).copy_from(&new_th);
     }
 
+    /// Widens the covariance for `t` seconds whose measurements are missing (a gap in the
+    /// stream). The prediction across the gap interpolated the readings on either side; the
+    /// truth may differ from them by an unknown constant acceleration and angular rate, of
+    /// 1-sigma `accel` (m/s^2) and `rate` (rad/s) per axis for a gap as long as the platform's
+    /// quickest manoeuvre `manoeuvre_s` or longer, and in proportion to the gap below it (the
+    /// readings on either side of a short gap bound what happened in it). Velocity error
+    /// `a t`, position `a t^2 / 2`, rotation `w t` (at most pi). The position's share is added
+    /// uncorrelated with the velocity's: the path inside the gap is not known from the velocity
+    /// at its end, so a zero-velocity update after the gap must not shrink it (with the two
+    /// fully correlated, as a constant acceleration would make them, it did, and the 1-sigma
+    /// at the end of a simulated drive fell below its error).
+    pub fn missed(&mut self, t: f64, accel: f64, rate: f64, manoeuvre_s: f64) {
+        let share = (t / manoeuvre_s).min(1.0);
+        let a = accel * share;
+        let (pp, vv) = ((a * t * t / 2.0).powi(2), (a * t).powi(2));
+        let th = (rate * share * t).min(std::f64::consts::PI).powi(2);
+        for i in 0..3 {
+            self.cov[(P + i, P + i)] += pp;
+            self.cov[(V + i, V + i)] += vv;
+            self.cov[(TH + i, TH + i)] += th;
+        }
+    }
+
     /// Zero-velocity update: the true velocity is zero, measured with 1-sigma `sigma` (m/s).
     pub fn zero_velocity(&mut self, sigma: f64) {
         let mut h = SMatrix::<f64, 3, N>::zeros();

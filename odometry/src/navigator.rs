@@ -11,7 +11,7 @@ use crate::hints::{
 use crate::stage::OdometryConfig;
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
-    odometry_flags,
+    odometry_flags, raw_flags,
 };
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
@@ -169,7 +169,8 @@ pub(crate) struct Navigator {
     hints: Hints,
     align: AlignSums,
     kf: Option<Eskf>,
-    last: Option<(u64, Imu)>,
+    /// Time (ns), sequence number and measurement of the previous sample.
+    last: Option<(u64, u64, Imu)>,
     history: Vec<HistoryEntry>,
     history_overflowed: bool,
     motion_start_ns: Option<u64>,
@@ -286,7 +287,14 @@ impl Navigator {
             w: self.cfg.gyro_correction * Vector3::from(s.gyro_rps),
         };
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
-        let prev = self.last.replace((t_ns, m));
+        let prev = self
+            .last
+            .replace((t_ns, s.seq, m))
+            .map(|(t, seq, m)| ((t, m), seq));
+        // Samples are missing before this one: the raw stream says so, or the sequence skips.
+        let gap = s.raw_flags & raw_flags::GAP_BEFORE != 0
+            || prev.is_some_and(|(_, seq)| s.seq != seq + 1);
+        let prev = prev.map(|(p, _)| p);
 
         // Hints delivered by this sample's time; the newest fresh one with a rest source
         // decides rest.
@@ -326,6 +334,15 @@ impl Navigator {
         let dt = (t_ns - prev.map_or(t_ns, |p| p.0)) as f64 * 1e-9;
         let p_before = kf.x.p;
         kf.predict(m, dt);
+        if gap {
+            kf.missed(
+                dt,
+                self.cfg.manoeuvre_accel_mps2,
+                self.cfg.manoeuvre_rate_rps,
+                self.cfg.manoeuvre_s,
+            );
+            hs.flags |= odometry_flags::GAP_BEFORE;
+        }
         let moved = (kf.x.p - p_before).xy().norm();
         // The IMU's rest flag decides without a fresh hint; after hints went stale, only when
         // the velocity is consistent with rest (a detector that takes cruising for rest must not

@@ -42,6 +42,10 @@ impl Profile {
             // `sigma_vel`); on the real walks of docs/real-data.md it took the loops from
             // 0.19/0.37/0.56 % to 0.14/0.27/0.57 %.
             config.zupt_sigma_mps = 0.01;
+            // A swinging foot: several g and hundreds of deg/s, within a tenth of a second.
+            config.manoeuvre_accel_mps2 = 30.0;
+            config.manoeuvre_rate_rps = 10.0;
+            config.manoeuvre_s = 0.1;
         }
         config
     }
