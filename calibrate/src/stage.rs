@@ -55,7 +55,8 @@ use crate::calibfile::CalibrationFile;
 use crate::model::AccelModel;
 use crate::terms::ReadingTerms;
 use crate::zero_state::{
-    BATCH_LEN, DetectorConfig, NoiseFloor, Verdict, ZeroStateDetector, batch_duration_s, rest_gain,
+    BATCH_LEN, DetectorConfig, NoiseFloor, StaticReference, Verdict, ZeroStateDetector,
+    batch_duration_s, rest_gain,
 };
 
 /// Settings of the bias refinement.
@@ -266,6 +267,47 @@ impl Refinement {
     }
 }
 
+/// What a restarted calibration process needs to go on where its predecessor stopped, on the
+/// same sensor stream: the detector's references and the bias refinement (so the corrected
+/// stream neither changes its bias nor waits for a new rest to learn, and a moving robot is not
+/// learned as rest), the stream's start (for the time terms) and the last sample seen. Written
+/// by `mems-calibrate serve --state`; a new stream (sequence numbers starting again) discards it.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct WarmState {
+    /// The calibration the state was made with ([`calib_id`]).
+    pub calib_id: u64,
+    /// The detector's reference (`None`: not learned yet, or SHOE).
+    pub reference: Option<StaticReference>,
+    /// Rest time the reference has been kept current over, s.
+    pub rest_seen_s: f64,
+    /// Accelerometer offset subtracted from the output, m/s^2.
+    pub refine_accel_mps2: [f64; 3],
+    /// Gyroscope bias subtracted from the output, rad/s.
+    pub refine_gyro_rps: [f64; 3],
+    /// Rest time the accelerometer offset was refined from, s.
+    pub accel_seen_s: f64,
+    /// Rest time the gyroscope bias was refined from, s.
+    pub gyro_seen_s: f64,
+    /// Whether a refinement was made.
+    pub refined: bool,
+    /// Sample time of the stream's first sample, ns.
+    pub stream_start_ns: u64,
+    /// Sequence number and sample time of the last sample taken, ns.
+    pub last_seq: u64,
+    /// Sample time of the last sample taken, ns.
+    pub last_ns: u64,
+}
+
+/// A [`WarmState`] that does not fit the stage.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("the state was made with calibration {state:016x}, the stage has {stage:016x}")]
+pub struct ResumeError {
+    /// The state's calibration.
+    pub state: u64,
+    /// The stage's.
+    pub stage: u64,
+}
+
 /// The calibration stage (see the module documentation).
 #[derive(Debug, Clone)]
 pub struct CalibrationStage {
@@ -286,6 +328,8 @@ pub struct CalibrationStage {
     /// The latest verdict's flags and `zs_*` fields, carried over to provisional samples.
     carried: Carried,
     last: Option<(u64, u64)>,
+    /// Whether `last` comes from [`CalibrationStage::resume`] and no sample has confirmed it.
+    resumed: bool,
     stats: StageStats,
 }
 
@@ -322,6 +366,7 @@ impl CalibrationStage {
             batch_gyro: true,
             carried: Carried::default(),
             last: None,
+            resumed: false,
             stats: StageStats::default(),
         })
     }
@@ -334,6 +379,52 @@ impl CalibrationStage {
     /// The detector (for its state and references).
     pub fn detector(&self) -> &ZeroStateDetector {
         &self.detector
+    }
+
+    /// What a restarted process would need to go on from here (`None` before the first
+    /// sample).
+    pub fn warm_state(&self) -> Option<WarmState> {
+        let (last_seq, last_ns) = self.last?;
+        let r = &self.refine;
+        Some(WarmState {
+            calib_id: self.calib_id,
+            reference: self.detector.reference(),
+            rest_seen_s: self.detector.rest_seen_s(),
+            refine_accel_mps2: r.accel_mps2.into(),
+            refine_gyro_rps: r.gyro_rps.into(),
+            accel_seen_s: r.accel_seen_s,
+            gyro_seen_s: r.gyro_seen_s,
+            refined: r.refined,
+            stream_start_ns: self.stream_start_ns.unwrap_or(last_ns),
+            last_seq,
+            last_ns,
+        })
+    }
+
+    /// Goes on from `state` (a fresh stage, before its first sample): the references,
+    /// the refinement and the stream as they were. The next sample is a gap after
+    /// `state.last_seq`; one that is not later in sequence and time belongs to another stream
+    /// (a new power-on), and the stage starts over.
+    pub fn resume(&mut self, state: &WarmState) -> Result<(), ResumeError> {
+        if state.calib_id != self.calib_id {
+            return Err(ResumeError {
+                state: state.calib_id,
+                stage: self.calib_id,
+            });
+        }
+        if let Some(reference) = &state.reference {
+            self.detector.resume(reference, state.rest_seen_s);
+        }
+        let r = &mut self.refine;
+        r.accel_mps2 = state.refine_accel_mps2.into();
+        r.gyro_rps = state.refine_gyro_rps.into();
+        r.accel_seen_s = state.accel_seen_s;
+        r.gyro_seen_s = state.gyro_seen_s;
+        r.refined = state.refined;
+        self.stream_start_ns = Some(state.stream_start_ns);
+        self.last = Some((state.last_seq, state.last_ns));
+        self.resumed = true;
+        Ok(())
     }
 
     /// The current refinement: accelerometer offset (m/s^2) and gyroscope bias (rad/s)
@@ -367,15 +458,17 @@ impl CalibrationStage {
         let has_gyro = raw.flags & raw_flags::GYRO_VALID != 0;
         let has_temp = raw.flags & raw_flags::TEMP_VALID != 0;
         self.check(raw, has_gyro, has_temp)?;
+        if std::mem::take(&mut self.resumed)
+            && self
+                .last
+                .is_some_and(|(seq, ns)| raw.seq <= seq || raw.stamps.sample_ns <= ns)
+        {
+            // Not the stream the resumed state was made on (a new power-on): start over.
+            self.start_over();
+            self.last = None;
+        }
         match self.last {
-            Some((prev_seq, _)) if raw.seq <= prev_seq => {
-                self.cut_batch();
-                self.carried = Carried::default();
-                self.detector.reset();
-                self.refine = Refinement::new(self.refine_config);
-                self.stream_start_ns = None;
-                self.stats.restarts += 1;
-            }
+            Some((prev_seq, _)) if raw.seq <= prev_seq => self.start_over(),
             Some((prev_seq, prev_ns)) if raw.stamps.sample_ns <= prev_ns => {
                 return Err(StageError::TimeNotIncreasing {
                     seq: raw.seq,
@@ -455,6 +548,16 @@ impl CalibrationStage {
     pub fn finish(&mut self) {
         self.cut_batch();
         self.detector.interrupt();
+    }
+
+    /// A new sensor session: everything learned and refined is forgotten.
+    fn start_over(&mut self) {
+        self.cut_batch();
+        self.carried = Carried::default();
+        self.detector.reset();
+        self.refine = Refinement::new(self.refine_config);
+        self.stream_start_ns = None;
+        self.stats.restarts += 1;
     }
 
     /// Starts a new batch.

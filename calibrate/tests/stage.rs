@@ -550,3 +550,99 @@ fn shoe_stances_are_rest_but_refine_nothing() {
         "{gyro:?}"
     );
 }
+
+/// A restarted process that goes on from its predecessor's warm state behaves exactly as the
+/// predecessor would have after a gap: the same corrected samples, flags and zero-state
+/// verdicts (through JSON, as `mems-calibrate serve --state` writes it). Only the first batch's
+/// provisional samples differ: the predecessor carries its verdict from before the gap over
+/// to them, the new process has none to carry (not rest).
+#[test]
+fn a_resumed_stage_goes_on_as_the_original_after_a_gap() {
+    let file = calibration();
+    let samples = still(
+        &file,
+        Vector3::z(),
+        Vector3::new(0.03, 0.0, 0.01),
+        [0.4, -0.2, 0.1],
+        12.0,
+        7,
+    );
+    let (before, after) = samples.split_at(8_000);
+    // 300 samples lost: the restart's gap.
+    let after = &after[300..];
+    let mut original = stage(&file, DetectorKind::Glrt);
+    run(&mut original, before);
+    let state = original.warm_state().unwrap();
+    assert!(state.reference.is_some() && state.refined);
+    let text = serde_json::to_string(&state).unwrap();
+    let mut resumed = stage(&file, DetectorKind::Glrt);
+    resumed
+        .resume(&serde_json::from_str(&text).unwrap())
+        .unwrap();
+    let (a, b) = (run(&mut original, after), run(&mut resumed, after));
+    assert_eq!(a.len(), b.len());
+    let first = BATCH_LEN - 1;
+    for (x, y) in a[..first].iter().zip(&b[..first]) {
+        assert_eq!((x.accel_mps2, x.gyro_rps), (y.accel_mps2, y.gyro_rps));
+        assert_eq!(y.flags & corrected_flags::ZERO_STATE, 0);
+        assert_ne!(y.flags & corrected_flags::PROVISIONAL, 0);
+    }
+    let first_difference = a[first..].iter().zip(&b[first..]).position(|(x, y)| x != y);
+    assert_eq!(
+        first_difference,
+        None,
+        "{:?}",
+        first_difference.map(|i| (&a[first + i], &b[first + i]))
+    );
+    assert!(
+        b.iter()
+            .all(|o| o.flags & corrected_flags::BIAS_REFINED != 0)
+    );
+    assert!(
+        b[first..]
+            .iter()
+            .all(|o| o.flags & corrected_flags::DETECTOR_READY != 0),
+        "ready without learning again"
+    );
+    // A fresh stage on the same samples learns from them first: not the same output.
+    assert_ne!(run(&mut stage(&file, DetectorKind::Glrt), after), b);
+}
+
+/// A warm state from another stream (a new power-on: sequence numbers start again) or another
+/// calibration is not gone on from.
+#[test]
+fn a_warm_state_from_another_stream_or_calibration_is_not_used() {
+    let file = calibration();
+    let samples = still(
+        &file,
+        Vector3::z(),
+        Vector3::zeros(),
+        [0.4, -0.2, 0.1],
+        8.0,
+        8,
+    );
+    let mut original = stage(&file, DetectorKind::Glrt);
+    run(&mut original, &samples);
+    let state = original.warm_state().unwrap();
+    // The same samples again: sequence numbers and times not after the state's.
+    let mut resumed = stage(&file, DetectorKind::Glrt);
+    resumed.resume(&state).unwrap();
+    let out = run(&mut resumed, &samples[..2_000]);
+    assert!(
+        out.iter()
+            .all(|o| o.flags & corrected_flags::DETECTOR_READY == 0)
+    );
+    assert_eq!(resumed.stats().restarts, 1);
+    assert_eq!(
+        out,
+        run(&mut stage(&file, DetectorKind::Glrt), &samples[..2_000])
+    );
+
+    let mut other = calibration();
+    other.bias_g[0] += 1e-3;
+    let err = stage(&other, DetectorKind::Glrt)
+        .resume(&state)
+        .unwrap_err();
+    assert_eq!(err.state, calib_id(&file));
+    assert_eq!(err.stage, calib_id(&other));
+}

@@ -83,6 +83,20 @@ pub struct ConsiderModel {
     pub accel: Matrix3<f64>,
 }
 
+/// What the platform can do while samples are missing ([`Eskf::missed`]): 1-sigma figures of
+/// a manoeuvre.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Manoeuvre {
+    /// Acceleration, m/s^2, each axis.
+    pub accel: f64,
+    /// Rotation rate, rad/s.
+    pub rate: f64,
+    /// Largest change of tilt (roll, pitch), rad.
+    pub tilt: f64,
+    /// Duration of the quickest manoeuvre, s.
+    pub duration_s: f64,
+}
+
 /// The nominal (full) navigation state.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Nominal {
@@ -258,25 +272,33 @@ impl Eskf {
 
     /// Widens the covariance for `t` seconds whose measurements are missing (a gap in the
     /// stream). The prediction across the gap interpolated the readings on either side; the
-    /// truth may differ from them by an unknown constant acceleration and angular rate, of
-    /// 1-sigma `accel` (m/s^2) and `rate` (rad/s) per axis for a gap as long as the platform's
-    /// quickest manoeuvre `manoeuvre_s` or longer, and in proportion to the gap below it (the
-    /// readings on either side of a short gap bound what happened in it). Velocity error
-    /// `a t`, position `a t^2 / 2`, rotation `w t` (at most pi). The position's share is added
-    /// uncorrelated with the velocity's: the path inside the gap is not known from the velocity
-    /// at its end, so a zero-velocity update after the gap must not shrink it (with the two
-    /// fully correlated, as a constant acceleration would make them, it did, and the 1-sigma
-    /// at the end of a simulated drive fell below its error).
-    pub fn missed(&mut self, t: f64, accel: f64, rate: f64, manoeuvre_s: f64) {
-        let share = (t / manoeuvre_s).min(1.0);
-        let a = accel * share;
+    /// truth may differ from them by an unknown constant acceleration and rotation rate, of
+    /// 1-sigma `m.accel` (m/s^2, each axis) and `m.rate` (rad/s, about the vertical) for a gap
+    /// as long as the platform's quickest manoeuvre `m.duration_s` or longer, and in proportion
+    /// to the gap below it (the readings on either side of a short gap bound what happened in
+    /// it). Velocity error `a t`, position `a t^2 / 2`, heading `w t` (at most pi), tilt as
+    /// much but at most `m.tilt` (a ground robot stays about level). The position's share is
+    /// added uncorrelated with the velocity's: the path inside the gap is not known from the
+    /// velocity at its end, so a zero-velocity update after the gap must not shrink it (fully
+    /// correlated, as a constant acceleration would make them, it did, and the 1-sigma at the
+    /// end of a simulated drive fell below its error).
+    pub fn missed(&mut self, t: f64, m: &Manoeuvre) {
+        let share = (t / m.duration_s).min(1.0);
+        let a = m.accel * share;
         let (pp, vv) = ((a * t * t / 2.0).powi(2), (a * t).powi(2));
-        let th = (rate * share * t).min(std::f64::consts::PI).powi(2);
+        let turn = m.rate * share * t;
+        let yaw = turn.min(std::f64::consts::PI).powi(2);
+        let tilt = turn.min(m.tilt).powi(2);
         for i in 0..3 {
             self.cov[(P + i, P + i)] += pp;
             self.cov[(V + i, V + i)] += vv;
-            self.cov[(TH + i, TH + i)] += th;
         }
+        // Navigation-frame rotation uncertainty, into the local attitude error's frame.
+        let r = self.x.q.to_rotation_matrix().into_inner();
+        let nav = Matrix3::from_diagonal(&Vector3::new(tilt, tilt, yaw));
+        let local = r.transpose() * nav * r;
+        let mut th = self.cov.fixed_view_mut::<3, 3>(TH, TH);
+        th += local;
     }
 
     /// Zero-velocity update: the true velocity is zero, measured with 1-sigma `sigma` (m/s).

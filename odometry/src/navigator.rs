@@ -335,12 +335,7 @@ impl Navigator {
         let p_before = kf.x.p;
         kf.predict(m, dt);
         if gap {
-            kf.missed(
-                dt,
-                self.cfg.manoeuvre_accel_mps2,
-                self.cfg.manoeuvre_rate_rps,
-                self.cfg.manoeuvre_s,
-            );
+            kf.missed(dt, &self.cfg.manoeuvre);
             hs.flags |= odometry_flags::GAP_BEFORE;
         }
         let moved = (kf.x.p - p_before).xy().norm();

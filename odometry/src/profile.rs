@@ -4,6 +4,7 @@
 
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
 
+use crate::eskf::Manoeuvre;
 use crate::stage::OdometryConfig;
 
 /// A platform's motion profile.
@@ -42,10 +43,14 @@ impl Profile {
             // `sigma_vel`); on the real walks of docs/real-data.md it took the loops from
             // 0.19/0.37/0.56 % to 0.14/0.27/0.57 %.
             config.zupt_sigma_mps = 0.01;
-            // A swinging foot: several g and hundreds of deg/s, within a tenth of a second.
-            config.manoeuvre_accel_mps2 = 30.0;
-            config.manoeuvre_rate_rps = 10.0;
-            config.manoeuvre_s = 0.1;
+            // A swinging foot: several g and hundreds of deg/s within a tenth of a second,
+            // tilting through a radian.
+            config.manoeuvre = Manoeuvre {
+                accel: 30.0,
+                rate: 10.0,
+                tilt: 1.0,
+                duration_s: 0.1,
+            };
         }
         config
     }

@@ -70,7 +70,7 @@
 //! the stream. Rest decided by a fresh
 //! robot hint is not withdrawn (the controller knows).
 
-use crate::eskf::{Eskf, NoiseModel};
+use crate::eskf::{Eskf, Manoeuvre, NoiseModel};
 use crate::hints::{HintConfig, HintConfigError, HintError, HintStats, Ring, check_hint};
 use crate::navigator::Navigator;
 use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags};
@@ -125,15 +125,10 @@ pub struct OdometryConfig {
     /// followed by `rest_hindsight_s` of rest (a bump, a glitch, a detector's false alarm on a
     /// static sensor) leaves them standing.
     pub motion_confirm_s: f64,
-    /// The platform's acceleration in a manoeuvre, m/s^2 (1-sigma, each axis): over missing
-    /// samples (a gap, flagged by the raw stream or a skipped sequence number) the velocity may
-    /// change by this times the gap, and the reported 1-sigma grows with it (`Eskf::missed`).
-    pub manoeuvre_accel_mps2: f64,
-    /// The platform's angular rate in a manoeuvre, rad/s (1-sigma, each axis), for the same.
-    pub manoeuvre_rate_rps: f64,
-    /// Duration of the platform's quickest manoeuvre, s: a gap shorter than this widens the
-    /// 1-sigma in proportion (the readings on either side bound what happened in it).
-    pub manoeuvre_s: f64,
+    /// What the platform can do while samples are missing (a gap, flagged by the raw stream
+    /// or a skipped sequence number): the reported 1-sigma grows with it across the gap
+    /// (`Eskf::missed`).
+    pub manoeuvre: Manoeuvre,
     /// Whether rest flags, once aligned, give zero-velocity and zero-rate updates (`false`: a
     /// diagnostic that integrates freely after alignment, as `mems-odometry offline
     /// --no-zupt`).
@@ -167,10 +162,13 @@ impl OdometryConfig {
             revision_rate_hz: 100.0,
             rest_hindsight_s: 0.5,
             motion_confirm_s: 0.5,
-            // A ground robot: 1 m/s^2 and 30 deg/s, reached in half a second.
-            manoeuvre_accel_mps2: 1.0,
-            manoeuvre_rate_rps: 0.5,
-            manoeuvre_s: 0.5,
+            // A ground robot: 1 m/s^2 and 30 deg/s reached in half a second, about level.
+            manoeuvre: Manoeuvre {
+                accel: 1.0,
+                rate: 0.5,
+                tilt: 0.05,
+                duration_s: 0.5,
+            },
             rest_updates: true,
         }
     }

@@ -28,8 +28,8 @@ fn drive_with_gap(seed: u64, gap_s: f64, widen: bool) -> [(OdometryState, [f64; 
     cfg.noise.vibration_accel_density_per_mps = accel;
     cfg.noise.vibration_gyro_density_per_mps = gyro;
     if !widen {
-        cfg.manoeuvre_accel_mps2 = 0.0;
-        cfg.manoeuvre_rate_rps = 0.0;
+        cfg.manoeuvre.accel = 0.0;
+        cfg.manoeuvre.rate = 0.0;
     }
     let mut stage = OdometryStage::new(cfg);
     let mut gap: Option<(u64, u64)> = None;

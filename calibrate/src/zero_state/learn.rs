@@ -95,7 +95,7 @@ impl LearnConfig {
 }
 
 /// What the rest taught: the references and noise of the six channels.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StaticReference {
     /// Mean specific force, m/s^2, sensor frame (gravity's reaction at the rest's attitude).
     pub accel_mean_mps2: [f64; 3],

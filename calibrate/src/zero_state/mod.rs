@@ -238,6 +238,8 @@ pub struct ZeroStateDetector {
     gyro: WindowAccumulator,
     learner: StaticLearner,
     rule: Option<Rule>,
+    /// What the rule was built from (learned, or resumed).
+    learned: Option<StaticReference>,
     rest_s: f64,
     /// Storage for the GLRT's window, allocated once and handed to the rule when it is learned.
     ring: Vec<glrt::BatchSums>,
@@ -296,6 +298,7 @@ impl ZeroStateDetector {
             learner: StaticLearner::new(config.learn, config.noise),
             rule: shoe
                 .then(|| Rule::Shoe(shoe::ShoeRule::new(config.shoe, config.learn.gravity_mps2))),
+            learned: None,
             rest_s: 0.0,
             ring: Vec::with_capacity(config.glrt.window_batches),
         }
@@ -326,6 +329,56 @@ impl ZeroStateDetector {
         }
     }
 
+    /// What the rule stands on: the learned (or resumed) reference with its means as they are
+    /// now (kept current at rest); `None` before learning and for SHOE, which learns nothing.
+    pub fn reference(&self) -> Option<StaticReference> {
+        let (accel, gyro) = self.references()?;
+        self.learned.map(|r| StaticReference {
+            accel_mean_mps2: accel,
+            gyro_mean_rps: gyro,
+            ..r
+        })
+    }
+
+    /// Rest time the references have been kept current over, s (the learning included).
+    pub fn rest_seen_s(&self) -> f64 {
+        self.rest_s
+    }
+
+    /// Builds the rule from `reference`, kept current over `rest_seen_s` of rest, as the
+    /// detector that made them had it (a restarted process going on with its predecessor's
+    /// references). SHOE learns nothing and ignores it.
+    pub fn resume(&mut self, reference: &StaticReference, rest_seen_s: f64) {
+        if self.config.kind != DetectorKind::Shoe {
+            self.install(*reference);
+            self.rest_s = rest_seen_s;
+        }
+    }
+
+    /// Makes `reference` (after the noise floor) the rule's.
+    fn install(&mut self, learned: StaticReference) -> StaticReference {
+        let reference = self.config.noise.map_or(learned, |f| f.apply(learned));
+        self.rest_s = reference.duration_s;
+        let ring = match self.rule.take() {
+            Some(Rule::Glrt(rule)) => rule.into_ring(),
+            _ => std::mem::take(&mut self.ring),
+        };
+        self.rule = Some(match self.config.kind {
+            DetectorKind::Yu => Rule::Yu(yu::YuRule::new(&reference, &self.config.yu)),
+            kind @ (DetectorKind::Glrt | DetectorKind::GlrtAccel) => {
+                Rule::Glrt(glrt::GlrtRule::new(
+                    &reference,
+                    &self.config.glrt,
+                    ring,
+                    kind == DetectorKind::GlrtAccel,
+                ))
+            }
+            DetectorKind::Shoe => unreachable!("SHOE is ready from the start"),
+        });
+        self.learned = Some(reference);
+        reference
+    }
+
     /// Adds one sample at `t_ns`: specific force `accel_mps2` (m/s^2) and angular rate
     /// `gyro_rps` (rad/s; ignored by Yu's detector), sensor frame. Returns the verdict when
     /// this sample completes a batch.
@@ -344,22 +397,8 @@ impl ZeroStateDetector {
         };
         let Some(rule) = self.rule.as_mut() else {
             if let Some(learned) = self.learner.push(&accel, &gyro) {
-                let reference = self.config.noise.map_or(learned, |f| f.apply(learned));
-                self.rest_s = reference.duration_s;
-                self.rule = Some(match self.config.kind {
-                    DetectorKind::Yu => Rule::Yu(yu::YuRule::new(&reference, &self.config.yu)),
-                    kind @ (DetectorKind::Glrt | DetectorKind::GlrtAccel) => {
-                        Rule::Glrt(glrt::GlrtRule::new(
-                            &reference,
-                            &self.config.glrt,
-                            std::mem::take(&mut self.ring),
-                            kind == DetectorKind::GlrtAccel,
-                        ))
-                    }
-                    DetectorKind::Shoe => unreachable!("SHOE is ready from the start"),
-                });
                 verdict.ready = true;
-                verdict.learned = Some(reference);
+                verdict.learned = Some(self.install(learned));
             }
             return Some(verdict);
         };
@@ -404,6 +443,7 @@ impl ZeroStateDetector {
         self.accel.reset();
         self.gyro.reset();
         self.learner.clear();
+        self.learned = None;
         self.rest_s = 0.0;
         match self.rule.take() {
             Some(Rule::Glrt(rule)) => self.ring = rule.into_ring(),

@@ -10,6 +10,12 @@
 //!   and not published; the service goes on.
 //! - A restarted publisher (sequence numbers starting again) is a new sensor session: the stage
 //!   starts over (time check, detector learning, refinement).
+//! - `--state FILE`: the stage's [`WarmState`] (references, bias refinement, stream) is written
+//!   to FILE when the detector has learned and then at most once a second while it changes
+//!   (atomically: a temporary file renamed over it), and read back at start-up when FILE
+//!   exists, so that a restarted process goes on where the killed one stopped instead of
+//!   learning again, possibly from a robot in motion. A malformed FILE or one made with another
+//!   calibration is a start-up error naming it.
 //! - SIGINT/SIGTERM: a summary, exit status 0.
 
 use std::path::PathBuf;
@@ -17,7 +23,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, anyhow};
 use calibrate::calibfile::CalibrationFile;
-use calibrate::stage::{CalibrationStage, RefineConfig};
+use calibrate::stage::{CalibrationStage, RefineConfig, WarmState};
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use ipc_types::clock::monotonic_ns;
 use ipc_types::wake::{self, Output, WaitMode};
@@ -56,6 +62,34 @@ pub struct ServeArgs {
     /// the publisher's event wakes the process.
     #[arg(long)]
     spin: bool,
+    /// Keep the stage's learned state in this file (JSON) and go on from it at start-up when
+    /// it exists: a restarted process neither relearns nor changes the output's bias.
+    #[arg(long, value_name = "FILE")]
+    state: Option<PathBuf>,
+}
+
+/// Reads a warm state written by `--state`.
+fn load_state(path: &std::path::Path) -> Result<WarmState> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read the state file {}", path.display()))?;
+    serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a calibration stage state", path.display()))
+}
+
+/// Whether two states hold the same learning (references and refinement): the stream
+/// position alone changing is no reason to write.
+fn same_learning(a: &WarmState, b: &WarmState) -> bool {
+    a.reference == b.reference
+        && a.refine_accel_mps2 == b.refine_accel_mps2
+        && a.refine_gyro_rps == b.refine_gyro_rps
+}
+
+/// Writes `state` to `path` atomically (a temporary file beside it, renamed over it).
+fn save_state(path: &std::path::Path, state: &WarmState) -> Result<()> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, serde_json::to_string_pretty(state)?)
+        .with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("cannot replace {}", path.display()))
 }
 
 /// Runs the service until SIGINT/SIGTERM.
@@ -71,6 +105,23 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
     }
     let mut stage = CalibrationStage::new(&file, config, RefineConfig::default())
         .with_context(|| args.calib.display().to_string())?;
+    if let Some(path) = args.state.as_deref().filter(|p| p.exists()) {
+        let state = load_state(path)?;
+        stage
+            .resume(&state)
+            .with_context(|| format!("{}: cannot go on from it", path.display()))?;
+        eprintln!(
+            "mems-calibrate serve: going on from {} (last sample seq {}, detector {}, refined {})",
+            path.display(),
+            state.last_seq,
+            if state.reference.is_some() {
+                "learned"
+            } else {
+                "not learned"
+            },
+            state.refined
+        );
+    }
 
     let ns = service::namespace(args.namespace.as_deref());
     let raw_name = service::full_name(&ns, service::RAW);
@@ -97,6 +148,8 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
 
     let mut refused = 0u64;
     let mut last_cleanup = Instant::now();
+    // The state as last written, and when (not per sample: at most once a second).
+    let mut saved: Option<(WarmState, Instant)> = None;
     let step = || -> Result<ControlFlow<(), bool>> {
         let mut received = false;
         while let Some(sample) = subscriber
@@ -117,6 +170,16 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
                 }
             }
             out.end_of_input()?;
+        }
+        if let Some(path) = &args.state
+            && let Some(state) = stage.warm_state()
+            && state.reference.is_some()
+            && saved.as_ref().is_none_or(|(s, at)| {
+                at.elapsed() >= Duration::from_secs(1) && !same_learning(s, &state)
+            })
+        {
+            save_state(path, &state)?;
+            saved = Some((state, Instant::now()));
         }
         if last_cleanup.elapsed() >= Duration::from_secs(1) {
             // Subscribers killed without closing their ports would otherwise stay connected.
