@@ -30,9 +30,16 @@ struct Cli {
     /// SPI: the odometry then estimates no position and the status line says so).
     #[arg(long, default_value_t = 1000)]
     rate: u32,
-    /// Record every topic to this MCAP file.
+    /// Record every topic to this MCAP file, checked before anything starts (its directory
+    /// must exist and be writable; an existing recording is refused unless `--force`). A
+    /// recorder that dies is restarted and continues the run in the file's next segment
+    /// (`run.1.mcap`, ...), which the readers and `mems-replay` read with it as one run.
     #[arg(long)]
     record: Option<PathBuf>,
+    /// Overwrite the recording at `--record` (its successor segments too), once the stack
+    /// starts its stages.
+    #[arg(long, requires = "record")]
+    force: bool,
     /// Stop after this many seconds (default: until Ctrl-C).
     #[arg(long)]
     duration: Option<f64>,
@@ -189,12 +196,54 @@ fn calibrate_sim(bins: &Path, work: &Path, seed: u64) -> Result<PathBuf> {
     Ok(calib)
 }
 
+/// Removes what a previous stack killed with SIGKILL left behind: the iceoryx2 resources of
+/// dead nodes (its own and, if they died with it, its children's) and the work directories
+/// of stacks whose process is gone.
+fn clean_stale() {
+    match service::remove_dead_nodes() {
+        Ok(0) => {}
+        Ok(n) => eprintln!("mems-stack: removed the shared memory of {n} dead iceoryx2 nodes"),
+        Err(e) => eprintln!("mems-stack: {e}"),
+    }
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(WORK_DIR_PREFIX))
+            .and_then(|p| p.parse::<i32>().ok())
+        else {
+            continue;
+        };
+        // SAFETY: kill(2) with signal 0 only checks whether the process exists.
+        let gone = unsafe { libc::kill(pid, 0) } != 0
+            && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
+        if gone && std::fs::remove_dir_all(entry.path()).is_ok() {
+            eprintln!(
+                "mems-stack: removed {}, left by a stack that died",
+                entry.path().display()
+            );
+        }
+    }
+}
+
+/// Name of a stack's work directory under the temporary directory, before its process id.
+const WORK_DIR_PREFIX: &str = "mems-stack-";
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     check_source(&cli)?;
+    // Before calibrating: a stack that cannot record must not start, nor touch a recording.
+    let overwrite = match &cli.record {
+        Some(out) => recording::segment::check_target(out, cli.force)?,
+        None => Vec::new(),
+    };
+    clean_stale();
     let namespace = service::namespace(cli.namespace.as_deref());
     let bins = bin_dir()?;
-    let work = std::env::temp_dir().join(format!("mems-stack-{}", std::process::id()));
+    let work = std::env::temp_dir().join(format!("{WORK_DIR_PREFIX}{}", std::process::id()));
     std::fs::create_dir_all(&work).with_context(|| format!("cannot create {}", work.display()))?;
     let calib = match (&cli.calib, cli.source.as_str()) {
         (Some(c), _) => c.clone(),
@@ -218,7 +267,11 @@ fn main() -> Result<()> {
         specs.push(spec(
             "record",
             "mems-record",
-            vec!["--out".into(), out.display().to_string()],
+            vec![
+                "--out".into(),
+                out.display().to_string(),
+                "--continue".into(),
+            ],
         ));
     }
     specs.push(spec(
@@ -248,6 +301,9 @@ fn main() -> Result<()> {
     let corrected_sub = service::subscriber(&corrected)?;
     let odometry_sub = service::subscriber(&odometry)?;
 
+    for old in &overwrite {
+        std::fs::remove_file(old).with_context(|| format!("cannot remove {}", old.display()))?;
+    }
     let mut supervisor = Supervisor::start(specs)?;
     eprintln!("mems-stack: running (namespace {namespace:?}); Ctrl-C stops");
     let (mut raw_stats, mut cor_stats, mut odo_stats) =

@@ -1,8 +1,10 @@
 //! Supervision of the stack's child processes: start in pipeline order, restart a child that
-//! dies (with back-off), clean up what a killed child left in shared memory, give up on a child
-//! that keeps failing right after it starts (a configuration error, such as SCHED_FIFO refused,
-//! that no restart can fix), and stop everything in source-first order so that downstream
-//! stages drain what is in flight.
+//! dies (at once if it ran for [`FAST_EXIT`], else with back-off), clean up what a killed
+//! child left in shared memory, give up on a child that keeps failing right after it starts (a
+//! configuration error, such as SCHED_FIFO refused, that no restart can fix), and stop
+//! everything in source-first order so that downstream stages drain what is in flight. Every
+//! child is killed by the kernel when the stack dies, however it dies (`PR_SET_PDEATHSIG`), so
+//! no stage outlives a kill -9'd stack.
 
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -75,12 +77,38 @@ pub const FAST_EXIT: Duration = Duration::from_secs(2);
 pub const MAX_FAST_EXITS: u32 = 3;
 
 fn spawn(spec: &ChildSpec) -> std::io::Result<Child> {
-    Command::new(&spec.program)
+    use std::os::unix::process::CommandExt;
+    let mut command = Command::new(&spec.program);
+    command
         .args(&spec.args)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
-        .stderr(Stdio::inherit())
-        .spawn()
+        .stderr(Stdio::inherit());
+    // SAFETY: the closure runs in the forked child before exec and calls only prctl(2) and
+    // getppid(2), which are async-signal-safe; it touches no memory of the parent.
+    unsafe { command.pre_exec(die_with_parent(std::process::id())) };
+    command.spawn()
+}
+
+/// The child's side of "dies with the stack": SIGKILL (not SIGTERM: a stopped or blocked child
+/// must die too) when the thread that forked it exits, which for the stack is its main thread
+/// and so the stack itself (prctl(2), PR_SET_PDEATHSIG). If the stack died between the fork and
+/// the prctl, the child has already been re-parented and must not start at all.
+fn die_with_parent(parent: u32) -> impl FnMut() -> std::io::Result<()> + Send + Sync + 'static {
+    move || {
+        // SAFETY: prctl(PR_SET_PDEATHSIG) and getppid have no memory-safety preconditions.
+        unsafe {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            if libc::getppid() as u32 != parent {
+                return Err(std::io::Error::other(
+                    "mems-stack died before its child started",
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 fn describe(status: std::process::ExitStatus) -> String {
@@ -151,8 +179,14 @@ impl Supervisor {
                     events.push(Event::GaveUp { name, status });
                     continue;
                 }
-                c.restart_at = Some(Instant::now() + c.backoff);
-                c.backoff = (c.backoff * 2).min(MAX_BACKOFF);
+                // A child that ran a while is no crash loop: it is restarted at once, which
+                // keeps the gap in its stream (the recorder's file) short.
+                if ran >= FAST_EXIT {
+                    c.restart_at = Some(Instant::now());
+                } else {
+                    c.restart_at = Some(Instant::now() + c.backoff);
+                    c.backoff = (c.backoff * 2).min(MAX_BACKOFF);
+                }
                 events.push(Event::Exited { name, status });
             }
         }
