@@ -88,6 +88,27 @@ pub struct RecordSummary {
     pub interrupted: bool,
 }
 
+impl RecordSummary {
+    /// Keeps `events` and prints a line on standard output for each gap, as
+    /// `mems-record: lost N of SERVICE (seq A..=B)`: the loss count a supervisor (`mems-stack`)
+    /// reads while the recording goes on.
+    fn note(&mut self, events: Vec<RecorderEvent>) {
+        for e in &events {
+            if let (EventKind::Gap, Some(from), Some(to)) = (e.kind, e.from_seq, e.to_seq) {
+                println!(
+                    "{LOST_PREFIX}{} of {} (seq {from}..={to})",
+                    to - from + 1,
+                    e.service
+                );
+            }
+        }
+        self.events.extend(events);
+    }
+}
+
+/// Start of the line [`RecordSummary`] prints for each gap, before the count.
+pub const LOST_PREFIX: &str = "mems-record: lost ";
+
 /// Detects lost sequence numbers and vanished publishers on one service. No I/O: feed it what
 /// was received and how many publishers the service has, and write the events it returns.
 #[derive(Debug, Clone, PartialEq)]
@@ -498,7 +519,7 @@ fn record_loop(
             match scanned {
                 Ok(last) => {
                     for stream in streams.iter_mut() {
-                        summary.events.extend(stream.continues_from(writer, &last)?);
+                        summary.note(stream.continues_from(writer, &last)?);
                     }
                     oldest_unflushed.get_or_insert_with(Instant::now);
                 }
@@ -521,7 +542,7 @@ fn record_loop(
                 if !events.is_empty() || stream.received().1 > before {
                     oldest_unflushed.get_or_insert_with(Instant::now);
                 }
-                summary.events.extend(events);
+                summary.note(events);
             }
         }
         if oldest_unflushed.is_some_and(|t| t.elapsed() >= FLUSH_PERIOD) {
@@ -548,7 +569,7 @@ fn drain(
     let mut any = false;
     for stream in streams.iter_mut() {
         let (_, before) = stream.received();
-        summary.events.extend(stream.drain(writer, MAX_BATCH)?);
+        summary.note(stream.drain(writer, MAX_BATCH)?);
         any |= stream.received().1 > before;
     }
     Ok(any)

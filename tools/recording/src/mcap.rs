@@ -92,7 +92,13 @@ impl Topic for RawImuSample {
                     "lost_before",
                     uint("Samples lost just before this one.", u32::MAX.into()),
                 ),
-                ("reserved", uint("Zero.", u32::MAX.into())),
+                (
+                    "undelivered",
+                    uint(
+                        "Samples the publisher gave up delivering so far because a subscriber stayed full, all subscribers.",
+                        u32::MAX.into(),
+                    ),
+                ),
             ],
         )
     }

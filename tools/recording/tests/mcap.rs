@@ -24,7 +24,7 @@ fn arbitrary_samples(n: usize, seed: u64) -> Vec<RawImuSample> {
         s.stamps.acquired_ns = s.stamps.sample_ns + 1000 + i as u64;
         s.stamps.calibrated_ns = u64::MAX - i as u64;
         s.seq = 1_000_000 + 3 * i as u64;
-        s.reserved = i as u32;
+        s.undelivered = i as u32;
     }
     samples[0].accel_g[0] = -0.0;
     samples

@@ -34,7 +34,7 @@ fn samples(n: u64, rate_hz: u64) -> Vec<RawImuSample> {
             temp_counts: i as i16,
             flags: raw_flags::GYRO_VALID | raw_flags::TEMP_VALID,
             lost_before: (i % 3) as u32,
-            reserved: 0,
+            undelivered: 0,
         })
         .collect()
 }

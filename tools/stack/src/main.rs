@@ -2,6 +2,7 @@
 //! plus the recorder), supervised: a crashed stage is restarted, Ctrl-C stops everything
 //! cleanly, and a status line shows rates, losses, zero-state and position.
 
+mod losses;
 mod supervisor;
 
 use std::io::IsTerminal;
@@ -16,6 +17,7 @@ use ipc_types::{
     CorrectedImuSample, Message, OdometryState, RawImuSample, clock::monotonic_ns, corrected_flags,
     odometry_flags, service,
 };
+use losses::{RecorderLosses, SourceLosses};
 use mems_topic::TopicStats;
 use supervisor::{ChildSpec, Event, Supervisor};
 
@@ -259,20 +261,28 @@ fn main() -> Result<()> {
         name: name.to_string(),
         program: bins.join(program),
         args: args.into_iter().chain(ns_args.clone()).collect(),
+        restart_at_once: false,
+        stdout: None,
     };
 
     // Start order: consumers first, the source last, so nothing is published to nobody.
     let mut specs = Vec::new();
+    let recorder_losses = cli.record.is_some().then(RecorderLosses::default);
+    let mut source = SourceLosses::new(cli.rate);
     if let Some(out) = &cli.record {
-        specs.push(spec(
-            "record",
-            "mems-record",
-            vec![
-                "--out".into(),
-                out.display().to_string(),
-                "--continue".into(),
-            ],
-        ));
+        specs.push(ChildSpec {
+            restart_at_once: true,
+            stdout: recorder_losses.as_ref().map(RecorderLosses::sink),
+            ..spec(
+                "record",
+                "mems-record",
+                vec![
+                    "--out".into(),
+                    out.display().to_string(),
+                    "--continue".into(),
+                ],
+            )
+        });
     }
     specs.push(spec(
         "odometry",
@@ -322,6 +332,7 @@ fn main() -> Result<()> {
     while node.wait(Duration::from_millis(20)).is_ok() {
         while let Some(s) = raw_sub.receive()? {
             observe(&mut raw_stats, s.payload());
+            source.observe(s.payload());
         }
         while let Some(s) = corrected_sub.receive()? {
             observe(&mut cor_stats, s.payload());
@@ -362,9 +373,9 @@ fn main() -> Result<()> {
         }
         if last_status.elapsed() >= Duration::from_secs(1) {
             let line = status_line(
-                &raw_stats,
-                &cor_stats,
-                &odo_stats,
+                &[&raw_stats, &cor_stats, &odo_stats],
+                &source,
+                recorder_losses.as_ref(),
                 zero_state,
                 last_state.as_ref(),
             );
@@ -398,9 +409,9 @@ fn main() -> Result<()> {
     println!(
         "{}",
         status_line(
-            &raw_stats,
-            &cor_stats,
-            &odo_stats,
+            &[&raw_stats, &cor_stats, &odo_stats],
+            &source,
+            recorder_losses.as_ref(),
             zero_state,
             last_state.as_ref()
         )
@@ -421,16 +432,27 @@ fn observe<T: Message>(stats: &mut TopicStats, m: &T) {
     );
 }
 
-/// The status line: rate and losses per topic, the rest verdict of the newest corrected
-/// sample, and the newest live odometry state's position (or why there is none).
+/// The status line: losses at the source (sensor FIFO, acquire restarts), rate and losses
+/// per topic (sequence gaps as the stack receives them; for raw also the samples acquire gave
+/// up for stalled subscribers), what the recording misses per topic (when recording), the rest
+/// verdict of the newest corrected sample, and the newest live odometry state's position (or
+/// why there is none).
 fn status_line(
-    raw: &TopicStats,
-    cor: &TopicStats,
-    odo: &TopicStats,
+    [raw, cor, odo]: &[&TopicStats; 3],
+    source: &SourceLosses,
+    recorder: Option<&RecorderLosses>,
     zero_state: Option<bool>,
     state: Option<&OdometryState>,
 ) -> String {
     let (r, c, o) = (raw.report(), cor.report(), odo.report());
+    let recording = recorder.map_or(String::new(), |rec| {
+        format!(
+            " | recording lost {}/{}/{}",
+            rec.of(service::RAW),
+            rec.of(service::CORRECTED),
+            rec.of(service::ODOMETRY)
+        )
+    });
     let position = match state {
         Some(s) if s.flags & odometry_flags::NO_GYRO != 0 => {
             "no position: the sensor runs without its gyroscope at this rate".to_string()
@@ -448,9 +470,13 @@ fn status_line(
         None => "no odometry yet".to_string(),
     };
     format!(
-        "raw {:.0} Hz lost {} | corrected {:.0} Hz lost {} | odometry {:.0} Hz lost {} | {} | {}",
+        "sensor lost {} + {} across acquire restarts | raw {:.0} Hz lost {} undelivered {} | \
+         corrected {:.0} Hz lost {} | odometry {:.0} Hz lost {}{recording} | {} | {}",
+        source.fifo,
+        source.restarts,
         r.rate_hz,
         r.lost,
+        source.undelivered(),
         c.rate_hz,
         c.lost,
         o.rate_hz,
@@ -559,19 +585,50 @@ mod tests {
                 position_m: [1.5, -2.0, 0.0],
                 ..OdometryState::default()
             };
-            status_line(&stats, &stats, &stats, Some(true), Some(&state))
+            let source = SourceLosses::new(1000);
+            status_line(&[&stats; 3], &source, None, Some(true), Some(&state))
         };
         let aligned = line(odometry_flags::ALIGNED);
         assert!(aligned.contains("pos (+1.50, -2.00, +0.00) m"), "{aligned}");
         let no_gyro = line(odometry_flags::NO_GYRO);
         assert!(no_gyro.contains("no position"), "{no_gyro}");
         assert!(!no_gyro.contains("pos ("), "{no_gyro}");
-        let learning = status_line(&stats, &stats, &stats, None, None);
+        let learning = status_line(&[&stats; 3], &SourceLosses::new(1000), None, None, None);
         assert!(learning.contains("rest detector learning"), "{learning}");
         assert!(
             !learning.contains("at rest") && !learning.contains("moving"),
             "{learning}"
         );
+    }
+
+    #[test]
+    fn the_status_line_shows_losses_at_every_point() {
+        let stats = TopicStats::new();
+        let mut source = SourceLosses::new(1000);
+        let raw = |seq, t_ms: u64, lost_before, undelivered| RawImuSample {
+            seq,
+            stamps: ipc_types::Stamps {
+                sample_ns: t_ms * 1_000_000,
+                ..Default::default()
+            },
+            lost_before,
+            undelivered,
+            ..Default::default()
+        };
+        source.observe(&raw(7, 10, 3, 45));
+        source.observe(&raw(0, 240, 0, 0));
+        let recorder = RecorderLosses::default();
+        recorder.sink()("mems-record: lost 20 of mems/imu/raw (seq 100..=119)");
+        let line = status_line(&[&stats; 3], &source, Some(&recorder), None, None);
+        for needle in [
+            "sensor lost 3 + 229 across acquire restarts",
+            "undelivered 45",
+            "recording lost 20/0/0",
+        ] {
+            assert!(line.contains(needle), "{needle:?} missing from: {line}");
+        }
+        let unrecorded = status_line(&[&stats; 3], &source, None, None, None);
+        assert!(!unrecorded.contains("recording"), "{unrecorded}");
     }
 
     #[test]

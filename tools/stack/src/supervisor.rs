@@ -1,17 +1,22 @@
 //! Supervision of the stack's child processes: start in pipeline order, restart a child that
-//! dies (at once if it ran for [`FAST_EXIT`], else with back-off), clean up what a killed
-//! child left in shared memory, give up on a child that keeps failing right after it starts (a
-//! configuration error, such as SCHED_FIFO refused, that no restart can fix), and stop
-//! everything in source-first order so that downstream stages drain what is in flight. Every
-//! child is killed by the kernel when the stack dies, however it dies (`PR_SET_PDEATHSIG`), so
-//! no stage outlives a kill -9'd stack.
+//! dies (with back-off, or at once if it asks so and ran for [`FAST_EXIT`]), clean up what a
+//! killed child left in shared memory, give up on a child that keeps failing right after it
+//! starts (a configuration error, such as SCHED_FIFO refused, that no restart can fix), and
+//! stop everything in source-first order so that downstream stages drain what is in flight.
+//! Every child is killed by the kernel when the stack dies, however it dies
+//! (`PR_SET_PDEATHSIG`), so no stage outlives a kill -9'd stack.
 
+use std::io::BufRead;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// Receives each line a child prints on its standard output (from a thread of its own).
+pub type LineSink = Arc<dyn Fn(&str) + Send + Sync>;
+
 /// How one child is started.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct ChildSpec {
     /// Short name for messages (e.g. "calibrate").
     pub name: String,
@@ -19,6 +24,13 @@ pub struct ChildSpec {
     pub program: PathBuf,
     /// Its arguments.
     pub args: Vec<String>,
+    /// Restart it at once when it dies after running for [`FAST_EXIT`] (the back-off still
+    /// applies to fast exits). For the recorder, whose downtime is a gap in the recording;
+    /// a publishing stage waits for the back-off, so that the recorder sees its publisher
+    /// gone before the new one appears.
+    pub restart_at_once: bool,
+    /// Where its standard output goes, line by line; `None` discards it.
+    pub stdout: Option<LineSink>,
 }
 
 /// A supervised child and its restart bookkeeping.
@@ -82,12 +94,26 @@ fn spawn(spec: &ChildSpec) -> std::io::Result<Child> {
     command
         .args(&spec.args)
         .stdin(Stdio::null())
-        .stdout(Stdio::null())
+        .stdout(if spec.stdout.is_some() {
+            Stdio::piped()
+        } else {
+            Stdio::null()
+        })
         .stderr(Stdio::inherit());
     // SAFETY: the closure runs in the forked child before exec and calls only prctl(2) and
     // getppid(2), which are async-signal-safe; it touches no memory of the parent.
     unsafe { command.pre_exec(die_with_parent(std::process::id())) };
-    command.spawn()
+    let mut child = command.spawn()?;
+    if let (Some(sink), Some(out)) = (spec.stdout.clone(), child.stdout.take()) {
+        // Ends when the child's end of the pipe closes (it exited).
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(out).lines() {
+                let Ok(line) = line else { break };
+                sink(&line);
+            }
+        });
+    }
+    Ok(child)
 }
 
 /// The child's side of "dies with the stack": SIGKILL (not SIGTERM: a stopped or blocked child
@@ -179,9 +205,7 @@ impl Supervisor {
                     events.push(Event::GaveUp { name, status });
                     continue;
                 }
-                // A child that ran a while is no crash loop: it is restarted at once, which
-                // keeps the gap in its stream (the recorder's file) short.
-                if ran >= FAST_EXIT {
+                if ran >= FAST_EXIT && c.spec.restart_at_once {
                     c.restart_at = Some(Instant::now());
                 } else {
                     c.restart_at = Some(Instant::now() + c.backoff);
@@ -276,6 +300,8 @@ mod tests {
             name: name.into(),
             program: "/bin/sh".into(),
             args: vec!["-c".into(), script.into()],
+            restart_at_once: false,
+            stdout: None,
         }
     }
 
