@@ -1453,6 +1453,7 @@ mod tests {
             EventKind::SeqReset,
             EventKind::PublisherLost,
             EventKind::PublisherBack,
+            EventKind::Segment,
         ];
         let written: Vec<Value> = kinds
             .iter()
