@@ -381,6 +381,8 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
             t_ns: monotonic_ns(),
         };
         writer.write(events, &event, event.t_ns)?;
+        // On disk at once: it makes this file part of the run for the readers.
+        writer.flush()?;
         split.push(event);
     }
     let pose = writer.add_channel::<PoseInFrame>()?;

@@ -1071,7 +1071,8 @@ impl Contents {
 
 /// Reads every message of the known topics of an MCAP recording (raw, truth, corrected,
 /// odometry, robot hints, pose, events), from the file at `path` and then from each of its
-/// successor segments ([`crate::segment`]) as one run, each up to its cut if it was truncated
+/// successor segments ([`crate::segment`]: files named as successors that begin with their
+/// [`EventKind::Segment`] event) as one run, each up to its cut if it was truncated
 /// (reported in [`Contents::segments`], and for the last in [`Contents::truncation`], never
 /// silently).
 ///
@@ -1083,11 +1084,15 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
     let mut contents = Contents::default();
     // The first file is read even if missing, for its error.
     let segments = crate::segment::existing(path);
-    for segment in segments
+    for (n, segment) in segments
         .iter()
         .map(PathBuf::as_path)
         .chain(segments.is_empty().then_some(path))
+        .enumerate()
     {
+        if n > 0 && !continues_run(segment, n)? {
+            break;
+        }
         let truncation = read_segment(segment, &mut contents)?;
         contents.segments.push(SegmentRead {
             path: segment.to_path_buf(),
@@ -1096,6 +1101,24 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
         contents.truncation = truncation;
     }
     Ok(contents)
+}
+
+/// Whether the file at `path` is segment `n` of a run: its first message is the recorder's
+/// [`EventKind::Segment`] event numbered `n` (a file that merely has a successor's name is
+/// not read with the run).
+fn continues_run(path: &Path, n: usize) -> Result<bool> {
+    let reader = Reader::open(path)?;
+    let first = reader.messages()?.next();
+    Ok(match first {
+        Some(Ok(message)) => match message.decode::<RecorderEvent>() {
+            Some(event) => {
+                let event = event?;
+                event.kind == EventKind::Segment && event.from_seq == Some(n as u64)
+            }
+            None => false,
+        },
+        _ => false,
+    })
 }
 
 /// Appends the messages of one file to `contents`; returns its truncation, if any.

@@ -27,8 +27,10 @@ pub fn path(base: &Path, n: u32) -> PathBuf {
     base.with_file_name(name)
 }
 
-/// The segments of the run at `base` that exist, in order: `base`, then its successors up to
-/// the first number that does not exist (none when `base` does not exist).
+/// The files named as segments of the run at `base` that exist, in order: `base`, then its
+/// successors up to the first number that does not exist (none when `base` does not exist).
+/// A successor is part of the run only if it begins with its segment event (see
+/// [`crate::mcap::read_all`]).
 pub fn existing(base: &Path) -> Vec<PathBuf> {
     (0..)
         .map(|n| path(base, n))
@@ -61,7 +63,13 @@ pub fn check_target(base: &Path, force: bool) -> Result<Vec<PathBuf>> {
     if base.is_dir() {
         return Err(fail("is a directory".into()));
     }
-    let existing = existing(base);
+    // Successors count even without `base`: a new run would skip their numbers.
+    let existing: Vec<PathBuf> = base
+        .exists()
+        .then(|| base.to_path_buf())
+        .into_iter()
+        .chain((1..).map(|n| path(base, n)).take_while(|p| p.exists()))
+        .collect();
     if !existing.is_empty() && !force {
         let names: Vec<String> = existing.iter().map(|p| p.display().to_string()).collect();
         return Err(fail(format!(
@@ -123,6 +131,10 @@ mod tests {
             vec![base.clone(), path(&base, 1)]
         );
         assert_eq!(next_free(&base), (2, path(&base, 2)));
+        // A successor alone is refused too.
+        std::fs::remove_file(&base).unwrap();
+        let err = check_target(&base, false).unwrap_err().to_string();
+        assert!(err.contains("run.1.mcap"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -529,7 +529,14 @@ fn a_run_continues_in_its_successor_segment() {
     assert_eq!(rec.samples, expected);
     let last = recording::mcap::last_seqs(&base).unwrap();
     assert_eq!(last, vec![(ipc_types::service::RAW, samples[99].seq)]);
-    for p in [&base, &second] {
+
+    // A file that only has a successor's name (no segment event first) is not part of the run.
+    let third = segment::path(&base, 2);
+    write(&third, &samples[..10], &truth[..10], 10);
+    let contents = read_all(&base).unwrap();
+    assert_eq!(contents.segments.len(), 2);
+    assert_eq!(contents.raw, expected);
+    for p in [&base, &second, &third] {
         std::fs::remove_file(p).unwrap();
     }
 }

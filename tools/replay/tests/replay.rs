@@ -358,13 +358,28 @@ fn a_bad_csv_line_is_reported_with_file_line_and_field() {
 /// recorded sample, in order, once.
 #[test]
 fn a_run_in_two_segment_files_is_replayed_as_one() {
-    use recording::mcap::Writer;
+    use recording::mcap::{EventKind, RecorderEvent, Writer};
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"));
     let base = dir.join(format!("replay-segments-{}.mcap", std::process::id()));
     let second = recording::segment::path(&base, 1);
     let sent = samples(1000, 1000);
-    for (path, part) in [(&base, &sent[..400]), (&second, &sent[450..])] {
+    for (n, (path, part)) in [(&base, &sent[..400]), (&second, &sent[450..])]
+        .into_iter()
+        .enumerate()
+    {
         let mut writer = Writer::create(path).unwrap();
+        if n > 0 {
+            // What a restarted recorder writes first.
+            let events = writer.add_channel::<RecorderEvent>().unwrap();
+            let split = RecorderEvent {
+                kind: EventKind::Segment,
+                service: String::new(),
+                from_seq: Some(n as u64),
+                to_seq: Some(n as u64),
+                t_ns: 0,
+            };
+            writer.write(events, &split, 0).unwrap();
+        }
         let raw = writer.add_channel::<RawImuSample>().unwrap();
         for s in part {
             writer.write(raw, s, s.stamps.sample_ns).unwrap();
