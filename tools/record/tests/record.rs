@@ -146,8 +146,10 @@ fn sigkilled_recorder_loses_at_most_100_ms() {
         std::os::unix::process::ExitStatusExt::signal(&status),
         Some(libc::SIGKILL)
     );
-    let (status, stdout) = replay.wait(WAIT);
-    assert!(status.success(), "mems-replay failed: {stdout}");
+    // The replay may exit non-zero: once the dead recorder's node is cleaned up (by any
+    // iceoryx2 process on the machine), it counts what reached no subscriber.
+    let (_, stdout) = replay.wait(WAIT);
+    assert!(stdout.contains("sent 4000 of 4000 samples"), "{stdout}");
 
     let recording = recording::load_raw(&mcap).unwrap();
     let truncation = recording
