@@ -128,8 +128,15 @@ pub fn config_for_rate(rate_hz: u32) -> Result<driver::Config, String> {
 /// still finds room in the FIFO, while each read still moves several frames (the fixed cost of
 /// a read, INT_STATUS and FIFO_COUNT, is about 0.2 ms of bus time at 400 kHz I2C).
 pub fn default_read_interval_ns(config: &driver::Config) -> u64 {
+    fifo_fill_ns(config) / 8
+}
+
+/// The time the 512-byte FIFO takes to fill from empty for `config`, ns (10.6 ms at 4 kHz
+/// accelerometer-only, 36 ms at 1 kHz): the longest the acquisition loop may be away from the
+/// sensor, waiting on anything, before samples are lost.
+pub fn fifo_fill_ns(config: &driver::Config) -> u64 {
     let frames = reg::FIFO_SIZE / config.frame_len();
-    (frames as f64 / config.fifo_rate_hz() * 1e9 / 8.0) as u64
+    (frames as f64 / config.fifo_rate_hz() * 1e9) as u64
 }
 
 /// Counters of the acquisition loop.

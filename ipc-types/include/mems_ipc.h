@@ -74,7 +74,7 @@ typedef struct mems_raw_imu_sample {
     int16_t temp_counts;
     uint16_t flags;
     uint32_t lost_before;
-    uint32_t reserved;
+    uint32_t undelivered; /* samples given up for stalled subscribers so far */
 } mems_raw_imu_sample;
 
 /* One calibrated sample, sensor frame, SI units. */

@@ -107,7 +107,7 @@ class RawImuSample(ctypes.Structure):
         ("temp_counts", ctypes.c_int16),
         ("flags", ctypes.c_uint16),
         ("lost_before", ctypes.c_uint32),
-        ("reserved", ctypes.c_uint32),
+        ("undelivered", ctypes.c_uint32),
     ]
 
     @staticmethod

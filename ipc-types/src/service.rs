@@ -12,8 +12,8 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// Raw samples from the acquisition (or replay) process: [`crate::RawImuSample`].
@@ -148,34 +148,84 @@ pub fn stalled_discards() -> u64 {
 pub fn publisher<T: core::fmt::Debug + ZeroCopySend>(
     service: &PortFactory<ipc::Service, T, ()>,
 ) -> Result<Publisher<ipc::Service, T, ()>, ServiceError> {
-    // Receiver port id -> when it was last given up on.
-    let stalled: Mutex<Vec<(u128, Instant)>> = Mutex::new(Vec::new());
+    Ok(publisher_waiting_at_most(service, STALL_TIMEOUT)?.0)
+}
+
+/// Samples a publisher gave up delivering, per subscriber port (see
+/// [`publisher_waiting_at_most`]). Cloning shares the counts.
+#[derive(Debug, Clone, Default)]
+pub struct Undelivered(Arc<Mutex<Vec<(u128, u64)>>>);
+
+impl Undelivered {
+    /// (subscriber port id, samples given up for it), in the order the subscribers stalled.
+    pub fn per_subscriber(&self) -> Vec<(u128, u64)> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    /// Samples given up, summed over subscribers.
+    pub fn total(&self) -> u64 {
+        let counts = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        counts.iter().map(|(_, n)| n).sum()
+    }
+
+    fn count(&self, port: u128) {
+        let mut counts = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        match counts.iter_mut().find(|(id, _)| *id == port) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((port, 1)),
+        }
+    }
+}
+
+/// [`publisher`], but waiting at most `wait` for a subscriber whose buffer is full before
+/// giving the sample up for it (the source, whose sensor FIFO overflows if it waits longer,
+/// passes a fraction of the FIFO's fill time), and counting what it gave up per subscriber in
+/// the returned [`Undelivered`] (and in [`stalled_discards`]). `wait` is per stalled
+/// subscriber; while one stays stalled (it took no sample within [`STALL_TIMEOUT`] of the last
+/// sample given up for it), later samples for it are given up at once.
+pub fn publisher_waiting_at_most<T: core::fmt::Debug + ZeroCopySend>(
+    service: &PortFactory<ipc::Service, T, ()>,
+    wait: Duration,
+) -> Result<(Publisher<ipc::Service, T, ()>, Undelivered), ServiceError> {
+    let undelivered = Undelivered::default();
+    let counts = undelivered.clone();
+    // Receiver port id -> when it was last given up on. Room for every subscriber up front,
+    // so that the hot path does not allocate.
+    let stalled: Mutex<Vec<(u128, Instant)>> = Mutex::new(Vec::with_capacity(MAX_SUBSCRIBERS));
+    counts
+        .0
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .reserve(MAX_SUBSCRIBERS);
     let handler = move |info: &BackpressureInfo| -> BackpressureAction {
         let mut stalled = stalled.lock().unwrap_or_else(|e| e.into_inner());
         let recently = stalled
             .iter()
             .any(|(id, at)| *id == info.receiver_port_id && at.elapsed() < STALL_TIMEOUT);
-        if !recently && info.elapsed_time < STALL_TIMEOUT {
+        if !recently && info.elapsed_time < wait {
             return BackpressureAction::Retry;
         }
         if !recently {
             eprintln!(
-                "mems: subscriber port {:#x} has not taken a sample for {:?}: discarding for it",
-                info.receiver_port_id, STALL_TIMEOUT
+                "mems: subscriber port {:#x} has not taken a sample for {wait:?}: discarding \
+                 for it",
+                info.receiver_port_id
             );
         }
         stalled.retain(|(id, _)| *id != info.receiver_port_id);
         stalled.push((info.receiver_port_id, Instant::now()));
         STALLED_DISCARDS.fetch_add(1, Ordering::Relaxed);
+        counts.count(info.receiver_port_id);
         BackpressureAction::DiscardData
     };
-    service
+    let publisher = service
         .publisher_builder()
         .max_loaned_samples(MAX_LOANED)
         .backpressure_strategy(BackpressureStrategy::RetryUntilDelivered)
         .set_backpressure_handler(handler)
         .create()
-        .map_err(|e| ServiceError(format!("cannot create publisher: {e:?}")))
+        .map_err(|e| ServiceError(format!("cannot create publisher: {e:?}")))?;
+    Ok((publisher, undelivered))
 }
 
 /// A publisher for a robot controller's hints ([`HINT`]): it never blocks. A subscriber whose
@@ -249,12 +299,11 @@ mod tests {
         let service = open::<RawImuSample>(&node, &name).unwrap();
         let stuck = subscriber(&service).unwrap();
         let live = subscriber(&service).unwrap();
-        let publisher = publisher(&service).unwrap();
+        let (publisher, undelivered) = publisher_waiting_at_most(&service, STALL_TIMEOUT).unwrap();
         // A subscriber's side of the connection is established by its first receive: the
         // stuck one has been receiving, then stops (as one that is killed).
         assert!(stuck.receive().unwrap().is_none());
         let extra = 10;
-        let before = stalled_discards();
         let start = Instant::now();
         let mut got = 0u64;
         for seq in 0..(SUBSCRIBER_BUFFER as u64 + extra) {
@@ -271,11 +320,51 @@ mod tests {
         }
         let waited = start.elapsed();
         assert_eq!(got, SUBSCRIBER_BUFFER as u64 + extra);
-        assert_eq!(stalled_discards() - before, extra);
+        assert_eq!(undelivered.total(), extra);
         assert!(waited >= STALL_TIMEOUT, "waited {waited:?}");
         assert!(
             waited < 2 * STALL_TIMEOUT,
             "stalled more than once: {waited:?}"
         );
+    }
+
+    /// With a bounded wait, a stalled subscriber's samples are given up and counted for that
+    /// subscriber alone: the live one receives all of them and has nothing counted.
+    #[test]
+    fn samples_given_up_are_counted_per_subscriber() {
+        let node = node().unwrap();
+        let name = full_name(&format!("bounded-{}", std::process::id()), RAW);
+        let service = open::<RawImuSample>(&node, &name).unwrap();
+        let stuck = subscriber(&service).unwrap();
+        let live = subscriber(&service).unwrap();
+        let (publisher, undelivered) =
+            publisher_waiting_at_most(&service, Duration::from_millis(5)).unwrap();
+        assert!(stuck.receive().unwrap().is_none());
+        let extra = 25;
+        let mut got = 0u64;
+        for seq in 0..(SUBSCRIBER_BUFFER as u64 + extra) {
+            publisher
+                .send_copy(RawImuSample {
+                    seq,
+                    ..Default::default()
+                })
+                .unwrap();
+            while let Some(s) = live.receive().unwrap() {
+                assert_eq!(s.seq, got);
+                got += 1;
+            }
+        }
+        assert_eq!(got, SUBSCRIBER_BUFFER as u64 + extra);
+        let counts = undelivered.per_subscriber();
+        assert_eq!(counts.len(), 1, "{counts:?}");
+        assert_eq!(counts[0].1, extra);
+        assert_eq!(undelivered.total(), extra);
+        // The stalled subscriber still holds the samples that fitted, in order.
+        let mut held = 0u64;
+        while let Some(s) = stuck.receive().unwrap() {
+            assert_eq!(s.seq, held);
+            held += 1;
+        }
+        assert_eq!(held, SUBSCRIBER_BUFFER as u64);
     }
 }

@@ -71,8 +71,12 @@ pub struct RawImuSample {
     pub flags: u16,
     /// Number of sensor samples lost immediately before this one (0 when none).
     pub lost_before: u32,
-    /// Zero; keeps the layout free of implicit padding.
-    pub reserved: u32,
+    /// Samples the publisher has given up delivering so far, before this one, because a
+    /// subscriber's buffer stayed full (a stalled subscriber), summed over subscribers and
+    /// saturating; 0 from publishers that do not count (a replay). Recordings made before
+    /// this field was counted name it `reserved` and hold 0.
+    #[serde(alias = "reserved")]
+    pub undelivered: u32,
 }
 
 /// Bits of [`CorrectedImuSample::flags`].
@@ -341,7 +345,7 @@ mod tests {
         assert_eq!(offset_of!(RawImuSample, temp_counts), 108);
         assert_eq!(offset_of!(RawImuSample, flags), 110);
         assert_eq!(offset_of!(RawImuSample, lost_before), 112);
-        assert_eq!(offset_of!(RawImuSample, reserved), 116);
+        assert_eq!(offset_of!(RawImuSample, undelivered), 116);
     }
 
     #[test]

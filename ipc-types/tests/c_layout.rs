@@ -52,7 +52,7 @@ fn facts() -> Vec<Fact> {
             temp_counts,
             flags,
             lost_before,
-            reserved
+            undelivered
         ]
     );
     layout_facts!(

@@ -39,7 +39,7 @@ fn python_ctypes_match_rust_layout() {
                 temp_counts,
                 flags,
                 lost_before,
-                reserved
+                undelivered
             ]
         ),
         rust_line!(

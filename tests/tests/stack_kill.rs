@@ -8,12 +8,19 @@
 //! topic and the recorder's `gap`, `publisher_lost` and `publisher_back` events naming exactly
 //! those ranges; and once the stack has exited, nothing of the killed processes' iceoryx2 nodes
 //! remains (no node record, no `/dev/shm` segment of their ports, no service of the namespace).
+//!
+//! And `mems-stack` itself killed with SIGKILL: its children die with it (none is left alive;
+//! the time they took is printed, its figure is measured by the command in
+//! docs/acquisition.md); a new stack refuses to record over the recording left there, before
+//! it starts anything, leaving the file as it was; and the next stack that starts removes what
+//! the killed one left: its and its children's iceoryx2 nodes, their shared memory and
+//! services, and its work directory.
 
 use std::time::Duration;
 
 use integration_tests::{
-    NodeFootprint, Proc, child_named, leftovers, missing_ranges, nodes_of, path_arg,
-    service_exists, unique_namespace, wait_until,
+    NodeFootprint, Proc, child_named, children, leftovers, missing_ranges, nodes_of, path_arg,
+    run_ok, service_exists, unique_namespace, wait_until,
 };
 use ipc_types::{OdometryState, service};
 use recording::mcap::{EventKind, RecorderEvent, read_all};
@@ -188,6 +195,95 @@ fn killed_stages_are_restarted_peers_keep_running_and_the_gap_is_recorded() {
         service::ODOMETRY,
         service::HINT,
     ] {
+        assert!(!service_exists(&ns, base), "{base} left behind");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Whether process `pid` still runs (a zombie does not: it is dead, waiting to be reaped).
+fn alive(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| {
+        stat.rsplit_once(')')
+            .is_some_and(|(_, rest)| !rest.trim_start().starts_with('Z'))
+    })
+}
+
+#[test]
+fn a_killed_stack_takes_its_children_and_the_next_start_cleans_up() {
+    let ns = unique_namespace("stackkill9");
+    let dir = std::env::temp_dir().join(&ns);
+    std::fs::create_dir_all(&dir).unwrap();
+    let rec = dir.join("run.mcap");
+    let stack = Proc::spawn(
+        "mems-stack",
+        &["--record", path_arg(&rec), "--namespace", &ns],
+    );
+    wait_until(WAIT, "raw samples recorded", || {
+        last_seq(&rec, service::RAW) > 500
+    });
+    let kids = children(stack.pid());
+    let mut exes: Vec<&str> = kids.iter().map(|(_, exe)| exe.as_str()).collect();
+    exes.sort_unstable();
+    assert_eq!(
+        exes,
+        [
+            "mems-acquire",
+            "mems-calibrate",
+            "mems-odometry",
+            "mems-record"
+        ]
+    );
+    let pids: Vec<u32> = kids
+        .iter()
+        .map(|(pid, _)| *pid)
+        .chain([stack.pid()])
+        .collect();
+    let mut nodes = Vec::new();
+    wait_until(WAIT, "every process's iceoryx2 node", || {
+        nodes = pids.iter().flat_map(|&pid| nodes_of(pid)).collect();
+        nodes.len() == pids.len()
+    });
+    let work = std::env::temp_dir().join(format!("mems-stack-{}", stack.pid()));
+    assert!(
+        work.is_dir(),
+        "{} exists while the stack runs",
+        work.display()
+    );
+
+    stack.signal(libc::SIGKILL);
+    let killed = std::time::Instant::now();
+    let (status, _) = stack.wait(WAIT);
+    assert_eq!(
+        std::os::unix::process::ExitStatusExt::signal(&status),
+        Some(libc::SIGKILL)
+    );
+    wait_until(WAIT, "every child of the killed stack dead", || {
+        kids.iter().all(|(pid, _)| !alive(*pid))
+    });
+    eprintln!(
+        "the killed stack's children were gone {:.0} ms after the kill",
+        killed.elapsed().as_secs_f64() * 1e3
+    );
+
+    // A stack that cannot record where asked stops before anything starts, file untouched.
+    let left = std::fs::read(&rec).unwrap();
+    let refused = Proc::spawn(
+        "mems-stack",
+        &["--record", path_arg(&rec), "--namespace", &ns],
+    );
+    let (status, _) = refused.wait(WAIT);
+    assert!(!status.success(), "an existing recording is refused");
+    assert_eq!(std::fs::read(&rec).unwrap(), left, "and left as it was");
+
+    run_ok("mems-stack", &["--duration", "1", "--namespace", &ns]);
+    for node in &nodes {
+        assert_eq!(leftovers(node), Vec::<std::path::PathBuf>::new());
+    }
+    for pid in pids {
+        assert_eq!(nodes_of(pid), [], "node of process {pid} left behind");
+    }
+    assert!(!work.exists(), "{} left behind", work.display());
+    for base in [service::RAW, service::CORRECTED, service::ODOMETRY] {
         assert!(!service_exists(&ns, base), "{base} left behind");
     }
     std::fs::remove_dir_all(&dir).unwrap();

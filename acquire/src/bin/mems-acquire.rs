@@ -3,7 +3,9 @@
 
 use std::time::{Duration, Instant};
 
-use acquire::acquisition::{Acquisition, SourceSpec, config_for_rate, default_read_interval_ns};
+use acquire::acquisition::{
+    Acquisition, SourceSpec, config_for_rate, default_read_interval_ns, fifo_fill_ns,
+};
 use acquire::clock::{Clock, MonotonicClock, SimClock};
 use acquire::driver::Mpu9250;
 use acquire::pool::BlockPool;
@@ -207,7 +209,11 @@ fn run<I2C: I2c, C: Clock>(
     let name = service::full_name(&namespace, service::RAW);
     let node = service::node()?;
     let raw = service::open::<RawImuSample>(&node, &name)?;
-    let publisher = service::publisher(&raw)?;
+    // A subscriber whose buffer is full (stopped, hung) is waited for at most an eighth of the
+    // FIFO's fill time, then its samples are given up and counted for it: the loop never waits
+    // on a subscriber for as long as the FIFO lasts, so the sensor loses nothing for it.
+    let stall_wait = Duration::from_nanos(fifo_fill_ns(&config) / 8);
+    let (publisher, undelivered) = service::publisher_waiting_at_most(&raw, stall_wait)?;
     // Wakes the subscribers after each send (they sleep on the event service).
     let waker = ipc_types::wake::Waker::new(&node, &name)?;
 
@@ -226,8 +232,12 @@ fn run<I2C: I2c, C: Clock>(
         let sample = publisher
             .loan_uninit()
             .map_err(|e| anyhow::anyhow!("cannot loan a sample on {name}: {e:?}"))?;
+        let counted = RawImuSample {
+            undelivered: u32::try_from(undelivered.total()).unwrap_or(u32::MAX),
+            ..*s
+        };
         sample
-            .write_payload(*s)
+            .write_payload(counted)
             .send()
             .map_err(|e| anyhow::anyhow!("cannot send on {name}: {e:?}"))?;
         waker.notify()?;
@@ -277,9 +287,14 @@ fn run<I2C: I2c, C: Clock>(
             driver.pair_mismatches
         );
     }
+    let per_subscriber: Vec<String> = undelivered
+        .per_subscriber()
+        .iter()
+        .map(|(port, n)| format!("{n} for subscriber port {port:#x}"))
+        .collect();
     eprintln!(
         "mems-acquire: published {} samples in {:.1} s; reads {}, failed {}, overflows {}, \
-         gaps {}, lost {}, bus errors {}, re-inits {}; discarded for stalled subscribers {}; \
+         gaps {}, lost {}, bus errors {}, re-inits {}; discarded for stalled subscribers {}{}; \
          small-block pool: peak {} of 1024 blocks, {} requests found it empty",
         stats.published,
         start.elapsed().as_secs_f64(),
@@ -290,7 +305,12 @@ fn run<I2C: I2c, C: Clock>(
         driver.lost_samples,
         driver.bus_errors,
         driver.reinits,
-        service::stalled_discards(),
+        undelivered.total(),
+        if per_subscriber.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", per_subscriber.join(", "))
+        },
         ALLOCATOR.peak_blocks(),
         ALLOCATOR.fallbacks()
     );

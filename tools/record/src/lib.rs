@@ -7,11 +7,18 @@
 //! system whenever its oldest message is [`FLUSH_PERIOD`] old, so a killed recorder loses at
 //! most that much; SIGINT and SIGTERM (iceoryx2's signal handler, seen through `Node::wait`)
 //! end the recording cleanly with its summary and footer.
+//!
+//! An existing recording is never overwritten unless asked ([`Target::Overwrite`]). A recorder
+//! restarted by a supervisor continues the run ([`Target::Continue`]) in the next segment file
+//! ([`recording::segment`]), which starts with a `segment` event; once the previous segments
+//! have been scanned for their last sequence numbers, the numbers lost across the split are
+//! written as `gap` events.
 
 #![warn(missing_docs)]
 
 use std::ops::ControlFlow;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
@@ -23,6 +30,7 @@ use ipc_types::clock::monotonic_ns;
 use ipc_types::wake::{self, Exit, WaitMode};
 use ipc_types::{CorrectedImuSample, Message, OdometryState, RawImuSample, RobotHint, service};
 use recording::mcap::{Channel, EventKind, PoseInFrame, RecorderEvent, Topic, Writer};
+use recording::segment;
 
 /// Age of the oldest unflushed message at which the recorder closes the current chunk and
 /// hands it to the operating system: the most a killed recorder can lose. Half the 100 ms the
@@ -38,11 +46,25 @@ pub const MAX_BATCH: usize = service::SUBSCRIBER_BUFFER;
 /// each service's publisher count is compared with the last one.
 pub const PUBLISHER_CHECK_PERIOD: Duration = Duration::from_millis(100);
 
+/// What to do with a recording already at the output path.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Target {
+    /// Refuse to start if a recording (any segment of a run) is there.
+    New,
+    /// Remove the run that is there (every segment) and record a new one.
+    Overwrite,
+    /// Continue the run that is there in its next segment file (a restarted recorder); start
+    /// it if there is none.
+    Continue,
+}
+
 /// What to record and for how long.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RecordOptions {
-    /// The MCAP file to write (created or truncated).
+    /// The MCAP file of the run (its first segment).
     pub out: PathBuf,
+    /// What to do with a recording already there.
+    pub target: Target,
     /// Namespace prefix of the service names ("" for none); topics in the file are the base names.
     pub namespace: String,
     /// Stop after this long; `None` records until SIGINT or SIGTERM.
@@ -52,6 +74,10 @@ pub struct RecordOptions {
 /// What was recorded.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RecordSummary {
+    /// The file written (the run's first file, or the segment that continues it).
+    pub path: PathBuf,
+    /// Its segment number (0: the run's first file).
+    pub segment: u32,
     /// Messages per service (base name) received and written, in subscription order.
     pub received: Vec<(&'static str, u64)>,
     /// Events written on [`recording::mcap::EVENTS_TOPIC`].
@@ -62,12 +88,34 @@ pub struct RecordSummary {
     pub interrupted: bool,
 }
 
+impl RecordSummary {
+    /// Keeps `events` and prints a line on standard output for each gap, as
+    /// `mems-record: lost N of SERVICE (seq A..=B)`: the loss count a supervisor (`mems-stack`)
+    /// reads while the recording goes on.
+    fn note(&mut self, events: Vec<RecorderEvent>) {
+        for e in &events {
+            if let (EventKind::Gap, Some(from), Some(to)) = (e.kind, e.from_seq, e.to_seq) {
+                println!(
+                    "{LOST_PREFIX}{} of {} (seq {from}..={to})",
+                    to - from + 1,
+                    e.service
+                );
+            }
+        }
+        self.events.extend(events);
+    }
+}
+
+/// Start of the line [`RecordSummary`] prints for each gap, before the count.
+pub const LOST_PREFIX: &str = "mems-record: lost ";
+
 /// Detects lost sequence numbers and vanished publishers on one service. No I/O: feed it what
 /// was received and how many publishers the service has, and write the events it returns.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SeqTracker {
     service: &'static str,
     last_seq: Option<u64>,
+    first_seq: Option<u64>,
     had_publisher: bool,
     lost: bool,
 }
@@ -78,6 +126,7 @@ impl SeqTracker {
         Self {
             service,
             last_seq: None,
+            first_seq: None,
             had_publisher: false,
             lost: false,
         }
@@ -130,7 +179,27 @@ impl SeqTracker {
         });
         events.extend(jump);
         self.last_seq = Some(seq);
+        self.first_seq.get_or_insert(seq);
         events
+    }
+
+    /// Accounts for the previous segment of the run having ended at sequence number `previous`
+    /// (a restarted recorder learns it after it has started): the numbers between it and the
+    /// first one received here are a [`EventKind::Gap`] (or a [`EventKind::SeqReset`] if the
+    /// sequence went back). Before any message here, the first one will report it instead.
+    pub fn continues_from(&mut self, previous: u64, t_ns: u64) -> Option<RecorderEvent> {
+        let Some(first) = self.first_seq else {
+            self.last_seq = Some(previous);
+            return None;
+        };
+        let expected = previous.wrapping_add(1);
+        if first > expected {
+            Some(self.event(EventKind::Gap, Some(expected), Some(first - 1), t_ns))
+        } else if first < expected {
+            Some(self.event(EventKind::SeqReset, Some(expected), Some(first), t_ns))
+        } else {
+            None
+        }
     }
 
     /// Accounts for the service's publisher count at `t_ns`: [`EventKind::PublisherLost`] when
@@ -159,6 +228,13 @@ trait Stream {
     /// Compares the publisher count with the last one; returns the events written (with those
     /// of the messages drained on the way).
     fn check_publishers(&mut self, writer: &mut Writer) -> Result<Vec<RecorderEvent>>;
+    /// Writes what was lost since the previous segment ended, given the last sequence number
+    /// of each service there (see [`SeqTracker::continues_from`]); returns the events written.
+    fn continues_from(
+        &mut self,
+        writer: &mut Writer,
+        previous: &[(&'static str, u64)],
+    ) -> Result<Vec<RecorderEvent>>;
     /// The service's base name and the messages received so far.
     fn received(&self) -> (&'static str, u64);
     /// The full service name.
@@ -259,6 +335,22 @@ impl<T: Topic + Message> Stream for Subscription<T> {
         Ok(events)
     }
 
+    fn continues_from(
+        &mut self,
+        writer: &mut Writer,
+        previous: &[(&'static str, u64)],
+    ) -> Result<Vec<RecorderEvent>> {
+        let Some(&(_, last)) = previous.iter().find(|(topic, _)| *topic == T::TOPIC) else {
+            return Ok(Vec::new());
+        };
+        let now = monotonic_ns();
+        let event = self.tracker.continues_from(last, now);
+        if let Some(event) = &event {
+            writer.write(self.events, event, now)?;
+        }
+        Ok(event.into_iter().collect())
+    }
+
     fn name(&self) -> &str {
         &self.name
     }
@@ -276,8 +368,23 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
         .name(&node_name)
         .create::<ipc::Service>()
         .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
-    let mut writer = Writer::create(&options.out)?;
+    let (number, path) = open_target(&options.out, options.target)?;
+    let mut writer = Writer::create_new(&path)?;
     let events = writer.add_channel::<RecorderEvent>()?;
+    let mut split = Vec::new();
+    if number > 0 {
+        let event = RecorderEvent {
+            kind: EventKind::Segment,
+            service: String::new(),
+            from_seq: Some(u64::from(number)),
+            to_seq: Some(u64::from(number)),
+            t_ns: monotonic_ns(),
+        };
+        writer.write(events, &event, event.t_ns)?;
+        // On disk at once: it makes this file part of the run for the readers.
+        writer.flush()?;
+        split.push(event);
+    }
     let pose = writer.add_channel::<PoseInFrame>()?;
     let ns = options.namespace.as_str();
     // One line per service; a new service is one more line here.
@@ -310,13 +417,23 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
     ];
 
     let start = Instant::now();
+    let previous = (number > 0).then(|| scan_previous(&options.out, number));
     let mut summary = RecordSummary {
+        path,
+        segment: number,
         received: Vec::new(),
-        events: Vec::new(),
+        events: split,
         elapsed: Duration::ZERO,
         interrupted: false,
     };
-    let looped = record_loop(&node, &mut writer, &mut streams, options, &mut summary);
+    let looped = record_loop(
+        &node,
+        &mut writer,
+        &mut streams,
+        options,
+        previous,
+        &mut summary,
+    );
     // Finish the file even after an error, so that it keeps its summary and footer.
     let finished = writer.finish();
     looped?;
@@ -326,15 +443,66 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
     Ok(summary)
 }
 
+/// The segment number and file to write for `out` and `target`, having removed the run there
+/// for [`Target::Overwrite`]; errors (naming the file) for [`Target::New`] when a recording is
+/// there.
+fn open_target(out: &Path, target: Target) -> Result<(u32, PathBuf)> {
+    match target {
+        Target::New => {
+            segment::check_target(out, false)?;
+            Ok((0, out.to_path_buf()))
+        }
+        Target::Overwrite => {
+            for old in segment::check_target(out, true)? {
+                std::fs::remove_file(&old)
+                    .with_context(|| format!("cannot remove {}", old.display()))?;
+            }
+            Ok((0, out.to_path_buf()))
+        }
+        Target::Continue => Ok(segment::next_free(out)),
+    }
+}
+
+/// What [`scan_previous`] finds: the last sequence number of each service (base name) before
+/// the split.
+type PreviousScan = recording::Result<Vec<(&'static str, u64)>>;
+
+/// Last sequence numbers of the run before segment `number`, per service, from a thread (the
+/// recorder subscribes and records meanwhile): the newest segment that holds each service.
+fn scan_previous(out: &Path, number: u32) -> mpsc::Receiver<PreviousScan> {
+    let (tx, rx) = mpsc::channel();
+    let out = out.to_path_buf();
+    std::thread::spawn(move || {
+        let scan = || {
+            let mut found: Vec<(&'static str, u64)> = Vec::new();
+            for n in (0..number).rev() {
+                for (topic, seq) in recording::mcap::last_seqs(segment::path(&out, n))? {
+                    if !found.iter().any(|(t, _)| *t == topic) {
+                        found.push((topic, seq));
+                    }
+                }
+                if found.len() >= 4 {
+                    break;
+                }
+            }
+            Ok(found)
+        };
+        let _ = tx.send(scan());
+    });
+    rx
+}
+
 /// Drains, writes, checks publishers and flushes until the duration has passed or a signal
 /// arrived; records events and `interrupted` in `summary`. Sleeps on the services' events
 /// (their publishers notify after each send), waking at least every [`POLL_PERIOD`] for the
-/// flush and the publisher check.
+/// flush and the publisher check. Once `previous` delivers the previous segments' last
+/// sequence numbers, writes what was lost across the split.
 fn record_loop(
     node: &Node<ipc::Service>,
     writer: &mut Writer,
     streams: &mut [Box<dyn Stream>],
     options: &RecordOptions,
+    mut previous: Option<mpsc::Receiver<PreviousScan>>,
     summary: &mut RecordSummary,
 ) -> Result<()> {
     let start = Instant::now();
@@ -347,6 +515,21 @@ fn record_loop(
     let exit = wake::serve_loop(node, &listeners, POLL_PERIOD, || -> Result<_> {
         if drain(writer, streams, summary)? {
             oldest_unflushed.get_or_insert_with(Instant::now);
+        }
+        if let Some(scanned) = previous.as_ref().and_then(|rx| rx.try_recv().ok()) {
+            previous = None;
+            match scanned {
+                Ok(last) => {
+                    for stream in streams.iter_mut() {
+                        summary.note(stream.continues_from(writer, &last)?);
+                    }
+                    oldest_unflushed.get_or_insert_with(Instant::now);
+                }
+                Err(e) => eprintln!(
+                    "mems-record: cannot read the previous segment ({e}): the split is \
+                     recorded, the numbers lost across it are not"
+                ),
+            }
         }
         if options.duration.is_some_and(|d| start.elapsed() >= d) {
             return Ok(ControlFlow::Break(()));
@@ -361,7 +544,7 @@ fn record_loop(
                 if !events.is_empty() || stream.received().1 > before {
                     oldest_unflushed.get_or_insert_with(Instant::now);
                 }
-                summary.events.extend(events);
+                summary.note(events);
             }
         }
         if oldest_unflushed.is_some_and(|t| t.elapsed() >= FLUSH_PERIOD) {
@@ -388,7 +571,7 @@ fn drain(
     let mut any = false;
     for stream in streams.iter_mut() {
         let (_, before) = stream.received();
-        summary.events.extend(stream.drain(writer, MAX_BATCH)?);
+        summary.note(stream.drain(writer, MAX_BATCH)?);
         any |= stream.received().1 > before;
     }
     Ok(any)
@@ -475,6 +658,34 @@ mod tests {
         let lost = t.publishers(0, 3).unwrap();
         assert_eq!(lost.kind, EventKind::PublisherLost);
         assert_eq!((lost.from_seq, lost.to_seq), (Some(1), Some(1)));
+    }
+
+    /// A restarted recorder learns where the previous segment ended after it has started:
+    /// the numbers in between are a gap, whether or not a message came first.
+    #[test]
+    fn the_split_between_segments_is_a_gap() {
+        let mut t = SeqTracker::new(service::RAW);
+        t.observe(120, false, 1);
+        t.observe(121, false, 2);
+        let gap = t.continues_from(99, 3).unwrap();
+        assert_eq!(gap.kind, EventKind::Gap);
+        assert_eq!(
+            (gap.from_seq, gap.to_seq, gap.t_ns),
+            (Some(100), Some(119), 3)
+        );
+        let mut early = SeqTracker::new(service::RAW);
+        assert_eq!(early.continues_from(99, 1), None, "no message yet");
+        let e = early.observe(105, false, 2);
+        assert_eq!(kinds(&e), [EventKind::Gap]);
+        assert_eq!((e[0].from_seq, e[0].to_seq), (Some(100), Some(104)));
+        let mut none_lost = SeqTracker::new(service::RAW);
+        none_lost.observe(100, false, 1);
+        assert_eq!(none_lost.continues_from(99, 2), None);
+        let mut reset = SeqTracker::new(service::RAW);
+        reset.observe(0, false, 1);
+        let e = reset.continues_from(99, 2).unwrap();
+        assert_eq!(e.kind, EventKind::SeqReset);
+        assert_eq!((e.from_seq, e.to_seq), (Some(100), Some(0)));
     }
 
     #[test]

@@ -1,5 +1,5 @@
-//! `mems-record --out FILE.mcap [--namespace NS] [--duration S]`: records every mems service
-//! to MCAP until the duration has passed or SIGINT/SIGTERM arrives.
+//! `mems-record --out FILE.mcap [--force | --continue] [--namespace NS] [--duration S]`: records
+//! every mems service to MCAP until the duration has passed or SIGINT/SIGTERM arrives.
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -8,14 +8,23 @@ use anyhow::{Result, bail};
 use clap::Parser;
 use iceoryx2::prelude::{LogLevel, set_log_level_from_env_or};
 use ipc_types::service;
-use mems_record::{RecordOptions, record};
+use mems_record::{RecordOptions, Target, record};
 
 #[derive(Parser)]
 #[command(version, about)]
 struct Cli {
-    /// The MCAP file to write (created or truncated).
+    /// The MCAP file to write. An existing recording there is refused, unless `--force` or
+    /// `--continue` is given.
     #[arg(long)]
     out: PathBuf,
+    /// Overwrite the recording at `--out` (its successor segments too).
+    #[arg(long, conflicts_with = "continue_run")]
+    force: bool,
+    /// Continue the run at `--out` if there is one, in its next segment file (`run.1.mcap`,
+    /// `run.2.mcap`, ...), with the split recorded: what a supervisor that restarts the
+    /// recorder asks for.
+    #[arg(long = "continue")]
+    continue_run: bool,
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
@@ -34,8 +43,14 @@ fn main() -> Result<()> {
         }
         s => s.map(Duration::from_secs_f64),
     };
+    let target = match (cli.force, cli.continue_run) {
+        (true, _) => Target::Overwrite,
+        (_, true) => Target::Continue,
+        _ => Target::New,
+    };
     let options = RecordOptions {
         out: cli.out,
+        target,
         namespace: service::namespace(cli.namespace.as_deref()),
         duration,
     };
@@ -46,8 +61,13 @@ fn main() -> Result<()> {
         .map(|(name, n)| format!("{name} {n}"))
         .collect();
     println!(
-        "mems-record: wrote {} in {:.1} s ({}); {} events{}",
-        options.out.display(),
+        "mems-record: wrote {}{} in {:.1} s ({}); {} events{}",
+        summary.path.display(),
+        if summary.segment > 0 {
+            format!(" (segment {} of the run)", summary.segment)
+        } else {
+            String::new()
+        },
         summary.elapsed.as_secs_f64(),
         counts.join(", "),
         summary.events.len(),

@@ -6,6 +6,7 @@
 //!   logs in the text formats ([`LogPolicy`]).
 //! - [`csv`]: the canonical CSV ([`csv::read_raw`], [`csv::write_raw`]).
 //! - [`mcap`]: MCAP recordings ([`mcap::Writer`], [`mcap::Reader`], [`mcap::read_all`]).
+//! - [`segment`]: a run recorded across recorder restarts, in several files read as one.
 //! - [`thesis`]: the thesis's six-position means ([`load_six_position`]) and fitted parameters.
 //!
 //! Units follow `ipc-types`: raw samples in g, deg/s and degC in the sensor frame, times in
@@ -16,6 +17,7 @@
 pub mod csv;
 mod error;
 pub mod mcap;
+pub mod segment;
 mod text;
 pub mod thesis;
 mod truth;

@@ -92,7 +92,13 @@ impl Topic for RawImuSample {
                     "lost_before",
                     uint("Samples lost just before this one.", u32::MAX.into()),
                 ),
-                ("reserved", uint("Zero.", u32::MAX.into())),
+                (
+                    "undelivered",
+                    uint(
+                        "Samples the publisher gave up delivering so far because a subscriber stayed full, all subscribers.",
+                        u32::MAX.into(),
+                    ),
+                ),
             ],
         )
     }
@@ -566,6 +572,11 @@ pub enum EventKind {
     PublisherLost,
     /// A publisher appeared again after [`EventKind::PublisherLost`] (sequence numbers as there).
     PublisherBack,
+    /// The recorder was restarted and this file continues the run of the previous segment
+    /// (see [`crate::segment`]): `from_seq` = `to_seq` = this segment's number (1 for the first
+    /// successor), `service` empty. What was lost across the split follows as
+    /// [`EventKind::Gap`] events.
+    Segment,
 }
 
 /// An event the recorder noticed on a service, so that a crashed or restarted stage shows in
@@ -605,8 +616,8 @@ impl Topic for RecorderEvent {
                     "kind",
                     json!({
                         "type": "string",
-                        "enum": ["gap", "seq_reset", "publisher_lost", "publisher_back"],
-                        "description": "gap: from_seq..=to_seq missing; seq_reset: to_seq arrived when from_seq was expected; publisher_lost/back: from_seq = to_seq = last sequence number received (null if none).",
+                        "enum": ["gap", "seq_reset", "publisher_lost", "publisher_back", "segment"],
+                        "description": "gap: from_seq..=to_seq missing; seq_reset: to_seq arrived when from_seq was expected; publisher_lost/back: from_seq = to_seq = last sequence number received (null if none); segment: a restarted recorder continues the run in this file, from_seq = to_seq = its segment number.",
                     }),
                 ),
                 (
@@ -716,6 +727,23 @@ impl Writer {
     pub fn create(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
         let file = File::create(path).map_err(|e| Error::io(path, e))?;
+        Self::on(path, file)
+    }
+
+    /// Creates the file at `path`, which must not exist (an existing file is never
+    /// overwritten: the error names it), and writes the MCAP header.
+    pub fn create_new(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let file = File::options()
+            .write(true)
+            .create_new(true)
+            .open(path)
+            .map_err(|e| Error::io(path, e))?;
+        Self::on(path, file)
+    }
+
+    /// Writes the MCAP header to `file`, newly created at `path`.
+    fn on(path: &Path, file: File) -> Result<Self> {
         let inner = WriteOptions::new()
             .compression(Some(Compression::Zstd))
             .create(BufWriter::new(file))
@@ -991,7 +1019,21 @@ pub struct Contents {
     pub events: Vec<RecorderEvent>,
     /// Number of messages on other topics (not decoded).
     pub other_messages: u64,
-    /// Set when the file ends early or is damaged; everything before the cut is above.
+    /// Set when the run's last segment ends early or is damaged (a killed recorder);
+    /// everything before the cut is above.
+    pub truncation: Option<Truncation>,
+    /// The files read, in order: the run's first file and its successors
+    /// ([`crate::segment`]), each with its own truncation (a segment whose recorder was killed
+    /// ends early; the next one continues the run).
+    pub segments: Vec<SegmentRead>,
+}
+
+/// One file of a run as [`read_all`] read it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SegmentRead {
+    /// The file.
+    pub path: PathBuf,
+    /// Set when the file ends early or is damaged.
     pub truncation: Option<Truncation>,
 }
 
@@ -1027,26 +1069,68 @@ impl Contents {
     }
 }
 
-/// Reads every message of the known topics of an MCAP file (raw, truth, corrected, odometry,
-/// robot hints, pose, events), up to the cut if the file was truncated (reported in
-/// [`Contents::truncation`], never silently).
+/// Reads every message of the known topics of an MCAP recording (raw, truth, corrected,
+/// odometry, robot hints, pose, events), from the file at `path` and then from each of its
+/// successor segments ([`crate::segment`]: files named as successors that begin with their
+/// [`EventKind::Segment`] event) as one run, each up to its cut if it was truncated
+/// (reported in [`Contents::segments`], and for the last in [`Contents::truncation`], never
+/// silently).
 ///
 /// Raw samples are split into acquisition sessions where their sequence number restarts
 /// ([`Contents::raw_sessions`]). Errors if the file is not MCAP, a message does not decode, or
 /// raw sample times (`stamps.sample_ns`) do not strictly increase within a session.
 pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
-    let reader = Reader::open(path)?;
+    let path = path.as_ref();
     let mut contents = Contents::default();
+    // The first file is read even if missing, for its error.
+    let segments = crate::segment::existing(path);
+    for (n, segment) in segments
+        .iter()
+        .map(PathBuf::as_path)
+        .chain(segments.is_empty().then_some(path))
+        .enumerate()
+    {
+        if n > 0 && !continues_run(segment, n)? {
+            break;
+        }
+        let truncation = read_segment(segment, &mut contents)?;
+        contents.segments.push(SegmentRead {
+            path: segment.to_path_buf(),
+            truncation: truncation.clone(),
+        });
+        contents.truncation = truncation;
+    }
+    Ok(contents)
+}
+
+/// Whether the file at `path` is segment `n` of a run: its first message is the recorder's
+/// [`EventKind::Segment`] event numbered `n` (a file that merely has a successor's name is
+/// not read with the run).
+fn continues_run(path: &Path, n: usize) -> Result<bool> {
+    let reader = Reader::open(path)?;
+    let first = reader.messages()?.next();
+    Ok(match first {
+        Some(Ok(message)) => match message.decode::<RecorderEvent>() {
+            Some(event) => {
+                let event = event?;
+                event.kind == EventKind::Segment && event.from_seq == Some(n as u64)
+            }
+            None => false,
+        },
+        _ => false,
+    })
+}
+
+/// Appends the messages of one file to `contents`; returns its truncation, if any.
+fn read_segment(path: &Path, contents: &mut Contents) -> Result<Option<Truncation>> {
+    let reader = Reader::open(path)?;
     for message in reader.messages()? {
         let message = match message {
             Ok(message) => message,
             Err(Error {
                 kind: ErrorKind::Truncated(truncation),
                 ..
-            }) => {
-                contents.truncation = Some(truncation);
-                break;
-            }
+            }) => return Ok(Some(truncation)),
             Err(e) => return Err(e),
         };
         if let Some(sample) = message.decode::<RawImuSample>() {
@@ -1095,7 +1179,36 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
             contents.other_messages += 1;
         }
     }
-    Ok(contents)
+    Ok(None)
+}
+
+/// The last sequence number of each service in one MCAP file (odometry revisions excluded),
+/// as (topic, seq), for a restarted recorder to name what was lost across the split. Reads up
+/// to the cut of a truncated file.
+pub fn last_seqs(path: impl AsRef<Path>) -> Result<Vec<(&'static str, u64)>> {
+    let reader = Reader::open(path)?;
+    let mut last: Vec<(&'static str, u64)> = Vec::new();
+    let mut note = |topic: &'static str, seq: u64| match last.iter_mut().find(|(t, _)| *t == topic)
+    {
+        Some(entry) => entry.1 = seq,
+        None => last.push((topic, seq)),
+    };
+    for message in reader.messages()? {
+        let Ok(message) = message else { break };
+        if let Some(s) = message.decode::<RawImuSample>() {
+            note(RawImuSample::TOPIC, s?.seq);
+        } else if let Some(s) = message.decode::<CorrectedImuSample>() {
+            note(CorrectedImuSample::TOPIC, s?.seq);
+        } else if let Some(s) = message.decode::<OdometryState>() {
+            let s = s?;
+            if s.flags & ipc_types::odometry_flags::REVISION == 0 {
+                note(OdometryState::TOPIC, s.seq);
+            }
+        } else if let Some(s) = message.decode::<RobotHint>() {
+            note(RobotHint::TOPIC, s?.seq);
+        }
+    }
+    Ok(last)
 }
 
 #[cfg(test)]
@@ -1363,6 +1476,7 @@ mod tests {
             EventKind::SeqReset,
             EventKind::PublisherLost,
             EventKind::PublisherBack,
+            EventKind::Segment,
         ];
         let written: Vec<Value> = kinds
             .iter()

@@ -292,7 +292,7 @@ impl SampleBuilder {
             temp_counts,
             flags,
             lost_before: row.lost_before,
-            reserved: 0,
+            undelivered: 0,
         });
         Ok(true)
     }

@@ -24,7 +24,7 @@ fn arbitrary_samples(n: usize, seed: u64) -> Vec<RawImuSample> {
         s.stamps.acquired_ns = s.stamps.sample_ns + 1000 + i as u64;
         s.stamps.calibrated_ns = u64::MAX - i as u64;
         s.seq = 1_000_000 + 3 * i as u64;
-        s.reserved = i as u32;
+        s.undelivered = i as u32;
     }
     samples[0].accel_g[0] = -0.0;
     samples
@@ -468,4 +468,75 @@ fn schemas_describe_the_json_the_writer_produces() {
         &Truth::json_schema(),
         "Truth",
     );
+}
+
+/// A run recorded across a recorder restart: the first file cut mid-chunk (a killed
+/// recorder), its successor written whole. `read_all` of the first file reads both as one run,
+/// names each file with its own truncation, and `load_raw` gives one session.
+#[test]
+fn a_run_continues_in_its_successor_segment() {
+    use recording::mcap::{EventKind, RecorderEvent};
+    use recording::segment;
+    let samples = live_samples(300, 31);
+    let truth = any_truth(&samples, 32);
+    let base = tmp("segmented.mcap");
+    let second = segment::path(&base, 1);
+    let _ = std::fs::remove_file(segment::path(&base, 2));
+    // The first 100 samples reach the file (flushed), then the recorder dies mid-chunk.
+    let boundaries = write(&base, &samples[..150], &truth[..150], 100);
+    let bytes = std::fs::read(&base).unwrap();
+    std::fs::write(&base, &bytes[..boundaries[0] as usize + 20]).unwrap();
+    // The restarted recorder missed samples 100..120.
+    let mut writer = Writer::create_new(&second).unwrap();
+    assert!(
+        Writer::create_new(&second).is_err(),
+        "an existing segment is never overwritten"
+    );
+    let events = writer.add_channel::<RecorderEvent>().unwrap();
+    let raw = writer.add_channel::<RawImuSample>().unwrap();
+    let split = RecorderEvent {
+        kind: EventKind::Segment,
+        service: String::new(),
+        from_seq: Some(1),
+        to_seq: Some(1),
+        t_ns: 1,
+    };
+    writer.write(events, &split, 1).unwrap();
+    for (i, s) in samples.iter().enumerate().skip(120) {
+        writer.write(raw, s, log_time(i)).unwrap();
+    }
+    writer.finish().unwrap();
+
+    let contents = read_all(&base).unwrap();
+    let expected: Vec<RawImuSample> = samples[..100]
+        .iter()
+        .chain(&samples[120..])
+        .copied()
+        .collect();
+    assert_eq!(contents.raw, expected);
+    assert_eq!(contents.raw_sessions, vec![0..expected.len()]);
+    assert_eq!(contents.events, vec![split]);
+    assert_eq!(contents.segments.len(), 2);
+    assert_eq!(contents.segments[0].path, base);
+    assert!(contents.segments[0].truncation.is_some(), "first file cut");
+    assert_eq!(contents.segments[1].path, second);
+    assert_eq!(contents.segments[1].truncation, None);
+    assert_eq!(
+        contents.truncation, None,
+        "the run ends with a finished file"
+    );
+    let rec = recording::load_raw(&base).unwrap();
+    assert_eq!(rec.samples, expected);
+    let last = recording::mcap::last_seqs(&base).unwrap();
+    assert_eq!(last, vec![(ipc_types::service::RAW, samples[99].seq)]);
+
+    // A file that only has a successor's name (no segment event first) is not part of the run.
+    let third = segment::path(&base, 2);
+    write(&third, &samples[..10], &truth[..10], 10);
+    let contents = read_all(&base).unwrap();
+    assert_eq!(contents.segments.len(), 2);
+    assert_eq!(contents.raw, expected);
+    for p in [&base, &second, &third] {
+        std::fs::remove_file(p).unwrap();
+    }
 }

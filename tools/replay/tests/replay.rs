@@ -34,7 +34,7 @@ fn samples(n: u64, rate_hz: u64) -> Vec<RawImuSample> {
             temp_counts: i as i16,
             flags: raw_flags::GYRO_VALID | raw_flags::TEMP_VALID,
             lost_before: (i % 3) as u32,
-            reserved: 0,
+            undelivered: 0,
         })
         .collect()
 }
@@ -351,4 +351,57 @@ fn a_bad_csv_line_is_reported_with_file_line_and_field() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     let expected = format!("{}:3: field \"ay_g\"", path.display());
     assert!(stderr.contains(&expected), "{stderr}");
+}
+
+/// A run recorded across a recorder restart (its first file and the successor segment, which
+/// misses what the recorder lost) is replayed by `mems-replay FIRST.mcap` as one run: every
+/// recorded sample, in order, once.
+#[test]
+fn a_run_in_two_segment_files_is_replayed_as_one() {
+    use recording::mcap::{EventKind, RecorderEvent, Writer};
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"));
+    let base = dir.join(format!("replay-segments-{}.mcap", std::process::id()));
+    let second = recording::segment::path(&base, 1);
+    let sent = samples(1000, 1000);
+    for (n, (path, part)) in [(&base, &sent[..400]), (&second, &sent[450..])]
+        .into_iter()
+        .enumerate()
+    {
+        let mut writer = Writer::create(path).unwrap();
+        if n > 0 {
+            // What a restarted recorder writes first.
+            let events = writer.add_channel::<RecorderEvent>().unwrap();
+            let split = RecorderEvent {
+                kind: EventKind::Segment,
+                service: String::new(),
+                from_seq: Some(n as u64),
+                to_seq: Some(n as u64),
+                t_ns: 0,
+            };
+            writer.write(events, &split, 0).unwrap();
+        }
+        let raw = writer.add_channel::<RawImuSample>().unwrap();
+        for s in part {
+            writer.write(raw, s, s.stamps.sample_ns).unwrap();
+        }
+        writer.finish().unwrap();
+    }
+    let expected: Vec<RawImuSample> = sent[..400].iter().chain(&sent[450..]).copied().collect();
+    let ns = namespace("segments");
+    let sub = subscribe(&ns, expected.len(), None);
+    let out = Command::new(env!("CARGO_BIN_EXE_mems-replay"))
+        .arg(&base)
+        .args(["--max", "--namespace", &ns, "--wait-subscribers", "1"])
+        .output()
+        .unwrap();
+    for p in [&base, &second] {
+        std::fs::remove_file(p).unwrap();
+    }
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let got = sub.join().unwrap();
+    assert_same_but_acquired(&got, &expected);
 }

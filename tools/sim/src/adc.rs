@@ -45,6 +45,6 @@ pub fn quantize_sample(
         temp_counts,
         flags,
         lost_before: 0,
-        reserved: 0,
+        undelivered: 0,
     }
 }

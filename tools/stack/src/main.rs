@@ -2,6 +2,7 @@
 //! plus the recorder), supervised: a crashed stage is restarted, Ctrl-C stops everything
 //! cleanly, and a status line shows rates, losses, zero-state and position.
 
+mod losses;
 mod supervisor;
 
 use std::io::IsTerminal;
@@ -16,6 +17,7 @@ use ipc_types::{
     CorrectedImuSample, Message, OdometryState, RawImuSample, clock::monotonic_ns, corrected_flags,
     odometry_flags, service,
 };
+use losses::{RecorderLosses, SourceLosses};
 use mems_topic::TopicStats;
 use supervisor::{ChildSpec, Event, Supervisor};
 
@@ -30,9 +32,16 @@ struct Cli {
     /// SPI: the odometry then estimates no position and the status line says so).
     #[arg(long, default_value_t = 1000)]
     rate: u32,
-    /// Record every topic to this MCAP file.
+    /// Record every topic to this MCAP file, checked before anything starts (its directory
+    /// must exist and be writable; an existing recording is refused unless `--force`). A
+    /// recorder that dies is restarted and continues the run in the file's next segment
+    /// (`run.1.mcap`, ...), which the readers and `mems-replay` read with it as one run.
     #[arg(long)]
     record: Option<PathBuf>,
+    /// Overwrite the recording at `--record` (its successor segments too), once the stack
+    /// starts its stages.
+    #[arg(long, requires = "record")]
+    force: bool,
     /// Stop after this many seconds (default: until Ctrl-C).
     #[arg(long)]
     duration: Option<f64>,
@@ -189,12 +198,54 @@ fn calibrate_sim(bins: &Path, work: &Path, seed: u64) -> Result<PathBuf> {
     Ok(calib)
 }
 
+/// Removes what a previous stack killed with SIGKILL left behind: the iceoryx2 resources of
+/// dead nodes (its own and, if they died with it, its children's) and the work directories
+/// of stacks whose process is gone.
+fn clean_stale() {
+    match service::remove_dead_nodes() {
+        Ok(0) => {}
+        Ok(n) => eprintln!("mems-stack: removed the shared memory of {n} dead iceoryx2 nodes"),
+        Err(e) => eprintln!("mems-stack: {e}"),
+    }
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(WORK_DIR_PREFIX))
+            .and_then(|p| p.parse::<i32>().ok())
+        else {
+            continue;
+        };
+        // SAFETY: kill(2) with signal 0 only checks whether the process exists.
+        let gone = unsafe { libc::kill(pid, 0) } != 0
+            && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
+        if gone && std::fs::remove_dir_all(entry.path()).is_ok() {
+            eprintln!(
+                "mems-stack: removed {}, left by a stack that died",
+                entry.path().display()
+            );
+        }
+    }
+}
+
+/// Name of a stack's work directory under the temporary directory, before its process id.
+const WORK_DIR_PREFIX: &str = "mems-stack-";
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     check_source(&cli)?;
+    // Before calibrating: a stack that cannot record must not start, nor touch a recording.
+    let overwrite = match &cli.record {
+        Some(out) => recording::segment::check_target(out, cli.force)?,
+        None => Vec::new(),
+    };
+    clean_stale();
     let namespace = service::namespace(cli.namespace.as_deref());
     let bins = bin_dir()?;
-    let work = std::env::temp_dir().join(format!("mems-stack-{}", std::process::id()));
+    let work = std::env::temp_dir().join(format!("{WORK_DIR_PREFIX}{}", std::process::id()));
     std::fs::create_dir_all(&work).with_context(|| format!("cannot create {}", work.display()))?;
     let calib = match (&cli.calib, cli.source.as_str()) {
         (Some(c), _) => c.clone(),
@@ -210,16 +261,28 @@ fn main() -> Result<()> {
         name: name.to_string(),
         program: bins.join(program),
         args: args.into_iter().chain(ns_args.clone()).collect(),
+        restart_at_once: false,
+        stdout: None,
     };
 
     // Start order: consumers first, the source last, so nothing is published to nobody.
     let mut specs = Vec::new();
+    let recorder_losses = cli.record.is_some().then(RecorderLosses::default);
+    let mut source = SourceLosses::new(cli.rate);
     if let Some(out) = &cli.record {
-        specs.push(spec(
-            "record",
-            "mems-record",
-            vec!["--out".into(), out.display().to_string()],
-        ));
+        specs.push(ChildSpec {
+            restart_at_once: true,
+            stdout: recorder_losses.as_ref().map(RecorderLosses::sink),
+            ..spec(
+                "record",
+                "mems-record",
+                vec![
+                    "--out".into(),
+                    out.display().to_string(),
+                    "--continue".into(),
+                ],
+            )
+        });
     }
     specs.push(spec(
         "odometry",
@@ -248,6 +311,9 @@ fn main() -> Result<()> {
     let corrected_sub = service::subscriber(&corrected)?;
     let odometry_sub = service::subscriber(&odometry)?;
 
+    for old in &overwrite {
+        std::fs::remove_file(old).with_context(|| format!("cannot remove {}", old.display()))?;
+    }
     let mut supervisor = Supervisor::start(specs)?;
     eprintln!("mems-stack: running (namespace {namespace:?}); Ctrl-C stops");
     let (mut raw_stats, mut cor_stats, mut odo_stats) =
@@ -266,6 +332,7 @@ fn main() -> Result<()> {
     while node.wait(Duration::from_millis(20)).is_ok() {
         while let Some(s) = raw_sub.receive()? {
             observe(&mut raw_stats, s.payload());
+            source.observe(s.payload());
         }
         while let Some(s) = corrected_sub.receive()? {
             observe(&mut cor_stats, s.payload());
@@ -306,9 +373,9 @@ fn main() -> Result<()> {
         }
         if last_status.elapsed() >= Duration::from_secs(1) {
             let line = status_line(
-                &raw_stats,
-                &cor_stats,
-                &odo_stats,
+                &[&raw_stats, &cor_stats, &odo_stats],
+                &source,
+                recorder_losses.as_ref(),
                 zero_state,
                 last_state.as_ref(),
             );
@@ -342,9 +409,9 @@ fn main() -> Result<()> {
     println!(
         "{}",
         status_line(
-            &raw_stats,
-            &cor_stats,
-            &odo_stats,
+            &[&raw_stats, &cor_stats, &odo_stats],
+            &source,
+            recorder_losses.as_ref(),
             zero_state,
             last_state.as_ref()
         )
@@ -365,16 +432,27 @@ fn observe<T: Message>(stats: &mut TopicStats, m: &T) {
     );
 }
 
-/// The status line: rate and losses per topic, the rest verdict of the newest corrected
-/// sample, and the newest live odometry state's position (or why there is none).
+/// The status line: losses at the source (sensor FIFO, acquire restarts), rate and losses
+/// per topic (sequence gaps as the stack receives them; for raw also the samples acquire gave
+/// up for stalled subscribers), what the recording misses per topic (when recording), the rest
+/// verdict of the newest corrected sample, and the newest live odometry state's position (or
+/// why there is none).
 fn status_line(
-    raw: &TopicStats,
-    cor: &TopicStats,
-    odo: &TopicStats,
+    [raw, cor, odo]: &[&TopicStats; 3],
+    source: &SourceLosses,
+    recorder: Option<&RecorderLosses>,
     zero_state: Option<bool>,
     state: Option<&OdometryState>,
 ) -> String {
     let (r, c, o) = (raw.report(), cor.report(), odo.report());
+    let recording = recorder.map_or(String::new(), |rec| {
+        format!(
+            " | recording lost {}/{}/{}",
+            rec.of(service::RAW),
+            rec.of(service::CORRECTED),
+            rec.of(service::ODOMETRY)
+        )
+    });
     let position = match state {
         Some(s) if s.flags & odometry_flags::NO_GYRO != 0 => {
             "no position: the sensor runs without its gyroscope at this rate".to_string()
@@ -392,9 +470,13 @@ fn status_line(
         None => "no odometry yet".to_string(),
     };
     format!(
-        "raw {:.0} Hz lost {} | corrected {:.0} Hz lost {} | odometry {:.0} Hz lost {} | {} | {}",
+        "sensor lost {} + {} across acquire restarts | raw {:.0} Hz lost {} undelivered {} | \
+         corrected {:.0} Hz lost {} | odometry {:.0} Hz lost {}{recording} | {} | {}",
+        source.fifo,
+        source.restarts,
         r.rate_hz,
         r.lost,
+        source.undelivered(),
         c.rate_hz,
         c.lost,
         o.rate_hz,
@@ -503,19 +585,50 @@ mod tests {
                 position_m: [1.5, -2.0, 0.0],
                 ..OdometryState::default()
             };
-            status_line(&stats, &stats, &stats, Some(true), Some(&state))
+            let source = SourceLosses::new(1000);
+            status_line(&[&stats; 3], &source, None, Some(true), Some(&state))
         };
         let aligned = line(odometry_flags::ALIGNED);
         assert!(aligned.contains("pos (+1.50, -2.00, +0.00) m"), "{aligned}");
         let no_gyro = line(odometry_flags::NO_GYRO);
         assert!(no_gyro.contains("no position"), "{no_gyro}");
         assert!(!no_gyro.contains("pos ("), "{no_gyro}");
-        let learning = status_line(&stats, &stats, &stats, None, None);
+        let learning = status_line(&[&stats; 3], &SourceLosses::new(1000), None, None, None);
         assert!(learning.contains("rest detector learning"), "{learning}");
         assert!(
             !learning.contains("at rest") && !learning.contains("moving"),
             "{learning}"
         );
+    }
+
+    #[test]
+    fn the_status_line_shows_losses_at_every_point() {
+        let stats = TopicStats::new();
+        let mut source = SourceLosses::new(1000);
+        let raw = |seq, t_ms: u64, lost_before, undelivered| RawImuSample {
+            seq,
+            stamps: ipc_types::Stamps {
+                sample_ns: t_ms * 1_000_000,
+                ..Default::default()
+            },
+            lost_before,
+            undelivered,
+            ..Default::default()
+        };
+        source.observe(&raw(7, 10, 3, 45));
+        source.observe(&raw(0, 240, 0, 0));
+        let recorder = RecorderLosses::default();
+        recorder.sink()("mems-record: lost 20 of mems/imu/raw (seq 100..=119)");
+        let line = status_line(&[&stats; 3], &source, Some(&recorder), None, None);
+        for needle in [
+            "sensor lost 3 + 229 across acquire restarts",
+            "undelivered 45",
+            "recording lost 20/0/0",
+        ] {
+            assert!(line.contains(needle), "{needle:?} missing from: {line}");
+        }
+        let unrecorded = status_line(&[&stats; 3], &source, None, None, None);
+        assert!(!unrecorded.contains("recording"), "{unrecorded}");
     }
 
     #[test]

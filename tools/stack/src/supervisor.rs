@@ -1,15 +1,22 @@
 //! Supervision of the stack's child processes: start in pipeline order, restart a child that
-//! dies (with back-off), clean up what a killed child left in shared memory, give up on a child
-//! that keeps failing right after it starts (a configuration error, such as SCHED_FIFO refused,
-//! that no restart can fix), and stop everything in source-first order so that downstream
-//! stages drain what is in flight.
+//! dies (with back-off, or at once if it asks so and ran for [`FAST_EXIT`]), clean up what a
+//! killed child left in shared memory, give up on a child that keeps failing right after it
+//! starts (a configuration error, such as SCHED_FIFO refused, that no restart can fix), and
+//! stop everything in source-first order so that downstream stages drain what is in flight.
+//! Every child is killed by the kernel when the stack dies, however it dies
+//! (`PR_SET_PDEATHSIG`), so no stage outlives a kill -9'd stack.
 
+use std::io::BufRead;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// Receives each line a child prints on its standard output (from a thread of its own).
+pub type LineSink = Arc<dyn Fn(&str) + Send + Sync>;
+
 /// How one child is started.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct ChildSpec {
     /// Short name for messages (e.g. "calibrate").
     pub name: String,
@@ -17,6 +24,13 @@ pub struct ChildSpec {
     pub program: PathBuf,
     /// Its arguments.
     pub args: Vec<String>,
+    /// Restart it at once when it dies after running for [`FAST_EXIT`] (the back-off still
+    /// applies to fast exits). For the recorder, whose downtime is a gap in the recording;
+    /// a publishing stage waits for the back-off, so that the recorder sees its publisher
+    /// gone before the new one appears.
+    pub restart_at_once: bool,
+    /// Where its standard output goes, line by line; `None` discards it.
+    pub stdout: Option<LineSink>,
 }
 
 /// A supervised child and its restart bookkeeping.
@@ -75,12 +89,52 @@ pub const FAST_EXIT: Duration = Duration::from_secs(2);
 pub const MAX_FAST_EXITS: u32 = 3;
 
 fn spawn(spec: &ChildSpec) -> std::io::Result<Child> {
-    Command::new(&spec.program)
+    use std::os::unix::process::CommandExt;
+    let mut command = Command::new(&spec.program);
+    command
         .args(&spec.args)
         .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(Stdio::inherit())
-        .spawn()
+        .stdout(if spec.stdout.is_some() {
+            Stdio::piped()
+        } else {
+            Stdio::null()
+        })
+        .stderr(Stdio::inherit());
+    // SAFETY: the closure runs in the forked child before exec and calls only prctl(2) and
+    // getppid(2), which are async-signal-safe; it touches no memory of the parent.
+    unsafe { command.pre_exec(die_with_parent(std::process::id())) };
+    let mut child = command.spawn()?;
+    if let (Some(sink), Some(out)) = (spec.stdout.clone(), child.stdout.take()) {
+        // Ends when the child's end of the pipe closes (it exited).
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(out).lines() {
+                let Ok(line) = line else { break };
+                sink(&line);
+            }
+        });
+    }
+    Ok(child)
+}
+
+/// The child's side of "dies with the stack": SIGKILL (not SIGTERM: a stopped or blocked child
+/// must die too) when the thread that forked it exits, which for the stack is its main thread
+/// and so the stack itself (prctl(2), PR_SET_PDEATHSIG). If the stack died between the fork and
+/// the prctl, the child has already been re-parented and must not start at all.
+fn die_with_parent(parent: u32) -> impl FnMut() -> std::io::Result<()> + Send + Sync + 'static {
+    move || {
+        // SAFETY: prctl(PR_SET_PDEATHSIG) and getppid have no memory-safety preconditions.
+        unsafe {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            if libc::getppid() as u32 != parent {
+                return Err(std::io::Error::other(
+                    "mems-stack died before its child started",
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 fn describe(status: std::process::ExitStatus) -> String {
@@ -151,8 +205,12 @@ impl Supervisor {
                     events.push(Event::GaveUp { name, status });
                     continue;
                 }
-                c.restart_at = Some(Instant::now() + c.backoff);
-                c.backoff = (c.backoff * 2).min(MAX_BACKOFF);
+                if ran >= FAST_EXIT && c.spec.restart_at_once {
+                    c.restart_at = Some(Instant::now());
+                } else {
+                    c.restart_at = Some(Instant::now() + c.backoff);
+                    c.backoff = (c.backoff * 2).min(MAX_BACKOFF);
+                }
                 events.push(Event::Exited { name, status });
             }
         }
@@ -242,6 +300,8 @@ mod tests {
             name: name.into(),
             program: "/bin/sh".into(),
             args: vec!["-c".into(), script.into()],
+            restart_at_once: false,
+            stdout: None,
         }
     }
 

@@ -188,7 +188,7 @@ pub fn raw_samples(n: usize, first_seq: u64, rate_hz: u64) -> Vec<RawImuSample> 
                 temp_counts: c(7),
                 flags: raw_flags::GYRO_VALID | raw_flags::TEMP_VALID,
                 lost_before: 0,
-                reserved: 0,
+                undelivered: 0,
             }
         })
         .collect()

@@ -63,7 +63,7 @@ pub fn live_samples(n: usize, seed: u64) -> Vec<RawImuSample> {
                 } else {
                     0
                 },
-                reserved: 0,
+                undelivered: 0,
             }
         })
         .collect()
