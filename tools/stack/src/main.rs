@@ -1,6 +1,7 @@
 //! `mems-stack`: the whole pipeline as separate processes (acquire -> calibrate -> odometry,
-//! plus the recorder), supervised: a crashed stage is restarted, Ctrl-C stops everything
-//! cleanly, and a status line shows rates, losses, zero-state and position.
+//! plus the recorder), supervised: a crashed stage is restarted (the calibration stage going on
+//! from its predecessor's learned state, `mems-calibrate serve --state`), Ctrl-C stops
+//! everything cleanly, and a status line shows rates, losses, zero-state and position.
 
 mod losses;
 mod supervisor;
@@ -289,13 +290,22 @@ fn main() -> Result<()> {
         "mems-odometry",
         vec!["serve".into(), "--calib".into(), calib.clone()],
     ));
+    // A restarted calibration stage goes on from what the killed one had learned, in the
+    // stack's work directory (a new stack starts afresh).
+    let calibrate_state = work.join("calibrate-state.json").display().to_string();
     specs.push(spec(
         "calibrate",
         "mems-calibrate",
-        ["serve".into(), "--calib".into(), calib]
-            .into_iter()
-            .chain(detector_args(&cli))
-            .collect(),
+        [
+            "serve".into(),
+            "--calib".into(),
+            calib,
+            "--state".into(),
+            calibrate_state,
+        ]
+        .into_iter()
+        .chain(detector_args(&cli))
+        .collect(),
     ));
     specs.push(spec("acquire", "mems-acquire", acquire_args(&cli)));
 
