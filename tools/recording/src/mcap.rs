@@ -30,9 +30,11 @@ use std::io::{BufWriter, Read};
 use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
 
+use ::mcap::io::MessageReader;
 use ::mcap::records::MessageHeader;
-use ::mcap::{Compression, MAGIC, MessageStream, WriteOptions};
-use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
+use ::mcap::sans_io::LinearReaderOptions;
+use ::mcap::{Compression, MAGIC, WriteOptions};
+use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint, limits};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
@@ -859,25 +861,110 @@ impl Reader {
 
     /// The messages of all topics in file order. If the file ends early or is damaged, the
     /// last item is an [`ErrorKind::Truncated`] error after every message before the cut.
+    ///
+    /// Memory is bounded by the file: a chunk that declares more than [`MAX_CHUNK_EXPANSION`]
+    /// times its record's size uncompressed is damage, and reading stops before it; no record
+    /// may be longer than the file or the largest chunk that passed (see [`ReadBounds`]).
     pub fn messages(&self) -> Result<Messages<'_>> {
-        let options = ::mcap::read::Options::ValidateChunkCrcs.into();
-        let stream = MessageStream::new_with_options(&self.bytes, options)
-            .map_err(|e| Error::file(&self.path, ErrorKind::Mcap(e)))?;
+        let bounds = ReadBounds::of(&self.bytes);
+        let options = LinearReaderOptions::default()
+            .with_validate_chunk_crcs(true)
+            .with_record_length_limit(bounds.record_limit);
+        let stream = MessageReader::new_with_options(
+            std::io::Cursor::new(&self.bytes[..bounds.len]),
+            options,
+        );
         Ok(Messages {
             path: &self.path,
             stream,
             read: 0,
             done: false,
+            cut: bounds.cut,
         })
+    }
+}
+
+/// Largest ratio of a chunk's declared uncompressed size to its record's size in the file.
+/// Our recorder's zstd chunks of JSON expand 5-20 times; 1024 leaves room for any real
+/// recording and caps what a damaged size field can make the reader allocate.
+pub const MAX_CHUNK_EXPANSION: u64 = 1024;
+
+/// MCAP opcode of a chunk record (MCAP specification, "Chunk (op=0x06)").
+const OP_CHUNK: u8 = 0x06;
+
+/// What the message reader may read and allocate for one MCAP file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReadBounds {
+    /// How many leading bytes of the file it reads.
+    pub len: usize,
+    /// Why it stops before the end (`None` when it reads the whole file).
+    pub cut: Option<String>,
+    /// The longest record (or chunk content) it accepts, bytes: the larger of the bytes read
+    /// and the largest declared uncompressed size of a chunk among them.
+    pub record_limit: usize,
+}
+
+impl ReadBounds {
+    /// Walks the top-level record framing of `bytes` (MCAP specification, "Records": an
+    /// opcode byte, a little-endian `u64` body length, the body; a chunk's body starts with
+    /// its message start and end times, then its uncompressed size as a `u64`) and stops
+    /// before the first chunk whose uncompressed size exceeds [`MAX_CHUNK_EXPANSION`] times
+    /// its record. A record that runs past the end of the file ends the walk; the reader
+    /// reports that truncation itself.
+    ///
+    /// Hand-written because the `mcap` crate (0.26) checks record and chunk lengths only
+    /// against one `record_length_limit`, and allocates up to it when a length field is
+    /// damaged (without a limit, one changed byte in a chunk header asked for 7.3e18 bytes and
+    /// aborted the process); a limit that fits every chunk of a real file is too loose to
+    /// catch a damaged chunk among them.
+    pub fn of(bytes: &[u8]) -> Self {
+        let mut at = MAGIC.len().min(bytes.len());
+        let mut largest_chunk = 0usize;
+        let mut cut = None;
+        while let Some(head) = bytes.get(at..at + 9) {
+            let opcode = head[0];
+            let body_len = u64::from_le_bytes(head[1..9].try_into().expect("8 bytes"));
+            let body_start = at + 9;
+            let Some(body) = usize::try_from(body_len)
+                .ok()
+                .and_then(|n| bytes.get(body_start..body_start.checked_add(n)?))
+            else {
+                break;
+            };
+            if opcode == OP_CHUNK
+                && let Some(size) = body.get(16..24)
+            {
+                let uncompressed = u64::from_le_bytes(size.try_into().expect("8 bytes"));
+                let record = 9 + body_len;
+                if uncompressed > MAX_CHUNK_EXPANSION.saturating_mul(record) {
+                    cut = Some(format!(
+                        "the chunk at byte {at} declares {uncompressed} bytes uncompressed, more \
+                         than {MAX_CHUNK_EXPANSION} times its {record} bytes (a damaged size)"
+                    ));
+                    break;
+                }
+                // Within the bound just checked, which is a fraction of the address space.
+                largest_chunk = largest_chunk.max(uncompressed as usize);
+            }
+            at = body_start + body.len();
+        }
+        let len = if cut.is_some() { at } else { bytes.len() };
+        Self {
+            len,
+            cut,
+            record_limit: len.max(largest_chunk),
+        }
     }
 }
 
 /// Iterator over the messages of a [`Reader`].
 pub struct Messages<'a> {
     path: &'a Path,
-    stream: MessageStream<'a>,
+    stream: MessageReader<std::io::Cursor<&'a [u8]>>,
     read: u64,
     done: bool,
+    /// Why the stream was given only the bytes before a damaged chunk.
+    cut: Option<String>,
 }
 
 impl<'a> Iterator for Messages<'a> {
@@ -908,20 +995,25 @@ impl<'a> Iterator for Messages<'a> {
             }
             Some(Err(e)) => {
                 self.done = true;
-                let truncation = Truncation {
-                    messages_read: self.read,
-                    reason: e.to_string(),
-                };
-                Some(Err(Error::file(
-                    self.path,
-                    ErrorKind::Truncated(truncation),
-                )))
+                let reason = self.cut.take().unwrap_or_else(|| e.to_string());
+                Some(Err(self.truncated(reason)))
             }
             None => {
                 self.done = true;
-                None
+                self.cut.take().map(|reason| Err(self.truncated(reason)))
             }
         }
+    }
+}
+
+impl Messages<'_> {
+    /// The error reporting a cut after the messages read so far.
+    fn truncated(&self, reason: String) -> Error {
+        let truncation = Truncation {
+            messages_read: self.read,
+            reason,
+        };
+        Error::file(self.path, ErrorKind::Truncated(truncation))
     }
 }
 
@@ -1027,13 +1119,36 @@ impl Contents {
     }
 }
 
+/// Refuses a raw sample whose values the sensor cannot produce ([`limits::check_raw`]; the
+/// gyroscope and temperature when their flags mark them valid).
+fn check_raw_values(path: &Path, message: &Recorded, sample: &RawImuSample) -> Result<()> {
+    let gyro = sample.flags & ipc_types::raw_flags::GYRO_VALID != 0;
+    let temp = sample.flags & ipc_types::raw_flags::TEMP_VALID != 0;
+    limits::check_raw(
+        &sample.accel_g,
+        gyro.then_some(&sample.gyro_dps),
+        temp.then_some(sample.temp_c),
+    )
+    .map_err(|bad| {
+        let field = format!("{}: {}", message.topic, bad.field);
+        Error::message(
+            path,
+            message.index,
+            Some(&field),
+            ErrorKind::OutOfRange(bad),
+        )
+    })
+}
+
 /// Reads every message of the known topics of an MCAP file (raw, truth, corrected, odometry,
 /// robot hints, pose, events), up to the cut if the file was truncated (reported in
 /// [`Contents::truncation`], never silently).
 ///
 /// Raw samples are split into acquisition sessions where their sequence number restarts
-/// ([`Contents::raw_sessions`]). Errors if the file is not MCAP, a message does not decode, or
-/// raw sample times (`stamps.sample_ns`) do not strictly increase within a session.
+/// ([`Contents::raw_sessions`]). Errors if the file is not MCAP, a message does not decode, a
+/// raw sample holds a value the sensor cannot produce ([`limits::check_raw`]), or raw sample
+/// times (`stamps.sample_ns`) do not strictly increase within a session or step further than
+/// [`limits::MAX_STEP_S`].
 pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
     let reader = Reader::open(path)?;
     let mut contents = Contents::default();
@@ -1051,6 +1166,7 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
         };
         if let Some(sample) = message.decode::<RawImuSample>() {
             let sample = sample?;
+            check_raw_values(&reader.path, &message, &sample)?;
             let restart = contents.raw.last().is_none_or(|p| sample.seq <= p.seq);
             if restart {
                 let start = contents.raw.len();
@@ -1062,6 +1178,8 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
                     Some(ErrorKind::TimeBackwards { t_ns, previous_ns })
                 } else if t_ns == previous_ns {
                     Some(ErrorKind::DuplicateTime { t_ns })
+                } else if t_ns > previous_ns.saturating_add(limits::MAX_STEP_NS) {
+                    Some(ErrorKind::TimeStep { t_ns, previous_ns })
                 } else {
                     None
                 };
