@@ -23,6 +23,8 @@
 //! truncation ([`ErrorKind::Truncated`]); [`read_all`] returns it in [`Contents::truncation`].
 //! [`Writer::flush`] closes the current chunk, bounding what a kill can lose.
 
+pub mod scan;
+
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
 use std::fs::File;
@@ -30,9 +32,7 @@ use std::io::{BufWriter, Read};
 use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
 
-use ::mcap::io::MessageReader;
 use ::mcap::records::MessageHeader;
-use ::mcap::sans_io::LinearReaderOptions;
 use ::mcap::{Compression, MAGIC, WriteOptions};
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint, limits};
 use serde::de::DeserializeOwned;
@@ -862,109 +862,26 @@ impl Reader {
     /// The messages of all topics in file order. If the file ends early or is damaged, the
     /// last item is an [`ErrorKind::Truncated`] error after every message before the cut.
     ///
-    /// Memory is bounded by the file: a chunk that declares more than [`MAX_CHUNK_EXPANSION`]
-    /// times its record's size uncompressed is damage, and reading stops before it; no record
-    /// may be longer than the file or the largest chunk that passed (see [`ReadBounds`]).
+    /// Memory is bounded by the file: a chunk that declares more than
+    /// [`scan::MAX_CHUNK_EXPANSION`] times its record's size uncompressed is damage, and
+    /// reading stops before it; no record or string may be longer than what holds it (see
+    /// [`scan`]).
     pub fn messages(&self) -> Result<Messages<'_>> {
-        let bounds = ReadBounds::of(&self.bytes);
-        let options = LinearReaderOptions::default()
-            .with_validate_chunk_crcs(true)
-            .with_record_length_limit(bounds.record_limit);
-        let stream = MessageReader::new_with_options(
-            std::io::Cursor::new(&self.bytes[..bounds.len]),
-            options,
-        );
         Ok(Messages {
             path: &self.path,
-            stream,
+            stream: scan::Scanner::new(&self.bytes),
             read: 0,
             done: false,
-            cut: bounds.cut,
         })
-    }
-}
-
-/// Largest ratio of a chunk's declared uncompressed size to its record's size in the file.
-/// Our recorder's zstd chunks of JSON expand 5-20 times; 1024 leaves room for any real
-/// recording and caps what a damaged size field can make the reader allocate.
-pub const MAX_CHUNK_EXPANSION: u64 = 1024;
-
-/// MCAP opcode of a chunk record (MCAP specification, "Chunk (op=0x06)").
-const OP_CHUNK: u8 = 0x06;
-
-/// What the message reader may read and allocate for one MCAP file.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ReadBounds {
-    /// How many leading bytes of the file it reads.
-    pub len: usize,
-    /// Why it stops before the end (`None` when it reads the whole file).
-    pub cut: Option<String>,
-    /// The longest record (or chunk content) it accepts, bytes: the larger of the bytes read
-    /// and the largest declared uncompressed size of a chunk among them.
-    pub record_limit: usize,
-}
-
-impl ReadBounds {
-    /// Walks the top-level record framing of `bytes` (MCAP specification, "Records": an
-    /// opcode byte, a little-endian `u64` body length, the body; a chunk's body starts with
-    /// its message start and end times, then its uncompressed size as a `u64`) and stops
-    /// before the first chunk whose uncompressed size exceeds [`MAX_CHUNK_EXPANSION`] times
-    /// its record. A record that runs past the end of the file ends the walk; the reader
-    /// reports that truncation itself.
-    ///
-    /// Hand-written because the `mcap` crate (0.26) checks record and chunk lengths only
-    /// against one `record_length_limit`, and allocates up to it when a length field is
-    /// damaged (without a limit, one changed byte in a chunk header asked for 7.3e18 bytes and
-    /// aborted the process); a limit that fits every chunk of a real file is too loose to
-    /// catch a damaged chunk among them.
-    pub fn of(bytes: &[u8]) -> Self {
-        let mut at = MAGIC.len().min(bytes.len());
-        let mut largest_chunk = 0usize;
-        let mut cut = None;
-        while let Some(head) = bytes.get(at..at + 9) {
-            let opcode = head[0];
-            let body_len = u64::from_le_bytes(head[1..9].try_into().expect("8 bytes"));
-            let body_start = at + 9;
-            let Some(body) = usize::try_from(body_len)
-                .ok()
-                .and_then(|n| bytes.get(body_start..body_start.checked_add(n)?))
-            else {
-                break;
-            };
-            if opcode == OP_CHUNK
-                && let Some(size) = body.get(16..24)
-            {
-                let uncompressed = u64::from_le_bytes(size.try_into().expect("8 bytes"));
-                let record = 9 + body_len;
-                if uncompressed > MAX_CHUNK_EXPANSION.saturating_mul(record) {
-                    cut = Some(format!(
-                        "the chunk at byte {at} declares {uncompressed} bytes uncompressed, more \
-                         than {MAX_CHUNK_EXPANSION} times its {record} bytes (a damaged size)"
-                    ));
-                    break;
-                }
-                // Within the bound just checked, which is a fraction of the address space.
-                largest_chunk = largest_chunk.max(uncompressed as usize);
-            }
-            at = body_start + body.len();
-        }
-        let len = if cut.is_some() { at } else { bytes.len() };
-        Self {
-            len,
-            cut,
-            record_limit: len.max(largest_chunk),
-        }
     }
 }
 
 /// Iterator over the messages of a [`Reader`].
 pub struct Messages<'a> {
     path: &'a Path,
-    stream: MessageReader<std::io::Cursor<&'a [u8]>>,
+    stream: scan::Scanner<'a>,
     read: u64,
     done: bool,
-    /// Why the stream was given only the bytes before a damaged chunk.
-    cut: Option<String>,
 }
 
 impl<'a> Iterator for Messages<'a> {
@@ -977,43 +894,33 @@ impl<'a> Iterator for Messages<'a> {
         match self.stream.next() {
             Some(Ok(message)) => {
                 self.read += 1;
-                let channel = &message.channel;
                 Some(Ok(Recorded {
                     source: self.path,
                     index: self.read,
-                    topic: channel.topic.clone(),
-                    schema_name: channel
-                        .schema
-                        .as_ref()
-                        .map(|s| s.name.clone())
-                        .unwrap_or_default(),
-                    encoding: channel.message_encoding.clone(),
-                    log_time_ns: message.log_time,
-                    publish_time_ns: message.publish_time,
-                    data: message.data.into_owned(),
+                    topic: message.channel.topic.clone(),
+                    schema_name: message.channel.schema_name.clone(),
+                    encoding: message.channel.encoding.clone(),
+                    log_time_ns: message.log_time_ns,
+                    publish_time_ns: message.publish_time_ns,
+                    data: message.data,
                 }))
             }
-            Some(Err(e)) => {
+            Some(Err(reason)) => {
                 self.done = true;
-                let reason = self.cut.take().unwrap_or_else(|| e.to_string());
-                Some(Err(self.truncated(reason)))
+                let truncation = Truncation {
+                    messages_read: self.read,
+                    reason,
+                };
+                Some(Err(Error::file(
+                    self.path,
+                    ErrorKind::Truncated(truncation),
+                )))
             }
             None => {
                 self.done = true;
-                self.cut.take().map(|reason| Err(self.truncated(reason)))
+                None
             }
         }
-    }
-}
-
-impl Messages<'_> {
-    /// The error reporting a cut after the messages read so far.
-    fn truncated(&self, reason: String) -> Error {
-        let truncation = Truncation {
-            messages_read: self.read,
-            reason,
-        };
-        Error::file(self.path, ErrorKind::Truncated(truncation))
     }
 }
 
