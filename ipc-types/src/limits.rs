@@ -50,11 +50,11 @@ impl std::fmt::Display for OutOfBounds {
         if self.value.is_finite() {
             write!(
                 f,
-                "{} = {} is beyond the sensor's range (limit {})",
+                "{} = {:?} is beyond the sensor's range (limit {:?})",
                 self.field, self.value, self.limit
             )
         } else {
-            write!(f, "{} = {} is not finite", self.field, self.value)
+            write!(f, "{} = {:?} is not finite", self.field, self.value)
         }
     }
 }
