@@ -339,19 +339,19 @@ impl CalibrationFile {
         for (i, b) in self.bias_g.iter().enumerate() {
             if !plausibility::within(*b, p.accel_bias_g) {
                 return Err(format!(
-                    "bias_g[{i}] = {b} g is not a MEMS accelerometer's bias (limit {} g)",
+                    "bias_g[{i}] = {b:?} g is not a MEMS accelerometer's bias (limit {} g)",
                     p.accel_bias_g
                 ));
             }
         }
         for (i, v) in self.sigma.iter().enumerate() {
             if !(v.is_finite() && *v >= 0.0) {
-                return Err(format!("sigma[{i}] = {v} must be finite and >= 0"));
+                return Err(format!("sigma[{i}] = {v:?} must be finite and >= 0"));
             }
         }
         for (r, row) in self.covariance.iter().enumerate() {
             if let Some(c) = row.iter().position(|v| !v.is_finite()) {
-                return Err(format!("covariance[{r}][{c}] = {} is not finite", row[c]));
+                return Err(format!("covariance[{r}][{c}] = {:?} is not finite", row[c]));
             }
             if row[r] < 0.0 {
                 return Err(format!(
@@ -366,7 +366,7 @@ impl CalibrationFile {
                 .position(|b| !plausibility::within(*b, p.gyro_bias_dps))
         {
             return Err(format!(
-                "gyro.bias_dps[{i}] = {} deg/s is not a MEMS gyroscope's bias (limit {} deg/s)",
+                "gyro.bias_dps[{i}] = {:?} deg/s is not a MEMS gyroscope's bias (limit {} deg/s)",
                 bias[i], p.gyro_bias_dps
             ));
         }
@@ -516,7 +516,7 @@ pub mod plausibility {
                 };
                 if !within(off, limit) {
                     return Err(format!(
-                        "{name}[{r}][{c}] = {v} is not plausible ({what} {limit} from the identity)"
+                        "{name}[{r}][{c}] = {v:?} is not plausible ({what} {limit} from the identity)"
                     ));
                 }
             }

@@ -109,14 +109,14 @@ fn check_pose(path: &Path, line: u64, values: &[f64], pose: &Pose) -> Result<()>
             let limit = ipc_types::limits::ACCEL_LIMIT_G;
             return Err(fail(
                 3 * axis + 1,
-                format!("mean {mean} g is beyond the sensor's range (limit {limit} g)"),
+                format!("mean {mean:?} g is beyond the sensor's range (limit {limit} g)"),
             ));
         }
         if !(0.0..=POSE_STD_MAX_G).contains(&std) {
             return Err(fail(
                 3 * axis + 2,
                 format!(
-                    "standard deviation {std} g is not in 0..={POSE_STD_MAX_G} g (a pose at rest)"
+                    "standard deviation {std:?} g is not in 0..={POSE_STD_MAX_G} g (a pose at rest)"
                 ),
             ));
         }
@@ -127,14 +127,14 @@ fn check_pose(path: &Path, line: u64, values: &[f64], pose: &Pose) -> Result<()>
         let (lo, hi) = POSE_TRUE_NORM_G;
         return Err(fail(
             0,
-            format!("the true vector's magnitude is {t} g, not gravity's 1 g ({lo}..={hi})"),
+            format!("the true vector's magnitude is {t:?} g, not gravity's 1 g ({lo}..={hi})"),
         ));
     }
     if !(POSE_MEAN_NORM_G.0..=POSE_MEAN_NORM_G.1).contains(&m) {
         let (lo, hi) = POSE_MEAN_NORM_G;
         return Err(fail(
             1,
-            format!("the mean's magnitude is {m} g: not a pose at rest ({lo}..={hi} g)"),
+            format!("the mean's magnitude is {m:?} g: not a pose at rest ({lo}..={hi} g)"),
         ));
     }
     Ok(())
