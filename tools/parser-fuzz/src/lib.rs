@@ -6,7 +6,7 @@
 //!
 //! A run passes when every input gives `Ok` or an error naming its file: no panic, no abort, no
 //! allocation over the cap. The binary `parser-fuzz` runs campaigns; `tests/short_run.rs` runs
-//! a short one in CI. See `docs/fuzzing.md` for the commands and the current figures.
+//! a short one in CI. See `docs/input-checks.md` for the commands and the current figures.
 
 pub mod mutate;
 pub mod seeds;

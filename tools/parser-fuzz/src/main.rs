@@ -1,5 +1,5 @@
 //! `parser-fuzz`: runs mutation campaigns on the file readers (see the library documentation
-//! and `docs/fuzzing.md`). Exits non-zero when any campaign found a failure; an allocation over
+//! and `docs/input-checks.md`). Exits non-zero when any campaign found a failure; an allocation over
 //! the cap aborts the process after printing the command that reproduces it.
 
 use std::path::PathBuf;

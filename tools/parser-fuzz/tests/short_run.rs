@@ -1,4 +1,4 @@
-//! A short campaign on every reader (a few seconds; the full one is in `docs/fuzzing.md`): no
+//! A short campaign on every reader (a few seconds; the full one is in `docs/input-checks.md`): no
 //! panic, no error without the file's name, no allocation over the cap (the process would
 //! abort), and the mutations reach both accepted and refused inputs.
 
