@@ -329,8 +329,56 @@ impl CalibrationFile {
         })
     }
 
-    /// Reads and checks a file: parses, then checks the version, the covariance shape and that
-    /// the parameters form a valid model of the stated kind.
+    /// Checks that the parameters describe a real MEMS part (see [`plausibility`]): `S` and
+    /// the gyroscope correction near the identity and well conditioned, biases within a few
+    /// times the datasheet's tolerances, covariance and sigmas finite and non-negative. The
+    /// message names the field.
+    pub fn check_plausible(&self) -> Result<(), String> {
+        let p = plausibility::PLAUSIBLE;
+        plausibility::near_identity("scale", &self.scale, &p)?;
+        for (i, b) in self.bias_g.iter().enumerate() {
+            if !plausibility::within(*b, p.accel_bias_g) {
+                return Err(format!(
+                    "bias_g[{i}] = {b:?} g is not a MEMS accelerometer's bias (limit {} g)",
+                    p.accel_bias_g
+                ));
+            }
+        }
+        for (i, v) in self.sigma.iter().enumerate() {
+            if !(v.is_finite() && *v >= 0.0) {
+                return Err(format!("sigma[{i}] = {v:?} must be finite and >= 0"));
+            }
+        }
+        for (r, row) in self.covariance.iter().enumerate() {
+            if let Some(c) = row.iter().position(|v| !v.is_finite()) {
+                return Err(format!("covariance[{r}][{c}] = {:?} is not finite", row[c]));
+            }
+            if row[r] < 0.0 {
+                return Err(format!(
+                    "covariance[{r}][{r}] = {} is a negative variance",
+                    row[r]
+                ));
+            }
+        }
+        if let Some(bias) = self.gyro.bias_dps
+            && let Some(i) = bias
+                .iter()
+                .position(|b| !plausibility::within(*b, p.gyro_bias_dps))
+        {
+            return Err(format!(
+                "gyro.bias_dps[{i}] = {:?} deg/s is not a MEMS gyroscope's bias (limit {} deg/s)",
+                bias[i], p.gyro_bias_dps
+            ));
+        }
+        if let Some(c) = &self.gyro.correction {
+            plausibility::near_identity("gyro.correction", c, &p)?;
+        }
+        Ok(())
+    }
+
+    /// Reads and checks a file: parses, then checks the version, the covariance shape, that
+    /// the parameters form a valid model of the stated kind, and that they are plausible
+    /// ([`Self::check_plausible`]).
     pub fn load(path: &Path) -> Result<Self, CalibFileError> {
         let name = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|source| CalibFileError::Io {
@@ -407,12 +455,81 @@ impl CalibrationFile {
             }
         }
         crate::terms::ReadingTerms::from_file(&file).map_err(|e| invalid(e.to_string()))?;
+        file.check_plausible().map_err(invalid)?;
         if let Some(noise) = &file.noise {
             noise
                 .validate()
                 .map_err(|e| invalid(format!("noise.{}: {}", e.field, e.problem)))?;
         }
         Ok(file)
+    }
+}
+
+/// The bounds [`CalibrationFile::check_plausible`] holds a file to.
+pub mod plausibility {
+    use nalgebra::Matrix3;
+
+    /// Bounds on the parameters of a real part.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct Bounds {
+        /// Largest distance of a diagonal entry of `S` (or the gyroscope correction) from 1.
+        pub scale_error: f64,
+        /// Largest magnitude of an off-diagonal entry (cross-axis sensitivity, misalignment).
+        pub cross_axis: f64,
+        /// Largest condition number (largest over smallest singular value).
+        pub condition: f64,
+        /// Largest accelerometer bias per axis, g.
+        pub accel_bias_g: f64,
+        /// Largest gyroscope bias per axis, deg/s.
+        pub gyro_bias_dps: f64,
+    }
+
+    /// The MPU-9250's tolerances (PS-MPU-9250A-01 rev 1.1, tables 3.1 and 3.2: sensitivity
+    /// +-3 %, cross-axis sensitivity +-2 %, zero-g offset +-60/+-80 mg, zero-rate offset
+    /// +-5 deg/s) widened several times for other parts, temperature and mounting: a file
+    /// beyond them holds a fit that failed or a damaged value.
+    pub const PLAUSIBLE: Bounds = Bounds {
+        scale_error: 0.2,
+        cross_axis: 0.1,
+        condition: 1.5,
+        accel_bias_g: 0.5,
+        gyro_bias_dps: 50.0,
+    };
+
+    /// Whether `v` is a number of magnitude at most `limit` (false for NaN).
+    pub fn within(v: f64, limit: f64) -> bool {
+        v.abs() <= limit
+    }
+
+    /// Checks that `m` (named `name`, row-major) is near the identity and well conditioned.
+    pub fn near_identity(name: &str, m: &[[f64; 3]; 3], b: &Bounds) -> Result<(), String> {
+        for (r, row) in m.iter().enumerate() {
+            for (c, v) in row.iter().enumerate() {
+                let (off, limit, what) = if r == c {
+                    (
+                        (v - 1.0).abs(),
+                        b.scale_error,
+                        "a scale factor farther than",
+                    )
+                } else {
+                    (v.abs(), b.cross_axis, "a cross-axis term larger than")
+                };
+                if !within(off, limit) {
+                    return Err(format!(
+                        "{name}[{r}][{c}] = {v:?} is not plausible ({what} {limit} from the identity)"
+                    ));
+                }
+            }
+        }
+        let sv = Matrix3::from_fn(|r, c| m[r][c]).singular_values();
+        let condition = sv.max() / sv.min();
+        if !within(condition, b.condition) {
+            return Err(format!(
+                "{name} has condition number {condition:.3}, more than {}",
+                b.condition
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -625,6 +742,38 @@ mod tests {
             err.contains("bad.toml") && err.contains("gyro.bias_dps"),
             "{err}"
         );
+        // Implausible values: each is refused naming the file and the field.
+        type Spoil = fn(&mut CalibrationFile);
+        let cases: [(&str, Spoil); 7] = [
+            ("scale[0][0]", |f| f.scale[0][0] = 1e300),
+            ("scale[0][0]", |f| f.scale[0][0] = -1.0),
+            ("scale[1][2]", |f| f.scale[1][2] = 0.5),
+            ("bias_g[2]", |f| f.bias_g[2] = 3.0),
+            ("gyro.correction[0][0]", |f| {
+                f.gyro.correction = Some([[0.0; 3]; 3])
+            }),
+            ("gyro.bias_dps[1]", |f| {
+                f.gyro.bias_dps = Some([0.0, 400.0, 0.0])
+            }),
+            ("covariance[4][4]", |f| f.covariance[4][4] = -1e-6),
+        ];
+        for (field, spoil) in cases {
+            let mut f = example();
+            spoil(&mut f);
+            std::fs::write(&path, f.to_toml()).unwrap();
+            let err = CalibrationFile::load(&path).unwrap_err().to_string();
+            assert!(
+                err.contains("bad.toml") && err.contains(field),
+                "{field}: {err}"
+            );
+        }
+        // Entries each within bounds that together make a badly conditioned matrix.
+        let mut f = example();
+        f.gyro.correction = Some([[0.8, 0.1, 0.1], [0.1, 0.8, -0.1], [0.1, 0.1, 1.2]]);
+        let b = plausibility::PLAUSIBLE;
+        let m = f.gyro.correction.unwrap();
+        let err = plausibility::near_identity("m", &m, &b).unwrap_err();
+        assert!(err.contains("condition number"), "{err}");
         let good = dir.join("good.toml");
         example().save(&good).unwrap();
         assert_eq!(CalibrationFile::load(&good).unwrap(), example());

@@ -48,7 +48,7 @@
 //! The gyroscope's has none: a turn-on bias of 0.3-1 deg/s that no file can know is measured to
 //! 0.01 deg/s by one second of rest.
 
-use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, raw_flags};
+use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, limits, raw_flags};
 use nalgebra::Vector3;
 
 use crate::calibfile::CalibrationFile;
@@ -108,6 +108,32 @@ pub enum StageError {
         /// Sequence number of the previous sample.
         prev_seq: u64,
         /// Its sample time, ns.
+        prev_ns: u64,
+    },
+    /// A value the sensor cannot produce (beyond its largest range).
+    #[error("raw sample seq {seq} (t {t_ns} ns): {bad}")]
+    OutOfRange {
+        /// Sequence number of the sample.
+        seq: u64,
+        /// Its sample time, ns.
+        t_ns: u64,
+        /// The field, its value and the bound.
+        bad: limits::OutOfBounds,
+    },
+    /// The sample time is further after the previous sample's than
+    /// [`limits::MAX_STEP_S`] (a corrupted stamp; a second such step in a row starts a new
+    /// stream instead).
+    #[error(
+        "raw sample seq {seq}: sample time {t_ns} ns is more than {} s after the previous \
+         sample's ({prev_ns} ns); dropped",
+        limits::MAX_STEP_S
+    )]
+    TimeStep {
+        /// Sequence number of the sample.
+        seq: u64,
+        /// Its sample time, ns.
+        t_ns: u64,
+        /// The previous sample's time, ns.
         prev_ns: u64,
     },
     /// The detector needs the gyroscope but the sample has none.
@@ -330,6 +356,8 @@ pub struct CalibrationStage {
     last: Option<(u64, u64)>,
     /// Whether `last` comes from [`CalibrationStage::resume`] and no sample has confirmed it.
     resumed: bool,
+    /// Whether the previous sample was dropped for a time step beyond the bound.
+    jumped: bool,
     stats: StageStats,
 }
 
@@ -367,6 +395,7 @@ impl CalibrationStage {
             carried: Carried::default(),
             last: None,
             resumed: false,
+            jumped: false,
             stats: StageStats::default(),
         })
     }
@@ -450,6 +479,13 @@ impl CalibrationStage {
     /// restarted publisher): the time check and the detector and refinement start over (a new
     /// sensor session has a new turn-on bias, and a stale gyroscope reference would hold every
     /// later window in "motion").
+    ///
+    /// A refused sample (see [`StageError`]: not finite, beyond the sensor's range
+    /// ([`limits::check_raw`]), time not increasing or more than [`limits::MAX_STEP_S`] ahead)
+    /// changes nothing; the caller counts it. The next sample then skips a sequence number: a
+    /// gap, and its corrected sample carries [`raw_flags::GAP_BEFORE`] (as every sample after a
+    /// gap does). A second step beyond the bound in a row is a new time base: a new stream, as
+    /// for a restarted publisher.
     pub fn push(
         &mut self,
         raw: &RawImuSample,
@@ -467,8 +503,22 @@ impl CalibrationStage {
             self.start_over();
             self.last = None;
         }
+        let jump = self.last.is_some_and(|(_, prev_ns)| {
+            raw.stamps.sample_ns > prev_ns.saturating_add(limits::MAX_STEP_NS)
+        });
+        if jump && !self.jumped {
+            // One stamp far ahead is a corrupted stamp until the next one agrees.
+            self.jumped = true;
+            return Err(StageError::TimeStep {
+                seq: raw.seq,
+                t_ns: raw.stamps.sample_ns,
+                prev_ns: self.last.map_or(0, |(_, ns)| ns),
+            });
+        }
+        self.jumped = false;
+        let mut gap = false;
         match self.last {
-            Some((prev_seq, _)) if raw.seq <= prev_seq => self.start_over(),
+            Some((prev_seq, _)) if raw.seq <= prev_seq || jump => self.start_over(),
             Some((prev_seq, prev_ns)) if raw.stamps.sample_ns <= prev_ns => {
                 return Err(StageError::TimeNotIncreasing {
                     seq: raw.seq,
@@ -485,6 +535,7 @@ impl CalibrationStage {
                 self.cut_batch();
                 self.detector.interrupt();
                 self.stats.gaps += 1;
+                gap = true;
             }
             _ => {}
         }
@@ -516,7 +567,7 @@ impl CalibrationStage {
             },
             temp_c: raw.temp_c,
             calib_id: self.calib_id,
-            raw_flags: raw.flags,
+            raw_flags: raw.flags | if gap { raw_flags::GAP_BEFORE } else { 0 },
             ..CorrectedImuSample::default()
         };
         self.batch_gyro &= has_gyro;
@@ -599,7 +650,14 @@ impl CalibrationStage {
         if has_temp && !raw.temp_c.is_finite() {
             return Err(err("temp_c", raw.temp_c));
         }
-        Ok(())
+        let gyro = has_gyro.then_some(&raw.gyro_dps);
+        limits::check_raw(&raw.accel_g, gyro, has_temp.then_some(raw.temp_c)).map_err(|bad| {
+            StageError::OutOfRange {
+                seq: raw.seq,
+                t_ns: raw.stamps.sample_ns,
+                bad,
+            }
+        })
     }
 
     /// Refines at rest with the batch's `verdict` and carries the verdict over.

@@ -239,6 +239,63 @@ fn bad_input_is_refused_with_the_sample_named_and_the_state_unchanged() {
     run(&mut yu, &[no_gyro]);
 }
 
+#[test]
+fn absurd_samples_and_time_jumps_are_dropped_counted_and_flag_the_gap() {
+    let file = calibration();
+    let mut st = stage(&file, DetectorKind::Glrt);
+    let ms = 1_000_000;
+    let ok = |k: u64| raw(k, ms * (k + 1), [0.0, 0.0, 1.0], [0.0; 3], 25.0);
+    let mut out = run(&mut st, &[ok(0), ok(1), ok(2)]);
+    let mut refused = 0;
+    let mut push = |st: &mut CalibrationStage, s: &RawImuSample, out: &mut Vec<_>| {
+        st.push(s, &mut |c| out.push(*c))
+            .inspect_err(|_| refused += 1)
+    };
+    for (seq, field, value) in [(3, 1, 1e300), (4, 2, 100.0)] {
+        let mut bad = ok(seq);
+        bad.accel_g[field] = value;
+        let e = push(&mut st, &bad, &mut out).unwrap_err();
+        assert!(matches!(e, StageError::OutOfRange { .. }), "{e}");
+        assert!(e.to_string().contains("beyond the sensor's range"), "{e}");
+    }
+    let mut bad_gyro = ok(4);
+    bad_gyro.gyro_dps[0] = -1e5;
+    assert!(push(&mut st, &bad_gyro, &mut out).is_err());
+    // The next good sample is after a gap, and says so.
+    push(&mut st, &ok(5), &mut out).unwrap();
+    let last = out.last().unwrap();
+    assert_eq!(last.seq, 5);
+    assert_ne!(last.raw_flags & raw_flags::GAP_BEFORE, 0);
+    assert_eq!(st.stats().gaps, 1);
+    // One stamp an hour ahead is dropped; the stream goes on after it.
+    let mut ahead = ok(6);
+    ahead.stamps.sample_ns += 3_600_000_000_000;
+    let e = push(&mut st, &ahead, &mut out).unwrap_err();
+    assert!(matches!(e, StageError::TimeStep { seq: 6, .. }), "{e}");
+    push(&mut st, &ok(7), &mut out).unwrap();
+    assert_eq!((st.stats().gaps, st.stats().restarts), (2, 0));
+    // Two in a row are a new time base: a new stream from the second.
+    let later = |k: u64| {
+        let mut s = ok(k);
+        s.stamps.sample_ns += 3_600_000_000_000;
+        s
+    };
+    assert!(push(&mut st, &later(8), &mut out).is_err());
+    push(&mut st, &later(9), &mut out).unwrap();
+    push(&mut st, &later(10), &mut out).unwrap();
+    assert_eq!(st.stats().restarts, 1);
+    assert_eq!(refused, 5);
+    assert_eq!(st.stats().accepted, 7);
+    for c in &out {
+        assert!(
+            c.accel_mps2
+                .iter()
+                .chain(&c.gyro_rps)
+                .all(|v| v.is_finite() && v.abs() < 300.0)
+        );
+    }
+}
+
 /// Rest samples of the sensor lying still with gravity along `up` (unit, sensor frame), with
 /// the file's errors applied in reverse plus an extra accelerometer bias (m/s^2) and gyroscope
 /// bias (deg/s) the file does not know, white noise at the MPU-9250's densities at 1 kHz.

@@ -15,6 +15,7 @@
 //! alignments and offsets on both sides.
 
 pub mod clock;
+pub mod limits;
 pub mod service;
 pub mod units;
 pub mod wake;

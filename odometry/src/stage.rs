@@ -73,7 +73,9 @@
 use crate::eskf::{Eskf, Manoeuvre, NoiseModel};
 use crate::hints::{HintConfig, HintConfigError, HintError, HintStats, Ring, check_hint};
 use crate::navigator::Navigator;
-use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags};
+use ipc_types::{
+    CorrectedImuSample, OdometryState, RobotHint, corrected_flags, limits, odometry_flags,
+};
 use nalgebra::{Matrix3, UnitQuaternion};
 
 /// Configuration of the stage. Noise figures come from the calibration file's noise parameters.
@@ -212,6 +214,33 @@ pub enum OdometryError {
         seq: u64,
         /// The field.
         field: &'static str,
+    },
+    /// A sample holds a value no calibrated sensor produces.
+    #[error("sample seq {seq}: field {field} holds {value}, beyond the limit {limit}")]
+    OutOfRange {
+        /// Sequence number of the offending sample.
+        seq: u64,
+        /// The field.
+        field: &'static str,
+        /// The offending value, in the field's unit.
+        value: f64,
+        /// The limit of its magnitude.
+        limit: f64,
+    },
+    /// A sample's time is more than [`limits::MAX_STEP_S`] after the previous one's: no
+    /// dead reckoning bridges it; the caller starts a new stage.
+    #[error(
+        "sample seq {seq}: time {t_ns} ns is more than {} s after the previous sample's \
+         {prev_ns} ns",
+        limits::MAX_STEP_S
+    )]
+    TimeStep {
+        /// Sequence number of the offending sample.
+        seq: u64,
+        /// Its time.
+        t_ns: u64,
+        /// The previous sample's time.
+        prev_ns: u64,
     },
 }
 
@@ -575,6 +604,15 @@ impl OdometryStage {
                 prev_ns,
             });
         }
+        if let Some(prev_ns) = self.last_ns
+            && t_ns > prev_ns.saturating_add(limits::MAX_STEP_NS)
+        {
+            return Err(OdometryError::TimeStep {
+                seq: s.seq,
+                t_ns,
+                prev_ns,
+            });
+        }
         self.last_ns = Some(t_ns);
         let mut budget = REPLAY_PER_CALL;
         let budget = &mut budget;
@@ -722,12 +760,36 @@ impl Settled {
     }
 }
 
+/// Largest calibrated specific force per axis, m/s^2: twice the raw bound
+/// ([`limits::ACCEL_LIMIT_G`]) in standard gravities, room for any plausible calibration's
+/// scale and bias (`calibrate::calibfile::plausibility`).
+pub const ACCEL_LIMIT_MPS2: f64 =
+    2.0 * limits::ACCEL_LIMIT_G * ipc_types::units::STANDARD_GRAVITY_MPS2;
+
+/// Largest calibrated angular rate per axis, rad/s: twice the raw bound
+/// ([`limits::GYRO_LIMIT_DPS`]), as for [`ACCEL_LIMIT_MPS2`].
+pub const GYRO_LIMIT_RPS: f64 = 2.0 * limits::GYRO_LIMIT_DPS * std::f64::consts::PI / 180.0;
+
+/// Checks the values the filter takes: finite, and within [`ACCEL_LIMIT_MPS2`] and
+/// [`GYRO_LIMIT_RPS`] (a value beyond them would drive the filter's state to infinity and NaN).
 fn check_finite(s: &CorrectedImuSample) -> Result<(), OdometryError> {
-    let fields: [(&'static str, &[f64]); 2] =
-        [("accel_mps2", &s.accel_mps2), ("gyro_rps", &s.gyro_rps)];
-    for (field, values) in fields {
+    let fields: [(&'static str, &[f64], f64); 4] = [
+        ("accel_mps2", &s.accel_mps2, ACCEL_LIMIT_MPS2),
+        ("gyro_rps", &s.gyro_rps, GYRO_LIMIT_RPS),
+        ("zs_mean_mps2", &s.zs_mean_mps2, ACCEL_LIMIT_MPS2),
+        ("zs_std_mps2", &s.zs_std_mps2, ACCEL_LIMIT_MPS2),
+    ];
+    for (field, values, limit) in fields {
         if values.iter().any(|v| !v.is_finite()) {
             return Err(OdometryError::NotFinite { seq: s.seq, field });
+        }
+        if let Some(&value) = values.iter().find(|v| v.abs() > limit) {
+            return Err(OdometryError::OutOfRange {
+                seq: s.seq,
+                field,
+                value,
+                limit,
+            });
         }
     }
     Ok(())
@@ -738,6 +800,70 @@ mod tests {
     use super::*;
     use approx::assert_relative_eq;
     use ipc_types::Stamps;
+
+    #[test]
+    fn absurd_values_and_hour_long_steps_are_refused_and_the_state_stays_finite() {
+        let g = 9.81;
+        let mut stage = OdometryStage::new(OdometryConfig::mpu9250(g));
+        let sample = |k: u64| CorrectedImuSample {
+            stamps: Stamps {
+                sample_ns: k * 5_000_000,
+                ..Default::default()
+            },
+            seq: k,
+            accel_mps2: [0.0, 0.0, g],
+            // Moving after the first two seconds: every state integrates.
+            flags: if k < 400 {
+                corrected_flags::ZERO_STATE
+            } else {
+                0
+            },
+            ..Default::default()
+        };
+        let mut states = Vec::new();
+        let (mut refused, mut k) = (0, 0);
+        let mut feed = |stage: &mut OdometryStage, s: &CorrectedImuSample| {
+            if stage.process(s, &mut |o| states.push(*o)).is_err() {
+                refused += 1;
+            }
+        };
+        while k < 800 {
+            let mut s = sample(k);
+            match k {
+                450 => s.accel_mps2[0] = 1e300 * g,
+                460 => s.accel_mps2[1] = 100.0 * g,
+                470 => s.gyro_rps[2] = 1e6,
+                480 => s.zs_mean_mps2[2] = f64::NAN,
+                490 => s.stamps.sample_ns += 3_600_000_000_000,
+                _ => {}
+            }
+            feed(&mut stage, &s);
+            k += 1;
+        }
+        assert_eq!(refused, 5);
+        assert!(stage.aligned());
+        for o in &states {
+            let values = o
+                .position_m
+                .iter()
+                .chain(&o.position_sigma_m)
+                .chain(&o.velocity_mps);
+            assert!(values.copied().all(f64::is_finite), "{o:?}");
+        }
+        let e = stage.process(&sample(799), &mut |_| {}).unwrap_err();
+        assert!(matches!(e, OdometryError::TimeNotIncreasing { .. }), "{e}");
+        let mut big = sample(800);
+        big.accel_mps2[0] = 1e300;
+        let e = stage.process(&big, &mut |_| {}).unwrap_err();
+        assert!(
+            e.to_string().contains("accel_mps2") && e.to_string().contains("beyond"),
+            "{e}"
+        );
+        let mut late = sample(800);
+        late.stamps.sample_ns += 3_600_000_000_000;
+        let e = stage.process(&late, &mut |_| {}).unwrap_err();
+        assert!(matches!(e, OdometryError::TimeStep { seq: 800, .. }), "{e}");
+    }
 
     #[test]
     fn alignment_counts_the_residual_scale_as_bias() {

@@ -17,30 +17,93 @@
 //!
 //! Only the calling thread's calls are counted, so allocations by the test harness or by other
 //! tests running in parallel do not disturb the count.
+//!
+//! For fuzzing, a thread can also cap the size of a single allocation ([`set_limit`]): a larger
+//! request runs the hook set with [`on_refusal`] (to say which input asked) and then fails, which
+//! makes `handle_alloc_error` abort the process; [`largest_request`] reports the largest request
+//! made.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// A global allocator that forwards every call to [`System`] and counts, per thread, the
-/// allocation calls (`alloc`, `alloc_zeroed`, `realloc`); deallocations are not counted.
+/// allocation calls (`alloc`, `alloc_zeroed`, `realloc`) and the largest request; deallocations
+/// are not counted. A request over the thread's [`set_limit`] fails.
 pub struct Counting;
 
 thread_local! {
     /// Allocation calls (alloc, alloc_zeroed, realloc) made by this thread.
     static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+    /// Largest single request this thread may make, bytes.
+    static LIMIT: Cell<usize> = const { Cell::new(usize::MAX) };
+    /// Largest single request this thread made, bytes.
+    static LARGEST: Cell<usize> = const { Cell::new(0) };
 }
 
-fn count() {
+/// The hook run before a request over the limit fails (a `fn(usize)` as an address; 0: none).
+static ON_REFUSAL: AtomicUsize = AtomicUsize::new(0);
+
+/// Counts a request of `size` bytes; `false` if it is over this thread's limit.
+fn count(size: usize) -> bool {
     ALLOCATIONS.with(|c| c.set(c.get() + 1));
+    LARGEST.with(|c| c.set(c.get().max(size)));
+    if size <= LIMIT.with(Cell::get) {
+        return true;
+    }
+    let hook = ON_REFUSAL.load(Ordering::Relaxed);
+    if hook != 0 {
+        // SAFETY: only `on_refusal` stores here, and it stores a `fn(usize)`.
+        let hook: fn(usize) = unsafe { std::mem::transmute::<usize, fn(usize)>(hook) };
+        // The hook may allocate (small amounts): lift the limit while it runs.
+        let limit = LIMIT.with(|c| c.replace(usize::MAX));
+        hook(size);
+        LIMIT.with(|c| c.set(limit));
+    }
+    false
 }
 
-// SAFETY: every call is forwarded unchanged to `System`; the thread-local counter is a
-// const-initialised `Cell` without a destructor, which needs no allocation to access.
+/// Caps every later single allocation of this thread at `bytes` (`usize::MAX`: no cap). A
+/// larger request fails after the [`on_refusal`] hook ran; Rust's `handle_alloc_error` then
+/// aborts with the size.
+pub fn set_limit(bytes: usize) {
+    LIMIT.with(|c| c.set(bytes));
+}
+
+/// Sets the hook run (with the requested size) before a request over the limit fails.
+pub fn on_refusal(hook: fn(usize)) {
+    ON_REFUSAL.store(hook as usize, Ordering::Relaxed);
+}
+
+/// The largest single allocation request this thread has made, bytes (since it started or
+/// the last [`reset_largest`]).
+pub fn largest_request() -> usize {
+    LARGEST.with(Cell::get)
+}
+
+/// Starts [`largest_request`] over from 0.
+pub fn reset_largest() {
+    LARGEST.with(|c| c.set(0));
+}
+
+// SAFETY: every call is forwarded unchanged to `System` or fails with null (allowed by the
+// `GlobalAlloc` contract); the thread-locals are const-initialised `Cell`s without destructors,
+// which need no allocation to access.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
+        if !count(layout.size()) {
+            return std::ptr::null_mut();
+        }
         // SAFETY: same contract as the caller's.
         unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        if !count(layout.size()) {
+            return std::ptr::null_mut();
+        }
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc_zeroed(layout) }
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
@@ -49,7 +112,9 @@ unsafe impl GlobalAlloc for Counting {
     }
 
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
+        if !count(new_size) {
+            return std::ptr::null_mut();
+        }
         // SAFETY: same contract as the caller's.
         unsafe { System.realloc(ptr, layout, new_size) }
     }
@@ -89,6 +154,23 @@ mod tests {
             3,
             "freeing and empty Vecs count nothing"
         );
+    }
+
+    #[test]
+    fn tracks_the_largest_request_and_refuses_one_over_the_limit() {
+        static REFUSED: AtomicU64 = AtomicU64::new(0);
+        on_refusal(|size| REFUSED.store(size as u64, Ordering::Relaxed));
+        reset_largest();
+        let v: Vec<u8> = black_box(Vec::with_capacity(1000));
+        assert_eq!(largest_request(), 1000);
+        drop(v);
+        set_limit(4096);
+        let mut big: Vec<u8> = Vec::new();
+        assert!(big.try_reserve_exact(1 << 20).is_err(), "over the limit");
+        assert_eq!(REFUSED.load(Ordering::Relaxed), 1 << 20);
+        assert!(big.try_reserve_exact(4096).is_ok(), "at the limit");
+        set_limit(usize::MAX);
+        assert_eq!(largest_request(), 1 << 20);
     }
 
     #[test]

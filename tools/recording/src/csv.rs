@@ -29,7 +29,7 @@ use std::path::Path;
 use ipc_types::{RawImuSample, raw_flags};
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::text::{self, Row, Rows, SampleBuilder};
+use crate::text::{self, Columns, Row, Rows, SampleBuilder};
 use crate::{Format, LogPolicy, Recording, Truth};
 
 /// Names of the ground-truth columns, in the order the writer puts them.
@@ -59,6 +59,14 @@ const GYRO: [&str; 3] = ["gx_dps", "gy_dps", "gz_dps"];
 const TEMP: &str = "temp_c";
 const FLAGS: &str = "flags";
 const LOST: &str = "lost_before";
+
+/// The columns the sample builder names in its errors.
+const NAMES: Columns = Columns {
+    time: TIME,
+    accel: ACCEL,
+    gyro: GYRO,
+    temp: TEMP,
+};
 
 /// Every column the canonical CSV defines.
 fn known_columns() -> impl Iterator<Item = &'static str> {
@@ -204,7 +212,7 @@ pub(crate) fn read_body(
             flags,
             lost_before,
         };
-        if !samples.push(&path, line, time_column, parsed)? {
+        if !samples.push(&path, line, &NAMES, parsed)? {
             continue;
         }
         if let (Some(idx), Some(truth)) = (layout.truth, truth.as_mut()) {
@@ -275,7 +283,9 @@ pub fn read_raw(path: impl AsRef<Path>) -> Result<Recording> {
 /// +-250 deg/s, and their stamps other than `sample_ns` are 0 (see the module documentation).
 ///
 /// Errors (before anything is written) if the truth does not match the samples one to one in
-/// time, if times do not strictly increase, or if a value is not finite.
+/// time, if times do not strictly increase or step further than
+/// [`ipc_types::limits::MAX_STEP_S`], or if a value is not finite or beyond the sensor's range
+/// ([`ipc_types::limits::check_raw`]).
 pub fn write_raw(
     path: impl AsRef<Path>,
     samples: &[RawImuSample],
@@ -386,6 +396,22 @@ fn validate_for_writing(
                 "not decrease"
             };
             return Err(fail(i, TIME, format!("sample {i}: times must {rule}")));
+        }
+        if previous.is_some_and(|p| t_ns > p.saturating_add(ipc_types::limits::MAX_STEP_NS)) {
+            let message = format!(
+                "sample {i}: the step from the previous sample exceeds {} s",
+                ipc_types::limits::MAX_STEP_S
+            );
+            return Err(fail(i, TIME, message));
+        }
+        let gyro = sample.flags & raw_flags::GYRO_VALID != 0;
+        let temp = sample.flags & raw_flags::TEMP_VALID != 0;
+        if let Err(bad) = ipc_types::limits::check_raw(
+            &sample.accel_g,
+            gyro.then_some(&sample.gyro_dps),
+            temp.then_some(sample.temp_c),
+        ) {
+            return Err(fail(i, bad.field, format!("sample {i}: {bad}")));
         }
         let mut values = sample
             .accel_g

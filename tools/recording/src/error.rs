@@ -76,6 +76,25 @@ pub enum ErrorKind {
         /// The previous sample's time, ns.
         previous_ns: u64,
     },
+    /// A value is not a measurement the sensor can make (beyond its largest range, or not
+    /// finite; see [`ipc_types::limits`]).
+    #[error("{0}")]
+    OutOfRange(ipc_types::limits::OutOfBounds),
+    /// A sample's time is further after the previous sample's than any real gap
+    /// ([`ipc_types::limits::MAX_STEP_S`]).
+    #[error(
+        "time jumps {} s ahead of the previous sample's ({} s); steps longer than {} s are not \
+         a sampling gap",
+        seconds(*.t_ns - *.previous_ns),
+        seconds(*.previous_ns),
+        ipc_types::limits::MAX_STEP_S
+    )]
+    TimeStep {
+        /// This sample's time, ns.
+        t_ns: u64,
+        /// The previous sample's time, ns.
+        previous_ns: u64,
+    },
     /// A sample's time equals the previous sample's (a duplicated sample).
     #[error("duplicate time {} s (equal to the previous sample's)", seconds(*.t_ns))]
     DuplicateTime {

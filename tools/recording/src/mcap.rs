@@ -23,6 +23,8 @@
 //! truncation ([`ErrorKind::Truncated`]); [`read_all`] returns it in [`Contents::truncation`].
 //! [`Writer::flush`] closes the current chunk, bounding what a kill can lose.
 
+pub mod scan;
+
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
 use std::fs::File;
@@ -31,8 +33,8 @@ use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
 
 use ::mcap::records::MessageHeader;
-use ::mcap::{Compression, MAGIC, MessageStream, WriteOptions};
-use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
+use ::mcap::{Compression, MAGIC, WriteOptions};
+use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint, limits};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
@@ -887,13 +889,15 @@ impl Reader {
 
     /// The messages of all topics in file order. If the file ends early or is damaged, the
     /// last item is an [`ErrorKind::Truncated`] error after every message before the cut.
+    ///
+    /// Memory is bounded by the file: a chunk that declares more than
+    /// [`scan::MAX_CHUNK_EXPANSION`] times its record's size uncompressed is damage, and
+    /// reading stops before it; no record or string may be longer than what holds it (see
+    /// [`scan`]).
     pub fn messages(&self) -> Result<Messages<'_>> {
-        let options = ::mcap::read::Options::ValidateChunkCrcs.into();
-        let stream = MessageStream::new_with_options(&self.bytes, options)
-            .map_err(|e| Error::file(&self.path, ErrorKind::Mcap(e)))?;
         Ok(Messages {
             path: &self.path,
-            stream,
+            stream: scan::Scanner::new(&self.bytes),
             read: 0,
             done: false,
         })
@@ -903,7 +907,7 @@ impl Reader {
 /// Iterator over the messages of a [`Reader`].
 pub struct Messages<'a> {
     path: &'a Path,
-    stream: MessageStream<'a>,
+    stream: scan::Scanner<'a>,
     read: u64,
     done: bool,
 }
@@ -918,27 +922,22 @@ impl<'a> Iterator for Messages<'a> {
         match self.stream.next() {
             Some(Ok(message)) => {
                 self.read += 1;
-                let channel = &message.channel;
                 Some(Ok(Recorded {
                     source: self.path,
                     index: self.read,
-                    topic: channel.topic.clone(),
-                    schema_name: channel
-                        .schema
-                        .as_ref()
-                        .map(|s| s.name.clone())
-                        .unwrap_or_default(),
-                    encoding: channel.message_encoding.clone(),
-                    log_time_ns: message.log_time,
-                    publish_time_ns: message.publish_time,
-                    data: message.data.into_owned(),
+                    topic: message.channel.topic.clone(),
+                    schema_name: message.channel.schema_name.clone(),
+                    encoding: message.channel.encoding.clone(),
+                    log_time_ns: message.log_time_ns,
+                    publish_time_ns: message.publish_time_ns,
+                    data: message.data,
                 }))
             }
-            Some(Err(e)) => {
+            Some(Err(reason)) => {
                 self.done = true;
                 let truncation = Truncation {
                     messages_read: self.read,
-                    reason: e.to_string(),
+                    reason,
                 };
                 Some(Err(Error::file(
                     self.path,
@@ -1069,6 +1068,27 @@ impl Contents {
     }
 }
 
+/// Refuses a raw sample whose values the sensor cannot produce ([`limits::check_raw`]; the
+/// gyroscope and temperature when their flags mark them valid).
+fn check_raw_values(path: &Path, message: &Recorded, sample: &RawImuSample) -> Result<()> {
+    let gyro = sample.flags & ipc_types::raw_flags::GYRO_VALID != 0;
+    let temp = sample.flags & ipc_types::raw_flags::TEMP_VALID != 0;
+    limits::check_raw(
+        &sample.accel_g,
+        gyro.then_some(&sample.gyro_dps),
+        temp.then_some(sample.temp_c),
+    )
+    .map_err(|bad| {
+        let field = format!("{}: {}", message.topic, bad.field);
+        Error::message(
+            path,
+            message.index,
+            Some(&field),
+            ErrorKind::OutOfRange(bad),
+        )
+    })
+}
+
 /// Reads every message of the known topics of an MCAP recording (raw, truth, corrected,
 /// odometry, robot hints, pose, events), from the file at `path` and then from each of its
 /// successor segments ([`crate::segment`]: files named as successors that begin with their
@@ -1077,8 +1097,10 @@ impl Contents {
 /// silently).
 ///
 /// Raw samples are split into acquisition sessions where their sequence number restarts
-/// ([`Contents::raw_sessions`]). Errors if the file is not MCAP, a message does not decode, or
-/// raw sample times (`stamps.sample_ns`) do not strictly increase within a session.
+/// ([`Contents::raw_sessions`]). Errors if the file is not MCAP, a message does not decode, a
+/// raw sample holds a value the sensor cannot produce ([`limits::check_raw`]), or raw sample
+/// times (`stamps.sample_ns`) do not strictly increase within a session or step further than
+/// [`limits::MAX_STEP_S`].
 pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
     let path = path.as_ref();
     let mut contents = Contents::default();
@@ -1135,6 +1157,7 @@ fn read_segment(path: &Path, contents: &mut Contents) -> Result<Option<Truncatio
         };
         if let Some(sample) = message.decode::<RawImuSample>() {
             let sample = sample?;
+            check_raw_values(&reader.path, &message, &sample)?;
             let restart = contents.raw.last().is_none_or(|p| sample.seq <= p.seq);
             if restart {
                 let start = contents.raw.len();
@@ -1146,6 +1169,8 @@ fn read_segment(path: &Path, contents: &mut Contents) -> Result<Option<Truncatio
                     Some(ErrorKind::TimeBackwards { t_ns, previous_ns })
                 } else if t_ns == previous_ns {
                     Some(ErrorKind::DuplicateTime { t_ns })
+                } else if t_ns > previous_ns.saturating_add(limits::MAX_STEP_NS) {
+                    Some(ErrorKind::TimeStep { t_ns, previous_ns })
                 } else {
                     None
                 };

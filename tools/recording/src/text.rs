@@ -7,6 +7,7 @@ use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 use ::csv::{ReaderBuilder, StringRecord, Trim};
+use ipc_types::limits;
 use ipc_types::units::{self, AccelRange, GyroRange};
 use ipc_types::{RawImuSample, Stamps, raw_flags};
 
@@ -185,6 +186,33 @@ pub(crate) struct SampleBuilder {
     repeats_dropped: u64,
 }
 
+/// The column names a reader reports a row's errors under.
+pub(crate) struct Columns<'a> {
+    /// The time column.
+    pub time: &'a str,
+    /// The accelerometer's columns, x, y, z.
+    pub accel: [&'a str; 3],
+    /// The gyroscope's columns (unused when the file has none).
+    pub gyro: [&'a str; 3],
+    /// The temperature column (unused when the file has none).
+    pub temp: &'a str,
+}
+
+impl Columns<'_> {
+    /// The column of a field named by [`ipc_types::limits::check_raw`].
+    fn of(&self, field: &str) -> &str {
+        match field {
+            "accel_g[0]" => self.accel[0],
+            "accel_g[1]" => self.accel[1],
+            "accel_g[2]" => self.accel[2],
+            "gyro_dps[0]" => self.gyro[0],
+            "gyro_dps[1]" => self.gyro[1],
+            "gyro_dps[2]" => self.gyro[2],
+            _ => self.temp,
+        }
+    }
+}
+
 /// One row of a raw recording in sensor units, before counts are derived.
 pub(crate) struct Row {
     /// Sample time, ns.
@@ -211,8 +239,12 @@ impl SampleBuilder {
         }
     }
 
-    /// Appends a row read from `line` of `path` (the line is used for errors only); `false`
-    /// when [`LogPolicy::Repair`] dropped it as a repeat.
+    /// Appends a row read from `line` of `path` (the line and `columns` are used for errors
+    /// only); `false` when [`LogPolicy::Repair`] dropped it as a repeat.
+    ///
+    /// Refuses values the sensor cannot produce ([`ipc_types::limits::check_raw`]) and a time
+    /// more than [`ipc_types::limits::MAX_STEP_S`] after the previous row's, whatever the
+    /// policy: no repair makes them a measurement.
     ///
     /// Counts are derived from the values at the ranges the thesis and the defaults use:
     /// accel at +-2 g (16384 counts/g), gyro at +-250 deg/s (131 counts/(deg/s)), temperature
@@ -222,12 +254,24 @@ impl SampleBuilder {
         &mut self,
         path: &Path,
         line: u64,
-        time_column: &str,
+        columns: &Columns,
         row: Row,
     ) -> Result<bool> {
+        let time_column = columns.time;
+        if let Err(bad) = limits::check_raw(&row.accel_g, row.gyro_dps.as_ref(), row.temp_c) {
+            let kind = ErrorKind::OutOfRange(bad);
+            return Err(Error::line(path, line, Some(columns.of(bad.field)), kind));
+        }
         if let Some(previous) = self.samples.last() {
             let previous_ns = previous.stamps.sample_ns;
             let repair = self.policy == LogPolicy::Repair;
+            if row.t_ns > previous_ns.saturating_add(limits::MAX_STEP_NS) {
+                let kind = ErrorKind::TimeStep {
+                    t_ns: row.t_ns,
+                    previous_ns,
+                };
+                return Err(Error::line(path, line, Some(time_column), kind));
+            }
             if repair && is_repeat(previous, &row) {
                 self.repeats_dropped += 1;
                 return Ok(false);

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use ::csv::StringRecord;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::text::{self, Row, Rows, SampleBuilder};
+use crate::text::{self, Columns, Row, Rows, SampleBuilder};
 use crate::{Format, LogPolicy, Recording};
 
 /// One orientation of a six-position session: 30 s at rest, averaged.
@@ -57,7 +57,9 @@ const SIX_POSITION_COLUMNS: [&str; 9] = [
 
 /// Reads a six-position means file (`x_true (g),x_mean (g),x_std,y_true (g),...,z_std`).
 ///
-/// Errors if the header differs, a cell is not a finite number, or the file has no poses.
+/// Errors if the header differs, a cell is not a finite number, a pose is not one at rest
+/// (true vector of magnitude 1 g, mean within 0.5..1.5 g and the sensor's range, standard
+/// deviations within 0..1 g), or the file has no poses.
 pub fn load_six_position(path: impl AsRef<Path>) -> Result<SixPosition> {
     let path = path.as_ref();
     let mut rows = Rows::open(path)?;
@@ -66,11 +68,13 @@ pub fn load_six_position(path: impl AsRef<Path>) -> Result<SixPosition> {
     while let Some((line, row)) = rows.next_row()? {
         let values = numbers(path, line, row, &SIX_POSITION_COLUMNS)?;
         let axis = |k: usize| [values[k], values[3 + k], values[6 + k]];
-        poses.push(Pose {
+        let pose = Pose {
             true_g: axis(0),
             mean_g: axis(1),
             std_g: axis(2),
-        });
+        };
+        check_pose(path, line, &values, &pose)?;
+        poses.push(pose);
     }
     if poses.is_empty() {
         return Err(Error::file(
@@ -82,6 +86,58 @@ pub fn load_six_position(path: impl AsRef<Path>) -> Result<SixPosition> {
         source: path.to_path_buf(),
         poses,
     })
+}
+
+/// Bounds on a pose at rest, g: the magnitude of its true vector (a unit gravity reaction), of
+/// its mean (gravity's 1 g through an uncalibrated part: the MPU-9250's zero-g offset is
+/// +-60 mg on x and y, +-80 mg on z, and its scale +-3 %, PS-MPU-9250A-01 rev 1.1 table 3.2; the thesis's
+/// worst pose reads 1.27 g), and a reading's standard deviation at rest.
+const POSE_TRUE_NORM_G: (f64, f64) = (0.9, 1.1);
+const POSE_MEAN_NORM_G: (f64, f64) = (0.5, 1.5);
+const POSE_STD_MAX_G: f64 = 1.0;
+
+/// Checks that a pose is one at rest (see [`POSE_MEAN_NORM_G`]); `values` are its cells in
+/// [`SIX_POSITION_COLUMNS`] order, the first offending one is named.
+fn check_pose(path: &Path, line: u64, values: &[f64], pose: &Pose) -> Result<()> {
+    let fail = |column: usize, message: String| {
+        let column = SIX_POSITION_COLUMNS[column];
+        Error::line(path, line, Some(column), ErrorKind::Invalid(message))
+    };
+    for axis in 0..3 {
+        let (mean, std) = (values[3 * axis + 1], values[3 * axis + 2]);
+        if mean.abs() > ipc_types::limits::ACCEL_LIMIT_G {
+            let limit = ipc_types::limits::ACCEL_LIMIT_G;
+            return Err(fail(
+                3 * axis + 1,
+                format!("mean {mean:?} g is beyond the sensor's range (limit {limit} g)"),
+            ));
+        }
+        if !(0.0..=POSE_STD_MAX_G).contains(&std) {
+            return Err(fail(
+                3 * axis + 2,
+                format!(
+                    "standard deviation {std:?} g is not in 0..={POSE_STD_MAX_G} g (a pose at rest)"
+                ),
+            ));
+        }
+    }
+    let norm = |v: [f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let (t, m) = (norm(pose.true_g), norm(pose.mean_g));
+    if !(POSE_TRUE_NORM_G.0..=POSE_TRUE_NORM_G.1).contains(&t) {
+        let (lo, hi) = POSE_TRUE_NORM_G;
+        return Err(fail(
+            0,
+            format!("the true vector's magnitude is {t:?} g, not gravity's 1 g ({lo}..={hi})"),
+        ));
+    }
+    if !(POSE_MEAN_NORM_G.0..=POSE_MEAN_NORM_G.1).contains(&m) {
+        let (lo, hi) = POSE_MEAN_NORM_G;
+        return Err(fail(
+            1,
+            format!("the mean's magnitude is {m:?} g: not a pose at rest ({lo}..={hi} g)"),
+        ));
+    }
+    Ok(())
 }
 
 /// One of the thesis's accelerometer models, `a' = S a + b`: `a'` the measured and `a` the true
@@ -189,6 +245,15 @@ pub fn load_optim_params(path: impl AsRef<Path>) -> Result<OptimParams> {
 /// The column names the time-series readers report errors under.
 const SERIES_COLUMNS: [&str; 4] = ["time", "x (g)", "y (g)", "z (g)"];
 
+/// [`SERIES_COLUMNS`] as the sample builder names them (the files have no gyroscope or
+/// temperature).
+const SERIES_NAMES: Columns = Columns {
+    time: SERIES_COLUMNS[0],
+    accel: [SERIES_COLUMNS[1], SERIES_COLUMNS[2], SERIES_COLUMNS[3]],
+    gyro: ["", "", ""],
+    temp: "",
+};
+
 /// Whether a row is one of the thesis's time-series headers: `time,x (g),y (g),z (g)`,
 /// `time (s),x (g),y (g),z (g)`, or the published malformed `time (s)x (g),y (g),z (g)`.
 pub(crate) fn is_series_header(row: &StringRecord) -> bool {
@@ -218,7 +283,7 @@ pub(crate) fn read_series_body(rows: &mut Rows, policy: LogPolicy) -> Result<Rec
             flags: None,
             lost_before: 0,
         };
-        samples.push(&path, line, SERIES_COLUMNS[0], parsed)?;
+        samples.push(&path, line, &SERIES_NAMES, parsed)?;
     }
     let (samples, repairs) = samples.finish(&path, None)?;
     Ok(Recording {

@@ -2,8 +2,8 @@
 
 mod common;
 
-use common::{any_finite, any_truth, live_samples, sample_bits, tmp, truth_bits};
-use ipc_types::raw_flags;
+use common::{any_truth, any_within, live_samples, sample_bits, tmp, truth_bits};
+use ipc_types::{limits, raw_flags};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use recording::{ErrorKind, Format, Position};
@@ -31,16 +31,17 @@ fn live_samples_with_truth_round_trip_exactly() {
     assert_eq!(sniffed.samples, samples);
 }
 
+/// Every value the readers accept (finite, within the sensor's range) reads back bit for bit.
 #[test]
-fn arbitrary_finite_values_round_trip_bit_for_bit() {
+fn arbitrary_values_in_range_round_trip_bit_for_bit() {
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let mut samples = live_samples(300, 4);
     for s in &mut samples {
-        s.accel_g = [0.0; 3].map(|_| any_finite(&mut rng));
-        s.gyro_dps = [0.0; 3].map(|_| any_finite(&mut rng));
-        s.temp_c = any_finite(&mut rng);
+        s.accel_g = [0.0; 3].map(|_| any_within(&mut rng, limits::ACCEL_LIMIT_G));
+        s.gyro_dps = [0.0; 3].map(|_| any_within(&mut rng, limits::GYRO_LIMIT_DPS));
+        s.temp_c = any_within(&mut rng, limits::TEMP_MAX_C);
     }
-    samples[0].accel_g = [-0.0, f64::MIN_POSITIVE / 3.0, f64::MAX];
+    samples[0].accel_g = [-0.0, f64::MIN_POSITIVE / 3.0, limits::ACCEL_LIMIT_G];
     let path = tmp("roundtrip_any.csv");
     recording::csv::write_raw(&path, &samples, None).unwrap();
     let read = recording::csv::read_raw(&path).unwrap();
@@ -109,17 +110,21 @@ fn seconds_convert_exactly_with_rounding_beyond_nanoseconds() {
          0.0000000014,0,0,0\n\
          0.0000000025,0,0,0\n\
          1e-8,0,0,0\n\
-         .5,0,0,0\n\
-         18446744073.709551615,0,0,0\n",
+         .5,0,0,0\n",
     )
     .unwrap();
-    let times: Vec<u64> = recording::load_raw(&path)
-        .unwrap()
-        .samples
-        .iter()
-        .map(|s| s.stamps.sample_ns)
-        .collect();
-    assert_eq!(times, [1, 3, 10, 500_000_000, u64::MAX]);
+    let times = |path| -> Vec<u64> {
+        let rec = recording::load_raw(path).unwrap();
+        rec.samples.iter().map(|s| s.stamps.sample_ns).collect()
+    };
+    assert_eq!(times(&path), [1, 3, 10, 500_000_000]);
+    // The end of the u64 range, a second file (a step from 0.5 s would be a 584-year gap).
+    std::fs::write(
+        &path,
+        "t_s,ax_g,ay_g,az_g\n18446744073.7,0,0,0\n18446744073.709551615,0,0,0\n",
+    )
+    .unwrap();
+    assert_eq!(times(&path), [u64::MAX - 9_551_615, u64::MAX]);
 }
 
 /// Writes `body` to a file and returns the error `load_raw` gives for it.

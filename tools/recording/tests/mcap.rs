@@ -4,8 +4,8 @@ mod common;
 
 use std::path::Path;
 
-use common::{any_finite, any_truth, live_samples, sample_bits, tmp, truth_bits};
-use ipc_types::RawImuSample;
+use common::{any_truth, any_within, live_samples, sample_bits, tmp, truth_bits};
+use ipc_types::{RawImuSample, limits};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use recording::mcap::{Reader, Topic, Writer, read_all};
@@ -13,14 +13,15 @@ use recording::{ErrorKind, Format, Position, Truth};
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-/// Samples with arbitrary finite floats (all bit patterns), to check exactness.
+/// Samples with arbitrary floats within the sensor's range (all such bit patterns), to check
+/// exactness.
 fn arbitrary_samples(n: usize, seed: u64) -> Vec<RawImuSample> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut samples = live_samples(n, seed);
     for (i, s) in samples.iter_mut().enumerate() {
-        s.accel_g = [0.0; 3].map(|_| any_finite(&mut rng));
-        s.gyro_dps = [0.0; 3].map(|_| any_finite(&mut rng));
-        s.temp_c = any_finite(&mut rng);
+        s.accel_g = [0.0; 3].map(|_| any_within(&mut rng, limits::ACCEL_LIMIT_G));
+        s.gyro_dps = [0.0; 3].map(|_| any_within(&mut rng, limits::GYRO_LIMIT_DPS));
+        s.temp_c = any_within(&mut rng, limits::TEMP_MAX_C);
         s.stamps.acquired_ns = s.stamps.sample_ns + 1000 + i as u64;
         s.stamps.calibrated_ns = u64::MAX - i as u64;
         s.seq = 1_000_000 + 3 * i as u64;

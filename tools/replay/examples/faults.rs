@@ -41,7 +41,7 @@ use serde_json::json;
 const NEES_95: f64 = 5.991;
 /// Rest at the start of each drive, s (the calibration stage learns for 2 s of it).
 const INITIAL_REST_S: f64 = 10.0;
-/// The fault comes this long after the first motion that starts after `FAULT_AFTER_S`.
+/// The fault comes this long into the first motion after `FAULT_AFTER_S`.
 const INTO_MOTION_S: f64 = 1.0;
 const FAULT_AFTER_S: f64 = 20.0;
 
@@ -148,16 +148,21 @@ fn truth_at(truth: &[Truth], t_ns: u64) -> Option<&Truth> {
         .map(|i| &truth[i])
 }
 
-/// The sample time of the fault: `INTO_MOTION_S` into the first motion after `FAULT_AFTER_S`.
+/// The sample time of the fault: `INTO_MOTION_S` into motion, the first after
+/// `FAULT_AFTER_S` (at its first moving sample if it stops sooner).
 fn fault_time_ns(truth: &[Truth]) -> Result<u64> {
     let t0 = truth.first().context("no truth")?.t_ns;
     let after = t0 + (FAULT_AFTER_S * 1e9) as u64;
-    let start = truth
-        .windows(2)
-        .find(|w| w[0].t_ns >= after && w[0].at_rest && !w[1].at_rest)
-        .context("no motion starts after the warm-up")?[1]
-        .t_ns;
-    Ok(start + (INTO_MOTION_S * 1e9) as u64)
+    let i = truth
+        .iter()
+        .position(|t| t.t_ns >= after && !t.at_rest)
+        .context("the drive does not move after the warm-up")?;
+    let into = truth[i].t_ns + (INTO_MOTION_S * 1e9) as u64;
+    let still_moving = truth[i..]
+        .iter()
+        .take_while(|t| t.t_ns <= into)
+        .all(|t| !t.at_rest);
+    Ok(if still_moving { into } else { truth[i].t_ns })
 }
 
 /// One replay of `drive` through the stages with `fault`, at `speed` times real time.

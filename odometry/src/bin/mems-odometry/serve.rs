@@ -11,13 +11,16 @@
 //! - Every corrected sample gives one state, in order; the end of a motion interval also
 //!   republishes that interval's states with the `REVISION` flag. `stamps.odometry_ns` is
 //!   `CLOCK_MONOTONIC` at publication.
-//! - A refused sample (NaN, time not increasing) is reported on stderr and skipped.
+//! - A refused sample (NaN, a value beyond any calibrated sensor's range, time not increasing)
+//!   is reported on stderr, counted (`refused` in the summary) and skipped: it never reaches
+//!   the filter's state.
 //! - Samples without a gyroscope (`raw_flags::GYRO_VALID` clear: an accelerometer-only sensor
 //!   mode, the MPU-9250 at 4 kHz) cannot be navigated, since nothing tracks the attitude: each
 //!   gets a state flagged `NO_GYRO`, never `ALIGNED`, with no position or velocity (zero), and
 //!   does not reach the stage; the first one is reported once on stderr.
-//! - Sequence numbers that go back mean a new sensor session (a restarted acquire): the stage
-//!   starts over (new alignment).
+//! - Sequence numbers that go back mean a new sensor session (a restarted acquire), and so does
+//!   a time step longer than `ipc_types::limits::MAX_STEP_S` (no dead reckoning bridges it):
+//!   the stage starts over (new alignment).
 //! - The process sleeps on the corrected service's event (its publisher notifies it after each
 //!   send) and notifies `mems/odometry/state`'s: the live state at once, a sample's revisions
 //!   together after them. `--spin` polls instead.
@@ -30,6 +33,7 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
 use ipc_types::clock::monotonic_ns;
+use ipc_types::limits::MAX_STEP_NS;
 use ipc_types::wake::{self, Output, WaitMode};
 use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, odometry_flags, raw_flags, service};
 use odometry::hints::usable_from_ns;
@@ -93,6 +97,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
     let (mut hints_received, mut hints_refused) = (0u64, 0u64);
     let mut held: Option<RobotHint> = None;
     let mut last_seq: Option<u64> = None;
+    let mut last_ns: Option<u64> = None;
     let (mut received, mut refused, mut sessions) = (0u64, 0u64, 1u64);
     let mut warned_no_gyro = false;
     let step = || -> Result<ControlFlow<(), bool>> {
@@ -132,7 +137,11 @@ pub fn run(args: ServeArgs) -> Result<()> {
                     s.seq
                 );
             }
-            if last_seq.is_some_and(|l| s.seq <= l) {
+            // A time step no dead reckoning bridges (the stage refuses it) is a new time
+            // base, as a new session is.
+            let jump =
+                last_ns.is_some_and(|l: u64| s.stamps.sample_ns > l.saturating_add(MAX_STEP_NS));
+            if last_seq.is_some_and(|l| s.seq <= l) || jump {
                 // A new sensor session: the old one's revisions are completed, then align
                 // again.
                 stage.finish(&mut |state| send(&mut out, state));
@@ -141,6 +150,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
                 sessions += 1;
             }
             last_seq = Some(s.seq);
+            last_ns = Some(s.stamps.sample_ns);
             // The live state is published (and its subscribers woken) before any revision
             // work the stage does after it.
             let mut emit = |state: &OdometryState| send(&mut out, state);

@@ -79,6 +79,17 @@ pub fn any_finite(rng: &mut ChaCha8Rng) -> f64 {
     }
 }
 
+/// An arbitrary bit pattern that is finite and at most `limit` in magnitude (about half of
+/// all patterns are within 20).
+pub fn any_within(rng: &mut ChaCha8Rng, limit: f64) -> f64 {
+    loop {
+        let v = any_finite(rng);
+        if v.abs() <= limit {
+            return v;
+        }
+    }
+}
+
 /// Truth records at the samples' times with arbitrary finite values.
 pub fn any_truth(samples: &[RawImuSample], seed: u64) -> Vec<Truth> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
