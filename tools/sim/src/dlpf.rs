@@ -123,11 +123,6 @@ pub const ACCEL_DLPF: [Setting; 8] = [
 /// Accelerometer with ACCEL_CONFIG2.accel_fchoice_b = 1 (DLPF bypassed, 4 kHz).
 pub const ACCEL_BYPASS: Setting = setting(1130.0, 0.75, 4000.0);
 
-/// Whether the simulators model the DLPF unless told otherwise: the `mems-sim` subcommands'
-/// `--dlpf` default (`driver` when true, `off` when false) and `acquire::sim::SimConfig`'s
-/// `model_dlpf` default.
-pub const MODEL_BY_DEFAULT: bool = false;
-
 /// The gyroscope setting GYRO_CONFIG.FCHOICE_B (bits 1:0) and CONFIG.DLPF_CFG (bits 2:0) select.
 pub fn gyro_setting(fchoice_b: u8, dlpf_cfg: u8) -> Setting {
     match fchoice_b & 0b11 {
