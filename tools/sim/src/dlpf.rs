@@ -251,6 +251,25 @@ impl Coefficients {
         self.k / (1.0 + self.k)
     }
 
+    /// Low-frequency density of the filter's output kept every `m`-th internal sample
+    /// (decimation by `1 + SMPLRT_DIV`, no further filtering) over the density of the white
+    /// noise at its input: `sqrt(sum_{k=0}^{m-1} |H(e^{j 2 pi k / m})|^2)`. Decimation folds the
+    /// noise the filter passes between the kept rate's and the internal rate's Nyquist
+    /// frequencies down to low frequency (1 for `m = 1`; `sqrt(m)` for no filter at all).
+    ///
+    /// # Panics
+    /// If `m` is 0.
+    pub fn aliased_density_ratio(&self, m: u32) -> f64 {
+        assert!(m > 0, "decimation by 0");
+        (0..m)
+            .map(|k| {
+                let half_w = PI * f64::from(k) / f64::from(m);
+                1.0 / (1.0 + (half_w.tan() / self.k).powi(2))
+            })
+            .sum::<f64>()
+            .sqrt()
+    }
+
     /// Autocorrelation coefficient at lag `lag` (internal samples) of filtered white noise:
     /// 1 at lag 0, `(1 + p) p^(lag-1) / 2` after.
     pub fn autocorrelation(&self, lag: u32) -> f64 {

@@ -592,11 +592,7 @@ fn simulate(
         .then(|| Logger::new(&defects, rate, common.seed))
         .transpose()?;
     let mut sim = SimSensor::new(scenario, &model, vibration, common.seed)?;
-    sim.set_dlpf(dlpf.map(|config| DlpfGrid {
-        config,
-        start_s: 0.0,
-        clock_scale: 1.0,
-    }));
+    sim.set_dlpf(dlpf.map(DlpfGrid::from_power_on));
     let mut sink = Sink::create(&common.out, !hints.is_empty())?;
     let mut next_hint = 0;
     let (mut distance, mut saturated, mut rest, mut rows) = (0.0, 0u64, 0u64, 0u64);

@@ -61,11 +61,7 @@ fn expected(
         seed,
     )
     .unwrap();
-    sim.set_dlpf(Some(DlpfGrid {
-        config: DlpfConfig::driver(rate_hz),
-        start_s: 0.0,
-        clock_scale: 1.0,
-    }));
+    sim.set_dlpf(Some(DlpfGrid::from_power_on(DlpfConfig::driver(rate_hz))));
     (0..n)
         .map(|k| {
             let t_s = k as f64 / rate_hz;
