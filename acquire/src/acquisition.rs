@@ -293,6 +293,10 @@ mod tests {
                 ..AnalogSample::default()
             }
         }
+
+        /// A constant input leaves the DLPF unchanged (unit gain at DC, started in its steady
+        /// state), so the filter the registers select needs no modelling here.
+        fn set_dlpf(&mut self, _grid: Option<mems_sim::DlpfGrid>) {}
     }
 
     /// Runs 400 reads at 4 kHz over simulated SPI with the default interval on a virtual

@@ -139,7 +139,7 @@ fn probe_accepts_the_parts_linux_and_ardupilot_accept() {
     for (who_am_i, part) in [(0x70, "MPU-6500"), (0x71, "MPU-9250"), (0x73, "MPU-9255")] {
         let config = SimConfig {
             who_am_i,
-            ..SimConfig::default()
+            ..common::white_config()
         };
         let clock = SimClock::new_virtual(0);
         let sim = SimMpu9250::new(NoisySource::new(1), clock.clone(), config);
@@ -154,7 +154,7 @@ fn probe_accepts_the_parts_linux_and_ardupilot_accept() {
 fn probe_names_bus_address_and_value_of_a_wrong_part() {
     let config = SimConfig {
         who_am_i: 0x12, // an ICM-20602: another register map
-        ..SimConfig::default()
+        ..common::white_config()
     };
     let sim = SimMpu9250::new(NoisySource::new(1), SimClock::new_virtual(0), config);
     let mut drv = Mpu9250::new(sim, "/dev/i2c-7", A);
@@ -538,7 +538,7 @@ fn sample_times_follow_the_internal_oscillator_eight_percent_off() {
         let config = SimConfig {
             rate_error_ppm: ppm,
             history_len: 20_000,
-            ..SimConfig::default()
+            ..common::white_config()
         };
         let clock = SimClock::new_virtual(0);
         let sim = SimMpu9250::new(NoisySource::new(5), clock.clone(), config);
@@ -566,7 +566,7 @@ fn accel_4khz_times_follow_a_device_clock_five_percent_fast() {
     let config = SimConfig {
         rate_error_ppm: 50_000.0,
         history_len: 50_000,
-        ..SimConfig::default()
+        ..common::white_config()
     };
     let sim = SimMpu9250::new(NoisySource::new(5), SimClock::new_virtual(0), config);
     let (mut drv, clock) = started_spi(sim, accel_4k());
@@ -827,7 +827,7 @@ fn temperature_is_read_and_attached_in_accel_only_mode() {
 fn saturated_samples_are_flagged() {
     let mut source = NoisySource::new(12);
     source.accel_g = [0.0, 0.0, 2.0]; // at the end of ±2 g: about half the samples saturate
-    let sim = SimMpu9250::new(source, SimClock::new_virtual(0), SimConfig::default());
+    let sim = SimMpu9250::new(source, SimClock::new_virtual(0), common::white_config());
     let (mut drv, clock) = started_spi(sim, accel_4k());
     let samples = read_for(&mut drv, &clock, 20_000_000, 5_000_000);
     assert!(!samples.is_empty());
@@ -1044,7 +1044,7 @@ fn accel_4khz_rate_holds_under_one_sided_host_latency() {
         let clock = SimClock::new_virtual(1_000_000_000);
         let config = SimConfig {
             history_len: 0,
-            ..SimConfig::default()
+            ..common::white_config()
         };
         let sim = SimMpu9250::new(NoisySource::new(seed), clock.clone(), config);
         let bus = LateLatch {
@@ -1130,7 +1130,7 @@ fn a_stalled_first_count_read_does_not_anchor_the_sample_times() {
     let clock = SimClock::new_virtual(1_000_000_000);
     let config = SimConfig {
         history_len: 40_000,
-        ..SimConfig::default()
+        ..common::white_config()
     };
     let sim = SimMpu9250::new(NoisySource::new(31), clock.clone(), config);
     let bus = StallBeforeCount {

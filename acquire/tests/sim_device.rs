@@ -1,5 +1,5 @@
 //! The simulated MPU-9250 driven with raw I2C transactions through its register map (no driver):
-//! FIFO statistics against the sensor model, torn reads, FIFO overflow in both modes, reset,
+//! FIFO statistics against the sensor model through the DLPF the registers select, torn reads, FIFO overflow in both modes, reset,
 //! addressing, the bus timing model and fault injection.
 
 mod common;
@@ -13,6 +13,7 @@ use embedded_hal::i2c::{ErrorKind, I2c, NoAcknowledgeSource};
 use ipc_types::units::{TEMP_LSB_PER_DEGC, temp_c_from_counts, temp_counts_from_c};
 use mems_sim::SampleSource;
 use mems_sim::SimSensor;
+use mems_sim::dlpf::{self, Coefficients, Setting};
 use mems_sim::model::{SensorModel, ThermalModel, TriadModel};
 use mems_sim::scenario::PoseSession;
 use mems_sim::vibration::VibrationModel;
@@ -79,15 +80,37 @@ fn mean_std(x: &[f64]) -> (f64, f64) {
     (mean, var.sqrt())
 }
 
-/// Checks the sample mean and standard deviation of `counts` against a model mean and white
-/// noise `sigma` (both in counts) quantized to integers: tolerances are 5 standard errors of
-/// each estimator for the sample size.
-fn assert_matches_model(name: &str, counts: &[f64], model_mean: f64, sigma: f64) {
+/// Checks the sample mean and standard deviation of `counts` against a model mean and the
+/// noise the part outputs: white noise of standard deviation `sigma_in` (counts) per internal
+/// sample through the DLPF `setting`, read at every internal sample, then quantized to
+/// integers. The filtered noise has standard deviation `sigma_in sqrt(K / (1 + K))` and the
+/// lag-k autocorrelation of `mems_sim::dlpf::Coefficients` (closed forms tested in mems-sim);
+/// the tolerances are 5 standard errors of each estimator for correlated samples:
+/// `sigma sqrt(sum_k rho_k / n)` for the mean and `sigma sqrt(sum_k rho_k^2 / (2 n))` for the
+/// standard deviation (sums over all lags, negative ones included; the quantization noise,
+/// variance 1/12, is white).
+fn assert_matches_model(
+    name: &str,
+    counts: &[f64],
+    model_mean: f64,
+    sigma_in: f64,
+    setting: &Setting,
+) {
+    let c = Coefficients::new(setting);
+    let filtered_var = sigma_in * sigma_in * c.noise_variance_ratio();
+    let expected_var = filtered_var + 1.0 / 12.0;
+    let expected_std = expected_var.sqrt();
+    // Correlation of the quantized samples: the filtered part's scaled by its share.
+    let rho = |k: u32| c.autocorrelation(k) * filtered_var / expected_var;
+    let (mut sum_rho, mut sum_rho2) = (1.0, 1.0);
+    for k in 1..10_000 {
+        sum_rho += 2.0 * rho(k);
+        sum_rho2 += 2.0 * rho(k).powi(2);
+    }
     let n = counts.len() as f64;
-    let expected_std = (sigma * sigma + 1.0 / 12.0).sqrt();
     let (mean, std) = mean_std(counts);
-    let mean_tol = 5.0 * expected_std / n.sqrt();
-    let std_tol = 5.0 * expected_std / (2.0 * (n - 1.0)).sqrt();
+    let mean_tol = 5.0 * expected_std * (sum_rho / n).sqrt();
+    let std_tol = 5.0 * expected_std * (sum_rho2 / (2.0 * (n - 1.0))).sqrt();
     assert!(
         (mean - model_mean).abs() < mean_tol,
         "{name}: mean {mean:.3} counts, model {model_mean:.3} +- {mean_tol:.3}"
@@ -145,6 +168,8 @@ fn fifo_data_match_the_sensor_model_at_1khz_accel_temp_gyro() {
     let rate = n as f64 / (elapsed as f64 * 1e-9);
     assert!((rate - 1000.0).abs() < 1000.0 * 0.01, "rate {rate} Hz");
 
+    // The noise is drawn per internal sample (1 kHz, the output rate here) and filtered by
+    // DLPF_CFG = A_DLPF_CFG = 1 (gyro 184 Hz, accel 218.1 Hz).
     let per_sample = |density: f64| density * 1000f64.sqrt(); // mems-sim: N sqrt(rate)
     for axis in 0..3 {
         let a: Vec<f64> = frames
@@ -156,6 +181,7 @@ fn fifo_data_match_the_sensor_model_at_1khz_accel_temp_gyro() {
             &a,
             accel_mean_g[axis] * 16384.0,
             per_sample(300e-6) * 16384.0,
+            &dlpf::ACCEL_DLPF[1],
         );
         let g: Vec<f64> = frames
             .iter()
@@ -166,6 +192,7 @@ fn fifo_data_match_the_sensor_model_at_1khz_accel_temp_gyro() {
             &g,
             gyro_mean_dps[axis] * 131.0,
             per_sample(0.01) * 131.0,
+            &dlpf::GYRO_DLPF[1],
         );
     }
     // The die is at a constant 30 degC: every TEMP_OUT is the datasheet formula's value.
@@ -215,13 +242,20 @@ fn fifo_data_match_the_sensor_model_at_4khz_accel_only() {
         .collect();
     assert!(frames.windows(2).filter(|w| w[0] == w[1]).count() < 10);
     assert_eq!(dev.inner().stats().spi_overspeed, 0);
+    // Every 4 kHz accelerometer sample, through the bypassed accelerometer's filter.
     let sigma = 300e-6 * 4000f64.sqrt() * 16384.0;
     for (axis, mean_g) in accel_mean_g.iter().enumerate() {
         let a: Vec<f64> = frames
             .iter()
             .map(|f| f64::from(be16(f, 2 * axis)))
             .collect();
-        assert_matches_model(&format!("accel {axis}"), &a, mean_g * 16384.0, sigma);
+        assert_matches_model(
+            &format!("accel {axis}"),
+            &a,
+            mean_g * 16384.0,
+            sigma,
+            &dlpf::ACCEL_BYPASS,
+        );
     }
 }
 
@@ -413,7 +447,7 @@ fn output_rate_follows_the_rate_registers() {
     let clock = SimClock::new_virtual(0);
     let config = SimConfig {
         rate_error_ppm: 10_000.0,
-        ..SimConfig::default()
+        ..common::white_config()
     };
     let mut fast = SimMpu9250::new(common::NoisySource::new(1), clock.clone(), config);
     write_reg(&mut fast, A, reg::ACCEL_CONFIG2, reg::ACCEL_FCHOICE_B);
@@ -425,7 +459,7 @@ fn output_rate_follows_the_rate_registers() {
     let clock = SimClock::new_virtual(0);
     let config = SimConfig {
         rate_error_ppm: -80_000.0,
-        ..SimConfig::default()
+        ..common::white_config()
     };
     let mut slow = SimMpu9250::new(common::NoisySource::new(1), clock.clone(), config);
     write_reg(&mut slow, A, reg::CONFIG, 1);
@@ -515,6 +549,10 @@ fn full_scale_saturates() {
                 temp_c: 25.0,
             }
         }
+
+        /// A constant input leaves the DLPF unchanged (unit gain at DC, started in its steady
+        /// state), so the filter the registers select needs no modelling here.
+        fn set_dlpf(&mut self, _grid: Option<mems_sim::DlpfGrid>) {}
     }
     let clock = SimClock::new_virtual(0);
     let mut dev = SimMpu9250::new(Huge, clock.clone(), SimConfig::default());
@@ -534,7 +572,7 @@ fn only_the_configured_address_answers() {
     let config = SimConfig {
         address: reg::ADDRESS_AD0_HIGH,
         who_am_i: 0x70,
-        ..SimConfig::default()
+        ..common::white_config()
     };
     let mut dev = SimMpu9250::new(common::NoisySource::new(1), clock, config);
     let mut b = [0u8; 1];
@@ -578,7 +616,7 @@ fn real_time_pacing_sleeps_for_the_transaction() {
     let mut dev = SimMpu9250::new(
         common::NoisySource::new(1),
         clock.clone(),
-        SimConfig::default(),
+        common::white_config(),
     );
     let mut buf = [0u8; 400];
     let t0 = clock.now_ns();

@@ -136,10 +136,11 @@ struct Args {
     /// Smooth floor: no vibration (for every case).
     #[arg(long)]
     smooth: bool,
-    /// The part's digital low-pass filter, DLPF_CFG and A_DLPF_CFG both (1: 184 Hz gyro /
-    /// 218 Hz accel, our driver's; 3: 41 / 45 Hz; 4: 20 / 21 Hz); none: white samples.
-    #[arg(long)]
-    dlpf_cfg: Option<u8>,
+    /// The part's digital low-pass filter, DLPF_CFG and A_DLPF_CFG both, 0-7 (1: 184 Hz gyro /
+    /// 218 Hz accel, our driver's, the default; 3: 41 / 45 Hz; 4: 20 / 21 Hz), or `off`:
+    /// white samples, which no MPU-9250 produces.
+    #[arg(long, default_value = "1", value_parser = parse_dlpf_cfg)]
+    dlpf_cfg: DlpfCfg,
     /// The stage's rest hindsight, s (`OdometryConfig::rest_hindsight_s`; default: the
     /// configuration's, 0.5 s).
     #[arg(long)]
@@ -150,11 +151,26 @@ struct Args {
     undo_gyro_refinement: bool,
 }
 
+/// A `--dlpf-cfg` value: DLPF_CFG = A_DLPF_CFG, or `None` for no filter.
+#[derive(Clone, Copy)]
+struct DlpfCfg(Option<u8>);
+
+/// Parses a `--dlpf-cfg` value: `off` or a DLPF_CFG of 0-7.
+fn parse_dlpf_cfg(s: &str) -> Result<DlpfCfg, String> {
+    if s == "off" {
+        return Ok(DlpfCfg(None));
+    }
+    match s.parse::<u8>() {
+        Ok(cfg) if cfg <= 7 => Ok(DlpfCfg(Some(cfg))),
+        _ => Err(format!("expected `off` or a DLPF_CFG of 0-7, got {s:?}")),
+    }
+}
+
 /// The simulated case and the stage configuration for a case name.
 fn case(name: CaseName, args: &Args) -> (Case, OdometryConfig) {
     let mut c = Case::straight();
     c.rate_hz = args.rate_hz;
-    c.dlpf = args.dlpf_cfg.map(mems_sim::dlpf::DlpfConfig::both);
+    c.dlpf = args.dlpf_cfg.0.map(mems_sim::dlpf::DlpfConfig::both);
     if args.sim_default_legs {
         c.max_legs = 3;
         c.leg_s = [2.0, 10.0];

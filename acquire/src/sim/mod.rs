@@ -29,7 +29,7 @@
 //!   typical).
 //! - Register writes are logged with their times ([`SimMpu9250::write_log`]), so tests can
 //!   check the order and timing of a driver's writes.
-//! - DLPF (with [`SimConfig::model_dlpf`]): the filters CONFIG.DLPF_CFG with
+//! - DLPF (unless [`SimConfig::model_dlpf`] is false): the filters CONFIG.DLPF_CFG with
 //!   GYRO_CONFIG.FCHOICE_B and ACCEL_CONFIG2 (accel_fchoice_b, A_DLPF_CFG) select, at the
 //!   internal rates the register map gives (`mems_sim::dlpf`), are handed to the
 //!   [`SampleSource`] on an internal grid aligned with the output grid, so each output sample
@@ -146,8 +146,9 @@ pub struct SimConfig {
     /// Number of most recent produced samples kept for inspection (0 keeps none); the buffer
     /// is allocated once, up front.
     pub history_len: usize,
-    /// Whether the sample source applies the DLPF the registers select (the source must model
-    /// it, see `SampleSource::set_dlpf`).
+    /// Whether the sample source applies the DLPF the registers select, as the real part does
+    /// (default true; the source must model it, see `SampleSource::set_dlpf`). False gives
+    /// the source's samples at the output rate unfiltered, for sources that do not model it.
     pub model_dlpf: bool,
     /// How long the gyro outputs are off after the gyros start, ns.
     pub gyro_startup_ns: u64,
@@ -166,7 +167,7 @@ impl Default for SimConfig {
             rate_error_ppm: 0.0,
             startup_ns: reg::STARTUP_TYPICAL_NS,
             history_len: 0,
-            model_dlpf: mems_sim::dlpf::MODEL_BY_DEFAULT,
+            model_dlpf: true,
             gyro_startup_ns: reg::GYRO_STARTUP_TYPICAL_NS,
             gyro_startup_offset_dps: 20.0,
             spi: SpiTiming::DATASHEET,

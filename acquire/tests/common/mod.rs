@@ -48,6 +48,18 @@ impl SampleSource for NoisySource {
     }
 }
 
+/// The simulated device's configuration for a [`NoisySource`]: the source's white noise per
+/// output sample is not passed through the DLPF (`model_dlpf: false`; the source models no
+/// filter). The tests that use it check the bus, the FIFO, the registers and the sample
+/// times, which the filter does not change; `sim_dlpf.rs` and the tests with `SimSensor`
+/// check the filtered samples.
+pub fn white_config() -> SimConfig {
+    SimConfig {
+        model_dlpf: false,
+        ..SimConfig::default()
+    }
+}
+
 /// A simulated device at 0x68 on a virtual clock starting at 1 s, keeping `history` samples.
 pub fn noisy_sim(seed: u64, history: usize) -> SimMpu9250<NoisySource> {
     SimMpu9250::new(
@@ -55,7 +67,7 @@ pub fn noisy_sim(seed: u64, history: usize) -> SimMpu9250<NoisySource> {
         SimClock::new_virtual(1_000_000_000),
         SimConfig {
             history_len: history,
-            ..SimConfig::default()
+            ..white_config()
         },
     )
 }

@@ -69,7 +69,9 @@ pub struct Case {
     pub mounting: nalgebra::UnitQuaternion<f64>,
     /// Longest motion between two rests, s (see `DriveParams::max_motion_s`).
     pub max_motion_s: f64,
-    /// The part's digital low-pass filters (`None`: white samples).
+    /// The part's digital low-pass filters (the default: our driver's, DLPF_CFG = A_DLPF_CFG
+    /// = 1, see `mems_sim::dlpf::DlpfConfig::driver`; `None`: white samples, which no
+    /// MPU-9250 produces).
     pub dlpf: Option<mems_sim::dlpf::DlpfConfig>,
 }
 
@@ -94,7 +96,7 @@ impl Case {
             peak_yaw_rate_dps: 45.0,
             mounting: nalgebra::UnitQuaternion::identity(),
             max_motion_s: DriveParams::new(600.0).max_motion_s,
-            dlpf: None,
+            dlpf: Some(mems_sim::dlpf::DlpfConfig::driver(200.0)),
         }
     }
 
@@ -296,11 +298,7 @@ impl Simulation {
         };
         let mut sim = SimSensor::new(scenario, &case.model(), &case.sim_vibration(), seed)
             .expect("valid sensor model");
-        sim.set_dlpf(case.dlpf.map(|config| mems_sim::DlpfGrid {
-            config,
-            start_s: 0.0,
-            clock_scale: 1.0,
-        }));
+        sim.set_dlpf(case.dlpf.map(mems_sim::DlpfGrid::from_power_on));
         let dc_free = case.vibration_dc_free.then(|| DcFreeVibration {
             vibration: Vibration::new(&VibrationModel::moderate(case.vibration), seed)
                 .expect("valid vibration model"),

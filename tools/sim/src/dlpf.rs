@@ -123,11 +123,6 @@ pub const ACCEL_DLPF: [Setting; 8] = [
 /// Accelerometer with ACCEL_CONFIG2.accel_fchoice_b = 1 (DLPF bypassed, 4 kHz).
 pub const ACCEL_BYPASS: Setting = setting(1130.0, 0.75, 4000.0);
 
-/// Whether the simulators model the DLPF unless told otherwise: the `mems-sim` subcommands'
-/// `--dlpf` default (`driver` when true, `off` when false) and `acquire::sim::SimConfig`'s
-/// `model_dlpf` default.
-pub const MODEL_BY_DEFAULT: bool = false;
-
 /// The gyroscope setting GYRO_CONFIG.FCHOICE_B (bits 1:0) and CONFIG.DLPF_CFG (bits 2:0) select.
 pub fn gyro_setting(fchoice_b: u8, dlpf_cfg: u8) -> Setting {
     match fchoice_b & 0b11 {
@@ -254,6 +249,25 @@ impl Coefficients {
     /// Variance of filtered white noise over the variance of the noise, `K / (1 + K)`.
     pub fn noise_variance_ratio(&self) -> f64 {
         self.k / (1.0 + self.k)
+    }
+
+    /// Low-frequency density of the filter's output kept every `m`-th internal sample
+    /// (decimation by `1 + SMPLRT_DIV`, no further filtering) over the density of the white
+    /// noise at its input: `sqrt(sum_{k=0}^{m-1} |H(e^{j 2 pi k / m})|^2)`. Decimation folds the
+    /// noise the filter passes between the kept rate's and the internal rate's Nyquist
+    /// frequencies down to low frequency (1 for `m = 1`; `sqrt(m)` for no filter at all).
+    ///
+    /// # Panics
+    /// If `m` is 0.
+    pub fn aliased_density_ratio(&self, m: u32) -> f64 {
+        assert!(m > 0, "decimation by 0");
+        (0..m)
+            .map(|k| {
+                let half_w = PI * f64::from(k) / f64::from(m);
+                1.0 / (1.0 + (half_w.tan() / self.k).powi(2))
+            })
+            .sum::<f64>()
+            .sqrt()
     }
 
     /// Autocorrelation coefficient at lag `lag` (internal samples) of filtered white noise:

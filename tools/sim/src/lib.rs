@@ -76,6 +76,18 @@ pub struct DlpfGrid {
     pub clock_scale: f64,
 }
 
+impl DlpfGrid {
+    /// The filters `config` on a grid that starts at power-on (t = 0) with a nominal clock, as
+    /// a part sampling from power-on at a fixed configuration.
+    pub fn from_power_on(config: dlpf::DlpfConfig) -> Self {
+        Self {
+            config,
+            start_s: 0.0,
+            clock_scale: 1.0,
+        }
+    }
+}
+
 /// The ChaCha8 stream numbers of the simulator's random choices: one stream per independent
 /// random term, so that changing one term leaves the realisation of the others unchanged.
 pub(crate) mod streams {

@@ -154,11 +154,11 @@ struct Common {
     /// Local gravity, m/s^2.
     #[arg(long, default_value_t = STANDARD_GRAVITY_MPS2)]
     gravity: f64,
-    /// Digital low-pass filter: `off` (white noise at the output rate), `driver` (what our
-    /// driver configures for --rate: DLPF_CFG = A_DLPF_CFG = 1 at 1000/n Hz, the accelerometer
-    /// bypassed at 4000 Hz), or the gyro bandwidth in Hz of DLPF_CFG 0-7 (250, 184, 92, 41, 20,
+    /// Digital low-pass filter: `driver` (what our driver configures for --rate, as the real
+    /// part then filters: DLPF_CFG = A_DLPF_CFG = 1 at 1000/n Hz, the accelerometer bypassed
+    /// at 4000 Hz), `off` (white noise at the output rate, no part produces it), or the gyro bandwidth in Hz of DLPF_CFG 0-7 (250, 184, 92, 41, 20,
     /// 10, 5, 3600; the accelerometer gets the same A_DLPF_CFG).
-    #[arg(long, default_value = if mems_sim::dlpf::MODEL_BY_DEFAULT { "driver" } else { "off" })]
+    #[arg(long, default_value = "driver")]
     dlpf: DlpfChoice,
     /// The recording starts this late into the scenario: seconds, or `motion` (at the highest
     /// speed of the first motion: a start in motion, no rest before it).
@@ -401,7 +401,7 @@ impl Common {
             };
             bail!(
                 "--rate {}: with this --dlpf the part samples at {fast} Hz internally and can \
-                 output {allowed}",
+                 output {allowed} (--dlpf off gives white samples at any rate)",
                 self.rate
             );
         }
@@ -592,11 +592,7 @@ fn simulate(
         .then(|| Logger::new(&defects, rate, common.seed))
         .transpose()?;
     let mut sim = SimSensor::new(scenario, &model, vibration, common.seed)?;
-    sim.set_dlpf(dlpf.map(|config| DlpfGrid {
-        config,
-        start_s: 0.0,
-        clock_scale: 1.0,
-    }));
+    sim.set_dlpf(dlpf.map(DlpfGrid::from_power_on));
     let mut sink = Sink::create(&common.out, !hints.is_empty())?;
     let mut next_hint = 0;
     let (mut distance, mut saturated, mut rest, mut rows) = (0.0, 0u64, 0u64, 0u64);

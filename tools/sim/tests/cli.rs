@@ -6,11 +6,12 @@ use std::process::{Command, Output};
 
 use ipc_types::RawImuSample;
 use ipc_types::units::{AccelRange, GyroRange, STANDARD_GRAVITY_MPS2};
-use mems_sim::SimSensor;
 use mems_sim::adc::quantize_sample;
+use mems_sim::dlpf::{Coefficients, DlpfConfig};
 use mems_sim::model::SensorModel;
 use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
 use mems_sim::vibration::VibrationModel;
+use mems_sim::{DlpfGrid, SimSensor};
 use nalgebra::{UnitQuaternion, Vector3};
 use recording::{Format, Truth};
 
@@ -44,7 +45,8 @@ fn fails(args: &[&str]) -> String {
     String::from_utf8(out.stderr).unwrap()
 }
 
-/// What the library produces for `scenario` with the default (calibrated) model at `rate_hz`.
+/// What the library produces for `scenario` with the default (calibrated) model at `rate_hz`
+/// through the default DLPF, our driver's for that rate.
 fn expected(
     scenario: impl Scenario,
     vibration: f64,
@@ -59,6 +61,7 @@ fn expected(
         seed,
     )
     .unwrap();
+    sim.set_dlpf(Some(DlpfGrid::from_power_on(DlpfConfig::driver(rate_hz))));
     (0..n)
         .map(|k| {
             let t_s = k as f64 / rate_hz;
@@ -304,11 +307,17 @@ fn ranges_and_models_are_applied() {
     let n = x.len() as f64;
     let mean = x.iter().sum::<f64>() / n;
     let std = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-    // 1000 ug/sqrt(Hz) at 100 Hz: 0.01 g per sample (quantization adds 1/16384/sqrt(12),
-    // negligible); 4-sigma sampling bound on the std.
+    // 1000 ug/sqrt(Hz) drawn at the 1 kHz internal rate (0.0316 g per internal sample) through
+    // the driver's accelerometer DLPF (A_DLPF_CFG = 1, 218.1 Hz): variance ratio K / (1 + K),
+    // 0.0212 g; quantization adds 1/16384/sqrt(12), negligible. Every tenth internal sample
+    // is kept, whose lag-10 correlation (1 + p) p^9 / 2 is below 1e-8: independent samples,
+    // 4-sigma sampling bound on the std.
+    let c = Coefficients::new(&DlpfConfig::driver(100.0).accel);
+    assert!(c.autocorrelation(10) < 1e-8);
+    let want = 1000e-6 * 1000f64.sqrt() * c.noise_variance_ratio().sqrt();
     assert!(
-        (std - 0.01).abs() < 4.0 * 0.01 / (2.0 * (n - 1.0)).sqrt(),
-        "std {std}"
+        (std - want).abs() < 4.0 * want / (2.0 * (n - 1.0)).sqrt(),
+        "std {std}, filtered white noise {want}"
     );
 }
 
@@ -472,11 +481,12 @@ fn log_defects_and_a_start_in_motion_are_written() {
         "--duration",
         "60",
         "--rate",
-        "2000",
+        "1000",
         "--start-at",
         "motion",
+        // A 4 ms host clock (Linux jiffies at HZ = 250): three of four rows repeat a time.
         "--quantum-ms",
-        "1",
+        "4",
         "--repeat-fraction",
         "0.1",
         "--out",

@@ -175,6 +175,33 @@ fn filtered_white_noise_has_the_closed_form_variance_and_autocorrelation() {
     }
 }
 
+/// The low-frequency density of decimated filtered noise (a frequency-domain sum over the
+/// aliases) against the time domain: the sum over lags of the kept samples' autocovariance,
+/// `m K / (1 + K) (1 + 2 sum_l rho(l m))` in units of the input density squared, from the
+/// closed-form autocorrelation (tested against the recursion above).
+#[test]
+fn decimation_folds_the_passed_noise_as_the_autocorrelation_says() {
+    for s in all_settings() {
+        let c = Coefficients::new(&s);
+        for m in [1u32, 2, 4, 5, 10, 20] {
+            let tail: f64 = (1..20_000).map(|l| c.autocorrelation(l * m)).sum();
+            let want = (f64::from(m) * c.noise_variance_ratio() * (1.0 + 2.0 * tail)).sqrt();
+            let got = c.aliased_density_ratio(m);
+            assert!(
+                (got - want).abs() < 1e-9 * want,
+                "{s:?} kept every {m}: {got} vs {want}"
+            );
+        }
+        assert!((c.aliased_density_ratio(1) - 1.0).abs() < 1e-12);
+    }
+    // The driver's filters at 200 Hz (every fifth 1 kHz sample) fold 1.41x (gyro, 184 Hz) and
+    // 1.50x (accelerometer, 218.1 Hz) the density in; 20 Hz next to none.
+    let at_200 = |s: &Setting| Coefficients::new(s).aliased_density_ratio(5);
+    assert!((at_200(&GYRO_DLPF[1]) - 1.407).abs() < 1e-3);
+    assert!((at_200(&ACCEL_DLPF[1]) - 1.500).abs() < 1e-3);
+    assert!((at_200(&GYRO_DLPF[4]) - 1.008).abs() < 1e-3);
+}
+
 /// A level, still sensor with only white noise (and a gyro bias), measured through `dlpf` at
 /// `rate_hz` for `n` samples; returns the gyro x and accel x series.
 fn noisy_static(dlpf: Option<DlpfConfig>, rate_hz: f64, n: usize) -> (Vec<f64>, Vec<f64>) {
@@ -193,11 +220,7 @@ fn noisy_static(dlpf: Option<DlpfConfig>, rate_hz: f64, n: usize) -> (Vec<f64>, 
     let g = ipc_types::units::STANDARD_GRAVITY_MPS2;
     let s = PoseSession::static_pose(Default::default(), 1e6, g).unwrap();
     let mut sim = SimSensor::new(s, &model, &VibrationModel::moderate(0.0), 3).unwrap();
-    sim.set_dlpf(dlpf.map(|config| DlpfGrid {
-        config,
-        start_s: 0.0,
-        clock_scale: 1.0,
-    }));
+    sim.set_dlpf(dlpf.map(DlpfGrid::from_power_on));
     let mut gx = Vec::with_capacity(n);
     let mut ax = Vec::with_capacity(n);
     for k in 0..n {
@@ -278,11 +301,7 @@ fn sensor_output_lags_the_truth_by_the_register_map_delay() {
     )
     .unwrap();
     let config = DlpfConfig::both(6);
-    sim.set_dlpf(Some(DlpfGrid {
-        config,
-        start_s: 0.0,
-        clock_scale: 1.0,
-    }));
+    sim.set_dlpf(Some(DlpfGrid::from_power_on(config)));
     let rate = 1000.0;
     let delays = [-1e-3, 0.0, 1e-3].map(|d| config.gyro.delay_s + d);
     let (mut err, mut peak) = ([0.0f64; 3], 0.0f64);
