@@ -14,6 +14,8 @@ use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+use alloc_count::pool::Counts;
+use alloc_count::steady::SteadyState;
 use anyhow::{Context, Result};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -34,12 +36,13 @@ pub const POLL_PERIOD: Duration = Duration::from_millis(25);
 /// Most messages taken from one subscriber per poll, so that flushing and the publisher check
 /// keep their periods while a fast publisher (replay `--max`) keeps the queue full.
 pub const MAX_BATCH: usize = service::SUBSCRIBER_BUFFER;
-/// Period of the publisher check: dead iceoryx2 nodes (a kill -9'd stage) are cleaned up, then
-/// each service's publisher count is compared with the last one.
+/// Period of the publisher check (each service's publisher count compared with the last one)
+/// and of the dead-node cleanup beside it, which removes a kill -9'd stage's publisher
+/// ([`service::DeadNodeCleanup`], on its own thread: it allocates).
 pub const PUBLISHER_CHECK_PERIOD: Duration = Duration::from_millis(100);
 
 /// What to record and for how long.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct RecordOptions {
     /// The MCAP file to write (created or truncated).
     pub out: PathBuf,
@@ -47,10 +50,13 @@ pub struct RecordOptions {
     pub namespace: String,
     /// Stop after this long; `None` records until SIGINT or SIGTERM.
     pub duration: Option<Duration>,
+    /// Reads the process allocator's counts (`mems-record`'s pool); with it the summary has
+    /// the steady-state allocation calls per message received.
+    pub allocations: Option<fn() -> Counts>,
 }
 
 /// What was recorded.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct RecordSummary {
     /// Messages per service (base name) received and written, in subscription order.
     pub received: Vec<(&'static str, u64)>,
@@ -60,6 +66,11 @@ pub struct RecordSummary {
     pub elapsed: Duration,
     /// Whether SIGINT or SIGTERM ended the recording (rather than `duration`).
     pub interrupted: bool,
+    /// Allocation calls after a warm-up of messages (inputs: messages received), when
+    /// [`RecordOptions::allocations`] was given.
+    pub steady: Option<SteadyState>,
+    /// Chunks flushed after that warm-up.
+    pub steady_flushes: u64,
 }
 
 /// Detects lost sequence numbers and vanished publishers on one service. No I/O: feed it what
@@ -315,6 +326,12 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
         events: Vec::new(),
         elapsed: Duration::ZERO,
         interrupted: false,
+        steady: options
+            .allocations
+            .map(SteadyState::from_env)
+            .transpose()
+            .map_err(anyhow::Error::msg)?,
+        steady_flushes: 0,
     };
     let looped = record_loop(&node, &mut writer, &mut streams, options, &mut summary);
     // Finish the file even after an error, so that it keeps its summary and footer.
@@ -344,6 +361,8 @@ fn record_loop(
         .iter()
         .map(|s| wake::listener(node, s.name(), WaitMode::Event))
         .collect::<Result<Vec<_>, _>>()?;
+    // Removes the resources of kill -9'd nodes, so that their publishers stop counting.
+    let _cleanup = service::DeadNodeCleanup::start(PUBLISHER_CHECK_PERIOD)?;
     let exit = wake::serve_loop(node, &listeners, POLL_PERIOD, || -> Result<_> {
         if drain(writer, streams, summary)? {
             oldest_unflushed.get_or_insert_with(Instant::now);
@@ -353,8 +372,6 @@ fn record_loop(
         }
         if last_check.is_none_or(|t| t.elapsed() >= PUBLISHER_CHECK_PERIOD) {
             last_check = Some(Instant::now());
-            // Removes the resources of kill -9'd nodes, so that their publishers stop counting.
-            node.try_cleanup_dead_nodes();
             for stream in streams.iter_mut() {
                 let (_, before) = stream.received();
                 let events = stream.check_publishers(writer)?;
@@ -367,6 +384,9 @@ fn record_loop(
         if oldest_unflushed.is_some_and(|t| t.elapsed() >= FLUSH_PERIOD) {
             writer.flush()?;
             oldest_unflushed = None;
+            if summary.steady.as_ref().is_some_and(SteadyState::is_steady) {
+                summary.steady_flushes += 1;
+            }
         }
         Ok(ControlFlow::Continue(false))
     })?;
@@ -389,7 +409,11 @@ fn drain(
     for stream in streams.iter_mut() {
         let (_, before) = stream.received();
         summary.events.extend(stream.drain(writer, MAX_BATCH)?);
-        any |= stream.received().1 > before;
+        let received = stream.received().1 - before;
+        if let Some(steady) = summary.steady.as_mut() {
+            steady.inputs(received);
+        }
+        any |= received > 0;
     }
     Ok(any)
 }
