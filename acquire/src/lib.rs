@@ -8,7 +8,6 @@
 pub mod acquisition;
 pub mod clock;
 pub mod driver;
-pub mod pool;
 pub mod registers;
 pub mod sim;
 pub mod spi;

@@ -1,5 +1,5 @@
 //! The steady-state loops allocate nothing from the system allocator. The global allocator here
-//! is the one `mems-acquire` installs, [`acquire::pool::BlockPool`], wrapped in a counter of the
+//! is the one `mems-acquire` installs, [`alloc_count::pool::BlockPool`], wrapped in a counter of the
 //! calls the current thread makes and of those that reach the system allocator (their result is
 //! not a pool block). The driver's read loop makes no allocation call at all; the publishing
 //! loop makes exactly one per sample, inside iceoryx2's loan, and the pool serves every one.
@@ -10,8 +10,8 @@ use std::alloc::{GlobalAlloc, Layout};
 use std::cell::Cell;
 
 use acquire::driver::{Config, Dlpf, Mpu9250, OutputMode};
-use acquire::pool::BlockPool;
 use acquire::registers as reg;
+use alloc_count::pool::BlockPool;
 use ipc_types::RawImuSample;
 
 /// The pool of `mems-acquire`'s size, counting this thread's calls. Armed (as `mems-acquire`

@@ -1,10 +1,15 @@
 //! A robot process's view of mems-odometry: subscribe, zero-copy, to the odometry state and
-//! print position with its 1-sigma.
+//! print position with its 1-sigma. Event-driven: it sleeps on the state service's event (the
+//! odometry notifies it after each send) and drains the subscriber when woken
+//! (`ipc_types::wake`), so a state is handled as soon as it is published and an idle client
+//! uses no CPU.
 //!
 //! `cargo run --release -p ipc-types --example subscribe_odometry -- [COUNT]`
 //! (honours `MEMS_NAMESPACE`; stops after COUNT live states, or on Ctrl-C).
 
+use ipc_types::wake::{self, WaitMode};
 use ipc_types::{OdometryState, odometry_flags, service};
+use std::ops::ControlFlow;
 use std::time::Duration;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -13,9 +18,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let name = service::full_name(&service::namespace(None), service::ODOMETRY);
     let odometry = service::open::<OdometryState>(&node, &name)?;
     let subscriber = service::subscriber(&odometry)?;
+    let listener = wake::listener(&node, &name, WaitMode::Event)?;
     let mut seen = 0;
-    while node.wait(Duration::from_millis(10)).is_ok() {
+    // Woken by each notification, and at least every 100 ms; returns on Ctrl-C.
+    let step = || -> Result<ControlFlow<(), bool>, Box<dyn std::error::Error>> {
+        let mut any = false;
         while let Some(sample) = subscriber.receive()? {
+            any = true;
             // Revisions re-publish past states after drift removal; a controller that only
             // wants the latest estimate skips them.
             if sample.flags & odometry_flags::REVISION != 0 {
@@ -41,9 +50,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             );
             seen += 1;
             if count.is_some_and(|c| seen >= c) {
-                return Ok(());
+                return Ok(ControlFlow::Break(()));
             }
         }
-    }
+        Ok(ControlFlow::Continue(any))
+    };
+    wake::serve_loop(&node, &[listener], Duration::from_millis(100), step)?;
     Ok(())
 }

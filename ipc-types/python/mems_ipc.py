@@ -50,6 +50,9 @@ SUBSCRIBER_BUFFER = 4096
 MAX_PUBLISHERS = 2
 MAX_SUBSCRIBERS = 16
 MAX_NODES = 32
+# The event service beside each data service (ipc_types::wake): publishers notify it after
+# each send, subscribers sleep on it.
+MAX_NOTIFIERS = 8
 
 Vec3 = ctypes.c_double * 3
 
@@ -73,6 +76,21 @@ def open_service(node, name, payload):
         .history_size(0)
         .max_publishers(MAX_PUBLISHERS)
         .max_subscribers(MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
+        .open_or_create()
+    )
+
+
+def open_event(node, name):
+    """Opens (or creates) the event service that goes with data service ``name``, with the
+    settings of ipc_types::wake::open_event: its publishers notify it after each send."""
+    import iceoryx2 as iox2
+
+    return (
+        node.service_builder(iox2.ServiceName.new(name))
+        .event()
+        .max_notifiers(MAX_NOTIFIERS)
+        .max_listeners(MAX_SUBSCRIBERS)
         .max_nodes(MAX_NODES)
         .open_or_create()
     )

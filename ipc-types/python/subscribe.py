@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """Subscribes to a mems-odometry service with the iceoryx2 Python package (0.10) and prints
-each message as one JSON line.
+each message as one JSON line. Event-driven: it sleeps in an iceoryx2 WaitSet on the
+service's event (its publisher notifies it after each send) and drains the subscriber when
+woken, so a message is printed as soon as it is sent and an idle subscriber uses no CPU.
 
     python3 ipc-types/python/subscribe.py mems/odometry/state [--namespace NS] [--count N]
 
@@ -48,24 +50,37 @@ def main():
     payload = TYPES[args.service]
     service = mems_ipc.open_service(node, name, payload)
     subscriber = service.subscriber_builder().buffer_size(mems_ipc.SUBSCRIBER_BUFFER).create()
+    event = mems_ipc.open_event(node, name)
+    listener = event.listener_builder().create()
+    waitset = iox2.WaitSetBuilder.new().create(iox2.ServiceType.Ipc)
+    guard = waitset.attach_notification(listener)
 
     received = 0
     started = time.monotonic()
-    try:
+    # The longest sleep without a notification (only to check the timeout).
+    tick = iox2.Duration.from_millis(100)
+    while args.count == 0 or received < args.count:
+        # Consume the notifications first: a message sent after this is notified again.
+        listener.try_wait()
         while args.count == 0 or received < args.count:
-            node.wait(iox2.Duration.from_millis(10))
-            while args.count == 0 or received < args.count:
-                sample = subscriber.receive()
-                if sample is None:
-                    break
-                print(json.dumps(to_dict(sample.payload().contents)), flush=True)
-                received += 1
-            if received == 0 and time.monotonic() - started > args.timeout:
-                print(f"no message on {name} within {args.timeout} s", file=sys.stderr)
-                sys.exit(1)
-    except iox2.NodeWaitFailure:
-        pass
+            sample = subscriber.receive()
+            if sample is None:
+                break
+            print(json.dumps(to_dict(sample.payload().contents)), flush=True)
+            received += 1
+        if args.count and received >= args.count:
+            break
+        if received == 0 and time.monotonic() - started > args.timeout:
+            print(f"no message on {name} within {args.timeout} s", file=sys.stderr)
+            sys.exit(1)
+        _, result = waitset.wait_and_process_with_timeout(tick)
+        if result in (iox2.WaitSetRunResult.Interrupt, iox2.WaitSetRunResult.TerminationRequest):
+            break
     # Release the ports before exit, or iceoryx2 leaves a segment in /dev/shm.
+    del guard
+    del waitset
+    del listener
+    del event
     del subscriber
     del service
     del node

@@ -12,7 +12,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -226,6 +226,67 @@ pub fn publisher_waiting_at_most<T: core::fmt::Debug + ZeroCopySend>(
         .create()
         .map_err(|e| ServiceError(format!("cannot create publisher: {e:?}")))?;
     Ok((publisher, undelivered))
+}
+
+/// Dead-node cleanup on a thread of its own: every `period` it removes the resources of
+/// iceoryx2 nodes whose process died (a SIGKILLed subscriber's connection, which would
+/// otherwise stall a lossless publisher for [`STALL_TIMEOUT`], or count as a live publisher).
+/// Listing the nodes makes thousands of heap allocations per call in iceoryx2 0.10 (every path
+/// is formatted) and reads a directory, which a serving loop must not do per sample; this
+/// thread does it beside the loop, with its own node and as `SCHED_OTHER` (a SCHED_FIFO
+/// process's threads inherit its policy). Dropping it stops and joins the thread, which
+/// releases its node.
+pub struct DeadNodeCleanup {
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl DeadNodeCleanup {
+    /// Starts the thread; returns once its node exists (or with the error creating it).
+    pub fn start(period: Duration) -> Result<Self, ServiceError> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let (ready, started) = std::sync::mpsc::sync_channel(1);
+        let stopped = stop.clone();
+        let thread = std::thread::Builder::new()
+            .name("dead-node-cleanup".into())
+            .spawn(move || {
+                // SAFETY: sets this thread's own scheduling policy; `param` outlives the call.
+                unsafe {
+                    let param = libc::sched_param { sched_priority: 0 };
+                    libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_OTHER, &param);
+                }
+                let node = match node() {
+                    Ok(n) => n,
+                    Err(e) => {
+                        let _ = ready.send(Err(e));
+                        return;
+                    }
+                };
+                let _ = ready.send(Ok(()));
+                while !stopped.load(Ordering::Relaxed) {
+                    node.try_cleanup_dead_nodes();
+                    std::thread::park_timeout(period);
+                }
+            })
+            .map_err(|e| ServiceError(format!("cannot start the dead-node cleanup thread: {e}")))?;
+        started
+            .recv()
+            .map_err(|_| ServiceError("the dead-node cleanup thread ended at start".into()))??;
+        Ok(Self {
+            stop,
+            thread: Some(thread),
+        })
+    }
+}
+
+impl Drop for DeadNodeCleanup {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            thread.thread().unpark();
+            let _ = thread.join();
+        }
+    }
 }
 
 /// A publisher for a robot controller's hints ([`HINT`]): it never blocks. A subscriber whose

@@ -1,9 +1,15 @@
 //! Event-driven waking: every data service has an iceoryx2 event service of the same name.
-//! A publisher notifies it after each send ([`Waker`]); a subscribing process sleeps in a
-//! WaitSet on its listener until a notification (or its periodic tick) arrives, then drains its
+//! A publisher notifies it after each send ([`Waker`]); a subscribing process sleeps in epoll
+//! on its listeners until a notification (or its periodic tick) arrives, then drains its
 //! subscribers ([`serve_loop`]). An idle process makes no system call and uses no CPU between
 //! ticks; a notification that arrives between the last drain and the wait wakes the next wait
 //! at once (iceoryx2's listener counts notifications), so no sample waits for a tick.
+//!
+//! The wait is iceoryx2's own epoll reactor (`iceoryx2_cal::reactor`, what its WaitSet is
+//! built on), not the WaitSet: iceoryx2 0.10's `WaitSet::wait_and_process_once*` collect the
+//! triggered file descriptors in two new `Vec`s on every wake-up (`waitset.rs`,
+//! `wait_and_process_once_with_timeout` and `handle_all_attachments`), that is two heap
+//! allocations per sample; the reactor waits on a stack array and allocates nothing.
 //!
 //! [`WaitMode::Spin`] polls instead, for a process pinned to an isolated core: no listener is
 //! created (a notifier without listeners costs no system call) and the loop never sleeps.
@@ -14,7 +20,8 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
+use iceoryx2_bb_posix::signal::SignalHandler;
+use iceoryx2_cal::reactor::{Reactor, ReactorBuilder, ReactorWaitError};
 
 use crate::service::{MAX_NODES, MAX_SUBSCRIBERS, ServiceError};
 
@@ -195,6 +202,9 @@ pub enum Exit {
     Done,
 }
 
+/// The epoll reactor iceoryx2 uses for `ipc::Service` listeners.
+type IpcReactor = <ipc::Service as iceoryx2::service::Service>::Reactor;
+
 /// Calls `step` whenever input may have arrived on one of `listeners` (at once at the start,
 /// then after every notification), and at least every `tick`, until SIGINT/SIGTERM or `step`
 /// breaks. `step` drains its subscribers and returns whether it found anything
@@ -211,18 +221,20 @@ pub fn serve_loop<E: From<ServiceError>>(
         return spin(node, tick, step);
     }
     let err = |what: &str, e: &dyn core::fmt::Debug| ServiceError(format!("{what}: {e:?}"));
-    let waitset = WaitSetBuilder::new()
-        .create::<ipc::Service>()
-        .map_err(|e| err("cannot create a WaitSet", &e))?;
+    // Through the reactor traits (the epoll type has inherent methods of the same names).
+    let builder = <<IpcReactor as Reactor>::Builder as ReactorBuilder<IpcReactor>>::new();
+    let reactor =
+        ReactorBuilder::create(builder).map_err(|e| err("cannot create an epoll reactor", &e))?;
     let _guards = listeners
         .iter()
-        .map(|l| waitset.attach_notification(*l))
+        .map(|l| Reactor::attach(&reactor, *l))
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| err("cannot attach a listener to the WaitSet", &e))?;
-    let _tick = waitset
-        .attach_interval(tick)
-        .map_err(|e| err("cannot attach the tick to the WaitSet", &e))?;
+        .map_err(|e| err("cannot attach a listener to the reactor", &e))?;
     loop {
+        // iceoryx2's handler records SIGINT/SIGTERM; a signal during the wait interrupts it.
+        if SignalHandler::termination_requested() {
+            return Ok(Exit::Signal);
+        }
         // Consume the notifications first: a sample sent after this is notified again.
         for l in &listeners {
             l.try_wait(|_| {})
@@ -231,14 +243,9 @@ pub fn serve_loop<E: From<ServiceError>>(
         if step()?.is_break() {
             return Ok(Exit::Done);
         }
-        match waitset
-            .wait_and_process_once(|_| CallbackProgression::Continue)
-            .map_err(|e| err("WaitSet", &e))?
-        {
-            WaitSetRunResult::Interrupt | WaitSetRunResult::TerminationRequest => {
-                return Ok(Exit::Signal);
-            }
-            WaitSetRunResult::StopRequest | WaitSetRunResult::AllEventsHandled => {}
+        match Reactor::timed_wait(&reactor, |_| {}, tick) {
+            Ok(_) | Err(ReactorWaitError::Interrupt) => {}
+            Err(e) => return Err(err("epoll wait", &e).into()),
         }
     }
 }

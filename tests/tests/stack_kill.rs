@@ -48,13 +48,16 @@ fn live(states: &[OdometryState]) -> Vec<u64> {
 }
 
 /// SIGKILLs the stack's child `exe` once its iceoryx2 node exists, waits until the stack has
-/// started a new one, and returns the killed process's node footprint.
+/// started a new one, and returns the footprint of the killed process's node with ports.
 fn kill_and_await_restart(stack: &Proc, exe: &str) -> NodeFootprint {
     let pid = child_named(stack.pid(), exe).unwrap_or_else(|| panic!("{exe} runs"));
     let mut nodes = Vec::new();
     wait_until(WAIT, &format!("{exe}'s iceoryx2 node"), || {
+        // The node with the process's ports (mems-calibrate also has the node of its dead-node
+        // cleanup thread, which has none).
         nodes = nodes_of(pid);
-        nodes.len() == 1 && !nodes[0].port_ids.is_empty()
+        nodes.retain(|n| !n.port_ids.is_empty());
+        nodes.len() == 1
     });
     // SAFETY: kill(2) on a process of this test's own stack; no memory is involved.
     assert_eq!(unsafe { libc::kill(pid as i32, libc::SIGKILL) }, 0);

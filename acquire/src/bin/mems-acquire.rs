@@ -8,9 +8,9 @@ use acquire::acquisition::{
 };
 use acquire::clock::{Clock, MonotonicClock, SimClock};
 use acquire::driver::Mpu9250;
-use acquire::pool::BlockPool;
 use acquire::sim::{SimConfig, SimMpu9250};
 use acquire::spi::SpiRegisters;
+use alloc_count::pool::BlockPool;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 use embedded_hal::i2c::I2c;
@@ -22,7 +22,7 @@ use mems_sim::{SampleSource, SimSensor};
 use nalgebra::UnitQuaternion;
 
 /// Small blocks come from a bounded lock-free pool once the loop starts: iceoryx2 0.10
-/// allocates one small block per published sample (see `acquire::pool`), which the pool
+/// allocates one small block per published sample (see `alloc_count::pool`), which the pool
 /// recycles without reaching the system allocator. Start-up allocates from the system (a
 /// simulated day's drive plan alone keeps thousands of small blocks), so 1024 blocks of 64
 /// bytes (64 KiB) are for the loop only; the summary line reports the peak use and any request

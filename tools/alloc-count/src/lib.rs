@@ -1,4 +1,6 @@
-//! A counting global allocator for the "no allocation per sample" tests.
+//! Allocators for the "no allocation per sample" guarantee: [`Counting`], a per-thread counting
+//! global allocator for tests; [`pool::BlockPool`], the bounded small-block pool every live
+//! process installs, with its counts; [`steady::SteadyState`], those counts after a warm-up.
 //!
 //! A test binary declares it as its global allocator and reads [`allocations`] before and
 //! after the code under test:
@@ -26,6 +28,9 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
+
+pub mod pool;
+pub mod steady;
 
 /// A global allocator that forwards every call to [`System`] and counts, per thread, the
 /// allocation calls (`alloc`, `alloc_zeroed`, `realloc`) and the largest request; deallocations

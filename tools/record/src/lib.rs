@@ -21,6 +21,8 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
+use alloc_count::pool::Counts;
+use alloc_count::steady::SteadyState;
 use anyhow::{Context, Result};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -42,8 +44,9 @@ pub const POLL_PERIOD: Duration = Duration::from_millis(25);
 /// Most messages taken from one subscriber per poll, so that flushing and the publisher check
 /// keep their periods while a fast publisher (replay `--max`) keeps the queue full.
 pub const MAX_BATCH: usize = service::SUBSCRIBER_BUFFER;
-/// Period of the publisher check: dead iceoryx2 nodes (a kill -9'd stage) are cleaned up, then
-/// each service's publisher count is compared with the last one.
+/// Period of the publisher check (each service's publisher count compared with the last one)
+/// and of the dead-node cleanup beside it, which removes a kill -9'd stage's publisher
+/// ([`service::DeadNodeCleanup`], on its own thread: it allocates).
 pub const PUBLISHER_CHECK_PERIOD: Duration = Duration::from_millis(100);
 
 /// What to do with a recording already at the output path.
@@ -59,7 +62,7 @@ pub enum Target {
 }
 
 /// What to record and for how long.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct RecordOptions {
     /// The MCAP file of the run (its first segment).
     pub out: PathBuf,
@@ -69,10 +72,13 @@ pub struct RecordOptions {
     pub namespace: String,
     /// Stop after this long; `None` records until SIGINT or SIGTERM.
     pub duration: Option<Duration>,
+    /// Reads the process allocator's counts (`mems-record`'s pool); with it the summary has
+    /// the steady-state allocation calls per message received.
+    pub allocations: Option<fn() -> Counts>,
 }
 
 /// What was recorded.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct RecordSummary {
     /// The file written (the run's first file, or the segment that continues it).
     pub path: PathBuf,
@@ -86,6 +92,11 @@ pub struct RecordSummary {
     pub elapsed: Duration,
     /// Whether SIGINT or SIGTERM ended the recording (rather than `duration`).
     pub interrupted: bool,
+    /// Allocation calls after a warm-up of messages (inputs: messages received), when
+    /// [`RecordOptions::allocations`] was given.
+    pub steady: Option<SteadyState>,
+    /// Chunks flushed after that warm-up.
+    pub steady_flushes: u64,
 }
 
 impl RecordSummary {
@@ -425,6 +436,12 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
         events: split,
         elapsed: Duration::ZERO,
         interrupted: false,
+        steady: options
+            .allocations
+            .map(SteadyState::from_env)
+            .transpose()
+            .map_err(anyhow::Error::msg)?,
+        steady_flushes: 0,
     };
     let looped = record_loop(
         &node,
@@ -512,6 +529,8 @@ fn record_loop(
         .iter()
         .map(|s| wake::listener(node, s.name(), WaitMode::Event))
         .collect::<Result<Vec<_>, _>>()?;
+    // Removes the resources of kill -9'd nodes, so that their publishers stop counting.
+    let _cleanup = service::DeadNodeCleanup::start(PUBLISHER_CHECK_PERIOD)?;
     let exit = wake::serve_loop(node, &listeners, POLL_PERIOD, || -> Result<_> {
         if drain(writer, streams, summary)? {
             oldest_unflushed.get_or_insert_with(Instant::now);
@@ -536,8 +555,6 @@ fn record_loop(
         }
         if last_check.is_none_or(|t| t.elapsed() >= PUBLISHER_CHECK_PERIOD) {
             last_check = Some(Instant::now());
-            // Removes the resources of kill -9'd nodes, so that their publishers stop counting.
-            node.try_cleanup_dead_nodes();
             for stream in streams.iter_mut() {
                 let (_, before) = stream.received();
                 let events = stream.check_publishers(writer)?;
@@ -550,6 +567,9 @@ fn record_loop(
         if oldest_unflushed.is_some_and(|t| t.elapsed() >= FLUSH_PERIOD) {
             writer.flush()?;
             oldest_unflushed = None;
+            if summary.steady.as_ref().is_some_and(SteadyState::is_steady) {
+                summary.steady_flushes += 1;
+            }
         }
         Ok(ControlFlow::Continue(false))
     })?;
@@ -572,7 +592,11 @@ fn drain(
     for stream in streams.iter_mut() {
         let (_, before) = stream.received();
         summary.note(stream.drain(writer, MAX_BATCH)?);
-        any |= stream.received().1 > before;
+        let received = stream.received().1 - before;
+        if let Some(steady) = summary.steady.as_mut() {
+            steady.inputs(received);
+        }
+        any |= received > 0;
     }
     Ok(any)
 }

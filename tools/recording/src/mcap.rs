@@ -25,6 +25,7 @@
 
 pub mod scan;
 
+use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
 use std::fs::File;
@@ -458,8 +459,8 @@ pub struct FoxglovePose {
 pub struct PoseInFrame {
     /// The state's sample time (`stamps.sample_ns`), ns `CLOCK_MONOTONIC`.
     pub timestamp: FoxgloveTime,
-    /// Always [`NAV_FRAME`].
-    pub frame_id: String,
+    /// Always [`NAV_FRAME`] (borrowed: a pose per state allocates nothing).
+    pub frame_id: Cow<'static, str>,
     /// `position_m` and `attitude_wxyz` of the state.
     pub pose: FoxglovePose,
 }
@@ -472,7 +473,7 @@ impl PoseInFrame {
         let [w, qx, qy, qz] = state.attitude_wxyz;
         Self {
             timestamp: FoxgloveTime::from_ns(state.stamps.sample_ns),
-            frame_id: NAV_FRAME.to_owned(),
+            frame_id: Cow::Borrowed(NAV_FRAME),
             pose: FoxglovePose {
                 position: FoxgloveVector3 { x, y, z },
                 orientation: FoxgloveQuaternion {
@@ -722,6 +723,9 @@ pub struct Writer {
     inner: ::mcap::Writer<BufWriter<File>>,
     path: PathBuf,
     sequences: HashMap<u16, u32>,
+    /// The JSON of the message being written, reused: a message allocates nothing once the
+    /// buffer has grown to the largest one.
+    json: Vec<u8>,
 }
 
 impl Writer {
@@ -754,6 +758,7 @@ impl Writer {
             inner,
             path: path.to_path_buf(),
             sequences: HashMap::new(),
+            json: Vec::new(),
         })
     }
 
@@ -796,7 +801,9 @@ impl Writer {
                 ..self.fail(kind)
             });
         }
-        let data = serde_json::to_vec(message).map_err(|e| self.fail(ErrorKind::Json(e)))?;
+        self.json.clear();
+        serde_json::to_writer(&mut self.json, message)
+            .map_err(|e| Error::file(&self.path, ErrorKind::Json(e)))?;
         let sequence = self.sequences.entry(channel.id).or_default();
         let header = MessageHeader {
             channel_id: channel.id,
@@ -806,8 +813,8 @@ impl Writer {
         };
         *sequence = sequence.wrapping_add(1);
         self.inner
-            .write_to_known_channel(&header, &data)
-            .map_err(|e| self.fail(ErrorKind::Mcap(e)))
+            .write_to_known_channel(&header, &self.json)
+            .map_err(|e| Error::file(&self.path, ErrorKind::Mcap(e)))
     }
 
     /// Closes the current chunk and hands everything written so far to the operating system,

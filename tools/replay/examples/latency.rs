@@ -6,7 +6,7 @@
 //!
 //! ```sh
 //! cargo build --release -p mems-replay -p mems-calibrate ... (the workspace binaries)
-//! cargo run --release -p mems-replay --example latency [-- --seconds 30] [--json]
+//! cargo run --release -p mems-replay --example latency [-- --seconds 30] [--cpu-seconds 30] [--json]
 //! ```
 //!
 //! Measures, each as an hdrhistogram of nanoseconds (reported in us), at 1 kHz and 4 kHz:
@@ -17,7 +17,9 @@
 //! - the pipeline, replaying a simulated drive of the part it calibrated (so the odometry
 //!   aligns: checked) at real time: per hop from the stamps every state carries and end to end,
 //!   over the live (non-revision) states that are aligned (at rest and moving, both counted);
-//! - each process's CPU use over the run (utime + stime from /proc), and of the stages idle;
+//! - each process's CPU use over the real-time replays at 1 kHz and 4 kHz (utime + stime from
+//!   /proc), which last at least `--cpu-seconds` (default 30), and of the stages idle; checked
+//!   against the targets (idle < 1 % of a core per process, each stage < 10 % at 1 kHz);
 //! - plain, and pinned with SCHED_FIFO (publisher/replay and the last subscriber on CPU 0, the
 //!   relays/stages on CPU 1), at 1 kHz;
 //! - throughput: a drive replayed with `--max` through both stages.
@@ -43,6 +45,11 @@ use std::ops::ControlFlow;
 const LEARN_S: &str = "2";
 /// Rest at the start of the drive, s.
 const INITIAL_REST_S: u64 = 4;
+/// Longest idle measurement, s.
+const IDLE_S: u64 = 10;
+/// CPU targets: an idle process, and a stage at 1 kHz, % of one core.
+const IDLE_MAX_PERCENT: f64 = 1.0;
+const STAGE_MAX_PERCENT_1KHZ: f64 = 10.0;
 
 /// One latency distribution.
 fn histogram() -> Histogram<u64> {
@@ -291,6 +298,8 @@ struct PipelineRun {
     replay_line: String,
     /// Percent of one core per process over the replay.
     cpu: Vec<(String, f64)>,
+    /// Length of the CPU measurement (the replay), s.
+    cpu_span_s: f64,
 }
 
 /// The stages' options for a drive at `rate_hz`: the 4 kHz MPU-9250 has no gyroscope.
@@ -466,6 +475,7 @@ fn pipeline(
         },
         replay_line: String::from_utf8_lossy(&out.stdout).trim().to_owned(),
         cpu,
+        cpu_span_s: span,
     })
 }
 
@@ -534,7 +544,8 @@ fn print_pipeline(title: &str, run: &PipelineRun) {
         .map(|(n, p)| format!("{n} {p:.1}%"))
         .collect();
     println!(
-        "\nCPU over the replay (% of one core): {}\n",
+        "\nCPU over the {:.0} s replay (% of one core): {}\n",
+        run.cpu_span_s,
         cpu.join(", ")
     );
 }
@@ -556,13 +567,17 @@ fn main() -> Result<()> {
         return chain_child(input, output, n.parse()?, cpu.parse().ok());
     }
     let mut seconds: u64 = 20;
+    let mut cpu_seconds: u64 = 30;
     let mut as_json = false;
     let mut it = args.iter().skip(1);
     while let Some(a) = it.next() {
         match a.as_str() {
             "--seconds" => seconds = it.next().context("--seconds needs a value")?.parse()?,
+            "--cpu-seconds" => {
+                cpu_seconds = it.next().context("--cpu-seconds needs a value")?.parse()?;
+            }
             "--json" => as_json = true,
-            _ => bail!("usage: latency [--seconds S] [--json]"),
+            _ => bail!("usage: latency [--seconds S] [--cpu-seconds S] [--json]"),
         }
     }
     let bench = std::env::current_exe()?;
@@ -608,9 +623,10 @@ fn main() -> Result<()> {
         )
     };
     // The drive plan drops a motion that does not fit: at least 20 s hold a drive and a rest.
-    let drive_s = seconds.max(20);
+    // The real-time replays at 1 and 4 kHz give the CPU figures: at least --cpu-seconds.
+    let drive_s = seconds.max(20).max(cpu_seconds);
     sim_drive(&drive, drive_s, "1000")?;
-    sim_drive(&drive4k, seconds, "4000")?;
+    sim_drive(&drive4k, seconds.max(cpu_seconds), "4000")?;
     sim_drive(&long, seconds * 6, "1000")?;
     run(
         &bins,
@@ -691,15 +707,33 @@ fn main() -> Result<()> {
     cpu.insert("4kHz".into(), cpu_json(&p4.cpu));
 
     eprintln!("latency: idle stages ...");
-    let idle = idle_cpu(&bins, calib_path, 5)?;
+    let idle_s = cpu_seconds.clamp(1, IDLE_S);
+    let idle = idle_cpu(&bins, calib_path, idle_s)?;
     println!(
-        "Idle stages, no input for 5 s (% of one core): {}\n",
+        "Idle stages, no input for {idle_s} s (% of one core): {}\n",
         idle.iter()
             .map(|(n, p)| format!("{n} {p:.2}%"))
             .collect::<Vec<_>>()
             .join(", ")
     );
     cpu.insert("idle".into(), cpu_json(&idle));
+    let idle_ok = idle.iter().all(|(_, p)| *p < IDLE_MAX_PERCENT);
+    let stages_ok = p
+        .cpu
+        .iter()
+        .filter(|(n, _)| n != "mems-replay")
+        .all(|(_, c)| *c < STAGE_MAX_PERCENT_1KHZ);
+    println!(
+        "CPU targets: idle < {IDLE_MAX_PERCENT} % of a core per process: {}; each stage < \
+         {STAGE_MAX_PERCENT_1KHZ} % at 1 kHz (over {:.0} s): {}\n",
+        if idle_ok { "met" } else { "NOT met" },
+        p.cpu_span_s,
+        if stages_ok { "met" } else { "NOT met" },
+    );
+    put("cpu_seconds_1khz", json!(p.cpu_span_s.round()));
+    put("cpu_seconds_4khz", json!(p4.cpu_span_s.round()));
+    put("idle_under_1_percent", json!(idle_ok));
+    put("stages_1khz_under_10_percent", json!(stages_ok));
 
     eprintln!("latency: throughput with --max ...");
     let t = pipeline(&bins, Path::new(&long), calib_path, 1000, true, false)?;

@@ -25,6 +25,12 @@ use clap::{Parser, Subcommand, ValueEnum};
 mod diagnose;
 mod serve;
 
+/// Small blocks come from a bounded pool once `serve` starts its loop (iceoryx2 0.10 allocates
+/// one per published sample: see `alloc_count::pool`); the other subcommands never arm it, so
+/// they use the system allocator through it. `serve` reports its steady-state counts.
+#[global_allocator]
+static ALLOCATOR: alloc_count::pool::BlockPool<1024> = alloc_count::pool::BlockPool::new();
+
 #[derive(Parser)]
 #[command(
     name = "mems-calibrate",

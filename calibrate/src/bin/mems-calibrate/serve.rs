@@ -16,11 +16,15 @@
 //!   exists, so that a restarted process goes on where the killed one stopped instead of
 //!   learning again, possibly from a robot in motion. A malformed FILE or one made with another
 //!   calibration is a start-up error naming it.
+//! - The loop allocates nothing per sample from the system allocator: iceoryx2's one small
+//!   block per published sample comes from the process's pool (`alloc_count::pool`). The
+//!   summary gives the steady-state counts (`alloc_count::steady`).
 //! - SIGINT/SIGTERM: a summary, exit status 0.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+use alloc_count::steady::SteadyState;
 use anyhow::{Context, Result, anyhow};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig, WarmState};
@@ -147,9 +151,14 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
     );
 
     let mut refused = 0u64;
-    let mut last_cleanup = Instant::now();
     // The state as last written, and when (not per sample: at most once a second).
     let mut saved: Option<(WarmState, Instant)> = None;
+    // Subscribers killed without closing their ports would otherwise stay connected.
+    let _cleanup = service::DeadNodeCleanup::start(Duration::from_secs(1))?;
+    let mut steady =
+        SteadyState::from_env(|| crate::ALLOCATOR.counts()).map_err(anyhow::Error::msg)?;
+    // Start-up is over: from here on small blocks come from the pool.
+    crate::ALLOCATOR.arm();
     let step = || -> Result<ControlFlow<(), bool>> {
         let mut received = false;
         while let Some(sample) = subscriber
@@ -157,6 +166,7 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
             .map_err(|e| anyhow!("receive on {raw_name}: {e:?}"))?
         {
             received = true;
+            steady.inputs(1);
             let pushed = stage.push(sample.payload(), &mut |s| {
                 let mut s = *s;
                 s.stamps.calibrated_ns = monotonic_ns();
@@ -181,11 +191,6 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
             save_state(path, &state)?;
             saved = Some((state, Instant::now()));
         }
-        if last_cleanup.elapsed() >= Duration::from_secs(1) {
-            // Subscribers killed without closing their ports would otherwise stay connected.
-            node.try_cleanup_dead_nodes();
-            last_cleanup = Instant::now();
-        }
         Ok(ControlFlow::Continue(received))
     };
     wake::serve_loop(&node, &[listener], TICK, step)?;
@@ -205,6 +210,12 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
         stage.detector().is_ready(),
         accel,
         gyro
+    );
+    eprintln!(
+        "mems-calibrate serve: {}; small-block pool: peak {} of 1024 blocks, {} requests found it empty",
+        steady.summary(),
+        crate::ALLOCATOR.peak_blocks(),
+        crate::ALLOCATOR.fallbacks()
     );
     Ok(())
 }

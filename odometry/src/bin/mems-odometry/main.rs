@@ -9,6 +9,12 @@ mod hint_args;
 mod offline;
 mod serve;
 
+/// Small blocks come from a bounded pool once `serve` starts its loop (iceoryx2 0.10 allocates
+/// one per published state: see `alloc_count::pool`); the other subcommands never arm it, so
+/// they use the system allocator through it. `serve` reports its steady-state counts.
+#[global_allocator]
+static ALLOCATOR: alloc_count::pool::BlockPool<1024> = alloc_count::pool::BlockPool::new();
+
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Once;

@@ -4,7 +4,12 @@
 //! armed come from the system allocator. Start-up (which may keep thousands of small blocks, such
 //! as a simulated drive's plan) thus leaves the whole pool to the hot loop.
 //!
-//! Why `mems-acquire` needs it: iceoryx2 0.10 allocates one small block per published sample
+//! Every live process installs it (`mems-acquire`, `mems-calibrate serve`, `mems-odometry serve`,
+//! `mems-record`) and counts, once armed, the allocation calls it served and those that reached
+//! the system allocator ([`BlockPool::counts`], reported in steady state by
+//! [`crate::steady::SteadyState`]).
+//!
+//! Why a publishing process needs it: iceoryx2 0.10 allocates one small block per published sample
 //! (`Publisher::loan_uninit`, and `send_copy` and the slice loans through it, wrap the loan's
 //! shared state in an `Rc` (`ipc::Service`) or an `Arc` (`ipc_threadsafe::Service`) in
 //! `ChunkMutSharedState::new`; no publishing API reuses it). That block is freed again when the
@@ -29,7 +34,7 @@
 //! owner's writes happen before the new owner's.
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::UnsafeCell;
+use std::cell::{Cell, UnsafeCell};
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 
 /// Size and alignment of every pool block, bytes (one cache line; iceoryx2 0.10's per-loan
@@ -59,6 +64,30 @@ pub struct BlockPool<const N: usize> {
     fallbacks: AtomicU64,
     /// Whether small requests are served from the pool yet.
     armed: AtomicBool,
+}
+
+thread_local! {
+    /// This thread's allocation calls served from a pool's blocks once armed.
+    static POOL_CALLS: Cell<u64> = const { Cell::new(0) };
+    /// This thread's allocation calls served by the system allocator once a pool was armed.
+    static SYSTEM_CALLS: Cell<u64> = const { Cell::new(0) };
+}
+
+/// Adds one to a thread-local counter (const-initialised, no destructor: no allocation).
+fn bump(counter: &'static std::thread::LocalKey<Cell<u64>>) {
+    counter.with(|c| c.set(c.get() + 1));
+}
+
+/// Allocation calls (alloc, alloc_zeroed, realloc) the current thread made through a
+/// [`BlockPool`] since it was armed: a process's serving loop, not its helper threads (such as
+/// `ipc_types::service::DeadNodeCleanup`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counts {
+    /// Served from the pool's blocks (no lock, no system call).
+    pub pool: u64,
+    /// Served by the system allocator (larger requests, and small ones while the pool is
+    /// empty).
+    pub system: u64,
 }
 
 // SAFETY: the storage is only reached through raw pointers to whole blocks, and a block is
@@ -104,6 +133,22 @@ impl<const N: usize> BlockPool<N> {
     /// instead, since start-up.
     pub fn fallbacks(&self) -> u64 {
         self.fallbacks.load(Ordering::Relaxed)
+    }
+
+    /// The allocation calls the current thread made since the pool was armed (a process has
+    /// one pool: its global allocator).
+    pub fn counts(&self) -> Counts {
+        Counts {
+            pool: POOL_CALLS.with(Cell::get),
+            system: SYSTEM_CALLS.with(Cell::get),
+        }
+    }
+
+    /// Counts a call served by the system allocator, once armed.
+    fn count_system(&self) {
+        if self.armed.load(Ordering::Relaxed) {
+            bump(&SYSTEM_CALLS);
+        }
     }
 
     /// The most blocks that were ever in use at once (a block is taken from the never-used
@@ -181,10 +226,12 @@ unsafe impl<const N: usize> GlobalAlloc for BlockPool<N> {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         if Self::fits(layout) && self.armed.load(Ordering::Relaxed) {
             if let Some(index) = self.pop() {
+                bump(&POOL_CALLS);
                 return self.block_ptr(index);
             }
             self.fallbacks.fetch_add(1, Ordering::Relaxed);
         }
+        self.count_system();
         // SAFETY: the caller's layout contract is passed on unchanged.
         unsafe { System.alloc(layout) }
     }
@@ -200,13 +247,16 @@ unsafe impl<const N: usize> GlobalAlloc for BlockPool<N> {
 
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
         if !self.contains(ptr) {
+            self.count_system();
             // SAFETY: a system block, with the caller's contract passed on unchanged.
             return unsafe { System.realloc(ptr, layout, new_size) };
         }
         if new_size <= BLOCK_SIZE {
             // The block already holds BLOCK_SIZE bytes at the same alignment.
+            bump(&POOL_CALLS);
             return ptr;
         }
+        self.count_system();
         // SAFETY: the caller guarantees that `new_size`, rounded up to `layout.align()`, does
         // not overflow isize, which is what `from_size_align_unchecked` requires.
         let grown = unsafe { Layout::from_size_align_unchecked(new_size, layout.align()) };
@@ -267,6 +317,8 @@ mod tests {
         // SAFETY: allocated above with this layout.
         unsafe { pool.dealloc(before, layout(8, 8)) };
         assert_eq!((pool.fallbacks(), pool.peak_blocks()), (0, 1));
+        // Counted from arming on: five pool requests, three system ones.
+        assert_eq!(pool.counts(), Counts { pool: 5, system: 3 });
     }
 
     #[test]
