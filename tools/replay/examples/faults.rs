@@ -105,6 +105,19 @@ impl Frame {
     }
 }
 
+/// The stage processes of a run, killed when it ends early (an error).
+struct Stages(Vec<(&'static str, Child)>);
+
+impl Drop for Stages {
+    fn drop(&mut self) {
+        for (_, child) in &mut self.0 {
+            signal(child, libc::SIGCONT);
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
 /// What one run measured.
 #[derive(Debug, Default)]
 struct Outcome {
@@ -175,6 +188,7 @@ fn one_run(
     speed: f64,
     tag: &str,
 ) -> Result<Outcome> {
+    let fault_ns = fault_time_ns(truth)?;
     let ns = format!("faults-{}-{tag}", std::process::id());
     let node = service::node()?;
     let name = service::full_name(&ns, service::ODOMETRY);
@@ -200,18 +214,22 @@ fn one_run(
             ],
             _ => &["serve", "--calib", calib],
         };
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(std::env::temp_dir().join(format!("{ns}-{stage}.log")))?;
         Command::new(bins.join(stage))
             .args(args)
             .args(["--namespace", &ns])
             .stdout(Stdio::null())
-            .stderr(Stdio::null())
+            .stderr(log)
             .spawn()
             .with_context(|| format!("cannot start {stage}"))
     };
-    let mut stages = vec![
+    let mut stages = Stages(vec![
         ("mems-odometry", spawn("mems-odometry")?),
         ("mems-calibrate", spawn("mems-calibrate")?),
-    ];
+    ]);
     let hogs: Vec<Child> = if fault == Fault::Hogs {
         (0..6)
             .map(|_| {
@@ -230,11 +248,12 @@ fn one_run(
         .args(["--speed", &speed.to_string(), "--wait-subscribers", "1"])
         .args(["--namespace", &ns])
         .stdout(Stdio::null())
-        .stderr(Stdio::null())
+        .stderr(std::fs::File::create(
+            std::env::temp_dir().join(format!("{ns}-mems-replay.log")),
+        )?)
         .spawn()
         .context("cannot start mems-replay")?;
 
-    let fault_ns = fault_time_ns(truth)?;
     let mut out = Outcome::default();
     let mut frame: Option<Frame> = None;
     let mut last: Option<OdometryState> = None;
@@ -258,15 +277,15 @@ fn one_run(
             if let Some(at) = injected
                 && !restored
             {
-                let idx = |n: &str| stages.iter().position(|(s, _)| *s == n).expect("a stage");
+                let idx = |n: &str| stages.0.iter().position(|(s, _)| *s == n).expect("a stage");
                 match fault {
                     Fault::Kill(n) if at.elapsed() >= Duration::from_millis(200) => {
                         let i = idx(n);
-                        stages[i].1 = spawn(n)?;
+                        stages.0[i].1 = spawn(n)?;
                         restored = true;
                     }
                     Fault::Stop(n) if at.elapsed() >= Duration::from_secs(2) => {
-                        signal(&stages[idx(n)].1, libc::SIGCONT);
+                        signal(&stages.0[idx(n)].1, libc::SIGCONT);
                         restored = true;
                     }
                     Fault::StopSubscriber => {
@@ -297,13 +316,21 @@ fn one_run(
                     injected = Some(Instant::now());
                     match fault {
                         Fault::Kill(n) => {
-                            let i = stages.iter().position(|(st, _)| *st == n).expect("a stage");
-                            signal(&stages[i].1, libc::SIGKILL);
-                            stages[i].1.wait()?;
+                            let i = stages
+                                .0
+                                .iter()
+                                .position(|(st, _)| *st == n)
+                                .expect("a stage");
+                            signal(&stages.0[i].1, libc::SIGKILL);
+                            stages.0[i].1.wait()?;
                         }
                         Fault::Stop(n) => {
-                            let i = stages.iter().position(|(st, _)| *st == n).expect("a stage");
-                            signal(&stages[i].1, libc::SIGSTOP);
+                            let i = stages
+                                .0
+                                .iter()
+                                .position(|(st, _)| *st == n)
+                                .expect("a stage");
+                            signal(&stages.0[i].1, libc::SIGSTOP);
                         }
                         _ => {}
                     }
@@ -343,6 +370,12 @@ fn one_run(
             if !replay_done && replay.try_wait()?.is_some() {
                 replay_done = true;
             }
+            // A stage that exits by itself (not the one just killed) is a finding, not a fault.
+            for (name, child) in stages.0.iter_mut() {
+                if restored && let Some(status) = child.try_wait()? {
+                    bail!("{}: {name} exited by itself ({status})", fault.label());
+                }
+            }
             let done = replay_done && idle_since.elapsed() > Duration::from_millis(1500);
             Ok(if done {
                 ControlFlow::Break(())
@@ -351,11 +384,13 @@ fn one_run(
             })
         },
     )?;
-    for (_, stage) in &mut stages {
-        signal(stage, libc::SIGCONT);
+    // SIGTERM alone: a SIGCONT pending with it is delivered after it (ascending signal
+    // numbers) and replaces it as iceoryx2's last signal, so the stage would not stop.
+    for (_, stage) in &mut stages.0 {
         signal(stage, libc::SIGTERM);
         stage.wait()?;
     }
+    stages.0.clear();
     for mut h in hogs {
         h.kill()?;
         h.wait()?;
@@ -465,9 +500,9 @@ fn main() -> Result<()> {
         let truth = recording::load_raw(&drive)?
             .truth
             .context("the simulated drive has truth")?;
-        for (fault, outcomes) in &mut results {
+        for (k, (fault, outcomes)) in results.iter_mut().enumerate() {
             eprintln!("faults: seed {seed}, {} ...", fault.label());
-            let tag = format!("{seed}-{}", outcomes.len());
+            let tag = format!("{seed}-{k}");
             let o = one_run(&bins, &drive, &truth, &calib, *fault, speed, &tag)?;
             if let Some(dir) = &dump {
                 std::fs::create_dir_all(dir)?;

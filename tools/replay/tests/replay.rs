@@ -26,7 +26,8 @@ fn samples(n: u64, rate_hz: u64) -> Vec<RawImuSample> {
                 odometry_ns: 0,
             },
             seq: 100 + i,
-            accel_g: [0.1 * i as f64, -1.0 / 3.0, 1.0 + 1e-9 * i as f64],
+            // Within the sensor's range (readers refuse beyond 20 g).
+            accel_g: [0.1 * (i % 150) as f64, -1.0 / 3.0, 1.0 + 1e-9 * i as f64],
             gyro_dps: [-250.0, 0.5, f64::MIN_POSITIVE],
             temp_c: 21.0 + i as f64 / 333.87,
             accel_counts: [i as i16, -(i as i16), 16384],
