@@ -350,6 +350,29 @@ mod tests {
         assert_eq!(got, (0..1000).collect::<Vec<_>>());
     }
 
+    /// Sends `n` samples with sequence numbers 0.. on `publisher`, draining `live` after each
+    /// (checking their order); returns how many `live` received.
+    fn send_and_drain(
+        publisher: &Publisher<ipc::Service, RawImuSample, ()>,
+        live: &iceoryx2::port::subscriber::Subscriber<ipc::Service, RawImuSample, ()>,
+        n: u64,
+    ) -> u64 {
+        let mut got = 0u64;
+        for seq in 0..n {
+            publisher
+                .send_copy(RawImuSample {
+                    seq,
+                    ..Default::default()
+                })
+                .unwrap();
+            while let Some(s) = live.receive().unwrap() {
+                assert_eq!(s.seq, got);
+                got += 1;
+            }
+        }
+        got
+    }
+
     /// A subscriber that never takes its samples (as a SIGKILLed one) stalls the publisher for
     /// STALL_TIMEOUT once; after that its samples are discarded and counted, and a live
     /// subscriber receives every sample.
@@ -366,19 +389,7 @@ mod tests {
         assert!(stuck.receive().unwrap().is_none());
         let extra = 10;
         let start = Instant::now();
-        let mut got = 0u64;
-        for seq in 0..(SUBSCRIBER_BUFFER as u64 + extra) {
-            publisher
-                .send_copy(RawImuSample {
-                    seq,
-                    ..Default::default()
-                })
-                .unwrap();
-            while let Some(s) = live.receive().unwrap() {
-                assert_eq!(s.seq, got);
-                got += 1;
-            }
-        }
+        let got = send_and_drain(&publisher, &live, SUBSCRIBER_BUFFER as u64 + extra);
         let waited = start.elapsed();
         assert_eq!(got, SUBSCRIBER_BUFFER as u64 + extra);
         assert_eq!(undelivered.total(), extra);
@@ -402,19 +413,7 @@ mod tests {
             publisher_waiting_at_most(&service, Duration::from_millis(5)).unwrap();
         assert!(stuck.receive().unwrap().is_none());
         let extra = 25;
-        let mut got = 0u64;
-        for seq in 0..(SUBSCRIBER_BUFFER as u64 + extra) {
-            publisher
-                .send_copy(RawImuSample {
-                    seq,
-                    ..Default::default()
-                })
-                .unwrap();
-            while let Some(s) = live.receive().unwrap() {
-                assert_eq!(s.seq, got);
-                got += 1;
-            }
-        }
+        let got = send_and_drain(&publisher, &live, SUBSCRIBER_BUFFER as u64 + extra);
         assert_eq!(got, SUBSCRIBER_BUFFER as u64 + extra);
         let counts = undelivered.per_subscriber();
         assert_eq!(counts.len(), 1, "{counts:?}");

@@ -30,7 +30,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+
 use anyhow::{Context, Result, bail};
+use common::run;
 use ipc_types::wake::{self, WaitMode};
 use ipc_types::{OdometryState, odometry_flags, service};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
@@ -131,21 +134,6 @@ struct Outcome {
     gaps_flagged: u64,
     /// `t_s,flags,x,y,sx,sy,tx,ty` per live state, for `--dump`.
     trace: Vec<String>,
-}
-
-fn run(bins: &Path, name: &str, args: &[&str]) -> Result<()> {
-    let out = Command::new(bins.join(name))
-        .args(args)
-        .output()
-        .with_context(|| format!("cannot run {name}"))?;
-    if !out.status.success() {
-        bail!(
-            "{name} {args:?} failed: {}: {}",
-            out.status,
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
-    Ok(())
 }
 
 fn signal(child: &Child, sig: i32) {
@@ -430,11 +418,7 @@ fn main() -> Result<()> {
             ),
         }
     }
-    let bins: PathBuf = std::env::current_exe()?
-        .parent()
-        .and_then(Path::parent)
-        .context("the example lives in target/<profile>/examples")?
-        .to_path_buf();
+    let bins = common::bin_dir()?;
     let work = std::env::temp_dir().join(format!("mems-faults-{}", std::process::id()));
     std::fs::create_dir_all(&work)?;
     let path = |name: &str| work.join(name);

@@ -27,11 +27,14 @@
 //! With `--json` the last line is a JSON object of the headline figures. Every time is
 //! `CLOCK_MONOTONIC` on one machine, so differences between processes are valid.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+
 use anyhow::{Context, Result, bail};
+use common::run;
 use hdrhistogram::Histogram;
 use iceoryx2::service::port_factory::PortFactory as _;
 use ipc_types::clock::monotonic_ns;
@@ -245,19 +248,6 @@ fn chain(bench: &Path, hops: usize, rate_hz: u64, seconds: u64, pinned: bool) ->
         bail!("chain subscriber printed {v:?}");
     };
     Ok([p50 / 1e3, p99 / 1e3, p999 / 1e3, max / 1e3, count])
-}
-
-/// Runs a workspace binary to completion.
-fn run(bins: &Path, name: &str, args: &[&str]) -> Result<String> {
-    let out = Command::new(bins.join(name))
-        .args(args)
-        .output()
-        .with_context(|| format!("cannot run {name}"))?;
-    if !out.status.success() {
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        bail!("{name} {args:?} failed: {}: {stderr}", out.status);
-    }
-    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
 /// A command for workspace binary `name`, under `taskset -c CPU chrt -f PRIO` when `rt` is given.
@@ -581,12 +571,7 @@ fn main() -> Result<()> {
         }
     }
     let bench = std::env::current_exe()?;
-    // target/<profile>/examples/latency -> target/<profile>
-    let bins: PathBuf = bench
-        .parent()
-        .and_then(Path::parent)
-        .context("the example lives in target/<profile>/examples")?
-        .to_path_buf();
+    let bins = common::bin_dir()?;
     let work = std::env::temp_dir().join(format!("mems-latency-{}", std::process::id()));
     std::fs::create_dir_all(&work)?;
     let path = |name: &str| work.join(name).to_string_lossy().into_owned();
