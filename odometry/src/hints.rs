@@ -218,6 +218,23 @@ pub struct HintStats {
     pub speed_skipped: u64,
 }
 
+impl std::fmt::Display for HintStats {
+    /// One line for a person: `received 12, consumed 12, out of order 0, ...`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "received {}, consumed {}, out of order {}, overflowed {}, speed updates {}, \
+             speed skipped {}",
+            self.received,
+            self.consumed,
+            self.out_of_order,
+            self.overflowed,
+            self.speed_updates,
+            self.speed_skipped
+        )
+    }
+}
+
 /// A first-in first-out ring of `Copy` values with its storage allocated once.
 ///
 /// Hand-written rather than `VecDeque` so that a full ring overwrites its oldest entry

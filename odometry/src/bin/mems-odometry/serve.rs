@@ -189,7 +189,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
     eprintln!(
         "mems-odometry: received {received}, published {published} (revisions included), \
          refused {refused}, sessions {sessions}, discarded for stalled subscribers {}; hints \
-         received {hints_received}, refused {hints_refused}, this session: {:?}",
+         received {hints_received}, refused {hints_refused}, this session: {}",
         service::stalled_discards(),
         h
     );

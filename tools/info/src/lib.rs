@@ -1,0 +1,422 @@
+//! What a recording holds, for a person (`mems-info RUN.mcap`) or a script (`--json`), in the
+//! manner of `mcap info` and `ros2 bag info`: the run's files (a run recorded across
+//! recorder restarts spans several, read as one, see `recording::segment`), its time span,
+//! each topic's count, rate and sequence gaps, the raw stream's losses, the recorder's events
+//! and the calibration the run used.
+//!
+//! Counts are of messages as stored (what the official MCAP readers count), read with
+//! `recording::mcap::Reader` up to the cut of a truncated file. Sequence gaps are found from
+//! the messages' own `seq` fields (odometry revisions, which repeat earlier numbers, are
+//! counted apart); a number that goes back is a restarted publisher, not a gap. Times are the
+//! recording's: ns of the recording machine's `CLOCK_MONOTONIC` (MCAP log times), which has
+//! no wall-clock reference.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use ipc_types::{odometry_flags, raw_flags, service};
+use recording::mcap::{EventKind, Reader, RecorderEvent};
+use recording::{Error, ErrorKind};
+use serde::{Deserialize, Serialize};
+
+/// One file of the run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FileInfo {
+    /// The file.
+    pub path: PathBuf,
+    /// Its size, bytes.
+    pub bytes: u64,
+    /// Messages read from it (all topics).
+    pub messages: u64,
+    /// Why reading stopped early (a killed recorder's file ends without its summary), if it
+    /// did; the messages before the cut are counted.
+    pub truncated: Option<String>,
+}
+
+/// One topic of the run.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct TopicInfo {
+    /// Messages stored.
+    pub count: u64,
+    /// The channel's schema name.
+    pub schema: String,
+    /// The channel's message encoding.
+    pub encoding: String,
+    /// First and last MCAP log time, ns.
+    pub first_log_ns: u64,
+    /// See `first_log_ns`.
+    pub last_log_ns: u64,
+    /// Messages per second of log time ((count - 1) over the span; 0 for fewer than two).
+    pub rate_hz: f64,
+    /// Whether the messages carry a sequence number (the pose and truth topics do not); the
+    /// three counts below are 0 without one.
+    pub sequenced: bool,
+    /// Places where the sequence number skipped ahead.
+    pub seq_gaps: u64,
+    /// Sequence numbers skipped over all gaps.
+    pub seq_missing: u64,
+    /// Places where the sequence number went back: a restarted publisher.
+    pub seq_restarts: u64,
+    /// Odometry states flagged `REVISION` (republished history; not part of the sequence).
+    pub revisions: u64,
+    /// Messages of a JSON channel that did not decode as JSON with the expected fields.
+    pub undecodable: u64,
+}
+
+/// The raw sample stream's own account of its losses.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct RawInfo {
+    /// Acquisition sessions (the sequence number restarts at each).
+    pub sessions: u64,
+    /// Sample rate from the sample times of the longest session, Hz.
+    pub sample_rate_hz: f64,
+    /// Whether any sample holds a gyroscope measurement.
+    pub gyro: bool,
+    /// Samples the sensor lost (sum of `lost_before`).
+    pub lost_at_sensor: u64,
+    /// Samples the publisher gave up for stalled subscribers (the last `undelivered` of each
+    /// session, summed).
+    pub undelivered: u64,
+    /// Samples flagged `SATURATED`.
+    pub saturated: u64,
+}
+
+/// The recorder's events, by kind.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct EventCounts {
+    /// `gap` events: sequence ranges the recording misses.
+    pub gap: u64,
+    /// Sequence numbers the `gap` events name.
+    pub gap_missing: u64,
+    /// `seq_reset` events.
+    pub seq_reset: u64,
+    /// `publisher_lost` events.
+    pub publisher_lost: u64,
+    /// `publisher_back` events.
+    pub publisher_back: u64,
+    /// `segment` events (recorder restarts).
+    pub segment: u64,
+}
+
+/// Everything `mems-info` reports about a run.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct RunInfo {
+    /// The run's files in order.
+    pub files: Vec<FileInfo>,
+    /// Messages over all files and topics.
+    pub messages: u64,
+    /// Earliest and latest MCAP log time, ns `CLOCK_MONOTONIC` (none without messages).
+    pub start_ns: Option<u64>,
+    /// See `start_ns`.
+    pub end_ns: Option<u64>,
+    /// `end_ns - start_ns`, s.
+    pub duration_s: f64,
+    /// Per topic.
+    pub topics: BTreeMap<String, TopicInfo>,
+    /// The raw stream, when the run has one.
+    pub raw: Option<RawInfo>,
+    /// The recorder's events.
+    pub events: EventCounts,
+    /// The calibrations the corrected samples name (`calib_id`, hex).
+    pub calib_ids: BTreeSet<String>,
+}
+
+/// The fields `mems-info` reads from a message; the topics' own types have more, which are
+/// skipped, so every topic decodes with this one type.
+#[derive(Deserialize, Default)]
+struct Fields {
+    seq: Option<u64>,
+    flags: Option<u16>,
+    lost_before: Option<u32>,
+    #[serde(alias = "reserved")]
+    undelivered: Option<u32>,
+    calib_id: Option<u64>,
+    stamps: Option<SampleTime>,
+}
+
+#[derive(Deserialize)]
+struct SampleTime {
+    sample_ns: u64,
+}
+
+/// Per-topic sequence tracking.
+#[derive(Default)]
+struct Sequence {
+    last: Option<u64>,
+}
+
+impl Sequence {
+    /// Updates `topic` with sequence number `seq`; returns whether it restarted.
+    fn next(&mut self, seq: u64, topic: &mut TopicInfo) -> bool {
+        let restart = match self.last {
+            Some(last) if seq > last + 1 => {
+                topic.seq_gaps += 1;
+                topic.seq_missing += seq - last - 1;
+                false
+            }
+            Some(last) if seq <= last => {
+                topic.seq_restarts += 1;
+                true
+            }
+            _ => false,
+        };
+        self.last = Some(seq);
+        restart
+    }
+}
+
+/// The raw stream's running state.
+#[derive(Default)]
+struct RawTrack {
+    info: RawInfo,
+    /// The current session's latest `undelivered` (a running total per publisher).
+    session_undelivered: u64,
+    /// The current session's first and latest sample time, ns, and its sample count.
+    session: Option<(u64, u64, u64)>,
+    /// The longest session's sample count and rate, Hz.
+    longest: (u64, f64),
+}
+
+impl RawTrack {
+    /// Counts one raw sample; `new_session` when its sequence number restarted.
+    fn sample(&mut self, f: &Fields, new_session: bool) {
+        if new_session || self.session.is_none() {
+            self.close_session();
+            self.info.sessions += 1;
+        }
+        let flags = f.flags.unwrap_or(0);
+        self.info.gyro |= flags & raw_flags::GYRO_VALID != 0;
+        self.info.saturated += u64::from(flags & raw_flags::SATURATED != 0);
+        self.info.lost_at_sensor += u64::from(f.lost_before.unwrap_or(0));
+        self.session_undelivered = u64::from(f.undelivered.unwrap_or(0));
+        let t = f.stamps.as_ref().map_or(0, |s| s.sample_ns);
+        self.session = Some(match self.session {
+            Some((first, _, n)) => (first, t, n + 1),
+            None => (t, t, 1),
+        });
+    }
+
+    /// Ends the current session: its undelivered count, and its rate if it is the longest.
+    fn close_session(&mut self) {
+        self.info.undelivered += std::mem::take(&mut self.session_undelivered);
+        if let Some((first, last, n)) = self.session.take()
+            && n > self.longest.0
+            && last > first
+        {
+            self.longest = (n, (n - 1) as f64 / ((last - first) as f64 * 1e-9));
+        }
+    }
+
+    fn finish(mut self) -> RawInfo {
+        self.close_session();
+        self.info.sample_rate_hz = self.longest.1;
+        self.info
+    }
+}
+
+impl RunInfo {
+    /// Reads the run whose first file is `path` (and its successor segments). Errors if a file
+    /// cannot be read or is not MCAP; a truncated file is reported, not an error.
+    pub fn read(path: &Path) -> anyhow::Result<Self> {
+        let mut info = RunInfo::default();
+        let mut sequences: BTreeMap<String, Sequence> = BTreeMap::new();
+        let mut raw: Option<RawTrack> = None;
+        for file in recording::mcap::run_files(path)? {
+            let reader = Reader::open(&file)?;
+            let bytes = std::fs::metadata(&file)
+                .with_context(|| format!("{}", file.display()))?
+                .len();
+            let mut read = FileInfo {
+                path: file.clone(),
+                bytes,
+                messages: 0,
+                truncated: None,
+            };
+            for message in reader.messages()? {
+                let message = match message {
+                    Ok(m) => m,
+                    Err(Error {
+                        kind: ErrorKind::Truncated(t),
+                        ..
+                    }) => {
+                        read.truncated = Some(t.to_string());
+                        break;
+                    }
+                    Err(e) => return Err(e.into()),
+                };
+                read.messages += 1;
+                let t = message.log_time_ns;
+                info.start_ns = Some(info.start_ns.map_or(t, |s| s.min(t)));
+                info.end_ns = Some(info.end_ns.map_or(t, |e| e.max(t)));
+                let topic = info.topics.entry(message.topic.clone()).or_default();
+                if topic.count == 0 {
+                    topic.schema = message.schema_name.clone();
+                    topic.encoding = message.encoding.clone();
+                    topic.first_log_ns = t;
+                }
+                topic.count += 1;
+                topic.last_log_ns = t;
+                if message.encoding != recording::mcap::MESSAGE_ENCODING {
+                    continue;
+                }
+                if message.topic == recording::mcap::EVENTS_TOPIC {
+                    match message.decode::<RecorderEvent>() {
+                        Some(Ok(event)) => info.events.count(&event),
+                        _ => topic.undecodable += 1,
+                    }
+                    continue;
+                }
+                let Ok(fields) = serde_json::from_slice::<Fields>(&message.data) else {
+                    topic.undecodable += 1;
+                    continue;
+                };
+                if message.topic == service::ODOMETRY
+                    && fields.flags.unwrap_or(0) & odometry_flags::REVISION != 0
+                {
+                    topic.revisions += 1;
+                    continue;
+                }
+                topic.sequenced |= fields.seq.is_some();
+                let restart = fields.seq.is_some_and(|seq| {
+                    sequences
+                        .entry(message.topic.clone())
+                        .or_default()
+                        .next(seq, topic)
+                });
+                if message.topic == service::RAW {
+                    raw.get_or_insert_with(RawTrack::default)
+                        .sample(&fields, restart);
+                }
+                if let Some(id) = fields
+                    .calib_id
+                    .filter(|_| message.topic == service::CORRECTED)
+                {
+                    info.calib_ids.insert(format!("{id:016x}"));
+                }
+            }
+            info.messages += read.messages;
+            info.files.push(read);
+        }
+        for topic in info.topics.values_mut() {
+            let span_s = (topic.last_log_ns - topic.first_log_ns) as f64 * 1e-9;
+            if topic.count > 1 && span_s > 0.0 {
+                topic.rate_hz = (topic.count - 1) as f64 / span_s;
+            }
+        }
+        if let (Some(s), Some(e)) = (info.start_ns, info.end_ns) {
+            info.duration_s = (e - s) as f64 * 1e-9;
+        }
+        info.raw = raw.map(RawTrack::finish);
+        Ok(info)
+    }
+
+    /// The report as a table for a person.
+    pub fn table(&self) -> String {
+        let mut s = String::new();
+        let total: u64 = self.files.iter().map(|f| f.bytes).sum();
+        let _ = writeln!(
+            s,
+            "files:     {} ({:.1} MB, {} messages)",
+            self.files.len(),
+            total as f64 / 1e6,
+            self.messages
+        );
+        for f in &self.files {
+            let cut = f
+                .truncated
+                .as_deref()
+                .map_or(String::new(), |why| format!("; truncated: {why}"));
+            let _ = writeln!(
+                s,
+                "  {}: {:.1} MB, {} messages{cut}",
+                f.path.display(),
+                f.bytes as f64 / 1e6,
+                f.messages
+            );
+        }
+        let _ = writeln!(
+            s,
+            "duration:  {:.3} s (log times {} to {} ns CLOCK_MONOTONIC; no wall-clock reference)",
+            self.duration_s,
+            self.start_ns.unwrap_or(0),
+            self.end_ns.unwrap_or(0)
+        );
+        let _ = writeln!(s, "topics:");
+        let width = self.topics.keys().map(String::len).max().unwrap_or(0);
+        for (name, t) in &self.topics {
+            let revisions = if t.revisions > 0 {
+                format!(", {} revisions", t.revisions)
+            } else {
+                String::new()
+            };
+            let undecodable = if t.undecodable > 0 {
+                format!(", {} undecodable", t.undecodable)
+            } else {
+                String::new()
+            };
+            let sequence = if t.sequenced {
+                format!(
+                    "gaps {} ({} missing), restarts {}",
+                    t.seq_gaps, t.seq_missing, t.seq_restarts
+                )
+            } else {
+                "no sequence numbers".to_string()
+            };
+            let _ = writeln!(
+                s,
+                "  {name:width$}  {:>9} msgs {:>9.1} Hz  {} ({})  {sequence}{revisions}{undecodable}",
+                t.count, t.rate_hz, t.schema, t.encoding
+            );
+        }
+        if let Some(r) = &self.raw {
+            let _ = writeln!(
+                s,
+                "raw:       {} session(s), {:.1} Hz, gyro {}; lost at the sensor {}, \
+                 undelivered {}, saturated {}",
+                r.sessions,
+                r.sample_rate_hz,
+                if r.gyro { "yes" } else { "no" },
+                r.lost_at_sensor,
+                r.undelivered,
+                r.saturated
+            );
+        }
+        let e = &self.events;
+        let _ = writeln!(
+            s,
+            "recorder:  gap {} ({} missing), seq reset {}, publisher lost {}, back {}, \
+             segments {}",
+            e.gap, e.gap_missing, e.seq_reset, e.publisher_lost, e.publisher_back, e.segment
+        );
+        let ids: Vec<&str> = self.calib_ids.iter().map(String::as_str).collect();
+        let _ = writeln!(
+            s,
+            "calib_id:  {}",
+            if ids.is_empty() {
+                "none (no corrected samples)".to_string()
+            } else {
+                ids.join(", ")
+            }
+        );
+        s
+    }
+}
+
+impl EventCounts {
+    fn count(&mut self, event: &RecorderEvent) {
+        match event.kind {
+            EventKind::Gap => {
+                self.gap += 1;
+                if let (Some(from), Some(to)) = (event.from_seq, event.to_seq) {
+                    self.gap_missing += to.saturating_sub(from) + 1;
+                }
+            }
+            EventKind::SeqReset => self.seq_reset += 1,
+            EventKind::PublisherLost => self.publisher_lost += 1,
+            EventKind::PublisherBack => self.publisher_back += 1,
+            EventKind::Segment => self.segment += 1,
+        }
+    }
+}
