@@ -1,6 +1,8 @@
 //! Helpers for the multi-process integration tests: locating the workspace's binaries, unique
 //! service namespaces, and child processes that are stopped when a test ends.
 
+pub mod foxglove;
+
 use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};

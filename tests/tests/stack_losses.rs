@@ -40,6 +40,11 @@ fn a_stopped_subscriber_loses_samples_counted_and_acquire_keeps_its_fifo() {
     wait_until(Duration::from_secs(60), "a first raw sample", || {
         stalled.receive().unwrap().is_some()
     });
+    assert_eq!(
+        integration_tests::child_named(stack.pid(), "mems-foxglove"),
+        None,
+        "no live view (and no listening socket) without --foxglove"
+    );
     let (status, summary) = stack.wait(Duration::from_secs(60));
     assert!(status.success(), "mems-stack failed: {status}\n{summary}");
     let line = summary

@@ -72,6 +72,11 @@ struct Cli {
     /// Lock the acquisition process's memory (mlockall), as `mems-acquire --mlock`.
     #[arg(long)]
     mlock: bool,
+    /// Serve the live topics to the Foxglove app over its WebSocket protocol at HOST:PORT
+    /// (`mems-foxglove`; off by default). Use a loopback address unless the network is trusted:
+    /// anyone who can connect sees the robot's odometry.
+    #[arg(long, value_name = "HOST:PORT")]
+    foxglove: Option<String>,
 }
 
 /// Window of the accelerometer-only GLRT, s: 0.5 s, as the GLRT's default at 1 kHz (measured
@@ -243,6 +248,10 @@ fn main() -> Result<()> {
         Some(out) => recording::segment::check_target(out, cli.force)?,
         None => Vec::new(),
     };
+    if let Some(addr) = &cli.foxglove {
+        std::net::ToSocketAddrs::to_socket_addrs(addr.as_str())
+            .with_context(|| format!("--foxglove {addr:?}: expected HOST:PORT"))?;
+    }
     clean_stale();
     let namespace = service::namespace(cli.namespace.as_deref());
     let bins = bin_dir()?;
@@ -284,6 +293,13 @@ fn main() -> Result<()> {
                 ],
             )
         });
+    }
+    if let Some(addr) = &cli.foxglove {
+        specs.push(spec(
+            "foxglove",
+            "mems-foxglove",
+            vec!["--listen".into(), addr.clone()],
+        ));
     }
     specs.push(spec(
         "odometry",
