@@ -4,6 +4,7 @@
 //! everything cleanly, and a status line shows rates, losses, zero-state and position.
 
 mod losses;
+mod summary;
 mod supervisor;
 
 use std::io::IsTerminal;
@@ -405,6 +406,11 @@ fn main() -> Result<()> {
                 zero_state,
                 last_state.as_ref(),
             );
+            let elapsed = start.elapsed().as_secs_f64();
+            let line = match cli.duration {
+                Some(total) => format!("{elapsed:.0}/{total:.0} s | {line}"),
+                None => format!("{elapsed:.0} s | {line}"),
+            };
             if tty {
                 eprint!("\r{line}\x1b[K");
             } else {
@@ -426,12 +432,18 @@ fn main() -> Result<()> {
         .collect::<Vec<_>>();
     supervisor.shutdown(Duration::from_secs(3));
     let _ = std::fs::remove_dir_all(&work);
-    // The summary goes to stdout (the live status is on stderr), for scripts and tests.
-    println!(
-        "mems-stack: stopped after {:.1} s; restarts: {}",
-        start.elapsed().as_secs_f64(),
-        restarts.join(", ")
-    );
+    // The summary goes to stdout (the live status is on stderr), for scripts and tests: for a
+    // person, then the status line.
+    let summary = summary::Summary {
+        elapsed_s: start.elapsed().as_secs_f64(),
+        restarts: &restarts,
+        topics: [&raw_stats, &cor_stats, &odo_stats],
+        source: &source,
+        recorder: recorder_losses.as_ref(),
+        record: cli.record.as_deref(),
+        state: last_state.as_ref(),
+    };
+    print!("{summary}");
     println!(
         "{}",
         status_line(
