@@ -400,3 +400,30 @@ pub fn python_iceoryx2() -> bool {
     }
     ok
 }
+
+/// An aligned odometry state numbered `seq`, stamped now (sample and publication), with a
+/// position and 1-sigma that differ per state: what the transport tests carry.
+pub fn odometry_state(seq: u64) -> ipc_types::OdometryState {
+    let t = ipc_types::clock::monotonic_ns();
+    ipc_types::OdometryState {
+        stamps: ipc_types::Stamps {
+            sample_ns: t,
+            odometry_ns: t,
+            ..ipc_types::Stamps::default()
+        },
+        seq,
+        position_m: [seq as f64 * 1e-3, -0.5, 0.125],
+        position_sigma_m: [0.01, 0.02 + seq as f64 * 1e-6, 0.03],
+        attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
+        flags: ipc_types::odometry_flags::ALIGNED,
+        ..ipc_types::OdometryState::default()
+    }
+}
+
+/// A TCP port on the loopback interface that was free a moment ago.
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free loopback port")
+        .port()
+}

@@ -6,27 +6,10 @@
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::PortFactory;
-use integration_tests::{Proc, unique_namespace, wait_until};
-use ipc_types::{OdometryState, Stamps, odometry_flags, service};
+use integration_tests::{Proc, free_port, odometry_state, unique_namespace, wait_until};
+use ipc_types::{OdometryState, service};
 
 const WAIT: Duration = Duration::from_secs(60);
-
-fn state(seq: u64) -> OdometryState {
-    let t = ipc_types::clock::monotonic_ns();
-    OdometryState {
-        stamps: Stamps {
-            sample_ns: t,
-            odometry_ns: t,
-            ..Stamps::default()
-        },
-        seq,
-        position_m: [seq as f64 * 1e-3, -0.5, 0.125],
-        position_sigma_m: [0.01, 0.02, 0.03],
-        attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
-        flags: odometry_flags::ALIGNED,
-        ..OdometryState::default()
-    }
-}
 
 /// The number after `label` in `line`.
 fn count_after(line: &str, label: &str) -> u64 {
@@ -40,12 +23,7 @@ fn count_after(line: &str, label: &str) -> u64 {
 #[test]
 fn odometry_crosses_the_bridge_without_loss() {
     let (robot, station) = (unique_namespace("bridge-a"), unique_namespace("bridge-b"));
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let out = Proc::spawn(
         "mems-bridge",
         &[
@@ -88,7 +66,7 @@ fn odometry_crosses_the_bridge_without_loss() {
     let mut seq = 0;
     let first = loop {
         assert!(start.elapsed() < WAIT, "nothing crossed the bridge");
-        publisher.send_copy(state(seq)).unwrap();
+        publisher.send_copy(odometry_state(seq)).unwrap();
         seq += 1;
         std::thread::sleep(Duration::from_millis(10));
         if let Some(s) = subscriber.receive().unwrap() {
@@ -106,7 +84,7 @@ fn odometry_crosses_the_bridge_without_loss() {
         }
     };
     for k in seq..seq + n {
-        let s = state(k);
+        let s = odometry_state(k);
         publisher.send_copy(s).unwrap();
         expected.push(s);
         if k % 100 == 0 {

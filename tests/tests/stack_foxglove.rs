@@ -6,19 +6,14 @@
 use std::time::{Duration, Instant};
 
 use integration_tests::foxglove::Client;
-use integration_tests::{Proc, child_named, unique_namespace};
+use integration_tests::{Proc, child_named, free_port, unique_namespace};
 use ipc_types::{OdometryState, odometry_flags};
 
 #[test]
 fn a_foxglove_client_receives_the_stacks_odometry() {
     let ns = unique_namespace("foxglove");
     // A free port now; the stack binds it after calibrating, some seconds later.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let addr = format!("127.0.0.1:{port}");
+    let addr = format!("127.0.0.1:{}", free_port());
     let stack = Proc::spawn(
         "mems-stack",
         &["--duration", "40", "--namespace", &ns, "--foxglove", &addr],

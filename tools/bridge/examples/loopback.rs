@@ -10,8 +10,9 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
+use integration_tests::{free_port, odometry_state};
 use ipc_types::wake::Output;
-use ipc_types::{OdometryState, Stamps, odometry_flags, service};
+use ipc_types::{OdometryState, service};
 
 fn arg(name: &str, default: f64) -> Result<f64> {
     let args: Vec<String> = std::env::args().collect();
@@ -30,10 +31,7 @@ fn main() -> Result<()> {
         .join("mems-bridge");
     let pid = std::process::id();
     let (robot, station) = (format!("bench-a-{pid}"), format!("bench-b-{pid}"));
-    let port = std::net::TcpListener::bind("127.0.0.1:0")?
-        .local_addr()?
-        .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let spawn = |args: &[&str]| {
         Command::new(&bin)
             .args(args)
@@ -70,20 +68,6 @@ fn main() -> Result<()> {
     let station_svc =
         service::open::<OdometryState>(&node, &service::full_name(&station, service::ODOMETRY))?;
     let subscriber = service::subscriber(&station_svc)?;
-    let state = |seq: u64| {
-        let t = ipc_types::clock::monotonic_ns();
-        OdometryState {
-            stamps: Stamps {
-                sample_ns: t,
-                odometry_ns: t,
-                ..Stamps::default()
-            },
-            seq,
-            attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
-            flags: odometry_flags::ALIGNED,
-            ..OdometryState::default()
-        }
-    };
     // Warm-up: until one state crosses (the link and the subscription are up).
     let mut seq = 0;
     let start = Instant::now();
@@ -91,7 +75,7 @@ fn main() -> Result<()> {
         if start.elapsed() > Duration::from_secs(60) {
             bail!("nothing crossed the bridge in 60 s");
         }
-        publisher.send(state(seq));
+        publisher.send(odometry_state(seq));
         publisher.end_of_input()?;
         seq += 1;
         std::thread::sleep(Duration::from_millis(10));
@@ -106,7 +90,7 @@ fn main() -> Result<()> {
         if let Some(wait) = due.checked_duration_since(Instant::now()) {
             std::thread::sleep(wait);
         }
-        publisher.send(state(first + k));
+        publisher.send(odometry_state(first + k));
         publisher.end_of_input()?;
         while let Some(s) = subscriber.receive()? {
             received += u64::from(s.seq >= first);

@@ -9,7 +9,8 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use integration_tests::foxglove::Client;
-use ipc_types::{OdometryState, Stamps, odometry_flags, service};
+use integration_tests::odometry_state;
+use ipc_types::{OdometryState, service};
 
 /// Generous: CI is a loaded 2-core machine.
 const WAIT: Duration = Duration::from_secs(60);
@@ -45,23 +46,6 @@ fn start(namespace: &str) -> (Server, String) {
         .recv_timeout(WAIT)
         .expect("mems-foxglove did not say where it serves");
     (Server(child), url)
-}
-
-fn state(seq: u64) -> OdometryState {
-    let t = ipc_types::clock::monotonic_ns();
-    OdometryState {
-        stamps: Stamps {
-            sample_ns: t,
-            odometry_ns: t,
-            ..Stamps::default()
-        },
-        seq,
-        position_m: [0.5 * seq as f64, -0.25, 0.125],
-        position_sigma_m: [0.01, 0.02, 0.03],
-        attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
-        flags: odometry_flags::ALIGNED,
-        ..OdometryState::default()
-    }
 }
 
 #[test]
@@ -114,7 +98,7 @@ fn a_foxglove_client_sees_the_channels_and_the_odometry() {
             "received {} states, {poses} poses",
             states.len()
         );
-        let s = state(sent.len() as u64);
+        let s = odometry_state(sent.len() as u64);
         publisher.send_copy(s).unwrap();
         sent.push(s);
         while let Some(data) = client.read() {
