@@ -4,8 +4,8 @@
 //! publication order, each before the first raw sample taken after its publication (the
 //! stage's own delivery rule decides which samples use it), unless `--no-hints`.
 //!
-//! An MCAP run (with its successor segments) is streamed: raw samples flow from the reader
-//! through both stages as they are read, each held back only [`HINT_WINDOW_NS`] for the hints
+//! An MCAP run (with its successor segments) is streamed: raw samples flow from the reader (a
+//! thread of its own, decoding beside the stages) through both stages as they are read, each held back only [`HINT_WINDOW_NS`] for the hints
 //! recorded after it, so memory is bounded by that window and the stages' own, not by the
 //! file. Text recordings, and MCAP with `--repair-torn-reads` (a pass over the whole
 //! recording), are read into memory first.
@@ -17,7 +17,9 @@
 //! and the truth positions are expressed in our frame relative to the truth position there.
 
 use std::collections::VecDeque;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::thread::JoinHandle;
 
 use anyhow::{Result, bail};
 use calibrate::stage::{CalibrationStage, RefineConfig};
@@ -25,6 +27,7 @@ use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint, odom
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
 use odometry::stage::OdometryStage;
 use recording::Truth;
+use recording::mcap::SegmentRead;
 use recording::mcap::run::{Item, RawRun};
 use serde_json::json;
 
@@ -90,11 +93,55 @@ impl TruthFrame {
 /// recorded later than this after its publication reaches the stage late (counted).
 const HINT_WINDOW_NS: u64 = 2_000_000_000;
 
+/// Items a reader thread sends at a time, and blocks in flight: what the streamed path holds
+/// between the reader and the stages.
+const BLOCK: usize = 4096;
+const BLOCKS_IN_FLIGHT: usize = 4;
+
 /// The recording's raw samples, truth and hints, in file order: an MCAP run streamed
-/// ([`recording::mcap::run::RawRun`]), or a text recording (or a repaired one) in memory.
+/// ([`recording::mcap::run::RawRun`]) by a reader thread, so that decoding runs beside the
+/// stages on a second core, or a text recording (or a repaired one) in memory.
 enum Source {
-    Stream(Box<RawRun>),
+    Stream {
+        blocks: Receiver<recording::Result<Vec<Item>>>,
+        block: std::vec::IntoIter<Item>,
+        reader: Option<JoinHandle<Vec<SegmentRead>>>,
+    },
     Memory(std::vec::IntoIter<Item>),
+}
+
+/// Reads the run at `path` in blocks of [`BLOCK`] items into `tx` until the end, an error
+/// (sent as the last block) or the receiver's end; returns the files read.
+fn read_run(
+    path: &Path,
+    hints: bool,
+    tx: SyncSender<recording::Result<Vec<Item>>>,
+) -> Vec<SegmentRead> {
+    let mut run = match RawRun::open(path, hints) {
+        Ok(run) => run,
+        Err(e) => {
+            let _ = tx.send(Err(e));
+            return Vec::new();
+        }
+    };
+    let mut block = Vec::with_capacity(BLOCK);
+    for item in run.by_ref() {
+        match item {
+            Ok(item) => block.push(item),
+            Err(e) => {
+                let _ = tx.send(Err(e));
+                return run.segments().to_vec();
+            }
+        }
+        if block.len() == BLOCK {
+            let full = std::mem::replace(&mut block, Vec::with_capacity(BLOCK));
+            if tx.send(Ok(full)).is_err() {
+                return run.segments().to_vec();
+            }
+        }
+    }
+    let _ = tx.send(Ok(block));
+    run.segments().to_vec()
 }
 
 impl Source {
@@ -102,11 +149,17 @@ impl Source {
     fn open(args: &OfflineArgs) -> Result<(Self, recording::LogRepairs)> {
         let is_mcap = recording::mcap::has_magic(&args.input)?;
         if is_mcap && !args.repair_torn_reads {
-            let run = RawRun::open(&args.input, !args.no_hints)?;
-            return Ok((
-                Self::Stream(Box::new(run)),
-                recording::LogRepairs::default(),
-            ));
+            let (tx, blocks) = sync_channel(BLOCKS_IN_FLIGHT);
+            let (path, hints) = (args.input.clone(), !args.no_hints);
+            let reader = std::thread::Builder::new()
+                .name("mcap-reader".into())
+                .spawn(move || read_run(&path, hints, tx))?;
+            let source = Self::Stream {
+                blocks,
+                block: Vec::new().into_iter(),
+                reader: Some(reader),
+            };
+            return Ok((source, recording::LogRepairs::default()));
         }
         let policy = if args.strict_time {
             recording::LogPolicy::Strict
@@ -149,8 +202,28 @@ impl Source {
 
     fn next(&mut self) -> Option<recording::Result<Item>> {
         match self {
-            Self::Stream(run) => run.next(),
+            Self::Stream { blocks, block, .. } => loop {
+                if let Some(item) = block.next() {
+                    return Some(Ok(item));
+                }
+                match blocks.recv() {
+                    Ok(Ok(next)) => *block = next.into_iter(),
+                    Ok(Err(e)) => return Some(Err(e)),
+                    Err(_) => return None,
+                }
+            },
             Self::Memory(items) => items.next().map(Ok),
+        }
+    }
+
+    /// The files a streamed run was read from (after its end), each with its truncation.
+    fn segments(&mut self) -> Vec<SegmentRead> {
+        match self {
+            Self::Stream { reader, .. } => reader
+                .take()
+                .and_then(|r| r.join().ok())
+                .unwrap_or_default(),
+            Self::Memory(_) => Vec::new(),
         }
     }
 }
@@ -322,11 +395,9 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             break;
         }
     }
-    if let Source::Stream(run) = &source {
-        for segment in run.segments() {
-            if let Some(t) = &segment.truncation {
-                eprintln!("mems-odometry: {}: {t}", segment.path.display());
-            }
+    for segment in source.segments() {
+        if let Some(t) = &segment.truncation {
+            eprintln!("mems-odometry: {}: {t}", segment.path.display());
         }
     }
     if merge.hints_late > 0 {
