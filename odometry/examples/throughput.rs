@@ -130,9 +130,9 @@ fn main() -> Result<()> {
 
     let (startup, calibration, odometry) = stages(input, args.block)?;
     println!(
-        "calibration stage        {} start-up {:.1} ms",
+        "calibration stage        {} start-up {:.0} us",
         calibration.show(raw),
-        startup.wall.as_secs_f64() * 1e3
+        startup.wall.as_secs_f64() * 1e6
     );
     println!("odometry stage           {}", odometry.show(raw));
 
