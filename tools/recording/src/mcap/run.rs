@@ -152,7 +152,7 @@ impl RunReader {
         loop {
             let current = self.current.as_mut()?;
             match current.scanner.next_into(&mut self.data) {
-                Ok(Some((channel, log_time_ns, publish_time_ns))) => {
+                Some(Ok((channel, log_time_ns, publish_time_ns))) => {
                     current.read += 1;
                     if self
                         .channel
@@ -175,8 +175,8 @@ impl RunReader {
                         data: &self.data,
                     }));
                 }
-                result => {
-                    let truncation = result.err().map(|reason| Truncation {
+                end => {
+                    let truncation = end.and_then(|e| e.err()).map(|reason| Truncation {
                         messages_read: current.read,
                         reason,
                     });

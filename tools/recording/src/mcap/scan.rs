@@ -192,23 +192,32 @@ impl<R: Read> Scanner<R> {
         }
     }
 
-    /// The next message, `Ok(None)` at the end of the data.
-    fn next_message(&mut self) -> Result<Option<RawMessage>, String> {
-        let mut data = Vec::new();
-        Ok(self
-            .next_into(&mut data)?
-            .map(|(channel, log_time_ns, publish_time_ns)| RawMessage {
-                channel,
-                log_time_ns,
-                publish_time_ns,
-                data,
-            }))
+    /// The next message into `data` (its storage reused: no allocation per message once it
+    /// is as long as the longest), with its channel, log time and publish time; after the
+    /// last, the reason the file was cut short, if it was (as [`Iterator::next`]).
+    #[allow(clippy::type_complexity)]
+    pub fn next_into(
+        &mut self,
+        data: &mut Vec<u8>,
+    ) -> Option<Result<(Rc<ChannelInfo>, u64, u64), String>> {
+        if self.done {
+            return None;
+        }
+        match self.read_into(data) {
+            Ok(Some(message)) => Some(Ok(message)),
+            Ok(None) => {
+                self.done = true;
+                self.cut.take().map(Err)
+            }
+            Err(reason) => {
+                self.done = true;
+                Some(Err(self.cut.take().unwrap_or(reason)))
+            }
+        }
     }
 
-    /// The next message into `data` (its storage reused: no allocation per message once it
-    /// is as long as the longest), with its channel, log time and publish time; `Ok(None)` at
-    /// the end of the data.
-    pub fn next_into(
+    /// The next message into `data`, `Ok(None)` at the end of the data.
+    fn read_into(
         &mut self,
         data: &mut Vec<u8>,
     ) -> Result<Option<(Rc<ChannelInfo>, u64, u64)>, String> {
@@ -301,20 +310,15 @@ impl<R: Read> Iterator for Scanner<R> {
 
     /// The next message; after the last, the reason the file was cut short, if it was.
     fn next(&mut self) -> Option<Self::Item> {
-        if self.done {
-            return None;
-        }
-        match self.next_message() {
-            Ok(Some(message)) => Some(Ok(message)),
-            Ok(None) => {
-                self.done = true;
-                self.cut.take().map(Err)
-            }
-            Err(reason) => {
-                self.done = true;
-                Some(Err(self.cut.take().unwrap_or(reason)))
-            }
-        }
+        let mut data = Vec::new();
+        self.next_into(&mut data).map(|m| {
+            m.map(|(channel, log_time_ns, publish_time_ns)| RawMessage {
+                channel,
+                log_time_ns,
+                publish_time_ns,
+                data,
+            })
+        })
     }
 }
 
