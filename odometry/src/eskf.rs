@@ -141,6 +141,51 @@ pub struct Eskf {
     f_align: Vector3<f64>,
 }
 
+/// The error-state transition `F` of one prediction: the identity but for `F_pv = dt I`,
+/// `F_vth`, `F_vba`, `F_thth` and `F_thbg = -dt I`. Written out because `F P F^T` runs at
+/// every sample, and with these blocks it is a few 3-row and 3-column products instead of two
+/// dense 16 x 16 ones.
+struct Transition {
+    dt: f64,
+    v_th: Matrix3<f64>,
+    v_ba: Matrix3<f64>,
+    th_th: Matrix3<f64>,
+}
+
+impl Transition {
+    /// `P <- F P F^T`.
+    fn propagate(&self, cov: &mut Cov) {
+        // F P: only the position, velocity and attitude rows change.
+        let rows = |m: &Cov, i: usize| m.fixed_rows::<3>(i).into_owned();
+        let (p, v, th, ba, bg) = (
+            rows(cov, P),
+            rows(cov, V),
+            rows(cov, TH),
+            rows(cov, BA),
+            rows(cov, BG),
+        );
+        cov.fixed_rows_mut::<3>(P).copy_from(&(p + v * self.dt));
+        cov.fixed_rows_mut::<3>(V)
+            .copy_from(&(v + self.v_th * th + self.v_ba * ba));
+        cov.fixed_rows_mut::<3>(TH)
+            .copy_from(&(self.th_th * th - bg * self.dt));
+        // (F P) F^T: the same on the columns.
+        let cols = |m: &Cov, i: usize| m.fixed_columns::<3>(i).into_owned();
+        let (p, v, th, ba, bg) = (
+            cols(cov, P),
+            cols(cov, V),
+            cols(cov, TH),
+            cols(cov, BA),
+            cols(cov, BG),
+        );
+        cov.fixed_columns_mut::<3>(P).copy_from(&(p + v * self.dt));
+        cov.fixed_columns_mut::<3>(V)
+            .copy_from(&(v + th * self.v_th.transpose() + ba * self.v_ba.transpose()));
+        cov.fixed_columns_mut::<3>(TH)
+            .copy_from(&(th * self.th_th.transpose() - bg * self.dt));
+    }
+}
+
 /// Skew-symmetric matrix: `skew(a) * b == a.cross(&b)`.
 pub fn skew(a: &Vector3<f64>) -> Matrix3<f64> {
     a.cross_matrix()
@@ -199,26 +244,21 @@ impl Eskf {
         self.x.v = v1;
         self.x.q = q1;
 
-        // Error-state transition at the interval's midpoint, first order in dt.
+        // Error-state transition at the interval's midpoint, first order in dt: the identity
+        // but for the blocks below (Sola 2017, eq. 269).
         let r_mid = x0.q.slerp(&q1, 0.5).to_rotation_matrix().into_inner();
         let f_mid = 0.5 * (f0 + f1);
-        let mut fx = Cov::identity();
-        fx.fixed_view_mut::<3, 3>(P, V)
-            .copy_from(&(Matrix3::identity() * dt));
-        fx.fixed_view_mut::<3, 3>(V, TH)
-            .copy_from(&(-r_mid * skew(&f_mid) * dt));
-        fx.fixed_view_mut::<3, 3>(V, BA).copy_from(&(-r_mid * dt));
-        fx.fixed_view_mut::<3, 3>(TH, TH).copy_from(
-            &UnitQuaternion::from_scaled_axis(-w_mid * dt)
+        let fx = Transition {
+            dt,
+            v_th: -r_mid * skew(&f_mid) * dt,
+            v_ba: -r_mid * dt,
+            th_th: UnitQuaternion::from_scaled_axis(-w_mid * dt)
                 .to_rotation_matrix()
                 .into_inner(),
-        );
-        fx.fixed_view_mut::<3, 3>(TH, BG)
-            .copy_from(&(-Matrix3::identity() * dt));
+        };
 
         let n = &self.noise;
         let speed = x0.v.norm();
-        let mut qd = VecN::zeros();
         let vel = (n.accel_noise_density.powi(2)
             + (n.vibration_accel_density_per_mps * speed).powi(2))
             * dt;
@@ -227,13 +267,13 @@ impl Eskf {
             * dt;
         let ba = n.accel_bias_random_walk.powi(2) * dt;
         let bg = n.gyro_bias_random_walk.powi(2) * dt;
+        fx.propagate(&mut self.cov);
         for i in 0..3 {
-            qd[V + i] = vel;
-            qd[TH + i] = ang;
-            qd[BA + i] = ba;
-            qd[BG + i] = bg;
+            self.cov[(V + i, V + i)] += vel;
+            self.cov[(TH + i, TH + i)] += ang;
+            self.cov[(BA + i, BA + i)] += ba;
+            self.cov[(BG + i, BG + i)] += bg;
         }
-        self.cov = fx * self.cov * fx.transpose() + Cov::from_diagonal(&qd);
         self.propagate_sensitivity(&fx, &w_mid, &(f_mid - self.f_align), &r_mid, dt);
         self.last = m;
     }
@@ -243,7 +283,7 @@ impl Eskf {
     /// `-R E_a (f - f_align)` on the velocity error, over `dt`.
     fn propagate_sensitivity(
         &mut self,
-        fx: &Cov,
+        fx: &Transition,
         w: &Vector3<f64>,
         df: &Vector3<f64>,
         r: &Matrix3<f64>,
@@ -254,8 +294,8 @@ impl Eskf {
         let th = m.fixed_rows::<3>(TH).into_owned();
         let ba = m.fixed_rows::<3>(BA).into_owned();
         let bg = m.fixed_rows::<3>(BG).into_owned();
-        let mut new_v = v + fx.fixed_view::<3, 3>(V, TH) * th + fx.fixed_view::<3, 3>(V, BA) * ba;
-        let mut new_th = fx.fixed_view::<3, 3>(TH, TH) * th - bg * dt;
+        let mut new_v = v + fx.v_th * th + fx.v_ba * ba;
+        let mut new_th = fx.th_th * th - bg * dt;
         for j in 0..3 {
             for k in 0..3 {
                 new_th[(j, 3 * j + k)] -= w[k] * dt;
@@ -303,11 +343,8 @@ impl Eskf {
 
     /// Zero-velocity update: the true velocity is zero, measured with 1-sigma `sigma` (m/s).
     pub fn zero_velocity(&mut self, sigma: f64) {
-        let mut h = SMatrix::<f64, 3, N>::zeros();
-        h.fixed_view_mut::<3, 3>(0, V)
-            .copy_from(&Matrix3::identity());
         let residual = -self.x.v;
-        self.update_iso(&h, residual, sigma * sigma);
+        self.update_selected(V, residual, sigma * sigma);
     }
 
     /// Whether the velocity is consistent with rest: every component within `gate` standard
@@ -324,9 +361,6 @@ impl Eskf {
     /// deviation: the body is rotating after all (an in-place spin flagged as rest), and the
     /// reading must not become the bias.
     pub fn zero_rate(&mut self, sigma: f64, gate: f64) -> bool {
-        let mut h = SMatrix::<f64, 3, N>::zeros();
-        h.fixed_view_mut::<3, 3>(0, BG)
-            .copy_from(&Matrix3::identity());
         let residual = self.last.w - self.x.b_g;
         let predicted_var = self
             .cov
@@ -340,7 +374,7 @@ impl Eskf {
         {
             return false;
         }
-        self.update_iso(&h, residual, sigma * sigma);
+        self.update_selected(BG, residual, sigma * sigma);
         true
     }
 
@@ -381,10 +415,28 @@ impl Eskf {
         self.body_velocity(r_bs) - before
     }
 
-    /// A linear measurement `z = H dx + noise` with isotropic variance `var`, in Joseph form,
-    /// injected into the nominal state.
-    fn update_iso(&mut self, h: &SMatrix<f64, 3, N>, residual: Vector3<f64>, var: f64) {
-        self.update(h, residual, &(Matrix3::identity() * var));
+    /// The measurement of [`Self::update`] with `H` selecting the three error-state components
+    /// from `c` (`H = [0 I 0]`) and isotropic variance `var`, the products with `H` written
+    /// out: `S = P_cc + R`, `K = P_:c S^-1`, `(I - K H) P = P - K P_c:`, and the Joseph form
+    /// `X (I - K H)^T = X - X_:c K^T`. The zero-velocity and zero-rate updates run at every
+    /// sample at rest.
+    fn update_selected(&mut self, c: usize, residual: Vector3<f64>, var: f64) {
+        let r = Matrix3::identity() * var;
+        let s = self.cov.fixed_view::<3, 3>(c, c) + r;
+        let Some(s_inv) = s.try_inverse() else {
+            return;
+        };
+        let k: SMatrix<f64, N, 3> = self.cov.fixed_columns::<3>(c) * s_inv;
+        let dx: VecN = k * residual;
+        let mut x = self.cov;
+        x -= k * self.cov.fixed_rows::<3>(c);
+        let x_c = x.fixed_columns::<3>(c).into_owned();
+        x -= x_c * k.transpose();
+        x += k * r * k.transpose();
+        self.cov = 0.5 * (x + x.transpose());
+        let sens_c = self.sens.fixed_rows::<3>(c).into_owned();
+        self.sens -= k * sens_c;
+        self.inject(&dx);
     }
 
     /// A linear measurement `z = H dx + noise` with noise covariance `r`, in Joseph form,
@@ -511,6 +563,70 @@ mod tests {
             vibration_accel_density_per_mps: 0.0,
             vibration_gyro_density_per_mps: 0.0,
         }
+    }
+
+    /// A dense, well-conditioned covariance with every entry non-zero.
+    fn full_cov() -> Cov {
+        let a = Cov::from_fn(|i, j| ((7 * i + 3 * j) as f64).sin());
+        a * a.transpose() * 1e-3 + Cov::identity() * 1e-4
+    }
+
+    #[test]
+    fn written_out_transition_is_the_dense_product() {
+        let fx = Transition {
+            dt: 1e-3,
+            v_th: Matrix3::from_fn(|i, j| ((i + 2 * j) as f64).cos() * 1e-2),
+            v_ba: Matrix3::from_fn(|i, j| ((3 * i + j) as f64).sin() * 1e-3),
+            th_th: UnitQuaternion::from_scaled_axis(Vector3::new(1e-3, -2e-3, 5e-4))
+                .to_rotation_matrix()
+                .into_inner(),
+        };
+        let mut dense = Cov::identity();
+        dense
+            .fixed_view_mut::<3, 3>(P, V)
+            .copy_from(&(Matrix3::identity() * fx.dt));
+        dense.fixed_view_mut::<3, 3>(V, TH).copy_from(&fx.v_th);
+        dense.fixed_view_mut::<3, 3>(V, BA).copy_from(&fx.v_ba);
+        dense.fixed_view_mut::<3, 3>(TH, TH).copy_from(&fx.th_th);
+        dense
+            .fixed_view_mut::<3, 3>(TH, BG)
+            .copy_from(&(-Matrix3::identity() * fx.dt));
+        let cov = full_cov();
+        let mut sparse = cov;
+        fx.propagate(&mut sparse);
+        assert_relative_eq!(sparse, dense * cov * dense.transpose(), epsilon = 1e-15);
+    }
+
+    #[test]
+    fn selected_update_is_the_general_update() {
+        let x = Nominal {
+            p: Vector3::new(1.0, 2.0, 3.0),
+            v: Vector3::new(0.1, -0.2, 0.05),
+            q: UnitQuaternion::from_scaled_axis(Vector3::new(0.1, 0.2, 0.3)),
+            b_a: Vector3::new(0.01, 0.02, -0.01),
+            b_g: Vector3::new(1e-3, -2e-3, 3e-3),
+            k: 0.01,
+        };
+        let first = Imu {
+            f: Vector3::new(0.1, 0.2, 9.8),
+            w: Vector3::new(0.01, 0.02, -0.03),
+        };
+        let mut a = Eskf::new(x, full_cov(), G, noise(), first);
+        a.sens = Sensitivity::from_fn(|i, j| ((i * 5 + j) as f64).cos());
+        let mut b = a.clone();
+        for c in [V, BG] {
+            let residual = Vector3::new(0.03, -0.01, 0.02);
+            let mut h = SMatrix::<f64, 3, N>::zeros();
+            h.fixed_view_mut::<3, 3>(0, c)
+                .copy_from(&Matrix3::identity());
+            a.update(&h, residual, &(Matrix3::identity() * 4e-6));
+            b.update_selected(c, residual, 4e-6);
+        }
+        assert_relative_eq!(a.cov, b.cov, epsilon = 1e-15);
+        assert_relative_eq!(a.sens, b.sens, epsilon = 1e-12);
+        assert_relative_eq!(a.x.p, b.x.p, epsilon = 1e-12);
+        assert_relative_eq!(a.x.q, b.x.q, epsilon = 1e-12);
+        assert_relative_eq!(a.x.b_g, b.x.b_g, epsilon = 1e-15);
     }
 
     #[test]

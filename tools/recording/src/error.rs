@@ -117,6 +117,20 @@ pub enum ErrorKind {
         /// Its sequence number.
         seq: u64,
     },
+    /// A streamed raw stream restarts: its sequence number does not increase.
+    #[error(
+        "the raw stream restarts at raw sample {index} (from 0): the sequence number goes \
+         {previous_seq} -> {seq} (a second acquisition session; read the sessions with \
+         recording::mcap::read_all, Contents::raw_sessions)"
+    )]
+    SessionRestart {
+        /// Index among the raw samples of the second session's first sample.
+        index: u64,
+        /// Sequence number of the sample before it.
+        previous_seq: u64,
+        /// Its sequence number.
+        seq: u64,
+    },
     /// A header names a column the format does not define.
     #[error("unknown column (known columns: {known})")]
     UnknownColumn {

@@ -23,6 +23,7 @@
 //! truncation ([`ErrorKind::Truncated`]); [`read_all`] returns it in [`Contents::truncation`].
 //! [`Writer::flush`] closes the current chunk, bounding what a kill can lose.
 
+pub mod run;
 pub mod scan;
 
 use std::borrow::Cow;
@@ -49,6 +50,34 @@ pub const TRUTH_TOPIC: &str = "mems/sim/truth";
 pub const MESSAGE_ENCODING: &str = "json";
 /// The schema encoding of every schema this crate writes.
 pub const SCHEMA_ENCODING: &str = "jsonschema";
+
+/// How a channel's messages are encoded, from its message encoding and its schema's encoding:
+/// the decoder its messages go through. A second encoding is a variant here, with its
+/// decoding of each [`Topic`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MessageEncoding {
+    /// [`MESSAGE_ENCODING`] described by [`SCHEMA_ENCODING`] (or schemaless): what this crate
+    /// writes, read with `serde_json`.
+    Json,
+}
+
+impl MessageEncoding {
+    /// The encoding of a channel with message encoding `message` and schema encoding `schema`
+    /// ("" without a schema); `None` when no decoder reads it.
+    pub fn of(message: &str, schema: &str) -> Option<Self> {
+        match (message, schema) {
+            (MESSAGE_ENCODING, SCHEMA_ENCODING | "") => Some(Self::Json),
+            _ => None,
+        }
+    }
+
+    /// Decodes one message as a `T`.
+    pub fn decode<T: Topic>(self, data: &[u8]) -> std::result::Result<T, ErrorKind> {
+        match self {
+            Self::Json => serde_json::from_slice(data).map_err(ErrorKind::Json),
+        }
+    }
+}
 
 /// A message type that can be recorded: its topic, its JSON Schema, and its own time.
 pub trait Topic: Serialize + DeserializeOwned {
@@ -914,7 +943,7 @@ impl Reader {
 /// Iterator over the messages of a [`Reader`].
 pub struct Messages<'a> {
     path: &'a Path,
-    stream: scan::Scanner<'a>,
+    stream: scan::Scanner<&'a [u8]>,
     read: u64,
     done: bool,
 }
@@ -935,6 +964,7 @@ impl<'a> Iterator for Messages<'a> {
                     topic: message.channel.topic.clone(),
                     schema_name: message.channel.schema_name.clone(),
                     encoding: message.channel.encoding.clone(),
+                    schema_encoding: message.channel.schema_encoding.clone(),
                     log_time_ns: message.log_time_ns,
                     publish_time_ns: message.publish_time_ns,
                     data: message.data,
@@ -971,6 +1001,8 @@ pub struct Recorded<'a> {
     pub schema_name: String,
     /// The channel's message encoding.
     pub encoding: String,
+    /// The encoding of the channel's schema ("" without a schema).
+    pub schema_encoding: String,
     /// MCAP log time, ns (the recorder's receive time).
     pub log_time_ns: u64,
     /// MCAP publish time, ns (the message's own time).
@@ -986,18 +1018,42 @@ impl Recorded<'_> {
         if self.topic != T::TOPIC {
             return None;
         }
-        let fail = |kind| Error::message(self.source, self.index, Some(&self.topic), kind);
-        if self.encoding != MESSAGE_ENCODING || self.schema_name != T::SCHEMA_NAME {
+        Some(decode_as(
+            self.source,
+            self.index,
+            &self.topic,
+            &self.schema_name,
+            MessageEncoding::of(&self.encoding, &self.schema_encoding)
+                .ok_or((&self.encoding, &self.schema_encoding)),
+            &self.data,
+        ))
+    }
+}
+
+/// Decodes message `index` of `path` (on `topic`, schema `schema_name`, in `encoding` or in
+/// an encoding no decoder reads) as a `T`; errors name the message.
+pub(crate) fn decode_as<T: Topic>(
+    path: &Path,
+    index: u64,
+    topic: &str,
+    schema_name: &str,
+    encoding: std::result::Result<MessageEncoding, (&String, &String)>,
+    data: &[u8],
+) -> Result<T> {
+    let fail = |kind| Error::message(path, index, Some(topic), kind);
+    let encoding = match encoding {
+        Ok(e) if schema_name == T::SCHEMA_NAME => e,
+        Ok(_) | Err(_) => {
+            let (message, schema) = encoding.err().map_or(("json", ""), |(m, s)| (m, s));
             let kind = ErrorKind::Invalid(format!(
-                "channel has encoding {:?} and schema {:?}, expected {MESSAGE_ENCODING:?} and {:?}",
-                self.encoding,
-                self.schema_name,
+                "channel has encoding {message:?} (schema encoding {schema:?}) and schema \
+                 {schema_name:?}, expected {MESSAGE_ENCODING:?} and {:?}",
                 T::SCHEMA_NAME
             ));
-            return Some(Err(fail(kind)));
+            return Err(fail(kind));
         }
-        Some(serde_json::from_slice(&self.data).map_err(|e| fail(ErrorKind::Json(e))))
-    }
+    };
+    encoding.decode(data).map_err(fail)
 }
 
 /// Everything [`read_all`] found in a file.
@@ -1077,7 +1133,7 @@ impl Contents {
 
 /// Refuses a raw sample whose values the sensor cannot produce ([`limits::check_raw`]; the
 /// gyroscope and temperature when their flags mark them valid).
-fn check_raw_values(path: &Path, message: &Recorded, sample: &RawImuSample) -> Result<()> {
+fn check_raw_values(path: &Path, index: u64, topic: &str, sample: &RawImuSample) -> Result<()> {
     let gyro = sample.flags & ipc_types::raw_flags::GYRO_VALID != 0;
     let temp = sample.flags & ipc_types::raw_flags::TEMP_VALID != 0;
     limits::check_raw(
@@ -1086,14 +1142,53 @@ fn check_raw_values(path: &Path, message: &Recorded, sample: &RawImuSample) -> R
         temp.then_some(sample.temp_c),
     )
     .map_err(|bad| {
-        let field = format!("{}: {}", message.topic, bad.field);
-        Error::message(
-            path,
-            message.index,
-            Some(&field),
-            ErrorKind::OutOfRange(bad),
-        )
+        let field = format!("{topic}: {}", bad.field);
+        Error::message(path, index, Some(&field), ErrorKind::OutOfRange(bad))
     })
+}
+
+/// The checks of the raw stream as it is read: values the sensor can produce, and within a
+/// session (a run of increasing sequence numbers) times that strictly increase by at most
+/// [`limits::MAX_STEP_S`].
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct RawChecks {
+    /// The previous sample's sequence number and time.
+    previous: Option<(u64, u64)>,
+}
+
+impl RawChecks {
+    /// The sequence number of the last sample checked.
+    pub(crate) fn previous_seq(&self) -> Option<u64> {
+        self.previous.map(|(seq, _)| seq)
+    }
+
+    /// Checks `sample`, message `index` of `path` on `topic`; whether it starts a new session
+    /// (the first sample, or a sequence number that does not increase).
+    pub(crate) fn check(
+        &mut self,
+        path: &Path,
+        index: u64,
+        topic: &str,
+        sample: &RawImuSample,
+    ) -> Result<bool> {
+        check_raw_values(path, index, topic, sample)?;
+        let previous = self.previous.replace((sample.seq, sample.stamps.sample_ns));
+        let Some((_, previous_ns)) = previous.filter(|(seq, _)| sample.seq > *seq) else {
+            return Ok(true);
+        };
+        let t_ns = sample.stamps.sample_ns;
+        let kind = if t_ns < previous_ns {
+            ErrorKind::TimeBackwards { t_ns, previous_ns }
+        } else if t_ns == previous_ns {
+            ErrorKind::DuplicateTime { t_ns }
+        } else if t_ns > previous_ns.saturating_add(limits::MAX_STEP_NS) {
+            ErrorKind::TimeStep { t_ns, previous_ns }
+        } else {
+            return Ok(false);
+        };
+        let field = format!("{topic}: stamps.sample_ns");
+        Err(Error::message(path, index, Some(&field), kind))
+    }
 }
 
 /// Reads every message of the known topics of an MCAP recording (raw, truth, corrected,
@@ -1154,10 +1249,9 @@ pub fn run_files(path: impl AsRef<Path>) -> Result<Vec<PathBuf>> {
 /// Whether the file at `path` is segment `n` of a run: its first message is the recorder's
 /// [`EventKind::Segment`] event numbered `n` (a file that merely has a successor's name is
 /// not read with the run).
-fn continues_run(path: &Path, n: usize) -> Result<bool> {
-    let reader = Reader::open(path)?;
-    let first = reader.messages()?.next();
-    Ok(match first {
+pub(crate) fn continues_run(path: &Path, n: usize) -> Result<bool> {
+    let mut run = run::RunReader::one(path)?;
+    Ok(match run.next() {
         Some(Ok(message)) => match message.decode::<RecorderEvent>() {
             Some(event) => {
                 let event = event?;
@@ -1183,32 +1277,12 @@ fn read_segment(path: &Path, contents: &mut Contents) -> Result<Option<Truncatio
         };
         if let Some(sample) = message.decode::<RawImuSample>() {
             let sample = sample?;
-            check_raw_values(&reader.path, &message, &sample)?;
-            let restart = contents.raw.last().is_none_or(|p| sample.seq <= p.seq);
-            if restart {
+            let mut checks = RawChecks {
+                previous: contents.raw.last().map(|p| (p.seq, p.stamps.sample_ns)),
+            };
+            if checks.check(&reader.path, message.index, &message.topic, &sample)? {
                 let start = contents.raw.len();
                 contents.raw_sessions.push(start..start);
-            } else if let Some(previous) = contents.raw.last() {
-                let previous_ns = previous.stamps.sample_ns;
-                let t_ns = sample.stamps.sample_ns;
-                let kind = if t_ns < previous_ns {
-                    Some(ErrorKind::TimeBackwards { t_ns, previous_ns })
-                } else if t_ns == previous_ns {
-                    Some(ErrorKind::DuplicateTime { t_ns })
-                } else if t_ns > previous_ns.saturating_add(limits::MAX_STEP_NS) {
-                    Some(ErrorKind::TimeStep { t_ns, previous_ns })
-                } else {
-                    None
-                };
-                if let Some(kind) = kind {
-                    let field = format!("{}: stamps.sample_ns", message.topic);
-                    return Err(Error::message(
-                        &reader.path,
-                        message.index,
-                        Some(&field),
-                        kind,
-                    ));
-                }
             }
             contents.raw.push(sample);
             if let Some(session) = contents.raw_sessions.last_mut() {

@@ -5,6 +5,7 @@ mod common;
 
 use common::{live_samples, tmp};
 use ipc_types::{RawImuSample, limits};
+use recording::mcap::run::{RawRun, RunReader};
 use recording::{ErrorKind, LogPolicy, Position};
 
 /// Writes `body` and returns the error `load_raw_with` gives for it.
@@ -127,18 +128,52 @@ fn write_mcap(name: &str, samples: &[RawImuSample]) -> std::path::PathBuf {
 fn an_mcap_raw_sample_beyond_range_or_after_an_hour_names_its_message() {
     let mut samples = live_samples(50, 7);
     samples[20].accel_g[1] = 1e300;
-    let err = recording::mcap::read_all(write_mcap("range.mcap", &samples)).unwrap_err();
+    let path = write_mcap("range.mcap", &samples);
+    let err = recording::mcap::read_all(&path).unwrap_err();
     assert_eq!(err.position, Some(Position::Message(21)), "{err}");
     assert_eq!(err.field.as_deref(), Some("mems/imu/raw: accel_g[1]"));
     assert!(matches!(err.kind, ErrorKind::OutOfRange(_)), "{err}");
+    // Streamed, the same error after the 20 samples before it, and nothing after it.
+    let items: Vec<_> = RawRun::open(&path, false).unwrap().collect();
+    assert_eq!(items.len(), 21);
+    let streamed = items[20].as_ref().unwrap_err();
+    assert_eq!(streamed.to_string(), err.to_string());
 
     let mut samples = live_samples(50, 8);
     for s in &mut samples[30..] {
         s.stamps.sample_ns += 3_600_000_000_000;
     }
-    let err = recording::load_raw(write_mcap("gap.mcap", &samples)).unwrap_err();
+    let path = write_mcap("gap.mcap", &samples);
+    let err = recording::load_raw(&path).unwrap_err();
     assert_eq!(err.position, Some(Position::Message(31)), "{err}");
     assert!(matches!(err.kind, ErrorKind::TimeStep { .. }), "{err}");
+    let streamed = RawRun::open(&path, false).unwrap().find_map(Result::err);
+    assert_eq!(streamed.map(|e| e.to_string()), Some(err.to_string()));
+
+    // A raw stream that restarts (a second session) is refused when streamed, naming it.
+    let mut samples = live_samples(50, 9);
+    samples.extend(live_samples(10, 10));
+    let path = write_mcap("restart.mcap", &samples);
+    let err = RawRun::open(&path, false)
+        .unwrap()
+        .find_map(Result::err)
+        .unwrap();
+    assert_eq!(err.position, Some(Position::Message(51)), "{err}");
+    assert!(
+        matches!(err.kind, ErrorKind::SessionRestart { index: 50, .. }),
+        "{err}"
+    );
+}
+
+/// The messages a streamed read of `path` yields, and its file's truncation.
+fn streamed(path: &std::path::Path) -> (usize, Option<recording::mcap::Truncation>) {
+    let mut run = RunReader::open(path).unwrap();
+    let mut n = 0;
+    while let Some(m) = run.next() {
+        m.unwrap();
+        n += 1;
+    }
+    (n, run.segments()[0].truncation.clone())
 }
 
 /// Byte offsets of the uncompressed-size fields of the file's chunk headers (opcode 0x06,
@@ -172,10 +207,13 @@ fn a_damaged_chunk_size_ends_the_read_as_a_truncation_without_aborting() {
     assert_eq!(cut.messages_read, 0);
     assert!(cut.reason.contains("declares"), "{}", cut.reason);
     assert!(contents.raw.is_empty());
+    // The streamed read walks the framing with seeks and stops at the same place.
+    assert_eq!(streamed(&path), (0, Some(cut)));
     // A size a little too large for the data is the crate's own error, also a truncation.
     let mut short = clean.clone();
     short[fields[0] + 1] ^= 0x01;
     std::fs::write(&path, &short).unwrap();
     let contents = recording::mcap::read_all(&path).unwrap();
     assert!(contents.truncation.is_some());
+    assert_eq!(streamed(&path), (contents.raw.len(), contents.truncation));
 }

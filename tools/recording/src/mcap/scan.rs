@@ -12,6 +12,8 @@
 //! a `u32` length and bytes. Other records are skipped unparsed.
 
 use std::collections::HashMap;
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom, Take};
 use std::rc::Rc;
 
 use ::mcap::MAGIC;
@@ -54,23 +56,44 @@ impl ReadBounds {
     /// `record_length_limit`, and allocates up to it when a length field is damaged: a limit
     /// that fits every chunk of a real file is too loose to catch a damaged chunk among them.
     pub fn of(bytes: &[u8]) -> Self {
-        let mut at = MAGIC.len().min(bytes.len());
+        Self::walk(bytes.len(), |at, out| {
+            bytes
+                .get(at..at + out.len())
+                .map(|b| out.copy_from_slice(b))
+                .is_some()
+        })
+    }
+
+    /// [`Self::of`] for a file of `len` bytes read in place, its record headers read with
+    /// seeks (a streaming reader does not hold the file). An I/O error ends the walk as the
+    /// end of the file would; the reader then meets it itself.
+    pub fn of_file(file: &mut File, len: u64) -> Self {
+        let len = usize::try_from(len).unwrap_or(usize::MAX);
+        Self::walk(len, |at, out| {
+            file.seek(SeekFrom::Start(at as u64)).is_ok() && file.read_exact(out).is_ok()
+        })
+    }
+
+    /// The walk of [`Self::of`] over `len` bytes, `read_at(offset, out)` filling `out` from
+    /// `offset` (false past the end).
+    fn walk(len: usize, mut read_at: impl FnMut(usize, &mut [u8]) -> bool) -> Self {
+        let mut at = MAGIC.len().min(len);
         let mut largest_chunk = 0usize;
         let mut cut = None;
-        while let Some(head) = bytes.get(at..at + 9) {
+        let mut head = [0u8; 9 + 24];
+        while at + 9 <= len && read_at(at, &mut head[..9]) {
             let opcode = head[0];
             let body_len = u64::from_le_bytes(head[1..9].try_into().expect("8 bytes"));
             let body_start = at + 9;
-            let Some(body) = usize::try_from(body_len)
+            let Some(body_end) = usize::try_from(body_len)
                 .ok()
-                .and_then(|n| bytes.get(body_start..body_start.checked_add(n)?))
+                .and_then(|n| body_start.checked_add(n))
+                .filter(|&end| end <= len)
             else {
                 break;
             };
-            if opcode == op::CHUNK
-                && let Some(size) = body.get(16..24)
-            {
-                let uncompressed = u64::from_le_bytes(size.try_into().expect("8 bytes"));
+            if opcode == op::CHUNK && body_len >= 24 && read_at(body_start, &mut head[9..]) {
+                let uncompressed = u64::from_le_bytes(head[9 + 16..].try_into().expect("8 bytes"));
                 let record = 9 + body_len;
                 if uncompressed > MAX_CHUNK_EXPANSION.saturating_mul(record) {
                     cut = Some(format!(
@@ -82,9 +105,9 @@ impl ReadBounds {
                 // Within the bound just checked, which is a fraction of the address space.
                 largest_chunk = largest_chunk.max(uncompressed as usize);
             }
-            at = body_start + body.len();
+            at = body_end;
         }
-        let len = if cut.is_some() { at } else { bytes.len() };
+        let len = if cut.is_some() { at } else { len };
         Self {
             len,
             cut,
@@ -102,6 +125,8 @@ pub struct ChannelInfo {
     pub schema_name: String,
     /// The message encoding.
     pub encoding: String,
+    /// The schema's encoding ("" without a schema).
+    pub schema_encoding: String,
 }
 
 /// One message and its channel.
@@ -117,28 +142,47 @@ pub struct RawMessage {
     pub data: Vec<u8>,
 }
 
-/// The messages of an MCAP file in file order; an error (a message for the truncation) ends
-/// them.
-pub struct Scanner<'a> {
-    input: &'a [u8],
+/// The messages of an MCAP file in file order, read from `R` (the file in memory, or the file
+/// itself); an error (a message for the truncation) ends them.
+pub struct Scanner<R> {
+    input: Take<R>,
     reader: LinearReader,
     cut: Option<String>,
-    schemas: HashMap<u16, String>,
+    /// Name and encoding of each schema.
+    schemas: HashMap<u16, (String, String)>,
     channels: HashMap<u16, Rc<ChannelInfo>>,
     past_data_end: bool,
     done: bool,
 }
 
-impl<'a> Scanner<'a> {
+impl<'a> Scanner<&'a [u8]> {
     /// A scanner over a whole file (magic included), within its [`ReadBounds`]; chunk CRCs
     /// are checked.
     pub fn new(bytes: &'a [u8]) -> Self {
-        let bounds = ReadBounds::of(bytes);
+        Self::with_bounds(bytes, ReadBounds::of(bytes))
+    }
+}
+
+impl Scanner<BufReader<File>> {
+    /// A scanner reading `file` (`len` bytes, from its start) as it goes: what it holds at a
+    /// time is one chunk, compressed and not, however long the file.
+    pub fn stream(mut file: File, len: u64) -> std::io::Result<Self> {
+        let bounds = ReadBounds::of_file(&mut file, len);
+        file.seek(SeekFrom::Start(0))?;
+        Ok(Self::with_bounds(
+            BufReader::with_capacity(1 << 16, file),
+            bounds,
+        ))
+    }
+}
+
+impl<R: Read> Scanner<R> {
+    fn with_bounds(input: R, bounds: ReadBounds) -> Self {
         let options = LinearReaderOptions::default()
             .with_validate_chunk_crcs(true)
             .with_record_length_limit(bounds.record_limit);
         Self {
-            input: &bytes[..bounds.len],
+            input: input.take(bounds.len as u64),
             reader: LinearReader::new_with_options(options),
             cut: bounds.cut,
             schemas: HashMap::new(),
@@ -148,8 +192,35 @@ impl<'a> Scanner<'a> {
         }
     }
 
-    /// The next message, `Ok(None)` at the end of the data.
-    fn next_message(&mut self) -> Result<Option<RawMessage>, String> {
+    /// The next message into `data` (its storage reused: no allocation per message once it
+    /// is as long as the longest), with its channel, log time and publish time; after the
+    /// last, the reason the file was cut short, if it was (as [`Iterator::next`]).
+    #[allow(clippy::type_complexity)]
+    pub fn next_into(
+        &mut self,
+        data: &mut Vec<u8>,
+    ) -> Option<Result<(Rc<ChannelInfo>, u64, u64), String>> {
+        if self.done {
+            return None;
+        }
+        match self.read_into(data) {
+            Ok(Some(message)) => Some(Ok(message)),
+            Ok(None) => {
+                self.done = true;
+                self.cut.take().map(Err)
+            }
+            Err(reason) => {
+                self.done = true;
+                Some(Err(self.cut.take().unwrap_or(reason)))
+            }
+        }
+    }
+
+    /// The next message into `data`, `Ok(None)` at the end of the data.
+    fn read_into(
+        &mut self,
+        data: &mut Vec<u8>,
+    ) -> Result<Option<(Rc<ChannelInfo>, u64, u64)>, String> {
         loop {
             let event = match self.reader.next_event() {
                 None => return Ok(None),
@@ -158,10 +229,9 @@ impl<'a> Scanner<'a> {
             };
             let (opcode, body) = match event {
                 LinearReadEvent::ReadRequest(need) => {
-                    let n = need.min(self.input.len());
-                    self.reader.insert(n).copy_from_slice(&self.input[..n]);
+                    let n = read_full(&mut self.input, self.reader.insert(need))
+                        .map_err(|e| format!("reading failed: {e}"))?;
                     self.reader.notify_read(n);
-                    self.input = &self.input[n..];
                     continue;
                 }
                 LinearReadEvent::Record { data, opcode } => (opcode, data),
@@ -174,10 +244,11 @@ impl<'a> Scanner<'a> {
                     let mut r = Fields::new(body, "schema");
                     let id = r.u16()?;
                     let name = r.string()?;
+                    let encoding = r.string()?;
                     if id == 0 {
                         return Err("a schema record has the reserved id 0".into());
                     }
-                    self.schemas.insert(id, name);
+                    self.schemas.insert(id, (name, encoding));
                 }
                 op::CHANNEL => {
                     let mut r = Fields::new(body, "channel");
@@ -185,8 +256,8 @@ impl<'a> Scanner<'a> {
                     let schema_id = r.u16()?;
                     let topic = r.string()?;
                     let encoding = r.string()?;
-                    let schema_name = match schema_id {
-                        0 => String::new(),
+                    let (schema_name, schema_encoding) = match schema_id {
+                        0 => (String::new(), String::new()),
                         id => self.schemas.get(&id).cloned().ok_or_else(|| {
                             format!(
                                 "channel {topic:?} refers to schema {id}, not defined before it"
@@ -197,6 +268,7 @@ impl<'a> Scanner<'a> {
                         topic,
                         schema_name,
                         encoding,
+                        schema_encoding,
                     };
                     self.channels.insert(id, Rc::new(info));
                 }
@@ -209,12 +281,9 @@ impl<'a> Scanner<'a> {
                     let channel = self.channels.get(&channel_id).cloned().ok_or_else(|| {
                         format!("a message on channel {channel_id}, not defined before it")
                     })?;
-                    return Ok(Some(RawMessage {
-                        channel,
-                        log_time_ns,
-                        publish_time_ns,
-                        data: r.rest().to_vec(),
-                    }));
+                    data.clear();
+                    data.extend_from_slice(r.rest());
+                    return Ok(Some((channel, log_time_ns, publish_time_ns)));
                 }
                 _ => {}
             }
@@ -222,25 +291,34 @@ impl<'a> Scanner<'a> {
     }
 }
 
-impl Iterator for Scanner<'_> {
+/// Reads into `buf` until it is full or the input ends; the bytes read.
+fn read_full(input: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match input.read(&mut buf[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(n)
+}
+
+impl<R: Read> Iterator for Scanner<R> {
     type Item = Result<RawMessage, String>;
 
     /// The next message; after the last, the reason the file was cut short, if it was.
     fn next(&mut self) -> Option<Self::Item> {
-        if self.done {
-            return None;
-        }
-        match self.next_message() {
-            Ok(Some(message)) => Some(Ok(message)),
-            Ok(None) => {
-                self.done = true;
-                self.cut.take().map(Err)
-            }
-            Err(reason) => {
-                self.done = true;
-                Some(Err(self.cut.take().unwrap_or(reason)))
-            }
-        }
+        let mut data = Vec::new();
+        self.next_into(&mut data).map(|m| {
+            m.map(|(channel, log_time_ns, publish_time_ns)| RawMessage {
+                channel,
+                log_time_ns,
+                publish_time_ns,
+                data,
+            })
+        })
     }
 }
 

@@ -1,0 +1,151 @@
+//! `mems-odometry offline` as a process on real MCAP files of a simulated drive with truth and
+//! robot hints (each hint recorded 40 ms after its publication, so after samples it precedes
+//! in publication order): the streamed run split across two segments (a recorder restarted
+//! with `--continue`) gives exactly the single file's result.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::{Case, Simulation};
+use ipc_types::{RawImuSample, RobotHint};
+use mems_sim::hints::{HintParams, RestSource};
+use recording::Truth;
+use recording::mcap::{EventKind, RecorderEvent, Writer};
+
+/// How long after its publication the recorder receives a hint, ns.
+const HINT_LATENCY_NS: u64 = 40_000_000;
+
+/// A scratch directory for this test binary.
+fn scratch() -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("offline-stream-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// One message of the recording, in the order the recorder writes them.
+enum Message {
+    Raw(RawImuSample, Truth),
+    Hint(RobotHint),
+}
+
+/// A drive with turns at 200 Hz and its encoder hints, in recorder order (by receive time).
+fn drive() -> Vec<Message> {
+    let case = Case {
+        duration_s: 120.0,
+        turns: true,
+        ..Case::straight()
+    };
+    let mut sim = Simulation::new(&case, 3);
+    sim.session();
+    let mut raw = Vec::new();
+    // The truth on the samples' clock, as `mems-sim drive` records it.
+    sim.drive_raw(|r, t| {
+        let t = Truth {
+            t_ns: r.stamps.sample_ns,
+            ..*t
+        };
+        raw.push((*r, t))
+    });
+    // The hints' times count from the drive's start, the samples' from the session's.
+    let t0_ns = raw[0].0.stamps.sample_ns;
+    let mut hints = case
+        .hints(3, &HintParams::new(RestSource::Encoders))
+        .hints
+        .into_iter()
+        .map(|mut h| {
+            h.stamps.sample_ns += t0_ns;
+            h.stamps.acquired_ns += t0_ns;
+            h
+        })
+        .peekable();
+    let mut messages = Vec::new();
+    for (r, t) in raw {
+        while let Some(h) =
+            hints.next_if(|h| h.stamps.acquired_ns + HINT_LATENCY_NS <= r.stamps.sample_ns)
+        {
+            messages.push(Message::Hint(h));
+        }
+        messages.push(Message::Raw(r, t));
+    }
+    messages.extend(hints.map(Message::Hint));
+    messages
+}
+
+/// Writes `messages` to `path`; a successor segment (`segment` > 0) starts with its event.
+fn write(path: &Path, segment: u64, messages: &[Message]) {
+    let mut w = Writer::create(path).unwrap();
+    let events = w.add_channel::<RecorderEvent>().unwrap();
+    let raw = w.add_channel::<RawImuSample>().unwrap();
+    let truth = w.add_channel::<Truth>().unwrap();
+    let hint = w.add_channel::<RobotHint>().unwrap();
+    if segment > 0 {
+        let event = RecorderEvent {
+            kind: EventKind::Segment,
+            service: String::new(),
+            from_seq: Some(segment),
+            to_seq: Some(segment),
+            t_ns: 0,
+        };
+        w.write(events, &event, 0).unwrap();
+    }
+    for m in messages {
+        match m {
+            Message::Raw(r, t) => {
+                w.write(raw, r, r.stamps.sample_ns).unwrap();
+                w.write(truth, t, r.stamps.sample_ns).unwrap();
+            }
+            Message::Hint(h) => w
+                .write(hint, h, h.stamps.acquired_ns + HINT_LATENCY_NS)
+                .unwrap(),
+        }
+    }
+    w.finish().unwrap();
+}
+
+fn offline(input: &Path, extra: &[&str]) -> serde_json::Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
+        .args(["offline", "--json", "--input"])
+        .arg(input)
+        .args(extra)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "offline failed: {err}");
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn a_segmented_run_streams_to_the_single_files_result() {
+    let dir = scratch();
+    let messages = drive();
+    let single = dir.join("single.mcap");
+    write(&single, 0, &messages);
+    let run = dir.join("run.mcap");
+    let half = messages.len() / 2;
+    write(&run, 0, &messages[..half]);
+    write(&dir.join("run.1.mcap"), 1, &messages[half..]);
+
+    let whole = offline(&single, &[]);
+    let segmented = offline(&run, &[]);
+    std::fs::remove_dir_all(&dir).unwrap();
+
+    // The hints were used, and the drive was navigated against its truth.
+    assert!(whole["hints"]["applied"].as_u64().unwrap() > 0, "{whole}");
+    assert!(
+        whole["hints"]["in_recording"].as_u64().unwrap() > 1000,
+        "{whole}"
+    );
+    assert_eq!(whole["hints"]["late"], 0, "{whole}");
+    assert!(
+        whole["truth_distance_m"].as_f64().unwrap() > 10.0,
+        "{whole}"
+    );
+    assert!(
+        whole["rest_intervals"].as_array().unwrap().len() > 2,
+        "{whole}"
+    );
+    // serde_json's Value compares f64 exactly.
+    assert_eq!(segmented, whole);
+}
