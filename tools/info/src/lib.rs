@@ -4,8 +4,8 @@
 //! each topic's count, rate and sequence gaps, the raw stream's losses, the recorder's events
 //! and the calibration the run used.
 //!
-//! Counts are of messages as stored (what the official MCAP readers count), read with
-//! `recording::mcap::Reader` up to the cut of a truncated file. Sequence gaps are found from
+//! Counts are of messages as stored (what the official MCAP readers count), streamed with
+//! `recording::mcap::run::RunReader` up to the cut of a truncated file. Sequence gaps are found from
 //! the messages' own `seq` fields (odometry revisions, which repeat earlier numbers, are
 //! counted apart); a number that goes back is a restarted publisher, not a gap. Times are the
 //! recording's: ns of the recording machine's `CLOCK_MONOTONIC` (MCAP log times), which has
@@ -17,8 +17,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use ipc_types::{odometry_flags, raw_flags, service};
-use recording::mcap::{EventKind, Reader, RecorderEvent};
-use recording::{Error, ErrorKind};
+use recording::mcap::run::{Message, RunReader};
+use recording::mcap::{EventKind, RecorderEvent};
 use serde::{Deserialize, Serialize};
 
 /// One file of the run.
@@ -216,88 +216,103 @@ impl RawTrack {
     }
 }
 
-impl RunInfo {
-    /// Reads the run whose first file is `path` (and its successor segments). Errors if a file
-    /// cannot be read or is not MCAP; a truncated file is reported, not an error.
-    pub fn read(path: &Path) -> anyhow::Result<Self> {
-        let mut info = RunInfo::default();
-        let mut sequences: BTreeMap<String, Sequence> = BTreeMap::new();
-        let mut raw: Option<RawTrack> = None;
-        for file in recording::mcap::run_files(path)? {
-            let reader = Reader::open(&file)?;
-            let bytes = std::fs::metadata(&file)
-                .with_context(|| format!("{}", file.display()))?
-                .len();
-            let mut read = FileInfo {
-                path: file.clone(),
-                bytes,
-                messages: 0,
-                truncated: None,
-            };
-            for message in reader.messages()? {
-                let message = match message {
-                    Ok(m) => m,
-                    Err(Error {
-                        kind: ErrorKind::Truncated(t),
-                        ..
-                    }) => {
-                        read.truncated = Some(t.to_string());
-                        break;
-                    }
-                    Err(e) => return Err(e.into()),
-                };
-                read.messages += 1;
-                let t = message.log_time_ns;
-                info.start_ns = Some(info.start_ns.map_or(t, |s| s.min(t)));
-                info.end_ns = Some(info.end_ns.map_or(t, |e| e.max(t)));
-                let topic = info.topics.entry(message.topic.clone()).or_default();
-                if topic.count == 0 {
-                    topic.schema = message.schema_name.clone();
-                    topic.encoding = message.encoding.clone();
-                    topic.first_log_ns = t;
-                }
-                topic.count += 1;
-                topic.last_log_ns = t;
-                if message.encoding != recording::mcap::MESSAGE_ENCODING {
-                    continue;
-                }
-                if message.topic == recording::mcap::EVENTS_TOPIC {
-                    match message.decode::<RecorderEvent>() {
-                        Some(Ok(event)) => info.events.count(&event),
-                        _ => topic.undecodable += 1,
-                    }
-                    continue;
-                }
-                let Ok(fields) = serde_json::from_slice::<Fields>(&message.data) else {
-                    topic.undecodable += 1;
-                    continue;
-                };
-                if message.topic == service::ODOMETRY
-                    && fields.flags.unwrap_or(0) & odometry_flags::REVISION != 0
-                {
-                    topic.revisions += 1;
-                    continue;
-                }
-                topic.sequenced |= fields.seq.is_some();
-                let restart = fields.seq.is_some_and(|seq| {
-                    sequences
-                        .entry(message.topic.clone())
-                        .or_default()
-                        .next(seq, topic)
-                });
-                if message.topic == service::RAW {
-                    raw.get_or_insert_with(RawTrack::default)
-                        .sample(&fields, restart);
-                }
-                if let Some(id) = fields
-                    .calib_id
-                    .filter(|_| message.topic == service::CORRECTED)
-                {
-                    info.calib_ids.insert(format!("{id:016x}"));
-                }
+/// The counts of a run as its messages go by.
+#[derive(Default)]
+struct Tally {
+    info: RunInfo,
+    sequences: BTreeMap<String, Sequence>,
+    raw: Option<RawTrack>,
+}
+
+impl Tally {
+    /// Counts one message: its topic, time, and what its fields say.
+    fn message(&mut self, message: &Message<'_>) {
+        let (info, channel, t) = (&mut self.info, message.channel, message.log_time_ns);
+        info.start_ns = Some(info.start_ns.map_or(t, |s| s.min(t)));
+        info.end_ns = Some(info.end_ns.map_or(t, |e| e.max(t)));
+        let topic = info.topics.entry(channel.topic.clone()).or_default();
+        if topic.count == 0 {
+            topic.schema = channel.schema_name.clone();
+            topic.encoding = channel.encoding.clone();
+            topic.first_log_ns = t;
+        }
+        topic.count += 1;
+        topic.last_log_ns = t;
+        if channel.encoding != recording::mcap::MESSAGE_ENCODING {
+            return;
+        }
+        if channel.topic == recording::mcap::EVENTS_TOPIC {
+            match message.decode::<RecorderEvent>() {
+                Some(Ok(event)) => info.events.count(&event),
+                _ => topic.undecodable += 1,
             }
-            info.messages += read.messages;
-            info.files.push(read);
+            return;
+        }
+        let Ok(fields) = serde_json::from_slice::<Fields>(message.data) else {
+            topic.undecodable += 1;
+            return;
+        };
+        if channel.topic == service::ODOMETRY
+            && fields.flags.unwrap_or(0) & odometry_flags::REVISION != 0
+        {
+            topic.revisions += 1;
+            return;
+        }
+        topic.sequenced |= fields.seq.is_some();
+        let restart = fields.seq.is_some_and(|seq| {
+            self.sequences
+                .entry(channel.topic.clone())
+                .or_default()
+                .next(seq, topic)
+        });
+        if channel.topic == service::RAW {
+            self.raw
+                .get_or_insert_with(RawTrack::default)
+                .sample(&fields, restart);
+        }
+        if let Some(id) = fields
+            .calib_id
+            .filter(|_| channel.topic == service::CORRECTED)
+        {
+            info.calib_ids.insert(format!("{id:016x}"));
+        }
+    }
+}
+
+impl RunInfo {
+    /// Reads the run whose first file is `path` (and its successor segments), message by
+    /// message (memory is bounded by a chunk, not the run). Errors if a file cannot be read
+    /// or is not MCAP; a truncated file is reported, not an error.
+    pub fn read(path: &Path) -> anyhow::Result<Self> {
+        let mut tally = Tally::default();
+        let mut run = RunReader::open(path)?;
+        let mut per_file: Vec<(PathBuf, u64)> = Vec::new();
+        while let Some(message) = run.next() {
+            let message = message?;
+            if per_file.last().is_none_or(|(p, _)| p != message.path) {
+                per_file.push((message.path.to_path_buf(), 0));
+            }
+            if let Some((_, n)) = per_file.last_mut() {
+                *n += 1;
+            }
+            tally.message(&message);
+        }
+        let mut info = tally.info;
+        for segment in run.segments() {
+            let bytes = std::fs::metadata(&segment.path)
+                .with_context(|| format!("{}", segment.path.display()))?
+                .len();
+            let messages = per_file
+                .iter()
+                .find(|(p, _)| *p == segment.path)
+                .map_or(0, |(_, n)| *n);
+            info.messages += messages;
+            info.files.push(FileInfo {
+                path: segment.path.clone(),
+                bytes,
+                messages,
+                truncated: segment.truncation.as_ref().map(ToString::to_string),
+            });
         }
         for topic in info.topics.values_mut() {
             let span_s = (topic.last_log_ns - topic.first_log_ns) as f64 * 1e-9;
@@ -308,7 +323,7 @@ impl RunInfo {
         if let (Some(s), Some(e)) = (info.start_ns, info.end_ns) {
             info.duration_s = (e - s) as f64 * 1e-9;
         }
-        info.raw = raw.map(RawTrack::finish);
+        info.raw = tally.raw.map(RawTrack::finish);
         Ok(info)
     }
 

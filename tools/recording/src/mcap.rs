@@ -1227,25 +1227,6 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
     Ok(contents)
 }
 
-/// The files of the run whose first segment is `path`, in order: `path` itself, then each
-/// successor ([`crate::segment`]) that begins with its [`EventKind::Segment`] event, up to
-/// the first that does not.
-pub fn run_files(path: impl AsRef<Path>) -> Result<Vec<PathBuf>> {
-    let path = path.as_ref();
-    let mut files = vec![path.to_path_buf()];
-    for (n, successor) in crate::segment::existing(path)
-        .into_iter()
-        .enumerate()
-        .skip(1)
-    {
-        if !continues_run(&successor, n)? {
-            break;
-        }
-        files.push(successor);
-    }
-    Ok(files)
-}
-
 /// Whether the file at `path` is segment `n` of a run: its first message is the recorder's
 /// [`EventKind::Segment`] event numbered `n` (a file that merely has a successor's name is
 /// not read with the run).
