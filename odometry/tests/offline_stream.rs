@@ -149,3 +149,60 @@ fn a_segmented_run_streams_to_the_single_files_result() {
     // serde_json's Value compares f64 exactly.
     assert_eq!(segmented, whole);
 }
+
+/// `--out` writes the run as a live run's recording: the raw samples and hints read, one
+/// corrected sample per raw sample, a state per sample (revisions besides) each with its
+/// pose, and the last live state is the one the report gives. An existing file is refused
+/// unless `--force`.
+#[test]
+fn offline_writes_its_run_as_a_recording() {
+    // Not under `scratch()`, which the other test removes when it ends.
+    let dir = std::env::temp_dir().join(format!("offline-out-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let messages = drive();
+    let input = dir.join("drive.mcap");
+    write(&input, 0, &messages);
+    let out = dir.join("states.mcap");
+    let out_arg = out.to_str().unwrap();
+    let report = offline(&input, &["--out", out_arg]);
+
+    let read = recording::mcap::read_all(&out).unwrap();
+    let raw: Vec<RawImuSample> = messages
+        .iter()
+        .filter_map(|m| match m {
+            Message::Raw(r, _) => Some(*r),
+            Message::Hint(_) => None,
+        })
+        .collect();
+    assert_eq!(read.raw, raw);
+    let hints = messages.len() - raw.len();
+    assert_eq!(read.hints.len(), hints);
+    assert_eq!(read.corrected.len(), raw.len());
+    let live: Vec<_> = read
+        .odometry
+        .iter()
+        .filter(|s| s.flags & ipc_types::odometry_flags::REVISION == 0)
+        .collect();
+    assert_eq!(live.len(), raw.len());
+    assert!(read.odometry.len() > live.len(), "revisions are kept");
+    assert_eq!(read.poses.len(), read.odometry.len());
+    let end = live.last().unwrap();
+    assert_eq!(
+        serde_json::json!(end.position_m),
+        report["end_displacement_m"]
+    );
+
+    let refused = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
+        .args(["offline", "--input"])
+        .arg(&input)
+        .args(["--out", out_arg])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success() && err.contains("--force"),
+        "{err}"
+    );
+    offline(&input, &["--out", out_arg, "--force"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -7,6 +7,7 @@
 mod gyrocal;
 mod hint_args;
 mod offline;
+mod out;
 mod serve;
 
 /// Small blocks come from a bounded pool once `serve` starts its loop (iceoryx2 0.10 allocates

@@ -60,6 +60,14 @@ pub struct OfflineArgs {
     repair_torn_reads: bool,
     #[command(flatten)]
     hints: crate::hint_args::HintArgs,
+    /// Also write the run as a live run's recording to this MCAP file: raw samples and hints
+    /// as read, corrected samples, odometry states (revisions included) and poses, each logged
+    /// at its own time (`crate::out`).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Overwrite the recording at `--out`.
+    #[arg(long, requires = "out")]
+    force: bool,
 }
 
 fn quat(wxyz: [f64; 4]) -> UnitQuaternion<f64> {
@@ -354,6 +362,10 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     let mut odometry = OdometryStage::with_hints(config, args.hints.config()?)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let input = args.input.display();
+    let mut out = match &args.out {
+        Some(path) => Some(crate::out::Out::create(path, args.force)?),
+        None => None,
+    };
 
     let mut summary = Summary::default();
     let mut merge = Merge::default();
@@ -372,7 +384,12 @@ pub fn run(args: OfflineArgs) -> Result<()> {
                 }
                 merge.raw.push_back(raw);
             }
-            Some(Item::Hint(h)) => merge.hint(h),
+            Some(Item::Hint(h)) => {
+                if let Some(out) = out.as_mut() {
+                    out.hint(&h);
+                }
+                merge.hint(h);
+            }
             Some(Item::Truth(t)) => summary.truth.0.push_back(t),
             None => newest_ns = None,
         }
@@ -385,9 +402,12 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             if let Some(e) = hint_error.take() {
                 bail!("{input}: {e}");
             }
+            if let Some(out) = out.as_mut() {
+                out.raw(&raw);
+            }
             calibration
                 .push(&raw, &mut |c: &CorrectedImuSample| {
-                    feed(c, &mut odometry, &mut summary, &mut error)
+                    feed(c, &mut odometry, &mut summary, &mut out, &mut error)
                 })
                 .map_err(|e| anyhow::anyhow!("{input}: {e}"))?;
         }
@@ -409,8 +429,16 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         );
     }
     calibration.finish();
-    // As `mems-odometry serve` at its end: revisions only, which this report does not use.
-    odometry.finish(&mut |_| {});
+    // As `mems-odometry serve` at its end: revisions only, which this report does not use (the
+    // recording keeps them).
+    odometry.finish(&mut |s| {
+        if let Some(out) = out.as_mut() {
+            out.state(s);
+        }
+    });
+    if let Some(out) = out {
+        out.finish()?;
+    }
     if let Some(e) = error {
         return Err(e.context(format!("{input}")));
     }
@@ -485,19 +513,27 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     Ok(())
 }
 
-/// Gives one corrected sample to the odometry stage and its state to the summary; the first
-/// error is kept in `error` and stops the feeding.
+/// Gives one corrected sample to the odometry stage and its state to the summary (and both,
+/// revisions included, to the recording being written); the first error is kept in `error`
+/// and stops the feeding.
 fn feed(
     c: &CorrectedImuSample,
     odometry: &mut OdometryStage,
     summary: &mut Summary,
+    out: &mut Option<crate::out::Out>,
     error: &mut Option<anyhow::Error>,
 ) {
     if error.is_some() {
         return;
     }
+    if let Some(out) = out.as_mut() {
+        out.corrected(c);
+    }
     let mut state = None;
     let result = odometry.process(c, &mut |s: &OdometryState| {
+        if let Some(out) = out.as_mut() {
+            out.state(s);
+        }
         if s.flags & odometry_flags::REVISION == 0 {
             state = Some(*s);
         }

@@ -1,0 +1,85 @@
+//! `mems-odometry offline --out F.mcap`: the offline run written as a live run's recording
+//! (what `mems-record` writes of `mems-calibrate serve` and `mems-odometry serve`): the raw
+//! samples and robot hints as read, every corrected sample, every odometry state (revisions
+//! included) and its pose. A recording has no receive times offline, so each message's log
+//! time is its own publish time (the sample time; a hint's publication time).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
+use recording::mcap::{Channel, PoseInFrame, Topic, Writer};
+
+/// The MCAP file being written, its channels and the first write error (later writes are
+/// skipped: the stages' emit callbacks cannot return one).
+pub struct Out {
+    path: PathBuf,
+    writer: Writer,
+    raw: Channel<RawImuSample>,
+    corrected: Channel<CorrectedImuSample>,
+    odometry: Channel<OdometryState>,
+    pose: Channel<PoseInFrame>,
+    hint: Channel<RobotHint>,
+    error: Option<recording::Error>,
+}
+
+impl Out {
+    /// Creates the file at `path`; an existing recording there is refused unless `force`.
+    pub fn create(path: &Path, force: bool) -> Result<Self> {
+        for old in recording::segment::check_target(path, force)? {
+            std::fs::remove_file(&old)
+                .with_context(|| format!("cannot remove {}", old.display()))?;
+        }
+        let mut writer = Writer::create_new(path)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            raw: writer.add_channel()?,
+            corrected: writer.add_channel()?,
+            odometry: writer.add_channel()?,
+            pose: writer.add_channel()?,
+            hint: writer.add_channel()?,
+            writer,
+            error: None,
+        })
+    }
+
+    fn write<T: Topic>(&mut self, channel: Channel<T>, message: &T) {
+        if self.error.is_none() {
+            let log_ns = message.publish_time_ns();
+            if let Err(e) = self.writer.write(channel, message, log_ns) {
+                self.error = Some(e);
+            }
+        }
+    }
+
+    /// Writes a raw sample.
+    pub fn raw(&mut self, s: &RawImuSample) {
+        self.write(self.raw, s);
+    }
+
+    /// Writes a corrected sample.
+    pub fn corrected(&mut self, c: &CorrectedImuSample) {
+        self.write(self.corrected, c);
+    }
+
+    /// Writes an odometry state and its pose.
+    pub fn state(&mut self, s: &OdometryState) {
+        self.write(self.odometry, s);
+        self.write(self.pose, &PoseInFrame::from_state(s));
+    }
+
+    /// Writes a robot hint.
+    pub fn hint(&mut self, h: &RobotHint) {
+        self.write(self.hint, h);
+    }
+
+    /// Writes the summary and footer; returns the first error met, if any.
+    pub fn finish(self) -> Result<()> {
+        if let Some(e) = self.error {
+            return Err(e.into());
+        }
+        self.writer
+            .finish()
+            .with_context(|| format!("{}", self.path.display()))
+    }
+}
