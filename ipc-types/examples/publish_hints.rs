@@ -29,7 +29,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let publisher = service::hint_publisher(&hints)?;
     let start = Instant::now();
     let mut seq = 0u64;
-    while node.wait(PERIOD).is_ok() {
+    while !ipc_types::stop::sleep(PERIOD) {
         if duration_s > 0.0 && start.elapsed().as_secs_f64() >= duration_s {
             break;
         }

@@ -55,6 +55,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         Ok(ControlFlow::Continue(any))
     };
-    wake::serve_loop(&node, &[listener], Duration::from_millis(100), step)?;
+    wake::serve_loop(&[listener], Duration::from_millis(100), step)?;
     Ok(())
 }

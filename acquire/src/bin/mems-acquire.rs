@@ -247,10 +247,9 @@ fn run<I2C: I2c, C: Clock>(
     ALLOCATOR.arm();
     loop {
         // An absolute-deadline sleep (a relative one would add any preemption between reading
-        // the clock and sleeping); then node.wait(0) returns an error once SIGINT/SIGTERM has
-        // arrived: the clean way out.
+        // the clock and sleeping); then SIGINT/SIGTERM ends the loop: the clean way out.
         acq.clock().sleep_until(acq.next_read_ns());
-        if node.wait(Duration::ZERO).is_err() {
+        if ipc_types::stop::requested() {
             break;
         }
         if let Err(e) = acq.read_and_publish(&mut publish)? {

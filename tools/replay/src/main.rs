@@ -77,6 +77,8 @@ fn main() -> Result<()> {
         wait_timeout: Duration::from_secs_f64(cli.wait_timeout),
     };
     let namespace = service::namespace(cli.namespace.as_deref());
+    // Before any port exists: a SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node_name = NodeName::new("mems-replay").context("node name")?;
     let node = NodeBuilder::new()
         .name(&node_name)

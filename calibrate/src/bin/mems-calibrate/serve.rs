@@ -193,7 +193,7 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
         }
         Ok(ControlFlow::Continue(received))
     };
-    wake::serve_loop(&node, &[listener], TICK, step)?;
+    wake::serve_loop(&[listener], TICK, step)?;
     stage.finish();
     let s = stage.stats();
     let (learn_restarts, _) = stage.detector().learn_rejections();

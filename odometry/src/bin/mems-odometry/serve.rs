@@ -179,7 +179,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
         }
         Ok(ControlFlow::Continue(any))
     };
-    wake::serve_loop(&node, &[listener], TICK, step)?;
+    wake::serve_loop(&[listener], TICK, step)?;
     // A replay of the hindsight still under way is completed (as offline at the end of a
     // recording).
     stage.finish(&mut |state| send(&mut out, state));
