@@ -61,10 +61,17 @@ pub struct ReplaySummary {
     pub elapsed: Duration,
     /// Whether SIGINT or SIGTERM stopped the replay before the last sample.
     pub interrupted: bool,
-    /// Samples that reached fewer subscribers than [`ReplayOptions::wait_subscribers`]: lost
-    /// for a subscriber that had not connected yet (iceoryx2 queues up to one buffer for it,
-    /// then drops) or that left. 0 in a lossless replay.
+    /// Samples that reached fewer subscribers than [`ReplayOptions::wait_subscribers`] while
+    /// that many were registered: lost for a subscriber that had not connected yet (iceoryx2
+    /// queues up to one buffer for it, then drops). 0 in a lossless replay; an error for
+    /// `mems-replay`.
     pub short_deliveries: u64,
+    /// Samples sent while fewer than [`ReplayOptions::wait_subscribers`] subscribers were
+    /// registered, because one left: it ended, or it died and an iceoryx2 process removed its
+    /// dead node (any node creation does). A departure, not a replay fault: counted and
+    /// reported, and the remaining subscribers get every sample. A dead subscriber counts as
+    /// registered until its node is removed, and what is sent to it until then as delivered.
+    pub after_subscriber_left: u64,
 }
 
 impl ReplaySummary {
@@ -133,7 +140,8 @@ pub const SETTLE: Duration = Duration::from_millis(100);
 /// service under `namespace`, from `node`, and `hints` (in order of publication,
 /// `stamps.acquired_ns`) on the hint service among them (see the module documentation), paced
 /// as `options` say; with `wait_subscribers` > 0 it starts
-/// [`SETTLE`] after they are registered and counts samples that reached fewer of them. SIGINT or SIGTERM ([`ipc_types::stop`], installed here)
+/// [`SETTLE`] after they are registered and counts samples that reached fewer of them, apart
+/// from those sent after one of them left ([`ReplaySummary`]). SIGINT or SIGTERM ([`ipc_types::stop`], installed here)
 /// stops the replay early with [`ReplaySummary::interrupted`] set. Returns
 /// [`LINGER`] after the last sample, so that every subscriber has connected to it.
 pub fn replay(
@@ -173,6 +181,7 @@ pub fn replay(
         elapsed: Duration::ZERO,
         interrupted: false,
         short_deliveries: 0,
+        after_subscriber_left: 0,
     };
 
     let wait_start = Instant::now();
@@ -247,7 +256,11 @@ pub fn replay(
             message: e.to_string(),
         })?;
         if recipients < options.wait_subscribers {
-            summary.short_deliveries += 1;
+            if raw.dynamic_config().number_of_subscribers() < options.wait_subscribers {
+                summary.after_subscriber_left += 1;
+            } else {
+                summary.short_deliveries += 1;
+            }
         }
         summary.sent += 1;
         summary.elapsed = start.elapsed();
