@@ -22,6 +22,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let duration_s: f64 = args.next().map_or(Ok(10.0), |s| s.parse())?;
     let speed_mps: f64 = args.next().map_or(Ok(0.0), |s| s.parse())?;
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node = service::node()?;
     let name = service::full_name(&service::namespace(None), service::HINT);
     let hints = service::open::<RobotHint>(&node, &name)?;

@@ -207,6 +207,8 @@ fn run<I2C: I2c, C: Clock>(
 ) -> Result<()> {
     let namespace = service::namespace(cli.namespace.as_deref());
     let name = service::full_name(&namespace, service::RAW);
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node = service::node()?;
     let raw = service::open::<RawImuSample>(&node, &name)?;
     // A subscriber whose buffer is full (stopped, hung) is waited for at most an eighth of the

@@ -309,6 +309,10 @@ fn main() -> Result<()> {
     ));
     specs.push(spec("acquire", "mems-acquire", acquire_args(&cli)));
 
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+
+    ipc_types::stop::install()?;
+
     let node = service::node()?;
     let raw = service::open::<RawImuSample>(&node, &service::full_name(&namespace, service::RAW))?;
     let corrected = service::open::<CorrectedImuSample>(

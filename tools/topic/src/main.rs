@@ -63,6 +63,8 @@ fn main() -> Result<()> {
 fn run<T: Message>(args: &Args, echo: bool) -> Result<()> {
     let ns = service::namespace(args.namespace.as_deref());
     let name = service::full_name(&ns, &args.service);
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node = service::node()?;
     let svc = service::open::<T>(&node, &name)?;
     let subscriber = service::subscriber(&svc)?;

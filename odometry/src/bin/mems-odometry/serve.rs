@@ -77,6 +77,8 @@ pub fn run(args: ServeArgs) -> Result<()> {
     let config = args.profile.odometry(crate::odometry_config(&file));
     let hint_config = args.hints.config()?;
     let namespace = service::namespace(args.namespace.as_deref());
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node = service::node()?;
     let corrected = service::open::<CorrectedImuSample>(
         &node,
