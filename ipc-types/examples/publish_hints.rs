@@ -22,6 +22,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let duration_s: f64 = args.next().map_or(Ok(10.0), |s| s.parse())?;
     let speed_mps: f64 = args.next().map_or(Ok(0.0), |s| s.parse())?;
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node = service::node()?;
     let name = service::full_name(&service::namespace(None), service::HINT);
     let hints = service::open::<RobotHint>(&node, &name)?;
@@ -29,7 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let publisher = service::hint_publisher(&hints)?;
     let start = Instant::now();
     let mut seq = 0u64;
-    while node.wait(PERIOD).is_ok() {
+    while !ipc_types::stop::sleep(PERIOD) {
         if duration_s > 0.0 && start.elapsed().as_secs_f64() >= duration_s {
             break;
         }

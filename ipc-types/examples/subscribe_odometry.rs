@@ -14,6 +14,8 @@ use std::time::Duration;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let count: Option<u64> = std::env::args().nth(1).map(|s| s.parse()).transpose()?;
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node = service::node()?;
     let name = service::full_name(&service::namespace(None), service::ODOMETRY);
     let odometry = service::open::<OdometryState>(&node, &name)?;
@@ -55,6 +57,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         Ok(ControlFlow::Continue(any))
     };
-    wake::serve_loop(&node, &[listener], Duration::from_millis(100), step)?;
+    wake::serve_loop(&[listener], Duration::from_millis(100), step)?;
     Ok(())
 }

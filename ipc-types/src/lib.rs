@@ -17,6 +17,7 @@
 pub mod clock;
 pub mod limits;
 pub mod service;
+pub mod stop;
 pub mod units;
 pub mod wake;
 mod wire;

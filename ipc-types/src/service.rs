@@ -75,7 +75,8 @@ pub fn namespace(cli: Option<&str>) -> String {
 
 /// Creates the iceoryx2 node of a process. iceoryx2's own log is limited to errors unless the
 /// `IOX2_LOG_LEVEL` environment variable says otherwise (its warning that no config file was
-/// loaded is expected: every setting that matters is made explicitly in this module).
+/// loaded is expected: every setting that matters is made explicitly in this module). A
+/// process installs [`crate::stop`] itself (a test harness keeps its own Ctrl-C).
 pub fn node() -> Result<Node<ipc::Service>, ServiceError> {
     set_log_level_from_env_or(LogLevel::Error);
     NodeBuilder::new()

@@ -20,7 +20,6 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
-use iceoryx2_bb_posix::signal::SignalHandler;
 use iceoryx2_cal::reactor::{Reactor, ReactorBuilder, ReactorWaitError};
 
 use crate::service::{MAX_NODES, MAX_SUBSCRIBERS, ServiceError};
@@ -190,13 +189,10 @@ pub fn listener(
         .map_err(|e| ServiceError(format!("cannot create listener on {name:?}: {e:?}")))
 }
 
-/// Empty polls between two checks for SIGINT/SIGTERM in [`WaitMode::Spin`].
-const SPIN_SIGNAL_CHECK: u32 = 4096;
-
 /// Why [`serve_loop`] returned.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Exit {
-    /// SIGINT or SIGTERM arrived.
+    /// SIGINT or SIGTERM arrived ([`crate::stop`]).
     Signal,
     /// The step broke the loop.
     Done,
@@ -206,19 +202,21 @@ pub enum Exit {
 type IpcReactor = <ipc::Service as iceoryx2::service::Service>::Reactor;
 
 /// Calls `step` whenever input may have arrived on one of `listeners` (at once at the start,
-/// then after every notification), and at least every `tick`, until SIGINT/SIGTERM or `step`
-/// breaks. `step` drains its subscribers and returns whether it found anything
-/// (`Continue(true)`): without listeners ([`WaitMode::Spin`]) it is called in a loop that never
-/// sleeps. Allocates nothing per wake-up once running.
+/// then after every notification), and at least every `tick`, until SIGINT/SIGTERM (the flag of
+/// [`crate::stop`], installed here if it was not) or `step` breaks. `step` drains its
+/// subscribers and returns whether it found anything (`Continue(true)`): without listeners
+/// ([`WaitMode::Spin`]) it is called in a loop that never sleeps. Any other signal that
+/// interrupts the wait (a SIGCONT after a SIGSTOP) only wakes it. Allocates nothing per wake-up
+/// once running.
 pub fn serve_loop<E: From<ServiceError>>(
-    node: &Node<ipc::Service>,
     listeners: &[Option<Listener<ipc::Service>>],
     tick: Duration,
     mut step: impl FnMut() -> Result<ControlFlow<(), bool>, E>,
 ) -> Result<Exit, E> {
+    crate::stop::install()?;
     let listeners: Vec<&Listener<ipc::Service>> = listeners.iter().flatten().collect();
     if listeners.is_empty() {
-        return spin(node, tick, step);
+        return spin(step);
     }
     let err = |what: &str, e: &dyn core::fmt::Debug| ServiceError(format!("{what}: {e:?}"));
     // Through the reactor traits (the epoll type has inherent methods of the same names).
@@ -231,8 +229,8 @@ pub fn serve_loop<E: From<ServiceError>>(
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| err("cannot attach a listener to the reactor", &e))?;
     loop {
-        // iceoryx2's handler records SIGINT/SIGTERM; a signal during the wait interrupts it.
-        if SignalHandler::termination_requested() {
+        // A SIGINT/SIGTERM during the wait interrupts it (epoll_wait is never restarted).
+        if crate::stop::requested() {
             return Ok(Exit::Signal);
         }
         // Consume the notifications first: a sample sent after this is notified again.
@@ -252,25 +250,15 @@ pub fn serve_loop<E: From<ServiceError>>(
 
 /// [`serve_loop`] without listeners: polls `step` without sleeping.
 fn spin<E: From<ServiceError>>(
-    node: &Node<ipc::Service>,
-    tick: Duration,
     mut step: impl FnMut() -> Result<ControlFlow<(), bool>, E>,
 ) -> Result<Exit, E> {
-    let mut idle = 0u32;
-    let mut last_tick = std::time::Instant::now();
     loop {
-        match step()? {
-            ControlFlow::Break(()) => return Ok(Exit::Done),
-            ControlFlow::Continue(true) => idle = 0,
-            ControlFlow::Continue(false) => idle += 1,
+        // One atomic load: cheap enough to check on every poll.
+        if crate::stop::requested() {
+            return Ok(Exit::Signal);
         }
-        if idle >= SPIN_SIGNAL_CHECK || last_tick.elapsed() >= tick {
-            idle = 0;
-            last_tick = std::time::Instant::now();
-            // Returns an error once SIGINT/SIGTERM was received.
-            if node.wait(Duration::ZERO).is_err() {
-                return Ok(Exit::Signal);
-            }
+        if step()?.is_break() {
+            return Ok(Exit::Done);
         }
     }
 }

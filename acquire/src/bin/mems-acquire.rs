@@ -207,6 +207,8 @@ fn run<I2C: I2c, C: Clock>(
 ) -> Result<()> {
     let namespace = service::namespace(cli.namespace.as_deref());
     let name = service::full_name(&namespace, service::RAW);
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node = service::node()?;
     let raw = service::open::<RawImuSample>(&node, &name)?;
     // A subscriber whose buffer is full (stopped, hung) is waited for at most an eighth of the
@@ -247,10 +249,9 @@ fn run<I2C: I2c, C: Clock>(
     ALLOCATOR.arm();
     loop {
         // An absolute-deadline sleep (a relative one would add any preemption between reading
-        // the clock and sleeping); then node.wait(0) returns an error once SIGINT/SIGTERM has
-        // arrived: the clean way out.
+        // the clock and sleeping); then SIGINT/SIGTERM ends the loop: the clean way out.
         acq.clock().sleep_until(acq.next_read_ns());
-        if node.wait(Duration::ZERO).is_err() {
+        if ipc_types::stop::requested() {
             break;
         }
         if let Err(e) = acq.read_and_publish(&mut publish)? {

@@ -55,6 +55,7 @@ enum Direction {
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
+    ipc_types::stop::install()?;
     let session = zenoh::open(zenoh_config(&cli.listen, &cli.connect)?)
         .wait()
         .map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
@@ -161,7 +162,7 @@ fn out<T: Message + Send>(
             }
             Ok(ControlFlow::Continue(any))
         };
-        let served = wake::serve_loop(&node, &[listener], TICK, step);
+        let served = wake::serve_loop(&[listener], TICK, step);
         drop(tx);
         let sent = sender.join().map_err(|_| anyhow!("the sender panicked"))?;
         served.and(sent).map(|_| ())
@@ -185,8 +186,7 @@ fn into<T: Message + Send>(
     let mut output = wake::Output::new(&node, &service::open::<T>(&node, name)?, name)?;
     let mut latency_us = Histogram::<u64>::new(3)?;
     let mut last = None;
-    // Returns at SIGINT/SIGTERM (iceoryx2's handler, seen through the node).
-    while node.wait(Duration::ZERO).is_ok() {
+    while !ipc_types::stop::requested() {
         let Some(sample) = subscriber
             .recv_timeout(TICK)
             .map_err(|e| anyhow!("{key}: {e}"))?

@@ -27,6 +27,7 @@ struct Cli {
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
+    ipc_types::stop::install()?;
     let (host, port) = cli
         .listen
         .rsplit_once(':')
@@ -67,7 +68,7 @@ fn main() -> Result<()> {
         }
         Ok(ControlFlow::Continue(any))
     };
-    wake::serve_loop(&node, &listeners, Duration::from_millis(100), step)?;
+    wake::serve_loop(&listeners, Duration::from_millis(100), step)?;
     server.stop().wait_blocking();
     Ok(())
 }

@@ -5,8 +5,8 @@
 //! Times: each message's MCAP `log_time` is its receive time, its `publish_time` the message's
 //! own sample time (both ns `CLOCK_MONOTONIC`). The writer's chunk is flushed to the operating
 //! system whenever its oldest message is [`FLUSH_PERIOD`] old, so a killed recorder loses at
-//! most that much; SIGINT and SIGTERM (iceoryx2's signal handler, seen through `Node::wait`)
-//! end the recording cleanly with its summary and footer.
+//! most that much; SIGINT and SIGTERM ([`ipc_types::stop`]) end the recording cleanly with its
+//! summary and footer.
 //!
 //! An existing recording is never overwritten unless asked ([`Target::Overwrite`]). A recorder
 //! restarted by a supervisor continues the run ([`Target::Continue`]) in the next segment file
@@ -374,6 +374,8 @@ impl<T: Topic + Message> Stream for Subscription<T> {
 /// Records every service until `options.duration` has passed or SIGINT/SIGTERM arrives, then
 /// finishes the file (summary and footer).
 pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
+    // Before any port exists: a SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node_name = NodeName::new("mems-record").context("node name")?;
     let node = NodeBuilder::new()
         .name(&node_name)
@@ -531,7 +533,7 @@ fn record_loop(
         .collect::<Result<Vec<_>, _>>()?;
     // Removes the resources of kill -9'd nodes, so that their publishers stop counting.
     let _cleanup = service::DeadNodeCleanup::start(PUBLISHER_CHECK_PERIOD)?;
-    let exit = wake::serve_loop(node, &listeners, POLL_PERIOD, || -> Result<_> {
+    let exit = wake::serve_loop(&listeners, POLL_PERIOD, || -> Result<_> {
         if drain(writer, streams, summary)? {
             oldest_unflushed.get_or_insert_with(Instant::now);
         }

@@ -256,124 +256,117 @@ fn one_run(
             out.rest_ends.push(f.nees(s, t).0);
         }
     };
-    wake::serve_loop(
-        &node,
-        &[listener],
-        Duration::from_millis(20),
-        || -> Result<_> {
-            // The fault, once the states reach its sample time; its end after 0.2 s or 2 s.
-            if let Some(at) = injected
-                && !restored
+    wake::serve_loop(&[listener], Duration::from_millis(20), || -> Result<_> {
+        // The fault, once the states reach its sample time; its end after 0.2 s or 2 s.
+        if let Some(at) = injected
+            && !restored
+        {
+            let idx = |n: &str| stages.0.iter().position(|(s, _)| *s == n).expect("a stage");
+            match fault {
+                Fault::Kill(n) if at.elapsed() >= Duration::from_millis(200) => {
+                    let i = idx(n);
+                    stages.0[i].1 = spawn(n)?;
+                    restored = true;
+                }
+                Fault::Stop(n) if at.elapsed() >= Duration::from_secs(2) => {
+                    signal(&stages.0[idx(n)].1, libc::SIGCONT);
+                    restored = true;
+                }
+                Fault::StopSubscriber => {
+                    std::thread::sleep(Duration::from_secs(2));
+                    restored = true;
+                }
+                _ => {}
+            }
+        }
+        let mut any = false;
+        while let Some(s) = sub.receive()? {
+            any = true;
+            idle_since = Instant::now();
+            let s = *s;
+            if s.flags & odometry_flags::REVISION != 0 {
+                continue;
+            }
+            out.states += 1;
+            if s.flags & odometry_flags::GAP_BEFORE != 0 {
+                out.gaps_flagged += 1;
+            }
+            if let Some(p) = last
+                && s.seq > p.seq + 1
             {
-                let idx = |n: &str| stages.0.iter().position(|(s, _)| *s == n).expect("a stage");
+                out.missing += s.seq - p.seq - 1;
+            }
+            if injected.is_none() && s.stamps.sample_ns >= fault_ns {
+                injected = Some(Instant::now());
                 match fault {
-                    Fault::Kill(n) if at.elapsed() >= Duration::from_millis(200) => {
-                        let i = idx(n);
-                        stages.0[i].1 = spawn(n)?;
-                        restored = true;
+                    Fault::Kill(n) => {
+                        let i = stages
+                            .0
+                            .iter()
+                            .position(|(st, _)| *st == n)
+                            .expect("a stage");
+                        signal(&stages.0[i].1, libc::SIGKILL);
+                        stages.0[i].1.wait()?;
                     }
-                    Fault::Stop(n) if at.elapsed() >= Duration::from_secs(2) => {
-                        signal(&stages.0[idx(n)].1, libc::SIGCONT);
-                        restored = true;
-                    }
-                    Fault::StopSubscriber => {
-                        std::thread::sleep(Duration::from_secs(2));
-                        restored = true;
+                    Fault::Stop(n) => {
+                        let i = stages
+                            .0
+                            .iter()
+                            .position(|(st, _)| *st == n)
+                            .expect("a stage");
+                        signal(&stages.0[i].1, libc::SIGSTOP);
                     }
                     _ => {}
                 }
             }
-            let mut any = false;
-            while let Some(s) = sub.receive()? {
-                any = true;
-                idle_since = Instant::now();
-                let s = *s;
-                if s.flags & odometry_flags::REVISION != 0 {
-                    continue;
-                }
-                out.states += 1;
-                if s.flags & odometry_flags::GAP_BEFORE != 0 {
-                    out.gaps_flagged += 1;
-                }
-                if let Some(p) = last
-                    && s.seq > p.seq + 1
-                {
-                    out.missing += s.seq - p.seq - 1;
-                }
-                if injected.is_none() && s.stamps.sample_ns >= fault_ns {
-                    injected = Some(Instant::now());
-                    match fault {
-                        Fault::Kill(n) => {
-                            let i = stages
-                                .0
-                                .iter()
-                                .position(|(st, _)| *st == n)
-                                .expect("a stage");
-                            signal(&stages.0[i].1, libc::SIGKILL);
-                            stages.0[i].1.wait()?;
-                        }
-                        Fault::Stop(n) => {
-                            let i = stages
-                                .0
-                                .iter()
-                                .position(|(st, _)| *st == n)
-                                .expect("a stage");
-                            signal(&stages.0[i].1, libc::SIGSTOP);
-                        }
-                        _ => {}
-                    }
-                }
-                let aligned = s.flags & odometry_flags::ALIGNED != 0;
-                let was_aligned = last.is_some_and(|p| p.flags & odometry_flags::ALIGNED != 0);
-                if aligned && !was_aligned {
-                    frame = truth_at(truth, s.stamps.sample_ns).map(|t| Frame::new(&s, t));
-                }
-                if !aligned {
-                    frame = None;
-                }
-                let rest = s.flags & odometry_flags::ZERO_VELOCITY != 0;
-                if let (Some(f), Some(t)) = (&frame, truth_at(truth, s.stamps.sample_ns)) {
-                    let tp = f.to_ours * (Vector3::from(t.position_m) - f.origin);
-                    out.trace.push(format!(
-                        "{:.3},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}",
-                        s.stamps.sample_ns as f64 * 1e-9,
-                        s.flags,
-                        s.position_m[0],
-                        s.position_m[1],
-                        s.position_sigma_m[0],
-                        s.position_sigma_m[1],
-                        tp.x,
-                        tp.y
-                    ));
-                }
-                if let Some(p) = last
-                    && p.flags & odometry_flags::ZERO_VELOCITY != 0
-                    && !rest
-                    && aligned
-                {
-                    judge_rest_end(&p, &frame, &mut out);
-                }
-                last = Some(s);
+            let aligned = s.flags & odometry_flags::ALIGNED != 0;
+            let was_aligned = last.is_some_and(|p| p.flags & odometry_flags::ALIGNED != 0);
+            if aligned && !was_aligned {
+                frame = truth_at(truth, s.stamps.sample_ns).map(|t| Frame::new(&s, t));
             }
-            if !replay_done && replay.try_wait()?.is_some() {
-                replay_done = true;
+            if !aligned {
+                frame = None;
             }
-            // A stage that exits by itself (not the one just killed) is a finding, not a fault.
-            for (name, child) in stages.0.iter_mut() {
-                if restored && let Some(status) = child.try_wait()? {
-                    bail!("{}: {name} exited by itself ({status})", fault.label());
-                }
+            let rest = s.flags & odometry_flags::ZERO_VELOCITY != 0;
+            if let (Some(f), Some(t)) = (&frame, truth_at(truth, s.stamps.sample_ns)) {
+                let tp = f.to_ours * (Vector3::from(t.position_m) - f.origin);
+                out.trace.push(format!(
+                    "{:.3},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}",
+                    s.stamps.sample_ns as f64 * 1e-9,
+                    s.flags,
+                    s.position_m[0],
+                    s.position_m[1],
+                    s.position_sigma_m[0],
+                    s.position_sigma_m[1],
+                    tp.x,
+                    tp.y
+                ));
             }
-            let done = replay_done && idle_since.elapsed() > Duration::from_millis(1500);
-            Ok(if done {
-                ControlFlow::Break(())
-            } else {
-                ControlFlow::Continue(any)
-            })
-        },
-    )?;
-    // SIGTERM alone: a SIGCONT pending with it is delivered after it (ascending signal
-    // numbers) and replaces it as iceoryx2's last signal, so the stage would not stop.
+            if let Some(p) = last
+                && p.flags & odometry_flags::ZERO_VELOCITY != 0
+                && !rest
+                && aligned
+            {
+                judge_rest_end(&p, &frame, &mut out);
+            }
+            last = Some(s);
+        }
+        if !replay_done && replay.try_wait()?.is_some() {
+            replay_done = true;
+        }
+        // A stage that exits by itself (not the one just killed) is a finding, not a fault.
+        for (name, child) in stages.0.iter_mut() {
+            if restored && let Some(status) = child.try_wait()? {
+                bail!("{}: {name} exited by itself ({status})", fault.label());
+            }
+        }
+        let done = replay_done && idle_since.elapsed() > Duration::from_millis(1500);
+        Ok(if done {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(any)
+        })
+    })?;
     for (_, stage) in &mut stages.0 {
         signal(stage, libc::SIGTERM);
         stage.wait()?;

@@ -124,31 +124,26 @@ fn chain_child(input: &str, output: &str, n: u64, cpu: Option<usize>) -> Result<
     let mut h = histogram();
     let mut got = 0u64;
     let start = Instant::now();
-    wake::serve_loop(
-        &node,
-        &[listener],
-        Duration::from_millis(100),
-        || -> Result<_> {
-            let mut any = false;
-            while let Some(s) = sub.receive()? {
-                any = true;
-                got += 1;
-                match out.as_mut() {
-                    Some(o) => {
-                        o.send(*s.payload());
-                        o.end_of_input()?;
-                    }
-                    None => h.record(monotonic_ns().saturating_sub(s.stamps.acquired_ns).max(1))?,
+    wake::serve_loop(&[listener], Duration::from_millis(100), || -> Result<_> {
+        let mut any = false;
+        while let Some(s) = sub.receive()? {
+            any = true;
+            got += 1;
+            match out.as_mut() {
+                Some(o) => {
+                    o.send(*s.payload());
+                    o.end_of_input()?;
                 }
+                None => h.record(monotonic_ns().saturating_sub(s.stamps.acquired_ns).max(1))?,
             }
-            let done = got >= n || start.elapsed() > Duration::from_secs(300);
-            Ok(if done {
-                ControlFlow::Break(())
-            } else {
-                ControlFlow::Continue(any)
-            })
-        },
-    )?;
+        }
+        let done = got >= n || start.elapsed() > Duration::from_secs(300);
+        Ok(if done {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(any)
+        })
+    })?;
     if out.is_none() {
         println!(
             "{} {} {} {} {}",
@@ -376,65 +371,59 @@ fn pipeline(
     let mut cpu1: Option<(Vec<f64>, f64)> = None;
     // The replay's CPU time, read while it runs (its /proc entry goes when it is reaped).
     let mut replay_cpu = (cpu0[2], Instant::now());
-    wake::serve_loop(
-        &node,
-        &[listener],
-        Duration::from_millis(20),
-        || -> Result<_> {
-            let mut any = false;
-            while let Some(s) = sub.receive()? {
-                any = true;
-                let now = monotonic_ns();
-                idle_since = Instant::now();
-                if s.flags & odometry_flags::REVISION != 0 {
-                    continue;
-                }
-                first.get_or_insert(now);
-                last = now;
-                states += 1;
-                let aligned = s.flags & odometry_flags::ALIGNED != 0;
-                if !aligned && !max {
-                    untimed += 1;
-                    continue;
-                }
-                if s.flags & odometry_flags::ZERO_VELOCITY != 0 {
-                    rest += 1;
-                } else {
-                    moving += 1;
-                }
-                let st = s.stamps;
-                for (h, ns) in hops.iter_mut().zip([
-                    st.calibrated_ns.saturating_sub(st.acquired_ns),
-                    st.odometry_ns.saturating_sub(st.calibrated_ns),
-                    now.saturating_sub(st.odometry_ns),
-                    now.saturating_sub(st.acquired_ns),
-                ]) {
-                    h.record(ns.max(1))?;
-                }
+    wake::serve_loop(&[listener], Duration::from_millis(20), || -> Result<_> {
+        let mut any = false;
+        while let Some(s) = sub.receive()? {
+            any = true;
+            let now = monotonic_ns();
+            idle_since = Instant::now();
+            if s.flags & odometry_flags::REVISION != 0 {
+                continue;
             }
-            if !replay_out.is_finished()
-                && replay_cpu.1.elapsed() > Duration::from_millis(100)
-                && let Ok(c) = cpu_s(replay_pid)
-            {
-                replay_cpu = (c, Instant::now());
+            first.get_or_insert(now);
+            last = now;
+            states += 1;
+            let aligned = s.flags & odometry_flags::ALIGNED != 0;
+            if !aligned && !max {
+                untimed += 1;
+                continue;
             }
-            if replay_out.is_finished() && cpu1.is_none() {
-                let mut now: Vec<f64> = stages
-                    .iter()
-                    .map(|(_, c)| cpu_s(c.id()))
-                    .collect::<Result<_>>()?;
-                now.push(replay_cpu.0);
-                cpu1 = Some((now, t0.elapsed().as_secs_f64()));
-            }
-            let done =
-                replay_out.is_finished() && idle_since.elapsed() > Duration::from_millis(1500);
-            Ok(if done {
-                ControlFlow::Break(())
+            if s.flags & odometry_flags::ZERO_VELOCITY != 0 {
+                rest += 1;
             } else {
-                ControlFlow::Continue(any)
-            })
-        },
-    )?;
+                moving += 1;
+            }
+            let st = s.stamps;
+            for (h, ns) in hops.iter_mut().zip([
+                st.calibrated_ns.saturating_sub(st.acquired_ns),
+                st.odometry_ns.saturating_sub(st.calibrated_ns),
+                now.saturating_sub(st.odometry_ns),
+                now.saturating_sub(st.acquired_ns),
+            ]) {
+                h.record(ns.max(1))?;
+            }
+        }
+        if !replay_out.is_finished()
+            && replay_cpu.1.elapsed() > Duration::from_millis(100)
+            && let Ok(c) = cpu_s(replay_pid)
+        {
+            replay_cpu = (c, Instant::now());
+        }
+        if replay_out.is_finished() && cpu1.is_none() {
+            let mut now: Vec<f64> = stages
+                .iter()
+                .map(|(_, c)| cpu_s(c.id()))
+                .collect::<Result<_>>()?;
+            now.push(replay_cpu.0);
+            cpu1 = Some((now, t0.elapsed().as_secs_f64()));
+        }
+        let done = replay_out.is_finished() && idle_since.elapsed() > Duration::from_millis(1500);
+        Ok(if done {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(any)
+        })
+    })?;
     let out = replay_out.join().expect("replay waiter")?;
     let (cpu1, span) = cpu1.context("the replay did not finish")?;
     for (_, stage) in &mut stages {

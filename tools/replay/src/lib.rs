@@ -24,6 +24,7 @@ use std::time::{Duration, Instant};
 use iceoryx2::prelude::*;
 use ipc_types::clock::monotonic_ns;
 use ipc_types::service::{self, ServiceError};
+use ipc_types::stop;
 use ipc_types::{RawImuSample, RobotHint};
 
 /// How fast to publish.
@@ -60,10 +61,17 @@ pub struct ReplaySummary {
     pub elapsed: Duration,
     /// Whether SIGINT or SIGTERM stopped the replay before the last sample.
     pub interrupted: bool,
-    /// Samples that reached fewer subscribers than [`ReplayOptions::wait_subscribers`]: lost
-    /// for a subscriber that had not connected yet (iceoryx2 queues up to one buffer for it,
-    /// then drops) or that left. 0 in a lossless replay.
+    /// Samples that reached fewer subscribers than [`ReplayOptions::wait_subscribers`] while
+    /// that many were registered: lost for a subscriber that had not connected yet (iceoryx2
+    /// queues up to one buffer for it, then drops). 0 in a lossless replay; an error for
+    /// `mems-replay`.
     pub short_deliveries: u64,
+    /// Samples sent while fewer than [`ReplayOptions::wait_subscribers`] subscribers were
+    /// registered, because one left: it ended, or it died and an iceoryx2 process removed its
+    /// dead node (any node creation does). A departure, not a replay fault: counted and
+    /// reported, and the remaining subscribers get every sample. A dead subscriber counts as
+    /// registered until its node is removed, and what is sent to it until then as delivered.
+    pub after_subscriber_left: u64,
 }
 
 impl ReplaySummary {
@@ -128,15 +136,13 @@ pub const LINGER: Duration = Duration::from_millis(200);
 /// recorder, polling every 1 ms, had connected, and 777 samples were lost).
 pub const SETTLE: Duration = Duration::from_millis(100);
 
-/// Samples between signal checks when no pacing sleep checks for us.
-const SIGNAL_CHECK_EVERY: usize = 256;
-
 /// Publishes `samples` (in order, `stamps.sample_ns` increasing within each session) on the raw
 /// service under `namespace`, from `node`, and `hints` (in order of publication,
 /// `stamps.acquired_ns`) on the hint service among them (see the module documentation), paced
 /// as `options` say; with `wait_subscribers` > 0 it starts
-/// [`SETTLE`] after they are registered and counts samples that reached fewer of them. SIGINT or SIGTERM (seen through
-/// `Node::wait`) stops the replay early with [`ReplaySummary::interrupted`] set. Returns
+/// [`SETTLE`] after they are registered and counts samples that reached fewer of them, apart
+/// from those sent after one of them left ([`ReplaySummary`]). SIGINT or SIGTERM ([`ipc_types::stop`], installed here)
+/// stops the replay early with [`ReplaySummary::interrupted`] set. Returns
 /// [`LINGER`] after the last sample, so that every subscriber has connected to it.
 pub fn replay(
     node: &Node<ipc::Service>,
@@ -150,6 +156,7 @@ pub fn replay(
     {
         return Err(ReplayError::BadSpeed(speed));
     }
+    stop::install()?;
     let name = service::full_name(namespace, service::RAW);
     let raw = service::open::<RawImuSample>(node, &name)?;
     let publisher = service::publisher(&raw)?;
@@ -174,6 +181,7 @@ pub fn replay(
         elapsed: Duration::ZERO,
         interrupted: false,
         short_deliveries: 0,
+        after_subscriber_left: 0,
     };
 
     let wait_start = Instant::now();
@@ -190,11 +198,11 @@ pub fn replay(
                 waited: wait_start.elapsed(),
             });
         }
-        if node.wait(Duration::from_millis(1)).is_err() {
+        if stop::sleep(Duration::from_millis(1)) {
             return Ok(interrupted(summary));
         }
     }
-    if options.wait_subscribers > 0 && node.wait(SETTLE).is_err() {
+    if options.wait_subscribers > 0 && stop::sleep(SETTLE) {
         return Ok(interrupted(summary));
     }
 
@@ -206,28 +214,18 @@ pub fn replay(
     let mut previous_ns = anchor_ns;
     let start = anchor;
     let mut next_hint = 0;
-    for (i, recorded) in samples.iter().enumerate() {
+    for recorded in samples {
         let t_ns = recorded.stamps.sample_ns;
         if t_ns < previous_ns {
             (anchor_ns, anchor) = (t_ns, Instant::now());
         }
         previous_ns = t_ns;
-        let mut checked_signal = false;
         if let Pace::RealTime { speed } = options.pace {
             let offset_ns = t_ns.saturating_sub(anchor_ns) as f64 / speed;
             let due = anchor + Duration::from_nanos(offset_ns.round() as u64);
-            let now = Instant::now();
-            if due > now {
-                if node.wait(due - now).is_err() {
-                    return Ok(interrupted(summary));
-                }
-                checked_signal = true;
-            }
+            stop::sleep(due.saturating_duration_since(Instant::now()));
         }
-        if !checked_signal
-            && i % SIGNAL_CHECK_EVERY == SIGNAL_CHECK_EVERY - 1
-            && node.wait(Duration::ZERO).is_err()
-        {
+        if stop::requested() {
             return Ok(interrupted(summary));
         }
         if let Some((hint_name, _, hint_publisher)) = &hint_port {
@@ -258,12 +256,16 @@ pub fn replay(
             message: e.to_string(),
         })?;
         if recipients < options.wait_subscribers {
-            summary.short_deliveries += 1;
+            if raw.dynamic_config().number_of_subscribers() < options.wait_subscribers {
+                summary.after_subscriber_left += 1;
+            } else {
+                summary.short_deliveries += 1;
+            }
         }
         summary.sent += 1;
         summary.elapsed = start.elapsed();
     }
-    if node.wait(LINGER).is_err() {
+    if stop::sleep(LINGER) {
         return Ok(interrupted(summary));
     }
     Ok(summary)

@@ -25,7 +25,13 @@ struct Cli {
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
-    /// Wait until this many subscribers are connected before the first sample.
+    /// Wait until this many subscribers are connected before the first sample, then check
+    /// that every sample reaches that many. A sample that reaches fewer while that many are
+    /// registered was lost for a subscriber that had not connected: counted, and the exit
+    /// status is 1. A subscriber that leaves during the replay (ends, or dies and its node is
+    /// removed by any iceoryx2 process) is not a replay failure: the samples sent after it left
+    /// are counted and reported, the others still get every sample, and the exit status is 0
+    /// (the subscriber's own exit tells why it left).
     #[arg(long, default_value_t = 0)]
     wait_subscribers: usize,
     /// Give up waiting for subscribers after this many seconds.
@@ -77,6 +83,8 @@ fn main() -> Result<()> {
         wait_timeout: Duration::from_secs_f64(cli.wait_timeout),
     };
     let namespace = service::namespace(cli.namespace.as_deref());
+    // Before any port exists: a SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node_name = NodeName::new("mems-replay").context("node name")?;
     let node = NodeBuilder::new()
         .name(&node_name)
@@ -97,10 +105,16 @@ fn main() -> Result<()> {
             ""
         }
     );
+    if summary.after_subscriber_left > 0 {
+        println!(
+            "mems-replay: {} samples were sent after a subscriber left (fewer than {} registered)",
+            summary.after_subscriber_left, options.wait_subscribers
+        );
+    }
     if summary.short_deliveries > 0 {
         bail!(
-            "{} samples reached fewer than {} subscribers: lost for a subscriber that had not \
-             connected yet or that left",
+            "{} samples reached fewer than {} subscribers while that many were registered: lost \
+             for a subscriber that had not connected yet",
             summary.short_deliveries,
             options.wait_subscribers
         );

@@ -299,6 +299,85 @@ fn samples_dropped_for_an_unconnected_subscriber_are_counted() {
     assert_eq!(summary.short_deliveries, (n - got.len()) as u64);
 }
 
+/// A subscriber that leaves during a replay is a departure, not a loss: the samples sent after
+/// it left are counted apart, none is counted as short, and the subscriber that stays gets
+/// every sample. The one that stays holds the replay (lossless back-pressure on a full buffer)
+/// until the other has left, so at least `n - SUBSCRIBER_BUFFER - 1` samples follow the
+/// departure.
+#[test]
+fn a_subscriber_that_leaves_is_counted_apart_and_the_others_get_everything() {
+    let ns = namespace("leaves");
+    let n = service::SUBSCRIBER_BUFFER + 1000;
+    let sent = samples(n as u64, 4000);
+    let name = service::full_name(&ns, service::RAW);
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let (left_tx, left_rx) = mpsc::channel::<()>();
+    let leaving = {
+        let (name, ready_tx) = (name.clone(), ready_tx.clone());
+        thread::spawn(move || {
+            let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+            let svc = service::open::<RawImuSample>(&node, &name).unwrap();
+            let sub = service::subscriber(&svc).unwrap();
+            ready_tx.send(()).unwrap();
+            let mut got = 0;
+            while got < 100 {
+                while got < 100 && sub.receive().unwrap().is_some() {
+                    got += 1;
+                }
+                thread::sleep(Duration::from_micros(100));
+            }
+            // Leaves: the port is deregistered when dropped.
+            drop(sub);
+            drop(svc);
+            drop(node);
+            left_tx.send(()).unwrap();
+        })
+    };
+    let staying = thread::spawn(move || {
+        let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+        let svc = service::open::<RawImuSample>(&node, &name).unwrap();
+        let sub = service::subscriber(&svc).unwrap();
+        ready_tx.send(()).unwrap();
+        // Connected by its first receive of a sample (an unconnected subscriber is not waited
+        // for: see the test above), then silent until the other has left.
+        let mut got = Vec::new();
+        while got.is_empty() {
+            if let Some(s) = sub.receive().unwrap() {
+                got.push(s.seq);
+            }
+            thread::sleep(Duration::from_micros(100));
+        }
+        left_rx.recv().unwrap();
+        let start = Instant::now();
+        while got.len() < n && start.elapsed() < Duration::from_secs(60) {
+            while let Some(s) = sub.receive().unwrap() {
+                got.push(s.seq);
+            }
+            thread::sleep(Duration::from_micros(100));
+        }
+        got
+    });
+    ready_rx.recv().unwrap();
+    ready_rx.recv().unwrap();
+    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+    let options = ReplayOptions {
+        pace: Pace::Max,
+        wait_subscribers: 2,
+        wait_timeout: Duration::from_secs(60),
+    };
+    let summary = replay(&node, &ns, &sent, &[], &options).unwrap();
+    leaving.join().unwrap();
+    let got = staying.join().unwrap();
+    assert_eq!(got, (100..100 + n as u64).collect::<Vec<_>>());
+    assert_eq!(summary.sent, n as u64);
+    assert_eq!(summary.short_deliveries, 0);
+    assert!(
+        summary.after_subscriber_left >= (n - service::SUBSCRIBER_BUFFER - 1) as u64
+            && summary.after_subscriber_left <= (n - 100) as u64,
+        "{summary:?}"
+    );
+}
+
 #[test]
 fn too_few_subscribers_is_an_error_naming_the_service() {
     let ns = namespace("nosub");

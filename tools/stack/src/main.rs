@@ -326,6 +326,10 @@ fn main() -> Result<()> {
     ));
     specs.push(spec("acquire", "mems-acquire", acquire_args(&cli)));
 
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+
+    ipc_types::stop::install()?;
+
     let node = service::node()?;
     let raw = service::open::<RawImuSample>(&node, &service::full_name(&namespace, service::RAW))?;
     let corrected = service::open::<CorrectedImuSample>(
@@ -355,8 +359,8 @@ fn main() -> Result<()> {
     let deadline = cli.duration.map(Duration::from_secs_f64);
     let mut gave_up: Option<String> = None;
 
-    // node.wait returns an error on SIGINT/SIGTERM: the clean way out.
-    while node.wait(Duration::from_millis(20)).is_ok() {
+    // SIGINT/SIGTERM ends the loop: the clean way out.
+    while !ipc_types::stop::sleep(Duration::from_millis(20)) {
         while let Some(s) = raw_sub.receive()? {
             observe(&mut raw_stats, s.payload());
             source.observe(s.payload());

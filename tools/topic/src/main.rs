@@ -63,6 +63,8 @@ fn main() -> Result<()> {
 fn run<T: Message>(args: &Args, echo: bool) -> Result<()> {
     let ns = service::namespace(args.namespace.as_deref());
     let name = service::full_name(&ns, &args.service);
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node = service::node()?;
     let svc = service::open::<T>(&node, &name)?;
     let subscriber = service::subscriber(&svc)?;
@@ -74,54 +76,49 @@ fn run<T: Message>(args: &Args, echo: bool) -> Result<()> {
     // Sleeps until the publisher's event (or a 100 ms tick for the report and the deadline);
     // returns on SIGINT/SIGTERM: print the summary and exit cleanly.
     let listener = wake::listener(&node, &name, WaitMode::Event)?;
-    wake::serve_loop(
-        &node,
-        &[listener],
-        Duration::from_millis(100),
-        || -> Result<_> {
-            let mut any = false;
-            while let Some(sample) = subscriber
-                .receive()
-                .map_err(|e| anyhow::anyhow!("receive on {name}: {e:?}"))?
-            {
-                any = true;
-                let msg: &T = sample.payload();
-                let now = monotonic_ns();
-                stats.observe(
-                    msg.seq(),
-                    msg.stamps().sample_ns,
-                    msg.published_ns(),
-                    now,
-                    msg.is_revision(),
-                );
-                if echo {
-                    if args.json {
-                        println!("{}", serde_json::to_string(msg)?);
-                    } else {
-                        println!("{msg:?}");
-                    }
+    wake::serve_loop(&[listener], Duration::from_millis(100), || -> Result<_> {
+        let mut any = false;
+        while let Some(sample) = subscriber
+            .receive()
+            .map_err(|e| anyhow::anyhow!("receive on {name}: {e:?}"))?
+        {
+            any = true;
+            let msg: &T = sample.payload();
+            let now = monotonic_ns();
+            stats.observe(
+                msg.seq(),
+                msg.stamps().sample_ns,
+                msg.published_ns(),
+                now,
+                msg.is_revision(),
+            );
+            if echo {
+                if args.json {
+                    println!("{}", serde_json::to_string(msg)?);
+                } else {
+                    println!("{msg:?}");
                 }
             }
-            if !echo && !args.json && last_print.elapsed() >= Duration::from_secs(1) {
-                let r = stats.report();
-                println!(
-                    "{name}: {:.1} Hz, received {}, lost {}, duplicated {}, latency p50 {:.0} us p99 {:.0} us max {:.0} us",
-                    r.rate_hz,
-                    r.received,
-                    r.lost,
-                    r.duplicated,
-                    r.latency_us.p50,
-                    r.latency_us.p99,
-                    r.latency_us.max
-                );
-                last_print = Instant::now();
-            }
-            if deadline.is_some_and(|d| start.elapsed() >= d) {
-                return Ok(ControlFlow::Break(()));
-            }
-            Ok(ControlFlow::Continue(any))
-        },
-    )?;
+        }
+        if !echo && !args.json && last_print.elapsed() >= Duration::from_secs(1) {
+            let r = stats.report();
+            println!(
+                "{name}: {:.1} Hz, received {}, lost {}, duplicated {}, latency p50 {:.0} us p99 {:.0} us max {:.0} us",
+                r.rate_hz,
+                r.received,
+                r.lost,
+                r.duplicated,
+                r.latency_us.p50,
+                r.latency_us.p99,
+                r.latency_us.max
+            );
+            last_print = Instant::now();
+        }
+        if deadline.is_some_and(|d| start.elapsed() >= d) {
+            return Ok(ControlFlow::Break(()));
+        }
+        Ok(ControlFlow::Continue(any))
+    })?;
     if !echo {
         let r = stats.report();
         if args.json {

@@ -130,6 +130,8 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
     let ns = service::namespace(args.namespace.as_deref());
     let raw_name = service::full_name(&ns, service::RAW);
     let corrected_name = service::full_name(&ns, service::CORRECTED);
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node = service::node()?;
     let raw = service::open::<RawImuSample>(&node, &raw_name)?;
     let subscriber = service::subscriber(&raw)?;
@@ -193,7 +195,7 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
         }
         Ok(ControlFlow::Continue(received))
     };
-    wake::serve_loop(&node, &[listener], TICK, step)?;
+    wake::serve_loop(&[listener], TICK, step)?;
     stage.finish();
     let s = stage.stats();
     let (learn_restarts, _) = stage.detector().learn_rejections();

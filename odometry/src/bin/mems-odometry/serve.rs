@@ -39,7 +39,10 @@ use calibrate::calibfile::CalibrationFile;
 use ipc_types::clock::monotonic_ns;
 use ipc_types::limits::MAX_STEP_NS;
 use ipc_types::wake::{self, Output, WaitMode};
-use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, odometry_flags, raw_flags, service};
+use ipc_types::{
+    CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags, raw_flags,
+    service,
+};
 use odometry::hints::usable_from_ns;
 use odometry::stage::OdometryStage;
 
@@ -74,6 +77,8 @@ pub fn run(args: ServeArgs) -> Result<()> {
     let config = args.profile.odometry(crate::odometry_config(&file));
     let hint_config = args.hints.config()?;
     let namespace = service::namespace(args.namespace.as_deref());
+    // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+    ipc_types::stop::install()?;
     let node = service::node()?;
     let corrected = service::open::<CorrectedImuSample>(
         &node,
@@ -161,8 +166,18 @@ pub fn run(args: ServeArgs) -> Result<()> {
             last_seq = Some(s.seq);
             last_ns = Some(s.stamps.sample_ns);
             // The live state is published (and its subscribers woken) before any revision
-            // work the stage does after it.
-            let mut emit = |state: &OdometryState| send(&mut out, state);
+            // work the stage does after it. A sample that settles a zero-state batch is
+            // followed by that batch's settling and revisions (a few hundred us): the process
+            // yields its core first, so that a subscriber woken onto it runs before that work
+            // rather than after it (docs/latency.md). Only then: a yield hands the core to any
+            // runnable task, which may keep it for a whole time slice.
+            let settles = s.flags & corrected_flags::PROVISIONAL == 0;
+            let mut emit = |state: &OdometryState| {
+                send(&mut out, state);
+                if settles && state.flags & odometry_flags::REVISION == 0 {
+                    std::thread::yield_now();
+                }
+            };
             if no_gyro {
                 emit(&OdometryState {
                     stamps: s.stamps,
@@ -179,7 +194,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
         }
         Ok(ControlFlow::Continue(any))
     };
-    wake::serve_loop(&node, &[listener], TICK, step)?;
+    wake::serve_loop(&[listener], TICK, step)?;
     // A replay of the hindsight still under way is completed (as offline at the end of a
     // recording).
     stage.finish(&mut |state| send(&mut out, state));
