@@ -428,5 +428,18 @@ mod tests {
         );
         assert!(config_for_rate(3000, None).is_err());
         assert!(config_for_rate(0, None).is_err());
+        // The DLPF follows the rate (Linux's rule) unless overridden.
+        let imu = |dlpf, divider| driver::OutputMode::Imu { dlpf, divider };
+        let mode = |rate, dlpf| config_for_rate(rate, dlpf).unwrap().mode;
+        assert_eq!(mode(1000, None), imu(driver::Dlpf::Hz184, 0));
+        assert_eq!(mode(200, None), imu(driver::Dlpf::Hz92, 4));
+        assert_eq!(mode(100, None), imu(driver::Dlpf::Hz41, 9));
+        assert_eq!(mode(50, None), imu(driver::Dlpf::Hz20, 19));
+        assert_eq!(
+            mode(200, Some(driver::Dlpf::Hz184)),
+            imu(driver::Dlpf::Hz184, 4)
+        );
+        assert_eq!("41".parse::<driver::Dlpf>(), Ok(driver::Dlpf::Hz41));
+        assert!("40".parse::<driver::Dlpf>().is_err());
     }
 }
