@@ -48,7 +48,7 @@ fn run(rate_hz: u32, read_interval_ms: Option<f64>, seconds: u64) {
     .expect("sensor");
     let clock = SimClock::new_virtual(1_000_000_000);
     let device = SimMpu9250::new(sensor, clock.clone(), SimConfig::default());
-    let config = config_for_rate(rate_hz).unwrap();
+    let config = config_for_rate(rate_hz, None).unwrap();
     let interval_ns =
         read_interval_ms.map_or_else(|| default_read_interval_ns(&config), |ms| (ms * 1e6) as u64);
     if rate_hz > 1000 {

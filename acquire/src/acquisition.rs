@@ -46,7 +46,7 @@ impl SourceSpec {
     /// Checks that `rate_hz` is a supported rate and that this source's bus can carry it;
     /// the error says why not (with the bus arithmetic) and what to use instead.
     pub fn check_rate(&self, rate_hz: u32) -> Result<driver::Config, String> {
-        let config = config_for_rate(rate_hz)?;
+        let config = config_for_rate(rate_hz, None)?;
         self.bus_kind().check(&config)?;
         Ok(config)
     }
@@ -101,13 +101,14 @@ impl std::str::FromStr for SourceSpec {
 
 /// The driver configuration for an output rate: 4000 Hz is accelerometer-only with the DLPF
 /// bypassed; 1000 Hz / n (n = 1..=256) is accelerometer, gyro and temperature through the
-/// 184 Hz DLPF with SMPLRT_DIV = n - 1.
-pub fn config_for_rate(rate_hz: u32) -> Result<driver::Config, String> {
+/// DLPF with SMPLRT_DIV = n - 1, the setting [`driver::Dlpf::for_rate`] picks for the rate
+/// unless `dlpf` overrides it (ignored at 4000 Hz, where the accelerometer bypasses it).
+pub fn config_for_rate(rate_hz: u32, dlpf: Option<driver::Dlpf>) -> Result<driver::Config, String> {
     let mode = if rate_hz == 4000 {
         driver::OutputMode::Accel4kHz
     } else if rate_hz > 0 && 1000 % rate_hz == 0 && 1000 / rate_hz <= 256 {
         driver::OutputMode::Imu {
-            dlpf: driver::Dlpf::Hz184,
+            dlpf: dlpf.unwrap_or_else(|| driver::Dlpf::for_rate(f64::from(rate_hz))),
             divider: (1000 / rate_hz - 1) as u8,
         }
     } else {
@@ -306,7 +307,7 @@ mod tests {
         let clock = SimClock::new_virtual(1_000_000_000);
         let device = SimMpu9250::new(Still, clock.clone(), SimConfig::default());
         let drv = Mpu9250::new_spi(device, "sim-spi");
-        let config = config_for_rate(4000).unwrap();
+        let config = config_for_rate(4000, None).unwrap();
         let interval = default_read_interval_ns(&config);
         let mut acq = Acquisition::start(drv, clock.clone(), config, interval).unwrap();
         let mut publish = |_: &RawImuSample| Ok::<(), ()>(());
@@ -323,11 +324,11 @@ mod tests {
         // 512 bytes of 6-byte frames: 85 frames, 10.6 ms at the 8 kHz sample rate; an eighth
         // is 1.33 ms.
         let fill_ns = 85.0 * 125_000.0;
-        let config = config_for_rate(4000).unwrap();
+        let config = config_for_rate(4000, None).unwrap();
         assert_eq!(default_read_interval_ns(&config), (fill_ns / 8.0) as u64);
         // 1 kHz, 14-byte frames: 36 samples, 36 ms; an eighth is 4.5 ms.
         assert_eq!(
-            default_read_interval_ns(&config_for_rate(1000).unwrap()),
+            default_read_interval_ns(&config_for_rate(1000, None).unwrap()),
             4_500_000
         );
         // A read a quarter millisecond short of 7/8 of the fill time late finds room ...
@@ -349,7 +350,7 @@ mod tests {
         let clock = SimClock::new_virtual(0);
         let device = SimMpu9250::new(Still, clock.clone(), SimConfig::default());
         let drv = Mpu9250::new(device, "sim", reg::ADDRESS_AD0_LOW);
-        let config = config_for_rate(4000).unwrap();
+        let config = config_for_rate(4000, None).unwrap();
         let Err(err) = Acquisition::start(drv, clock.clone(), config, 1_000_000) else {
             panic!("4 kHz over I2C was accepted");
         };
@@ -370,9 +371,13 @@ mod tests {
         assert!(drv.init(config, &clock).is_err());
         assert_eq!(drv.bus_mut().stats().transactions, 0);
         // 1 kHz with gyro over I2C: 14 B x 9 clocks x 1000/s = 31.5 % of the bus.
-        let share = driver::BusKind::I2C_FAST_MODE.data_share(&config_for_rate(1000).unwrap());
+        let share =
+            driver::BusKind::I2C_FAST_MODE.data_share(&config_for_rate(1000, None).unwrap());
         assert!((share - 0.315).abs() < 1e-12, "{share}");
-        assert!(drv.init(config_for_rate(1000).unwrap(), &clock).is_ok());
+        assert!(
+            drv.init(config_for_rate(1000, None).unwrap(), &clock)
+                .is_ok()
+        );
     }
 
     #[test]
@@ -413,12 +418,28 @@ mod tests {
     #[test]
     fn rates_map_to_modes() {
         assert_eq!(
-            config_for_rate(4000).unwrap().mode,
+            config_for_rate(4000, None).unwrap().mode,
             driver::OutputMode::Accel4kHz
         );
-        assert_eq!(config_for_rate(200).unwrap().output_rate_hz(), 200.0);
-        assert_eq!(config_for_rate(1000).unwrap().output_rate_hz(), 1000.0);
-        assert!(config_for_rate(3000).is_err());
-        assert!(config_for_rate(0).is_err());
+        assert_eq!(config_for_rate(200, None).unwrap().output_rate_hz(), 200.0);
+        assert_eq!(
+            config_for_rate(1000, None).unwrap().output_rate_hz(),
+            1000.0
+        );
+        assert!(config_for_rate(3000, None).is_err());
+        assert!(config_for_rate(0, None).is_err());
+        // The DLPF follows the rate (Linux's rule) unless overridden.
+        let imu = |dlpf, divider| driver::OutputMode::Imu { dlpf, divider };
+        let mode = |rate, dlpf| config_for_rate(rate, dlpf).unwrap().mode;
+        assert_eq!(mode(1000, None), imu(driver::Dlpf::Hz184, 0));
+        assert_eq!(mode(200, None), imu(driver::Dlpf::Hz92, 4));
+        assert_eq!(mode(100, None), imu(driver::Dlpf::Hz41, 9));
+        assert_eq!(mode(50, None), imu(driver::Dlpf::Hz20, 19));
+        assert_eq!(
+            mode(200, Some(driver::Dlpf::Hz184)),
+            imu(driver::Dlpf::Hz184, 4)
+        );
+        assert_eq!("41".parse::<driver::Dlpf>(), Ok(driver::Dlpf::Hz41));
+        assert!("40".parse::<driver::Dlpf>().is_err());
     }
 }

@@ -151,7 +151,7 @@ fn publishing_loop_reaches_the_system_allocator_zero_times_per_sample() {
     let mut acq = Acquisition::start(
         driver,
         clock.clone(),
-        config_for_rate(4000).unwrap(),
+        config_for_rate(4000, None).unwrap(),
         5_000_000,
     )
     .unwrap();

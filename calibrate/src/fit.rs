@@ -41,7 +41,9 @@ pub struct Pose {
     pub mean_g: Vector3<f64>,
     /// Per-sample standard deviation of the readings, g, per axis.
     pub std_g: Vector3<f64>,
-    /// Number of samples averaged, when known.
+    /// Number of independent samples the mean is worth, when known: the samples averaged, or
+    /// for correlated samples (a sensor's low-pass filter) that count divided by how much more
+    /// their mean scatters than white noise's (`NoiseLevel::mean_variance_factor`).
     pub n: Option<usize>,
 }
 

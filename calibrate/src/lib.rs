@@ -15,6 +15,7 @@ pub mod fit;
 pub mod integrate;
 pub mod labelfree;
 pub mod model;
+pub mod noise_level;
 pub mod plots;
 pub mod repair;
 pub mod segments;

@@ -1,11 +1,12 @@
 //! Static-segment detection in a raw session: finds the intervals where the sensor was at rest
 //! (the poses of a calibration session) from the data alone.
 //!
-//! 1. Noise level per axis from the data itself: [`difference_sigma`] (MAD of first
-//!    differences), which does not depend on how much of the session is at rest.
+//! 1. Noise level and autocorrelation per axis from the data itself ([`NoiseLevel`], from the
+//!    MAD of lag-L differences), which hold for samples correlated by the part's low-pass
+//!    filter and depend little on how much of the session is at rest.
 //! 2. Non-overlapping windows ([`WindowAccumulator`], default 0.5 s) tested with
-//!    [`RestCriterion::from_noise`]: std consistent with the noise and mean consistent with the
-//!    previous window's, each at false-alarm probability `alpha` per axis.
+//!    [`RestCriterion::from_noise_level`]: std consistent with the noise and mean consistent
+//!    with the previous window's, each at false-alarm probability `alpha` per axis.
 //! 3. Runs of consecutive rest windows, minus `trim_windows` windows at each end (the settling
 //!    after a move), at least `min_duration_s` long, become segments; a gap in the sample times
 //!    longer than `max_gap_s` ends a run.
@@ -16,7 +17,7 @@
 use ipc_types::RawImuSample;
 
 use crate::fit::Pose;
-use crate::repair::difference_sigma;
+use crate::noise_level::NoiseLevel;
 use crate::window::{RestCriterion, WindowAccumulator};
 use nalgebra::Vector3;
 
@@ -89,13 +90,16 @@ impl StaticSegment {
         (self.t_end_ns - self.t_start_ns) as f64 * 1e-9
     }
 
-    /// The segment as a fitting pose with the given label (g).
-    pub fn to_pose(&self, truth_g: Vector3<f64>) -> Pose {
+    /// The segment as a fitting pose with the given label (g), its sample count divided by
+    /// `mean_variance_factor` (the largest axis' [`Detection::mean_variance_factor`]; 1 for
+    /// white noise) to give the independent samples its mean is worth.
+    pub fn to_pose(&self, truth_g: Vector3<f64>, mean_variance_factor: f64) -> Pose {
+        let effective = (self.n as f64 / mean_variance_factor.max(1.0)).floor() as usize;
         Pose {
             truth_g,
             mean_g: Vector3::from(self.mean_g),
             std_g: Vector3::from(self.std_g),
-            n: Some(self.n),
+            n: Some(effective.max(1)),
         }
     }
 }
@@ -103,14 +107,28 @@ impl StaticSegment {
 /// The result of a detection.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Detection {
-    /// White-noise sigma per axis measured from the data, g.
+    /// Per-sample noise sigma per axis measured from the data (the marginal one, correlated
+    /// or not), g.
     pub noise_sigma_g: [f64; 3],
+    /// How much more a long mean of the noise scatters than white noise's, per axis
+    /// ([`NoiseLevel::mean_variance_factor`] of the shortest segment kept; 1 for white noise).
+    pub mean_variance_factor: [f64; 3],
     /// Window length used, samples.
     pub window_len: usize,
     /// The thresholds applied.
     pub criterion: RestCriterion,
     /// The segments found, in time order.
     pub segments: Vec<StaticSegment>,
+}
+
+impl Detection {
+    /// Segment `seg` of this detection as a fitting pose with the given label (g), worth the
+    /// independent samples the noise's correlation leaves ([`StaticSegment::to_pose`] with the
+    /// largest axis' mean-variance factor).
+    pub fn pose(&self, seg: &StaticSegment, truth_g: Vector3<f64>) -> Pose {
+        let [x, y, z] = self.mean_variance_factor;
+        seg.to_pose(truth_g, x.max(y).max(z))
+    }
 }
 
 /// Why detection could not run.
@@ -239,10 +257,14 @@ pub fn detect_static_segments_in<S: SampleSeries + ?Sized>(
     if n < 3 * window_len {
         return Err(SegmentError::TooFewSamples(n));
     }
-    let noise_sigma_g: [f64; 3] = std::array::from_fn(|i| {
-        difference_sigma((0..n).map(|k| samples.accel_g(k)[i])).max(SIGMA_FLOOR_G)
+    let noise: [NoiseLevel; 3] = std::array::from_fn(|i| {
+        let axis: Vec<f64> = (0..n).map(|k| samples.accel_g(k)[i]).collect();
+        let mut level = NoiseLevel::of(&axis);
+        level.sigma = level.sigma.max(SIGMA_FLOOR_G);
+        level
     });
-    let criterion = RestCriterion::from_noise(noise_sigma_g, window_len, cfg.alpha);
+    let noise_sigma_g = noise.each_ref().map(|l| l.sigma);
+    let criterion = RestCriterion::from_noise_level(&noise, window_len, cfg.alpha);
     let max_gap_ns = (cfg.max_gap_s * 1e9) as u64;
 
     // Runs of rest windows as (first sample, one past last sample, number of windows).
@@ -284,8 +306,10 @@ pub fn detect_static_segments_in<S: SampleSeries + ?Sized>(
         .map(|(a, b)| segment_stats(samples, a, b))
         .filter(|seg| seg.duration_s() >= cfg.min_duration_s)
         .collect();
+    let min_len = ((cfg.min_duration_s / median_dt_s).round() as usize).max(2);
     Ok(Detection {
         noise_sigma_g,
+        mean_variance_factor: noise.each_ref().map(|l| l.mean_variance_factor(min_len)),
         window_len,
         criterion,
         segments,

@@ -171,7 +171,7 @@ pub fn label_axis_aligned(path: &Path, raw: &RawPoses) -> Result<Vec<Pose>, Inpu
                     angle_deg,
                 });
             }
-            Ok(seg.to_pose(axis))
+            Ok(raw.detection.pose(seg, axis))
         })
         .collect()
 }

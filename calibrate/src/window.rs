@@ -9,6 +9,7 @@
 //! its std and from its mean's distance to a reference mean (the previous window's, offline).
 //! Values are in whatever unit the caller feeds (g offline, SI live).
 
+use crate::noise_level::NoiseLevel;
 use statrs::distribution::{ChiSquared, ContinuousCDF, Normal};
 
 /// Statistics of one completed window.
@@ -113,19 +114,32 @@ impl RestCriterion {
     /// # Panics
     /// If `len < 2` or `alpha` is not in (0, 1).
     pub fn from_noise(sigma: [f64; 3], len: usize, alpha: f64) -> Self {
+        Self::from_noise_level(&sigma.map(NoiseLevel::white), len, alpha)
+    }
+
+    /// [`Self::from_noise`] for noise that may be correlated from sample to sample (the
+    /// MPU-9250's DLPF): the std test with the sample variance's effective degrees of freedom
+    /// ([`NoiseLevel::variance_dof`]) in place of `len - 1`, and the mean tolerance widened by
+    /// the square root of [`NoiseLevel::mean_variance_factor`] (neglecting the positive
+    /// correlation of adjacent windows' means, which only narrows their difference).
+    ///
+    /// # Panics
+    /// If `len < 2` or `alpha` is not in (0, 1).
+    pub fn from_noise_level(noise: &[NoiseLevel; 3], len: usize, alpha: f64) -> Self {
         assert!(
             len >= 2 && alpha > 0.0 && alpha < 1.0,
             "len {len}, alpha {alpha}"
         );
-        let dof = (len - 1) as f64;
-        let chi = ChiSquared::new(dof).expect("dof > 0");
-        let std_factor = (chi.inverse_cdf(1.0 - alpha) / dof).sqrt();
         let z = Normal::standard().inverse_cdf(1.0 - alpha / 2.0);
-        let mean_factor = z * (2.0 / len as f64).sqrt();
-        Self {
-            std_max: sigma.map(|s| s * std_factor),
-            mean_tol: sigma.map(|s| s * mean_factor),
-        }
+        let std_max = noise.each_ref().map(|n| {
+            let dof = n.variance_dof(len);
+            let chi = ChiSquared::new(dof).expect("dof > 0");
+            n.sigma * (chi.inverse_cdf(1.0 - alpha) / dof).sqrt()
+        });
+        let mean_tol = noise
+            .each_ref()
+            .map(|n| z * n.sigma * (2.0 * n.mean_variance_factor(len) / len as f64).sqrt());
+        Self { std_max, mean_tol }
     }
 
     /// Whether window `w` is at rest: its std within `std_max` and, when a reference mean is

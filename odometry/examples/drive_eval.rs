@@ -136,10 +136,11 @@ struct Args {
     /// Smooth floor: no vibration (for every case).
     #[arg(long)]
     smooth: bool,
-    /// The part's digital low-pass filter, DLPF_CFG and A_DLPF_CFG both, 0-7 (1: 184 Hz gyro /
-    /// 218 Hz accel, our driver's, the default; 3: 41 / 45 Hz; 4: 20 / 21 Hz), or `off`:
-    /// white samples, which no MPU-9250 produces.
-    #[arg(long, default_value = "1", value_parser = parse_dlpf_cfg)]
+    /// The part's digital low-pass filter, DLPF_CFG and A_DLPF_CFG both: `driver` (the
+    /// default: what our driver picks for --rate, `mems_sim::dlpf::cfg_for_rate`: 1 at 1 kHz,
+    /// 2 at 200 Hz), 0-7 (1: 184 Hz gyro / 218 Hz accel; 2: 92 / 99 Hz; 3: 41 / 45 Hz; 4:
+    /// 20 / 21 Hz), or `off`: white samples, which no MPU-9250 produces.
+    #[arg(long, default_value = "driver", value_parser = parse_dlpf_cfg)]
     dlpf_cfg: DlpfCfg,
     /// The stage's rest hindsight, s (`OdometryConfig::rest_hindsight_s`; default: the
     /// configuration's, 0.5 s).
@@ -151,18 +152,40 @@ struct Args {
     undo_gyro_refinement: bool,
 }
 
-/// A `--dlpf-cfg` value: DLPF_CFG = A_DLPF_CFG, or `None` for no filter.
+/// A `--dlpf-cfg` value.
 #[derive(Clone, Copy)]
-struct DlpfCfg(Option<u8>);
+enum DlpfCfg {
+    /// No filter: white samples.
+    Off,
+    /// What our driver picks for the rate.
+    Driver,
+    /// DLPF_CFG = A_DLPF_CFG = this.
+    Cfg(u8),
+}
 
-/// Parses a `--dlpf-cfg` value: `off` or a DLPF_CFG of 0-7.
+impl DlpfCfg {
+    /// The filters for output rate `rate_hz`, or `None` for white samples.
+    fn config(self, rate_hz: f64) -> Option<mems_sim::dlpf::DlpfConfig> {
+        match self {
+            Self::Off => None,
+            Self::Driver => Some(mems_sim::dlpf::DlpfConfig::driver(rate_hz)),
+            Self::Cfg(cfg) => Some(mems_sim::dlpf::DlpfConfig::both(cfg)),
+        }
+    }
+}
+
+/// Parses a `--dlpf-cfg` value: `off`, `driver` or a DLPF_CFG of 0-7.
 fn parse_dlpf_cfg(s: &str) -> Result<DlpfCfg, String> {
-    if s == "off" {
-        return Ok(DlpfCfg(None));
+    match s {
+        "off" => return Ok(DlpfCfg::Off),
+        "driver" => return Ok(DlpfCfg::Driver),
+        _ => {}
     }
     match s.parse::<u8>() {
-        Ok(cfg) if cfg <= 7 => Ok(DlpfCfg(Some(cfg))),
-        _ => Err(format!("expected `off` or a DLPF_CFG of 0-7, got {s:?}")),
+        Ok(cfg) if cfg <= 7 => Ok(DlpfCfg::Cfg(cfg)),
+        _ => Err(format!(
+            "expected `off`, `driver` or a DLPF_CFG of 0-7, got {s:?}"
+        )),
     }
 }
 
@@ -170,7 +193,7 @@ fn parse_dlpf_cfg(s: &str) -> Result<DlpfCfg, String> {
 fn case(name: CaseName, args: &Args) -> (Case, OdometryConfig) {
     let mut c = Case::straight();
     c.rate_hz = args.rate_hz;
-    c.dlpf = args.dlpf_cfg.0.map(mems_sim::dlpf::DlpfConfig::both);
+    c.dlpf = args.dlpf_cfg.config(args.rate_hz);
     if args.sim_default_legs {
         c.max_legs = 3;
         c.leg_s = [2.0, 10.0];

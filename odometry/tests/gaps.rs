@@ -18,8 +18,8 @@ fn drive_with_gap(seed: u64, gap_s: f64, widen: bool) -> [(OdometryState, [f64; 
         duration_s: 90.0,
         rate_hz: 50.0,
         turns: true,
-        // White samples: at 50 Hz the driver's DLPF folds 2-3x the noise density in and the
-        // harness does not take the filter's delay off the sample times (as simulated_drive.rs).
+        // White samples: the harness does not take the DLPF's delay off the sample times (9.9 ms
+        // with the driver's 20 Hz setting at 50 Hz), as simulated_drive.rs says.
         dlpf: None,
         ..Case::straight()
     };

@@ -7,8 +7,8 @@
 //! The drives run at 100 Hz to be quick, with white samples (`dlpf: None`): the tolerances
 //! are those of the hint logic on the noise the stage is configured for. With the part's DLPF
 //! at 100 Hz the samples lag the hints by the filter's delay (the harness does not take it
-//! off the sample times as the driver does) and the filter folds 1.2x (41 Hz) to 2x (our
-//! driver's 184 Hz) the datasheet noise density in; the DLPF's effect on drives is measured
+//! off the sample times as the driver does) and the filter folds 1.2x (41 Hz, our driver's
+//! setting at 100 Hz) to 2x (184 Hz) the datasheet noise density in; the DLPF's effect on drives is measured
 //! by `drive_eval` (docs/odometry.md).
 
 mod common;

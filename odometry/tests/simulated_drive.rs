@@ -45,10 +45,10 @@ fn drive(c: &Case, seed: u64) -> (OdometryState, recording::Truth, f64) {
 #[test]
 fn a_short_drive_with_turns_ends_within_its_reported_sigma() {
     // 50 Hz keeps the debug build quick; the motions are smooth enough for it. White samples:
-    // at 50 Hz our driver's 184 Hz DLPF folds 2.8-3x the datasheet noise density in, which
-    // the stage's configuration does not know, and the harness does not take the filter's
-    // delay off the sample times as the driver does; the DLPF's effect on drives is measured
-    // by `drive_eval` (docs/odometry.md).
+    // the harness does not take the DLPF's delay off the sample times as the driver does
+    // (9.9 ms with the driver's 20 Hz setting at 50 Hz, which the stage would see as a lag
+    // of the accelerometer and gyro behind the motion); the DLPF's effect on drives is
+    // measured by `drive_eval` (docs/odometry.md).
     let c = Case {
         duration_s: 100.0,
         rate_hz: 50.0,

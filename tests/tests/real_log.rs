@@ -120,12 +120,9 @@ fn calibration_with_noise(dir: &Path) -> std::path::PathBuf {
 fn a_recording_that_starts_in_motion_aligns_at_its_first_rest() {
     let dir = std::env::temp_dir().join(unique_namespace("in-motion"));
     std::fs::create_dir_all(&dir).unwrap();
-    // White samples: with the driver's DLPF (184 Hz) at 200 Hz the part folds 1.4-1.5x the
-    // noise density in, the detector then calls part of the slow cruise rest and this drive
-    // ends 16% of its distance off (docs/odometry.md: the driver's filter at 200 Hz); at
-    // 1 kHz, where nothing is folded, `mems-calibrate fit` finds no static segment in the
-    // correlated six-position session (its noise estimate from first differences assumes
-    // white samples).
+    // White samples: this test is about a start in motion; what the part's DLPF does to
+    // drives is measured by `drive_eval` (docs/odometry.md), and the calibration here is
+    // configured with the white noise it draws.
     let moving = drive(
         &dir,
         "moving.csv",

@@ -77,6 +77,54 @@ pub enum Dlpf {
     Hz5 = 6,
 }
 
+impl Dlpf {
+    /// Every setting, widest first.
+    pub const ALL: [Self; 6] = [
+        Self::Hz184,
+        Self::Hz92,
+        Self::Hz41,
+        Self::Hz20,
+        Self::Hz10,
+        Self::Hz5,
+    ];
+
+    /// The setting for output rate `rate_hz`: bandwidth about half the rate or less, as the
+    /// Linux kernel's driver picks it (`mems_sim::dlpf::cfg_for_rate`, which cites it), so
+    /// that decimating the 1 kHz filter output folds little noise (184 Hz at 1 kHz and
+    /// 500 Hz, 92 Hz at 200-333 Hz, 41 Hz at 100 Hz).
+    pub fn for_rate(rate_hz: f64) -> Self {
+        let cfg = mems_sim::dlpf::cfg_for_rate(rate_hz);
+        Self::ALL
+            .into_iter()
+            .find(|d| *d as u8 == cfg)
+            .unwrap_or(Self::Hz5)
+    }
+
+    /// The gyro bandwidth this setting is named for, Hz.
+    pub fn gyro_bandwidth_hz(self) -> u32 {
+        match self {
+            Self::Hz184 => 184,
+            Self::Hz92 => 92,
+            Self::Hz41 => 41,
+            Self::Hz20 => 20,
+            Self::Hz10 => 10,
+            Self::Hz5 => 5,
+        }
+    }
+}
+
+impl std::str::FromStr for Dlpf {
+    type Err = String;
+
+    /// Parses a gyro bandwidth in Hz: 184, 92, 41, 20, 10 or 5.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|d| d.gyro_bandwidth_hz().to_string() == s)
+            .ok_or_else(|| format!("unknown DLPF {s:?}: expected 184, 92, 41, 20, 10 or 5 (Hz)"))
+    }
+}
+
 /// What the FIFO collects and how fast.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum OutputMode {

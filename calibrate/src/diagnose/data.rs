@@ -69,10 +69,7 @@ pub struct DataConfig {
     pub torn: TornReadConfig,
 }
 
-/// Noisiest axis (counts at 16384/g) the torn-read repair is tried on: a tear (256 counts)
-/// must lie at least 3.2 sigmas from the level to be told from noise (the thesis's z axis, 60
-/// to 66 counts, is; the simulator's 1 kHz output at 300 ug/sqrt(Hz), 155 counts, is not).
-pub const MAX_TEAR_SIGMA_COUNTS: f64 = 80.0;
+pub use crate::repair::MAX_TEAR_SIGMA_COUNTS;
 
 impl Default for DataConfig {
     fn default() -> Self {

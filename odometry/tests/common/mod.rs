@@ -69,9 +69,9 @@ pub struct Case {
     pub mounting: nalgebra::UnitQuaternion<f64>,
     /// Longest motion between two rests, s (see `DriveParams::max_motion_s`).
     pub max_motion_s: f64,
-    /// The part's digital low-pass filters (the default: our driver's, DLPF_CFG = A_DLPF_CFG
-    /// = 1, see `mems_sim::dlpf::DlpfConfig::driver`; `None`: white samples, which no
-    /// MPU-9250 produces).
+    /// The part's digital low-pass filters (the default: our driver's at 200 Hz, DLPF_CFG =
+    /// A_DLPF_CFG = 2, see `mems_sim::dlpf::DlpfConfig::driver`; `None`: white samples, which
+    /// no MPU-9250 produces).
     pub dlpf: Option<mems_sim::dlpf::DlpfConfig>,
 }
 

@@ -141,6 +141,21 @@ pub fn accel_setting(accel_fchoice_b: bool, a_dlpf_cfg: u8) -> Setting {
     }
 }
 
+/// The DLPF_CFG (= A_DLPF_CFG) our driver selects for output rate `rate_hz` at 1000/n Hz: the
+/// widest setting whose nominal bandwidth is at most about half the rate, so that little noise
+/// folds when SMPLRT_DIV keeps every (1 + SMPLRT_DIV)-th internal sample. The thresholds are
+/// those of the Linux kernel's InvenSense driver (drivers/iio/imu/inv_mpu6050/inv_mpu_core.c,
+/// `inv_mpu6050_set_lpf`, "lpf is set automatically when setting sampling rate to avoid any
+/// aliases"): at least 400 Hz gives 1 (gyro 184 Hz), 200 Hz 2 (92 Hz), 90 Hz 3 (41 Hz), 40 Hz
+/// 4 (20 Hz), 20 Hz 5 (10 Hz), anything slower 6 (5 Hz). The one rule for the driver
+/// (`acquire::driver::Dlpf::for_rate`), the simulator's `--dlpf driver` and `drive_eval`.
+pub fn cfg_for_rate(rate_hz: f64) -> u8 {
+    const RULE: [(f64, u8); 5] = [(400.0, 1), (200.0, 2), (90.0, 3), (40.0, 4), (20.0, 5)];
+    RULE.iter()
+        .find(|&&(min_rate, _)| rate_hz >= min_rate)
+        .map_or(6, |&(_, cfg)| cfg)
+}
+
 /// The filters of both triads.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DlpfConfig {
@@ -162,7 +177,8 @@ impl DlpfConfig {
 
     /// What our driver configures for output rate `rate_hz` (`acquire::config_for_rate`):
     /// at 4 kHz the accelerometer bypassed (1.13 kHz at 4 kHz) and DLPF_CFG = 1 for the gyro;
-    /// at 1000/n Hz, DLPF_CFG = A_DLPF_CFG = 1 (gyro 184 Hz, accel 218.1 Hz).
+    /// at 1000/n Hz, DLPF_CFG = A_DLPF_CFG = [`cfg_for_rate`] (e.g. 1 at 1 kHz: gyro 184 Hz,
+    /// accel 218.1 Hz; 2 at 200 Hz: 92 / 99 Hz).
     pub fn driver(rate_hz: f64) -> Self {
         if rate_hz == 4000.0 {
             Self {
@@ -170,7 +186,7 @@ impl DlpfConfig {
                 gyro: GYRO_DLPF[1],
             }
         } else {
-            Self::both(1)
+            Self::both(cfg_for_rate(rate_hz))
         }
     }
 

@@ -155,9 +155,11 @@ struct Common {
     #[arg(long, default_value_t = STANDARD_GRAVITY_MPS2)]
     gravity: f64,
     /// Digital low-pass filter: `driver` (what our driver configures for --rate, as the real
-    /// part then filters: DLPF_CFG = A_DLPF_CFG = 1 at 1000/n Hz, the accelerometer bypassed
-    /// at 4000 Hz), `off` (white noise at the output rate, no part produces it), or the gyro bandwidth in Hz of DLPF_CFG 0-7 (250, 184, 92, 41, 20,
-    /// 10, 5, 3600; the accelerometer gets the same A_DLPF_CFG).
+    /// part then filters: DLPF_CFG = A_DLPF_CFG picked from the rate at 1000/n Hz, 1 (184 Hz)
+    /// at 1000 and 500 Hz, 2 (92 Hz) at 200 Hz, see `mems_sim::dlpf::cfg_for_rate`; the
+    /// accelerometer bypassed at 4000 Hz), `off` (white noise at the output rate, no part
+    /// produces it), or the gyro bandwidth in Hz of DLPF_CFG 0-7 (250, 184, 92, 41, 20, 10, 5,
+    /// 3600; the accelerometer gets the same A_DLPF_CFG).
     #[arg(long, default_value = "driver")]
     dlpf: DlpfChoice,
     /// The recording starts this late into the scenario: seconds, or `motion` (at the highest

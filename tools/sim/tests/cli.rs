@@ -295,6 +295,8 @@ fn ranges_and_models_are_applied() {
         "20",
         "--rate",
         "100",
+        "--dlpf",
+        "184",
         "--preset",
         "ideal",
         "--accel-noise-ug",
@@ -308,11 +310,11 @@ fn ranges_and_models_are_applied() {
     let mean = x.iter().sum::<f64>() / n;
     let std = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
     // 1000 ug/sqrt(Hz) drawn at the 1 kHz internal rate (0.0316 g per internal sample) through
-    // the driver's accelerometer DLPF (A_DLPF_CFG = 1, 218.1 Hz): variance ratio K / (1 + K),
+    // the accelerometer DLPF `--dlpf 184` selects (A_DLPF_CFG = 1, 218.1 Hz): variance ratio K / (1 + K),
     // 0.0212 g; quantization adds 1/16384/sqrt(12), negligible. Every tenth internal sample
     // is kept, whose lag-10 correlation (1 + p) p^9 / 2 is below 1e-8: independent samples,
     // 4-sigma sampling bound on the std.
-    let c = Coefficients::new(&DlpfConfig::driver(100.0).accel);
+    let c = Coefficients::new(&DlpfConfig::both(1).accel);
     assert!(c.autocorrelation(10) < 1e-8);
     let want = 1000e-6 * 1000f64.sqrt() * c.noise_variance_ratio().sqrt();
     assert!(

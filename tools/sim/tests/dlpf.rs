@@ -7,7 +7,7 @@ use std::f64::consts::PI;
 
 use mems_sim::dlpf::{
     ACCEL_BYPASS, ACCEL_DLPF, Coefficients, DlpfConfig, GYRO_BYPASS_3600, GYRO_BYPASS_8800,
-    GYRO_DLPF, Setting, TriadFilter,
+    GYRO_DLPF, Setting, TriadFilter, cfg_for_rate,
 };
 use mems_sim::model::{SensorModel, TriadModel};
 use mems_sim::scenario::{PoseParams, PoseSession, Scenario};
@@ -194,8 +194,8 @@ fn decimation_folds_the_passed_noise_as_the_autocorrelation_says() {
         }
         assert!((c.aliased_density_ratio(1) - 1.0).abs() < 1e-12);
     }
-    // The driver's filters at 200 Hz (every fifth 1 kHz sample) fold 1.41x (gyro, 184 Hz) and
-    // 1.50x (accelerometer, 218.1 Hz) the density in; 20 Hz next to none.
+    // The 184 Hz filters at 200 Hz (every fifth 1 kHz sample) fold 1.41x (gyro) and 1.50x
+    // (accelerometer, 218.1 Hz) the density in; 20 Hz next to none.
     let at_200 = |s: &Setting| Coefficients::new(s).aliased_density_ratio(5);
     assert!((at_200(&GYRO_DLPF[1]) - 1.407).abs() < 1e-3);
     assert!((at_200(&ACCEL_DLPF[1]) - 1.500).abs() < 1e-3);
@@ -323,4 +323,29 @@ fn sensor_output_lags_the_truth_by_the_register_map_delay() {
         "max error against the truth delayed by the table's delay -1 ms, +0, +1 ms: {err:?} \
          deg/s (peak {peak})"
     );
+}
+
+#[test]
+fn the_driver_rule_keeps_the_folded_noise_small_at_every_divided_rate() {
+    // At every output rate 1000/n Hz down to 10 Hz (where the narrowest setting, 5 Hz, is
+    // half the rate) the rule's setting keeps the gyro bandwidth at most half the rate
+    // (Nyquist, the reason Linux's driver gives) and, for both triads, the noise density
+    // folded in by keeping every n-th filter output below 1.31x (a first-order section with
+    // its bandwidth at exactly half the rate folds 1.30x). The old fixed choice (DLPF_CFG = 1
+    // at every rate) folds 1.41x at 200 Hz, so this fails on it.
+    for n in 1..=100u32 {
+        let rate = 1000.0 / f64::from(n);
+        let config = DlpfConfig::driver(rate);
+        let cfg = cfg_for_rate(rate);
+        assert_eq!(config, DlpfConfig::both(cfg));
+        let bandwidth = GYRO_DLPF[usize::from(cfg)].bandwidth_hz;
+        assert!(bandwidth <= rate / 2.0, "{rate} Hz: DLPF_CFG {cfg}");
+        for s in [config.gyro, config.accel] {
+            let fold = Coefficients::new(&s).aliased_density_ratio(n);
+            assert!(fold < 1.31, "{rate} Hz: {s:?} folds {fold}");
+        }
+    }
+    assert_eq!(cfg_for_rate(1000.0), 1);
+    assert_eq!(cfg_for_rate(200.0), 2);
+    assert!(Coefficients::new(&GYRO_DLPF[1]).aliased_density_ratio(5) > 1.31);
 }

@@ -315,7 +315,7 @@ fn label_unlabelled(raw: &calibrate::session::RawPoses) -> Vec<Pose> {
     raw.detection
         .segments
         .iter()
-        .map(|s| s.to_pose(nalgebra::Vector3::zeros()))
+        .map(|s| raw.detection.pose(s, nalgebra::Vector3::zeros()))
         .collect()
 }
 
