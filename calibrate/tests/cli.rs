@@ -1,6 +1,8 @@
 //! End-to-end tests of `mems-calibrate fit`: on simulated raw sessions (mems-sim, written as
 //! canonical CSV) and on the thesis's six-position files (skipped when the data is absent).
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -12,7 +14,6 @@ use mems_sim::scenario::Scenario;
 use mems_sim::scenario::{PoseParams, PoseSession};
 use mems_sim::vibration::VibrationModel;
 use mems_sim::{SimSensor, adc};
-use nalgebra::{Matrix3, Vector3};
 
 const RATE_HZ: f64 = 100.0;
 
@@ -32,19 +33,6 @@ fn sensor_model() -> SensorModel {
         ..TriadModel::ideal()
     };
     m
-}
-
-/// The true model `a' = S a + b` of [`sensor_model`].
-fn true_model() -> AccelModel {
-    let t = sensor_model().accel;
-    let s = Matrix3::from_fn(|r, c| {
-        if r == c {
-            1.0 + t.scale[r]
-        } else {
-            t.misalignment[r][c]
-        }
-    });
-    AccelModel::new(ModelKind::Full, s, Vector3::from(t.bias)).unwrap()
 }
 
 /// Simulates `session` at 100 Hz and writes it as a canonical CSV in a fresh directory.
@@ -151,7 +139,7 @@ fn six_position_raw_session_auto_labels_and_label_free_refusal() {
     assert_eq!(file.method, FitMethod::Labelled);
     assert_eq!(file.source.poses, 6);
     assert_eq!(file.source.kind, "canonical_csv");
-    assert_within(&file, &true_model(), 4.0);
+    assert_within(&file, &common::true_model(&sensor_model().accel), 4.0);
 
     let (output, _) = fit(&csv, &["--labels", "none"]);
     assert!(!output.status.success());
@@ -181,7 +169,7 @@ fn many_orientations_fit_label_free() {
     let file = CalibrationFile::load(&toml).unwrap();
     assert_eq!(file.method, FitMethod::LabelFree);
     assert_eq!(file.source.poses, 14);
-    let qr = true_model().scale_inv().qr();
+    let qr = common::true_model(&sensor_model().accel).scale_inv().qr();
     let mut r = qr.r();
     for i in 0..3 {
         if r[(i, i)] < 0.0 {
@@ -191,7 +179,7 @@ fn many_orientations_fit_label_free() {
     let upper = AccelModel::new(
         ModelKind::Full,
         r.try_inverse().unwrap(),
-        *true_model().bias_g(),
+        *common::true_model(&sensor_model().accel).bias_g(),
     )
     .unwrap();
     assert_within(&file, &upper, 4.0);

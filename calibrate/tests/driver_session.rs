@@ -4,6 +4,8 @@
 //! the static segments are found, no noise is "repaired" as torn reads, and the weighted fit
 //! recovers the simulated part within its stated uncertainty.
 
+mod common;
+
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -12,13 +14,12 @@ use acquire::driver::{Mpu9250, OutputMode};
 use acquire::registers as reg;
 use acquire::sim::{SimConfig, SimMpu9250};
 use calibrate::calibfile::CalibrationFile;
-use calibrate::model::{AccelModel, ModelKind, N_PARAMS, PARAM_NAMES};
+use calibrate::model::{N_PARAMS, PARAM_NAMES};
 use ipc_types::RawImuSample;
 use mems_sim::SimSensor;
 use mems_sim::model::{SensorModel, TriadModel};
 use mems_sim::scenario::{PoseParams, PoseSession, Scenario};
 use mems_sim::vibration::VibrationModel;
-use nalgebra::{Matrix3, Vector3};
 
 /// A part with only the terms the calibration models (bias, scale, misalignment, the
 /// datasheet's 300 ug/sqrt(Hz) white noise before the DLPF), at a constant temperature.
@@ -36,19 +37,6 @@ fn sensor_model() -> SensorModel {
         ..TriadModel::ideal()
     };
     m
-}
-
-/// The true model `a' = S a + b` of [`sensor_model`].
-fn true_model() -> AccelModel {
-    let t = sensor_model().accel;
-    let s = Matrix3::from_fn(|r, c| {
-        if r == c {
-            1.0 + t.scale[r]
-        } else {
-            t.misalignment[r][c]
-        }
-    });
-    AccelModel::new(ModelKind::Full, s, Vector3::from(t.bias)).unwrap()
 }
 
 /// The whole session as the driver reads it at `rate_hz` (its own DLPF choice).
@@ -105,7 +93,7 @@ fn a_1khz_session_through_the_driver_dlpf_is_fitted_within_its_uncertainty() {
     );
     let file = CalibrationFile::load(&toml).unwrap();
     let p = file.accel_model().unwrap().params();
-    let t = true_model().params();
+    let t = common::true_model(&sensor_model().accel).params();
     for j in 0..N_PARAMS {
         let (s, err) = (file.sigma[j], (p[j] - t[j]).abs());
         if s == 0.0 {
