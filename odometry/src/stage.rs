@@ -59,10 +59,15 @@
 //! verdict changed (the start and end of a rest, 20 samples at most) ran on the previous one.
 //!
 //! For that the stage runs two navigators (module `navigator`): one on every input, whose
-//! states it emits, and one lagging `2 rest_hindsight_s + motion_confirm_s` behind on inputs
-//! whose flags are final. A change of the flags in force copies the lagging one into the live
-//! one and replays the inputs in between (kept, in arrival order, in a ring allocated up
-//! front), so the output is what one pass with the final flags gives. The replay is spread
+//! states it emits, and the settled one. A change of the flags in force navigates again, from
+//! the state a navigator fed only final flags had `2 rest_hindsight_s + motion_confirm_s`
+//! before (as long as flags can change), the inputs since (kept, in arrival order, in a ring
+//! allocated up front), so the output is what one pass with the final flags gives. That
+//! state is not kept by a third navigator lagging behind: the settled navigator takes the
+//! same inputs, and on the same flags unless they changed, so copies of it are kept every
+//! `CHECKPOINT_EVERY` (256) inputs, and one whose inputs have all become final unchanged stands
+//! for it (a replay first takes it through the final inputs after it, at most a few hundred).
+//! The replay is spread
 //! over calls, at most [`REPLAY_PER_CALL`] inputs per call, so that no call holds up the
 //! samples behind it for long: meanwhile the live navigator goes on with the flags it had (its
 //! states are republished by the replay), and when the replay has caught up it takes the
@@ -244,7 +249,7 @@ pub enum OdometryError {
     },
 }
 
-/// One input of the stage, kept in arrival order until the lagging navigator has taken it.
+/// One input of the stage, kept in arrival order while a replay may need it.
 #[derive(Debug, Clone, Copy)]
 enum Input {
     /// A sample whose `ZERO_STATE` flag is the one in force (the detector's, or cleared when
@@ -263,22 +268,52 @@ impl Default for Input {
     }
 }
 
-/// The navigator that lags behind by as long as flags can change (twice the hindsight plus the
-/// confirmation time), and the inputs it has not taken yet.
+/// A copy of the settled navigator taken after it had taken the journal's inputs up to an
+/// absolute position, with the flags then in force.
+#[derive(Debug, Clone, Copy)]
+struct Checkpoint {
+    /// Inputs the copy has taken since the start.
+    pos: u64,
+    /// Its navigator in [`Hindsight::pool`].
+    slot: usize,
+}
+
+/// The inputs of the last `2 rest_hindsight_s + motion_confirm_s` (as long as flags can
+/// change) and a navigator state from before them to navigate them again from.
+///
+/// That state, the base, is what a navigator that took every input with its final flags had
+/// at the journal's front. The settled navigator itself takes every input, on the flags in
+/// force when it takes it; most of the time they stay so. So instead of running a third
+/// navigator behind it on final flags, copies of the settled navigator are kept every
+/// [`CHECKPOINT_EVERY`] inputs: a copy whose inputs have all become final with no flag
+/// changed since it was taken is exactly that lagging navigator, and becomes the base; a
+/// change of the flags drops the copies that took a changed input. The base is only fed
+/// inputs itself when the journal is full (no copy became final in time).
 struct Hindsight {
     /// [`OdometryConfig::rest_hindsight_s`], ns.
     lag_ns: u64,
     /// [`OdometryConfig::motion_confirm_s`], ns.
     confirm_ns: u64,
-    lagged: Navigator,
+    /// The navigator state after the inputs before the journal's front, on final flags.
+    base: Navigator,
+    /// Absolute position (inputs since the start) of the journal's front.
+    base_pos: u64,
+    /// Absolute position of the first input whose flags are not final yet.
+    final_pos: u64,
+    /// The inputs from `base_pos` on, in arrival order, with the flags in force.
     journal: Ring<Input>,
+    /// Copies of the settled navigator not yet final, oldest first.
+    checkpoints: Vec<Checkpoint>,
+    /// Storage of the copies, allocated up front.
+    pool: Vec<Navigator>,
+    /// Slots of `pool` not in use.
+    free: Vec<usize>,
     /// The navigator replaying the journal after a change of the flags in force, from the
-    /// lagging navigator's state, a bounded number of inputs per call.
+    /// base's state, a bounded number of inputs per call.
     redo: Navigator,
-    /// How many of the journal's inputs (from its oldest) `redo` has taken; `None` when no
-    /// replay is under way.
-    redo_pos: Option<usize>,
-    /// Samples the lagging navigator took with their rest flag withdrawn.
+    /// Absolute position of the next input `redo` takes; `None` when no replay is under way.
+    redo_pos: Option<u64>,
+    /// Samples that became final with their rest flag withdrawn.
     withdrawn: u64,
     /// Start of the current run of IMU motion flags, ns.
     motion_since_ns: u64,
@@ -288,6 +323,28 @@ struct Hindsight {
 }
 
 impl Hindsight {
+    /// Hindsight of `lag_s` and `confirm_s` for `cfg`, its storage allocated here.
+    fn new(cfg: OdometryConfig, hints: HintConfig, lag_s: f64, confirm_s: f64) -> Self {
+        let window = ((2.0 * lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize;
+        let copies = window.div_ceil(CHECKPOINT_EVERY) + 4;
+        Self {
+            lag_ns: (lag_s * 1e9).round() as u64,
+            confirm_ns: (confirm_s * 1e9).round() as u64,
+            base: Navigator::new(cfg, hints),
+            base_pos: 0,
+            final_pos: 0,
+            journal: Ring::new(window + 2 * CHECKPOINT_EVERY + hints.capacity + 2),
+            checkpoints: Vec::with_capacity(copies),
+            pool: (0..copies).map(|_| Navigator::new(cfg, hints)).collect(),
+            free: (0..copies).rev().collect(),
+            redo: Navigator::new(cfg, hints),
+            redo_pos: None,
+            withdrawn: 0,
+            motion_since_ns: 0,
+            reinstate_at_ns: None,
+        }
+    }
+
     /// Follows the runs of IMU motion flags (`flipped`: the flag changed at this sample, now
     /// `imu_rest`); whether, at `t_ns`, a short run that ended has been followed by the
     /// hindsight of rest, so that its withdrawals are to be undone.
@@ -308,8 +365,19 @@ impl Hindsight {
         due
     }
 
-    /// Keeps `input`; when the journal is full (a sample rate above `max_rate_hz`), the oldest
-    /// input goes to the lagging navigator early, with its flags as they stand.
+    /// Absolute position after the newest input.
+    fn end_pos(&self) -> u64 {
+        self.base_pos + self.journal.len() as u64
+    }
+
+    /// The input at absolute position `pos`, if the journal holds it.
+    fn at(&self, pos: u64) -> Option<&Input> {
+        self.journal
+            .oldest(pos.checked_sub(self.base_pos)? as usize)
+    }
+
+    /// Keeps `input`; when the journal is full, its oldest input goes to the base navigator
+    /// (above `max_rate_hz`, early, with its flags as they stand).
     fn keep(&mut self, input: Input, emit: &mut impl FnMut(&OdometryState)) {
         if self.journal.is_full() {
             self.pop_front(emit);
@@ -317,24 +385,48 @@ impl Hindsight {
         self.journal.push(input);
     }
 
-    /// Gives the journal's oldest input to the lagging navigator; a replay under way takes it
-    /// first if it has not yet (so that every state it changes is republished).
+    /// Gives the journal's oldest input to the base navigator, making it final if it was not
+    /// (a replay under way takes it first if it has not yet, so that every state it changes is
+    /// republished).
     fn pop_front(&mut self, emit: &mut impl FnMut(&OdometryState)) {
-        if self.redo_pos == Some(0) {
-            self.redo_step(emit);
+        if self.final_pos == self.base_pos {
+            self.finalise_next(emit);
         }
         if let Some(input) = self.journal.pop() {
-            if let Some(p) = self.redo_pos.as_mut() {
-                *p -= 1;
-            }
-            self.take(&input);
+            feed(&mut self.base, &input, &mut |_| {});
+            self.base_pos += 1;
         }
+        while self
+            .checkpoints
+            .first()
+            .is_some_and(|c| c.pos <= self.base_pos)
+        {
+            let c = self.checkpoints.remove(0);
+            self.free.push(c.slot);
+        }
+    }
+
+    /// Makes the input at `final_pos` final: a replay that has not taken it takes it first,
+    /// and a withdrawn rest flag is counted.
+    fn finalise_next(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        let Some(input) = self.at(self.final_pos).copied() else {
+            return;
+        };
+        if self.redo_pos == Some(self.final_pos) {
+            self.redo_step(emit);
+        }
+        if let Input::Sample { s, imu_rest: true } = input
+            && s.flags & corrected_flags::ZERO_STATE == 0
+        {
+            self.withdrawn += 1;
+        }
+        self.final_pos += 1;
     }
 
     /// The replay takes its next journal input, its states republished as `REVISION`.
     fn redo_step(&mut self, emit: &mut impl FnMut(&OdometryState)) {
         let Some(p) = self.redo_pos else { return };
-        let Some(input) = self.journal.oldest(p).copied() else {
+        let Some(input) = self.at(p).copied() else {
             return;
         };
         feed(&mut self.redo, &input, &mut |o| {
@@ -344,13 +436,14 @@ impl Hindsight {
             })
         });
         self.redo_pos = Some(p + 1);
+        self.checkpoint_redo();
     }
 
     /// Advances the replay by at most `*budget` inputs (counted down); whether it has caught
     /// up with the newest input (then `redo` holds the final state and the replay is over).
     fn redo_advance(&mut self, budget: &mut usize, emit: &mut impl FnMut(&OdometryState)) -> bool {
         while let Some(p) = self.redo_pos {
-            if p >= self.journal.len() {
+            if p >= self.end_pos() {
                 self.redo_pos = None;
                 return true;
             }
@@ -363,38 +456,87 @@ impl Hindsight {
         false
     }
 
-    /// Gives the lagging navigator every input up to the last sample whose rest flag is final
-    /// at `t_ns`: a motion starting within the hindsight after it is confirmed or not at the
-    /// latest the confirmation time plus the hindsight after its start.
+    /// Starts a replay of the inputs whose flags are not final, from the state a navigator
+    /// on final flags has before them: the base, taken through the final inputs after it
+    /// (their states unchanged, so not republished).
+    fn start_replay(&mut self) {
+        self.redo.copy_from(&self.base);
+        for pos in self.base_pos..self.final_pos {
+            let input = *self.at(pos).expect("final inputs are journalled");
+            feed(&mut self.redo, &input, &mut |_| {});
+            self.redo_pos = Some(pos + 1);
+            self.checkpoint_redo();
+        }
+        self.redo_pos = Some(self.final_pos);
+    }
+
+    /// Makes final every input up to the last sample whose rest flag is final at `t_ns`: a
+    /// motion starting within the hindsight after it is confirmed or not at the latest the
+    /// confirmation time plus the hindsight after its start. The newest checkpoint whose
+    /// inputs are all final becomes the base.
     fn catch_up(&mut self, t_ns: u64, emit: &mut impl FnMut(&OdometryState)) {
-        while let Some(input) = self.journal.front().copied() {
+        while let Some(input) = self.at(self.final_pos).copied() {
             if let Input::Sample { s, .. } = input
                 && s.stamps.sample_ns + 2 * self.lag_ns + self.confirm_ns > t_ns
             {
                 break;
             }
-            self.pop_front(emit);
+            self.finalise_next(emit);
         }
-    }
-
-    fn take(&mut self, input: &Input) {
-        if let Input::Sample { s, imu_rest } = input
-            && *imu_rest
-            && s.flags & corrected_flags::ZERO_STATE == 0
+        while self
+            .checkpoints
+            .first()
+            .is_some_and(|c| c.pos <= self.final_pos)
         {
-            self.withdrawn += 1;
+            let c = self.checkpoints.remove(0);
+            std::mem::swap(&mut self.base, &mut self.pool[c.slot]);
+            self.free.push(c.slot);
+            while self.base_pos < c.pos {
+                self.journal.pop();
+                self.base_pos += 1;
+            }
         }
-        feed(&mut self.lagged, input, &mut |_| {});
     }
 
-    /// Sets the flag in force of every sample in the journal by the rule (module docs): a
-    /// detector rest flag stands unless a confirmed motion starts within the hindsight after
-    /// it. A run of motion flags is confirmed unless it lasts less than the confirmation time
-    /// and is followed by at least the hindsight of rest flags (so a run still going on, or
-    /// one whose rest after it is younger than the hindsight, counts as confirmed for now).
-    /// Returns whether any flag changed.
-    fn resolve(&mut self) -> bool {
-        let mut changed = false;
+    /// Keeps a copy of `settled`, which has taken every input with the flags in force, if the
+    /// last copy is [`CHECKPOINT_EVERY`] inputs old.
+    fn checkpoint(&mut self, settled: &Navigator) {
+        if let Some(slot) = self.checkpoint_slot(self.end_pos()) {
+            self.pool[slot].copy_from(settled);
+        }
+    }
+
+    /// The same for the replay, which has taken the inputs before `redo_pos` with the flags in
+    /// force: after a change of the flags, the copies it leaves keep the replays that follow
+    /// short.
+    fn checkpoint_redo(&mut self) {
+        let Some(pos) = self.redo_pos else { return };
+        if let Some(slot) = self.checkpoint_slot(pos) {
+            self.pool[slot].copy_from(&self.redo);
+        }
+    }
+
+    /// A free slot for the copy of a navigator that has taken the inputs before `pos`,
+    /// registered, if the newest copy (or the base) is [`CHECKPOINT_EVERY`] inputs older.
+    fn checkpoint_slot(&mut self, pos: u64) -> Option<usize> {
+        let last = self.checkpoints.last().map_or(self.base_pos, |c| c.pos);
+        if pos < last + CHECKPOINT_EVERY as u64 {
+            return None;
+        }
+        let slot = self.free.pop()?;
+        self.checkpoints.push(Checkpoint { pos, slot });
+        Some(slot)
+    }
+
+    /// Sets the flag in force of every sample whose flags are not final by the rule (module
+    /// docs): a detector rest flag stands unless a confirmed motion starts within the
+    /// hindsight after it. A run of motion flags is confirmed unless it lasts less than the
+    /// confirmation time and is followed by at least the hindsight of rest flags (so a run
+    /// still going on, or one whose rest after it is younger than the hindsight, counts as
+    /// confirmed for now). Returns the absolute position of the oldest sample whose flag
+    /// changed, and drops the checkpoints that took it.
+    fn resolve(&mut self) -> Option<u64> {
+        let mut oldest_changed = None;
         // Backwards: the newest sample's time, the start of the nearest later confirmed run
         // and of the nearest later run, the time of the first rest sample after the run being
         // crossed (None: it runs to the newest sample), and whether a run is being crossed.
@@ -404,7 +546,8 @@ impl Hindsight {
         let mut run_end: Option<u64> = None;
         let mut in_run = false;
         let mut run_start = 0u64;
-        for i in (0..self.journal.len()).rev() {
+        let first = (self.final_pos - self.base_pos) as usize;
+        for i in (first..self.journal.len()).rev() {
             let Some(Input::Sample { s, imu_rest }) = self.journal.oldest_mut(i) else {
                 continue;
             };
@@ -434,10 +577,17 @@ impl Hindsight {
             } else {
                 s.flags & !corrected_flags::ZERO_STATE
             };
-            changed |= flags != s.flags;
+            if flags != s.flags {
+                oldest_changed = Some(self.base_pos + i as u64);
+            }
             s.flags = flags;
         }
-        changed
+        let changed = oldest_changed?;
+        while self.checkpoints.last().is_some_and(|c| c.pos > changed) {
+            let c = self.checkpoints.pop().expect("checked");
+            self.free.push(c.slot);
+        }
+        Some(changed)
     }
 }
 
@@ -453,6 +603,11 @@ fn feed(nav: &mut Navigator, input: &Input, emit: &mut impl FnMut(&OdometryState
 /// call of [`OdometryStage::process`] (a replay needs up to `2 rest_hindsight_s +
 /// motion_confirm_s` of inputs, 1 500 at 1 kHz, 6 000 at 4 kHz).
 pub const REPLAY_PER_CALL: usize = 64;
+
+/// Inputs between two copies of the settled navigator kept by the hindsight: a replay first
+/// navigates at most about this many final inputs at once (in the call that starts it), and
+/// each copy costs a navigator's storage in use (its motion history).
+const CHECKPOINT_EVERY: usize = 4 * REPLAY_PER_CALL;
 
 /// Provisional samples the stage holds until their batch is settled: more than the two
 /// batches a calibration stage can leave unsettled (a batch cut by a gap, then a new one).
@@ -503,19 +658,7 @@ impl OdometryStage {
         hints.validate()?;
         let lag_s = cfg.rest_hindsight_s.max(0.0);
         let confirm_s = cfg.motion_confirm_s.max(0.0);
-        let hindsight = (lag_s > 0.0).then(|| Hindsight {
-            lag_ns: (lag_s * 1e9).round() as u64,
-            confirm_ns: (confirm_s * 1e9).round() as u64,
-            lagged: Navigator::new(cfg, hints),
-            redo: Navigator::new(cfg, hints),
-            redo_pos: None,
-            journal: Ring::new(
-                ((2.0 * lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize + hints.capacity + 2,
-            ),
-            withdrawn: 0,
-            motion_since_ns: 0,
-            reinstate_at_ns: None,
-        });
+        let hindsight = (lag_s > 0.0).then(|| Hindsight::new(cfg, hints, lag_s, confirm_s));
         Ok(Self {
             ahead: Navigator::new(cfg, hints),
             settled: Settled {
@@ -569,9 +712,9 @@ impl OdometryStage {
     /// within the hindsight may yet be reinstated).
     pub fn withdrawn_rest_samples(&self) -> u64 {
         self.settled.hindsight.as_ref().map_or(0, |hs| {
-            let pending = (0..hs.journal.len())
-                .filter(|&i| {
-                    matches!(hs.journal.oldest(i), Some(Input::Sample { s, imu_rest: true })
+            let pending = (hs.final_pos..hs.end_pos())
+                .filter(|&pos| {
+                    matches!(hs.at(pos), Some(Input::Sample { s, imu_rest: true })
                         if s.flags & corrected_flags::ZERO_STATE == 0)
                 })
                 .count() as u64;
@@ -722,14 +865,14 @@ impl Settled {
         let reinstate = hs.reinstatement_due(t_ns, imu_rest, flipped);
         hs.keep(Input::Sample { s: *s, imu_rest }, emit);
         hs.catch_up(t_ns, emit);
-        if (imu_transition || reinstate) && hs.resolve() {
-            // Flags in force changed: navigate the journal again from the lagging navigator
+        if (imu_transition || reinstate) && hs.resolve().is_some() {
+            // Flags in force changed: navigate the journal again from the state on final flags
             // (starting over if a replay was under way).
-            hs.redo.copy_from(&hs.lagged);
-            hs.redo_pos = Some(0);
+            hs.start_replay();
         }
         if hs.redo_pos.is_none() {
             self.live.process(s, emit);
+            hs.checkpoint(&self.live);
             return false;
         }
         // While a replay is under way the live navigator runs on the flags it had: its states
