@@ -67,6 +67,12 @@
 //! same inputs, and on the same flags unless they changed, so copies of it are kept every
 //! `CHECKPOINT_EVERY` (256) inputs, and one whose inputs have all become final unchanged stands
 //! for it (a replay first takes it through the final inputs after it, at most a few hundred).
+//! Nor is the settled navigator run while it would repeat the live one (the same inputs in
+//! the same order, every batch settled with its provisional verdict): the live navigator's
+//! states and motion-end revisions are taken for it, and when a batch's verdict changes (or
+//! a hint came while samples were unsettled) its state is rebuilt from the newest copy and the
+//! inputs since, and it runs until the two agree again. Every sample is therefore navigated
+//! about once, but around the changes of the flags.
 //! The replay is spread
 //! over calls, at most [`REPLAY_PER_CALL`] inputs per call, so that no call holds up the
 //! samples behind it for long: meanwhile the live navigator goes on with the flags it had (its
@@ -498,6 +504,22 @@ impl Hindsight {
         }
     }
 
+    /// Makes `nav` the settled navigator as it is after the newest input (no replay under way):
+    /// the newest copy (or the base) taken through the journal's inputs after it.
+    fn rebuild(&self, nav: &mut Navigator) {
+        let (from, pos) = match self.checkpoints.last() {
+            Some(c) => (&self.pool[c.slot], c.pos),
+            None => (&self.base, self.base_pos),
+        };
+        nav.copy_from(from);
+        for p in pos..self.end_pos() {
+            let input = self
+                .at(p)
+                .expect("the journal holds the inputs after its copies");
+            feed(nav, input, &mut |_| {});
+        }
+    }
+
     /// Keeps a copy of `settled`, which has taken every input with the flags in force, if the
     /// last copy is [`CHECKPOINT_EVERY`] inputs old.
     fn checkpoint(&mut self, settled: &Navigator) {
@@ -613,11 +635,16 @@ const CHECKPOINT_EVERY: usize = 4 * REPLAY_PER_CALL;
 /// batches a calibration stage can leave unsettled (a batch cut by a gap, then a new one).
 const UNSETTLED: usize = 64;
 
-/// A provisional sample and the live state emitted for it.
+/// A provisional sample, the live state emitted for it, and what the live navigator did at it
+/// that the settled stage takes over while in step ([`OdometryStage::in_step`]).
 #[derive(Debug, Clone, Copy, Default)]
 struct Unsettled {
     s: CorrectedImuSample,
     state: OdometryState,
+    /// The live navigator's [`Navigator::imu_decided`] after the sample.
+    imu_decided: bool,
+    /// End of the sample's motion-end revisions in [`OdometryStage::revisions`].
+    revisions_end: usize,
 }
 
 /// The odometry state machine (see the module documentation).
@@ -628,6 +655,24 @@ pub struct OdometryStage {
     settled: Settled,
     /// Provisional samples not settled yet, oldest first.
     unsettled: Ring<Unsettled>,
+    /// Whether the settled navigator's state is the live navigator's as it was at the last
+    /// settled input: the live navigator has taken the same inputs in the same order since
+    /// they last agreed, and the settled flags of those settled since were the provisional
+    /// ones. The settled navigator is then not run: a batch settled with its provisional
+    /// flags takes the live navigator's states and motion-end revisions, and the live
+    /// navigator stands for it at the batch's end. Otherwise (a verdict changed, a hint came
+    /// while samples were unsettled, a replay is under way) the settled navigator runs, its
+    /// state first rebuilt from the hindsight's newest copy and journal. Only with hindsight.
+    in_step: bool,
+    /// The live navigator's motion-end revisions of the unsettled samples, in order (while in
+    /// step), allocated up front.
+    revisions: Vec<OdometryState>,
+    /// How many of `revisions` the settled stage has taken.
+    revisions_taken: usize,
+    /// Whether the unsettled samples cannot be settled in step: a hint came while they were
+    /// unsettled (the settled navigator took it before them, the live one after), or
+    /// `revisions` was full.
+    out_of_step: bool,
     last_ns: Option<u64>,
     revisions_emitted: u64,
 }
@@ -640,6 +685,8 @@ struct Settled {
     hindsight: Option<Hindsight>,
     /// The previous sample's IMU zero-state flag.
     imu_rest: bool,
+    /// The settled navigator's [`Navigator::imu_decided`] after the previous sample.
+    imu_decided: bool,
 }
 
 impl OdometryStage {
@@ -659,13 +706,21 @@ impl OdometryStage {
         let lag_s = cfg.rest_hindsight_s.max(0.0);
         let confirm_s = cfg.motion_confirm_s.max(0.0);
         let hindsight = (lag_s > 0.0).then(|| Hindsight::new(cfg, hints, lag_s, confirm_s));
+        // A motion-end revision republishes at most the motion history.
+        let history = (cfg.max_motion_s * cfg.revision_rate_hz).ceil() as usize + 1;
+        let ahead = Navigator::new(cfg, hints);
         Ok(Self {
-            ahead: Navigator::new(cfg, hints),
+            in_step: hindsight.is_some(),
+            revisions: Vec::with_capacity(history + UNSETTLED),
+            revisions_taken: 0,
+            out_of_step: false,
             settled: Settled {
                 live: Navigator::new(cfg, hints),
                 hindsight,
                 imu_rest: false,
+                imu_decided: ahead.imu_decided(),
             },
+            ahead,
             unsettled: Ring::new(UNSETTLED),
             last_ns: None,
             revisions_emitted: 0,
@@ -684,6 +739,7 @@ impl OdometryStage {
         }
         self.settled.live.hint(h);
         self.ahead.hint(h);
+        self.out_of_step |= !self.unsettled.is_empty();
         Ok(())
     }
 
@@ -760,15 +816,31 @@ impl OdometryStage {
         let mut budget = REPLAY_PER_CALL;
         let budget = &mut budget;
         let mut state = OdometryState::default();
-        // Its motion-end revisions come again, on settled flags, from the settled navigator.
+        // Its motion-end revisions come again, on settled flags, from the settled stage: kept
+        // for it while in step.
+        let (in_step, revisions, full) = (self.in_step, &mut self.revisions, &mut self.out_of_step);
         self.ahead.process(s, &mut |o| {
             if o.flags & odometry_flags::REVISION == 0 {
                 state = *o;
+            } else if in_step {
+                if revisions.len() < revisions.capacity() {
+                    revisions.push(*o);
+                } else {
+                    *full = true;
+                }
             }
         });
         emit(&state);
-        let sample = Unsettled { s: *s, state };
+        let sample = Unsettled {
+            s: *s,
+            state,
+            imu_decided: self.ahead.imu_decided(),
+            revisions_end: self.revisions.len(),
+        };
         if s.flags & corrected_flags::PROVISIONAL != 0 {
+            if self.unsettled.is_full() {
+                self.leave_step();
+            }
             if let Some(old) = self.unsettled.push(sample) {
                 // Never settled in time: final as it stands.
                 self.settle(&old, budget, emit);
@@ -777,12 +849,21 @@ impl OdometryStage {
         }
         // Older samples than those `s` settles were cut from their batch: final as they are.
         let settles = (s.settles as usize).min(self.unsettled.len());
+        const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
+        let n = self.unsettled.len();
+        let verdict_changed = (n - settles..n).any(|i| {
+            self.unsettled
+                .oldest(i)
+                .is_some_and(|u| u.s.flags & VERDICT != s.flags & VERDICT)
+        });
+        if verdict_changed || self.out_of_step {
+            self.leave_step();
+        }
         let mut diverged = false;
         while self.unsettled.len() > settles {
             let old = self.unsettled.pop().expect("len > settles");
             diverged |= self.settle(&old, budget, emit);
         }
-        const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
         while let Some(mut u) = self.unsettled.pop() {
             let flags =
                 (u.s.flags & !(VERDICT | corrected_flags::PROVISIONAL)) | (s.flags & VERDICT);
@@ -796,7 +877,44 @@ impl OdometryStage {
         if diverged {
             self.ahead.copy_from(&self.settled.live);
         }
+        self.end_batch(diverged);
         Ok(())
+    }
+
+    /// After a batch has settled (`diverged`: the live navigator took the settled one's
+    /// state): whether the two are in step from here, and the live navigator's state kept as
+    /// a hindsight copy when they are.
+    fn end_batch(&mut self, diverged: bool) {
+        let Some(hs) = self.settled.hindsight.as_mut() else {
+            return;
+        };
+        let replaying = hs.redo_pos.is_some();
+        if self.in_step && replaying {
+            // Until the replay catches up, the settled navigator goes on with the flags it had,
+            // as the live one did: from here it runs itself.
+            self.settled.live.copy_from(&self.ahead);
+            self.in_step = false;
+        } else if diverged && !replaying {
+            self.in_step = true;
+        }
+        if self.in_step {
+            hs.checkpoint(&self.ahead);
+        }
+        self.revisions.clear();
+        self.revisions_taken = 0;
+        self.out_of_step = false;
+    }
+
+    /// Runs the settled navigator itself from here: its state at the last settled input is
+    /// rebuilt from the hindsight's newest copy and the journal's inputs since.
+    fn leave_step(&mut self) {
+        if !self.in_step {
+            return;
+        }
+        self.in_step = false;
+        if let Some(hs) = self.settled.hindsight.as_ref() {
+            hs.rebuild(&mut self.settled.live);
+        }
     }
 
     /// End of the stream: completes a replay under way (see [`REPLAY_PER_CALL`]), so that the
@@ -810,6 +928,7 @@ impl OdometryStage {
             emit(o);
         }) {
             self.ahead.copy_from(&self.settled.live);
+            self.in_step = self.unsettled.is_empty();
         }
     }
 
@@ -823,6 +942,18 @@ impl OdometryStage {
         emit: &mut impl FnMut(&OdometryState),
     ) -> bool {
         let revisions = &mut self.revisions_emitted;
+        if self.in_step {
+            let kept = &self.revisions[self.revisions_taken..u.revisions_end];
+            self.revisions_taken = u.revisions_end;
+            let replayed =
+                self.settled
+                    .process_in_step(&u.s, u.imu_decided, kept, budget, &mut |o| {
+                        *revisions += 1;
+                        emit(o);
+                    });
+            self.in_step = !replayed;
+            return replayed;
+        }
         let mut differs = false;
         let replayed = self.settled.process(&u.s, budget, &mut |o| {
             let o = if o.flags & odometry_flags::REVISION != 0 {
@@ -852,11 +983,23 @@ impl Settled {
         budget: &mut usize,
         emit: &mut impl FnMut(&OdometryState),
     ) -> bool {
+        let replayed = self.navigate(s, budget, emit);
+        self.imu_decided = self.live.imu_decided();
+        replayed
+    }
+
+    /// [`Self::process`] but for following the navigator's rest decision.
+    fn navigate(
+        &mut self,
+        s: &CorrectedImuSample,
+        budget: &mut usize,
+        emit: &mut impl FnMut(&OdometryState),
+    ) -> bool {
         let t_ns = s.stamps.sample_ns;
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
         let flipped = imu_rest != self.imu_rest;
         // Rest decided by a fresh hint is not the detector's to withdraw.
-        let imu_transition = flipped && self.live.imu_decided();
+        let imu_transition = flipped && self.imu_decided;
         self.imu_rest = imu_rest;
         let Some(hs) = self.hindsight.as_mut() else {
             self.live.process(s, emit);
@@ -889,6 +1032,50 @@ impl Settled {
         false
     }
 
+    /// Takes one (checked) sample with settled flags in step with the live navigator (see
+    /// [`OdometryStage::in_step`]): the hindsight's bookkeeping as [`Self::process`], but the
+    /// navigator's states are the live one's (`imu_decided` after it, and its motion-end
+    /// revisions `kept`), emitted as the settled navigator would have. Returns whether a
+    /// replay caught up (the settled navigator then holds its state and runs itself).
+    fn process_in_step(
+        &mut self,
+        s: &CorrectedImuSample,
+        imu_decided: bool,
+        kept: &[OdometryState],
+        budget: &mut usize,
+        emit: &mut impl FnMut(&OdometryState),
+    ) -> bool {
+        let t_ns = s.stamps.sample_ns;
+        let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
+        let flipped = imu_rest != self.imu_rest;
+        let imu_transition = flipped && self.imu_decided;
+        self.imu_rest = imu_rest;
+        self.imu_decided = imu_decided;
+        let hs = self
+            .hindsight
+            .as_mut()
+            .expect("in step only with hindsight");
+        let reinstate = hs.reinstatement_due(t_ns, imu_rest, flipped);
+        hs.keep(Input::Sample { s: *s, imu_rest }, emit);
+        hs.catch_up(t_ns, emit);
+        if (imu_transition || reinstate) && hs.resolve().is_some() {
+            hs.start_replay();
+        }
+        if hs.redo_pos.is_none() {
+            for o in kept {
+                emit(o);
+            }
+            return false;
+        }
+        // The state is the one emitted live; the revisions are not republished meanwhile.
+        if hs.redo_advance(budget, emit) {
+            self.live.copy_from(&hs.redo);
+            self.imu_decided = self.live.imu_decided();
+            return true;
+        }
+        false
+    }
+
     /// Completes a replay under way; whether there was one.
     fn finish(&mut self, emit: &mut impl FnMut(&OdometryState)) -> bool {
         let Some(hs) = self.hindsight.as_mut() else {
@@ -899,6 +1086,7 @@ impl Settled {
             return false;
         }
         self.live.copy_from(&hs.redo);
+        self.imu_decided = self.live.imu_decided();
         true
     }
 }
