@@ -63,7 +63,7 @@
 //! the state a navigator fed only final flags had `2 rest_hindsight_s + motion_confirm_s`
 //! before (as long as flags can change), the inputs since (kept, in arrival order, in a ring
 //! allocated up front), so the output is what one pass with the final flags gives. That
-//! state is not kept by a third navigator lagging behind: the settled navigator takes the
+//! state needs no navigator of its own lagging behind: the settled navigator takes the
 //! same inputs, and on the same flags unless they changed, so copies of it are kept every
 //! `CHECKPOINT_EVERY` (256) inputs, and one whose inputs have all become final unchanged stands
 //! for it (a replay first takes it through the final inputs after it, at most a few hundred).
@@ -288,13 +288,13 @@ struct Checkpoint {
 /// change) and a navigator state from before them to navigate them again from.
 ///
 /// That state, the base, is what a navigator that took every input with its final flags had
-/// at the journal's front. The settled navigator itself takes every input, on the flags in
-/// force when it takes it; most of the time they stay so. So instead of running a third
-/// navigator behind it on final flags, copies of the settled navigator are kept every
-/// [`CHECKPOINT_EVERY`] inputs: a copy whose inputs have all become final with no flag
-/// changed since it was taken is exactly that lagging navigator, and becomes the base; a
-/// change of the flags drops the copies that took a changed input. The base is only fed
-/// inputs itself when the journal is full (no copy became final in time).
+/// at the journal's front. The settled navigator takes every input, on the flags in force
+/// when it takes it (or the live navigator does in its stead, `OdometryStage::in_step`); most
+/// of the time they stay so. So copies of it are kept every [`CHECKPOINT_EVERY`] inputs: a
+/// copy whose inputs have all become final with no flag changed since it was taken holds
+/// what a navigator on final flags would, and becomes the base; a change of the flags drops
+/// the copies that took a changed input. The base is only fed inputs itself when the journal
+/// is full (no copy became final in time).
 struct Hindsight {
     /// [`OdometryConfig::rest_hindsight_s`], ns.
     lag_ns: u64,
