@@ -1,8 +1,8 @@
 //! The navigator: the odometry stage's filter-driving state machine for one stream of inputs
 //! (alignment, prediction, rest and hint updates, motion-interval revisions). The public
 //! [`crate::stage::OdometryStage`] validates the inputs and runs two navigators, one on the
-//! newest inputs and one lagging behind by the rest hindsight; this module holds what each of
-//! them does. The module documentation of [`crate::stage`] describes the behaviour.
+//! newest inputs and one on settled flags (and replays on final flags); this module holds what
+//! each of them does. The module documentation of [`crate::stage`] describes the behaviour.
 
 use crate::eskf::{ConsiderModel, Eskf, Imu, KS, align};
 use crate::hints::{

@@ -59,10 +59,21 @@
 //! verdict changed (the start and end of a rest, 20 samples at most) ran on the previous one.
 //!
 //! For that the stage runs two navigators (module `navigator`): one on every input, whose
-//! states it emits, and one lagging `2 rest_hindsight_s + motion_confirm_s` behind on inputs
-//! whose flags are final. A change of the flags in force copies the lagging one into the live
-//! one and replays the inputs in between (kept, in arrival order, in a ring allocated up
-//! front), so the output is what one pass with the final flags gives. The replay is spread
+//! states it emits, and the settled one. A change of the flags in force navigates again, from
+//! the state a navigator fed only final flags had `2 rest_hindsight_s + motion_confirm_s`
+//! before (as long as flags can change), the inputs since (kept, in arrival order, in a ring
+//! allocated up front), so the output is what one pass with the final flags gives. That
+//! state needs no navigator of its own lagging behind: the settled navigator takes the
+//! same inputs, and on the same flags unless they changed, so copies of it are kept every
+//! `CHECKPOINT_EVERY` (256) inputs, and one whose inputs have all become final unchanged stands
+//! for it (a replay first takes it through the final inputs after it, at most a few hundred).
+//! Nor is the settled navigator run while it would repeat the live one (the same inputs in
+//! the same order, every batch settled with its provisional verdict): the live navigator's
+//! states and motion-end revisions are taken for it, and when a batch's verdict changes (or
+//! a hint came while samples were unsettled) its state is rebuilt from the newest copy and the
+//! inputs since, and it runs until the two agree again. Every sample is therefore navigated
+//! about once, but around the changes of the flags.
+//! The replay is spread
 //! over calls, at most [`REPLAY_PER_CALL`] inputs per call, so that no call holds up the
 //! samples behind it for long: meanwhile the live navigator goes on with the flags it had (its
 //! states are republished by the replay), and when the replay has caught up it takes the
@@ -244,7 +255,7 @@ pub enum OdometryError {
     },
 }
 
-/// One input of the stage, kept in arrival order until the lagging navigator has taken it.
+/// One input of the stage, kept in arrival order while a replay may need it.
 #[derive(Debug, Clone, Copy)]
 enum Input {
     /// A sample whose `ZERO_STATE` flag is the one in force (the detector's, or cleared when
@@ -263,22 +274,52 @@ impl Default for Input {
     }
 }
 
-/// The navigator that lags behind by as long as flags can change (twice the hindsight plus the
-/// confirmation time), and the inputs it has not taken yet.
+/// A copy of the settled navigator taken after it had taken the journal's inputs up to an
+/// absolute position, with the flags then in force.
+#[derive(Debug, Clone, Copy)]
+struct Checkpoint {
+    /// Inputs the copy has taken since the start.
+    pos: u64,
+    /// Its navigator in [`Hindsight::pool`].
+    slot: usize,
+}
+
+/// The inputs of the last `2 rest_hindsight_s + motion_confirm_s` (as long as flags can
+/// change) and a navigator state from before them to navigate them again from.
+///
+/// That state, the base, is what a navigator that took every input with its final flags had
+/// at the journal's front. The settled navigator takes every input, on the flags in force
+/// when it takes it (or the live navigator does in its stead, `OdometryStage::in_step`); most
+/// of the time they stay so. So copies of it are kept every [`CHECKPOINT_EVERY`] inputs: a
+/// copy whose inputs have all become final with no flag changed since it was taken holds
+/// what a navigator on final flags would, and becomes the base; a change of the flags drops
+/// the copies that took a changed input. The base is only fed inputs itself when the journal
+/// is full (no copy became final in time).
 struct Hindsight {
     /// [`OdometryConfig::rest_hindsight_s`], ns.
     lag_ns: u64,
     /// [`OdometryConfig::motion_confirm_s`], ns.
     confirm_ns: u64,
-    lagged: Navigator,
+    /// The navigator state after the inputs before the journal's front, on final flags.
+    base: Navigator,
+    /// Absolute position (inputs since the start) of the journal's front.
+    base_pos: u64,
+    /// Absolute position of the first input whose flags are not final yet.
+    final_pos: u64,
+    /// The inputs from `base_pos` on, in arrival order, with the flags in force.
     journal: Ring<Input>,
+    /// Copies of the settled navigator not yet final, oldest first.
+    checkpoints: Vec<Checkpoint>,
+    /// Storage of the copies, allocated up front.
+    pool: Vec<Navigator>,
+    /// Slots of `pool` not in use.
+    free: Vec<usize>,
     /// The navigator replaying the journal after a change of the flags in force, from the
-    /// lagging navigator's state, a bounded number of inputs per call.
+    /// base's state, a bounded number of inputs per call.
     redo: Navigator,
-    /// How many of the journal's inputs (from its oldest) `redo` has taken; `None` when no
-    /// replay is under way.
-    redo_pos: Option<usize>,
-    /// Samples the lagging navigator took with their rest flag withdrawn.
+    /// Absolute position of the next input `redo` takes; `None` when no replay is under way.
+    redo_pos: Option<u64>,
+    /// Samples that became final with their rest flag withdrawn.
     withdrawn: u64,
     /// Start of the current run of IMU motion flags, ns.
     motion_since_ns: u64,
@@ -288,6 +329,28 @@ struct Hindsight {
 }
 
 impl Hindsight {
+    /// Hindsight of `lag_s` and `confirm_s` for `cfg`, its storage allocated here.
+    fn new(cfg: OdometryConfig, hints: HintConfig, lag_s: f64, confirm_s: f64) -> Self {
+        let window = ((2.0 * lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize;
+        let copies = window.div_ceil(CHECKPOINT_EVERY) + 4;
+        Self {
+            lag_ns: (lag_s * 1e9).round() as u64,
+            confirm_ns: (confirm_s * 1e9).round() as u64,
+            base: Navigator::new(cfg, hints),
+            base_pos: 0,
+            final_pos: 0,
+            journal: Ring::new(window + 2 * CHECKPOINT_EVERY + hints.capacity + 2),
+            checkpoints: Vec::with_capacity(copies),
+            pool: (0..copies).map(|_| Navigator::new(cfg, hints)).collect(),
+            free: (0..copies).rev().collect(),
+            redo: Navigator::new(cfg, hints),
+            redo_pos: None,
+            withdrawn: 0,
+            motion_since_ns: 0,
+            reinstate_at_ns: None,
+        }
+    }
+
     /// Follows the runs of IMU motion flags (`flipped`: the flag changed at this sample, now
     /// `imu_rest`); whether, at `t_ns`, a short run that ended has been followed by the
     /// hindsight of rest, so that its withdrawals are to be undone.
@@ -308,8 +371,19 @@ impl Hindsight {
         due
     }
 
-    /// Keeps `input`; when the journal is full (a sample rate above `max_rate_hz`), the oldest
-    /// input goes to the lagging navigator early, with its flags as they stand.
+    /// Absolute position after the newest input.
+    fn end_pos(&self) -> u64 {
+        self.base_pos + self.journal.len() as u64
+    }
+
+    /// The input at absolute position `pos`, if the journal holds it.
+    fn at(&self, pos: u64) -> Option<&Input> {
+        self.journal
+            .oldest(pos.checked_sub(self.base_pos)? as usize)
+    }
+
+    /// Keeps `input`; when the journal is full, its oldest input goes to the base navigator
+    /// (above `max_rate_hz`, early, with its flags as they stand).
     fn keep(&mut self, input: Input, emit: &mut impl FnMut(&OdometryState)) {
         if self.journal.is_full() {
             self.pop_front(emit);
@@ -317,24 +391,48 @@ impl Hindsight {
         self.journal.push(input);
     }
 
-    /// Gives the journal's oldest input to the lagging navigator; a replay under way takes it
-    /// first if it has not yet (so that every state it changes is republished).
+    /// Gives the journal's oldest input to the base navigator, making it final if it was not
+    /// (a replay under way takes it first if it has not yet, so that every state it changes is
+    /// republished).
     fn pop_front(&mut self, emit: &mut impl FnMut(&OdometryState)) {
-        if self.redo_pos == Some(0) {
-            self.redo_step(emit);
+        if self.final_pos == self.base_pos {
+            self.finalise_next(emit);
         }
         if let Some(input) = self.journal.pop() {
-            if let Some(p) = self.redo_pos.as_mut() {
-                *p -= 1;
-            }
-            self.take(&input);
+            feed(&mut self.base, &input, &mut |_| {});
+            self.base_pos += 1;
         }
+        while self
+            .checkpoints
+            .first()
+            .is_some_and(|c| c.pos <= self.base_pos)
+        {
+            let c = self.checkpoints.remove(0);
+            self.free.push(c.slot);
+        }
+    }
+
+    /// Makes the input at `final_pos` final: a replay that has not taken it takes it first,
+    /// and a withdrawn rest flag is counted.
+    fn finalise_next(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        let Some(input) = self.at(self.final_pos).copied() else {
+            return;
+        };
+        if self.redo_pos == Some(self.final_pos) {
+            self.redo_step(emit);
+        }
+        if let Input::Sample { s, imu_rest: true } = input
+            && s.flags & corrected_flags::ZERO_STATE == 0
+        {
+            self.withdrawn += 1;
+        }
+        self.final_pos += 1;
     }
 
     /// The replay takes its next journal input, its states republished as `REVISION`.
     fn redo_step(&mut self, emit: &mut impl FnMut(&OdometryState)) {
         let Some(p) = self.redo_pos else { return };
-        let Some(input) = self.journal.oldest(p).copied() else {
+        let Some(input) = self.at(p).copied() else {
             return;
         };
         feed(&mut self.redo, &input, &mut |o| {
@@ -344,13 +442,14 @@ impl Hindsight {
             })
         });
         self.redo_pos = Some(p + 1);
+        self.checkpoint_redo();
     }
 
     /// Advances the replay by at most `*budget` inputs (counted down); whether it has caught
     /// up with the newest input (then `redo` holds the final state and the replay is over).
     fn redo_advance(&mut self, budget: &mut usize, emit: &mut impl FnMut(&OdometryState)) -> bool {
         while let Some(p) = self.redo_pos {
-            if p >= self.journal.len() {
+            if p >= self.end_pos() {
                 self.redo_pos = None;
                 return true;
             }
@@ -363,38 +462,103 @@ impl Hindsight {
         false
     }
 
-    /// Gives the lagging navigator every input up to the last sample whose rest flag is final
-    /// at `t_ns`: a motion starting within the hindsight after it is confirmed or not at the
-    /// latest the confirmation time plus the hindsight after its start.
+    /// Starts a replay of the inputs whose flags are not final, from the state a navigator
+    /// on final flags has before them: the base, taken through the final inputs after it
+    /// (their states unchanged, so not republished).
+    fn start_replay(&mut self) {
+        self.redo.copy_from(&self.base);
+        for pos in self.base_pos..self.final_pos {
+            let input = *self.at(pos).expect("final inputs are journalled");
+            feed(&mut self.redo, &input, &mut |_| {});
+            self.redo_pos = Some(pos + 1);
+            self.checkpoint_redo();
+        }
+        self.redo_pos = Some(self.final_pos);
+    }
+
+    /// Makes final every input up to the last sample whose rest flag is final at `t_ns`: a
+    /// motion starting within the hindsight after it is confirmed or not at the latest the
+    /// confirmation time plus the hindsight after its start. The newest checkpoint whose
+    /// inputs are all final becomes the base.
     fn catch_up(&mut self, t_ns: u64, emit: &mut impl FnMut(&OdometryState)) {
-        while let Some(input) = self.journal.front().copied() {
+        while let Some(input) = self.at(self.final_pos).copied() {
             if let Input::Sample { s, .. } = input
                 && s.stamps.sample_ns + 2 * self.lag_ns + self.confirm_ns > t_ns
             {
                 break;
             }
-            self.pop_front(emit);
+            self.finalise_next(emit);
         }
-    }
-
-    fn take(&mut self, input: &Input) {
-        if let Input::Sample { s, imu_rest } = input
-            && *imu_rest
-            && s.flags & corrected_flags::ZERO_STATE == 0
+        while self
+            .checkpoints
+            .first()
+            .is_some_and(|c| c.pos <= self.final_pos)
         {
-            self.withdrawn += 1;
+            let c = self.checkpoints.remove(0);
+            std::mem::swap(&mut self.base, &mut self.pool[c.slot]);
+            self.free.push(c.slot);
+            while self.base_pos < c.pos {
+                self.journal.pop();
+                self.base_pos += 1;
+            }
         }
-        feed(&mut self.lagged, input, &mut |_| {});
     }
 
-    /// Sets the flag in force of every sample in the journal by the rule (module docs): a
-    /// detector rest flag stands unless a confirmed motion starts within the hindsight after
-    /// it. A run of motion flags is confirmed unless it lasts less than the confirmation time
-    /// and is followed by at least the hindsight of rest flags (so a run still going on, or
-    /// one whose rest after it is younger than the hindsight, counts as confirmed for now).
-    /// Returns whether any flag changed.
-    fn resolve(&mut self) -> bool {
-        let mut changed = false;
+    /// Makes `nav` the settled navigator as it is after the newest input (no replay under way):
+    /// the newest copy (or the base) taken through the journal's inputs after it.
+    fn rebuild(&self, nav: &mut Navigator) {
+        let (from, pos) = match self.checkpoints.last() {
+            Some(c) => (&self.pool[c.slot], c.pos),
+            None => (&self.base, self.base_pos),
+        };
+        nav.copy_from(from);
+        for p in pos..self.end_pos() {
+            let input = self
+                .at(p)
+                .expect("the journal holds the inputs after its copies");
+            feed(nav, input, &mut |_| {});
+        }
+    }
+
+    /// Keeps a copy of `settled`, which has taken every input with the flags in force, if the
+    /// last copy is [`CHECKPOINT_EVERY`] inputs old.
+    fn checkpoint(&mut self, settled: &Navigator) {
+        if let Some(slot) = self.checkpoint_slot(self.end_pos()) {
+            self.pool[slot].copy_from(settled);
+        }
+    }
+
+    /// The same for the replay, which has taken the inputs before `redo_pos` with the flags in
+    /// force: after a change of the flags, the copies it leaves keep the replays that follow
+    /// short.
+    fn checkpoint_redo(&mut self) {
+        let Some(pos) = self.redo_pos else { return };
+        if let Some(slot) = self.checkpoint_slot(pos) {
+            self.pool[slot].copy_from(&self.redo);
+        }
+    }
+
+    /// A free slot for the copy of a navigator that has taken the inputs before `pos`,
+    /// registered, if the newest copy (or the base) is [`CHECKPOINT_EVERY`] inputs older.
+    fn checkpoint_slot(&mut self, pos: u64) -> Option<usize> {
+        let last = self.checkpoints.last().map_or(self.base_pos, |c| c.pos);
+        if pos < last + CHECKPOINT_EVERY as u64 {
+            return None;
+        }
+        let slot = self.free.pop()?;
+        self.checkpoints.push(Checkpoint { pos, slot });
+        Some(slot)
+    }
+
+    /// Sets the flag in force of every sample whose flags are not final by the rule (module
+    /// docs): a detector rest flag stands unless a confirmed motion starts within the
+    /// hindsight after it. A run of motion flags is confirmed unless it lasts less than the
+    /// confirmation time and is followed by at least the hindsight of rest flags (so a run
+    /// still going on, or one whose rest after it is younger than the hindsight, counts as
+    /// confirmed for now). Returns the absolute position of the oldest sample whose flag
+    /// changed, and drops the checkpoints that took it.
+    fn resolve(&mut self) -> Option<u64> {
+        let mut oldest_changed = None;
         // Backwards: the newest sample's time, the start of the nearest later confirmed run
         // and of the nearest later run, the time of the first rest sample after the run being
         // crossed (None: it runs to the newest sample), and whether a run is being crossed.
@@ -404,7 +568,8 @@ impl Hindsight {
         let mut run_end: Option<u64> = None;
         let mut in_run = false;
         let mut run_start = 0u64;
-        for i in (0..self.journal.len()).rev() {
+        let first = (self.final_pos - self.base_pos) as usize;
+        for i in (first..self.journal.len()).rev() {
             let Some(Input::Sample { s, imu_rest }) = self.journal.oldest_mut(i) else {
                 continue;
             };
@@ -434,10 +599,17 @@ impl Hindsight {
             } else {
                 s.flags & !corrected_flags::ZERO_STATE
             };
-            changed |= flags != s.flags;
+            if flags != s.flags {
+                oldest_changed = Some(self.base_pos + i as u64);
+            }
             s.flags = flags;
         }
-        changed
+        let changed = oldest_changed?;
+        while self.checkpoints.last().is_some_and(|c| c.pos > changed) {
+            let c = self.checkpoints.pop().expect("checked");
+            self.free.push(c.slot);
+        }
+        Some(changed)
     }
 }
 
@@ -454,15 +626,25 @@ fn feed(nav: &mut Navigator, input: &Input, emit: &mut impl FnMut(&OdometryState
 /// motion_confirm_s` of inputs, 1 500 at 1 kHz, 6 000 at 4 kHz).
 pub const REPLAY_PER_CALL: usize = 64;
 
+/// Inputs between two copies of the settled navigator kept by the hindsight: a replay first
+/// navigates at most about this many final inputs at once (in the call that starts it), and
+/// each copy costs a navigator's storage in use (its motion history).
+const CHECKPOINT_EVERY: usize = 4 * REPLAY_PER_CALL;
+
 /// Provisional samples the stage holds until their batch is settled: more than the two
 /// batches a calibration stage can leave unsettled (a batch cut by a gap, then a new one).
 const UNSETTLED: usize = 64;
 
-/// A provisional sample and the live state emitted for it.
+/// A provisional sample, the live state emitted for it, and what the live navigator did at it
+/// that the settled stage takes over while in step ([`OdometryStage::in_step`]).
 #[derive(Debug, Clone, Copy, Default)]
 struct Unsettled {
     s: CorrectedImuSample,
     state: OdometryState,
+    /// The live navigator's [`Navigator::imu_decided`] after the sample.
+    imu_decided: bool,
+    /// End of the sample's motion-end revisions in [`OdometryStage::revisions`].
+    revisions_end: usize,
 }
 
 /// The odometry state machine (see the module documentation).
@@ -473,6 +655,24 @@ pub struct OdometryStage {
     settled: Settled,
     /// Provisional samples not settled yet, oldest first.
     unsettled: Ring<Unsettled>,
+    /// Whether the settled navigator's state is the live navigator's as it was at the last
+    /// settled input: the live navigator has taken the same inputs in the same order since
+    /// they last agreed, and the settled flags of those settled since were the provisional
+    /// ones. The settled navigator is then not run: a batch settled with its provisional
+    /// flags takes the live navigator's states and motion-end revisions, and the live
+    /// navigator stands for it at the batch's end. Otherwise (a verdict changed, a hint came
+    /// while samples were unsettled, a replay is under way) the settled navigator runs, its
+    /// state first rebuilt from the hindsight's newest copy and journal. Only with hindsight.
+    in_step: bool,
+    /// The live navigator's motion-end revisions of the unsettled samples, in order (while in
+    /// step), allocated up front.
+    revisions: Vec<OdometryState>,
+    /// How many of `revisions` the settled stage has taken.
+    revisions_taken: usize,
+    /// Whether the unsettled samples cannot be settled in step: a hint came while they were
+    /// unsettled (the settled navigator took it before them, the live one after), or
+    /// `revisions` was full.
+    out_of_step: bool,
     last_ns: Option<u64>,
     revisions_emitted: u64,
 }
@@ -485,6 +685,8 @@ struct Settled {
     hindsight: Option<Hindsight>,
     /// The previous sample's IMU zero-state flag.
     imu_rest: bool,
+    /// The settled navigator's [`Navigator::imu_decided`] after the previous sample.
+    imu_decided: bool,
 }
 
 impl OdometryStage {
@@ -503,26 +705,22 @@ impl OdometryStage {
         hints.validate()?;
         let lag_s = cfg.rest_hindsight_s.max(0.0);
         let confirm_s = cfg.motion_confirm_s.max(0.0);
-        let hindsight = (lag_s > 0.0).then(|| Hindsight {
-            lag_ns: (lag_s * 1e9).round() as u64,
-            confirm_ns: (confirm_s * 1e9).round() as u64,
-            lagged: Navigator::new(cfg, hints),
-            redo: Navigator::new(cfg, hints),
-            redo_pos: None,
-            journal: Ring::new(
-                ((2.0 * lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize + hints.capacity + 2,
-            ),
-            withdrawn: 0,
-            motion_since_ns: 0,
-            reinstate_at_ns: None,
-        });
+        let hindsight = (lag_s > 0.0).then(|| Hindsight::new(cfg, hints, lag_s, confirm_s));
+        // A motion-end revision republishes at most the motion history.
+        let history = (cfg.max_motion_s * cfg.revision_rate_hz).ceil() as usize + 1;
+        let ahead = Navigator::new(cfg, hints);
         Ok(Self {
-            ahead: Navigator::new(cfg, hints),
+            in_step: hindsight.is_some(),
+            revisions: Vec::with_capacity(history + UNSETTLED),
+            revisions_taken: 0,
+            out_of_step: false,
             settled: Settled {
                 live: Navigator::new(cfg, hints),
                 hindsight,
                 imu_rest: false,
+                imu_decided: ahead.imu_decided(),
             },
+            ahead,
             unsettled: Ring::new(UNSETTLED),
             last_ns: None,
             revisions_emitted: 0,
@@ -541,6 +739,7 @@ impl OdometryStage {
         }
         self.settled.live.hint(h);
         self.ahead.hint(h);
+        self.out_of_step |= !self.unsettled.is_empty();
         Ok(())
     }
 
@@ -569,9 +768,9 @@ impl OdometryStage {
     /// within the hindsight may yet be reinstated).
     pub fn withdrawn_rest_samples(&self) -> u64 {
         self.settled.hindsight.as_ref().map_or(0, |hs| {
-            let pending = (0..hs.journal.len())
-                .filter(|&i| {
-                    matches!(hs.journal.oldest(i), Some(Input::Sample { s, imu_rest: true })
+            let pending = (hs.final_pos..hs.end_pos())
+                .filter(|&pos| {
+                    matches!(hs.at(pos), Some(Input::Sample { s, imu_rest: true })
                         if s.flags & corrected_flags::ZERO_STATE == 0)
                 })
                 .count() as u64;
@@ -617,15 +816,31 @@ impl OdometryStage {
         let mut budget = REPLAY_PER_CALL;
         let budget = &mut budget;
         let mut state = OdometryState::default();
-        // Its motion-end revisions come again, on settled flags, from the settled navigator.
+        // Its motion-end revisions come again, on settled flags, from the settled stage: kept
+        // for it while in step.
+        let (in_step, revisions, full) = (self.in_step, &mut self.revisions, &mut self.out_of_step);
         self.ahead.process(s, &mut |o| {
             if o.flags & odometry_flags::REVISION == 0 {
                 state = *o;
+            } else if in_step {
+                if revisions.len() < revisions.capacity() {
+                    revisions.push(*o);
+                } else {
+                    *full = true;
+                }
             }
         });
         emit(&state);
-        let sample = Unsettled { s: *s, state };
+        let sample = Unsettled {
+            s: *s,
+            state,
+            imu_decided: self.ahead.imu_decided(),
+            revisions_end: self.revisions.len(),
+        };
         if s.flags & corrected_flags::PROVISIONAL != 0 {
+            if self.unsettled.is_full() {
+                self.leave_step();
+            }
             if let Some(old) = self.unsettled.push(sample) {
                 // Never settled in time: final as it stands.
                 self.settle(&old, budget, emit);
@@ -634,12 +849,21 @@ impl OdometryStage {
         }
         // Older samples than those `s` settles were cut from their batch: final as they are.
         let settles = (s.settles as usize).min(self.unsettled.len());
+        const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
+        let n = self.unsettled.len();
+        let verdict_changed = (n - settles..n).any(|i| {
+            self.unsettled
+                .oldest(i)
+                .is_some_and(|u| u.s.flags & VERDICT != s.flags & VERDICT)
+        });
+        if verdict_changed || self.out_of_step {
+            self.leave_step();
+        }
         let mut diverged = false;
         while self.unsettled.len() > settles {
             let old = self.unsettled.pop().expect("len > settles");
             diverged |= self.settle(&old, budget, emit);
         }
-        const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
         while let Some(mut u) = self.unsettled.pop() {
             let flags =
                 (u.s.flags & !(VERDICT | corrected_flags::PROVISIONAL)) | (s.flags & VERDICT);
@@ -653,7 +877,44 @@ impl OdometryStage {
         if diverged {
             self.ahead.copy_from(&self.settled.live);
         }
+        self.end_batch(diverged);
         Ok(())
+    }
+
+    /// After a batch has settled (`diverged`: the live navigator took the settled one's
+    /// state): whether the two are in step from here, and the live navigator's state kept as
+    /// a hindsight copy when they are.
+    fn end_batch(&mut self, diverged: bool) {
+        let Some(hs) = self.settled.hindsight.as_mut() else {
+            return;
+        };
+        let replaying = hs.redo_pos.is_some();
+        if self.in_step && replaying {
+            // Until the replay catches up, the settled navigator goes on with the flags it had,
+            // as the live one did: from here it runs itself.
+            self.settled.live.copy_from(&self.ahead);
+            self.in_step = false;
+        } else if diverged && !replaying {
+            self.in_step = true;
+        }
+        if self.in_step {
+            hs.checkpoint(&self.ahead);
+        }
+        self.revisions.clear();
+        self.revisions_taken = 0;
+        self.out_of_step = false;
+    }
+
+    /// Runs the settled navigator itself from here: its state at the last settled input is
+    /// rebuilt from the hindsight's newest copy and the journal's inputs since.
+    fn leave_step(&mut self) {
+        if !self.in_step {
+            return;
+        }
+        self.in_step = false;
+        if let Some(hs) = self.settled.hindsight.as_ref() {
+            hs.rebuild(&mut self.settled.live);
+        }
     }
 
     /// End of the stream: completes a replay under way (see [`REPLAY_PER_CALL`]), so that the
@@ -667,6 +928,7 @@ impl OdometryStage {
             emit(o);
         }) {
             self.ahead.copy_from(&self.settled.live);
+            self.in_step = self.unsettled.is_empty();
         }
     }
 
@@ -680,6 +942,18 @@ impl OdometryStage {
         emit: &mut impl FnMut(&OdometryState),
     ) -> bool {
         let revisions = &mut self.revisions_emitted;
+        if self.in_step {
+            let kept = &self.revisions[self.revisions_taken..u.revisions_end];
+            self.revisions_taken = u.revisions_end;
+            let replayed =
+                self.settled
+                    .process_in_step(&u.s, u.imu_decided, kept, budget, &mut |o| {
+                        *revisions += 1;
+                        emit(o);
+                    });
+            self.in_step = !replayed;
+            return replayed;
+        }
         let mut differs = false;
         let replayed = self.settled.process(&u.s, budget, &mut |o| {
             let o = if o.flags & odometry_flags::REVISION != 0 {
@@ -709,11 +983,23 @@ impl Settled {
         budget: &mut usize,
         emit: &mut impl FnMut(&OdometryState),
     ) -> bool {
+        let replayed = self.navigate(s, budget, emit);
+        self.imu_decided = self.live.imu_decided();
+        replayed
+    }
+
+    /// [`Self::process`] but for following the navigator's rest decision.
+    fn navigate(
+        &mut self,
+        s: &CorrectedImuSample,
+        budget: &mut usize,
+        emit: &mut impl FnMut(&OdometryState),
+    ) -> bool {
         let t_ns = s.stamps.sample_ns;
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
         let flipped = imu_rest != self.imu_rest;
         // Rest decided by a fresh hint is not the detector's to withdraw.
-        let imu_transition = flipped && self.live.imu_decided();
+        let imu_transition = flipped && self.imu_decided;
         self.imu_rest = imu_rest;
         let Some(hs) = self.hindsight.as_mut() else {
             self.live.process(s, emit);
@@ -722,14 +1008,14 @@ impl Settled {
         let reinstate = hs.reinstatement_due(t_ns, imu_rest, flipped);
         hs.keep(Input::Sample { s: *s, imu_rest }, emit);
         hs.catch_up(t_ns, emit);
-        if (imu_transition || reinstate) && hs.resolve() {
-            // Flags in force changed: navigate the journal again from the lagging navigator
+        if (imu_transition || reinstate) && hs.resolve().is_some() {
+            // Flags in force changed: navigate the journal again from the state on final flags
             // (starting over if a replay was under way).
-            hs.redo.copy_from(&hs.lagged);
-            hs.redo_pos = Some(0);
+            hs.start_replay();
         }
         if hs.redo_pos.is_none() {
             self.live.process(s, emit);
+            hs.checkpoint(&self.live);
             return false;
         }
         // While a replay is under way the live navigator runs on the flags it had: its states
@@ -746,6 +1032,50 @@ impl Settled {
         false
     }
 
+    /// Takes one (checked) sample with settled flags in step with the live navigator (see
+    /// [`OdometryStage::in_step`]): the hindsight's bookkeeping as [`Self::process`], but the
+    /// navigator's states are the live one's (`imu_decided` after it, and its motion-end
+    /// revisions `kept`), emitted as the settled navigator would have. Returns whether a
+    /// replay caught up (the settled navigator then holds its state and runs itself).
+    fn process_in_step(
+        &mut self,
+        s: &CorrectedImuSample,
+        imu_decided: bool,
+        kept: &[OdometryState],
+        budget: &mut usize,
+        emit: &mut impl FnMut(&OdometryState),
+    ) -> bool {
+        let t_ns = s.stamps.sample_ns;
+        let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
+        let flipped = imu_rest != self.imu_rest;
+        let imu_transition = flipped && self.imu_decided;
+        self.imu_rest = imu_rest;
+        self.imu_decided = imu_decided;
+        let hs = self
+            .hindsight
+            .as_mut()
+            .expect("in step only with hindsight");
+        let reinstate = hs.reinstatement_due(t_ns, imu_rest, flipped);
+        hs.keep(Input::Sample { s: *s, imu_rest }, emit);
+        hs.catch_up(t_ns, emit);
+        if (imu_transition || reinstate) && hs.resolve().is_some() {
+            hs.start_replay();
+        }
+        if hs.redo_pos.is_none() {
+            for o in kept {
+                emit(o);
+            }
+            return false;
+        }
+        // The state is the one emitted live; the revisions are not republished meanwhile.
+        if hs.redo_advance(budget, emit) {
+            self.live.copy_from(&hs.redo);
+            self.imu_decided = self.live.imu_decided();
+            return true;
+        }
+        false
+    }
+
     /// Completes a replay under way; whether there was one.
     fn finish(&mut self, emit: &mut impl FnMut(&OdometryState)) -> bool {
         let Some(hs) = self.hindsight.as_mut() else {
@@ -756,6 +1086,7 @@ impl Settled {
             return false;
         }
         self.live.copy_from(&hs.redo);
+        self.imu_decided = self.live.imu_decided();
         true
     }
 }
