@@ -89,15 +89,7 @@ impl NoiseLevel {
     /// How much more the mean of `len` successive samples scatters than for white noise
     /// (variance ratio): `1 + 2 sum_k (1 - k / len) rho(k)`, at least `1 / len`.
     pub fn mean_variance_factor(&self, len: usize) -> f64 {
-        let n = len as f64;
-        let sum: f64 = self
-            .autocorrelation
-            .iter()
-            .take(len.saturating_sub(1))
-            .enumerate()
-            .map(|(i, r)| (1.0 - (i + 1) as f64 / n) * r)
-            .sum();
-        (1.0 + 2.0 * sum).max(1.0 / n)
+        (1.0 + 2.0 * self.triangle_sum(len, |w, r| w * r)).max(1.0 / len as f64)
     }
 
     /// Effective degrees of freedom of the sample variance of `len` successive samples:
@@ -105,14 +97,18 @@ impl NoiseLevel {
     /// Gaussian series), `len - 1` for white noise.
     pub fn variance_dof(&self, len: usize) -> f64 {
         let n = len as f64;
-        let sum: f64 = self
-            .autocorrelation
+        ((n - 1.0) / (1.0 + 2.0 * self.triangle_sum(len, |w, r| w * r * r))).max(1.0)
+    }
+
+    /// `sum_k term(1 - k / len, rho(k))` over the lags `k` of a window of `len` samples.
+    fn triangle_sum(&self, len: usize, term: impl Fn(f64, f64) -> f64) -> f64 {
+        let n = len as f64;
+        self.autocorrelation
             .iter()
             .take(len.saturating_sub(1))
             .enumerate()
-            .map(|(i, r)| (1.0 - (i + 1) as f64 / n) * r * r)
-            .sum();
-        ((n - 1.0) / (1.0 + 2.0 * sum)).max(1.0)
+            .map(|(i, &r)| term(1.0 - (i + 1) as f64 / n, r))
+            .sum()
     }
 }
 

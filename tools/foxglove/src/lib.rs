@@ -135,17 +135,17 @@ impl View {
         self.json.clear();
         serde_json::to_writer(&mut self.json, s)?;
         self.state.log_with_meta(&self.json, meta);
+        let pose = pose_of(s);
         let stamped = PoseInFrame {
             timestamp: Some(self.clock.timestamp(t_ns)),
             frame_id: NAV_FRAME.into(),
-            pose: Some(pose_of(s)),
+            pose: Some(pose),
         };
         if s.flags & odometry_flags::REVISION != 0 {
             self.revised.log_with_meta(&stamped, meta);
             return Ok(());
         }
         self.pose.log_with_meta(&stamped, meta);
-        let pose = pose_of(s);
         self.tf.log_with_meta(
             &FrameTransform {
                 timestamp: stamped.timestamp,
