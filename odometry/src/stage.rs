@@ -462,6 +462,28 @@ impl Hindsight {
         false
     }
 
+    /// Journals one sample with settled flags (`flipped`: its IMU rest flag differs from the
+    /// previous one; `imu_transition`: and the detector, not a hint, decided that one) and
+    /// starts a replay when the flags in force changed.
+    fn journal(
+        &mut self,
+        s: &CorrectedImuSample,
+        imu_rest: bool,
+        flipped: bool,
+        imu_transition: bool,
+        emit: &mut impl FnMut(&OdometryState),
+    ) {
+        let t_ns = s.stamps.sample_ns;
+        let reinstate = self.reinstatement_due(t_ns, imu_rest, flipped);
+        self.keep(Input::Sample { s: *s, imu_rest }, emit);
+        self.catch_up(t_ns, emit);
+        if (imu_transition || reinstate) && self.resolve().is_some() {
+            // Flags in force changed: navigate the journal again from the state on final
+            // flags (starting over if a replay was under way).
+            self.start_replay();
+        }
+    }
+
     /// Starts a replay of the inputs whose flags are not final, from the state a navigator
     /// on final flags has before them: the base, taken through the final inputs after it
     /// (their states unchanged, so not republished).
@@ -988,6 +1010,16 @@ impl Settled {
         replayed
     }
 
+    /// The sample's IMU rest flag, whether it differs from the previous sample's, and whether
+    /// that change is a transition the detector decided (rest decided by a fresh hint is not
+    /// the detector's to withdraw); keeps the flag for the next sample.
+    fn take_flag(&mut self, s: &CorrectedImuSample) -> (bool, bool, bool) {
+        let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
+        let flipped = imu_rest != self.imu_rest;
+        self.imu_rest = imu_rest;
+        (imu_rest, flipped, flipped && self.imu_decided)
+    }
+
     /// [`Self::process`] but for following the navigator's rest decision.
     fn navigate(
         &mut self,
@@ -995,24 +1027,12 @@ impl Settled {
         budget: &mut usize,
         emit: &mut impl FnMut(&OdometryState),
     ) -> bool {
-        let t_ns = s.stamps.sample_ns;
-        let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
-        let flipped = imu_rest != self.imu_rest;
-        // Rest decided by a fresh hint is not the detector's to withdraw.
-        let imu_transition = flipped && self.imu_decided;
-        self.imu_rest = imu_rest;
+        let (imu_rest, flipped, imu_transition) = self.take_flag(s);
         let Some(hs) = self.hindsight.as_mut() else {
             self.live.process(s, emit);
             return false;
         };
-        let reinstate = hs.reinstatement_due(t_ns, imu_rest, flipped);
-        hs.keep(Input::Sample { s: *s, imu_rest }, emit);
-        hs.catch_up(t_ns, emit);
-        if (imu_transition || reinstate) && hs.resolve().is_some() {
-            // Flags in force changed: navigate the journal again from the state on final flags
-            // (starting over if a replay was under way).
-            hs.start_replay();
-        }
+        hs.journal(s, imu_rest, flipped, imu_transition, emit);
         if hs.redo_pos.is_none() {
             self.live.process(s, emit);
             hs.checkpoint(&self.live);
@@ -1045,22 +1065,13 @@ impl Settled {
         budget: &mut usize,
         emit: &mut impl FnMut(&OdometryState),
     ) -> bool {
-        let t_ns = s.stamps.sample_ns;
-        let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
-        let flipped = imu_rest != self.imu_rest;
-        let imu_transition = flipped && self.imu_decided;
-        self.imu_rest = imu_rest;
+        let (imu_rest, flipped, imu_transition) = self.take_flag(s);
         self.imu_decided = imu_decided;
         let hs = self
             .hindsight
             .as_mut()
             .expect("in step only with hindsight");
-        let reinstate = hs.reinstatement_due(t_ns, imu_rest, flipped);
-        hs.keep(Input::Sample { s: *s, imu_rest }, emit);
-        hs.catch_up(t_ns, emit);
-        if (imu_transition || reinstate) && hs.resolve().is_some() {
-            hs.start_replay();
-        }
+        hs.journal(s, imu_rest, flipped, imu_transition, emit);
         if hs.redo_pos.is_none() {
             for o in kept {
                 emit(o);
