@@ -266,9 +266,13 @@ fn cpu_s(pid: u32) -> Result<f64> {
     // Fields after the command name (which may hold spaces): state is field 3, utime 14.
     let rest = &stat[stat.rfind(')').context("malformed /proc stat")? + 2..];
     let f: Vec<&str> = rest.split_whitespace().collect();
+    Ok((f[11].parse::<f64>()? + f[12].parse::<f64>()?) / ticks_per_s())
+}
+
+/// `/proc`'s clock ticks (USER_HZ) per second.
+fn ticks_per_s() -> f64 {
     // SAFETY: sysconf has no preconditions.
-    let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
-    Ok((f[11].parse::<f64>()? + f[12].parse::<f64>()?) / tick)
+    unsafe { libc::sysconf(libc::_SC_CLK_TCK) as f64 }
 }
 
 /// Per-hop and end-to-end latency of the pipeline, its rate at the subscriber, and its
@@ -287,6 +291,60 @@ struct PipelineRun {
     cpu: Vec<(String, f64)>,
     /// Length of the CPU measurement (the replay), s.
     cpu_span_s: f64,
+    /// Timed states above `TAIL_NS` end to end (all counted, the first `MAX_TAILS` kept).
+    tails: Tails,
+    /// Time each vCPU was stolen by the hypervisor over the replay, ms (`/proc/stat`).
+    steal_ms: Vec<f64>,
+    /// When the first and the last live state arrived, `CLOCK_MONOTONIC` ns.
+    window_ns: [u64; 2],
+    /// Process ids of the replay, the calibration and odometry stages and the subscriber.
+    pids: [u32; 4],
+}
+
+/// End-to-end latency above which a state is listed with its stamps, ns.
+const TAIL_NS: u64 = 1_000_000;
+/// States listed per run.
+const MAX_TAILS: usize = 200;
+
+/// The timed states above `TAIL_NS`: their publish time (`CLOCK_MONOTONIC`, to match against
+/// `perf sched record -k CLOCK_MONOTONIC`) and per-hop latencies, ns.
+struct Tails {
+    count: u64,
+    kept: Vec<(u64, [u64; 4])>,
+}
+
+impl Tails {
+    fn with_capacity() -> Self {
+        Self {
+            count: 0,
+            kept: Vec::with_capacity(MAX_TAILS),
+        }
+    }
+
+    fn note(&mut self, acquired_ns: u64, hops: [u64; 4]) {
+        self.count += 1;
+        if self.kept.len() < MAX_TAILS {
+            self.kept.push((acquired_ns, hops));
+        }
+    }
+}
+
+/// Each vCPU's steal time so far, ms (the 8th value of `/proc/stat`'s `cpuN` lines, in
+/// USER_HZ ticks, proc(5)).
+fn steal_ms() -> Result<Vec<f64>> {
+    let stat = std::fs::read_to_string("/proc/stat")?;
+    let tick_ms = 1000.0 / ticks_per_s();
+    stat.lines()
+        .filter(|l| l.starts_with("cpu") && !l.starts_with("cpu "))
+        .map(|l| {
+            let ticks: f64 = l
+                .split_whitespace()
+                .nth(8)
+                .context("/proc/stat: a cpu line without a steal field")?
+                .parse()?;
+            Ok(ticks * tick_ms)
+        })
+        .collect()
 }
 
 /// The stages' options for a drive at `rate_hz`: the 4 kHz MPU-9250 has no gyroscope.
@@ -363,14 +421,16 @@ fn pipeline(
         .map(|(_, c)| cpu_s(c.id()))
         .chain([cpu_s(replay_pid)])
         .collect::<Result<_>>()?;
+    let steal0 = steal_ms()?;
     let t0 = Instant::now();
     let replay_out = std::thread::spawn(move || replay.wait_with_output());
+    let mut tails = Tails::with_capacity();
 
     let mut hops = [histogram(), histogram(), histogram(), histogram()];
     let (mut first, mut last, mut states) = (None, 0u64, 0u64);
     let (mut rest, mut moving, mut untimed) = (0u64, 0u64, 0u64);
     let mut idle_since = Instant::now();
-    let mut cpu1: Option<(Vec<f64>, f64)> = None;
+    let mut cpu1: Option<(Vec<f64>, f64, Vec<f64>)> = None;
     // The replay's CPU time, read while it runs (its /proc entry goes when it is reaped).
     let mut replay_cpu = (cpu0[2], Instant::now());
     wake::serve_loop(&[listener], Duration::from_millis(20), || -> Result<_> {
@@ -396,13 +456,17 @@ fn pipeline(
                 moving += 1;
             }
             let st = s.stamps;
-            for (h, ns) in hops.iter_mut().zip([
+            let hop_ns = [
                 st.calibrated_ns.saturating_sub(st.acquired_ns),
                 st.odometry_ns.saturating_sub(st.calibrated_ns),
                 now.saturating_sub(st.odometry_ns),
                 now.saturating_sub(st.acquired_ns),
-            ]) {
+            ];
+            for (h, ns) in hops.iter_mut().zip(hop_ns) {
                 h.record(ns.max(1))?;
+            }
+            if hop_ns[3] > TAIL_NS {
+                tails.note(st.acquired_ns, hop_ns);
             }
         }
         if !replay_out.is_finished()
@@ -417,7 +481,7 @@ fn pipeline(
                 .map(|(_, c)| cpu_s(c.id()))
                 .collect::<Result<_>>()?;
             now.push(replay_cpu.0);
-            cpu1 = Some((now, t0.elapsed().as_secs_f64()));
+            cpu1 = Some((now, t0.elapsed().as_secs_f64(), steal_ms()?));
         }
         let done = replay_out.is_finished() && idle_since.elapsed() > Duration::from_millis(1500);
         Ok(if done {
@@ -427,7 +491,7 @@ fn pipeline(
         })
     })?;
     let out = replay_out.join().expect("replay waiter")?;
-    let (cpu1, span) = cpu1.context("the replay did not finish")?;
+    let (cpu1, span, steal1) = cpu1.context("the replay did not finish")?;
     for (_, stage) in &mut stages {
         // SAFETY: kill(2) on our own child; no memory is involved.
         unsafe { libc::kill(stage.id() as i32, libc::SIGTERM) };
@@ -436,6 +500,12 @@ fn pipeline(
     if !out.status.success() {
         bail!("mems-replay failed: {}", out.status);
     }
+    let pids = [
+        replay_pid,
+        stages[1].1.id(),
+        stages[0].1.id(),
+        std::process::id(),
+    ];
     let names = ["mems-odometry", "mems-calibrate", "mems-replay"];
     let cpu = names
         .iter()
@@ -457,6 +527,10 @@ fn pipeline(
         replay_line: String::from_utf8_lossy(&out.stdout).trim().to_owned(),
         cpu,
         cpu_span_s: span,
+        tails,
+        steal_ms: steal1.iter().zip(&steal0).map(|(b, a)| b - a).collect(),
+        window_ns: [first.unwrap_or(0), last],
+        pids,
     })
 }
 
@@ -524,11 +598,52 @@ fn print_pipeline(title: &str, run: &PipelineRun) {
         .iter()
         .map(|(n, p)| format!("{n} {p:.1}%"))
         .collect();
+    let steal: Vec<String> = run.steal_ms.iter().map(|s| format!("{s:.0}")).collect();
     println!(
-        "\nCPU over the {:.0} s replay (% of one core): {}\n",
+        "\nLive states arrived from CLOCK_MONOTONIC {} to {} ns (pids: replay {}, calibrate {}, \
+         odometry {}, subscriber {}). CPU over the {:.0} s replay (% of one core): {}; vCPU time \
+         stolen by the hypervisor over it (ms per vCPU): {}\n",
+        run.window_ns[0],
+        run.window_ns[1],
+        run.pids[0],
+        run.pids[1],
+        run.pids[2],
+        run.pids[3],
         run.cpu_span_s,
-        cpu.join(", ")
+        cpu.join(", "),
+        steal.join(", ")
     );
+    print_tails(&run.tails);
+}
+
+/// Lists the states above `TAIL_NS` end to end with their publish time, to be matched
+/// against a scheduler trace taken with the same clock.
+fn print_tails(tails: &Tails) {
+    let over = format!(
+        "{} timed states above {} ms end to end",
+        tails.count,
+        TAIL_NS / 1_000_000
+    );
+    if tails.kept.is_empty() {
+        println!("{over}\n");
+        return;
+    }
+    println!(
+        "{over}; the first {} (publish time CLOCK_MONOTONIC ns; hops in us):\n",
+        tails.kept.len()
+    );
+    println!(
+        "| published ns | replay -> calibrate | calibrate -> odometry | odometry -> subscriber | end to end |"
+    );
+    println!("| --- | --- | --- | --- | --- |");
+    for (t, h) in &tails.kept {
+        let us = h.map(|ns| ns as f64 / 1000.0);
+        println!(
+            "| {t} | {:.1} | {:.1} | {:.1} | {:.1} |",
+            us[0], us[1], us[2], us[3]
+        );
+    }
+    println!();
 }
 
 fn cpu_json(cpu: &[(String, f64)]) -> Value {
@@ -657,6 +772,7 @@ fn main() -> Result<()> {
     put("pipeline_p99_us", json!(p99));
     put("pipeline_p999_us", json!(p999));
     put("pipeline_max_us", json!(max));
+    put("pipeline_states_over_1ms", json!(p.tails.count));
     put(
         "pipeline_hop_p99_us",
         json!(
@@ -749,6 +865,7 @@ fn main() -> Result<()> {
     put("pinned_pipeline_p99_us", json!(pp99));
     put("pinned_pipeline_p999_us", json!(pp999));
     put("pinned_pipeline_max_us", json!(ppmax));
+    put("pinned_pipeline_states_over_1ms", json!(pp.tails.count));
     cpu.insert("1kHz_pinned".into(), cpu_json(&pp.cpu));
     put("cpu_percent_per_process", Value::Object(cpu));
     let ratio = p99 / chain3[1];
