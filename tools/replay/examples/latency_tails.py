@@ -76,12 +76,8 @@ def runs_of(md):
 class Trace:
     """The events of one perf.data, indexed per CPU."""
 
-    def __init__(self, data):
-        out = subprocess.run(
-            ["perf", "script", "-i", data, "-F", "cpu,time,event,trace", "--ns",
-             "--show-lost-events"],
-            capture_output=True, text=True, check=True,
-        ).stdout
+    def __init__(self, out):
+        """Indexes `perf script -F cpu,time,event,trace --ns --show-lost-events` output."""
         line_re = re.compile(r"\s*\[(\d+)\]\s+([\d.]+):\s+(\S+?):?(?:\s+(.*))?$")
         self.lost = collections.defaultdict(list)  # cpu -> times of PERF_RECORD_LOST
         self.any = collections.defaultdict(list)  # cpu -> event times
@@ -200,11 +196,16 @@ def classify(tr, pids, published, hops):
     return f"{receiver}: other{note}", s - w
 
 
-def main():
-    if len(sys.argv) != 3:
-        sys.exit("usage: latency_tails.py RUN.md TRACE.data")
-    runs = runs_of(sys.argv[1])
-    tr = Trace(sys.argv[2])
+def perf_script(data):
+    """The events of a perf.data file as `Trace` reads them."""
+    return subprocess.run(
+        ["perf", "script", "-i", data, "-F", "cpu,time,event,trace", "--ns", "--show-lost-events"],
+        capture_output=True, text=True, check=True,
+    ).stdout
+
+
+def report(runs, tr):
+    """Prints the classes of each run's tails and our long on-CPU slices."""
     for title, (w0, w1), pids, tails in runs:
         waits = collections.defaultdict(list)
         for t, h in tails:
@@ -226,6 +227,67 @@ def main():
         for (comm, how), v in sorted(slices.items()):
             v.sort()
             print(f"  {len(v):5d}  {v[len(v) // 2]:9.2f}  {v[-1]:6.2f}  {comm}: {how}")
+
+
+def self_test():
+    """Each class on a hand-made trace of one hop (replay pid 10 on CPU 0 -> calibrate pid 11,
+    subscriber pid 13): times in us from 1 s."""
+
+    def ev(cpu, us, what):
+        return f"[{cpu:03d}] {1 + us * 1e-6:.9f}: {what}"
+
+    def switch(cpu, us, prev, prev_pid, nxt, pid):
+        return ev(cpu, us, f"sched:sched_switch: prev_comm={prev} prev_pid={prev_pid} "
+                  f"prev_prio=120 prev_state=S ==> next_comm={nxt} next_pid={pid} next_prio=49")
+
+    def waking(cpu, us, pid, prio, target):
+        return ev(cpu, us, f"sched:sched_waking: comm=x pid={pid} prio={prio} target_cpu={target:03d}")
+
+    ipi = "irq_vectors:reschedule_entry: vector=253"
+    tick = "irq_vectors:local_timer_entry: vector=236"
+    pids = {"replay": 10, "calibrate": 11, "odometry": 12, "subscriber": 13}
+    # The sample is published at 1000 us; calibrate stamps it on receipt, 2000 us later.
+    hops = [2000.0, 10.0, 10.0, 2020.0]
+    cases = {
+        # The IPI comes at once, the linker keeps CPU 1 for 2 ms (kernel code).
+        "not preempted, ld in the kernel": [
+            switch(1, 0, "swapper/1", 0, "ld", 50), waking(0, 1005, 11, 49, 1),
+            ev(1, 1010, ipi), ev(1, 2000, tick), switch(1, 3000, "ld", 50, "mems-calibrate", 11)],
+        # CPU 1 takes nothing for 2 ms: its IPI comes with the switch.
+        "its vCPU took no interrupt": [
+            switch(1, 0, "swapper/1", 0, "ld", 50), waking(0, 1005, 11, 49, 1),
+            ev(1, 2990, ipi), switch(1, 3000, "ld", 50, "mems-calibrate", 11)],
+        # A SCHED_OTHER calibrate waits for CFS to finish the compiler's turn.
+        "CFS ran rustc first": [
+            switch(1, 0, "swapper/1", 0, "rustc", 50), waking(0, 1005, 11, 120, 1),
+            ev(1, 2000, tick), switch(1, 3000, "rustc", 50, "mems-calibrate", 11)],
+        # The replay wakes calibrate 1.9 ms after stamping the sample.
+        "sender held up": [
+            switch(1, 0, "swapper/1", 0, "mems-calibrate", 11), ev(0, 1500, tick),
+            waking(0, 2900, 11, 49, 1), ev(1, 2905, ipi),
+            switch(1, 2910, "swapper/1", 0, "mems-calibrate", 11)],
+    }
+    for want, lines in cases.items():
+        tr = Trace("\n".join(lines))
+        label, _ = classify(tr, pids, 1_001_000_000, hops)
+        assert label == f"calibrate: {want}", (want, label)
+    md = ("## Pipeline\n\nLive states arrived from CLOCK_MONOTONIC 1 to 2 ns (pids: replay 10, "
+          "calibrate 11, odometry 12, subscriber 13). CPU ...\n\n| 1001000000 | 2000.0 | 10.0 | 10.0 "
+          "| 2020.0 |\n")
+    import tempfile
+    with tempfile.NamedTemporaryFile("w", suffix=".md") as f:
+        f.write(md)
+        f.flush()
+        assert runs_of(f.name) == [("Pipeline", [1, 2], pids, [(1001000000, hops)])]
+    print("latency_tails self-test: ok")
+
+
+def main():
+    if sys.argv[1:] == ["--self-test"]:
+        return self_test()
+    if len(sys.argv) != 3:
+        sys.exit("usage: latency_tails.py RUN.md TRACE.data | --self-test")
+    report(runs_of(sys.argv[1]), Trace(perf_script(sys.argv[2])))
 
 
 if __name__ == "__main__":
