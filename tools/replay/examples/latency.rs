@@ -27,7 +27,7 @@
 //! With `--json` the last line is a JSON object of the headline figures. Every time is
 //! `CLOCK_MONOTONIC` on one machine, so differences between processes are valid.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -275,28 +275,18 @@ fn ticks_per_s() -> f64 {
     unsafe { libc::sysconf(libc::_SC_CLK_TCK) as f64 }
 }
 
-/// Per-hop and end-to-end latency of the pipeline, its rate at the subscriber, and its
-/// processes' CPU use.
+/// One pipeline run: what its subscriber measured, its rate, and its processes' CPU use.
 struct PipelineRun {
-    hops: [Histogram<u64>; 4],
-    /// Live states timed: aligned and at rest, aligned and moving.
-    rest: u64,
-    moving: u64,
-    /// States not timed (before alignment, or NO_GYRO).
-    untimed: u64,
-    states: u64,
+    timing: Timing,
+    /// Live states per second at the subscriber.
     rate_hz: f64,
     replay_line: String,
     /// Percent of one core per process over the replay.
     cpu: Vec<(String, f64)>,
     /// Length of the CPU measurement (the replay), s.
     cpu_span_s: f64,
-    /// Timed states above `TAIL_NS` end to end (all counted, the first `MAX_TAILS` kept).
-    tails: Tails,
     /// Time each vCPU was stolen by the hypervisor over the replay, ms (`/proc/stat`).
     steal_ms: Vec<f64>,
-    /// When the first and the last live state arrived, `CLOCK_MONOTONIC` ns.
-    window_ns: [u64; 2],
     /// Process ids of the replay, the calibration and odometry stages and the subscriber.
     pids: [u32; 4],
 }
@@ -356,6 +346,116 @@ fn stage_args(rate_hz: u64) -> Vec<&'static str> {
     }
 }
 
+/// What the subscriber measured over the live (non-revision) states: per-hop latency and the
+/// counts.
+struct Timing {
+    hops: [Histogram<u64>; 4],
+    /// When the first and the last live state arrived, `CLOCK_MONOTONIC` ns.
+    first: Option<u64>,
+    last: u64,
+    states: u64,
+    rest: u64,
+    moving: u64,
+    untimed: u64,
+    tails: Tails,
+}
+
+impl Timing {
+    fn new() -> Self {
+        Self {
+            hops: [histogram(), histogram(), histogram(), histogram()],
+            first: None,
+            last: 0,
+            states: 0,
+            rest: 0,
+            moving: 0,
+            untimed: 0,
+            tails: Tails::with_capacity(),
+        }
+    }
+
+    /// Takes a state received at `now` (ns). Only aligned states are timed unless `all`.
+    fn take(&mut self, s: &OdometryState, now: u64, all: bool) -> Result<()> {
+        if s.flags & odometry_flags::REVISION != 0 {
+            return Ok(());
+        }
+        self.first.get_or_insert(now);
+        self.last = now;
+        self.states += 1;
+        if s.flags & odometry_flags::ALIGNED == 0 && !all {
+            self.untimed += 1;
+            return Ok(());
+        }
+        if s.flags & odometry_flags::ZERO_VELOCITY != 0 {
+            self.rest += 1;
+        } else {
+            self.moving += 1;
+        }
+        let st = s.stamps;
+        let hop_ns = [
+            st.calibrated_ns.saturating_sub(st.acquired_ns),
+            st.odometry_ns.saturating_sub(st.calibrated_ns),
+            now.saturating_sub(st.odometry_ns),
+            now.saturating_sub(st.acquired_ns),
+        ];
+        for (h, ns) in self.hops.iter_mut().zip(hop_ns) {
+            h.record(ns.max(1))?;
+        }
+        if hop_ns[3] > TAIL_NS {
+            self.tails.note(st.acquired_ns, hop_ns);
+        }
+        Ok(())
+    }
+}
+
+/// Starts the odometry and calibration stages (in that order) in namespace `ns`, then, once
+/// they are up, the replay of `recording` (`--speed 1`, or `--max`), pinned if asked.
+fn start(
+    bins: &Path,
+    ns: &str,
+    recording: &Path,
+    calib: &Path,
+    rate_hz: u64,
+    max: bool,
+    pinned: bool,
+) -> Result<(Vec<(&'static str, Child)>, Child)> {
+    let rt_stage = pinned.then_some((1, 50));
+    let calib = calib.to_str().context("calibration path is not UTF-8")?;
+    let spawn = |name: &str, args: &[&str], rt| -> Result<Child> {
+        command(bins, name, rt)
+            .args(args)
+            .args(["--namespace", ns])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .with_context(|| format!("cannot start {name}"))
+    };
+    let mut calibrate_args = vec!["serve", "--calib", calib, "--learn-s", LEARN_S];
+    calibrate_args.extend(stage_args(rate_hz));
+    let stages = vec![
+        (
+            "mems-odometry",
+            spawn("mems-odometry", &["serve", "--calib", calib], rt_stage)?,
+        ),
+        (
+            "mems-calibrate",
+            spawn("mems-calibrate", &calibrate_args, rt_stage)?,
+        ),
+    ];
+    std::thread::sleep(Duration::from_millis(1500));
+    let recording = recording.to_str().context("recording path is not UTF-8")?;
+    let pace: &[&str] = if max { &["--max"] } else { &["--speed", "1"] };
+    let replay = command(bins, "mems-replay", pinned.then_some((0, 40)))
+        .arg(recording)
+        .args(pace)
+        .args(["--wait-subscribers", "1", "--namespace", ns])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .context("cannot start mems-replay")?;
+    Ok((stages, replay))
+}
+
 /// Replays `recording` (`--speed 1` or `--max`) through calibrate and odometry processes and
 /// measures at this process's odometry subscriber.
 fn pipeline(
@@ -370,51 +470,12 @@ fn pipeline(
         "latency-pipe-{}-{rate_hz}-{max}-{pinned}",
         std::process::id()
     );
-    let rt_stage = pinned.then_some((1, 50));
-    let rt_replay = pinned.then_some((0, 40));
     let node = service::node()?;
     let name = service::full_name(&ns, service::ODOMETRY);
     let svc = service::open::<OdometryState>(&node, &name)?;
     let sub = service::subscriber(&svc)?;
     let listener = wake::listener(&node, &name, WaitMode::Event)?;
-    let calib = calib.to_str().context("calibration path is not UTF-8")?;
-    let spawn = |name: &str, args: &[&str], rt| -> Result<Child> {
-        command(bins, name, rt)
-            .args(args)
-            .args(["--namespace", &ns])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .with_context(|| format!("cannot start {name}"))
-    };
-    let mut calibrate_args = vec!["serve", "--calib", calib, "--learn-s", LEARN_S];
-    calibrate_args.extend(stage_args(rate_hz));
-    let mut stages = vec![
-        (
-            "mems-odometry",
-            spawn("mems-odometry", &["serve", "--calib", calib], rt_stage)?,
-        ),
-        (
-            "mems-calibrate",
-            spawn("mems-calibrate", &calibrate_args, rt_stage)?,
-        ),
-    ];
-    std::thread::sleep(Duration::from_millis(1500));
-    let pace = if max { "--max" } else { "--speed" };
-    let mut replay_args = vec![
-        recording.to_str().context("recording path is not UTF-8")?,
-        pace,
-    ];
-    if !max {
-        replay_args.push("1");
-    }
-    replay_args.extend(["--wait-subscribers", "1", "--namespace", &ns]);
-    let replay = command(bins, "mems-replay", rt_replay)
-        .args(&replay_args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .context("cannot start mems-replay")?;
+    let (mut stages, replay) = start(bins, &ns, recording, calib, rate_hz, max, pinned)?;
     let replay_pid = replay.id();
     let cpu0: Vec<f64> = stages
         .iter()
@@ -424,11 +485,7 @@ fn pipeline(
     let steal0 = steal_ms()?;
     let t0 = Instant::now();
     let replay_out = std::thread::spawn(move || replay.wait_with_output());
-    let mut tails = Tails::with_capacity();
-
-    let mut hops = [histogram(), histogram(), histogram(), histogram()];
-    let (mut first, mut last, mut states) = (None, 0u64, 0u64);
-    let (mut rest, mut moving, mut untimed) = (0u64, 0u64, 0u64);
+    let mut timing = Timing::new();
     let mut idle_since = Instant::now();
     let mut cpu1: Option<(Vec<f64>, f64, Vec<f64>)> = None;
     // The replay's CPU time, read while it runs (its /proc entry goes when it is reaped).
@@ -437,37 +494,8 @@ fn pipeline(
         let mut any = false;
         while let Some(s) = sub.receive()? {
             any = true;
-            let now = monotonic_ns();
             idle_since = Instant::now();
-            if s.flags & odometry_flags::REVISION != 0 {
-                continue;
-            }
-            first.get_or_insert(now);
-            last = now;
-            states += 1;
-            let aligned = s.flags & odometry_flags::ALIGNED != 0;
-            if !aligned && !max {
-                untimed += 1;
-                continue;
-            }
-            if s.flags & odometry_flags::ZERO_VELOCITY != 0 {
-                rest += 1;
-            } else {
-                moving += 1;
-            }
-            let st = s.stamps;
-            let hop_ns = [
-                st.calibrated_ns.saturating_sub(st.acquired_ns),
-                st.odometry_ns.saturating_sub(st.calibrated_ns),
-                now.saturating_sub(st.odometry_ns),
-                now.saturating_sub(st.acquired_ns),
-            ];
-            for (h, ns) in hops.iter_mut().zip(hop_ns) {
-                h.record(ns.max(1))?;
-            }
-            if hop_ns[3] > TAIL_NS {
-                tails.note(st.acquired_ns, hop_ns);
-            }
+            timing.take(&s, monotonic_ns(), max)?;
         }
         if !replay_out.is_finished()
             && replay_cpu.1.elapsed() > Duration::from_millis(100)
@@ -512,24 +540,20 @@ fn pipeline(
         .zip(cpu0.iter().zip(&cpu1))
         .map(|(n, (a, b))| (n.to_string(), 100.0 * (b - a) / span))
         .collect();
-    let span_s = first.map_or(0.0, |f| (last - f) as f64 * 1e-9);
+    let span_s = timing
+        .first
+        .map_or(0.0, |f| (timing.last - f) as f64 * 1e-9);
     Ok(PipelineRun {
-        hops,
-        rest,
-        moving,
-        untimed,
-        states,
         rate_hz: if span_s > 0.0 {
-            (states - 1) as f64 / span_s
+            (timing.states - 1) as f64 / span_s
         } else {
             0.0
         },
+        timing,
         replay_line: String::from_utf8_lossy(&out.stdout).trim().to_owned(),
         cpu,
         cpu_span_s: span,
-        tails,
         steal_ms: steal1.iter().zip(&steal0).map(|(b, a)| b - a).collect(),
-        window_ns: [first.unwrap_or(0), last],
         pids,
     })
 }
@@ -581,16 +605,16 @@ fn print_pipeline(title: &str, run: &PipelineRun) {
     println!(
         "## {title}\n\n{} live states, {} timed: aligned at rest {}, aligned moving {} \
          (not timed: {} before alignment); {}\n",
-        run.states,
-        run.rest + run.moving,
-        run.rest,
-        run.moving,
-        run.untimed,
+        run.timing.states,
+        run.timing.rest + run.timing.moving,
+        run.timing.rest,
+        run.timing.moving,
+        run.timing.untimed,
         run.replay_line
     );
     println!("| hop | p50 us | p99 us | p99.9 us | max us | states |");
     println!("| --- | --- | --- | --- | --- | --- |");
-    for (name, h) in names.iter().zip(&run.hops) {
+    for (name, h) in names.iter().zip(&run.timing.hops) {
         println!("| {name} {}", row(h));
     }
     let cpu: Vec<String> = run
@@ -603,8 +627,8 @@ fn print_pipeline(title: &str, run: &PipelineRun) {
         "\nLive states arrived from CLOCK_MONOTONIC {} to {} ns (pids: replay {}, calibrate {}, \
          odometry {}, subscriber {}). CPU over the {:.0} s replay (% of one core): {}; vCPU time \
          stolen by the hypervisor over it (ms per vCPU): {}\n",
-        run.window_ns[0],
-        run.window_ns[1],
+        run.timing.first.unwrap_or(0),
+        run.timing.last,
         run.pids[0],
         run.pids[1],
         run.pids[2],
@@ -613,7 +637,7 @@ fn print_pipeline(title: &str, run: &PipelineRun) {
         cpu.join(", "),
         steal.join(", ")
     );
-    print_tails(&run.tails);
+    print_tails(&run.timing.tails);
 }
 
 /// Lists the states above `TAIL_NS` end to end with their publish time, to be matched
@@ -654,153 +678,203 @@ fn cpu_json(cpu: &[(String, f64)]) -> Value {
     )
 }
 
-fn main() -> Result<()> {
-    let args: Vec<String> = std::env::args().collect();
-    if args.get(1).map(String::as_str) == Some("chain") {
-        let [_, _, input, output, n, cpu] = &args[..] else {
-            bail!("usage: latency chain IN OUT|- N CPU|-");
-        };
-        return chain_child(input, output, n.parse()?, cpu.parse().ok());
-    }
-    let mut seconds: u64 = 20;
-    let mut cpu_seconds: u64 = 30;
-    let mut as_json = false;
+/// The benchmark's options.
+struct Options {
+    /// Length of each bare chain run, s (the drives are at least 20 s).
+    seconds: u64,
+    /// Shortest real-time replay for the CPU figures, s.
+    cpu_seconds: u64,
+    /// Print the headline figures as JSON last.
+    as_json: bool,
+}
+
+fn options(args: &[String]) -> Result<Options> {
+    let mut o = Options {
+        seconds: 20,
+        cpu_seconds: 30,
+        as_json: false,
+    };
     let mut it = args.iter().skip(1);
     while let Some(a) = it.next() {
         match a.as_str() {
-            "--seconds" => seconds = it.next().context("--seconds needs a value")?.parse()?,
+            "--seconds" => o.seconds = it.next().context("--seconds needs a value")?.parse()?,
             "--cpu-seconds" => {
-                cpu_seconds = it.next().context("--cpu-seconds needs a value")?.parse()?;
+                o.cpu_seconds = it.next().context("--cpu-seconds needs a value")?.parse()?;
             }
-            "--json" => as_json = true,
+            "--json" => o.as_json = true,
             _ => bail!("usage: latency [--seconds S] [--cpu-seconds S] [--json]"),
         }
     }
-    let bench = std::env::current_exe()?;
-    let bins = common::bin_dir()?;
+    Ok(o)
+}
+
+/// The simulated drives and the calibration every pipeline run uses.
+struct Inputs {
+    work: PathBuf,
+    drive: PathBuf,
+    drive4k: PathBuf,
+    long: PathBuf,
+    calib: PathBuf,
+}
+
+/// Simulates one part (preset and seed) for the calibration and every drive, so the odometry
+/// aligns: a 1 kHz and a 4 kHz drive for the real-time runs, a longer one for throughput, and
+/// the six-position session its calibration is fitted from.
+fn inputs(bins: &Path, o: &Options) -> Result<Inputs> {
     let work = std::env::temp_dir().join(format!("mems-latency-{}", std::process::id()));
     std::fs::create_dir_all(&work)?;
-    let path = |name: &str| work.join(name).to_string_lossy().into_owned();
-    let (drive, drive4k, long, six, calib) = (
-        path("drive.mcap"),
-        path("drive4k.mcap"),
-        path("long.mcap"),
-        path("six.csv"),
-        path("calib.toml"),
-    );
+    let path = |name: &str| work.join(name);
+    let i = Inputs {
+        drive: path("drive.mcap"),
+        drive4k: path("drive4k.mcap"),
+        long: path("long.mcap"),
+        calib: path("calib.toml"),
+        work: work.clone(),
+    };
+    let six = path("six.csv");
+    let text = |p: &Path| {
+        p.to_str()
+            .context("work path is not UTF-8")
+            .map(str::to_owned)
+    };
     eprintln!("latency: simulating the recordings and calibrating ...");
-    // One part (preset and seed) for the calibration and every drive: the odometry aligns.
     let part = ["--preset", "datasheet", "--seed", "1"];
     let rest = INITIAL_REST_S.to_string();
-    let sim_drive = |out: &str, secs: u64, rate: &str| -> Result<String> {
+    let sim_drive = |out: &Path, secs: u64, rate: &str| -> Result<String> {
         let secs = (secs + INITIAL_REST_S).to_string();
+        let drive = [
+            "drive",
+            "--duration",
+            &secs,
+            "--rate",
+            rate,
+            "--initial-rest",
+            &rest,
+        ];
         run(
-            &bins,
+            bins,
             "mems-sim",
-            &[
-                &[
-                    "drive",
-                    "--duration",
-                    &secs,
-                    "--rate",
-                    rate,
-                    "--initial-rest",
-                    &rest,
-                ][..],
-                &part,
-                &["--out", out],
-            ]
-            .concat(),
+            &[&drive[..], &part, &["--out", &text(out)?]].concat(),
         )
     };
     // The drive plan drops a motion that does not fit: at least 20 s hold a drive and a rest.
     // The real-time replays at 1 and 4 kHz give the CPU figures: at least --cpu-seconds.
-    let drive_s = seconds.max(20).max(cpu_seconds);
-    sim_drive(&drive, drive_s, "1000")?;
-    sim_drive(&drive4k, seconds.max(cpu_seconds), "4000")?;
-    sim_drive(&long, seconds * 6, "1000")?;
+    sim_drive(&i.drive, o.seconds.max(20).max(o.cpu_seconds), "1000")?;
+    sim_drive(&i.drive4k, o.seconds.max(o.cpu_seconds), "4000")?;
+    sim_drive(&i.long, o.seconds * 6, "1000")?;
+    let session = ["six-position", "--rate", "200", "--out", &text(&six)?];
+    run(bins, "mems-sim", &[&session[..], &part].concat())?;
+    let fit = ["fit", "--input", &text(&six)?, "--model", "full"];
     run(
-        &bins,
-        "mems-sim",
-        &[&["six-position", "--rate", "200", "--out", &six][..], &part].concat(),
-    )?;
-    run(
-        &bins,
+        bins,
         "mems-calibrate",
-        &["fit", "--input", &six, "--model", "full", "--out", &calib],
+        &[&fit[..], &["--out", &text(&i.calib)?]].concat(),
     )?;
+    Ok(i)
+}
 
-    let mut j = serde_json::Map::new();
-    let mut put = |k: &str, v: Value| {
-        j.insert(k.to_string(), v);
-    };
+/// The headline figures, printed as JSON last.
+type Figures = serde_json::Map<String, Value>;
+
+/// Runs and prints one bare chain: p50, p99, p99.9, max (us) and the count.
+fn bare(
+    bench: &Path,
+    label: &str,
+    hops: usize,
+    rate: u64,
+    o: &Options,
+    pinned: bool,
+) -> Result<[f64; 5]> {
+    eprintln!("latency: {label} ...");
+    let r = chain(bench, hops, rate, o.seconds, pinned)?;
+    println!(
+        "| {label} | {:.1} | {:.1} | {:.1} | {:.1} | {} |",
+        r[0], r[1], r[2], r[3], r[4]
+    );
+    Ok(r)
+}
+
+/// The plain bare hops: one hop and three at 1 kHz, three at 4 kHz. Returns the three hops'
+/// figures at 1 kHz.
+fn bare_runs(bench: &Path, o: &Options, j: &mut Figures) -> Result<[f64; 5]> {
     println!("## Bare iceoryx2 hops, event-driven, lossless settings\n");
     println!("| run | p50 us | p99 us | p99.9 us | max us | samples |");
     println!("| --- | --- | --- | --- | --- | --- |");
-    let bare = |label: &str, hops, rate, pinned| -> Result<[f64; 5]> {
-        eprintln!("latency: {label} ...");
-        let r = chain(&bench, hops, rate, seconds, pinned)?;
-        println!(
-            "| {label} | {:.1} | {:.1} | {:.1} | {:.1} | {} |",
-            r[0], r[1], r[2], r[3], r[4]
-        );
-        Ok(r)
-    };
-    let hop1 = bare("one hop, 1 kHz, plain", 1, 1000, false)?;
-    let chain3 = bare("three hops, 1 kHz, plain", 3, 1000, false)?;
-    let chain3_4k = bare("three hops, 4 kHz, plain", 3, 4000, false)?;
+    let hop1 = bare(bench, "one hop, 1 kHz, plain", 1, 1000, o, false)?;
+    let chain3 = bare(bench, "three hops, 1 kHz, plain", 3, 1000, o, false)?;
+    let chain3_4k = bare(bench, "three hops, 4 kHz, plain", 3, 4000, o, false)?;
     println!();
-    put("bare_hop_p99_us", json!(hop1[1]));
-    put("bare_chain3_p50_us", json!(chain3[0]));
-    put("bare_chain3_p99_us", json!(chain3[1]));
-    put("bare_chain3_p999_us", json!(chain3[2]));
-    put("bare_chain3_4k_p99_us", json!(chain3_4k[1]));
+    j.insert("bare_hop_p99_us".into(), json!(hop1[1]));
+    j.insert("bare_chain3_p50_us".into(), json!(chain3[0]));
+    j.insert("bare_chain3_p99_us".into(), json!(chain3[1]));
+    j.insert("bare_chain3_p999_us".into(), json!(chain3[2]));
+    j.insert("bare_chain3_4k_p99_us".into(), json!(chain3_4k[1]));
+    Ok(chain3)
+}
 
-    let calib_path = Path::new(&calib);
+/// The plain pipeline at 1 kHz (checked to time aligned states at rest and moving) and at
+/// 4 kHz, and the idle stages, with the CPU targets checked. Returns the 1 kHz run.
+fn realtime_runs(
+    bins: &Path,
+    i: &Inputs,
+    o: &Options,
+    j: &mut Figures,
+    cpu: &mut Figures,
+) -> Result<PipelineRun> {
     eprintln!("latency: pipeline at 1 kHz, plain ...");
-    let p = pipeline(&bins, Path::new(&drive), calib_path, 1000, false, false)?;
+    let p = pipeline(bins, &i.drive, &i.calib, 1000, false, false)?;
     print_pipeline("Pipeline at 1 kHz, real time, plain", &p);
-    if p.rest == 0 || p.moving == 0 {
+    if p.timing.rest == 0 || p.timing.moving == 0 {
         bail!(
             "the timed states must be aligned at rest and moving: {} at rest, {} moving",
-            p.rest,
-            p.moving
+            p.timing.rest,
+            p.timing.moving
         );
     }
-    let [p50, p99, p999, max] = quantiles(&p.hops[3]);
-    put("pipeline_p50_us", json!(p50));
-    put("pipeline_p99_us", json!(p99));
-    put("pipeline_p999_us", json!(p999));
-    put("pipeline_max_us", json!(max));
-    put("pipeline_states_over_1ms", json!(p.tails.count));
-    put(
-        "pipeline_hop_p99_us",
-        json!(
-            p.hops[..3]
-                .iter()
-                .map(|h| quantiles(h)[1])
-                .collect::<Vec<_>>()
-        ),
-    );
-    put("timed_states_aligned_rest", json!(p.rest));
-    put("timed_states_aligned_moving", json!(p.moving));
-    let mut cpu = serde_json::Map::new();
+    let [p50, p99, p999, max] = quantiles(&p.timing.hops[3]);
+    let hop_p99: Vec<f64> = p.timing.hops[..3].iter().map(|h| quantiles(h)[1]).collect();
+    for (k, v) in [
+        ("pipeline_p50_us", json!(p50)),
+        ("pipeline_p99_us", json!(p99)),
+        ("pipeline_p999_us", json!(p999)),
+        ("pipeline_max_us", json!(max)),
+        ("pipeline_states_over_1ms", json!(p.timing.tails.count)),
+        ("pipeline_hop_p99_us", json!(hop_p99)),
+        ("timed_states_aligned_rest", json!(p.timing.rest)),
+        ("timed_states_aligned_moving", json!(p.timing.moving)),
+    ] {
+        j.insert(k.into(), v);
+    }
     cpu.insert("1kHz".into(), cpu_json(&p.cpu));
 
     eprintln!("latency: pipeline at 4 kHz, plain ...");
-    let p4 = pipeline(&bins, Path::new(&drive4k), calib_path, 4000, false, false)?;
+    let p4 = pipeline(bins, &i.drive4k, &i.calib, 4000, false, false)?;
     print_pipeline(
         "Pipeline at 4 kHz (accelerometer only: states NO_GYRO), real time, plain",
         &p4,
     );
-    let [_, p4_99, p4_999, _] = quantiles(&p4.hops[3]);
-    put("pipeline_4k_p99_us", json!(p4_99));
-    put("pipeline_4k_p999_us", json!(p4_999));
+    let [_, p4_99, p4_999, _] = quantiles(&p4.timing.hops[3]);
+    j.insert("pipeline_4k_p99_us".into(), json!(p4_99));
+    j.insert("pipeline_4k_p999_us".into(), json!(p4_999));
     cpu.insert("4kHz".into(), cpu_json(&p4.cpu));
+    j.insert("cpu_seconds_1khz".into(), json!(p.cpu_span_s.round()));
+    j.insert("cpu_seconds_4khz".into(), json!(p4.cpu_span_s.round()));
+    cpu_targets(bins, i, o, &p, j, cpu)?;
+    Ok(p)
+}
 
+/// Measures the idle stages and checks the CPU targets against them and the 1 kHz run `p`.
+fn cpu_targets(
+    bins: &Path,
+    i: &Inputs,
+    o: &Options,
+    p: &PipelineRun,
+    j: &mut Figures,
+    cpu: &mut Figures,
+) -> Result<()> {
     eprintln!("latency: idle stages ...");
-    let idle_s = cpu_seconds.clamp(1, IDLE_S);
-    let idle = idle_cpu(&bins, calib_path, idle_s)?;
+    let idle_s = o.cpu_seconds.clamp(1, IDLE_S);
+    let idle = idle_cpu(bins, &i.calib, idle_s)?;
     println!(
         "Idle stages, no input for {idle_s} s (% of one core): {}\n",
         idle.iter()
@@ -822,18 +896,20 @@ fn main() -> Result<()> {
         p.cpu_span_s,
         if stages_ok { "met" } else { "NOT met" },
     );
-    put("cpu_seconds_1khz", json!(p.cpu_span_s.round()));
-    put("cpu_seconds_4khz", json!(p4.cpu_span_s.round()));
-    put("idle_under_1_percent", json!(idle_ok));
-    put("stages_1khz_under_10_percent", json!(stages_ok));
+    j.insert("idle_under_1_percent".into(), json!(idle_ok));
+    j.insert("stages_1khz_under_10_percent".into(), json!(stages_ok));
+    Ok(())
+}
 
+/// The long drive replayed with `--max` through both stages.
+fn throughput_run(bins: &Path, i: &Inputs, j: &mut Figures, cpu: &mut Figures) -> Result<()> {
     eprintln!("latency: throughput with --max ...");
-    let t = pipeline(&bins, Path::new(&long), calib_path, 1000, true, false)?;
+    let t = pipeline(bins, &i.long, &i.calib, 1000, true, false)?;
     println!(
         "## Throughput, `mems-replay --max` through calibrate and odometry (plain)\n\n\
          {} states at {:.0} states/s at the subscriber; {}\n\n\
          CPU over the replay (% of one core): {}\n",
-        t.states,
+        t.timing.states,
         t.rate_hz,
         t.replay_line,
         t.cpu
@@ -842,49 +918,85 @@ fn main() -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     );
-    put("throughput_states_per_s", json!(t.rate_hz.round()));
+    j.insert("throughput_states_per_s".into(), json!(t.rate_hz.round()));
     cpu.insert("throughput".into(), cpu_json(&t.cpu));
+    Ok(())
+}
 
-    // The pinned runs last: SCHED_FIFO and pinning of this process's threads stay for good.
+/// The pinned SCHED_FIFO runs: three bare hops and the pipeline at 1 kHz. Returns the bare
+/// chain's and the pipeline's p99, us. Run last: this process's threads stay pinned.
+fn pinned_runs(
+    bench: &Path,
+    bins: &Path,
+    i: &Inputs,
+    o: &Options,
+    j: &mut Figures,
+    cpu: &mut Figures,
+) -> Result<(f64, f64)> {
     println!(
         "## Pinned (CPU 0: publisher/replay and subscriber; CPU 1: relays/stages), SCHED_FIFO\n"
     );
     println!("| run | p50 us | p99 us | p99.9 us | max us | samples |");
     println!("| --- | --- | --- | --- | --- | --- |");
-    let pinned_chain3 = bare("three hops, 1 kHz, pinned", 3, 1000, true)?;
+    let chain3 = bare(bench, "three hops, 1 kHz, pinned", 3, 1000, o, true)?;
     println!();
-    put("pinned_bare_chain3_p99_us", json!(pinned_chain3[1]));
+    j.insert("pinned_bare_chain3_p99_us".into(), json!(chain3[1]));
     if let Some(note) = realtime(0, Some(45))? {
         eprintln!("pipeline subscriber: {note}");
     }
     eprintln!("latency: pipeline at 1 kHz, pinned ...");
-    let pp = pipeline(&bins, Path::new(&drive), calib_path, 1000, false, true)?;
+    let pp = pipeline(bins, &i.drive, &i.calib, 1000, false, true)?;
     print_pipeline("Pipeline at 1 kHz, real time, pinned, SCHED_FIFO", &pp);
-    let [pp50, pp99, pp999, ppmax] = quantiles(&pp.hops[3]);
-    put("pinned_pipeline_p50_us", json!(pp50));
-    put("pinned_pipeline_p99_us", json!(pp99));
-    put("pinned_pipeline_p999_us", json!(pp999));
-    put("pinned_pipeline_max_us", json!(ppmax));
-    put("pinned_pipeline_states_over_1ms", json!(pp.tails.count));
+    let [p50, p99, p999, max] = quantiles(&pp.timing.hops[3]);
+    for (k, v) in [
+        ("pinned_pipeline_p50_us", json!(p50)),
+        ("pinned_pipeline_p99_us", json!(p99)),
+        ("pinned_pipeline_p999_us", json!(p999)),
+        ("pinned_pipeline_max_us", json!(max)),
+        (
+            "pinned_pipeline_states_over_1ms",
+            json!(pp.timing.tails.count),
+        ),
+    ] {
+        j.insert(k.into(), v);
+    }
     cpu.insert("1kHz_pinned".into(), cpu_json(&pp.cpu));
-    put("cpu_percent_per_process", Value::Object(cpu));
-    let ratio = p99 / chain3[1];
-    let pinned_ratio = pp99 / pinned_chain3[1];
-    put(
-        "pipeline_over_chain3_p99",
-        json!((ratio * 100.0).round() / 100.0),
-    );
-    put(
-        "pinned_pipeline_over_chain3_p99",
-        json!((pinned_ratio * 100.0).round() / 100.0),
+    Ok((chain3[1], p99))
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    if args.get(1).map(String::as_str) == Some("chain") {
+        let [_, _, input, output, n, cpu] = &args[..] else {
+            bail!("usage: latency chain IN OUT|- N CPU|-");
+        };
+        return chain_child(input, output, n.parse()?, cpu.parse().ok());
+    }
+    let o = options(&args)?;
+    let bench = std::env::current_exe()?;
+    let bins = common::bin_dir()?;
+    let i = inputs(&bins, &o)?;
+    let (mut j, mut cpu) = (Figures::new(), Figures::new());
+    let chain3 = bare_runs(&bench, &o, &mut j)?;
+    let p = realtime_runs(&bins, &i, &o, &mut j, &mut cpu)?;
+    throughput_run(&bins, &i, &mut j, &mut cpu)?;
+    let (pinned_chain3_p99, pinned_p99) = pinned_runs(&bench, &bins, &i, &o, &mut j, &mut cpu)?;
+    j.insert("cpu_percent_per_process".into(), Value::Object(cpu));
+    let ratio = quantiles(&p.timing.hops[3])[1] / chain3[1];
+    let pinned_ratio = pinned_p99 / pinned_chain3_p99;
+    let hundredths = |x: f64| json!((x * 100.0).round() / 100.0);
+    j.insert("pipeline_over_chain3_p99".into(), hundredths(ratio));
+    j.insert(
+        "pinned_pipeline_over_chain3_p99".into(),
+        hundredths(pinned_ratio),
     );
     println!(
         "Pipeline p99 / three bare hops' p99 in the same run: plain {ratio:.2}, pinned \
          {pinned_ratio:.2}; the timed states were aligned ({} at rest, {} moving)\n",
-        p.rest, p.moving
+        p.timing.rest, p.timing.moving
     );
-    std::fs::remove_dir_all(&work)?;
-    if as_json {
+    std::fs::remove_dir_all(&i.work)?;
+    if o.as_json {
         println!("{}", Value::Object(j));
     }
     Ok(())
