@@ -166,6 +166,199 @@ fn fault_time_ns(truth: &[Truth]) -> Result<u64> {
     Ok(if still_moving { into } else { truth[i].t_ns })
 }
 
+/// How a run's stage processes are started (and restarted after a kill).
+struct Launcher<'a> {
+    bins: &'a Path,
+    ns: &'a str,
+    calib: &'a str,
+    /// Where the calibration stage keeps its learned state for its restart, as in mems-stack.
+    state: &'a str,
+}
+
+impl Launcher<'_> {
+    fn spawn(&self, stage: &str) -> Result<Child> {
+        let args: &[&str] = match stage {
+            "mems-calibrate" => &[
+                "serve",
+                "--calib",
+                self.calib,
+                "--learn-s",
+                "2",
+                "--state",
+                self.state,
+            ],
+            _ => &["serve", "--calib", self.calib],
+        };
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(std::env::temp_dir().join(format!("{}-{stage}.log", self.ns)))?;
+        Command::new(self.bins.join(stage))
+            .args(args)
+            .args(["--namespace", self.ns])
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .with_context(|| format!("cannot start {stage}"))
+    }
+}
+
+/// Six busy processes for the `Hogs` fault, none for the others.
+fn hogs(fault: Fault) -> Result<Vec<Child>> {
+    if fault != Fault::Hogs {
+        return Ok(Vec::new());
+    }
+    (0..6)
+        .map(|_| {
+            Command::new("sh")
+                .args(["-c", "while :; do :; done"])
+                .spawn()
+                .context("cannot start a CPU hog")
+        })
+        .collect()
+}
+
+/// The fault's state within a run: injected when the states reach its sample time, ended
+/// (restarted, continued) after 0.2 s or 2 s.
+struct Injection {
+    fault: Fault,
+    at_ns: u64,
+    injected: Option<Instant>,
+    restored: bool,
+}
+
+impl Injection {
+    fn new(fault: Fault, at_ns: u64) -> Self {
+        Self {
+            fault,
+            at_ns,
+            injected: None,
+            restored: fault == Fault::None || fault == Fault::Hogs,
+        }
+    }
+
+    /// Injects the fault once a state of sample time `sample_ns` reaches it.
+    fn inject(&mut self, sample_ns: u64, stages: &mut Stages) -> Result<()> {
+        if self.injected.is_some() || sample_ns < self.at_ns {
+            return Ok(());
+        }
+        self.injected = Some(Instant::now());
+        match self.fault {
+            Fault::Kill(n) => {
+                let child = stages.get(n);
+                signal(child, libc::SIGKILL);
+                child.wait()?;
+            }
+            Fault::Stop(n) => signal(stages.get(n), libc::SIGSTOP),
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// Ends the fault when its time has come.
+    fn restore(&mut self, stages: &mut Stages, launch: &Launcher) -> Result<()> {
+        let Some(at) = self.injected.filter(|_| !self.restored) else {
+            return Ok(());
+        };
+        match self.fault {
+            Fault::Kill(n) if at.elapsed() >= Duration::from_millis(200) => {
+                *stages.get(n) = launch.spawn(n)?;
+                self.restored = true;
+            }
+            Fault::Stop(n) if at.elapsed() >= Duration::from_secs(2) => {
+                signal(stages.get(n), libc::SIGCONT);
+                self.restored = true;
+            }
+            Fault::StopSubscriber => {
+                std::thread::sleep(Duration::from_secs(2));
+                self.restored = true;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
+impl Stages {
+    fn get(&mut self, name: &str) -> &mut Child {
+        let i = self
+            .0
+            .iter()
+            .position(|(s, _)| *s == name)
+            .expect("a stage");
+        &mut self.0[i].1
+    }
+}
+
+/// Judges a run's live states against the truth: losses, the frame of each alignment, the
+/// NEES at the end of each rest after the fault, and the `--dump` trace.
+struct Judge<'a> {
+    truth: &'a [Truth],
+    fault_ns: u64,
+    frame: Option<Frame>,
+    last: Option<OdometryState>,
+    out: Outcome,
+}
+
+impl Judge<'_> {
+    fn take(&mut self, s: OdometryState) {
+        self.out.states += 1;
+        if s.flags & odometry_flags::GAP_BEFORE != 0 {
+            self.out.gaps_flagged += 1;
+        }
+        if let Some(p) = self.last
+            && s.seq > p.seq + 1
+        {
+            self.out.missing += s.seq - p.seq - 1;
+        }
+        let truth = truth_at(self.truth, s.stamps.sample_ns);
+        let aligned = s.flags & odometry_flags::ALIGNED != 0;
+        let was_aligned = self
+            .last
+            .is_some_and(|p| p.flags & odometry_flags::ALIGNED != 0);
+        if !aligned {
+            self.frame = None;
+        } else if !was_aligned {
+            self.frame = truth.map(|t| Frame::new(&s, t));
+        }
+        if let (Some(f), Some(t)) = (&self.frame, truth) {
+            let tp = f.to_ours * (Vector3::from(t.position_m) - f.origin);
+            self.out.trace.push(format!(
+                "{:.3},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}",
+                s.stamps.sample_ns as f64 * 1e-9,
+                s.flags,
+                s.position_m[0],
+                s.position_m[1],
+                s.position_sigma_m[0],
+                s.position_sigma_m[1],
+                tp.x,
+                tp.y
+            ));
+        }
+        let rest = s.flags & odometry_flags::ZERO_VELOCITY != 0;
+        if let Some(p) = self.last
+            && p.flags & odometry_flags::ZERO_VELOCITY != 0
+            && !rest
+            && aligned
+            && p.stamps.sample_ns > self.fault_ns
+            && let (Some(f), Some(t)) = (&self.frame, truth_at(self.truth, p.stamps.sample_ns))
+        {
+            self.out.rest_ends.push(f.nees(&p, t).0);
+        }
+        self.last = Some(s);
+    }
+
+    /// The outcome, with the NEES of the last state if aligned.
+    fn finish(mut self) -> Outcome {
+        if let (Some(s), Some(f)) = (self.last, &self.frame)
+            && let Some(t) = truth_at(self.truth, s.stamps.sample_ns)
+        {
+            self.out.end = Some(f.nees(&s, t));
+        }
+        self.out
+    }
+}
+
 /// One replay of `drive` through the stages with `fault`, at `speed` times real time.
 fn one_run(
     bins: &Path,
@@ -183,53 +376,19 @@ fn one_run(
     let svc = service::open::<OdometryState>(&node, &name)?;
     let sub = service::subscriber(&svc)?;
     let listener = wake::listener(&node, &name, WaitMode::Event)?;
-    let calib = calib.to_str().context("calibration path is not UTF-8")?;
-    // The calibration stage keeps its learned state where its restart finds it, as in
-    // mems-stack.
     let state = std::env::temp_dir().join(format!("{ns}-calibrate-state.json"));
     std::fs::remove_file(&state).ok();
-    let state_arg = state.to_str().context("state path is not UTF-8")?;
-    let spawn = |stage: &str| -> Result<Child> {
-        let args: &[&str] = match stage {
-            "mems-calibrate" => &[
-                "serve",
-                "--calib",
-                calib,
-                "--learn-s",
-                "2",
-                "--state",
-                state_arg,
-            ],
-            _ => &["serve", "--calib", calib],
-        };
-        let log = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(std::env::temp_dir().join(format!("{ns}-{stage}.log")))?;
-        Command::new(bins.join(stage))
-            .args(args)
-            .args(["--namespace", &ns])
-            .stdout(Stdio::null())
-            .stderr(log)
-            .spawn()
-            .with_context(|| format!("cannot start {stage}"))
+    let launch = Launcher {
+        bins,
+        ns: &ns,
+        calib: calib.to_str().context("calibration path is not UTF-8")?,
+        state: state.to_str().context("state path is not UTF-8")?,
     };
     let mut stages = Stages(vec![
-        ("mems-odometry", spawn("mems-odometry")?),
-        ("mems-calibrate", spawn("mems-calibrate")?),
+        ("mems-odometry", launch.spawn("mems-odometry")?),
+        ("mems-calibrate", launch.spawn("mems-calibrate")?),
     ]);
-    let hogs: Vec<Child> = if fault == Fault::Hogs {
-        (0..6)
-            .map(|_| {
-                Command::new("sh")
-                    .args(["-c", "while :; do :; done"])
-                    .spawn()
-                    .context("cannot start a CPU hog")
-            })
-            .collect::<Result<_>>()?
-    } else {
-        Vec::new()
-    };
+    let hogs = hogs(fault)?;
     std::thread::sleep(Duration::from_millis(1500));
     let mut replay = Command::new(bins.join("mems-replay"))
         .arg(drive)
@@ -241,122 +400,34 @@ fn one_run(
         )?)
         .spawn()
         .context("cannot start mems-replay")?;
-
-    let mut out = Outcome::default();
-    let mut frame: Option<Frame> = None;
-    let mut last: Option<OdometryState> = None;
-    let mut injected: Option<Instant> = None;
-    let mut restored = fault == Fault::None || fault == Fault::Hogs;
+    let mut judge = Judge {
+        truth,
+        fault_ns,
+        frame: None,
+        last: None,
+        out: Outcome::default(),
+    };
+    let mut injection = Injection::new(fault, fault_ns);
     let mut replay_done = false;
     let mut idle_since = Instant::now();
-    let judge_rest_end = |s: &OdometryState, frame: &Option<Frame>, out: &mut Outcome| {
-        if let (Some(f), Some(t)) = (frame, truth_at(truth, s.stamps.sample_ns))
-            && s.stamps.sample_ns > fault_ns
-        {
-            out.rest_ends.push(f.nees(s, t).0);
-        }
-    };
     wake::serve_loop(&[listener], Duration::from_millis(20), || -> Result<_> {
-        // The fault, once the states reach its sample time; its end after 0.2 s or 2 s.
-        if let Some(at) = injected
-            && !restored
-        {
-            let idx = |n: &str| stages.0.iter().position(|(s, _)| *s == n).expect("a stage");
-            match fault {
-                Fault::Kill(n) if at.elapsed() >= Duration::from_millis(200) => {
-                    let i = idx(n);
-                    stages.0[i].1 = spawn(n)?;
-                    restored = true;
-                }
-                Fault::Stop(n) if at.elapsed() >= Duration::from_secs(2) => {
-                    signal(&stages.0[idx(n)].1, libc::SIGCONT);
-                    restored = true;
-                }
-                Fault::StopSubscriber => {
-                    std::thread::sleep(Duration::from_secs(2));
-                    restored = true;
-                }
-                _ => {}
-            }
-        }
+        injection.restore(&mut stages, &launch)?;
         let mut any = false;
         while let Some(s) = sub.receive()? {
             any = true;
             idle_since = Instant::now();
-            let s = *s;
             if s.flags & odometry_flags::REVISION != 0 {
                 continue;
             }
-            out.states += 1;
-            if s.flags & odometry_flags::GAP_BEFORE != 0 {
-                out.gaps_flagged += 1;
-            }
-            if let Some(p) = last
-                && s.seq > p.seq + 1
-            {
-                out.missing += s.seq - p.seq - 1;
-            }
-            if injected.is_none() && s.stamps.sample_ns >= fault_ns {
-                injected = Some(Instant::now());
-                match fault {
-                    Fault::Kill(n) => {
-                        let i = stages
-                            .0
-                            .iter()
-                            .position(|(st, _)| *st == n)
-                            .expect("a stage");
-                        signal(&stages.0[i].1, libc::SIGKILL);
-                        stages.0[i].1.wait()?;
-                    }
-                    Fault::Stop(n) => {
-                        let i = stages
-                            .0
-                            .iter()
-                            .position(|(st, _)| *st == n)
-                            .expect("a stage");
-                        signal(&stages.0[i].1, libc::SIGSTOP);
-                    }
-                    _ => {}
-                }
-            }
-            let aligned = s.flags & odometry_flags::ALIGNED != 0;
-            let was_aligned = last.is_some_and(|p| p.flags & odometry_flags::ALIGNED != 0);
-            if aligned && !was_aligned {
-                frame = truth_at(truth, s.stamps.sample_ns).map(|t| Frame::new(&s, t));
-            }
-            if !aligned {
-                frame = None;
-            }
-            let rest = s.flags & odometry_flags::ZERO_VELOCITY != 0;
-            if let (Some(f), Some(t)) = (&frame, truth_at(truth, s.stamps.sample_ns)) {
-                let tp = f.to_ours * (Vector3::from(t.position_m) - f.origin);
-                out.trace.push(format!(
-                    "{:.3},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}",
-                    s.stamps.sample_ns as f64 * 1e-9,
-                    s.flags,
-                    s.position_m[0],
-                    s.position_m[1],
-                    s.position_sigma_m[0],
-                    s.position_sigma_m[1],
-                    tp.x,
-                    tp.y
-                ));
-            }
-            if let Some(p) = last
-                && p.flags & odometry_flags::ZERO_VELOCITY != 0
-                && !rest
-                && aligned
-            {
-                judge_rest_end(&p, &frame, &mut out);
-            }
-            last = Some(s);
+            injection.inject(s.stamps.sample_ns, &mut stages)?;
+            judge.take(*s);
         }
-        if !replay_done && replay.try_wait()?.is_some() {
-            replay_done = true;
-        }
+        replay_done = replay_done || replay.try_wait()?.is_some();
         // A stage that exits by itself (not the one just killed) is a finding, not a fault.
         for (name, child) in stages.0.iter_mut() {
-            if restored && let Some(status) = child.try_wait()? {
+            if injection.restored
+                && let Some(status) = child.try_wait()?
+            {
                 bail!("{}: {name} exited by itself ({status})", fault.label());
             }
         }
@@ -377,166 +448,174 @@ fn one_run(
         h.wait()?;
     }
     std::fs::remove_file(&state).ok();
-    if injected.is_none() {
+    if injection.injected.is_none() {
         bail!(
             "{}: the states never reached the fault's time",
             fault.label()
         );
     }
-    if let (Some(s), Some(f)) = (last, &frame)
-        && let Some(t) = truth_at(truth, s.stamps.sample_ns)
-    {
-        out.end = Some(f.nees(&s, t));
-    }
-    Ok(out)
+    Ok(judge.finish())
 }
 
-fn main() -> Result<()> {
-    let (mut seeds, mut seconds, mut speed, mut as_json) = (5u64, 60u64, 2.0f64, false);
-    let mut dump: Option<PathBuf> = None;
-    let mut only: Vec<String> = Vec::new();
+/// The benchmark's options.
+struct Options {
+    seeds: u64,
+    seconds: u64,
+    speed: f64,
+    as_json: bool,
+    dump: Option<PathBuf>,
+    only: Vec<String>,
+}
+
+fn options() -> Result<Options> {
+    let mut o = Options {
+        seeds: 5,
+        seconds: 60,
+        speed: 2.0,
+        as_json: false,
+        dump: None,
+        only: Vec::new(),
+    };
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mut it = args.iter();
     while let Some(a) = it.next() {
         let mut value = || it.next().context("a value is missing");
         match a.as_str() {
-            "--seeds" => seeds = value()?.parse()?,
-            "--seconds" => seconds = value()?.parse()?,
-            "--speed" => speed = value()?.parse()?,
-            "--json" => as_json = true,
-            "--dump" => dump = Some(value()?.into()),
-            "--only" => only.push(value()?.clone()),
+            "--seeds" => o.seeds = value()?.parse()?,
+            "--seconds" => o.seconds = value()?.parse()?,
+            "--speed" => o.speed = value()?.parse()?,
+            "--json" => o.as_json = true,
+            "--dump" => o.dump = Some(value()?.into()),
+            "--only" => o.only.push(value()?.clone()),
             _ => bail!(
                 "usage: faults [--seeds N] [--seconds S] [--speed X] [--only TEXT]... [--dump DIR] [--json]"
             ),
         }
     }
+    Ok(o)
+}
+
+/// Simulates seed `seed`'s part: its six-position session, the calibration fitted from it,
+/// and a drive with truth. Returns the drive's path, the calibration's and the truth.
+fn simulate(
+    bins: &Path,
+    work: &Path,
+    seed: u64,
+    seconds: u64,
+) -> Result<(PathBuf, PathBuf, Vec<Truth>)> {
+    let path = |name: String| work.join(name);
+    let (six, calib, drive) = (
+        path(format!("six{seed}.csv")),
+        path(format!("calib{seed}.toml")),
+        path(format!("drive{seed}.csv")),
+    );
+    let s = |p: &Path| p.to_string_lossy().into_owned();
+    let seed_text = seed.to_string();
+    let part = ["--preset", "datasheet", "--seed", &seed_text];
+    let session = ["six-position", "--rate", "200", "--out", &s(&six)];
+    run(bins, "mems-sim", &[&session[..], &part].concat())?;
+    let fit = [
+        "fit",
+        "--input",
+        &s(&six),
+        "--model",
+        "full",
+        "--out",
+        &s(&calib),
+    ];
+    run(bins, "mems-calibrate", &fit)?;
+    let duration = (seconds as f64 + INITIAL_REST_S).to_string();
+    let rest = INITIAL_REST_S.to_string();
+    let sim = [
+        "drive",
+        "--duration",
+        &duration,
+        "--rate",
+        "1000",
+        "--initial-rest",
+        &rest,
+        "--out",
+        &s(&drive),
+    ];
+    run(bins, "mems-sim", &[&sim[..], &part].concat())?;
+    let truth = recording::load_raw(&drive)?
+        .truth
+        .context("the simulated drive has truth")?;
+    Ok((drive, calib, truth))
+}
+
+/// Prints one fault's row of the table and returns its JSON summary.
+fn summarize(fault: Fault, outcomes: &[Outcome]) -> serde_json::Value {
+    let ends: Vec<(f64, f64)> = outcomes.iter().filter_map(|o| o.end).collect();
+    let within = ends.iter().filter(|(n, _)| *n <= NEES_95).count();
+    let rests: Vec<f64> = outcomes.iter().flat_map(|o| o.rest_ends.clone()).collect();
+    let rests_within = rests.iter().filter(|n| **n <= NEES_95).count();
+    let mean = ends.iter().map(|(n, _)| n).sum::<f64>() / ends.len().max(1) as f64;
+    let max_err = ends.iter().map(|(_, e)| *e).fold(0.0, f64::max);
+    let lost: u64 = outcomes.iter().map(|o| o.missing).sum();
+    let flagged: u64 = outcomes.iter().map(|o| o.gaps_flagged).sum();
+    println!(
+        "| {} | {} | {}/{} | {:.2} | {:.2} | {}/{} | {} | {} |",
+        fault.label(),
+        outcomes.len(),
+        within,
+        outcomes.len(),
+        mean,
+        max_err,
+        rests_within,
+        rests.len(),
+        lost,
+        flagged
+    );
+    json!({
+        "runs": outcomes.len(),
+        "end_aligned": ends.len(),
+        "end_within_95": within,
+        "end_nees_mean": mean,
+        "end_error_max_m": max_err,
+        "rest_ends": rests.len(),
+        "rest_ends_within_95": rests_within,
+        "states_lost": lost,
+        "gaps_flagged": flagged,
+    })
+}
+
+fn main() -> Result<()> {
+    let o = options()?;
     let bins = common::bin_dir()?;
     let work = std::env::temp_dir().join(format!("mems-faults-{}", std::process::id()));
     std::fs::create_dir_all(&work)?;
-    let path = |name: &str| work.join(name);
-    let s = |p: &Path| p.to_string_lossy().into_owned();
-    let duration = (seconds as f64 + INITIAL_REST_S).to_string();
-    let rest = INITIAL_REST_S.to_string();
     let mut results: Vec<(Fault, Vec<Outcome>)> = Fault::ALL
         .iter()
-        .filter(|f| only.is_empty() || only.iter().any(|o| f.label().contains(o.as_str())))
+        .filter(|f| o.only.is_empty() || o.only.iter().any(|t| f.label().contains(t.as_str())))
         .map(|f| (*f, vec![]))
         .collect();
-    for seed in 1..=seeds {
+    for seed in 1..=o.seeds {
         // One part per seed, calibrated from its own six-position session, then driven.
-        let (six, calib, drive) = (
-            path(&format!("six{seed}.csv")),
-            path(&format!("calib{seed}.toml")),
-            path(&format!("drive{seed}.csv")),
-        );
-        let part = ["--preset", "datasheet", "--seed", &seed.to_string()].map(String::from);
-        let part: Vec<&str> = part.iter().map(String::as_str).collect();
         eprintln!("faults: seed {seed}: calibrating and simulating the drive ...");
-        run(
-            &bins,
-            "mems-sim",
-            &[
-                &["six-position", "--rate", "200", "--out", &s(&six)][..],
-                &part,
-            ]
-            .concat(),
-        )?;
-        run(
-            &bins,
-            "mems-calibrate",
-            &[
-                "fit",
-                "--input",
-                &s(&six),
-                "--model",
-                "full",
-                "--out",
-                &s(&calib),
-            ],
-        )?;
-        run(
-            &bins,
-            "mems-sim",
-            &[
-                &[
-                    "drive",
-                    "--duration",
-                    &duration,
-                    "--rate",
-                    "1000",
-                    "--initial-rest",
-                    &rest,
-                    "--out",
-                    &s(&drive),
-                ][..],
-                &part,
-            ]
-            .concat(),
-        )?;
-        let truth = recording::load_raw(&drive)?
-            .truth
-            .context("the simulated drive has truth")?;
+        let (drive, calib, truth) = simulate(&bins, &work, seed, o.seconds)?;
         for (k, (fault, outcomes)) in results.iter_mut().enumerate() {
             eprintln!("faults: seed {seed}, {} ...", fault.label());
             let tag = format!("{seed}-{k}");
-            let o = one_run(&bins, &drive, &truth, &calib, *fault, speed, &tag)?;
-            if let Some(dir) = &dump {
+            let run = one_run(&bins, &drive, &truth, &calib, *fault, o.speed, &tag)?;
+            if let Some(dir) = &o.dump {
                 std::fs::create_dir_all(dir)?;
-                let file = dir.join(format!(
-                    "seed{seed}-{}.csv",
-                    fault.label().replace(' ', "_")
-                ));
-                std::fs::write(file, o.trace.join("\n"))?;
+                let name = format!("seed{seed}-{}.csv", fault.label().replace(' ', "_"));
+                std::fs::write(dir.join(name), run.trace.join("\n"))?;
             }
-            outcomes.push(o);
+            outcomes.push(run);
         }
     }
-
     println!(
         "| fault | runs | end NEES within 95 % | end NEES mean | end error max (m) | rest ends after the fault within 95 % | states lost | gaps flagged |"
     );
     println!("|---|---|---|---|---|---|---|---|");
     let mut summary = serde_json::Map::new();
     for (fault, outcomes) in &results {
-        let ends: Vec<(f64, f64)> = outcomes.iter().filter_map(|o| o.end).collect();
-        let within = ends.iter().filter(|(n, _)| *n <= NEES_95).count();
-        let rests: Vec<f64> = outcomes.iter().flat_map(|o| o.rest_ends.clone()).collect();
-        let rests_within = rests.iter().filter(|n| **n <= NEES_95).count();
-        let mean = ends.iter().map(|(n, _)| n).sum::<f64>() / ends.len().max(1) as f64;
-        let max_err = ends.iter().map(|(_, e)| *e).fold(0.0, f64::max);
-        let lost: u64 = outcomes.iter().map(|o| o.missing).sum();
-        let flagged: u64 = outcomes.iter().map(|o| o.gaps_flagged).sum();
-        println!(
-            "| {} | {} | {}/{} | {:.2} | {:.2} | {}/{} | {} | {} |",
-            fault.label(),
-            outcomes.len(),
-            within,
-            outcomes.len(),
-            mean,
-            max_err,
-            rests_within,
-            rests.len(),
-            lost,
-            flagged
-        );
-        summary.insert(
-            fault.label(),
-            json!({
-                "runs": outcomes.len(),
-                "end_aligned": ends.len(),
-                "end_within_95": within,
-                "end_nees_mean": mean,
-                "end_error_max_m": max_err,
-                "rest_ends": rests.len(),
-                "rest_ends_within_95": rests_within,
-                "states_lost": lost,
-                "gaps_flagged": flagged,
-            }),
-        );
+        summary.insert(fault.label(), summarize(*fault, outcomes));
     }
     std::fs::remove_dir_all(&work).ok();
-    if as_json {
+    if o.as_json {
         println!("{}", serde_json::Value::Object(summary));
     }
     Ok(())
