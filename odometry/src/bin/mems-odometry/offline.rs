@@ -355,79 +355,33 @@ impl Summary {
 pub fn run(args: OfflineArgs) -> Result<()> {
     let (file, detector) = args.stage.load()?;
     let (mut source, repairs) = Source::open(&args)?;
-    let mut calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
+    let calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.stage.calib_name()))?;
     let mut config = args.stage.profile.odometry(crate::odometry_config(&file));
     config.rest_updates = !args.no_zupt;
-    let mut odometry = OdometryStage::with_hints(config, args.hints.config()?)
+    let odometry = OdometryStage::with_hints(config, args.hints.config()?)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let input = args.input.display();
-    let mut out = match &args.out {
+    let out = match &args.out {
         Some(path) => Some(crate::out::Out::create(path, args.force)?),
         None => None,
     };
-
-    let mut summary = Summary::default();
-    let mut merge = Merge::default();
-    let mut first_ns = None;
-    let mut warned_no_gyro = false;
-    let mut error: Option<anyhow::Error> = None;
-    let mut newest_ns = Some(0);
-    loop {
-        match source.next().transpose()? {
-            Some(Item::Raw(raw)) => {
-                newest_ns = Some(raw.stamps.sample_ns);
-                first_ns.get_or_insert(raw.stamps.sample_ns);
-                if !warned_no_gyro && raw.flags & ipc_types::raw_flags::GYRO_VALID == 0 {
-                    warned_no_gyro = true;
-                    warn_no_gyro(&args, raw.seq);
-                }
-                merge.raw.push_back(raw);
-            }
-            Some(Item::Hint(h)) => {
-                if let Some(out) = out.as_mut() {
-                    out.hint(&h);
-                }
-                merge.hint(h);
-            }
-            Some(Item::Truth(t)) => summary.truth.0.push_back(t),
-            None => newest_ns = None,
-        }
-        let mut hint_error = None;
-        while let Some(raw) = merge.release(newest_ns, |h| {
-            if let Err(e) = odometry.hint(h) {
-                hint_error.get_or_insert(e);
-            }
-        }) {
-            if let Some(e) = hint_error.take() {
-                bail!("{input}: {e}");
-            }
-            if let Some(out) = out.as_mut() {
-                out.raw(&raw);
-            }
-            calibration
-                .push(&raw, &mut |c: &CorrectedImuSample| {
-                    feed(c, &mut odometry, &mut summary, &mut out, &mut error)
-                })
-                .map_err(|e| anyhow::anyhow!("{input}: {e}"))?;
-        }
-        if newest_ns.is_none() {
-            break;
-        }
-    }
-    for segment in source.segments() {
-        if let Some(t) = &segment.truncation {
-            eprintln!("mems-odometry: {}: {t}", segment.path.display());
-        }
-    }
-    if merge.hints_late > 0 {
-        eprintln!(
-            "mems-odometry: {input}: {} robot hints were recorded more than {} s after their \
-             publication and reached the odometry stage after samples they would have preceded",
-            merge.hints_late,
-            HINT_WINDOW_NS as f64 * 1e-9
-        );
-    }
+    let mut stages = Stages {
+        calibration,
+        odometry,
+        out,
+        summary: Summary::default(),
+        error: None,
+    };
+    let (merge, first_ns) = stages.stream(&args, &mut source)?;
+    report_input(&args, &mut source, &merge);
+    let Stages {
+        mut calibration,
+        mut odometry,
+        mut out,
+        mut summary,
+        error,
+    } = stages;
     calibration.finish();
     // As `mems-odometry serve` at its end: revisions only, which this report does not use (the
     // recording keeps them).
@@ -492,30 +446,121 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     if args.json {
         println!("{result}");
     } else {
-        let p = end.position_m;
-        let s = end.position_sigma_m;
-        println!(
-            "end displacement ({:+.4}, {:+.4}, {:+.4}) m +- ({:.4}, {:.4}, {:.4}) m, distance {:.2} m",
-            p[0], p[1], p[2], s[0], s[1], s[2], end.distance_m
-        );
-        if let Some(e) = truth_error {
-            let horizontal = (e[0] * e[0] + e[1] * e[1]).sqrt();
-            println!(
-                "error against truth ({:+.3}, {:+.3}, {:+.3}) m: {:.2} % of {:.1} m travelled",
-                e[0],
-                e[1],
-                e[2],
-                100.0 * horizontal / truth_distance.max(f64::EPSILON),
-                truth_distance
-            );
-        }
+        print_result(&end, truth_error, truth_distance);
     }
     Ok(())
 }
 
-/// Gives one corrected sample to the odometry stage and its state to the summary (and both,
-/// revisions included, to the recording being written); the first error is kept in `error`
-/// and stops the feeding.
+/// The two stages of an offline run, what they write and what is learned from their output.
+struct Stages {
+    calibration: CalibrationStage,
+    odometry: OdometryStage,
+    out: Option<crate::out::Out>,
+    summary: Summary,
+    /// The odometry stage's first error: the run stops feeding it and reports it.
+    error: Option<anyhow::Error>,
+}
+
+impl Stages {
+    /// Streams `source` through both stages, with robot hints merged into sample order and the
+    /// raw samples and hints written to the output. Returns the merge's counts and the first
+    /// sample's time, ns.
+    fn stream(&mut self, args: &OfflineArgs, source: &mut Source) -> Result<(Merge, Option<u64>)> {
+        let input = args.input.display();
+        let mut merge = Merge::default();
+        let mut first_ns = None;
+        let mut warned_no_gyro = false;
+        let mut newest_ns = Some(0);
+        while newest_ns.is_some() {
+            match source.next().transpose()? {
+                Some(Item::Raw(raw)) => {
+                    newest_ns = Some(raw.stamps.sample_ns);
+                    first_ns.get_or_insert(raw.stamps.sample_ns);
+                    if !warned_no_gyro && raw.flags & ipc_types::raw_flags::GYRO_VALID == 0 {
+                        warned_no_gyro = true;
+                        warn_no_gyro(args, raw.seq);
+                    }
+                    merge.raw.push_back(raw);
+                }
+                Some(Item::Hint(h)) => {
+                    if let Some(out) = self.out.as_mut() {
+                        out.hint(&h);
+                    }
+                    merge.hint(h);
+                }
+                Some(Item::Truth(t)) => self.summary.truth.0.push_back(t),
+                None => newest_ns = None,
+            }
+            let mut hint_error = None;
+            while let Some(raw) = merge.release(newest_ns, |h| {
+                if let Err(e) = self.odometry.hint(h) {
+                    hint_error.get_or_insert(e);
+                }
+            }) {
+                if let Some(e) = hint_error.take() {
+                    bail!("{input}: {e}");
+                }
+                if let Some(out) = self.out.as_mut() {
+                    out.raw(&raw);
+                }
+                let (odometry, summary, out, error) = (
+                    &mut self.odometry,
+                    &mut self.summary,
+                    &mut self.out,
+                    &mut self.error,
+                );
+                self.calibration
+                    .push(&raw, &mut |c: &CorrectedImuSample| {
+                        feed(c, odometry, summary, out, error)
+                    })
+                    .map_err(|e| anyhow::anyhow!("{input}: {e}"))?;
+            }
+        }
+        Ok((merge, first_ns))
+    }
+}
+
+/// Says on stderr what the input held that the result does not show: truncated segments and
+/// robot hints recorded too late to be merged in order.
+fn report_input(args: &OfflineArgs, source: &mut Source, merge: &Merge) {
+    for segment in source.segments() {
+        if let Some(t) = &segment.truncation {
+            eprintln!("mems-odometry: {}: {t}", segment.path.display());
+        }
+    }
+    if merge.hints_late > 0 {
+        eprintln!(
+            "mems-odometry: {}: {} robot hints were recorded more than {} s after their \
+             publication and reached the odometry stage after samples they would have preceded",
+            args.input.display(),
+            merge.hints_late,
+            HINT_WINDOW_NS as f64 * 1e-9
+        );
+    }
+}
+
+/// The human-readable result: the end displacement with its 1-sigma, and the error against
+/// truth where the recording has one.
+fn print_result(end: &OdometryState, truth_error: Option<[f64; 3]>, truth_distance: f64) {
+    let p = end.position_m;
+    let s = end.position_sigma_m;
+    println!(
+        "end displacement ({:+.4}, {:+.4}, {:+.4}) m +- ({:.4}, {:.4}, {:.4}) m, distance {:.2} m",
+        p[0], p[1], p[2], s[0], s[1], s[2], end.distance_m
+    );
+    if let Some(e) = truth_error {
+        let horizontal = (e[0] * e[0] + e[1] * e[1]).sqrt();
+        println!(
+            "error against truth ({:+.3}, {:+.3}, {:+.3}) m: {:.2} % of {:.1} m travelled",
+            e[0],
+            e[1],
+            e[2],
+            100.0 * horizontal / truth_distance.max(f64::EPSILON),
+            truth_distance
+        );
+    }
+}
+
 fn feed(
     c: &CorrectedImuSample,
     odometry: &mut OdometryStage,
