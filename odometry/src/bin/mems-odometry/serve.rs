@@ -43,7 +43,7 @@ use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags, raw_flags,
     service,
 };
-use odometry::hints::usable_from_ns;
+use odometry::hints::{HintConfigError, usable_from_ns};
 use odometry::stage::OdometryStage;
 
 /// Options of `mems-odometry serve`.
@@ -80,16 +80,12 @@ pub fn run(args: ServeArgs) -> Result<()> {
     // Before any port exists: a SIGINT/SIGTERM is kept from then on.
     ipc_types::stop::install()?;
     let node = service::node()?;
-    let corrected = service::open::<CorrectedImuSample>(
-        &node,
-        &service::full_name(&namespace, service::CORRECTED),
-    )?;
-    let odometry =
-        service::open::<OdometryState>(&node, &service::full_name(&namespace, service::ODOMETRY))?;
-    let hint_service =
-        service::open::<RobotHint>(&node, &service::full_name(&namespace, service::HINT))?;
     let corrected_name = service::full_name(&namespace, service::CORRECTED);
     let odometry_name = service::full_name(&namespace, service::ODOMETRY);
+    let corrected = service::open::<CorrectedImuSample>(&node, &corrected_name)?;
+    let odometry = service::open::<OdometryState>(&node, &odometry_name)?;
+    let hint_service =
+        service::open::<RobotHint>(&node, &service::full_name(&namespace, service::HINT))?;
     let subscriber = service::subscriber(&corrected)?;
     let hint_subscriber = service::subscriber(&hint_service)?;
     let mode = if args.spin {
@@ -100,121 +96,173 @@ pub fn run(args: ServeArgs) -> Result<()> {
     // Hints are taken before the samples they precede: only samples wake the process.
     let listener = wake::listener(&node, &corrected_name, mode)?;
     let mut out = Output::new(&node, &odometry, &odometry_name)?;
-
-    let new_stage = || OdometryStage::with_hints(config, hint_config);
-    let mut stage = new_stage()?;
-    let (mut hints_received, mut hints_refused) = (0u64, 0u64);
-    let mut held: Option<RobotHint> = None;
-    let mut last_seq: Option<u64> = None;
-    let mut last_ns: Option<u64> = None;
-    let (mut received, mut refused, mut sessions) = (0u64, 0u64, 1u64);
-    let mut warned_no_gyro = false;
+    let mut server = Server::new(move || OdometryStage::with_hints(config, hint_config))?;
     let mut steady =
         SteadyState::from_env(|| crate::ALLOCATOR.counts()).map_err(anyhow::Error::msg)?;
     // Start-up is over: from here on small blocks come from the pool.
     crate::ALLOCATOR.arm();
-    let step = || -> Result<ControlFlow<(), bool>> {
+    wake::serve_loop(&[listener], TICK, || -> Result<ControlFlow<(), bool>> {
         let mut any = false;
         while let Some(sample) = subscriber.receive()? {
             any = true;
             steady.inputs(1);
             let s = *sample.payload();
             drop(sample);
-            // The hints published by this sample's time go in before it, in publication order;
-            // a later one waits (held) for the samples to catch up, so that hints running ahead
-            // of the samples (a replay at full speed) do not pile up in the stage.
-            loop {
-                if held.is_none() {
-                    held = hint_subscriber.receive()?.map(|h| *h.payload());
-                }
-                match held {
-                    Some(h) if usable_from_ns(&h, 0) <= s.stamps.sample_ns => {
-                        held = None;
-                        hints_received += 1;
-                        if let Err(e) = stage.hint(&h) {
-                            hints_refused += 1;
-                            eprintln!("mems-odometry: refused: {e}");
-                        }
-                    }
-                    _ => break,
-                }
-            }
-            received += 1;
-            let no_gyro = s.raw_flags & raw_flags::GYRO_VALID == 0;
-            if no_gyro && !warned_no_gyro {
-                warned_no_gyro = true;
-                eprintln!(
-                    "mems-odometry: sample seq {} has no gyroscope (GYRO_VALID clear: an \
-                     accelerometer-only sensor mode, such as the MPU-9250 at 4 kHz); without it \
-                     the attitude cannot be tracked, so no position is estimated: states carry \
-                     NO_GYRO and never ALIGNED. Run the sensor at 1000 Hz or below for odometry",
-                    s.seq
-                );
-            }
-            // A time step no dead reckoning bridges (the stage refuses it) is a new time
-            // base, as a new session is.
-            let jump =
-                last_ns.is_some_and(|l: u64| s.stamps.sample_ns > l.saturating_add(MAX_STEP_NS));
-            if last_seq.is_some_and(|l| s.seq <= l) || jump {
-                // A new sensor session: the old one's revisions are completed, then align
-                // again.
-                stage.finish(&mut |state| send(&mut out, state));
-                out.end_of_input()?;
-                stage = new_stage()?;
-                sessions += 1;
-            }
-            last_seq = Some(s.seq);
-            last_ns = Some(s.stamps.sample_ns);
-            // The live state is published (and its subscribers woken) before any revision
-            // work the stage does after it. A sample that settles a zero-state batch is
-            // followed by that batch's settling and revisions (a few hundred us): the process
-            // yields its core first, so that a subscriber woken onto it runs before that work
-            // rather than after it (docs/latency.md). Only then: a yield hands the core to any
-            // runnable task, which may keep it for a whole time slice.
-            let settles = s.flags & corrected_flags::PROVISIONAL == 0;
-            let mut emit = |state: &OdometryState| {
-                send(&mut out, state);
-                if settles && state.flags & odometry_flags::REVISION == 0 {
-                    std::thread::yield_now();
-                }
-            };
-            if no_gyro {
-                emit(&OdometryState {
-                    stamps: s.stamps,
-                    seq: s.seq,
-                    attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
-                    flags: odometry_flags::NO_GYRO,
-                    ..OdometryState::default()
-                });
-            } else if let Err(e) = stage.process(&s, &mut emit) {
-                refused += 1;
-                eprintln!("mems-odometry: refused: {e}");
-            }
-            out.end_of_input()?;
+            server.take_hints(s.stamps.sample_ns, || {
+                Ok(hint_subscriber.receive()?.map(|h| *h.payload()))
+            })?;
+            server.process(&s, &mut out)?;
         }
         Ok(ControlFlow::Continue(any))
-    };
-    wake::serve_loop(&[listener], TICK, step)?;
+    })?;
     // A replay of the hindsight still under way is completed (as offline at the end of a
     // recording).
-    stage.finish(&mut |state| send(&mut out, state));
+    server.stage.finish(&mut |state| send(&mut out, state));
     out.end_of_input()?;
-    let published = out.sent();
-    let h = stage.hint_stats();
-    eprintln!(
-        "mems-odometry: received {received}, published {published} (revisions included), \
-         refused {refused}, sessions {sessions}, discarded for stalled subscribers {}; hints \
-         received {hints_received}, refused {hints_refused}, this session: {}",
-        service::stalled_discards(),
-        h
-    );
-    eprintln!(
-        "mems-odometry: {}; small-block pool: peak {} of 1024 blocks, {} requests found it empty",
-        steady.summary(),
-        crate::ALLOCATOR.peak_blocks(),
-        crate::ALLOCATOR.fallbacks()
-    );
+    server.report(out.sent(), &steady);
     Ok(())
+}
+
+/// The odometry stage as the live process drives it: hints before the samples they precede,
+/// a new stage for each sensor session, NO_GYRO samples answered without it, and the counts
+/// of the summary.
+struct Server<F> {
+    new_stage: F,
+    stage: OdometryStage,
+    /// A hint received before the samples it precedes.
+    held: Option<RobotHint>,
+    hints_received: u64,
+    hints_refused: u64,
+    last_seq: Option<u64>,
+    last_ns: Option<u64>,
+    received: u64,
+    refused: u64,
+    sessions: u64,
+    warned_no_gyro: bool,
+}
+
+impl<F: Fn() -> Result<OdometryStage, HintConfigError>> Server<F> {
+    fn new(new_stage: F) -> Result<Self> {
+        Ok(Self {
+            stage: new_stage()?,
+            new_stage,
+            held: None,
+            hints_received: 0,
+            hints_refused: 0,
+            last_seq: None,
+            last_ns: None,
+            received: 0,
+            refused: 0,
+            sessions: 1,
+            warned_no_gyro: false,
+        })
+    }
+
+    /// Hands the stage the hints published by `sample_ns`, in publication order; a later one
+    /// waits (held) for the samples to catch up, so that hints running ahead of the samples (a
+    /// replay at full speed) do not pile up in the stage. `next` receives one hint.
+    fn take_hints(
+        &mut self,
+        sample_ns: u64,
+        mut next: impl FnMut() -> Result<Option<RobotHint>>,
+    ) -> Result<()> {
+        loop {
+            if self.held.is_none() {
+                self.held = next()?;
+            }
+            match self.held {
+                Some(h) if usable_from_ns(&h, 0) <= sample_ns => {
+                    self.held = None;
+                    self.hints_received += 1;
+                    if let Err(e) = self.stage.hint(&h) {
+                        self.hints_refused += 1;
+                        eprintln!("mems-odometry: refused: {e}");
+                    }
+                }
+                _ => return Ok(()),
+            }
+        }
+    }
+
+    /// One corrected sample: its live state (and revisions) published to `out`.
+    fn process(&mut self, s: &CorrectedImuSample, out: &mut Output<OdometryState>) -> Result<()> {
+        self.received += 1;
+        let no_gyro = s.raw_flags & raw_flags::GYRO_VALID == 0;
+        if no_gyro && !self.warned_no_gyro {
+            self.warned_no_gyro = true;
+            eprintln!(
+                "mems-odometry: sample seq {} has no gyroscope (GYRO_VALID clear: an \
+                 accelerometer-only sensor mode, such as the MPU-9250 at 4 kHz); without it \
+                 the attitude cannot be tracked, so no position is estimated: states carry \
+                 NO_GYRO and never ALIGNED. Run the sensor at 1000 Hz or below for odometry",
+                s.seq
+            );
+        }
+        // A time step no dead reckoning bridges (the stage refuses it) is a new time base, as
+        // a new session is.
+        let jump = self
+            .last_ns
+            .is_some_and(|l| s.stamps.sample_ns > l.saturating_add(MAX_STEP_NS));
+        if self.last_seq.is_some_and(|l| s.seq <= l) || jump {
+            // A new sensor session: the old one's revisions are completed, then align again.
+            self.stage.finish(&mut |state| send(out, state));
+            out.end_of_input()?;
+            self.stage = (self.new_stage)()?;
+            self.sessions += 1;
+        }
+        self.last_seq = Some(s.seq);
+        self.last_ns = Some(s.stamps.sample_ns);
+        // The live state is published (and its subscribers woken) before any revision work
+        // the stage does after it. A sample that settles a zero-state batch is followed by
+        // that batch's settling and revisions (a few hundred us): the process yields its core
+        // first, so that a subscriber woken onto it runs before that work rather than after it
+        // (docs/latency.md). Only then: a yield hands the core to any runnable task, which may
+        // keep it for a whole time slice.
+        let settles = s.flags & corrected_flags::PROVISIONAL == 0;
+        let mut emit = |state: &OdometryState| {
+            send(out, state);
+            if settles && state.flags & odometry_flags::REVISION == 0 {
+                std::thread::yield_now();
+            }
+        };
+        if no_gyro {
+            emit(&OdometryState {
+                stamps: s.stamps,
+                seq: s.seq,
+                attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
+                flags: odometry_flags::NO_GYRO,
+                ..OdometryState::default()
+            });
+        } else if let Err(e) = self.stage.process(s, &mut emit) {
+            self.refused += 1;
+            eprintln!("mems-odometry: refused: {e}");
+        }
+        out.end_of_input()?;
+        Ok(())
+    }
+
+    /// The summary on stderr, with the `published` count and the steady-state allocations.
+    fn report(&self, published: u64, steady: &SteadyState) {
+        eprintln!(
+            "mems-odometry: received {}, published {published} (revisions included), refused \
+             {}, sessions {}, discarded for stalled subscribers {}; hints received {}, refused \
+             {}, this session: {}",
+            self.received,
+            self.refused,
+            self.sessions,
+            service::stalled_discards(),
+            self.hints_received,
+            self.hints_refused,
+            self.stage.hint_stats()
+        );
+        eprintln!(
+            "mems-odometry: {}; small-block pool: peak {} of 1024 blocks, {} requests found it \
+             empty",
+            steady.summary(),
+            crate::ALLOCATOR.peak_blocks(),
+            crate::ALLOCATOR.fallbacks()
+        );
+    }
 }
 
 /// Publishes `state`, stamped with the time it leaves the process.
