@@ -267,6 +267,17 @@ fn run<I2C: I2c, C: Clock>(
             break;
         }
     }
+    report(&acq, &undelivered, start.elapsed());
+    Ok(())
+}
+
+/// The run's summary on stderr: read lateness, FIFO timing, and the counts of samples
+/// published, lost and discarded.
+fn report<I2C: I2c, C: Clock>(
+    acq: &Acquisition<I2C, C>,
+    undelivered: &service::Undelivered,
+    elapsed: Duration,
+) {
     let stats = acq.stats();
     let driver = acq.driver().stats();
     let late = acq.lateness();
@@ -304,7 +315,7 @@ fn run<I2C: I2c, C: Clock>(
          gaps {}, lost {}, bus errors {}, re-inits {}; discarded for stalled subscribers {}{}; \
          small-block pool: peak {} of 1024 blocks, {} requests found it empty",
         stats.published,
-        start.elapsed().as_secs_f64(),
+        elapsed.as_secs_f64(),
         stats.reads,
         stats.failed_reads,
         driver.overflows,
@@ -321,5 +332,4 @@ fn run<I2C: I2c, C: Clock>(
         ALLOCATOR.peak_blocks(),
         ALLOCATOR.fallbacks()
     );
-    Ok(())
 }
