@@ -757,30 +757,7 @@ impl<I2C: I2c> Mpu9250<I2C> {
                 sample.seq = self.seq;
                 self.seq += 1;
             }
-            // The gap's size: what the times say, at least what the driver discarded, and at
-            // least one sample whenever a gap is known to have happened.
-            // Settling frames dropped after a FIFO reset are part of the gap.
-            let gap = self.pending_flags & raw_flags::GAP_BEFORE != 0;
-            let dropped = if gap { skipped as u64 } else { 0 };
-            let mut lost = ((a.lost + dropped) as f64 / fps as f64).round() as u64;
-            lost = lost.max(self.pending_discarded);
-            if self.pending_flags & raw_flags::GAP_BEFORE != 0 {
-                lost = lost.max(1);
-            }
-            if n > 0 {
-                if lost > 0 {
-                    out[0].flags |= self.pending_flags | raw_flags::GAP_BEFORE;
-                    out[0].lost_before = u32::try_from(lost).unwrap_or(u32::MAX);
-                    self.stats.gaps += 1;
-                    self.stats.lost_samples += lost;
-                }
-                self.pending_flags = 0;
-                self.pending_discarded = 0;
-            } else {
-                // Nothing delivered (a settling or repeated frame only): the gap is carried
-                // to the next sample.
-                self.pending_discarded = lost;
-            }
+            self.mark_gap(&mut out[..n], a.lost, skipped, fps);
             delivered = n;
             self.stats.samples += n as u64;
             if let Some(bad) = mismatch {
@@ -809,6 +786,39 @@ impl<I2C: I2c> Mpu9250<I2C> {
             self.reset_fifo(config, (available / fps) as u64)?;
         }
         Ok(Some(delivered))
+    }
+
+    /// Flags the first of the `delivered` samples with the gap before it, if any: its size is
+    /// what the times say (`frames_lost` frames), at least what the driver discarded (settling
+    /// frames dropped after a FIFO reset, `skipped`, are part of a gap), and at least one
+    /// sample whenever a gap is known to have happened. With nothing delivered (a settling or
+    /// repeated frame only) the gap is carried to the next sample. `fps`: frames per sample.
+    fn mark_gap(
+        &mut self,
+        delivered: &mut [RawImuSample],
+        frames_lost: u64,
+        skipped: usize,
+        fps: u64,
+    ) {
+        let gap = self.pending_flags & raw_flags::GAP_BEFORE != 0;
+        let dropped = if gap { skipped as u64 } else { 0 };
+        let mut lost = ((frames_lost + dropped) as f64 / fps as f64).round() as u64;
+        lost = lost.max(self.pending_discarded);
+        if gap {
+            lost = lost.max(1);
+        }
+        let Some(first) = delivered.first_mut() else {
+            self.pending_discarded = lost;
+            return;
+        };
+        if lost > 0 {
+            first.flags |= self.pending_flags | raw_flags::GAP_BEFORE;
+            first.lost_before = u32::try_from(lost).unwrap_or(u32::MAX);
+            self.stats.gaps += 1;
+            self.stats.lost_samples += lost;
+        }
+        self.pending_flags = 0;
+        self.pending_discarded = 0;
     }
 
     /// Reads FIFO_COUNT again for an observation to anchor the sample times on, when the read
