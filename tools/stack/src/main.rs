@@ -4,6 +4,7 @@
 //! everything cleanly, and a status line shows rates, losses, zero-state and position.
 
 mod losses;
+mod monitor;
 mod summary;
 mod supervisor;
 
@@ -15,12 +16,9 @@ use std::time::{Duration, Instant};
 use acquire::acquisition::SourceSpec;
 use anyhow::{Context, Result, bail};
 use clap::Parser;
-use ipc_types::{
-    CorrectedImuSample, Message, OdometryState, RawImuSample, clock::monotonic_ns, corrected_flags,
-    odometry_flags, service,
-};
-use losses::{RecorderLosses, SourceLosses};
-use mems_topic::TopicStats;
+use ipc_types::service;
+use losses::RecorderLosses;
+use monitor::Monitor;
 use supervisor::{ChildSpec, Event, Supervisor};
 
 #[derive(Parser)]
@@ -241,6 +239,91 @@ fn clean_stale() {
 /// Name of a stack's work directory under the temporary directory, before its process id.
 const WORK_DIR_PREFIX: &str = "mems-stack-";
 
+/// The supervised processes, in start order: consumers first, the source last, so nothing is
+/// published to nobody. `calib` is the calibration file, `work` the stack's work directory.
+fn child_specs(
+    cli: &Cli,
+    bins: &Path,
+    namespace: &str,
+    calib: String,
+    work: &Path,
+    recorder_losses: Option<&RecorderLosses>,
+) -> Vec<ChildSpec> {
+    let spec = |name: &str, program: &str, args: Vec<String>| ChildSpec {
+        name: name.to_string(),
+        program: bins.join(program),
+        args: args
+            .into_iter()
+            .chain(["--namespace".to_string(), namespace.to_string()])
+            .collect(),
+        restart_at_once: false,
+        stdout: None,
+    };
+    let mut specs = Vec::new();
+    if let Some(out) = &cli.record {
+        let args = vec![
+            "--out".into(),
+            out.display().to_string(),
+            "--continue".into(),
+        ];
+        specs.push(ChildSpec {
+            restart_at_once: true,
+            stdout: recorder_losses.map(RecorderLosses::sink),
+            ..spec("record", "mems-record", args)
+        });
+    }
+    if let Some(addr) = &cli.foxglove {
+        let args = vec!["--listen".into(), addr.clone()];
+        specs.push(spec("foxglove", "mems-foxglove", args));
+    }
+    let args = vec!["serve".into(), "--calib".into(), calib.clone()];
+    specs.push(spec("odometry", "mems-odometry", args));
+    // A restarted calibration stage goes on from what the killed one had learned, in the
+    // stack's work directory (a new stack starts afresh).
+    let state = work.join("calibrate-state.json").display().to_string();
+    let args = [
+        "serve".into(),
+        "--calib".into(),
+        calib,
+        "--state".into(),
+        state,
+    ];
+    let args = args.into_iter().chain(detector_args(cli)).collect();
+    specs.push(spec("calibrate", "mems-calibrate", args));
+    specs.push(spec("acquire", "mems-acquire", acquire_args(cli)));
+    specs
+}
+
+/// Says on stderr what the supervisor reports; returns why the stack must stop, if a child
+/// keeps failing at start.
+fn announce(events: Vec<Event>, tty: bool) -> Option<String> {
+    let mut gave_up = None;
+    for event in events {
+        if tty {
+            eprintln!();
+        }
+        match event {
+            Event::Exited { name, status } => {
+                eprintln!("mems-stack: {name} exited ({status}); restarting");
+            }
+            Event::Restarted { name, count } => {
+                eprintln!("mems-stack: {name} restarted ({count} so far)");
+            }
+            Event::GaveUp { name, status } => {
+                let why = format!(
+                    "{name} exited within {:?} of starting {} times in a row (last: {status}); \
+                     not restarting it: see its error above",
+                    supervisor::FAST_EXIT,
+                    supervisor::MAX_FAST_EXITS
+                );
+                eprintln!("mems-stack: {why}; stopping the stack");
+                gave_up.get_or_insert(why);
+            }
+        }
+    }
+    gave_up
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     check_source(&cli)?;
@@ -263,153 +346,36 @@ fn main() -> Result<()> {
         (None, "sim" | "sim-spi") => calibrate_sim(&bins, &work, cli.seed)?,
         (None, other) => bail!("--calib is required for source {other}"),
     };
-    let calib = calib
-        .to_str()
-        .context("calibration path is not UTF-8")?
-        .to_string();
-    let ns_args = vec!["--namespace".to_string(), namespace.clone()];
-    let spec = |name: &str, program: &str, args: Vec<String>| ChildSpec {
-        name: name.to_string(),
-        program: bins.join(program),
-        args: args.into_iter().chain(ns_args.clone()).collect(),
-        restart_at_once: false,
-        stdout: None,
-    };
-
-    // Start order: consumers first, the source last, so nothing is published to nobody.
-    let mut specs = Vec::new();
+    let calib = calib.to_str().context("calibration path is not UTF-8")?;
     let recorder_losses = cli.record.is_some().then(RecorderLosses::default);
-    let mut source = SourceLosses::new(cli.rate);
-    if let Some(out) = &cli.record {
-        specs.push(ChildSpec {
-            restart_at_once: true,
-            stdout: recorder_losses.as_ref().map(RecorderLosses::sink),
-            ..spec(
-                "record",
-                "mems-record",
-                vec![
-                    "--out".into(),
-                    out.display().to_string(),
-                    "--continue".into(),
-                ],
-            )
-        });
-    }
-    if let Some(addr) = &cli.foxglove {
-        specs.push(spec(
-            "foxglove",
-            "mems-foxglove",
-            vec!["--listen".into(), addr.clone()],
-        ));
-    }
-    specs.push(spec(
-        "odometry",
-        "mems-odometry",
-        vec!["serve".into(), "--calib".into(), calib.clone()],
-    ));
-    // A restarted calibration stage goes on from what the killed one had learned, in the
-    // stack's work directory (a new stack starts afresh).
-    let calibrate_state = work.join("calibrate-state.json").display().to_string();
-    specs.push(spec(
-        "calibrate",
-        "mems-calibrate",
-        [
-            "serve".into(),
-            "--calib".into(),
-            calib,
-            "--state".into(),
-            calibrate_state,
-        ]
-        .into_iter()
-        .chain(detector_args(&cli))
-        .collect(),
-    ));
-    specs.push(spec("acquire", "mems-acquire", acquire_args(&cli)));
-
+    let specs = child_specs(
+        &cli,
+        &bins,
+        &namespace,
+        calib.to_string(),
+        &work,
+        recorder_losses.as_ref(),
+    );
     // Before any port exists: a SIGINT/SIGTERM is kept from then on.
-
     ipc_types::stop::install()?;
-
     let node = service::node()?;
-    let raw = service::open::<RawImuSample>(&node, &service::full_name(&namespace, service::RAW))?;
-    let corrected = service::open::<CorrectedImuSample>(
-        &node,
-        &service::full_name(&namespace, service::CORRECTED),
-    )?;
-    let odometry =
-        service::open::<OdometryState>(&node, &service::full_name(&namespace, service::ODOMETRY))?;
-    let raw_sub = service::subscriber(&raw)?;
-    let corrected_sub = service::subscriber(&corrected)?;
-    let odometry_sub = service::subscriber(&odometry)?;
-
+    let mut monitor = Monitor::new(&node, &namespace, cli.rate)?;
     for old in &overwrite {
         std::fs::remove_file(old).with_context(|| format!("cannot remove {}", old.display()))?;
     }
     let mut supervisor = Supervisor::start(specs)?;
     eprintln!("mems-stack: running (namespace {namespace:?}); Ctrl-C stops");
-    let (mut raw_stats, mut cor_stats, mut odo_stats) =
-        (TopicStats::new(), TopicStats::new(), TopicStats::new());
-    // The calibration stage's rest verdict on the newest sample; `None` until its detector has
-    // learned (no verdict yet).
-    let mut zero_state: Option<bool> = None;
-    let mut last_state: Option<OdometryState> = None;
     let start = Instant::now();
     let mut last_status = Instant::now();
     let tty = std::io::stderr().is_terminal();
     let deadline = cli.duration.map(Duration::from_secs_f64);
     let mut gave_up: Option<String> = None;
-
     // SIGINT/SIGTERM ends the loop: the clean way out.
-    while !ipc_types::stop::sleep(Duration::from_millis(20)) {
-        while let Some(s) = raw_sub.receive()? {
-            observe(&mut raw_stats, s.payload());
-            source.observe(s.payload());
-        }
-        while let Some(s) = corrected_sub.receive()? {
-            observe(&mut cor_stats, s.payload());
-            zero_state = (s.flags & corrected_flags::DETECTOR_READY != 0)
-                .then_some(s.flags & corrected_flags::ZERO_STATE != 0);
-        }
-        while let Some(s) = odometry_sub.receive()? {
-            observe(&mut odo_stats, s.payload());
-            if s.flags & odometry_flags::REVISION == 0 {
-                last_state = Some(*s.payload());
-            }
-        }
-        for event in supervisor.poll() {
-            if tty {
-                eprintln!();
-            }
-            match event {
-                Event::Exited { name, status } => {
-                    eprintln!("mems-stack: {name} exited ({status}); restarting");
-                }
-                Event::Restarted { name, count } => {
-                    eprintln!("mems-stack: {name} restarted ({count} so far)");
-                }
-                Event::GaveUp { name, status } => {
-                    let why = format!(
-                        "{name} exited within {:?} of starting {} times in a row (last: \
-                         {status}); not restarting it: see its error above",
-                        supervisor::FAST_EXIT,
-                        supervisor::MAX_FAST_EXITS
-                    );
-                    eprintln!("mems-stack: {why}; stopping the stack");
-                    gave_up.get_or_insert(why);
-                }
-            }
-        }
-        if gave_up.is_some() {
-            break;
-        }
+    while !ipc_types::stop::sleep(Duration::from_millis(20)) && gave_up.is_none() {
+        monitor.drain()?;
+        gave_up = announce(supervisor.poll(), tty);
         if last_status.elapsed() >= Duration::from_secs(1) {
-            let line = status_line(
-                &[&raw_stats, &cor_stats, &odo_stats],
-                &source,
-                recorder_losses.as_ref(),
-                zero_state,
-                last_state.as_ref(),
-            );
+            let line = monitor.status(recorder_losses.as_ref());
             let elapsed = start.elapsed().as_secs_f64();
             let line = match cli.duration {
                 Some(total) => format!("{elapsed:.0}/{total:.0} s | {line}"),
@@ -438,98 +404,22 @@ fn main() -> Result<()> {
     let _ = std::fs::remove_dir_all(&work);
     // The summary goes to stdout (the live status is on stderr), for scripts and tests: for a
     // person, then the status line.
+    let [raw, corrected, odometry] = &monitor.stats;
     let summary = summary::Summary {
         elapsed_s: start.elapsed().as_secs_f64(),
         restarts: &restarts,
-        topics: [&raw_stats, &cor_stats, &odo_stats],
-        source: &source,
+        topics: [raw, corrected, odometry],
+        source: &monitor.source,
         recorder: recorder_losses.as_ref(),
         record: cli.record.as_deref(),
-        state: last_state.as_ref(),
+        state: monitor.last_state.as_ref(),
     };
     print!("{summary}");
-    println!(
-        "{}",
-        status_line(
-            &[&raw_stats, &cor_stats, &odo_stats],
-            &source,
-            recorder_losses.as_ref(),
-            zero_state,
-            last_state.as_ref()
-        )
-    );
+    println!("{}", monitor.status(recorder_losses.as_ref()));
     match gave_up {
         Some(why) => bail!("{why}"),
         None => Ok(()),
     }
-}
-
-fn observe<T: Message>(stats: &mut TopicStats, m: &T) {
-    stats.observe(
-        m.seq(),
-        m.stamps().sample_ns,
-        m.published_ns(),
-        monotonic_ns(),
-        m.is_revision(),
-    );
-}
-
-/// The status line: losses at the source (sensor FIFO, acquire restarts), rate and losses
-/// per topic (sequence gaps as the stack receives them; for raw also the samples acquire gave
-/// up for stalled subscribers), what the recording misses per topic (when recording), the rest
-/// verdict of the newest corrected sample, and the newest live odometry state's position (or
-/// why there is none).
-fn status_line(
-    [raw, cor, odo]: &[&TopicStats; 3],
-    source: &SourceLosses,
-    recorder: Option<&RecorderLosses>,
-    zero_state: Option<bool>,
-    state: Option<&OdometryState>,
-) -> String {
-    let (r, c, o) = (raw.report(), cor.report(), odo.report());
-    let recording = recorder.map_or(String::new(), |rec| {
-        format!(
-            " | recording lost {}/{}/{}",
-            rec.of(service::RAW),
-            rec.of(service::CORRECTED),
-            rec.of(service::ODOMETRY)
-        )
-    });
-    let position = match state {
-        Some(s) if s.flags & odometry_flags::NO_GYRO != 0 => {
-            "no position: the sensor runs without its gyroscope at this rate".to_string()
-        }
-        Some(s) if s.flags & odometry_flags::ALIGNED != 0 => format!(
-            "pos ({:+.2}, {:+.2}, {:+.2}) m +- ({:.2}, {:.2}, {:.2})",
-            s.position_m[0],
-            s.position_m[1],
-            s.position_m[2],
-            s.position_sigma_m[0],
-            s.position_sigma_m[1],
-            s.position_sigma_m[2]
-        ),
-        Some(_) => "aligning".to_string(),
-        None => "no odometry yet".to_string(),
-    };
-    format!(
-        "sensor lost {} + {} across acquire restarts | raw {:.0} Hz lost {} undelivered {} | \
-         corrected {:.0} Hz lost {} | odometry {:.0} Hz lost {}{recording} | {} | {}",
-        source.fifo,
-        source.restarts,
-        r.rate_hz,
-        r.lost,
-        source.undelivered(),
-        c.rate_hz,
-        c.lost,
-        o.rate_hz,
-        o.lost,
-        match zero_state {
-            None => "rest detector learning",
-            Some(true) => "at rest",
-            Some(false) => "moving",
-        },
-        position
-    )
 }
 
 #[cfg(test)]
@@ -616,61 +506,6 @@ mod tests {
         assert_eq!(value(&at_1k, "--glrt-window"), None);
         let asked = detector(&["--rate", "4000", "--detector", "yu"]);
         assert_eq!(asked, vec!["--detector".to_string(), "yu".to_string()]);
-    }
-
-    #[test]
-    fn the_status_line_shows_no_position_without_gyro() {
-        let stats = TopicStats::new();
-        let line = |flags| {
-            let state = OdometryState {
-                flags,
-                position_m: [1.5, -2.0, 0.0],
-                ..OdometryState::default()
-            };
-            let source = SourceLosses::new(1000);
-            status_line(&[&stats; 3], &source, None, Some(true), Some(&state))
-        };
-        let aligned = line(odometry_flags::ALIGNED);
-        assert!(aligned.contains("pos (+1.50, -2.00, +0.00) m"), "{aligned}");
-        let no_gyro = line(odometry_flags::NO_GYRO);
-        assert!(no_gyro.contains("no position"), "{no_gyro}");
-        assert!(!no_gyro.contains("pos ("), "{no_gyro}");
-        let learning = status_line(&[&stats; 3], &SourceLosses::new(1000), None, None, None);
-        assert!(learning.contains("rest detector learning"), "{learning}");
-        assert!(
-            !learning.contains("at rest") && !learning.contains("moving"),
-            "{learning}"
-        );
-    }
-
-    #[test]
-    fn the_status_line_shows_losses_at_every_point() {
-        let stats = TopicStats::new();
-        let mut source = SourceLosses::new(1000);
-        let raw = |seq, t_ms: u64, lost_before, undelivered| RawImuSample {
-            seq,
-            stamps: ipc_types::Stamps {
-                sample_ns: t_ms * 1_000_000,
-                ..Default::default()
-            },
-            lost_before,
-            undelivered,
-            ..Default::default()
-        };
-        source.observe(&raw(7, 10, 3, 45));
-        source.observe(&raw(0, 240, 0, 0));
-        let recorder = RecorderLosses::default();
-        recorder.sink()("mems-record: lost 20 of mems/imu/raw (seq 100..=119)");
-        let line = status_line(&[&stats; 3], &source, Some(&recorder), None, None);
-        for needle in [
-            "sensor lost 3 + 229 across acquire restarts",
-            "undelivered 45",
-            "recording lost 20/0/0",
-        ] {
-            assert!(line.contains(needle), "{needle:?} missing from: {line}");
-        }
-        let unrecorded = status_line(&[&stats; 3], &source, None, None, None);
-        assert!(!unrecorded.contains("recording"), "{unrecorded}");
     }
 
     #[test]
