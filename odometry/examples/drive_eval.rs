@@ -261,6 +261,9 @@ struct Outcome {
     scale_sigma: f64,
     /// Angle between the estimated (or configured) mounting and the true one, degrees.
     mounting_error_deg: f64,
+    /// 1-sigma of one sample's zero-velocity update over the configured one: the square root
+    /// of the effective-sample factor the stage estimated at alignment.
+    zupt_widening: f64,
     /// The rest flags the stage got, scored against the drive's truth.
     flags: FlagScore,
     /// Time of the alignment, s.
@@ -587,6 +590,7 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
         mounting_error_deg: stage
             .mounting()
             .map_or(f64::NAN, |m| m.angle_to(&true_mounting).to_degrees()),
+        zupt_widening: stage.zupt_sigma_mps() / cfg.zupt_sigma_mps,
         distance_m,
         error_m,
         sigma_m: Vector2::new(o.position_sigma_m[0], o.position_sigma_m[1]),
@@ -656,7 +660,7 @@ fn main() {
             let p = 100.0 * o.error_m.norm() / o.distance_m;
             if args.per_seed {
                 eprintln!(
-                    "{} seed {seed}: distance {:.1} m, error ({:.3}, {:.3}) m = {p:.2}%, sigma ({:.3}, {:.3}) m, NEES {:.2}, gyro correction error {:.1e}, speed updates {}, disagreements {}, stale samples {}, scale error {:+.2}% (sigma {:.2}%), mounting error {:.2} deg",
+                    "{} seed {seed}: distance {:.1} m, error ({:.3}, {:.3}) m = {p:.2}%, sigma ({:.3}, {:.3}) m, NEES {:.2}, gyro correction error {:.1e}, speed updates {}, disagreements {}, stale samples {}, scale error {:+.2}% (sigma {:.2}%), mounting error {:.2} deg, zero-velocity update's effective-sample factor {:.2}",
                     label.get_name(),
                     o.distance_m,
                     o.error_m.x,
@@ -670,7 +674,8 @@ fn main() {
                     o.hint_counts.2,
                     100.0 * o.scale_error,
                     100.0 * o.scale_sigma,
-                    o.mounting_error_deg
+                    o.mounting_error_deg,
+                    o.zupt_widening.powi(2)
                 );
             }
             flags.add(&o.flags);

@@ -12,4 +12,5 @@ pub mod gyrocal;
 pub mod hints;
 mod navigator;
 pub mod profile;
+pub mod rest_noise;
 pub mod stage;

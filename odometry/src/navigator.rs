@@ -8,6 +8,7 @@ use crate::eskf::{ConsiderModel, Eskf, Imu, KS, align};
 use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
+use crate::rest_noise::RestNoise;
 use crate::stage::OdometryConfig;
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
@@ -30,11 +31,9 @@ struct HistoryEntry {
 
 #[derive(Debug, Clone, Copy, Default)]
 struct AlignSums {
-    n: u64,
     t0_ns: u64,
-    f: Vector3<f64>,
-    w: Vector3<f64>,
-    w2: Vector3<f64>,
+    accel: RestNoise,
+    gyro: RestNoise,
 }
 
 /// What happens to the motion history after a motion interval has ended.
@@ -168,6 +167,10 @@ pub(crate) struct Navigator {
     cfg: OdometryConfig,
     hints: Hints,
     align: AlignSums,
+    /// 1-sigma of one sample's zero-velocity update, m/s: the configured one, widened by the
+    /// square root of the alignment rest's accelerometer mean-variance factor when
+    /// `effective_samples` is set.
+    zupt_sigma_mps: f64,
     kf: Option<Eskf>,
     /// Time (ns), sequence number and measurement of the previous sample.
     last: Option<(u64, u64, Imu)>,
@@ -209,6 +212,7 @@ impl Navigator {
                 stats: HintStats::default(),
             },
             align: AlignSums::default(),
+            zupt_sigma_mps: cfg.zupt_sigma_mps,
             kf: None,
             last: None,
             history: Vec::with_capacity(capacity),
@@ -228,6 +232,7 @@ impl Navigator {
         self.cfg = other.cfg;
         self.hints.copy_from(&other.hints);
         self.align = other.align;
+        self.zupt_sigma_mps = other.zupt_sigma_mps;
         self.kf.clone_from(&other.kf);
         self.last = other.last;
         self.history.clone_from(&other.history);
@@ -252,6 +257,11 @@ impl Navigator {
     /// Counters of the hints seen so far.
     pub fn hint_stats(&self) -> HintStats {
         self.hints.stats
+    }
+
+    /// 1-sigma of one sample's zero-velocity update, m/s (see the field).
+    pub fn zupt_sigma_mps(&self) -> f64 {
+        self.zupt_sigma_mps
     }
 
     /// The IMU-to-body mounting (sensor to body), configured or estimated; `None` while it is
@@ -395,7 +405,7 @@ impl Navigator {
         }
         if rest && self.cfg.rest_updates {
             let (p0, v0) = (kf.x.p, kf.x.v);
-            kf.zero_velocity(self.cfg.zupt_sigma_mps);
+            kf.zero_velocity(self.zupt_sigma_mps);
             let gyro_sigma = self.cfg.noise.gyro_noise_density / dt.sqrt();
             kf.zero_rate(gyro_sigma, self.cfg.zaru_gate_sigma);
             if let Some(pending) = self.pending.as_mut() {
@@ -464,22 +474,28 @@ impl Navigator {
             return;
         }
         let a = &mut self.align;
-        if a.n == 0 {
+        if a.accel.is_empty() {
             a.t0_ns = t_ns;
         }
-        a.n += 1;
-        a.f += m.f;
-        a.w += m.w;
-        a.w2 += m.w.component_mul(&m.w);
-        if (t_ns - a.t0_ns) as f64 * 1e-9 < self.cfg.align_s || a.n < 2 {
+        a.accel.push(m.f);
+        a.gyro.push(m.w);
+        if (t_ns - a.t0_ns) as f64 * 1e-9 < self.cfg.align_s || a.accel.len() < 2 {
             return;
         }
-        let n = a.n as f64;
-        let f_mean = a.f / n;
-        let w_mean = a.w / n;
-        // Gyro bias from the rest mean: its uncertainty is the sample std over sqrt(n).
-        let w_var = (a.w2 / n - w_mean.component_mul(&w_mean)).map(|v| v.max(0.0));
-        let w_sigma = (w_var / n).map(f64::sqrt);
+        let n = a.accel.len() as f64;
+        let f_mean = a.accel.mean();
+        let w_mean = a.gyro.mean();
+        // Gyro bias from the rest mean: its variance is the sample variance over n, times the
+        // samples' mean-variance factor when they count as effective samples; each
+        // zero-velocity update then counts for one effective sample of the accelerometer's
+        // noise (`OdometryConfig::effective_samples`).
+        let mut w_var = a.gyro.variance() / n;
+        self.zupt_sigma_mps = self.cfg.zupt_sigma_mps;
+        if self.cfg.effective_samples {
+            w_var.component_mul_assign(&a.gyro.mean_variance_factor());
+            self.zupt_sigma_mps *= a.accel.mean_variance_factor().max().sqrt();
+        }
+        let w_sigma = w_var.map(f64::sqrt);
         let g = self.cfg.gravity_mps2;
         let scale_as_bias = g * self.cfg.accel_residual_scale;
         let bias_sigma =

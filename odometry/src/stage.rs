@@ -120,6 +120,16 @@ pub struct OdometryConfig {
     pub zaru_gate_sigma: f64,
     /// 1-sigma of the zero-velocity pseudo-measurement, m/s.
     pub zupt_sigma_mps: f64,
+    /// Whether a rest's successive samples count as effective samples of the sensor's noise
+    /// rather than as independent ones, with the mean-variance factors (`crate::rest_noise`)
+    /// estimated from the samples of the rest the filter aligns on (1 for white samples): each
+    /// zero-velocity update's variance is `zupt_sigma_mps^2` times the accelerometer's factor
+    /// (its largest axis'), and the alignment's gyro-bias variance (the rest's sample variance
+    /// over `n`) is multiplied by the gyro's factor per axis. A sensor whose own low-pass
+    /// filter correlates successive samples (an MPU-9250 at 1 kHz with its 20 Hz DLPF: about
+    /// 15) then gets from a rest the information of its effective number of samples, as the
+    /// detector's thresholds do (docs/odometry.md).
+    pub effective_samples: bool,
     /// Rest needed before alignment, s.
     pub align_s: f64,
     /// Time after the end of a motion interval over which corrections are gathered before the
@@ -168,6 +178,7 @@ impl OdometryConfig {
             accel_residual_scale: 1e-3,
             zaru_gate_sigma: 5.0,
             zupt_sigma_mps: 2e-3,
+            effective_samples: true,
             align_s: 1.0,
             revision_delay_s: 0.2,
             max_motion_s: 120.0,
@@ -798,6 +809,13 @@ impl OdometryStage {
                 .count() as u64;
             hs.withdrawn + pending
         })
+    }
+
+    /// 1-sigma of one sample's zero-velocity update, m/s: `zupt_sigma_mps`, widened once
+    /// aligned by the alignment rest's effective-sample factor when `effective_samples` is
+    /// set (for diagnostics).
+    pub fn zupt_sigma_mps(&self) -> f64 {
+        self.ahead.zupt_sigma_mps()
     }
 
     /// The filter, once aligned (for diagnostics and tests).
