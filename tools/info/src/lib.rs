@@ -16,9 +16,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
 use ipc_types::{odometry_flags, raw_flags, service};
 use recording::mcap::run::{Message, RunReader};
-use recording::mcap::{EventKind, RecorderEvent};
+use recording::mcap::{EventKind, MessageEncoding, RecorderEvent};
 use serde::{Deserialize, Serialize};
 
 /// One file of the run.
@@ -141,6 +142,61 @@ struct SampleTime {
     sample_ns: u64,
 }
 
+impl Fields {
+    /// The fields of a message: from its JSON whatever the topic; from protobuf by decoding
+    /// it as its topic's type (`None` if it does not decode; all fields absent on a topic
+    /// without them, as the pose and truth).
+    fn of(message: &Message<'_>) -> Option<Self> {
+        if message.encoding == Some(MessageEncoding::Json) {
+            return serde_json::from_slice(message.data).ok();
+        }
+        let stamps = |s: ipc_types::Stamps| {
+            Some(SampleTime {
+                sample_ns: s.sample_ns,
+            })
+        };
+        let fields = if let Some(m) = message.decode::<RawImuSample>() {
+            let m = m.ok()?;
+            Self {
+                seq: Some(m.seq),
+                flags: Some(m.flags),
+                lost_before: Some(m.lost_before),
+                undelivered: Some(m.undelivered),
+                stamps: stamps(m.stamps),
+                ..Self::default()
+            }
+        } else if let Some(m) = message.decode::<CorrectedImuSample>() {
+            let m = m.ok()?;
+            Self {
+                seq: Some(m.seq),
+                flags: Some(m.flags),
+                calib_id: Some(m.calib_id),
+                stamps: stamps(m.stamps),
+                ..Self::default()
+            }
+        } else if let Some(m) = message.decode::<OdometryState>() {
+            let m = m.ok()?;
+            Self {
+                seq: Some(m.seq),
+                flags: Some(m.flags),
+                stamps: stamps(m.stamps),
+                ..Self::default()
+            }
+        } else if let Some(m) = message.decode::<RobotHint>() {
+            let m = m.ok()?;
+            Self {
+                seq: Some(m.seq),
+                flags: Some(m.flags),
+                stamps: stamps(m.stamps),
+                ..Self::default()
+            }
+        } else {
+            Self::default()
+        };
+        Some(fields)
+    }
+}
+
 /// Per-topic sequence tracking.
 #[derive(Default)]
 struct Sequence {
@@ -238,7 +294,7 @@ impl Tally {
         }
         topic.count += 1;
         topic.last_log_ns = t;
-        if channel.encoding != recording::mcap::MESSAGE_ENCODING {
+        if message.encoding.is_none() {
             return;
         }
         if channel.topic == recording::mcap::EVENTS_TOPIC {
@@ -248,7 +304,7 @@ impl Tally {
             }
             return;
         }
-        let Ok(fields) = serde_json::from_slice::<Fields>(message.data) else {
+        let Some(fields) = Fields::of(message) else {
             topic.undecodable += 1;
             return;
         };
