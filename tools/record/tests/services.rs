@@ -19,7 +19,7 @@ use serde_json::Value;
 
 const WAIT: Duration = Duration::from_secs(10);
 /// The Python `mcap` version `.ci/run` installs (and these tests were run with).
-const PYTHON_MCAP: &str = "mcap==1.6.0";
+const PYTHON_MCAP: &str = "mcap==1.6.0 mcap-protobuf-support==0.6.0";
 
 /// What the fake stages sent.
 struct Sent {
@@ -204,7 +204,7 @@ fn python_decode(mcap: &Path) -> Value {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(
         output.status.code() != Some(3),
-        "the Python package `mcap` is not installed: run .ci/run (CI installs {PYTHON_MCAP}) \
+        "the Python packages `mcap` and `mcap-protobuf-support` are not installed: run .ci/run (CI installs {PYTHON_MCAP}) \
          or `python3 -m pip install {PYTHON_MCAP}`\n{stderr}"
     );
     assert!(output.status.success(), "decode_mcap.py failed:\n{stderr}");
@@ -212,7 +212,8 @@ fn python_decode(mcap: &Path) -> Value {
 }
 
 /// The official Python reader opens the recording (its summary written by the clean finish),
-/// decodes every message with its channel's JSON schema, and finds what was sent, with
+/// decodes every message with its channel's schema (protobuf, with the decoder factory of
+/// `mcap-protobuf-support`), and finds what was sent, with
 /// publish_time = the sample time and log_time = the receive time.
 #[test]
 fn python_mcap_reader_decodes_every_channel_with_its_schema() {
@@ -248,8 +249,8 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
     for (topic, schema, values) in &expect {
         let c = &channels[*topic];
         assert_eq!(c["schema_name"], *schema, "{topic}");
-        assert_eq!(c["schema_encoding"], "jsonschema", "{topic}");
-        assert_eq!(c["message_encoding"], "json", "{topic}");
+        assert_eq!(c["schema_encoding"], "protobuf", "{topic}");
+        assert_eq!(c["message_encoding"], "protobuf", "{topic}");
         // A channel without messages may be absent from the statistics.
         assert_eq!(
             report["summary_counts"][*topic].as_u64().unwrap_or(0),
