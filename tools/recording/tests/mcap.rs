@@ -609,3 +609,59 @@ fn a_run_continues_in_its_successor_segment() {
         std::fs::remove_file(p).unwrap();
     }
 }
+
+/// The streaming reader (`RawRun`, behind `mems-odometry offline`, `mems-replay` and
+/// `mems-info`) reads a JSON recording (the older encoding) and a protobuf one, written by the
+/// real writer, to the same samples and truth, bit for bit; each message names its encoding.
+#[test]
+fn the_streaming_reader_reads_both_encodings() {
+    use recording::mcap::run::{Item, RawRun, RunReader};
+    let samples = live_samples(500, 71);
+    let truth = any_truth(&samples, 72);
+    let mut read = Vec::new();
+    for (encoding, name) in [
+        (MessageEncoding::Json, "json"),
+        (MessageEncoding::Protobuf, "protobuf"),
+    ] {
+        let path = tmp(&format!("stream-{name}.mcap"));
+        write_in(&path, &samples, &truth, 100, encoding);
+        let mut run = RunReader::open(&path).unwrap();
+        while let Some(m) = run.next() {
+            let m = m.unwrap();
+            assert_eq!(m.encoding, Some(encoding), "{name}");
+            assert_eq!(m.channel.encoding, name);
+        }
+        let items: Vec<Item> = RawRun::open(&path, false)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let raw: Vec<RawImuSample> = items
+            .iter()
+            .filter_map(|i| match i {
+                Item::Raw(s) => Some(*s),
+                _ => None,
+            })
+            .collect();
+        let t: Vec<Truth> = items
+            .iter()
+            .filter_map(|i| match i {
+                Item::Truth(t) => Some(*t),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(raw, samples, "{name}");
+        let bits: Vec<_> = raw.iter().map(sample_bits).collect();
+        assert_eq!(bits, samples.iter().map(sample_bits).collect::<Vec<_>>());
+        assert_eq!(
+            t.iter().map(truth_bits).collect::<Vec<_>>(),
+            truth.iter().map(truth_bits).collect::<Vec<_>>()
+        );
+        read.push(std::fs::metadata(&path).unwrap().len());
+    }
+    assert!(
+        read[1] < read[0],
+        "protobuf {} bytes, JSON {}",
+        read[1],
+        read[0]
+    );
+}
