@@ -16,10 +16,9 @@
 //!
 //! Times: our messages carry `CLOCK_MONOTONIC` ns; Foxglove places messages by Unix time, so
 //! each time is shifted by `CLOCK_REALTIME - CLOCK_MONOTONIC` measured once at start
-//! ([`WallClock`]). The JSON messages keep their own monotonic stamps.
+//! ([`WallClock`], the recorder's too). The JSON messages keep their own monotonic stamps.
 
 use std::sync::Arc;
-use std::time::{SystemTime, UNIX_EPOCH};
 
 use foxglove::messages::{
     FrameTransform, Pose, PoseInFrame, PosesInFrame, Quaternion, Timestamp, Vector3,
@@ -39,35 +38,15 @@ pub const PATH_LEN: usize = 3000;
 /// Sample time between two path messages, ns.
 pub const PATH_EVERY_NS: u64 = 500_000_000;
 
-/// Converts `CLOCK_MONOTONIC` ns to Unix ns with the offset between the two clocks taken once.
-#[derive(Debug, Clone, Copy)]
-pub struct WallClock {
-    offset_ns: i128,
-}
+pub use recording::clock::WallClock;
 
-impl WallClock {
-    /// Measures the offset now.
-    pub fn now() -> Self {
-        let unix = SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos() as i128);
-        Self {
-            offset_ns: unix - i128::from(ipc_types::clock::monotonic_ns()),
-        }
-    }
-
-    /// The Unix time, ns, of monotonic time `t_ns` (0 if before 1970).
-    pub fn unix_ns(&self, t_ns: u64) -> u64 {
-        u64::try_from(i128::from(t_ns) + self.offset_ns).unwrap_or(0)
-    }
-
-    fn timestamp(&self, t_ns: u64) -> Timestamp {
-        let unix = self.unix_ns(t_ns);
-        Timestamp::new(
-            u32::try_from(unix / 1_000_000_000).unwrap_or(u32::MAX),
-            (unix % 1_000_000_000) as u32,
-        )
-    }
+/// Foxglove's timestamp of monotonic time `t_ns` on `clock`.
+fn timestamp(clock: &WallClock, t_ns: u64) -> Timestamp {
+    let unix = clock.unix_ns(t_ns);
+    Timestamp::new(
+        u32::try_from(unix / 1_000_000_000).unwrap_or(u32::MAX),
+        (unix % 1_000_000_000) as u32,
+    )
 }
 
 /// A JSON channel whose schema is the recording's for `T`.
@@ -137,7 +116,7 @@ impl View {
         self.state.log_with_meta(&self.json, meta);
         let pose = pose_of(s);
         let stamped = PoseInFrame {
-            timestamp: Some(self.clock.timestamp(t_ns)),
+            timestamp: Some(timestamp(&self.clock, t_ns)),
             frame_id: NAV_FRAME.into(),
             pose: Some(pose),
         };

@@ -1,7 +1,7 @@
 """Decodes an MCAP recording with the official Python `mcap` reader and each channel's schema
 (protobuf through `mcap-protobuf-support`'s decoder factory; JSON Schema for older recordings),
 and prints a JSON report on stdout: channels (schema name and encodings), the summary's
-per-channel message counts, and every decoded message with its log and publish times. A
+per-channel message counts, the metadata records, and every decoded message with its log and publish times. A
 protobuf message is reported in our JSON form (every field, `null` for an unset optional,
 Foxglove's timestamps as {"sec", "nsec"}) so that both encodings compare with the same values.
 
@@ -129,8 +129,14 @@ def main(path):
                     "value": value if isinstance(value, dict) else plain(value),
                 }
             )
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
     json.dump(
-        {"channels": channels, "summary_counts": counts, "messages": messages},
+        {
+            "channels": channels,
+            "summary_counts": counts,
+            "metadata": metadata,
+            "messages": messages,
+        },
         sys.stdout,
     )
 

@@ -214,7 +214,8 @@ fn python_decode(mcap: &Path) -> Value {
 /// The official Python reader opens the recording (its summary written by the clean finish),
 /// decodes every message with its channel's schema (protobuf, with the decoder factory of
 /// `mcap-protobuf-support`), and finds what was sent, with
-/// publish_time = the sample time and log_time = the receive time.
+/// publish_time = the sample time and log_time = the receive time, both Unix ns through the
+/// clock the file's `mems.clock` metadata record states.
 #[test]
 fn python_mcap_reader_decodes_every_channel_with_its_schema() {
     let n = 120;
@@ -222,6 +223,12 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
     let (mcap, sent) = record_fake_stack("python", n);
     let end_ns = ipc_types::clock::monotonic_ns();
     let report = python_decode(&mcap);
+    let clock = &report["metadata"]["mems.clock"];
+    let field = |name: &str| clock[name].as_str().unwrap().parse::<i128>().unwrap();
+    let (realtime, monotonic) = (field("realtime_ns"), field("monotonic_ns"));
+    assert_eq!(field("offset_ns"), realtime - monotonic);
+    assert!(monotonic >= i128::from(start_ns) && monotonic <= i128::from(end_ns));
+    let unix = |t: u64| u64::try_from(i128::from(t) + realtime - monotonic).unwrap();
 
     let poses: Vec<PoseInFrame> = sent.odometry.iter().map(PoseInFrame::from_state).collect();
     let expect: [(&str, &str, Vec<Value>); 6] = [
@@ -272,10 +279,10 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
                 }
                 _ => v["stamps"]["sample_ns"].as_u64().unwrap(),
             };
-            assert_eq!(m["publish_time"].as_u64(), Some(own_time), "{topic}");
+            assert_eq!(m["publish_time"].as_u64(), Some(unix(own_time)), "{topic}");
             let log = m["log_time"].as_u64().unwrap();
             assert!(
-                log > start_ns && log < end_ns,
+                log > unix(start_ns) && log < unix(end_ns),
                 "{topic}: log_time {log} is the receive time"
             );
         }

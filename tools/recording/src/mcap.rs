@@ -43,6 +43,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
+use crate::clock::WallClock;
 use crate::error::{Error, ErrorKind, Result};
 use crate::{Format, Recording, Truth};
 
@@ -1088,6 +1089,8 @@ pub struct Writer {
     buf: Vec<u8>,
     /// Each channel's protobuf message ([`Topic::Proto`]), reused in the same way.
     protos: HashMap<u16, Box<dyn Any>>,
+    /// Shifts log and publish times to Unix time, once [`Writer::anchor`]ed.
+    clock: Option<WallClock>,
 }
 
 impl Writer {
@@ -1123,7 +1126,24 @@ impl Writer {
             sequences: HashMap::new(),
             buf: Vec::new(),
             protos: HashMap::new(),
+            clock: None,
         })
+    }
+
+    /// Anchors the recording to the wall clock: writes `clock` as the metadata record
+    /// [`crate::clock::METADATA_NAME`], and from now on every message's log and publish time
+    /// is the Unix time (ns, UTC) of the monotonic time given for it
+    /// ([`WallClock::unix_ns`]). The messages' own stamps stay `CLOCK_MONOTONIC`.
+    pub fn anchor(&mut self, clock: WallClock) -> Result<()> {
+        let metadata = ::mcap::records::Metadata {
+            name: crate::clock::METADATA_NAME.into(),
+            metadata: clock.metadata(),
+        };
+        self.inner
+            .write_metadata(&metadata)
+            .map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
+        self.clock = Some(clock);
+        Ok(())
     }
 
     /// Writes the channels added from now on in `encoding` (protobuf unless told).
@@ -1176,7 +1196,13 @@ impl Writer {
         message: &T,
         log_time_ns: u64,
     ) -> Result<()> {
-        let publish_time = message.publish_time_ns();
+        let (publish_time, log_time_ns) = match &self.clock {
+            Some(clock) => (
+                clock.unix_ns(message.publish_time_ns()),
+                clock.unix_ns(log_time_ns),
+            ),
+            None => (message.publish_time_ns(), log_time_ns),
+        };
         self.buf.clear();
         match self.protos.get_mut(&channel.id) {
             Some(proto) => {
