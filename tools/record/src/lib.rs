@@ -34,7 +34,8 @@ use ipc_types::clock::monotonic_ns;
 use ipc_types::wake::{self, Exit, WaitMode};
 use ipc_types::{CorrectedImuSample, Message, OdometryState, RawImuSample, RobotHint, service};
 use recording::clock::WallClock;
-use recording::mcap::{Channel, EventKind, PoseInFrame, RecorderEvent, Topic, Writer};
+use recording::mcap::derived::DerivedChannels;
+use recording::mcap::{Channel, EventKind, RecorderEvent, Topic, Writer};
 use recording::segment;
 
 /// Age of the oldest unflushed message at which the recorder closes the current chunk and
@@ -402,7 +403,7 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
         writer.flush()?;
         split.push(event);
     }
-    let pose = writer.add_channel::<PoseInFrame>()?;
+    let mut derived = DerivedChannels::add(&mut writer)?;
     let ns = options.namespace.as_str();
     // One line per service; a new service is one more line here.
     let mut streams: Vec<Box<dyn Stream>> = vec![
@@ -419,9 +420,8 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
             events,
         )?),
         Box::new(
-            Subscription::<OdometryState>::open(&node, ns, &mut writer, events)?.deriving(
-                move |w, state, log_ns| w.write(pose, &PoseInFrame::from_state(state), log_ns),
-            ),
+            Subscription::<OdometryState>::open(&node, ns, &mut writer, events)?
+                .deriving(move |w, state, log_ns| derived.write(w, state, log_ns)),
         ),
         // Hints from the robot's controller (published without back-pressure: a hint the
         // recorder could not take shows as a gap event).

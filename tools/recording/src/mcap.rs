@@ -1,28 +1,34 @@
-//! MCAP recordings: JSON messages described by JSON Schema (message encoding `json`, schema
-//! encoding `jsonschema`, which Foxglove and the official MCAP readers understand), in
-//! zstd-compressed chunks.
+//! MCAP recordings: protobuf messages with their `FileDescriptorSet` schemas (message and
+//! schema encoding `protobuf`, which Foxglove and the official MCAP readers decode; [`proto`]),
+//! or JSON described by JSON Schema in older recordings, which every reader here still reads
+//! ([`MessageEncoding`]), in zstd-compressed chunks.
 //!
 //! Channels: [`ipc_types::service::RAW`] (`mems/imu/raw`, [`RawImuSample`]),
 //! [`ipc_types::service::CORRECTED`] (`mems/imu/corrected`, [`CorrectedImuSample`]),
 //! [`ipc_types::service::ODOMETRY`] (`mems/odometry/state`, [`OdometryState`]),
-//! [`ipc_types::service::HINT`] (`mems/robot/hint`, [`RobotHint`]), the pose derived
-//! from each odometry state for Foxglove ([`POSE_TOPIC`], [`PoseInFrame`], schema
-//! `foxglove.PoseInFrame`), the recorder's events ([`EVENTS_TOPIC`], [`RecorderEvent`]) and
-//! [`TRUTH_TOPIC`] (`mems/sim/truth`, [`Truth`]). Topics are the services' base names, without
-//! the namespace they were recorded under. Another message type becomes recordable by
-//! implementing [`Topic`] for it; its channel is then one [`Writer::add_channel`] call.
+//! [`ipc_types::service::HINT`] (`mems/robot/hint`, [`RobotHint`]), the Foxglove messages
+//! derived from each odometry state ([`derived`]: pose [`POSE_TOPIC`], read back as
+//! [`PoseInFrame`], revised pose, transform and path), the recorder's events ([`EVENTS_TOPIC`],
+//! [`RecorderEvent`]) and [`TRUTH_TOPIC`] (`mems/sim/truth`, [`Truth`]). Topics are the
+//! services' base names, without the namespace they were recorded under. Another message type
+//! becomes recordable by implementing [`Topic`] for it; its channel is then one
+//! [`Writer::add_channel`] call.
 //!
 //! Times: each message's `log_time` is chosen by the writer's caller (the recorder uses the
 //! receive time, ns `CLOCK_MONOTONIC`); its `publish_time` is the message's own time
-//! ([`Topic::publish_time_ns`], e.g. a raw sample's `stamps.sample_ns`). Floats are written in
-//! their shortest round-trip form and parsed with `serde_json`'s `float_roundtrip`, so every
-//! `f64` reads back bit for bit. JSON cannot hold NaN or infinity: the writer rejects them.
+//! ([`Topic::publish_time_ns`], e.g. a raw sample's `stamps.sample_ns`). A writer anchored to
+//! the wall clock ([`Writer::anchor`], as the recorder's is) writes both as Unix ns and states
+//! the anchor in a metadata record ([`crate::clock`]). Every `f64` reads back bit for bit:
+//! protobuf `double`s as they are; JSON in its shortest round-trip form, parsed with
+//! `serde_json`'s `float_roundtrip` (JSON cannot hold NaN or infinity: a JSON writer refuses
+//! them).
 //!
 //! A writer killed mid-recording leaves a file without summary or footer. [`Reader`] scans
 //! linearly and yields every message of every complete chunk before the cut, then reports the
 //! truncation ([`ErrorKind::Truncated`]); [`read_all`] returns it in [`Contents::truncation`].
 //! [`Writer::flush`] closes the current chunk, bounding what a kill can lose.
 
+pub mod derived;
 pub mod proto;
 pub mod run;
 pub mod scan;
@@ -1075,6 +1081,20 @@ impl<T> Clone for Channel<T> {
 
 impl<T> Copy for Channel<T> {}
 
+/// A channel of one of Foxglove's messages ([`Writer::add_foxglove_channel`]).
+pub struct FoxgloveChannel<M> {
+    id: u16,
+    message: PhantomData<fn(&M)>,
+}
+
+impl<M> Clone for FoxgloveChannel<M> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<M> Copy for FoxgloveChannel<M> {}
+
 /// Writes an MCAP recording to a file: zstd chunks, protobuf messages (or JSON, for files in
 /// the older encoding: [`Writer::with_encoding`]).
 ///
@@ -1226,17 +1246,69 @@ impl Writer {
                     .map_err(|e| Error::file(&self.path, ErrorKind::Json(e)))?;
             }
         }
-        let sequence = self.sequences.entry(channel.id).or_default();
+        self.write_buf(channel.id, publish_time, log_time_ns)
+    }
+
+    /// Writes the encoded message in `self.buf` on channel `id` with these times (already
+    /// anchored).
+    fn write_buf(&mut self, id: u16, publish_time: u64, log_time: u64) -> Result<()> {
+        let sequence = self.sequences.entry(id).or_default();
         let header = MessageHeader {
-            channel_id: channel.id,
+            channel_id: id,
             sequence: *sequence,
-            log_time: log_time_ns,
+            log_time,
             publish_time,
         };
         *sequence = sequence.wrapping_add(1);
         self.inner
             .write_to_known_channel(&header, &self.buf)
             .map_err(|e| Error::file(&self.path, ErrorKind::Mcap(e)))
+    }
+
+    /// The wall clock the file is anchored to ([`Writer::anchor`]), if it is.
+    pub fn clock(&self) -> Option<WallClock> {
+        self.clock
+    }
+
+    /// Adds a protobuf channel on `topic` for one of Foxglove's messages `M` (its SDK's
+    /// schema), written as it is: the derived topics of [`derived`], which have no JSON form.
+    pub fn add_foxglove_channel<M: foxglove::Encode>(
+        &mut self,
+        topic: &str,
+    ) -> Result<FoxgloveChannel<M>> {
+        let schema = M::get_schema().expect("Foxglove's messages have schemas");
+        let schema_id = self
+            .inner
+            .add_schema(&schema.name, &schema.encoding, &schema.data)
+            .map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
+        let id = self
+            .inner
+            .add_channel(schema_id, topic, "protobuf", &BTreeMap::new())
+            .map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
+        Ok(FoxgloveChannel {
+            id,
+            message: PhantomData,
+        })
+    }
+
+    /// Writes one message on a Foxglove channel; `publish_time_ns` and `log_time_ns` are
+    /// monotonic, anchored like [`Writer::write`]'s.
+    pub fn write_foxglove<M: prost::Message>(
+        &mut self,
+        channel: FoxgloveChannel<M>,
+        message: &M,
+        publish_time_ns: u64,
+        log_time_ns: u64,
+    ) -> Result<()> {
+        let (publish_time, log_time) = match &self.clock {
+            Some(clock) => (clock.unix_ns(publish_time_ns), clock.unix_ns(log_time_ns)),
+            None => (publish_time_ns, log_time_ns),
+        };
+        self.buf.clear();
+        message
+            .encode(&mut self.buf)
+            .expect("a Vec grows to any message");
+        self.write_buf(channel.id, publish_time, log_time)
     }
 
     /// Closes the current chunk and hands everything written so far to the operating system,
