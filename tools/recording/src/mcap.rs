@@ -63,8 +63,8 @@ pub enum MessageEncoding {
     /// recordings hold.
     Json,
     /// `protobuf` described by a `protobuf` schema (a `FileDescriptorSet`), read with
-    /// `prost`: what [`Writer::create`] writes, about a third of the JSON's size (see
-    /// docs/recording.md).
+    /// `prost`: what [`Writer::create`] writes, 0.76 of the JSON's size for the same
+    /// messages (docs/recording.md).
     Protobuf,
 }
 
