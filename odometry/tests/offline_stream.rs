@@ -151,8 +151,8 @@ fn a_segmented_run_streams_to_the_single_files_result() {
 }
 
 /// `--out` writes the run as a live run's recording: the raw samples and hints read, one
-/// corrected sample per raw sample, a state per sample (revisions besides) each with its
-/// pose, and the last live state is the one the report gives. An existing file is refused
+/// corrected sample per raw sample, a state per sample (revisions besides), each live state
+/// with its pose, and the last live state is the one the report gives. An existing file is refused
 /// unless `--force`.
 #[test]
 fn offline_writes_its_run_as_a_recording() {
@@ -185,7 +185,15 @@ fn offline_writes_its_run_as_a_recording() {
         .collect();
     assert_eq!(live.len(), raw.len());
     assert!(read.odometry.len() > live.len(), "revisions are kept");
-    assert_eq!(read.poses.len(), read.odometry.len());
+    // Each live state's pose; revised poses, transforms and the path are on their own topics,
+    // which read_all counts without decoding: one revised pose per revision, one transform
+    // per live state, and at least one path message once aligned.
+    assert_eq!(read.poses.len(), live.len());
+    for (pose, state) in read.poses.iter().zip(&live) {
+        let p = pose.pose.position;
+        assert_eq!([p.x, p.y, p.z], state.position_m);
+    }
+    assert!(read.other_messages > read.odometry.len() as u64);
     let end = live.last().unwrap();
     assert_eq!(
         serde_json::json!(end.position_m),

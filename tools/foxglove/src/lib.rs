@@ -16,59 +16,19 @@
 //!
 //! Times: our messages carry `CLOCK_MONOTONIC` ns; Foxglove places messages by Unix time, so
 //! each time is shifted by `CLOCK_REALTIME - CLOCK_MONOTONIC` measured once at start
-//! ([`WallClock`]). The JSON messages keep their own monotonic stamps.
+//! ([`WallClock`], the recorder's too). The JSON messages keep their own monotonic stamps.
 
 use std::sync::Arc;
-use std::time::{SystemTime, UNIX_EPOCH};
 
-use foxglove::messages::{
-    FrameTransform, Pose, PoseInFrame, PosesInFrame, Quaternion, Timestamp, Vector3,
-};
+use foxglove::messages::{FrameTransform, PoseInFrame, PosesInFrame};
 use foxglove::{Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema};
-use ipc_types::{CorrectedImuSample, OdometryState, odometry_flags};
+use ipc_types::{CorrectedImuSample, OdometryState};
 use recording::mcap::Topic;
+use recording::mcap::derived::{Derived, Out};
 
-/// The navigation frame's id (z up, origin and heading fixed at alignment).
-pub const NAV_FRAME: &str = "nav";
-/// The sensor body's frame id.
-pub const BODY_FRAME: &str = "body";
-/// Sample time between two poses of the path, ns.
-pub const PATH_STEP_NS: u64 = 100_000_000;
-/// Poses kept in the path.
-pub const PATH_LEN: usize = 3000;
-/// Sample time between two path messages, ns.
-pub const PATH_EVERY_NS: u64 = 500_000_000;
+pub use recording::mcap::derived::{BODY_FRAME, NAV_FRAME, PATH_EVERY_NS, PATH_LEN, PATH_STEP_NS};
 
-/// Converts `CLOCK_MONOTONIC` ns to Unix ns with the offset between the two clocks taken once.
-#[derive(Debug, Clone, Copy)]
-pub struct WallClock {
-    offset_ns: i128,
-}
-
-impl WallClock {
-    /// Measures the offset now.
-    pub fn now() -> Self {
-        let unix = SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos() as i128);
-        Self {
-            offset_ns: unix - i128::from(ipc_types::clock::monotonic_ns()),
-        }
-    }
-
-    /// The Unix time, ns, of monotonic time `t_ns` (0 if before 1970).
-    pub fn unix_ns(&self, t_ns: u64) -> u64 {
-        u64::try_from(i128::from(t_ns) + self.offset_ns).unwrap_or(0)
-    }
-
-    fn timestamp(&self, t_ns: u64) -> Timestamp {
-        let unix = self.unix_ns(t_ns);
-        Timestamp::new(
-            u32::try_from(unix / 1_000_000_000).unwrap_or(u32::MAX),
-            (unix % 1_000_000_000) as u32,
-        )
-    }
-}
+pub use recording::clock::WallClock;
 
 /// A JSON channel whose schema is the recording's for `T`.
 fn json_channel<T: Topic>(ctx: &Arc<Context>) -> anyhow::Result<Arc<RawChannel>> {
@@ -83,30 +43,14 @@ fn json_channel<T: Topic>(ctx: &Arc<Context>) -> anyhow::Result<Arc<RawChannel>>
 /// The channels of the live view and the path it keeps.
 pub struct View {
     clock: WallClock,
+    derived: Derived,
     pose: Channel<PoseInFrame>,
     revised: Channel<PoseInFrame>,
     tf: Channel<FrameTransform>,
     path: Channel<PosesInFrame>,
     state: Arc<RawChannel>,
     corrected: Arc<RawChannel>,
-    poses: std::collections::VecDeque<Pose>,
-    last_path_pose_ns: Option<u64>,
-    last_path_sent_ns: Option<u64>,
     json: Vec<u8>,
-}
-
-fn pose_of(s: &OdometryState) -> Pose {
-    let [x, y, z] = s.position_m;
-    let [w, qx, qy, qz] = s.attitude_wxyz;
-    Pose {
-        position: Some(Vector3 { x, y, z }),
-        orientation: Some(Quaternion {
-            x: qx,
-            y: qy,
-            z: qz,
-            w,
-        }),
-    }
 }
 
 impl View {
@@ -115,74 +59,42 @@ impl View {
         let typed = |topic: &str| ChannelBuilder::new(topic).context(ctx);
         Ok(Self {
             clock,
+            derived: Derived::new(Some(clock)),
             pose: typed("/mems/odometry/pose").build(),
             revised: typed("/mems/odometry/revised_pose").build(),
             tf: typed("/tf").build(),
             path: typed("/mems/odometry/path").build(),
             state: json_channel::<OdometryState>(ctx)?,
             corrected: json_channel::<CorrectedImuSample>(ctx)?,
-            poses: std::collections::VecDeque::with_capacity(PATH_LEN),
-            last_path_pose_ns: None,
-            last_path_sent_ns: None,
             json: Vec::new(),
         })
     }
 
-    /// Logs one odometry state on its channels, at its sample time.
+    /// Logs one odometry state on its channels, at its sample time (the derived messages of
+    /// `recording::mcap::derived`, as the recorder writes them).
     pub fn state(&mut self, s: &OdometryState) -> anyhow::Result<()> {
         let t_ns = s.stamps.sample_ns;
         let meta = PartialMetadata::with_log_time(self.clock.unix_ns(t_ns));
         self.json.clear();
         serde_json::to_writer(&mut self.json, s)?;
         self.state.log_with_meta(&self.json, meta);
-        let pose = pose_of(s);
-        let stamped = PoseInFrame {
-            timestamp: Some(self.clock.timestamp(t_ns)),
-            frame_id: NAV_FRAME.into(),
-            pose: Some(pose),
-        };
-        if s.flags & odometry_flags::REVISION != 0 {
-            self.revised.log_with_meta(&stamped, meta);
-            return Ok(());
-        }
-        self.pose.log_with_meta(&stamped, meta);
-        self.tf.log_with_meta(
-            &FrameTransform {
-                timestamp: stamped.timestamp,
-                parent_frame_id: NAV_FRAME.into(),
-                child_frame_id: BODY_FRAME.into(),
-                translation: pose.position,
-                rotation: pose.orientation,
-            },
-            meta,
-        );
-        if s.flags & odometry_flags::ALIGNED == 0 {
-            return Ok(());
-        }
-        if self
-            .last_path_pose_ns
-            .is_none_or(|t| t_ns >= t + PATH_STEP_NS)
-        {
-            if self.poses.len() == PATH_LEN {
-                self.poses.pop_front();
+        let Self {
+            derived,
+            pose,
+            revised,
+            tf,
+            path,
+            ..
+        } = self;
+        derived.state(s, |out| {
+            match out {
+                Out::Pose(m) => pose.log_with_meta(m, meta),
+                Out::RevisedPose(m) => revised.log_with_meta(m, meta),
+                Out::Tf(m) => tf.log_with_meta(m, meta),
+                Out::Path(m) => path.log_with_meta(m, meta),
             }
-            self.poses.push_back(pose);
-            self.last_path_pose_ns = Some(t_ns);
-        }
-        if self
-            .last_path_sent_ns
-            .is_none_or(|t| t_ns >= t + PATH_EVERY_NS)
-        {
-            self.path.log_with_meta(
-                &PosesInFrame {
-                    timestamp: stamped.timestamp,
-                    frame_id: NAV_FRAME.into(),
-                    poses: self.poses.iter().cloned().collect(),
-                },
-                meta,
-            );
-            self.last_path_sent_ns = Some(t_ns);
-        }
+            Ok::<(), std::convert::Infallible>(())
+        })?;
         Ok(())
     }
 

@@ -8,17 +8,19 @@
 //! `recording::mcap::run::RunReader` up to the cut of a truncated file. Sequence gaps are found from
 //! the messages' own `seq` fields (odometry revisions, which repeat earlier numbers, are
 //! counted apart); a number that goes back is a restarted publisher, not a gap. Times are the
-//! recording's: ns of the recording machine's `CLOCK_MONOTONIC` (MCAP log times), which has
-//! no wall-clock reference.
+//! recording's MCAP log times: Unix ns (UTC) in a recording anchored to the wall clock (its
+//! `mems.clock` metadata record, `recording::clock`), printed as UTC dates; ns of the recording
+//! machine's `CLOCK_MONOTONIC` in an older one, which has no wall-clock reference.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
 use ipc_types::{odometry_flags, raw_flags, service};
 use recording::mcap::run::{Message, RunReader};
-use recording::mcap::{EventKind, RecorderEvent};
+use recording::mcap::{EventKind, MessageEncoding, RecorderEvent};
 use serde::{Deserialize, Serialize};
 
 /// One file of the run.
@@ -100,6 +102,21 @@ pub struct EventCounts {
     pub segment: u64,
 }
 
+/// A recording's wall-clock anchor and its start and end as UTC dates.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct WallClockInfo {
+    /// `CLOCK_REALTIME` at the recorder's start, Unix ns.
+    pub realtime_ns: u64,
+    /// `CLOCK_MONOTONIC` at the same moment, ns.
+    pub monotonic_ns: u64,
+    /// `realtime_ns - monotonic_ns`: what turns the messages' monotonic stamps into Unix ns.
+    pub offset_ns: i128,
+    /// The first log time, RFC 3339 UTC.
+    pub start_utc: String,
+    /// The last log time, RFC 3339 UTC.
+    pub end_utc: String,
+}
+
 /// Everything `mems-info` reports about a run.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct RunInfo {
@@ -107,10 +124,13 @@ pub struct RunInfo {
     pub files: Vec<FileInfo>,
     /// Messages over all files and topics.
     pub messages: u64,
-    /// Earliest and latest MCAP log time, ns `CLOCK_MONOTONIC` (none without messages).
+    /// Earliest and latest MCAP log time, ns (none without messages): Unix ns when
+    /// `wall_clock` is set, `CLOCK_MONOTONIC` ns otherwise.
     pub start_ns: Option<u64>,
     /// See `start_ns`.
     pub end_ns: Option<u64>,
+    /// The wall clock the log times are anchored to, when the recording states one.
+    pub wall_clock: Option<WallClockInfo>,
     /// `end_ns - start_ns`, s.
     pub duration_s: f64,
     /// Per topic.
@@ -139,6 +159,61 @@ struct Fields {
 #[derive(Deserialize)]
 struct SampleTime {
     sample_ns: u64,
+}
+
+impl Fields {
+    /// The fields of a message: from its JSON whatever the topic; from protobuf by decoding
+    /// it as its topic's type (`None` if it does not decode; all fields absent on a topic
+    /// without them, as the pose and truth).
+    fn of(message: &Message<'_>) -> Option<Self> {
+        if message.encoding == Some(MessageEncoding::Json) {
+            return serde_json::from_slice(message.data).ok();
+        }
+        let stamps = |s: ipc_types::Stamps| {
+            Some(SampleTime {
+                sample_ns: s.sample_ns,
+            })
+        };
+        let fields = if let Some(m) = message.decode::<RawImuSample>() {
+            let m = m.ok()?;
+            Self {
+                seq: Some(m.seq),
+                flags: Some(m.flags),
+                lost_before: Some(m.lost_before),
+                undelivered: Some(m.undelivered),
+                stamps: stamps(m.stamps),
+                ..Self::default()
+            }
+        } else if let Some(m) = message.decode::<CorrectedImuSample>() {
+            let m = m.ok()?;
+            Self {
+                seq: Some(m.seq),
+                flags: Some(m.flags),
+                calib_id: Some(m.calib_id),
+                stamps: stamps(m.stamps),
+                ..Self::default()
+            }
+        } else if let Some(m) = message.decode::<OdometryState>() {
+            let m = m.ok()?;
+            Self {
+                seq: Some(m.seq),
+                flags: Some(m.flags),
+                stamps: stamps(m.stamps),
+                ..Self::default()
+            }
+        } else if let Some(m) = message.decode::<RobotHint>() {
+            let m = m.ok()?;
+            Self {
+                seq: Some(m.seq),
+                flags: Some(m.flags),
+                stamps: stamps(m.stamps),
+                ..Self::default()
+            }
+        } else {
+            Self::default()
+        };
+        Some(fields)
+    }
 }
 
 /// Per-topic sequence tracking.
@@ -238,7 +313,7 @@ impl Tally {
         }
         topic.count += 1;
         topic.last_log_ns = t;
-        if channel.encoding != recording::mcap::MESSAGE_ENCODING {
+        if message.encoding.is_none() {
             return;
         }
         if channel.topic == recording::mcap::EVENTS_TOPIC {
@@ -248,7 +323,7 @@ impl Tally {
             }
             return;
         }
-        let Ok(fields) = serde_json::from_slice::<Fields>(message.data) else {
+        let Some(fields) = Fields::of(message) else {
             topic.undecodable += 1;
             return;
         };
@@ -322,6 +397,13 @@ impl RunInfo {
         }
         if let (Some(s), Some(e)) = (info.start_ns, info.end_ns) {
             info.duration_s = (e - s) as f64 * 1e-9;
+            info.wall_clock = run.clock().map(|c| WallClockInfo {
+                realtime_ns: c.realtime_ns,
+                monotonic_ns: c.monotonic_ns,
+                offset_ns: c.offset_ns(),
+                start_utc: recording::clock::utc(s),
+                end_utc: recording::clock::utc(e),
+            });
         }
         info.raw = tally.raw.map(RawTrack::finish);
         Ok(info)
@@ -351,13 +433,26 @@ impl RunInfo {
                 f.messages
             );
         }
-        let _ = writeln!(
-            s,
-            "duration:  {:.3} s (log times {} to {} ns CLOCK_MONOTONIC; no wall-clock reference)",
-            self.duration_s,
-            self.start_ns.unwrap_or(0),
-            self.end_ns.unwrap_or(0)
-        );
+        match &self.wall_clock {
+            Some(c) => {
+                let _ = writeln!(
+                    s,
+                    "duration:  {:.3} s, {} to {} (log times UTC; message stamps CLOCK_MONOTONIC \
+                     + {} ns)",
+                    self.duration_s, c.start_utc, c.end_utc, c.offset_ns
+                );
+            }
+            None => {
+                let _ = writeln!(
+                    s,
+                    "duration:  {:.3} s (log times {} to {} ns CLOCK_MONOTONIC; no wall-clock \
+                     reference)",
+                    self.duration_s,
+                    self.start_ns.unwrap_or(0),
+                    self.end_ns.unwrap_or(0)
+                );
+            }
+        }
         let _ = writeln!(s, "topics:");
         let width = self.topics.keys().map(String::len).max().unwrap_or(0);
         for (name, t) in &self.topics {

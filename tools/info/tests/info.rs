@@ -1,6 +1,7 @@
 //! `mems-info` on runs written by the recording crate's MCAP writer (the recorder's own): its
 //! counts against the official Python MCAP reader's, and a two-segment run whose second
-//! file was cut (a killed recorder) with its sequence gap, revisions and events.
+//! file was cut (a killed recorder) with its sequence gap, revisions and events, and the
+//! wall-clock start and end of an anchored run.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -245,5 +246,43 @@ fn a_file_that_is_not_mcap_is_named() {
         stderr.contains("notes.mcap") && stderr.contains("MCAP"),
         "{stderr}"
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A recording anchored to the wall clock: `mems-info` prints its start and end as UTC dates
+/// (the anchor's realtime reading is 2026-11-25T05:00:01Z, `date -u -d @1795582801`), with the
+/// anchor; an older, monotonic-only recording has none.
+#[test]
+fn an_anchored_run_has_wall_clock_start_and_end() {
+    let dir = temp_dir("clock");
+    let path = dir.join("run.mcap");
+    let mut writer = Writer::create(&path).unwrap();
+    // Monotonic 0.5 s before the first message's log time (write_samples: 1_000_200_000).
+    let clock = recording::clock::WallClock {
+        realtime_ns: 1_795_582_801_000_000_000,
+        monotonic_ns: 1_000_200_000 - 500_000_000,
+    };
+    writer.anchor(clock).unwrap();
+    write_samples(&mut writer, 0..100);
+    writer.finish().unwrap();
+    let info = mems_info(&path);
+    let wall = &info["wall_clock"];
+    assert_eq!(
+        wall["start_utc"], "2026-11-25T05:00:01.500000000Z",
+        "{info}"
+    );
+    // The last sample (seq 99) is received 99 ms later.
+    assert_eq!(wall["end_utc"], "2026-11-25T05:00:01.599000000Z", "{info}");
+    assert_eq!(
+        wall["offset_ns"].as_i64().unwrap(),
+        1_795_582_801_000_000_000 - 500_200_000
+    );
+    assert_eq!(info["start_ns"].as_u64(), Some(1_795_582_801_500_000_000));
+
+    let old = dir.join("old.mcap");
+    let mut writer = Writer::create(&old).unwrap();
+    write_samples(&mut writer, 0..10);
+    writer.finish().unwrap();
+    assert!(mems_info(&old)["wall_clock"].is_null());
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -3,7 +3,9 @@
 //! and explicit events for lost sequence numbers and vanished publishers.
 //!
 //! Times: each message's MCAP `log_time` is its receive time, its `publish_time` the message's
-//! own sample time (both ns `CLOCK_MONOTONIC`). The writer's chunk is flushed to the operating
+//! own sample time, both taken as ns `CLOCK_MONOTONIC` and written as Unix ns (UTC) through the
+//! wall clock read at start (`recording::clock::WallClock`, stored in the file's `mems.clock`
+//! metadata record); the stamps inside the messages stay `CLOCK_MONOTONIC`. The writer's chunk is flushed to the operating
 //! system whenever its oldest message is [`FLUSH_PERIOD`] old, so a killed recorder loses at
 //! most that much; SIGINT and SIGTERM ([`ipc_types::stop`]) end the recording cleanly with its
 //! summary and footer.
@@ -31,7 +33,9 @@ use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use ipc_types::clock::monotonic_ns;
 use ipc_types::wake::{self, Exit, WaitMode};
 use ipc_types::{CorrectedImuSample, Message, OdometryState, RawImuSample, RobotHint, service};
-use recording::mcap::{Channel, EventKind, PoseInFrame, RecorderEvent, Topic, Writer};
+use recording::clock::WallClock;
+use recording::mcap::derived::DerivedChannels;
+use recording::mcap::{Channel, EventKind, RecorderEvent, Topic, Writer};
 use recording::segment;
 
 /// Age of the oldest unflushed message at which the recorder closes the current chunk and
@@ -383,6 +387,7 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
         .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
     let (number, path) = open_target(&options.out, options.target)?;
     let mut writer = Writer::create_new(&path)?;
+    writer.anchor(WallClock::now())?;
     let events = writer.add_channel::<RecorderEvent>()?;
     let mut split = Vec::new();
     if number > 0 {
@@ -398,7 +403,7 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
         writer.flush()?;
         split.push(event);
     }
-    let pose = writer.add_channel::<PoseInFrame>()?;
+    let mut derived = DerivedChannels::add(&mut writer)?;
     let ns = options.namespace.as_str();
     // One line per service; a new service is one more line here.
     let mut streams: Vec<Box<dyn Stream>> = vec![
@@ -415,9 +420,8 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
             events,
         )?),
         Box::new(
-            Subscription::<OdometryState>::open(&node, ns, &mut writer, events)?.deriving(
-                move |w, state, log_ns| w.write(pose, &PoseInFrame::from_state(state), log_ns),
-            ),
+            Subscription::<OdometryState>::open(&node, ns, &mut writer, events)?
+                .deriving(move |w, state, log_ns| derived.write(w, state, log_ns)),
         ),
         // Hints from the robot's controller (published without back-pressure: a hint the
         // recorder could not take shows as a gap event).

@@ -1,9 +1,12 @@
-"""Decodes an MCAP recording with the official Python `mcap` reader and each channel's JSON
-schema, and prints a JSON report on stdout: channels (schema name and encodings), the summary's
-per-channel message counts, and every decoded message with its log and publish times.
+"""Decodes an MCAP recording with the official Python `mcap` reader and each channel's schema
+(protobuf through `mcap-protobuf-support`'s decoder factory; JSON Schema for older recordings),
+and prints a JSON report on stdout: channels (schema name and encodings), the summary's
+per-channel message counts, the metadata records, and every decoded message with its log and publish times. A
+protobuf message is reported in our JSON form (every field, `null` for an unset optional,
+Foxglove's timestamps as {"sec", "nsec"}) so that both encodings compare with the same values.
 
-Exit status 3: the `mcap` package is missing. Any schema violation fails with the topic, the
-message's log time and the offending JSON path.
+Exit status 3: the `mcap` or `mcap-protobuf-support` package is missing. Any schema violation
+fails with the topic, the message's log time and the offending JSON path.
 """
 
 import json
@@ -12,6 +15,7 @@ import sys
 try:
     from mcap.decoder import DecoderFactory
     from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 except ImportError as e:
     print(f"cannot import mcap: {e}", file=sys.stderr)
     sys.exit(3)
@@ -79,9 +83,28 @@ class JsonSchemaDecoder(DecoderFactory):
         return decode
 
 
+def plain(message):
+    """A decoded protobuf message as our JSON form."""
+    if message.DESCRIPTOR.full_name == "google.protobuf.Timestamp":
+        return {"sec": message.seconds, "nsec": message.nanos}
+    out = {}
+    for f in message.DESCRIPTOR.fields:
+        value = getattr(message, f.name)
+        # protobuf 7 dropped `label` for `is_repeated`.
+        repeated = f.is_repeated if hasattr(f, "is_repeated") else f.label == f.LABEL_REPEATED
+        if repeated:
+            value = [plain(v) if f.message_type else v for v in value]
+        elif f.has_presence and f.message_type is None and not message.HasField(f.name):
+            value = None
+        elif f.message_type is not None:
+            value = plain(value)
+        out[f.name] = value
+    return out
+
+
 def main(path):
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[JsonSchemaDecoder()])
+        reader = make_reader(f, decoder_factories=[ProtobufDecoderFactory(), JsonSchemaDecoder()])
         summary = reader.get_summary()
         if summary is None:
             raise SystemExit(f"{path}: no summary (the recorder did not finish the file)")
@@ -103,11 +126,17 @@ def main(path):
                 {
                     "log_time": message.log_time,
                     "publish_time": message.publish_time,
-                    "value": value,
+                    "value": value if isinstance(value, dict) else plain(value),
                 }
             )
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
     json.dump(
-        {"channels": channels, "summary_counts": counts, "messages": messages},
+        {
+            "channels": channels,
+            "summary_counts": counts,
+            "metadata": metadata,
+            "messages": messages,
+        },
         sys.stdout,
     )
 

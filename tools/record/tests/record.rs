@@ -93,16 +93,22 @@ fn csv_replayed_at_max_speed_is_recorded_bit_exact() {
     );
     assert!(contents.events[0].t_ns > acquired[7999]);
 
-    // log_time is the receive time (after publication), publish_time the sample time.
+    // log_time is the receive time (after publication), publish_time the sample time, both
+    // shifted to Unix time by the clock in the file's metadata.
+    let mut run = recording::mcap::run::RunReader::open(&mcap).unwrap();
+    run.next().unwrap().unwrap();
+    let clock = run
+        .clock()
+        .expect("the recorder anchors its file to the wall clock");
     let reader = Reader::open(&mcap).unwrap();
     for m in reader.messages().unwrap() {
         let m = m.unwrap();
         if let Some(sample) = m.decode::<ipc_types::RawImuSample>() {
             let sample = sample.unwrap();
-            assert_eq!(m.publish_time_ns, sample.stamps.sample_ns);
+            assert_eq!(m.publish_time_ns, clock.unix_ns(sample.stamps.sample_ns));
             assert!(
-                m.log_time_ns >= sample.stamps.acquired_ns
-                    && m.log_time_ns < after_ns + 1_000_000_000
+                m.log_time_ns >= clock.unix_ns(sample.stamps.acquired_ns)
+                    && m.log_time_ns < clock.unix_ns(after_ns + 1_000_000_000)
             );
         }
     }

@@ -14,12 +14,12 @@ use ipc_types::{
     CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps, corrected_flags,
     hint_flags, odometry_flags,
 };
-use recording::mcap::{PoseInFrame, read_all};
-use serde_json::Value;
+use recording::mcap::read_all;
+use serde_json::{Value, json};
 
 const WAIT: Duration = Duration::from_secs(10);
 /// The Python `mcap` version `.ci/run` installs (and these tests were run with).
-const PYTHON_MCAP: &str = "mcap==1.6.0";
+const PYTHON_MCAP: &str = "mcap==1.6.0 mcap-protobuf-support==0.6.0";
 
 /// What the fake stages sent.
 struct Sent {
@@ -177,7 +177,8 @@ fn record_fake_stack(test: &str, n: usize) -> (PathBuf, Sent) {
 }
 
 /// Every message of every service arrives exactly as sent, each odometry state (revision
-/// included) has its pose, and a revision is neither a gap nor a reset.
+/// included) arrives exactly as sent, each live state has its pose (the revision has its own
+/// topic), and a revision is neither a gap nor a reset.
 #[test]
 fn every_service_is_recorded_with_the_pose() {
     let (mcap, sent) = record_fake_stack("services", 500);
@@ -187,10 +188,44 @@ fn every_service_is_recorded_with_the_pose() {
     assert_eq!(contents.corrected, sent.corrected);
     assert_eq!(contents.odometry, sent.odometry);
     assert_eq!(contents.hints, sent.hints);
-    let poses: Vec<PoseInFrame> = sent.odometry.iter().map(PoseInFrame::from_state).collect();
-    assert_eq!(contents.poses, poses);
+    let mut run = recording::mcap::run::RunReader::open(&mcap).unwrap();
+    run.next().unwrap().unwrap();
+    let clock = run.clock().expect("anchored");
+    let poses: Vec<Value> = live(&sent.odometry)
+        .map(|s| pose_json(s, clock.unix_ns(s.stamps.sample_ns)))
+        .collect();
+    assert_eq!(json_values(&contents.poses), poses);
     assert_eq!(contents.events, [], "the publishers stayed: no event");
-    assert_eq!(contents.other_messages, 0);
+    // The revised pose, the transforms and the path: topics read_all does not decode.
+    let path_messages = 1
+        + (sent.odometry[sent.odometry.len() - 2].stamps.sample_ns
+            - sent.odometry[0].stamps.sample_ns)
+            / 500_000_000;
+    assert_eq!(contents.other_messages, 1 + 500 + path_messages);
+}
+
+/// The live (not revised) states.
+fn live(states: &[OdometryState]) -> impl Iterator<Item = &OdometryState> {
+    states
+        .iter()
+        .filter(|s| s.flags & odometry_flags::REVISION == 0)
+}
+
+/// Foxglove's time of Unix ns `t`, as our JSON form spells it.
+fn time_json(t: u64) -> Value {
+    json!({"sec": t / 1_000_000_000, "nsec": t % 1_000_000_000})
+}
+
+/// A state's position and attitude as Foxglove's `foxglove.Pose` (quaternion x, y, z, w).
+fn pose_value(s: &OdometryState) -> Value {
+    let [x, y, z] = s.position_m;
+    let [w, qx, qy, qz] = s.attitude_wxyz;
+    json!({"position": {"x": x, "y": y, "z": z}, "orientation": {"x": qx, "y": qy, "z": qz, "w": w}})
+}
+
+/// The `foxglove.PoseInFrame` of a state at Unix time `t`.
+fn pose_json(s: &OdometryState, t: u64) -> Value {
+    json!({"timestamp": time_json(t), "frame_id": "nav", "pose": pose_value(s)})
 }
 
 /// Runs the Python decoder on `mcap`; fails (does not skip) when the `mcap` package is missing.
@@ -204,7 +239,7 @@ fn python_decode(mcap: &Path) -> Value {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(
         output.status.code() != Some(3),
-        "the Python package `mcap` is not installed: run .ci/run (CI installs {PYTHON_MCAP}) \
+        "the Python packages `mcap` and `mcap-protobuf-support` are not installed: run .ci/run (CI installs {PYTHON_MCAP}) \
          or `python3 -m pip install {PYTHON_MCAP}`\n{stderr}"
     );
     assert!(output.status.success(), "decode_mcap.py failed:\n{stderr}");
@@ -212,8 +247,10 @@ fn python_decode(mcap: &Path) -> Value {
 }
 
 /// The official Python reader opens the recording (its summary written by the clean finish),
-/// decodes every message with its channel's JSON schema, and finds what was sent, with
-/// publish_time = the sample time and log_time = the receive time.
+/// decodes every message with its channel's schema (protobuf, with the decoder factory of
+/// `mcap-protobuf-support`), and finds what was sent, with
+/// publish_time = the sample time and log_time = the receive time, both Unix ns through the
+/// clock the file's `mems.clock` metadata record states.
 #[test]
 fn python_mcap_reader_decodes_every_channel_with_its_schema() {
     let n = 120;
@@ -221,9 +258,42 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
     let (mcap, sent) = record_fake_stack("python", n);
     let end_ns = ipc_types::clock::monotonic_ns();
     let report = python_decode(&mcap);
+    let clock = &report["metadata"]["mems.clock"];
+    let field = |name: &str| clock[name].as_str().unwrap().parse::<i128>().unwrap();
+    let (realtime, monotonic) = (field("realtime_ns"), field("monotonic_ns"));
+    assert_eq!(field("offset_ns"), realtime - monotonic);
+    assert!(monotonic >= i128::from(start_ns) && monotonic <= i128::from(end_ns));
+    let unix = |t: u64| u64::try_from(i128::from(t) + realtime - monotonic).unwrap();
 
-    let poses: Vec<PoseInFrame> = sent.odometry.iter().map(PoseInFrame::from_state).collect();
-    let expect: [(&str, &str, Vec<Value>); 6] = [
+    let at = |s: &OdometryState| unix(s.stamps.sample_ns);
+    let poses: Vec<Value> = live(&sent.odometry).map(|s| pose_json(s, at(s))).collect();
+    let revised: Vec<Value> = sent
+        .odometry
+        .iter()
+        .filter(|s| s.flags & odometry_flags::REVISION != 0)
+        .map(|s| pose_json(s, at(s)))
+        .collect();
+    let tf: Vec<Value> = live(&sent.odometry)
+        .map(|s| {
+            let p = pose_value(s);
+            json!({
+                "timestamp": time_json(at(s)),
+                "parent_frame_id": "nav",
+                "child_frame_id": "body",
+                "translation": p["position"],
+                "rotation": p["orientation"],
+            })
+        })
+        .collect();
+    // 120 states 1 ms apart, all aligned: one path message (every 0.5 s), of one pose (one
+    // every 0.1 s), at the first state.
+    let first = &sent.odometry[0];
+    let path = vec![json!({
+        "timestamp": time_json(at(first)),
+        "frame_id": "nav",
+        "poses": [pose_value(first)],
+    })];
+    let expect: [(&str, &str, Vec<Value>); 9] = [
         (service::RAW, "mems.RawImuSample", json_values(&sent.raw)),
         (
             service::CORRECTED,
@@ -235,11 +305,14 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
             "mems.OdometryState",
             json_values(&sent.odometry),
         ),
+        ("mems/odometry/pose", "foxglove.PoseInFrame", poses),
         (
-            "mems/odometry/pose",
+            "mems/odometry/revised_pose",
             "foxglove.PoseInFrame",
-            json_values(&poses),
+            revised,
         ),
+        ("mems/odometry/tf", "foxglove.FrameTransform", tf),
+        ("mems/odometry/path", "foxglove.PosesInFrame", path),
         (service::HINT, "mems.RobotHint", json_values(&sent.hints)),
         ("mems/recorder/events", "mems.RecorderEvent", vec![]),
     ];
@@ -248,8 +321,8 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
     for (topic, schema, values) in &expect {
         let c = &channels[*topic];
         assert_eq!(c["schema_name"], *schema, "{topic}");
-        assert_eq!(c["schema_encoding"], "jsonschema", "{topic}");
-        assert_eq!(c["message_encoding"], "json", "{topic}");
+        assert_eq!(c["schema_encoding"], "protobuf", "{topic}");
+        assert_eq!(c["message_encoding"], "protobuf", "{topic}");
         // A channel without messages may be absent from the statistics.
         assert_eq!(
             report["summary_counts"][*topic].as_u64().unwrap_or(0),
@@ -264,17 +337,15 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
         // Floats compare exactly: both sides write shortest round-trip decimals.
         assert_eq!(decoded, values.iter().collect::<Vec<_>>(), "{topic}");
         for (m, v) in messages.iter().zip(values) {
-            let own_time = match *topic {
-                "mems/odometry/pose" => {
-                    v["timestamp"]["sec"].as_u64().unwrap() * 1_000_000_000
-                        + v["timestamp"]["nsec"].as_u64().unwrap()
-                }
-                _ => v["stamps"]["sample_ns"].as_u64().unwrap(),
+            // Foxglove's messages carry Unix time; ours their monotonic stamps.
+            let own_time = match v.get("timestamp") {
+                Some(t) => t["sec"].as_u64().unwrap() * 1_000_000_000 + t["nsec"].as_u64().unwrap(),
+                None => unix(v["stamps"]["sample_ns"].as_u64().unwrap()),
             };
             assert_eq!(m["publish_time"].as_u64(), Some(own_time), "{topic}");
             let log = m["log_time"].as_u64().unwrap();
             assert!(
-                log > start_ns && log < end_ns,
+                log > unix(start_ns) && log < unix(end_ns),
                 "{topic}: log_time {log} is the receive time"
             );
         }

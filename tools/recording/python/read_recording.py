@@ -1,10 +1,14 @@
-"""Reads a mems-odometry MCAP recording with the official Python reader (`pip install mcap`).
+"""Reads a mems-odometry MCAP recording with the official Python reader.
 
-Every channel is JSON described by a JSON Schema, so the reader needs a JSON decoder factory
-(`mcap` ships none for JSON): the one below turns each message into a dict. Prints each
-topic's count and the last live odometry position with its 1-sigma.
-
+    python3 -m pip install mcap==1.6.0 mcap-protobuf-support==0.6.0
     python3 tools/recording/python/read_recording.py run.mcap
+
+Recordings are protobuf (every channel's schema is a protobuf FileDescriptorSet: ours in
+package `mems`, Foxglove's named `foxglove.*`), decoded by `mcap-protobuf-support`'s decoder
+factory; older recordings are JSON described by JSON Schema, for which `mcap` ships no decoder:
+the JSON factory below turns each message into a dict. With both factories, every message of
+either kind decodes. Prints each topic's count and the last live odometry position with its
+1-sigma.
 """
 
 import json
@@ -12,6 +16,7 @@ import sys
 
 from mcap.decoder import DecoderFactory
 from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 
 REVISION = 1 << 2  # OdometryState.flags: republished history (ipc-types odometry_flags)
 
@@ -25,18 +30,23 @@ class JsonDecoderFactory(DecoderFactory):
         return None
 
 
+def field(value, name):
+    """A field of a decoded message: a dict's key (JSON) or a protobuf message's attribute."""
+    return value[name] if isinstance(value, dict) else getattr(value, name)
+
+
 def main(path):
     counts, last = {}, None
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[JsonDecoderFactory()])
+        reader = make_reader(f, decoder_factories=[ProtobufDecoderFactory(), JsonDecoderFactory()])
         for _schema, channel, _message, value in reader.iter_decoded_messages(log_time_order=False):
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
-            if channel.topic == "mems/odometry/state" and not value["flags"] & REVISION:
+            if channel.topic == "mems/odometry/state" and not field(value, "flags") & REVISION:
                 last = value
     for topic, n in sorted(counts.items()):
         print(f"{topic}: {n}")
     if last is not None:
-        p, s = last["position_m"], last["position_sigma_m"]
+        p, s = field(last, "position_m"), field(last, "position_sigma_m")
         print("last position: ({:+.3f}, {:+.3f}, {:+.3f}) m +- ({:.3f}, {:.3f}, {:.3f})".format(*p, *s))
 
 

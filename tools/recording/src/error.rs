@@ -162,6 +162,9 @@ pub enum ErrorKind {
     /// A message's JSON does not decode into the expected type.
     #[error("JSON: {0}")]
     Json(serde_json::Error),
+    /// A protobuf message does not decode into the expected type.
+    #[error("protobuf: {0}")]
+    Protobuf(String),
 }
 
 impl Error {

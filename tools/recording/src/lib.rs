@@ -14,6 +14,7 @@
 
 #![warn(missing_docs)]
 
+pub mod clock;
 pub mod csv;
 mod error;
 pub mod mcap;

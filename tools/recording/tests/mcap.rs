@@ -8,7 +8,7 @@ use common::{any_truth, any_within, live_samples, sample_bits, tmp, truth_bits};
 use ipc_types::{RawImuSample, limits};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use recording::mcap::{Reader, Topic, Writer, read_all};
+use recording::mcap::{MessageEncoding, Reader, Topic, Writer, read_all};
 use recording::{ErrorKind, Format, Position, Truth};
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
@@ -39,7 +39,18 @@ fn log_time(i: usize) -> u64 {
 /// Writes samples (and truth), flushing every `flush_every` samples; returns the file length
 /// after each flush (the byte offset where every message written so far is complete).
 fn write(path: &Path, samples: &[RawImuSample], truth: &[Truth], flush_every: usize) -> Vec<u64> {
-    let mut writer = Writer::create(path).unwrap();
+    write_in(path, samples, truth, flush_every, MessageEncoding::Protobuf)
+}
+
+/// [`write`] in `encoding`.
+fn write_in(
+    path: &Path,
+    samples: &[RawImuSample],
+    truth: &[Truth],
+    flush_every: usize,
+    encoding: MessageEncoding,
+) -> Vec<u64> {
+    let mut writer = Writer::create(path).unwrap().with_encoding(encoding);
     let raw = writer.add_channel::<RawImuSample>().unwrap();
     let truth_channel = writer.add_channel::<Truth>().unwrap();
     let mut boundaries = Vec::new();
@@ -57,12 +68,18 @@ fn write(path: &Path, samples: &[RawImuSample], truth: &[Truth], flush_every: us
     boundaries
 }
 
+/// In both encodings (protobuf as written now, JSON as in older recordings).
 #[test]
 fn messages_round_trip_bit_for_bit_with_their_times() {
+    round_trip(MessageEncoding::Protobuf, "protobuf");
+    round_trip(MessageEncoding::Json, "json");
+}
+
+fn round_trip(encoding: MessageEncoding, name: &str) {
     let samples = arbitrary_samples(400, 11);
     let truth = any_truth(&samples, 12);
-    let path = tmp("roundtrip.mcap");
-    write(&path, &samples, &truth, 64);
+    let path = tmp(&format!("roundtrip-{name}.mcap"));
+    write_in(&path, &samples, &truth, 64, encoding);
 
     let reader = Reader::open(&path).unwrap();
     let mut raw_read = 0;
@@ -73,7 +90,8 @@ fn messages_round_trip_bit_for_bit_with_their_times() {
         if n % 2 == 0 {
             assert_eq!(message.topic, "mems/imu/raw");
             assert_eq!(message.schema_name, "mems.RawImuSample");
-            assert_eq!(message.encoding, "json");
+            assert_eq!(message.encoding, name);
+            assert_eq!(message.schema_encoding, encoding.schema());
             assert_eq!(message.log_time_ns, log_time(i));
             assert_eq!(message.publish_time_ns, samples[i].stamps.sample_ns);
             assert!(message.decode::<Truth>().is_none());
@@ -237,10 +255,13 @@ fn garbage_files_give_clear_errors_naming_the_file() {
     assert!(err.to_string().starts_with(&missing.display().to_string()));
 }
 
+/// JSON cannot hold them (protobuf can: see the crate's unit tests).
 #[test]
-fn non_finite_values_are_refused_when_writing() {
+fn non_finite_values_are_refused_when_writing_json() {
     let path = tmp("nan.mcap");
-    let mut writer = Writer::create(&path).unwrap();
+    let mut writer = Writer::create(&path)
+        .unwrap()
+        .with_encoding(MessageEncoding::Json);
     let raw = writer.add_channel::<RawImuSample>().unwrap();
     let mut sample = live_samples(1, 31)[0];
     sample.gyro_dps[1] = f64::INFINITY;
@@ -324,17 +345,64 @@ fn restarted_raw_streams_are_split_into_sessions() {
     assert_eq!(recording::load_raw(&path).unwrap().samples.len(), 300);
 }
 
-/// A message type defined outside the crate, as later channels (corrected samples, odometry,
-/// hints) will be: implementing `Topic` is all it takes to record it.
+/// A message type defined outside the crate: implementing `Topic` (its JSON Schema, its
+/// protobuf message and descriptor) is all it takes to record it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct Hint {
     t_ns: u64,
     speed_mps: f64,
 }
 
+/// The protobuf form of [`Hint`].
+#[derive(Clone, PartialEq, prost::Message)]
+struct HintProto {
+    #[prost(uint64, tag = 1)]
+    t_ns: u64,
+    #[prost(double, tag = 2)]
+    speed_mps: f64,
+}
+
 impl Topic for Hint {
     const TOPIC: &'static str = "mems/test/hint";
     const SCHEMA_NAME: &'static str = "test.Hint";
+    type Proto = HintProto;
+
+    fn proto_schema() -> Vec<u8> {
+        use prost_types::field_descriptor_proto::Type;
+        let field = |name: &str, number, ty: Type| prost_types::FieldDescriptorProto {
+            name: Some(name.into()),
+            number: Some(number),
+            r#type: Some(ty as i32),
+            ..Default::default()
+        };
+        let file = prost_types::FileDescriptorProto {
+            name: Some("test.proto".into()),
+            package: Some("test".into()),
+            syntax: Some("proto3".into()),
+            message_type: vec![prost_types::DescriptorProto {
+                name: Some("Hint".into()),
+                field: vec![
+                    field("t_ns", 1, Type::Uint64),
+                    field("speed_mps", 2, Type::Double),
+                ],
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        prost::Message::encode_to_vec(&prost_types::FileDescriptorSet { file: vec![file] })
+    }
+
+    fn fill_proto(&self, p: &mut HintProto) {
+        p.t_ns = self.t_ns;
+        p.speed_mps = self.speed_mps;
+    }
+
+    fn from_proto(p: HintProto) -> Result<Self, String> {
+        Ok(Self {
+            t_ns: p.t_ns,
+            speed_mps: p.speed_mps,
+        })
+    }
 
     fn json_schema() -> Value {
         json!({
@@ -540,4 +608,60 @@ fn a_run_continues_in_its_successor_segment() {
     for p in [&base, &second, &third] {
         std::fs::remove_file(p).unwrap();
     }
+}
+
+/// The streaming reader (`RawRun`, behind `mems-odometry offline`, `mems-replay` and
+/// `mems-info`) reads a JSON recording (the older encoding) and a protobuf one, written by the
+/// real writer, to the same samples and truth, bit for bit; each message names its encoding.
+#[test]
+fn the_streaming_reader_reads_both_encodings() {
+    use recording::mcap::run::{Item, RawRun, RunReader};
+    let samples = live_samples(500, 71);
+    let truth = any_truth(&samples, 72);
+    let mut read = Vec::new();
+    for (encoding, name) in [
+        (MessageEncoding::Json, "json"),
+        (MessageEncoding::Protobuf, "protobuf"),
+    ] {
+        let path = tmp(&format!("stream-{name}.mcap"));
+        write_in(&path, &samples, &truth, 100, encoding);
+        let mut run = RunReader::open(&path).unwrap();
+        while let Some(m) = run.next() {
+            let m = m.unwrap();
+            assert_eq!(m.encoding, Some(encoding), "{name}");
+            assert_eq!(m.channel.encoding, name);
+        }
+        let items: Vec<Item> = RawRun::open(&path, false)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let raw: Vec<RawImuSample> = items
+            .iter()
+            .filter_map(|i| match i {
+                Item::Raw(s) => Some(*s),
+                _ => None,
+            })
+            .collect();
+        let t: Vec<Truth> = items
+            .iter()
+            .filter_map(|i| match i {
+                Item::Truth(t) => Some(*t),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(raw, samples, "{name}");
+        let bits: Vec<_> = raw.iter().map(sample_bits).collect();
+        assert_eq!(bits, samples.iter().map(sample_bits).collect::<Vec<_>>());
+        assert_eq!(
+            t.iter().map(truth_bits).collect::<Vec<_>>(),
+            truth.iter().map(truth_bits).collect::<Vec<_>>()
+        );
+        read.push(std::fs::metadata(&path).unwrap().len());
+    }
+    assert!(
+        read[1] < read[0],
+        "protobuf {} bytes, JSON {}",
+        read[1],
+        read[0]
+    );
 }

@@ -1,21 +1,27 @@
 //! The README's Python reader example (`tools/recording/python/read_recording.py`) on a
-//! recording written by our writer: it decodes every channel with its JSON decoder factory
-//! and finds the last live position (revisions skipped). Fails, not skips, without the
-//! `mcap` package (`.ci/run` installs it).
+//! recording written by our writer, protobuf and JSON (older recordings): it decodes every
+//! channel with its decoder factories and finds the last live position (revisions skipped).
+//! Fails, not skips, without the `mcap` and `mcap-protobuf-support` packages (`.ci/run`
+//! installs them).
 
 use std::path::Path;
 use std::process::Command;
 
 use ipc_types::{OdometryState, RawImuSample, Stamps, odometry_flags};
-use recording::mcap::Writer;
+use recording::mcap::{MessageEncoding, Writer};
 
 #[test]
 fn the_python_example_reads_every_channel() {
-    let dir = std::env::temp_dir().join(format!("python-example-{}", std::process::id()));
+    reads(MessageEncoding::Protobuf, "protobuf");
+    reads(MessageEncoding::Json, "json");
+}
+
+fn reads(encoding: MessageEncoding, name: &str) {
+    let dir = std::env::temp_dir().join(format!("python-example-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("run.mcap");
-    let mut writer = Writer::create(&path).unwrap();
+    let mut writer = Writer::create(&path).unwrap().with_encoding(encoding);
     let raw = writer.add_channel::<RawImuSample>().unwrap();
     let odometry = writer.add_channel::<OdometryState>().unwrap();
     for seq in 0..10u64 {
@@ -59,7 +65,8 @@ fn the_python_example_reads_every_channel() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(
         output.status.success(),
-        "read_recording.py failed (the `mcap` package: .ci/run installs it):\n{stderr}"
+        "read_recording.py failed on {name} (the `mcap` and `mcap-protobuf-support` packages: \
+         .ci/run installs them):\n{stderr}"
     );
     assert_eq!(
         stdout.lines().collect::<Vec<_>>(),
@@ -68,7 +75,7 @@ fn the_python_example_reads_every_channel() {
             "mems/odometry/state: 11",
             "last position: (+9.000, -0.500, +0.250) m +- (0.010, 0.020, 0.030)",
         ],
-        "{stdout}"
+        "{name}: {stdout}"
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -1,14 +1,17 @@
 //! `mems-odometry offline --out F.mcap`: the offline run written as a live run's recording
 //! (what `mems-record` writes of `mems-calibrate serve` and `mems-odometry serve`): the raw
 //! samples and robot hints as read, every corrected sample, every odometry state (revisions
-//! included) and its pose. A recording has no receive times offline, so each message's log
-//! time is its own publish time (the sample time; a hint's publication time).
+//! included) and the Foxglove messages derived from it (`recording::mcap::derived`: pose,
+//! revised pose, transform, path). A recording has no receive times offline, so each
+//! message's log time is its own publish time (the sample time; a hint's publication time),
+//! `CLOCK_MONOTONIC` as the input's stamps (the file is not anchored to the wall clock).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
-use recording::mcap::{Channel, PoseInFrame, Topic, Writer};
+use recording::mcap::derived::DerivedChannels;
+use recording::mcap::{Channel, Topic, Writer};
 
 /// The MCAP file being written, its channels and the first write error (later writes are
 /// skipped: the stages' emit callbacks cannot return one).
@@ -18,7 +21,7 @@ pub struct Out {
     raw: Channel<RawImuSample>,
     corrected: Channel<CorrectedImuSample>,
     odometry: Channel<OdometryState>,
-    pose: Channel<PoseInFrame>,
+    derived: DerivedChannels,
     hint: Channel<RobotHint>,
     error: Option<recording::Error>,
 }
@@ -36,7 +39,7 @@ impl Out {
             raw: writer.add_channel()?,
             corrected: writer.add_channel()?,
             odometry: writer.add_channel()?,
-            pose: writer.add_channel()?,
+            derived: DerivedChannels::add(&mut writer)?,
             hint: writer.add_channel()?,
             writer,
             error: None,
@@ -62,10 +65,14 @@ impl Out {
         self.write(self.corrected, c);
     }
 
-    /// Writes an odometry state and its pose.
+    /// Writes an odometry state and what it derives.
     pub fn state(&mut self, s: &OdometryState) {
         self.write(self.odometry, s);
-        self.write(self.pose, &PoseInFrame::from_state(s));
+        if self.error.is_none()
+            && let Err(e) = self.derived.write(&mut self.writer, s, s.stamps.sample_ns)
+        {
+            self.error = Some(e);
+        }
     }
 
     /// Writes a robot hint.

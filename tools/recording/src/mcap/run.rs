@@ -17,6 +17,7 @@ use ipc_types::{RawImuSample, RobotHint};
 use super::scan::{ChannelInfo, Scanner};
 use super::{MessageEncoding, RawChecks, SegmentRead, Topic, Truncation, decode_as};
 use crate::Truth;
+use crate::clock::WallClock;
 use crate::error::{Error, ErrorKind, Result};
 
 /// One message of a run, borrowed from the reader until its next message.
@@ -77,6 +78,8 @@ pub struct RunReader {
     channel: Option<(Rc<ChannelInfo>, Option<MessageEncoding>)>,
     data: Vec<u8>,
     segments: Vec<SegmentRead>,
+    /// The wall clock of the newest file that had one.
+    clock: Option<WallClock>,
 }
 
 impl RunReader {
@@ -111,7 +114,15 @@ impl RunReader {
             channel: None,
             data: Vec::new(),
             segments: Vec::new(),
+            clock: None,
         }
+    }
+
+    /// The wall clock the run's log and publish times are anchored to (the metadata record
+    /// [`crate::clock::METADATA_NAME`] of the files read so far; a recorder writes it before
+    /// its first message), `None` for a recording whose times are `CLOCK_MONOTONIC`.
+    pub fn clock(&self) -> Option<WallClock> {
+        self.clock
     }
 
     /// Opens the next file of the run, if any (a successor only if it continues the run).
@@ -151,7 +162,17 @@ impl RunReader {
     pub fn next(&mut self) -> Option<Result<Message<'_>>> {
         loop {
             let current = self.current.as_mut()?;
-            match current.scanner.next_into(&mut self.data) {
+            let next = current.scanner.next_into(&mut self.data);
+            if let Some((_, fields)) = current
+                .scanner
+                .metadata()
+                .iter()
+                .rev()
+                .find(|(name, _)| name == crate::clock::METADATA_NAME)
+            {
+                self.clock = WallClock::from_metadata(fields).or(self.clock);
+            }
+            match next {
                 Some(Ok((channel, log_time_ns, publish_time_ns))) => {
                     current.read += 1;
                     if self

@@ -11,7 +11,7 @@
 //! "Records"): little-endian integers, a string is a `u32` length and UTF-8 bytes, a byte array
 //! a `u32` length and bytes. Other records are skipped unparsed.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom, Take};
 use std::rc::Rc;
@@ -30,6 +30,7 @@ mod op {
     pub const CHANNEL: u8 = 0x04;
     pub const MESSAGE: u8 = 0x05;
     pub const CHUNK: u8 = 0x06;
+    pub const METADATA: u8 = 0x0c;
     pub const DATA_END: u8 = 0x0f;
 }
 
@@ -151,6 +152,8 @@ pub struct Scanner<R> {
     /// Name and encoding of each schema.
     schemas: HashMap<u16, (String, String)>,
     channels: HashMap<u16, Rc<ChannelInfo>>,
+    /// The metadata records read so far: name and fields.
+    metadata: Vec<(String, BTreeMap<String, String>)>,
     past_data_end: bool,
     done: bool,
 }
@@ -187,9 +190,15 @@ impl<R: Read> Scanner<R> {
             cut: bounds.cut,
             schemas: HashMap::new(),
             channels: HashMap::new(),
+            metadata: Vec::new(),
             past_data_end: false,
             done: false,
         }
+    }
+
+    /// The metadata records read so far (name and fields), in file order.
+    pub fn metadata(&self) -> &[(String, BTreeMap<String, String>)] {
+        &self.metadata
     }
 
     /// The next message into `data` (its storage reused: no allocation per message once it
@@ -271,6 +280,18 @@ impl<R: Read> Scanner<R> {
                         schema_encoding,
                     };
                     self.channels.insert(id, Rc::new(info));
+                }
+                op::METADATA => {
+                    let mut r = Fields::new(body, "metadata");
+                    let name = r.string()?;
+                    let len = r.u32()? as usize;
+                    let mut map = Fields::new(r.take(len)?, "metadata");
+                    let mut fields = BTreeMap::new();
+                    while !map.body.is_empty() {
+                        let key = map.string()?;
+                        fields.insert(key, map.string()?);
+                    }
+                    self.metadata.push((name, fields));
                 }
                 op::MESSAGE => {
                     let mut r = Fields::new(body, "message");
