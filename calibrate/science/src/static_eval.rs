@@ -12,7 +12,7 @@
 //!   through the correction at the alignment interval's mean reading) + bias drift. It cannot
 //!   account for label errors of the six-position session (a table that is not level), which
 //!   dominate its real error.
-//! - `best`: torn reads repaired ([`crate::repair`]); model 3 applied; gravity alignment: the
+//! - `best`: torn reads repaired ([`calibrate::repair`]); model 3 applied; gravity alignment: the
 //!   mean corrected reading over the alignment interval defines the vertical (the navigation
 //!   frame's z axis; the minimal rotation from the sensor frame) and the magnitude of gravity,
 //!   which is subtracted; a warm-up term where earlier recordings allow (the mean displacement
@@ -43,9 +43,9 @@ use recording::thesis::SixPosition;
 use crate::drerror::{bias_sigma_m, flicker_sigma_m, rrw_sigma_m, white_sigma_m};
 use crate::fit::{FitError, Weighting, fit_labelled};
 use crate::integrate::DoubleIntegrator;
-use crate::model::{AccelModel, ModelKind};
-use crate::repair::{RepairReport, TornReadConfig, repair_torn_reads};
 use crate::session::poses_from_six;
+use calibrate::model::{AccelModel, ModelKind};
+use calibrate::repair::{RepairReport, TornReadConfig, repair_torn_reads};
 use noise::NoiseParams;
 
 /// Settings of the evaluation.

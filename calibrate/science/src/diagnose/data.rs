@@ -15,11 +15,11 @@ use ipc_types::{RawImuSample, raw_flags};
 use nalgebra::Vector3;
 
 use crate::fit::Pose;
-use crate::repair::{RepairReport, TornReadConfig, difference_sigma, repair_torn_values};
 use crate::segments::{
     SampleSeries, SegmentConfig, SegmentError, StaticSegment, detect_static_segments_in,
 };
 use crate::session::nearest_axis;
+use calibrate::repair::{RepairReport, TornReadConfig, difference_sigma, repair_torn_values};
 
 /// One input session.
 #[derive(Debug, Clone)]
@@ -69,7 +69,7 @@ pub struct DataConfig {
     pub torn: TornReadConfig,
 }
 
-pub use crate::repair::MAX_TEAR_SIGMA_COUNTS;
+pub use calibrate::repair::MAX_TEAR_SIGMA_COUNTS;
 
 impl Default for DataConfig {
     fn default() -> Self {

@@ -10,8 +10,8 @@ use recording::thesis::SixPosition;
 use recording::{Format, Recording};
 
 use crate::fit::Pose;
-use crate::repair::{RepairReport, TornReadConfig, repair_torn_reads};
 use crate::segments::{Detection, SegmentConfig, SegmentError, detect_static_segments};
+use calibrate::repair::{RepairReport, TornReadConfig, repair_torn_reads};
 
 /// Largest angle (degrees) between a pose's mean reading and the nearest axis for the pose to
 /// count as axis aligned. Generous on purpose: the thesis's sensor has a 0.25 g bias on z,

@@ -76,9 +76,9 @@ pub use data::{
 pub use effects::Effect;
 
 use crate::labelfree::distinct_orientations;
-use crate::model::{AccelModel, ModelKind, ParamCovariance, bias_index, scale_index};
 use crate::session::{AXIS_ALIGNED_MAX_DEG, nearest_axis};
-use crate::terms::ReadingTerms;
+use calibrate::model::{AccelModel, ModelKind, ParamCovariance, bias_index, scale_index};
+use calibrate::terms::ReadingTerms;
 use data::{Fixes, Labelling, Obs, Session};
 use effects::{Tag, direction, has_columns, regressor};
 use linear::{Design, Round};
