@@ -29,7 +29,9 @@ pub mod kalibr;
 /// the live processes link without this crate's analysis and plots).
 pub use calibrate::noise_params as params;
 pub mod plot;
-pub mod repair;
+/// The torn-read repair and repeat count (in `calibrate`, which `mems-odometry offline` and the
+/// calibration fits use too).
+pub use calibrate::repair;
 pub mod series;
 pub mod synth;
 

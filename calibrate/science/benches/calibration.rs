@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use calibrate::model::{AccelModel, ModelKind};
-use calibrate::repair::{TornReadConfig, repair_torn_reads};
+use calibrate::repair::{RepairConfig, repair_torn_reads};
 use calibrate_science::fit::{Pose, Weighting};
 use calibrate_science::labelfree::fit_label_free;
 use calibrate_science::static_eval::{StaticEvalConfig, evaluate_static};
@@ -89,7 +89,7 @@ fn evaluation_throughput() {
     );
     let t = median_time(20, || {
         let mut s = test.samples.clone();
-        black_box(repair_torn_reads(&mut s, &TornReadConfig::default()));
+        black_box(repair_torn_reads(&mut s, &RepairConfig::default()));
     });
     println!(
         "torn-read repair alone: {:.2} ms, {:.1} M samples/s",

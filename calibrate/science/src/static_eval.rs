@@ -45,7 +45,7 @@ use crate::fit::{FitError, Weighting, fit_labelled};
 use crate::integrate::DoubleIntegrator;
 use crate::session::poses_from_six;
 use calibrate::model::{AccelModel, ModelKind};
-use calibrate::repair::{RepairReport, TornReadConfig, repair_torn_reads};
+use calibrate::repair::{RepairConfig, TornReport, repair_torn_reads};
 use noise::NoiseParams;
 
 /// Settings of the evaluation.
@@ -150,7 +150,7 @@ pub struct StaticEvalReport {
     /// Root-mean-square displacement over windows per axis: (thesis_full, best), m.
     pub rms: ([f64; 3], [f64; 3]),
     /// Torn-read repairs in the test file.
-    pub repair: RepairReport,
+    pub repair: TornReport,
     /// Earlier recordings that contributed to the drift and warm-up terms (per window, the
     /// smallest count).
     pub prior_runs: usize,
@@ -201,7 +201,7 @@ impl StaticEvalReport {
             cfg.window_s,
             cfg.step_s,
             cfg.gravity_mps2,
-            self.repair.repaired,
+            self.repair.accel.map(|a| a.repaired),
             self.prior_runs,
             match &self.drift_source {
                 DriftSource::Priors => "not needed".to_owned(),
@@ -526,13 +526,13 @@ pub fn evaluate_static(
 
     let raw_series = Series::new(&test.samples, &model, g);
     let mut repaired = test.samples.clone();
-    let repair = repair_torn_reads(&mut repaired, &TornReadConfig::default());
+    let repair = repair_torn_reads(&mut repaired, &RepairConfig::default());
     let series = Series::new(&repaired, &model, g);
 
     let prior_series: Vec<Series> = priors
         .into_iter()
         .map(|mut p| {
-            repair_torn_reads(&mut p.samples, &TornReadConfig::default());
+            repair_torn_reads(&mut p.samples, &RepairConfig::default());
             progress.inc(1);
             Series::new(&p.samples, &model, g)
         })

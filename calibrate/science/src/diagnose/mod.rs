@@ -1591,7 +1591,7 @@ impl Diagnoser<'_> {
             repaired: std::array::from_fn(|_| vec![0; BINS]),
         };
         let mut any = false;
-        let lsb = self.cfg.data.torn.lsb_per_g;
+        let lsb = self.cfg.data.accel_lsb_per_g;
         let block = (self.cfg.data.block_s * 1e9) as u64;
         for s in &self.sessions {
             let Session::Raw(r) = s else { continue };

@@ -186,7 +186,7 @@ fn fit(args: FitArgs) -> Result<()> {
         Input::SixPosition(six) => (poses_from_six(six), labels == Labels::None),
         Input::Raw(rec) => {
             let raw = raw_poses(rec, &SegmentConfig::with_min_duration(min_segment_s))?;
-            repaired_samples = raw.repair.total();
+            repaired_samples = raw.repair.samples_repaired;
             eprintln!(
                 "{}: {} samples, {} torn reads repaired, {} static segments (noise {:.2e} / {:.2e} / {:.2e} g)",
                 input.display(),
