@@ -15,19 +15,38 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::fit::{CovarianceMode, Weighting};
 use crate::model::{AccelModel, ModelKind, N_PARAMS, PARAM_NAMES, ParamCovariance};
 
 /// Format version written by this code.
 pub const FORMAT_VERSION: u32 = 1;
 
+/// How poses are weighted (see `calibrate_science::fit`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Weighting {
+    /// Ordinary least squares.
+    Unweighted,
+    /// Weights `1/sigma^2` from each pose's std (standard error of the mean when `n` is known).
+    PoseStd,
+}
+
+/// How the parameter covariance was obtained (see `calibrate_science::fit`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CovarianceMode {
+    /// `s^2 (X^T W X)^-1` with `s^2 = chi^2 / dof` estimated from the residuals.
+    ResidualScaled,
+    /// `(X^T W X)^-1` with sigmas taken as known.
+    Absolute,
+}
+
 /// How the parameters were estimated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum FitMethod {
-    /// Labelled linear least squares ([`crate::fit`]).
+    /// Labelled linear least squares (`calibrate_science::fit`).
     Labelled,
-    /// Label-free Levenberg-Marquardt on `|a| = 1 g` ([`crate::labelfree`]).
+    /// Label-free Levenberg-Marquardt on `|a| = 1 g` (`calibrate_science::labelfree`).
     LabelFree,
 }
 
@@ -64,9 +83,9 @@ pub struct ResidualSection {
 
 /// The `[noise]` table: the sensor's noise parameters from an Allan analysis of a static
 /// recording (`mems-calibrate allan --into`), per axis in SI units with their 1-sigma (see
-/// [`noise::params`]). The one source of truth for the zero-state detectors' noise levels, the
+/// [`crate::noise_params`]). The one source of truth for the zero-state detectors' noise levels, the
 /// odometry filter's noise model and `mems-eval static`'s uncertainty propagation.
-pub type NoiseSection = noise::NoiseParams;
+pub type NoiseSection = crate::noise_params::NoiseParams;
 
 /// Keys of the `[noise]` table written by format-1 files before the Allan analysis existed (a
 /// per-sample sigma from static-segment detection); such a table is read as "no noise

@@ -140,6 +140,27 @@ fn robust_variance(abs: &mut [f64]) -> f64 {
     (1.4826 * *m).powi(2)
 }
 
+/// Robust white-noise sigma of a series: `1.4826 MAD(first differences) / sqrt(2)` (the MAD is
+/// taken about zero, as the differences of a static series have zero median). Independent of
+/// how much of the series is at rest, insensitive to isolated outliers; assumes near-white noise.
+/// Returns 0 for fewer than 2 values.
+pub fn difference_sigma(values: impl Iterator<Item = f64>) -> f64 {
+    let mut d: Vec<f64> = Vec::with_capacity(values.size_hint().0);
+    let mut prev: Option<f64> = None;
+    for v in values {
+        if let Some(p) = prev {
+            d.push((v - p).abs());
+        }
+        prev = Some(v);
+    }
+    if d.is_empty() {
+        return 0.0;
+    }
+    let mid = d.len() / 2;
+    let (_, m, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+    1.4826 * *m / std::f64::consts::SQRT_2
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -184,5 +205,16 @@ mod tests {
             let got = est.mean_variance_factor(2000);
             assert!((got - want).abs() < 0.1 * want, "p {p}: {got} vs {want}");
         }
+    }
+
+    #[test]
+    fn difference_sigma_estimates_white_noise() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let noise = Normal::new(0.0, 2.5).unwrap();
+        let v: Vec<f64> = (0..50_000)
+            .map(|k| 100.0 + 1e-4 * k as f64 + noise.sample(&mut rng))
+            .collect();
+        let s = difference_sigma(v.iter().copied());
+        assert!((s - 2.5).abs() < 0.05, "{s}");
     }
 }

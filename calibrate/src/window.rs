@@ -1,5 +1,5 @@
 //! Streaming windowed statistics and the rest test built on them. [`WindowAccumulator`] is the
-//! shared core of the offline static-segment detector ([`crate::segments`]) and of the live
+//! shared core of the offline static-segment detector (`calibrate_science::segments`) and of the live
 //! zero-state detectors ([`crate::zero_state`]: non-overlapping batches of 20 samples), which
 //! apply their own thresholds learned at start-up.
 //!

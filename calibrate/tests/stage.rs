@@ -2,7 +2,7 @@
 //! and latency, bad input, stream restarts and gaps, and the bias refinement at rest.
 
 use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
-use calibrate::fit::{CovarianceMode, Weighting};
+use calibrate::calibfile::{CovarianceMode, Weighting};
 use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
 use calibrate::stage::{CalibrationStage, RefineConfig, Settler, StageError, calib_id};
 use calibrate::zero_state::{BATCH_LEN, DetectorConfig, DetectorKind};

@@ -323,8 +323,8 @@ fn glrt_on_a_simulated_drive() {
 
 /// Noise parameters whose accelerometer and gyro white noise is `scale` times the synthetic
 /// sensor's, as measured at `rate_hz` (per-sample sigma = N sqrt(rate)).
-fn noise_params(scale: f64, rate_hz: f64) -> calibrate::noise::NoiseParams {
-    use calibrate::noise::params::{AxisNoise, Estimate, NoiseParams, SensorNoise};
+fn noise_params(scale: f64, rate_hz: f64) -> calibrate::noise_params::NoiseParams {
+    use calibrate::noise_params::{AxisNoise, Estimate, NoiseParams, SensorNoise};
     let axis = |sigma: f64| AxisNoise {
         white_noise_density: Some(Estimate {
             value: scale * sigma / rate_hz.sqrt(),

@@ -16,12 +16,12 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
+use calibrate_science::gyrocal::{GyroCalConfig, calibrate_gyro};
 use clap::{Parser, ValueEnum};
 use common::{Case, Simulation, live_calibration_stage, live_detector};
 use ipc_types::{CorrectedImuSample, RobotHint, corrected_flags, odometry_flags};
 use mems_sim::hints::{HintParams, RestSource};
 use nalgebra::{Matrix2, Matrix3, Vector2};
-use odometry::gyrocal::{GyroCalConfig, calibrate_gyro};
 use odometry::hints::HintConfig;
 use odometry::stage::{OdometryConfig, OdometryStage};
 use statrs::statistics::{Data, Max, Median, OrderStatistics};
@@ -389,7 +389,7 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
             let cal = calibrate_gyro(&session, &GyroCalConfig::new(mems_sim::model::G_MPS2))
                 .expect("the simulated session calibrates the gyro");
             gyro_cal_error = (cal.correction - model_correction).abs().max();
-            cfg = cfg.with_gyro_calibration(&cal);
+            cfg = cfg.with_gyro_calibration(cal.correction, cal.correction_sigma);
         }
         GyroCal::Model => {
             cfg.gyro_correction = model_correction;

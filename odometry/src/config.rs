@@ -18,7 +18,7 @@
 //! (they are g times the gravity used).
 
 use calibrate::calibfile::CalibrationFile;
-use calibrate::noise::params::{AxisNoise, Estimate, SensorNoise};
+use calibrate::noise_params::{AxisNoise, Estimate, SensorNoise};
 use nalgebra::Matrix3;
 
 use crate::stage::OdometryConfig;
@@ -163,7 +163,7 @@ pub fn from_calibration(file: &CalibrationFile) -> CalibratedConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use calibrate::noise::params::{NoiseParams, UpperLimits};
+    use calibrate::noise_params::{NoiseParams, UpperLimits};
 
     fn estimate(value: f64) -> Option<Estimate> {
         Some(Estimate {
@@ -185,8 +185,8 @@ mod tests {
     }
 
     fn file_with(gravity: f64, noise: Option<NoiseParams>) -> CalibrationFile {
+        use calibrate::calibfile::{CovarianceMode, Weighting};
         use calibrate::calibfile::{FitMethod, ResidualSection, SourceSection};
-        use calibrate::fit::{CovarianceMode, Weighting};
         use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
         let model = AccelModel::new(
             ModelKind::Bias,

@@ -2,13 +2,13 @@
 //! velocity and displacement with zero-velocity updates, and drift removal over motion
 //! intervals. The stage is a plain state machine (sample in, states out) with no I/O, shared
 //! by the live process and the offline runner. The gyro's scale and misalignment, which the
-//! calibration stage does not correct, are fitted from a pose session by [`gyrocal`]. Robot
+//! calibration stage does not correct, are fitted from a pose session by
+//! `calibrate_science::gyrocal`. Robot
 //! hints (the controller's rest and speed knowledge, [`hints`]) feed the same stage.
 //! Measured accuracy on simulated drives: docs/odometry.md.
 
 pub mod config;
 pub mod eskf;
-pub mod gyrocal;
 pub mod hints;
 mod navigator;
 pub mod profile;

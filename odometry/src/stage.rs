@@ -98,7 +98,7 @@ pub struct OdometryConfig {
     pub noise: NoiseModel,
     /// Gyro correction `C` applied to every angular rate before the filter (`omega = C w`,
     /// sensor frame): the inverse of the gyro's scale and misalignment, from
-    /// [`crate::gyrocal::calibrate_gyro`]; identity for an uncalibrated gyro. (The calibration
+    /// `calibrate_science::gyrocal::calibrate_gyro`; identity for an uncalibrated gyro. (The calibration
     /// stage corrects the accelerometer only, so the gyro's correction is applied here.)
     pub gyro_correction: Matrix3<f64>,
     /// 1-sigma of each entry of the corrected gyro's residual scale and misalignment error,
@@ -197,11 +197,11 @@ impl OdometryConfig {
         }
     }
 
-    /// `self` with the gyro correction fitted by [`crate::gyrocal::calibrate_gyro`] and its
-    /// 1-sigma.
-    pub fn with_gyro_calibration(mut self, cal: &crate::gyrocal::GyroCalibration) -> Self {
-        self.gyro_correction = cal.correction;
-        self.gyro_correction_sigma = cal.correction_sigma;
+    /// `self` with the gyro correction fitted by `calibrate_science::gyrocal::calibrate_gyro`
+    /// and its 1-sigma.
+    pub fn with_gyro_calibration(mut self, correction: Matrix3<f64>, sigma: Matrix3<f64>) -> Self {
+        self.gyro_correction = correction;
+        self.gyro_correction_sigma = sigma;
         self
     }
 }

@@ -4,10 +4,10 @@
 
 mod common;
 
+use calibrate_science::gyrocal::{GyroCalConfig, calibrate_gyro};
 use common::{Case, Simulation};
 use ipc_types::{OdometryState, odometry_flags};
 use mems_sim::model::G_MPS2;
-use odometry::gyrocal::{GyroCalConfig, calibrate_gyro};
 use odometry::stage::{OdometryConfig, OdometryStage};
 
 /// Runs a drive with turns at 50 Hz whose samples from `gap_from_s` (after the drive's start)
@@ -25,8 +25,9 @@ fn drive_with_gap(seed: u64, gap_s: f64, widen: bool) -> [(OdometryState, [f64; 
     };
     let mut sim = Simulation::new(&c, seed);
     let session = sim.session();
-    let mut cfg = OdometryConfig::mpu9250(G_MPS2)
-        .with_gyro_calibration(&calibrate_gyro(&session, &GyroCalConfig::new(G_MPS2)).unwrap());
+    let cal = calibrate_gyro(&session, &GyroCalConfig::new(G_MPS2)).unwrap();
+    let mut cfg =
+        OdometryConfig::mpu9250(G_MPS2).with_gyro_calibration(cal.correction, cal.correction_sigma);
     let (accel, gyro) = c.vibration_density_per_mps();
     cfg.noise.vibration_accel_density_per_mps = accel;
     cfg.noise.vibration_gyro_density_per_mps = gyro;

@@ -3,6 +3,7 @@
 
 mod common;
 
+use calibrate_science::gyrocal::{GyroCalConfig, GyroCalError, MIN_POSES, calibrate_gyro};
 use common::{Case, SESSION_HOLD_S, Simulation};
 use ipc_types::{CorrectedImuSample, Stamps, corrected_flags};
 use mems_sim::SimSensor;
@@ -10,7 +11,6 @@ use mems_sim::model::{G_MPS2, SensorModel};
 use mems_sim::scenario::{PoseParams, PoseSession, Scenario};
 use mems_sim::vibration::VibrationModel;
 use nalgebra::{UnitQuaternion, Vector3};
-use odometry::gyrocal::{GyroCalConfig, GyroCalError, MIN_POSES, calibrate_gyro};
 
 /// A case at 100 Hz (enough for the session's slow rotations, and quick in debug builds).
 fn case() -> Case {

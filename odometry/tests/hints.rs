@@ -13,12 +13,12 @@
 
 mod common;
 
+use calibrate_science::gyrocal::{GyroCalConfig, calibrate_gyro};
 use common::{Case, Simulation, run_with_hints};
 use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags};
 use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
 use nalgebra::{UnitQuaternion, Vector2};
-use odometry::gyrocal::{GyroCalConfig, calibrate_gyro};
 use odometry::hints::HintConfig;
 use odometry::stage::{OdometryConfig, OdometryStage};
 use recording::Truth;
@@ -28,10 +28,10 @@ use recording::Truth;
 fn simulate(c: &Case, seed: u64) -> (Vec<CorrectedImuSample>, Vec<Truth>, OdometryConfig) {
     let mut sim = Simulation::new(c, seed);
     let session = sim.session();
-    let mut cfg = OdometryConfig::mpu9250(G_MPS2).with_gyro_calibration(
-        &calibrate_gyro(&session, &GyroCalConfig::new(G_MPS2))
-            .expect("the session calibrates the gyro"),
-    );
+    let cal = calibrate_gyro(&session, &GyroCalConfig::new(G_MPS2))
+        .expect("the session calibrates the gyro");
+    let mut cfg =
+        OdometryConfig::mpu9250(G_MPS2).with_gyro_calibration(cal.correction, cal.correction_sigma);
     let (accel, gyro) = c.vibration_density_per_mps();
     cfg.noise.vibration_accel_density_per_mps = accel;
     cfg.noise.vibration_gyro_density_per_mps = gyro;

@@ -10,9 +10,9 @@
 use std::path::{Path, PathBuf};
 
 use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
-use calibrate::fit::{CovarianceMode, Weighting};
+use calibrate::calibfile::{CovarianceMode, Weighting};
 use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
-use calibrate::noise::params::{AxisNoise, Estimate, NoiseParams, SensorNoise};
+use calibrate::noise_params::{AxisNoise, Estimate, NoiseParams, SensorNoise};
 use ipc_types::{CorrectedImuSample, OdometryState, Stamps, corrected_flags};
 use odometry::config::from_calibration;
 use odometry::stage::{OdometryConfig, OdometryStage};

@@ -4,11 +4,11 @@
 
 mod common;
 
+use calibrate_science::gyrocal::{GyroCalConfig, calibrate_gyro};
 use common::{Case, Simulation};
 use ipc_types::{CorrectedImuSample, OdometryState, Stamps, corrected_flags, odometry_flags};
 use mems_sim::model::G_MPS2;
 use nalgebra::{UnitQuaternion, Vector3};
-use odometry::gyrocal::{GyroCalConfig, calibrate_gyro};
 use odometry::stage::{OdometryConfig, OdometryStage};
 
 /// Runs the stage over a drive, with the gyro calibrated from the session before it; returns
@@ -17,9 +17,9 @@ use odometry::stage::{OdometryConfig, OdometryStage};
 fn drive(c: &Case, seed: u64) -> (OdometryState, recording::Truth, f64) {
     let mut sim = Simulation::new(c, seed);
     let session = sim.session();
-    let mut cfg = OdometryConfig::mpu9250(G_MPS2);
-    cfg =
-        cfg.with_gyro_calibration(&calibrate_gyro(&session, &GyroCalConfig::new(G_MPS2)).unwrap());
+    let cal = calibrate_gyro(&session, &GyroCalConfig::new(G_MPS2)).unwrap();
+    let mut cfg =
+        OdometryConfig::mpu9250(G_MPS2).with_gyro_calibration(cal.correction, cal.correction_sigma);
     let (accel, gyro) = c.vibration_density_per_mps();
     cfg.noise.vibration_accel_density_per_mps = accel;
     cfg.noise.vibration_gyro_density_per_mps = gyro;

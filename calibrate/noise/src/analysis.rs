@@ -172,7 +172,7 @@ pub fn analyze(
         let axes: Vec<AxisNoise> = reports
             .iter()
             .filter(|r| r.sensor == sensor)
-            .map(|r| AxisNoise::from_fit(&r.fit))
+            .map(|r| crate::fit::axis_noise(&r.fit))
             .collect();
         let [x, y, z]: [AxisNoise; 3] = axes.try_into().ok()?;
         Some(SensorNoise {

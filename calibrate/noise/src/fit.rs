@@ -22,6 +22,7 @@
 //! A term is reported when its `p_k` is at least twice its sigma; otherwise the result says why
 //! and gives a 2-sigma upper limit from the unconstrained fit.
 
+use calibrate::noise_params::{AxisNoise, Estimate, UpperLimits};
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use serde::{Deserialize, Serialize};
 
@@ -611,6 +612,28 @@ fn unresolved_reason(
     };
     reason.push_str(&dominates);
     reason
+}
+
+/// The calibration file's parameters of a fit: resolved terms as estimates, the others as upper
+/// limits.
+pub fn axis_noise(fit: &ModelFit) -> AxisNoise {
+    let split = |term: &Term| match *term {
+        Term::Resolved { value, sigma } => (Some(Estimate { value, sigma }), None),
+        Term::Unresolved { upper_limit, .. } => (None, Some(upper_limit)),
+    };
+    let (white_noise_density, n_limit) = split(&fit.white);
+    let (bias_instability, b_limit) = split(&fit.bias_instability);
+    let (random_walk, k_limit) = split(&fit.random_walk);
+    AxisNoise {
+        white_noise_density,
+        bias_instability,
+        random_walk,
+        upper_limits: UpperLimits {
+            white_noise_density: n_limit,
+            bias_instability: b_limit,
+            random_walk: k_limit,
+        },
+    }
 }
 
 #[cfg(test)]

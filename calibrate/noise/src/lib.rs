@@ -25,9 +25,13 @@ pub mod covariance;
 pub mod fit;
 pub mod floor;
 pub mod kalibr;
-pub mod params;
+/// The noise parameters as the calibration file stores them (they live in `calibrate`, which
+/// the live processes link without this crate's analysis and plots).
+pub use calibrate::noise_params as params;
 pub mod plot;
-pub mod repair;
+/// The torn-read repair and repeat count (in `calibrate`, which `mems-odometry offline` and the
+/// calibration fits use too).
+pub use calibrate::repair;
 pub mod series;
 pub mod synth;
 

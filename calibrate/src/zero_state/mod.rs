@@ -100,10 +100,10 @@ impl NoiseFloor {
     /// The per-sample sigmas `N sqrt(rate)` (Kalibr's discrete-time convention) of the
     /// resolved white noise densities of `params`; accelerometer values converted to the
     /// gravity `gravity_mps2` the detector works in.
-    pub fn from_params(params: &noise::NoiseParams, gravity_mps2: f64) -> Self {
+    pub fn from_params(params: &crate::noise_params::NoiseParams, gravity_mps2: f64) -> Self {
         let root_rate = params.sample_rate_hz.sqrt();
         let scale = gravity_mps2 / params.gravity_mps2;
-        let sigmas = |sensor: Option<&noise::params::SensorNoise>, scale: f64| {
+        let sigmas = |sensor: Option<&crate::noise_params::SensorNoise>, scale: f64| {
             let axes = sensor.map(|s| s.axes());
             std::array::from_fn(|i| {
                 axes.and_then(|a| a[i].white_noise_density)

@@ -131,7 +131,7 @@ impl Case {
     }
 
     /// The gyro correction a perfect calibration would give, as an independent reference for
-    /// [`odometry::gyrocal::calibrate_gyro`]: the inverse of the gyro model's scale and
+    /// [`calibrate_science::gyrocal::calibrate_gyro`]: the inverse of the gyro model's scale and
     /// misalignment `(I + diag(s) + M)^-1`, turned into the orthonormal frame closest to the
     /// accelerometer's axes (the rotation part `I + (M_a - M_a^T) / 2` of the accelerometer's
     /// residual misalignment).

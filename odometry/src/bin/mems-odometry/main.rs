@@ -2,9 +2,9 @@
 //! `mems/robot/hint` in, `mems/odometry/state` out) or offline over a raw recording (`offline`:
 //! the calibration stage and the odometry stage in one process, the same code the live
 //! processes run, with the recording's robot hints). `gyrocal` fits the gyro's scale and
-//! misalignment correction from a recorded pose session into the calibration file.
+//! misalignment correction from a recorded pose session into the calibration file: it is
+//! `mems-calibrate gyrocal`, run by `mems-calibrate-offline` (package calibrate-science).
 
-mod gyrocal;
 mod hint_args;
 mod offline;
 mod out;
@@ -42,8 +42,14 @@ enum Command {
     /// Run calibration and odometry over a raw recording (CSV or MCAP).
     Offline(offline::OfflineArgs),
     /// Fit the gyro's scale and misalignment correction from a recorded pose session and
-    /// optionally store it in the calibration file's [gyro] table.
-    Gyrocal(gyrocal::GyroCalArgs),
+    /// optionally store it in the calibration file's [gyro] table (`mems-calibrate gyrocal`:
+    /// see its --help).
+    #[command(disable_help_flag = true)]
+    Gyrocal {
+        /// Arguments of `mems-calibrate gyrocal`.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<std::ffi::OsString>,
+    },
 }
 
 /// The odometry configuration a calibration file implies ([`odometry::config::from_calibration`]:
@@ -159,7 +165,9 @@ fn main() -> ExitCode {
     let result: Result<()> = match Cli::parse().command {
         Command::Serve(args) => serve::run(args),
         Command::Offline(args) => offline::run(args),
-        Command::Gyrocal(args) => gyrocal::run(args),
+        Command::Gyrocal { args } => Err(calibrate::offline::exec_offline(
+            std::iter::once("gyrocal".as_ref()).chain(args.iter().map(|a| a.as_os_str())),
+        )),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

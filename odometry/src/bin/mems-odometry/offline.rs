@@ -178,14 +178,16 @@ impl Source {
         if args.repair_torn_reads {
             let report = calibrate::repair::repair_torn_reads(
                 &mut recording.samples,
-                &calibrate::repair::TornReadConfig::default(),
+                &calibrate::repair::RepairConfig::default(),
             );
             eprintln!(
-                "mems-odometry: {}: repaired {} torn reads (x, y, z: {:?}) in {} samples",
+                "mems-odometry: {}: repaired torn reads in {} of {} samples (accelerometer x, y, \
+                 z: {:?}; gyro: {:?})",
                 args.input.display(),
-                report.total(),
-                report.repaired,
-                report.samples
+                report.samples_repaired,
+                recording.samples.len(),
+                report.accel.map(|a| a.repaired),
+                report.gyro.map(|g| g.map(|a| a.repaired))
             );
         }
         // Hints first (the merge orders them by publication), then truth and samples by time.

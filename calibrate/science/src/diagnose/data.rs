@@ -15,11 +15,13 @@ use ipc_types::{RawImuSample, raw_flags};
 use nalgebra::Vector3;
 
 use crate::fit::Pose;
-use crate::repair::{RepairReport, TornReadConfig, difference_sigma, repair_torn_values};
 use crate::segments::{
     SampleSeries, SegmentConfig, SegmentError, StaticSegment, detect_static_segments_in,
 };
 use crate::session::nearest_axis;
+use calibrate::noise_level::difference_sigma;
+use calibrate::repair::{TEAR_COUNTS, detect_tears};
+use ipc_types::units::{AccelRange, quantize};
 
 /// One input session.
 #[derive(Debug, Clone)]
@@ -65,11 +67,10 @@ pub struct DataConfig {
     pub gap_min_s: f64,
     /// Static-segment detection.
     pub segments: SegmentConfig,
-    /// Torn-read repair.
-    pub torn: TornReadConfig,
+    /// Accelerometer sensitivity of the recordings, counts per g: a torn read is off by a
+    /// whole high-byte step of these counts (`calibrate::repair`).
+    pub accel_lsb_per_g: f64,
 }
-
-pub use crate::repair::MAX_TEAR_SIGMA_COUNTS;
 
 impl Default for DataConfig {
     fn default() -> Self {
@@ -80,12 +81,45 @@ impl Default for DataConfig {
             gap_factor: 10.0,
             gap_min_s: 0.05,
             segments: SegmentConfig::default(),
-            torn: TornReadConfig {
-                max_sigma_counts: MAX_TEAR_SIGMA_COUNTS,
-                ..TornReadConfig::default()
-            },
+            accel_lsb_per_g: AccelRange::G2.lsb_per_g(),
         }
     }
+}
+
+/// Torn reads undone on the accelerometer axes of a session.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TornFindings {
+    /// Samples repaired per axis.
+    pub repaired: [usize; 3],
+    /// Of those, the samples that read too high (by a multiple of 256 counts).
+    pub high: [usize; 3],
+}
+
+impl TornFindings {
+    /// Repairs over all axes.
+    pub fn total(&self) -> usize {
+        self.repaired.iter().sum()
+    }
+}
+
+/// Finds torn reads in accelerometer values (g, `[x, y, z]` per sample, quantized at
+/// `lsb_per_g` counts per g) with `calibrate::repair::detect_tears` and undoes them in place.
+fn repair_torn_values(values: &mut [[f64; 3]], lsb_per_g: f64) -> TornFindings {
+    let mut found = TornFindings::default();
+    for axis in 0..3 {
+        let counts: Vec<i16> = values
+            .iter()
+            .map(|v| quantize(v[axis] * lsb_per_g))
+            .collect();
+        for &(k, shift) in &detect_tears(&counts).fixes {
+            values[k][axis] -= f64::from(shift * TEAR_COUNTS) / lsb_per_g;
+            found.repaired[axis] += 1;
+            if shift > 0 {
+                found.high[axis] += 1;
+            }
+        }
+    }
+    found
 }
 
 /// Why the data cannot be diagnosed.
@@ -143,8 +177,8 @@ pub struct AcquisitionFindings {
     pub samples: usize,
     /// Median sample interval, s.
     pub median_dt_s: f64,
-    /// Torn reads found and undone by [`repair_torn_reads`].
-    pub torn: RepairReport,
+    /// Torn reads found and undone (`calibrate::repair::detect_tears`).
+    pub torn: TornFindings,
     /// Outliers farther than 5 robust sigmas from the median of their 8 neighbours, per axis.
     pub outliers: [usize; 3],
     /// Median distance of those outliers from the neighbours' median, counts at 16384/g
@@ -237,7 +271,7 @@ pub(crate) fn prepare_raw(
     }
     // Quantization step: the greatest common divisor of the counts (at 16384/g) of up to
     // 2000 samples; the thesis's values are multiples of 4 counts.
-    let lsb = cfg.torn.lsb_per_g;
+    let lsb = cfg.accel_lsb_per_g;
     let step_counts = a_raw
         .iter()
         .take(2000)
@@ -266,7 +300,7 @@ pub(crate) fn prepare_raw(
         (0..n).collect()
     };
     let mut work_a: Vec<[f64; 3]> = kept.iter().map(|&k| a_raw[k]).collect();
-    let torn = repair_torn_values(&mut work_a, &cfg.torn);
+    let torn = repair_torn_values(&mut work_a, cfg.accel_lsb_per_g);
     let seg_error = |source| DataError::Segments {
         name: name.to_string(),
         source,

@@ -10,8 +10,8 @@ use recording::thesis::SixPosition;
 use recording::{Format, Recording};
 
 use crate::fit::Pose;
-use crate::repair::{RepairReport, TornReadConfig, repair_torn_reads};
 use crate::segments::{Detection, SegmentConfig, SegmentError, detect_static_segments};
+use calibrate::repair::{RepairConfig, TornReport, repair_torn_reads};
 
 /// Largest angle (degrees) between a pose's mean reading and the nearest axis for the pose to
 /// count as axis aligned. Generous on purpose: the thesis's sensor has a 0.25 g bias on z,
@@ -121,7 +121,7 @@ pub struct RawPoses {
     /// The repaired samples.
     pub samples: Vec<RawImuSample>,
     /// What the repair changed.
-    pub repair: RepairReport,
+    pub repair: TornReport,
     /// The static-segment detection.
     pub detection: Detection,
 }
@@ -129,7 +129,7 @@ pub struct RawPoses {
 /// Repairs torn reads and detects the static segments of a raw recording.
 pub fn raw_poses(rec: &Recording, segment_cfg: &SegmentConfig) -> Result<RawPoses, InputError> {
     let mut samples = rec.samples.clone();
-    let repair = repair_torn_reads(&mut samples, &TornReadConfig::default());
+    let repair = repair_torn_reads(&mut samples, &RepairConfig::default());
     let detection =
         detect_static_segments(&samples, segment_cfg).map_err(|source| InputError::Segments {
             path: rec.source.clone(),

@@ -35,7 +35,7 @@ fn an_absurd_mean_stops_the_fit_naming_file_line_and_column() {
             text.push('\n');
         }
         std::fs::write(&means, text).unwrap();
-        Command::new(env!("CARGO_BIN_EXE_mems-calibrate"))
+        Command::new(env!("CARGO_BIN_EXE_mems-calibrate-offline"))
             .args(["fit", "--input"])
             .arg(&means)
             .args(["--model", "full", "--out"])

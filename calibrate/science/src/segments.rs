@@ -11,14 +11,14 @@
 //!    after a move), at least `min_duration_s` long, become segments; a gap in the sample times
 //!    longer than `max_gap_s` ends a run.
 //!
-//! Run [`crate::repair::repair_torn_reads`] first on data with torn reads: a single +-256-count
+//! Run [`calibrate::repair::repair_torn_reads`] first on data with torn reads: a single +-256-count
 //! outlier makes its window's std fail the test.
 
 use ipc_types::RawImuSample;
 
 use crate::fit::Pose;
-use crate::noise_level::NoiseLevel;
-use crate::window::{RestCriterion, WindowAccumulator};
+use calibrate::noise_level::NoiseLevel;
+use calibrate::window::{RestCriterion, WindowAccumulator};
 use nalgebra::Vector3;
 
 /// Settings of the detector.

@@ -6,8 +6,8 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use calibrate::calibfile::CalibrationFile;
-use calibrate::static_eval::{DriftSource, StaticEvalConfig, evaluate_static};
-use calibrate::{plots, thesis_eval};
+use calibrate_science::static_eval::{DriftSource, StaticEvalConfig, evaluate_static};
+use calibrate_science::{plots, thesis_eval};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 

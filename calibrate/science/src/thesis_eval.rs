@@ -12,8 +12,8 @@ use nalgebra::Vector3;
 
 use crate::fit::{FitError, Weighting, fit_labelled};
 use crate::integrate::DoubleIntegrator;
-use crate::model::{AccelModel, ModelKind};
 use crate::session::poses_from_six;
+use calibrate::model::{AccelModel, ModelKind};
 
 /// The evaluated variants, in the thesis's row order.
 pub const METHODS: [&str; 4] = ["none", "bias", "scale", "full"];

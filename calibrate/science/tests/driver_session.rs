@@ -70,7 +70,7 @@ fn a_1khz_session_through_the_driver_dlpf_is_fitted_within_its_uncertainty() {
     let csv: PathBuf = dir.join("six-1khz.csv");
     recording::csv::write_raw(&csv, &samples, None).unwrap();
     let toml = dir.join("six-1khz.toml");
-    let out = Command::new(env!("CARGO_BIN_EXE_mems-calibrate"))
+    let out = Command::new(env!("CARGO_BIN_EXE_mems-calibrate-offline"))
         .args([
             "fit",
             "--model",

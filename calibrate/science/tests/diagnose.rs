@@ -5,7 +5,7 @@
 //! of the same session simulated without noise (what the exact model predicts), over the held
 //! poses.
 
-use calibrate::diagnose::{DiagnoseConfig, Diagnosis, Effect, SessionInput, diagnose};
+use calibrate_science::diagnose::{DiagnoseConfig, Diagnosis, Effect, SessionInput, diagnose};
 use ipc_types::RawImuSample;
 use ipc_types::units::{AccelRange, GyroRange, STANDARD_GRAVITY_MPS2};
 use mems_sim::model::{SensorModel, ThermalModel, TriadModel};
@@ -456,7 +456,7 @@ fn label_free_clean_selects_nothing() {
     model.thermal = varying_temperature();
     let s = simulate(Layout::Orientations(14), &model, 3, no_extra);
     let d = run(s.samples.clone());
-    assert_eq!(d.kind, calibrate::diagnose::BaselineKind::LabelFree);
+    assert_eq!(d.kind, calibrate_science::diagnose::BaselineKind::LabelFree);
     check(&d, None, true_model_rms(&s.samples, &s.exact, &s.holds));
 }
 
@@ -467,7 +467,7 @@ fn label_free_temperature_bias_is_found() {
     model.accel.bias_temp_coeff = [1.5e-3, -1.0e-3, 2.0e-3];
     let s = simulate(Layout::Orientations(14), &model, 3, no_extra);
     let d = run(s.samples.clone());
-    assert_eq!(d.kind, calibrate::diagnose::BaselineKind::LabelFree);
+    assert_eq!(d.kind, calibrate_science::diagnose::BaselineKind::LabelFree);
     check(
         &d,
         Some(Effect::TemperatureBias),
@@ -485,7 +485,7 @@ fn a_cross_axis_product_is_reported_as_unexplained() {
         [0.03 * f[1] * f[2] / STANDARD_GRAVITY_MPS2.powi(2), 0.0, 0.0]
     });
     let d = run(s.samples);
-    assert_eq!(d.kind, calibrate::diagnose::BaselineKind::LabelFree);
+    assert_eq!(d.kind, calibrate_science::diagnose::BaselineKind::LabelFree);
     assert_eq!(d.selected, None, "{}", summary(&d));
     assert!(d.unexplained_structure, "{}", summary(&d));
 }

@@ -1,12 +1,12 @@
-//! `mems-odometry gyrocal`: fits the gyro's scale and misalignment correction from a recorded
+//! `mems-calibrate gyrocal` (also run as `mems-odometry gyrocal`): fits the gyro's scale and misalignment correction from a recorded
 //! pose session (static orientations with rotations in between, e.g. `mems-sim orientations`)
-//! and optionally stores it in the calibration file's `[gyro]` table, where `serve` and
-//! `offline` read it (`odometry::config::from_calibration`).
+//! and optionally stores it in the calibration file's `[gyro]` table, where `mems-odometry
+//! serve` and `offline` read it (`odometry::config::from_calibration`).
 //!
 //! The raw session goes through the calibration stage with the file (the code `offline` and
 //! `mems-calibrate serve` run): the accelerometer corrected by the file's model, the gyro's
 //! bias refined at rest, and the zero-state detector's flags marking the static poses. The
-//! corrected samples go to [`odometry::gyrocal::calibrate_gyro`]; its correction `C` gives
+//! corrected samples go to [`calibrate_science::gyrocal::calibrate_gyro`]; its correction `C` gives
 //! `omega = C w` (w the bias-free reading, rad/s) in the orthonormal frame closest to the
 //! corrected accelerometer's axes, which is why it belongs with the accelerometer calibration
 //! it was fitted through (`--into` refuses a file with a different one).
@@ -22,17 +22,24 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig, Settler, calib_id};
-use calibrate::zero_state::BATCH_LEN;
+use calibrate::zero_state::{BATCH_LEN, DetectorConfig, DetectorKind};
+use calibrate_science::gyrocal::{GyroCalConfig, calibrate_gyro};
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, raw_flags};
 use nalgebra::Matrix3;
-use odometry::gyrocal::{GyroCalConfig, calibrate_gyro};
 use serde_json::json;
 
-/// Options of `mems-odometry gyrocal`.
+/// Options of `mems-calibrate gyrocal`.
 #[derive(clap::Args)]
 pub struct GyroCalArgs {
-    #[command(flatten)]
-    stage: crate::StageArgs,
+    /// The accelerometer calibration the session is corrected with (TOML).
+    #[arg(long)]
+    calib: Option<PathBuf>,
+    /// Zero-state detector marking the static poses (the vehicle profile's GLRT by default).
+    #[arg(long, value_enum, default_value = "glrt")]
+    detector: DetectorKind,
+    /// Start-up learning time of the detector, s (the session starts at rest for this long).
+    #[arg(long)]
+    learn_s: Option<f64>,
     /// Raw pose session (canonical CSV, thesis CSV or MCAP): at least 9 static poses of 2 s or
     /// more, with rotations about varied axes between them, starting at rest for `--learn-s`.
     #[arg(long)]
@@ -79,12 +86,20 @@ fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
 
 /// Fits the correction, prints it and stores it when asked.
 pub fn run(args: GyroCalArgs) -> Result<()> {
-    let Some(calib_path) = &args.stage.calib else {
+    let Some(calib_path) = &args.calib else {
         bail!(
             "gyrocal needs --calib: the correction is fitted through that accelerometer calibration"
         );
     };
-    let (file, mut detector) = args.stage.load()?;
+    let file = CalibrationFile::load(calib_path)
+        .with_context(|| format!("cannot load calibration {}", calib_path.display()))?;
+    let mut detector = DetectorConfig::new(args.detector, file.gravity_mps2);
+    if let Some(learn_s) = args.learn_s {
+        if !(learn_s > 0.0 && learn_s.is_finite()) {
+            bail!("--learn-s must be > 0, got {learn_s}");
+        }
+        detector.learn.duration_s = learn_s;
+    }
     // Read the target first, so that a bad one fails before the fit.
     let mut target = match &args.into {
         Some(path) => {
@@ -106,7 +121,7 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
         None => None,
     };
 
-    let recording = crate::load_recording(&args.input, recording::LogPolicy::Strict)?;
+    let recording = load_session(&args.input)?;
     if let Some(r) = recording
         .samples
         .iter()
@@ -193,4 +208,14 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
         eprintln!("wrote the gyro correction into {} [gyro]", path.display());
     }
     Ok(())
+}
+
+/// The raw session, refusing a file with broken timing (as `mems-odometry offline
+/// --strict-time`); a truncated file is reported and its readable part used.
+fn load_session(path: &std::path::Path) -> Result<recording::Recording> {
+    let recording = recording::load_raw_with(path, recording::LogPolicy::Strict)?;
+    if let Some(t) = &recording.truncation {
+        eprintln!("mems-calibrate: {}: {t}", path.display());
+    }
+    Ok(recording)
 }

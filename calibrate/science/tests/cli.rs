@@ -63,7 +63,7 @@ fn write_session(session: PoseSession, name: &str) -> PathBuf {
 
 fn fit(input: &Path, extra: &[&str]) -> (Output, PathBuf) {
     let out = input.with_extension("toml");
-    let output = Command::new(env!("CARGO_BIN_EXE_mems-calibrate"))
+    let output = Command::new(env!("CARGO_BIN_EXE_mems-calibrate-offline"))
         .args(["fit", "--model", "full", "--input"])
         .arg(input)
         .arg("--out")
@@ -204,7 +204,7 @@ fn unreadable_input_names_the_file() {
 }
 
 fn thesis_six(trial: usize) -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/capstone");
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/capstone");
     let path = dir.join(format!(
         "Six-Position-Test/data/trial_{trial}/six_position_data_{trial}.csv"
     ));
@@ -224,7 +224,7 @@ fn thesis_six_position_file() {
     let dir = std::env::temp_dir().join(format!("calibrate-cli-{}-thesis", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("calib.toml");
-    let output = Command::new(env!("CARGO_BIN_EXE_mems-calibrate"))
+    let output = Command::new(env!("CARGO_BIN_EXE_mems-calibrate-offline"))
         .args(["fit", "--model", "full", "--gravity", "9.797", "--input"])
         .arg(&six)
         .arg("--out")
@@ -248,7 +248,7 @@ fn thesis_six_position_file() {
             assert!((p[3 + 3 * i + j] - stored.full.s[i][j]).abs() < 1e-6);
         }
     }
-    let output = Command::new(env!("CARGO_BIN_EXE_mems-calibrate"))
+    let output = Command::new(env!("CARGO_BIN_EXE_mems-calibrate-offline"))
         .args(["fit", "--model", "full", "--labels", "none", "--input"])
         .arg(&six)
         .arg("--out")

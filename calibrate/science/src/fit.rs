@@ -25,9 +25,8 @@
 //!   imperfect cube); [`LabelledFit::reduced_chi2`] far above 1 is the sign of those.
 
 use nalgebra::{DMatrix, DVector, Vector3};
-use serde::{Deserialize, Serialize};
 
-use crate::model::{
+use calibrate::model::{
     AccelModel, ModelError, ModelKind, PARAM_NAMES, ParamCovariance, ParamVector, scale_index,
 };
 
@@ -54,25 +53,7 @@ impl Pose {
     }
 }
 
-/// How poses are weighted (see the module documentation).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Weighting {
-    /// Ordinary least squares.
-    Unweighted,
-    /// Weights `1/sigma^2` from each pose's std (standard error of the mean when `n` is known).
-    PoseStd,
-}
-
-/// How the parameter covariance was obtained (see the module documentation).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum CovarianceMode {
-    /// `s^2 (X^T W X)^-1` with `s^2 = chi^2 / dof` estimated from the residuals.
-    ResidualScaled,
-    /// `(X^T W X)^-1` with sigmas taken as known.
-    Absolute,
-}
+pub use calibrate::calibfile::{CovarianceMode, Weighting};
 
 /// Why a fit could not be made.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -132,7 +113,7 @@ pub enum FitError {
 pub struct LabelledFit {
     /// The fitted model.
     pub model: AccelModel,
-    /// Parameter covariance in the 12-parameter layout (see [`crate::model`]).
+    /// Parameter covariance in the 12-parameter layout (see [`calibrate::model`]).
     pub covariance: ParamCovariance,
     /// How `covariance` was obtained.
     pub covariance_mode: CovarianceMode,

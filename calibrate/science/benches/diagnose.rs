@@ -5,7 +5,7 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use calibrate::diagnose::{DiagnoseConfig, SessionInput, diagnose};
+use calibrate_science::diagnose::{DiagnoseConfig, SessionInput, diagnose};
 use ipc_types::RawImuSample;
 use ipc_types::units::{AccelRange, GyroRange, STANDARD_GRAVITY_MPS2};
 use mems_sim::model::{SensorModel, ThermalModel, TriadModel};

@@ -76,9 +76,9 @@ pub use data::{
 pub use effects::Effect;
 
 use crate::labelfree::distinct_orientations;
-use crate::model::{AccelModel, ModelKind, ParamCovariance, bias_index, scale_index};
 use crate::session::{AXIS_ALIGNED_MAX_DEG, nearest_axis};
-use crate::terms::ReadingTerms;
+use calibrate::model::{AccelModel, ModelKind, ParamCovariance, bias_index, scale_index};
+use calibrate::terms::ReadingTerms;
 use data::{Fixes, Labelling, Obs, Session};
 use effects::{Tag, direction, has_columns, regressor};
 use linear::{Design, Round};
@@ -1591,7 +1591,7 @@ impl Diagnoser<'_> {
             repaired: std::array::from_fn(|_| vec![0; BINS]),
         };
         let mut any = false;
-        let lsb = self.cfg.data.torn.lsb_per_g;
+        let lsb = self.cfg.data.accel_lsb_per_g;
         let block = (self.cfg.data.block_s * 1e9) as u64;
         for s in &self.sessions {
             let Session::Raw(r) = s else { continue };

@@ -8,11 +8,11 @@ use std::process::{Command, Output};
 use calibrate::calibfile::{
     CalibFileError, CalibrationFile, FitMethod, ResidualSection, SourceSection,
 };
-use calibrate::fit::{CovarianceMode, Weighting};
 use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
-use calibrate::noise::synth::{NoiseModel, static_samples};
 use calibrate::zero_state::{DetectorConfig, DetectorKind, NoiseFloor};
+use calibrate_science::fit::{CovarianceMode, Weighting};
 use nalgebra::{Matrix3, Vector3};
+use noise::synth::{NoiseModel, static_samples};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -86,7 +86,7 @@ fn write_calibration(dir: &Path) -> (PathBuf, CalibrationFile) {
 }
 
 fn mems_calibrate(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mems-calibrate"))
+    Command::new(env!("CARGO_BIN_EXE_mems-calibrate-offline"))
         .args(args)
         .output()
         .expect("mems-calibrate runs")
@@ -117,8 +117,7 @@ fn allan_into_stores_the_fitted_parameters_in_the_noise_table() {
     let stored = CalibrationFile::load(&calib).unwrap();
     let noise = stored.noise.clone().expect("a [noise] table");
     // The table is the report's parameters, converted with the file's gravity.
-    let from_report: calibrate::noise::NoiseParams =
-        serde_json::from_value(report["params"].clone()).unwrap();
+    let from_report: noise::NoiseParams = serde_json::from_value(report["params"].clone()).unwrap();
     assert_eq!(noise, from_report);
     assert_eq!(noise.gravity_mps2, GRAVITY);
     assert_eq!(noise.source, input.display().to_string());

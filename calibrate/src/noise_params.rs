@@ -29,8 +29,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::fit::{ModelFit, Term};
-
 /// An estimate with its 1-sigma, in the unit of the field holding it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Estimate {
@@ -79,27 +77,6 @@ pub struct AxisNoise {
 }
 
 impl AxisNoise {
-    /// The parameters of a fit: resolved terms as estimates, the others as upper limits.
-    pub fn from_fit(fit: &ModelFit) -> Self {
-        let split = |term: &Term| match *term {
-            Term::Resolved { value, sigma } => (Some(Estimate { value, sigma }), None),
-            Term::Unresolved { upper_limit, .. } => (None, Some(upper_limit)),
-        };
-        let (white_noise_density, n_limit) = split(&fit.white);
-        let (bias_instability, b_limit) = split(&fit.bias_instability);
-        let (random_walk, k_limit) = split(&fit.random_walk);
-        Self {
-            white_noise_density,
-            bias_instability,
-            random_walk,
-            upper_limits: UpperLimits {
-                white_noise_density: n_limit,
-                bias_instability: b_limit,
-                random_walk: k_limit,
-            },
-        }
-    }
-
     /// `(N, B, K)` with each unresolved term replaced by its upper limit (0 when it has
     /// neither): the conservative figures a consumer needing numbers should use.
     pub fn values_or_limits(&self) -> [f64; 3] {

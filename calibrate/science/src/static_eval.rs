@@ -12,7 +12,7 @@
 //!   through the correction at the alignment interval's mean reading) + bias drift. It cannot
 //!   account for label errors of the six-position session (a table that is not level), which
 //!   dominate its real error.
-//! - `best`: torn reads repaired ([`crate::repair`]); model 3 applied; gravity alignment: the
+//! - `best`: torn reads repaired ([`calibrate::repair`]); model 3 applied; gravity alignment: the
 //!   mean corrected reading over the alignment interval defines the vertical (the navigation
 //!   frame's z axis; the minimal rotation from the sensor frame) and the magnitude of gravity,
 //!   which is subtracted; a warm-up term where earlier recordings allow (the mean displacement
@@ -43,9 +43,9 @@ use recording::thesis::SixPosition;
 use crate::drerror::{bias_sigma_m, flicker_sigma_m, rrw_sigma_m, white_sigma_m};
 use crate::fit::{FitError, Weighting, fit_labelled};
 use crate::integrate::DoubleIntegrator;
-use crate::model::{AccelModel, ModelKind};
-use crate::repair::{RepairReport, TornReadConfig, repair_torn_reads};
 use crate::session::poses_from_six;
+use calibrate::model::{AccelModel, ModelKind};
+use calibrate::repair::{RepairConfig, TornReport, repair_torn_reads};
 use noise::NoiseParams;
 
 /// Settings of the evaluation.
@@ -150,7 +150,7 @@ pub struct StaticEvalReport {
     /// Root-mean-square displacement over windows per axis: (thesis_full, best), m.
     pub rms: ([f64; 3], [f64; 3]),
     /// Torn-read repairs in the test file.
-    pub repair: RepairReport,
+    pub repair: TornReport,
     /// Earlier recordings that contributed to the drift and warm-up terms (per window, the
     /// smallest count).
     pub prior_runs: usize,
@@ -201,7 +201,7 @@ impl StaticEvalReport {
             cfg.window_s,
             cfg.step_s,
             cfg.gravity_mps2,
-            self.repair.repaired,
+            self.repair.accel.map(|a| a.repaired),
             self.prior_runs,
             match &self.drift_source {
                 DriftSource::Priors => "not needed".to_owned(),
@@ -526,13 +526,13 @@ pub fn evaluate_static(
 
     let raw_series = Series::new(&test.samples, &model, g);
     let mut repaired = test.samples.clone();
-    let repair = repair_torn_reads(&mut repaired, &TornReadConfig::default());
+    let repair = repair_torn_reads(&mut repaired, &RepairConfig::default());
     let series = Series::new(&repaired, &model, g);
 
     let prior_series: Vec<Series> = priors
         .into_iter()
         .map(|mut p| {
-            repair_torn_reads(&mut p.samples, &TornReadConfig::default());
+            repair_torn_reads(&mut p.samples, &RepairConfig::default());
             progress.inc(1);
             Series::new(&p.samples, &model, g)
         })

@@ -4,13 +4,13 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use calibrate::fit::{Weighting, fit_labelled};
 use calibrate::model::{ModelKind, N_PARAMS, PARAM_NAMES};
-use calibrate::session::poses_from_six;
-use calibrate::thesis_eval::{METHODS, TABLE_A2_M, trial_paths};
+use calibrate_science::fit::{Weighting, fit_labelled};
+use calibrate_science::session::poses_from_six;
+use calibrate_science::thesis_eval::{METHODS, TABLE_A2_M, trial_paths};
 
 fn data_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/capstone");
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/capstone");
     if dir.join("Six-Position-Test").is_dir() {
         Some(dir)
     } else {
@@ -221,7 +221,7 @@ fn static_trial_1_with_the_noise_table_covers_the_error() {
     let calib = scratch.join("trial1.toml");
     let (six, _) = trial_paths(&dir, 1);
     let run = |args: &[&std::ffi::OsStr]| {
-        let out = Command::new(env!("CARGO_BIN_EXE_mems-calibrate"))
+        let out = Command::new(env!("CARGO_BIN_EXE_mems-calibrate-offline"))
             .args(args)
             .output()
             .unwrap();

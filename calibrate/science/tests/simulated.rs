@@ -5,9 +5,9 @@
 //! averaged over `n` samples (standard error `std / sqrt(n)`): exactly the data the fits see
 //! from a real session, at a fraction of the cost of simulating every sample.
 
-use calibrate::fit::{CovarianceMode, Pose, Weighting, fit_labelled};
-use calibrate::labelfree::fit_label_free;
 use calibrate::model::{AccelModel, ModelKind, N_PARAMS};
+use calibrate_science::fit::{CovarianceMode, Pose, Weighting, fit_labelled};
+use calibrate_science::labelfree::fit_label_free;
 use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -1,15 +1,15 @@
-//! `mems-calibrate diagnose`: residual diagnosis of a calibration (see `calibrate::diagnose`).
+//! `mems-calibrate diagnose`: residual diagnosis of a calibration (see `calibrate_science::diagnose`).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
-use calibrate::diagnose::{
+use calibrate_science::diagnose::{
     BaselineKind, CandidateStatus, DiagnoseConfig, Diagnosis, Effect, SessionInput, diagnose, plots,
 };
-use calibrate::fit::{CovarianceMode, Weighting};
-use calibrate::segments::SegmentConfig;
-use calibrate::session::{Input, load_input, poses_from_six};
+use calibrate_science::fit::{CovarianceMode, Weighting};
+use calibrate_science::segments::SegmentConfig;
+use calibrate_science::session::{Input, load_input, poses_from_six};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -253,7 +253,7 @@ pub fn report(d: &Diagnosis) -> String {
         );
     }
     if sessions > 6 {
-        let sum = |f: fn(&calibrate::diagnose::AcquisitionFindings) -> usize| {
+        let sum = |f: fn(&calibrate_science::diagnose::AcquisitionFindings) -> usize| {
             d.acquisition.iter().map(f).sum::<usize>()
         };
         let _ = writeln!(
@@ -277,7 +277,7 @@ pub fn report(d: &Diagnosis) -> String {
                 .fold(0.0, f64::max),
         );
     }
-    let line = |s: &mut String, name: &str, m: &calibrate::diagnose::ModelScore| {
+    let line = |s: &mut String, name: &str, m: &calibrate_science::diagnose::ModelScore| {
         let axes = m.rms_axes_mps2.map_or(String::new(), |a| {
             format!(" (x {:.5}, y {:.5}, z {:.5})", a[0], a[1], a[2])
         });

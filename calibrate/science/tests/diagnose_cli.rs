@@ -25,7 +25,7 @@ fn dir(name: &str) -> PathBuf {
 }
 
 fn diagnose(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mems-calibrate"))
+    Command::new(env!("CARGO_BIN_EXE_mems-calibrate-offline"))
         .arg("diagnose")
         .args(args)
         .output()
@@ -279,7 +279,7 @@ fn bad_input_is_refused_with_a_clear_message() {
 }
 
 fn capstone() -> Option<PathBuf> {
-    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/capstone");
+    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/capstone");
     if d.is_dir() {
         Some(d)
     } else {

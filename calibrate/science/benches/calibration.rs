@@ -6,11 +6,11 @@ use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use calibrate::fit::{Pose, Weighting};
-use calibrate::labelfree::fit_label_free;
 use calibrate::model::{AccelModel, ModelKind};
-use calibrate::repair::{TornReadConfig, repair_torn_reads};
-use calibrate::static_eval::{StaticEvalConfig, evaluate_static};
+use calibrate::repair::{RepairConfig, repair_torn_reads};
+use calibrate_science::fit::{Pose, Weighting};
+use calibrate_science::labelfree::fit_label_free;
+use calibrate_science::static_eval::{StaticEvalConfig, evaluate_static};
 use indicatif::ProgressBar;
 use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, SeedableRng};
@@ -56,7 +56,7 @@ fn label_free_36() {
 
 fn evaluation_throughput() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/capstone/Six-Position-Test/data/trial_1");
+        .join("../../../shared/data/capstone/Six-Position-Test/data/trial_1");
     let (six_path, test_path) = (
         dir.join("six_position_data_1.csv"),
         dir.join("six_position_test_data_1.csv"),
@@ -89,7 +89,7 @@ fn evaluation_throughput() {
     );
     let t = median_time(20, || {
         let mut s = test.samples.clone();
-        black_box(repair_torn_reads(&mut s, &TornReadConfig::default()));
+        black_box(repair_torn_reads(&mut s, &RepairConfig::default()));
     });
     println!(
         "torn-read repair alone: {:.2} ms, {:.1} M samples/s",

@@ -27,7 +27,7 @@ use nalgebra::storage::Owned;
 use nalgebra::{DMatrix, DVector, Dyn, Matrix3, OMatrix, SMatrix, SVector, U9, Vector3};
 
 use crate::fit::{CovarianceMode, Pose, Weighting};
-use crate::model::{AccelModel, ModelError, ModelKind, N_PARAMS, ParamCovariance, scale_index};
+use calibrate::model::{AccelModel, ModelError, ModelKind, N_PARAMS, ParamCovariance, scale_index};
 
 /// Minimum number of poses (and of distinct orientations) for the 9-parameter fit.
 pub const MIN_POSES: usize = 9;

@@ -1,20 +1,18 @@
-//! `mems-odometry gyrocal` as a process on simulated pose sessions (raw samples written to MCAP
+//! `mems-calibrate gyrocal` (`mems-calibrate-offline gyrocal`, which `mems-odometry gyrocal`
+//! also runs) as a process on simulated pose sessions (raw samples written to MCAP
 //! and CSV and read back): the correction it fits against the simulator's own gyro model, the
 //! calibration file it writes and what `odometry::config::from_calibration` then makes of it,
 //! and its refusals.
-
-mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use calibrate::calibfile::CalibrationFile;
-use common::{Case, identity_calibration};
 use ipc_types::RawImuSample;
 use ipc_types::units::{AccelRange, GyroRange};
 use mems_sim::SimSensor;
 use mems_sim::adc::quantize_sample;
-use mems_sim::model::SensorModel;
+use mems_sim::model::{G_MPS2, SensorModel};
 use mems_sim::scenario::{PoseParams, PoseSession, Scenario, ns_from_s};
 use mems_sim::vibration::VibrationModel;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
@@ -25,6 +23,26 @@ const RATE_HZ: f64 = 100.0;
 /// How long each pose is held, s (the first hold is also the detector's 5 s of learning).
 const HOLD_S: f64 = 10.0;
 
+/// An identity accelerometer calibration at standard gravity: the simulated sensor
+/// (`SensorModel::mpu9250_calibrated`) is already what a calibration leaves.
+fn identity_calibration() -> CalibrationFile {
+    CalibrationFile::identity(G_MPS2)
+}
+
+/// The gyro correction a perfect calibration would give, as an independent reference for
+/// `calibrate_gyro`: the inverse of the simulated gyro's scale and misalignment
+/// `(I + diag(s) + M)^-1`, turned into the orthonormal frame closest to the accelerometer's axes
+/// (the rotation part `I + (M_a - M_a^T) / 2` of the accelerometer's residual misalignment).
+fn gyro_correction_reference() -> Matrix3<f64> {
+    let m = SensorModel::mpu9250_calibrated();
+    let gyro = Matrix3::identity()
+        + Matrix3::from_fn(|i, k| m.gyro.misalignment[i][k])
+        + Matrix3::from_diagonal(&Vector3::from(m.gyro.scale));
+    let ma = Matrix3::from_fn(|i, k| m.accel.misalignment[i][k]);
+    (Matrix3::identity() + 0.5 * (ma - ma.transpose()))
+        * gyro.try_inverse().expect("an invertible gyro model")
+}
+
 /// A scratch directory for one test.
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("gyrocal-{name}-{}", std::process::id()));
@@ -34,7 +52,7 @@ fn scratch(name: &str) -> PathBuf {
 
 /// The quantized raw samples (as the acquisition publishes them) of `session` on a powered-on
 /// MPU-9250 after accelerometer calibration (`SensorModel::mpu9250_calibrated`, the model
-/// [`Case::gyro_correction_reference`] inverts).
+/// [`gyro_correction_reference`] inverts).
 fn raw_session(session: PoseSession, seed: u64) -> Vec<RawImuSample> {
     let duration = session.duration_s();
     let mut sim = SimSensor::new(
@@ -71,17 +89,17 @@ fn write_mcap(path: &Path, samples: &[RawImuSample]) {
 }
 
 fn gyrocal(args: &[&Path]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
+    Command::new(env!("CARGO_BIN_EXE_mems-calibrate-offline"))
         .arg("gyrocal")
         .args(args)
         .output()
         .unwrap()
 }
 
-/// Runs `mems-odometry gyrocal` with `args` (paths and flags) and returns its stderr, failing
+/// Runs `mems-calibrate gyrocal` with `args` (paths and flags) and returns its stderr, failing
 /// unless it fails.
 fn refused(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
+    let out = Command::new(env!("CARGO_BIN_EXE_mems-calibrate-offline"))
         .arg("gyrocal")
         .args(args)
         .output()
@@ -135,7 +153,7 @@ fn the_fitted_correction_matches_the_simulated_gyro_and_reaches_the_odometry_con
     assert!(json["poses"].as_u64().unwrap() >= 12, "{json}");
 
     // Against the simulator's model inverted (the gyro is 1% off in scale, 0.5% misaligned).
-    let reference = Case::straight().gyro_correction_reference();
+    let reference = gyro_correction_reference();
     for r in 0..3 {
         for k in 0..3 {
             let err = c[(r, k)] - reference[(r, k)];
