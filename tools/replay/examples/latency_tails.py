@@ -16,6 +16,12 @@ odometry or the benchmark's subscriber), then follows that process's wake-up: th
 `sched_waking` of it (time w, target CPU c) before it was switched in (time s), and the first
 wake-up interrupt (reschedule or call-function IPI) CPU c took after w (time i). Each wait is put
 in the first class that fits:
+- idle, untraced exit: no switch to the process after w is recorded (on this VM the trace
+  misses the switches out of idle on one CPU); the CPU's first event after w bounds when it
+  ran: more than 0.5 ms after w, its idle vCPU took nothing for that long;
+- on its CPU: the process was woken and switched in in time but took the sample more than
+  0.5 ms later (its own work first, or it was switched out again; said apart when its CPU took
+  no interrupt for more than a tick period meanwhile);
 - sender held up: w came more than 0.5 ms after the hop began (and, where the sender's CPU
   took no interrupt for more than a tick period meanwhile, that is said);
 - no interrupt: CPU c, busy, took no interrupt at all for more than one 250 Hz tick period
@@ -171,10 +177,25 @@ def classify(tr, pids, published, hops):
     j = bisect.bisect_right(wakes, (s,)) - 1
     if j < 0:
         return f"{receiver}: no wake-up in the trace{note}", t1 - t0
+    latest = bisect.bisect_right(wakes, (t1,)) - 1
+    if latest > j:
+        j = latest
     w, prio, cpu, waker_cpu = wakes[j]
     rt = prio < 100
     if tr.lossy(cpu, t0, t1) or tr.lossy(waker_cpu, t0, t1):
         return f"{receiver}: not known, the trace lost events{note}", t1 - t0
+    if s < w:
+        # No switch-in after the wake-up in the trace: on this VM the switches out of idle on
+        # some CPUs are not recorded. The CPU's first event after w bounds when it ran.
+        first = tr.first(tr.any[cpu], w + 1, t1 + 1_000_000) or t1
+        if first - w > LATE_NS:
+            return f"{receiver}: its idle vCPU took nothing for a while after the wake-up{note}", first - w
+        return f"{receiver}: woken on its idle CPU in time, the rest after it{note}", t1 - first
+    if t1 - max(s, t0) > LATE_NS and s - w <= LATE_NS:
+        # Woken in time; the time went after it was switched in.
+        if tr.silence(cpu, max(s, t0), t1) > NO_TICK_NS:
+            return f"{receiver}: on its CPU, which took no interrupt{note}", t1 - max(s, t0)
+        return f"{receiver}: on its CPU before it took the sample{note}", t1 - max(s, t0)
     if w - t0 > LATE_NS:
         if tr.silence(waker_cpu, t0, w) > NO_TICK_NS:
             return f"{receiver}: sender held up, its vCPU took no interrupt{note}", w - t0
