@@ -97,8 +97,9 @@ fn save_state(path: &std::path::Path, state: &WarmState) -> Result<()> {
 }
 
 /// Runs the service until SIGINT/SIGTERM.
-pub fn serve(args: &ServeArgs) -> Result<()> {
-    let file = CalibrationFile::load(&args.calib)?;
+/// The calibration stage `args` ask for: the file's model and gravity, the detector and its
+/// learning time, and, with `--state`, what a predecessor had learned.
+fn stage(args: &ServeArgs, file: &CalibrationFile) -> Result<CalibrationStage> {
     if !(args.learn_s > 0.0 && args.learn_s.is_finite()) {
         anyhow::bail!("--learn-s must be > 0, got {}", args.learn_s);
     }
@@ -107,7 +108,7 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
     if let Some(k) = args.glrt_window {
         config.glrt.window_batches = k as usize;
     }
-    let mut stage = CalibrationStage::new(&file, config, RefineConfig::default())
+    let mut stage = CalibrationStage::new(file, config, RefineConfig::default())
         .with_context(|| args.calib.display().to_string())?;
     if let Some(path) = args.state.as_deref().filter(|p| p.exists()) {
         let state = load_state(path)?;
@@ -126,7 +127,39 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
             state.refined
         );
     }
+    Ok(stage)
+}
 
+/// The summary on stderr: the stage's counts, what it learned and refined, and the
+/// steady-state allocations.
+fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
+    let s = stage.stats();
+    let (learn_restarts, _) = stage.detector().learn_rejections();
+    let (accel, gyro, refined) = stage.refinement();
+    eprintln!(
+        "mems-calibrate serve: accepted {}, published {}, at rest {}, refused {refused}, gaps {}, \
+         stream restarts {}, learning restarts {learn_restarts}, detector ready {}, refined {refined} \
+         (accel {:.4?} m/s^2, gyro {:.5?} rad/s)",
+        s.accepted,
+        s.released,
+        s.rest,
+        s.gaps,
+        s.restarts,
+        stage.detector().is_ready(),
+        accel,
+        gyro
+    );
+    eprintln!(
+        "mems-calibrate serve: {}; small-block pool: peak {} of 1024 blocks, {} requests found it empty",
+        steady.summary(),
+        crate::ALLOCATOR.peak_blocks(),
+        crate::ALLOCATOR.fallbacks()
+    );
+}
+
+pub fn serve(args: &ServeArgs) -> Result<()> {
+    let file = CalibrationFile::load(&args.calib)?;
+    let mut stage = stage(args, &file)?;
     let ns = service::namespace(args.namespace.as_deref());
     let raw_name = service::full_name(&ns, service::RAW);
     let corrected_name = service::full_name(&ns, service::CORRECTED);
@@ -197,27 +230,6 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
     };
     wake::serve_loop(&[listener], TICK, step)?;
     stage.finish();
-    let s = stage.stats();
-    let (learn_restarts, _) = stage.detector().learn_rejections();
-    let (accel, gyro, refined) = stage.refinement();
-    eprintln!(
-        "mems-calibrate serve: accepted {}, published {}, at rest {}, refused {refused}, gaps {}, \
-         stream restarts {}, learning restarts {learn_restarts}, detector ready {}, refined {refined} \
-         (accel {:.4?} m/s^2, gyro {:.5?} rad/s)",
-        s.accepted,
-        s.released,
-        s.rest,
-        s.gaps,
-        s.restarts,
-        stage.detector().is_ready(),
-        accel,
-        gyro
-    );
-    eprintln!(
-        "mems-calibrate serve: {}; small-block pool: peak {} of 1024 blocks, {} requests found it empty",
-        steady.summary(),
-        crate::ALLOCATOR.peak_blocks(),
-        crate::ALLOCATOR.fallbacks()
-    );
+    report(&stage, refused, &steady);
     Ok(())
 }
