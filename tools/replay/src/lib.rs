@@ -136,6 +136,38 @@ pub const LINGER: Duration = Duration::from_millis(200);
 /// recorder, polling every 1 ms, had connected, and 777 samples were lost).
 pub const SETTLE: Duration = Duration::from_millis(100);
 
+/// Waits until `options.wait_subscribers` subscribers are connected to `raw` (named `name`),
+/// then lets them settle. `Ok(false)`: termination was requested meanwhile.
+fn wait_for_subscribers(
+    raw: &iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+        ipc::Service,
+        RawImuSample,
+        (),
+    >,
+    name: &str,
+    options: &ReplayOptions,
+) -> Result<bool, ReplayError> {
+    let wait_start = Instant::now();
+    loop {
+        let connected = raw.dynamic_config().number_of_subscribers();
+        if connected >= options.wait_subscribers {
+            break;
+        }
+        if wait_start.elapsed() >= options.wait_timeout {
+            return Err(ReplayError::NoSubscribers {
+                service: name.to_string(),
+                wanted: options.wait_subscribers,
+                connected,
+                waited: wait_start.elapsed(),
+            });
+        }
+        if stop::sleep(Duration::from_millis(1)) {
+            return Ok(false);
+        }
+    }
+    Ok(!(options.wait_subscribers > 0 && stop::sleep(SETTLE)))
+}
+
 /// Publishes `samples` (in order, `stamps.sample_ns` increasing within each session) on the raw
 /// service under `namespace`, from `node`, and `hints` (in order of publication,
 /// `stamps.acquired_ns`) on the hint service among them (see the module documentation), paced
@@ -184,25 +216,7 @@ pub fn replay(
         after_subscriber_left: 0,
     };
 
-    let wait_start = Instant::now();
-    loop {
-        let connected = raw.dynamic_config().number_of_subscribers();
-        if connected >= options.wait_subscribers {
-            break;
-        }
-        if wait_start.elapsed() >= options.wait_timeout {
-            return Err(ReplayError::NoSubscribers {
-                service: name,
-                wanted: options.wait_subscribers,
-                connected,
-                waited: wait_start.elapsed(),
-            });
-        }
-        if stop::sleep(Duration::from_millis(1)) {
-            return Ok(interrupted(summary));
-        }
-    }
-    if options.wait_subscribers > 0 && stop::sleep(SETTLE) {
+    if !wait_for_subscribers(&raw, &name, options)? {
         return Ok(interrupted(summary));
     }
 
