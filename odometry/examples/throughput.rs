@@ -12,8 +12,9 @@
 //! - `offline end-to-end`: the built `mems-odometry offline --json` as a process, its wall
 //!   time and peak RSS (`/usr/bin/time`);
 //! - with `--python`, the official Python `mcap` reader on the same file
-//!   (`odometry/examples/mcap_read.py`): the raw topic's messages read, then also
-//!   JSON-decoded.
+//!   (`odometry/examples/mcap_read.py`): the raw topic's messages read, then also decoded
+//!   (protobuf with `mcap-protobuf-support`'s decoder factory, or `json.loads` for an older
+//!   JSON recording).
 //!
 //! Each figure is given on the wall clock and on the CPU time of the thread (or process) that
 //! ran it: on a shared machine the second is the one that does not depend on the load.
@@ -126,7 +127,7 @@ fn main() -> Result<()> {
         input.display()
     );
     println!("scan (framing, zstd)     {}", scan.show(raw));
-    println!("raw read (JSON decoded)  {}", read.show(raw));
+    println!("raw read (decoded)       {}", read.show(raw));
 
     let (startup, calibration, odometry) = stages(input, args.block)?;
     println!(
