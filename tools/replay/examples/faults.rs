@@ -512,18 +512,7 @@ fn simulate(
     let s = |p: &Path| p.to_string_lossy().into_owned();
     let seed_text = seed.to_string();
     let part = ["--preset", "datasheet", "--seed", &seed_text];
-    let session = ["six-position", "--rate", "200", "--out", &s(&six)];
-    run(bins, "mems-sim", &[&session[..], &part].concat())?;
-    let fit = [
-        "fit",
-        "--input",
-        &s(&six),
-        "--model",
-        "full",
-        "--out",
-        &s(&calib),
-    ];
-    run(bins, "mems-calibrate", &fit)?;
+    common::calibrate_part(bins, &part, &six, &calib)?;
     let duration = (seconds as f64 + INITIAL_REST_S).to_string();
     let rest = INITIAL_REST_S.to_string();
     let sim = [

@@ -304,7 +304,7 @@ struct Tails {
 }
 
 impl Tails {
-    fn with_capacity() -> Self {
+    fn new() -> Self {
         Self {
             count: 0,
             kept: Vec::with_capacity(MAX_TAILS),
@@ -370,7 +370,7 @@ impl Timing {
             rest: 0,
             moving: 0,
             untimed: 0,
-            tails: Tails::with_capacity(),
+            tails: Tails::new(),
         }
     }
 
@@ -762,14 +762,7 @@ fn inputs(bins: &Path, o: &Options) -> Result<Inputs> {
     sim_drive(&i.drive, o.seconds.max(20).max(o.cpu_seconds), "1000")?;
     sim_drive(&i.drive4k, o.seconds.max(o.cpu_seconds), "4000")?;
     sim_drive(&i.long, o.seconds * 6, "1000")?;
-    let session = ["six-position", "--rate", "200", "--out", &text(&six)?];
-    run(bins, "mems-sim", &[&session[..], &part].concat())?;
-    let fit = ["fit", "--input", &text(&six)?, "--model", "full"];
-    run(
-        bins,
-        "mems-calibrate",
-        &[&fit[..], &["--out", &text(&i.calib)?]].concat(),
-    )?;
+    common::calibrate_part(bins, &part, &six, &i.calib)?;
     Ok(i)
 }
 

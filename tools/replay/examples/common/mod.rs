@@ -29,3 +29,22 @@ pub fn run(bins: &Path, name: &str, args: &[&str]) -> Result<String> {
     }
     Ok(String::from_utf8_lossy(&out.stdout).into_owned())
 }
+
+/// Calibrates the simulated part `part` (`mems-sim` options, e.g. `--preset datasheet --seed
+/// 1`) as `mems-stack` does: its six-position session at 200 Hz written to `session`, model 3
+/// fitted from it into `calib`.
+pub fn calibrate_part(bins: &Path, part: &[&str], session: &Path, calib: &Path) -> Result<()> {
+    let text = |p: &Path| {
+        p.to_str()
+            .context("work path is not UTF-8")
+            .map(str::to_owned)
+    };
+    let (session, calib) = (text(session)?, text(calib)?);
+    let sim = ["six-position", "--rate", "200", "--out", &session];
+    run(bins, "mems-sim", &[&sim[..], part].concat())?;
+    let fit = [
+        "fit", "--input", &session, "--model", "full", "--out", &calib,
+    ];
+    run(bins, "mems-calibrate", &fit)?;
+    Ok(())
+}
