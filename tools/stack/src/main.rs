@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 
 use acquire::acquisition::SourceSpec;
 use anyhow::{Context, Result, bail};
+use calibrate::zero_state::DetectorKind;
 use clap::Parser;
 use ipc_types::service;
 use losses::RecorderLosses;
@@ -52,8 +53,8 @@ struct Cli {
     /// Zero-state detector of the calibration stage (default: `glrt`, which needs the
     /// gyroscope; above 1000 Hz, where the sensor runs accelerometer-only, `glrt-accel` over a
     /// 0.5 s window). `yu` is the thesis's detector.
-    #[arg(long)]
-    detector: Option<String>,
+    #[arg(long, value_enum)]
+    detector: Option<DetectorKind>,
     /// Seed of the simulated sensor and its drive.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -86,7 +87,7 @@ const ACCEL_GLRT_WINDOW_S: f64 = 0.5;
 /// the accelerometer alone over [`ACCEL_GLRT_WINDOW_S`] above 1000 Hz (no gyroscope there).
 fn detector_args(cli: &Cli) -> Vec<String> {
     match &cli.detector {
-        Some(d) => vec!["--detector".into(), d.clone()],
+        Some(d) => vec!["--detector".into(), d.name().into()],
         None if cli.rate > 1000 => {
             // Batches of 20 samples (calibrate::zero_state::BATCH_LEN).
             let batches = (ACCEL_GLRT_WINDOW_S * f64::from(cli.rate) / 20.0)
@@ -103,13 +104,25 @@ fn detector_args(cli: &Cli) -> Vec<String> {
     }
 }
 
-/// Refuses, before anything starts, a source that cannot be parsed or a rate its bus cannot
-/// carry (acquire's own check, with its arithmetic: 4 kHz needs SPI).
+/// Refuses, before anything starts, a source that cannot be parsed, a rate its bus cannot
+/// carry (acquire's own check, with its arithmetic: 4 kHz needs SPI), and a detector that needs
+/// the gyroscope above 1000 Hz, where the sensor runs accelerometer-only.
 fn check_source(cli: &Cli) -> Result<()> {
     let source: SourceSpec = cli.source.parse().map_err(anyhow::Error::msg)?;
     source
         .check_rate(cli.rate)
         .map_err(|e| anyhow::anyhow!("--source {} --rate {}: {e}", cli.source, cli.rate))?;
+    if let Some(d) = cli.detector
+        && d.needs_gyro()
+        && cli.rate > 1000
+    {
+        bail!(
+            "--detector {} needs the gyroscope, which the sensor does not sample above 1000 Hz \
+             (--rate {}): use glrt-accel or yu",
+            d.name(),
+            cli.rate
+        );
+    }
     Ok(())
 }
 
@@ -478,6 +491,25 @@ mod tests {
         check(&["--rate", "1000"]).unwrap();
         assert!(check(&["--rate", "3000", "--source", "sim-spi"]).is_err());
         assert!(check(&["--source", "usb"]).is_err());
+        let err = check(&[
+            "--rate",
+            "4000",
+            "--source",
+            "sim-spi",
+            "--detector",
+            "glrt",
+        ])
+        .unwrap_err();
+        assert!(err.contains("--detector glrt needs the gyroscope"), "{err}");
+        check(&["--rate", "4000", "--source", "sim-spi", "--detector", "yu"]).unwrap();
+    }
+
+    #[test]
+    fn an_unknown_detector_is_refused_by_the_parser() {
+        let err = Cli::try_parse_from(["mems-stack", "--detector", "foo"])
+            .err()
+            .expect("--detector foo parses");
+        assert!(err.to_string().contains("glrt-accel"), "{err}");
     }
 
     #[test]
