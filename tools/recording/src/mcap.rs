@@ -1614,22 +1614,23 @@ fn check_raw_values(path: &Path, index: u64, topic: &str, sample: &RawImuSample)
 
 /// The checks of the raw stream as it is read: values the sensor can produce, and within a
 /// session (a run of increasing sequence numbers) times that strictly increase by at most
-/// [`limits::MAX_STEP_S`].
+/// [`limits::MAX_STEP_S`]. Public for readers that stream a run's raw samples themselves
+/// (`mems-replay`), so that they refuse what [`read_all`] refuses.
 #[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct RawChecks {
+pub struct RawChecks {
     /// The previous sample's sequence number and time.
     previous: Option<(u64, u64)>,
 }
 
 impl RawChecks {
     /// The sequence number of the last sample checked.
-    pub(crate) fn previous_seq(&self) -> Option<u64> {
+    pub fn previous_seq(&self) -> Option<u64> {
         self.previous.map(|(seq, _)| seq)
     }
 
     /// Checks `sample`, message `index` of `path` on `topic`; whether it starts a new session
     /// (the first sample, or a sequence number that does not increase).
-    pub(crate) fn check(
+    pub fn check(
         &mut self,
         path: &Path,
         index: u64,

@@ -1,41 +1,52 @@
-//! The replay loop behind `mems-replay`: publishes recorded raw samples on the raw service as
-//! the acquisition process would, for the pipeline, the latency benchmark and tests.
+//! The replay behind `mems-replay`: publishes a recording's replayable topics (raw samples,
+//! corrected samples, odometry states, robot hints: [`topics`]) on their iceoryx2 services as
+//! the processes that publish them live would ([`ports`]), each message at its place in
+//! recorded time, for the pipeline, control processes under test, the latency benchmark and
+//! tests.
 //!
-//! Each sample is published with the recorded payload except `stamps.acquired_ns`, which is set
-//! to the publish time (ns `CLOCK_MONOTONIC`, as acquisition stamps it); `seq` and
-//! `stamps.sample_ns` stay as recorded, so that downstream results are reproducible bit for bit.
-//! Pacing follows the recorded sample times against the monotonic clock, scaled by a speed
-//! factor, or is as fast as the subscribers take the samples ([`Pace::Max`]): the lossless
-//! publisher of `ipc_types::service` retries until every subscriber has room, so nothing is lost
-//! either way. Where the sample times start over (a recording of several acquisition sessions),
-//! pacing starts over with them.
+//! Replaying the raw samples and robot hints lets the live pipeline recompute everything, bit
+//! for bit: `seq`, `stamps.sample_ns` and the hints stay as recorded, and a raw sample's
+//! `stamps.acquired_ns` is its publication time (as acquisition stamps it). Replaying recorded
+//! outputs (corrected samples, states) lets a control process be tested against a run without
+//! the pipeline.
 //!
-//! Recorded robot hints are published on the hint service as the robot's controller would:
-//! with `ipc_types::service::hint_publisher` (never blocking), exactly as recorded (both
-//! stamps kept, since the odometry judges a hint's age and delivery by them), each at its
-//! place in time among the raw samples: before the first raw sample whose `sample_ns` is not
-//! earlier than the hint's publication time `stamps.acquired_ns` (hints published after the
-//! last raw sample are not replayed: no sample would use them).
+//! Messages are taken from the file topic by topic ([`source`]) and merged by their replay time
+//! (a sample's or state's sample time, a hint's publication time: a hint goes before the first
+//! raw sample taken at or after it). Pacing follows those times against the monotonic clock,
+//! scaled by a speed factor, or is as fast as the subscribers take the messages
+//! ([`Pace::Max`]): the lossless publishers of `ipc_types::service` retry until every
+//! subscriber has room, so nothing is lost either way. Where the recorded times start over (runs
+//! recorded into one file), pacing starts over with them. A window ([`source::Window`]) keeps
+//! part of the recording; looping ([`ReplayOptions::looping`]) replays it again and again: each
+//! pass sends the same sequence numbers and sample times again, which our processes take for a
+//! new acquisition session (the calibration starts over, the odometry aligns again).
 
 #![warn(missing_docs)]
+
+pub mod ports;
+pub mod progress;
+pub mod source;
+pub mod topics;
 
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
-use ipc_types::clock::monotonic_ns;
-use ipc_types::service::{self, ServiceError};
+use ipc_types::service::ServiceError;
 use ipc_types::stop;
-use ipc_types::{RawImuSample, RobotHint};
+
+use crate::ports::Ports;
+use crate::source::{Merge, Recording, Window};
+use crate::topics::{Place, Replayable};
 
 /// How fast to publish.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Pace {
-    /// The recorded sample spacing divided by `speed` (1 = real time, 2 = twice as fast).
+    /// The recorded spacing divided by `speed` (1 = real time, 2 = twice as fast).
     RealTime {
         /// Speed factor, positive and finite.
         speed: f64,
     },
-    /// As fast as the slowest subscriber takes the samples.
+    /// As fast as the slowest subscriber takes the messages.
     Max,
 }
 
@@ -44,44 +55,54 @@ pub enum Pace {
 pub struct ReplayOptions {
     /// Pacing.
     pub pace: Pace,
-    /// Subscribers that must be connected before the first sample is sent (0: start at once).
+    /// Subscribers that must be connected to each replayed service (the robot hints' only when
+    /// they are replayed alone) before the first message is sent (0: start at once).
     pub wait_subscribers: usize,
     /// How long to wait for them before giving up with [`ReplayError::NoSubscribers`].
     pub wait_timeout: Duration,
+    /// Replay the recording (or its window) again and again until SIGINT or SIGTERM.
+    pub looping: bool,
 }
 
 /// What a replay did.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ReplaySummary {
-    /// Samples published.
-    pub sent: u64,
-    /// Robot hints published.
-    pub hints_sent: u64,
+    /// Messages published per topic (indexed by [`Replayable::index`]).
+    pub sent: [u64; 4],
+    /// Passes over the recording started (more than one only when looping).
+    pub passes: u64,
+    /// Recorded time covered by the current pass so far, ns (over epochs).
+    pub pass_recorded_ns: u64,
     /// Time from the first publication to the last.
     pub elapsed: Duration,
-    /// Whether SIGINT or SIGTERM stopped the replay before the last sample.
+    /// Whether SIGINT or SIGTERM stopped the replay before the last message.
     pub interrupted: bool,
-    /// Samples that reached fewer subscribers than [`ReplayOptions::wait_subscribers`] while
+    /// Messages that reached fewer subscribers than [`ReplayOptions::wait_subscribers`] while
     /// that many were registered: lost for a subscriber that had not connected yet (iceoryx2
     /// queues up to one buffer for it, then drops). 0 in a lossless replay; an error for
     /// `mems-replay`.
     pub short_deliveries: u64,
-    /// Samples sent while fewer than [`ReplayOptions::wait_subscribers`] subscribers were
+    /// Messages sent while fewer than [`ReplayOptions::wait_subscribers`] subscribers were
     /// registered, because one left: it ended, or it died and an iceoryx2 process removed its
     /// dead node (any node creation does). A departure, not a replay fault: counted and
-    /// reported, and the remaining subscribers get every sample. A dead subscriber counts as
+    /// reported, and the remaining subscribers get every message. A dead subscriber counts as
     /// registered until its node is removed, and what is sent to it until then as delivered.
     pub after_subscriber_left: u64,
 }
 
 impl ReplaySummary {
-    /// Publication rate, samples per second: (sent - 1) / elapsed; 0 with fewer than 2 samples.
+    /// Messages published, all topics.
+    pub fn total_sent(&self) -> u64 {
+        self.sent.iter().sum()
+    }
+
+    /// Publication rate, messages per second: (sent - 1) / elapsed; 0 with fewer than 2.
     pub fn rate_hz(&self) -> f64 {
-        let s = self.elapsed.as_secs_f64();
-        if self.sent < 2 || s <= 0.0 {
+        let (s, sent) = (self.elapsed.as_secs_f64(), self.total_sent());
+        if sent < 2 || s <= 0.0 {
             0.0
         } else {
-            (self.sent - 1) as f64 / s
+            (sent - 1) as f64 / s
         }
     }
 }
@@ -92,7 +113,10 @@ pub enum ReplayError {
     /// The speed factor is not a positive finite number.
     #[error("the speed factor must be a positive finite number, got {0}")]
     BadSpeed(f64),
-    /// The service or publisher could not be opened.
+    /// The recording could not be read.
+    #[error(transparent)]
+    Recording(#[from] recording::Error),
+    /// A service or publisher could not be opened.
     #[error(transparent)]
     Service(#[from] ServiceError),
     /// Too few subscribers connected within the timeout.
@@ -110,18 +134,17 @@ pub enum ReplayError {
         /// How long the replay waited.
         waited: Duration,
     },
-    /// iceoryx2 refused to send a sample.
-    #[error("{service}: cannot send the sample with seq {seq}: {message}")]
+    /// iceoryx2 refused to send a message.
+    #[error("{service}: cannot send the message with seq {seq}: {message}")]
     Send {
         /// The full service name.
         service: String,
-        /// The sample's sequence number.
+        /// The message's sequence number.
         seq: u64,
         /// iceoryx2's error.
         message: String,
     },
 }
-
 /// How long the publisher stays after the last sample. An iceoryx2 subscriber connects to a
 /// publisher's data on its next `receive` after the publisher appeared; if the publisher leaves
 /// before that, the subscriber never sees what it sent (measured: a 400-sample replay at
@@ -136,26 +159,22 @@ pub const LINGER: Duration = Duration::from_millis(200);
 /// recorder, polling every 1 ms, had connected, and 777 samples were lost).
 pub const SETTLE: Duration = Duration::from_millis(100);
 
-/// Waits until `options.wait_subscribers` subscribers are connected to `raw` (named `name`),
-/// then lets them settle. `Ok(false)`: termination was requested meanwhile.
+/// Waits until every waited-for service of `ports` has `options.wait_subscribers`
+/// subscribers, then lets them settle. `Ok(false)`: termination was requested meanwhile.
 fn wait_for_subscribers(
-    raw: &iceoryx2::service::port_factory::publish_subscribe::PortFactory<
-        ipc::Service,
-        RawImuSample,
-        (),
-    >,
-    name: &str,
+    ports: &Ports,
+    namespace: &str,
     options: &ReplayOptions,
 ) -> Result<bool, ReplayError> {
     let wait_start = Instant::now();
     loop {
-        let connected = raw.dynamic_config().number_of_subscribers();
+        let (service, connected) = ports.fewest_subscribers(namespace);
         if connected >= options.wait_subscribers {
             break;
         }
         if wait_start.elapsed() >= options.wait_timeout {
             return Err(ReplayError::NoSubscribers {
-                service: name.to_string(),
+                service,
                 wanted: options.wait_subscribers,
                 connected,
                 waited: wait_start.elapsed(),
@@ -168,20 +187,99 @@ fn wait_for_subscribers(
     Ok(!(options.wait_subscribers > 0 && stop::sleep(SETTLE)))
 }
 
-/// Publishes `samples` (in order, `stamps.sample_ns` increasing within each session) on the raw
-/// service under `namespace`, from `node`, and `hints` (in order of publication,
-/// `stamps.acquired_ns`) on the hint service among them (see the module documentation), paced
-/// as `options` say; with `wait_subscribers` > 0 it starts
-/// [`SETTLE`] after they are registered and counts samples that reached fewer of them, apart
-/// from those sent after one of them left ([`ReplaySummary`]). SIGINT or SIGTERM ([`ipc_types::stop`], installed here)
-/// stops the replay early with [`ReplaySummary::interrupted`] set. Returns
-/// [`LINGER`] after the last sample, so that every subscriber has connected to it.
+/// When each message of one pass is due, and how much recorded time the pass has covered.
+#[derive(Debug, Default)]
+struct Pacer {
+    /// The epoch, a replay time in it and when that time was (or would have been) due.
+    anchor: Option<(u32, u64, Instant)>,
+    /// Recorded time covered by the epochs before the anchor's, ns.
+    before_ns: u64,
+    /// Recorded time covered so far, ns.
+    covered_ns: u64,
+}
+
+impl Pacer {
+    /// When the message at `place` is due at `speed` (pacing starts over with each epoch).
+    fn due(&mut self, place: Place, speed: f64) -> Instant {
+        let (_, anchor_ns, anchor) = self.place(place);
+        let offset_ns = place.time_ns.saturating_sub(anchor_ns) as f64 / speed;
+        anchor + Duration::from_nanos(offset_ns.round() as u64)
+    }
+
+    /// Notes `place` and returns the anchor of its epoch.
+    fn place(&mut self, place: Place) -> (u32, u64, Instant) {
+        let anchor = match self.anchor {
+            Some(a) if a.0 == place.epoch => a,
+            _ => {
+                self.before_ns = self.covered_ns;
+                let a = (place.epoch, place.time_ns, Instant::now());
+                self.anchor = Some(a);
+                a
+            }
+        };
+        let into_epoch = place.time_ns.saturating_sub(anchor.1);
+        self.covered_ns = self.covered_ns.max(self.before_ns + into_epoch);
+        anchor
+    }
+}
+
+/// Sends one pass of `messages` through `ports`, counting in `summary`; `Ok(false)` if
+/// SIGINT or SIGTERM stopped it.
+fn pass(
+    ports: &Ports,
+    messages: Merge<'_>,
+    options: &ReplayOptions,
+    summary: &mut ReplaySummary,
+    start: Instant,
+    progress: &mut dyn FnMut(&ReplaySummary),
+) -> Result<bool, ReplayError> {
+    let mut pacer = Pacer::default();
+    for message in messages {
+        let (place, payload) = message?;
+        match options.pace {
+            Pace::RealTime { speed } => {
+                let due = pacer.due(place, speed);
+                stop::sleep(due.saturating_duration_since(Instant::now()));
+            }
+            Pace::Max => _ = pacer.place(place),
+        }
+        if stop::requested() {
+            return Ok(false);
+        }
+        let recipients = ports.send(&payload)?;
+        if let Some(n) = recipients
+            && n < options.wait_subscribers
+        {
+            if ports.subscribers(payload.topic()) < options.wait_subscribers {
+                summary.after_subscriber_left += 1;
+            } else {
+                summary.short_deliveries += 1;
+            }
+        }
+        summary.sent[payload.topic().index()] += 1;
+        summary.pass_recorded_ns = pacer.covered_ns;
+        summary.elapsed = start.elapsed();
+        progress(summary);
+    }
+    Ok(true)
+}
+
+/// Publishes `topics` of `recording` (within `window`, if given) on their services under
+/// `namespace`, from `node`, paced as `options` say (see the crate documentation); with
+/// `wait_subscribers` > 0 it starts [`SETTLE`] after they are registered and counts messages
+/// that reached fewer of them, apart from those sent after one of them left
+/// ([`ReplaySummary`]). `progress` sees the summary after each message. SIGINT or SIGTERM
+/// ([`ipc_types::stop`], installed here) stops the replay with [`ReplaySummary::interrupted`]
+/// set (the only way a looping replay ends). Returns [`LINGER`] after the last message, so
+/// that every subscriber has connected to it.
 pub fn replay(
     node: &Node<ipc::Service>,
     namespace: &str,
-    samples: &[RawImuSample],
-    hints: &[RobotHint],
+    recording: &Recording,
+    topics: &[Replayable],
+    window: Option<Window>,
     options: &ReplayOptions,
+    progress: &mut dyn FnMut(&ReplaySummary),
 ) -> Result<ReplaySummary, ReplayError> {
     if let Pace::RealTime { speed } = options.pace
         && !(speed.is_finite() && speed > 0.0)
@@ -189,98 +287,25 @@ pub fn replay(
         return Err(ReplayError::BadSpeed(speed));
     }
     stop::install()?;
-    let name = service::full_name(namespace, service::RAW);
-    let raw = service::open::<RawImuSample>(node, &name)?;
-    let publisher = service::publisher(&raw)?;
-    // Wakes the subscribers after each send (they sleep on the event service).
-    let waker = ipc_types::wake::Waker::new(node, &name)?;
-    // The hint service is only opened when there are hints to publish.
-    let hint_port = if hints.is_empty() {
-        None
-    } else {
-        let hint_name = service::full_name(namespace, service::HINT);
-        let hint_service = service::open::<RobotHint>(node, &hint_name)?;
-        let hint_publisher = service::hint_publisher(&hint_service)?;
-        Some((hint_name, hint_service, hint_publisher))
-    };
-    let interrupted = |summary: ReplaySummary| ReplaySummary {
-        interrupted: true,
-        ..summary
-    };
-    let mut summary = ReplaySummary {
-        sent: 0,
-        hints_sent: 0,
-        elapsed: Duration::ZERO,
-        interrupted: false,
-        short_deliveries: 0,
-        after_subscriber_left: 0,
-    };
-
-    if !wait_for_subscribers(&raw, &name, options)? {
-        return Ok(interrupted(summary));
-    }
-
-    let Some(first) = samples.first() else {
+    let ports = Ports::open(node, namespace, topics)?;
+    let mut summary = ReplaySummary::default();
+    if !wait_for_subscribers(&ports, namespace, options)? {
+        summary.interrupted = true;
         return Ok(summary);
-    };
-    // Pacing anchor: a sample time and when it was due; moved where sample times start over.
-    let (mut anchor_ns, mut anchor) = (first.stamps.sample_ns, Instant::now());
-    let mut previous_ns = anchor_ns;
-    let start = anchor;
-    let mut next_hint = 0;
-    for recorded in samples {
-        let t_ns = recorded.stamps.sample_ns;
-        if t_ns < previous_ns {
-            (anchor_ns, anchor) = (t_ns, Instant::now());
-        }
-        previous_ns = t_ns;
-        if let Pace::RealTime { speed } = options.pace {
-            let offset_ns = t_ns.saturating_sub(anchor_ns) as f64 / speed;
-            let due = anchor + Duration::from_nanos(offset_ns.round() as u64);
-            stop::sleep(due.saturating_duration_since(Instant::now()));
-        }
-        if stop::requested() {
-            return Ok(interrupted(summary));
-        }
-        if let Some((hint_name, _, hint_publisher)) = &hint_port {
-            while let Some(hint) = hints.get(next_hint)
-                && hint.stamps.acquired_ns <= t_ns
-            {
-                hint_publisher
-                    .send_copy(*hint)
-                    .map_err(|e| ReplayError::Send {
-                        service: hint_name.clone(),
-                        seq: hint.seq,
-                        message: format!("{e:?}"),
-                    })?;
-                next_hint += 1;
-                summary.hints_sent += 1;
-            }
-        }
-        let mut sample = *recorded;
-        sample.stamps.acquired_ns = monotonic_ns();
-        let recipients = publisher.send_copy(sample).map_err(|e| ReplayError::Send {
-            service: name.clone(),
-            seq: sample.seq,
-            message: format!("{e:?}"),
-        })?;
-        waker.notify().map_err(|e| ReplayError::Send {
-            service: name.clone(),
-            seq: sample.seq,
-            message: e.to_string(),
-        })?;
-        if recipients < options.wait_subscribers {
-            if raw.dynamic_config().number_of_subscribers() < options.wait_subscribers {
-                summary.after_subscriber_left += 1;
-            } else {
-                summary.short_deliveries += 1;
-            }
-        }
-        summary.sent += 1;
-        summary.elapsed = start.elapsed();
     }
-    if stop::sleep(LINGER) {
-        return Ok(interrupted(summary));
+    let start = Instant::now();
+    loop {
+        summary.passes += 1;
+        summary.pass_recorded_ns = 0;
+        let messages = Merge::new(recording.streams(topics)?, window);
+        if !pass(&ports, messages, options, &mut summary, start, progress)? {
+            summary.interrupted = true;
+            return Ok(summary);
+        }
+        if !options.looping || summary.total_sent() == 0 {
+            break;
+        }
     }
+    summary.interrupted = stop::sleep(LINGER);
     Ok(summary)
 }

@@ -1,37 +1,65 @@
-//! `mems-replay FILE [--speed X | --max] [--namespace NS] [--wait-subscribers N]
-//! [--wait-timeout S]`: publishes a recording's raw samples (MCAP or CSV) on the raw service,
-//! and an MCAP recording's robot hints on the hint service.
+//! `mems-replay FILE [--topics T,...] [--start S] [--end S] [--loop] [--speed X | --max]
+//! [--progress] [--namespace NS] [--wait-subscribers N] [--wait-timeout S]`: publishes a
+//! recording's topics on their iceoryx2 services, each message at its place in recorded time.
 
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, anyhow, bail};
 use clap::Parser;
 use iceoryx2::prelude::*;
 use ipc_types::service;
-use mems_replay::{Pace, ReplayOptions, replay};
+use mems_replay::progress::Progress;
+use mems_replay::source::{Recording, Survey};
+use mems_replay::topics::Replayable;
+use mems_replay::{Pace, ReplayOptions, ReplaySummary, replay};
 
+/// Publishes a recording's topics on their services as the live processes would, each message
+/// at its place in recorded time (real time by default).
+///
+/// By default the raw samples and robot hints: the live pipeline (mems-calibrate serve,
+/// mems-odometry serve) recomputes everything from them, bit for bit. --topics replays
+/// recorded outputs instead (mems/imu/corrected, mems/odometry/state): a control process can
+/// then be tested against a run without the pipeline.
 #[derive(Parser)]
-#[command(version, about)]
+#[command(version, about, long_about)]
 struct Cli {
-    /// The recording: MCAP, the canonical CSV, or a thesis time-series CSV.
+    /// The recording: MCAP (with its successor segments), the canonical CSV, or a thesis
+    /// time-series CSV (raw samples only).
     file: PathBuf,
-    /// Speed factor over the recorded sample times (1 = real time).
+    /// Topics to replay, by recorded name, comma-separated: mems/imu/raw, mems/robot/hint,
+    /// mems/imu/corrected, mems/odometry/state (default: raw and hints).
+    #[arg(long, value_delimiter = ',')]
+    topics: Option<Vec<String>>,
+    /// Start this many seconds after the recording's first message (sample time).
+    #[arg(long)]
+    start: Option<f64>,
+    /// End this many seconds after the recording's first message (sample time), included.
+    #[arg(long)]
+    end: Option<f64>,
+    /// Replay again and again until SIGINT or SIGTERM. Each pass sends the same sequence
+    /// numbers and sample times again: our processes take it for a new acquisition session.
+    #[arg(long = "loop")]
+    looping: bool,
+    /// Speed factor over the recorded times (1 = real time).
     #[arg(long, default_value_t = 1.0, conflicts_with = "max")]
     speed: f64,
-    /// As fast as the subscribers take the samples (lossless back-pressure).
+    /// As fast as the subscribers take the messages (lossless back-pressure).
     #[arg(long)]
     max: bool,
+    /// Show the progress line on stderr even when it is not a terminal (one line a second).
+    #[arg(long)]
+    progress: bool,
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
-    /// Wait until this many subscribers are connected before the first sample, then check
-    /// that every sample reaches that many. A sample that reaches fewer while that many are
-    /// registered was lost for a subscriber that had not connected: counted, and the exit
-    /// status is 1. A subscriber that leaves during the replay (ends, or dies and its node is
-    /// removed by any iceoryx2 process) is not a replay failure: the samples sent after it left
-    /// are counted and reported, the others still get every sample, and the exit status is 0
-    /// (the subscriber's own exit tells why it left).
+    /// Wait until this many subscribers are connected to each replayed service (the hints'
+    /// only when replayed alone) before the first message, then check that every message
+    /// reaches that many. A message that reaches fewer while that many are registered was lost
+    /// for a subscriber that had not connected: counted, and the exit status is 1. A
+    /// subscriber that leaves during the replay (ends, or dies and its node is removed by any
+    /// iceoryx2 process) is not a replay failure: the messages sent after it left are counted
+    /// and reported, the others still get every message, and the exit status is 0.
     #[arg(long, default_value_t = 0)]
     wait_subscribers: usize,
     /// Give up waiting for subscribers after this many seconds.
@@ -49,29 +77,28 @@ fn main() -> Result<()> {
             cli.wait_timeout
         );
     }
-    // MCAP: every acquisition session in order, and the robot hints; CSV: raw samples only.
-    let (samples, hints, truncation) = if recording::mcap::has_magic(&cli.file)? {
-        let contents = recording::mcap::read_all(&cli.file)?;
-        if contents.raw_sessions.len() > 1 {
-            eprintln!(
-                "mems-replay: {}: {} acquisition sessions, replayed in order",
-                cli.file.display(),
-                contents.raw_sessions.len()
-            );
-        }
-        (contents.raw, contents.hints, contents.truncation)
-    } else {
-        let recording = recording::load_raw(&cli.file)?;
-        (recording.samples, Vec::new(), recording.truncation)
-    };
-    if let Some(truncation) = &truncation {
-        eprintln!(
-            "mems-replay: warning: {}: {truncation}; replaying what was read",
-            cli.file.display()
-        );
+    let file = cli.file.display();
+    let (recording, csv_cut) = Recording::open(&cli.file)?;
+    let survey = Survey::of(&recording)?;
+    for cut in csv_cut.iter().chain(&survey.truncations) {
+        eprintln!("mems-replay: warning: {file}: {cut}; replaying what was read");
     }
-    if samples.is_empty() {
-        bail!("{}: holds no raw samples", cli.file.display());
+    let topics = survey
+        .select(cli.topics.as_deref())
+        .map_err(|e| anyhow!("{file}: {e}"))?;
+    let window = survey
+        .window(cli.start, cli.end)
+        .map_err(|e| anyhow!("{file}: {e}"))?;
+    let counts = survey.counts_in(&recording, &topics, window)?;
+    if counts.iter().sum::<u64>() == 0 {
+        bail!("{file}: no message of the chosen topics between --start and --end");
+    }
+    if survey.spans.len() > 1 {
+        eprintln!(
+            "mems-replay: {file}: its times start over {} times (runs recorded into one file): \
+             replayed in order, pacing starting over with each",
+            survey.spans.len() - 1
+        );
     }
     let options = ReplayOptions {
         pace: if cli.max {
@@ -81,24 +108,51 @@ fn main() -> Result<()> {
         },
         wait_subscribers: cli.wait_subscribers,
         wait_timeout: Duration::from_secs_f64(cli.wait_timeout),
+        looping: cli.looping,
     };
     let namespace = service::namespace(cli.namespace.as_deref());
     // Before any port exists: a SIGTERM is kept from then on.
     ipc_types::stop::install()?;
-    let node_name = NodeName::new("mems-replay").context("node name")?;
     let node = NodeBuilder::new()
-        .name(&node_name)
+        .name(&NodeName::new("mems-replay").context("node name")?)
         .create::<ipc::Service>()
-        .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
-    let summary = replay(&node, &namespace, &samples, &hints, &options)?;
+        .map_err(|e| anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+    let span_ns = window.map_or(survey.span_ns(), |w| w.end_ns - w.start_ns);
+    let mut progress = Progress::new(cli.progress, span_ns);
+    let summary = replay(
+        &node,
+        &namespace,
+        &recording,
+        &topics,
+        window,
+        &options,
+        &mut |s| progress.update(s),
+    )?;
+    progress.finish(&summary);
+    report(&summary, &counts, &topics, &options)
+}
+
+/// Prints the summary; an error if messages were lost for a subscriber.
+fn report(
+    summary: &ReplaySummary,
+    counts: &[u64; 4],
+    topics: &[Replayable],
+    options: &ReplayOptions,
+) -> Result<()> {
+    let per_pass: u64 = counts.iter().sum();
+    let per_topic: Vec<String> = topics
+        .iter()
+        .map(|t| format!("{} {}", t.topic(), summary.sent[t.index()]))
+        .collect();
     println!(
-        "mems-replay: sent {} of {} samples and {} of {} hints in {:.3} s ({:.0} samples/s){}",
-        summary.sent,
-        samples.len(),
-        summary.hints_sent,
-        hints.len(),
+        "mems-replay: sent {} of {} samples in {} pass{} in {:.3} s ({:.0} samples/s): {}{}",
+        summary.total_sent(),
+        per_pass * summary.passes.max(1),
+        summary.passes,
+        if summary.passes == 1 { "" } else { "es" },
         summary.elapsed.as_secs_f64(),
         summary.rate_hz(),
+        per_topic.join(", "),
         if summary.interrupted {
             " (stopped by signal)"
         } else {

@@ -9,7 +9,9 @@ use std::time::{Duration, Instant};
 use iceoryx2::prelude::*;
 use ipc_types::clock::monotonic_ns;
 use ipc_types::{RawImuSample, RobotHint, Stamps, hint_flags, raw_flags, service};
-use mems_replay::{LINGER, Pace, ReplayError, ReplayOptions, SETTLE, replay};
+use mems_replay::source::Recording;
+use mems_replay::topics::{Payload, Replayable};
+use mems_replay::{LINGER, Pace, ReplayError, ReplayOptions, ReplaySummary, SETTLE, replay};
 
 fn namespace(test: &str) -> String {
     format!("t{}-{test}", std::process::id())
@@ -68,14 +70,36 @@ fn subscribe(
     })
 }
 
-fn run(ns: &str, samples: &[RawImuSample], pace: Pace) -> mems_replay::ReplaySummary {
+/// Replays `samples` and `hints` (held in memory) as `mems-replay` would.
+fn replay_in_memory(
+    ns: &str,
+    samples: &[RawImuSample],
+    hints: &[RobotHint],
+    options: &ReplayOptions,
+) -> Result<ReplaySummary, ReplayError> {
     let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+    let payloads = hints
+        .iter()
+        .map(|h| Payload::Hint(*h))
+        .chain(samples.iter().map(|s| Payload::Raw(*s)))
+        .collect();
+    let topics: &[Replayable] = if hints.is_empty() {
+        &[Replayable::Raw]
+    } else {
+        &[Replayable::Hint, Replayable::Raw]
+    };
+    let recording = Recording::Memory(payloads);
+    replay(&node, ns, &recording, topics, None, options, &mut |_| {})
+}
+
+fn run(ns: &str, samples: &[RawImuSample], pace: Pace) -> ReplaySummary {
     let options = ReplayOptions {
         pace,
         wait_subscribers: 1,
         wait_timeout: Duration::from_secs(5),
+        looping: false,
     };
-    replay(&node, ns, samples, &[], &options).unwrap()
+    replay_in_memory(ns, samples, &[], &options).unwrap()
 }
 
 /// Payloads arrive as recorded except `acquired_ns`, which is the publish time.
@@ -108,7 +132,7 @@ fn real_time_pace_follows_the_sample_times_scaled_by_speed() {
     );
     let got = sub.join().unwrap();
     assert_same_but_acquired(&got, &sent);
-    assert_eq!(summary.sent, 400);
+    assert_eq!(summary.total_sent(), 400);
     assert!(!summary.interrupted);
     assert_eq!(summary.short_deliveries, 0);
 
@@ -173,7 +197,7 @@ fn max_pace_is_lossless_with_a_slow_subscriber() {
     let summary = run(&ns, &sent, Pace::Max);
     let got = sub.join().unwrap();
     assert_same_but_acquired(&got, &sent);
-    assert_eq!(summary.sent, n as u64);
+    assert_eq!(summary.total_sent(), n as u64);
     assert_eq!(summary.short_deliveries, 0);
     // The last sample fits in the subscriber's queue only once it has taken n - buffer samples
     // (2000), and it stalls 2 ms after every 500 it takes: the stalls after 500, 1000 and 1500
@@ -189,15 +213,21 @@ fn max_pace_is_lossless_with_a_slow_subscriber() {
 
 /// Recorded hints are published exactly as recorded (both stamps kept), each just before the
 /// first raw sample taken at or after its publication time; a hint published after the last
-/// sample is not replayed. Samples 50 ms apart at real-time pace leave no doubt about the order
+/// sample follows it. Samples 50 ms apart at real-time pace leave no doubt about the order
 /// in which a subscriber polling every 0.1 ms sees them.
 #[test]
 fn hints_are_published_as_recorded_among_the_raw_samples_in_time_order() {
     let ns = namespace("hints");
     let sent = samples(20, 20);
     let t = |i: usize| sent[i].stamps.sample_ns;
-    // Published 1 ms after sample 2, exactly at sample 5, 30 ms after sample 5, after the last.
-    let hint_times = [t(2) + 1_000_000, t(5), t(5) + 30_000_000, t(19) + 1];
+    // Published 1 ms after sample 2, exactly at sample 5, 30 ms after sample 5, 30 ms after
+    // the last.
+    let hint_times = [
+        t(2) + 1_000_000,
+        t(5),
+        t(5) + 30_000_000,
+        t(19) + 30_000_000,
+    ];
     let hints: Vec<RobotHint> = hint_times
         .iter()
         .zip(0..)
@@ -215,7 +245,7 @@ fn hints_are_published_as_recorded_among_the_raw_samples_in_time_order() {
         })
         .collect();
     // Raw samples received before each hint.
-    let expected_before = [3, 5, 6];
+    let expected_before = [3, 5, 6, 20];
 
     let (raw_name, hint_name) = (
         service::full_name(&ns, service::RAW),
@@ -231,7 +261,7 @@ fn hints_are_published_as_recorded_among_the_raw_samples_in_time_order() {
         ready_tx.send(()).unwrap();
         let (mut raw_count, mut got) = (0, Vec::new());
         let start = Instant::now();
-        while raw_count < 20 && start.elapsed() < Duration::from_secs(10) {
+        while got.len() < 4 && start.elapsed() < Duration::from_secs(10) {
             while let Some(h) = hint.receive().unwrap() {
                 got.push((*h.payload(), raw_count));
             }
@@ -243,18 +273,22 @@ fn hints_are_published_as_recorded_among_the_raw_samples_in_time_order() {
         (raw_count, got)
     });
     ready_rx.recv().unwrap();
-    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
     let options = ReplayOptions {
         pace: Pace::RealTime { speed: 1.0 },
         wait_subscribers: 1,
         wait_timeout: Duration::from_secs(5),
+        looping: false,
     };
-    let summary = replay(&node, &ns, &sent, &hints, &options).unwrap();
+    let summary = replay_in_memory(&ns, &sent, &hints, &options).unwrap();
     let (raw_count, got) = sub.join().unwrap();
-    assert_eq!((summary.sent, summary.hints_sent), (20, 3));
+    let (hints_sent, raw_sent) = (
+        summary.sent[Replayable::Hint.index()],
+        summary.sent[Replayable::Raw.index()],
+    );
+    assert_eq!((raw_sent, hints_sent), (20, 4));
     assert_eq!(raw_count, 20);
     let received: Vec<RobotHint> = got.iter().map(|(h, _)| *h).collect();
-    assert_eq!(received, hints[..3], "as recorded, stamps included");
+    assert_eq!(received, hints, "as recorded, stamps included");
     let before: Vec<usize> = got.iter().map(|(_, n)| *n).collect();
     assert_eq!(before, expected_before);
 }
@@ -361,17 +395,17 @@ fn a_subscriber_that_leaves_is_counted_apart_and_the_others_get_everything() {
     });
     ready_rx.recv().unwrap();
     ready_rx.recv().unwrap();
-    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
     let options = ReplayOptions {
         pace: Pace::Max,
         wait_subscribers: 2,
         wait_timeout: Duration::from_secs(60),
+        looping: false,
     };
-    let summary = replay(&node, &ns, &sent, &[], &options).unwrap();
+    let summary = replay_in_memory(&ns, &sent, &[], &options).unwrap();
     leaving.join().unwrap();
     let got = staying.join().unwrap();
     assert_eq!(got, (100..100 + n as u64).collect::<Vec<_>>());
-    assert_eq!(summary.sent, n as u64);
+    assert_eq!(summary.total_sent(), n as u64);
     assert_eq!(summary.short_deliveries, 0);
     assert!(
         summary.after_subscriber_left >= (n - service::SUBSCRIBER_BUFFER - 2) as u64
@@ -383,13 +417,13 @@ fn a_subscriber_that_leaves_is_counted_apart_and_the_others_get_everything() {
 #[test]
 fn too_few_subscribers_is_an_error_naming_the_service() {
     let ns = namespace("nosub");
-    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
     let options = ReplayOptions {
         pace: Pace::Max,
         wait_subscribers: 2,
         wait_timeout: Duration::from_millis(50),
+        looping: false,
     };
-    let err = replay(&node, &ns, &samples(3, 100), &[], &options).unwrap_err();
+    let err = replay_in_memory(&ns, &samples(3, 100), &[], &options).unwrap_err();
     assert!(matches!(
         err,
         ReplayError::NoSubscribers {
@@ -405,14 +439,14 @@ fn too_few_subscribers_is_an_error_naming_the_service() {
 
 #[test]
 fn a_speed_that_is_not_positive_is_refused() {
-    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
     for speed in [0.0, -1.0, f64::NAN, f64::INFINITY] {
         let options = ReplayOptions {
             pace: Pace::RealTime { speed },
             wait_subscribers: 0,
             wait_timeout: Duration::ZERO,
+            looping: false,
         };
-        let err = replay(&node, "unused", &samples(2, 100), &[], &options).unwrap_err();
+        let err = replay_in_memory("unused", &samples(2, 100), &[], &options).unwrap_err();
         assert!(matches!(err, ReplayError::BadSpeed(_)), "{speed}: {err}");
     }
 }

@@ -20,6 +20,7 @@ use mems_sim::vibration::VibrationModel;
 use mems_sim::{DlpfGrid, SimSensor};
 use nalgebra::{UnitQuaternion, Vector3};
 use recording::Truth;
+use recording::clock::WallClock;
 
 /// Simulated MPU-9250 sessions with ground truth, written as canonical CSV (truth columns) or
 /// MCAP (truth channel `mems/sim/truth`).
@@ -437,6 +438,17 @@ impl Common {
     }
 }
 
+/// The wall clock of a simulated MCAP recording. Its stamps are scenario time (ns from the
+/// scenario's start), not `CLOCK_MONOTONIC`; the file is anchored with scenario time 0 at the
+/// moment it is written, so that Foxglove and `mems-info` place the run at that date. The
+/// stamps inside the messages are unchanged, so results do not depend on it.
+fn wall_clock_now_at_scenario_start() -> WallClock {
+    WallClock {
+        realtime_ns: WallClock::now().realtime_ns,
+        monotonic_ns: 0,
+    }
+}
+
 /// Where samples go: MCAP is written as it is produced; the canonical CSV writer takes the
 /// whole session at once.
 enum Sink {
@@ -468,6 +480,7 @@ impl Sink {
             }),
             "mcap" => {
                 let mut writer = recording::mcap::Writer::create(path)?;
+                writer.anchor(wall_clock_now_at_scenario_start())?;
                 let raw = writer.add_channel()?;
                 let truth = writer.add_channel()?;
                 let hint = if hints {

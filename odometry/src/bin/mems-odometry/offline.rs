@@ -365,7 +365,10 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let input = args.input.display();
     let out = match &args.out {
-        Some(path) => Some(crate::out::Out::create(path, args.force)?),
+        Some(path) => {
+            let clock = recording::mcap::run::clock_of(&args.input)?;
+            Some(crate::out::Out::create(path, args.force, clock)?)
+        }
         None => None,
     };
     let mut stages = Stages {

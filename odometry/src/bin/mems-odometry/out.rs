@@ -3,13 +3,17 @@
 //! samples and robot hints as read, every corrected sample, every odometry state (revisions
 //! included) and the Foxglove messages derived from it (`recording::mcap::derived`: pose,
 //! revised pose, transform, path). A recording has no receive times offline, so each
-//! message's log time is its own publish time (the sample time; a hint's publication time),
-//! `CLOCK_MONOTONIC` as the input's stamps (the file is not anchored to the wall clock).
+//! message's log time is its own publish time (the sample time; a hint's publication time).
+//! The file is anchored to the input's wall clock (its `mems.clock` record, copied), so that
+//! its log and publish times are the input's and the two line up in Foxglove; an input
+//! without one (a CSV, an unanchored MCAP) gives an unanchored file, whose times are the
+//! input's `CLOCK_MONOTONIC` stamps as they are.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
+use recording::clock::WallClock;
 use recording::mcap::derived::DerivedChannels;
 use recording::mcap::{Channel, Topic, Writer};
 
@@ -27,13 +31,17 @@ pub struct Out {
 }
 
 impl Out {
-    /// Creates the file at `path`; an existing recording there is refused unless `force`.
-    pub fn create(path: &Path, force: bool) -> Result<Self> {
+    /// Creates the file at `path`, anchored to `clock` if given; an existing recording there
+    /// is refused unless `force`.
+    pub fn create(path: &Path, force: bool, clock: Option<WallClock>) -> Result<Self> {
         for old in recording::segment::check_target(path, force)? {
             std::fs::remove_file(&old)
                 .with_context(|| format!("cannot remove {}", old.display()))?;
         }
         let mut writer = Writer::create_new(path)?;
+        if let Some(clock) = clock {
+            writer.anchor(clock)?;
+        }
         Ok(Self {
             path: path.to_path_buf(),
             raw: writer.add_channel()?,

@@ -215,6 +215,21 @@ impl RunReader {
     }
 }
 
+/// The wall clock a recording's times are anchored to ([`RunReader::clock`] after its first
+/// message: a recorder writes the metadata record before it), `None` for a CSV or an MCAP
+/// file without the record.
+pub fn clock_of(path: impl AsRef<Path>) -> Result<Option<WallClock>> {
+    let path = path.as_ref();
+    if !super::has_magic(path)? {
+        return Ok(None);
+    }
+    let mut run = RunReader::one(path)?;
+    if let Some(Err(e)) = run.next() {
+        return Err(e);
+    }
+    Ok(run.clock())
+}
+
 /// One item of a [`RawRun`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Item {
