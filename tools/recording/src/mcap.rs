@@ -18,10 +18,11 @@
 //! receive time, ns `CLOCK_MONOTONIC`); its `publish_time` is the message's own time
 //! ([`Topic::publish_time_ns`], e.g. a raw sample's `stamps.sample_ns`). A writer anchored to
 //! the wall clock ([`Writer::anchor`], as the recorder's is) writes both as Unix ns and states
-//! the anchor in a metadata record ([`crate::clock`]). Every `f64` reads back bit for bit:
-//! protobuf `double`s as they are; JSON in its shortest round-trip form, parsed with
-//! `serde_json`'s `float_roundtrip` (JSON cannot hold NaN or infinity: a JSON writer refuses
-//! them).
+//! the anchor in a metadata record ([`crate::clock`]). Precision: protobuf keeps time stamps,
+//! counts and raw samples exact, and the corrected samples' and states' quantities at their
+//! [`quantum`] ([`Topic::as_recorded`]); JSON keeps every `f64` bit for bit, in its shortest
+//! round-trip form parsed with `serde_json`'s `float_roundtrip` (JSON cannot hold NaN or
+//! infinity: a JSON writer refuses them).
 //!
 //! A writer killed mid-recording leaves a file without summary or footer. [`Reader`] scans
 //! linearly and yields every message of every complete chunk before the cut, then reports the
@@ -88,8 +89,8 @@ pub enum MessageEncoding {
     /// recordings hold.
     Json,
     /// `protobuf` described by a `protobuf` schema (a `FileDescriptorSet`), read with
-    /// `prost`: what [`Writer::create`] writes, 0.76 of the JSON's size for the same
-    /// messages (docs/recording.md).
+    /// `prost`: what [`Writer::create`] writes, 0.40 of the JSON's size for the same run
+    /// (docs/recording.md).
     Protobuf,
 }
 
