@@ -9,10 +9,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use common::{Case, Simulation};
-use ipc_types::{RawImuSample, RobotHint};
+use ipc_types::{OdometryState, RawImuSample, RobotHint};
 use mems_sim::hints::{HintParams, RestSource};
 use recording::Truth;
-use recording::mcap::{EventKind, RecorderEvent, Writer};
+use recording::mcap::{EventKind, RecorderEvent, Writer, quantum};
 
 /// How long after its publication the recorder receives a hint, ns.
 const HINT_LATENCY_NS: u64 = 40_000_000;
@@ -185,20 +185,31 @@ fn offline_writes_its_run_as_a_recording() {
         .collect();
     assert_eq!(live.len(), raw.len());
     assert!(read.odometry.len() > live.len(), "revisions are kept");
-    // Each live state's pose; revised poses, transforms and the path are on their own topics,
-    // which read_all counts without decoding: one revised pose per revision, one transform
-    // per live state, and at least one path message once aligned.
-    assert_eq!(read.poses.len(), live.len());
-    for (pose, state) in read.poses.iter().zip(&live) {
+    // The pose of the first live state in each 20 ms of sample time; revised poses (likewise
+    // thinned), transforms (one per pose) and the path are on their own topics, which
+    // read_all counts without decoding.
+    let shown = displayed(live.iter().copied());
+    assert_eq!(read.poses.len(), shown.len());
+    for (pose, state) in read.poses.iter().zip(&shown) {
         let p = pose.pose.position;
         assert_eq!([p.x, p.y, p.z], state.position_m);
     }
-    assert!(read.other_messages > read.odometry.len() as u64);
+    let revisions = read
+        .odometry
+        .iter()
+        .filter(|s| s.flags & ipc_types::odometry_flags::REVISION != 0);
+    let revised = displayed(revisions).len() as u64;
+    let path = read.other_messages - revised - shown.len() as u64;
+    assert!(path >= 1, "{path} path messages");
+    // The recorded end equals the report's f64 end rounded to the recording's quantum.
     let end = live.last().unwrap();
-    assert_eq!(
-        serde_json::json!(end.position_m),
-        report["end_displacement_m"]
-    );
+    let reported: Vec<f64> = report["end_displacement_m"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| quantum::recorded(v.as_f64().unwrap(), quantum::POSITION_M))
+        .collect();
+    assert_eq!(reported, end.position_m);
 
     let refused = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
         .args(["offline", "--input"])
@@ -213,4 +224,15 @@ fn offline_writes_its_run_as_a_recording() {
     );
     offline(&input, &["--out", out_arg, "--force"]);
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The states the Foxglove topics show: the first of each 20 ms of sample time.
+fn displayed<'a>(states: impl Iterator<Item = &'a OdometryState>) -> Vec<&'a OdometryState> {
+    let mut step = None;
+    states
+        .filter(|s| {
+            let this = s.stamps.sample_ns / 20_000_000;
+            step.replace(this) != Some(this)
+        })
+        .collect()
 }

@@ -4,10 +4,12 @@
 //!
 //! Channels (Foxglove's well-known schemas are protobuf; ours are JSON with the JSON Schema
 //! the recordings use, so a panel reads the same fields live and from an MCAP file):
-//! - `/mems/odometry/pose` (`foxglove.PoseInFrame`, frame `nav`): each live state's pose;
+//! - `/mems/odometry/pose` (`foxglove.PoseInFrame`, frame `nav`): the pose of the first live
+//!   state in each [`DISPLAY_STEP_NS`] of sample time (50 Hz, as the recording has it);
 //! - `/mems/odometry/revised_pose` (`foxglove.PoseInFrame`): states republished with
-//!   `REVISION` (history corrected in hindsight), apart, so the live pose's times never go back;
-//! - `/tf` (`foxglove.FrameTransform`): `nav` -> `body` at each live state, for the 3D panel;
+//!   `REVISION` (history corrected in hindsight), likewise at most one per
+//!   [`DISPLAY_STEP_NS`], apart, so the live pose's times never go back;
+//! - `/tf` (`foxglove.FrameTransform`): `nav` -> `body` with each pose, for the 3D panel;
 //! - `/mems/odometry/path` (`foxglove.PosesInFrame`): the live track, one pose per
 //!   [`PATH_STEP_NS`] of sample time, the last [`PATH_LEN`] of them, sent every
 //!   [`PATH_EVERY_NS`];
@@ -26,7 +28,9 @@ use ipc_types::{CorrectedImuSample, OdometryState};
 use recording::mcap::Topic;
 use recording::mcap::derived::{Derived, Out};
 
-pub use recording::mcap::derived::{BODY_FRAME, NAV_FRAME, PATH_EVERY_NS, PATH_LEN, PATH_STEP_NS};
+pub use recording::mcap::derived::{
+    BODY_FRAME, DISPLAY_STEP_NS, NAV_FRAME, PATH_EVERY_NS, PATH_LEN, PATH_STEP_NS,
+};
 
 pub use recording::clock::WallClock;
 

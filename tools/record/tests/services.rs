@@ -14,7 +14,7 @@ use ipc_types::{
     CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps, corrected_flags,
     hint_flags, odometry_flags,
 };
-use recording::mcap::read_all;
+use recording::mcap::{Topic, read_all};
 use serde_json::{Value, json};
 
 const WAIT: Duration = Duration::from_secs(10);
@@ -185,13 +185,17 @@ fn every_service_is_recorded_with_the_pose() {
     let contents = read_all(&mcap).unwrap();
     assert_eq!(contents.truncation, None);
     assert_eq!(contents.raw, sent.raw);
-    assert_eq!(contents.corrected, sent.corrected);
-    assert_eq!(contents.odometry, sent.odometry);
+    assert_eq!(contents.corrected, recorded(&sent.corrected));
+    assert_eq!(contents.odometry, recorded(&sent.odometry));
     assert_eq!(contents.hints, sent.hints);
     let mut run = recording::mcap::run::RunReader::open(&mcap).unwrap();
     run.next().unwrap().unwrap();
     let clock = run.clock().expect("anchored");
-    let poses: Vec<Value> = live(&sent.odometry)
+    let shown = displayed(live(&sent.odometry));
+    // 500 states 1 ms apart from 5 s: one pose per 20 ms.
+    assert_eq!(shown.len(), 25);
+    let poses: Vec<Value> = shown
+        .iter()
         .map(|s| pose_json(s, clock.unix_ns(s.stamps.sample_ns)))
         .collect();
     assert_eq!(json_values(&contents.poses), poses);
@@ -201,7 +205,23 @@ fn every_service_is_recorded_with_the_pose() {
         + (sent.odometry[sent.odometry.len() - 2].stamps.sample_ns
             - sent.odometry[0].stamps.sample_ns)
             / 500_000_000;
-    assert_eq!(contents.other_messages, 1 + 500 + path_messages);
+    assert_eq!(contents.other_messages, 1 + 25 + path_messages);
+}
+
+/// Messages as a recording gives them back (corrected samples and states at their quanta).
+fn recorded<T: Topic + Clone>(messages: &[T]) -> Vec<T> {
+    messages.iter().map(Topic::as_recorded).collect()
+}
+
+/// The states the Foxglove topics show, as recorded: the first of each 20 ms of sample time.
+fn displayed<'a>(states: impl Iterator<Item = &'a OdometryState>) -> Vec<OdometryState> {
+    let mut step = None;
+    states
+        .filter(|s| {
+            step.replace(s.stamps.sample_ns / 20_000_000) != Some(s.stamps.sample_ns / 20_000_000)
+        })
+        .map(Topic::as_recorded)
+        .collect()
 }
 
 /// The live (not revised) states.
@@ -266,14 +286,20 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
     let unix = |t: u64| u64::try_from(i128::from(t) + realtime - monotonic).unwrap();
 
     let at = |s: &OdometryState| unix(s.stamps.sample_ns);
-    let poses: Vec<Value> = live(&sent.odometry).map(|s| pose_json(s, at(s))).collect();
-    let revised: Vec<Value> = sent
-        .odometry
+    // 120 states 1 ms apart from 5 s: one pose per 20 ms.
+    let shown = displayed(live(&sent.odometry));
+    assert_eq!(shown.len(), 6);
+    let poses: Vec<Value> = shown.iter().map(|s| pose_json(s, at(s))).collect();
+    let revised: Vec<Value> = displayed(
+        sent.odometry
+            .iter()
+            .filter(|s| s.flags & odometry_flags::REVISION != 0),
+    )
+    .iter()
+    .map(|s| pose_json(s, at(s)))
+    .collect();
+    let tf: Vec<Value> = shown
         .iter()
-        .filter(|s| s.flags & odometry_flags::REVISION != 0)
-        .map(|s| pose_json(s, at(s)))
-        .collect();
-    let tf: Vec<Value> = live(&sent.odometry)
         .map(|s| {
             let p = pose_value(s);
             json!({
@@ -287,23 +313,23 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
         .collect();
     // 120 states 1 ms apart, all aligned: one path message (every 0.5 s), of one pose (one
     // every 0.1 s), at the first state.
-    let first = &sent.odometry[0];
+    let first = &sent.odometry[0].as_recorded();
     let path = vec![json!({
         "timestamp": time_json(at(first)),
         "frame_id": "nav",
         "poses": [pose_value(first)],
     })];
     let expect: [(&str, &str, Vec<Value>); 9] = [
-        (service::RAW, "mems.RawImuSample", json_values(&sent.raw)),
+        (service::RAW, "mems.RawImuSample", raw_as_stored(&sent.raw)),
         (
             service::CORRECTED,
             "mems.CorrectedImuSample",
-            json_values(&sent.corrected),
+            json_values(&recorded(&sent.corrected)),
         ),
         (
             service::ODOMETRY,
             "mems.OdometryState",
-            json_values(&sent.odometry),
+            json_values(&recorded(&sent.odometry)),
         ),
         ("mems/odometry/pose", "foxglove.PoseInFrame", poses),
         (
@@ -350,6 +376,47 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
             );
         }
     }
+    // The raw values, rebuilt from what Python decoded as docs/recording.md says, are the
+    // values sent, bit for bit.
+    let decoded = report["messages"][service::RAW].as_array().unwrap();
+    for (m, sent) in decoded.iter().zip(&sent.raw) {
+        let v = &m["value"];
+        let rebuilt = |counts: &str, lsb: &str| -> Vec<u64> {
+            let lsb = v[lsb].as_f64().unwrap();
+            let counts = v[counts].as_array().unwrap();
+            counts
+                .iter()
+                .map(|c| (c.as_f64().unwrap() / lsb).to_bits())
+                .collect()
+        };
+        assert_eq!(
+            rebuilt("accel_counts", "accel_lsb_per_g"),
+            sent.accel_g.map(f64::to_bits)
+        );
+        assert_eq!(
+            rebuilt("gyro_counts", "gyro_lsb_per_dps"),
+            sent.gyro_dps.map(f64::to_bits)
+        );
+        let temp = v["temp_counts"].as_f64().unwrap() / 333.87 + 21.0;
+        assert_eq!(temp.to_bits(), sent.temp_c.to_bits());
+    }
+}
+
+/// Raw samples as the file stores them (their values are what the counts give): the
+/// sensitivities instead of the values.
+fn raw_as_stored(samples: &[RawImuSample]) -> Vec<Value> {
+    json_values(samples)
+        .into_iter()
+        .map(|mut v| {
+            v["accel_g"] = json!([]);
+            v["gyro_dps"] = json!([]);
+            v["temp_c"] = Value::Null;
+            v["accel_lsb_per_g"] = json!(16384.0);
+            v["gyro_lsb_per_dps"] = json!(131.0);
+            v["temp_from_counts"] = json!(true);
+            v
+        })
+        .collect()
 }
 
 /// Messages as serde JSON values.

@@ -1,8 +1,15 @@
-//! Size and write cost of a recording in each message encoding: reads every message of the
-//! known topics of a recording (either encoding), then writes them all again, in the same
-//! order with the same log times, once as JSON and once as protobuf, and prints each file's
-//! size and the time spent writing (encoding, compressing and writing each message, then
-//! finishing the file) per message.
+//! Size and write cost of a recording's layout: reads every message of the known topics of a
+//! recording (either encoding, older layouts too), then writes them all again, in the same
+//! order with the same log times:
+//! - as JSON, the form older recorders wrote (raw, corrected, state, a pose per live state,
+//!   hints, truth, events);
+//! - as protobuf, as the recorder writes now (the Foxglove topics derived from the states by
+//!   `recording::mcap::derived`, at their display rate), with the chunk size and zstd level
+//!   of the recorder, and with others;
+//!
+//! and prints each file's size and the time spent writing it (deriving, encoding,
+//! compressing and writing each message, then finishing the file) per message written, the
+//! best of three; then each topic's bytes written alone (protobuf, the recorder's settings).
 //!
 //!     cargo run --release -p recording --example encoding_cost -- run.mcap
 
@@ -11,35 +18,37 @@ use std::time::Instant;
 
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
 use recording::Truth;
+use recording::mcap::derived::{
+    Derived, Out, PATH_TOPIC, POSE_TOPIC, REVISED_POSE_TOPIC, TF_TOPIC,
+};
 use recording::mcap::run::RunReader;
-use recording::mcap::{MessageEncoding, PoseInFrame, RecorderEvent, Writer};
+use recording::mcap::{MessageEncoding, PoseInFrame, RecorderEvent, Topic, Writer};
 
-/// One decoded message with its log time.
+/// One decoded message with its log time (the recording's own Foxglove topics are not read:
+/// they are derived again from the states).
 #[derive(Clone)]
 enum Item {
     Raw(RawImuSample),
     Corrected(CorrectedImuSample),
     State(OdometryState),
-    Pose(PoseInFrame),
     Hint(RobotHint),
     Truth(Truth),
     Event(RecorderEvent),
 }
 
-impl Item {
-    /// The topic's index in the per-topic report.
-    fn kind(&self) -> usize {
-        match self {
-            Item::Raw(_) => 0,
-            Item::Corrected(_) => 1,
-            Item::State(_) => 2,
-            Item::Pose(_) => 3,
-            Item::Hint(_) => 4,
-            Item::Truth(_) => 5,
-            Item::Event(_) => 6,
-        }
-    }
-}
+/// The topics, in the per-topic report's order.
+const TOPICS: [&str; 10] = [
+    RawImuSample::TOPIC,
+    CorrectedImuSample::TOPIC,
+    OdometryState::TOPIC,
+    POSE_TOPIC,
+    REVISED_POSE_TOPIC,
+    TF_TOPIC,
+    PATH_TOPIC,
+    RobotHint::TOPIC,
+    Truth::TOPIC,
+    RecorderEvent::TOPIC,
+];
 
 fn read(path: &Path) -> recording::Result<Vec<(Item, u64)>> {
     let mut run = RunReader::open(path)?;
@@ -52,8 +61,6 @@ fn read(path: &Path) -> recording::Result<Vec<(Item, u64)>> {
             Item::Corrected(x?)
         } else if let Some(x) = m.decode::<OdometryState>() {
             Item::State(x?)
-        } else if let Some(x) = m.decode::<PoseInFrame>() {
-            Item::Pose(x?)
         } else if let Some(x) = m.decode::<RobotHint>() {
             Item::Hint(x?)
         } else if let Some(x) = m.decode::<Truth>() {
@@ -68,30 +75,103 @@ fn read(path: &Path) -> recording::Result<Vec<(Item, u64)>> {
     Ok(items)
 }
 
-/// Writes `items` to `out` in `encoding`; the seconds it took.
-fn write(items: &[(Item, u64)], out: &Path, encoding: MessageEncoding) -> recording::Result<f64> {
+/// How a rewrite is written.
+#[derive(Clone, Copy)]
+struct Layout {
+    encoding: MessageEncoding,
+    level: u32,
+    /// Every topic but this one, or all.
+    without: Option<&'static str>,
+    /// Closes the chunk when its first message is this much log time old, as the recorder
+    /// does (`mems_record::FLUSH_PERIOD`, 50 ms), or never.
+    flush_ns: Option<u64>,
+}
+
+/// Writes `items` to `out` as `layout` says; the seconds it took and the messages written.
+fn write(items: &[(Item, u64)], out: &Path, layout: Layout) -> recording::Result<(f64, u64)> {
     let start = Instant::now();
-    let mut w = Writer::create(out)?.with_encoding(encoding);
+    let mut w = Writer::create_tuned(out, layout.level)?.with_encoding(layout.encoding);
     let raw = w.add_channel::<RawImuSample>()?;
     let corrected = w.add_channel::<CorrectedImuSample>()?;
     let state = w.add_channel::<OdometryState>()?;
-    let pose = w.add_channel::<PoseInFrame>()?;
     let hint = w.add_channel::<RobotHint>()?;
     let truth = w.add_channel::<Truth>()?;
     let event = w.add_channel::<RecorderEvent>()?;
+    let json = layout.encoding == MessageEncoding::Json;
+    let json_pose = w.add_channel::<PoseInFrame>()?;
+    let pose = w.add_foxglove_channel(POSE_TOPIC)?;
+    let revised = w.add_foxglove_channel(REVISED_POSE_TOPIC)?;
+    let tf = w.add_foxglove_channel(TF_TOPIC)?;
+    let path = w.add_foxglove_channel(PATH_TOPIC)?;
+    let mut derived = Derived::new(None);
+    let wanted = |topic: &str| layout.without != Some(topic);
+    let mut n = 0u64;
+    let mut chunk_start = None;
     for (item, t) in items {
+        if let Some(period) = layout.flush_ns {
+            let start = *chunk_start.get_or_insert(*t);
+            if *t >= start + period {
+                w.flush()?;
+                chunk_start = Some(*t);
+            }
+        }
+        let mut put = |topic: &str| {
+            let yes = wanted(topic);
+            n += u64::from(yes);
+            yes
+        };
         match item {
-            Item::Raw(x) => w.write(raw, x, *t)?,
-            Item::Corrected(x) => w.write(corrected, x, *t)?,
-            Item::State(x) => w.write(state, x, *t)?,
-            Item::Pose(x) => w.write(pose, x, *t)?,
-            Item::Hint(x) => w.write(hint, x, *t)?,
-            Item::Truth(x) => w.write(truth, x, *t)?,
-            Item::Event(x) => w.write(event, x, *t)?,
+            Item::Raw(x) if put(RawImuSample::TOPIC) => w.write(raw, x, *t)?,
+            Item::Corrected(x) if put(CorrectedImuSample::TOPIC) => w.write(corrected, x, *t)?,
+            Item::State(x) => {
+                if put(OdometryState::TOPIC) {
+                    w.write(state, x, *t)?;
+                }
+                let live = x.flags & ipc_types::odometry_flags::REVISION == 0;
+                if json && live && put(POSE_TOPIC) {
+                    w.write(json_pose, &PoseInFrame::from_state(x), *t)?;
+                }
+                if !json {
+                    let p = x.stamps.sample_ns;
+                    derived.state(x, |out| match out {
+                        Out::Pose(m) if put(POSE_TOPIC) => w.write_foxglove(pose, m, p, *t),
+                        Out::RevisedPose(m) if put(REVISED_POSE_TOPIC) => {
+                            w.write_foxglove(revised, m, p, *t)
+                        }
+                        Out::Tf(m) if put(TF_TOPIC) => w.write_foxglove(tf, m, p, *t),
+                        Out::Path(m) if put(PATH_TOPIC) => w.write_foxglove(path, m, p, *t),
+                        _ => Ok(()),
+                    })?;
+                }
+            }
+            Item::Hint(x) if put(RobotHint::TOPIC) => w.write(hint, x, *t)?,
+            Item::Truth(x) if put(Truth::TOPIC) => w.write(truth, x, *t)?,
+            Item::Event(x) if put(RecorderEvent::TOPIC) => w.write(event, x, *t)?,
+            _ => {}
         }
     }
     w.finish()?;
-    Ok(start.elapsed().as_secs_f64())
+    Ok((start.elapsed().as_secs_f64(), n))
+}
+
+/// Writes `items` as `layout` says, three times; the file's size, the messages written and
+/// the best time.
+fn measure(
+    items: &[(Item, u64)],
+    layout: Layout,
+    runs: usize,
+) -> Result<(u64, u64, f64), Box<dyn std::error::Error>> {
+    let out = std::env::temp_dir().join(format!("encoding-cost-{}.mcap", std::process::id()));
+    let mut best = f64::INFINITY;
+    let mut n = 0;
+    for _ in 0..runs {
+        let (seconds, written) = write(items, &out, layout)?;
+        best = best.min(seconds);
+        n = written;
+    }
+    let size = std::fs::metadata(&out)?.len();
+    std::fs::remove_file(&out)?;
+    Ok((size, n, best))
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -99,54 +179,68 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .nth(1)
         .ok_or("usage: encoding_cost RECORDING.mcap")?;
     let items = read(Path::new(&input))?;
-    println!("{input}: {} messages", items.len());
-    let dir = std::env::temp_dir();
-    for (name, encoding) in [
-        ("json", MessageEncoding::Json),
-        ("protobuf", MessageEncoding::Protobuf),
-    ] {
-        let out = dir.join(format!("encoding-cost-{}.{name}.mcap", std::process::id()));
-        // The best of three, against a loaded machine.
-        let mut best = f64::INFINITY;
-        for _ in 0..3 {
-            best = best.min(write(&items, &out, encoding)?);
-        }
-        let size = std::fs::metadata(&out)?.len();
-        std::fs::remove_file(&out)?;
+    println!(
+        "{input}: {} messages read (Foxglove topics derived again)",
+        items.len()
+    );
+    let recorder = Layout {
+        encoding: MessageEncoding::Protobuf,
+        level: 0,
+        without: None,
+        flush_ns: Some(50_000_000),
+    };
+    let layouts = [
+        (
+            "json",
+            Layout {
+                encoding: MessageEncoding::Json,
+                ..recorder
+            },
+        ),
+        ("protobuf", recorder),
+        (
+            "protobuf, never flushed",
+            Layout {
+                flush_ns: None,
+                ..recorder
+            },
+        ),
+        (
+            "protobuf, zstd 6",
+            Layout {
+                level: 6,
+                ..recorder
+            },
+        ),
+    ];
+    println!("| layout | bytes | messages | bytes/message | write, us/message |");
+    println!("|---|---|---|---|---|");
+    for (name, layout) in layouts {
+        let (size, n, best) = measure(&items, layout, 3)?;
         println!(
-            "{name:>8}: {size:>10} bytes ({:.1} bytes/message), written in {:.3} s ({:.2} us/message)",
-            size as f64 / items.len() as f64,
-            best,
-            best * 1e6 / items.len() as f64
+            "| {name} | {size} | {n} | {:.1} | {:.2} |",
+            size as f64 / n as f64,
+            best * 1e6 / n as f64
         );
     }
-    // Each topic alone, protobuf.
-    let kinds = [
-        "raw",
-        "corrected",
-        "state",
-        "pose",
-        "hint",
-        "truth",
-        "event",
-    ];
-    for (k, kind) in kinds.iter().enumerate() {
-        let alone: Vec<(Item, u64)> = items
-            .iter()
-            .filter(|(i, _)| i.kind() == k)
-            .map(|(i, t)| (i.clone(), *t))
-            .collect();
-        if alone.is_empty() {
-            continue;
+    // What each topic adds: the file without it, against the file with every topic (the
+    // recorder's layout, flushed as it flushes).
+    let (all, _, _) = measure(&items, recorder, 1)?;
+    println!("| topic | messages | bytes it adds |");
+    println!("|---|---|---|");
+    for topic in TOPICS {
+        let (size, n, _) = measure(
+            &items,
+            Layout {
+                without: Some(topic),
+                ..recorder
+            },
+            1,
+        )?;
+        let (_, everything, _) = measure(&items, recorder, 1)?;
+        if n < everything {
+            println!("| {topic} | {} | {} |", everything - n, all - size);
         }
-        let out = dir.join(format!("encoding-cost-{}.{kind}.mcap", std::process::id()));
-        write(&alone, &out, MessageEncoding::Protobuf)?;
-        let size = std::fs::metadata(&out)?.len();
-        std::fs::remove_file(&out)?;
-        println!(
-            "{kind:>10} alone, protobuf: {size:>10} bytes ({} messages)",
-            alone.len()
-        );
     }
     Ok(())
 }

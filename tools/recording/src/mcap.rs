@@ -18,10 +18,11 @@
 //! receive time, ns `CLOCK_MONOTONIC`); its `publish_time` is the message's own time
 //! ([`Topic::publish_time_ns`], e.g. a raw sample's `stamps.sample_ns`). A writer anchored to
 //! the wall clock ([`Writer::anchor`], as the recorder's is) writes both as Unix ns and states
-//! the anchor in a metadata record ([`crate::clock`]). Every `f64` reads back bit for bit:
-//! protobuf `double`s as they are; JSON in its shortest round-trip form, parsed with
-//! `serde_json`'s `float_roundtrip` (JSON cannot hold NaN or infinity: a JSON writer refuses
-//! them).
+//! the anchor in a metadata record ([`crate::clock`]). Precision: protobuf keeps time stamps,
+//! counts and raw samples exact, and the corrected samples' and states' quantities at their
+//! [`quantum`] ([`Topic::as_recorded`]); JSON keeps every `f64` bit for bit, in its shortest
+//! round-trip form parsed with `serde_json`'s `float_roundtrip` (JSON cannot hold NaN or
+//! infinity: a JSON writer refuses them).
 //!
 //! A writer killed mid-recording leaves a file without summary or footer. [`Reader`] scans
 //! linearly and yields every message of every complete chunk before the cut, then reports the
@@ -53,6 +54,31 @@ use crate::clock::WallClock;
 use crate::error::{Error, ErrorKind, Result};
 use crate::{Format, Recording, Truth};
 
+/// The resolution at which the corrected samples and the odometry states are recorded: each
+/// value is the nearest multiple of its quantum (a power of two), written as a `float`
+/// (docs/recording.md, "Precision"). Each is far below the sensor's one count or the
+/// estimate's 1-sigma.
+pub mod quantum {
+    /// Specific force, m/s^2: 2^-15 (31 um/s^2), 1/20 of one count at +-2 g (599 um/s^2).
+    pub const ACCEL_MPS2: f64 = 1.0 / (1u64 << 15) as f64;
+    /// Angular rate, rad/s: 2^-17 (7.6 urad/s), 1/17 of one count at +-250 deg/s
+    /// (133 urad/s).
+    pub const GYRO_RPS: f64 = 1.0 / (1u64 << 17) as f64;
+    /// Die temperature, degC: 2^-12 (0.24 mK), 1/12 of one count (3.0 mK).
+    pub const TEMP_C: f64 = 1.0 / (1u64 << 12) as f64;
+    /// Position, its 1-sigma and the distance travelled, m: 2^-16 (15 um).
+    pub const POSITION_M: f64 = 1.0 / (1u64 << 16) as f64;
+    /// Velocity and its 1-sigma, m/s: 2^-16 (15 um/s).
+    pub const VELOCITY_MPS: f64 = 1.0 / (1u64 << 16) as f64;
+    /// Attitude quaternion components: 2^-20 (about 2 urad of rotation).
+    pub const ATTITUDE: f64 = 1.0 / (1u64 << 20) as f64;
+
+    /// `value` as a recording gives it back at resolution `quantum`.
+    pub fn recorded(value: f64, quantum: f64) -> f64 {
+        f64::from(super::proto::quantize(value, quantum))
+    }
+}
+
 /// Topic of the simulator's ground truth.
 pub const TRUTH_TOPIC: &str = "mems/sim/truth";
 /// How a channel's messages are encoded, from its message encoding and its schema's encoding:
@@ -63,8 +89,8 @@ pub enum MessageEncoding {
     /// recordings hold.
     Json,
     /// `protobuf` described by a `protobuf` schema (a `FileDescriptorSet`), read with
-    /// `prost`: what [`Writer::create`] writes, 0.76 of the JSON's size for the same
-    /// messages (docs/recording.md).
+    /// `prost`: what [`Writer::create`] writes, 0.40 of the JSON's size for the same run
+    /// (docs/recording.md).
     Protobuf,
 }
 
@@ -126,6 +152,14 @@ pub trait Topic: Serialize + DeserializeOwned {
     fn fill_proto(&self, proto: &mut Self::Proto);
     /// The message of a decoded `proto`; errors name the field that does not fit.
     fn from_proto(proto: Self::Proto) -> std::result::Result<Self, String>;
+    /// The message as a protobuf recording gives it back: the same, or with its `float`
+    /// fields rounded to `f32` (docs/recording.md, "Precision").
+    fn as_recorded(&self) -> Self
+    where
+        Self: Clone,
+    {
+        self.clone()
+    }
     /// The message's own time, ns, recorded as the MCAP `publish_time`.
     fn publish_time_ns(&self) -> u64;
     /// Whether every float in the message is finite (JSON cannot hold NaN or infinity).
@@ -142,12 +176,41 @@ impl Topic for RawImuSample {
         proto::file_descriptor_set()
     }
 
+    /// Writes the scaled values only where they are not what the counts give with one of
+    /// the part's sensitivities (the one of the previous sample first).
     fn fill_proto(&self, p: &mut Self::Proto) {
+        use ipc_types::units::{self, AccelRange, GyroRange};
         p.stamps = Some(self.stamps.into());
         p.seq = self.seq;
-        proto::fill(&mut p.accel_g, &self.accel_g);
-        proto::fill(&mut p.gyro_dps, &self.gyro_dps);
-        p.temp_c = self.temp_c;
+        p.accel_lsb_per_g = proto::sensitivity(
+            &self.accel_g,
+            &self.accel_counts,
+            p.accel_lsb_per_g,
+            [
+                AccelRange::G2,
+                AccelRange::G4,
+                AccelRange::G8,
+                AccelRange::G16,
+            ]
+            .map(AccelRange::lsb_per_g),
+        );
+        p.gyro_lsb_per_dps = proto::sensitivity(
+            &self.gyro_dps,
+            &self.gyro_counts,
+            p.gyro_lsb_per_dps,
+            [
+                GyroRange::Dps250,
+                GyroRange::Dps500,
+                GyroRange::Dps1000,
+                GyroRange::Dps2000,
+            ]
+            .map(GyroRange::lsb_per_dps),
+        );
+        proto::fill(&mut p.accel_g, written(p.accel_lsb_per_g, &self.accel_g));
+        proto::fill(&mut p.gyro_dps, written(p.gyro_lsb_per_dps, &self.gyro_dps));
+        p.temp_from_counts =
+            units::temp_c_from_counts(self.temp_counts).to_bits() == self.temp_c.to_bits();
+        p.temp_c = (!p.temp_from_counts).then_some(self.temp_c);
         proto::fill(&mut p.accel_counts, &self.accel_counts);
         proto::fill(&mut p.gyro_counts, &self.gyro_counts);
         p.temp_counts = self.temp_counts.into();
@@ -157,15 +220,23 @@ impl Topic for RawImuSample {
     }
 
     fn from_proto(p: Self::Proto) -> std::result::Result<Self, String> {
+        let accel_counts = proto::array("accel_counts", &p.accel_counts)?;
+        let gyro_counts = proto::array("gyro_counts", &p.gyro_counts)?;
+        let temp_counts = proto::narrow("temp_counts", p.temp_counts)?;
+        let temp_c = match p.temp_c {
+            _ if p.temp_from_counts => ipc_types::units::temp_c_from_counts(temp_counts),
+            // proto3 omits a 0 (older recordings' `temp_c` has no presence).
+            value => value.unwrap_or(0.0),
+        };
         Ok(Self {
             stamps: proto::stamps(p.stamps)?,
             seq: p.seq,
-            accel_g: proto::array("accel_g", &p.accel_g)?,
-            gyro_dps: proto::array("gyro_dps", &p.gyro_dps)?,
-            temp_c: p.temp_c,
-            accel_counts: proto::array("accel_counts", &p.accel_counts)?,
-            gyro_counts: proto::array("gyro_counts", &p.gyro_counts)?,
-            temp_counts: proto::narrow("temp_counts", p.temp_counts)?,
+            accel_g: proto::scaled("accel_g", &p.accel_g, &accel_counts, p.accel_lsb_per_g)?,
+            gyro_dps: proto::scaled("gyro_dps", &p.gyro_dps, &gyro_counts, p.gyro_lsb_per_dps)?,
+            temp_c,
+            accel_counts,
+            gyro_counts,
+            temp_counts,
             flags: proto::narrow("flags", p.flags)?,
             lost_before: p.lost_before,
             undelivered: p.undelivered,
@@ -322,11 +393,11 @@ impl Topic for CorrectedImuSample {
     fn fill_proto(&self, p: &mut Self::Proto) {
         p.stamps = Some(self.stamps.into());
         p.seq = self.seq;
-        proto::fill(&mut p.accel_mps2, &self.accel_mps2);
-        proto::fill(&mut p.gyro_rps, &self.gyro_rps);
-        p.temp_c = self.temp_c;
-        proto::fill(&mut p.zs_mean_mps2, &self.zs_mean_mps2);
-        proto::fill(&mut p.zs_std_mps2, &self.zs_std_mps2);
+        proto::fill_f32(&mut p.accel_mps2, &self.accel_mps2, quantum::ACCEL_MPS2);
+        proto::fill_f32(&mut p.gyro_rps, &self.gyro_rps, quantum::GYRO_RPS);
+        p.temp_c = Some(proto::quantize(self.temp_c, quantum::TEMP_C));
+        proto::fill_f32(&mut p.zs_mean_mps2, &self.zs_mean_mps2, quantum::ACCEL_MPS2);
+        proto::fill_f32(&mut p.zs_std_mps2, &self.zs_std_mps2, quantum::ACCEL_MPS2);
         p.calib_id = self.calib_id;
         p.flags = self.flags.into();
         p.raw_flags = self.raw_flags.into();
@@ -337,16 +408,28 @@ impl Topic for CorrectedImuSample {
         Ok(Self {
             stamps: proto::stamps(p.stamps)?,
             seq: p.seq,
-            accel_mps2: proto::array("accel_mps2", &p.accel_mps2)?,
-            gyro_rps: proto::array("gyro_rps", &p.gyro_rps)?,
-            temp_c: p.temp_c,
-            zs_mean_mps2: proto::array("zs_mean_mps2", &p.zs_mean_mps2)?,
-            zs_std_mps2: proto::array("zs_std_mps2", &p.zs_std_mps2)?,
+            accel_mps2: proto::array_f32("accel_mps2", &p.accel_mps2, &p.accel_mps2_f64)?,
+            gyro_rps: proto::array_f32("gyro_rps", &p.gyro_rps, &p.gyro_rps_f64)?,
+            temp_c: proto::scalar_f32(p.temp_c, p.temp_c_f64),
+            zs_mean_mps2: proto::array_f32("zs_mean_mps2", &p.zs_mean_mps2, &p.zs_mean_mps2_f64)?,
+            zs_std_mps2: proto::array_f32("zs_std_mps2", &p.zs_std_mps2, &p.zs_std_mps2_f64)?,
             calib_id: p.calib_id,
             flags: proto::narrow("flags", p.flags)?,
             raw_flags: proto::narrow("raw_flags", p.raw_flags)?,
             settles: p.settles,
         })
+    }
+
+    fn as_recorded(&self) -> Self {
+        use quantum::{ACCEL_MPS2, GYRO_RPS, TEMP_C};
+        Self {
+            accel_mps2: self.accel_mps2.map(|x| quantum::recorded(x, ACCEL_MPS2)),
+            gyro_rps: self.gyro_rps.map(|x| quantum::recorded(x, GYRO_RPS)),
+            temp_c: quantum::recorded(self.temp_c, TEMP_C),
+            zs_mean_mps2: self.zs_mean_mps2.map(|x| quantum::recorded(x, ACCEL_MPS2)),
+            zs_std_mps2: self.zs_std_mps2.map(|x| quantum::recorded(x, ACCEL_MPS2)),
+            ..*self
+        }
     }
 
     fn json_schema() -> Value {
@@ -425,13 +508,29 @@ impl Topic for OdometryState {
     fn fill_proto(&self, p: &mut Self::Proto) {
         p.stamps = Some(self.stamps.into());
         p.seq = self.seq;
-        proto::fill(&mut p.position_m, &self.position_m);
-        proto::fill(&mut p.position_sigma_m, &self.position_sigma_m);
-        proto::fill(&mut p.velocity_mps, &self.velocity_mps);
-        proto::fill(&mut p.velocity_sigma_mps, &self.velocity_sigma_mps);
-        proto::fill(&mut p.gravity_sensor_mps2, &self.gravity_sensor_mps2);
-        proto::fill(&mut p.attitude_wxyz, &self.attitude_wxyz);
-        p.distance_m = self.distance_m;
+        proto::fill_f32(&mut p.position_m, &self.position_m, quantum::POSITION_M);
+        proto::fill_f32(
+            &mut p.position_sigma_m,
+            &self.position_sigma_m,
+            quantum::POSITION_M,
+        );
+        proto::fill_f32(
+            &mut p.velocity_mps,
+            &self.velocity_mps,
+            quantum::VELOCITY_MPS,
+        );
+        proto::fill_f32(
+            &mut p.velocity_sigma_mps,
+            &self.velocity_sigma_mps,
+            quantum::VELOCITY_MPS,
+        );
+        proto::fill_f32(
+            &mut p.gravity_sensor_mps2,
+            &self.gravity_sensor_mps2,
+            quantum::ACCEL_MPS2,
+        );
+        proto::fill_f32(&mut p.attitude_wxyz, &self.attitude_wxyz, quantum::ATTITUDE);
+        p.distance_m = Some(proto::quantize(self.distance_m, quantum::POSITION_M));
         p.flags = self.flags.into();
         p.reserved16 = self.reserved16.into();
         p.rest_count = self.rest_count;
@@ -443,19 +542,49 @@ impl Topic for OdometryState {
         Ok(Self {
             stamps: proto::stamps(p.stamps)?,
             seq: p.seq,
-            position_m: proto::array("position_m", &p.position_m)?,
-            position_sigma_m: proto::array("position_sigma_m", &p.position_sigma_m)?,
-            velocity_mps: proto::array("velocity_mps", &p.velocity_mps)?,
-            velocity_sigma_mps: proto::array("velocity_sigma_mps", &p.velocity_sigma_mps)?,
-            gravity_sensor_mps2: proto::array("gravity_sensor_mps2", &p.gravity_sensor_mps2)?,
-            attitude_wxyz: proto::array("attitude_wxyz", &p.attitude_wxyz)?,
-            distance_m: p.distance_m,
+            position_m: proto::array_f32("position_m", &p.position_m, &p.position_m_f64)?,
+            position_sigma_m: proto::array_f32(
+                "position_sigma_m",
+                &p.position_sigma_m,
+                &p.position_sigma_m_f64,
+            )?,
+            velocity_mps: proto::array_f32("velocity_mps", &p.velocity_mps, &p.velocity_mps_f64)?,
+            velocity_sigma_mps: proto::array_f32(
+                "velocity_sigma_mps",
+                &p.velocity_sigma_mps,
+                &p.velocity_sigma_mps_f64,
+            )?,
+            gravity_sensor_mps2: proto::array_f32(
+                "gravity_sensor_mps2",
+                &p.gravity_sensor_mps2,
+                &p.gravity_sensor_mps2_f64,
+            )?,
+            attitude_wxyz: proto::array_f32(
+                "attitude_wxyz",
+                &p.attitude_wxyz,
+                &p.attitude_wxyz_f64,
+            )?,
+            distance_m: proto::scalar_f32(p.distance_m, p.distance_m_f64),
             flags: proto::narrow("flags", p.flags)?,
             reserved16: proto::narrow("reserved16", p.reserved16)?,
             rest_count: p.rest_count,
             hints_applied: p.hints_applied,
             hint_disagreements: p.hint_disagreements,
         })
+    }
+
+    fn as_recorded(&self) -> Self {
+        use quantum::{ACCEL_MPS2, ATTITUDE, POSITION_M, VELOCITY_MPS, recorded};
+        Self {
+            position_m: self.position_m.map(|x| recorded(x, POSITION_M)),
+            position_sigma_m: self.position_sigma_m.map(|x| recorded(x, POSITION_M)),
+            velocity_mps: self.velocity_mps.map(|x| recorded(x, VELOCITY_MPS)),
+            velocity_sigma_mps: self.velocity_sigma_mps.map(|x| recorded(x, VELOCITY_MPS)),
+            gravity_sensor_mps2: self.gravity_sensor_mps2.map(|x| recorded(x, ACCEL_MPS2)),
+            attitude_wxyz: self.attitude_wxyz.map(|x| recorded(x, ATTITUDE)),
+            distance_m: recorded(self.distance_m, POSITION_M),
+            ..*self
+        }
     }
 
     fn json_schema() -> Value {
@@ -1011,6 +1140,12 @@ impl Topic for RecorderEvent {
     }
 }
 
+/// The scaled values a raw sample writes: none when they derive from the counts with
+/// `sensitivity` (non-zero).
+fn written(sensitivity: f64, values: &[f64; 3]) -> &[f64] {
+    if sensitivity == 0.0 { values } else { &[] }
+}
+
 /// JSON Schema of [`ipc_types::Stamps`].
 fn stamps_schema() -> Value {
     let stamp = |what: &str| {
@@ -1133,10 +1268,26 @@ impl Writer {
         Self::on(path, file)
     }
 
+    /// Creates (or truncates) the file at `path` with chunks compressed at zstd level
+    /// `level` (0: zstd's default, 3), and writes the MCAP header: for measuring the cost of
+    /// the level (`examples/encoding_cost.rs`).
+    pub fn create_tuned(path: impl AsRef<Path>, level: u32) -> Result<Self> {
+        let path = path.as_ref();
+        let file = File::create(path).map_err(|e| Error::io(path, e))?;
+        Self::with_options(path, file, level)
+    }
+
     /// Writes the MCAP header to `file`, newly created at `path`.
     fn on(path: &Path, file: File) -> Result<Self> {
+        Self::with_options(path, file, 0)
+    }
+
+    /// Writes the MCAP header to `file`, newly created at `path`, for chunks compressed at
+    /// zstd level `level`.
+    fn with_options(path: &Path, file: File, level: u32) -> Result<Self> {
         let inner = WriteOptions::new()
             .compression(Some(Compression::Zstd))
+            .compression_level(level)
             .create(BufWriter::new(file))
             .map_err(|e| Error::file(path, ErrorKind::Mcap(e)))?;
         Ok(Self {
@@ -1919,6 +2070,14 @@ mod tests {
         writer.finish().unwrap();
 
         let contents = read_all(&path).unwrap();
+        // Protobuf records corrected samples and states at their quanta; JSON as they are.
+        let (corrected, odometry): (Vec<_>, Vec<_>) = match encoding {
+            MessageEncoding::Protobuf => (
+                corrected.iter().map(Topic::as_recorded).collect(),
+                odometry.iter().map(Topic::as_recorded).collect(),
+            ),
+            MessageEncoding::Json => (corrected, odometry),
+        };
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(contents.corrected.len(), 50);
         for (a, b) in contents.corrected.iter().zip(&corrected) {
@@ -2075,13 +2234,21 @@ mod tests {
         );
     }
 
-    /// Protobuf keeps NaN and infinity as they are, bit for bit.
+    /// Protobuf keeps NaN and infinity: a raw sample's values bit for bit (they are not what
+    /// the counts give, so they are written as `double`s), a state's as `float`s.
     #[test]
     fn protobuf_keeps_non_finite_values() {
         let path = tmp("nan-protobuf.mcap");
         let mut writer = Writer::create(&path).unwrap();
+        let r = writer.add_channel::<RawImuSample>().unwrap();
         let o = writer.add_channel::<OdometryState>().unwrap();
         let nan = f64::from_bits(0x7ff8_0000_dead_beef);
+        let raw = RawImuSample {
+            accel_g: [nan, f64::INFINITY, -0.0],
+            temp_c: f64::NEG_INFINITY,
+            ..RawImuSample::default()
+        };
+        writer.write(r, &raw, 0).unwrap();
         let state = OdometryState {
             distance_m: nan,
             position_m: [f64::INFINITY, f64::NEG_INFINITY, -0.0],
@@ -2089,9 +2256,27 @@ mod tests {
         };
         writer.write(o, &state, 0).unwrap();
         writer.finish().unwrap();
-        let read = read_all(&path).unwrap().odometry;
-        assert_eq!(read[0].distance_m.to_bits(), nan.to_bits());
-        let bits = read[0].position_m.map(f64::to_bits);
+        let reader = Reader::open(&path).unwrap();
+        let mut messages = reader.messages().unwrap().map(Result::unwrap);
+        let back = messages
+            .next()
+            .unwrap()
+            .decode::<RawImuSample>()
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            back.accel_g.map(f64::to_bits),
+            raw.accel_g.map(f64::to_bits)
+        );
+        assert_eq!(back.temp_c, f64::NEG_INFINITY);
+        let back = messages
+            .next()
+            .unwrap()
+            .decode::<OdometryState>()
+            .unwrap()
+            .unwrap();
+        assert!(back.distance_m.is_nan());
+        let bits = back.position_m.map(f64::to_bits);
         assert_eq!(bits, state.position_m.map(f64::to_bits));
         std::fs::remove_file(&path).unwrap();
     }

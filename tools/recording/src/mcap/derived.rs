@@ -1,12 +1,14 @@
 //! The Foxglove messages derived from odometry states, one mapping for the recording
 //! (`mems-record`) and the live view (`mems-foxglove`), in Foxglove's protobuf schemas (its
 //! SDK's messages):
-//! - the pose ([`POSE_TOPIC`], `foxglove.PoseInFrame`, frame [`NAV_FRAME`]) of each live state;
-//! - the revised pose ([`REVISED_POSE_TOPIC`], `foxglove.PoseInFrame`) of each state
-//!   republished with `REVISION` (history corrected in hindsight), apart, so the live pose's
-//!   times never go back;
+//! - the pose ([`POSE_TOPIC`], `foxglove.PoseInFrame`, frame [`NAV_FRAME`]) of the first live
+//!   state in each [`DISPLAY_STEP_NS`] of sample time (50 Hz: these topics are for display;
+//!   every state, at full rate, is on the state topic);
+//! - the revised pose ([`REVISED_POSE_TOPIC`], `foxglove.PoseInFrame`) of states republished
+//!   with `REVISION` (history corrected in hindsight), likewise the first in each
+//!   [`DISPLAY_STEP_NS`] of a run of revisions, apart, so the live pose's times never go back;
 //! - the transform ([`TF_TOPIC`], `foxglove.FrameTransform`) [`NAV_FRAME`] -> [`BODY_FRAME`]
-//!   at each live state, for the 3D panel;
+//!   with each pose, for the 3D panel;
 //! - the path ([`PATH_TOPIC`], `foxglove.PosesInFrame`): the aligned track, one pose per
 //!   [`PATH_STEP_NS`] of sample time, the last [`PATH_LEN`] of them, sent every
 //!   [`PATH_EVERY_NS`].
@@ -28,7 +30,7 @@ use foxglove::messages::{
 };
 use ipc_types::{OdometryState, odometry_flags};
 
-use super::{FoxgloveChannel, Writer};
+use super::{FoxgloveChannel, Topic, Writer};
 use crate::clock::WallClock;
 
 /// Topic of the live states' poses.
@@ -43,6 +45,10 @@ pub const PATH_TOPIC: &str = "mems/odometry/path";
 pub const NAV_FRAME: &str = super::NAV_FRAME;
 /// The sensor body's frame id.
 pub const BODY_FRAME: &str = "body";
+/// The display step of the pose, revised pose and transform: one per this much sample
+/// time, ns (50 Hz, above the rate at which Foxglove redraws a panel and a twentieth of
+/// the 1 kHz state rate).
+pub const DISPLAY_STEP_NS: u64 = 20_000_000;
 /// Sample time between two poses of the path, ns.
 pub const PATH_STEP_NS: u64 = 100_000_000;
 /// Poses kept in the path.
@@ -63,9 +69,11 @@ pub enum Out<'a> {
     Path(&'a PosesInFrame),
 }
 
-/// The pose of a state: its position and attitude (`attitude_wxyz` reordered to Foxglove's
-/// x, y, z, w).
+/// The pose of a state: its position and attitude as a recording holds them
+/// ([`Topic::as_recorded`]: the pose shows the state topic's values), `attitude_wxyz`
+/// reordered to Foxglove's x, y, z, w.
 pub fn pose_of(s: &OdometryState) -> Pose {
+    let s = s.as_recorded();
     let [x, y, z] = s.position_m;
     let [w, qx, qy, qz] = s.attitude_wxyz;
     Pose {
@@ -88,6 +96,9 @@ pub struct Derived {
     poses: VecDeque<Pose>,
     last_path_pose_ns: Option<u64>,
     last_path_sent_ns: Option<u64>,
+    /// The display step ([`DISPLAY_STEP_NS`]) of the last pose and of the last revised pose.
+    last_pose_step: Option<u64>,
+    last_revised_step: Option<u64>,
 }
 
 impl Derived {
@@ -112,6 +123,8 @@ impl Derived {
             poses: VecDeque::with_capacity(PATH_LEN),
             last_path_pose_ns: None,
             last_path_sent_ns: None,
+            last_pose_step: None,
+            last_revised_step: None,
         }
     }
 
@@ -121,8 +134,9 @@ impl Derived {
         super::FoxgloveTime::from_ns(t).foxglove()
     }
 
-    /// Gives `emit` the messages derived from state `s`: its revised pose if it is a revision;
-    /// otherwise its pose, its transform and, once aligned, the path when it is due.
+    /// Gives `emit` the messages derived from state `s`: if it is a revision, its revised
+    /// pose when it is the first in its display step; otherwise its pose and its transform
+    /// when it is the first in its display step and, once aligned, the path when it is due.
     pub fn state<E>(
         &mut self,
         s: &OdometryState,
@@ -131,16 +145,32 @@ impl Derived {
         let t_ns = s.stamps.sample_ns;
         let pose = pose_of(s);
         let timestamp = Some(self.timestamp(t_ns));
-        self.pose.timestamp = timestamp;
-        self.pose.pose = Some(pose);
-        if s.flags & odometry_flags::REVISION != 0 {
-            return emit(Out::RevisedPose(&self.pose));
+        let step = t_ns / DISPLAY_STEP_NS;
+        let revision = s.flags & odometry_flags::REVISION != 0;
+        let last_step = if revision {
+            &mut self.last_revised_step
+        } else {
+            &mut self.last_pose_step
+        };
+        let shown = last_step.replace(step) != Some(step);
+        if shown {
+            self.pose.timestamp = timestamp;
+            self.pose.pose = Some(pose);
         }
-        emit(Out::Pose(&self.pose))?;
-        self.tf.timestamp = timestamp;
-        self.tf.translation = pose.position;
-        self.tf.rotation = pose.orientation;
-        emit(Out::Tf(&self.tf))?;
+        if revision {
+            return if shown {
+                emit(Out::RevisedPose(&self.pose))
+            } else {
+                Ok(())
+            };
+        }
+        if shown {
+            emit(Out::Pose(&self.pose))?;
+            self.tf.timestamp = timestamp;
+            self.tf.translation = pose.position;
+            self.tf.rotation = pose.orientation;
+            emit(Out::Tf(&self.tf))?;
+        }
         if s.flags & odometry_flags::ALIGNED == 0 {
             return Ok(());
         }

@@ -3,10 +3,15 @@
 //! schema of each channel (schema encoding `protobuf`), so that Foxglove and the official
 //! readers (`mcap-protobuf-support`) decode them.
 //!
-//! Field names and numbers follow the JSON form (the same names, numbered in the same order);
-//! fixed-size arrays are `repeated` (packed) fields holding exactly their length, `i16` counts
-//! are `sint32`, `u16` flags are `uint32`, and an absent sequence number of a recorder event
-//! is an unset `optional`. Floats are `double`, so every `f64` reads back bit for bit.
+//! Field names follow the JSON form, numbered in its order; fixed-size arrays are `repeated`
+//! (packed) fields holding exactly their length, `i16` counts are `sint32`, `u16` flags are
+//! `uint32`, and an absent sequence number of a recorder event is an unset `optional`.
+//! Precision (docs/recording.md, "Precision"): time stamps and counts are exact; a raw
+//! sample's scaled values are not written when they are exactly what its counts give (the
+//! sensitivity is, and the reader computes them bit for bit); the corrected samples' and the
+//! odometry states' quantities are `float` under new field numbers, their older `double`
+//! numbers reserved (older recordings hold them, and the structs still read them); hints and
+//! ground truth are `double`.
 //!
 //! The descriptor is built here from one table per message rather than compiled from a
 //! `.proto` file: prost's code generator needs `protoc` at build time, and the table is what
@@ -17,6 +22,7 @@
 // documented there.
 #![allow(missing_docs)]
 
+use prost_types::descriptor_proto::ReservedRange;
 use prost_types::field_descriptor_proto::{Label, Type};
 use prost_types::{
     DescriptorProto, FieldDescriptorProto, FileDescriptorProto, FileDescriptorSet,
@@ -36,7 +42,10 @@ pub struct Stamps {
     pub odometry_ns: u64,
 }
 
-/// [`ipc_types::RawImuSample`].
+/// [`ipc_types::RawImuSample`]. The scaled values are written only when they are not
+/// exactly what the counts give: `accel_g` when it is not `accel_counts / accel_lsb_per_g`
+/// (then `accel_lsb_per_g` is 0), likewise `gyro_dps` with `gyro_lsb_per_dps`, and `temp_c`
+/// when `temp_from_counts` is false. Older recordings hold every value and no sensitivity.
 #[derive(Clone, PartialEq, prost::Message)]
 pub struct RawImuSample {
     #[prost(message, optional, tag = 1)]
@@ -47,8 +56,8 @@ pub struct RawImuSample {
     pub accel_g: Vec<f64>,
     #[prost(double, repeated, tag = 4)]
     pub gyro_dps: Vec<f64>,
-    #[prost(double, tag = 5)]
-    pub temp_c: f64,
+    #[prost(double, optional, tag = 5)]
+    pub temp_c: Option<f64>,
     #[prost(sint32, repeated, tag = 6)]
     pub accel_counts: Vec<i32>,
     #[prost(sint32, repeated, tag = 7)]
@@ -61,9 +70,19 @@ pub struct RawImuSample {
     pub lost_before: u32,
     #[prost(uint32, tag = 11)]
     pub undelivered: u32,
+    /// Counts per g that `accel_g` is derived with; 0 when `accel_g` is written.
+    #[prost(double, tag = 12)]
+    pub accel_lsb_per_g: f64,
+    /// Counts per deg/s that `gyro_dps` is derived with; 0 when `gyro_dps` is written.
+    #[prost(double, tag = 13)]
+    pub gyro_lsb_per_dps: f64,
+    /// `temp_c` is `temp_counts / 333.87 + 21` ([`ipc_types::units::temp_c_from_counts`]).
+    #[prost(bool, tag = 14)]
+    pub temp_from_counts: bool,
 }
 
-/// [`ipc_types::CorrectedImuSample`].
+/// [`ipc_types::CorrectedImuSample`]: `float`s under new tags (12-16); older recordings hold
+/// `double`s under tags 3-7 (the `*_f64` fields), read when the `float` ones are absent.
 #[derive(Clone, PartialEq, prost::Message)]
 pub struct CorrectedImuSample {
     #[prost(message, optional, tag = 1)]
@@ -71,15 +90,15 @@ pub struct CorrectedImuSample {
     #[prost(uint64, tag = 2)]
     pub seq: u64,
     #[prost(double, repeated, tag = 3)]
-    pub accel_mps2: Vec<f64>,
+    pub accel_mps2_f64: Vec<f64>,
     #[prost(double, repeated, tag = 4)]
-    pub gyro_rps: Vec<f64>,
+    pub gyro_rps_f64: Vec<f64>,
     #[prost(double, tag = 5)]
-    pub temp_c: f64,
+    pub temp_c_f64: f64,
     #[prost(double, repeated, tag = 6)]
-    pub zs_mean_mps2: Vec<f64>,
+    pub zs_mean_mps2_f64: Vec<f64>,
     #[prost(double, repeated, tag = 7)]
-    pub zs_std_mps2: Vec<f64>,
+    pub zs_std_mps2_f64: Vec<f64>,
     #[prost(uint64, tag = 8)]
     pub calib_id: u64,
     #[prost(uint32, tag = 9)]
@@ -88,9 +107,20 @@ pub struct CorrectedImuSample {
     pub raw_flags: u32,
     #[prost(uint32, tag = 11)]
     pub settles: u32,
+    #[prost(float, repeated, tag = 12)]
+    pub accel_mps2: Vec<f32>,
+    #[prost(float, repeated, tag = 13)]
+    pub gyro_rps: Vec<f32>,
+    #[prost(float, optional, tag = 14)]
+    pub temp_c: Option<f32>,
+    #[prost(float, repeated, tag = 15)]
+    pub zs_mean_mps2: Vec<f32>,
+    #[prost(float, repeated, tag = 16)]
+    pub zs_std_mps2: Vec<f32>,
 }
 
-/// [`ipc_types::OdometryState`].
+/// [`ipc_types::OdometryState`]: `float`s under new tags (15-21); older recordings hold
+/// `double`s under tags 3-9 (the `*_f64` fields), read when the `float` ones are absent.
 #[derive(Clone, PartialEq, prost::Message)]
 pub struct OdometryState {
     #[prost(message, optional, tag = 1)]
@@ -98,19 +128,19 @@ pub struct OdometryState {
     #[prost(uint64, tag = 2)]
     pub seq: u64,
     #[prost(double, repeated, tag = 3)]
-    pub position_m: Vec<f64>,
+    pub position_m_f64: Vec<f64>,
     #[prost(double, repeated, tag = 4)]
-    pub position_sigma_m: Vec<f64>,
+    pub position_sigma_m_f64: Vec<f64>,
     #[prost(double, repeated, tag = 5)]
-    pub velocity_mps: Vec<f64>,
+    pub velocity_mps_f64: Vec<f64>,
     #[prost(double, repeated, tag = 6)]
-    pub velocity_sigma_mps: Vec<f64>,
+    pub velocity_sigma_mps_f64: Vec<f64>,
     #[prost(double, repeated, tag = 7)]
-    pub gravity_sensor_mps2: Vec<f64>,
+    pub gravity_sensor_mps2_f64: Vec<f64>,
     #[prost(double, repeated, tag = 8)]
-    pub attitude_wxyz: Vec<f64>,
+    pub attitude_wxyz_f64: Vec<f64>,
     #[prost(double, tag = 9)]
-    pub distance_m: f64,
+    pub distance_m_f64: f64,
     #[prost(uint32, tag = 10)]
     pub flags: u32,
     #[prost(uint32, tag = 11)]
@@ -121,6 +151,20 @@ pub struct OdometryState {
     pub hints_applied: u32,
     #[prost(uint32, tag = 14)]
     pub hint_disagreements: u32,
+    #[prost(float, repeated, tag = 15)]
+    pub position_m: Vec<f32>,
+    #[prost(float, repeated, tag = 16)]
+    pub position_sigma_m: Vec<f32>,
+    #[prost(float, repeated, tag = 17)]
+    pub velocity_mps: Vec<f32>,
+    #[prost(float, repeated, tag = 18)]
+    pub velocity_sigma_mps: Vec<f32>,
+    #[prost(float, repeated, tag = 19)]
+    pub gravity_sensor_mps2: Vec<f32>,
+    #[prost(float, repeated, tag = 20)]
+    pub attitude_wxyz: Vec<f32>,
+    #[prost(float, optional, tag = 21)]
+    pub distance_m: Option<f32>,
 }
 
 /// [`ipc_types::RobotHint`].
@@ -191,135 +235,162 @@ enum Kind {
     Str,
     /// `repeated double`.
     F64s,
+    /// `repeated float`.
+    F32s,
     /// `repeated sint32`.
     S32s,
     /// `optional uint64` (proto3 explicit presence).
     OptU64,
+    /// `optional double`.
+    OptF64,
+    /// `optional float`.
+    OptF32,
     /// The `mems.Stamps` message.
     Stamps,
 }
 
-/// Each message's fields in tag order (tag = position + 1), as the structs above declare them.
-const MESSAGES: &[(&str, &[(&str, Kind)])] = {
+/// One message of the descriptor: its name, its fields (name, number, kind) as the structs
+/// above write them, and the numbers it no longer writes (those of older recordings' `double`
+/// fields, which the structs still read).
+struct Table {
+    name: &'static str,
+    fields: &'static [(&'static str, i32, Kind)],
+    reserved: Option<(i32, i32)>,
+}
+
+/// Every message of `mems.proto`.
+const MESSAGES: &[Table] = {
     use Kind::*;
     &[
-        (
-            "Stamps",
-            &[
-                ("sample_ns", U64),
-                ("acquired_ns", U64),
-                ("calibrated_ns", U64),
-                ("odometry_ns", U64),
+        Table {
+            name: "Stamps",
+            fields: &[
+                ("sample_ns", 1, U64),
+                ("acquired_ns", 2, U64),
+                ("calibrated_ns", 3, U64),
+                ("odometry_ns", 4, U64),
             ],
-        ),
-        (
-            "RawImuSample",
-            &[
-                ("stamps", Stamps),
-                ("seq", U64),
-                ("accel_g", F64s),
-                ("gyro_dps", F64s),
-                ("temp_c", F64),
-                ("accel_counts", S32s),
-                ("gyro_counts", S32s),
-                ("temp_counts", S32),
-                ("flags", U32),
-                ("lost_before", U32),
-                ("undelivered", U32),
+            reserved: None,
+        },
+        Table {
+            name: "RawImuSample",
+            fields: &[
+                ("stamps", 1, Stamps),
+                ("seq", 2, U64),
+                ("accel_g", 3, F64s),
+                ("gyro_dps", 4, F64s),
+                ("temp_c", 5, OptF64),
+                ("accel_counts", 6, S32s),
+                ("gyro_counts", 7, S32s),
+                ("temp_counts", 8, S32),
+                ("flags", 9, U32),
+                ("lost_before", 10, U32),
+                ("undelivered", 11, U32),
+                ("accel_lsb_per_g", 12, F64),
+                ("gyro_lsb_per_dps", 13, F64),
+                ("temp_from_counts", 14, Bool),
             ],
-        ),
-        (
-            "CorrectedImuSample",
-            &[
-                ("stamps", Stamps),
-                ("seq", U64),
-                ("accel_mps2", F64s),
-                ("gyro_rps", F64s),
-                ("temp_c", F64),
-                ("zs_mean_mps2", F64s),
-                ("zs_std_mps2", F64s),
-                ("calib_id", U64),
-                ("flags", U32),
-                ("raw_flags", U32),
-                ("settles", U32),
+            reserved: None,
+        },
+        Table {
+            name: "CorrectedImuSample",
+            fields: &[
+                ("stamps", 1, Stamps),
+                ("seq", 2, U64),
+                ("calib_id", 8, U64),
+                ("flags", 9, U32),
+                ("raw_flags", 10, U32),
+                ("settles", 11, U32),
+                ("accel_mps2", 12, F32s),
+                ("gyro_rps", 13, F32s),
+                ("temp_c", 14, OptF32),
+                ("zs_mean_mps2", 15, F32s),
+                ("zs_std_mps2", 16, F32s),
             ],
-        ),
-        (
-            "OdometryState",
-            &[
-                ("stamps", Stamps),
-                ("seq", U64),
-                ("position_m", F64s),
-                ("position_sigma_m", F64s),
-                ("velocity_mps", F64s),
-                ("velocity_sigma_mps", F64s),
-                ("gravity_sensor_mps2", F64s),
-                ("attitude_wxyz", F64s),
-                ("distance_m", F64),
-                ("flags", U32),
-                ("reserved16", U32),
-                ("rest_count", U32),
-                ("hints_applied", U32),
-                ("hint_disagreements", U32),
+            reserved: Some((3, 7)),
+        },
+        Table {
+            name: "OdometryState",
+            fields: &[
+                ("stamps", 1, Stamps),
+                ("seq", 2, U64),
+                ("flags", 10, U32),
+                ("reserved16", 11, U32),
+                ("rest_count", 12, U32),
+                ("hints_applied", 13, U32),
+                ("hint_disagreements", 14, U32),
+                ("position_m", 15, F32s),
+                ("position_sigma_m", 16, F32s),
+                ("velocity_mps", 17, F32s),
+                ("velocity_sigma_mps", 18, F32s),
+                ("gravity_sensor_mps2", 19, F32s),
+                ("attitude_wxyz", 20, F32s),
+                ("distance_m", 21, OptF32),
             ],
-        ),
-        (
-            "RobotHint",
-            &[
-                ("stamps", Stamps),
-                ("seq", U64),
-                ("forward_speed_mps", F64),
-                ("forward_speed_sigma_mps", F64),
-                ("yaw_rate_rps", F64),
-                ("yaw_rate_sigma_rps", F64),
-                ("flags", U32),
-                ("reserved16", U32),
-                ("reserved", U32),
+            reserved: Some((3, 9)),
+        },
+        Table {
+            name: "RobotHint",
+            fields: &[
+                ("stamps", 1, Stamps),
+                ("seq", 2, U64),
+                ("forward_speed_mps", 3, F64),
+                ("forward_speed_sigma_mps", 4, F64),
+                ("yaw_rate_rps", 5, F64),
+                ("yaw_rate_sigma_rps", 6, F64),
+                ("flags", 7, U32),
+                ("reserved16", 8, U32),
+                ("reserved", 9, U32),
             ],
-        ),
-        (
-            "Truth",
-            &[
-                ("t_ns", U64),
-                ("position_m", F64s),
-                ("velocity_mps", F64s),
-                ("attitude_wxyz", F64s),
-                ("specific_force_mps2", F64s),
-                ("angular_rate_rps", F64s),
-                ("at_rest", Bool),
+            reserved: None,
+        },
+        Table {
+            name: "Truth",
+            fields: &[
+                ("t_ns", 1, U64),
+                ("position_m", 2, F64s),
+                ("velocity_mps", 3, F64s),
+                ("attitude_wxyz", 4, F64s),
+                ("specific_force_mps2", 5, F64s),
+                ("angular_rate_rps", 6, F64s),
+                ("at_rest", 7, Bool),
             ],
-        ),
-        (
-            "RecorderEvent",
-            &[
-                ("kind", Str),
-                ("service", Str),
-                ("from_seq", OptU64),
-                ("to_seq", OptU64),
-                ("t_ns", U64),
+            reserved: None,
+        },
+        Table {
+            name: "RecorderEvent",
+            fields: &[
+                ("kind", 1, Str),
+                ("service", 2, Str),
+                ("from_seq", 3, OptU64),
+                ("to_seq", 4, OptU64),
+                ("t_ns", 5, U64),
             ],
-        ),
+            reserved: None,
+        },
     ]
 };
 
 /// The descriptor of one message of [`MESSAGES`].
-fn message(name: &str, fields: &[(&str, Kind)]) -> DescriptorProto {
+fn message(table: &Table) -> DescriptorProto {
     let mut oneofs = Vec::new();
-    let field = |(number, &(field_name, kind)): (usize, &(&str, Kind))| {
+    let field = |&(field_name, number, kind): &(&str, i32, Kind)| {
         let (label, ty) = match kind {
             Kind::U64 | Kind::OptU64 => (Label::Optional, Type::Uint64),
             Kind::U32 => (Label::Optional, Type::Uint32),
             Kind::S32 => (Label::Optional, Type::Sint32),
-            Kind::F64 => (Label::Optional, Type::Double),
+            Kind::F64 | Kind::OptF64 => (Label::Optional, Type::Double),
+            Kind::OptF32 => (Label::Optional, Type::Float),
             Kind::Bool => (Label::Optional, Type::Bool),
             Kind::Str => (Label::Optional, Type::String),
             Kind::F64s => (Label::Repeated, Type::Double),
+            Kind::F32s => (Label::Repeated, Type::Float),
             Kind::S32s => (Label::Repeated, Type::Sint32),
             Kind::Stamps => (Label::Optional, Type::Message),
         };
         let mut f = FieldDescriptorProto {
             name: Some(field_name.into()),
-            number: Some(number as i32 + 1),
+            number: Some(number),
             label: Some(label as i32),
             r#type: Some(ty as i32),
             json_name: Some(field_name.into()),
@@ -328,7 +399,7 @@ fn message(name: &str, fields: &[(&str, Kind)]) -> DescriptorProto {
         if let Kind::Stamps = kind {
             f.type_name = Some(".mems.Stamps".into());
         }
-        if let Kind::OptU64 = kind {
+        if let Kind::OptU64 | Kind::OptF64 | Kind::OptF32 = kind {
             // proto3 `optional`: a synthetic one-field oneof named `_NAME`.
             f.proto3_optional = Some(true);
             f.oneof_index = Some(oneofs.len() as i32);
@@ -339,11 +410,21 @@ fn message(name: &str, fields: &[(&str, Kind)]) -> DescriptorProto {
         }
         f
     };
-    let field = fields.iter().enumerate().map(field).collect();
+    let field = table.fields.iter().map(field).collect();
+    // A reserved range's end is exclusive in the descriptor.
+    let reserved_range = table
+        .reserved
+        .map(|(start, end)| ReservedRange {
+            start: Some(start),
+            end: Some(end + 1),
+        })
+        .into_iter()
+        .collect();
     DescriptorProto {
-        name: Some(name.into()),
+        name: Some(table.name.into()),
         field,
         oneof_decl: oneofs,
+        reserved_range,
         ..Default::default()
     }
 }
@@ -354,7 +435,7 @@ pub fn file_descriptor_set() -> Vec<u8> {
     let file = FileDescriptorProto {
         name: Some("mems.proto".into()),
         package: Some("mems".into()),
-        message_type: MESSAGES.iter().map(|(n, f)| message(n, f)).collect(),
+        message_type: MESSAGES.iter().map(message).collect(),
         syntax: Some("proto3".into()),
         ..Default::default()
     };
@@ -387,6 +468,79 @@ where
             .map_err(|_| format!("field {name}: {v} is out of range"))?;
     }
     Ok(out)
+}
+
+/// `value` rounded to the nearest multiple of `quantum` (a power of two), as a `float`:
+/// exact while `|value| < 2^24 quantum`, beyond that `float`'s own rounding of it. NaN and
+/// infinities stay what they are.
+pub fn quantize(value: f64, quantum: f64) -> f32 {
+    ((value / quantum).round() * quantum) as f32
+}
+
+/// [`quantize`]d `values` into `out`, keeping its storage.
+pub fn fill_f32(out: &mut Vec<f32>, values: &[f64], quantum: f64) {
+    out.clear();
+    out.extend(values.iter().map(|&v| quantize(v, quantum)));
+}
+
+/// The `N` values of field `name`: its `float`s (`values`, widened exactly), or in an older
+/// recording its `double`s (`older`, the field's former number); errors unless exactly one
+/// of them holds exactly `N`.
+pub fn array_f32<const N: usize>(
+    name: &str,
+    values: &[f32],
+    older: &[f64],
+) -> Result<[f64; N], String> {
+    if values.is_empty() {
+        return array(name, older);
+    }
+    if !older.is_empty() {
+        return Err(format!("field {name} holds both float and double values"));
+    }
+    let values: [f32; N] = array(name, values)?;
+    Ok(values.map(f64::from))
+}
+
+/// A `float` scalar widened exactly, or in an older recording its `double` (0 when neither
+/// is present, as proto3 writes 0).
+pub fn scalar_f32(value: Option<f32>, older: f64) -> f64 {
+    value.map_or(older, f64::from)
+}
+
+/// The sensitivity (counts per unit) among `last` and then `candidates` with which `values`
+/// are exactly `counts / sensitivity`, bit for bit, as the driver computes them; 0 if none
+/// is (the values are then written).
+pub fn sensitivity(
+    values: &[f64; 3],
+    counts: &[i16; 3],
+    last: f64,
+    candidates: impl IntoIterator<Item = f64>,
+) -> f64 {
+    let exact = |lsb: f64| {
+        lsb != 0.0
+            && values
+                .iter()
+                .zip(counts)
+                .all(|(v, &c)| (f64::from(c) / lsb).to_bits() == v.to_bits())
+    };
+    std::iter::once(last)
+        .chain(candidates)
+        .find(|&lsb| exact(lsb))
+        .unwrap_or(0.0)
+}
+
+/// The values of field `name`: those written, or `counts / sensitivity` when none are (an
+/// error if neither is).
+pub fn scaled(
+    name: &str,
+    values: &[f64],
+    counts: &[i16; 3],
+    sensitivity: f64,
+) -> Result<[f64; 3], String> {
+    if values.is_empty() && sensitivity != 0.0 {
+        return Ok(counts.map(|c| f64::from(c) / sensitivity));
+    }
+    array(name, values)
 }
 
 /// `value` as a `T`, or an error naming field `name`.
@@ -426,14 +580,35 @@ mod tests {
     use super::*;
     use prost::Message;
 
-    /// The table and the structs agree: a struct whose every field is set encodes, field by
-    /// field, to the numbers and wire types the descriptor gives (each field decoded alone
-    /// as the descriptor's type).
+    /// The (number, wire type) of each field message `name` of the descriptor declares, and
+    /// its reserved numbers.
+    fn described(set: &FileDescriptorSet, name: &str) -> (Vec<(u32, u32)>, Vec<u32>) {
+        let m = set.file[0]
+            .message_type
+            .iter()
+            .find(|m| m.name() == name)
+            .unwrap();
+        let fields = m
+            .field
+            .iter()
+            .map(|f| (f.number() as u32, wire_type(f)))
+            .collect();
+        let reserved = m
+            .reserved_range
+            .iter()
+            .flat_map(|r| r.start() as u32..r.end() as u32)
+            .collect();
+        (fields, reserved)
+    }
+
+    /// The table and the structs agree: what the writer fills in encodes, field by field, to
+    /// the numbers and wire types the descriptor gives, and the numbers of older recordings'
+    /// `double`s are reserved, not reused.
     #[test]
     fn descriptor_numbers_match_the_structs() {
+        use crate::mcap::Topic;
         let set = FileDescriptorSet::decode(file_descriptor_set().as_slice()).unwrap();
-        let file = &set.file[0];
-        let names: Vec<&str> = file.message_type.iter().map(|m| m.name()).collect();
+        let names: Vec<&str> = set.file[0].message_type.iter().map(|m| m.name()).collect();
         assert_eq!(
             names,
             [
@@ -446,27 +621,157 @@ mod tests {
                 "RecorderEvent"
             ]
         );
-        let raw = RawImuSample {
-            stamps: Some(Stamps::default()),
+        let ones = |n: f64| [n; 3];
+        // Values the counts do not give, so that every field of the raw sample is written.
+        let raw = ipc_types::RawImuSample {
             seq: 1,
-            accel_g: vec![1.0; 3],
-            gyro_dps: vec![1.0; 3],
-            temp_c: 1.0,
-            accel_counts: vec![-1; 3],
-            gyro_counts: vec![-1; 3],
+            accel_g: ones(0.1),
+            gyro_dps: ones(0.1),
+            temp_c: 0.1,
+            accel_counts: [-1; 3],
+            gyro_counts: [-1; 3],
             temp_counts: -1,
             flags: 1,
             lost_before: 1,
             undelivered: 1,
+            ..Default::default()
         };
-        let bytes = raw.encode_to_vec();
-        let tags = field_tags(&bytes);
-        let described: Vec<(u32, u32)> = file.message_type[1]
-            .field
-            .iter()
-            .map(|f| (f.number() as u32, wire_type(f)))
-            .collect();
-        assert_eq!(tags, described);
+        let mut p = RawImuSample::default();
+        raw.fill_proto(&mut p);
+        let (fields, _) = described(&set, "RawImuSample");
+        assert_eq!(field_tags(&p.encode_to_vec()), fields[..11]);
+        // Values the counts give: the sensitivities instead of the values.
+        let raw = ipc_types::RawImuSample {
+            accel_g: ones(-1.0 / 16384.0),
+            gyro_dps: ones(-1.0 / 131.0),
+            temp_c: ipc_types::units::temp_c_from_counts(-1),
+            ..raw
+        };
+        raw.fill_proto(&mut p);
+        let written = [&fields[..2], &fields[5..]].concat();
+        assert_eq!(field_tags(&p.encode_to_vec()), written);
+
+        let corrected = ipc_types::CorrectedImuSample {
+            seq: 1,
+            accel_mps2: ones(1.0),
+            gyro_rps: ones(1.0),
+            temp_c: 1.0,
+            zs_mean_mps2: ones(1.0),
+            zs_std_mps2: ones(1.0),
+            calib_id: 1,
+            flags: 1,
+            raw_flags: 1,
+            settles: 1,
+            ..Default::default()
+        };
+        let mut p = CorrectedImuSample::default();
+        corrected.fill_proto(&mut p);
+        let (fields, reserved) = described(&set, "CorrectedImuSample");
+        let mut tags = field_tags(&p.encode_to_vec());
+        tags.sort();
+        assert_eq!(tags, fields);
+        assert_eq!(reserved, [3, 4, 5, 6, 7]);
+
+        let state = ipc_types::OdometryState {
+            seq: 1,
+            position_m: ones(1.0),
+            position_sigma_m: ones(1.0),
+            velocity_mps: ones(1.0),
+            velocity_sigma_mps: ones(1.0),
+            gravity_sensor_mps2: ones(1.0),
+            attitude_wxyz: [1.0; 4],
+            distance_m: 1.0,
+            flags: 1,
+            reserved16: 1,
+            rest_count: 1,
+            hints_applied: 1,
+            hint_disagreements: 1,
+            ..Default::default()
+        };
+        let mut p = OdometryState::default();
+        state.fill_proto(&mut p);
+        let (fields, reserved) = described(&set, "OdometryState");
+        let mut tags = field_tags(&p.encode_to_vec());
+        tags.sort();
+        assert_eq!(tags, fields);
+        assert_eq!(reserved, [3, 4, 5, 6, 7, 8, 9]);
+    }
+
+    /// A raw sample whose values are what its counts give writes none of them, and reads
+    /// them back bit for bit; one whose values are not (a repaired sample, a thesis file)
+    /// writes them. Every sensitivity of the part is found.
+    #[test]
+    fn raw_values_are_rebuilt_from_the_counts_bit_for_bit() {
+        use crate::mcap::Topic;
+        use ipc_types::units::{AccelRange, GyroRange, temp_c_from_counts};
+        let accel = [
+            AccelRange::G2,
+            AccelRange::G4,
+            AccelRange::G8,
+            AccelRange::G16,
+        ];
+        let gyro = [
+            GyroRange::Dps250,
+            GyroRange::Dps500,
+            GyroRange::Dps1000,
+            GyroRange::Dps2000,
+        ];
+        let mut p = RawImuSample::default();
+        for (a, g) in accel.into_iter().zip(gyro) {
+            for c in [i16::MIN, -12345, -1, 0, 1, 7, 16384, i16::MAX] {
+                let counts = [c, c.wrapping_add(1), c.wrapping_mul(3)];
+                let raw = ipc_types::RawImuSample {
+                    accel_g: counts.map(|c| f64::from(c) / a.lsb_per_g()),
+                    gyro_dps: counts.map(|c| f64::from(c) / g.lsb_per_dps()),
+                    temp_c: temp_c_from_counts(c),
+                    accel_counts: counts,
+                    gyro_counts: counts,
+                    temp_counts: c,
+                    ..Default::default()
+                };
+                raw.fill_proto(&mut p);
+                assert!(p.accel_g.is_empty() && p.gyro_dps.is_empty() && p.temp_c.is_none());
+                let back = ipc_types::RawImuSample::from_proto(p.clone()).unwrap();
+                assert_eq!(
+                    back.accel_g.map(f64::to_bits),
+                    raw.accel_g.map(f64::to_bits)
+                );
+                assert_eq!(
+                    back.gyro_dps.map(f64::to_bits),
+                    raw.gyro_dps.map(f64::to_bits)
+                );
+                assert_eq!(back.temp_c.to_bits(), raw.temp_c.to_bits());
+                let off = ipc_types::RawImuSample {
+                    accel_g: [raw.accel_g[0], raw.accel_g[1], raw.accel_g[2] + 1e-9],
+                    temp_c: -0.0,
+                    ..raw
+                };
+                off.fill_proto(&mut p);
+                assert_eq!((p.accel_lsb_per_g, p.accel_g.len()), (0.0, 3));
+                let back = ipc_types::RawImuSample::from_proto(p.clone()).unwrap();
+                assert_eq!(
+                    back.accel_g.map(f64::to_bits),
+                    off.accel_g.map(f64::to_bits)
+                );
+                assert_eq!(back.temp_c.to_bits(), (-0.0f64).to_bits());
+            }
+        }
+    }
+
+    /// A value is recorded at its quantum: a multiple of it, the nearest, exactly; -0.0,
+    /// NaN and infinities stay what they are.
+    #[test]
+    fn quantize_rounds_to_the_nearest_multiple() {
+        let q = 1.0 / 1024.0;
+        for x in [0.1, -0.1, 9.80665, 1e-7, -3.0 / 2048.0, 123.456] {
+            let r = f64::from(quantize(x, q));
+            assert_eq!(r / q, (r / q).round(), "{x}");
+            assert!((r - x).abs() <= q / 2.0, "{x}: {r}");
+        }
+        assert_eq!(quantize(-0.0, q).to_bits(), (-0.0f32).to_bits());
+        assert!(quantize(f64::NAN, q).is_nan());
+        assert_eq!(quantize(f64::NEG_INFINITY, q), f32::NEG_INFINITY);
+        assert_eq!(quantize(1e300, q), f32::INFINITY);
     }
 
     /// The (field number, wire type) of each top-level field of an encoded message.
@@ -480,6 +785,7 @@ mod tests {
                     prost::encoding::decode_varint(&mut bytes).unwrap();
                 }
                 1 => bytes = &bytes[8..],
+                5 => bytes = &bytes[4..],
                 2 => {
                     let n = prost::encoding::decode_varint(&mut bytes).unwrap() as usize;
                     bytes = &bytes[n..];
@@ -498,6 +804,7 @@ mod tests {
         }
         match f.r#type() {
             Type::Double => 1,
+            Type::Float => 5,
             Type::Message | Type::String => 2,
             _ => 0,
         }
