@@ -664,31 +664,7 @@ impl Diagnoser<'_> {
             }
         }
         let calib_rows: Vec<usize> = (0..obs.len()).filter(|&o| !obs[o].test).collect();
-        let test_rows: Vec<usize> = (0..obs.len()).filter(|&o| obs[o].test).collect();
-        let rounds = if !test_rows.is_empty() {
-            vec![Round {
-                train: calib_rows.clone(),
-                eval: test_rows,
-            }]
-        } else {
-            let folds: std::collections::BTreeSet<usize> =
-                calib_rows.iter().map(|&o| obs[o].fold).collect();
-            folds
-                .iter()
-                .map(|&f| Round {
-                    train: calib_rows
-                        .iter()
-                        .copied()
-                        .filter(|&o| obs[o].fold != f)
-                        .collect(),
-                    eval: calib_rows
-                        .iter()
-                        .copied()
-                        .filter(|&o| obs[o].fold == f)
-                        .collect(),
-                })
-                .collect()
-        };
+        let rounds = validation_rounds(&obs, &calib_rows);
         let t_ref_c = obs
             .iter()
             .all(|o| o.temp_c.is_some())
@@ -704,27 +680,8 @@ impl Diagnoser<'_> {
         let n: Vec<usize> = obs.iter().map(|o| o.n).collect();
         let pose: Vec<usize> = obs.iter().map(|o| o.pose).collect();
         let (dir_est, lf_start) = if self.kind == BaselineKind::LabelFree {
-            let x0 = magnitude::start(&m, &v, &n, &pose, &calib_rows).map_err(|e| {
-                DiagnoseError::Baseline {
-                    kind: self.kind.name(),
-                    reason: e.to_string(),
-                }
-            })?;
-            let f = magnitude::fit(&m, &v, &[], &calib_rows, &x0).map_err(|e| {
-                DiagnoseError::Baseline {
-                    kind: self.kind.name(),
-                    reason: e.to_string(),
-                }
-            })?;
-            let (t, b) = (f.t(), f.bias());
-            let dirs = m
-                .iter()
-                .map(|mm| {
-                    let c = (t * (Vector3::from(*mm) - b)).normalize();
-                    [c.x, c.y, c.z]
-                })
-                .collect();
-            (Some(dirs), Some(f.x))
+            let (dirs, x) = self.label_free_start(&m, &v, &n, &pose, &calib_rows)?;
+            (Some(dirs), Some(x))
         } else {
             (None, None)
         };
@@ -741,6 +698,35 @@ impl Diagnoser<'_> {
             dir_est,
             lf_start,
         })
+    }
+
+    /// The label-free baseline's fit on all calibration rows: each observation's direction
+    /// (its corrected reading, normalized) and the parameters, the start of later fits.
+    fn label_free_start(
+        &self,
+        m: &[[f64; 3]],
+        v: &[[f64; 3]],
+        n: &[usize],
+        pose: &[usize],
+        calib_rows: &[usize],
+    ) -> Result<(Vec<[f64; 3]>, DVector<f64>), DiagnoseError> {
+        let baseline_error = |e: String| DiagnoseError::Baseline {
+            kind: self.kind.name(),
+            reason: e,
+        };
+        let x0 = magnitude::start(m, v, n, pose, calib_rows)
+            .map_err(|e| baseline_error(e.to_string()))?;
+        let f = magnitude::fit(m, v, &[], calib_rows, &x0)
+            .map_err(|e| baseline_error(e.to_string()))?;
+        let (t, b) = (f.t(), f.bias());
+        let dirs = m
+            .iter()
+            .map(|mm| {
+                let c = (t * (Vector3::from(*mm) - b)).normalize();
+                [c.x, c.y, c.z]
+            })
+            .collect();
+        Ok((dirs, f.x))
     }
 
     fn fixes_of(effects: &[Effect]) -> Fixes {
@@ -1563,9 +1549,9 @@ impl Diagnoser<'_> {
         } else {
             1.0
         };
-        for axis in 0..3 {
+        for (axis, axis_tags) in tags.iter().enumerate() {
             let th = &f.theta[axis];
-            let layout_index = unpacked.axis(axis, th, &tags[axis], &mut solved.coef);
+            let layout_index = unpacked.axis(axis, th, axis_tags, &mut solved.coef);
             for &(a, ka) in &layout_index {
                 for &(b, kb) in &layout_index {
                     unpacked.cov[(ka, kb)] = red * f.cov[axis][(a, b)];
@@ -1648,6 +1634,35 @@ impl Diagnoser<'_> {
         }
         any.then_some(h)
     }
+}
+
+/// The validation rounds: the test observations against all calibration rows when there are
+/// any, otherwise one round per fold of the calibration rows.
+fn validation_rounds(obs: &[Obs], calib_rows: &[usize]) -> Vec<Round> {
+    let test_rows: Vec<usize> = (0..obs.len()).filter(|&o| obs[o].test).collect();
+    if !test_rows.is_empty() {
+        return vec![Round {
+            train: calib_rows.to_vec(),
+            eval: test_rows,
+        }];
+    }
+    let folds: std::collections::BTreeSet<usize> =
+        calib_rows.iter().map(|&o| obs[o].fold).collect();
+    folds
+        .iter()
+        .map(|&f| Round {
+            train: calib_rows
+                .iter()
+                .copied()
+                .filter(|&o| obs[o].fold != f)
+                .collect(),
+            eval: calib_rows
+                .iter()
+                .copied()
+                .filter(|&o| obs[o].fold == f)
+                .collect(),
+        })
+        .collect()
 }
 
 /// What a final fit's solver leaves for the terms and residuals it reports.
