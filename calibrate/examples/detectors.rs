@@ -298,8 +298,12 @@ fn ratio(c: [u64; 2]) -> f64 {
     }
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    mems_log::init("detectors");
+    mems_log::exit(evaluate(Cli::parse()))
+}
+
+fn evaluate(cli: Cli) -> Result<()> {
     let variants = variants(cli.no_gyro);
     let mut rows = Vec::new();
     for &vibration in &cli.vibration {
@@ -316,7 +320,7 @@ fn main() -> Result<()> {
                 gyro_sq[i] += r.gyro_bias_error_dps.iter().map(|e| e * e).sum::<f64>();
                 restarts[i] += r.learn_restarts;
             }
-            eprintln!(
+            tracing::info!(
                 "vibration {vibration}, seed {seed}: {:.1} s",
                 start.elapsed().as_secs_f64()
             );
@@ -363,7 +367,7 @@ fn main() -> Result<()> {
             }
         );
         if r.learn_restarts > 0 {
-            eprintln!("{}: {} learning restarts", r.detector, r.learn_restarts);
+            tracing::info!("{}: {} learning restarts", r.detector, r.learn_restarts);
         }
     }
     Ok(())

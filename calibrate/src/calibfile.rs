@@ -230,20 +230,21 @@ pub struct CalibrationFile {
 #[derive(Debug, thiserror::Error)]
 pub enum CalibFileError {
     /// The file could not be read or written.
-    #[error("{path}: {source}")]
+    // The cause is part of the message, not a `source()`: an error chain prints it once.
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: String,
         /// The OS error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The TOML is malformed or misses a field.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Parse {
         /// The file.
         path: String,
         /// The parser's message (with line and column).
-        source: toml::de::Error,
+        error: toml::de::Error,
     },
     /// The contents are inconsistent.
     #[error("{path}: {message}")]
@@ -342,9 +343,9 @@ impl CalibrationFile {
 
     /// Writes the file.
     pub fn save(&self, path: &Path) -> Result<(), CalibFileError> {
-        std::fs::write(path, self.to_toml()).map_err(|source| CalibFileError::Io {
+        std::fs::write(path, self.to_toml()).map_err(|error| CalibFileError::Io {
             path: path.display().to_string(),
-            source,
+            error,
         })
     }
 
@@ -400,13 +401,13 @@ impl CalibrationFile {
     /// ([`Self::check_plausible`]).
     pub fn load(path: &Path) -> Result<Self, CalibFileError> {
         let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| CalibFileError::Io {
+        let text = std::fs::read_to_string(path).map_err(|error| CalibFileError::Io {
             path: name.clone(),
-            source,
+            error,
         })?;
-        let file: Self = toml::from_str(&text).map_err(|source| CalibFileError::Parse {
+        let file: Self = toml::from_str(&text).map_err(|error| CalibFileError::Parse {
             path: name.clone(),
-            source,
+            error,
         })?;
         let invalid = |message: String| CalibFileError::Invalid {
             path: name.clone(),

@@ -105,7 +105,7 @@ struct Args {
     /// Where the gyro correction comes from.
     #[arg(long, value_enum, default_value_t = GyroCal::Session)]
     gyro_cal: GyroCal,
-    /// Print every seed's outcome on stderr.
+    /// Print every seed's outcome on stderr (info events).
     #[arg(long)]
     per_seed: bool,
     /// Use the simulator's default motions (up to three legs of 2-10 s, up to 50 s between
@@ -744,7 +744,7 @@ fn print_title(args: &Args) {
 
 /// One seed's outcome (`--per-seed`).
 fn print_seed(label: &str, seed: u64, o: &Outcome, p: f64, args: &Args) {
-    eprintln!(
+    tracing::info!(
         "{label} seed {seed}: distance {:.1} m, error ({:.3}, {:.3}) m = {p:.2}%, sigma ({:.3}, {:.3}) m, NEES {:.2}, gyro correction error {:.1e}, speed updates {}, disagreements {}, stale samples {}, scale error {:+.2}% (sigma {:.2}%), mounting error {:.2} deg, zero-velocity update's effective-sample factor {:.2}",
         o.distance_m,
         o.error_m.x,
@@ -762,7 +762,7 @@ fn print_seed(label: &str, seed: u64, o: &Outcome, p: f64, args: &Args) {
         o.zupt_widening.powi(2)
     );
     if args.rest == Rest::Imu {
-        eprintln!(
+        tracing::info!(
             "  seed {seed}: aligned at {:.1} s, rests missed {} (longest {:.1} s), longest between flagged rests {:.1} s, false-rest runs {:?}",
             o.aligned_at_s,
             o.flags.missed_rests.0,
@@ -833,7 +833,7 @@ impl CaseTotals {
         );
         let (flags, n) = (&self.flags, seeds);
         if args.rest == Rest::Imu {
-            eprintln!(
+            tracing::info!(
                 "  {label}: rest flagged {:.1}% of rest, {:.2}% of motion; false-rest runs per drive ending at a motion's start / end / in between: {:.1} / {:.1} / {:.1}, speed x motion left after them {:.2} / {:.2} / {:.2} m; rests missed per drive {:.1} (longest {:.1} s), longest time between flagged rests {:.1} s",
                 100.0 * flags.rest.1 as f64 / flags.rest.0.max(1) as f64,
                 100.0 * flags.moving.1 as f64 / flags.moving.0.max(1) as f64,
@@ -849,7 +849,7 @@ impl CaseTotals {
             );
         }
         if args.hints != Hints::None {
-            eprintln!(
+            tracing::info!(
                 "  {label}: per drive {:.0} speed updates, {:.0} samples of hint/detector disagreement, {:.0} samples stale; scale error RMS {:.2}%; mounting error max {:.3} deg",
                 self.hint_totals.0 as f64 / n,
                 self.hint_totals.1 as f64 / n,
@@ -862,6 +862,7 @@ impl CaseTotals {
 }
 
 fn main() {
+    mems_log::init("drive_eval");
     let mut args = Args::parse();
     if args.cases.is_empty() {
         args.cases = CaseName::value_variants().to_vec();

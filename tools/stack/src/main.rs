@@ -209,8 +209,8 @@ fn calibrate_sim(bins: &Path, work: &Path, seed: u64) -> Result<PathBuf> {
 fn clean_stale() {
     match service::remove_dead_nodes() {
         Ok(0) => {}
-        Ok(n) => eprintln!("mems-stack: removed the shared memory of {n} dead iceoryx2 nodes"),
-        Err(e) => eprintln!("mems-stack: {e}"),
+        Ok(n) => tracing::info!("removed the shared memory of {n} dead iceoryx2 nodes"),
+        Err(e) => tracing::warn!("{e}"),
     }
     let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else {
         return;
@@ -228,8 +228,8 @@ fn clean_stale() {
         let gone = unsafe { libc::kill(pid, 0) } != 0
             && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
         if gone && std::fs::remove_dir_all(entry.path()).is_ok() {
-            eprintln!(
-                "mems-stack: removed {}, left by a stack that died",
+            tracing::info!(
+                "removed {}, left by a stack that died",
                 entry.path().display()
             );
         }
@@ -304,10 +304,10 @@ fn announce(events: Vec<Event>, tty: bool) -> Option<String> {
         }
         match event {
             Event::Exited { name, status } => {
-                eprintln!("mems-stack: {name} exited ({status}); restarting");
+                tracing::warn!("{name} exited ({status}); restarting");
             }
             Event::Restarted { name, count } => {
-                eprintln!("mems-stack: {name} restarted ({count} so far)");
+                tracing::info!("{name} restarted ({count} so far)");
             }
             Event::GaveUp { name, status } => {
                 let why = format!(
@@ -316,7 +316,8 @@ fn announce(events: Vec<Event>, tty: bool) -> Option<String> {
                     supervisor::FAST_EXIT,
                     supervisor::MAX_FAST_EXITS
                 );
-                eprintln!("mems-stack: {why}; stopping the stack");
+                // The error itself is printed once, as the stack's exit error.
+                tracing::info!("{name} keeps failing at start; stopping the stack");
                 gave_up.get_or_insert(why);
             }
         }
@@ -324,8 +325,12 @@ fn announce(events: Vec<Event>, tty: bool) -> Option<String> {
     gave_up
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    mems_log::init("mems-stack");
+    mems_log::exit(run(Cli::parse()))
+}
+
+fn run(cli: Cli) -> Result<()> {
     check_source(&cli)?;
     // Before calibrating: a stack that cannot record must not start, nor touch a recording.
     let overwrite = match &cli.record {
@@ -364,7 +369,7 @@ fn main() -> Result<()> {
         std::fs::remove_file(old).with_context(|| format!("cannot remove {}", old.display()))?;
     }
     let mut supervisor = Supervisor::start(specs)?;
-    eprintln!("mems-stack: running (namespace {namespace:?}); Ctrl-C stops");
+    tracing::info!("running (namespace {namespace:?}); Ctrl-C stops");
     let start = Instant::now();
     let mut last_status = Instant::now();
     let tty = std::io::stderr().is_terminal();
@@ -384,7 +389,7 @@ fn main() -> Result<()> {
             if tty {
                 eprint!("\r{line}\x1b[K");
             } else {
-                eprintln!("{line}");
+                tracing::info!("{line}");
             }
             last_status = Instant::now();
         }
