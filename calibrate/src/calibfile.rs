@@ -396,6 +396,76 @@ impl CalibrationFile {
         Ok(())
     }
 
+    /// Checks the format version, the covariance's shape and the gravity.
+    fn check_layout(&self) -> Result<(), String> {
+        if self.format_version > FORMAT_VERSION {
+            return Err(format!(
+                "format_version {} is newer than this program understands ({FORMAT_VERSION})",
+                self.format_version
+            ));
+        }
+        if self.covariance.len() != N_PARAMS || self.covariance.iter().any(|r| r.len() != N_PARAMS)
+        {
+            return Err(format!(
+                "covariance must be {N_PARAMS} rows of {N_PARAMS} values"
+            ));
+        }
+        if !(self.gravity_mps2 > 9.7 && self.gravity_mps2 < 9.9) {
+            return Err(format!(
+                "gravity_mps2 = {} is not a terrestrial gravity",
+                self.gravity_mps2
+            ));
+        }
+        Ok(())
+    }
+
+    /// Checks that the optional terms are finite (and the gyro correction's sigmas >= 0).
+    fn check_terms_finite(&self) -> Result<(), String> {
+        let t = &self.temperature;
+        let time = &self.time;
+        let extra = [
+            ("temperature.reference_c", t.reference_c.map(|r| [r; 3])),
+            ("temperature.bias_g_per_c", t.bias_g_per_c),
+            ("temperature.scale_per_c", t.scale_per_c),
+            ("time.drift_g_per_s", time.drift_g_per_s),
+            ("time.drift_max_s", time.drift_max_s.map(|r| [r; 3])),
+            ("time.warm_up_g", time.warm_up_g),
+            (
+                "time.warm_up_time_constant_s",
+                time.warm_up_time_constant_s.map(|r| [r; 3]),
+            ),
+            (
+                "nonlinearity.quadratic_g_per_g2",
+                self.nonlinearity.quadratic_g_per_g2,
+            ),
+            ("gyro.bias_dps", self.gyro.bias_dps),
+        ];
+        for (name, values) in extra {
+            if let Some(v) = values
+                && v.iter().any(|x| !x.is_finite())
+            {
+                return Err(format!("{name} must be finite, got {v:?}"));
+            }
+        }
+        let matrices = [
+            ("gyro.correction", self.gyro.correction, "finite", f64::MIN),
+            (
+                "gyro.correction_sigma",
+                self.gyro.correction_sigma,
+                "finite and >= 0",
+                0.0,
+            ),
+        ];
+        for (name, rows, what, min) in matrices {
+            if let Some(m) = rows
+                && m.iter().flatten().any(|x| !(x.is_finite() && *x >= min))
+            {
+                return Err(format!("{name} must be {what}, got {m:?}"));
+            }
+        }
+        Ok(())
+    }
+
     /// Reads and checks a file: parses, then checks the version, the covariance shape, that
     /// the parameters form a valid model of the stated kind, and that they are plausible
     /// ([`Self::check_plausible`]).
@@ -413,67 +483,9 @@ impl CalibrationFile {
             path: name.clone(),
             message,
         };
-        if file.format_version > FORMAT_VERSION {
-            return Err(invalid(format!(
-                "format_version {} is newer than this program understands ({FORMAT_VERSION})",
-                file.format_version
-            )));
-        }
-        if file.covariance.len() != N_PARAMS || file.covariance.iter().any(|r| r.len() != N_PARAMS)
-        {
-            return Err(invalid(format!(
-                "covariance must be {N_PARAMS} rows of {N_PARAMS} values"
-            )));
-        }
-        if !(file.gravity_mps2 > 9.7 && file.gravity_mps2 < 9.9) {
-            return Err(invalid(format!(
-                "gravity_mps2 = {} is not a terrestrial gravity",
-                file.gravity_mps2
-            )));
-        }
+        file.check_layout().map_err(invalid)?;
         file.accel_model().map_err(|e| invalid(e.to_string()))?;
-        let t = &file.temperature;
-        let time = &file.time;
-        let extra = [
-            ("temperature.reference_c", t.reference_c.map(|r| [r; 3])),
-            ("temperature.bias_g_per_c", t.bias_g_per_c),
-            ("temperature.scale_per_c", t.scale_per_c),
-            ("time.drift_g_per_s", time.drift_g_per_s),
-            ("time.drift_max_s", time.drift_max_s.map(|r| [r; 3])),
-            ("time.warm_up_g", time.warm_up_g),
-            (
-                "time.warm_up_time_constant_s",
-                time.warm_up_time_constant_s.map(|r| [r; 3]),
-            ),
-            (
-                "nonlinearity.quadratic_g_per_g2",
-                file.nonlinearity.quadratic_g_per_g2,
-            ),
-            ("gyro.bias_dps", file.gyro.bias_dps),
-        ];
-        for (name, values) in extra {
-            if let Some(v) = values
-                && v.iter().any(|x| !x.is_finite())
-            {
-                return Err(invalid(format!("{name} must be finite, got {v:?}")));
-            }
-        }
-        let matrices = [
-            ("gyro.correction", file.gyro.correction, "finite", f64::MIN),
-            (
-                "gyro.correction_sigma",
-                file.gyro.correction_sigma,
-                "finite and >= 0",
-                0.0,
-            ),
-        ];
-        for (name, rows, what, min) in matrices {
-            if let Some(m) = rows
-                && m.iter().flatten().any(|x| !(x.is_finite() && *x >= min))
-            {
-                return Err(invalid(format!("{name} must be {what}, got {m:?}")));
-            }
-        }
+        file.check_terms_finite().map_err(invalid)?;
         crate::terms::ReadingTerms::from_file(&file).map_err(|e| invalid(e.to_string()))?;
         file.check_plausible().map_err(invalid)?;
         if let Some(noise) = &file.noise {
