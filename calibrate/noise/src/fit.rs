@@ -549,6 +549,77 @@ fn seconds(s: f64) -> String {
     }
 }
 
+/// Where white noise at its upper limit `limit` would dominate (`flicker`: the flicker
+/// floor of `p`), against the shortest cluster time `tau_min`.
+fn white_dominates(p: &[f64; 3], limit: f64, flicker: f64, tau_min: f64) -> String {
+    let a = p[2] / 3.0;
+    let edge = if a > 0.0 {
+        (-flicker + (flicker * flicker + 4.0 * a * limit).sqrt()) / (2.0 * a)
+    } else if flicker > 0.0 {
+        limit / flicker
+    } else {
+        f64::INFINITY
+    };
+    format!(
+        "; at its upper limit it would dominate below {} (the cluster times start at {})",
+        seconds(edge),
+        seconds(tau_min)
+    )
+}
+
+/// Where bias instability at its upper limit `limit` would dominate, against the cluster
+/// times `(tau_min, tau_max)`.
+fn instability_dominates(p: &[f64; 3], limit: f64, (tau_min, tau_max): (f64, f64)) -> String {
+    let level = FLICKER_FACTOR * limit;
+    let a = p[2] / 3.0;
+    // level > N^2/tau + a tau between the roots of a tau^2 - level tau + N^2 = 0.
+    let window = if a > 0.0 {
+        let disc = level * level - 4.0 * a * p[0];
+        (disc > 0.0).then(|| {
+            (
+                (level - disc.sqrt()) / (2.0 * a),
+                (level + disc.sqrt()) / (2.0 * a),
+            )
+        })
+    } else if level > 0.0 {
+        Some((p[0] / level, f64::INFINITY))
+    } else {
+        None
+    };
+    match window {
+        None => "; even at its upper limit it would not dominate at any cluster time".to_owned(),
+        Some((low, high)) if high.is_finite() => format!(
+            "; at its upper limit it would dominate between {} and {} (the cluster times span {} .. {})",
+            seconds(low),
+            seconds(high),
+            seconds(tau_min),
+            seconds(tau_max)
+        ),
+        Some((low, _)) => format!(
+            "; at its upper limit it would dominate above {} (the cluster times span {} .. {})",
+            seconds(low),
+            seconds(tau_min),
+            seconds(tau_max)
+        ),
+    }
+}
+
+/// Where the random walk at its upper limit `limit` would dominate (`flicker`: the flicker
+/// floor of `p`), against the longest cluster time `tau_max`.
+fn random_walk_dominates(p: &[f64; 3], limit: f64, flicker: f64, tau_max: f64) -> String {
+    let a = limit / 3.0;
+    let edge = if a > 0.0 {
+        (flicker + (flicker * flicker + 4.0 * a * p[0]).sqrt()) / (2.0 * a)
+    } else {
+        f64::INFINITY
+    };
+    format!(
+        "; at its upper limit it would dominate beyond {} (the cluster times end at {}, a quarter of the longest gap-free stretch)",
+        seconds(edge),
+        seconds(tau_max)
+    )
+}
+
 /// Explains why term `k` is not resolved: its estimate, and where it would dominate at its
 /// upper limit `limit` (in `p` units) compared with the analysed cluster times.
 fn unresolved_reason(
@@ -576,70 +647,9 @@ fn unresolved_reason(
     // Where the term, at its upper limit, would exceed the other two (closed forms of the
     // quadratic crossings of the model terms), against the analysed cluster times.
     let dominates = match k {
-        0 => {
-            let a = p[2] / 3.0;
-            let edge = if a > 0.0 {
-                (-flicker + (flicker * flicker + 4.0 * a * limit).sqrt()) / (2.0 * a)
-            } else if flicker > 0.0 {
-                limit / flicker
-            } else {
-                f64::INFINITY
-            };
-            format!(
-                "; at its upper limit it would dominate below {} (the cluster times start at {})",
-                seconds(edge),
-                seconds(tau_min)
-            )
-        }
-        1 => {
-            let level = FLICKER_FACTOR * limit;
-            let a = p[2] / 3.0;
-            // level > N^2/tau + a tau between the roots of a tau^2 - level tau + N^2 = 0.
-            let window = if a > 0.0 {
-                let disc = level * level - 4.0 * a * p[0];
-                (disc > 0.0).then(|| {
-                    (
-                        (level - disc.sqrt()) / (2.0 * a),
-                        (level + disc.sqrt()) / (2.0 * a),
-                    )
-                })
-            } else if level > 0.0 {
-                Some((p[0] / level, f64::INFINITY))
-            } else {
-                None
-            };
-            match window {
-                None => {
-                    "; even at its upper limit it would not dominate at any cluster time".to_owned()
-                }
-                Some((low, high)) if high.is_finite() => format!(
-                    "; at its upper limit it would dominate between {} and {} (the cluster times span {} .. {})",
-                    seconds(low),
-                    seconds(high),
-                    seconds(tau_min),
-                    seconds(tau_max)
-                ),
-                Some((low, _)) => format!(
-                    "; at its upper limit it would dominate above {} (the cluster times span {} .. {})",
-                    seconds(low),
-                    seconds(tau_min),
-                    seconds(tau_max)
-                ),
-            }
-        }
-        _ => {
-            let a = limit / 3.0;
-            let edge = if a > 0.0 {
-                (flicker + (flicker * flicker + 4.0 * a * p[0]).sqrt()) / (2.0 * a)
-            } else {
-                f64::INFINITY
-            };
-            format!(
-                "; at its upper limit it would dominate beyond {} (the cluster times end at {}, a quarter of the longest gap-free stretch)",
-                seconds(edge),
-                seconds(tau_max)
-            )
-        }
+        0 => white_dominates(p, limit, flicker, tau_min),
+        1 => instability_dominates(p, limit, (tau_min, tau_max)),
+        _ => random_walk_dominates(p, limit, flicker, tau_max),
     };
     reason.push_str(&dominates);
     reason
