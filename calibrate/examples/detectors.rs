@@ -25,10 +25,10 @@ use calibrate::stage::{CalibrationStage, RefineConfig, Settler};
 use calibrate::zero_state::{DetectorConfig, DetectorKind, GlrtStatistic};
 use clap::Parser;
 use ipc_types::units::{AccelRange, GyroRange};
-use ipc_types::{corrected_flags, raw_flags};
+use ipc_types::{CorrectedImuSample, corrected_flags, raw_flags};
 use mems_sim::dlpf::DlpfConfig;
 use mems_sim::model::{G_MPS2, SensorModel};
-use mems_sim::scenario::{Drive, DriveParams, ns_from_s};
+use mems_sim::scenario::{Drive, DriveParams, DriveSegment, ns_from_s};
 use mems_sim::vibration::VibrationModel;
 use mems_sim::{DlpfGrid, SimSensor, adc};
 use serde::Serialize;
@@ -133,6 +133,31 @@ struct Counts {
 }
 
 impl Counts {
+    /// Scores one settled sample's zero-state flag against its label (rest counts only once
+    /// the detector is ready).
+    fn score(&mut self, label: &Label, out: &CorrectedImuSample) {
+        let flagged = u64::from(out.flags & corrected_flags::ZERO_STATE != 0);
+        if label.rest {
+            if out.flags & corrected_flags::DETECTOR_READY != 0 {
+                self.rest[0] += flagged;
+                self.rest[1] += 1;
+            }
+            return;
+        }
+        self.moving[0] += flagged;
+        self.moving[1] += 1;
+        for (is, count) in [
+            (label.clearly_moving, &mut self.clearly_moving),
+            (label.slow_cruise, &mut self.slow_cruise),
+            (label.in_place_turn, &mut self.in_place_turn),
+        ] {
+            if is {
+                count[0] += flagged;
+                count[1] += 1;
+            }
+        }
+    }
+
     fn add(&mut self, o: &Counts) {
         for (a, b) in [
             (&mut self.rest, o.rest),
@@ -161,11 +186,25 @@ struct Label {
     in_place_turn: bool,
 }
 
+impl Label {
+    /// The label of a sample in drive segment `s`, at rest or not, with the truth's
+    /// horizontal speed m/s and yaw rate deg/s.
+    fn new(s: &DriveSegment, at_rest: bool, speed_mps: f64, rate_dps: f64) -> Self {
+        let cruise = !s.at_rest && s.speed_change_mps == 0.0 && s.heading_change_rad == 0.0;
+        let spin = !s.at_rest && s.speed0_mps == 0.0 && s.speed_change_mps == 0.0;
+        Self {
+            rest: at_rest,
+            clearly_moving: speed_mps >= CLEAR_SPEED_MPS || rate_dps >= CLEAR_RATE_DPS,
+            slow_cruise: cruise && s.speed0_mps < 0.3,
+            in_place_turn: spin && s.heading_change_rad != 0.0,
+        }
+    }
+}
+
 fn identity_calibration() -> CalibrationFile {
     CalibrationFile::identity(G_MPS2)
 }
 
-/// Runs one seed at one vibration level through every variant.
 /// What one variant gives on one seed.
 struct SeedResult {
     counts: Counts,
@@ -174,6 +213,7 @@ struct SeedResult {
     learn_restarts: usize,
 }
 
+/// Runs one seed at one vibration level through every variant.
 fn run_seed(cli: &Cli, seed: u64, vibration: f64, variants: &[Variant]) -> Result<Vec<SeedResult>> {
     let mut params = DriveParams::new(cli.duration_s);
     params.turns = true;
@@ -204,17 +244,9 @@ fn run_seed(cli: &Cli, seed: u64, vibration: f64, variants: &[Variant]) -> Resul
         while seg + 1 < segments.len() && segments[seg + 1].start_s <= t {
             seg += 1;
         }
-        let s = &segments[seg];
-        let cruise = !s.at_rest && s.speed_change_mps == 0.0 && s.heading_change_rad == 0.0;
-        let spin = !s.at_rest && s.speed0_mps == 0.0 && s.speed_change_mps == 0.0;
         let speed = truth.velocity_mps[0].hypot(truth.velocity_mps[1]);
         let rate = truth.angular_rate_rps[2].abs().to_degrees();
-        labels.push_back(Label {
-            rest: truth.at_rest,
-            clearly_moving: speed >= CLEAR_SPEED_MPS || rate >= CLEAR_RATE_DPS,
-            slow_cruise: cruise && s.speed0_mps < 0.3,
-            in_place_turn: spin && s.heading_change_rad != 0.0,
-        });
+        labels.push_back(Label::new(&segments[seg], truth.at_rest, speed, rate));
         let mut raw =
             adc::quantize_sample(&analog, AccelRange::G2, GyroRange::Dps250, ns_from_s(t), k);
         if cli.no_gyro {
@@ -228,30 +260,8 @@ fn run_seed(cli: &Cli, seed: u64, vibration: f64, variants: &[Variant]) -> Resul
             let mut i = 0;
             stage.push(&raw, &mut |out| {
                 settler.push(out, &mut |out| {
-                    let label = labels[i];
+                    c.score(&labels[i], out);
                     i += 1;
-                    let flagged = u64::from(out.flags & corrected_flags::ZERO_STATE != 0);
-                    if label.rest {
-                        if out.flags & corrected_flags::DETECTOR_READY != 0 {
-                            c.rest[0] += flagged;
-                            c.rest[1] += 1;
-                        }
-                    } else {
-                        c.moving[0] += flagged;
-                        c.moving[1] += 1;
-                        if label.clearly_moving {
-                            c.clearly_moving[0] += flagged;
-                            c.clearly_moving[1] += 1;
-                        }
-                        if label.slow_cruise {
-                            c.slow_cruise[0] += flagged;
-                            c.slow_cruise[1] += 1;
-                        }
-                        if label.in_place_turn {
-                            c.in_place_turn[0] += flagged;
-                            c.in_place_turn[1] += 1;
-                        }
-                    }
                 })
             })?;
             released = i;
@@ -298,8 +308,12 @@ fn ratio(c: [u64; 2]) -> f64 {
     }
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    mems_log::init("detectors");
+    mems_log::exit(evaluate(Cli::parse()))
+}
+
+fn evaluate(cli: Cli) -> Result<()> {
     let variants = variants(cli.no_gyro);
     let mut rows = Vec::new();
     for &vibration in &cli.vibration {
@@ -316,7 +330,7 @@ fn main() -> Result<()> {
                 gyro_sq[i] += r.gyro_bias_error_dps.iter().map(|e| e * e).sum::<f64>();
                 restarts[i] += r.learn_restarts;
             }
-            eprintln!(
+            tracing::info!(
                 "vibration {vibration}, seed {seed}: {:.1} s",
                 start.elapsed().as_secs_f64()
             );
@@ -363,7 +377,7 @@ fn main() -> Result<()> {
             }
         );
         if r.learn_restarts > 0 {
-            eprintln!("{}: {} learning restarts", r.detector, r.learn_restarts);
+            tracing::info!("{}: {} learning restarts", r.detector, r.learn_restarts);
         }
     }
     Ok(())

@@ -230,20 +230,21 @@ pub struct CalibrationFile {
 #[derive(Debug, thiserror::Error)]
 pub enum CalibFileError {
     /// The file could not be read or written.
-    #[error("{path}: {source}")]
+    // The cause is part of the message, not a `source()`: an error chain prints it once.
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: String,
         /// The OS error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The TOML is malformed or misses a field.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Parse {
         /// The file.
         path: String,
         /// The parser's message (with line and column).
-        source: toml::de::Error,
+        error: toml::de::Error,
     },
     /// The contents are inconsistent.
     #[error("{path}: {message}")]
@@ -342,9 +343,9 @@ impl CalibrationFile {
 
     /// Writes the file.
     pub fn save(&self, path: &Path) -> Result<(), CalibFileError> {
-        std::fs::write(path, self.to_toml()).map_err(|source| CalibFileError::Io {
+        std::fs::write(path, self.to_toml()).map_err(|error| CalibFileError::Io {
             path: path.display().to_string(),
-            source,
+            error,
         })
     }
 
@@ -395,44 +396,33 @@ impl CalibrationFile {
         Ok(())
     }
 
-    /// Reads and checks a file: parses, then checks the version, the covariance shape, that
-    /// the parameters form a valid model of the stated kind, and that they are plausible
-    /// ([`Self::check_plausible`]).
-    pub fn load(path: &Path) -> Result<Self, CalibFileError> {
-        let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| CalibFileError::Io {
-            path: name.clone(),
-            source,
-        })?;
-        let file: Self = toml::from_str(&text).map_err(|source| CalibFileError::Parse {
-            path: name.clone(),
-            source,
-        })?;
-        let invalid = |message: String| CalibFileError::Invalid {
-            path: name.clone(),
-            message,
-        };
-        if file.format_version > FORMAT_VERSION {
-            return Err(invalid(format!(
+    /// Checks the format version, the covariance's shape and the gravity.
+    fn check_layout(&self) -> Result<(), String> {
+        if self.format_version > FORMAT_VERSION {
+            return Err(format!(
                 "format_version {} is newer than this program understands ({FORMAT_VERSION})",
-                file.format_version
-            )));
+                self.format_version
+            ));
         }
-        if file.covariance.len() != N_PARAMS || file.covariance.iter().any(|r| r.len() != N_PARAMS)
+        if self.covariance.len() != N_PARAMS || self.covariance.iter().any(|r| r.len() != N_PARAMS)
         {
-            return Err(invalid(format!(
+            return Err(format!(
                 "covariance must be {N_PARAMS} rows of {N_PARAMS} values"
-            )));
+            ));
         }
-        if !(file.gravity_mps2 > 9.7 && file.gravity_mps2 < 9.9) {
-            return Err(invalid(format!(
+        if !(self.gravity_mps2 > 9.7 && self.gravity_mps2 < 9.9) {
+            return Err(format!(
                 "gravity_mps2 = {} is not a terrestrial gravity",
-                file.gravity_mps2
-            )));
+                self.gravity_mps2
+            ));
         }
-        file.accel_model().map_err(|e| invalid(e.to_string()))?;
-        let t = &file.temperature;
-        let time = &file.time;
+        Ok(())
+    }
+
+    /// Checks that the optional terms are finite (and the gyro correction's sigmas >= 0).
+    fn check_terms_finite(&self) -> Result<(), String> {
+        let t = &self.temperature;
+        let time = &self.time;
         let extra = [
             ("temperature.reference_c", t.reference_c.map(|r| [r; 3])),
             ("temperature.bias_g_per_c", t.bias_g_per_c),
@@ -446,22 +436,22 @@ impl CalibrationFile {
             ),
             (
                 "nonlinearity.quadratic_g_per_g2",
-                file.nonlinearity.quadratic_g_per_g2,
+                self.nonlinearity.quadratic_g_per_g2,
             ),
-            ("gyro.bias_dps", file.gyro.bias_dps),
+            ("gyro.bias_dps", self.gyro.bias_dps),
         ];
         for (name, values) in extra {
             if let Some(v) = values
                 && v.iter().any(|x| !x.is_finite())
             {
-                return Err(invalid(format!("{name} must be finite, got {v:?}")));
+                return Err(format!("{name} must be finite, got {v:?}"));
             }
         }
         let matrices = [
-            ("gyro.correction", file.gyro.correction, "finite", f64::MIN),
+            ("gyro.correction", self.gyro.correction, "finite", f64::MIN),
             (
                 "gyro.correction_sigma",
-                file.gyro.correction_sigma,
+                self.gyro.correction_sigma,
                 "finite and >= 0",
                 0.0,
             ),
@@ -470,9 +460,32 @@ impl CalibrationFile {
             if let Some(m) = rows
                 && m.iter().flatten().any(|x| !(x.is_finite() && *x >= min))
             {
-                return Err(invalid(format!("{name} must be {what}, got {m:?}")));
+                return Err(format!("{name} must be {what}, got {m:?}"));
             }
         }
+        Ok(())
+    }
+
+    /// Reads and checks a file: parses, then checks the version, the covariance shape, that
+    /// the parameters form a valid model of the stated kind, and that they are plausible
+    /// ([`Self::check_plausible`]).
+    pub fn load(path: &Path) -> Result<Self, CalibFileError> {
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|error| CalibFileError::Io {
+            path: name.clone(),
+            error,
+        })?;
+        let file: Self = toml::from_str(&text).map_err(|error| CalibFileError::Parse {
+            path: name.clone(),
+            error,
+        })?;
+        let invalid = |message: String| CalibFileError::Invalid {
+            path: name.clone(),
+            message,
+        };
+        file.check_layout().map_err(invalid)?;
+        file.accel_model().map_err(|e| invalid(e.to_string()))?;
+        file.check_terms_finite().map_err(invalid)?;
         crate::terms::ReadingTerms::from_file(&file).map_err(|e| invalid(e.to_string()))?;
         file.check_plausible().map_err(invalid)?;
         if let Some(noise) = &file.noise {

@@ -494,6 +494,28 @@ impl CalibrationStage {
         let has_gyro = raw.flags & raw_flags::GYRO_VALID != 0;
         let has_temp = raw.flags & raw_flags::TEMP_VALID != 0;
         self.check(raw, has_gyro, has_temp)?;
+        let gap = self.sequence(raw)?;
+        self.last = Some((raw.seq, raw.stamps.sample_ns));
+        self.stats.accepted += 1;
+        self.stream_start_ns.get_or_insert(raw.stamps.sample_ns);
+
+        let (mut out, a, w) = self.correct(raw, has_gyro, has_temp, gap);
+        self.batch_gyro &= has_gyro;
+        let provisional = self.detect(raw.stamps.sample_ns, a, w, &mut out);
+        self.carried.apply(&mut out, self.refine.refined);
+        if provisional {
+            out.flags |= corrected_flags::PROVISIONAL;
+        }
+        self.stats.released += 1;
+        emit(&out);
+        Ok(())
+    }
+
+    /// Places `raw` in the stream: a resumed state that `raw` does not continue, a sequence
+    /// that starts again or a confirmed time jump start over; a time that does not increase or
+    /// a first jump is refused. Returns whether samples are missing before it (a gap).
+    #[inline]
+    fn sequence(&mut self, raw: &RawImuSample) -> Result<bool, StageError> {
         if std::mem::take(&mut self.resumed)
             && self
                 .last
@@ -539,10 +561,20 @@ impl CalibrationStage {
             }
             _ => {}
         }
-        self.last = Some((raw.seq, raw.stamps.sample_ns));
-        self.stats.accepted += 1;
+        Ok(gap)
+    }
 
-        let start_ns = *self.stream_start_ns.get_or_insert(raw.stamps.sample_ns);
+    /// The corrected sample of `raw` (flagged by the detector later), the corrected
+    /// acceleration m/s^2 and the bias-free rate rad/s the detector takes (before refinement).
+    #[inline]
+    fn correct(
+        &self,
+        raw: &RawImuSample,
+        has_gyro: bool,
+        has_temp: bool,
+        gap: bool,
+    ) -> (CorrectedImuSample, Vector3<f64>, [f64; 3]) {
+        let start_ns = self.stream_start_ns.unwrap_or(raw.stamps.sample_ns);
         let t_s = (raw.stamps.sample_ns - start_ns) as f64 * 1e-9;
         let a = self.terms.correct(
             &self.model,
@@ -556,7 +588,7 @@ impl CalibrationStage {
             [0.0; 3]
         };
         let (da, dw) = (self.refine.accel_mps2, self.refine.gyro_rps);
-        let mut out = CorrectedImuSample {
+        let out = CorrectedImuSample {
             stamps: raw.stamps,
             seq: raw.seq,
             accel_mps2: std::array::from_fn(|i| a[i] - da[i]),
@@ -570,8 +602,20 @@ impl CalibrationStage {
             raw_flags: raw.flags | if gap { raw_flags::GAP_BEFORE } else { 0 },
             ..CorrectedImuSample::default()
         };
-        self.batch_gyro &= has_gyro;
-        let provisional = match self.detector.push(raw.stamps.sample_ns, a.into(), w) {
+        (out, a, w)
+    }
+
+    /// Gives the sample to the zero-state detector; a verdict settles the batch it ends
+    /// (`out.settles`). Returns whether `out` is provisional (its batch not yet decided).
+    #[inline]
+    fn detect(
+        &mut self,
+        t_ns: u64,
+        a: Vector3<f64>,
+        w: [f64; 3],
+        out: &mut CorrectedImuSample,
+    ) -> bool {
+        match self.detector.push(t_ns, a.into(), w) {
             Some(verdict) => {
                 self.decide(&verdict);
                 out.settles = self.batch_len as u32;
@@ -583,14 +627,7 @@ impl CalibrationStage {
                 self.batch_len += 1;
                 true
             }
-        };
-        self.carried.apply(&mut out, self.refine.refined);
-        if provisional {
-            out.flags |= corrected_flags::PROVISIONAL;
         }
-        self.stats.released += 1;
-        emit(&out);
-        Ok(())
     }
 
     /// End of the stream: the detector's partial batch is dropped (its samples stay unsettled;

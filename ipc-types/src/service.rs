@@ -207,8 +207,8 @@ pub fn publisher_waiting_at_most<T: core::fmt::Debug + ZeroCopySend>(
             return BackpressureAction::Retry;
         }
         if !recently {
-            eprintln!(
-                "mems: subscriber port {:#x} has not taken a sample for {wait:?}: discarding \
+            tracing::warn!(
+                "subscriber port {:#x} has not taken a sample for {wait:?}: discarding \
                  for it",
                 info.receiver_port_id
             );

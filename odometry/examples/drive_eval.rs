@@ -19,7 +19,7 @@ mod common;
 use calibrate_science::gyrocal::{GyroCalConfig, calibrate_gyro};
 use clap::{Parser, ValueEnum};
 use common::{Case, Simulation, live_calibration_stage, live_detector};
-use ipc_types::{CorrectedImuSample, RobotHint, corrected_flags, odometry_flags};
+use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags};
 use mems_sim::hints::{HintParams, RestSource};
 use nalgebra::{Matrix2, Matrix3, Vector2};
 use odometry::hints::HintConfig;
@@ -105,7 +105,7 @@ struct Args {
     /// Where the gyro correction comes from.
     #[arg(long, value_enum, default_value_t = GyroCal::Session)]
     gyro_cal: GyroCal,
-    /// Print every seed's outcome on stderr.
+    /// Print every seed's outcome on stderr (info events).
     #[arg(long)]
     per_seed: bool,
     /// Use the simulator's default motions (up to three legs of 2-10 s, up to 50 s between
@@ -377,9 +377,14 @@ fn hint_stream(c: &Case, seed: u64, args: &Args) -> (Vec<RobotHint>, f64) {
     (s.hints, s.speed_scale)
 }
 
-fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
-    let gyro_cal = args.gyro_cal;
-    let mut sim = Simulation::new(c, seed);
+/// The gyro correction the options ask for, in the stage configuration, and its largest error
+/// against the model's (NaN unless fitted to the session).
+fn with_gyro_correction(
+    c: &Case,
+    mut cfg: OdometryConfig,
+    sim: &mut Simulation,
+    gyro_cal: GyroCal,
+) -> (OdometryConfig, f64) {
     let session = sim.session();
     let model_correction = c.gyro_correction_reference();
     let mut gyro_cal_error = f64::NAN;
@@ -396,141 +401,230 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
             cfg.gyro_correction_sigma = Matrix3::zeros();
         }
     };
-    let hint_cfg = HintConfig {
-        mounting: if args.estimate_mounting {
-            None
-        } else {
-            Some(c.mounting)
-        },
-        ..HintConfig::default()
-    };
-    let mut stage = OdometryStage::with_hints(cfg, hint_cfg).expect("valid hint configuration");
-    let (hints, true_scale) = hint_stream(c, seed, args);
-    let mut next_hint = 0;
-    let mut stale = 0u64;
-    let mut distance_m = 0.0;
-    let mut prev_truth: Option<[f64; 3]> = None;
-    let mut last = None;
-    let mut end_truth = None;
-    let mut was_rest = false;
-    let mut rest_covered = (0, 0);
-    // Horizontal truth and forward estimate per sample (by sequence number), to score the
-    // revised history against both.
-    let mut truth_xy: Vec<[f64; 2]> = Vec::new();
-    let mut forward_xy: Vec<[f64; 2]> = Vec::new();
-    let mut first_seq = None;
-    let mut revised: Vec<(u64, [f64; 2])> = Vec::new();
-    // Sequence numbers where motions start: the history of a motion is scored relative to the
-    // error at its start, which the revision leaves as it is.
-    let mut motion_starts: Vec<u64> = Vec::new();
-    // Per sample: rest flag given to the stage, truth at rest, truth speed m/s, time s.
-    let mut flag_log: Vec<(bool, bool, f64, f64)> = Vec::new();
-    // Our navigation frame starts at the sensor's position at alignment, with its heading (the
-    // yaw of its attitude) then: the truth is expressed in that frame. Before alignment the
-    // truth frame is turned by the mounting yaw (the sensor's heading at the start).
-    let mut to_ours = (
-        nalgebra::Vector3::zeros(),
-        nalgebra::Rotation3::from_axis_angle(
-            &nalgebra::Vector3::z_axis(),
-            -args.mount_yaw_deg.to_radians(),
-        ),
-    );
-    let mut aligned_at = None;
-    // One corrected sample and the truth at it, in order.
-    let mut step = |s: &CorrectedImuSample, truth: &recording::Truth, stage: &mut OdometryStage| {
+    (cfg, gyro_cal_error)
+}
+
+/// What one drive records per sample: the stage's newest state, the truth in our frame, and
+/// what the scores need.
+struct Track {
+    /// The newest forward state.
+    last: Option<OdometryState>,
+    /// Revised states: sequence number and horizontal position.
+    revised: Vec<(u64, [f64; 2])>,
+    /// Our navigation frame starts at the sensor's position at alignment, with its heading
+    /// (the yaw of its attitude) then: the truth is expressed in that frame. Before alignment
+    /// the truth frame is turned by the mounting yaw (the sensor's heading at the start).
+    to_ours: (nalgebra::Vector3<f64>, nalgebra::Rotation3<f64>),
+    /// Time of the alignment, s.
+    aligned_at: Option<f64>,
+    prev_truth: Option<[f64; 3]>,
+    /// Horizontal distance travelled from alignment on, m.
+    distance_m: f64,
+    /// Horizontal truth and forward estimate per sample (by sequence number), to score the
+    /// revised history against both.
+    truth_xy: Vec<[f64; 2]>,
+    forward_xy: Vec<[f64; 2]>,
+    first_seq: Option<u64>,
+    /// Sequence numbers where motions start: the history of a motion is scored relative to
+    /// the error at its start, which the revision leaves as it is.
+    motion_starts: Vec<u64>,
+    /// Per sample: rest flag given to the stage, truth at rest, truth speed m/s, time s.
+    flag_log: Vec<(bool, bool, f64, f64)>,
+    /// Samples flagged hint-stale.
+    stale: u64,
+    was_rest: bool,
+    /// Per rest end and axis: within 1 sigma, of all.
+    rest_covered: (usize, usize),
+    end_truth: Option<recording::Truth>,
+}
+
+impl Track {
+    fn new(mount_yaw_deg: f64) -> Self {
+        Self {
+            last: None,
+            revised: Vec::new(),
+            to_ours: (
+                nalgebra::Vector3::zeros(),
+                nalgebra::Rotation3::from_axis_angle(
+                    &nalgebra::Vector3::z_axis(),
+                    -mount_yaw_deg.to_radians(),
+                ),
+            ),
+            aligned_at: None,
+            prev_truth: None,
+            distance_m: 0.0,
+            truth_xy: Vec::new(),
+            forward_xy: Vec::new(),
+            first_seq: None,
+            motion_starts: Vec::new(),
+            flag_log: Vec::new(),
+            stale: 0,
+            was_rest: false,
+            rest_covered: (0, 0),
+            end_truth: None,
+        }
+    }
+
+    /// One corrected sample and the truth at it, in order.
+    fn step(
+        &mut self,
+        s: &CorrectedImuSample,
+        truth: &recording::Truth,
+        stage: &mut OdometryStage,
+    ) {
         stage
             .process(s, &mut |o| {
                 if o.flags & odometry_flags::REVISION == 0 {
-                    last = Some(*o);
+                    self.last = Some(*o);
                 } else {
-                    revised.push((o.seq, [o.position_m[0], o.position_m[1]]));
+                    self.revised
+                        .push((o.seq, [o.position_m[0], o.position_m[1]]));
                 }
             })
             .expect("valid samples");
-        // (Again if the alignment was withdrawn with the rest it stood on.)
-        let aligned = last.is_some_and(|o| o.flags & odometry_flags::ALIGNED != 0);
-        if !aligned {
-            aligned_at = None;
+        self.follow_alignment(s, truth);
+        // Distance from the truth itself (the frame changes at alignment), from alignment on.
+        if let Some(p) = self.prev_truth
+            && self.aligned_at.is_some()
+        {
+            self.distance_m += (truth.position_m[0] - p[0]).hypot(truth.position_m[1] - p[1]);
         }
-        if aligned_at.is_none() && aligned {
+        self.prev_truth = Some(truth.position_m);
+        let truth = recording::Truth {
+            position_m: (self.to_ours.1
+                * (nalgebra::Vector3::from(truth.position_m) - self.to_ours.0))
+                .into(),
+            ..*truth
+        };
+        self.score(s, &truth);
+    }
+
+    /// Moves our frame to the truth at alignment (again if the alignment was withdrawn with
+    /// the rest it stood on).
+    fn follow_alignment(&mut self, s: &CorrectedImuSample, truth: &recording::Truth) {
+        let aligned = self
+            .last
+            .is_some_and(|o| o.flags & odometry_flags::ALIGNED != 0);
+        if !aligned {
+            self.aligned_at = None;
+        }
+        if self.aligned_at.is_none() && aligned {
             let [w, x, y, z] = truth.attitude_wxyz;
             let q =
                 nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
-            to_ours = (
+            self.to_ours = (
                 nalgebra::Vector3::from(truth.position_m),
                 nalgebra::Rotation3::from_axis_angle(
                     &nalgebra::Vector3::z_axis(),
                     -q.euler_angles().2,
                 ),
             );
-            aligned_at = Some(s.stamps.sample_ns as f64 * 1e-9);
+            self.aligned_at = Some(s.stamps.sample_ns as f64 * 1e-9);
         }
-        // Distance from the truth itself (the frame changes at alignment), from alignment on.
-        if let Some(p) = prev_truth
-            && aligned_at.is_some()
-        {
-            distance_m += (truth.position_m[0] - p[0]).hypot(truth.position_m[1] - p[1]);
-        }
-        prev_truth = Some(truth.position_m);
-        let truth = &recording::Truth {
-            position_m: (to_ours.1 * (nalgebra::Vector3::from(truth.position_m) - to_ours.0))
-                .into(),
-            ..*truth
-        };
-        first_seq.get_or_insert(s.seq);
+    }
+
+    /// Records the sample's flags, truth (in our frame) and forward state for the scores.
+    fn score(&mut self, s: &CorrectedImuSample, truth: &recording::Truth) {
+        self.first_seq.get_or_insert(s.seq);
         let v = truth.velocity_mps;
-        flag_log.push((
+        self.flag_log.push((
             s.flags & corrected_flags::ZERO_STATE != 0,
             truth.at_rest,
             (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
             s.stamps.sample_ns as f64 * 1e-9,
         ));
-        truth_xy.push([truth.position_m[0], truth.position_m[1]]);
-        let o = last.expect("a state per sample");
-        stale += u64::from(o.flags & odometry_flags::HINT_STALE != 0);
-        forward_xy.push([o.position_m[0], o.position_m[1]]);
-        if was_rest && !truth.at_rest {
-            motion_starts.push(s.seq);
+        self.truth_xy
+            .push([truth.position_m[0], truth.position_m[1]]);
+        let o = self.last.expect("a state per sample");
+        self.stale += u64::from(o.flags & odometry_flags::HINT_STALE != 0);
+        self.forward_xy.push([o.position_m[0], o.position_m[1]]);
+        if self.was_rest && !truth.at_rest {
+            self.motion_starts.push(s.seq);
         }
-        if was_rest && !truth.at_rest && o.flags & odometry_flags::ALIGNED != 0 {
+        if self.was_rest && !truth.at_rest && o.flags & odometry_flags::ALIGNED != 0 {
             for i in 0..2 {
-                rest_covered.1 += 1;
+                self.rest_covered.1 += 1;
                 if (o.position_m[i] - truth.position_m[i]).abs() <= o.position_sigma_m[i] {
-                    rest_covered.0 += 1;
+                    self.rest_covered.0 += 1;
                 }
             }
         }
-        was_rest = truth.at_rest;
-        end_truth = Some(*truth);
-    };
-    // Hints published by a sample's time reach the stage before it (as in the live process).
-    let mut feed_hints = |t_ns: u64, stage: &mut OdometryStage| {
-        while let Some(h) = hints.get(next_hint)
+        self.was_rest = truth.at_rest;
+        self.end_truth = Some(*truth);
+    }
+
+    /// RMS horizontal error of the revised history and of the forward states it replaced,
+    /// each relative to the error at the start of its motion, m.
+    fn history_rms_m(&self) -> (f64, f64) {
+        let first_seq = self.first_seq.expect("samples");
+        let (mut se_rev, mut se_fwd) = (0.0, 0.0);
+        for (seq, p) in &self.revised {
+            let i = (seq - first_seq) as usize;
+            let k = self.motion_starts.partition_point(|m| m <= seq);
+            let i0 = (self.motion_starts[k.max(1) - 1] - first_seq) as usize;
+            let e0 = [0, 1].map(|a| self.forward_xy[i0][a] - self.truth_xy[i0][a]);
+            let e_rev = [0, 1].map(|a| p[a] - self.truth_xy[i][a] - e0[a]);
+            let e_fwd = [0, 1].map(|a| self.forward_xy[i][a] - self.truth_xy[i][a] - e0[a]);
+            se_rev += e_rev[0].powi(2) + e_rev[1].powi(2);
+            se_fwd += e_fwd[0].powi(2) + e_fwd[1].powi(2);
+        }
+        let n_rev = self.revised.len().max(1) as f64;
+        ((se_rev / n_rev).sqrt(), (se_fwd / n_rev).sqrt())
+    }
+}
+
+/// The robot's hints, handed to the stage by publication time.
+struct HintFeed<'a> {
+    hints: &'a [RobotHint],
+    next: usize,
+}
+
+impl HintFeed<'_> {
+    /// Hints published by a sample's time reach the stage before it (as in the live process).
+    fn feed(&mut self, t_ns: u64, stage: &mut OdometryStage) {
+        while let Some(h) = self.hints.get(self.next)
             && h.stamps.acquired_ns <= t_ns
         {
             stage.hint(h).expect("valid simulated hints");
-            next_hint += 1;
+            self.next += 1;
         }
-    };
+    }
+}
+
+/// The calibration stage that flags rest with `--rest imu`.
+fn rest_detector_stage(c: &Case) -> calibrate::stage::CalibrationStage {
+    let mut detector = live_detector();
+    if let Some(mg) = c.accel_turn_on_mg {
+        // An uncalibrated part: the start-up learning accepts a gravity magnitude off by up to
+        // 5 sigma of the bias on every axis (the default 5% refuses some).
+        detector.learn.max_gravity_error = detector
+            .learn
+            .max_gravity_error
+            .max(5.0 * 3f64.sqrt() * mg * 1e-3);
+    }
+    live_calibration_stage(detector)
+}
+
+/// Drives the simulation through the stage, with the hints and the rest flags the options
+/// ask for.
+fn drive(
+    c: &Case,
+    sim: &mut Simulation,
+    args: &Args,
+    stage: &mut OdometryStage,
+    feed: &mut HintFeed,
+    track: &mut Track,
+) {
     match args.rest {
         Rest::Perfect => sim.drive(|s, truth| {
-            feed_hints(s.stamps.sample_ns, &mut stage);
-            step(s, truth, &mut stage);
+            feed.feed(s.stamps.sample_ns, stage);
+            track.step(s, truth, stage);
         }),
         Rest::Imu => {
-            let mut detector = live_detector();
-            if let Some(mg) = c.accel_turn_on_mg {
-                // An uncalibrated part: the start-up learning accepts a gravity magnitude off
-                // by up to 5 sigma of the bias on every axis (the default 5% refuses some).
-                detector.learn.max_gravity_error = detector
-                    .learn
-                    .max_gravity_error
-                    .max(5.0 * 3f64.sqrt() * mg * 1e-3);
-            }
-            let mut calibration = live_calibration_stage(detector);
+            let mut calibration = rest_detector_stage(c);
             // Each sample leaves the calibration stage in the call that takes it.
             sim.drive_raw(|raw, truth| {
-                feed_hints(raw.stamps.sample_ns, &mut stage);
+                feed.feed(raw.stamps.sample_ns, stage);
                 // The refinement in force when the sample arrives is the one it was corrected
                 // with.
                 let (_, gyro_refined, _) = calibration.refinement();
@@ -542,29 +636,36 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
                                 *w += b;
                             }
                         }
-                        step(&c, truth, &mut stage);
+                        track.step(&c, truth, stage);
                     })
                     .expect("valid raw samples");
             });
             calibration.finish();
         }
     }
-    let o = last.expect("states");
-    let truth = end_truth.expect("truth");
-    let first_seq = first_seq.expect("samples");
-    let (mut se_rev, mut se_fwd) = (0.0, 0.0);
-    for (seq, p) in &revised {
-        let i = (seq - first_seq) as usize;
-        let k = motion_starts.partition_point(|m| m <= seq);
-        let i0 = (motion_starts[k.max(1) - 1] - first_seq) as usize;
-        let e0 = [0, 1].map(|a| forward_xy[i0][a] - truth_xy[i0][a]);
-        let e_rev = [0, 1].map(|a| p[a] - truth_xy[i][a] - e0[a]);
-        let e_fwd = [0, 1].map(|a| forward_xy[i][a] - truth_xy[i][a] - e0[a]);
-        se_rev += e_rev[0].powi(2) + e_rev[1].powi(2);
-        se_fwd += e_fwd[0].powi(2) + e_fwd[1].powi(2);
-    }
-    let n_rev = revised.len().max(1) as f64;
-    let history_rms_m = ((se_rev / n_rev).sqrt(), (se_fwd / n_rev).sqrt());
+}
+
+fn run(c: &Case, cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
+    let mut sim = Simulation::new(c, seed);
+    let (cfg, gyro_cal_error) = with_gyro_correction(c, cfg, &mut sim, args.gyro_cal);
+    let hint_cfg = HintConfig {
+        mounting: if args.estimate_mounting {
+            None
+        } else {
+            Some(c.mounting)
+        },
+        ..HintConfig::default()
+    };
+    let mut stage = OdometryStage::with_hints(cfg, hint_cfg).expect("valid hint configuration");
+    let (hints, true_scale) = hint_stream(c, seed, args);
+    let mut track = Track::new(args.mount_yaw_deg);
+    let mut feed = HintFeed {
+        hints: &hints,
+        next: 0,
+    };
+    drive(c, &mut sim, args, &mut stage, &mut feed, &mut track);
+    let o = track.last.expect("states");
+    let truth = track.end_truth.expect("truth");
     let error_m = Vector2::new(
         o.position_m[0] - truth.position_m[0],
         o.position_m[1] - truth.position_m[1],
@@ -580,7 +681,7 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
     let kf = stage.filter().expect("aligned");
     let true_mounting = c.drive(seed).params().mounting;
     Outcome {
-        hint_counts: (h.speed_updates, o.hint_disagreements, stale),
+        hint_counts: (h.speed_updates, o.hint_disagreements, track.stale),
         scale_error: if hints.is_empty() {
             f64::NAN
         } else {
@@ -591,23 +692,20 @@ fn run(c: &Case, mut cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
             .mounting()
             .map_or(f64::NAN, |m| m.angle_to(&true_mounting).to_degrees()),
         zupt_widening: stage.zupt_sigma_mps() / cfg.zupt_sigma_mps,
-        distance_m,
+        distance_m: track.distance_m,
         error_m,
         sigma_m: Vector2::new(o.position_sigma_m[0], o.position_sigma_m[1]),
         nees,
-        rest_covered,
+        rest_covered: track.rest_covered,
         gyro_cal_error,
-        history_rms_m,
-        flags: FlagScore::new(&flag_log),
-        aligned_at_s: aligned_at.expect("aligned"),
+        history_rms_m: track.history_rms_m(),
+        flags: FlagScore::new(&track.flag_log),
+        aligned_at_s: track.aligned_at.expect("aligned"),
     }
 }
 
-fn main() {
-    let mut args = Args::parse();
-    if args.cases.is_empty() {
-        args.cases = CaseName::value_variants().to_vec();
-    }
+/// The table's title line: the options the rows were run with.
+fn print_title(args: &Args) {
     println!(
         "seeds {}-{}, {} Hz, {}, gyro correction: {}, rest flags: {} (hindsight {} s), hints: {}{}{}",
         args.first_seed,
@@ -642,93 +740,101 @@ fn main() {
             (true, true) => ", smooth floor, mounting estimated",
         }
     );
-    println!(
-        "| case | median % | p90 % | max % | end within 1 sigma (per axis) | NEES/2 mean | rest ends within 1 sigma | motion drift RMS revised / forward, m |"
+}
+
+/// One seed's outcome (`--per-seed`).
+fn print_seed(label: &str, seed: u64, o: &Outcome, p: f64, args: &Args) {
+    tracing::info!(
+        "{label} seed {seed}: distance {:.1} m, error ({:.3}, {:.3}) m = {p:.2}%, sigma ({:.3}, {:.3}) m, NEES {:.2}, gyro correction error {:.1e}, speed updates {}, disagreements {}, stale samples {}, scale error {:+.2}% (sigma {:.2}%), mounting error {:.2} deg, zero-velocity update's effective-sample factor {:.2}",
+        o.distance_m,
+        o.error_m.x,
+        o.error_m.y,
+        o.sigma_m.x,
+        o.sigma_m.y,
+        o.nees,
+        o.gyro_cal_error,
+        o.hint_counts.0,
+        o.hint_counts.1,
+        o.hint_counts.2,
+        100.0 * o.scale_error,
+        100.0 * o.scale_sigma,
+        o.mounting_error_deg,
+        o.zupt_widening.powi(2)
     );
-    println!("|---|---|---|---|---|---|---|---|");
-    for &name in &args.cases {
-        let (c, cfg) = case(name, &args);
-        let label = name.to_possible_value().expect("no skipped variants");
-        let mut pct = Vec::new();
-        let (mut covered, mut axes, mut nees, mut rc, mut rn) = (0, 0, 0.0, 0, 0);
-        let (mut hist_rev, mut hist_fwd) = (0.0, 0.0);
-        let mut hint_totals = (0u64, 0u64, 0u64);
-        let mut flags = FlagScore::default();
-        let (mut scale_se, mut mounting_max) = (0.0, 0.0f64);
-        for seed in args.first_seed..args.first_seed + args.seeds {
-            let o = run(&c, cfg, seed, &args);
-            let p = 100.0 * o.error_m.norm() / o.distance_m;
-            if args.per_seed {
-                eprintln!(
-                    "{} seed {seed}: distance {:.1} m, error ({:.3}, {:.3}) m = {p:.2}%, sigma ({:.3}, {:.3}) m, NEES {:.2}, gyro correction error {:.1e}, speed updates {}, disagreements {}, stale samples {}, scale error {:+.2}% (sigma {:.2}%), mounting error {:.2} deg, zero-velocity update's effective-sample factor {:.2}",
-                    label.get_name(),
-                    o.distance_m,
-                    o.error_m.x,
-                    o.error_m.y,
-                    o.sigma_m.x,
-                    o.sigma_m.y,
-                    o.nees,
-                    o.gyro_cal_error,
-                    o.hint_counts.0,
-                    o.hint_counts.1,
-                    o.hint_counts.2,
-                    100.0 * o.scale_error,
-                    100.0 * o.scale_sigma,
-                    o.mounting_error_deg,
-                    o.zupt_widening.powi(2)
-                );
-            }
-            flags.add(&o.flags);
-            if args.per_seed && args.rest == Rest::Imu {
-                eprintln!(
-                    "  seed {seed}: aligned at {:.1} s, rests missed {} (longest {:.1} s), longest between flagged rests {:.1} s, false-rest runs {:?}",
-                    o.aligned_at_s,
-                    o.flags.missed_rests.0,
-                    o.flags.missed_rests.1,
-                    o.flags.longest_unflagged_s,
-                    o.flags.runs
-                );
-            }
-            hint_totals.0 += o.hint_counts.0;
-            hint_totals.1 += u64::from(o.hint_counts.1);
-            hint_totals.2 += o.hint_counts.2;
-            if o.scale_error.is_finite() {
-                scale_se += o.scale_error.powi(2);
-            }
-            if o.mounting_error_deg.is_finite() {
-                mounting_max = mounting_max.max(o.mounting_error_deg);
-            }
-            pct.push(p);
-            for i in 0..2 {
-                axes += 1;
-                if o.error_m[i].abs() <= o.sigma_m[i] {
-                    covered += 1;
-                }
-            }
-            nees += o.nees;
-            hist_rev += o.history_rms_m.0.powi(2);
-            hist_fwd += o.history_rms_m.1.powi(2);
-            rc += o.rest_covered.0;
-            rn += o.rest_covered.1;
+    if args.rest == Rest::Imu {
+        tracing::info!(
+            "  seed {seed}: aligned at {:.1} s, rests missed {} (longest {:.1} s), longest between flagged rests {:.1} s, false-rest runs {:?}",
+            o.aligned_at_s,
+            o.flags.missed_rests.0,
+            o.flags.missed_rests.1,
+            o.flags.longest_unflagged_s,
+            o.flags.runs
+        );
+    }
+}
+
+/// One case's outcomes summed over its seeds.
+#[derive(Default)]
+struct CaseTotals {
+    /// End error as % of distance, per seed.
+    pct: Vec<f64>,
+    /// Axes whose end error is within 1 sigma, of all.
+    covered: (usize, usize),
+    nees: f64,
+    rest_covered: (usize, usize),
+    /// Sums of the squared history RMS, revised and forward.
+    history_ss: (f64, f64),
+    hint_totals: (u64, u64, u64),
+    flags: FlagScore,
+    scale_se: f64,
+    mounting_max: f64,
+}
+
+impl CaseTotals {
+    fn add(&mut self, o: &Outcome, p: f64) {
+        self.flags.add(&o.flags);
+        self.hint_totals.0 += o.hint_counts.0;
+        self.hint_totals.1 += u64::from(o.hint_counts.1);
+        self.hint_totals.2 += o.hint_counts.2;
+        if o.scale_error.is_finite() {
+            self.scale_se += o.scale_error.powi(2);
         }
-        let mut pct = Data::new(pct);
+        if o.mounting_error_deg.is_finite() {
+            self.mounting_max = self.mounting_max.max(o.mounting_error_deg);
+        }
+        self.pct.push(p);
+        for i in 0..2 {
+            self.covered.1 += 1;
+            if o.error_m[i].abs() <= o.sigma_m[i] {
+                self.covered.0 += 1;
+            }
+        }
+        self.nees += o.nees;
+        self.history_ss.0 += o.history_rms_m.0.powi(2);
+        self.history_ss.1 += o.history_rms_m.1.powi(2);
+        self.rest_covered.0 += o.rest_covered.0;
+        self.rest_covered.1 += o.rest_covered.1;
+    }
+
+    /// The case's table row, then its rest-flag and hint notes on stderr.
+    fn print(self, label: &str, args: &Args) {
+        let seeds = args.seeds as f64;
+        let mut pct = Data::new(self.pct);
         println!(
-            "| {} | {:.2} | {:.2} | {:.2} | {:.0}% | {:.2} | {:.0}% | {:.2} / {:.2} |",
-            label.get_name(),
+            "| {label} | {:.2} | {:.2} | {:.2} | {:.0}% | {:.2} | {:.0}% | {:.2} / {:.2} |",
             pct.median(),
             pct.quantile(0.9),
             pct.max(),
-            100.0 * covered as f64 / axes as f64,
-            nees / (2.0 * args.seeds as f64),
-            100.0 * rc as f64 / rn.max(1) as f64,
-            (hist_rev / args.seeds as f64).sqrt(),
-            (hist_fwd / args.seeds as f64).sqrt(),
+            100.0 * self.covered.0 as f64 / self.covered.1 as f64,
+            self.nees / (2.0 * seeds),
+            100.0 * self.rest_covered.0 as f64 / self.rest_covered.1.max(1) as f64,
+            (self.history_ss.0 / seeds).sqrt(),
+            (self.history_ss.1 / seeds).sqrt(),
         );
+        let (flags, n) = (&self.flags, seeds);
         if args.rest == Rest::Imu {
-            let n = args.seeds as f64;
-            eprintln!(
-                "  {}: rest flagged {:.1}% of rest, {:.2}% of motion; false-rest runs per drive ending at a motion's start / end / in between: {:.1} / {:.1} / {:.1}, speed x motion left after them {:.2} / {:.2} / {:.2} m; rests missed per drive {:.1} (longest {:.1} s), longest time between flagged rests {:.1} s",
-                label.get_name(),
+            tracing::info!(
+                "  {label}: rest flagged {:.1}% of rest, {:.2}% of motion; false-rest runs per drive ending at a motion's start / end / in between: {:.1} / {:.1} / {:.1}, speed x motion left after them {:.2} / {:.2} / {:.2} m; rests missed per drive {:.1} (longest {:.1} s), longest time between flagged rests {:.1} s",
                 100.0 * flags.rest.1 as f64 / flags.rest.0.max(1) as f64,
                 100.0 * flags.moving.1 as f64 / flags.moving.0.max(1) as f64,
                 flags.runs[0] as f64 / n,
@@ -743,16 +849,41 @@ fn main() {
             );
         }
         if args.hints != Hints::None {
-            let n = args.seeds as f64;
-            eprintln!(
-                "  {}: per drive {:.0} speed updates, {:.0} samples of hint/detector disagreement, {:.0} samples stale; scale error RMS {:.2}%; mounting error max {:.3} deg",
-                label.get_name(),
-                hint_totals.0 as f64 / n,
-                hint_totals.1 as f64 / n,
-                hint_totals.2 as f64 / n,
-                100.0 * (scale_se / n).sqrt(),
-                mounting_max
+            tracing::info!(
+                "  {label}: per drive {:.0} speed updates, {:.0} samples of hint/detector disagreement, {:.0} samples stale; scale error RMS {:.2}%; mounting error max {:.3} deg",
+                self.hint_totals.0 as f64 / n,
+                self.hint_totals.1 as f64 / n,
+                self.hint_totals.2 as f64 / n,
+                100.0 * (self.scale_se / n).sqrt(),
+                self.mounting_max
             );
         }
+    }
+}
+
+fn main() {
+    mems_log::init("drive_eval");
+    let mut args = Args::parse();
+    if args.cases.is_empty() {
+        args.cases = CaseName::value_variants().to_vec();
+    }
+    print_title(&args);
+    println!(
+        "| case | median % | p90 % | max % | end within 1 sigma (per axis) | NEES/2 mean | rest ends within 1 sigma | motion drift RMS revised / forward, m |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for &name in &args.cases {
+        let (c, cfg) = case(name, &args);
+        let label = name.to_possible_value().expect("no skipped variants");
+        let mut totals = CaseTotals::default();
+        for seed in args.first_seed..args.first_seed + args.seeds {
+            let o = run(&c, cfg, seed, &args);
+            let p = 100.0 * o.error_m.norm() / o.distance_m;
+            if args.per_seed {
+                print_seed(label.get_name(), seed, &o, p, &args);
+            }
+            totals.add(&o, p);
+        }
+        totals.print(label.get_name(), &args);
     }
 }

@@ -63,6 +63,18 @@ struct HintSample {
     flags: u16,
 }
 
+/// What the hints delivered by a sample's time say about it.
+struct HintDecision {
+    /// The newest delivered hint, if not older than the maximum age.
+    fresh: Option<RobotHint>,
+    /// The fresh hint's rest decision, if it has a rest source.
+    rest: Option<bool>,
+    /// Hints were received, but none is fresh.
+    stale: bool,
+    /// The flags the hints set on this sample's state.
+    sample: HintSample,
+}
+
 /// Hint state of the stage.
 struct Hints {
     cfg: HintConfig,
@@ -304,44 +316,79 @@ impl Navigator {
         // Samples are missing before this one: the raw stream says so, or the sequence skips.
         let gap = s.raw_flags & raw_flags::GAP_BEFORE != 0
             || prev.is_some_and(|(_, seq)| s.seq != seq + 1);
-        let prev = prev.map(|(p, _)| p);
+        let prev_ns = prev.map(|((t, _), _)| t);
+        let detector_ready = s.flags & corrected_flags::DETECTOR_READY != 0;
+        let mut d = self.hint_decision(t_ns, imu_rest, detector_ready);
 
-        // Hints delivered by this sample's time; the newest fresh one with a rest source
-        // decides rest.
+        if self.kf.is_none() {
+            let rest = d.rest.unwrap_or(imu_rest);
+            // A stationary hint aligns only once the calibration stage has learned its
+            // references (its zero-state flag never comes earlier): until then the stage's gyro
+            // output still carries the turn-on bias it is about to subtract, and a filter
+            // aligned on it would take that step for rotation.
+            let ready = detector_ready || d.rest.is_none();
+            self.accumulate_alignment(t_ns, &m, rest && ready);
+            emit(&self.unaligned_state(s, rest, d.sample));
+            return;
+        }
+        let dt = (t_ns - prev_ns.unwrap_or(t_ns)) as f64 * 1e-9;
+        let moved = self.predict(m, dt, gap, &mut d.sample);
+        let rest = self.rest_decision(&d, imu_rest);
+        self.count_hint_use(&d);
+        self.track_motion(t_ns, prev_ns, rest, emit);
+        self.update(t_ns, dt, rest, moved, &mut d.sample);
+
+        let state = self.state(s, rest, d.sample);
+        if !rest && self.motion_start_ns.is_some() {
+            self.record(&state);
+        }
+        emit(&state);
+
+        if let Some(pending) = self.pending
+            && rest
+            && (t_ns - pending.end_ns) as f64 * 1e-9 >= self.cfg.revision_delay_s
+        {
+            self.republish(pending, emit);
+        }
+    }
+
+    /// Delivers the hints due by `t_ns` and decides what they say about this sample: the
+    /// newest fresh one with a rest source decides rest.
+    #[inline]
+    fn hint_decision(&mut self, t_ns: u64, imu_rest: bool, detector_ready: bool) -> HintDecision {
         self.deliver_hints(t_ns);
         let fresh = self
             .hints
             .newest
             .filter(|h| t_ns.saturating_sub(h.stamps.sample_ns) <= self.hints.max_age_ns);
-        let hint_rest = fresh
+        let rest = fresh
             .filter(has_rest_source)
             .map(|h| h.flags & hint_flags::STATIONARY != 0);
-        self.imu_decided = hint_rest.is_none();
-        let mut hs = HintSample::default();
+        self.imu_decided = rest.is_none();
+        let mut sample = HintSample::default();
         let stale = self.hints.newest.is_some() && fresh.is_none();
         if stale {
-            hs.flags |= odometry_flags::HINT_STALE;
+            sample.flags |= odometry_flags::HINT_STALE;
         }
-        if hint_rest == Some(true) {
-            hs.flags |= odometry_flags::HINT_STATIONARY;
+        if rest == Some(true) {
+            sample.flags |= odometry_flags::HINT_STATIONARY;
         }
-        let detector_ready = s.flags & corrected_flags::DETECTOR_READY != 0;
-        if hint_rest.is_some_and(|h| detector_ready && h != imu_rest) {
-            hs.flags |= odometry_flags::HINT_DISAGREE;
+        if rest.is_some_and(|h| detector_ready && h != imu_rest) {
+            sample.flags |= odometry_flags::HINT_DISAGREE;
         }
+        HintDecision {
+            fresh,
+            rest,
+            stale,
+            sample,
+        }
+    }
 
-        let Some(kf) = self.kf.as_mut() else {
-            let rest = hint_rest.unwrap_or(imu_rest);
-            // A stationary hint aligns only once the calibration stage has learned its
-            // references (its zero-state flag never comes earlier): until then the stage's gyro
-            // output still carries the turn-on bias it is about to subtract, and a filter
-            // aligned on it would take that step for rotation.
-            let ready = detector_ready || hint_rest.is_none();
-            self.accumulate_alignment(t_ns, &m, rest && ready);
-            emit(&self.unaligned_state(s, rest, hs));
-            return;
-        };
-        let dt = (t_ns - prev.map_or(t_ns, |p| p.0)) as f64 * 1e-9;
+    /// The aligned filter's prediction over `dt` (widened across a gap); returns the
+    /// horizontal distance it moved, m.
+    #[inline]
+    fn predict(&mut self, m: Imu, dt: f64, gap: bool, hs: &mut HintSample) -> f64 {
+        let kf = self.kf.as_mut().expect("aligned");
         let p_before = kf.x.p;
         // Across a gap the trapezoid of the readings on either side is the guess (on simulated
         // drives it ended closer than coasting with velocity and attitude held: NEES/2 at the
@@ -351,29 +398,54 @@ impl Navigator {
             kf.missed(dt, &self.cfg.manoeuvre);
             hs.flags |= odometry_flags::GAP_BEFORE;
         }
-        let moved = (kf.x.p - p_before).xy().norm();
+        (kf.x.p - p_before).xy().norm()
+    }
+
+    /// Whether the aligned filter takes this sample as rest.
+    #[inline]
+    fn rest_decision(&self, d: &HintDecision, imu_rest: bool) -> bool {
         // The IMU's rest flag decides without a fresh hint; after hints went stale, only when
         // the velocity is consistent with rest (a detector that takes cruising for rest must not
         // stop a robot the hints have just seen moving).
-        let rest = match hint_rest {
+        match d.rest {
             Some(r) => r,
-            None if stale && imu_rest => kf.velocity_consistent_with_zero(
-                self.cfg.zupt_sigma_mps,
-                self.hints.cfg.fallback_zupt_gate_sigma,
-            ),
+            None if d.stale && imu_rest => self
+                .kf
+                .as_ref()
+                .expect("aligned")
+                .velocity_consistent_with_zero(
+                    self.cfg.zupt_sigma_mps,
+                    self.hints.cfg.fallback_zupt_gate_sigma,
+                ),
             None => imu_rest,
-        };
+        }
+    }
 
-        if hs.flags & odometry_flags::HINT_DISAGREE != 0 {
+    /// Counts the hint's disagreement with the detector and its first use.
+    #[inline]
+    fn count_hint_use(&mut self, d: &HintDecision) {
+        if d.sample.flags & odometry_flags::HINT_DISAGREE != 0 {
             self.hints.disagreements += 1;
         }
-        if hint_rest.is_some() && fresh.is_some_and(|h| self.hints.newest_used != Some(h.seq)) {
-            self.hints.newest_used = fresh.map(|h| h.seq);
+        if d.rest.is_some()
+            && d.fresh
+                .is_some_and(|h| self.hints.newest_used != Some(h.seq))
+        {
+            self.hints.newest_used = d.fresh.map(|h| h.seq);
             self.hints.applied += 1;
         }
+    }
 
-        // Motion interval bookkeeping: a rest after motion opens a pending revision; motion
-        // that resumes before the revision delay has passed revises with what was gathered.
+    /// Motion interval bookkeeping: a rest after motion opens a pending revision; motion that
+    /// resumes before the revision delay has passed revises with what was gathered.
+    #[inline]
+    fn track_motion(
+        &mut self,
+        t_ns: u64,
+        prev_ns: Option<u64>,
+        rest: bool,
+        emit: &mut impl FnMut(&OdometryState),
+    ) {
         if rest && !self.at_rest && self.motion_start_ns.is_some() && self.pending.is_none() {
             self.rest_count += 1;
             self.pending = Some(PendingRevision {
@@ -387,14 +459,20 @@ impl Navigator {
                 self.republish(pending, emit);
             }
             if self.motion_start_ns.is_none() {
-                self.motion_start_ns = Some(prev.map_or(t_ns, |p| p.0));
+                self.motion_start_ns = Some(prev_ns.unwrap_or(t_ns));
                 self.history.clear();
                 self.history_overflowed = false;
             }
         }
         self.at_rest = rest;
+    }
 
-        let kf = self.kf.as_mut().expect("aligned above");
+    /// The aligned filter's updates at this sample: zero velocity and zero rate at rest,
+    /// the waiting speed hints in motion; the body velocity's corrections are tracked for the
+    /// mounting estimate.
+    #[inline]
+    fn update(&mut self, t_ns: u64, dt: f64, rest: bool, moved: f64, hs: &mut HintSample) {
+        let kf = self.kf.as_mut().expect("aligned");
         let hints = &mut self.hints;
         let body_before = hints.r_bs.map(|r| kf.body_velocity(&r));
         if let Some(v_b) = body_before {
@@ -428,19 +506,6 @@ impl Navigator {
         }
         if let (Some(r), Some(before)) = (hints.r_bs, body_before) {
             hints.corrections += kf.body_velocity(&r) - before;
-        }
-
-        let state = self.state(s, rest, hs);
-        if !rest && self.motion_start_ns.is_some() {
-            self.record(&state);
-        }
-        emit(&state);
-
-        if let Some(pending) = self.pending
-            && rest
-            && (t_ns - pending.end_ns) as f64 * 1e-9 >= self.cfg.revision_delay_s
-        {
-            self.republish(pending, emit);
         }
     }
 

@@ -833,6 +833,36 @@ impl OdometryStage {
         emit: &mut impl FnMut(&OdometryState),
     ) -> Result<(), OdometryError> {
         check_finite(s)?;
+        self.check_time(s)?;
+        self.last_ns = Some(s.stamps.sample_ns);
+        let mut budget = REPLAY_PER_CALL;
+        let budget = &mut budget;
+        let state = self.navigate_ahead(s);
+        emit(&state);
+        let sample = Unsettled {
+            s: *s,
+            state,
+            imu_decided: self.ahead.imu_decided(),
+            revisions_end: self.revisions.len(),
+        };
+        if s.flags & corrected_flags::PROVISIONAL != 0 {
+            if self.unsettled.is_full() {
+                self.leave_step();
+            }
+            if let Some(old) = self.unsettled.push(sample) {
+                // Never settled in time: final as it stands.
+                self.settle(&old, budget, emit);
+            }
+            return Ok(());
+        }
+        self.settle_batch(s, &sample, budget, emit);
+        Ok(())
+    }
+
+    /// Refuses a sample whose time does not increase, or jumps by more than
+    /// [`limits::MAX_STEP_NS`].
+    #[inline]
+    fn check_time(&self, s: &CorrectedImuSample) -> Result<(), OdometryError> {
         let t_ns = s.stamps.sample_ns;
         if let Some(prev_ns) = self.last_ns
             && t_ns <= prev_ns
@@ -852,12 +882,14 @@ impl OdometryStage {
                 prev_ns,
             });
         }
-        self.last_ns = Some(t_ns);
-        let mut budget = REPLAY_PER_CALL;
-        let budget = &mut budget;
+        Ok(())
+    }
+
+    /// The live navigator's state for `s`. Its motion-end revisions come again, on settled
+    /// flags, from the settled stage: kept for it while in step.
+    #[inline]
+    fn navigate_ahead(&mut self, s: &CorrectedImuSample) -> OdometryState {
         let mut state = OdometryState::default();
-        // Its motion-end revisions come again, on settled flags, from the settled stage: kept
-        // for it while in step.
         let (in_step, revisions, full) = (self.in_step, &mut self.revisions, &mut self.out_of_step);
         self.ahead.process(s, &mut |o| {
             if o.flags & odometry_flags::REVISION == 0 {
@@ -870,23 +902,20 @@ impl OdometryStage {
                 }
             }
         });
-        emit(&state);
-        let sample = Unsettled {
-            s: *s,
-            state,
-            imu_decided: self.ahead.imu_decided(),
-            revisions_end: self.revisions.len(),
-        };
-        if s.flags & corrected_flags::PROVISIONAL != 0 {
-            if self.unsettled.is_full() {
-                self.leave_step();
-            }
-            if let Some(old) = self.unsettled.push(sample) {
-                // Never settled in time: final as it stands.
-                self.settle(&old, budget, emit);
-            }
-            return Ok(());
-        }
+        state
+    }
+
+    /// Settles the batch that final sample `s` (`sample`, with its live state) ends: the
+    /// unsettled samples take its verdict, and the live navigator the settled one's state
+    /// when a verdict changed.
+    #[inline]
+    fn settle_batch(
+        &mut self,
+        s: &CorrectedImuSample,
+        sample: &Unsettled,
+        budget: &mut usize,
+        emit: &mut impl FnMut(&OdometryState),
+    ) {
         // Older samples than those `s` settles were cut from their batch: final as they are.
         let settles = (s.settles as usize).min(self.unsettled.len());
         const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
@@ -913,12 +942,11 @@ impl OdometryStage {
             u.s.zs_std_mps2 = s.zs_std_mps2;
             diverged |= self.settle(&u, budget, emit);
         }
-        diverged |= self.settle(&sample, budget, emit);
+        diverged |= self.settle(sample, budget, emit);
         if diverged {
             self.ahead.copy_from(&self.settled.live);
         }
         self.end_batch(diverged);
-        Ok(())
     }
 
     /// After a batch has settled (`diverged`: the live navigator took the settled one's

@@ -1,6 +1,7 @@
 //! `mems-acquire`: reads an MPU-9250 (simulated by default, or real over Linux I2C or SPI) and
 //! publishes every sample on `mems/imu/raw`, losslessly.
 
+use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use acquire::acquisition::{
@@ -89,8 +90,12 @@ enum Scenario {
     Static,
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> ExitCode {
+    mems_log::init("mems-acquire");
+    mems_log::exit(acquire(Cli::parse()))
+}
+
+fn acquire(cli: Cli) -> Result<()> {
     realtime_setup(&cli)?;
     let config = config_for_rate(cli.rate, cli.dlpf).map_err(anyhow::Error::msg)?;
     let read_interval_ns = match cli.read_interval_ms {
@@ -227,8 +232,8 @@ fn run<I2C: I2c, C: Clock>(
 
     let mut acq = Acquisition::start(driver, clock, config, read_interval_ns)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
-    eprintln!(
-        "mems-acquire: {} ({}) at {} Hz on {name}, reading every {:.2} ms",
+    tracing::info!(
+        "{} ({}) at {} Hz on {name}, reading every {:.2} ms",
         acq.driver().bus_label(),
         acq.driver().part().unwrap_or("?"),
         config.output_rate_hz(),
@@ -261,7 +266,7 @@ fn run<I2C: I2c, C: Clock>(
             break;
         }
         if let Err(e) = acq.read_and_publish(&mut publish)? {
-            eprintln!("mems-acquire: read failed, device re-initialising: {e}");
+            tracing::warn!("read failed, device re-initialising: {e}");
         }
         if deadline.is_some_and(|d| start.elapsed() >= d) {
             break;
@@ -284,8 +289,8 @@ fn report<I2C: I2c, C: Clock>(
     // The histogram reports a bucket's upper end (2 significant digits): never above the
     // exact maximum.
     let us = |q: f64| late.value_at_quantile(q).min(stats.max_late_ns.max(1)) as f64 * 1e-3;
-    eprintln!(
-        "mems-acquire: read lateness p50 {:.0} us, p99 {:.0} us, p99.9 {:.0} us, max {:.0} us; \
+    tracing::info!(
+        "read lateness p50 {:.0} us, p99 {:.0} us, p99.9 {:.0} us, max {:.0} us; \
          fullest FIFO {} of 512 bytes",
         us(0.5),
         us(0.99),
@@ -294,8 +299,8 @@ fn report<I2C: I2c, C: Clock>(
         driver.max_fifo_bytes
     );
     if let Some((ahead, behind)) = stats.sample_time_excursion_ns {
-        eprintln!(
-            "mems-acquire: newest sample's FIFO time at most {:.3} ms after its acquisition and \
+        tracing::info!(
+            "newest sample's FIFO time at most {:.3} ms after its acquisition and \
              {:.3} ms before its read's start minus a period (<= 0: on the clock); duplicates \
              dropped {}, settling frames dropped {}, pair mismatches {}",
             ahead as f64 * 1e-6,
@@ -310,8 +315,8 @@ fn report<I2C: I2c, C: Clock>(
         .iter()
         .map(|(port, n)| format!("{n} for subscriber port {port:#x}"))
         .collect();
-    eprintln!(
-        "mems-acquire: published {} samples in {:.1} s; reads {}, failed {}, overflows {}, \
+    tracing::info!(
+        "published {} samples in {:.1} s; reads {}, failed {}, overflows {}, \
          gaps {}, lost {}, bus errors {}, re-inits {}; discarded for stalled subscribers {}{}; \
          small-block pool: peak {} of 1024 blocks, {} requests found it empty",
         stats.published,

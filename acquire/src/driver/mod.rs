@@ -394,6 +394,23 @@ const STALL_PERIODS: f64 = 50.0;
 /// Lower bound of the stall timeout, ns.
 const STALL_MIN_NS: f64 = 50e6;
 
+/// What one poll's FIFO_COUNT read said: when it was read (ns, before and after), the whole
+/// frames counted, and whether the FIFO was full.
+#[derive(Clone, Copy)]
+struct FifoCount {
+    t_before: u64,
+    t_after: u64,
+    available: usize,
+    full: bool,
+}
+
+/// The outcome of reading a poll's frames: samples delivered, the poll going on to check for
+/// an overflow; or delivered before the FIFO was reset, which ends the poll.
+enum FramesRead {
+    Delivered(usize),
+    FifoReset(usize),
+}
+
 /// An MPU-9250 on an I2C bus (or on SPI through [`crate::spi::SpiRegisters`]).
 pub struct Mpu9250<I2C: I2c> {
     i2c: I2C,
@@ -717,62 +734,104 @@ impl<I2C: I2c> Mpu9250<I2C> {
         };
         let mut delivered = 0;
         if take > 0 {
-            // The observation for the times: this poll's count, or, when that was delayed and
-            // the times are to be anchored on it, a prompt count taken before any frame is read.
-            let mut obs = (t_before, available);
-            let mut reliable = !full && t_after - t_before <= COUNT_READ_MAX_NS;
-            if !reliable
-                && !full
-                && self.timer.anchoring()
-                && let Some(again) = self.observe_count(clock, frame)?
-            {
-                (obs, reliable) = (again, true);
-            }
-            let bytes = take * frame;
-            // Only an address NACK is retried: after any other failure, the bytes clocked out
-            // before it are gone from the FIFO and the frames can no longer be trusted.
-            let address = self.address;
-            let buf = &mut self.buf[..bytes];
-            let fifo_read = attempt(&mut self.i2c, &mut self.stats, is_address_nack, |i2c| {
-                i2c.write_read(address, &[reg::FIFO_R_W], buf)
-            });
-            match fifo_read {
-                Err(e) if is_address_nack(e.kind()) => {
-                    return Err(self.persistent("reading the FIFO", e));
-                }
-                Err(_) => {
-                    self.stats.short_reads += 1;
-                    let lost = available / config.frames_per_sample();
-                    self.reset_fifo(config, lost as u64)?;
-                    return Ok(Some(0));
-                }
-                Ok(()) => {}
-            }
-            // The newest sample was produced within one period before the count was latched.
-            let newest_obs = obs.0 as f64 - self.timer.period_ns() / 2.0;
-            let a = self.timer.assign(take, obs.1, newest_obs, reliable);
-            let fps = config.frames_per_sample() as u64;
-            let (n, skipped, mismatch) = self.decode_frames(&config, take, &a, out);
-            for sample in &mut out[..n] {
-                sample.seq = self.seq;
-                self.seq += 1;
-            }
-            self.mark_gap(&mut out[..n], a.lost, skipped, fps);
-            delivered = n;
-            self.stats.samples += n as u64;
-            if let Some(bad) = mismatch {
-                // The frames from the mismatch on cannot be trusted: drop them and what is
-                // left in the FIFO.
-                self.stats.pair_mismatches += 1;
-                let dropped = (available - bad) as u64 / fps;
-                self.reset_fifo(config, dropped)?;
-                return Ok(Some(delivered));
+            let count = FifoCount {
+                t_before,
+                t_after,
+                available,
+                full,
+            };
+            match self.read_frames(config, clock, count, take, out)? {
+                FramesRead::Delivered(n) => delivered = n,
+                FramesRead::FifoReset(n) => return Ok(Some(n)),
             }
         }
-        // INT_STATUS after the data: FIFO_OFLOW_INT covers the time since the last poll read it.
-        // An overflow before this poll's count left the FIFO full (nothing was read since);
-        // one after it, while this poll ran, left a partial frame behind the frames just read,
-        // which would misalign every later frame: the rest of the FIFO is dropped.
+        self.check_overflow(config, full, short, available)?;
+        Ok(Some(delivered))
+    }
+
+    /// Reads `take` whole frames (of `count.available`) and decodes them into `out`, numbered
+    /// and timed; a failed read or a mismatched pair resets the FIFO (the frames from there
+    /// on cannot be trusted).
+    fn read_frames(
+        &mut self,
+        config: Config,
+        clock: &impl Clock,
+        count: FifoCount,
+        take: usize,
+        out: &mut [RawImuSample],
+    ) -> Result<FramesRead, Error<I2C::Error>> {
+        let frame = config.frame_len();
+        let FifoCount {
+            t_before,
+            t_after,
+            available,
+            full,
+        } = count;
+        // The observation for the times: this poll's count, or, when that was delayed and
+        // the times are to be anchored on it, a prompt count taken before any frame is read.
+        let mut obs = (t_before, available);
+        let mut reliable = !full && t_after - t_before <= COUNT_READ_MAX_NS;
+        if !reliable
+            && !full
+            && self.timer.anchoring()
+            && let Some(again) = self.observe_count(clock, frame)?
+        {
+            (obs, reliable) = (again, true);
+        }
+        let bytes = take * frame;
+        // Only an address NACK is retried: after any other failure, the bytes clocked out
+        // before it are gone from the FIFO and the frames can no longer be trusted.
+        let address = self.address;
+        let buf = &mut self.buf[..bytes];
+        let fifo_read = attempt(&mut self.i2c, &mut self.stats, is_address_nack, |i2c| {
+            i2c.write_read(address, &[reg::FIFO_R_W], buf)
+        });
+        match fifo_read {
+            Err(e) if is_address_nack(e.kind()) => {
+                return Err(self.persistent("reading the FIFO", e));
+            }
+            Err(_) => {
+                self.stats.short_reads += 1;
+                let lost = available / config.frames_per_sample();
+                self.reset_fifo(config, lost as u64)?;
+                return Ok(FramesRead::FifoReset(0));
+            }
+            Ok(()) => {}
+        }
+        // The newest sample was produced within one period before the count was latched.
+        let newest_obs = obs.0 as f64 - self.timer.period_ns() / 2.0;
+        let a = self.timer.assign(take, obs.1, newest_obs, reliable);
+        let fps = config.frames_per_sample() as u64;
+        let (n, skipped, mismatch) = self.decode_frames(&config, take, &a, out);
+        for sample in &mut out[..n] {
+            sample.seq = self.seq;
+            self.seq += 1;
+        }
+        self.mark_gap(&mut out[..n], a.lost, skipped, fps);
+        self.stats.samples += n as u64;
+        if let Some(bad) = mismatch {
+            // The frames from the mismatch on cannot be trusted: drop them and what is
+            // left in the FIFO.
+            self.stats.pair_mismatches += 1;
+            let dropped = (available - bad) as u64 / fps;
+            self.reset_fifo(config, dropped)?;
+            return Ok(FramesRead::FifoReset(n));
+        }
+        Ok(FramesRead::Delivered(n))
+    }
+
+    /// INT_STATUS after the data: FIFO_OFLOW_INT covers the time since the last poll read it.
+    /// An overflow before this poll's count left the FIFO full (nothing was read since); one
+    /// after it, while this poll ran, left a partial frame behind the frames just read, which
+    /// would misalign every later frame: the rest of the FIFO is dropped. So is a FIFO whose
+    /// count was not whole frames (`short`; `available` whole frames counted).
+    fn check_overflow(
+        &mut self,
+        config: Config,
+        full: bool,
+        short: bool,
+        available: usize,
+    ) -> Result<(), Error<I2C::Error>> {
         let mut status = [0u8; 1];
         self.read_registers(reg::INT_STATUS, &mut status, "reading INT_STATUS")?;
         let overflow = full || status[0] & reg::INT_STATUS_FIFO_OFLOW != 0;
@@ -785,7 +844,7 @@ impl<I2C: I2c> Mpu9250<I2C> {
             self.stats.short_reads += 1;
             self.reset_fifo(config, (available / fps) as u64)?;
         }
-        Ok(Some(delivered))
+        Ok(())
     }
 
     /// Flags the first of the `delivered` samples with the gap before it, if any: its size is

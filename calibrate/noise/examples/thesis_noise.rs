@@ -55,13 +55,8 @@ fn rms(values: &[f64]) -> f64 {
     (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt()
 }
 
-fn main() -> Result<()> {
-    let dir = std::env::args().nth(1).map_or_else(
-        || PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/capstone"),
-        PathBuf::from,
-    );
-    let table_head = "| record | axis | N (m/s²/√Hz) | B (m/s²) | K (m/s²·√Hz) | χ²/dof |\n|---|---|---|---|---|---|";
-
+/// The six-position trials' test files: fits and the 60 s displacement floor.
+fn six_position(dir: &Path, table_head: &str) -> Result<()> {
     println!("## Six-position test files (60 s, z up)\n\n{table_head}");
     let mut floors = Vec::new();
     for trial in 1..=3 {
@@ -87,8 +82,11 @@ fn main() -> Result<()> {
             f.measured_record_m[2]
         );
     }
+    Ok(())
+}
 
-    // Effect of torn-read repair on trial 1.
+/// Effect of torn-read repair on trial 1: its fits without it.
+fn unrepaired_trial(dir: &Path, table_head: &str) -> Result<()> {
     let path = dir.join("Six-Position-Test/data/trial_1/six_position_test_data_1.csv");
     let mut raw = load(&path)?;
     let unrepaired = analyze(
@@ -101,11 +99,23 @@ fn main() -> Result<()> {
     )?;
     println!("\n### Trial 1 without torn-read repair\n\n{table_head}");
     print_fits("trial 1 raw", &unrepaired);
+    Ok(())
+}
 
-    // Start-up runs: each, then pooled.
-    let mut records = Vec::new();
-    let mut measured: [Vec<f64>; 3] = Default::default();
-    let mut single_n: [Vec<f64>; 3] = Default::default();
+/// The start-up runs analysed one by one: each run's repaired samples, and per axis its
+/// measured 60 s displacement and resolved white noise.
+struct StartUpRuns {
+    records: Vec<Vec<RawImuSample>>,
+    measured: [Vec<f64>; 3],
+    single_n: [Vec<f64>; 3],
+}
+
+fn start_up_runs(dir: &Path) -> Result<StartUpRuns> {
+    let mut runs = StartUpRuns {
+        records: Vec::new(),
+        measured: Default::default(),
+        single_n: Default::default(),
+    };
     for run in 1..=60 {
         let path = dir.join(format!(
             "Preliminary-Tests/Start-Up-Shut-Down/Data/start_up_data_{run}.csv"
@@ -113,9 +123,9 @@ fn main() -> Result<()> {
         let mut samples = load(&path)?;
         let report = analyze(&mut samples, &path.display().to_string(), &options())?;
         for axis in 0..3 {
-            measured[axis].push(report.floor.measured_record_m[axis]);
+            runs.measured[axis].push(report.floor.measured_record_m[axis]);
             if let Some((n, _)) = report.channels[axis].fit.white.resolved() {
-                single_n[axis].push(n);
+                runs.single_n[axis].push(n);
             }
         }
         // Repaired samples: the pooled analysis below must not repair twice.
@@ -123,28 +133,17 @@ fn main() -> Result<()> {
             measured_static_displacement(&samples, THESIS_GRAVITY_MPS2)[0],
             report.floor.measured_record_m[0]
         );
-        records.push(samples);
+        runs.records.push(samples);
     }
-    let mut pooled = join_records(&records);
-    let report = analyze(
-        &mut pooled,
-        "60 start-up runs pooled",
-        &Options {
-            repair: None, // already repaired run by run
-            ..options()
-        },
-    )?;
-    println!(
-        "\n## Start-up runs (60 x 60 s), pooled as {} segments\n\n{table_head}",
-        report.timing.segments.len()
-    );
-    print_fits("pooled", &report);
-    if let Some(png) = std::env::args().nth(2) {
-        noise::plot::write_png(Path::new(&png), "60 start-up runs pooled", &report.channels)?;
-    }
+    Ok(runs)
+}
+
+/// The white noise of the runs one by one, and the pooled prediction of the 60 s floor
+/// against the runs' displacements.
+fn print_start_up(report: &Report, runs: &mut StartUpRuns) {
     println!("\nWhite noise of the runs analysed one by one (median, min, max):\n");
     for axis in 0..3 {
-        let v = &mut single_n[axis];
+        let v = &mut runs.single_n[axis];
         v.sort_by(f64::total_cmp);
         println!(
             "- {}: {:.3e} ({:.3e} .. {:.3e}), {} runs",
@@ -163,12 +162,45 @@ fn main() -> Result<()> {
         let p = report.channels[axis].fit.coefficients;
         let predicted = static_displacement_sigma(p[0].sqrt(), p[1].sqrt(), p[2].sqrt(), 60.0);
         let white = static_displacement_sigma(p[0].sqrt(), 0.0, 0.0, 60.0);
-        let max = measured[axis].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let max = runs.measured[axis]
+            .iter()
+            .fold(0.0f64, |m, v| m.max(v.abs()));
         println!(
             "| {} | {predicted:.3} | {white:.3} | {:.3} | {max:.3} |",
             ["x", "y", "z"][axis],
-            rms(&measured[axis])
+            rms(&runs.measured[axis])
         );
     }
+}
+
+fn main() -> Result<()> {
+    let dir = std::env::args().nth(1).map_or_else(
+        || PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/capstone"),
+        PathBuf::from,
+    );
+    let table_head = "| record | axis | N (m/s²/√Hz) | B (m/s²) | K (m/s²·√Hz) | χ²/dof |\n|---|---|---|---|---|---|";
+    six_position(&dir, table_head)?;
+    unrepaired_trial(&dir, table_head)?;
+
+    // Start-up runs: each, then pooled.
+    let mut runs = start_up_runs(&dir)?;
+    let mut pooled = join_records(&runs.records);
+    let report = analyze(
+        &mut pooled,
+        "60 start-up runs pooled",
+        &Options {
+            repair: None, // already repaired run by run
+            ..options()
+        },
+    )?;
+    println!(
+        "\n## Start-up runs (60 x 60 s), pooled as {} segments\n\n{table_head}",
+        report.timing.segments.len()
+    );
+    print_fits("pooled", &report);
+    if let Some(png) = std::env::args().nth(2) {
+        noise::plot::write_png(Path::new(&png), "60 start-up runs pooled", &report.channels)?;
+    }
+    print_start_up(&report, &mut runs);
     Ok(())
 }

@@ -118,6 +118,53 @@ pub enum AnalysisError {
     },
 }
 
+/// Repairs torn reads in the raw counts and the same shifts on the SI columns: g (times
+/// gravity) and deg/s (in radians); `samples` are repaired in place.
+fn repair(
+    samples: &mut [RawImuSample],
+    columns: &mut Columns,
+    config: &RepairConfig,
+    gravity_mps2: f64,
+) -> TornReport {
+    let tears = detect_axes(&columns.counts);
+    for (a, axis_tears) in tears.iter().enumerate() {
+        let step = if a < 3 {
+            f64::from(TEAR_COUNTS) / config.accel_lsb_per_g * gravity_mps2
+        } else {
+            (f64::from(TEAR_COUNTS) / config.gyro_lsb_per_dps).to_radians()
+        };
+        for &(i, k) in &axis_tears.fixes {
+            columns.values[a][i] -= f64::from(k) * step;
+        }
+    }
+    apply_to_samples(samples, &tears, config)
+}
+
+/// The noise parameters of `sensor`'s three axes, if analysed.
+fn sensor_noise(reports: &[ChannelReport], sensor: Sensor) -> Option<SensorNoise> {
+    let axes: Vec<AxisNoise> = reports
+        .iter()
+        .filter(|r| r.sensor == sensor)
+        .map(|r| crate::fit::axis_noise(&r.fit))
+        .collect();
+    let [x, y, z]: [AxisNoise; 3] = axes.try_into().ok()?;
+    Some(SensorNoise {
+        unit: sensor.unit().to_owned(),
+        x,
+        y,
+        z,
+    })
+}
+
+/// The displacement floor after `t` s at rest (mean removed, 1-sigma) per accelerometer axis,
+/// m, from the fitted noise.
+fn floor_at(reports: &[ChannelReport], t: f64) -> [f64; 3] {
+    std::array::from_fn(|axis| {
+        let p = reports[axis].fit.coefficients;
+        static_displacement_sigma(p[0].sqrt(), p[1].sqrt(), p[2].sqrt(), t)
+    })
+}
+
 /// Analyses a static recording named `source` (see the crate documentation). The samples are
 /// repaired in place when `options.repair` is set.
 pub fn analyze(
@@ -132,21 +179,9 @@ pub fn analyze(
     let mut columns = Columns::new(samples, options.gravity_mps2).map_err(series_error)?;
     let timing = columns.timing(&options.gaps);
     let repeats = columns.repeats;
-    let torn = options.repair.map(|config| {
-        let tears = detect_axes(&columns.counts);
-        // The same shifts on the SI columns: g (times gravity) and deg/s (in radians).
-        for (a, axis_tears) in tears.iter().enumerate() {
-            let step = if a < 3 {
-                f64::from(TEAR_COUNTS) / config.accel_lsb_per_g * options.gravity_mps2
-            } else {
-                (f64::from(TEAR_COUNTS) / config.gyro_lsb_per_dps).to_radians()
-            };
-            for &(i, k) in &axis_tears.fixes {
-                columns.values[a][i] -= f64::from(k) * step;
-            }
-        }
-        apply_to_samples(samples, &tears, &config)
-    });
+    let torn = options
+        .repair
+        .map(|config| repair(samples, &mut columns, &config, options.gravity_mps2));
     let times_ns = std::mem::take(&mut columns.times_ns);
     let channels = columns.into_channels();
     let kinds: Vec<(Sensor, usize)> = channels.iter().map(|c| (c.sensor, c.axis)).collect();
@@ -168,36 +203,16 @@ pub fn analyze(
         });
     }
 
-    let sensor_noise = |sensor: Sensor| -> Option<SensorNoise> {
-        let axes: Vec<AxisNoise> = reports
-            .iter()
-            .filter(|r| r.sensor == sensor)
-            .map(|r| crate::fit::axis_noise(&r.fit))
-            .collect();
-        let [x, y, z]: [AxisNoise; 3] = axes.try_into().ok()?;
-        Some(SensorNoise {
-            unit: sensor.unit().to_owned(),
-            x,
-            y,
-            z,
-        })
-    };
     let params = NoiseParams {
         source: source.to_owned(),
         sample_rate_hz: 1.0 / timing.mean_interval_s,
         record_length_s: timing.duration_s,
         samples: samples.len(),
         gravity_mps2: options.gravity_mps2,
-        accel: sensor_noise(Sensor::Accel).expect("the accelerometer is always analysed"),
-        gyro: sensor_noise(Sensor::Gyro),
+        accel: sensor_noise(&reports, Sensor::Accel).expect("the accelerometer is always analysed"),
+        gyro: sensor_noise(&reports, Sensor::Gyro),
     };
-
-    let floor_at = |t: f64| -> [f64; 3] {
-        std::array::from_fn(|axis| {
-            let p = reports[axis].fit.coefficients;
-            static_displacement_sigma(p[0].sqrt(), p[1].sqrt(), p[2].sqrt(), t)
-        })
-    };
+    let floor_at = |t: f64| floor_at(&reports, t);
     let floor = FloorReport {
         horizon_s: options.floor_horizon_s,
         predicted_m: floor_at(options.floor_horizon_s),

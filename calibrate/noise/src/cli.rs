@@ -186,11 +186,9 @@ fn term_text(term: &Term) -> String {
     }
 }
 
-/// The human-readable summary.
-pub fn render(report: &Report) -> String {
-    let mut s = String::new();
+/// The recording: samples, timing, gaps, repeats and the torn-read repair.
+fn write_recording(s: &mut String, report: &Report) {
     let t = &report.timing;
-    let _ = writeln!(s, "Allan deviation of {}", report.source);
     let _ = writeln!(
         s,
         "  {} samples over {:.2} s; mean interval {:.3} ms ({:.1} Hz), median {:.3} ms",
@@ -238,6 +236,10 @@ pub fn render(report: &Report) -> String {
             let _ = writeln!(s, "  torn-read repair disabled");
         }
     }
+}
+
+/// A table per sensor: each axis's terms and fit, then why the unresolved ones are.
+fn write_channels(s: &mut String, report: &Report) {
     for sensor in [Sensor::Accel, Sensor::Gyro] {
         let channels: Vec<_> = report
             .channels
@@ -285,6 +287,10 @@ pub fn render(report: &Report) -> String {
             let _ = writeln!(s, "{note}");
         }
     }
+}
+
+/// The displacement floor the noise predicts, and this record's.
+fn write_floor(s: &mut String, report: &Report) {
     let f = &report.floor;
     let axes = |v: &[f64; 3]| format!("x {:.3}, y {:.3}, z {:.3} m", v[0], v[1], v[2]);
     let _ = writeln!(
@@ -300,5 +306,14 @@ pub fn render(report: &Report) -> String {
         axes(&f.predicted_record_m),
         axes(&f.measured_record_m)
     );
+}
+
+/// The human-readable summary.
+pub fn render(report: &Report) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "Allan deviation of {}", report.source);
+    write_recording(&mut s, report);
+    write_channels(&mut s, report);
+    write_floor(&mut s, report);
     s
 }

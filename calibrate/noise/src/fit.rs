@@ -355,14 +355,8 @@ pub fn fit(curve: &AllanCurve) -> Result<ModelFit, FitError> {
     fit_with(curve, &CovarianceBasis::for_curve(curve))
 }
 
-/// [`fit`] with precomputed integrals (see [`CovarianceBasis`]).
-///
-/// Panics if `basis` was computed for other cluster sizes or another sample interval.
-pub fn fit_with(curve: &AllanCurve, basis: &CovarianceBasis) -> Result<ModelFit, FitError> {
-    assert!(
-        basis.matches(curve),
-        "the covariance basis was computed for other cluster sizes or another sample interval"
-    );
+/// Checks that the curve has enough points and that each is a finite positive variance.
+fn check_curve(curve: &AllanCurve) -> Result<(), FitError> {
     if curve.points.len() < MIN_POINTS {
         return Err(FitError::TooFewPoints {
             found: curve.points.len(),
@@ -379,35 +373,22 @@ pub fn fit_with(curve: &AllanCurve, basis: &CovarianceBasis) -> Result<ModelFit,
             avar: bad.avar,
         });
     }
-    let problem = Problem::new(curve, basis);
-    let t = problem.len();
-    let white_edf: Vec<f64> = curve
-        .points
-        .iter()
-        .map(|point| allan::pooled_edf(NoiseKind::White, point.m, &curve.segment_lengths))
-        .collect();
-    // Equivalent degrees of freedom under model p: 2 AVAR^2 / Var(AVAR estimate), with the
-    // noise that dominates (reported; the white-noise formula where the model is empty).
-    let edf_for = |p: &[f64; 3]| -> Vec<(f64, NoiseKind)> {
-        (0..t)
-            .map(|i| {
-                let model = model_avar(p, problem.taus[i]);
-                let variance = problem.covariance(i, i, p);
-                let edf = if model > 0.0 && variance > 0.0 {
-                    2.0 * model * model / variance
-                } else {
-                    white_edf[i]
-                };
-                (edf, dominant(p, problem.taus[i]))
-            })
-            .collect()
-    };
+    Ok(())
+}
 
-    // Start: independent points, white-noise degrees of freedom, measured variances.
+/// Iteratively reweighted non-negative least squares: starts from independent points with
+/// white-noise degrees of freedom and the measured variances, then weights by the model's own
+/// covariance until the model curve settles. Returns the solution and its whitening.
+fn reweighted_fit(
+    problem: &Problem,
+    curve: &AllanCurve,
+    white_edf: &[f64],
+) -> (Solution, DMatrix<f64>) {
+    let t = problem.len();
     let sd: Vec<f64> = curve
         .points
         .iter()
-        .zip(&white_edf)
+        .zip(white_edf)
         .map(|(point, &edf)| point.avar * (2.0 / edf).sqrt())
         .collect();
     let floor = sd.iter().map(|s| 1e-3 * s).collect::<Vec<f64>>();
@@ -438,7 +419,95 @@ pub fn fit_with(curve: &AllanCurve, basis: &CovarianceBasis) -> Result<ModelFit,
             break;
         }
     }
+    (solution, whitening)
+}
 
+/// The three terms of coefficients `p` with covariance `covariance`: resolved when
+/// significant, otherwise an upper limit (from the `unconstrained` fit where there is one,
+/// its covariance scaled by `inflation`).
+fn terms(
+    p: &[f64; 3],
+    covariance: &[[f64; 3]; 3],
+    unconstrained: Option<&Solution>,
+    inflation: f64,
+    tau_range: (f64, f64),
+) -> [Term; 3] {
+    std::array::from_fn(|k| {
+        let sigma = covariance[k][k].sqrt();
+        if p[k] > 0.0 && p[k] >= SIGNIFICANCE * sigma {
+            let value = p[k].sqrt();
+            Term::Resolved {
+                value,
+                sigma: sigma / (2.0 * value),
+            }
+        } else {
+            let limit = match unconstrained {
+                Some(u) => u.p[k].max(0.0) + 2.0 * (u.covariance[k][k] * inflation).sqrt(),
+                None => p[k] + 2.0 * sigma,
+            };
+            let estimate = unconstrained.map(|u| (u.p[k], (u.covariance[k][k] * inflation).sqrt()));
+            Term::Unresolved {
+                upper_limit: limit.sqrt(),
+                reason: unresolved_reason(k, p, limit, estimate, tau_range),
+            }
+        }
+    })
+}
+
+/// The curve's points with their 1-sigma intervals and the model `p` at them. Equivalent
+/// degrees of freedom under model p: 2 AVAR^2 / Var(AVAR estimate), with the noise that
+/// dominates (reported; the white-noise formula where the model is empty).
+fn fit_points(
+    curve: &AllanCurve,
+    problem: &Problem,
+    p: &[f64; 3],
+    white_edf: &[f64],
+) -> Vec<FitPoint> {
+    curve
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, point)| {
+            let model = model_avar(p, problem.taus[i]);
+            let variance = problem.covariance(i, i, p);
+            let edf = if model > 0.0 && variance > 0.0 {
+                2.0 * model * model / variance
+            } else {
+                white_edf[i]
+            };
+            let kind = dominant(p, problem.taus[i]);
+            let (low, high) = allan::one_sigma_interval(point.avar, edf);
+            FitPoint {
+                tau_s: point.tau_s,
+                adev: point.avar.sqrt(),
+                adev_low: low.sqrt(),
+                adev_high: high.sqrt(),
+                edf,
+                model_adev: model_avar(p, point.tau_s).sqrt(),
+                dominant: kind,
+                terms: point.terms,
+            }
+        })
+        .collect()
+}
+
+/// [`fit`] with precomputed integrals (see [`CovarianceBasis`]).
+///
+/// Panics if `basis` was computed for other cluster sizes or another sample interval.
+pub fn fit_with(curve: &AllanCurve, basis: &CovarianceBasis) -> Result<ModelFit, FitError> {
+    assert!(
+        basis.matches(curve),
+        "the covariance basis was computed for other cluster sizes or another sample interval"
+    );
+    check_curve(curve)?;
+    let problem = Problem::new(curve, basis);
+    let t = problem.len();
+    let white_edf: Vec<f64> = curve
+        .points
+        .iter()
+        .map(|point| allan::pooled_edf(NoiseKind::White, point.m, &curve.segment_lengths))
+        .collect();
+    let (solution, whitening) = reweighted_fit(&problem, curve, &white_edf);
     let dof = t - solution.free;
     let inflation = if dof > 0 {
         (solution.chi2 / dof as f64).max(1.0)
@@ -449,51 +518,13 @@ pub fn fit_with(curve: &AllanCurve, basis: &CovarianceBasis) -> Result<ModelFit,
     let p = solution.p;
     let covariance = solution.covariance.map(|row| row.map(|v| v * inflation));
     let tau_range = (problem.taus[0], problem.taus[t - 1]);
-    let terms: Vec<Term> = (0..3)
-        .map(|k| {
-            let sigma = covariance[k][k].sqrt();
-            if p[k] > 0.0 && p[k] >= SIGNIFICANCE * sigma {
-                let value = p[k].sqrt();
-                Term::Resolved {
-                    value,
-                    sigma: sigma / (2.0 * value),
-                }
-            } else {
-                let limit = match &unconstrained {
-                    Some(u) => u.p[k].max(0.0) + 2.0 * (u.covariance[k][k] * inflation).sqrt(),
-                    None => p[k] + 2.0 * sigma,
-                };
-                let estimate = unconstrained
-                    .as_ref()
-                    .map(|u| (u.p[k], (u.covariance[k][k] * inflation).sqrt()));
-                Term::Unresolved {
-                    upper_limit: limit.sqrt(),
-                    reason: unresolved_reason(k, &p, limit, estimate, tau_range),
-                }
-            }
-        })
-        .collect();
-
-    let edfs = edf_for(&p);
-    let points = curve
-        .points
-        .iter()
-        .zip(&edfs)
-        .map(|(point, &(edf, kind))| {
-            let (low, high) = allan::one_sigma_interval(point.avar, edf);
-            FitPoint {
-                tau_s: point.tau_s,
-                adev: point.avar.sqrt(),
-                adev_low: low.sqrt(),
-                adev_high: high.sqrt(),
-                edf,
-                model_adev: model_avar(&p, point.tau_s).sqrt(),
-                dominant: kind,
-                terms: point.terms,
-            }
-        })
-        .collect();
-    let [white, bias_instability, random_walk]: [Term; 3] = terms.try_into().expect("three terms");
+    let [white, bias_instability, random_walk] = terms(
+        &p,
+        &covariance,
+        unconstrained.as_ref(),
+        inflation,
+        tau_range,
+    );
     Ok(ModelFit {
         white,
         bias_instability,
@@ -502,7 +533,7 @@ pub fn fit_with(curve: &AllanCurve, basis: &CovarianceBasis) -> Result<ModelFit,
         covariance,
         chi2: solution.chi2,
         dof,
-        points,
+        points: fit_points(curve, &problem, &p, &white_edf),
     })
 }
 
@@ -516,6 +547,77 @@ fn seconds(s: f64) -> String {
     } else {
         format!("{s:.2e} s")
     }
+}
+
+/// Where white noise at its upper limit `limit` would dominate (`flicker`: the flicker
+/// floor of `p`), against the shortest cluster time `tau_min`.
+fn white_dominates(p: &[f64; 3], limit: f64, flicker: f64, tau_min: f64) -> String {
+    let a = p[2] / 3.0;
+    let edge = if a > 0.0 {
+        (-flicker + (flicker * flicker + 4.0 * a * limit).sqrt()) / (2.0 * a)
+    } else if flicker > 0.0 {
+        limit / flicker
+    } else {
+        f64::INFINITY
+    };
+    format!(
+        "; at its upper limit it would dominate below {} (the cluster times start at {})",
+        seconds(edge),
+        seconds(tau_min)
+    )
+}
+
+/// Where bias instability at its upper limit `limit` would dominate, against the cluster
+/// times `(tau_min, tau_max)`.
+fn instability_dominates(p: &[f64; 3], limit: f64, (tau_min, tau_max): (f64, f64)) -> String {
+    let level = FLICKER_FACTOR * limit;
+    let a = p[2] / 3.0;
+    // level > N^2/tau + a tau between the roots of a tau^2 - level tau + N^2 = 0.
+    let window = if a > 0.0 {
+        let disc = level * level - 4.0 * a * p[0];
+        (disc > 0.0).then(|| {
+            (
+                (level - disc.sqrt()) / (2.0 * a),
+                (level + disc.sqrt()) / (2.0 * a),
+            )
+        })
+    } else if level > 0.0 {
+        Some((p[0] / level, f64::INFINITY))
+    } else {
+        None
+    };
+    match window {
+        None => "; even at its upper limit it would not dominate at any cluster time".to_owned(),
+        Some((low, high)) if high.is_finite() => format!(
+            "; at its upper limit it would dominate between {} and {} (the cluster times span {} .. {})",
+            seconds(low),
+            seconds(high),
+            seconds(tau_min),
+            seconds(tau_max)
+        ),
+        Some((low, _)) => format!(
+            "; at its upper limit it would dominate above {} (the cluster times span {} .. {})",
+            seconds(low),
+            seconds(tau_min),
+            seconds(tau_max)
+        ),
+    }
+}
+
+/// Where the random walk at its upper limit `limit` would dominate (`flicker`: the flicker
+/// floor of `p`), against the longest cluster time `tau_max`.
+fn random_walk_dominates(p: &[f64; 3], limit: f64, flicker: f64, tau_max: f64) -> String {
+    let a = limit / 3.0;
+    let edge = if a > 0.0 {
+        (flicker + (flicker * flicker + 4.0 * a * p[0]).sqrt()) / (2.0 * a)
+    } else {
+        f64::INFINITY
+    };
+    format!(
+        "; at its upper limit it would dominate beyond {} (the cluster times end at {}, a quarter of the longest gap-free stretch)",
+        seconds(edge),
+        seconds(tau_max)
+    )
 }
 
 /// Explains why term `k` is not resolved: its estimate, and where it would dominate at its
@@ -545,70 +647,9 @@ fn unresolved_reason(
     // Where the term, at its upper limit, would exceed the other two (closed forms of the
     // quadratic crossings of the model terms), against the analysed cluster times.
     let dominates = match k {
-        0 => {
-            let a = p[2] / 3.0;
-            let edge = if a > 0.0 {
-                (-flicker + (flicker * flicker + 4.0 * a * limit).sqrt()) / (2.0 * a)
-            } else if flicker > 0.0 {
-                limit / flicker
-            } else {
-                f64::INFINITY
-            };
-            format!(
-                "; at its upper limit it would dominate below {} (the cluster times start at {})",
-                seconds(edge),
-                seconds(tau_min)
-            )
-        }
-        1 => {
-            let level = FLICKER_FACTOR * limit;
-            let a = p[2] / 3.0;
-            // level > N^2/tau + a tau between the roots of a tau^2 - level tau + N^2 = 0.
-            let window = if a > 0.0 {
-                let disc = level * level - 4.0 * a * p[0];
-                (disc > 0.0).then(|| {
-                    (
-                        (level - disc.sqrt()) / (2.0 * a),
-                        (level + disc.sqrt()) / (2.0 * a),
-                    )
-                })
-            } else if level > 0.0 {
-                Some((p[0] / level, f64::INFINITY))
-            } else {
-                None
-            };
-            match window {
-                None => {
-                    "; even at its upper limit it would not dominate at any cluster time".to_owned()
-                }
-                Some((low, high)) if high.is_finite() => format!(
-                    "; at its upper limit it would dominate between {} and {} (the cluster times span {} .. {})",
-                    seconds(low),
-                    seconds(high),
-                    seconds(tau_min),
-                    seconds(tau_max)
-                ),
-                Some((low, _)) => format!(
-                    "; at its upper limit it would dominate above {} (the cluster times span {} .. {})",
-                    seconds(low),
-                    seconds(tau_min),
-                    seconds(tau_max)
-                ),
-            }
-        }
-        _ => {
-            let a = limit / 3.0;
-            let edge = if a > 0.0 {
-                (flicker + (flicker * flicker + 4.0 * a * p[0]).sqrt()) / (2.0 * a)
-            } else {
-                f64::INFINITY
-            };
-            format!(
-                "; at its upper limit it would dominate beyond {} (the cluster times end at {}, a quarter of the longest gap-free stretch)",
-                seconds(edge),
-                seconds(tau_max)
-            )
-        }
+        0 => white_dominates(p, limit, flicker, tau_min),
+        1 => instability_dominates(p, limit, (tau_min, tau_max)),
+        _ => random_walk_dominates(p, limit, flicker, tau_max),
     };
     reason.push_str(&dominates);
     reason

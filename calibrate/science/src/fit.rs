@@ -172,13 +172,8 @@ fn axis_params(kind: ModelKind, axis: usize) -> Vec<usize> {
     }
 }
 
-/// Fits `kind` to labelled poses by (weighted) linear least squares; see the module
-/// documentation for the weighting and covariance conventions.
-pub fn fit_labelled(
-    poses: &[Pose],
-    kind: ModelKind,
-    weighting: Weighting,
-) -> Result<LabelledFit, FitError> {
+/// Checks that there are enough poses for `kind` and that every value is finite.
+fn check_poses(poses: &[Pose], kind: ModelKind) -> Result<(), FitError> {
     let per_axis = axis_params(kind, 0).len();
     if poses.len() < per_axis {
         return Err(FitError::TooFewPoses {
@@ -198,6 +193,125 @@ pub fn fit_labelled(
             return Err(FitError::NotFinite { pose: k });
         }
     }
+    Ok(())
+}
+
+/// One axis' weighted least-squares problem: design matrix, observations and weights.
+struct AxisProblem {
+    x: DMatrix<f64>,
+    y: DVector<f64>,
+    w: DVector<f64>,
+}
+
+/// The least-squares problem of `axis` for `kind` (columns as [`axis_params`]); weights
+/// `1 / s^2` with `s` each pose's standard error (`absolute`) or standard deviation when
+/// weighting by pose std, else 1.
+fn axis_problem(
+    poses: &[Pose],
+    kind: ModelKind,
+    axis: usize,
+    weighting: Weighting,
+    absolute: bool,
+) -> Result<AxisProblem, FitError> {
+    let (m, p) = (poses.len(), axis_params(kind, axis).len());
+    let mut x = DMatrix::zeros(m, p);
+    let mut y = DVector::zeros(m);
+    let mut w = DVector::from_element(m, 1.0);
+    for (r, pose) in poses.iter().enumerate() {
+        let t = &pose.truth_g;
+        match kind {
+            ModelKind::Bias => {
+                x[(r, 0)] = 1.0;
+                y[r] = pose.mean_g[axis] - t[axis];
+            }
+            ModelKind::Scale => {
+                x[(r, 0)] = t[axis];
+                x[(r, 1)] = 1.0;
+                y[r] = pose.mean_g[axis];
+            }
+            ModelKind::Full => {
+                for c in 0..3 {
+                    x[(r, c)] = t[c];
+                }
+                x[(r, 3)] = 1.0;
+                y[r] = pose.mean_g[axis];
+            }
+        }
+        if weighting == Weighting::PoseStd {
+            let s = if absolute {
+                pose.sem_g().expect("checked above")[axis]
+            } else {
+                pose.std_g[axis]
+            };
+            if !(s > 0.0 && s.is_finite()) {
+                return Err(FitError::BadStd {
+                    pose: r,
+                    axis: axis_name(axis),
+                    std: pose.std_g[axis],
+                });
+            }
+            w[r] = 1.0 / (s * s);
+        }
+    }
+    Ok(AxisProblem { x, y, w })
+}
+
+/// One axis' solution: parameters, their unscaled covariance `(X^T W X)^-1`, and the weighted
+/// sum of squared residuals.
+struct AxisSolution {
+    theta: DVector<f64>,
+    unscaled: DMatrix<f64>,
+    chi2: f64,
+}
+
+/// Solves `a` by SVD; `cols` (the columns' parameters) name those a rank-deficient design
+/// leaves undetermined.
+fn solve_axis(a: &AxisProblem, cols: &[usize]) -> Result<AxisSolution, FitError> {
+    let AxisProblem { x, y, w } = a;
+    let (m, p) = x.shape();
+    let sqrt_w = w.map(f64::sqrt);
+    let xw = DMatrix::from_fn(m, p, |r, c| x[(r, c)] * sqrt_w[r]);
+    let yw = y.component_mul(&sqrt_w);
+    let svd = xw.clone().svd(true, true);
+    let v_t = svd.v_t.as_ref().expect("requested V^T");
+    let s_max = svd.singular_values.max();
+    let tol = 1e-9 * s_max.max(f64::MIN_POSITIVE);
+    if let Some(k_min) = (0..p).find(|&k| svd.singular_values[k] <= tol) {
+        // The null direction names the undetermined parameters.
+        let null = v_t.row(k_min);
+        let names: Vec<&str> = (0..p)
+            .filter(|&c| null[c].abs() > 0.3)
+            .map(|c| PARAM_NAMES[cols[c]])
+            .collect();
+        return Err(FitError::Undetermined {
+            params: names.join(", "),
+        });
+    }
+    let theta = svd.solve(&yw, 0.0).expect("U and V^T were computed");
+    // (X^T W X)^-1 = V diag(1/s^2) V^T.
+    let inv_s2 = DMatrix::from_diagonal(&svd.singular_values.map(|s| 1.0 / (s * s)));
+    let unscaled = v_t.transpose() * inv_s2 * v_t;
+    let resid = y - x * &theta;
+    let chi2 = resid
+        .iter()
+        .zip(w.iter())
+        .map(|(r, wi)| wi * r * r)
+        .sum::<f64>();
+    Ok(AxisSolution {
+        theta,
+        unscaled,
+        chi2,
+    })
+}
+
+/// Fits `kind` to labelled poses by (weighted) linear least squares; see the module
+/// documentation for the weighting and covariance conventions.
+pub fn fit_labelled(
+    poses: &[Pose],
+    kind: ModelKind,
+    weighting: Weighting,
+) -> Result<LabelledFit, FitError> {
+    check_poses(poses, kind)?;
     let absolute =
         weighting == Weighting::PoseStd && poses.iter().all(|p| p.n.is_some_and(|n| n > 0));
     let covariance_mode = if absolute {
@@ -215,89 +329,23 @@ pub fn fit_labelled(
     let mut chi2 = [0.0; 3];
     for axis in 0..3 {
         let cols = axis_params(kind, axis);
-        let p = cols.len();
-        let mut x = DMatrix::zeros(m, p);
-        let mut y = DVector::zeros(m);
-        let mut w = DVector::from_element(m, 1.0);
-        for (r, pose) in poses.iter().enumerate() {
-            let t = &pose.truth_g;
-            match kind {
-                ModelKind::Bias => {
-                    x[(r, 0)] = 1.0;
-                    y[r] = pose.mean_g[axis] - t[axis];
-                }
-                ModelKind::Scale => {
-                    x[(r, 0)] = t[axis];
-                    x[(r, 1)] = 1.0;
-                    y[r] = pose.mean_g[axis];
-                }
-                ModelKind::Full => {
-                    for c in 0..3 {
-                        x[(r, c)] = t[c];
-                    }
-                    x[(r, 3)] = 1.0;
-                    y[r] = pose.mean_g[axis];
-                }
-            }
-            if weighting == Weighting::PoseStd {
-                let s = if absolute {
-                    pose.sem_g().expect("checked above")[axis]
-                } else {
-                    pose.std_g[axis]
-                };
-                if !(s > 0.0 && s.is_finite()) {
-                    return Err(FitError::BadStd {
-                        pose: r,
-                        axis: axis_name(axis),
-                        std: pose.std_g[axis],
-                    });
-                }
-                w[r] = 1.0 / (s * s);
-            }
-        }
-        let sqrt_w = w.map(f64::sqrt);
-        let xw = DMatrix::from_fn(m, p, |r, c| x[(r, c)] * sqrt_w[r]);
-        let yw = y.component_mul(&sqrt_w);
-        let svd = xw.clone().svd(true, true);
-        let v_t = svd.v_t.as_ref().expect("requested V^T");
-        let s_max = svd.singular_values.max();
-        let tol = 1e-9 * s_max.max(f64::MIN_POSITIVE);
-        if let Some(k_min) = (0..p).find(|&k| svd.singular_values[k] <= tol) {
-            // The null direction names the undetermined parameters.
-            let null = v_t.row(k_min);
-            let names: Vec<&str> = (0..p)
-                .filter(|&c| null[c].abs() > 0.3)
-                .map(|c| PARAM_NAMES[cols[c]])
-                .collect();
-            return Err(FitError::Undetermined {
-                params: names.join(", "),
-            });
-        }
-        let theta = svd.solve(&yw, 0.0).expect("U and V^T were computed");
-        // (X^T W X)^-1 = V diag(1/s^2) V^T.
-        let inv_s2 = DMatrix::from_diagonal(&svd.singular_values.map(|s| 1.0 / (s * s)));
-        let unscaled = v_t.transpose() * inv_s2 * v_t;
-        let resid = &y - &x * &theta;
-        let chi = resid
-            .iter()
-            .zip(w.iter())
-            .map(|(r, wi)| wi * r * r)
-            .sum::<f64>();
-        dof[axis] = m - p;
-        chi2[axis] = chi;
+        let problem = axis_problem(poses, kind, axis, weighting, absolute)?;
+        let sol = solve_axis(&problem, &cols)?;
+        dof[axis] = m - cols.len();
+        chi2[axis] = sol.chi2;
         let factor = match covariance_mode {
             CovarianceMode::Absolute => 1.0,
             CovarianceMode::ResidualScaled => {
                 if dof[axis] == 0 {
                     return Err(FitError::NoDegreesOfFreedom { kind, poses: m });
                 }
-                chi / dof[axis] as f64
+                sol.chi2 / dof[axis] as f64
             }
         };
         for (a, &ka) in cols.iter().enumerate() {
-            params[ka] = theta[a];
+            params[ka] = sol.theta[a];
             for (b, &kb) in cols.iter().enumerate() {
-                covariance[(ka, kb)] = factor * unscaled[(a, b)];
+                covariance[(ka, kb)] = factor * sol.unscaled[(a, b)];
             }
         }
     }

@@ -314,12 +314,9 @@ fn algebraic_start(means: &[Vector3<f64>]) -> Option<SVector<f64, 9>> {
     Some(x)
 }
 
-/// Fits the label-free model to static poses (their labels are ignored); see the module
-/// documentation for the parameterisation, the identifiability checks and the covariance.
-pub fn fit_label_free(
-    poses: &[Pose],
-    weighting: Weighting,
-) -> Result<LabelFreeFit, LabelFreeError> {
+/// Checks that every pose is finite and that there are enough distinct orientations;
+/// returns their number.
+fn check_poses(poses: &[Pose]) -> Result<usize, LabelFreeError> {
     for (k, p) in poses.iter().enumerate() {
         if !p.mean_g.iter().chain(p.std_g.iter()).all(|v| v.is_finite()) {
             return Err(LabelFreeError::NotFinite { pose: k });
@@ -332,16 +329,18 @@ pub fn fit_label_free(
             distinct,
         });
     }
-    let absolute =
-        weighting == Weighting::PoseStd && poses.iter().all(|p| p.n.is_some_and(|n| n > 0));
-    let covariance_mode = if absolute {
-        CovarianceMode::Absolute
-    } else {
-        CovarianceMode::ResidualScaled
-    };
-    let means: Vec<Vector3<f64>> = poses.iter().map(|p| p.mean_g).collect();
-    let sigmas: Option<Vec<Vector3<f64>>> = match weighting {
-        Weighting::Unweighted => None,
+    Ok(distinct)
+}
+
+/// Per pose, the sigma (g per axis) its residual is weighted by: the standard error of its
+/// mean (`absolute`) or its standard deviation; `None` unweighted.
+fn pose_sigmas(
+    poses: &[Pose],
+    weighting: Weighting,
+    absolute: bool,
+) -> Result<Option<Vec<Vector3<f64>>>, LabelFreeError> {
+    match weighting {
+        Weighting::Unweighted => Ok(None),
         Weighting::PoseStd => {
             let s: Vec<Vector3<f64>> = poses
                 .iter()
@@ -359,19 +358,58 @@ pub fn fit_label_free(
             {
                 return Err(LabelFreeError::BadStd { pose: k });
             }
-            Some(s)
+            Ok(Some(s))
         }
+    }
+}
+
+/// The refusal for means no ellipsoid fits: degenerate geometry (e.g. coplanar orientations)
+/// also defeats the algebraic fit, so the conditioning at a nominal point says what is
+/// missing.
+fn degenerate(means: &[Vector3<f64>]) -> LabelFreeError {
+    let mean_norm = means.iter().map(|m| m.norm()).sum::<f64>() / means.len() as f64;
+    let mut nominal = SVector::<f64, 9>::zeros();
+    for k in [3, 6, 8] {
+        nominal[k] = 1.0 / mean_norm;
+    }
+    let probe = MagnitudeProblem::new(means, None, nominal);
+    ill_conditioned(&probe.cache.1).unwrap_or(LabelFreeError::NoEllipsoid)
+}
+
+/// The covariance of (b, T) mapped to the 12-parameter layout: b unchanged, dS = -S dT S.
+fn covariance_12(s: &Matrix3<f64>, covariance9: &SMatrix<f64, 9, 9>) -> ParamCovariance {
+    let mut g = SMatrix::<f64, N_PARAMS, 9>::zeros();
+    for a in 0..3 {
+        g[(a, a)] = 1.0;
+    }
+    for (k, &(r_t, c_t)) in T_INDEX.iter().enumerate() {
+        for i in 0..3 {
+            for jj in 0..3 {
+                g[(scale_index(i, jj), 3 + k)] = -s[(i, r_t)] * s[(c_t, jj)];
+            }
+        }
+    }
+    g * covariance9 * g.transpose()
+}
+
+/// Fits the label-free model to static poses (their labels are ignored); see the module
+/// documentation for the parameterisation, the identifiability checks and the covariance.
+pub fn fit_label_free(
+    poses: &[Pose],
+    weighting: Weighting,
+) -> Result<LabelFreeFit, LabelFreeError> {
+    let distinct = check_poses(poses)?;
+    let absolute =
+        weighting == Weighting::PoseStd && poses.iter().all(|p| p.n.is_some_and(|n| n > 0));
+    let covariance_mode = if absolute {
+        CovarianceMode::Absolute
+    } else {
+        CovarianceMode::ResidualScaled
     };
+    let means: Vec<Vector3<f64>> = poses.iter().map(|p| p.mean_g).collect();
+    let sigmas = pose_sigmas(poses, weighting, absolute)?;
     let Some(start) = algebraic_start(&means) else {
-        // Degenerate geometry (e.g. coplanar orientations) also defeats the algebraic fit:
-        // report the conditioning at a nominal point so the refusal says what is missing.
-        let mean_norm = means.iter().map(|m| m.norm()).sum::<f64>() / means.len() as f64;
-        let mut nominal = SVector::<f64, 9>::zeros();
-        for k in [3, 6, 8] {
-            nominal[k] = 1.0 / mean_norm;
-        }
-        let probe = MagnitudeProblem::new(&means, None, nominal);
-        return Err(ill_conditioned(&probe.cache.1).unwrap_or(LabelFreeError::NoEllipsoid));
+        return Err(degenerate(&means));
     };
     let problem = MagnitudeProblem::new(&means, sigmas.as_deref(), start);
     let (problem, report) = LevenbergMarquardt::new()
@@ -418,19 +456,7 @@ pub fn fit_label_free(
     })?;
     let b = Vector3::new(problem.x[0], problem.x[1], problem.x[2]);
     let model = AccelModel::new(ModelKind::Full, s, b)?;
-    // Map the covariance to the 12-parameter layout: b unchanged, dS = -S dT S.
-    let mut g = SMatrix::<f64, N_PARAMS, 9>::zeros();
-    for a in 0..3 {
-        g[(a, a)] = 1.0;
-    }
-    for (k, &(r_t, c_t)) in T_INDEX.iter().enumerate() {
-        for i in 0..3 {
-            for jj in 0..3 {
-                g[(scale_index(i, jj), 3 + k)] = -s[(i, r_t)] * s[(c_t, jj)];
-            }
-        }
-    }
-    let covariance = g * covariance9 * g.transpose();
+    let covariance = covariance_12(&s, &covariance9);
     let residuals_g = means
         .iter()
         .map(|mean| (t * (mean - b)).norm() - 1.0)

@@ -41,7 +41,7 @@ use recording::Recording;
 use recording::thesis::SixPosition;
 
 use crate::drerror::{bias_sigma_m, flicker_sigma_m, rrw_sigma_m, white_sigma_m};
-use crate::fit::{FitError, Weighting, fit_labelled};
+use crate::fit::{FitError, LabelledFit, Weighting, fit_labelled};
 use crate::integrate::DoubleIntegrator;
 use crate::session::poses_from_six;
 use calibrate::model::{AccelModel, ModelKind};
@@ -496,6 +496,143 @@ fn own_rest_noise(
         .map_err(|e| StaticEvalError::Noise(e.to_string()))
 }
 
+/// The best method's trajectory with the prior runs' mean warm-up subtracted.
+fn warmup_subtracted(trajectory: &Trajectory, p: &PriorTerms) -> Trajectory {
+    trajectory
+        .iter()
+        .map(|&(tau, d)| {
+            let j = ((tau / GRID_S).round() as usize).min(p.warmup.len() - 1);
+            (tau, std::array::from_fn(|i| d[i] - p.warmup[j][i]))
+        })
+        .collect::<Vec<_>>()
+}
+
+/// The noise parameters a window without priors takes its drift from: the calibration file's
+/// `[noise]` table if given, else the test recording's own rest before `rest_end_s`.
+fn drift_noise(
+    noise: Option<&NoiseParams>,
+    test: &Recording,
+    rest_end_s: f64,
+    g: f64,
+) -> Result<(NoiseParams, DriftSource), StaticEvalError> {
+    Ok(match noise {
+        Some(p) => (p.clone(), DriftSource::NoiseTable(p.source.clone())),
+        None => (own_rest_noise(test, rest_end_s, g)?, DriftSource::OwnRest),
+    })
+}
+
+/// thesis_full: model 3 on the raw samples, (0, 0, g) subtracted, sensor frame, over the
+/// displacement range `dr` after aligning from `start` s.
+fn thesis_full(
+    raw_series: &Series,
+    fit: &LabelledFit,
+    start: f64,
+    dr: std::ops::Range<usize>,
+    drift: [f64; 3],
+    cfg: &StaticEvalConfig,
+) -> MethodResult {
+    let g = cfg.gravity_mps2;
+    let align = raw_series.range(start, start + cfg.align_s);
+    let (mean_raw_g, _, _) = mean_std(raw_series.raw_g[align.clone()].iter().copied());
+    let (_, sigma_raw, _) = mean_std(raw_series.a[align].iter().copied());
+    let (_, cov_g) = fit.model.correct_with_covariance(
+        &Vector3::from(mean_raw_g),
+        &fit.covariance,
+        &Matrix3::zeros(),
+    );
+    let (d_full, traj_full, t_full) = integrate(raw_series, dr.clone(), |k| {
+        let a = raw_series.a[k];
+        [a[0], a[1], a[2] - g]
+    });
+    let dt = t_full / (dr.len() - 1) as f64;
+    let full_terms = SigmaTerms {
+        white: std::array::from_fn(|i| white_sigma_m(sigma_raw[i], dt, t_full)),
+        reference: std::array::from_fn(|i| bias_sigma_m(cov_g[(i, i)].sqrt() * g, t_full)),
+        drift,
+        warmup: [0.0; 3],
+    };
+    MethodResult {
+        d: d_full,
+        sigma: full_terms.total(),
+        terms: full_terms,
+        trajectory: traj_full,
+    }
+}
+
+/// The earlier recordings, repaired, as series (`progress` advanced once per recording).
+fn prior_series(
+    priors: Vec<Recording>,
+    model: &AccelModel,
+    g: f64,
+    progress: &ProgressBar,
+) -> Vec<Series> {
+    priors
+        .into_iter()
+        .map(|mut p| {
+            repair_torn_reads(&mut p.samples, &RepairConfig::default());
+            progress.inc(1);
+            Series::new(&p.samples, model, g)
+        })
+        .collect()
+}
+
+/// The best method in one window (aligned from `start` s, displacement over `t_dr` s): its
+/// warm-up subtracted along the trajectory where earlier recordings allow, its drift from
+/// them or from the noise parameters. Also returns the drift's 1-sigma and, when the noise
+/// parameters gave it, where they came from.
+fn best_method(
+    best: BestRaw,
+    prior: Option<&PriorTerms>,
+    noise: Option<&NoiseParams>,
+    test: &Recording,
+    start: f64,
+    t_dr: f64,
+    cfg: &StaticEvalConfig,
+) -> Result<(MethodResult, [f64; 3], Option<DriftSource>), StaticEvalError> {
+    let (drift, warmup_sigma, trajectory, source) = match prior {
+        Some(p) => (
+            p.drift,
+            p.warmup_sigma,
+            warmup_subtracted(&best.trajectory, p),
+            None,
+        ),
+        None => {
+            let (params, source) = drift_noise(noise, test, start + cfg.align_s, cfg.gravity_mps2)?;
+            (
+                noise_drift(&params, &best.rot, cfg, t_dr),
+                [0.0; 3],
+                best.trajectory.clone(),
+                Some(source),
+            )
+        }
+    };
+    let d_best = trajectory.last().map_or(best.d, |p| p.1);
+    let best_terms = SigmaTerms {
+        white: best.white,
+        reference: best.align,
+        drift,
+        warmup: warmup_sigma,
+    };
+    let result = MethodResult {
+        d: d_best,
+        sigma: best_terms.total(),
+        terms: best_terms,
+        trajectory,
+    };
+    Ok((result, drift, source))
+}
+
+/// Checks that the configuration's durations are positive.
+fn check_config(cfg: &StaticEvalConfig) -> Result<(), StaticEvalError> {
+    if !(cfg.align_s > 0.0 && cfg.window_s > 0.0 && cfg.step_s > 0.0) {
+        return Err(StaticEvalError::Config(format!(
+            "align, window and step must be positive (got {}, {}, {})",
+            cfg.align_s, cfg.window_s, cfg.step_s
+        )));
+    }
+    Ok(())
+}
+
 /// Runs the evaluation (see the module documentation). `priors` are earlier static
 /// recordings of the same sensor (consumed: repaired in place); `noise` the sensor's noise
 /// parameters (a calibration file's `[noise]` table), for windows without priors;
@@ -508,12 +645,7 @@ pub fn evaluate_static(
     cfg: &StaticEvalConfig,
     progress: &ProgressBar,
 ) -> Result<StaticEvalReport, StaticEvalError> {
-    if !(cfg.align_s > 0.0 && cfg.window_s > 0.0 && cfg.step_s > 0.0) {
-        return Err(StaticEvalError::Config(format!(
-            "align, window and step must be positive (got {}, {}, {})",
-            cfg.align_s, cfg.window_s, cfg.step_s
-        )));
-    }
+    check_config(cfg)?;
     let poses = poses_from_six(six);
     let fit = fit_labelled(&poses, ModelKind::Full, Weighting::Unweighted).map_err(|source| {
         StaticEvalError::Fit {
@@ -529,14 +661,7 @@ pub fn evaluate_static(
     let repair = repair_torn_reads(&mut repaired, &RepairConfig::default());
     let series = Series::new(&repaired, &model, g);
 
-    let prior_series: Vec<Series> = priors
-        .into_iter()
-        .map(|mut p| {
-            repair_torn_reads(&mut p.samples, &RepairConfig::default());
-            progress.inc(1);
-            Series::new(&p.samples, &model, g)
-        })
-        .collect();
+    let prior_series = prior_series(priors, &model, g, progress);
 
     let needed = cfg.align_s + cfg.window_s;
     if series.duration() < needed {
@@ -560,80 +685,14 @@ pub fn evaluate_static(
         let prior = prior_terms(&prior_series, start, cfg);
         prior_runs = prior_runs.min(prior.as_ref().map_or(0, |p| p.runs));
 
-        // best: warm-up subtracted along the trajectory where earlier recordings allow.
-        let (drift, warmup_sigma, trajectory) = match &prior {
-            Some(p) => {
-                let traj = best
-                    .trajectory
-                    .iter()
-                    .map(|&(tau, d)| {
-                        let j = ((tau / GRID_S).round() as usize).min(p.warmup.len() - 1);
-                        (tau, std::array::from_fn(|i| d[i] - p.warmup[j][i]))
-                    })
-                    .collect::<Vec<_>>();
-                (p.drift, p.warmup_sigma, traj)
-            }
-            None => {
-                let params = match noise {
-                    Some(p) => {
-                        drift_source = DriftSource::NoiseTable(p.source.clone());
-                        p.clone()
-                    }
-                    None => {
-                        drift_source = DriftSource::OwnRest;
-                        own_rest_noise(test, start + cfg.align_s, g)?
-                    }
-                };
-                (
-                    noise_drift(&params, &best.rot, cfg, t_dr),
-                    [0.0; 3],
-                    best.trajectory.clone(),
-                )
-            }
-        };
-        let d_best = trajectory.last().map_or(best.d, |p| p.1);
-        let best_terms = SigmaTerms {
-            white: best.white,
-            reference: best.align,
-            drift,
-            warmup: warmup_sigma,
-        };
-        let best_result = MethodResult {
-            d: d_best,
-            sigma: best_terms.total(),
-            terms: best_terms,
-            trajectory,
-        };
-
-        // thesis_full: model 3 on the raw samples, (0, 0, g) subtracted, sensor frame.
-        let align = raw_series.range(start, start + cfg.align_s);
-        let (mean_raw_g, _, _) = mean_std(raw_series.raw_g[align.clone()].iter().copied());
-        let (_, sigma_raw, _) = mean_std(raw_series.a[align].iter().copied());
-        let (_, cov_g) = model.correct_with_covariance(
-            &Vector3::from(mean_raw_g),
-            &fit.covariance,
-            &Matrix3::zeros(),
-        );
-        let (d_full, traj_full, t_full) = integrate(&raw_series, dr.clone(), |k| {
-            let a = raw_series.a[k];
-            [a[0], a[1], a[2] - g]
-        });
-        let dt = t_full / (dr.len() - 1) as f64;
-        let full_terms = SigmaTerms {
-            white: std::array::from_fn(|i| white_sigma_m(sigma_raw[i], dt, t_full)),
-            reference: std::array::from_fn(|i| bias_sigma_m(cov_g[(i, i)].sqrt() * g, t_full)),
-            drift,
-            warmup: [0.0; 3],
-        };
-        let full_result = MethodResult {
-            d: d_full,
-            sigma: full_terms.total(),
-            terms: full_terms,
-            trajectory: traj_full,
-        };
+        let (best_result, drift, source) =
+            best_method(best, prior.as_ref(), noise, test, start, t_dr, cfg)?;
+        if let Some(source) = source {
+            drift_source = source;
+        }
         windows.push(WindowResult {
             start_s: start,
-            thesis_full: full_result,
+            thesis_full: thesis_full(&raw_series, &fit, start, dr, drift, cfg),
             best: best_result,
         });
         progress.inc(1);

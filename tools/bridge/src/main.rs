@@ -53,8 +53,12 @@ enum Direction {
     In,
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    mems_log::init("mems-bridge");
+    mems_log::exit(run(Cli::parse()))
+}
+
+fn run(cli: Cli) -> Result<()> {
     ipc_types::stop::install()?;
     let session = zenoh::open(zenoh_config(&cli.listen, &cli.connect)?)
         .wait()

@@ -25,8 +25,12 @@ struct Cli {
     namespace: Option<String>,
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    mems_log::init("mems-foxglove");
+    mems_log::exit(run(Cli::parse()))
+}
+
+fn run(cli: Cli) -> Result<()> {
     ipc_types::stop::install()?;
     let (host, port) = cli
         .listen
@@ -55,7 +59,7 @@ fn main() -> Result<()> {
         wake::listener(&node, &odometry_name, WaitMode::Event)?,
         wake::listener(&node, &corrected_name, WaitMode::Event)?,
     ];
-    eprintln!("mems-foxglove: serving ws://{host}:{}", server.port());
+    tracing::info!("serving ws://{host}:{}", server.port());
     let step = || -> Result<ControlFlow<(), bool>> {
         let mut any = false;
         while let Some(c) = corrected.receive()? {

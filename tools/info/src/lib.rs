@@ -409,9 +409,8 @@ impl RunInfo {
         Ok(info)
     }
 
-    /// The report as a table for a person.
-    pub fn table(&self) -> String {
-        let mut s = String::new();
+    /// The files, sizes and message counts, and the time the recording spans.
+    fn write_files(&self, s: &mut String) {
         let total: u64 = self.files.iter().map(|f| f.bytes).sum();
         let _ = writeln!(
             s,
@@ -453,6 +452,10 @@ impl RunInfo {
                 );
             }
         }
+    }
+
+    /// A line per topic: count, rate, schema and sequence.
+    fn write_topics(&self, s: &mut String) {
         let _ = writeln!(s, "topics:");
         let width = self.topics.keys().map(String::len).max().unwrap_or(0);
         for (name, t) in &self.topics {
@@ -480,6 +483,13 @@ impl RunInfo {
                 t.count, t.rate_hz, t.schema, t.encoding
             );
         }
+    }
+
+    /// The report as a table for a person.
+    pub fn table(&self) -> String {
+        let mut s = String::new();
+        self.write_files(&mut s);
+        self.write_topics(&mut s);
         if let Some(r) = &self.raw {
             let _ = writeln!(
                 s,

@@ -19,8 +19,12 @@ struct Cli {
     json: bool,
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    mems_log::init("mems-info");
+    mems_log::exit(run(Cli::parse()))
+}
+
+fn run(cli: Cli) -> Result<()> {
     let info = mems_info::RunInfo::read(&cli.file)?;
     let text = if cli.json {
         serde_json::to_string_pretty(&info)? + "\n"

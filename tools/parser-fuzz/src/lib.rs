@@ -121,8 +121,8 @@ static CURRENT_PARSER: AtomicUsize = AtomicUsize::new(0);
 /// Says which input asked for too much before the allocation fails and the process aborts.
 fn report_refused_allocation(size: usize) {
     let parser = Parser::ALL[CURRENT_PARSER.load(Ordering::Relaxed)].name();
-    eprintln!(
-        "parser-fuzz: {parser} input {} of seed {} asked for {size} bytes in one allocation; \
+    tracing::warn!(
+        "{parser} input {} of seed {} asked for {size} bytes in one allocation; \
          reproduce with: parser-fuzz --parser {parser} --seed {} --start {} --runs 1 --keep",
         CURRENT_INDEX.load(Ordering::Relaxed),
         CURRENT_SEED.load(Ordering::Relaxed),

@@ -38,8 +38,12 @@ struct Args {
     keep: bool,
 }
 
-fn main() -> Result<()> {
-    let args = Args::parse();
+fn main() -> std::process::ExitCode {
+    mems_log::init("parser-fuzz");
+    mems_log::exit(run(Args::parse()))
+}
+
+fn run(args: Args) -> Result<()> {
     let parsers = if args.parser.is_empty() {
         Parser::ALL.to_vec()
     } else {

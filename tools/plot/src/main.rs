@@ -17,12 +17,16 @@ struct Cli {
     out: Option<PathBuf>,
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    mems_log::init("mems-plot");
+    mems_log::exit(run(Cli::parse()))
+}
+
+fn run(cli: Cli) -> Result<()> {
     let contents = recording::mcap::read_all(&cli.file)?;
     if let Some(truncation) = &contents.truncation {
-        eprintln!(
-            "mems-plot: warning: {}: {truncation}; plotting what was read",
+        tracing::warn!(
+            "{}: {truncation}; plotting what was read",
             cli.file.display()
         );
     }

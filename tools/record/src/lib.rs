@@ -550,8 +550,8 @@ fn record_loop(
                     }
                     oldest_unflushed.get_or_insert_with(Instant::now);
                 }
-                Err(e) => eprintln!(
-                    "mems-record: cannot read the previous segment ({e}): the split is \
+                Err(e) => tracing::warn!(
+                    "cannot read the previous segment ({e}): the split is \
                      recorded, the numbers lost across it are not"
                 ),
             }

@@ -40,8 +40,12 @@ struct Cli {
     duration: Option<f64>,
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    mems_log::init("mems-record");
+    mems_log::exit(run(Cli::parse()))
+}
+
+fn run(cli: Cli) -> Result<()> {
     // iceoryx2 warns that it runs without a config file; IOX2_LOG_LEVEL still overrides.
     set_log_level_from_env_or(LogLevel::Error);
     let duration = match cli.duration {
@@ -88,8 +92,8 @@ fn main() -> Result<()> {
         }
     );
     if let Some(steady) = &summary.steady {
-        eprintln!(
-            "mems-record: {}, {} chunks flushed",
+        tracing::info!(
+            "{}, {} chunks flushed",
             steady.summary(),
             summary.steady_flushes
         );

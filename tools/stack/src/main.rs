@@ -222,8 +222,8 @@ fn calibrate_sim(bins: &Path, work: &Path, seed: u64) -> Result<PathBuf> {
 fn clean_stale() {
     match service::remove_dead_nodes() {
         Ok(0) => {}
-        Ok(n) => eprintln!("mems-stack: removed the shared memory of {n} dead iceoryx2 nodes"),
-        Err(e) => eprintln!("mems-stack: {e}"),
+        Ok(n) => tracing::info!("removed the shared memory of {n} dead iceoryx2 nodes"),
+        Err(e) => tracing::warn!("{e}"),
     }
     let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else {
         return;
@@ -241,8 +241,8 @@ fn clean_stale() {
         let gone = unsafe { libc::kill(pid, 0) } != 0
             && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
         if gone && std::fs::remove_dir_all(entry.path()).is_ok() {
-            eprintln!(
-                "mems-stack: removed {}, left by a stack that died",
+            tracing::info!(
+                "removed {}, left by a stack that died",
                 entry.path().display()
             );
         }
@@ -317,10 +317,10 @@ fn announce(events: Vec<Event>, tty: bool) -> Option<String> {
         }
         match event {
             Event::Exited { name, status } => {
-                eprintln!("mems-stack: {name} exited ({status}); restarting");
+                tracing::warn!("{name} exited ({status}); restarting");
             }
             Event::Restarted { name, count } => {
-                eprintln!("mems-stack: {name} restarted ({count} so far)");
+                tracing::info!("{name} restarted ({count} so far)");
             }
             Event::GaveUp { name, status } => {
                 let why = format!(
@@ -329,7 +329,8 @@ fn announce(events: Vec<Event>, tty: bool) -> Option<String> {
                     supervisor::FAST_EXIT,
                     supervisor::MAX_FAST_EXITS
                 );
-                eprintln!("mems-stack: {why}; stopping the stack");
+                // The error itself is printed once, as the stack's exit error.
+                tracing::info!("{name} keeps failing at start; stopping the stack");
                 gave_up.get_or_insert(why);
             }
         }
@@ -337,8 +338,64 @@ fn announce(events: Vec<Event>, tty: bool) -> Option<String> {
     gave_up
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+/// The calibration file the stack runs with: `--calib`, or for a simulated source one
+/// calibrated now in `work`.
+fn calibration(cli: &Cli, bins: &Path, work: &Path) -> Result<PathBuf> {
+    Ok(match (&cli.calib, cli.source.as_str()) {
+        (Some(c), _) => c.clone(),
+        (None, "sim" | "sim-spi") => calibrate_sim(bins, work, cli.seed)?,
+        (None, other) => bail!("--calib is required for source {other}"),
+    })
+}
+
+/// Supervises the children and shows the live status line until SIGINT/SIGTERM, the
+/// `duration` (s) since `start`, or a child that keeps failing at start (returned: why).
+fn supervise(
+    supervisor: &mut Supervisor,
+    monitor: &mut Monitor,
+    recorder_losses: Option<&RecorderLosses>,
+    duration: Option<f64>,
+    start: Instant,
+) -> Result<Option<String>> {
+    let mut last_status = Instant::now();
+    let tty = std::io::stderr().is_terminal();
+    let deadline = duration.map(Duration::from_secs_f64);
+    let mut gave_up: Option<String> = None;
+    // SIGINT/SIGTERM ends the loop: the clean way out.
+    while !ipc_types::stop::sleep(Duration::from_millis(20)) && gave_up.is_none() {
+        monitor.drain()?;
+        gave_up = announce(supervisor.poll(), tty);
+        if last_status.elapsed() >= Duration::from_secs(1) {
+            let line = monitor.status(recorder_losses);
+            let elapsed = start.elapsed().as_secs_f64();
+            let line = match duration {
+                Some(total) => format!("{elapsed:.0}/{total:.0} s | {line}"),
+                None => format!("{elapsed:.0} s | {line}"),
+            };
+            // On a terminal one status line, rewritten in place; otherwise a line each time.
+            if tty {
+                eprint!("\r{line}\x1b[K");
+            } else {
+                tracing::info!("{line}");
+            }
+            last_status = Instant::now();
+        }
+        if deadline.is_some_and(|d| start.elapsed() >= d) {
+            break;
+        }
+    }
+    if tty {
+        eprintln!();
+    }
+    Ok(gave_up)
+}
+
+fn main() -> std::process::ExitCode {
+    mems_log::init("mems-stack");
+    mems_log::exit(run(Cli::parse()))
+}
+
+fn run(cli: Cli) -> Result<()> {
     check_source(&cli)?;
     // Before calibrating: a stack that cannot record must not start, nor touch a recording.
     let overwrite = match &cli.record {
@@ -354,11 +411,7 @@ fn main() -> Result<()> {
     let bins = bin_dir()?;
     let work = std::env::temp_dir().join(format!("{WORK_DIR_PREFIX}{}", std::process::id()));
     std::fs::create_dir_all(&work).with_context(|| format!("cannot create {}", work.display()))?;
-    let calib = match (&cli.calib, cli.source.as_str()) {
-        (Some(c), _) => c.clone(),
-        (None, "sim" | "sim-spi") => calibrate_sim(&bins, &work, cli.seed)?,
-        (None, other) => bail!("--calib is required for source {other}"),
-    };
+    let calib = calibration(&cli, &bins, &work)?;
     let calib = calib.to_str().context("calibration path is not UTF-8")?;
     let recorder_losses = cli.record.is_some().then(RecorderLosses::default);
     let specs = child_specs(
@@ -377,37 +430,15 @@ fn main() -> Result<()> {
         std::fs::remove_file(old).with_context(|| format!("cannot remove {}", old.display()))?;
     }
     let mut supervisor = Supervisor::start(specs)?;
-    eprintln!("mems-stack: running (namespace {namespace:?}); Ctrl-C stops");
+    tracing::info!("running (namespace {namespace:?}); Ctrl-C stops");
     let start = Instant::now();
-    let mut last_status = Instant::now();
-    let tty = std::io::stderr().is_terminal();
-    let deadline = cli.duration.map(Duration::from_secs_f64);
-    let mut gave_up: Option<String> = None;
-    // SIGINT/SIGTERM ends the loop: the clean way out.
-    while !ipc_types::stop::sleep(Duration::from_millis(20)) && gave_up.is_none() {
-        monitor.drain()?;
-        gave_up = announce(supervisor.poll(), tty);
-        if last_status.elapsed() >= Duration::from_secs(1) {
-            let line = monitor.status(recorder_losses.as_ref());
-            let elapsed = start.elapsed().as_secs_f64();
-            let line = match cli.duration {
-                Some(total) => format!("{elapsed:.0}/{total:.0} s | {line}"),
-                None => format!("{elapsed:.0} s | {line}"),
-            };
-            if tty {
-                eprint!("\r{line}\x1b[K");
-            } else {
-                eprintln!("{line}");
-            }
-            last_status = Instant::now();
-        }
-        if deadline.is_some_and(|d| start.elapsed() >= d) {
-            break;
-        }
-    }
-    if tty {
-        eprintln!();
-    }
+    let gave_up = supervise(
+        &mut supervisor,
+        &mut monitor,
+        recorder_losses.as_ref(),
+        cli.duration,
+        start,
+    )?;
     let restarts = supervisor
         .restarts()
         .iter()

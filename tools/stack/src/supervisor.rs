@@ -215,7 +215,7 @@ impl Supervisor {
             }
         }
         if any_died && let Err(e) = ipc_types::service::remove_dead_nodes() {
-            eprintln!("mems-stack: {e}");
+            tracing::warn!("{e}");
         }
         for c in &mut self.children {
             if c.child.is_none() && c.restart_at.is_some_and(|t| Instant::now() >= t) {
@@ -231,7 +231,7 @@ impl Supervisor {
                         });
                     }
                     Err(e) => {
-                        eprintln!("mems-stack: cannot restart {}: {e}", c.spec.name);
+                        tracing::warn!("cannot restart {}: {e}", c.spec.name);
                         c.restart_at = Some(Instant::now() + c.backoff);
                     }
                 }
@@ -259,10 +259,7 @@ impl Supervisor {
                         std::thread::sleep(Duration::from_millis(20));
                     }
                     _ => {
-                        eprintln!(
-                            "mems-stack: {} did not stop in {grace:?}; killing it",
-                            c.spec.name
-                        );
+                        tracing::warn!("{} did not stop in {grace:?}; killing it", c.spec.name);
                         let _ = child.kill();
                         let _ = child.wait();
                         break;
@@ -271,7 +268,7 @@ impl Supervisor {
             }
         }
         if let Err(e) = ipc_types::service::remove_dead_nodes() {
-            eprintln!("mems-stack: {e}");
+            tracing::warn!("{e}");
         }
     }
 }

@@ -41,8 +41,12 @@ struct Args {
     namespace: Option<String>,
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    mems_log::init("mems-topic");
+    mems_log::exit(topic(Cli::parse()))
+}
+
+fn topic(cli: Cli) -> Result<()> {
     let (args, echo) = match &cli.command {
         Command::Hz(a) => (a, false),
         Command::Echo(a) => (a, true),

@@ -10,6 +10,7 @@ use calibrate_science::static_eval::{DriftSource, StaticEvalConfig, evaluate_sta
 use calibrate_science::{plots, thesis_eval};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use noise::NoiseParams;
 
 #[derive(Parser)]
 #[command(
@@ -75,13 +76,39 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("mems-eval: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    mems_log::init("mems-eval");
+    mems_log::exit(run(Cli::parse()))
+}
+
+/// The `[noise]` table of calibration file `path`.
+fn load_noise(path: &Path) -> Result<NoiseParams> {
+    CalibrationFile::load(path)?.noise.with_context(|| {
+        format!(
+            "{}: no [noise] table (run mems-calibrate allan --into)",
+            path.display()
+        )
+    })
+}
+
+/// The earlier recordings named by `prior` (files or folders), read with a progress bar
+/// (returned for the evaluation to go on with).
+fn load_priors(prior: &[PathBuf]) -> Result<(Vec<recording::Recording>, ProgressBar)> {
+    let prior_files = expand(prior)?;
+    let progress = ProgressBar::new(prior_files.len() as u64);
+    progress.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len}")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    progress.set_message("reading earlier recordings");
+    let priors = prior_files
+        .iter()
+        .map(|p| {
+            progress.inc(1);
+            recording::load_raw(p)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok((priors, progress))
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -113,15 +140,7 @@ fn run(cli: Cli) -> Result<()> {
             json,
             plot,
         } => {
-            let noise = match &noise {
-                Some(path) => Some(CalibrationFile::load(path)?.noise.with_context(|| {
-                    format!(
-                        "{}: no [noise] table (run mems-calibrate allan --into)",
-                        path.display()
-                    )
-                })?),
-                None => None,
-            };
+            let noise = noise.as_deref().map(load_noise).transpose()?;
             let cfg = StaticEvalConfig {
                 align_s,
                 window_s,
@@ -130,21 +149,7 @@ fn run(cli: Cli) -> Result<()> {
             };
             let six_data = recording::load_six_position(&six)?;
             let test_data = recording::load_raw(&test)?;
-            let prior_files = expand(&prior)?;
-            let progress = ProgressBar::new(prior_files.len() as u64);
-            progress.set_style(
-                ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len}")
-                    .expect("valid template")
-                    .progress_chars("=> "),
-            );
-            progress.set_message("reading earlier recordings");
-            let priors = prior_files
-                .iter()
-                .map(|p| {
-                    progress.inc(1);
-                    recording::load_raw(p)
-                })
-                .collect::<Result<Vec<_>, _>>()?;
+            let (priors, progress) = load_priors(&prior)?;
             progress.set_position(0);
             progress.set_length(priors.len() as u64 + 1);
             progress.set_message("evaluating");
@@ -158,8 +163,8 @@ fn run(cli: Cli) -> Result<()> {
             )?;
             progress.finish_and_clear();
             if report.drift_source == DriftSource::OwnRest {
-                eprintln!(
-                    "note: neither earlier recordings (--prior) nor noise parameters (--noise) cover a window: its \
+                tracing::info!(
+                    "neither earlier recordings (--prior) nor noise parameters (--noise) cover a window: its \
                      drift term comes from an Allan analysis of the rest before it, whose unresolved bias \
                      instability and random walk count at their upper limits (a conservative sigma)"
                 );
@@ -171,7 +176,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             if let Some(plot) = plot {
                 plots::plot_static_displacement(&plot, &report)?;
-                eprintln!("wrote {}", plot.display());
+                tracing::info!("wrote {}", plot.display());
             }
         }
     }

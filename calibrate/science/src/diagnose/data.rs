@@ -252,50 +252,79 @@ fn gcd(mut a: u64, mut b: u64) -> u64 {
     a
 }
 
-/// Prepares a raw session: torn-read repair, static segments, repeats, gaps and outliers.
-pub(crate) fn prepare_raw(
-    name: &str,
-    samples: &[RawImuSample],
-    cfg: &DataConfig,
-) -> Result<RawSession, DataError> {
-    let n = samples.len();
-    let t_ns: Vec<u64> = samples.iter().map(|s| s.stamps.sample_ns).collect();
-    let a_raw: Vec<[f64; 3]> = samples.iter().map(|s| s.accel_g).collect();
+/// Samples repeating the previous one exactly, and whether there are more of them than white
+/// noise quantized with `step_g` would give.
+struct Repeats {
+    /// Whether each sample repeats the previous one.
+    repeat: Vec<bool>,
+    count: usize,
+    expected: f64,
+    significant: bool,
+    /// Indices of the samples that do not repeat.
+    distinct: Vec<usize>,
+}
+
+fn find_repeats(a_raw: &[[f64; 3]], step_g: f64) -> Repeats {
+    let n = a_raw.len();
     let mut repeat = vec![false; n];
-    let mut repeats = 0;
+    let mut count = 0;
     for k in 1..n {
         if a_raw[k] == a_raw[k - 1] {
             repeat[k] = true;
-            repeats += 1;
+            count += 1;
         }
     }
-    // Quantization step: the greatest common divisor of the counts (at 16384/g) of up to
-    // 2000 samples; the thesis's values are multiples of 4 counts.
-    let lsb = cfg.accel_lsb_per_g;
-    let step_counts = a_raw
-        .iter()
-        .take(2000)
-        .flat_map(|a| a.iter().map(|v| (v * lsb).round().abs() as u64))
-        .fold(0, gcd)
-        .max(1);
-    let step_g = step_counts as f64 / lsb;
     // Repeats are significant when independent white noise would rarely give as many; the
     // noise is measured here without them (they would make it look smaller).
     let distinct: Vec<usize> = (0..n).filter(|&k| !repeat[k]).collect();
-    let repeats_expected = if repeats == 0 {
+    let expected = if count == 0 {
         0.0
     } else {
         let rough_sigma: [f64; 3] =
             std::array::from_fn(|i| difference_sigma(distinct.iter().map(|&k| a_raw[k][i])));
         repeat_probability(&rough_sigma, step_g) * n.saturating_sub(1) as f64
     };
-    let repeats_significant = repeats as f64 >= 2.0 * repeats_expected
-        && poisson_upper_tail(repeats, repeats_expected) < 1e-6;
+    let significant = count as f64 >= 2.0 * expected && poisson_upper_tail(count, expected) < 1e-6;
+    Repeats {
+        repeat,
+        count,
+        expected,
+        significant,
+        distinct,
+    }
+}
 
-    // Torn-read repair and static segments on the distinct samples when repeats are
-    // significant (both measure the noise from successive differences), mapped back.
-    let kept: Vec<usize> = if repeats_significant {
-        distinct
+/// Quantization step, g: the greatest common divisor of the counts (at `lsb` per g) of up to
+/// 2000 samples; the thesis's values are multiples of 4 counts.
+fn quantization_step_g(a_raw: &[[f64; 3]], lsb: f64) -> f64 {
+    let step_counts = a_raw
+        .iter()
+        .take(2000)
+        .flat_map(|a| a.iter().map(|v| (v * lsb).round().abs() as u64))
+        .fold(0, gcd)
+        .max(1);
+    step_counts as f64 / lsb
+}
+
+/// The repaired samples, what the repair found, and the static segments (found on them).
+struct Repaired {
+    a: Vec<[f64; 3]>,
+    torn: TornFindings,
+    segments: Vec<StaticSegment>,
+}
+
+/// Torn-read repair and static segments on the distinct samples when repeats are significant
+/// (both measure the noise from successive differences), mapped back to all samples.
+fn repair(
+    name: &str,
+    samples: &[RawImuSample],
+    a_raw: &[[f64; 3]],
+    repeats: &Repeats,
+    cfg: &DataConfig,
+) -> Result<Repaired, DataError> {
+    let n = samples.len();
+    let kept: Vec<usize> = if repeats.significant {
+        repeats.distinct.clone()
     } else {
         (0..n).collect()
     };
@@ -317,15 +346,15 @@ pub(crate) fn prepare_raw(
             min_s: cfg.segments.min_duration_s,
         });
     }
-    let mut a_repaired = a_raw.clone();
+    let mut a_repaired = a_raw.to_vec();
     for (j, &k) in kept.iter().enumerate() {
         a_repaired[k] = work_a[j];
     }
     for k in 1..n {
-        if !repeats_significant {
+        if !repeats.significant {
             break;
         }
-        if repeat[k] {
+        if repeats.repeat[k] {
             a_repaired[k] = a_repaired[k - 1];
         }
     }
@@ -338,11 +367,25 @@ pub(crate) fn prepare_raw(
             ..*s
         })
         .collect();
-    let temp_c = samples
-        .iter()
-        .all(|s| s.flags & raw_flags::TEMP_VALID != 0)
-        .then(|| samples.iter().map(|s| s.temp_c).collect());
+    Ok(Repaired {
+        a: a_repaired,
+        torn,
+        segments,
+    })
+}
 
+/// Gaps in the time stamps: intervals longer than `gap_factor` median intervals (at least
+/// `gap_min_s`).
+struct Gaps {
+    median_dt_s: f64,
+    /// Sample indices `k` with a gap between samples `k - 1` and `k`.
+    at: Vec<usize>,
+    longest_s: f64,
+    /// Time missing in gaps, s.
+    time_s: f64,
+}
+
+fn find_gaps(t_ns: &[u64], cfg: &DataConfig) -> Gaps {
     let mut dts: Vec<u64> = t_ns.windows(2).map(|w| w[1] - w[0]).collect();
     let median_dt_s = if dts.is_empty() {
         0.0
@@ -351,20 +394,33 @@ pub(crate) fn prepare_raw(
         *dts.select_nth_unstable(mid).1 as f64 * 1e-9
     };
     let gap_threshold_s = (cfg.gap_factor * median_dt_s).max(cfg.gap_min_s);
-    let mut gap_at = Vec::new();
-    let mut longest_gap_s: f64 = 0.0;
-    let mut gap_time_s = 0.0;
-    for k in 1..n {
+    let mut at = Vec::new();
+    let mut longest_s: f64 = 0.0;
+    let mut time_s = 0.0;
+    for k in 1..t_ns.len() {
         let dt = (t_ns[k] - t_ns[k - 1]) as f64 * 1e-9;
-        longest_gap_s = longest_gap_s.max(dt);
+        longest_s = longest_s.max(dt);
         if dt > gap_threshold_s {
-            gap_at.push(k);
-            gap_time_s += dt - median_dt_s;
+            at.push(k);
+            time_s += dt - median_dt_s;
         }
     }
+    Gaps {
+        median_dt_s,
+        at,
+        longest_s,
+        time_s,
+    }
+}
 
-    // Noise per axis over the static segments (robust to tears and slow drift), for each
-    // choice of fixes.
+/// Noise per axis over the static segments (robust to tears and slow drift), g, for each
+/// choice of fixes (indexed by [`Fixes::index`]).
+fn noise_per_fixes(
+    a_raw: &[[f64; 3]],
+    r: &Repaired,
+    repeats: &Repeats,
+    step_g: f64,
+) -> [[f64; 3]; 4] {
     let mut sigma = [[0.0; 3]; 4];
     for torn_fix in [false, true] {
         for dedup in [false, true] {
@@ -373,9 +429,9 @@ pub(crate) fn prepare_raw(
                 dedup,
             };
             // A fix that changes nothing has the noise of the data without it.
-            let same_as = if torn_fix && torn.total() == 0 {
+            let same_as = if torn_fix && r.torn.total() == 0 {
                 Some(Fixes { torn: false, dedup })
-            } else if dedup && !repeats_significant {
+            } else if dedup && !repeats.significant {
                 Some(Fixes {
                     torn: torn_fix,
                     dedup: false,
@@ -386,11 +442,11 @@ pub(crate) fn prepare_raw(
             sigma[fixes.index()] = match same_as {
                 Some(other) => sigma[other.index()],
                 None => {
-                    let a = if torn_fix { &a_repaired } else { &a_raw };
+                    let a = if torn_fix { &r.a[..] } else { a_raw };
                     std::array::from_fn(|i| {
-                        let values = segments.iter().flat_map(|s| {
+                        let values = r.segments.iter().flat_map(|s| {
                             (s.start..s.end)
-                                .filter(|&k| !(dedup && repeat[k]))
+                                .filter(|&k| !(dedup && repeats.repeat[k]))
                                 .map(move |k| a[k][i])
                         });
                         difference_sigma(values).max(step_g / 12f64.sqrt())
@@ -399,34 +455,56 @@ pub(crate) fn prepare_raw(
             };
         }
     }
+    sigma
+}
+
+/// Prepares a raw session: torn-read repair, static segments, repeats, gaps and outliers.
+pub(crate) fn prepare_raw(
+    name: &str,
+    samples: &[RawImuSample],
+    cfg: &DataConfig,
+) -> Result<RawSession, DataError> {
+    let n = samples.len();
+    let t_ns: Vec<u64> = samples.iter().map(|s| s.stamps.sample_ns).collect();
+    let a_raw: Vec<[f64; 3]> = samples.iter().map(|s| s.accel_g).collect();
+    let lsb = cfg.accel_lsb_per_g;
+    let step_g = quantization_step_g(&a_raw, lsb);
+    let repeats = find_repeats(&a_raw, step_g);
+    let repaired = repair(name, samples, &a_raw, &repeats, cfg)?;
+    let temp_c = samples
+        .iter()
+        .all(|s| s.flags & raw_flags::TEMP_VALID != 0)
+        .then(|| samples.iter().map(|s| s.temp_c).collect());
+    let gaps = find_gaps(&t_ns, cfg);
+    let sigma = noise_per_fixes(&a_raw, &repaired, &repeats, step_g);
     let (outliers, outlier_offset_counts) =
         offset_outliers(&a_raw, &sigma[Fixes::default().index()], lsb);
 
     let findings = AcquisitionFindings {
         name: name.to_string(),
         samples: n,
-        median_dt_s,
-        torn,
+        median_dt_s: gaps.median_dt_s,
+        torn: repaired.torn,
         outliers,
         outlier_offset_counts,
-        repeats,
-        repeats_expected,
-        repeats_significant,
+        repeats: repeats.count,
+        repeats_expected: repeats.expected,
+        repeats_significant: repeats.significant,
         step_g,
-        gaps: gap_at.len(),
-        longest_gap_s,
-        gap_time_s,
+        gaps: gaps.at.len(),
+        longest_gap_s: gaps.longest_s,
+        gap_time_s: gaps.time_s,
     };
     Ok(RawSession {
         name: name.to_string(),
         t_ns,
         a_raw,
-        a_repaired,
+        a_repaired: repaired.a,
         temp_c,
-        repeat,
+        repeat: repeats.repeat,
         sigma,
-        gap_at,
-        segments,
+        gap_at: gaps.at,
+        segments: repaired.segments,
         findings,
     })
 }

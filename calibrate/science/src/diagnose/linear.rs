@@ -96,18 +96,19 @@ struct Solved {
     rank: usize,
 }
 
-fn solve_axis(
+/// Group -> (weighted mean of the columns, weighted mean of y, total weight).
+type GroupStats = std::collections::HashMap<usize, (DVector<f64>, f64, f64)>;
+
+/// Weighted means of `y` and of each column per group over `rows` (empty without groups).
+fn group_means(
     cols: &[Vec<f64>],
     groups: Option<&[usize]>,
-    y: impl Fn(usize) -> f64,
-    w: impl Fn(usize) -> f64,
+    y: &impl Fn(usize) -> f64,
+    w: &impl Fn(usize) -> f64,
     rows: &[usize],
-) -> Solved {
+) -> GroupStats {
     let p = cols.len();
-    let n = rows.len();
-    // Weighted group means of y and of each column.
-    let mut gstats: std::collections::HashMap<usize, (DVector<f64>, f64, f64)> =
-        std::collections::HashMap::new();
+    let mut gstats = GroupStats::new();
     if let Some(g) = groups {
         for &o in rows {
             let e = gstats
@@ -125,6 +126,58 @@ fn solve_axis(
             e.1 /= e.2;
         }
     }
+    gstats
+}
+
+/// The SVD solution of the scaled design `x` (n x p) for `yv`, singular values below a
+/// relative 1e-10 dropped: (theta in scaled units, kept right singular vectors as columns,
+/// their inverse singular values, rank).
+fn truncated_svd_solve(
+    x: &DMatrix<f64>,
+    yv: &DVector<f64>,
+) -> (DVector<f64>, DMatrix<f64>, DVector<f64>, usize) {
+    let (n, p) = x.shape();
+    if p == 0 {
+        return (
+            DVector::zeros(0),
+            DMatrix::zeros(0, 0),
+            DVector::zeros(0),
+            0,
+        );
+    }
+    let svd = x.clone().svd(true, true);
+    let s_max = svd.singular_values.max();
+    let tol = 1e-10 * s_max.max(f64::MIN_POSITIVE) * (n.max(p) as f64).sqrt();
+    let keep: Vec<usize> = (0..svd.singular_values.len())
+        .filter(|&k| svd.singular_values[k] > tol)
+        .collect();
+    let u = svd.u.as_ref().expect("requested U");
+    let v_t = svd.v_t.as_ref().expect("requested V^T");
+    let mut v = DMatrix::zeros(p, keep.len());
+    let mut inv_s = DVector::zeros(keep.len());
+    let mut theta = DVector::zeros(p);
+    for (j, &k) in keep.iter().enumerate() {
+        let s = svd.singular_values[k];
+        inv_s[j] = 1.0 / s;
+        let coef = u.column(k).dot(yv) / s;
+        for c in 0..p {
+            v[(c, j)] = v_t[(k, c)];
+            theta[c] += coef * v_t[(k, c)];
+        }
+    }
+    (theta, v, inv_s, keep.len())
+}
+
+fn solve_axis(
+    cols: &[Vec<f64>],
+    groups: Option<&[usize]>,
+    y: impl Fn(usize) -> f64,
+    w: impl Fn(usize) -> f64,
+    rows: &[usize],
+) -> Solved {
+    let p = cols.len();
+    let n = rows.len();
+    let gstats = group_means(cols, groups, &y, &w, rows);
     let mut x = DMatrix::zeros(n, p);
     let mut yv = DVector::zeros(n);
     for (r, &o) in rows.iter().enumerate() {
@@ -155,36 +208,7 @@ fn solve_axis(
         let sc = scale[c];
         x.column_mut(c).scale_mut(sc);
     }
-    let (theta, v, inv_s, rank) = if p == 0 {
-        (
-            DVector::zeros(0),
-            DMatrix::zeros(0, 0),
-            DVector::zeros(0),
-            0,
-        )
-    } else {
-        let svd = x.clone().svd(true, true);
-        let s_max = svd.singular_values.max();
-        let tol = 1e-10 * s_max.max(f64::MIN_POSITIVE) * (n.max(p) as f64).sqrt();
-        let keep: Vec<usize> = (0..svd.singular_values.len())
-            .filter(|&k| svd.singular_values[k] > tol)
-            .collect();
-        let u = svd.u.as_ref().expect("requested U");
-        let v_t = svd.v_t.as_ref().expect("requested V^T");
-        let mut v = DMatrix::zeros(p, keep.len());
-        let mut inv_s = DVector::zeros(keep.len());
-        let mut theta = DVector::zeros(p);
-        for (j, &k) in keep.iter().enumerate() {
-            let s = svd.singular_values[k];
-            inv_s[j] = 1.0 / s;
-            let coef = u.column(k).dot(&yv) / s;
-            for c in 0..p {
-                v[(c, j)] = v_t[(k, c)];
-                theta[c] += coef * v_t[(k, c)];
-            }
-        }
-        (theta, v, inv_s, keep.len())
-    };
+    let (theta, v, inv_s, rank) = truncated_svd_solve(&x, &yv);
     let resid = &yv - &x * &theta;
     let chi2 = resid.norm_squared();
     // Back to the columns' own units.

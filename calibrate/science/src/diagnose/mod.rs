@@ -664,31 +664,7 @@ impl Diagnoser<'_> {
             }
         }
         let calib_rows: Vec<usize> = (0..obs.len()).filter(|&o| !obs[o].test).collect();
-        let test_rows: Vec<usize> = (0..obs.len()).filter(|&o| obs[o].test).collect();
-        let rounds = if !test_rows.is_empty() {
-            vec![Round {
-                train: calib_rows.clone(),
-                eval: test_rows,
-            }]
-        } else {
-            let folds: std::collections::BTreeSet<usize> =
-                calib_rows.iter().map(|&o| obs[o].fold).collect();
-            folds
-                .iter()
-                .map(|&f| Round {
-                    train: calib_rows
-                        .iter()
-                        .copied()
-                        .filter(|&o| obs[o].fold != f)
-                        .collect(),
-                    eval: calib_rows
-                        .iter()
-                        .copied()
-                        .filter(|&o| obs[o].fold == f)
-                        .collect(),
-                })
-                .collect()
-        };
+        let rounds = validation_rounds(&obs, &calib_rows);
         let t_ref_c = obs
             .iter()
             .all(|o| o.temp_c.is_some())
@@ -704,27 +680,8 @@ impl Diagnoser<'_> {
         let n: Vec<usize> = obs.iter().map(|o| o.n).collect();
         let pose: Vec<usize> = obs.iter().map(|o| o.pose).collect();
         let (dir_est, lf_start) = if self.kind == BaselineKind::LabelFree {
-            let x0 = magnitude::start(&m, &v, &n, &pose, &calib_rows).map_err(|e| {
-                DiagnoseError::Baseline {
-                    kind: self.kind.name(),
-                    reason: e.to_string(),
-                }
-            })?;
-            let f = magnitude::fit(&m, &v, &[], &calib_rows, &x0).map_err(|e| {
-                DiagnoseError::Baseline {
-                    kind: self.kind.name(),
-                    reason: e.to_string(),
-                }
-            })?;
-            let (t, b) = (f.t(), f.bias());
-            let dirs = m
-                .iter()
-                .map(|mm| {
-                    let c = (t * (Vector3::from(*mm) - b)).normalize();
-                    [c.x, c.y, c.z]
-                })
-                .collect();
-            (Some(dirs), Some(f.x))
+            let (dirs, x) = self.label_free_start(&m, &v, &n, &pose, &calib_rows)?;
+            (Some(dirs), Some(x))
         } else {
             (None, None)
         };
@@ -741,6 +698,35 @@ impl Diagnoser<'_> {
             dir_est,
             lf_start,
         })
+    }
+
+    /// The label-free baseline's fit on all calibration rows: each observation's direction
+    /// (its corrected reading, normalized) and the parameters, the start of later fits.
+    fn label_free_start(
+        &self,
+        m: &[[f64; 3]],
+        v: &[[f64; 3]],
+        n: &[usize],
+        pose: &[usize],
+        calib_rows: &[usize],
+    ) -> Result<(Vec<[f64; 3]>, DVector<f64>), DiagnoseError> {
+        let baseline_error = |e: String| DiagnoseError::Baseline {
+            kind: self.kind.name(),
+            reason: e,
+        };
+        let x0 = magnitude::start(m, v, n, pose, calib_rows)
+            .map_err(|e| baseline_error(e.to_string()))?;
+        let f = magnitude::fit(m, v, &[], calib_rows, &x0)
+            .map_err(|e| baseline_error(e.to_string()))?;
+        let (t, b) = (f.t(), f.bias());
+        let dirs = m
+            .iter()
+            .map(|mm| {
+                let c = (t * (Vector3::from(*mm) - b)).normalize();
+                [c.x, c.y, c.z]
+            })
+            .collect();
+        Ok((dirs, f.x))
     }
 
     fn fixes_of(effects: &[Effect]) -> Fixes {
@@ -1154,12 +1140,11 @@ impl Diagnoser<'_> {
         by_obs.into_values().collect()
     }
 
-    fn run(&mut self) -> Result<Diagnosis, DiagnoseError> {
-        let applied = self.cfg.apply.clone();
-        let base_fixes = Self::fixes_of(&applied);
+    /// Builds the observation sets of the applied fixes, and of each fix the data call for
+    /// (a fix without findings is not applicable and needs none); returns the applied fixes.
+    fn prepare_sets(&mut self, applied: &[Effect]) -> Result<Fixes, DiagnoseError> {
+        let base_fixes = Self::fixes_of(applied);
         self.set(base_fixes)?;
-        // The observations of each fix the data call for (a fix without findings is not
-        // applicable and needs none).
         let raw = |f: fn(&AcquisitionFindings) -> bool| {
             self.sessions.iter().any(|s| match s {
                 Session::Raw(r) => f(&r.findings),
@@ -1187,84 +1172,104 @@ impl Diagnoser<'_> {
                 self.set(fixes)?;
             }
         }
-        let base_set = &self.sets[&(base_fixes.torn, base_fixes.dedup)];
-        for &e in &applied {
+        Ok(base_fixes)
+    }
+
+    /// The held-out evaluation of the applied effects, refused when one of them does not
+    /// apply to the data or the baseline cannot be evaluated.
+    fn baseline_eval(&self, base_set: &ObsSet, applied: &[Effect]) -> Result<Eval, DiagnoseError> {
+        for &e in applied {
             if let Err(Skip::NotApplicable(reason) | Skip::NotIdentifiable(reason)) =
                 self.applicability(e, base_set)
             {
                 return Err(DiagnoseError::Apply { effect: e, reason });
             }
         }
-        let base_eval = self.evaluate(base_set, &applied).map_err(|s| {
+        self.evaluate(base_set, applied).map_err(|s| {
             let (Skip::NotApplicable(reason) | Skip::NotIdentifiable(reason)) = s;
             DiagnoseError::Baseline {
                 kind: self.kind.name(),
                 reason,
             }
-        })?;
-        let baseline = self.score(&base_eval, &applied);
-        let base_fit = self.final_fit(base_set, &applied);
-        let base_rank = base_fit.1;
+        })
+    }
 
-        let mut candidates = Vec::new();
-        let mut evals: BTreeMap<Effect, (Eval, Vec<Effect>)> = BTreeMap::new();
-        for effect in Effect::ALL {
-            if applied.contains(&effect) {
-                continue;
-            }
-            let mut effects = applied.clone();
-            effects.push(effect);
-            let fixes = Self::fixes_of(&effects);
-            // Applicability depends on the sessions, not on the fixes: judged on the baseline's
-            // observations, so that a fix's observations are only needed when it applies.
-            let outcome = self.applicability(effect, base_set).and_then(|()| {
-                let set = &self.sets[&(fixes.torn, fixes.dedup)];
-                let params = if effect.is_fix() {
-                    0
-                } else if self.kind == BaselineKind::LabelFree {
-                    3 + usize::from(effect == Effect::WarmUp)
-                } else {
-                    let (_, rank) = self.final_fit(set, &effects);
-                    let added = rank.saturating_sub(base_rank);
-                    if added == 0 {
-                        return Err(Skip::NotIdentifiable(
-                            "the calibration data cannot tell it from the baseline".into(),
-                        ));
-                    }
-                    added + usize::from(effect == Effect::WarmUp)
-                };
-                self.evaluate(set, &effects).map(|e| (e, params))
-            });
-            let result = match outcome {
-                Ok((eval, params)) => {
-                    let s = self.score(&eval, &effects);
-                    // Constants fitted on held-out data absorb about one unit each of the
-                    // scaled chi-square: charged after scaling.
-                    let scale = (s.chi2 / s.expected_chi2.max(1.0)).max(1.0);
-                    let mut score = (baseline.chi2 - s.chi2) / scale
-                        - (s.local_params as f64 - baseline.local_params as f64);
-                    if effect == Effect::Gaps {
-                        score -= self.placebo_gap_score(base_set, &effects, &baseline);
-                    }
-                    let excess = baseline.chi2 - baseline.expected_chi2;
-                    let explained = if excess > 0.0 {
-                        (baseline.chi2 - s.chi2) / excess
-                    } else if score > 0.0 {
-                        1.0
-                    } else {
-                        0.0
-                    };
-                    evals.insert(effect, (eval, effects.clone()));
-                    CandidateResult {
-                        effect,
-                        status: CandidateStatus::Evaluated,
-                        result: Some(s),
-                        score,
-                        explained,
-                        params,
-                    }
+    /// The parameters `effect` adds to `effects` minus itself (`base_rank`: the baseline's
+    /// rank), refused when the calibration data cannot tell it from the baseline.
+    fn added_params(
+        &self,
+        set: &ObsSet,
+        effect: Effect,
+        effects: &[Effect],
+        base_rank: usize,
+    ) -> Result<usize, Skip> {
+        if effect.is_fix() {
+            return Ok(0);
+        }
+        if self.kind == BaselineKind::LabelFree {
+            return Ok(3 + usize::from(effect == Effect::WarmUp));
+        }
+        let (_, rank) = self.final_fit(set, effects);
+        let added = rank.saturating_sub(base_rank);
+        if added == 0 {
+            return Err(Skip::NotIdentifiable(
+                "the calibration data cannot tell it from the baseline".into(),
+            ));
+        }
+        Ok(added + usize::from(effect == Effect::WarmUp))
+    }
+
+    /// Evaluates the applied effects plus `effect` against the baseline; also returns the
+    /// evaluation and the effects when it was evaluated.
+    fn candidate(
+        &self,
+        effect: Effect,
+        applied: &[Effect],
+        base_set: &ObsSet,
+        base_rank: usize,
+        baseline: &ModelScore,
+    ) -> (CandidateResult, Option<(Eval, Vec<Effect>)>) {
+        let mut effects = applied.to_vec();
+        effects.push(effect);
+        let fixes = Self::fixes_of(&effects);
+        // Applicability depends on the sessions, not on the fixes: judged on the baseline's
+        // observations, so that a fix's observations are only needed when it applies.
+        let outcome = self.applicability(effect, base_set).and_then(|()| {
+            let set = &self.sets[&(fixes.torn, fixes.dedup)];
+            let params = self.added_params(set, effect, &effects, base_rank)?;
+            self.evaluate(set, &effects).map(|e| (e, params))
+        });
+        match outcome {
+            Ok((eval, params)) => {
+                let s = self.score(&eval, &effects);
+                // Constants fitted on held-out data absorb about one unit each of the
+                // scaled chi-square: charged after scaling.
+                let scale = (s.chi2 / s.expected_chi2.max(1.0)).max(1.0);
+                let mut score = (baseline.chi2 - s.chi2) / scale
+                    - (s.local_params as f64 - baseline.local_params as f64);
+                if effect == Effect::Gaps {
+                    score -= self.placebo_gap_score(base_set, &effects, baseline);
                 }
-                Err(skip) => CandidateResult {
+                let excess = baseline.chi2 - baseline.expected_chi2;
+                let explained = if excess > 0.0 {
+                    (baseline.chi2 - s.chi2) / excess
+                } else if score > 0.0 {
+                    1.0
+                } else {
+                    0.0
+                };
+                let result = CandidateResult {
+                    effect,
+                    status: CandidateStatus::Evaluated,
+                    result: Some(s),
+                    score,
+                    explained,
+                    params,
+                };
+                (result, Some((eval, effects)))
+            }
+            Err(skip) => {
+                let result = CandidateResult {
                     effect,
                     status: match skip {
                         Skip::NotApplicable(r) => CandidateStatus::NotApplicable(r),
@@ -1274,8 +1279,30 @@ impl Diagnoser<'_> {
                     score: f64::NAN,
                     explained: f64::NAN,
                     params: 0,
-                },
-            };
+                };
+                (result, None)
+            }
+        }
+    }
+
+    fn run(&mut self) -> Result<Diagnosis, DiagnoseError> {
+        let applied = self.cfg.apply.clone();
+        let base_fixes = self.prepare_sets(&applied)?;
+        let base_set = &self.sets[&(base_fixes.torn, base_fixes.dedup)];
+        let base_eval = self.baseline_eval(base_set, &applied)?;
+        let baseline = self.score(&base_eval, &applied);
+        let (_, base_rank) = self.final_fit(base_set, &applied);
+
+        let mut candidates = Vec::new();
+        let mut evals: BTreeMap<Effect, (Eval, Vec<Effect>)> = BTreeMap::new();
+        for effect in Effect::ALL {
+            if applied.contains(&effect) {
+                continue;
+            }
+            let (result, eval) = self.candidate(effect, &applied, base_set, base_rank, &baseline);
+            if let Some(eval) = eval {
+                evals.insert(effect, eval);
+            }
             candidates.push(result);
         }
 
@@ -1287,11 +1314,40 @@ impl Diagnoser<'_> {
             }
             None => (baseline.clone(), base_eval.clone(), applied.clone()),
         };
+        let (final_fit, calibration_fit) = self.final_fits(&final_effects);
         let fixes = Self::fixes_of(&final_effects);
         let final_set = &self.sets[&(fixes.torn, fixes.dedup)];
-        let (final_fit, _) = self.final_fit(final_set, &final_effects);
-        // What a calibration file can carry: not the set-up's label errors nor the steps of
-        // one session's gaps.
+        let noise_floor_mps2 =
+            (final_eval.v.iter().sum::<f64>() / final_eval.v.len().max(1) as f64).sqrt()
+                * self.cfg.gravity_mps2;
+        let unexplained_structure = final_model.rms_mps2
+            > self.cfg.unexplained_ratio * final_model.expected_rms_mps2
+            && final_model.p_value < self.cfg.unexplained_p;
+        Ok(Diagnosis {
+            kind: self.kind,
+            validation: self.validation_text(base_set),
+            baseline_points: self.points(base_set, &base_eval),
+            final_points: self.points(final_set, &final_eval),
+            baseline,
+            candidates,
+            selected,
+            final_model,
+            noise_floor_mps2,
+            unexplained_structure,
+            acquisition: self.acquisition(),
+            final_fit,
+            calibration_fit,
+            histogram: self.histogram(),
+            gravity_mps2: self.cfg.gravity_mps2,
+        })
+    }
+
+    /// The final fit of `final_effects`, and the one a calibration file can carry: not the
+    /// set-up's label errors nor the steps of one session's gaps.
+    fn final_fits(&self, final_effects: &[Effect]) -> (FinalFit, FinalFit) {
+        let fixes = Self::fixes_of(final_effects);
+        let final_set = &self.sets[&(fixes.torn, fixes.dedup)];
+        let (final_fit, _) = self.final_fit(final_set, final_effects);
         let sensor_effects: Vec<Effect> = final_effects
             .iter()
             .copied()
@@ -1302,41 +1358,18 @@ impl Diagnoser<'_> {
         } else {
             self.final_fit(final_set, &sensor_effects).0
         };
-        let noise_floor_mps2 =
-            (final_eval.v.iter().sum::<f64>() / final_eval.v.len().max(1) as f64).sqrt()
-                * self.cfg.gravity_mps2;
-        let unexplained_structure = final_model.rms_mps2
-            > self.cfg.unexplained_ratio * final_model.expected_rms_mps2
-            && final_model.p_value < self.cfg.unexplained_p;
-        let validation = self.validation_text(base_set);
-        let baseline_points = self.points(base_set, &base_eval);
-        let final_points = self.points(final_set, &final_eval);
-        let histogram = self.histogram();
-        let acquisition = self
-            .sessions
+        (final_fit, calibration_fit)
+    }
+
+    /// The acquisition findings of the raw sessions.
+    fn acquisition(&self) -> Vec<AcquisitionFindings> {
+        self.sessions
             .iter()
             .filter_map(|s| match s {
                 Session::Raw(r) => Some(r.findings.clone()),
                 Session::Means { .. } => None,
             })
-            .collect();
-        Ok(Diagnosis {
-            kind: self.kind,
-            validation,
-            baseline,
-            candidates,
-            selected,
-            final_model,
-            noise_floor_mps2,
-            unexplained_structure,
-            acquisition,
-            final_fit,
-            calibration_fit,
-            baseline_points,
-            final_points,
-            histogram,
-            gravity_mps2: self.cfg.gravity_mps2,
-        })
+            .collect()
     }
 
     fn validation_text(&self, set: &ObsSet) -> String {
@@ -1378,12 +1411,28 @@ impl Diagnoser<'_> {
     /// the total rank it uses (linear: shared rank over the axes plus group constants;
     /// label-free: its parameter count).
     fn final_fit(&self, set: &ObsSet, effects: &[Effect]) -> (FinalFit, usize) {
-        let rows = &set.calib_rows;
         let tau_grid = if effects.contains(&Effect::WarmUp) {
             self.tau_grid(set)
         } else {
             vec![1.0]
         };
+        let mut out = self.empty_fit(set, effects);
+        let solved = match self.kind {
+            BaselineKind::LabelFree => self.final_label_free(set, effects, tau_grid, &mut out),
+            _ => Some(self.final_linear(set, effects, &tau_grid, &mut out)),
+        };
+        let Some(solved) = solved else {
+            return (out, 0);
+        };
+        out.per_pose_residual_g = per_pose_residual(set, &solved.resid);
+        out.terms = reading_terms(set, &solved.coef, solved.tau);
+        (out, solved.rank)
+    }
+
+    /// A final fit of `effects` on `set`'s calibration observations with what the data say
+    /// (poses, repaired samples, temperature range) and nothing fitted yet.
+    fn empty_fit(&self, set: &ObsSet, effects: &[Effect]) -> FinalFit {
+        let rows = &set.calib_rows;
         let repaired_samples = if effects.contains(&Effect::TornReads) {
             self.sessions[..self.n_calib]
                 .iter()
@@ -1404,7 +1453,7 @@ impl Diagnoser<'_> {
         });
         let poses: std::collections::BTreeSet<usize> =
             rows.iter().map(|&o| set.obs[o].pose).collect();
-        let mut out = FinalFit {
+        FinalFit {
             kind: self.kind,
             effects: effects.to_vec(),
             model: None,
@@ -1417,166 +1466,123 @@ impl Diagnoser<'_> {
             poses: poses.len(),
             repaired_samples,
             temperature_range_c,
+        }
+    }
+
+    /// The label-free final fit (the best warm-up time constant of `tau_grid`): the model,
+    /// its covariance and chi-square go into `out`; `None` if no fit converged.
+    fn final_label_free(
+        &self,
+        set: &ObsSet,
+        effects: &[Effect],
+        tau_grid: Vec<f64>,
+        out: &mut FinalFit,
+    ) -> Option<Solved> {
+        let rows = &set.calib_rows;
+        let x0 = set.lf_start.clone().expect("label-free start");
+        let tau_grid = if tau_grid.len() > 1 {
+            vec![self.best_tau_magnitude(set, effects, rows, &x0, &tau_grid)]
+        } else {
+            tau_grid
         };
-        let mut coef: BTreeMap<Effect, [f64; 3]> = BTreeMap::new();
-        let mut resid: Vec<[f64; 3]> = vec![[0.0; 3]; set.obs.len()];
-        let rank;
-        let tau;
-        match self.kind {
-            BaselineKind::LabelFree => {
-                let x0 = set.lf_start.clone().expect("label-free start");
-                let tau_grid = if tau_grid.len() > 1 {
-                    vec![self.best_tau_magnitude(set, effects, rows, &x0, &tau_grid)]
-                } else {
-                    tau_grid
-                };
-                let mut best: Option<MagnitudeChoice> = None;
-                for &t in &tau_grid {
-                    let terms = self.magnitude_terms(set, effects, t);
-                    let plain: Vec<Term> = terms.iter().map(|(_, t)| t.clone()).collect();
-                    if let Ok(f) = magnitude::fit(&set.m, &set.v, &plain, rows, &x0)
-                        && best.as_ref().is_none_or(|b| f.chi2 < b.0)
-                    {
-                        best = Some((f.chi2, f, terms, t));
-                    }
-                }
-                let Some((chi2, f, terms, t)) = best else {
-                    return (out, 0);
-                };
-                tau = t;
-                rank = f.x.len();
-                for (c, (e, term)) in terms.iter().enumerate() {
-                    coef.entry(*e).or_insert([0.0; 3])[term.axis] = f.x[9 + c];
-                }
-                let plain: Vec<Term> = terms.into_iter().map(|(_, t)| t).collect();
-                for &o in rows {
-                    let z = magnitude::corrected(&f.x, &plain, &set.m[o], o);
-                    resid[o] = [z.norm() - 1.0, 0.0, 0.0];
-                }
-                let t_mat = f.t();
-                let s = t_mat.try_inverse().unwrap_or_else(Matrix3::identity);
-                out.model = AccelModel::new(ModelKind::Full, s, f.bias()).ok();
-                let dof = rows.len().saturating_sub(f.x.len());
-                let scale = if dof > 0 {
-                    (chi2 / dof as f64).max(1.0)
-                } else {
-                    1.0
-                };
-                out.covariance = Some(label_free_covariance(&s, &f.cov, scale));
-                out.chi2 = chi2;
-                out.dof = dof;
-            }
-            _ => {
-                let mut best: Option<(f64, linear::AxisFit, [Vec<Tag>; 3], f64)> = None;
-                for &t in &tau_grid {
-                    let (design, tags) = self.linear_design(set, effects, t);
-                    let f = linear::fit(&set.m, &set.v, &design, rows);
-                    let c: f64 = f.chi2.iter().sum();
-                    if best.as_ref().is_none_or(|b| c < b.0) {
-                        best = Some((c, f, tags, t));
-                    }
-                }
-                let (chi2, f, tags, t) = best.expect("at least one time constant");
-                tau = t;
-                rank = f.rank.iter().sum::<usize>() + 3 * f.groups;
-                let (design, _) = self.linear_design(set, effects, t);
-                let mut scale_m = Matrix3::zeros();
-                let mut bias = Vector3::zeros();
-                let mut cov = ParamCovariance::zeros();
-                let dof = 3 * rows.len() - rank.min(3 * rows.len());
-                let red = if dof > 0 {
-                    (chi2 / dof as f64).max(1.0)
-                } else {
-                    1.0
-                };
-                let mut tilt: BTreeMap<usize, [f64; 3]> = BTreeMap::new();
-                for axis in 0..3 {
-                    let th = &f.theta[axis];
-                    let mut layout_index = Vec::new();
-                    for (c, tag) in tags[axis].iter().enumerate() {
-                        match tag {
-                            Tag::Base(j) if *j < 3 => {
-                                scale_m[(axis, *j)] = th[c];
-                                layout_index.push((c, scale_index(axis, *j)));
-                            }
-                            Tag::Base(_) => {
-                                bias[axis] = th[c];
-                                layout_index.push((c, bias_index(axis)));
-                            }
-                            Tag::Effect(Effect::ReferenceTilt, class) => {
-                                tilt.entry(*class).or_insert([0.0; 3])[axis] = th[c];
-                            }
-                            Tag::Effect(e, _) => {
-                                coef.entry(*e).or_insert([0.0; 3])[axis] = th[c];
-                            }
-                        }
-                    }
-                    for &(a, ka) in &layout_index {
-                        for &(b, kb) in &layout_index {
-                            cov[(ka, kb)] = red * f.cov[axis][(a, b)];
-                        }
-                    }
-                    let consts: BTreeMap<usize, f64> = f.group_const[axis]
-                        .iter()
-                        .map(|(g, a, _)| (*g, *a))
-                        .collect();
-                    for &o in rows {
-                        let pred: f64 = design.columns[axis]
-                            .iter()
-                            .zip(th)
-                            .map(|(col, t)| col[o] * t)
-                            .sum::<f64>()
-                            + design.groups.as_ref().map_or(0.0, |g| consts[&g[o]]);
-                        resid[o][axis] = set.m[o][axis] - pred;
-                    }
-                    if self.kind == BaselineKind::Full && design.groups.is_some() {
-                        // With bias steps at gaps, b is the constant before the first gap.
-                        bias[axis] = f.group_const[axis].first().map_or(0.0, |e| e.1);
-                    }
-                }
-                if self.kind == BaselineKind::Full {
-                    out.model = AccelModel::new(ModelKind::Full, scale_m, bias).ok();
-                    out.covariance = Some(cov);
-                }
-                out.tilt_g = tilt.into_iter().collect();
-                out.chi2 = chi2;
-                out.dof = dof;
+        let mut best: Option<MagnitudeChoice> = None;
+        for &t in &tau_grid {
+            let terms = self.magnitude_terms(set, effects, t);
+            let plain: Vec<Term> = terms.iter().map(|(_, t)| t.clone()).collect();
+            if let Ok(f) = magnitude::fit(&set.m, &set.v, &plain, rows, &x0)
+                && best.as_ref().is_none_or(|b| f.chi2 < b.0)
+            {
+                best = Some((f.chi2, f, terms, t));
             }
         }
-        // Per-pose mean residual.
-        let mut per_pose: BTreeMap<usize, ([f64; 3], usize)> = BTreeMap::new();
+        let (chi2, f, terms, tau) = best?;
+        let mut solved = Solved::new(set, tau, f.x.len());
+        for (c, (e, term)) in terms.iter().enumerate() {
+            solved.coef.entry(*e).or_insert([0.0; 3])[term.axis] = f.x[9 + c];
+        }
+        let plain: Vec<Term> = terms.into_iter().map(|(_, t)| t).collect();
         for &o in rows {
-            let e = per_pose.entry(set.obs[o].pose).or_insert(([0.0; 3], 0));
-            for (sum, r) in e.0.iter_mut().zip(resid[o]) {
-                *sum += r;
+            let z = magnitude::corrected(&f.x, &plain, &set.m[o], o);
+            solved.resid[o] = [z.norm() - 1.0, 0.0, 0.0];
+        }
+        let t_mat = f.t();
+        let s = t_mat.try_inverse().unwrap_or_else(Matrix3::identity);
+        out.model = AccelModel::new(ModelKind::Full, s, f.bias()).ok();
+        let dof = rows.len().saturating_sub(f.x.len());
+        let scale = if dof > 0 {
+            (chi2 / dof as f64).max(1.0)
+        } else {
+            1.0
+        };
+        out.covariance = Some(label_free_covariance(&s, &f.cov, scale));
+        out.chi2 = chi2;
+        out.dof = dof;
+        Some(solved)
+    }
+
+    /// The linear final fit (the best warm-up time constant of `tau_grid`): the model (full
+    /// baseline), its covariance, the reference tilts and chi-square go into `out`.
+    fn final_linear(
+        &self,
+        set: &ObsSet,
+        effects: &[Effect],
+        tau_grid: &[f64],
+        out: &mut FinalFit,
+    ) -> Solved {
+        let rows = &set.calib_rows;
+        let mut best: Option<(f64, linear::AxisFit, [Vec<Tag>; 3], f64)> = None;
+        for &t in tau_grid {
+            let (design, tags) = self.linear_design(set, effects, t);
+            let f = linear::fit(&set.m, &set.v, &design, rows);
+            let c: f64 = f.chi2.iter().sum();
+            if best.as_ref().is_none_or(|b| c < b.0) {
+                best = Some((c, f, tags, t));
             }
-            e.1 += 1;
         }
-        out.per_pose_residual_g = per_pose
-            .values()
-            .map(|(s, n)| s.map(|x| x / *n as f64))
-            .collect();
-        let t_ref = set.t_ref_c;
-        let mut terms = ReadingTerms::default();
-        if let Some(c) = coef.get(&Effect::TemperatureBias) {
-            terms.reference_c = t_ref;
-            terms.temp_bias_g_per_c = Some(Vector3::from(*c));
+        let (chi2, f, tags, tau) = best.expect("at least one time constant");
+        let mut solved = Solved::new(set, tau, f.rank.iter().sum::<usize>() + 3 * f.groups);
+        let (design, _) = self.linear_design(set, effects, tau);
+        let mut unpacked = Unpacked::default();
+        let dof = 3 * rows.len() - solved.rank.min(3 * rows.len());
+        let red = if dof > 0 {
+            (chi2 / dof as f64).max(1.0)
+        } else {
+            1.0
+        };
+        for (axis, axis_tags) in tags.iter().enumerate() {
+            let th = &f.theta[axis];
+            let layout_index = unpacked.axis(axis, th, axis_tags, &mut solved.coef);
+            for &(a, ka) in &layout_index {
+                for &(b, kb) in &layout_index {
+                    unpacked.cov[(ka, kb)] = red * f.cov[axis][(a, b)];
+                }
+            }
+            let consts: BTreeMap<usize, f64> = f.group_const[axis]
+                .iter()
+                .map(|(g, a, _)| (*g, *a))
+                .collect();
+            for &o in rows {
+                let pred: f64 = design.columns[axis]
+                    .iter()
+                    .zip(th)
+                    .map(|(col, t)| col[o] * t)
+                    .sum::<f64>()
+                    + design.groups.as_ref().map_or(0.0, |g| consts[&g[o]]);
+                solved.resid[o][axis] = set.m[o][axis] - pred;
+            }
+            if self.kind == BaselineKind::Full && design.groups.is_some() {
+                // With bias steps at gaps, b is the constant before the first gap.
+                unpacked.bias[axis] = f.group_const[axis].first().map_or(0.0, |e| e.1);
+            }
         }
-        if let Some(c) = coef.get(&Effect::TemperatureScale) {
-            terms.reference_c = t_ref;
-            terms.temp_scale_per_c = Some(Vector3::from(*c));
+        if self.kind == BaselineKind::Full {
+            out.model = AccelModel::new(ModelKind::Full, unpacked.scale, unpacked.bias).ok();
+            out.covariance = Some(unpacked.cov);
         }
-        if let Some(c) = coef.get(&Effect::BiasDrift) {
-            terms.drift = Some((Vector3::from(*c), set.t_max_s.unwrap_or(0.0)));
-        }
-        if let Some(c) = coef.get(&Effect::WarmUp) {
-            terms.warm_up = Some((Vector3::from(*c), tau));
-        }
-        if let Some(c) = coef.get(&Effect::ScaleNonlinearity) {
-            terms.quadratic_g_per_g2 = Some(Vector3::from(*c));
-        }
-        out.terms = terms;
-        (out, rank)
+        out.tilt_g = unpacked.tilt.into_iter().collect();
+        out.chi2 = chi2;
+        out.dof = dof;
+        solved
     }
 
     /// Histogram of sample deviations from their block means in every raw session.
@@ -1628,6 +1634,152 @@ impl Diagnoser<'_> {
         }
         any.then_some(h)
     }
+}
+
+/// The validation rounds: the test observations against all calibration rows when there are
+/// any, otherwise one round per fold of the calibration rows.
+fn validation_rounds(obs: &[Obs], calib_rows: &[usize]) -> Vec<Round> {
+    let test_rows: Vec<usize> = (0..obs.len()).filter(|&o| obs[o].test).collect();
+    if !test_rows.is_empty() {
+        return vec![Round {
+            train: calib_rows.to_vec(),
+            eval: test_rows,
+        }];
+    }
+    let folds: std::collections::BTreeSet<usize> =
+        calib_rows.iter().map(|&o| obs[o].fold).collect();
+    folds
+        .iter()
+        .map(|&f| Round {
+            train: calib_rows
+                .iter()
+                .copied()
+                .filter(|&o| obs[o].fold != f)
+                .collect(),
+            eval: calib_rows
+                .iter()
+                .copied()
+                .filter(|&o| obs[o].fold == f)
+                .collect(),
+        })
+        .collect()
+}
+
+/// What a final fit's solver leaves for the terms and residuals it reports.
+struct Solved {
+    /// The effects' coefficients per axis.
+    coef: BTreeMap<Effect, [f64; 3]>,
+    /// Residual of each observation (calibration rows only), g.
+    resid: Vec<[f64; 3]>,
+    /// Total rank used.
+    rank: usize,
+    /// The warm-up time constant used, s.
+    tau: f64,
+}
+
+impl Solved {
+    fn new(set: &ObsSet, tau: f64, rank: usize) -> Self {
+        Self {
+            coef: BTreeMap::new(),
+            resid: vec![[0.0; 3]; set.obs.len()],
+            rank,
+            tau,
+        }
+    }
+}
+
+/// The linear fit's columns sorted into model 3 (scale matrix, bias, their covariance in the
+/// 12-parameter layout) and reference tilts per orientation class.
+struct Unpacked {
+    scale: Matrix3<f64>,
+    bias: Vector3<f64>,
+    cov: ParamCovariance,
+    tilt: BTreeMap<usize, [f64; 3]>,
+}
+
+impl Default for Unpacked {
+    fn default() -> Self {
+        Self {
+            scale: Matrix3::zeros(),
+            bias: Vector3::zeros(),
+            cov: ParamCovariance::zeros(),
+            tilt: BTreeMap::new(),
+        }
+    }
+}
+
+impl Unpacked {
+    /// Sorts one axis' coefficients `th` (columns tagged `tags`); effects' coefficients go
+    /// into `coef`. Returns the (column, parameter index) pairs of model 3's parameters.
+    fn axis(
+        &mut self,
+        axis: usize,
+        th: &[f64],
+        tags: &[Tag],
+        coef: &mut BTreeMap<Effect, [f64; 3]>,
+    ) -> Vec<(usize, usize)> {
+        let mut layout_index = Vec::new();
+        for (c, tag) in tags.iter().enumerate() {
+            match tag {
+                Tag::Base(j) if *j < 3 => {
+                    self.scale[(axis, *j)] = th[c];
+                    layout_index.push((c, scale_index(axis, *j)));
+                }
+                Tag::Base(_) => {
+                    self.bias[axis] = th[c];
+                    layout_index.push((c, bias_index(axis)));
+                }
+                Tag::Effect(Effect::ReferenceTilt, class) => {
+                    self.tilt.entry(*class).or_insert([0.0; 3])[axis] = th[c];
+                }
+                Tag::Effect(e, _) => {
+                    coef.entry(*e).or_insert([0.0; 3])[axis] = th[c];
+                }
+            }
+        }
+        layout_index
+    }
+}
+
+/// Mean residual per pose over the calibration observations, g.
+fn per_pose_residual(set: &ObsSet, resid: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let mut per_pose: BTreeMap<usize, ([f64; 3], usize)> = BTreeMap::new();
+    for &o in &set.calib_rows {
+        let e = per_pose.entry(set.obs[o].pose).or_insert(([0.0; 3], 0));
+        for (sum, r) in e.0.iter_mut().zip(resid[o]) {
+            *sum += r;
+        }
+        e.1 += 1;
+    }
+    per_pose
+        .values()
+        .map(|(s, n)| s.map(|x| x / *n as f64))
+        .collect()
+}
+
+/// The reading terms of the fitted effects' coefficients (`tau`: the warm-up's time constant,
+/// s).
+fn reading_terms(set: &ObsSet, coef: &BTreeMap<Effect, [f64; 3]>, tau: f64) -> ReadingTerms {
+    let t_ref = set.t_ref_c;
+    let mut terms = ReadingTerms::default();
+    if let Some(c) = coef.get(&Effect::TemperatureBias) {
+        terms.reference_c = t_ref;
+        terms.temp_bias_g_per_c = Some(Vector3::from(*c));
+    }
+    if let Some(c) = coef.get(&Effect::TemperatureScale) {
+        terms.reference_c = t_ref;
+        terms.temp_scale_per_c = Some(Vector3::from(*c));
+    }
+    if let Some(c) = coef.get(&Effect::BiasDrift) {
+        terms.drift = Some((Vector3::from(*c), set.t_max_s.unwrap_or(0.0)));
+    }
+    if let Some(c) = coef.get(&Effect::WarmUp) {
+        terms.warm_up = Some((Vector3::from(*c), tau));
+    }
+    if let Some(c) = coef.get(&Effect::ScaleNonlinearity) {
+        terms.quadratic_g_per_g2 = Some(Vector3::from(*c));
+    }
+    terms
 }
 
 /// Covariance of `S = T^-1` and `b` in the 12-parameter layout from the covariance of

@@ -179,37 +179,51 @@ fn binned_means(points: &[(f64, f64)], x0: f64, x1: f64) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// The standardized histogram's range (residuals beyond it are clamped to its ends) and bins.
+const Z_LIM: f64 = 8.0;
+const Z_BINS: usize = 64;
+
+/// Density of the standardized residuals `r / sigma` of every axis in `set`, per bin of
+/// [`Z_BINS`] over +-[`Z_LIM`].
+fn standardized_density(set: &[ResidualPoint]) -> Vec<f64> {
+    let mut h = vec![0.0; Z_BINS];
+    let mut n = 0;
+    for p in set {
+        for i in 0..3 {
+            let z = p.resid_g[i] / p.sigma_g[i];
+            if !z.is_finite() {
+                continue;
+            }
+            n += 1;
+            let b =
+                ((z.clamp(-Z_LIM, Z_LIM - 1e-9) + Z_LIM) / (2.0 * Z_LIM) * Z_BINS as f64) as usize;
+            h[b] += 1.0;
+        }
+    }
+    let width = 2.0 * Z_LIM / Z_BINS as f64;
+    h.into_iter()
+        .map(|c| c / (n.max(1) as f64 * width))
+        .collect()
+}
+
+/// The standard normal density over +-[`Z_LIM`], 401 points.
+fn standard_normal() -> impl Iterator<Item = (f64, f64)> {
+    (0..=400).map(|k| {
+        let x = -Z_LIM + 2.0 * Z_LIM * k as f64 / 400.0;
+        (
+            x,
+            (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt(),
+        )
+    })
+}
+
 fn standardized_histogram(path: &Path, d: &Diagnosis) -> Result<(), PlotError> {
     register_font();
     let e = err(path);
     let root = BitMapBackend::new(path, (900, 500)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
-    const LIM: f64 = 8.0;
-    const BINS: usize = 64;
-    let hist = |set: &[ResidualPoint]| -> (Vec<f64>, usize) {
-        let mut h = vec![0.0; BINS];
-        let mut n = 0;
-        for p in set {
-            for i in 0..3 {
-                let z = p.resid_g[i] / p.sigma_g[i];
-                if !z.is_finite() {
-                    continue;
-                }
-                n += 1;
-                let b = ((z.clamp(-LIM, LIM - 1e-9) + LIM) / (2.0 * LIM) * BINS as f64) as usize;
-                h[b] += 1.0;
-            }
-        }
-        let width = 2.0 * LIM / BINS as f64;
-        (
-            h.into_iter()
-                .map(|c| c / (n.max(1) as f64 * width))
-                .collect(),
-            n,
-        )
-    };
-    let (hb, _) = hist(&d.baseline_points);
-    let (hf, _) = hist(&d.final_points);
+    let hb = standardized_density(&d.baseline_points);
+    let hf = standardized_density(&d.final_points);
     let top = hb.iter().chain(&hf).fold(0.45f64, |m, v| m.max(*v)) * 1.1;
     let mut chart = ChartBuilder::on(&root)
         .caption(
@@ -219,7 +233,7 @@ fn standardized_histogram(path: &Path, d: &Diagnosis) -> Result<(), PlotError> {
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(55)
-        .build_cartesian_2d(-LIM..LIM, 0.0..top)
+        .build_cartesian_2d(-Z_LIM..Z_LIM, 0.0..top)
         .map_err(|x| e(x.to_string()))?;
     chart
         .configure_mesh()
@@ -227,7 +241,7 @@ fn standardized_histogram(path: &Path, d: &Diagnosis) -> Result<(), PlotError> {
         .y_desc("density")
         .draw()
         .map_err(|x| e(x.to_string()))?;
-    let width = 2.0 * LIM / BINS as f64;
+    let width = 2.0 * Z_LIM / Z_BINS as f64;
     for (h, colour, label) in [
         (&hb, GREY, d.baseline.model.as_str()),
         (&hf, RGBColor(40, 70, 200), d.final_model.model.as_str()),
@@ -235,7 +249,7 @@ fn standardized_histogram(path: &Path, d: &Diagnosis) -> Result<(), PlotError> {
         chart
             .draw_series(LineSeries::new(
                 h.iter().enumerate().flat_map(|(k, v)| {
-                    let x = -LIM + k as f64 * width;
+                    let x = -Z_LIM + k as f64 * width;
                     [(x, *v), (x + width, *v)]
                 }),
                 colour.stroke_width(2),
@@ -247,16 +261,7 @@ fn standardized_histogram(path: &Path, d: &Diagnosis) -> Result<(), PlotError> {
             });
     }
     chart
-        .draw_series(LineSeries::new(
-            (0..=400).map(|k| {
-                let x = -LIM + 2.0 * LIM * k as f64 / 400.0;
-                (
-                    x,
-                    (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt(),
-                )
-            }),
-            BLACK,
-        ))
+        .draw_series(LineSeries::new(standard_normal(), BLACK))
         .map_err(|x| e(x.to_string()))?
         .label("white noise: N(0, 1)")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], BLACK));

@@ -47,15 +47,9 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let result: anyhow::Result<()> = match Cli::parse().command {
+    mems_log::init("mems-calibrate");
+    mems_log::exit(match Cli::parse().command {
         Command::Serve(args) => serve::serve(&args),
         Command::Offline(args) => Err(calibrate::offline::exec_offline(&args)),
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("mems-calibrate: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    })
 }

@@ -115,8 +115,8 @@ fn stage(args: &ServeArgs, file: &CalibrationFile) -> Result<CalibrationStage> {
         stage
             .resume(&state)
             .with_context(|| format!("{}: cannot go on from it", path.display()))?;
-        eprintln!(
-            "mems-calibrate serve: going on from {} (last sample seq {}, detector {}, refined {})",
+        tracing::info!(
+            "going on from {} (last sample seq {}, detector {}, refined {})",
             path.display(),
             state.last_seq,
             if state.reference.is_some() {
@@ -136,8 +136,8 @@ fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
     let s = stage.stats();
     let (learn_restarts, _) = stage.detector().learn_rejections();
     let (accel, gyro, refined) = stage.refinement();
-    eprintln!(
-        "mems-calibrate serve: accepted {}, published {}, at rest {}, refused {refused}, gaps {}, \
+    tracing::info!(
+        "accepted {}, published {}, at rest {}, refused {refused}, gaps {}, \
          stream restarts {}, learning restarts {learn_restarts}, detector ready {}, refined {refined} \
          (accel {:.4?} m/s^2, gyro {:.5?} rad/s)",
         s.accepted,
@@ -149,8 +149,8 @@ fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
         accel,
         gyro
     );
-    eprintln!(
-        "mems-calibrate serve: {}; small-block pool: peak {} of 1024 blocks, {} requests found it empty",
+    tracing::info!(
+        "{}; small-block pool: peak {} of 1024 blocks, {} requests found it empty",
         steady.summary(),
         crate::ALLOCATOR.peak_blocks(),
         crate::ALLOCATOR.fallbacks()
@@ -176,8 +176,8 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
     let listener = wake::listener(&node, &raw_name, mode)?;
     let corrected = service::open::<CorrectedImuSample>(&node, &corrected_name)?;
     let mut out = Output::new(&node, &corrected, &corrected_name)?;
-    eprintln!(
-        "mems-calibrate serve: {} ({} model, calib_id {:016x}), {} detector, {raw_name} -> {corrected_name}{}",
+    tracing::info!(
+        "{} ({} model, calib_id {:016x}), {} detector, {raw_name} -> {corrected_name}{}",
         args.calib.display(),
         file.model,
         stage.calib_id(),
@@ -211,7 +211,7 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
             if let Err(e) = pushed {
                 refused += 1;
                 if refused <= REPORTED_REFUSALS {
-                    eprintln!("mems-calibrate serve: refused: {e}");
+                    tracing::warn!("refused: {e}");
                 }
             }
             out.end_of_input()?;

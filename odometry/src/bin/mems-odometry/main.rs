@@ -61,7 +61,7 @@ pub fn odometry_config(file: &CalibrationFile) -> OdometryConfig {
     static NOTE: Once = Once::new();
     let calibrated = odometry::config::from_calibration(file);
     if let Some(note) = calibrated.defaults_note() {
-        NOTE.call_once(|| eprintln!("mems-odometry: {note}"));
+        NOTE.call_once(|| tracing::info!("{note}"));
     }
     calibrated.config
 }
@@ -99,11 +99,10 @@ impl StageArgs {
     /// finite.
     pub fn load(&self) -> Result<(CalibrationFile, DetectorConfig)> {
         let file = match &self.calib {
-            Some(path) => CalibrationFile::load(path)
-                .with_context(|| format!("cannot load calibration {}", path.display()))?,
+            Some(path) => CalibrationFile::load(path).context("cannot load calibration")?,
             None => {
-                eprintln!(
-                    "mems-odometry: no --calib: the identity calibration at standard gravity \
+                tracing::info!(
+                    "no --calib: the identity calibration at standard gravity \
                      ({} m/s^2) and the MPU-9250's datasheet noise",
                     ipc_types::units::STANDARD_GRAVITY_MPS2
                 );
@@ -149,11 +148,11 @@ impl StageArgs {
 pub fn load_recording(path: &Path, policy: LogPolicy) -> Result<recording::Recording> {
     let recording = recording::load_raw_with(path, policy)?;
     if let Some(t) = &recording.truncation {
-        eprintln!("mems-odometry: {}: {t}", path.display());
+        tracing::warn!("{}: {t}", path.display());
     }
     if recording.repairs.any() {
-        eprintln!(
-            "mems-odometry: warning: {}: {} (--strict-time refuses such a file)",
+        tracing::warn!(
+            "{}: {} (--strict-time refuses such a file)",
             path.display(),
             recording.repairs
         );
@@ -162,18 +161,12 @@ pub fn load_recording(path: &Path, policy: LogPolicy) -> Result<recording::Recor
 }
 
 fn main() -> ExitCode {
-    let result: Result<()> = match Cli::parse().command {
+    mems_log::init("mems-odometry");
+    mems_log::exit(match Cli::parse().command {
         Command::Serve(args) => serve::run(args),
         Command::Offline(args) => offline::run(args),
         Command::Gyrocal { args } => Err(calibrate::offline::exec_offline(
             std::iter::once("gyrocal".as_ref()).chain(args.iter().map(|a| a.as_os_str())),
         )),
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("mems-odometry: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    })
 }

@@ -72,8 +72,7 @@ const TICK: Duration = Duration::from_millis(100);
 
 /// Runs until SIGINT/SIGTERM.
 pub fn run(args: ServeArgs) -> Result<()> {
-    let file = CalibrationFile::load(&args.calib)
-        .with_context(|| format!("cannot load calibration {}", args.calib.display()))?;
+    let file = CalibrationFile::load(&args.calib).context("cannot load calibration")?;
     let config = args.profile.odometry(crate::odometry_config(&file));
     let hint_config = args.hints.config()?;
     let namespace = service::namespace(args.namespace.as_deref());
@@ -176,7 +175,7 @@ impl<F: Fn() -> Result<OdometryStage, HintConfigError>> Server<F> {
                     self.hints_received += 1;
                     if let Err(e) = self.stage.hint(&h) {
                         self.hints_refused += 1;
-                        eprintln!("mems-odometry: refused: {e}");
+                        tracing::warn!("refused: {e}");
                     }
                 }
                 _ => return Ok(()),
@@ -190,8 +189,8 @@ impl<F: Fn() -> Result<OdometryStage, HintConfigError>> Server<F> {
         let no_gyro = s.raw_flags & raw_flags::GYRO_VALID == 0;
         if no_gyro && !self.warned_no_gyro {
             self.warned_no_gyro = true;
-            eprintln!(
-                "mems-odometry: sample seq {} has no gyroscope (GYRO_VALID clear: an \
+            tracing::warn!(
+                "sample seq {} has no gyroscope (GYRO_VALID clear: an \
                  accelerometer-only sensor mode, such as the MPU-9250 at 4 kHz); without it \
                  the attitude cannot be tracked, so no position is estimated: states carry \
                  NO_GYRO and never ALIGNED. Run the sensor at 1000 Hz or below for odometry",
@@ -235,7 +234,7 @@ impl<F: Fn() -> Result<OdometryStage, HintConfigError>> Server<F> {
             });
         } else if let Err(e) = self.stage.process(s, &mut emit) {
             self.refused += 1;
-            eprintln!("mems-odometry: refused: {e}");
+            tracing::warn!("refused: {e}");
         }
         out.end_of_input()?;
         Ok(())
@@ -243,8 +242,8 @@ impl<F: Fn() -> Result<OdometryStage, HintConfigError>> Server<F> {
 
     /// The summary on stderr, with the `published` count and the steady-state allocations.
     fn report(&self, published: u64, steady: &SteadyState) {
-        eprintln!(
-            "mems-odometry: received {}, published {published} (revisions included), refused \
+        tracing::info!(
+            "received {}, published {published} (revisions included), refused \
              {}, sessions {}, discarded for stalled subscribers {}; hints received {}, refused \
              {}, this session: {}",
             self.received,
@@ -255,8 +254,8 @@ impl<F: Fn() -> Result<OdometryStage, HintConfigError>> Server<F> {
             self.hints_refused,
             self.stage.hint_stats()
         );
-        eprintln!(
-            "mems-odometry: {}; small-block pool: peak {} of 1024 blocks, {} requests found it \
+        tracing::info!(
+            "{}; small-block pool: peak {} of 1024 blocks, {} requests found it \
              empty",
             steady.summary(),
             crate::ALLOCATOR.peak_blocks(),

@@ -4,8 +4,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
+use calibrate::model::{AccelModel, ParamCovariance};
 use calibrate_science::diagnose::{
-    BaselineKind, CandidateStatus, DiagnoseConfig, Diagnosis, Effect, SessionInput, diagnose, plots,
+    BaselineKind, CandidateStatus, DiagnoseConfig, Diagnosis, Effect, ModelScore, SessionInput,
+    diagnose, plots,
 };
 use calibrate_science::fit::{CovarianceMode, Weighting};
 use calibrate_science::segments::SegmentConfig;
@@ -185,7 +187,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     }
     if let Some(dir) = &args.plot_dir {
         for f in plots::write_all(dir, &d)? {
-            eprintln!("wrote {}", f.display());
+            tracing::info!("wrote {}", f.display());
         }
     }
     if let Some(out) = &args.out {
@@ -199,13 +201,10 @@ fn mg(x: f64) -> String {
     format!("{:.3}", x * 1e3)
 }
 
-/// The human-readable report.
-pub fn report(d: &Diagnosis) -> String {
+/// The acquisition findings: a line per session (with many sessions, only those with gaps or
+/// repeats beyond chance, and a sum over all).
+fn write_acquisition(s: &mut String, d: &Diagnosis) {
     use std::fmt::Write;
-    let mut s = String::new();
-    let g = d.gravity_mps2;
-    let _ = writeln!(s, "baseline: {} ({:?})", d.baseline.model, d.kind);
-    let _ = writeln!(s, "validation: {}", d.validation);
     let sessions = d.acquisition.len();
     for a in &d.acquisition {
         // Many sessions: one line each only for those with gaps or repeats beyond chance.
@@ -277,19 +276,25 @@ pub fn report(d: &Diagnosis) -> String {
                 .fold(0.0, f64::max),
         );
     }
-    let line = |s: &mut String, name: &str, m: &calibrate_science::diagnose::ModelScore| {
-        let axes = m.rms_axes_mps2.map_or(String::new(), |a| {
-            format!(" (x {:.5}, y {:.5}, z {:.5})", a[0], a[1], a[2])
-        });
-        let _ = writeln!(
-            s,
-            "{name:<9} {:<40} rms {:.5} m/s^2{axes}; white noise and parameter uncertainty \
-             predict {:.5}; chi2 {:.1} for {:.1} expected, p {:.2e}",
-            m.model, m.rms_mps2, m.expected_rms_mps2, m.chi2, m.expected_chi2, m.p_value
-        );
-    };
-    line(&mut s, "baseline", &d.baseline);
-    let _ = writeln!(s, "candidates:");
+}
+
+/// A model's score line.
+fn write_score(s: &mut String, name: &str, m: &ModelScore) {
+    use std::fmt::Write;
+    let axes = m.rms_axes_mps2.map_or(String::new(), |a| {
+        format!(" (x {:.5}, y {:.5}, z {:.5})", a[0], a[1], a[2])
+    });
+    let _ = writeln!(
+        s,
+        "{name:<9} {:<40} rms {:.5} m/s^2{axes}; white noise and parameter uncertainty \
+         predict {:.5}; chi2 {:.1} for {:.1} expected, p {:.2e}",
+        m.model, m.rms_mps2, m.expected_rms_mps2, m.chi2, m.expected_chi2, m.p_value
+    );
+}
+
+/// A line per candidate: its score, or why it was not evaluated.
+fn write_candidates(s: &mut String, d: &Diagnosis) {
+    use std::fmt::Write;
     for c in &d.candidates {
         match (&c.status, &c.result) {
             (CandidateStatus::Evaluated, Some(r)) => {
@@ -312,13 +317,12 @@ pub fn report(d: &Diagnosis) -> String {
             (CandidateStatus::Evaluated, None) => {}
         }
     }
-    let _ = writeln!(s, "selected: {}", d.selected.map_or("none", Effect::name));
-    line(&mut s, "final", &d.final_model);
-    let _ = writeln!(
-        s,
-        "noise floor {:.5} m/s^2; unexplained structure: {}",
-        d.noise_floor_mps2, d.unexplained_structure
-    );
+}
+
+/// The final fit's model and its extra terms.
+fn write_final_fit(s: &mut String, d: &Diagnosis) {
+    use std::fmt::Write;
+    let g = d.gravity_mps2;
     let f = &d.final_fit;
     if let Some(m) = &f.model {
         let b = m.bias_g();
@@ -391,9 +395,84 @@ pub fn report(d: &Diagnosis) -> String {
             mg(off[2])
         );
     }
+}
+
+/// The human-readable report.
+pub fn report(d: &Diagnosis) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(s, "baseline: {} ({:?})", d.baseline.model, d.kind);
+    let _ = writeln!(s, "validation: {}", d.validation);
+    write_acquisition(&mut s, d);
+    write_score(&mut s, "baseline", &d.baseline);
+    let _ = writeln!(s, "candidates:");
+    write_candidates(&mut s, d);
+    let _ = writeln!(s, "selected: {}", d.selected.map_or("none", Effect::name));
+    write_score(&mut s, "final", &d.final_model);
+    let _ = writeln!(
+        s,
+        "noise floor {:.5} m/s^2; unexplained structure: {}",
+        d.noise_floor_mps2, d.unexplained_structure
+    );
+    write_final_fit(&mut s, d);
     s
 }
 
+/// The calibration file of the diagnosis's own model 3 (`kind` baseline) with its
+/// covariance and residuals.
+fn fitted_file(
+    args: &DiagnoseArgs,
+    d: &Diagnosis,
+    kind: BaselineKind,
+    model: &AccelModel,
+    cov: &ParamCovariance,
+) -> CalibrationFile {
+    let f = &d.calibration_fit;
+    let per_pose_g = f.per_pose_residual_g.clone();
+    let n = per_pose_g.len().max(1) as f64;
+    let rms_g: [f64; 3] =
+        std::array::from_fn(|i| (per_pose_g.iter().map(|r| r[i] * r[i]).sum::<f64>() / n).sqrt());
+    let residuals = ResidualSection {
+        rms_g,
+        max_abs_g: per_pose_g
+            .iter()
+            .flatten()
+            .fold(0.0, |m: f64, r| m.max(r.abs())),
+        dof: [f.dof; 3],
+        chi2: [f.chi2; 3],
+        per_pose_g,
+    };
+    let source = SourceSection {
+        file: args
+            .input
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
+        kind: format!("diagnose ({})", d.final_model.model),
+        poses: f.poses,
+        repaired_samples: f.repaired_samples,
+    };
+    let method = if kind == BaselineKind::LabelFree {
+        FitMethod::LabelFree
+    } else {
+        FitMethod::Labelled
+    };
+    let mut file = CalibrationFile::new(
+        model,
+        cov,
+        method,
+        Weighting::PoseStd,
+        CovarianceMode::ResidualScaled,
+        args.gravity,
+        source,
+        residuals,
+    );
+    file.temperature_range_c = f.temperature_range_c;
+    file
+}
+
+/// Writes the final model (or the terms added to `--base`) as a calibration file to `out`.
 fn write_calibration(args: &DiagnoseArgs, d: &Diagnosis, out: &Path) -> Result<()> {
     let f = &d.calibration_fit;
     let mut file = match (d.kind, &f.model, &f.covariance) {
@@ -406,61 +485,17 @@ fn write_calibration(args: &DiagnoseArgs, d: &Diagnosis, out: &Path) -> Result<(
             };
             CalibrationFile::load(base)?
         }
-        (kind, Some(model), Some(cov)) => {
-            let per_pose_g = f.per_pose_residual_g.clone();
-            let n = per_pose_g.len().max(1) as f64;
-            let rms_g: [f64; 3] = std::array::from_fn(|i| {
-                (per_pose_g.iter().map(|r| r[i] * r[i]).sum::<f64>() / n).sqrt()
-            });
-            let residuals = ResidualSection {
-                rms_g,
-                max_abs_g: per_pose_g
-                    .iter()
-                    .flatten()
-                    .fold(0.0, |m: f64, r| m.max(r.abs())),
-                dof: [f.dof; 3],
-                chi2: [f.chi2; 3],
-                per_pose_g,
-            };
-            let source = SourceSection {
-                file: args
-                    .input
-                    .iter()
-                    .map(|p| p.display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                kind: format!("diagnose ({})", d.final_model.model),
-                poses: f.poses,
-                repaired_samples: f.repaired_samples,
-            };
-            let method = if kind == BaselineKind::LabelFree {
-                FitMethod::LabelFree
-            } else {
-                FitMethod::Labelled
-            };
-            let mut file = CalibrationFile::new(
-                model,
-                cov,
-                method,
-                Weighting::PoseStd,
-                CovarianceMode::ResidualScaled,
-                args.gravity,
-                source,
-                residuals,
-            );
-            file.temperature_range_c = f.temperature_range_c;
-            file
-        }
+        (kind, Some(model), Some(cov)) => fitted_file(args, d, kind, model, cov),
     };
     if d.final_fit.effects.contains(&Effect::ReferenceTilt) {
-        eprintln!(
-            "note: reference_tilt describes the calibration set-up (labels off), not the sensor: the \
+        tracing::info!(
+            "reference_tilt describes the calibration set-up (labels off), not the sensor: the \
              file holds the model fitted without it; calibrate label-free from at least 9 \
              orientations instead"
         );
     }
     if d.final_fit.effects.contains(&Effect::Gaps) {
-        eprintln!("note: the bias steps at gaps belong to one session: not written");
+        tracing::info!("the bias steps at gaps belong to one session: not written");
     }
     let t = &f.terms;
     if t.temp_bias_g_per_c.is_some() || t.temp_scale_per_c.is_some() {
@@ -482,7 +517,7 @@ fn write_calibration(args: &DiagnoseArgs, d: &Diagnosis, out: &Path) -> Result<(
     file.save(out)?;
     // Read it back: the file must load (and so drive the live stage).
     CalibrationFile::load(out)?;
-    eprintln!("wrote {}", out.display());
+    tracing::info!("wrote {}", out.display());
     Ok(())
 }
 

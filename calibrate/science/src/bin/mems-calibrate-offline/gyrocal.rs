@@ -17,13 +17,13 @@
 //! scatter of both sensors, over a window of [`POSE_WINDOW_S`]. A fit whose largest 1-sigma
 //! exceeds [`MAX_SIGMA`] is refused (poses that are not static, rotations missed).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig, Settler, calib_id};
 use calibrate::zero_state::{BATCH_LEN, DetectorConfig, DetectorKind};
-use calibrate_science::gyrocal::{GyroCalConfig, calibrate_gyro};
+use calibrate_science::gyrocal::{GyroCalConfig, GyroCalibration, calibrate_gyro};
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, raw_flags};
 use nalgebra::Matrix3;
 use serde_json::json;
@@ -84,64 +84,44 @@ fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
     std::array::from_fn(|r| std::array::from_fn(|k| m[(r, k)]))
 }
 
-/// Fits the correction, prints it and stores it when asked.
-pub fn run(args: GyroCalArgs) -> Result<()> {
-    let Some(calib_path) = &args.calib else {
+/// The calibration file `--into` names, checked to hold the same calibration as `file`.
+fn load_target(
+    args: &GyroCalArgs,
+    calib_path: &Path,
+    file: &CalibrationFile,
+) -> Result<Option<CalibrationFile>> {
+    let Some(path) = &args.into else {
+        return Ok(None);
+    };
+    let target = CalibrationFile::load(path).context("cannot load calibration")?;
+    if calib_id(&target) != calib_id(file) {
         bail!(
-            "gyrocal needs --calib: the correction is fitted through that accelerometer calibration"
+            "{} holds a different calibration than {} (calib_id {:016x} vs {:016x}): the \
+             gyro correction is fitted through --calib's accelerometer calibration and \
+             belongs in that file",
+            path.display(),
+            calib_path.display(),
+            calib_id(&target),
+            calib_id(file)
         );
-    };
-    let file = CalibrationFile::load(calib_path)
-        .with_context(|| format!("cannot load calibration {}", calib_path.display()))?;
-    let mut detector = DetectorConfig::new(args.detector, file.gravity_mps2);
-    if let Some(learn_s) = args.learn_s {
-        if !(learn_s > 0.0 && learn_s.is_finite()) {
-            bail!("--learn-s must be > 0, got {learn_s}");
-        }
-        detector.learn.duration_s = learn_s;
     }
-    // Read the target first, so that a bad one fails before the fit.
-    let mut target = match &args.into {
-        Some(path) => {
-            let target = CalibrationFile::load(path)
-                .with_context(|| format!("cannot load calibration {}", path.display()))?;
-            if calib_id(&target) != calib_id(&file) {
-                bail!(
-                    "{} holds a different calibration than {} (calib_id {:016x} vs {:016x}): the \
-                     gyro correction is fitted through --calib's accelerometer calibration and \
-                     belongs in that file",
-                    path.display(),
-                    calib_path.display(),
-                    calib_id(&target),
-                    calib_id(&file)
-                );
-            }
-            Some(target)
-        }
-        None => None,
-    };
+    Ok(Some(target))
+}
 
-    let recording = load_session(&args.input)?;
-    if let Some(r) = recording
-        .samples
-        .iter()
-        .find(|r| r.flags & raw_flags::GYRO_VALID == 0)
-    {
-        bail!(
-            "{}: sample seq {} has no gyroscope (GYRO_VALID clear): a gyro calibration needs \
-             gyro readings (record the session at a rate with the gyroscope)",
-            args.input.display(),
-            r.seq
-        );
-    }
-    detector.glrt.accel_tolerance_mps2 = POSE_ACCEL_TOLERANCE_MPS2;
-    detector.glrt.window_batches = window_batches(&recording.samples);
-    let mut stage = CalibrationStage::new(&file, detector, RefineConfig::default())
+/// The session's samples through the calibration stage, each with its final zero-state
+/// verdict (the calibration's rest intervals need them).
+fn correct_session(
+    args: &GyroCalArgs,
+    calib_path: &Path,
+    file: &CalibrationFile,
+    detector: DetectorConfig,
+    samples: &[RawImuSample],
+) -> Result<Vec<CorrectedImuSample>> {
+    let mut stage = CalibrationStage::new(file, detector, RefineConfig::default())
         .map_err(|e| anyhow::anyhow!("{}: {e}", calib_path.display()))?;
-    let mut corrected: Vec<CorrectedImuSample> = Vec::with_capacity(recording.samples.len());
-    // The calibration's rest intervals need every sample's final zero-state verdict.
+    let mut corrected: Vec<CorrectedImuSample> = Vec::with_capacity(samples.len());
     let mut settler = Settler::default();
-    for raw in &recording.samples {
+    for raw in samples {
         stage
             .push(raw, &mut |c: &CorrectedImuSample| {
                 settler.push(c, &mut |c| corrected.push(*c))
@@ -150,21 +130,11 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
     }
     stage.finish();
     settler.finish(&mut |c| corrected.push(*c));
-    let rest = corrected
-        .iter()
-        .filter(|c| c.flags & corrected_flags::ZERO_STATE != 0)
-        .count();
+    Ok(corrected)
+}
 
-    let cal =
-        calibrate_gyro(&corrected, &GyroCalConfig::new(file.gravity_mps2)).with_context(|| {
-            format!(
-                "{}: {} of {} samples flagged at rest by the {} detector",
-                args.input.display(),
-                rest,
-                corrected.len(),
-                detector.kind.name()
-            )
-        })?;
+/// Prints the correction and its 1-sigma (as JSON with `--json`).
+fn print_correction(args: &GyroCalArgs, cal: &GyroCalibration) {
     let (c, sigma) = (rows(&cal.correction), rows(&cal.correction_sigma));
     if args.json {
         let result = json!({
@@ -190,6 +160,58 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
             );
         }
     }
+}
+
+/// Fits the correction, prints it and stores it when asked.
+pub fn run(args: GyroCalArgs) -> Result<()> {
+    let Some(calib_path) = &args.calib else {
+        bail!(
+            "gyrocal needs --calib: the correction is fitted through that accelerometer calibration"
+        );
+    };
+    let file = CalibrationFile::load(calib_path).context("cannot load calibration")?;
+    let mut detector = DetectorConfig::new(args.detector, file.gravity_mps2);
+    if let Some(learn_s) = args.learn_s {
+        if !(learn_s > 0.0 && learn_s.is_finite()) {
+            bail!("--learn-s must be > 0, got {learn_s}");
+        }
+        detector.learn.duration_s = learn_s;
+    }
+    // Read the target first, so that a bad one fails before the fit.
+    let mut target = load_target(&args, calib_path, &file)?;
+
+    let recording = load_session(&args.input)?;
+    if let Some(r) = recording
+        .samples
+        .iter()
+        .find(|r| r.flags & raw_flags::GYRO_VALID == 0)
+    {
+        bail!(
+            "{}: sample seq {} has no gyroscope (GYRO_VALID clear): a gyro calibration needs \
+             gyro readings (record the session at a rate with the gyroscope)",
+            args.input.display(),
+            r.seq
+        );
+    }
+    detector.glrt.accel_tolerance_mps2 = POSE_ACCEL_TOLERANCE_MPS2;
+    detector.glrt.window_batches = window_batches(&recording.samples);
+    let corrected = correct_session(&args, calib_path, &file, detector, &recording.samples)?;
+    let rest = corrected
+        .iter()
+        .filter(|c| c.flags & corrected_flags::ZERO_STATE != 0)
+        .count();
+
+    let cal =
+        calibrate_gyro(&corrected, &GyroCalConfig::new(file.gravity_mps2)).with_context(|| {
+            format!(
+                "{}: {} of {} samples flagged at rest by the {} detector",
+                args.input.display(),
+                rest,
+                corrected.len(),
+                detector.kind.name()
+            )
+        })?;
+    print_correction(&args, &cal);
     let largest = cal.correction_sigma.max();
     if largest > MAX_SIGMA {
         bail!(
@@ -202,10 +224,10 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
         );
     }
     if let (Some(path), Some(target)) = (&args.into, target.as_mut()) {
-        target.gyro.correction = Some(c);
-        target.gyro.correction_sigma = Some(sigma);
+        target.gyro.correction = Some(rows(&cal.correction));
+        target.gyro.correction_sigma = Some(rows(&cal.correction_sigma));
         target.save(path)?;
-        eprintln!("wrote the gyro correction into {} [gyro]", path.display());
+        tracing::info!("wrote the gyro correction into {} [gyro]", path.display());
     }
     Ok(())
 }
@@ -215,7 +237,7 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
 fn load_session(path: &std::path::Path) -> Result<recording::Recording> {
     let recording = recording::load_raw_with(path, recording::LogPolicy::Strict)?;
     if let Some(t) = &recording.truncation {
-        eprintln!("mems-calibrate: {}: {t}", path.display());
+        tracing::warn!("{}: {t}", path.display());
     }
     Ok(recording)
 }

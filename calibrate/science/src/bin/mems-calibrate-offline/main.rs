@@ -9,7 +9,7 @@
 //! `gyrocal`: the gyro's scale and misalignment correction from a pose session (also run as
 //! `mems-odometry gyrocal`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
@@ -107,13 +107,8 @@ struct AllanArgs {
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("mems-calibrate: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    mems_log::init("mems-calibrate");
+    mems_log::exit(run(Cli::parse()))
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -151,9 +146,145 @@ fn allan(mut args: AllanArgs) -> Result<()> {
     if let (Some(path), Some(file)) = (&args.into, calib.as_mut()) {
         file.noise = Some(report.params);
         file.save(path)?;
-        eprintln!("wrote the noise parameters into {} [noise]", path.display());
+        tracing::info!("wrote the noise parameters into {} [noise]", path.display());
     }
     Ok(())
+}
+
+/// The poses a fit takes from its input, and what the input says about them.
+struct FitPoses {
+    poses: Vec<Pose>,
+    /// Whether they are fitted label-free.
+    label_free: bool,
+    temperature_range_c: Option<[f64; 2]>,
+    repaired_samples: usize,
+}
+
+/// The poses of a six-position means file, or the static segments of a raw recording
+/// (labelled when `labels` allow and they are axis aligned).
+fn fit_poses(input: &Path, loaded: &Input, labels: Labels, min_segment_s: f64) -> Result<FitPoses> {
+    let rec = match loaded {
+        Input::SixPosition(six) => {
+            return Ok(FitPoses {
+                poses: poses_from_six(six),
+                label_free: labels == Labels::None,
+                temperature_range_c: None,
+                repaired_samples: 0,
+            });
+        }
+        Input::Raw(rec) => rec,
+    };
+    let raw = raw_poses(rec, &SegmentConfig::with_min_duration(min_segment_s))?;
+    let repaired_samples = raw.repair.samples_repaired;
+    tracing::info!(
+        "{}: {} samples, {} torn reads repaired, {} static segments (noise {:.2e} / {:.2e} / {:.2e} g)",
+        input.display(),
+        raw.samples.len(),
+        repaired_samples,
+        raw.detection.segments.len(),
+        raw.detection.noise_sigma_g[0],
+        raw.detection.noise_sigma_g[1],
+        raw.detection.noise_sigma_g[2]
+    );
+    let temperature_range_c = raw
+        .detection
+        .segments
+        .iter()
+        .filter_map(|s| s.temp_range_c)
+        .fold(None, |acc: Option<[f64; 2]>, [lo, hi]| {
+            Some(match acc {
+                None => [lo, hi],
+                Some([a, b]) => [f64::min(a, lo), f64::max(b, hi)],
+            })
+        });
+    let (poses, label_free) = match labels {
+        Labels::None => (label_unlabelled(&raw), true),
+        Labels::Auto if all_axis_aligned(&raw) => (label_axis_aligned(input, &raw)?, false),
+        Labels::Auto => {
+            tracing::info!(
+                "{}: the static poses are not all axis aligned; fitting label-free",
+                input.display()
+            );
+            (label_unlabelled(&raw), true)
+        }
+    };
+    Ok(FitPoses {
+        poses,
+        label_free,
+        temperature_range_c,
+        repaired_samples,
+    })
+}
+
+/// The label-free fit of `poses` as a calibration file.
+fn label_free_file(
+    input: &Path,
+    poses: &[Pose],
+    weighting: Weighting,
+    gravity: f64,
+    source: SourceSection,
+) -> Result<CalibrationFile> {
+    let fit = fit_label_free(poses, weighting).with_context(|| format!("{}", input.display()))?;
+    let per_pose_g: Vec<[f64; 3]> = fit.residuals_g.iter().map(|r| [*r, 0.0, 0.0]).collect();
+    let rms =
+        (fit.residuals_g.iter().map(|r| r * r).sum::<f64>() / fit.residuals_g.len() as f64).sqrt();
+    let residuals = ResidualSection {
+        rms_g: [rms; 3],
+        max_abs_g: fit.residuals_g.iter().fold(0.0, |m, r| m.max(r.abs())),
+        dof: [fit.dof; 3],
+        chi2: [fit.chi2; 3],
+        per_pose_g,
+    };
+    tracing::info!(
+        "label-free fit: {} poses, {} orientations, Jacobian condition number {:.1}",
+        poses.len(),
+        fit.distinct_orientations,
+        fit.condition
+    );
+    Ok(CalibrationFile::new(
+        &fit.model,
+        &fit.covariance,
+        FitMethod::LabelFree,
+        weighting,
+        fit.covariance_mode,
+        gravity,
+        source,
+        residuals,
+    ))
+}
+
+/// The labelled fit of `poses` with `model` as a calibration file.
+fn labelled_file(
+    input: &Path,
+    poses: &[Pose],
+    model: ModelKind,
+    weighting: Weighting,
+    gravity: f64,
+    source: SourceSection,
+) -> Result<CalibrationFile> {
+    let fit =
+        fit_labelled(poses, model, weighting).with_context(|| format!("{}", input.display()))?;
+    let per_pose_g: Vec<[f64; 3]> = fit.residuals_g.iter().map(|r| [r.x, r.y, r.z]).collect();
+    let residuals = ResidualSection {
+        rms_g: fit.residual_rms_g(),
+        max_abs_g: per_pose_g
+            .iter()
+            .flatten()
+            .fold(0.0, |m: f64, r| m.max(r.abs())),
+        dof: fit.dof,
+        chi2: fit.chi2,
+        per_pose_g,
+    };
+    Ok(CalibrationFile::new(
+        &fit.model,
+        &fit.covariance,
+        FitMethod::Labelled,
+        weighting,
+        fit.covariance_mode,
+        gravity,
+        source,
+        residuals,
+    ))
 }
 
 /// `mems-calibrate fit`.
@@ -180,119 +311,27 @@ fn fit(args: FitArgs) -> Result<()> {
         Weighting::Unweighted
     };
     let loaded = load_input(&input)?;
-    let mut temperature_range_c = None;
-    let mut repaired_samples = 0;
-    let (poses, label_free) = match &loaded {
-        Input::SixPosition(six) => (poses_from_six(six), labels == Labels::None),
-        Input::Raw(rec) => {
-            let raw = raw_poses(rec, &SegmentConfig::with_min_duration(min_segment_s))?;
-            repaired_samples = raw.repair.samples_repaired;
-            eprintln!(
-                "{}: {} samples, {} torn reads repaired, {} static segments (noise {:.2e} / {:.2e} / {:.2e} g)",
-                input.display(),
-                raw.samples.len(),
-                repaired_samples,
-                raw.detection.segments.len(),
-                raw.detection.noise_sigma_g[0],
-                raw.detection.noise_sigma_g[1],
-                raw.detection.noise_sigma_g[2]
-            );
-            temperature_range_c = raw
-                .detection
-                .segments
-                .iter()
-                .filter_map(|s| s.temp_range_c)
-                .fold(None, |acc: Option<[f64; 2]>, [lo, hi]| {
-                    Some(match acc {
-                        None => [lo, hi],
-                        Some([a, b]) => [f64::min(a, lo), f64::max(b, hi)],
-                    })
-                });
-            match labels {
-                Labels::None => (label_unlabelled(&raw), true),
-                Labels::Auto if all_axis_aligned(&raw) => {
-                    (label_axis_aligned(&input, &raw)?, false)
-                }
-                Labels::Auto => {
-                    eprintln!(
-                        "{}: the static poses are not all axis aligned; fitting label-free",
-                        input.display()
-                    );
-                    (label_unlabelled(&raw), true)
-                }
-            }
-        }
-    };
+    let fp = fit_poses(&input, &loaded, labels, min_segment_s)?;
     let source = SourceSection {
         file: input.display().to_string(),
         kind: loaded.kind_name().into(),
-        poses: poses.len(),
-        repaired_samples,
+        poses: fp.poses.len(),
+        repaired_samples: fp.repaired_samples,
     };
-    let mut file = if label_free {
+    let mut file = if fp.label_free {
         if model != ModelKind::Full {
             bail!(
                 "label-free fitting estimates the full model (upper-triangular S); use --model full"
             );
         }
-        let fit =
-            fit_label_free(&poses, weighting).with_context(|| format!("{}", input.display()))?;
-        let per_pose_g: Vec<[f64; 3]> = fit.residuals_g.iter().map(|r| [*r, 0.0, 0.0]).collect();
-        let rms = (fit.residuals_g.iter().map(|r| r * r).sum::<f64>()
-            / fit.residuals_g.len() as f64)
-            .sqrt();
-        let residuals = ResidualSection {
-            rms_g: [rms; 3],
-            max_abs_g: fit.residuals_g.iter().fold(0.0, |m, r| m.max(r.abs())),
-            dof: [fit.dof; 3],
-            chi2: [fit.chi2; 3],
-            per_pose_g,
-        };
-        eprintln!(
-            "label-free fit: {} poses, {} orientations, Jacobian condition number {:.1}",
-            poses.len(),
-            fit.distinct_orientations,
-            fit.condition
-        );
-        CalibrationFile::new(
-            &fit.model,
-            &fit.covariance,
-            FitMethod::LabelFree,
-            weighting,
-            fit.covariance_mode,
-            gravity,
-            source,
-            residuals,
-        )
+        label_free_file(&input, &fp.poses, weighting, gravity, source)?
     } else {
-        let fit = fit_labelled(&poses, model, weighting)
-            .with_context(|| format!("{}", input.display()))?;
-        let per_pose_g: Vec<[f64; 3]> = fit.residuals_g.iter().map(|r| [r.x, r.y, r.z]).collect();
-        let residuals = ResidualSection {
-            rms_g: fit.residual_rms_g(),
-            max_abs_g: per_pose_g
-                .iter()
-                .flatten()
-                .fold(0.0, |m: f64, r| m.max(r.abs())),
-            dof: fit.dof,
-            chi2: fit.chi2,
-            per_pose_g,
-        };
-        CalibrationFile::new(
-            &fit.model,
-            &fit.covariance,
-            FitMethod::Labelled,
-            weighting,
-            fit.covariance_mode,
-            gravity,
-            source,
-            residuals,
-        )
+        labelled_file(&input, &fp.poses, model, weighting, gravity, source)?
     };
-    file.temperature_range_c = temperature_range_c;
+    file.temperature_range_c = fp.temperature_range_c;
     print_summary(&file);
     file.save(&out)?;
-    eprintln!("wrote {}", out.display());
+    tracing::info!("wrote {}", out.display());
     if let Some(plot) = plot {
         let title = format!(
             "{} residuals per pose ({})",
@@ -302,7 +341,7 @@ fn fit(args: FitArgs) -> Result<()> {
                 .map_or(String::new(), |n| n.to_string_lossy().into_owned())
         );
         plot_pose_residuals(&plot, &title, &file.residuals.per_pose_g)?;
-        eprintln!("wrote {}", plot.display());
+        tracing::info!("wrote {}", plot.display());
     }
     Ok(())
 }
