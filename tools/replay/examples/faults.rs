@@ -570,6 +570,7 @@ fn summarize(fault: Fault, outcomes: &[Outcome]) -> serde_json::Value {
 }
 
 fn main() -> Result<()> {
+    mems_log::init("faults");
     let o = options()?;
     let bins = common::bin_dir()?;
     let work = std::env::temp_dir().join(format!("mems-faults-{}", std::process::id()));
@@ -581,10 +582,10 @@ fn main() -> Result<()> {
         .collect();
     for seed in 1..=o.seeds {
         // One part per seed, calibrated from its own six-position session, then driven.
-        eprintln!("faults: seed {seed}: calibrating and simulating the drive ...");
+        tracing::info!("seed {seed}: calibrating and simulating the drive ...");
         let (drive, calib, truth) = simulate(&bins, &work, seed, o.seconds)?;
         for (k, (fault, outcomes)) in results.iter_mut().enumerate() {
-            eprintln!("faults: seed {seed}, {} ...", fault.label());
+            tracing::info!("seed {seed}, {} ...", fault.label());
             let tag = format!("{seed}-{k}");
             let run = one_run(&bins, &drive, &truth, &calib, *fault, o.speed, &tag)?;
             if let Some(dir) = &o.dump {

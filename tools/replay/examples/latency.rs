@@ -111,7 +111,7 @@ fn chain_child(input: &str, output: &str, n: u64, cpu: Option<usize>) -> Result<
     if let Some(cpu) = cpu
         && let Some(note) = realtime(cpu, Some(50))?
     {
-        eprintln!("chain: {note}");
+        tracing::info!("chain: {note}");
     }
     let node = service::node()?;
     let svc = service::open::<RawImuSample>(&node, input)?;
@@ -193,7 +193,7 @@ fn chain(bench: &Path, hops: usize, rate_hz: u64, seconds: u64, pinned: bool) ->
     let first = names[0].clone();
     let publisher = std::thread::spawn(move || -> Result<()> {
         if pinned && let Some(note) = realtime(0, Some(40))? {
-            eprintln!("chain publisher: {note}");
+            tracing::info!("chain publisher: {note}");
         }
         let node = service::node()?;
         let svc = service::open::<RawImuSample>(&node, &first)?;
@@ -737,7 +737,7 @@ fn inputs(bins: &Path, o: &Options) -> Result<Inputs> {
             .context("work path is not UTF-8")
             .map(str::to_owned)
     };
-    eprintln!("latency: simulating the recordings and calibrating ...");
+    tracing::info!("simulating the recordings and calibrating ...");
     let part = ["--preset", "datasheet", "--seed", "1"];
     let rest = INITIAL_REST_S.to_string();
     let sim_drive = |out: &Path, secs: u64, rate: &str| -> Result<String> {
@@ -778,7 +778,7 @@ fn bare(
     o: &Options,
     pinned: bool,
 ) -> Result<[f64; 5]> {
-    eprintln!("latency: {label} ...");
+    tracing::info!("{label} ...");
     let r = chain(bench, hops, rate, o.seconds, pinned)?;
     println!(
         "| {label} | {:.1} | {:.1} | {:.1} | {:.1} | {} |",
@@ -814,7 +814,7 @@ fn realtime_runs(
     j: &mut Figures,
     cpu: &mut Figures,
 ) -> Result<PipelineRun> {
-    eprintln!("latency: pipeline at 1 kHz, plain ...");
+    tracing::info!("pipeline at 1 kHz, plain ...");
     let p = pipeline(bins, &i.drive, &i.calib, 1000, false, false)?;
     print_pipeline("Pipeline at 1 kHz, real time, plain", &p);
     if p.timing.rest == 0 || p.timing.moving == 0 {
@@ -840,7 +840,7 @@ fn realtime_runs(
     }
     cpu.insert("1kHz".into(), cpu_json(&p.cpu));
 
-    eprintln!("latency: pipeline at 4 kHz, plain ...");
+    tracing::info!("pipeline at 4 kHz, plain ...");
     let p4 = pipeline(bins, &i.drive4k, &i.calib, 4000, false, false)?;
     print_pipeline(
         "Pipeline at 4 kHz (accelerometer only: states NO_GYRO), real time, plain",
@@ -865,7 +865,7 @@ fn cpu_targets(
     j: &mut Figures,
     cpu: &mut Figures,
 ) -> Result<()> {
-    eprintln!("latency: idle stages ...");
+    tracing::info!("idle stages ...");
     let idle_s = o.cpu_seconds.clamp(1, IDLE_S);
     let idle = idle_cpu(bins, &i.calib, idle_s)?;
     println!(
@@ -896,7 +896,7 @@ fn cpu_targets(
 
 /// The long drive replayed with `--max` through both stages.
 fn throughput_run(bins: &Path, i: &Inputs, j: &mut Figures, cpu: &mut Figures) -> Result<()> {
-    eprintln!("latency: throughput with --max ...");
+    tracing::info!("throughput with --max ...");
     let t = pipeline(bins, &i.long, &i.calib, 1000, true, false)?;
     println!(
         "## Throughput, `mems-replay --max` through calibrate and odometry (plain)\n\n\
@@ -935,9 +935,9 @@ fn pinned_runs(
     println!();
     j.insert("pinned_bare_chain3_p99_us".into(), json!(chain3[1]));
     if let Some(note) = realtime(0, Some(45))? {
-        eprintln!("pipeline subscriber: {note}");
+        tracing::info!("pipeline subscriber: {note}");
     }
-    eprintln!("latency: pipeline at 1 kHz, pinned ...");
+    tracing::info!("pipeline at 1 kHz, pinned ...");
     let pp = pipeline(bins, &i.drive, &i.calib, 1000, false, true)?;
     print_pipeline("Pipeline at 1 kHz, real time, pinned, SCHED_FIFO", &pp);
     let [p50, p99, p999, max] = quantiles(&pp.timing.hops[3]);
@@ -958,6 +958,7 @@ fn pinned_runs(
 }
 
 fn main() -> Result<()> {
+    mems_log::init("latency");
     let args: Vec<String> = std::env::args().collect();
     if args.get(1).map(String::as_str) == Some("chain") {
         let [_, _, input, output, n, cpu] = &args[..] else {

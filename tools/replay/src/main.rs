@@ -3,6 +3,7 @@
 //! recording's topics on their iceoryx2 services, each message at its place in recorded time.
 
 use std::path::PathBuf;
+use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail};
@@ -67,8 +68,13 @@ struct Cli {
     wait_timeout: f64,
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn main() -> ExitCode {
+    mems_log::init("mems-replay");
+    mems_log::exit(run(Cli::parse()))
+}
+
+/// Replays `cli.file` as asked.
+fn run(cli: Cli) -> Result<()> {
     // iceoryx2 warns that it runs without a config file; IOX2_LOG_LEVEL still overrides.
     set_log_level_from_env_or(LogLevel::Error);
     if !(cli.wait_timeout.is_finite() && cli.wait_timeout >= 0.0) {
@@ -81,7 +87,7 @@ fn main() -> Result<()> {
     let (recording, csv_cut) = Recording::open(&cli.file)?;
     let survey = Survey::of(&recording)?;
     for cut in csv_cut.iter().chain(&survey.truncations) {
-        eprintln!("mems-replay: warning: {file}: {cut}; replaying what was read");
+        tracing::warn!("{file}: {cut}; replaying what was read");
     }
     let topics = survey
         .select(cli.topics.as_deref())
@@ -94,8 +100,8 @@ fn main() -> Result<()> {
         bail!("{file}: no message of the chosen topics between --start and --end");
     }
     if survey.spans.len() > 1 {
-        eprintln!(
-            "mems-replay: {file}: its times start over {} times (runs recorded into one file): \
+        tracing::info!(
+            "{file}: its times start over {} times (runs recorded into one file): \
              replayed in order, pacing starting over with each",
             survey.spans.len() - 1
         );

@@ -66,7 +66,7 @@ impl Progress {
             }
         } else if self.plain && self.last.elapsed() >= PLAIN_EVERY {
             self.last = Instant::now();
-            eprintln!("mems-replay: {}", self.line(summary));
+            tracing::info!("{}", self.line(summary));
         }
     }
 
@@ -76,7 +76,7 @@ impl Progress {
             bar.set_position(summary.pass_recorded_ns / 1_000_000);
             bar.finish_with_message(self.line(summary));
         } else if self.plain {
-            eprintln!("mems-replay: {}", self.line(summary));
+            tracing::info!("{}", self.line(summary));
         }
     }
 }

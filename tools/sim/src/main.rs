@@ -779,11 +779,6 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("mems-sim: error: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    mems_log::init("mems-sim");
+    mems_log::exit(run(Cli::parse()))
 }

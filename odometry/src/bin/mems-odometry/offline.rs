@@ -180,8 +180,8 @@ impl Source {
                 &mut recording.samples,
                 &calibrate::repair::RepairConfig::default(),
             );
-            eprintln!(
-                "mems-odometry: {}: repaired torn reads in {} of {} samples (accelerometer x, y, \
+            tracing::info!(
+                "{}: repaired torn reads in {} of {} samples (accelerometer x, y, \
                  z: {:?}; gyro: {:?})",
                 args.input.display(),
                 report.samples_repaired,
@@ -413,8 +413,8 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     let aligned_at_s = summary
         .aligned_ns
         .map_or(0.0, |t| (t - first_ns.unwrap_or(0)) as f64 * 1e-9);
-    eprintln!(
-        "mems-odometry: aligned {aligned_at_s:.2} s into the recording (at its first rest of \
+    tracing::info!(
+        "aligned {aligned_at_s:.2} s into the recording (at its first rest of \
          {} s); the position counts from there",
         config.align_s
     );
@@ -530,12 +530,12 @@ impl Stages {
 fn report_input(args: &OfflineArgs, source: &mut Source, merge: &Merge) {
     for segment in source.segments() {
         if let Some(t) = &segment.truncation {
-            eprintln!("mems-odometry: {}: {t}", segment.path.display());
+            tracing::warn!("{}: {t}", segment.path.display());
         }
     }
     if merge.hints_late > 0 {
-        eprintln!(
-            "mems-odometry: {}: {} robot hints were recorded more than {} s after their \
+        tracing::warn!(
+            "{}: {} robot hints were recorded more than {} s after their \
              publication and reached the odometry stage after samples they would have preceded",
             args.input.display(),
             merge.hints_late,
@@ -599,8 +599,8 @@ fn feed(
 /// recordings such as the thesis's, accelerometer-only, are dead-reckoned at a fixed
 /// attitude), but says what that position is worth.
 fn warn_no_gyro(args: &OfflineArgs, seq: u64) {
-    eprintln!(
-        "mems-odometry: {}: sample seq {seq} has no gyroscope (GYRO_VALID clear); the attitude \
+    tracing::warn!(
+        "{}: sample seq {seq} has no gyroscope (GYRO_VALID clear); the attitude \
          is held at its alignment, so the position is meaningful only if the sensor never \
          rotated (a static recording). mems-odometry serve publishes no position for such \
          samples (NO_GYRO)",
