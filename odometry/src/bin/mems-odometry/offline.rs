@@ -364,17 +364,10 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     let odometry = OdometryStage::with_hints(config, args.hints.config()?)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let input = args.input.display();
-    let out = match &args.out {
-        Some(path) => {
-            let clock = recording::mcap::run::clock_of(&args.input)?;
-            Some(crate::out::Out::create(path, args.force, clock)?)
-        }
-        None => None,
-    };
     let mut stages = Stages {
         calibration,
         odometry,
-        out,
+        out: output(&args)?,
         summary: Summary::default(),
         error: None,
     };
@@ -454,6 +447,15 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         print_result(&end, truth_error, truth_distance);
     }
     Ok(())
+}
+
+/// The `--out` recording, anchored to the input's wall clock (none for an unanchored input).
+fn output(args: &OfflineArgs) -> Result<Option<crate::out::Out>> {
+    let Some(path) = &args.out else {
+        return Ok(None);
+    };
+    let clock = recording::mcap::run::clock_of(&args.input)?;
+    Ok(Some(crate::out::Out::create(path, args.force, clock)?))
 }
 
 /// The two stages of an offline run, what they write and what is learned from their output.
