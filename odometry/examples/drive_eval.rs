@@ -108,8 +108,8 @@ struct Args {
     /// Print every seed's outcome on stderr (info events).
     #[arg(long)]
     per_seed: bool,
-    /// Use the simulator's default motions (up to three legs of 2-10 s, up to 50 s between
-    /// rests) instead of at most two legs of 2-6 s (a rest at least every 28 s).
+    /// Use the simulator's default motions (up to three legs of 2-10 s, at most 30 s of motion
+    /// between rests) instead of at most two legs of 2-6 s (a rest at least every 28 s).
     #[arg(long)]
     sim_default_legs: bool,
     /// Switch off a term of the sensor model (repeatable), for error budgets: accel-noise,
