@@ -304,6 +304,17 @@ fn solve_axis(a: &AxisProblem, cols: &[usize]) -> Result<AxisSolution, FitError>
     })
 }
 
+/// How a fit's covariance is obtained from `poses` weighted by `weighting`: absolute when each
+/// pose is weighted by its mean's standard error and every pose knows its sample count,
+/// scaled by the residuals otherwise (module documentation).
+pub fn covariance_mode(poses: &[Pose], weighting: Weighting) -> CovarianceMode {
+    if weighting == Weighting::PoseStd && poses.iter().all(|p| p.n.is_some_and(|n| n > 0)) {
+        CovarianceMode::Absolute
+    } else {
+        CovarianceMode::ResidualScaled
+    }
+}
+
 /// Fits `kind` to labelled poses by (weighted) linear least squares; see the module
 /// documentation for the weighting and covariance conventions.
 pub fn fit_labelled(
@@ -312,13 +323,8 @@ pub fn fit_labelled(
     weighting: Weighting,
 ) -> Result<LabelledFit, FitError> {
     check_poses(poses, kind)?;
-    let absolute =
-        weighting == Weighting::PoseStd && poses.iter().all(|p| p.n.is_some_and(|n| n > 0));
-    let covariance_mode = if absolute {
-        CovarianceMode::Absolute
-    } else {
-        CovarianceMode::ResidualScaled
-    };
+    let covariance_mode = covariance_mode(poses, weighting);
+    let absolute = covariance_mode == CovarianceMode::Absolute;
     let m = poses.len();
     let mut params = ParamVector::zeros();
     for d in [3, 7, 11] {

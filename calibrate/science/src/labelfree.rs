@@ -26,7 +26,7 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::storage::Owned;
 use nalgebra::{DMatrix, DVector, Dyn, Matrix3, OMatrix, SMatrix, SVector, U9, Vector3};
 
-use crate::fit::{CovarianceMode, Pose, Weighting};
+use crate::fit::{CovarianceMode, Pose, Weighting, covariance_mode};
 use calibrate::model::{AccelModel, ModelError, ModelKind, N_PARAMS, ParamCovariance, scale_index};
 
 /// Minimum number of poses (and of distinct orientations) for the 9-parameter fit.
@@ -399,13 +399,8 @@ pub fn fit_label_free(
     weighting: Weighting,
 ) -> Result<LabelFreeFit, LabelFreeError> {
     let distinct = check_poses(poses)?;
-    let absolute =
-        weighting == Weighting::PoseStd && poses.iter().all(|p| p.n.is_some_and(|n| n > 0));
-    let covariance_mode = if absolute {
-        CovarianceMode::Absolute
-    } else {
-        CovarianceMode::ResidualScaled
-    };
+    let covariance_mode = covariance_mode(poses, weighting);
+    let absolute = covariance_mode == CovarianceMode::Absolute;
     let means: Vec<Vector3<f64>> = poses.iter().map(|p| p.mean_g).collect();
     let sigmas = pose_sigmas(poses, weighting, absolute)?;
     let Some(start) = algebraic_start(&means) else {
