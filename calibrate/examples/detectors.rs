@@ -17,6 +17,7 @@
 //! With `--no-gyro` the samples carry no gyroscope (`GYRO_VALID` clear), as the MPU-9250's
 //! accelerometer-only 4 kHz mode; the variants are then Yu's and the accelerometer-only GLRT's.
 
+use mems_stage::Stage;
 use std::time::Instant;
 
 use anyhow::Result;
@@ -258,7 +259,7 @@ fn run_seed(cli: &Cli, seed: u64, vibration: f64, variants: &[Variant]) -> Resul
         let mut released = 0;
         for ((stage, c), settler) in stages.iter_mut().zip(counts.iter_mut()).zip(&mut settlers) {
             let mut i = 0;
-            stage.push(&raw, &mut |out| {
+            stage.process(&raw, &mut |out| {
                 settler.push(out, &mut |out| {
                     c.score(&labels[i], out);
                     i += 1;

@@ -49,6 +49,7 @@
 //! 0.01 deg/s by one second of rest.
 
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, limits, raw_flags};
+use mems_stage::Stage;
 use nalgebra::Vector3;
 
 use crate::calibfile::CalibrationFile;
@@ -474,41 +475,93 @@ impl CalibrationStage {
         self.batch_len
     }
 
-    /// Takes one raw sample and emits its corrected sample (see the module documentation for
-    /// its flags). A sample whose sequence number does not increase starts a new stream (a
-    /// restarted publisher): the time check and the detector and refinement start over (a new
-    /// sensor session has a new turn-on bias, and a stale gyroscope reference would hold every
-    /// later window in "motion").
-    ///
-    /// A refused sample (see [`StageError`]: not finite, beyond the sensor's range
-    /// ([`limits::check_raw`]), time not increasing or more than [`limits::MAX_STEP_S`] ahead)
-    /// changes nothing; the caller counts it. The next sample then skips a sequence number: a
-    /// gap, and its corrected sample carries [`raw_flags::GAP_BEFORE`] (as every sample after a
-    /// gap does). A second step beyond the bound in a row is a new time base: a new stream, as
-    /// for a restarted publisher.
-    pub fn push(
-        &mut self,
-        raw: &RawImuSample,
-        emit: &mut impl FnMut(&CorrectedImuSample),
-    ) -> Result<(), StageError> {
-        let has_gyro = raw.flags & raw_flags::GYRO_VALID != 0;
-        let has_temp = raw.flags & raw_flags::TEMP_VALID != 0;
-        self.check(raw, has_gyro, has_temp)?;
-        let gap = self.sequence(raw)?;
-        self.last = Some((raw.seq, raw.stamps.sample_ns));
-        self.stats.accepted += 1;
-        self.stream_start_ns.get_or_insert(raw.stamps.sample_ns);
+    /// A new sensor session: everything learned and refined is forgotten.
+    fn start_over(&mut self) {
+        self.cut_batch();
+        self.carried = Carried::default();
+        self.detector.reset();
+        self.refine = Refinement::new(self.refine_config);
+        self.stream_start_ns = None;
+        self.stats.restarts += 1;
+    }
 
-        let (mut out, a, w) = self.correct(raw, has_gyro, has_temp, gap);
-        self.batch_gyro &= has_gyro;
-        let provisional = self.detect(raw.stamps.sample_ns, a, w, &mut out);
-        self.carried.apply(&mut out, self.refine.refined);
-        if provisional {
-            out.flags |= corrected_flags::PROVISIONAL;
+    /// Starts a new batch.
+    fn cut_batch(&mut self) {
+        self.batch_len = 0;
+        self.batch_gyro = true;
+    }
+
+    /// Validates a sample before anything changes.
+    fn check(&self, raw: &RawImuSample, has_gyro: bool, has_temp: bool) -> Result<(), StageError> {
+        let err = |field, value| StageError::NotFinite {
+            seq: raw.seq,
+            t_ns: raw.stamps.sample_ns,
+            field,
+            value,
+        };
+        const ACCEL: [&str; 3] = ["accel_g[0]", "accel_g[1]", "accel_g[2]"];
+        const GYRO: [&str; 3] = ["gyro_dps[0]", "gyro_dps[1]", "gyro_dps[2]"];
+        for (i, x) in raw.accel_g.iter().enumerate() {
+            if !x.is_finite() {
+                return Err(err(ACCEL[i], *x));
+            }
         }
-        self.stats.released += 1;
-        emit(&out);
-        Ok(())
+        if has_gyro {
+            for (i, x) in raw.gyro_dps.iter().enumerate() {
+                if !x.is_finite() {
+                    return Err(err(GYRO[i], *x));
+                }
+            }
+        } else if self.detector.config().kind.needs_gyro() {
+            return Err(StageError::NoGyro {
+                seq: raw.seq,
+                detector: self.detector.config().kind.name(),
+            });
+        }
+        if self.terms.needs_temperature() && !has_temp {
+            return Err(StageError::NoTemperature { seq: raw.seq });
+        }
+        if has_temp && !raw.temp_c.is_finite() {
+            return Err(err("temp_c", raw.temp_c));
+        }
+        let gyro = has_gyro.then_some(&raw.gyro_dps);
+        limits::check_raw(&raw.accel_g, gyro, has_temp.then_some(raw.temp_c)).map_err(|bad| {
+            StageError::OutOfRange {
+                seq: raw.seq,
+                t_ns: raw.stamps.sample_ns,
+                bad,
+            }
+        })
+    }
+
+    /// Refines at rest with the batch's `verdict` and carries the verdict over.
+    fn decide(&mut self, v: &Verdict) {
+        let gyro = self.batch_gyro.then_some(v.gyro.mean);
+        if let Some(learned) = &v.learned {
+            // The start-up interval was at rest by assumption: the first refinement.
+            let gyro = self.batch_gyro.then_some(learned.gyro_mean_rps);
+            self.refine.update(
+                learned.accel_mean_mps2,
+                gyro,
+                learned.duration_s,
+                self.gravity_mps2,
+            );
+        } else if v.rest && self.detector.config().kind.rest_is_still() {
+            self.refine.update(
+                v.accel.mean,
+                gyro,
+                batch_duration_s(&v.accel),
+                self.gravity_mps2,
+            );
+        }
+        self.carried = Carried {
+            ready: v.ready,
+            rest: v.rest,
+            zs_mean_mps2: std::array::from_fn(|i| {
+                v.decided_mean_mps2[i] - self.refine.accel_mps2[i]
+            }),
+            zs_std_mps2: v.decided_std_mps2,
+        };
     }
 
     /// Places `raw` in the stream: a resumed state that `raw` does not continue, a sequence
@@ -629,102 +682,56 @@ impl CalibrationStage {
             }
         }
     }
+}
+
+impl Stage for CalibrationStage {
+    type Input = RawImuSample;
+    type Output = CorrectedImuSample;
+    type Refusal = StageError;
+
+    /// Takes one raw sample and emits its corrected sample (see the module documentation for
+    /// its flags). A sample whose sequence number does not increase starts a new stream (a
+    /// restarted publisher): the time check and the detector and refinement start over (a new
+    /// sensor session has a new turn-on bias, and a stale gyroscope reference would hold every
+    /// later window in "motion").
+    ///
+    /// A refused sample (see [`StageError`]: not finite, beyond the sensor's range
+    /// ([`limits::check_raw`]), time not increasing or more than [`limits::MAX_STEP_S`] ahead)
+    /// changes nothing; the caller counts it. The next sample then skips a sequence number: a
+    /// gap, and its corrected sample carries [`raw_flags::GAP_BEFORE`] (as every sample after a
+    /// gap does). A second step beyond the bound in a row is a new time base: a new stream, as
+    /// for a restarted publisher.
+    fn process(
+        &mut self,
+        raw: &RawImuSample,
+        emit: &mut impl FnMut(&CorrectedImuSample),
+    ) -> Result<(), StageError> {
+        let has_gyro = raw.flags & raw_flags::GYRO_VALID != 0;
+        let has_temp = raw.flags & raw_flags::TEMP_VALID != 0;
+        self.check(raw, has_gyro, has_temp)?;
+        let gap = self.sequence(raw)?;
+        self.last = Some((raw.seq, raw.stamps.sample_ns));
+        self.stats.accepted += 1;
+        self.stream_start_ns.get_or_insert(raw.stamps.sample_ns);
+
+        let (mut out, a, w) = self.correct(raw, has_gyro, has_temp, gap);
+        self.batch_gyro &= has_gyro;
+        let provisional = self.detect(raw.stamps.sample_ns, a, w, &mut out);
+        self.carried.apply(&mut out, self.refine.refined);
+        if provisional {
+            out.flags |= corrected_flags::PROVISIONAL;
+        }
+        self.stats.released += 1;
+        emit(&out);
+        Ok(())
+    }
 
     /// End of the stream: the detector's partial batch is dropped (its samples stay unsettled;
-    /// learned references stay). The last sequence number is kept, so a later stream that
+    /// nothing is emitted; learned references stay). The last sequence number is kept, so a later stream that
     /// starts again from 0 is still recognised as a new session.
-    pub fn finish(&mut self) {
+    fn finish(&mut self, _emit: &mut impl FnMut(&CorrectedImuSample)) {
         self.cut_batch();
         self.detector.interrupt();
-    }
-
-    /// A new sensor session: everything learned and refined is forgotten.
-    fn start_over(&mut self) {
-        self.cut_batch();
-        self.carried = Carried::default();
-        self.detector.reset();
-        self.refine = Refinement::new(self.refine_config);
-        self.stream_start_ns = None;
-        self.stats.restarts += 1;
-    }
-
-    /// Starts a new batch.
-    fn cut_batch(&mut self) {
-        self.batch_len = 0;
-        self.batch_gyro = true;
-    }
-
-    /// Validates a sample before anything changes.
-    fn check(&self, raw: &RawImuSample, has_gyro: bool, has_temp: bool) -> Result<(), StageError> {
-        let err = |field, value| StageError::NotFinite {
-            seq: raw.seq,
-            t_ns: raw.stamps.sample_ns,
-            field,
-            value,
-        };
-        const ACCEL: [&str; 3] = ["accel_g[0]", "accel_g[1]", "accel_g[2]"];
-        const GYRO: [&str; 3] = ["gyro_dps[0]", "gyro_dps[1]", "gyro_dps[2]"];
-        for (i, x) in raw.accel_g.iter().enumerate() {
-            if !x.is_finite() {
-                return Err(err(ACCEL[i], *x));
-            }
-        }
-        if has_gyro {
-            for (i, x) in raw.gyro_dps.iter().enumerate() {
-                if !x.is_finite() {
-                    return Err(err(GYRO[i], *x));
-                }
-            }
-        } else if self.detector.config().kind.needs_gyro() {
-            return Err(StageError::NoGyro {
-                seq: raw.seq,
-                detector: self.detector.config().kind.name(),
-            });
-        }
-        if self.terms.needs_temperature() && !has_temp {
-            return Err(StageError::NoTemperature { seq: raw.seq });
-        }
-        if has_temp && !raw.temp_c.is_finite() {
-            return Err(err("temp_c", raw.temp_c));
-        }
-        let gyro = has_gyro.then_some(&raw.gyro_dps);
-        limits::check_raw(&raw.accel_g, gyro, has_temp.then_some(raw.temp_c)).map_err(|bad| {
-            StageError::OutOfRange {
-                seq: raw.seq,
-                t_ns: raw.stamps.sample_ns,
-                bad,
-            }
-        })
-    }
-
-    /// Refines at rest with the batch's `verdict` and carries the verdict over.
-    fn decide(&mut self, v: &Verdict) {
-        let gyro = self.batch_gyro.then_some(v.gyro.mean);
-        if let Some(learned) = &v.learned {
-            // The start-up interval was at rest by assumption: the first refinement.
-            let gyro = self.batch_gyro.then_some(learned.gyro_mean_rps);
-            self.refine.update(
-                learned.accel_mean_mps2,
-                gyro,
-                learned.duration_s,
-                self.gravity_mps2,
-            );
-        } else if v.rest && self.detector.config().kind.rest_is_still() {
-            self.refine.update(
-                v.accel.mean,
-                gyro,
-                batch_duration_s(&v.accel),
-                self.gravity_mps2,
-            );
-        }
-        self.carried = Carried {
-            ready: v.ready,
-            rest: v.rest,
-            zs_mean_mps2: std::array::from_fn(|i| {
-                v.decided_mean_mps2[i] - self.refine.accel_mps2[i]
-            }),
-            zs_std_mps2: v.decided_std_mps2,
-        };
     }
 }
 

@@ -19,6 +19,7 @@ use mems_sim::model::{G_MPS2, SensorModel};
 use mems_sim::scenario::{Drive, DriveParams, ns_from_s};
 use mems_sim::vibration::VibrationModel;
 use mems_sim::{DlpfGrid, SimSensor, adc};
+use mems_stage::Stage;
 
 const RATE_HZ: f64 = 4000.0;
 const DURATION_S: f64 = 150.0;
@@ -69,7 +70,7 @@ fn run(configs: &[DetectorConfig]) -> Vec<[u64; 4]> {
         for ((stage, c), settler) in stages.iter_mut().zip(counts.iter_mut()).zip(&mut settlers) {
             let mut i = 0;
             stage
-                .push(&raw, &mut |out| {
+                .process(&raw, &mut |out| {
                     settler.push(out, &mut |out| {
                         let (rest, clearly_moving) = labels[i];
                         i += 1;
@@ -140,7 +141,7 @@ fn without_gyro_the_glrt_is_refused_and_the_accelerometer_glrt_is_not() {
         RefineConfig::default(),
     )
     .unwrap();
-    let err = glrt.push(&raw, &mut |_| {}).unwrap_err();
+    let err = glrt.process(&raw, &mut |_| {}).unwrap_err();
     assert!(matches!(err, StageError::NoGyro { .. }), "{err:?}");
     assert!(err.to_string().contains("glrt-accel"), "{err}");
     let mut accel = CalibrationStage::new(
@@ -149,5 +150,5 @@ fn without_gyro_the_glrt_is_refused_and_the_accelerometer_glrt_is_not() {
         RefineConfig::default(),
     )
     .unwrap();
-    accel.push(&raw, &mut |_| {}).unwrap();
+    accel.process(&raw, &mut |_| {}).unwrap();
 }

@@ -12,6 +12,7 @@ use mems_sim::model::{G_MPS2, SensorModel};
 use mems_sim::scenario::{Drive, DriveParams, ns_from_s};
 use mems_sim::vibration::VibrationModel;
 use mems_sim::{SimSensor, adc};
+use mems_stage::Stage;
 
 #[global_allocator]
 static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;
@@ -57,14 +58,14 @@ fn the_stage_allocates_nothing_per_sample() {
         // The drive, then its first 6 s again: a restarted publisher (seq from 0).
         for s in samples.iter().chain(&samples[..6000]) {
             stage
-                .push(s, &mut |c| {
+                .process(s, &mut |c| {
                     released += 1;
                     rest += u64::from(c.flags & ipc_types::corrected_flags::ZERO_STATE != 0);
                     checksum += c.accel_mps2[2];
                 })
                 .unwrap();
         }
-        stage.finish();
+        stage.finish(&mut |_| {});
         let allocs = allocations() - before;
         assert_eq!(
             allocs,

@@ -7,6 +7,7 @@ use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
 use calibrate::stage::{CalibrationStage, RefineConfig, Settler, StageError, calib_id};
 use calibrate::zero_state::{BATCH_LEN, DetectorConfig, DetectorKind};
 use ipc_types::{CorrectedImuSample, RawImuSample, Stamps, corrected_flags, raw_flags};
+use mems_stage::Stage;
 use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -76,7 +77,7 @@ fn raw(seq: u64, t_ns: u64, accel_g: [f64; 3], gyro_dps: [f64; 3], temp_c: f64) 
 fn run(stage: &mut CalibrationStage, samples: &[RawImuSample]) -> Vec<CorrectedImuSample> {
     let mut out = Vec::new();
     for s in samples {
-        stage.push(s, &mut |c| out.push(*c)).unwrap();
+        stage.process(s, &mut |c| out.push(*c)).unwrap();
     }
     out
 }
@@ -87,7 +88,7 @@ fn run_settled(stage: &mut CalibrationStage, samples: &[RawImuSample]) -> Vec<Co
     let mut out = Vec::new();
     for s in samples {
         stage
-            .push(s, &mut |c| settler.push(c, &mut |c| out.push(*c)))
+            .process(s, &mut |c| settler.push(c, &mut |c| out.push(*c)))
             .unwrap();
     }
     settler.finish(&mut |c| out.push(*c));
@@ -141,7 +142,7 @@ fn each_sample_leaves_at_once_and_its_batch_end_settles_it() {
     let mut released = Vec::new();
     for k in 0..(3 * BATCH_LEN + 7) as u64 {
         let mut now = Vec::new();
-        st.push(
+        st.process(
             &raw(
                 k,
                 1_000_000 * (k + 1),
@@ -162,7 +163,7 @@ fn each_sample_leaves_at_once_and_its_batch_end_settles_it() {
         released.push(seq);
     }
     assert_eq!(st.unsettled(), 7);
-    st.finish();
+    st.finish(&mut |_| {});
     assert_eq!(st.unsettled(), 0);
     assert_eq!(
         released,
@@ -180,7 +181,7 @@ fn bad_input_is_refused_with_the_sample_named_and_the_state_unchanged() {
     let mut nan = ok(2);
     nan.accel_g[1] = f64::NAN;
     let e = st
-        .push(&nan, &mut |_| panic!("nothing released"))
+        .process(&nan, &mut |_| panic!("nothing released"))
         .unwrap_err();
     assert!(
         matches!(
@@ -196,7 +197,7 @@ fn bad_input_is_refused_with_the_sample_named_and_the_state_unchanged() {
     assert!(e.to_string().contains("seq 2") && e.to_string().contains("accel_g[1]"));
     let mut back = ok(2);
     back.stamps.sample_ns = 2_000_000; // equal to sample 1's time
-    let e = st.push(&back, &mut |_| {}).unwrap_err();
+    let e = st.process(&back, &mut |_| {}).unwrap_err();
     assert!(
         matches!(
             e,
@@ -210,7 +211,7 @@ fn bad_input_is_refused_with_the_sample_named_and_the_state_unchanged() {
     );
     let mut no_gyro = ok(2);
     no_gyro.flags = raw_flags::TEMP_VALID;
-    let e = st.push(&no_gyro, &mut |_| {}).unwrap_err();
+    let e = st.process(&no_gyro, &mut |_| {}).unwrap_err();
     assert!(
         e.to_string().contains("glrt") && e.to_string().contains("seq 2"),
         "{e}"
@@ -218,13 +219,13 @@ fn bad_input_is_refused_with_the_sample_named_and_the_state_unchanged() {
     let mut no_temp = ok(2);
     no_temp.flags = raw_flags::GYRO_VALID;
     assert!(matches!(
-        st.push(&no_temp, &mut |_| {}),
+        st.process(&no_temp, &mut |_| {}),
         Err(StageError::NoTemperature { seq: 2 })
     ));
     let mut bad_gyro = ok(2);
     bad_gyro.gyro_dps[2] = f64::INFINITY;
     assert!(
-        st.push(&bad_gyro, &mut |_| {})
+        st.process(&bad_gyro, &mut |_| {})
             .unwrap_err()
             .to_string()
             .contains("gyro_dps[2]")
@@ -248,7 +249,7 @@ fn absurd_samples_and_time_jumps_are_dropped_counted_and_flag_the_gap() {
     let mut out = run(&mut st, &[ok(0), ok(1), ok(2)]);
     let mut refused = 0;
     let mut push = |st: &mut CalibrationStage, s: &RawImuSample, out: &mut Vec<_>| {
-        st.push(s, &mut |c| out.push(*c))
+        st.process(s, &mut |c| out.push(*c))
             .inspect_err(|_| refused += 1)
     };
     for (seq, field, value) in [(3, 1, 1e300), (4, 2, 100.0)] {
@@ -457,7 +458,7 @@ fn a_restarted_publisher_starts_a_new_session_and_a_gap_leaves_the_partial_batch
             .all(|o| o.flags & !corrected_flags::PROVISIONAL == 0)
     );
     out.extend(released);
-    st.finish();
+    st.finish(&mut |_| {});
     assert_eq!(out.len(), first.len() + after_gap.len() + second.len());
 }
 
@@ -538,7 +539,7 @@ fn every_fitted_term_is_applied_with_the_time_since_the_stream_began() {
         }
     }
     let out = run(&mut st, &samples);
-    st.finish();
+    st.finish(&mut |_| {});
     assert_eq!(out.len(), samples.len());
     let s = Matrix3::from_fn(|r, c| file.scale[r][c]);
     let b = Vector3::from(file.bias_g);

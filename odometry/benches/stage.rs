@@ -13,6 +13,7 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
+use mems_stage::Stage;
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -35,10 +36,10 @@ fn corrected_drive() -> Vec<CorrectedImuSample> {
     let mut out = Vec::new();
     sim.drive_raw(|raw, _| {
         calibration
-            .push(raw, &mut |c| out.push(*c))
+            .process(raw, &mut |c| out.push(*c))
             .expect("valid raw samples");
     });
-    calibration.finish();
+    calibration.finish(&mut |_| {});
     out
 }
 

@@ -21,6 +21,7 @@ use clap::{Parser, ValueEnum};
 use common::{Case, Simulation, live_calibration_stage, live_detector};
 use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags};
 use mems_sim::hints::{HintParams, RestSource};
+use mems_stage::Stage;
 use nalgebra::{Matrix2, Matrix3, Vector2};
 use odometry::hints::HintConfig;
 use odometry::stage::{OdometryConfig, OdometryStage};
@@ -629,7 +630,7 @@ fn drive(
                 // with.
                 let (_, gyro_refined, _) = calibration.refinement();
                 calibration
-                    .push(raw, &mut |c| {
+                    .process(raw, &mut |c| {
                         let mut c = *c;
                         if args.undo_gyro_refinement {
                             for (w, b) in c.gyro_rps.iter_mut().zip(gyro_refined) {
@@ -640,7 +641,7 @@ fn drive(
                     })
                     .expect("valid raw samples");
             });
-            calibration.finish();
+            calibration.finish(&mut |_| {});
         }
     }
 }

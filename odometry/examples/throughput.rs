@@ -22,6 +22,7 @@
 //! `cargo run --release -p odometry --example throughput -- --input drive.mcap
 //! [--python python3]` (build `mems-odometry` first: `cargo build --release -p odometry`).
 
+use mems_stage::Stage;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -198,7 +199,7 @@ fn stages(input: &Path, block: usize) -> Result<(Times, Times, Times)> {
         corrected.clear();
         let (result, t) = Times::of(|| -> Result<()> {
             for r in &raw {
-                calibration.push(r, &mut |c| corrected.push(*c))?;
+                calibration.process(r, &mut |c| corrected.push(*c))?;
             }
             Ok(())
         })?;

@@ -13,4 +13,5 @@ pub mod hints;
 mod navigator;
 pub mod profile;
 pub mod rest_noise;
+pub mod session;
 pub mod stage;

@@ -18,6 +18,7 @@
 
 mod common;
 
+use mems_stage::Stage;
 use std::collections::BTreeMap;
 
 use calibrate::stage::Settler;
@@ -39,10 +40,10 @@ fn calibrated_drive() -> Vec<CorrectedImuSample> {
     let mut out = Vec::new();
     sim.drive_raw(|raw, _| {
         calibration
-            .push(raw, &mut |s| out.push(*s))
+            .process(raw, &mut |s| out.push(*s))
             .expect("valid raw samples");
     });
-    calibration.finish();
+    calibration.finish(&mut |_| {});
     out
 }
 

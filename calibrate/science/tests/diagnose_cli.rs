@@ -2,6 +2,7 @@
 //! (JSON summary, plots, the calibration file it writes and the live stage applying it), bad
 //! input, and the thesis's recordings (skipped when the data are absent).
 
+use mems_stage::Stage;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -107,10 +108,10 @@ fn stage_error(
     let mut settler = Settler::default();
     for s in samples {
         stage
-            .push(s, &mut |c| settler.push(c, &mut |c| out.push(*c)))
+            .process(s, &mut |c| settler.push(c, &mut |c| out.push(*c)))
             .unwrap();
     }
-    stage.finish();
+    stage.finish(&mut |_| {});
     settler.finish(&mut |c| out.push(*c));
     let mut ss = 0.0;
     let mut count = 0;

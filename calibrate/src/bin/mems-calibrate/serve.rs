@@ -21,25 +21,17 @@
 //!   summary gives the steady-state counts (`alloc_count::steady`).
 //! - SIGINT/SIGTERM: a summary, exit status 0.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use alloc_count::steady::SteadyState;
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig, WarmState};
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
-use ipc_types::clock::monotonic_ns;
 use ipc_types::wake::{self, Output, WaitMode};
 use ipc_types::{CorrectedImuSample, RawImuSample, service};
-use std::ops::ControlFlow;
-
-/// Refused samples reported one by one before the rest are only counted.
-const REPORTED_REFUSALS: u64 = 10;
-
-/// Longest sleep without a notification: a publisher that does not notify (an older tool) is
-/// still served, with this latency.
-const TICK: Duration = Duration::from_millis(100);
+use mems_stage::live::{self, Hooks};
 
 /// Options of `mems-calibrate serve`.
 #[derive(clap::Args)]
@@ -73,7 +65,7 @@ pub struct ServeArgs {
 }
 
 /// Reads a warm state written by `--state`.
-fn load_state(path: &std::path::Path) -> Result<WarmState> {
+fn load_state(path: &Path) -> Result<WarmState> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read the state file {}", path.display()))?;
     serde_json::from_str(&text)
@@ -89,14 +81,13 @@ fn same_learning(a: &WarmState, b: &WarmState) -> bool {
 }
 
 /// Writes `state` to `path` atomically (a temporary file beside it, renamed over it).
-fn save_state(path: &std::path::Path, state: &WarmState) -> Result<()> {
+fn save_state(path: &Path, state: &WarmState) -> Result<()> {
     let tmp = path.with_extension("tmp");
     std::fs::write(&tmp, serde_json::to_string_pretty(state)?)
         .with_context(|| format!("cannot write {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("cannot replace {}", path.display()))
 }
 
-/// Runs the service until SIGINT/SIGTERM.
 /// The calibration stage `args` ask for: the file's model and gravity, the detector and its
 /// learning time, and, with `--state`, what a predecessor had learned.
 fn stage(args: &ServeArgs, file: &CalibrationFile) -> Result<CalibrationStage> {
@@ -157,6 +148,7 @@ fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
     );
 }
 
+/// Runs the service until SIGINT/SIGTERM.
 pub fn serve(args: &ServeArgs) -> Result<()> {
     let file = CalibrationFile::load(&args.calib)?;
     let mut stage = stage(args, &file)?;
@@ -166,8 +158,7 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
     // Before any port exists: a SIGINT/SIGTERM is kept from then on.
     ipc_types::stop::install()?;
     let node = service::node()?;
-    let raw = service::open::<RawImuSample>(&node, &raw_name)?;
-    let subscriber = service::subscriber(&raw)?;
+    let mut subscriber = service::subscriber(&service::open::<RawImuSample>(&node, &raw_name)?)?;
     let mode = if args.spin {
         WaitMode::Spin
     } else {
@@ -184,52 +175,44 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
         args.detector.name(),
         if args.spin { ", spinning" } else { "" }
     );
-
-    let mut refused = 0u64;
-    // The state as last written, and when (not per sample: at most once a second).
-    let mut saved: Option<(WarmState, Instant)> = None;
     // Subscribers killed without closing their ports would otherwise stay connected.
     let _cleanup = service::DeadNodeCleanup::start(Duration::from_secs(1))?;
-    let mut steady =
-        SteadyState::from_env(|| crate::ALLOCATOR.counts()).map_err(anyhow::Error::msg)?;
+    let mut watch = Watch {
+        steady: SteadyState::from_env(|| crate::ALLOCATOR.counts()).map_err(anyhow::Error::msg)?,
+        state_file: args.state.as_deref(),
+        saved: None,
+    };
     // Start-up is over: from here on small blocks come from the pool.
     crate::ALLOCATOR.arm();
-    let step = || -> Result<ControlFlow<(), bool>> {
-        let mut received = false;
-        while let Some(sample) = subscriber
-            .receive()
-            .map_err(|e| anyhow!("receive on {raw_name}: {e:?}"))?
-        {
-            received = true;
-            steady.inputs(1);
-            let pushed = stage.push(sample.payload(), &mut |s| {
-                let mut s = *s;
-                s.stamps.calibrated_ns = monotonic_ns();
-                out.send(s);
-            });
-            drop(sample);
-            if let Err(e) = pushed {
-                refused += 1;
-                if refused <= REPORTED_REFUSALS {
-                    tracing::warn!("refused: {e}");
-                }
-            }
-            out.end_of_input()?;
-        }
-        if let Some(path) = &args.state
+    let counts = live::serve(&mut stage, &mut subscriber, &mut out, listener, &mut watch)?;
+    report(&stage, counts.refused, &watch.steady);
+    Ok(())
+}
+
+/// The steady-state allocation count, and the `--state` file kept up to date.
+struct Watch<'a> {
+    steady: SteadyState,
+    state_file: Option<&'a Path>,
+    /// The state as last written, and when (not per sample: at most once a second).
+    saved: Option<(WarmState, Instant)>,
+}
+
+impl Hooks<CalibrationStage> for Watch<'_> {
+    fn input(&mut self) {
+        self.steady.inputs(1);
+    }
+
+    fn drained(&mut self, stage: &CalibrationStage) -> Result<()> {
+        if let Some(path) = self.state_file
             && let Some(state) = stage.warm_state()
             && state.reference.is_some()
-            && saved.as_ref().is_none_or(|(s, at)| {
+            && self.saved.as_ref().is_none_or(|(s, at)| {
                 at.elapsed() >= Duration::from_secs(1) && !same_learning(s, &state)
             })
         {
             save_state(path, &state)?;
-            saved = Some((state, Instant::now()));
+            self.saved = Some((state, Instant::now()));
         }
-        Ok(ControlFlow::Continue(received))
-    };
-    wake::serve_loop(&[listener], TICK, step)?;
-    stage.finish();
-    report(&stage, refused, &steady);
-    Ok(())
+        Ok(())
+    }
 }

@@ -17,6 +17,7 @@
 //! scatter of both sensors, over a window of [`POSE_WINDOW_S`]. A fit whose largest 1-sigma
 //! exceeds [`MAX_SIGMA`] is refused (poses that are not static, rotations missed).
 
+use mems_stage::Stage;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
@@ -123,12 +124,12 @@ fn correct_session(
     let mut settler = Settler::default();
     for raw in samples {
         stage
-            .push(raw, &mut |c: &CorrectedImuSample| {
+            .process(raw, &mut |c: &CorrectedImuSample| {
                 settler.push(c, &mut |c| corrected.push(*c))
             })
             .map_err(|e| anyhow::anyhow!("{}: {e}", args.input.display()))?;
     }
-    stage.finish();
+    stage.finish(&mut |_| {});
     settler.finish(&mut |c| corrected.push(*c));
     Ok(corrected)
 }

@@ -1,0 +1,231 @@
+//! The odometry stage as every process runs it ([`OdometrySession`], a [`Stage`]): corrected
+//! samples and robot hints in, in the order they arrive, odometry states out. It holds the
+//! policies around [`OdometryStage`] that the live process and the offline run must share:
+//!
+//! - **Hint order.** A hint waits in a queue (allocated up front, [`HINT_QUEUE`] hints, in
+//!   publication order) and goes to the stage just before the first sample taken at or after
+//!   its publication (`stamps.acquired_ns`); the stage's own delivery rule then decides which
+//!   samples use it. So the states do not depend on how hints and samples interleave in
+//!   transport, and a replay gives the same states. A hint is checked when it arrives
+//!   ([`check_hint`]): a refused one never reaches the queue.
+//! - **Sensor sessions.** Sequence numbers that go back mean a new sensor session (a restarted
+//!   acquire), and so does a time step longer than [`MAX_STEP_NS`] (no dead reckoning bridges
+//!   it): the old stage's revisions are completed and a new stage aligns again.
+//! - **Samples without a gyroscope** (`raw_flags::GYRO_VALID` clear: an accelerometer-only
+//!   sensor mode, the MPU-9250 at 4 kHz): nothing tracks the attitude, so what they give is
+//!   configuration ([`NoGyro`]).
+
+use std::collections::VecDeque;
+
+use ipc_types::limits::MAX_STEP_NS;
+use ipc_types::{
+    CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags, raw_flags,
+};
+use mems_stage::Stage;
+
+use crate::hints::{HintConfig, HintConfigError, HintError, HintStats, check_hint};
+use crate::stage::{OdometryConfig, OdometryError, OdometryStage};
+
+/// Hints the session holds for samples still to come: a hint rate 20 times the 50 Hz of a
+/// wheel controller for a second. The live driver takes no hint while the queue is full (it
+/// stays in the subscriber's queue).
+pub const HINT_QUEUE: usize = 1024;
+
+/// What a sample without a gyroscope gives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoGyro {
+    /// A state flagged `NO_GYRO` with no position or velocity (zero), never `ALIGNED`; the
+    /// stage does not see the sample. The live process: a moving robot's attitude is unknown.
+    Unnavigated,
+    /// The stage navigates it with the attitude held at its alignment: meaningful only if the
+    /// sensor never rotated (a static recording, such as the thesis's). Offline runs.
+    HoldAttitude,
+}
+
+/// An input of the session.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Input {
+    /// A corrected sample: its state (and revisions) are emitted.
+    Sample(CorrectedImuSample),
+    /// A robot hint: queued until the samples reach its publication.
+    Hint(RobotHint),
+}
+
+impl From<CorrectedImuSample> for Input {
+    fn from(s: CorrectedImuSample) -> Self {
+        Self::Sample(s)
+    }
+}
+
+/// An input the session refuses; it changes nothing.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Refusal {
+    /// The stage refused the sample.
+    #[error(transparent)]
+    Sample(#[from] OdometryError),
+    /// The hint is malformed.
+    #[error(transparent)]
+    Hint(#[from] HintError),
+    /// [`HINT_QUEUE`] hints already wait for their samples.
+    #[error(
+        "robot hint seq {seq}: {HINT_QUEUE} hints already wait for the samples they precede \
+         (hints published far ahead of the samples)"
+    )]
+    HintQueueFull {
+        /// The hint's sequence number.
+        seq: u64,
+    },
+}
+
+/// Counters of a session, for the processes' summaries.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SessionStats {
+    /// Sensor sessions seen (1 from the first sample).
+    pub sessions: u64,
+    /// Hints accepted into the queue.
+    pub hints: u64,
+    /// Samples without a gyroscope.
+    pub no_gyro: u64,
+    /// The first of them, by sequence number.
+    pub first_no_gyro_seq: Option<u64>,
+}
+
+/// The odometry stage with the policies of every process (module documentation).
+pub struct OdometrySession {
+    config: OdometryConfig,
+    hint_config: HintConfig,
+    no_gyro: NoGyro,
+    stage: OdometryStage,
+    /// Hints waiting for their samples, in publication order.
+    waiting: VecDeque<RobotHint>,
+    /// The previous sample's sequence number and time, ns.
+    last: Option<(u64, u64)>,
+    stats: SessionStats,
+}
+
+impl OdometrySession {
+    /// A session whose stages run `config` with `hint_config`; a sample without a gyroscope
+    /// gives what `no_gyro` says.
+    pub fn new(
+        config: OdometryConfig,
+        hint_config: HintConfig,
+        no_gyro: NoGyro,
+    ) -> Result<Self, HintConfigError> {
+        Ok(Self {
+            stage: OdometryStage::with_hints(config, hint_config)?,
+            config,
+            hint_config,
+            no_gyro,
+            waiting: VecDeque::with_capacity(HINT_QUEUE),
+            last: None,
+            stats: SessionStats::default(),
+        })
+    }
+
+    /// The current sensor session's stage.
+    pub fn stage(&self) -> &OdometryStage {
+        &self.stage
+    }
+
+    /// The current sensor session's hint counters.
+    pub fn hint_stats(&self) -> HintStats {
+        self.stage.hint_stats()
+    }
+
+    /// The session's counters.
+    pub fn stats(&self) -> SessionStats {
+        self.stats
+    }
+
+    /// Whether a hint would find room in the queue.
+    pub fn hint_room(&self) -> bool {
+        self.waiting.len() < HINT_QUEUE
+    }
+
+    /// Queues a checked hint after those published before it or with it.
+    fn queue(&mut self, h: &RobotHint) -> Result<(), Refusal> {
+        check_hint(h)?;
+        if !self.hint_room() {
+            return Err(Refusal::HintQueueFull { seq: h.seq });
+        }
+        let t = h.stamps.acquired_ns;
+        let at = self.waiting.partition_point(|q| q.stamps.acquired_ns <= t);
+        self.waiting.insert(at, *h);
+        self.stats.hints += 1;
+        Ok(())
+    }
+
+    /// Starts a new stage when `s` begins a new sensor session, completing the old one's
+    /// revisions first.
+    fn new_session(&mut self, s: &CorrectedImuSample, emit: &mut impl FnMut(&OdometryState)) {
+        let t = s.stamps.sample_ns;
+        let restart = match self.last {
+            None => {
+                self.stats.sessions = 1;
+                false
+            }
+            Some((seq, ns)) => s.seq <= seq || t > ns.saturating_add(MAX_STEP_NS),
+        };
+        if restart {
+            self.stage.finish(emit);
+            self.stage = OdometryStage::with_hints(self.config, self.hint_config)
+                .expect("validated when the session was made");
+            self.stats.sessions += 1;
+        }
+        self.last = Some((s.seq, t));
+    }
+}
+
+impl Stage for OdometrySession {
+    type Input = Input;
+    type Output = OdometryState;
+    type Refusal = Refusal;
+
+    /// A sample: the hints published by its time go to the stage, then the sample; its state
+    /// first, then any revisions. A hint: queued.
+    fn process(
+        &mut self,
+        input: &Input,
+        emit: &mut impl FnMut(&OdometryState),
+    ) -> Result<(), Refusal> {
+        let s = match input {
+            Input::Hint(h) => return self.queue(h),
+            Input::Sample(s) => s,
+        };
+        self.new_session(s, emit);
+        while let Some(h) = self.waiting.front()
+            && h.stamps.acquired_ns <= s.stamps.sample_ns
+        {
+            let checked = self.stage.hint(h);
+            debug_assert!(checked.is_ok(), "checked when queued");
+            self.waiting.pop_front();
+        }
+        if s.raw_flags & raw_flags::GYRO_VALID == 0 {
+            self.stats.no_gyro += 1;
+            self.stats.first_no_gyro_seq.get_or_insert(s.seq);
+            if self.no_gyro == NoGyro::Unnavigated {
+                emit(&OdometryState {
+                    stamps: s.stamps,
+                    seq: s.seq,
+                    attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
+                    flags: odometry_flags::NO_GYRO,
+                    ..OdometryState::default()
+                });
+                return Ok(());
+            }
+        }
+        Ok(self.stage.process(s, emit)?)
+    }
+
+    /// Completes a replay of the hindsight still under way.
+    fn finish(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        self.stage.finish(emit);
+    }
+
+    /// A sample that settles a zero-state batch is followed by that batch's settling and
+    /// revisions (a few hundred us) after its live state.
+    fn work_follows(input: &Input, output: &OdometryState) -> bool {
+        matches!(input, Input::Sample(s) if s.flags & corrected_flags::PROVISIONAL == 0)
+            && output.flags & odometry_flags::REVISION == 0
+    }
+}
