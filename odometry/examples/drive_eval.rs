@@ -24,7 +24,8 @@ use mems_sim::hints::{HintParams, RestSource};
 use mems_stage::Stage;
 use nalgebra::{Matrix2, Matrix3, Vector2};
 use odometry::hints::HintConfig;
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::session::{Input, NoGyro, OdometrySession};
+use odometry::stage::OdometryConfig;
 use statrs::statistics::{Data, Max, Median, OrderStatistics};
 
 /// Where the gyro correction comes from.
@@ -471,10 +472,10 @@ impl Track {
         &mut self,
         s: &CorrectedImuSample,
         truth: &recording::Truth,
-        stage: &mut OdometryStage,
+        session: &mut OdometrySession,
     ) {
-        stage
-            .process(s, &mut |o| {
+        session
+            .process(&Input::Sample(*s), &mut |o| {
                 if o.flags & odometry_flags::REVISION == 0 {
                     self.last = Some(*o);
                 } else {
@@ -574,19 +575,27 @@ impl Track {
     }
 }
 
-/// The robot's hints, handed to the stage by publication time.
+/// The robot's hints, handed to the session as they arrive. Here they arrive
+/// [`HINT_LEAD_NS`] before their publication, earlier than any live pipeline receives them:
+/// the session holds each until the samples reach its publication, so the states are those
+/// of a live run.
 struct HintFeed<'a> {
     hints: &'a [RobotHint],
     next: usize,
 }
 
+/// How far ahead of the samples the hints arrive, ns.
+const HINT_LEAD_NS: u64 = 500_000_000;
+
 impl HintFeed<'_> {
-    /// Hints published by a sample's time reach the stage before it (as in the live process).
-    fn feed(&mut self, t_ns: u64, stage: &mut OdometryStage) {
+    /// Hands the session the hints that arrived by the time of a sample at `t_ns`.
+    fn feed(&mut self, t_ns: u64, session: &mut OdometrySession) {
         while let Some(h) = self.hints.get(self.next)
-            && h.stamps.acquired_ns <= t_ns
+            && h.stamps.acquired_ns <= t_ns + HINT_LEAD_NS
         {
-            stage.hint(h).expect("valid simulated hints");
+            session
+                .process(&Input::Hint(*h), &mut |_| {})
+                .expect("valid simulated hints");
             self.next += 1;
         }
     }
@@ -612,7 +621,7 @@ fn drive(
     c: &Case,
     sim: &mut Simulation,
     args: &Args,
-    stage: &mut OdometryStage,
+    stage: &mut OdometrySession,
     feed: &mut HintFeed,
     track: &mut Track,
 ) {
@@ -657,14 +666,16 @@ fn run(c: &Case, cfg: OdometryConfig, seed: u64, args: &Args) -> Outcome {
         },
         ..HintConfig::default()
     };
-    let mut stage = OdometryStage::with_hints(cfg, hint_cfg).expect("valid hint configuration");
+    let mut session =
+        OdometrySession::new(cfg, hint_cfg, NoGyro::Unnavigated).expect("valid hint configuration");
     let (hints, true_scale) = hint_stream(c, seed, args);
     let mut track = Track::new(args.mount_yaw_deg);
     let mut feed = HintFeed {
         hints: &hints,
         next: 0,
     };
-    drive(c, &mut sim, args, &mut stage, &mut feed, &mut track);
+    drive(c, &mut sim, args, &mut session, &mut feed, &mut track);
+    let stage = session.stage();
     let o = track.last.expect("states");
     let truth = track.end_truth.expect("truth");
     let error_m = Vector2::new(

@@ -173,7 +173,7 @@ fn speed_hints_bound_the_drift_of_long_cruises() {
     assert!(e_imu > 0.02 * d, "IMU only: {e_imu} m of {d} m");
     assert!(e_hints < 0.005 * d, "with hints: {e_hints} m of {d} m");
     assert!(e_hints < e_imu / 5.0);
-    let stats = with_hints.stage.hint_stats();
+    let stats = with_hints.session.stage().hint_stats();
     // 50 Hz while moving.
     assert!(stats.speed_updates > 1000, "{stats:?}");
     let speed_flagged = with_hints
@@ -188,7 +188,7 @@ fn speed_hints_bound_the_drift_of_long_cruises() {
         "{speed_flagged} flagged, {stats:?}"
     );
     // The scale state learned the encoder's scale error.
-    let k = with_hints.stage.filter().unwrap().x.k;
+    let k = with_hints.session.stage().filter().unwrap().x.k;
     assert!(
         (k - hints.speed_scale).abs() < 0.005,
         "{k} vs {}",
@@ -291,10 +291,10 @@ fn the_mounting_is_estimated_from_the_first_drive() {
         ..HintConfig::default()
     };
     let r = run_with_hints(cfg, estimate, &samples, &hints);
-    let got = r.stage.mounting().expect("estimated");
+    let got = r.session.stage().mounting().expect("estimated");
     let error_deg = got.angle_to(&mounting).to_degrees();
     assert!(error_deg < 0.3, "mounting off by {error_deg} deg");
-    assert!(r.stage.hint_stats().speed_updates > 500);
+    assert!(r.session.stage().hint_stats().speed_updates > 500);
     let wrong = run_with_hints(cfg, HintConfig::default(), &samples, &hints);
     let (e, e_wrong) = (
         end_error(&r.states, &truth),
@@ -355,7 +355,7 @@ fn states_do_not_depend_on_how_hints_and_samples_interleave() {
     for (a, b) in upfront.iter().zip(&just_in_time.states) {
         assert_eq!(bits(a), bits(b), "seq {}", a.seq);
     }
-    assert!(just_in_time.stage.hint_stats().speed_updates > 100);
+    assert!(just_in_time.session.stage().hint_stats().speed_updates > 100);
 }
 
 /// A stationary hint does not align the filter before the calibration stage's detector is

@@ -10,7 +10,9 @@ use common::{Case, Simulation};
 use ipc_types::{RobotHint, odometry_flags};
 use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
+use mems_stage::Stage;
 use odometry::hints::HintConfig;
+use odometry::session::{Input, NoGyro, OdometrySession};
 use odometry::stage::{OdometryConfig, OdometryStage};
 
 #[global_allocator]
@@ -80,24 +82,36 @@ fn taking_hints_allocates_nothing() {
         mounting: None,
         ..HintConfig::default()
     };
-    let mut stage = OdometryStage::with_hints(OdometryConfig::mpu9250(G_MPS2), estimate).unwrap();
+    // The session, as the live process runs it: hints queued as they arrive (here half a
+    // second before their publication), then handed over with the samples.
+    let mut session = OdometrySession::new(
+        OdometryConfig::mpu9250(G_MPS2),
+        estimate,
+        NoGyro::Unnavigated,
+    )
+    .unwrap();
 
-    let (mut stale, mut next) = (0u64, 0);
+    let mut stale = 0u64;
+    let mut hints = hints.iter().peekable();
     let before = allocations();
     for s in &samples {
-        while next < hints.len() && hints[next].stamps.acquired_ns <= s.stamps.sample_ns {
-            stage.hint(&hints[next]).unwrap();
-            next += 1;
+        while let Some(h) =
+            hints.next_if(|h| h.stamps.acquired_ns <= s.stamps.sample_ns + 500_000_000)
+        {
+            session.process(&Input::Hint(*h), &mut |_| {}).unwrap();
         }
-        stage
-            .process(s, &mut |o| {
+        session
+            .process(&Input::Sample(*s), &mut |o| {
                 stale += u64::from(o.flags & odometry_flags::HINT_STALE != 0);
             })
             .unwrap();
     }
     let during = allocations() - before;
     assert_eq!(during, 0, "{during} allocations");
-    let h = stage.hint_stats();
+    let h = session.hint_stats();
     assert!(h.speed_updates > 100 && stale > 0, "{h:?}, {stale} stale");
-    assert!(stage.mounting().is_some(), "the mounting was estimated");
+    assert!(
+        session.stage().mounting().is_some(),
+        "the mounting was estimated"
+    );
 }

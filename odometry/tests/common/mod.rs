@@ -26,9 +26,11 @@ use mems_sim::hints::{HintParams, HintStream, drive_hints};
 use mems_sim::model::{G_MPS2, SensorModel};
 use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
 use mems_sim::vibration::{Vibration, VibrationModel};
+use mems_stage::Stage;
 use nalgebra::{Matrix3, Vector3};
 use odometry::hints::HintConfig;
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::session::{Input, NoGyro, OdometrySession};
+use odometry::stage::OdometryConfig;
 use recording::Truth;
 
 /// Number of attitudes in the calibration session.
@@ -431,38 +433,43 @@ pub fn unique_namespace(tag: &str) -> String {
     )
 }
 
-/// What a run of the stage produced: the forward state of every sample, in order, and the
-/// stage.
+/// What a run of the session produced: the forward state of every sample, in order, and the
+/// session.
 pub struct Run {
     pub states: Vec<OdometryState>,
-    pub stage: OdometryStage,
+    pub session: OdometrySession,
 }
 
-/// Runs the stage over `samples`, handing it each hint once the sample time reaches its
-/// publication (as the live process receives them).
+/// How far ahead of their publication the hints of [`run_with_hints`] arrive, ns: earlier
+/// than a live pipeline receives them; the session holds each until its time.
+pub const HINT_LEAD_NS: u64 = 500_000_000;
+
+/// Runs the odometry session (as the live process does) over `samples`, with each hint
+/// arriving [`HINT_LEAD_NS`] before its publication.
 pub fn run_with_hints(
     cfg: OdometryConfig,
     hint_cfg: HintConfig,
     samples: &[CorrectedImuSample],
     hints: &[RobotHint],
 ) -> Run {
-    let mut stage = OdometryStage::with_hints(cfg, hint_cfg).unwrap();
+    let mut session = OdometrySession::new(cfg, hint_cfg, NoGyro::Unnavigated).unwrap();
     let mut states = Vec::with_capacity(samples.len());
-    let mut next = 0;
+    let mut hints = hints.iter().peekable();
     for s in samples {
-        while next < hints.len() && hints[next].stamps.acquired_ns <= s.stamps.sample_ns {
-            stage.hint(&hints[next]).unwrap();
-            next += 1;
+        while let Some(h) =
+            hints.next_if(|h| h.stamps.acquired_ns <= s.stamps.sample_ns + HINT_LEAD_NS)
+        {
+            session.process(&Input::Hint(*h), &mut |_| {}).unwrap();
         }
-        stage
-            .process(s, &mut |o| {
+        session
+            .process(&Input::Sample(*s), &mut |o| {
                 if o.flags & odometry_flags::REVISION == 0 {
                     states.push(*o);
                 }
             })
             .unwrap();
     }
-    Run { states, stage }
+    Run { states, session }
 }
 
 /// The zero-state detector the live calibration stage runs (`mems-calibrate serve`'s GLRT
