@@ -28,6 +28,7 @@
 //!   without its gyroscope (the MPU-9250 at 4 kHz), where Yu's 20-sample batch lasts 5 ms, too
 //!   short to hold a vibration period (measured in docs/detectors.md).
 
+pub mod args;
 pub mod glrt;
 pub mod learn;
 pub mod shoe;

@@ -28,6 +28,7 @@ use alloc_count::steady::SteadyState;
 use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig, WarmState};
+use calibrate::zero_state::args::DetectorArgs;
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use ipc_types::wake::{self, Output, WaitMode};
 use ipc_types::{CorrectedImuSample, RawImuSample, service};
@@ -39,18 +40,9 @@ pub struct ServeArgs {
     /// Calibration file (TOML) written by `mems-calibrate fit`.
     #[arg(long)]
     calib: PathBuf,
-    /// Zero-state detector: glrt (accelerometer and gyroscope; needs the gyroscope),
-    /// glrt-accel (the same on the accelerometer alone, for a sensor run without its gyroscope)
-    /// or yu (accelerometer batches of 20, as in the thesis).
-    #[arg(long, value_enum, default_value_t = DetectorKind::Glrt)]
-    detector: DetectorKind,
-    /// The GLRT's window, in batches of 20 samples (default 25: 0.5 s at 1 kHz; 100 is 0.5 s
-    /// at 4 kHz).
-    #[arg(long, value_name = "BATCHES", value_parser = clap::value_parser!(u32).range(1..))]
-    glrt_window: Option<u32>,
-    /// Length of the start-up rest the detector learns its thresholds from, s.
-    #[arg(long, default_value_t = 5.0)]
-    learn_s: f64,
+    /// The zero-state detector (default: glrt, learning from the first 5 s of rest).
+    #[command(flatten)]
+    detector: DetectorArgs,
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
@@ -91,14 +83,10 @@ fn save_state(path: &Path, state: &WarmState) -> Result<()> {
 /// The calibration stage `args` ask for: the file's model and gravity, the detector and its
 /// learning time, and, with `--state`, what a predecessor had learned.
 fn stage(args: &ServeArgs, file: &CalibrationFile) -> Result<CalibrationStage> {
-    if !(args.learn_s > 0.0 && args.learn_s.is_finite()) {
-        anyhow::bail!("--learn-s must be > 0, got {}", args.learn_s);
-    }
-    let mut config = DetectorConfig::new(args.detector, file.gravity_mps2);
-    config.learn.duration_s = args.learn_s;
-    if let Some(k) = args.glrt_window {
-        config.glrt.window_batches = k as usize;
-    }
+    let config = args
+        .detector
+        .apply(DetectorConfig::new(DetectorKind::Glrt, file.gravity_mps2))
+        .map_err(anyhow::Error::msg)?;
     let mut stage = CalibrationStage::new(file, config, RefineConfig::default())
         .with_context(|| args.calib.display().to_string())?;
     if let Some(path) = args.state.as_deref().filter(|p| p.exists()) {
@@ -172,7 +160,7 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
         args.calib.display(),
         file.model,
         stage.calib_id(),
-        args.detector.name(),
+        stage.detector().config().kind.name(),
         if args.spin { ", spinning" } else { "" }
     );
     // Subscribers killed without closing their ports would otherwise stay connected.

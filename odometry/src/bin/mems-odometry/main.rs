@@ -20,9 +20,10 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Once;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
-use calibrate::zero_state::{DetectorConfig, DetectorKind};
+use calibrate::zero_state::DetectorConfig;
+use calibrate::zero_state::args::DetectorArgs;
 use clap::{Parser, Subcommand};
 use odometry::profile::Profile;
 use odometry::stage::OdometryConfig;
@@ -74,23 +75,13 @@ pub struct StageArgs {
     /// calibrated at the factory or a first look at a recording.
     #[arg(long)]
     pub calib: Option<PathBuf>,
-    /// Zero-state detector (offline; live, it is `mems-calibrate serve`'s). Default: the
+    /// The zero-state detector (offline; live, it is `mems-calibrate serve`'s). Default: the
     /// profile's.
-    #[arg(long, value_enum)]
-    pub detector: Option<DetectorKind>,
-    /// Rest the detector learns from, s (offline; as `mems-calibrate serve --learn-s`): the
-    /// first rest of this length anywhere in the data. Default: the profile's.
-    #[arg(long)]
-    pub learn_s: Option<f64>,
+    #[command(flatten)]
+    pub detector: DetectorArgs,
     /// Motion profile: the detector and rest handling for the platform.
     #[arg(long, value_enum, default_value_t = Profile::Vehicle)]
     pub profile: Profile,
-    /// SHOE detector: the fixed threshold (default OpenShoe's 3e4).
-    #[arg(long)]
-    pub shoe_gamma: Option<f64>,
-    /// SHOE detector: the adaptive threshold's factor on the recent minimum (0: fixed).
-    #[arg(long)]
-    pub shoe_factor: Option<f64>,
 }
 
 impl StageArgs {
@@ -109,28 +100,10 @@ impl StageArgs {
                 CalibrationFile::identity(ipc_types::units::STANDARD_GRAVITY_MPS2)
             }
         };
-        let mut detector = self.profile.detector(file.gravity_mps2);
-        if let Some(kind) = self.detector {
-            detector.kind = kind;
-        }
-        if let Some(gamma) = self.shoe_gamma {
-            if !(gamma > 0.0 && gamma.is_finite()) {
-                bail!("--shoe-gamma must be > 0, got {gamma}");
-            }
-            detector.shoe.gamma = gamma;
-        }
-        if let Some(factor) = self.shoe_factor {
-            if !(factor >= 0.0 && factor.is_finite()) {
-                bail!("--shoe-factor must be >= 0, got {factor}");
-            }
-            detector.shoe.adaptive_factor = factor;
-        }
-        if let Some(learn_s) = self.learn_s {
-            if !(learn_s > 0.0 && learn_s.is_finite()) {
-                bail!("--learn-s must be > 0, got {learn_s}");
-            }
-            detector.learn.duration_s = learn_s;
-        }
+        let detector = self
+            .detector
+            .apply(self.profile.detector(file.gravity_mps2))
+            .map_err(anyhow::Error::msg)?;
         Ok((file, detector))
     }
 

@@ -23,6 +23,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig, Settler, calib_id};
+use calibrate::zero_state::args::DetectorArgs;
 use calibrate::zero_state::{BATCH_LEN, DetectorConfig, DetectorKind};
 use calibrate_science::gyrocal::{GyroCalConfig, GyroCalibration, calibrate_gyro};
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, raw_flags};
@@ -35,12 +36,11 @@ pub struct GyroCalArgs {
     /// The accelerometer calibration the session is corrected with (TOML).
     #[arg(long)]
     calib: Option<PathBuf>,
-    /// Zero-state detector marking the static poses (the vehicle profile's GLRT by default).
-    #[arg(long, value_enum, default_value = "glrt")]
-    detector: DetectorKind,
-    /// Start-up learning time of the detector, s (the session starts at rest for this long).
-    #[arg(long)]
-    learn_s: Option<f64>,
+    /// The detector marking the static poses (the vehicle profile's GLRT by default; its
+    /// window fits the poses' rate unless --glrt-window is given); the session starts at rest
+    /// for `--learn-s`.
+    #[command(flatten)]
+    detector: DetectorArgs,
     /// Raw pose session (canonical CSV, thesis CSV or MCAP): at least 9 static poses of 2 s or
     /// more, with rotations about varied axes between them, starting at rest for `--learn-s`.
     #[arg(long)]
@@ -171,13 +171,10 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
         );
     };
     let file = CalibrationFile::load(calib_path).context("cannot load calibration")?;
-    let mut detector = DetectorConfig::new(args.detector, file.gravity_mps2);
-    if let Some(learn_s) = args.learn_s {
-        if !(learn_s > 0.0 && learn_s.is_finite()) {
-            bail!("--learn-s must be > 0, got {learn_s}");
-        }
-        detector.learn.duration_s = learn_s;
-    }
+    let mut detector = args
+        .detector
+        .apply(DetectorConfig::new(DetectorKind::Glrt, file.gravity_mps2))
+        .map_err(anyhow::Error::msg)?;
     // Read the target first, so that a bad one fails before the fit.
     let mut target = load_target(&args, calib_path, &file)?;
 
@@ -195,7 +192,9 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
         );
     }
     detector.glrt.accel_tolerance_mps2 = POSE_ACCEL_TOLERANCE_MPS2;
-    detector.glrt.window_batches = window_batches(&recording.samples);
+    if args.detector.glrt_window.is_none() {
+        detector.glrt.window_batches = window_batches(&recording.samples);
+    }
     let corrected = correct_session(&args, calib_path, &file, detector, &recording.samples)?;
     let rest = corrected
         .iter()

@@ -1,0 +1,107 @@
+//! The detector's command-line options, shared by every process that runs the calibration
+//! stage (`mems-calibrate serve`, `mems-odometry offline`, `mems-calibrate gyrocal`), so that
+//! a detector is configured the same way live and offline.
+
+use super::{DetectorConfig, DetectorKind};
+
+/// Detector options; each overrides the process's default [`DetectorConfig`] when given.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct DetectorArgs {
+    /// Zero-state detector: glrt (accelerometer and gyroscope; needs the gyroscope),
+    /// glrt-accel (the same on the accelerometer alone, for a sensor run without its
+    /// gyroscope), yu (accelerometer batches of 20, as in the thesis) or shoe (a foot-mounted
+    /// sensor). Default: the process's (the vehicle profile's glrt).
+    #[arg(long, value_enum)]
+    pub detector: Option<DetectorKind>,
+    /// The GLRT's window, in batches of 20 samples (default 25: 0.5 s at 1 kHz; 100 is 0.5 s
+    /// at 4 kHz).
+    #[arg(long, value_name = "BATCHES", value_parser = clap::value_parser!(u32).range(1..))]
+    pub glrt_window: Option<u32>,
+    /// Length of the start-up rest the detector learns its thresholds from, s (default 5; the
+    /// first rest of this length anywhere in the data).
+    #[arg(long)]
+    pub learn_s: Option<f64>,
+    /// SHOE detector: the fixed threshold (default OpenShoe's 3e4).
+    #[arg(long)]
+    pub shoe_gamma: Option<f64>,
+    /// SHOE detector: the adaptive threshold's factor on the recent minimum (0: fixed).
+    #[arg(long)]
+    pub shoe_factor: Option<f64>,
+}
+
+impl DetectorArgs {
+    /// `default` with the options given applied; an option out of its range is an error
+    /// naming it.
+    pub fn apply(&self, mut config: DetectorConfig) -> Result<DetectorConfig, String> {
+        let positive = |name: &str, v: f64| {
+            (v > 0.0 && v.is_finite())
+                .then_some(v)
+                .ok_or_else(|| format!("--{name} must be > 0, got {v}"))
+        };
+        if let Some(kind) = self.detector {
+            config.kind = kind;
+        }
+        if let Some(k) = self.glrt_window {
+            config.glrt.window_batches = k as usize;
+        }
+        if let Some(s) = self.learn_s {
+            config.learn.duration_s = positive("learn-s", s)?;
+        }
+        if let Some(gamma) = self.shoe_gamma {
+            config.shoe.gamma = positive("shoe-gamma", gamma)?;
+        }
+        if let Some(factor) = self.shoe_factor {
+            if !(factor >= 0.0 && factor.is_finite()) {
+                return Err(format!("--shoe-factor must be >= 0, got {factor}"));
+            }
+            config.shoe.adaptive_factor = factor;
+        }
+        Ok(config)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn given_options_override_the_default_and_bad_ones_are_named() {
+        let default = DetectorConfig::new(DetectorKind::Glrt, 9.8);
+        assert_eq!(DetectorArgs::default().apply(default), Ok(default));
+        let args = DetectorArgs {
+            detector: Some(DetectorKind::GlrtAccel),
+            glrt_window: Some(100),
+            learn_s: Some(2.5),
+            ..DetectorArgs::default()
+        };
+        let c = args.apply(default).unwrap();
+        assert_eq!(c.kind, DetectorKind::GlrtAccel);
+        assert_eq!(c.glrt.window_batches, 100);
+        assert_eq!(c.learn.duration_s, 2.5);
+        for (args, name) in [
+            (
+                DetectorArgs {
+                    learn_s: Some(0.0),
+                    ..Default::default()
+                },
+                "--learn-s",
+            ),
+            (
+                DetectorArgs {
+                    shoe_gamma: Some(f64::NAN),
+                    ..Default::default()
+                },
+                "--shoe-gamma",
+            ),
+            (
+                DetectorArgs {
+                    shoe_factor: Some(-1.0),
+                    ..Default::default()
+                },
+                "--shoe-factor",
+            ),
+        ] {
+            assert!(args.apply(default).unwrap_err().starts_with(name));
+        }
+    }
+}
