@@ -110,8 +110,18 @@ impl<T: core::fmt::Debug + ZeroCopySend + Copy + 'static> Output<T> {
         >,
         name: &str,
     ) -> Result<Self, ServiceError> {
+        Self::with_publisher(node, crate::service::publisher(service)?, name)
+    }
+
+    /// `publisher` (on the data service `name`) with its [`Waker`]: for a publisher made with
+    /// other settings, such as [`crate::service::publisher_waiting_at_most`]'s.
+    pub fn with_publisher(
+        node: &Node<ipc::Service>,
+        publisher: Publisher<ipc::Service, T, ()>,
+        name: &str,
+    ) -> Result<Self, ServiceError> {
         Ok(Self {
-            publisher: crate::service::publisher(service)?,
+            publisher,
             waker: Waker::new(node, name)?,
             error: None,
             notified: false,

@@ -1,6 +1,7 @@
 //! `mems-acquire`: reads an MPU-9250 (simulated by default, or real over Linux I2C or SPI) and
 //! publishes every sample on `mems/imu/raw`, losslessly.
 
+use std::convert::Infallible;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -15,6 +16,7 @@ use alloc_count::pool::BlockPool;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, ValueEnum};
 use embedded_hal::i2c::I2c;
+use ipc_types::wake::Output;
 use ipc_types::{RawImuSample, service};
 use mems_sim::model::Preset;
 use mems_sim::scenario::{Drive, DriveParams, PoseSession};
@@ -227,8 +229,8 @@ fn run<I2C: I2c, C: Clock>(
     // on a subscriber for as long as the FIFO lasts, so the sensor loses nothing for it.
     let stall_wait = Duration::from_nanos(fifo_fill_ns(&config) / 8);
     let (publisher, undelivered) = service::publisher_waiting_at_most(&raw, stall_wait)?;
-    // Wakes the subscribers after each send (they sleep on the event service).
-    let waker = ipc_types::wake::Waker::new(&node, &name)?;
+    // Wakes the subscribers after a read's first sample and after its last.
+    let mut out = Output::with_publisher(&node, publisher, &name)?;
 
     let mut acq = Acquisition::start(driver, clock, config, read_interval_ns)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -241,21 +243,6 @@ fn run<I2C: I2c, C: Clock>(
     );
     let start = Instant::now();
     let deadline = cli.duration.map(Duration::from_secs_f64);
-    let mut publish = |s: &RawImuSample| -> Result<()> {
-        let sample = publisher
-            .loan_uninit()
-            .map_err(|e| anyhow::anyhow!("cannot loan a sample on {name}: {e:?}"))?;
-        let counted = RawImuSample {
-            undelivered: u32::try_from(undelivered.total()).unwrap_or(u32::MAX),
-            ..*s
-        };
-        sample
-            .write_payload(counted)
-            .send()
-            .map_err(|e| anyhow::anyhow!("cannot send on {name}: {e:?}"))?;
-        waker.notify()?;
-        Ok(())
-    };
     // Start-up is over: from here on small blocks come from the pool.
     ALLOCATOR.arm();
     loop {
@@ -265,7 +252,15 @@ fn run<I2C: I2c, C: Clock>(
         if ipc_types::stop::requested() {
             break;
         }
-        if let Err(e) = acq.read_and_publish(&mut publish)? {
+        let Ok(read) = acq.read_and_publish(&mut |s| {
+            out.send(RawImuSample {
+                undelivered: u32::try_from(undelivered.total()).unwrap_or(u32::MAX),
+                ..*s
+            });
+            Ok::<_, Infallible>(())
+        });
+        out.end_of_input()?;
+        if let Err(e) = read {
             tracing::warn!("read failed, device re-initialising: {e}");
         }
         if deadline.is_some_and(|d| start.elapsed() >= d) {
