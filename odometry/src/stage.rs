@@ -152,6 +152,13 @@ pub struct OdometryConfig {
     /// or a skipped sequence number): the reported 1-sigma grows with it across the gap
     /// (`Eskf::missed`).
     pub manoeuvre: Manoeuvre,
+    /// Longest time between two propagations of the filter's covariance, s: the covariance is
+    /// propagated from the transition and noise accumulated over the samples since the last
+    /// one (`eskf::Eskf::with_propagation_interval`), and at rest the zero-velocity and
+    /// zero-rate updates are made once per propagation with the information of one per
+    /// sample. The reported 1-sigma is that of the last propagation. 0 propagates and updates
+    /// at every sample.
+    pub propagation_interval_s: f64,
     /// Whether rest flags, once aligned, give zero-velocity and zero-rate updates (`false`: a
     /// diagnostic that integrates freely after alignment, as `mems-odometry offline
     /// --no-zupt`).
@@ -193,6 +200,7 @@ impl OdometryConfig {
                 tilt: 0.05,
                 duration_s: 0.5,
             },
+            propagation_interval_s: 0.01,
             rest_updates: true,
         }
     }
