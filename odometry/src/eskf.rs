@@ -140,7 +140,8 @@ pub struct Eskf {
     g_n: Vector3<f64>,
     noise: NoiseModel,
     last: Imu,
-    /// `d(dx)/d(e)` for the consider parameters `e`.
+    /// `M^T`, the transpose of `M = d(dx)/d(e)` for the consider parameters `e` (stored
+    /// transposed: `M`'s rows, which propagation and updates take, are its columns).
     sens: Sensitivity,
     /// Their variances, in the order of [`NC`].
     consider_var: SVector<f64, NC>,
@@ -404,26 +405,52 @@ impl Eskf {
 
     /// The measurement of [`Self::update`] with `H` selecting the three error-state components
     /// from `c` (`H = [0 I 0]`) and isotropic variance `var`, the products with `H` written
-    /// out: `S = P_cc + R`, `K = P_:c S^-1`, `(I - K H) P = P - K P_c:`, and the Joseph form
-    /// `X (I - K H)^T = X - X_:c K^T`. The zero-velocity and zero-rate updates run at every
-    /// sample at rest.
+    /// out: with `L = P_:c`, `S = P_cc + R` and `K = L S^-1`, the Joseph form
+    /// `(I - K H) P (I - K H)^T + K R K^T` is `P - K L^T - L K^T + K S K^T`, computed as
+    /// `P - K L^T - D K^T` with `D = L - K S` (zero but for rounding with the optimal gain:
+    /// kept, it is what the Joseph form keeps), on the upper triangle and mirrored, with plain
+    /// loops over the covariance's contiguous columns (nalgebra's products on its row blocks
+    /// copied them out element by element). The zero-velocity and zero-rate updates run at
+    /// every rest window.
     fn update_selected(&mut self, c: usize, residual: Vector3<f64>, var: f64) {
         self.propagate();
-        let r = Matrix3::identity() * var;
-        let s = self.cov.fixed_view::<3, 3>(c, c) + r;
+        let l = SMatrix::<f64, N, 3>::from_fn(|i, j| self.cov[(i, c + j)]);
+        let s = l.fixed_rows::<3>(c) + Matrix3::identity() * var;
         let Some(s_inv) = s.try_inverse() else {
             return;
         };
-        let k: SMatrix<f64, N, 3> = self.cov.fixed_columns::<3>(c) * s_inv;
+        let k = l * s_inv;
+        let d = l - k * s;
         let dx: VecN = k * residual;
-        let mut x = self.cov;
-        x -= k * self.cov.fixed_rows::<3>(c);
-        let x_c = x.fixed_columns::<3>(c).into_owned();
-        x -= x_c * k.transpose();
-        x += k * r * k.transpose();
-        self.cov = 0.5 * (x + x.transpose());
-        let sens_c = self.sens.fixed_rows::<3>(c).into_owned();
-        self.sens -= k * sens_c;
+        let (ks, ds) = (k.as_slice(), d.as_slice());
+        let p = self.cov.as_mut_slice();
+        for j in 0..N {
+            let col = &mut p[j * N..j * N + j + 1];
+            for a in 0..3 {
+                let (lj, kj) = (l[(j, a)], k[(j, a)]);
+                let (ka, da) = (&ks[a * N..], &ds[a * N..]);
+                for (i, x) in col.iter_mut().enumerate() {
+                    *x -= ka[i] * lj + da[i] * kj;
+                }
+            }
+        }
+        for j in 0..N {
+            for i in 0..j {
+                p[i * N + j] = p[j * N + i];
+            }
+        }
+        // `M <- M - K M_c:`, on `M^T`'s columns: `M^T[:, i] -= sum_a K[i, a] M^T[:, c + a]`.
+        let m_c = SMatrix::<f64, NC, 3>::from_fn(|q, a| self.sens[(q, c + a)]);
+        let m = self.sens.as_mut_slice();
+        for i in 0..N {
+            let col = &mut m[i * NC..(i + 1) * NC];
+            for a in 0..3 {
+                let f = k[(i, a)];
+                for (x, y) in col.iter_mut().zip(m_c.column(a).iter()) {
+                    *x -= f * y;
+                }
+            }
+        }
         self.inject(&dx);
     }
 
@@ -440,7 +467,7 @@ impl Eskf {
         let i_kh = Cov::identity() - k * h;
         self.cov = i_kh * self.cov * i_kh.transpose() + k * r * k.transpose();
         self.cov = 0.5 * (self.cov + self.cov.transpose());
-        self.sens -= k * (h * self.sens);
+        self.sens -= (self.sens * h.transpose()) * k.transpose();
         self.inject(&dx);
     }
 
@@ -457,7 +484,7 @@ impl Eskf {
     /// Variance of error-state component `i` from the consider parameters alone.
     fn consider_variance(&self, i: usize) -> f64 {
         self.sens
-            .row(i)
+            .column(i)
             .iter()
             .zip(self.consider_var.iter())
             .map(|(m, var)| m * m * var)
@@ -581,7 +608,7 @@ mod tests {
             w: Vector3::new(0.01, 0.02, -0.03),
         };
         let mut a = Eskf::new(x, full_cov(), G, noise(), first);
-        a.sens = Sensitivity::from_fn(|i, j| ((i * 5 + j) as f64).cos());
+        a.sens = Sensitivity::from_fn(|j, i| ((i * 5 + j) as f64).cos());
         let mut b = a.clone();
         for c in [V, BG] {
             let residual = Vector3::new(0.03, -0.01, 0.02);
@@ -775,7 +802,7 @@ mod tests {
             w: m.w * (1.0 + eps),
             ..m
         });
-        let predicted = exact.sens.fixed_view::<3, 1>(P, 8) * eps;
+        let predicted = exact.sens.fixed_view::<1, 3>(8, P).transpose() * eps;
         assert_relative_eq!(exact.x.p - gyro.x.p, predicted, max_relative = 0.02);
         assert!(predicted.norm() > 1e-3, "{predicted}");
         // Accelerometer x scale (entry (0, 0), consider index 9): only the change of specific
@@ -784,7 +811,7 @@ mod tests {
             f: Vector3::new(m.f.x * (1.0 + eps), m.f.y, m.f.z),
             ..m
         });
-        let predicted = exact.sens.fixed_view::<3, 1>(P, 9) * eps;
+        let predicted = exact.sens.fixed_view::<1, 3>(9, P).transpose() * eps;
         assert_relative_eq!(exact.x.p - accel.x.p, predicted, max_relative = 0.02);
         assert!(predicted.norm() > 1e-3, "{predicted}");
         // The reported sigma holds the consider share: at 1 % per entry, well above eps's.
