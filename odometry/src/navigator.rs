@@ -46,14 +46,6 @@ struct PendingRevision {
     dv: Vector3<f64>,
 }
 
-/// Largest share of a rest window's zero-velocity update variance that the velocity noise
-/// accumulated over the window may reach ([`Navigator::rest_updates`]). At 5 %, the rest's
-/// steady velocity variance right after an update is 11 % below the limit that updates at
-/// every sample approach as the sample interval shrinks, `sqrt(q r T)`, and 12 % above it just
-/// before (a random walk of intensity `q` under updates of variance `r` every `T` settles
-/// after the update at the root of `x^2 + q T x - q T r = 0`, before it at `x + q T`).
-const REST_WINDOW_DRIFT: f64 = 0.05;
-
 /// Speed hints that can wait for the next sample's update (more arrive at once only at sample
 /// rates below the hint rate).
 const SPEED_QUEUE: usize = 8;
@@ -517,8 +509,8 @@ impl Navigator {
             w.t_s += dt;
             w.w_sum += m.w;
             let accel_var = self.cfg.noise.accel_noise_density.powi(2) * w.t_s;
-            let quasi_static =
-                accel_var * f64::from(w.n) < REST_WINDOW_DRIFT * self.zupt_sigma_mps.powi(2);
+            let quasi_static = accel_var * f64::from(w.n)
+                < self.cfg.rest_window_drift * self.zupt_sigma_mps.powi(2);
             if self.kf.as_ref().expect("aligned").propagated() || !quasi_static {
                 self.rest_updates();
             }
@@ -572,7 +564,7 @@ impl Navigator {
     /// which holds while the velocity error stays the same over the window to within that
     /// update's 1-sigma: the window is closed early once the velocity noise accumulated over
     /// it, `q_a T` (`q_a` the accelerometer's noise density squared, `T` the window's span),
-    /// reaches [`REST_WINDOW_DRIFT`] of `sigma^2 / n`. The zero-rate update takes the mean of
+    /// reaches `OdometryConfig::rest_window_drift` of `sigma^2 / n`. The zero-rate update takes the mean of
     /// the window's gyro readings with the noise density over the square root of their span
     /// (the gyro bias is constant over the window: the mean of the `n` readings is what they
     /// tell of it). Tested against updates at every sample in `odometry/tests/rest_window.rs`.
