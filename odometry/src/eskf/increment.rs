@@ -144,20 +144,8 @@ fn mul<const R: usize, const K: usize, const C: usize>(
 
 /// `a b^T`, as [`mul`].
 #[inline(always)]
-fn mul_t<const R: usize, const K: usize, const C: usize>(
-    a: &SMatrix<f64, R, K>,
-    b: &SMatrix<f64, C, K>,
-) -> SMatrix<f64, R, C> {
-    let mut out = SMatrix::<f64, R, C>::zeros();
-    for j in 0..C {
-        for k in 0..K {
-            let bjk = b[(j, k)];
-            for i in 0..R {
-                out[(i, j)] += a[(i, k)] * bjk;
-            }
-        }
-    }
-    out
+fn mul_t(a: &Matrix3<f64>, b: &Matrix3<f64>) -> Matrix3<f64> {
+    mul(a, &b.transpose())
 }
 
 impl Increment {
@@ -291,8 +279,7 @@ impl Increment {
         let mut top = [[0.0; 9]; 9];
         for (tj, wj) in top.iter_mut().zip(&w) {
             for (c, &f) in wj.iter().enumerate() {
-                let (lo, hi) = PHI_ROWS[c];
-                for i in lo..hi {
+                for i in 0..PHI_ROWS[c / 3] {
                     tj[i] += f * phi[i][c];
                 }
             }
@@ -343,25 +330,10 @@ impl Increment {
     }
 }
 
-/// The rows `lo..hi` of `Phi`'s top 9 that can be non-zero in column `c` (module docs).
-const PHI_ROWS: [(usize, usize); N] = [
-    (0, 3),
-    (0, 3),
-    (0, 3),
-    (0, 6),
-    (0, 6),
-    (0, 6),
-    (0, 9),
-    (0, 9),
-    (0, 9),
-    (0, 6),
-    (0, 6),
-    (0, 6),
-    (0, 9),
-    (0, 9),
-    (0, 9),
-    (0, 0),
-];
+/// How many of `Phi`'s top 9 rows can be non-zero in the columns of each error (position,
+/// velocity, attitude, the biases, the scale; module documentation): rows `0..PHI_ROWS[c / 3]`
+/// of column `c`.
+const PHI_ROWS: [usize; 6] = [3, 6, 9, 6, 9, 0];
 
 /// `X Phi^T`'s first 9 columns for the column-major `R x 16` matrix `x`: column `j` is
 /// `sum_c Phi[j, c] X[:, c]`, sums of `X`'s contiguous columns over `Phi`'s non-zero entries.
