@@ -57,10 +57,10 @@ struct BodyVelocity {
     uncorrected: Vector3<f64>,
 }
 
-/// The rest samples whose zero-velocity and zero-rate updates are still to be made: the
-/// updates are made once per covariance propagation at rest (`OdometryConfig::
-/// propagation_interval_s`), for all the rest samples since the last ones, with the same
-/// information (see [`Navigator::rest_updates`]).
+/// The rest samples whose zero-velocity and zero-rate updates are still to be made: at rest
+/// the updates are made once per covariance propagation (`OdometryConfig::
+/// propagation_interval_s`) or sooner, for all the rest samples since the last ones, with
+/// their information (see [`Navigator::rest_updates`]).
 #[derive(Debug, Clone, Copy, Default)]
 struct RestWindow {
     /// Samples.
@@ -427,8 +427,8 @@ impl Navigator {
     #[inline]
     fn rest_decision(&self, d: &HintDecision, imu_rest: bool) -> bool {
         // The IMU's rest flag decides without a fresh hint; after hints went stale, only when
-        // the velocity (at the previous sample) is consistent with rest (a detector that takes cruising for rest must not
-        // stop a robot the hints have just seen moving).
+        // the velocity (at the previous sample) is consistent with rest (a detector that takes
+        // cruising for rest must not stop a robot the hints have just seen moving).
         match d.rest {
             Some(r) => r,
             None if d.stale && imu_rest => self
@@ -490,9 +490,9 @@ impl Navigator {
     }
 
     /// The aligned filter's updates at this sample: at rest the sample joins the rest window,
-    /// whose updates are made when the covariance has just been propagated; in motion the
-    /// waiting speed hints. The body velocity's corrections are tracked for the mounting
-    /// estimate.
+    /// whose updates are made when the covariance has just been propagated or the window has
+    /// reached its drift bound ([`Self::rest_updates`]); in motion the waiting speed hints.
+    /// The body velocity's corrections are tracked for the mounting estimate.
     #[inline]
     fn update(&mut self, t_ns: u64, dt: f64, m: &Imu, rest: bool, moved: f64, hs: &mut HintSample) {
         let body_before = self.body_velocity();
@@ -564,10 +564,11 @@ impl Navigator {
     /// which holds while the velocity error stays the same over the window to within that
     /// update's 1-sigma: the window is closed early once the velocity noise accumulated over
     /// it, `q_a T` (`q_a` the accelerometer's noise density squared, `T` the window's span),
-    /// reaches `OdometryConfig::rest_window_drift` of `sigma^2 / n`. The zero-rate update takes the mean of
-    /// the window's gyro readings with the noise density over the square root of their span
-    /// (the gyro bias is constant over the window: the mean of the `n` readings is what they
-    /// tell of it). Tested against updates at every sample in `odometry/tests/rest_window.rs`.
+    /// reaches `OdometryConfig::rest_window_drift` of `sigma^2 / n`. The zero-rate update
+    /// takes the mean of the window's gyro readings with the noise density over the square
+    /// root of their span (the gyro bias is constant over the window: the mean of the `n`
+    /// readings is what they tell of it). Tested against updates at every sample in
+    /// `odometry/tests/rest_window.rs`.
     fn rest_updates(&mut self) {
         let w = std::mem::take(&mut self.rest_window);
         if w.n == 0 {

@@ -156,8 +156,9 @@ pub struct OdometryConfig {
     /// propagated from the transition and noise accumulated over the samples since the last
     /// one (`eskf::Eskf::with_propagation_interval`), and at rest the zero-velocity and
     /// zero-rate updates are made once per propagation with the information of one per
-    /// sample. The reported 1-sigma is that of the last propagation. 0 propagates and updates
-    /// at every sample.
+    /// sample (`rest_window_drift`). The reported 1-sigma is the last propagation's plus the
+    /// process noise accumulated since (`eskf::Eskf::position_sigma`). 0 propagates and
+    /// updates at every sample.
     pub propagation_interval_s: f64,
     /// Largest share of a rest window's zero-velocity update variance (`zupt_sigma_mps^2`
     /// over its `n` samples) that the velocity noise accumulated over the window may reach
