@@ -255,9 +255,18 @@ impl<T: Copy> Clone for Ring<T> {
         }
     }
 
-    /// Copies `other` into this ring's storage: no allocation when the capacities are equal.
+    /// Copies `other` into this ring's storage: no allocation when the capacities are equal,
+    /// and then only the values held are copied (the rest of the storage is never read).
     fn clone_from(&mut self, other: &Self) {
-        self.buf.clone_from(&other.buf);
+        let cap = other.buf.len();
+        if self.buf.len() == cap {
+            let (head, end) = (other.head, other.head + other.len);
+            let wrapped = end.saturating_sub(cap);
+            self.buf[head..end.min(cap)].copy_from_slice(&other.buf[head..end.min(cap)]);
+            self.buf[..wrapped].copy_from_slice(&other.buf[..wrapped]);
+        } else {
+            self.buf.clone_from(&other.buf);
+        }
         self.head = other.head;
         self.len = other.len;
     }
@@ -424,6 +433,28 @@ mod tests {
         assert_eq!(r.pop(), Some(3));
         r.push(5);
         assert_eq!((r.pop(), r.pop(), r.pop()), (Some(4), Some(5), None));
+    }
+
+    #[test]
+    fn a_copy_holds_the_same_values_wrapped_or_not() {
+        let mut a = Ring::<u32>::new(4);
+        let mut b = Ring::<u32>::new(4);
+        for v in 1..=6 {
+            a.push(v);
+            // Held values 2..=v (at most 4), wrapped around the storage's end from v = 5.
+            b.clone_from(&a);
+            let held = |r: &Ring<u32>| (0..r.len()).map(|i| *r.oldest(i).unwrap()).collect();
+            let (x, y): (Vec<u32>, Vec<u32>) = (held(&a), held(&b));
+            assert_eq!(x, y);
+            assert_eq!(x.last(), Some(&v));
+        }
+        a.pop();
+        b.clone_from(&a);
+        assert_eq!((b.len(), b.front(), b.newest(0)), (3, Some(&4), Some(&6)));
+        // A ring of another capacity takes the other's storage.
+        let mut c = Ring::<u32>::new(2);
+        c.clone_from(&a);
+        assert_eq!((c.len(), c.front(), c.newest(0)), (3, Some(&4), Some(&6)));
     }
 
     #[test]

@@ -57,6 +57,20 @@ struct BodyVelocity {
     uncorrected: Vector3<f64>,
 }
 
+/// The rest samples whose zero-velocity and zero-rate updates are still to be made: at rest
+/// the updates are made once per covariance propagation (`OdometryConfig::
+/// propagation_interval_s`) or sooner, for all the rest samples since the last ones, with
+/// their information (see [`Navigator::rest_updates`]).
+#[derive(Debug, Clone, Copy, Default)]
+struct RestWindow {
+    /// Samples.
+    n: u32,
+    /// Their intervals' sum, s.
+    t_s: f64,
+    /// Sum of their (corrected) gyro readings, rad/s, sensor frame.
+    w_sum: Vector3<f64>,
+}
+
 /// What the hints did at the current sample.
 #[derive(Debug, Clone, Copy, Default)]
 struct HintSample {
@@ -184,6 +198,8 @@ pub(crate) struct Navigator {
     /// `effective_samples` is set.
     zupt_sigma_mps: f64,
     kf: Option<Eskf>,
+    /// Rest samples whose updates are still to be made.
+    rest_window: RestWindow,
     /// Time (ns), sequence number and measurement of the previous sample.
     last: Option<(u64, u64, Imu)>,
     history: Vec<HistoryEntry>,
@@ -226,6 +242,7 @@ impl Navigator {
             align: AlignSums::default(),
             zupt_sigma_mps: cfg.zupt_sigma_mps,
             kf: None,
+            rest_window: RestWindow::default(),
             last: None,
             history: Vec::with_capacity(capacity),
             history_overflowed: false,
@@ -246,6 +263,7 @@ impl Navigator {
         self.align = other.align;
         self.zupt_sigma_mps = other.zupt_sigma_mps;
         self.kf.clone_from(&other.kf);
+        self.rest_window = other.rest_window;
         self.last = other.last;
         self.history.clone_from(&other.history);
         self.history_overflowed = other.history_overflowed;
@@ -332,11 +350,15 @@ impl Navigator {
             return;
         }
         let dt = (t_ns - prev_ns.unwrap_or(t_ns)) as f64 * 1e-9;
-        let moved = self.predict(m, dt, gap, &mut d.sample);
         let rest = self.rest_decision(&d, imu_rest);
+        if !rest {
+            // The rest ended at the previous sample: its last updates are made there.
+            self.close_rest_window();
+        }
+        let moved = self.predict(m, dt, gap, &mut d.sample);
         self.count_hint_use(&d);
         self.track_motion(t_ns, prev_ns, rest, emit);
-        self.update(t_ns, dt, rest, moved, &mut d.sample);
+        self.update(t_ns, dt, &m, rest, moved, &mut d.sample);
 
         let state = self.state(s, rest, d.sample);
         if !rest && self.motion_start_ns.is_some() {
@@ -401,12 +423,12 @@ impl Navigator {
         (kf.x.p - p_before).xy().norm()
     }
 
-    /// Whether the aligned filter takes this sample as rest.
+    /// Whether the aligned filter takes this sample as rest (decided before its prediction).
     #[inline]
     fn rest_decision(&self, d: &HintDecision, imu_rest: bool) -> bool {
         // The IMU's rest flag decides without a fresh hint; after hints went stale, only when
-        // the velocity is consistent with rest (a detector that takes cruising for rest must not
-        // stop a robot the hints have just seen moving).
+        // the velocity (at the previous sample) is consistent with rest (a detector that takes
+        // cruising for rest must not stop a robot the hints have just seen moving).
         match d.rest {
             Some(r) => r,
             None if d.stale && imu_rest => self
@@ -467,33 +489,37 @@ impl Navigator {
         self.at_rest = rest;
     }
 
-    /// The aligned filter's updates at this sample: zero velocity and zero rate at rest,
-    /// the waiting speed hints in motion; the body velocity's corrections are tracked for the
-    /// mounting estimate.
+    /// The aligned filter's updates at this sample: at rest the sample joins the rest window,
+    /// whose updates are made when the covariance has just been propagated or the window has
+    /// reached its drift bound ([`Self::rest_updates`]); in motion the waiting speed hints.
+    /// The body velocity's corrections are tracked for the mounting estimate.
     #[inline]
-    fn update(&mut self, t_ns: u64, dt: f64, rest: bool, moved: f64, hs: &mut HintSample) {
-        let kf = self.kf.as_mut().expect("aligned");
-        let hints = &mut self.hints;
-        let body_before = hints.r_bs.map(|r| kf.body_velocity(&r));
+    fn update(&mut self, t_ns: u64, dt: f64, m: &Imu, rest: bool, moved: f64, hs: &mut HintSample) {
+        let body_before = self.body_velocity();
         if let Some(v_b) = body_before {
+            let hints = &mut self.hints;
             hints.history.push(BodyVelocity {
                 t_ns,
                 uncorrected: v_b - hints.corrections,
             });
         }
         if rest && self.cfg.rest_updates {
-            let (p0, v0) = (kf.x.p, kf.x.v);
-            kf.zero_velocity(self.zupt_sigma_mps);
-            let gyro_sigma = self.cfg.noise.gyro_noise_density / dt.sqrt();
-            kf.zero_rate(gyro_sigma, self.cfg.zaru_gate_sigma);
-            if let Some(pending) = self.pending.as_mut() {
-                pending.dp += kf.x.p - p0;
-                pending.dv += kf.x.v - v0;
+            let w = &mut self.rest_window;
+            w.n += 1;
+            w.t_s += dt;
+            w.w_sum += m.w;
+            let accel_var = self.cfg.noise.accel_noise_density.powi(2) * w.t_s;
+            let quasi_static = accel_var * f64::from(w.n)
+                < self.cfg.rest_window_drift * self.zupt_sigma_mps.powi(2);
+            if self.kf.as_ref().expect("aligned").propagated() || !quasi_static {
+                self.rest_updates();
             }
             // A stationary robot's speed hint says nothing the zero-velocity update did not.
-            hints.speed.clear();
+            self.hints.speed.clear();
         } else {
             self.distance_m += moved;
+            let kf = self.kf.as_mut().expect("aligned");
+            let hints = &mut self.hints;
             while let Some(h) = hints.speed.pop() {
                 if hints.apply_speed(kf, &h, t_ns) {
                     hs.flags |= odometry_flags::HINT_SPEED;
@@ -504,8 +530,59 @@ impl Navigator {
                 }
             }
         }
-        if let (Some(r), Some(before)) = (hints.r_bs, body_before) {
-            hints.corrections += kf.body_velocity(&r) - before;
+        self.track_corrections(body_before);
+    }
+
+    /// The body velocity, once the mounting is known (before [`Self::track_corrections`]).
+    fn body_velocity(&self) -> Option<Vector3<f64>> {
+        let kf = self.kf.as_ref().expect("aligned");
+        self.hints.r_bs.map(|r| kf.body_velocity(&r))
+    }
+
+    /// Adds the change the updates made to the body velocity since `before` to the
+    /// corrections.
+    fn track_corrections(&mut self, before: Option<Vector3<f64>>) {
+        if let (Some(v_b), Some(before)) = (self.body_velocity(), before) {
+            self.hints.corrections += v_b - before;
+        }
+    }
+
+    /// Makes the updates of a rest window that the motion of this sample ended, at the
+    /// window's last sample (the filter's state before this sample's prediction).
+    fn close_rest_window(&mut self) {
+        if self.rest_window.n == 0 {
+            return;
+        }
+        let before = self.body_velocity();
+        self.rest_updates();
+        self.track_corrections(before);
+    }
+
+    /// The zero-velocity and zero-rate updates of the rest window's `n` samples, made at its
+    /// last sample, and the window emptied. They carry the information of `n` updates, one per
+    /// sample: the zero-velocity update's variance is the per-sample one, `sigma^2`, over `n`,
+    /// which holds while the velocity error stays the same over the window to within that
+    /// update's 1-sigma: the window is closed early once the velocity noise accumulated over
+    /// it, `q_a T` (`q_a` the accelerometer's noise density squared, `T` the window's span),
+    /// reaches `OdometryConfig::rest_window_drift` of `sigma^2 / n`. The zero-rate update
+    /// takes the mean of the window's gyro readings with the noise density over the square
+    /// root of their span (the gyro bias is constant over the window: the mean of the `n`
+    /// readings is what they tell of it). Tested against updates at every sample in
+    /// `odometry/tests/rest_window.rs`.
+    fn rest_updates(&mut self) {
+        let w = std::mem::take(&mut self.rest_window);
+        if w.n == 0 {
+            return;
+        }
+        let kf = self.kf.as_mut().expect("aligned");
+        let (p0, v0) = (kf.x.p, kf.x.v);
+        let n = f64::from(w.n);
+        kf.zero_velocity(self.zupt_sigma_mps / n.sqrt());
+        let gyro_sigma = self.cfg.noise.gyro_noise_density / w.t_s.sqrt();
+        kf.zero_rate(w.w_sum / n, gyro_sigma, self.cfg.zaru_gate_sigma);
+        if let Some(pending) = self.pending.as_mut() {
+            pending.dp += kf.x.p - p0;
+            pending.dv += kf.x.v - v0;
         }
     }
 
@@ -573,7 +650,8 @@ impl Navigator {
         };
         self.kf = Some(
             Eskf::new(x, cov, self.cfg.gravity_mps2, self.cfg.noise, *m)
-                .with_consider(consider, f_mean),
+                .with_consider(consider, f_mean)
+                .with_propagation_interval(self.cfg.propagation_interval_s),
         );
         self.at_rest = true;
     }

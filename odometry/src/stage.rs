@@ -152,6 +152,24 @@ pub struct OdometryConfig {
     /// or a skipped sequence number): the reported 1-sigma grows with it across the gap
     /// (`Eskf::missed`).
     pub manoeuvre: Manoeuvre,
+    /// Longest time between two propagations of the filter's covariance, s: the covariance is
+    /// propagated from the transition and noise accumulated over the samples since the last
+    /// one (`eskf::Eskf::with_propagation_interval`), and at rest the zero-velocity and
+    /// zero-rate updates are made once per propagation with the information of one per
+    /// sample (`rest_window_drift`). The reported 1-sigma is the last propagation's plus the
+    /// process noise accumulated since (`eskf::Eskf::position_sigma`). 0 propagates and
+    /// updates at every sample.
+    pub propagation_interval_s: f64,
+    /// Largest share of a rest window's zero-velocity update variance (`zupt_sigma_mps^2`
+    /// over its `n` samples) that the velocity noise accumulated over the window may reach
+    /// before the window's updates are made: the `n` per-sample updates are one of variance
+    /// `zupt_sigma_mps^2 / n` only while the velocity error stays put over the window. At
+    /// 0.05 the rest's steady velocity variance right after an update is 11 % below the limit
+    /// that updates at every sample approach as the sample interval shrinks, `sqrt(q r T)`,
+    /// and 12 % above it just before (a random walk of intensity `q` under updates of
+    /// variance `r` every `T` settles after the update at the root of
+    /// `x^2 + q T x - q T r = 0`, before it at `x + q T`). 0 updates at every rest sample.
+    pub rest_window_drift: f64,
     /// Whether rest flags, once aligned, give zero-velocity and zero-rate updates (`false`: a
     /// diagnostic that integrates freely after alignment, as `mems-odometry offline
     /// --no-zupt`).
@@ -193,6 +211,8 @@ impl OdometryConfig {
                 tilt: 0.05,
                 duration_s: 0.5,
             },
+            propagation_interval_s: 0.01,
+            rest_window_drift: 0.05,
             rest_updates: true,
         }
     }
