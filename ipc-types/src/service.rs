@@ -7,6 +7,7 @@
 //! An opener may not ask for more than the creator configured, so all processes must use
 //! these functions rather than their own builders.
 
+use iceoryx2::identifiers::UniqueNodeId;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
@@ -102,6 +103,22 @@ pub fn remove_dead_nodes() -> Result<usize, ServiceError> {
             .map_err(|e| ServiceError(format!("cannot remove a dead node's resources: {e:?}")))?;
     }
     Ok(found)
+}
+
+/// The ids of the iceoryx2 nodes whose process died and whose resources are not removed yet
+/// (their ports still registered on their services). iceoryx2 tells a dead node by its
+/// process's monitor lock, so a node is listed here from its process's death until its
+/// cleanup (by any process) has removed its ports; never one of a live process.
+pub fn dead_nodes() -> Result<Vec<UniqueNodeId>, ServiceError> {
+    let mut dead = Vec::new();
+    Node::<ipc::Service>::list(Config::global_config(), |state| {
+        if matches!(state, NodeState::Dead(_)) {
+            dead.push(*state.node_id());
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| ServiceError(format!("cannot list iceoryx2 nodes: {e:?}")))?;
+    Ok(dead)
 }
 
 /// Opens (or creates) the publish-subscribe service `name` carrying `T`, with the lossless

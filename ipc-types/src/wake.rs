@@ -83,13 +83,16 @@ impl Waker {
     }
 }
 
-/// A publisher that wakes its subscribers: the first sample sent for an input is notified at
-/// once (the live output reaches its subscribers without waiting for the rest), the others
-/// together by [`Output::end_of_input`]. A send error is kept (a stage's emit callback cannot
-/// return one) and returned by [`Output::end_of_input`]; nothing is sent after it.
+/// A publisher that wakes its subscribers (unless made [`Output::unwoken`]): the first sample
+/// sent for an input is notified at once (the live output reaches its subscribers without
+/// waiting for the rest), the others together by [`Output::end_of_input`]. A send error is
+/// kept (a stage's emit callback cannot return one) and returned by [`Output::end_of_input`];
+/// nothing is sent after it. `mems-replay` publishes through it too, each replayed message an
+/// input of its own.
 pub struct Output<T: core::fmt::Debug + ZeroCopySend + 'static> {
     publisher: Publisher<ipc::Service, T, ()>,
-    waker: Waker,
+    /// `None` for a publisher that wakes nobody ([`Output::unwoken`]).
+    waker: Option<Waker>,
     error: Option<ServiceError>,
     /// Whether the current input's first sample was notified.
     notified: bool,
@@ -120,20 +123,34 @@ impl<T: core::fmt::Debug + ZeroCopySend + Copy + 'static> Output<T> {
         publisher: Publisher<ipc::Service, T, ()>,
         name: &str,
     ) -> Result<Self, ServiceError> {
-        Ok(Self {
+        Ok(Self::woken_by(publisher, Some(Waker::new(node, name)?)))
+    }
+
+    /// `publisher` without a [`Waker`]: for a service whose subscribers are not woken by its
+    /// samples. The robot hints are one: only samples wake the odometry, which takes the hints
+    /// that arrived when it wakes (`mems-replay` publishes them so).
+    pub fn unwoken(publisher: Publisher<ipc::Service, T, ()>) -> Self {
+        Self::woken_by(publisher, None)
+    }
+
+    fn woken_by(publisher: Publisher<ipc::Service, T, ()>, waker: Option<Waker>) -> Self {
+        Self {
             publisher,
-            waker: Waker::new(node, name)?,
+            waker,
             error: None,
             notified: false,
             unnotified: false,
             sent: 0,
-        })
+        }
     }
 
-    /// Sends `value` (nothing after an error).
-    pub fn send(&mut self, value: T) {
+    /// Sends `value` and returns how many subscribers it reached (iceoryx2's count: a
+    /// subscriber whose buffer stayed full past the publisher's backpressure handling, or that
+    /// is gone, is not one); 0 if it was not sent (an error, now or since the last
+    /// [`Output::end_of_input`]).
+    pub fn send(&mut self, value: T) -> usize {
         if self.error.is_some() {
-            return;
+            return 0;
         }
         let sent = self
             .publisher
@@ -144,18 +161,24 @@ impl<T: core::fmt::Debug + ZeroCopySend + Copy + 'static> Output<T> {
                     .send()
                     .map_err(|e| ServiceError(format!("cannot send a sample: {e:?}")))
             });
-        if let Err(e) = sent {
-            self.error = Some(e);
-            return;
-        }
+        let recipients = match sent {
+            Ok(n) => n,
+            Err(e) => {
+                self.error = Some(e);
+                return 0;
+            }
+        };
         self.sent += 1;
-        if self.notified {
-            self.unnotified = true;
-        } else if let Err(e) = self.waker.notify() {
-            self.error = Some(e);
-        } else {
-            self.notified = true;
+        if let Some(waker) = &self.waker {
+            if self.notified {
+                self.unnotified = true;
+            } else if let Err(e) = waker.notify() {
+                self.error = Some(e);
+            } else {
+                self.notified = true;
+            }
         }
+        recipients
     }
 
     /// The input is done: notifies what was sent since its first sample, and returns the
@@ -163,7 +186,8 @@ impl<T: core::fmt::Debug + ZeroCopySend + Copy + 'static> Output<T> {
     pub fn end_of_input(&mut self) -> Result<(), ServiceError> {
         if self.unnotified
             && self.error.is_none()
-            && let Err(e) = self.waker.notify()
+            && let Some(waker) = &self.waker
+            && let Err(e) = waker.notify()
         {
             self.error = Some(e);
         }

@@ -15,14 +15,20 @@
 //! raw sample taken at or after it). Pacing follows those times against the monotonic clock,
 //! scaled by a speed factor, or is as fast as the subscribers take the messages
 //! ([`Pace::Max`]): the lossless publishers of `ipc_types::service` retry until every
-//! subscriber has room, so nothing is lost either way. Where the recorded times start over (runs
-//! recorded into one file), pacing starts over with them. A window ([`source::Window`]) keeps
-//! part of the recording; looping ([`ReplayOptions::looping`]) replays it again and again: each
-//! pass sends the same sequence numbers and sample times again, which our processes take for a
-//! new acquisition session (the calibration starts over, the odometry aligns again).
+//! subscriber has room, so nothing is lost either way. A subscriber that leaves during the
+//! replay (it ends, or its process dies) is a departure, not a replay fault: the others still
+//! get every message, and what reached fewer subscribers because of it is counted and reported
+//! ([`ReplaySummary`]). A dead subscriber's node is removed by the replay itself
+//! ([`DEAD_NODE_CLEANUP_PERIOD`]), so that it neither holds the replay back nor counts as
+//! registered for long. Where the recorded times start over (runs recorded into one file),
+//! pacing starts over with them. A window ([`source::Window`]) keeps part of the recording;
+//! looping ([`ReplayOptions::looping`]) replays it again and again: each pass sends the same
+//! sequence numbers and sample times again, which our processes take for a new acquisition
+//! session (the calibration starts over, the odometry aligns again).
 
 #![warn(missing_docs)]
 
+mod deliveries;
 pub mod ports;
 pub mod progress;
 pub mod source;
@@ -31,9 +37,10 @@ pub mod topics;
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
-use ipc_types::service::ServiceError;
+use ipc_types::service::{DeadNodeCleanup, ServiceError};
 use ipc_types::stop;
 
+use crate::deliveries::Deliveries;
 use crate::ports::Ports;
 use crate::source::{Merge, Recording, Window};
 use crate::topics::{Place, Replayable};
@@ -78,16 +85,23 @@ pub struct ReplaySummary {
     /// Whether SIGINT or SIGTERM stopped the replay before the last message.
     pub interrupted: bool,
     /// Messages that reached fewer subscribers than [`ReplayOptions::wait_subscribers`] while
-    /// that many were registered: lost for a subscriber that had not connected yet (iceoryx2
-    /// queues up to one buffer for it, then drops). 0 in a lossless replay; an error for
-    /// `mems-replay`.
+    /// that many were registered, none of them left and none was given up as stalled: lost for
+    /// a subscriber that had not connected yet (iceoryx2 queues up to one buffer for it, then
+    /// drops). 0 in a lossless replay; an error for `mems-replay`.
     pub short_deliveries: u64,
-    /// Messages sent while fewer than [`ReplayOptions::wait_subscribers`] subscribers were
-    /// registered, because one left: it ended, or it died and an iceoryx2 process removed its
-    /// dead node (any node creation does). A departure, not a replay fault: counted and
-    /// reported, and the remaining subscribers get every message. A dead subscriber counts as
-    /// registered until its node is removed, and what is sent to it until then as delivered.
+    /// Messages that reached fewer than [`ReplayOptions::wait_subscribers`] subscribers
+    /// because one left: it ended, or its process died (a SIGKILLed subscriber's node is
+    /// removed within [`DEAD_NODE_CLEANUP_PERIOD`], by the replay or by any iceoryx2 process
+    /// that creates a node). A departure, not a replay fault: counted and reported, and the
+    /// remaining subscribers get every message. Until a dead subscriber's node is removed, what
+    /// is sent to it fills its buffer and counts as delivered.
     pub after_subscriber_left: u64,
+    /// Messages that reached fewer than [`ReplayOptions::wait_subscribers`] subscribers
+    /// because the publisher gave them up for a subscriber whose buffer had stayed full for
+    /// `ipc_types::service::STALL_TIMEOUT` (one that died and whose node was not removed yet,
+    /// or one that hangs), as every publisher of ours does. Counted and reported, not a
+    /// replay fault.
+    pub given_up_stalled: u64,
 }
 
 impl ReplaySummary {
@@ -187,6 +201,16 @@ fn wait_for_subscribers(
     Ok(!(options.wait_subscribers > 0 && stop::sleep(SETTLE)))
 }
 
+/// How often the replay removes the nodes of dead processes ([`DeadNodeCleanup`], on a thread
+/// of its own, as `mems-record` does). A SIGKILLed subscriber stays registered until some
+/// process removes its node; until then what is sent to it fills its buffer, and then the
+/// lossless publisher waits for it (up to `ipc_types::service::STALL_TIMEOUT`). Removing it
+/// here makes its death a departure within this period, whether or not another iceoryx2
+/// process on the machine creates a node meanwhile: a real-time replay of up to 4 kHz at speed
+/// 1 sends far less than a buffer in it. Each removal lists every node (docs/acquisition.md:
+/// thousands of allocation calls with a few hundred nodes), hence not more often.
+pub const DEAD_NODE_CLEANUP_PERIOD: Duration = Duration::from_millis(250);
+
 /// When each message of one pass is due, and how much recorded time the pass has covered.
 #[derive(Debug, Default)]
 struct Pacer {
@@ -223,12 +247,13 @@ impl Pacer {
     }
 }
 
-/// Sends one pass of `messages` through `ports`, counting in `summary`; `Ok(false)` if
-/// SIGINT or SIGTERM stopped it.
+/// Sends one pass of `messages` through `ports`, counting in `summary` (short deliveries
+/// through `deliveries`); `Ok(false)` if SIGINT or SIGTERM stopped it.
 fn pass(
-    ports: &Ports,
+    ports: &mut Ports,
     messages: Merge<'_>,
     options: &ReplayOptions,
+    deliveries: &mut Deliveries,
     summary: &mut ReplaySummary,
     start: Instant,
     progress: &mut dyn FnMut(&ReplaySummary),
@@ -246,15 +271,8 @@ fn pass(
         if stop::requested() {
             return Ok(false);
         }
-        let recipients = ports.send(&payload)?;
-        if let Some(n) = recipients
-            && n < options.wait_subscribers
-        {
-            if ports.subscribers(payload.topic()) < options.wait_subscribers {
-                summary.after_subscriber_left += 1;
-            } else {
-                summary.short_deliveries += 1;
-            }
+        if let Some(delivery) = ports.send(&payload)? {
+            deliveries.note(ports, payload.topic(), delivery, summary);
         }
         summary.sent[payload.topic().index()] += 1;
         summary.pass_recorded_ns = pacer.covered_ns;
@@ -266,12 +284,13 @@ fn pass(
 
 /// Publishes `topics` of `recording` (within `window`, if given) on their services under
 /// `namespace`, from `node`, paced as `options` say (see the crate documentation); with
-/// `wait_subscribers` > 0 it starts [`SETTLE`] after they are registered and counts messages
-/// that reached fewer of them, apart from those sent after one of them left
-/// ([`ReplaySummary`]). `progress` sees the summary after each message. SIGINT or SIGTERM
-/// ([`ipc_types::stop`], installed here) stops the replay with [`ReplaySummary::interrupted`]
-/// set (the only way a looping replay ends). Returns [`LINGER`] after the last message, so
-/// that every subscriber has connected to it.
+/// `wait_subscribers` > 0 it starts [`SETTLE`] after they are registered and counts the
+/// messages that reached fewer of them by cause ([`ReplaySummary`]; some only later, at the
+/// latest at the end). Removes dead nodes every [`DEAD_NODE_CLEANUP_PERIOD`] meanwhile. `progress` sees
+/// the summary after each message. SIGINT or SIGTERM ([`ipc_types::stop`], installed here)
+/// stops the replay with [`ReplaySummary::interrupted`] set (the only way a looping replay
+/// ends). Returns [`LINGER`] after the last message, so that every subscriber has connected
+/// to it.
 pub fn replay(
     node: &Node<ipc::Service>,
     namespace: &str,
@@ -287,25 +306,39 @@ pub fn replay(
         return Err(ReplayError::BadSpeed(speed));
     }
     stop::install()?;
-    let ports = Ports::open(node, namespace, topics)?;
+    // Stopped and joined when the replay returns.
+    let _cleanup = DeadNodeCleanup::start(DEAD_NODE_CLEANUP_PERIOD)?;
+    let mut ports = Ports::open(node, namespace, topics)?;
     let mut summary = ReplaySummary::default();
     if !wait_for_subscribers(&ports, namespace, options)? {
         summary.interrupted = true;
         return Ok(summary);
     }
+    let mut deliveries = Deliveries::new(options.wait_subscribers);
     let start = Instant::now();
     loop {
         summary.passes += 1;
         summary.pass_recorded_ns = 0;
         let messages = Merge::new(recording.streams(topics)?, window);
-        if !pass(&ports, messages, options, &mut summary, start, progress)? {
+        if !pass(
+            &mut ports,
+            messages,
+            options,
+            &mut deliveries,
+            &mut summary,
+            start,
+            progress,
+        )? {
             summary.interrupted = true;
-            return Ok(summary);
+            break;
         }
         if !options.looping || summary.total_sent() == 0 {
             break;
         }
     }
-    summary.interrupted = stop::sleep(LINGER);
+    if !summary.interrupted {
+        summary.interrupted = stop::sleep(LINGER);
+    }
+    deliveries.finish(&ports, &mut summary);
     Ok(summary)
 }

@@ -56,11 +56,12 @@ struct Cli {
     namespace: Option<String>,
     /// Wait until this many subscribers are connected to each replayed service (the hints'
     /// only when replayed alone) before the first message, then check that every message
-    /// reaches that many. A message that reaches fewer while that many are registered was lost
-    /// for a subscriber that had not connected: counted, and the exit status is 1. A
-    /// subscriber that leaves during the replay (ends, or dies and its node is removed by any
-    /// iceoryx2 process) is not a replay failure: the messages sent after it left are counted
-    /// and reported, the others still get every message, and the exit status is 0.
+    /// reaches that many. A subscriber that leaves during the replay (ends, or is killed: the
+    /// replay removes dead processes' nodes every 0.25 s) is not a replay failure: the messages
+    /// that reached fewer because of it are counted and reported, the others still get every
+    /// message, and the exit status is 0; so are messages given up for a subscriber that took
+    /// none for 2 s (dead, or hung). A message lost for a subscriber that had not connected
+    /// yet is counted, and the exit status is 1.
     #[arg(long, default_value_t = 0)]
     wait_subscribers: usize,
     /// Give up waiting for subscribers after this many seconds.
@@ -138,7 +139,8 @@ fn run(cli: Cli) -> Result<()> {
     report(&summary, &counts, &topics, &options)
 }
 
-/// Prints the summary; an error if messages were lost for a subscriber.
+/// Prints the summary; an error if messages were lost for a subscriber that had not connected
+/// (a departure or a stalled subscriber is reported, not an error).
 fn report(
     summary: &ReplaySummary,
     counts: &[u64; 4],
@@ -167,14 +169,24 @@ fn report(
     );
     if summary.after_subscriber_left > 0 {
         println!(
-            "mems-replay: {} samples were sent after a subscriber left (fewer than {} registered)",
+            "mems-replay: {} samples reached fewer than {} subscribers after one left (it ended \
+             or died)",
             summary.after_subscriber_left, options.wait_subscribers
+        );
+    }
+    if summary.given_up_stalled > 0 {
+        println!(
+            "mems-replay: {} samples reached fewer than {} subscribers because they were given \
+             up for one that took none for {:.0} s (dead, or hung)",
+            summary.given_up_stalled,
+            options.wait_subscribers,
+            service::STALL_TIMEOUT.as_secs_f64()
         );
     }
     if summary.short_deliveries > 0 {
         bail!(
-            "{} samples reached fewer than {} subscribers while that many were registered: lost \
-             for a subscriber that had not connected yet",
+            "{} samples reached fewer than {} subscribers while that many were registered and \
+             none had left: lost for a subscriber that had not connected yet",
             summary.short_deliveries,
             options.wait_subscribers
         );

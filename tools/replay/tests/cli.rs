@@ -1,5 +1,6 @@
 //! `mems-replay` as a real process against real MCAP files, with subscribers on the real
-//! services in this process: topic choice, `--start`/`--end`, `--loop` with SIGTERM, and bad
+//! services in this process (or, to be SIGKILLed, in a process of their own): topic choice,
+//! `--start`/`--end`, `--loop` with SIGTERM, a subscriber killed during the replay, and bad
 //! arguments. What is expected is computed from the file read back (`read_all`).
 
 use std::path::{Path, PathBuf};
@@ -267,6 +268,99 @@ fn loop_replays_until_sigterm_and_exits_cleanly() {
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("no pass count in {stdout}"));
     assert!(passes >= 2, "{stdout}");
+}
+
+/// Environment variable that makes [`subscriber_process`] act: the namespace to subscribe in.
+const SUBSCRIBER_ENV: &str = "MEMS_REPLAY_TEST_SUBSCRIBER";
+/// Raw samples the subscriber process takes before it kills itself.
+const TAKEN: usize = 100;
+
+/// Not a test of its own (it returns at once): the subscriber process of
+/// [`a_killed_subscriber_is_a_departure_that_the_replay_removes_itself`], this test binary run
+/// again with [`SUBSCRIBER_ENV`] set. It subscribes to the raw samples, takes [`TAKEN`] of
+/// them and SIGKILLs itself: a subscriber that dies without closing its port, at a known
+/// point of the replay.
+#[test]
+fn subscriber_process() {
+    let Ok(ns) = std::env::var(SUBSCRIBER_ENV) else {
+        return;
+    };
+    let node = NodeBuilder::new().create::<ipc::Service>().unwrap();
+    let name = service::full_name(&ns, service::RAW);
+    let svc = service::open::<RawImuSample>(&node, &name).unwrap();
+    let sub = service::subscriber(&svc).unwrap();
+    let mut taken = 0;
+    while taken < TAKEN {
+        match sub.receive().unwrap() {
+            Some(_) => taken += 1,
+            None => thread::sleep(Duration::from_micros(100)),
+        }
+    }
+    // SAFETY: kill(2) on this process.
+    unsafe { libc::kill(libc::getpid(), libc::SIGKILL) };
+    unreachable!("SIGKILL cannot be caught");
+}
+
+/// A subscriber killed with SIGKILL during a `--max` replay that then sends far more than a
+/// subscriber buffer (the dead one's fills, and the lossless publisher would wait for it),
+/// with nothing in the test removing its node: the replay removes it (unless another iceoryx2
+/// process does first), takes its death for a departure and exits 0, counting and reporting every sample that did not reach it. It took
+/// [`TAKEN`] samples and its buffer holds at most [`service::SUBSCRIBER_BUFFER`] more (and
+/// the connection at times one or two beyond, see the replay tests), so at least the rest are
+/// counted, whether as sent after it left or, had its node outlived the publisher's stall
+/// timeout, as given up for it.
+#[test]
+fn a_killed_subscriber_is_a_departure_that_the_replay_removes_itself() {
+    let path = tmp("killed.mcap");
+    let n = TAKEN + service::SUBSCRIBER_BUFFER + 5000;
+    write_run(&path, n as u64);
+    let ns = namespace("killed");
+    let mut subscriber = Command::new(std::env::current_exe().unwrap())
+        .args(["subscriber_process", "--exact", "--test-threads", "1"])
+        .env(SUBSCRIBER_ENV, &ns)
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    let out = mems_replay(&[
+        path.to_str().unwrap(),
+        "--topics",
+        "mems/imu/raw",
+        "--max",
+        "--wait-subscribers",
+        "1",
+        "--wait-timeout",
+        "60",
+        "--namespace",
+        &ns,
+    ]);
+    let status = subscriber.wait().unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert_eq!(
+        std::os::unix::process::ExitStatusExt::signal(&status),
+        Some(libc::SIGKILL),
+        "the subscriber killed itself"
+    );
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", text(&out.stderr));
+    assert!(
+        stdout.contains(&format!("sent {n} of {n} samples")),
+        "{stdout}"
+    );
+    let count = |what: &str| {
+        stdout
+            .lines()
+            .find(|l| l.contains(what))
+            .and_then(|l| l.strip_prefix("mems-replay: "))
+            .and_then(|l| l.split(' ').next())
+            .map_or(0, |c| c.parse::<u64>().unwrap())
+    };
+    let departed = count("after one left") + count("given up");
+    let least = (n - TAKEN - service::SUBSCRIBER_BUFFER - 2) as u64;
+    assert!(
+        (least..=(n - TAKEN) as u64).contains(&departed),
+        "{departed} samples counted as departed, expected {least} to {}: {stdout}",
+        n - TAKEN
+    );
 }
 
 /// Bad arguments: a non-zero exit and a message that names the option (and for a topic that
