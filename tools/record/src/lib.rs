@@ -8,7 +8,10 @@
 //! metadata record); the stamps inside the messages stay `CLOCK_MONOTONIC`. The writer's chunk is flushed to the operating
 //! system whenever its oldest message is [`FLUSH_PERIOD`] old, so a killed recorder loses at
 //! most that much; SIGINT and SIGTERM ([`ipc_types::stop`]) end the recording cleanly with its
-//! summary and footer.
+//! summary and footer. Beside the flushed file the writer keeps a compact copy (whole chunks at
+//! a higher zstd level, `recording::mcap::Writer::create_new_compacting`) which replaces the
+//! file when the recording ends cleanly: a finished recording is 0.88 of the flushed file's
+//! size (docs/recording.md), a killed one is the flushed file.
 //!
 //! An existing recording is never overwritten unless asked ([`Target::Overwrite`]). A recorder
 //! restarted by a supervisor continues the run ([`Target::Continue`]) in the next segment file
@@ -386,7 +389,7 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
         .create::<ipc::Service>()
         .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
     let (number, path) = open_target(&options.out, options.target)?;
-    let mut writer = Writer::create_new(&path)?;
+    let mut writer = Writer::create_new_compacting(&path)?;
     writer.anchor(WallClock::now())?;
     let events = writer.add_channel::<RecorderEvent>()?;
     let mut split = Vec::new();
@@ -470,6 +473,17 @@ pub fn record(options: &RecordOptions) -> Result<RecordSummary> {
 /// for [`Target::Overwrite`]; errors (naming the file) for [`Target::New`] when a recording is
 /// there.
 fn open_target(out: &Path, target: Target) -> Result<(u32, PathBuf)> {
+    // The compact copies a killed recorder left beside the run's files (its flushed files
+    // are the recording).
+    let mut files = segment::existing(out);
+    if files.is_empty() {
+        files.push(out.to_path_buf());
+    }
+    for file in &files {
+        if recording::mcap::remove_stale_copy(file)? {
+            tracing::info!("removed the unfinished compact copy of {}", file.display());
+        }
+    }
     match target {
         Target::New => {
             segment::check_target(out, false)?;

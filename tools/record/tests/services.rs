@@ -311,8 +311,8 @@ fn python_mcap_reader_decodes_every_channel_with_its_schema() {
             })
         })
         .collect();
-    // 120 states 1 ms apart, all aligned: one path message (every 0.5 s), of one pose (one
-    // every 0.1 s), at the first state.
+    // 120 states 1 ms apart, all aligned: one path message (every 2 s), of one pose (one
+    // every 0.25 s), at the first state.
     let first = &sent.odometry[0].as_recorded();
     let path = vec![json!({
         "timestamp": time_json(at(first)),

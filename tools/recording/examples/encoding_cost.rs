@@ -4,12 +4,13 @@
 //! - as JSON, the form older recorders wrote (raw, corrected, state, a pose per live state,
 //!   hints, truth, events);
 //! - as protobuf, as the recorder writes now (the Foxglove topics derived from the states by
-//!   `recording::mcap::derived`, at their display rate), with the chunk size and zstd level
-//!   of the recorder, and with others;
+//!   `recording::mcap::derived`, at their display rate): its flushed file (a chunk closed
+//!   every 50 ms of log time, what a killed recorder leaves), its compact copy (whole chunks
+//!   at `recording::mcap::COMPACT_LEVEL`, what a finished recording is), and other levels;
 //!
 //! and prints each file's size and the time spent writing it (deriving, encoding,
 //! compressing and writing each message, then finishing the file) per message written, the
-//! best of three; then each topic's bytes written alone (protobuf, the recorder's settings).
+//! best of three; then what each topic adds to a finished recording.
 //!
 //!     cargo run --release -p recording --example encoding_cost -- run.mcap
 
@@ -22,7 +23,9 @@ use recording::mcap::derived::{
     Derived, Out, PATH_TOPIC, POSE_TOPIC, REVISED_POSE_TOPIC, TF_TOPIC,
 };
 use recording::mcap::run::RunReader;
-use recording::mcap::{MessageEncoding, PoseInFrame, RecorderEvent, Topic, Writer};
+use recording::mcap::{
+    COMPACT_CHUNK_BYTES, COMPACT_LEVEL, MessageEncoding, PoseInFrame, RecorderEvent, Topic, Writer,
+};
 
 /// One decoded message with its log time (the recording's own Foxglove topics are not read:
 /// they are derived again from the states).
@@ -80,6 +83,8 @@ fn read(path: &Path) -> recording::Result<Vec<(Item, u64)>> {
 struct Layout {
     encoding: MessageEncoding,
     level: u32,
+    /// Uncompressed bytes at which a chunk is closed.
+    chunk_bytes: u64,
     /// Every topic but this one, or all.
     without: Option<&'static str>,
     /// Closes the chunk when its first message is this much log time old, as the recorder
@@ -90,7 +95,8 @@ struct Layout {
 /// Writes `items` to `out` as `layout` says; the seconds it took and the messages written.
 fn write(items: &[(Item, u64)], out: &Path, layout: Layout) -> recording::Result<(f64, u64)> {
     let start = Instant::now();
-    let mut w = Writer::create_tuned(out, layout.level)?.with_encoding(layout.encoding);
+    let mut w =
+        Writer::create_tuned(out, layout.level, layout.chunk_bytes)?.with_encoding(layout.encoding);
     let raw = w.add_channel::<RawImuSample>()?;
     let corrected = w.add_channel::<CorrectedImuSample>()?;
     let state = w.add_channel::<OdometryState>()?;
@@ -183,33 +189,56 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "{input}: {} messages read (Foxglove topics derived again)",
         items.len()
     );
-    let recorder = Layout {
+    // What the recorder leaves: its flushed file (a chunk closed every 50 ms of log time)
+    // if it is killed, the compact copy (whole chunks at COMPACT_LEVEL) if it finishes.
+    let flushed = Layout {
         encoding: MessageEncoding::Protobuf,
         level: 0,
+        chunk_bytes: 1 << 20,
         without: None,
         flush_ns: Some(50_000_000),
     };
+    let compact = Layout {
+        level: COMPACT_LEVEL,
+        chunk_bytes: COMPACT_CHUNK_BYTES,
+        flush_ns: None,
+        ..flushed
+    };
     let layouts = [
         (
-            "json",
+            "json, flushed every 50 ms",
             Layout {
                 encoding: MessageEncoding::Json,
-                ..recorder
-            },
-        ),
-        ("protobuf", recorder),
-        (
-            "protobuf, never flushed",
-            Layout {
-                flush_ns: None,
-                ..recorder
+                ..flushed
             },
         ),
         (
-            "protobuf, zstd 6",
+            "protobuf, flushed every 50 ms (a killed recorder's file)",
+            flushed,
+        ),
+        (
+            "protobuf, 4 MiB chunks, zstd level 3",
             Layout {
-                level: 6,
-                ..recorder
+                level: 0,
+                ..compact
+            },
+        ),
+        (
+            "protobuf, 1 MiB chunks, zstd level 9",
+            Layout {
+                chunk_bytes: 1 << 20,
+                ..compact
+            },
+        ),
+        (
+            "protobuf, 4 MiB chunks, zstd level 9 (a finished recording)",
+            compact,
+        ),
+        (
+            "protobuf, 4 MiB chunks, zstd level 17",
+            Layout {
+                level: 17,
+                ..compact
             },
         ),
     ];
@@ -223,9 +252,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             best * 1e6 / n as f64
         );
     }
-    // What each topic adds: the file without it, against the file with every topic (the
-    // recorder's layout, flushed as it flushes).
-    let (all, _, _) = measure(&items, recorder, 1)?;
+    // What each topic adds: the file without it, against the file with every topic (a
+    // finished recording's layout).
+    let (all, _, _) = measure(&items, compact, 1)?;
     println!("| topic | messages | bytes it adds |");
     println!("|---|---|---|");
     for topic in TOPICS {
@@ -233,11 +262,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &items,
             Layout {
                 without: Some(topic),
-                ..recorder
+                ..compact
             },
             1,
         )?;
-        let (_, everything, _) = measure(&items, recorder, 1)?;
+        let (_, everything, _) = measure(&items, compact, 1)?;
         if n < everything {
             println!("| {topic} | {} | {} |", everything - n, all - size);
         }

@@ -89,8 +89,8 @@ pub enum MessageEncoding {
     /// recordings hold.
     Json,
     /// `protobuf` described by a `protobuf` schema (a `FileDescriptorSet`), read with
-    /// `prost`: what [`Writer::create`] writes, 0.40 of the JSON's size for the same run
-    /// (docs/recording.md).
+    /// `prost`: what [`Writer::create`] writes; a recorder's finished file is half the size
+    /// of the same messages in JSON (docs/recording.md).
     Protobuf,
 }
 
@@ -1230,12 +1230,28 @@ impl<M> Clone for FoxgloveChannel<M> {
 
 impl<M> Copy for FoxgloveChannel<M> {}
 
+/// The `mcap` crate's writer on a buffered file.
+type McapWriter = ::mcap::Writer<BufWriter<File>>;
+
+/// zstd level of the compact copy a recorder writes beside its file
+/// ([`Writer::create_new_compacting`]), measured on a 60 s, 1 kHz stack run (docs/recording.md,
+/// "Size and write cost"): with [`COMPACT_CHUNK_BYTES`] it is 0.89 of the file flushed every
+/// 50 ms at zstd's default level 3, and 0.96 of the same chunks at level 3; level 17 would
+/// take 0.94 of level 9's bytes at 10 times its cost per message.
+pub const COMPACT_LEVEL: u32 = 9;
+/// Uncompressed size of the compact copy's chunks: 4 MiB (about 20 s of a 1 kHz run), 0.98 of
+/// the size the `mcap` crate's default 1 MiB chunks take at [`COMPACT_LEVEL`].
+pub const COMPACT_CHUNK_BYTES: u64 = 4 << 20;
+
 /// Writes an MCAP recording to a file: zstd chunks, protobuf messages (or JSON, for files in
 /// the older encoding: [`Writer::with_encoding`]).
 ///
 /// Dropping the writer finishes the file but ignores errors; call [`Writer::finish`].
 pub struct Writer {
-    inner: ::mcap::Writer<BufWriter<File>>,
+    inner: McapWriter,
+    /// The compact copy of a recorder's file, if it writes one
+    /// ([`Writer::create_new_compacting`]).
+    compact: Option<Compact>,
     path: PathBuf,
     encoding: MessageEncoding,
     sequences: HashMap<u16, u32>,
@@ -1268,30 +1284,58 @@ impl Writer {
         Self::on(path, file)
     }
 
-    /// Creates (or truncates) the file at `path` with chunks compressed at zstd level
-    /// `level` (0: zstd's default, 3), and writes the MCAP header: for measuring the cost of
-    /// the level (`examples/encoding_cost.rs`).
-    pub fn create_tuned(path: impl AsRef<Path>, level: u32) -> Result<Self> {
+    /// Creates the file at `path` as [`Writer::create_new`] does, for a recorder that flushes
+    /// it often (every flush closes a chunk, so that a killed recorder loses little), and a
+    /// compact copy of it beside it ([`compacting_path`]): the same records, in chunks of
+    /// [`COMPACT_CHUNK_BYTES`] at zstd level [`COMPACT_LEVEL`], which [`Writer::flush`] leaves
+    /// alone. [`Writer::finish`] finishes both and renames the copy
+    /// over the file, so a finished recording is the compact one; a recorder killed before that
+    /// leaves its flushed file as it was (and a copy that [`remove_stale_copy`] removes).
+    pub fn create_new_compacting(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let mut writer = Self::create_new(path)?;
+        let temp = compacting_path(path);
+        let file = File::create(&temp).map_err(|e| Error::io(&temp, e))?;
+        let copy = WriteOptions::new()
+            .compression(Some(Compression::Zstd))
+            .compression_level(COMPACT_LEVEL)
+            .chunk_size(Some(COMPACT_CHUNK_BYTES))
+            .create(BufWriter::new(file))
+            .map_err(|e| Error::file(&temp, ErrorKind::Mcap(e)))?;
+        writer.compact = Some(Compact {
+            writer: Some(copy),
+            temp,
+            target: path.to_path_buf(),
+        });
+        Ok(writer)
+    }
+
+    /// Creates (or truncates) the file at `path` with chunks of `chunk_bytes` (uncompressed)
+    /// compressed at zstd level `level` (0: zstd's default, 3), and writes the MCAP header:
+    /// for measuring what they cost (`examples/encoding_cost.rs`).
+    pub fn create_tuned(path: impl AsRef<Path>, level: u32, chunk_bytes: u64) -> Result<Self> {
         let path = path.as_ref();
         let file = File::create(path).map_err(|e| Error::io(path, e))?;
-        Self::with_options(path, file, level)
+        Self::with_options(path, file, level, chunk_bytes)
     }
 
     /// Writes the MCAP header to `file`, newly created at `path`.
     fn on(path: &Path, file: File) -> Result<Self> {
-        Self::with_options(path, file, 0)
+        Self::with_options(path, file, 0, WriteOptions::DEFAULT_CHUNK_SIZE)
     }
 
-    /// Writes the MCAP header to `file`, newly created at `path`, for chunks compressed at
-    /// zstd level `level`.
-    fn with_options(path: &Path, file: File, level: u32) -> Result<Self> {
+    /// Writes the MCAP header to `file`, newly created at `path`, for chunks of `chunk_bytes`
+    /// compressed at zstd level `level`.
+    fn with_options(path: &Path, file: File, level: u32, chunk_bytes: u64) -> Result<Self> {
         let inner = WriteOptions::new()
             .compression(Some(Compression::Zstd))
             .compression_level(level)
+            .chunk_size(Some(chunk_bytes))
             .create(BufWriter::new(file))
             .map_err(|e| Error::file(path, ErrorKind::Mcap(e)))?;
         Ok(Self {
             inner,
+            compact: None,
             path: path.to_path_buf(),
             encoding: MessageEncoding::Protobuf,
             sequences: HashMap::new(),
@@ -1310,9 +1354,7 @@ impl Writer {
             name: crate::clock::METADATA_NAME.into(),
             metadata: clock.metadata(),
         };
-        self.inner
-            .write_metadata(&metadata)
-            .map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
+        self.each(|w| w.write_metadata(&metadata))?;
         self.clock = Some(clock);
         Ok(())
     }
@@ -1332,19 +1374,9 @@ impl Writer {
             }
             MessageEncoding::Protobuf => T::proto_schema(),
         };
-        let schema_id = self
-            .inner
-            .add_schema(T::SCHEMA_NAME, self.encoding.schema(), &schema)
-            .map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
-        let id = self
-            .inner
-            .add_channel(
-                schema_id,
-                T::TOPIC,
-                self.encoding.message(),
-                &BTreeMap::new(),
-            )
-            .map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
+        let (schema_encoding, encoding) = (self.encoding.schema(), self.encoding.message());
+        let schema_id = self.each(|w| w.add_schema(T::SCHEMA_NAME, schema_encoding, &schema))?;
+        let id = self.each(|w| w.add_channel(schema_id, T::TOPIC, encoding, &BTreeMap::new()))?;
         if self.encoding == MessageEncoding::Protobuf {
             self.protos
                 .entry(id)
@@ -1411,9 +1443,26 @@ impl Writer {
             publish_time,
         };
         *sequence = sequence.wrapping_add(1);
-        self.inner
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(|e| Error::file(&self.path, ErrorKind::Mcap(e)))
+        let buf = std::mem::take(&mut self.buf);
+        let written = self.each(|w| w.write_to_known_channel(&header, &buf));
+        self.buf = buf;
+        written
+    }
+
+    /// Runs `f` on the file's writer, then on the compact copy's (which takes the same
+    /// records in the same order, so the ids they return are the same); an error names the
+    /// file it was met on.
+    fn each<T>(
+        &mut self,
+        mut f: impl FnMut(&mut McapWriter) -> ::mcap::McapResult<T>,
+    ) -> Result<T> {
+        let out = f(&mut self.inner).map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
+        if let Some(c) = &mut self.compact
+            && let Some(w) = &mut c.writer
+        {
+            f(w).map_err(|e| Error::file(&c.temp, ErrorKind::Mcap(e)))?;
+        }
+        Ok(out)
     }
 
     /// The wall clock the file is anchored to ([`Writer::anchor`]), if it is.
@@ -1428,14 +1477,9 @@ impl Writer {
         topic: &str,
     ) -> Result<FoxgloveChannel<M>> {
         let schema = M::get_schema().expect("Foxglove's messages have schemas");
-        let schema_id = self
-            .inner
-            .add_schema(&schema.name, &schema.encoding, &schema.data)
-            .map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
-        let id = self
-            .inner
-            .add_channel(schema_id, topic, "protobuf", &BTreeMap::new())
-            .map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
+        let schema_id =
+            self.each(|w| w.add_schema(&schema.name, &schema.encoding, &schema.data))?;
+        let id = self.each(|w| w.add_channel(schema_id, topic, "protobuf", &BTreeMap::new()))?;
         Ok(FoxgloveChannel {
             id,
             message: PhantomData,
@@ -1463,28 +1507,86 @@ impl Writer {
     }
 
     /// Closes the current chunk and hands everything written so far to the operating system,
-    /// so that a killed process loses nothing written before this call.
+    /// so that a killed process loses nothing written before this call (the compact copy, if
+    /// any, keeps its chunk open).
     pub fn flush(&mut self) -> Result<()> {
         self.inner
             .flush()
             .map_err(|e| self.fail(ErrorKind::Mcap(e)))
     }
 
-    /// Writes the summary and footer and closes the file.
+    /// Writes the summary and footer and closes the file; with a compact copy, finishes it
+    /// too and renames it over the file.
     pub fn finish(mut self) -> Result<()> {
         self.inner
             .finish()
             .map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
+        let compact = self.compact.take();
         let path = self.path.clone();
         self.inner
             .into_inner()
             .into_inner()
             .map_err(|e| Error::io(&path, e.into_error()))?;
-        Ok(())
+        compact.map_or(Ok(()), Compact::finish)
     }
 
     fn fail(&self, kind: ErrorKind) -> Error {
         Error::file(&self.path, kind)
+    }
+}
+
+/// The compact copy of a recorder's file ([`Writer::create_new_compacting`]): written at
+/// `temp`, renamed to `target` when finished, removed if dropped unfinished.
+struct Compact {
+    /// `None` once finished.
+    writer: Option<McapWriter>,
+    temp: PathBuf,
+    target: PathBuf,
+}
+
+impl Compact {
+    /// Finishes the copy, syncs it to disk and renames it over the target.
+    fn finish(mut self) -> Result<()> {
+        let Some(mut writer) = self.writer.take() else {
+            return Ok(());
+        };
+        writer
+            .finish()
+            .map_err(|e| Error::file(&self.temp, ErrorKind::Mcap(e)))?;
+        let file = writer
+            .into_inner()
+            .into_inner()
+            .map_err(|e| Error::io(&self.temp, e.into_error()))?;
+        file.sync_all().map_err(|e| Error::io(&self.temp, e))?;
+        std::fs::rename(&self.temp, &self.target).map_err(|e| Error::io(&self.target, e))
+    }
+}
+
+impl Drop for Compact {
+    fn drop(&mut self) {
+        if self.writer.take().is_some() {
+            // Unfinished: the flushed file is the recording. Best effort, as in any drop.
+            let _ = std::fs::remove_file(&self.temp);
+        }
+    }
+}
+
+/// Where [`Writer::create_new_compacting`] writes the compact copy of `path`: `path` with
+/// `.compacting` added (`run.mcap.compacting`), which no reader takes for a recording.
+pub fn compacting_path(path: &Path) -> PathBuf {
+    let mut name = path.as_os_str().to_owned();
+    name.push(".compacting");
+    PathBuf::from(name)
+}
+
+/// Removes the compact copy a killed recorder left beside `path`, if there is one; whether
+/// it did.
+pub fn remove_stale_copy(path: &Path) -> Result<bool> {
+    let copy = compacting_path(path);
+    match std::fs::remove_file(&copy) {
+        Ok(()) => Ok(true),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(false),
+        Err(e) => Err(Error::io(&copy, e)),
     }
 }
 
