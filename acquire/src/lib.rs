@@ -2,12 +2,14 @@
 //! reads and sample-time reconstruction ([`driver`]), the same register transactions over SPI
 //! ([`spi`]), the register map it is written against ([`registers`]), a register-level
 //! simulated MPU-9250 behind the same traits ([`sim`]), and the
-//! clocks both run on ([`clock`]); the acquisition loop ([`acquisition`]) and the small-block
-//! pool `mems-acquire` allocates from ([`pool`]).
+//! clocks both run on ([`clock`]); the acquisition loop ([`acquisition`]), and the
+//! `mems-acquire` process around it ([`process`]: the source opened, real-time setup,
+//! publishing on `mems/imu/raw` and the run's summary).
 
 pub mod acquisition;
 pub mod clock;
 pub mod driver;
+pub mod process;
 pub mod registers;
 pub mod sim;
 pub mod spi;

@@ -269,23 +269,18 @@ impl CalibrationFile {
         source: SourceSection,
         residuals: ResidualSection,
     ) -> Self {
-        let s = model.scale();
-        Self {
+        let mut file = Self {
             format_version: FORMAT_VERSION,
             model: model.kind(),
             method,
             weighting,
             covariance_mode,
             gravity_mps2,
-            bias_g: [model.bias_g().x, model.bias_g().y, model.bias_g().z],
-            scale: std::array::from_fn(|r| std::array::from_fn(|c| s[(r, c)])),
+            bias_g: [0.0; 3],
+            scale: [[0.0; 3]; 3],
             param_names: PARAM_NAMES.iter().map(|s| s.to_string()).collect(),
-            covariance: (0..N_PARAMS)
-                .map(|r| (0..N_PARAMS).map(|c| covariance[(r, c)]).collect())
-                .collect(),
-            sigma: (0..N_PARAMS)
-                .map(|k| covariance[(k, k)].max(0.0).sqrt())
-                .collect(),
+            covariance: Vec::new(),
+            sigma: Vec::new(),
             temperature_range_c: None,
             source,
             residuals,
@@ -294,7 +289,25 @@ impl CalibrationFile {
             time: TimeTerms::default(),
             nonlinearity: NonlinearityTerms::default(),
             gyro: GyroSection::default(),
-        }
+        };
+        file.set_accel_model(model, covariance);
+        file
+    }
+
+    /// Replaces the accelerometer model (its kind, bias and `S`) and the parameter covariance
+    /// (and so the sigmas), keeping the rest of the file. With [`CalibrationFile::identity`],
+    /// the one way to build a file around a model of one's own, as tests do.
+    pub fn set_accel_model(&mut self, model: &AccelModel, covariance: &ParamCovariance) {
+        let s = model.scale();
+        self.model = model.kind();
+        self.bias_g = [model.bias_g().x, model.bias_g().y, model.bias_g().z];
+        self.scale = std::array::from_fn(|r| std::array::from_fn(|c| s[(r, c)]));
+        self.covariance = (0..N_PARAMS)
+            .map(|r| (0..N_PARAMS).map(|c| covariance[(r, c)]).collect())
+            .collect();
+        self.sigma = (0..N_PARAMS)
+            .map(|k| covariance[(k, k)].max(0.0).sqrt())
+            .collect();
     }
 
     /// An identity model-3 calibration (S = I, b = 0, zero covariance, no fit behind it) at

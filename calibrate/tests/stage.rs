@@ -1,8 +1,7 @@
 //! The calibration stage against an independent computation of the correction, its ordering
 //! and latency, bad input, stream restarts and gaps, and the bias refinement at rest.
 
-use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
-use calibrate::calibfile::{CovarianceMode, Weighting};
+use calibrate::calibfile::CalibrationFile;
 use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
 use calibrate::stage::{CalibrationStage, RefineConfig, Settler, StageError, calib_id};
 use calibrate::zero_state::{BATCH_LEN, DetectorConfig, DetectorKind};
@@ -21,27 +20,8 @@ fn calibration() -> CalibrationFile {
         1.01, 0.008, 0.009, -0.006, 0.995, 0.011, -0.010, -0.004, 1.022,
     );
     let m = AccelModel::new(ModelKind::Full, s, Vector3::new(0.04, -0.035, 0.055)).unwrap();
-    let mut f = CalibrationFile::new(
-        &m,
-        &ParamCovariance::zeros(),
-        FitMethod::Labelled,
-        Weighting::Unweighted,
-        CovarianceMode::ResidualScaled,
-        GRAVITY,
-        SourceSection {
-            file: "test".into(),
-            kind: "six_position_means".into(),
-            poses: 6,
-            repaired_samples: 0,
-        },
-        ResidualSection {
-            rms_g: [0.0; 3],
-            max_abs_g: 0.0,
-            dof: [2; 3],
-            chi2: [0.0; 3],
-            per_pose_g: vec![],
-        },
-    );
+    let mut f = CalibrationFile::identity(GRAVITY);
+    f.set_accel_model(&m, &ParamCovariance::zeros());
     f.temperature.reference_c = Some(25.0);
     f.temperature.bias_g_per_c = Some([8e-4, -6e-4, 1.2e-3]);
     f.gyro.bias_dps = Some([2.0, -1.5, 3.0]);

@@ -184,37 +184,10 @@ mod tests {
         }
     }
 
+    /// The identity calibration at `gravity` with `noise` as its `[noise]` table (the accelerometer
+    /// model plays no part in the odometry's configuration).
     fn file_with(gravity: f64, noise: Option<NoiseParams>) -> CalibrationFile {
-        use calibrate::calibfile::{CovarianceMode, Weighting};
-        use calibrate::calibfile::{FitMethod, ResidualSection, SourceSection};
-        use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
-        let model = AccelModel::new(
-            ModelKind::Bias,
-            nalgebra::Matrix3::identity(),
-            nalgebra::Vector3::new(0.01, -0.02, 0.03),
-        )
-        .unwrap();
-        let mut file = CalibrationFile::new(
-            &model,
-            &(ParamCovariance::identity() * 1e-8),
-            FitMethod::Labelled,
-            Weighting::Unweighted,
-            CovarianceMode::ResidualScaled,
-            gravity,
-            SourceSection {
-                file: "six.csv".into(),
-                kind: "six_position_means".into(),
-                poses: 6,
-                repaired_samples: 0,
-            },
-            ResidualSection {
-                rms_g: [1e-3; 3],
-                max_abs_g: 2e-3,
-                dof: [5; 3],
-                chi2: [1e-6; 3],
-                per_pose_g: vec![[0.0; 3]; 6],
-            },
-        );
+        let mut file = CalibrationFile::identity(gravity);
         file.noise = noise;
         file
     }

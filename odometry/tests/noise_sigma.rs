@@ -9,9 +9,7 @@
 
 use std::path::{Path, PathBuf};
 
-use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
-use calibrate::calibfile::{CovarianceMode, Weighting};
-use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
+use calibrate::calibfile::CalibrationFile;
 use calibrate::noise_params::{AxisNoise, Estimate, NoiseParams, SensorNoise};
 use ipc_types::{CorrectedImuSample, OdometryState, Stamps, corrected_flags};
 use odometry::config::from_calibration;
@@ -64,35 +62,9 @@ fn noise(accel_n: f64) -> NoiseParams {
     }
 }
 
-/// Writes a bias-only calibration file with `noise` as its `[noise]` table.
+/// Writes the identity calibration with `noise` as its `[noise]` table.
 fn write_calibration(dir: &Path, name: &str, noise: Option<NoiseParams>) -> PathBuf {
-    let model = AccelModel::new(
-        ModelKind::Bias,
-        nalgebra::Matrix3::identity(),
-        nalgebra::Vector3::zeros(),
-    )
-    .unwrap();
-    let mut file = CalibrationFile::new(
-        &model,
-        &(ParamCovariance::identity() * 1e-8),
-        FitMethod::Labelled,
-        Weighting::Unweighted,
-        CovarianceMode::ResidualScaled,
-        G,
-        SourceSection {
-            file: "six.csv".into(),
-            kind: "six_position_means".into(),
-            poses: 6,
-            repaired_samples: 0,
-        },
-        ResidualSection {
-            rms_g: [1e-3; 3],
-            max_abs_g: 2e-3,
-            dof: [5; 3],
-            chi2: [1e-6; 3],
-            per_pose_g: vec![[0.0; 3]; 6],
-        },
-    );
+    let mut file = CalibrationFile::identity(G);
     file.noise = noise;
     let path = dir.join(name);
     file.save(&path).unwrap();

@@ -60,63 +60,25 @@ pub fn path_arg(p: &std::path::Path) -> &str {
     p.to_str().expect("UTF-8 path")
 }
 
-/// Calibrates the simulated datasheet-level MPU-9250 the way a user would, and as `mems-stack`
-/// does: a `mems-sim` six-position session (power-on `seed`) fitted with model 3 by
-/// `mems-calibrate fit`, then the gyro's scale and misalignment from a 16-orientation session
-/// of the same power-on by `mems-odometry gyrocal --into`; returns the calibration file written
-/// in `dir`.
+/// Calibrates the simulated datasheet-level MPU-9250 of power-on `seed` the way a user would,
+/// and as `mems-stack` does: the commands of [`mems_sim::calibration::recipe`] (a six-position
+/// session fitted with model 3, then the gyro's scale and misalignment from 16 orientations),
+/// each given 3 minutes; returns the calibration file written in `dir` (beside the sessions'
+/// `six-position.csv` and `orientations.csv`).
 pub fn calibrate_sim_part(dir: &std::path::Path, seed: u64) -> PathBuf {
-    let (six, poses, calib) = (
-        dir.join("six.csv"),
-        dir.join("poses.csv"),
-        dir.join("calib.toml"),
-    );
-    let seed = seed.to_string();
-    let session = |kind: &[&str], out: &std::path::Path| {
-        let common = [
-            "--preset",
-            "datasheet",
-            "--seed",
-            &seed,
-            "--rate",
-            "200",
-            "--out",
-        ];
-        let args: Vec<&str> = kind
-            .iter()
-            .chain(&common)
-            .copied()
-            .chain([path_arg(out)])
-            .collect();
-        run_ok("mems-sim", &args);
-    };
-    session(&["six-position"], &six);
-    run_ok(
-        "mems-calibrate",
-        &[
-            "fit",
-            "--input",
-            path_arg(&six),
-            "--model",
-            "full",
-            "--out",
-            path_arg(&calib),
-        ],
-    );
-    session(&["orientations", "--n", "16"], &poses);
-    run_ok(
-        "mems-odometry",
-        &[
-            "gyrocal",
-            "--input",
-            path_arg(&poses),
-            "--calib",
-            path_arg(&calib),
-            "--into",
-            path_arg(&calib),
-        ],
-    );
-    calib
+    let recipe = mems_sim::calibration::recipe(dir, seed);
+    for step in &recipe.steps {
+        let mut command = Command::new(bin(step.program));
+        command.args(&step.args);
+        let (status, _) = Proc::start(step.program, command).wait(Duration::from_secs(180));
+        assert!(
+            status.success(),
+            "{} {:?} failed: {status}",
+            step.program,
+            step.args
+        );
+    }
+    recipe.calib
 }
 
 /// A namespace for service names that no other test (or stack) on the machine uses.

@@ -42,7 +42,8 @@ fn stops_every_process(tag: &str, signals: &[i32]) {
     let calib = calibrate_sim_part(&dir, 5);
     let (calib, six, mcap) = (
         path_arg(&calib).to_string(),
-        dir.join("six.csv"),
+        // The six-position session calibrate_sim_part recorded.
+        dir.join("six-position.csv"),
         dir.join("run.mcap"),
     );
     let serve = |exe: &str, extra: &[&str]| {

@@ -112,7 +112,7 @@ pub fn run_allan(args: &Args) -> Result<()> {
 /// Runs the command, printing to `out`; returns the report.
 pub fn run_allan_to(args: &Args, out: &mut impl Write) -> Result<Report> {
     let options = args.options()?;
-    let files = expand_inputs(&args.input)?;
+    let files = recording::folders::expand(&args.input)?;
     let source = args
         .input
         .iter()
@@ -153,30 +153,6 @@ pub fn run_allan_to(args: &Args, out: &mut impl Write) -> Result<Report> {
         plot::write_png(path, &title, &report.channels)?;
     }
     Ok(report)
-}
-
-/// The files named, plus the `.csv` and `.mcap` files of the folders named (sorted).
-fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let mut files = Vec::new();
-    for input in inputs {
-        if input.is_dir() {
-            let mut found: Vec<PathBuf> = std::fs::read_dir(input)
-                .with_context(|| format!("reading the folder {}", input.display()))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| matches!(p.extension().and_then(|e| e.to_str()), Some("csv" | "mcap")))
-                .collect();
-            anyhow::ensure!(
-                !found.is_empty(),
-                "{}: no .csv or .mcap recordings in this folder",
-                input.display()
-            );
-            found.sort();
-            files.extend(found);
-        } else {
-            files.push(input.clone());
-        }
-    }
-    Ok(files)
 }
 
 fn term_text(term: &Term) -> String {

@@ -168,6 +168,35 @@ pub fn static_samples(
         .collect()
 }
 
+/// A static recording of white noise alone ([`static_samples`]): density `accel_n`
+/// (m/s^2/sqrt(Hz)) on each accelerometer axis and `gyro_n` (rad/s/sqrt(Hz)) on each gyro
+/// axis, `len` samples every `tau0_s` s at local gravity `gravity_mps2`, drawn from a ChaCha8
+/// generator seeded with `seed`: a record whose Allan analysis must find those densities.
+pub fn white_static_samples(
+    accel_n: f64,
+    gyro_n: f64,
+    len: usize,
+    tau0_s: f64,
+    gravity_mps2: f64,
+    seed: u64,
+) -> Vec<RawImuSample> {
+    use rand::SeedableRng;
+    let white = |density| NoiseModel {
+        white_density: density,
+        ..Default::default()
+    };
+    let (accel, gyro) = (white(accel_n), white(gyro_n));
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    static_samples(
+        &[accel.clone(), accel.clone(), accel],
+        Some(&[gyro.clone(), gyro.clone(), gyro]),
+        len,
+        tau0_s,
+        gravity_mps2,
+        &mut rng,
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use clap::Parser;
 use ipc_types::units::STANDARD_GRAVITY_MPS2;
-use noise::synth::{NoiseModel, static_samples};
+use noise::synth::{NoiseModel, static_samples, white_static_samples};
 use noise::{Args, NoiseParams};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -39,23 +39,8 @@ fn scratch(name: &str) -> PathBuf {
 /// 18 counts rms), with TEARS torn reads on accelerometer x, each consistent with the value it
 /// corrupts (x and y read about 0 g and z 1 g = 0x4000 counts: all sit on a byte boundary).
 fn write_recording(dir: &Path) -> PathBuf {
-    let accel = NoiseModel {
-        white_density: ACCEL_N,
-        ..Default::default()
-    };
-    let gyro = NoiseModel {
-        white_density: GYRO_N,
-        ..Default::default()
-    };
-    let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let mut samples = static_samples(
-        &[accel.clone(), accel.clone(), accel],
-        Some(&[gyro.clone(), gyro.clone(), gyro]),
-        20_000,
-        0.005,
-        STANDARD_GRAVITY_MPS2,
-        &mut rng,
-    );
+    let mut samples =
+        white_static_samples(ACCEL_N, GYRO_N, 20_000, 0.005, STANDARD_GRAVITY_MPS2, 5);
     let mut injected = 0;
     let mut i = 100;
     while injected < TEARS {

@@ -5,16 +5,11 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use calibrate::calibfile::{
-    CalibFileError, CalibrationFile, FitMethod, ResidualSection, SourceSection,
-};
+use calibrate::calibfile::{CalibFileError, CalibrationFile};
 use calibrate::model::{AccelModel, ModelKind, ParamCovariance};
 use calibrate::zero_state::{DetectorConfig, DetectorKind, NoiseFloor};
-use calibrate_science::fit::{CovarianceMode, Weighting};
 use nalgebra::{Matrix3, Vector3};
-use noise::synth::{NoiseModel, static_samples};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
+use noise::synth::white_static_samples;
 
 /// Local gravity of the calibration file (the thesis's), m/s^2.
 const GRAVITY: f64 = 9.797;
@@ -31,23 +26,7 @@ fn scratch(name: &str) -> PathBuf {
 
 /// 30 000 samples at 200 Hz of white noise on both sensors, written as a canonical CSV.
 fn write_static(dir: &Path) -> PathBuf {
-    let accel = NoiseModel {
-        white_density: ACCEL_N,
-        ..Default::default()
-    };
-    let gyro = NoiseModel {
-        white_density: GYRO_N,
-        ..Default::default()
-    };
-    let mut rng = ChaCha8Rng::seed_from_u64(11);
-    let samples = static_samples(
-        &[accel.clone(), accel.clone(), accel],
-        Some(&[gyro.clone(), gyro.clone(), gyro]),
-        30_000,
-        0.005,
-        GRAVITY,
-        &mut rng,
-    );
+    let samples = white_static_samples(ACCEL_N, GYRO_N, 30_000, 0.005, GRAVITY, 11);
     let path = dir.join("static.csv");
     recording::csv::write_raw(&path, &samples, None).unwrap();
     path
@@ -59,27 +38,8 @@ fn write_calibration(dir: &Path) -> (PathBuf, CalibrationFile) {
         1.002, 0.008, 0.009, -0.006, 1.0004, 0.0106, -0.0102, -0.0044, 1.02,
     );
     let model = AccelModel::new(ModelKind::Full, s, Vector3::new(0.09, 0.047, -0.25)).unwrap();
-    let file = CalibrationFile::new(
-        &model,
-        &(ParamCovariance::identity() * 1e-8),
-        FitMethod::Labelled,
-        Weighting::Unweighted,
-        CovarianceMode::ResidualScaled,
-        GRAVITY,
-        SourceSection {
-            file: "six.csv".into(),
-            kind: "six_position_means".into(),
-            poses: 6,
-            repaired_samples: 0,
-        },
-        ResidualSection {
-            rms_g: [1e-3; 3],
-            max_abs_g: 2e-3,
-            dof: [2; 3],
-            chi2: [1e-6; 3],
-            per_pose_g: vec![[0.0; 3]; 6],
-        },
-    );
+    let mut file = CalibrationFile::identity(GRAVITY);
+    file.set_accel_model(&model, &(ParamCovariance::identity() * 1e-8));
     let path = dir.join("calib.toml");
     file.save(&path).unwrap();
     (path, file)

@@ -34,12 +34,12 @@ fn csv_replayed_at_max_speed_is_recorded_bit_exact() {
     // What the replay publishes: the CSV as the recording crate reads it.
     let expected = recording::load_raw(&csv).unwrap().samples;
 
-    let recorder = Proc::spawn(
+    let recorder = spawn(
         &mems_record(),
         &["--out", mcap.to_str().unwrap(), "--namespace", &ns],
     );
     let before_ns = monotonic_ns();
-    let replay = Proc::spawn(
+    let replay = spawn(
         &mems_replay(),
         &[
             csv.to_str().unwrap(),
@@ -140,11 +140,11 @@ fn sigkilled_recorder_loses_at_most_100_ms() {
     recording::csv::write_raw(&csv, &raw_samples(4000, 0, 2000), None).unwrap();
     let expected = recording::load_raw(&csv).unwrap().samples;
 
-    let recorder = Proc::spawn(
+    let recorder = spawn(
         &mems_record(),
         &["--out", mcap.to_str().unwrap(), "--namespace", &ns],
     );
-    let replay = Proc::spawn(
+    let replay = spawn(
         &mems_replay(),
         &[
             csv.to_str().unwrap(),
@@ -240,11 +240,11 @@ fn sigkilled_publisher_shows_as_lost_back_and_gap() {
     write(&second, &second_samples);
     let replay_bin = mems_replay();
 
-    let recorder = Proc::spawn(
+    let recorder = spawn(
         &mems_record(),
         &["--out", mcap.to_str().unwrap(), "--namespace", &ns],
     );
-    let replay = Proc::spawn(
+    let replay = spawn(
         &replay_bin,
         &[
             first.to_str().unwrap(),
@@ -262,7 +262,7 @@ fn sigkilled_publisher_shows_as_lost_back_and_gap() {
             .iter()
             .any(|e| e.kind == EventKind::PublisherLost)
     });
-    let replay = Proc::spawn(
+    let replay = spawn(
         &replay_bin,
         &[
             second.to_str().unwrap(),
@@ -323,7 +323,7 @@ fn duration_ends_the_recording_cleanly() {
     let ns = namespace("duration");
     let mcap = tmp("duration.mcap");
     let started = std::time::Instant::now();
-    let recorder = Proc::spawn(
+    let recorder = spawn(
         &mems_record(),
         &[
             "--out",
@@ -342,7 +342,7 @@ fn duration_ends_the_recording_cleanly() {
     assert_eq!(contents.truncation, None);
     assert!(contents.raw.is_empty() && contents.events.is_empty());
 
-    let bad = Proc::spawn(
+    let bad = spawn(
         &mems_record(),
         &["--out", mcap.to_str().unwrap(), "--duration", "-1"],
     );
@@ -367,7 +367,7 @@ fn a_restarted_recorder_continues_the_run_in_the_next_segment() {
     recording::csv::write_raw(&csv, &raw_samples(3000, 0, 1000), None).unwrap();
     let expected = recording::load_raw(&csv).unwrap().samples;
     let record = || {
-        Proc::spawn(
+        spawn(
             &mems_record(),
             &[
                 "--out",
@@ -379,7 +379,7 @@ fn a_restarted_recorder_continues_the_run_in_the_next_segment() {
         )
     };
     let first = record();
-    let replay = Proc::spawn(
+    let replay = spawn(
         &mems_replay(),
         &[
             csv.to_str().unwrap(),
@@ -396,7 +396,7 @@ fn a_restarted_recorder_continues_the_run_in_the_next_segment() {
     first.wait(WAIT);
     let cut = std::fs::read(&mcap).unwrap();
 
-    let refused = Proc::spawn(
+    let refused = spawn(
         &mems_record(),
         &["--out", mcap.to_str().unwrap(), "--namespace", &ns],
     );

@@ -112,7 +112,7 @@ fn state_from(c: &CorrectedImuSample, flags: u16) -> OdometryState {
 fn record_fake_stack(test: &str, n: usize) -> (PathBuf, Sent) {
     let ns = namespace(test);
     let mcap = tmp(&format!("{test}.mcap"));
-    let recorder = Proc::spawn(
+    let recorder = spawn(
         &mems_record(),
         &["--out", mcap.to_str().unwrap(), "--namespace", &ns],
     );

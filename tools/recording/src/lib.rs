@@ -5,6 +5,7 @@
 //!   by sniffing its first bytes and header; [`load_raw_with`] can repair the defects of real
 //!   logs in the text formats ([`LogPolicy`]).
 //! - [`csv`]: the canonical CSV ([`csv::read_raw`], [`csv::write_raw`]).
+//! - [`folders`]: the recordings a command line names, folders expanded ([`folders::expand`]).
 //! - [`mcap`]: MCAP recordings ([`mcap::Writer`], [`mcap::Reader`], [`mcap::read_all`]).
 //! - [`segment`]: a run recorded across recorder restarts, in several files read as one.
 //! - [`thesis`]: the thesis's six-position means ([`load_six_position`]) and fitted parameters.
@@ -17,6 +18,7 @@
 pub mod clock;
 pub mod csv;
 mod error;
+pub mod folders;
 pub mod mcap;
 pub mod segment;
 mod text;

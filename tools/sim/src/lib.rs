@@ -14,8 +14,11 @@
 //!   quantisation, a start in motion).
 //! - [`hints`]: the robot controller's rest and speed hints during a drive.
 //! - [`SimSensor`]: a scenario measured by a powered-on sensor, a [`SampleSource`].
+//! - [`calibration`]: the commands that calibrate the simulated part as a user would, which
+//!   `mems-stack` and the integration tests run.
 
 pub mod adc;
+pub mod calibration;
 pub mod defects;
 pub mod dlpf;
 pub mod hints;

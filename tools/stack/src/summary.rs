@@ -8,6 +8,7 @@ use ipc_types::{OdometryState, odometry_flags, service};
 use mems_topic::TopicStats;
 
 use crate::losses::{RecorderLosses, SourceLosses};
+use crate::monitor::Monitor;
 
 /// Everything the summary reports.
 pub struct Summary<'a> {
@@ -25,6 +26,29 @@ pub struct Summary<'a> {
     pub record: Option<&'a Path>,
     /// The newest live odometry state.
     pub state: Option<&'a OdometryState>,
+}
+
+impl<'a> Summary<'a> {
+    /// The summary of a run of `elapsed_s` seconds: what `monitor` saw, the children's
+    /// `restarts`, and when recording, what the recording misses and its first file.
+    pub fn of(
+        monitor: &'a Monitor,
+        elapsed_s: f64,
+        restarts: &'a [String],
+        recorder: Option<&'a RecorderLosses>,
+        record: Option<&'a Path>,
+    ) -> Self {
+        let [raw, corrected, odometry] = &monitor.stats;
+        Self {
+            elapsed_s,
+            restarts,
+            topics: [raw, corrected, odometry],
+            source: &monitor.source,
+            recorder,
+            record,
+            state: monitor.last_state.as_ref(),
+        }
+    }
 }
 
 /// The files of the run at `base` and their total size, bytes.

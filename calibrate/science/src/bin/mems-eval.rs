@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
 use calibrate_science::static_eval::{DriftSource, StaticEvalConfig, evaluate_static};
 use calibrate_science::{plots, thesis_eval};
@@ -93,7 +93,7 @@ fn load_noise(path: &Path) -> Result<NoiseParams> {
 /// The earlier recordings named by `prior` (files or folders), read with a progress bar
 /// (returned for the evaluation to go on with).
 fn load_priors(prior: &[PathBuf]) -> Result<(Vec<recording::Recording>, ProgressBar)> {
-    let prior_files = expand(prior)?;
+    let prior_files = recording::folders::expand(prior)?;
     let progress = ProgressBar::new(prior_files.len() as u64);
     progress.set_style(
         ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len}")
@@ -181,36 +181,4 @@ fn run(cli: Cli) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// Files named directly, plus the `.csv` and `.mcap` files in named folders (sorted).
-fn expand(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
-    for p in paths {
-        if p.is_dir() {
-            let mut files: Vec<PathBuf> = std::fs::read_dir(p)
-                .with_context(|| format!("{}", p.display()))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| is_recording(f))
-                .collect();
-            if files.is_empty() {
-                bail!(
-                    "{}: no .csv or .mcap recordings in this folder",
-                    p.display()
-                );
-            }
-            files.sort();
-            out.extend(files);
-        } else {
-            out.push(p.clone());
-        }
-    }
-    Ok(out)
-}
-
-fn is_recording(path: &Path) -> bool {
-    matches!(
-        path.extension().and_then(|e| e.to_str()),
-        Some("csv" | "mcap")
-    )
 }

@@ -54,6 +54,16 @@ impl Out {
         })
     }
 
+    /// The `--out` recording (`path`) of an offline run over `input`, anchored to the input's
+    /// wall clock (none for an unanchored input); `None` without one.
+    pub fn for_input(path: Option<&Path>, input: &Path, force: bool) -> Result<Option<Self>> {
+        let Some(path) = path else {
+            return Ok(None);
+        };
+        let clock = recording::mcap::run::clock_of(input)?;
+        Ok(Some(Self::create(path, force, clock)?))
+    }
+
     fn write<T: Topic>(&mut self, channel: Channel<T>, message: &T) {
         if self.error.is_none() {
             let log_ns = message.publish_time_ns();

@@ -20,18 +20,18 @@
 //!   iceoryx2's one small block per published state comes from the process's pool
 //!   (`alloc_count::pool`). SIGINT/SIGTERM: a summary with the steady-state counts, exit 0.
 
+mod hooks;
+
 use std::path::PathBuf;
 
-use alloc_count::steady::SteadyState;
 use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
-use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::ipc;
-use ipc_types::service::{self, ServiceError};
+use ipc_types::service;
 use ipc_types::wake::{self, Output, WaitMode};
-use ipc_types::{CorrectedImuSample, OdometryState, RobotHint};
-use mems_stage::live::{self, Hooks, Receive};
-use odometry::session::{Input, NoGyro, OdometrySession};
+use ipc_types::{OdometryState, RobotHint};
+use odometry::session::{NoGyro, OdometrySession};
+
+use hooks::{Inputs, Watch};
 
 /// Options of `mems-odometry serve`.
 #[derive(clap::Args)]
@@ -56,7 +56,7 @@ pub struct ServeArgs {
 /// Runs until SIGINT/SIGTERM.
 pub fn run(args: ServeArgs) -> Result<()> {
     let file = CalibrationFile::load(&args.calib).context("cannot load calibration")?;
-    let config = args.profile.odometry(crate::odometry_config(&file));
+    let config = args.profile.odometry(crate::load::odometry_config(&file));
     let mut session = OdometrySession::new(config, args.hints.config()?, NoGyro::Unnavigated)?;
     let ns = service::namespace(args.namespace.as_deref());
     let name = |base| service::full_name(&ns, base);
@@ -76,78 +76,10 @@ pub fn run(args: ServeArgs) -> Result<()> {
     };
     // Only samples wake the process: hints wait for them anyway.
     let listener = wake::listener(&node, &name(service::CORRECTED), mode)?;
-    let mut watch = Watch {
-        steady: SteadyState::from_env(|| crate::ALLOCATOR.counts()).map_err(anyhow::Error::msg)?,
-        warned_no_gyro: false,
-    };
+    let mut watch = Watch::new()?;
     // Start-up is over: from here on small blocks come from the pool.
     crate::ALLOCATOR.arm();
-    let counts = live::serve(&mut session, &mut input, &mut out, listener, &mut watch)?;
-    let stats = session.stats();
-    tracing::info!(
-        "received {}, published {} (revisions included), refused {}, sessions {}, discarded \
-         for stalled subscribers {}; hints received {}, this session: {}",
-        counts.received,
-        counts.published,
-        counts.refused,
-        stats.sessions,
-        service::stalled_discards(),
-        stats.hints,
-        session.hint_stats()
-    );
-    tracing::info!(
-        "{}; small-block pool: peak {} of 1024 blocks, {} requests found it empty",
-        watch.steady.summary(),
-        crate::ALLOCATOR.peak_blocks(),
-        crate::ALLOCATOR.fallbacks()
-    );
+    let counts = mems_stage::live::serve(&mut session, &mut input, &mut out, listener, &mut watch)?;
+    watch.report(&counts, &session);
     Ok(())
-}
-
-/// The session's inputs: each hint that has arrived (while the session has room for it),
-/// then a sample.
-struct Inputs {
-    hints: Subscriber<ipc::Service, RobotHint, ()>,
-    samples: Subscriber<ipc::Service, CorrectedImuSample, ()>,
-}
-
-impl Receive<OdometrySession> for Inputs {
-    fn receive(&mut self, session: &OdometrySession) -> Result<Option<Input>, ServiceError> {
-        let err = |e| ServiceError(format!("cannot receive: {e:?}"));
-        if session.hint_room()
-            && let Some(h) = self.hints.receive().map_err(err)?
-        {
-            return Ok(Some(Input::Hint(*h.payload())));
-        }
-        Ok(self
-            .samples
-            .receive()
-            .map_err(err)?
-            .map(|s| Input::Sample(*s.payload())))
-    }
-}
-
-/// The steady-state allocation count, and the one warning about samples without a gyroscope.
-struct Watch {
-    steady: SteadyState,
-    warned_no_gyro: bool,
-}
-
-impl Hooks<OdometrySession> for Watch {
-    fn input(&mut self) {
-        self.steady.inputs(1);
-    }
-
-    fn drained(&mut self, session: &OdometrySession) -> Result<()> {
-        if let (false, Some(seq)) = (self.warned_no_gyro, session.stats().first_no_gyro_seq) {
-            self.warned_no_gyro = true;
-            tracing::warn!(
-                "sample seq {seq} has no gyroscope (GYRO_VALID clear: an accelerometer-only \
-                 sensor mode, such as the MPU-9250 at 4 kHz); without it the attitude cannot be \
-                 tracked, so no position is estimated: states carry NO_GYRO and never ALIGNED. \
-                 Run the sensor at 1000 Hz or below for odometry"
-            );
-        }
-        Ok(())
-    }
 }

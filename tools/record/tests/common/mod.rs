@@ -1,14 +1,19 @@
-//! Helpers for the recorder's process tests: binaries, child processes, namespaces, polling.
+//! Helpers for the recorder's process tests: binaries, namespaces, samples, and the child
+//! processes and polling of `integration_tests`.
 #![allow(dead_code)] // Each test binary uses a different subset.
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::Command;
 use std::sync::OnceLock;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use iceoryx2::prelude::*;
 use ipc_types::service;
 use ipc_types::{RawImuSample, Stamps, raw_flags};
+
+// The process helpers of the workspace's integration tests, one copy for both.
+#[allow(unused_imports)] // Each test binary uses a different subset.
+pub use integration_tests::{Proc, service_exists, wait_until};
 
 /// A namespace no other test (or test run) uses.
 pub fn namespace(test: &str) -> String {
@@ -57,76 +62,12 @@ pub fn workspace_bin(package: &str, bin: &str) -> PathBuf {
     path
 }
 
-/// A child process that is SIGKILLed and reaped if the test ends without waiting for it.
-pub struct Proc {
-    child: Option<Child>,
-    name: String,
-}
-
-impl Proc {
-    /// Starts `program` with `args`, stdout captured, stderr passed through.
-    pub fn spawn(program: &Path, args: &[&str]) -> Self {
-        let child = Command::new(program)
-            .args(args)
-            .stdout(Stdio::piped())
-            .spawn()
-            .unwrap_or_else(|e| panic!("cannot start {}: {e}", program.display()));
-        Self {
-            child: Some(child),
-            name: program.file_name().unwrap().to_string_lossy().into_owned(),
-        }
-    }
-
-    /// The process id.
-    pub fn pid(&self) -> i32 {
-        self.child.as_ref().unwrap().id() as i32
-    }
-
-    /// Sends `signal` (a libc signal number).
-    pub fn signal(&self, signal: i32) {
-        // SAFETY: kill(2) on our own child's pid, which is not reaped yet.
-        let rc = unsafe { libc::kill(self.pid(), signal) };
-        assert_eq!(rc, 0, "kill({}, {signal}) failed", self.name);
-    }
-
-    /// Waits for the process (at most `timeout`) and returns its status and stdout.
-    pub fn wait(mut self, timeout: Duration) -> (ExitStatus, String) {
-        let mut child = self.child.take().unwrap();
-        let start = Instant::now();
-        loop {
-            if let Some(status) = child.try_wait().unwrap() {
-                let output = child.wait_with_output().unwrap();
-                return (status, String::from_utf8_lossy(&output.stdout).into_owned());
-            }
-            if start.elapsed() > timeout {
-                let _ = child.kill();
-                let _ = child.wait();
-                panic!("{} did not exit within {timeout:?}", self.name);
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        if let Some(mut child) = self.child.take() {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-    }
-}
-
-/// Polls `condition` every 10 ms until it holds; panics with `what` after `timeout`.
-pub fn wait_until(timeout: Duration, what: &str, mut condition: impl FnMut() -> bool) {
-    let start = Instant::now();
-    while !condition() {
-        assert!(
-            start.elapsed() < timeout,
-            "timed out after {timeout:?} waiting for {what}"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    }
+/// Starts `program` with `args` (stdout captured, stderr passed through): an
+/// [`integration_tests::Proc`], killed and reaped if the test ends without waiting for it.
+pub fn spawn(program: &Path, args: &[&str]) -> Proc {
+    let mut command = Command::new(program);
+    command.args(args);
+    Proc::start(&program.file_name().unwrap().to_string_lossy(), command)
 }
 
 /// A node for the test process itself.
@@ -148,20 +89,6 @@ pub fn wait_for_subscribers<T: core::fmt::Debug + ZeroCopySend>(
         &format!("{n} subscribers on {base}"),
         || svc.dynamic_config().number_of_subscribers() >= n,
     );
-}
-
-/// Whether the publish-subscribe service `base` under `namespace` still exists anywhere.
-pub fn service_exists(namespace: &str, base: &str) -> bool {
-    let name: ServiceName = service::full_name(namespace, base)
-        .as_str()
-        .try_into()
-        .unwrap();
-    ipc::Service::does_exist(
-        &name,
-        Config::global_config(),
-        MessagingPattern::PublishSubscribe,
-    )
-    .unwrap()
 }
 
 /// Raw samples at `rate_hz` from sequence number `first_seq`, with values that exercise every

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
 use calibrate::model::{AccelModel, ParamCovariance};
 use calibrate_science::diagnose::{
@@ -62,63 +62,8 @@ pub struct DiagnoseArgs {
     pose_samples: usize,
 }
 
-/// The files named by `paths`: files as given, folders as their `.csv` and `.mcap` files in
-/// natural order (numbers compared as numbers).
-fn expand(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
-    for p in paths {
-        if p.is_dir() {
-            let mut files: Vec<PathBuf> = std::fs::read_dir(p)
-                .with_context(|| format!("{}", p.display()))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| {
-                    f.is_file()
-                        && f.extension().is_some_and(|x| {
-                            x.eq_ignore_ascii_case("csv") || x.eq_ignore_ascii_case("mcap")
-                        })
-                })
-                .collect();
-            if files.is_empty() {
-                bail!(
-                    "{}: no .csv or .mcap recordings in this folder",
-                    p.display()
-                );
-            }
-            files
-                .sort_by_key(|f| natural_key(&f.file_name().unwrap_or_default().to_string_lossy()));
-            out.extend(files);
-        } else {
-            out.push(p.clone());
-        }
-    }
-    Ok(out)
-}
-
-/// Sort key comparing digit runs as numbers.
-fn natural_key(name: &str) -> Vec<(u8, u64, String)> {
-    let mut key = Vec::new();
-    let mut chars = name.chars().peekable();
-    while let Some(&c) = chars.peek() {
-        let mut run = String::new();
-        let digits = c.is_ascii_digit();
-        while let Some(&d) = chars.peek() {
-            if d.is_ascii_digit() != digits {
-                break;
-            }
-            run.push(d);
-            chars.next();
-        }
-        if digits {
-            key.push((0, run.parse().unwrap_or(u64::MAX), String::new()));
-        } else {
-            key.push((1, 0, run));
-        }
-    }
-    key
-}
-
 fn load(paths: &[PathBuf], what: &str) -> Result<Vec<SessionInput>> {
-    let files = expand(paths)?;
+    let files = recording::folders::expand(paths)?;
     let bar = ProgressBar::new(files.len() as u64).with_style(
         ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len}")
             .expect("valid template")
@@ -519,27 +464,4 @@ fn write_calibration(args: &DiagnoseArgs, d: &Diagnosis, out: &Path) -> Result<(
     CalibrationFile::load(out)?;
     tracing::info!("wrote {}", out.display());
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn natural_order_compares_numbers() {
-        let mut names = [
-            "start_up_data_10.csv",
-            "start_up_data_2.csv",
-            "start_up_data_1.csv",
-        ];
-        names.sort_by_key(|n| natural_key(n));
-        assert_eq!(
-            names,
-            [
-                "start_up_data_1.csv",
-                "start_up_data_2.csv",
-                "start_up_data_10.csv"
-            ]
-        );
-    }
 }

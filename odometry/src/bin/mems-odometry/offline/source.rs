@@ -96,7 +96,7 @@ impl Source {
         } else {
             recording::LogPolicy::Repair
         };
-        let mut recording = crate::load_recording(&args.input, policy)?;
+        let mut recording = crate::load::load_recording(&args.input, policy)?;
         if args.repair_torn_reads {
             let report = calibrate::repair::repair_torn_reads(
                 &mut recording.samples,

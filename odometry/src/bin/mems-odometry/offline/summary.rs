@@ -1,5 +1,6 @@
-//! What an offline run reports: the states it gathers (alignment, rests, the end), and the
-//! error against the truth a simulated recording carries.
+//! What an offline run reports: the states it gathers (alignment, rests, the end), the error
+//! against the truth a simulated recording carries, what the input held that the result does
+//! not show, and why a run that never aligned did not.
 //!
 //! Truth comparison: our navigation frame has its origin at the alignment point and its
 //! heading fixed there; the truth's frame is the scenario's. At the first aligned state the
@@ -8,11 +9,22 @@
 //! truth positions are expressed in our frame relative to the truth position there.
 
 use std::collections::VecDeque;
+use std::path::Path;
 
+use anyhow::{Result, bail};
+use calibrate::stage::CalibrationStage;
 use ipc_types::{OdometryState, odometry_flags};
+use mems_stage::Chain;
+use mems_stage::offline::Stop;
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
-use recording::Truth;
+use odometry::session::OdometrySession;
+use recording::{LogRepairs, Truth};
 use serde_json::json;
+
+use super::source::{HINT_WINDOW_NS, Inputs, Source};
+
+/// The offline chain: the calibration stage, then the odometry session.
+pub type OfflineChain = Chain<CalibrationStage, OdometrySession>;
 
 fn quat(wxyz: [f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(Quaternion::new(wxyz[0], wxyz[1], wxyz[2], wxyz[3]))
@@ -116,14 +128,62 @@ impl Summary {
         Some([e.x, e.y, e.z])
     }
 
-    /// The JSON result from the end state `end` (with `truth_error`) and `extra`'s fields.
-    pub fn json(
+    /// The result once the chain has run (`ran`): refuses a run that was stopped, gave no
+    /// state or never aligned (saying why); says when it aligned, then prints the result
+    /// (`json`: as JSON).
+    pub fn finish<R: std::fmt::Display>(
+        &self,
+        ran: Result<u64, Stop<R, anyhow::Error>>,
+        read: &Read,
+        chain: &OfflineChain,
+        truth: &mut TruthQueue,
+        json: bool,
+    ) -> Result<()> {
+        let input = read.input.display();
+        match ran {
+            Err(Stop::Refused { refusal, .. }) => bail!("{input}: {refusal}"),
+            Err(Stop::Input(e)) => return Err(e),
+            Ok(_) => {}
+        }
+        let Some(end) = self.last else {
+            bail!("{input}: no samples");
+        };
+        if end.flags & odometry_flags::ALIGNED == 0 {
+            bail!(
+                "{input}: never aligned: {}",
+                why_never_aligned(&chain.first)
+            );
+        }
+        let aligned_at_s = self
+            .aligned_ns
+            .map_or(0.0, |t| (t - read.first_ns.unwrap_or(0)) as f64 * 1e-9);
+        tracing::info!(
+            "aligned {aligned_at_s:.2} s into the recording (at its first rest of {} s); the \
+             position counts from there",
+            read.align_s
+        );
+        let truth_error = self.truth_error(&end, truth);
+        if json {
+            let speed_updates = chain.second.hint_stats().speed_updates;
+            let result = self.json(&end, truth_error, aligned_at_s, read, speed_updates);
+            println!("{result}");
+        } else {
+            self.print(&end, truth_error);
+        }
+        Ok(())
+    }
+
+    /// The JSON result from the end state `end` (with `truth_error`), when it aligned, what
+    /// the run read and the hints' speed updates.
+    fn json(
         &self,
         end: &OdometryState,
         truth_error: Option<[f64; 3]>,
-        extra: serde_json::Value,
+        aligned_at_s: f64,
+        read: &Read,
+        speed_updates: u64,
     ) -> serde_json::Value {
-        let mut result = json!({
+        json!({
             "end_displacement_m": end.position_m,
             "sigma_m": end.position_sigma_m,
             "distance_m": end.distance_m,
@@ -132,11 +192,19 @@ impl Summary {
             "rest_intervals": self.rest_errors,
             "rests": self.rests,
             "seq": end.seq,
-        });
-        if let (Some(r), serde_json::Value::Object(extra)) = (result.as_object_mut(), extra) {
-            r.extend(extra);
-        }
-        result
+            "aligned_at_s": aligned_at_s,
+            "log_repairs": {
+                "repeats_dropped": read.repairs.repeats_dropped,
+                "times_rebuilt": read.repairs.times_rebuilt,
+            },
+            "hints": {
+                "in_recording": read.hints_seen,
+                "late": read.hints_late,
+                "applied": end.hints_applied,
+                "disagreements": end.hint_disagreements,
+                "speed_updates": speed_updates,
+            },
+        })
     }
 
     /// The human-readable result: the end displacement with its 1-sigma, and the error
@@ -159,5 +227,90 @@ impl Summary {
                 self.truth_distance
             );
         }
+    }
+}
+
+/// What an offline run read besides the states, and what its report names.
+pub struct Read<'a> {
+    /// The input, for messages.
+    pub input: &'a Path,
+    /// The first raw sample's time, ns.
+    pub first_ns: Option<u64>,
+    /// Robot hints read.
+    pub hints_seen: u64,
+    /// Hints recorded too late for their place (see [`HINT_WINDOW_NS`]).
+    pub hints_late: u64,
+    /// What reading a text recording repaired.
+    pub repairs: LogRepairs,
+    /// The rest the odometry aligns on, s (for the message).
+    pub align_s: f64,
+}
+
+impl<'a> Read<'a> {
+    /// What `inputs` read of `input` (with the text reader's `repairs`), and the rest the
+    /// odometry aligns on, `align_s`.
+    pub fn new(input: &'a Path, inputs: &Inputs, repairs: LogRepairs, align_s: f64) -> Self {
+        Self {
+            input,
+            first_ns: inputs.first_ns,
+            hints_seen: inputs.hints_seen,
+            hints_late: inputs.hints_late,
+            repairs,
+            align_s,
+        }
+    }
+}
+
+/// Says on stderr what the input held that the result does not show: truncated segments,
+/// robot hints recorded too late to be merged in order, and samples without a gyroscope
+/// (`no_gyro`: the first one's seq; navigated at a held attitude: `NoGyro::HoldAttitude`).
+pub fn report_input(read: &Read, source: &mut Source, no_gyro: Option<u64>) {
+    let input = read.input.display();
+    for segment in source.segments() {
+        if let Some(t) = &segment.truncation {
+            tracing::warn!("{}: {t}", segment.path.display());
+        }
+    }
+    if read.hints_late > 0 {
+        tracing::warn!(
+            "{input}: {} robot hints were recorded more than {} s after their publication and \
+             reached the odometry stage after samples they would have preceded",
+            read.hints_late,
+            HINT_WINDOW_NS as f64 * 1e-9
+        );
+    }
+    if let Some(seq) = no_gyro {
+        tracing::warn!(
+            "{input}: sample seq {seq} has no gyroscope (GYRO_VALID clear); the attitude is \
+             held at its alignment, so the position is meaningful only if the sensor never \
+             rotated (a static recording). mems-odometry serve publishes no position for such \
+             samples (NO_GYRO)"
+        );
+    }
+}
+
+/// Why the odometry never aligned: the detector never learned (with the learner's last
+/// refusal), or it never flagged rest after it did.
+fn why_never_aligned(calibration: &CalibrationStage) -> String {
+    let detector = calibration.detector();
+    let kind = detector.config().kind.name();
+    let learn_s = detector.config().learn.duration_s;
+    if detector.is_ready() {
+        return format!(
+            "the {kind} detector flagged no rest long enough to align on after it was ready \
+             ({} samples flagged rest in all)",
+            calibration.stats().rest
+        );
+    }
+    match detector.learn_rejections() {
+        (0, _) => format!(
+            "the {kind} detector found no {learn_s} s of data to learn its rest from (a shorter \
+             --learn-s, or --profile pedestrian for a foot-mounted sensor)"
+        ),
+        (n, why) => format!(
+            "the {kind} detector refused all {n} windows of {learn_s} s it could learn its rest \
+             from; the last because {}",
+            why.map_or_else(|| "of a gap".into(), |w| w.to_string())
+        ),
     }
 }

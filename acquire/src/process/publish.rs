@@ -1,0 +1,90 @@
+//! The publishing loop of `mems-acquire`: FIFO reads on an absolute schedule, every sample
+//! published on `mems/imu/raw`, until the duration is over or SIGINT/SIGTERM arrives.
+
+use std::convert::Infallible;
+use std::time::{Duration, Instant};
+
+use alloc_count::pool::BlockPool;
+use anyhow::Result;
+use embedded_hal::i2c::I2c;
+use ipc_types::wake::Output;
+use ipc_types::{RawImuSample, service};
+
+use super::Summary;
+use crate::acquisition::{Acquisition, fifo_fill_ns};
+use crate::clock::Clock;
+use crate::driver::{self, Mpu9250};
+
+/// How the samples are published: where, for how long, at what configuration and read
+/// interval, and the process's small-block pool (armed once the loop starts).
+pub struct Publish<'a, const N: usize> {
+    /// Namespace prefix for service names (`None`: `$MEMS_NAMESPACE`).
+    pub namespace: Option<String>,
+    /// Stop after this many seconds (`None`: until SIGINT/SIGTERM).
+    pub duration_s: Option<f64>,
+    /// The sensor's configuration.
+    pub config: driver::Config,
+    /// Time between FIFO reads, ns.
+    pub read_interval_ns: u64,
+    /// The process's global allocator: small blocks come from it once the loop starts.
+    pub pool: &'a BlockPool<N>,
+}
+
+impl<const N: usize> Publish<'_, N> {
+    /// Publishes what `driver` reads, on `clock`, until the duration is over or SIGINT/SIGTERM
+    /// arrives; then logs the run's [`Summary`].
+    pub fn run<I2C: I2c, C: Clock>(&self, driver: Mpu9250<I2C>, clock: C) -> Result<()> {
+        let namespace = service::namespace(self.namespace.as_deref());
+        let name = service::full_name(&namespace, service::RAW);
+        // Before any port exists: a SIGINT/SIGTERM is kept from then on.
+        ipc_types::stop::install()?;
+        let node = service::node()?;
+        let raw = service::open::<RawImuSample>(&node, &name)?;
+        // A subscriber whose buffer is full (stopped, hung) is waited for at most an eighth of
+        // the FIFO's fill time, then its samples are given up and counted for it: the loop never
+        // waits on a subscriber for as long as the FIFO lasts, so the sensor loses nothing for it.
+        let stall_wait = Duration::from_nanos(fifo_fill_ns(&self.config) / 8);
+        let (publisher, undelivered) = service::publisher_waiting_at_most(&raw, stall_wait)?;
+        // Wakes the subscribers after a read's first sample and after its last.
+        let mut out = Output::with_publisher(&node, publisher, &name)?;
+
+        let mut acq = Acquisition::start(driver, clock, self.config, self.read_interval_ns)
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        tracing::info!(
+            "{} ({}) at {} Hz on {name}, reading every {:.2} ms",
+            acq.driver().bus_label(),
+            acq.driver().part().unwrap_or("?"),
+            self.config.output_rate_hz(),
+            self.read_interval_ns as f64 * 1e-6
+        );
+        let start = Instant::now();
+        let deadline = self.duration_s.map(Duration::from_secs_f64);
+        // Start-up is over: from here on small blocks come from the pool.
+        self.pool.arm();
+        loop {
+            // An absolute-deadline sleep (a relative one would add any preemption between
+            // reading the clock and sleeping); then SIGINT/SIGTERM ends the loop: the clean way
+            // out.
+            acq.clock().sleep_until(acq.next_read_ns());
+            if ipc_types::stop::requested() {
+                break;
+            }
+            let Ok(read) = acq.read_and_publish(&mut |s| {
+                out.send(RawImuSample {
+                    undelivered: u32::try_from(undelivered.total()).unwrap_or(u32::MAX),
+                    ..*s
+                });
+                Ok::<_, Infallible>(())
+            });
+            out.end_of_input()?;
+            if let Err(e) = read {
+                tracing::warn!("read failed, device re-initialising: {e}");
+            }
+            if deadline.is_some_and(|d| start.elapsed() >= d) {
+                break;
+            }
+        }
+        Summary::of(&acq, &undelivered, start.elapsed()).log(self.pool);
+        Ok(())
+    }
+}

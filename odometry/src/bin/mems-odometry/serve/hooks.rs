@@ -1,0 +1,96 @@
+//! What the live driver (`mems_stage::live`) calls back into for `serve`: the session's inputs
+//! from the hint and sample subscribers, the per-input hooks (the steady-state allocation
+//! count, the one warning about samples without a gyroscope), and the summary at the end.
+
+use alloc_count::steady::SteadyState;
+use anyhow::Result;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::ipc;
+use ipc_types::service::{self, ServiceError};
+use ipc_types::{CorrectedImuSample, RobotHint};
+use mems_stage::live::{Counts, Hooks, Receive};
+use odometry::session::{Input, OdometrySession};
+
+/// The session's inputs: each hint that has arrived (while the session has room for it),
+/// then a sample.
+pub struct Inputs {
+    /// `mems/robot/hint`.
+    pub hints: Subscriber<ipc::Service, RobotHint, ()>,
+    /// `mems/imu/corrected`.
+    pub samples: Subscriber<ipc::Service, CorrectedImuSample, ()>,
+}
+
+impl Receive<OdometrySession> for Inputs {
+    fn receive(&mut self, session: &OdometrySession) -> Result<Option<Input>, ServiceError> {
+        let err = |e| ServiceError(format!("cannot receive: {e:?}"));
+        if session.hint_room()
+            && let Some(h) = self.hints.receive().map_err(err)?
+        {
+            return Ok(Some(Input::Hint(*h.payload())));
+        }
+        Ok(self
+            .samples
+            .receive()
+            .map_err(err)?
+            .map(|s| Input::Sample(*s.payload())))
+    }
+}
+
+/// The steady-state allocation count, and the one warning about samples without a gyroscope.
+pub struct Watch {
+    steady: SteadyState,
+    warned_no_gyro: bool,
+}
+
+impl Hooks<OdometrySession> for Watch {
+    fn input(&mut self) {
+        self.steady.inputs(1);
+    }
+
+    fn drained(&mut self, session: &OdometrySession) -> Result<()> {
+        if let (false, Some(seq)) = (self.warned_no_gyro, session.stats().first_no_gyro_seq) {
+            self.warned_no_gyro = true;
+            tracing::warn!(
+                "sample seq {seq} has no gyroscope (GYRO_VALID clear: an accelerometer-only \
+                 sensor mode, such as the MPU-9250 at 4 kHz); without it the attitude cannot be \
+                 tracked, so no position is estimated: states carry NO_GYRO and never ALIGNED. \
+                 Run the sensor at 1000 Hz or below for odometry"
+            );
+        }
+        Ok(())
+    }
+}
+
+impl Watch {
+    /// Counts from the process's allocator, as `SteadyState::from_env` configures.
+    pub fn new() -> Result<Self> {
+        Ok(Self {
+            steady: SteadyState::from_env(|| crate::ALLOCATOR.counts())
+                .map_err(anyhow::Error::msg)?,
+            warned_no_gyro: false,
+        })
+    }
+
+    /// The run's summary on stderr: what the driver counted (`counts`), the session's
+    /// sessions and hints, and the steady-state and small-block pool counts.
+    pub fn report(&self, counts: &Counts, session: &OdometrySession) {
+        let stats = session.stats();
+        tracing::info!(
+            "received {}, published {} (revisions included), refused {}, sessions {}, discarded \
+             for stalled subscribers {}; hints received {}, this session: {}",
+            counts.received,
+            counts.published,
+            counts.refused,
+            stats.sessions,
+            service::stalled_discards(),
+            stats.hints,
+            session.hint_stats()
+        );
+        tracing::info!(
+            "{}; small-block pool: peak {} of 1024 blocks, {} requests found it empty",
+            self.steady.summary(),
+            crate::ALLOCATOR.peak_blocks(),
+            crate::ALLOCATOR.fallbacks()
+        );
+    }
+}

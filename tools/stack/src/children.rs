@@ -1,0 +1,178 @@
+//! The stack's child processes: where their binaries are, and the command line of each
+//! (`mems-record`, `mems-foxglove`, `mems-odometry serve`, `mems-calibrate serve` and
+//! `mems-acquire`), in start order.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+
+use crate::cli::Cli;
+use crate::losses::RecorderLosses;
+use crate::supervisor::ChildSpec;
+
+/// The directory holding this executable, where the other `mems-*` binaries are built.
+pub fn bin_dir() -> Result<PathBuf> {
+    let exe = std::env::current_exe().context("cannot locate mems-stack's own executable")?;
+    Ok(exe
+        .parent()
+        .context("mems-stack's executable has no parent directory")?
+        .to_path_buf())
+}
+
+/// The supervised processes, in start order: consumers first, the source last, so nothing is
+/// published to nobody. `calib` is the calibration file, `work` the stack's work directory.
+pub fn specs(
+    cli: &Cli,
+    bins: &Path,
+    namespace: &str,
+    calib: String,
+    work: &Path,
+    recorder_losses: Option<&RecorderLosses>,
+) -> Vec<ChildSpec> {
+    let spec = |name: &str, program: &str, args: Vec<String>| ChildSpec {
+        name: name.to_string(),
+        program: bins.join(program),
+        args: args
+            .into_iter()
+            .chain(["--namespace".to_string(), namespace.to_string()])
+            .collect(),
+        restart_at_once: false,
+        stdout: None,
+    };
+    let mut specs = Vec::new();
+    if let Some(out) = &cli.record {
+        let args = vec![
+            "--out".into(),
+            out.display().to_string(),
+            "--continue".into(),
+        ];
+        specs.push(ChildSpec {
+            restart_at_once: true,
+            stdout: recorder_losses.map(RecorderLosses::sink),
+            ..spec("record", "mems-record", args)
+        });
+    }
+    if let Some(addr) = &cli.foxglove {
+        let args = vec!["--listen".into(), addr.clone()];
+        specs.push(spec("foxglove", "mems-foxglove", args));
+    }
+    let args = vec!["serve".into(), "--calib".into(), calib.clone()];
+    specs.push(spec("odometry", "mems-odometry", args));
+    // A restarted calibration stage goes on from what the killed one had learned, in the
+    // stack's work directory (a new stack starts afresh).
+    let state = work.join("calibrate-state.json").display().to_string();
+    let args = [
+        "serve".into(),
+        "--calib".into(),
+        calib,
+        "--state".into(),
+        state,
+    ];
+    let args = args.into_iter().chain(detector_args(cli)).collect();
+    specs.push(spec("calibrate", "mems-calibrate", args));
+    specs.push(spec("acquire", "mems-acquire", acquire_args(cli)));
+    specs
+}
+
+/// Window of the accelerometer-only GLRT, s: 0.5 s, as the GLRT's default at 1 kHz (measured
+/// at 4 kHz in docs/detectors.md).
+const ACCEL_GLRT_WINDOW_S: f64 = 0.5;
+
+/// `mems-calibrate serve`'s detector arguments for `cli`: the one asked for, else the GLRT, on
+/// the accelerometer alone over [`ACCEL_GLRT_WINDOW_S`] above 1000 Hz (no gyroscope there).
+fn detector_args(cli: &Cli) -> Vec<String> {
+    match &cli.detector {
+        Some(d) => vec!["--detector".into(), d.name().into()],
+        None if cli.rate > 1000 => {
+            // Batches of 20 samples (calibrate::zero_state::BATCH_LEN).
+            let batches = (ACCEL_GLRT_WINDOW_S * f64::from(cli.rate) / 20.0)
+                .round()
+                .max(1.0);
+            vec![
+                "--detector".into(),
+                "glrt-accel".into(),
+                "--glrt-window".into(),
+                batches.to_string(),
+            ]
+        }
+        None => vec!["--detector".into(), "glrt".into()],
+    }
+}
+
+/// `mems-acquire`'s arguments for `cli` (the namespace is added by the caller): the source,
+/// rate and seed, and the real-time options passed through. Every restart uses the same.
+fn acquire_args(cli: &Cli) -> Vec<String> {
+    let mut args = vec![
+        "--source".into(),
+        cli.source.clone(),
+        "--rate".into(),
+        cli.rate.to_string(),
+        "--seed".into(),
+        cli.seed.to_string(),
+    ];
+    if let Some(priority) = cli.sched_fifo {
+        args.extend(["--sched-fifo".into(), priority.to_string()]);
+    }
+    if let Some(cpu) = cli.cpu {
+        args.extend(["--cpu".into(), cpu.to_string()]);
+    }
+    if cli.mlock {
+        args.push("--mlock".into());
+    }
+    args
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn acquire_args_for(args: &[&str]) -> Vec<String> {
+        acquire_args(&Cli::parse_args(args))
+    }
+
+    /// `flag`'s value in `args`, `None` when absent.
+    fn value<'a>(args: &'a [String], flag: &str) -> Option<&'a str> {
+        let i = args.iter().position(|a| a == flag)?;
+        Some(args.get(i + 1).expect("flag has a value").as_str())
+    }
+
+    #[test]
+    fn real_time_options_are_passed_to_acquire() {
+        let args = acquire_args_for(&[
+            "--rate",
+            "4000",
+            "--sched-fifo",
+            "50",
+            "--cpu",
+            "1",
+            "--mlock",
+        ]);
+        assert_eq!(value(&args, "--sched-fifo"), Some("50"));
+        assert_eq!(value(&args, "--cpu"), Some("1"));
+        assert_eq!(value(&args, "--rate"), Some("4000"));
+        assert!(args.iter().any(|a| a == "--mlock"), "{args:?}");
+    }
+
+    #[test]
+    fn without_real_time_options_acquire_gets_none() {
+        let args = acquire_args_for(&[]);
+        for flag in ["--sched-fifo", "--cpu", "--mlock"] {
+            assert!(!args.iter().any(|a| a == flag), "{flag} in {args:?}");
+        }
+        assert_eq!(value(&args, "--source"), Some("sim"));
+    }
+
+    #[test]
+    fn the_detector_needs_no_gyro_above_1_khz() {
+        let detector = |args: &[&str]| detector_args(&Cli::parse_args(args));
+        // 4 kHz is accelerometer-only: the accelerometer GLRT over 0.5 s = 100 batches of 20.
+        let at_4k = detector(&["--rate", "4000"]);
+        assert_eq!(value(&at_4k, "--detector"), Some("glrt-accel"));
+        assert_eq!(value(&at_4k, "--glrt-window"), Some("100"));
+        let at_1k = detector(&["--rate", "1000"]);
+        assert_eq!(value(&at_1k, "--detector"), Some("glrt"));
+        assert_eq!(value(&at_1k, "--glrt-window"), None);
+        let asked = detector(&["--rate", "4000", "--detector", "yu"]);
+        assert_eq!(asked, vec!["--detector".to_string(), "yu".to_string()]);
+    }
+}
