@@ -2,7 +2,8 @@
 //! calibrated ones. The accelerometer error model ([`model`]) and the calibration file that
 //! holds it ([`calibfile`], with its optional terms in [`terms`] and noise table in
 //! [`noise_params`]), the zero-state detectors ([`zero_state`]) and the calibration stage
-//! ([`stage`]) behind `mems-calibrate serve`, and the torn-read repair ([`repair`]) that
+//! ([`stage`]) behind `mems-calibrate serve` with the file its learned state is kept in
+//! ([`warm_file`]), and the torn-read repair ([`repair`]) that
 //! `mems-odometry offline` and the offline science apply to recordings. Fitting, diagnosis,
 //! evaluations and plots are in `calibrate-science` (calibrate/science), whose binary runs the
 //! offline subcommands ([`offline`]).
@@ -18,5 +19,6 @@ pub mod offline;
 pub mod repair;
 pub mod stage;
 pub mod terms;
+pub mod warm_file;
 pub mod window;
 pub mod zero_state;

@@ -325,6 +325,16 @@ pub struct WarmState {
     pub last_ns: u64,
 }
 
+impl WarmState {
+    /// Whether the two hold the same learning (references and refinement): the stream
+    /// position alone changing is no reason to write the state again.
+    pub fn same_learning(&self, other: &Self) -> bool {
+        self.reference == other.reference
+            && self.refine_accel_mps2 == other.refine_accel_mps2
+            && self.refine_gyro_rps == other.refine_gyro_rps
+    }
+}
+
 /// A [`WarmState`] that does not fit the stage.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("the state was made with calibration {state:016x}, the stage has {stage:016x}")]

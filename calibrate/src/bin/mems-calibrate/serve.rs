@@ -21,18 +21,20 @@
 //!   summary gives the steady-state counts (`alloc_count::steady`).
 //! - SIGINT/SIGTERM: a summary, exit status 0.
 
-use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+mod hooks;
+mod start;
 
-use alloc_count::steady::SteadyState;
-use anyhow::{Context, Result};
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Result;
 use calibrate::calibfile::CalibrationFile;
-use calibrate::stage::{CalibrationStage, RefineConfig, WarmState};
 use calibrate::zero_state::args::DetectorArgs;
-use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use ipc_types::wake::{self, Output, WaitMode};
 use ipc_types::{CorrectedImuSample, RawImuSample, service};
-use mems_stage::live::{self, Hooks};
+use mems_stage::live;
+
+use hooks::Watch;
 
 /// Options of `mems-calibrate serve`.
 #[derive(clap::Args)]
@@ -56,90 +58,10 @@ pub struct ServeArgs {
     state: Option<PathBuf>,
 }
 
-/// Reads a warm state written by `--state`.
-fn load_state(path: &Path) -> Result<WarmState> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read the state file {}", path.display()))?;
-    serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a calibration stage state", path.display()))
-}
-
-/// Whether two states hold the same learning (references and refinement): the stream
-/// position alone changing is no reason to write.
-fn same_learning(a: &WarmState, b: &WarmState) -> bool {
-    a.reference == b.reference
-        && a.refine_accel_mps2 == b.refine_accel_mps2
-        && a.refine_gyro_rps == b.refine_gyro_rps
-}
-
-/// Writes `state` to `path` atomically (a temporary file beside it, renamed over it).
-fn save_state(path: &Path, state: &WarmState) -> Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, serde_json::to_string_pretty(state)?)
-        .with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot replace {}", path.display()))
-}
-
-/// The calibration stage `args` ask for: the file's model and gravity, the detector and its
-/// learning time, and, with `--state`, what a predecessor had learned.
-fn stage(args: &ServeArgs, file: &CalibrationFile) -> Result<CalibrationStage> {
-    let config = args
-        .detector
-        .apply(DetectorConfig::new(DetectorKind::Glrt, file.gravity_mps2))
-        .map_err(anyhow::Error::msg)?;
-    let mut stage = CalibrationStage::new(file, config, RefineConfig::default())
-        .with_context(|| args.calib.display().to_string())?;
-    if let Some(path) = args.state.as_deref().filter(|p| p.exists()) {
-        let state = load_state(path)?;
-        stage
-            .resume(&state)
-            .with_context(|| format!("{}: cannot go on from it", path.display()))?;
-        tracing::info!(
-            "going on from {} (last sample seq {}, detector {}, refined {})",
-            path.display(),
-            state.last_seq,
-            if state.reference.is_some() {
-                "learned"
-            } else {
-                "not learned"
-            },
-            state.refined
-        );
-    }
-    Ok(stage)
-}
-
-/// The summary on stderr: the stage's counts, what it learned and refined, and the
-/// steady-state allocations.
-fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
-    let s = stage.stats();
-    let (learn_restarts, _) = stage.detector().learn_rejections();
-    let (accel, gyro, refined) = stage.refinement();
-    tracing::info!(
-        "accepted {}, published {}, at rest {}, refused {refused}, gaps {}, \
-         stream restarts {}, learning restarts {learn_restarts}, detector ready {}, refined {refined} \
-         (accel {:.4?} m/s^2, gyro {:.5?} rad/s)",
-        s.accepted,
-        s.released,
-        s.rest,
-        s.gaps,
-        s.restarts,
-        stage.detector().is_ready(),
-        accel,
-        gyro
-    );
-    tracing::info!(
-        "{}; small-block pool: peak {} of 1024 blocks, {} requests found it empty",
-        steady.summary(),
-        crate::ALLOCATOR.peak_blocks(),
-        crate::ALLOCATOR.fallbacks()
-    );
-}
-
 /// Runs the service until SIGINT/SIGTERM.
 pub fn serve(args: &ServeArgs) -> Result<()> {
     let file = CalibrationFile::load(&args.calib)?;
-    let mut stage = stage(args, &file)?;
+    let mut stage = start::stage(args, &file)?;
     let ns = service::namespace(args.namespace.as_deref());
     let raw_name = service::full_name(&ns, service::RAW);
     let corrected_name = service::full_name(&ns, service::CORRECTED);
@@ -165,42 +87,10 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
     );
     // Subscribers killed without closing their ports would otherwise stay connected.
     let _cleanup = service::DeadNodeCleanup::start(Duration::from_secs(1))?;
-    let mut watch = Watch {
-        steady: SteadyState::from_env(|| crate::ALLOCATOR.counts()).map_err(anyhow::Error::msg)?,
-        state_file: args.state.as_deref(),
-        saved: None,
-    };
+    let mut watch = Watch::new(args.state.as_deref())?;
     // Start-up is over: from here on small blocks come from the pool.
     crate::ALLOCATOR.arm();
     let counts = live::serve(&mut stage, &mut subscriber, &mut out, listener, &mut watch)?;
-    report(&stage, counts.refused, &watch.steady);
+    hooks::report(&stage, counts.refused, &watch.steady);
     Ok(())
-}
-
-/// The steady-state allocation count, and the `--state` file kept up to date.
-struct Watch<'a> {
-    steady: SteadyState,
-    state_file: Option<&'a Path>,
-    /// The state as last written, and when (not per sample: at most once a second).
-    saved: Option<(WarmState, Instant)>,
-}
-
-impl Hooks<CalibrationStage> for Watch<'_> {
-    fn input(&mut self) {
-        self.steady.inputs(1);
-    }
-
-    fn drained(&mut self, stage: &CalibrationStage) -> Result<()> {
-        if let Some(path) = self.state_file
-            && let Some(state) = stage.warm_state()
-            && state.reference.is_some()
-            && self.saved.as_ref().is_none_or(|(s, at)| {
-                at.elapsed() >= Duration::from_secs(1) && !same_learning(s, &state)
-            })
-        {
-            save_state(path, &state)?;
-            self.saved = Some((state, Instant::now()));
-        }
-        Ok(())
-    }
 }
