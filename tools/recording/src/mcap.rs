@@ -1235,11 +1235,11 @@ type McapWriter = ::mcap::Writer<BufWriter<File>>;
 
 /// zstd level of the compact copy a recorder writes beside its file
 /// ([`Writer::create_new_compacting`]), measured on a 60 s, 1 kHz stack run (docs/recording.md,
-/// "Size and write cost"): with [`COMPACT_CHUNK_BYTES`] it is 0.89 of the file flushed every
+/// "Size and write cost"): with [`COMPACT_CHUNK_BYTES`] it is 0.88 of the file flushed every
 /// 50 ms at zstd's default level 3, and 0.96 of the same chunks at level 3; level 17 would
 /// take 0.94 of level 9's bytes at 10 times its cost per message.
 pub const COMPACT_LEVEL: u32 = 9;
-/// Uncompressed size of the compact copy's chunks: 4 MiB (about 20 s of a 1 kHz run), 0.98 of
+/// Uncompressed size of the compact copy's chunks: 4 MiB (about 9 s of a 1 kHz run), 0.97 of
 /// the size the `mcap` crate's default 1 MiB chunks take at [`COMPACT_LEVEL`].
 pub const COMPACT_CHUNK_BYTES: u64 = 4 << 20;
 
