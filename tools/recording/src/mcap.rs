@@ -1296,16 +1296,10 @@ impl Writer {
         let mut writer = Self::create_new(path)?;
         let temp = compacting_path(path);
         let file = File::create(&temp).map_err(|e| Error::io(&temp, e))?;
-        let copy = WriteOptions::new()
-            .compression(Some(Compression::Zstd))
-            .compression_level(COMPACT_LEVEL)
-            .chunk_size(Some(COMPACT_CHUNK_BYTES))
-            .create(BufWriter::new(file))
-            .map_err(|e| Error::file(&temp, ErrorKind::Mcap(e)))?;
+        let copy = mcap_writer(&temp, file, COMPACT_LEVEL, COMPACT_CHUNK_BYTES)?;
         writer.compact = Some(Compact {
             writer: Some(copy),
             temp,
-            target: path.to_path_buf(),
         });
         Ok(writer)
     }
@@ -1327,14 +1321,8 @@ impl Writer {
     /// Writes the MCAP header to `file`, newly created at `path`, for chunks of `chunk_bytes`
     /// compressed at zstd level `level`.
     fn with_options(path: &Path, file: File, level: u32, chunk_bytes: u64) -> Result<Self> {
-        let inner = WriteOptions::new()
-            .compression(Some(Compression::Zstd))
-            .compression_level(level)
-            .chunk_size(Some(chunk_bytes))
-            .create(BufWriter::new(file))
-            .map_err(|e| Error::file(path, ErrorKind::Mcap(e)))?;
         Ok(Self {
-            inner,
+            inner: mcap_writer(path, file, level, chunk_bytes)?,
             compact: None,
             path: path.to_path_buf(),
             encoding: MessageEncoding::Protobuf,
@@ -1527,7 +1515,7 @@ impl Writer {
             .into_inner()
             .into_inner()
             .map_err(|e| Error::io(&path, e.into_error()))?;
-        compact.map_or(Ok(()), Compact::finish)
+        compact.map_or(Ok(()), |c| c.finish(&path))
     }
 
     fn fail(&self, kind: ErrorKind) -> Error {
@@ -1535,18 +1523,28 @@ impl Writer {
     }
 }
 
+/// The `mcap` crate's writer of zstd chunks of `chunk_bytes` (uncompressed) at `level` on
+/// `file`, newly created at `path` (named in its error), with the MCAP header written.
+fn mcap_writer(path: &Path, file: File, level: u32, chunk_bytes: u64) -> Result<McapWriter> {
+    WriteOptions::new()
+        .compression(Some(Compression::Zstd))
+        .compression_level(level)
+        .chunk_size(Some(chunk_bytes))
+        .create(BufWriter::new(file))
+        .map_err(|e| Error::file(path, ErrorKind::Mcap(e)))
+}
+
 /// The compact copy of a recorder's file ([`Writer::create_new_compacting`]): written at
-/// `temp`, renamed to `target` when finished, removed if dropped unfinished.
+/// `temp`, renamed over the file when finished, removed if dropped unfinished.
 struct Compact {
     /// `None` once finished.
     writer: Option<McapWriter>,
     temp: PathBuf,
-    target: PathBuf,
 }
 
 impl Compact {
-    /// Finishes the copy, syncs it to disk and renames it over the target.
-    fn finish(mut self) -> Result<()> {
+    /// Finishes the copy, syncs it to disk and renames it over `target`, the file it copies.
+    fn finish(mut self, target: &Path) -> Result<()> {
         let Some(mut writer) = self.writer.take() else {
             return Ok(());
         };
@@ -1558,7 +1556,7 @@ impl Compact {
             .into_inner()
             .map_err(|e| Error::io(&self.temp, e.into_error()))?;
         file.sync_all().map_err(|e| Error::io(&self.temp, e))?;
-        std::fs::rename(&self.temp, &self.target).map_err(|e| Error::io(&self.target, e))
+        std::fs::rename(&self.temp, target).map_err(|e| Error::io(target, e))
     }
 }
 
