@@ -78,37 +78,37 @@ fn variants(no_gyro: bool) -> Vec<Variant> {
         });
     }
     if no_gyro {
-        for (k, alpha) in [
-            (25, 1e-2),
-            (50, 1e-2),
-            (100, 1e-3),
-            (100, 1e-2),
-            (100, 1e-1),
-            (200, 1e-2),
+        for (w, alpha) in [
+            (0.125, 1e-2),
+            (0.25, 1e-2),
+            (0.5, 1e-3),
+            (0.5, 1e-2),
+            (0.5, 1e-1),
+            (1.0, 1e-2),
         ] {
             let mut c = DetectorConfig::new(DetectorKind::GlrtAccel, g);
-            c.glrt.window_batches = k;
+            c.glrt.window_s = w;
             c.glrt.false_alarm = alpha;
             out.push(Variant {
-                name: format!("glrt-accel split K={k} a={alpha:e}"),
+                name: format!("glrt-accel split W={w}s a={alpha:e}"),
                 config: c,
             });
         }
         return out;
     }
-    for (k, statistic, alpha) in [
-        (10, GlrtStatistic::Split, 1e-3),
-        (10, GlrtStatistic::Combined, 1e-3),
-        (5, GlrtStatistic::Split, 1e-3),
-        (25, GlrtStatistic::Split, 1e-3),
-        (50, GlrtStatistic::Split, 1e-3),
-        (10, GlrtStatistic::Split, 1e-2),
-        (25, GlrtStatistic::Split, 1e-2),
-        (25, GlrtStatistic::Split, 1e-1),
-        (25, GlrtStatistic::Combined, 1e-2),
+    for (w, statistic, alpha) in [
+        (0.2, GlrtStatistic::Split, 1e-3),
+        (0.2, GlrtStatistic::Combined, 1e-3),
+        (0.1, GlrtStatistic::Split, 1e-3),
+        (0.5, GlrtStatistic::Split, 1e-3),
+        (1.0, GlrtStatistic::Split, 1e-3),
+        (0.2, GlrtStatistic::Split, 1e-2),
+        (0.5, GlrtStatistic::Split, 1e-2),
+        (0.5, GlrtStatistic::Split, 1e-1),
+        (0.5, GlrtStatistic::Combined, 1e-2),
     ] {
         let mut c = DetectorConfig::new(DetectorKind::Glrt, g);
-        c.glrt.window_batches = k;
+        c.glrt.window_s = w;
         c.glrt.statistic = statistic;
         c.glrt.false_alarm = alpha;
         let stat = match statistic {
@@ -116,7 +116,7 @@ fn variants(no_gyro: bool) -> Vec<Variant> {
             GlrtStatistic::Combined => "combined",
         };
         out.push(Variant {
-            name: format!("glrt {stat} K={k} a={alpha:e}"),
+            name: format!("glrt {stat} W={w}s a={alpha:e}"),
             config: c,
         });
     }

@@ -103,8 +103,7 @@ fn accel_only(mut raw: RawImuSample) -> RawImuSample {
 #[test]
 fn at_4_khz_without_gyro_yu_calls_motion_rest_and_the_accelerometer_glrt_does_not() {
     let yu = DetectorConfig::new(DetectorKind::Yu, G_MPS2);
-    let mut glrt_accel = DetectorConfig::new(DetectorKind::GlrtAccel, G_MPS2);
-    glrt_accel.glrt.window_batches = 100;
+    let glrt_accel = DetectorConfig::new(DetectorKind::GlrtAccel, G_MPS2);
     let counts = run(&[yu, glrt_accel]);
     let ratio = |a: u64, b: u64| {
         assert!(b > 10_000, "too few samples in a category: {counts:?}");

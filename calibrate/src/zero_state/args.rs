@@ -13,12 +13,12 @@ pub struct DetectorArgs {
     /// sensor). Default: the process's (the vehicle profile's glrt).
     #[arg(long, value_enum)]
     pub detector: Option<DetectorKind>,
-    /// The GLRT's window, in batches of 20 samples (default 25: 0.5 s at 1 kHz; 100 is 0.5 s
-    /// at 4 kHz).
-    #[arg(long, value_name = "BATCHES", value_parser = clap::value_parser!(u32).range(1..))]
-    pub glrt_window: Option<u32>,
+    /// The GLRT's window, s, at any rate (default 0.5; whole batches of 20 samples, at least
+    /// one).
+    #[arg(long, value_name = "SECONDS")]
+    pub glrt_window_s: Option<f64>,
     /// Length of the start-up rest the detector learns its thresholds from, s (default 5; the
-    /// first rest of this length anywhere in the data).
+    /// first rest of this length anywhere in the data, at least two batches of 20 samples).
     #[arg(long)]
     pub learn_s: Option<f64>,
     /// SHOE detector: the fixed threshold (default OpenShoe's 3e4).
@@ -41,8 +41,8 @@ impl DetectorArgs {
         if let Some(kind) = self.detector {
             config.kind = kind;
         }
-        if let Some(k) = self.glrt_window {
-            config.glrt.window_batches = k as usize;
+        if let Some(s) = self.glrt_window_s {
+            config.glrt.window_s = positive("glrt-window-s", s)?;
         }
         if let Some(s) = self.learn_s {
             config.learn.duration_s = positive("learn-s", s)?;
@@ -70,13 +70,13 @@ mod tests {
         assert_eq!(DetectorArgs::default().apply(default), Ok(default));
         let args = DetectorArgs {
             detector: Some(DetectorKind::GlrtAccel),
-            glrt_window: Some(100),
+            glrt_window_s: Some(0.25),
             learn_s: Some(2.5),
             ..DetectorArgs::default()
         };
         let c = args.apply(default).unwrap();
         assert_eq!(c.kind, DetectorKind::GlrtAccel);
-        assert_eq!(c.glrt.window_batches, 100);
+        assert_eq!(c.glrt.window_s, 0.25);
         assert_eq!(c.learn.duration_s, 2.5);
         for (args, name) in [
             (

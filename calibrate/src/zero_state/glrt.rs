@@ -3,10 +3,12 @@
 //! gyroscope bias *learned at rest* rather than gravity's direction taken from each window
 //! (which tests only the magnitude and misses steady horizontal acceleration).
 //!
-//! Over a sliding window of the last `window_batches` batches (`N` samples), with references
-//! `mu_c` (specific force at rest, gyroscope bias) and per-sample noise `sigma_c` of the six
-//! channels `c`, and `rho_c` the learned excess scatter of means over white noise (1 for white
-//! noise), and `delta_c` the tolerance on each reference (its drift between rests):
+//! Over a sliding window of the last `window_s` seconds of whole batches (`N` samples; the
+//! window's length in batches follows the stream's rate, measured when the detector learns, so
+//! that it means the same time at 40 Hz and at 4 kHz), with references `mu_c` (specific force at
+//! rest, gyroscope bias) and per-sample noise `sigma_c` of the six channels `c`, and `rho_c` the
+//! learned excess scatter of means over white noise (1 for white noise), and `delta_c` the
+//! tolerance on each reference (its drift between rests):
 //!
 //! ```text
 //! T_mean    = sum_c (mean_c - mu_c)^2 / (rho_c sigma_c^2 / N + delta_c^2) ~ chi2(6) at rest
@@ -19,6 +21,23 @@
 //! batch's within sum of squares fewer effective degrees of freedom `d_c` than `n - 1` (`K`
 //! batches of `n` samples; `d_c = n - 1` for white noise, both learned at rest).
 //!
+//! **Gravity carried by the gyroscope.** The accelerometer's reference `mu` is not the gravity
+//! vector of the start: a robot that stops on a slope or after a turn rests with gravity
+//! elsewhere in its frame. Between rests `mu` is turned with the body, by the gyroscope's batch
+//! means less the bias reference (`mu <- exp(-omega dt) mu`, sensor frame), so the mean test
+//! still sees steady horizontal acceleration, against where gravity must be now. Its error
+//! grows across gravity only (a rotation keeps the magnitude): with `t` the time since the last
+//! rest, its 1-sigma across gravity is
+//! `g (s_b t + e_turn |theta|)` (`s_b` the bias reference's own noise, `theta` the gyroscope's
+//! integral: a scale error is linear in it, so a turn and back cancels), and the batch means'
+//! own noise integrated (an angle random walk, at rest as well), on top of what the last
+//! rests left (`P_perp`), and the
+//! accelerometer's part of `T_mean` is the component along `mu` against the window mean's own
+//! noise plus the component across it against that noise plus `P_perp` and the drift (still 3
+//! degrees of freedom). A rest batch updates the direction as a Kalman filter would (gain
+//! `P / (P + var(batch mean))`, at least the running-mean gain) and the magnitude as a running
+//! mean, so a rest measures gravity again and the test is tight right after it.
+//!
 //! - [`GlrtStatistic::Split`] (default): rest iff each is below its `1 - a/2` chi-squared
 //!   quantile. The mean part (6 degrees of freedom) is what catches steady acceleration, turns
 //!   and the low-frequency (wheel) part of vibration; the scatter part catches vibration.
@@ -27,16 +46,23 @@
 //!
 //! **Accelerometer only** ([`super::DetectorKind::GlrtAccel`], for a sensor run without its
 //! gyroscope, as the MPU-9250 at 4 kHz): the same test on the three accelerometer channels,
-//! `chi2(3)` and `chi2(3 (N - 1))`. It still sees acceleration and tilt against the learned
-//! gravity vector and vibration in the scatter, but not a rotation about gravity.
+//! `chi2(3)` and `chi2(3 (N - 1))`, with nothing to turn the gravity reference by: it sees
+//! acceleration and tilt against the gravity vector of the last rests, and vibration in the
+//! scatter, but not a rotation about gravity, and a rest at another tilt is motion to it.
+//!
+//! The quantiles are the F distribution's rather than the chi-squared's: the noise levels are
+//! estimates from the learned rest (`L` degrees of freedom for the sigmas, the learned batches
+//! less one for the correlations), so `T / dof ~ F(dof, L)` at rest, which tends to the
+//! chi-squared as `L` grows. A half-second learning is what makes that matter.
 //!
 //! `a` is the configured false-alarm rate per window at rest. The noise levels stay as learned
 //! at start-up (a part's noise density does not drift); the gravity vector and gyroscope bias
-//! are kept current as running means over rest batches (temperature moves them).
+//! are kept current over rest batches (temperature moves them).
 
-use statrs::distribution::{ChiSquared, ContinuousCDF};
+use nalgebra::{Rotation3, Vector3};
+use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
-use super::learn::StaticReference;
+use super::learn::{MAX_RATE_HZ, StaticReference};
 use super::{BATCH_LEN, Decision};
 use crate::window::WindowStats;
 
@@ -54,8 +80,9 @@ pub enum GlrtStatistic {
 pub struct GlrtConfig {
     /// Probability that a window at rest is called motion.
     pub false_alarm: f64,
-    /// Window length in batches of [`BATCH_LEN`] samples (slides by one batch).
-    pub window_batches: usize,
+    /// Window length, s, rounded to whole batches of [`BATCH_LEN`] samples at the rate the
+    /// detector learned at (at least one batch; it slides by one batch).
+    pub window_s: f64,
     /// How mean and scatter are combined.
     pub statistic: GlrtStatistic,
     /// How far the learned specific force at rest may be off between rests, m/s^2 (1-sigma per
@@ -68,19 +95,38 @@ pub struct GlrtConfig {
     /// window mean's own noise; a reference held tighter than that calls every later rest
     /// motion.
     pub gyro_tolerance_rps: f64,
+    /// 1-sigma of the gravity reference's turn across gravity per radian the body turns
+    /// between rests, as the gyroscope's scale and cross-axis errors make it: an uncalibrated
+    /// MPU-9250 has +-2 % of cross-axis sensitivity (PS-MPU-9250A-01 rev. 1.1, table 1), 1.2 %
+    /// as a uniform bound's sigma.
+    pub turn_error: f64,
+}
+
+impl GlrtConfig {
+    /// Batches the window holds at most, at [`MAX_RATE_HZ`] (the ring's capacity).
+    pub fn max_window_batches(&self) -> usize {
+        ((self.window_s * MAX_RATE_HZ / BATCH_LEN as f64).ceil() as usize).max(1)
+    }
+
+    /// The window in whole batches at `rate_hz`, at least one.
+    pub fn window_batches(&self, rate_hz: f64) -> usize {
+        ((self.window_s * rate_hz / BATCH_LEN as f64).round() as usize)
+            .clamp(1, self.max_window_batches())
+    }
 }
 
 impl Default for GlrtConfig {
-    /// False-alarm rate 1e-2 per window, 25 batches (500 ms at 1 kHz), split statistic: the
+    /// False-alarm rate 1e-2 per window, 0.5 s (25 batches at 1 kHz), split statistic: the
     /// best trade-off measured on simulated drives (docs/detectors.md); reference tolerances of
-    /// 0 for the accelerometer and 0.02 deg/s for the gyroscope.
+    /// 0 for the accelerometer and 0.02 deg/s for the gyroscope; 1.2 % per radian turned.
     fn default() -> Self {
         Self {
             false_alarm: 1e-2,
-            window_batches: 25,
+            window_s: 0.5,
             statistic: GlrtStatistic::Split,
             accel_tolerance_mps2: 0.0,
             gyro_tolerance_rps: 0.02_f64.to_radians(),
+            turn_error: 0.012,
         }
     }
 }
@@ -94,6 +140,12 @@ pub(crate) struct BatchSums {
 }
 
 impl BatchSums {
+    /// A batch of `n` samples with per-channel means and within-batch sums of squares
+    /// (accelerometer x, y, z then gyroscope x, y, z).
+    pub(crate) fn from_parts(n: f64, mean: [f64; 6], ss: [f64; 6]) -> Self {
+        Self { n, mean, ss }
+    }
+
     fn new(accel: &WindowStats, gyro: &WindowStats) -> Self {
         let n = accel.n as f64;
         let mut b = Self {
@@ -116,6 +168,8 @@ pub(crate) struct GlrtRule {
     statistic: GlrtStatistic,
     /// Channels tested: 6 (accelerometer and gyroscope) or 3 (accelerometer only).
     channels: usize,
+    /// Specific force at rest where the body is now (turned by the gyroscope since the last
+    /// rest), m/s^2, then the gyroscope bias, rad/s.
     reference: [f64; 6],
     inv_var: [f64; 6],
     inv_rho: [f64; 6],
@@ -123,9 +177,26 @@ pub(crate) struct GlrtRule {
     dof_factor: [f64; 6],
     /// Variance of each reference's drift between rests (tolerance squared).
     drift_var: [f64; 6],
+    /// Variance of the gravity reference across gravity that the last rests left, per axis,
+    /// (m/s^2)^2.
+    across_var: f64,
+    /// Time since the last rest batch, s.
+    moving_s: f64,
+    /// Rotation since the last rest batch, the gyroscope's integral (less the bias
+    /// reference), rad, sensor frame: a scale or cross-axis error turns the gravity reference
+    /// by a fraction of it (linear in the integral, so a turn and back cancels, and so does
+    /// noise, as a random walk).
+    turned_rad: Vector3<f64>,
+    /// 1-sigma of the gyroscope bias reference, rad/s (the learned mean's noise, largest axis).
+    bias_sigma_rps: f64,
+    turn_error: f64,
+    /// Consecutive rest decisions up to the last batch.
+    rest_run: usize,
     mean_quantile: f64,
     scatter_quantile: f64,
     combined_quantile: f64,
+    /// The noise pooled over the learned rest and the rest batches since (see [`Pool`]).
+    pool: Pool,
     /// Ring of the last batches, allocated once.
     ring: Vec<BatchSums>,
     head: usize,
@@ -133,21 +204,19 @@ pub(crate) struct GlrtRule {
 }
 
 impl GlrtRule {
-    /// The test from the start-up reference; `ring` (capacity at least `window_batches`) becomes
-    /// the window, so that learning allocates nothing. `accel_only` leaves the gyroscope out.
+    /// The test from the start-up reference `r` (after the noise floor; `learned` before it),
+    /// its window in batches at the reference's rate; `ring` (capacity at least
+    /// [`GlrtConfig::max_window_batches`]) becomes the window, so that learning allocates
+    /// nothing. `accel_only` leaves the gyroscope out.
     pub fn new(
         r: &StaticReference,
+        learned: &StaticReference,
         config: &GlrtConfig,
         mut ring: Vec<BatchSums>,
         accel_only: bool,
     ) -> Self {
         let channels = if accel_only { 3 } else { 6 };
-        let dof = channels as f64;
-        let k = config.window_batches;
-        let n = (k * BATCH_LEN) as f64;
-        let quantile =
-            |dof: f64, p: f64| ChiSquared::new(dof).expect("dof > 0").inverse_cdf(1.0 - p);
-        let a = config.false_alarm;
+        let k = config.window_batches(r.rate_hz());
         let mut reference = [0.0; 6];
         let mut inv_var = [0.0; 6];
         let mut inv_rho = [0.0; 6];
@@ -166,7 +235,14 @@ impl GlrtRule {
             inv_rho[i] = 1.0 / r.accel_correlation[i];
             inv_rho[i + 3] = 1.0 / r.gyro_correlation[i];
         }
-        Self {
+        let pool = Pool::new(r, learned, config.false_alarm);
+        // The learned mean's own noise, per axis on average.
+        let learned_n = (r.batches * BATCH_LEN) as f64;
+        let across_var = (0..3)
+            .map(|i| 1.0 / (learned_n * inv_var[i] * inv_rho[i]))
+            .sum::<f64>()
+            / 3.0;
+        let mut rule = Self {
             statistic: config.statistic,
             channels,
             reference,
@@ -174,15 +250,18 @@ impl GlrtRule {
             inv_rho,
             dof_factor,
             drift_var,
-            mean_quantile: quantile(dof, a / 2.0),
-            scatter_quantile: quantile(
-                dof_factor[..channels]
-                    .iter()
-                    .map(|f| k as f64 * f * nominal + k as f64 - 1.0)
-                    .sum(),
-                a / 2.0,
-            ),
-            combined_quantile: quantile(dof * n, a),
+            across_var,
+            moving_s: 0.0,
+            turned_rad: Vector3::zeros(),
+            bias_sigma_rps: (3..6)
+                .map(|c| (1.0 / (learned_n * inv_var[c] * inv_rho[c])).sqrt())
+                .fold(0.0, f64::max),
+            turn_error: config.turn_error,
+            rest_run: 0,
+            mean_quantile: 0.0,
+            scatter_quantile: 0.0,
+            combined_quantile: 0.0,
+            pool,
             ring: {
                 ring.clear();
                 ring.resize(k, BatchSums::default());
@@ -190,15 +269,129 @@ impl GlrtRule {
             },
             head: 0,
             filled: 0,
+        };
+        rule.set_quantiles();
+        rule
+    }
+
+    /// The three quantiles for the window and the pooled noise's degrees of freedom.
+    fn set_quantiles(&mut self) {
+        let channels = self.channels;
+        let dof = channels as f64;
+        let k = self.ring.len() as f64;
+        let nominal = (BATCH_LEN - 1) as f64;
+        let a = self.pool.false_alarm;
+        // The noise levels are estimates from rest, so each statistic over its degrees of
+        // freedom is F-distributed at rest (a chi-squared over an independent estimate's
+        // chi-squared), not chi-squared: `dof F^-1(1 - p; dof, learned)`. With a long rest
+        // behind it this is the chi-squared quantile; after half a second of learning it is
+        // what keeps the false-alarm rate at `a`.
+        let quantile = |dof: f64, learned: f64, p: f64| {
+            dof * FisherSnedecor::new(dof, learned.max(1.0))
+                .expect("dof > 0")
+                .inverse_cdf(1.0 - p)
+        };
+        // The fewest effective degrees of freedom of the channels' sigmas.
+        let sigma_dof = (0..channels)
+            .map(|c| self.pool.ss_dof[c] * self.dof_factor[c])
+            .fold(f64::INFINITY, f64::min);
+        self.mean_quantile = quantile(dof, self.pool.mean_dof, a / 2.0);
+        let scatter_dof = self.dof_factor[..channels]
+            .iter()
+            .map(|f| k * f * nominal + k - 1.0)
+            .sum();
+        self.scatter_quantile = quantile(scatter_dof, sigma_dof, a / 2.0);
+        self.combined_quantile = quantile(dof * k * BATCH_LEN as f64, sigma_dof, a);
+    }
+
+    /// Pools a rest batch's within-batch scatter into the noise levels, when the rest has held
+    /// for two windows (a false rest at a motion's start or end is short, and its vibration
+    /// must not loosen the test); once the pooled degrees of freedom have doubled since the
+    /// last refit, the sigmas (at least the floor they were installed with) and the quantiles
+    /// are set from the pool. The mean's variance per sample, `rho sigma^2`, is kept as
+    /// learned.
+    fn pool_rest(&mut self, accel: &WindowStats, gyro: &WindowStats) {
+        if self.rest_run < 2 * self.ring.len() {
+            return;
         }
+        let n = accel.n as f64;
+        for i in 0..3 {
+            self.pool.ss[i] += accel.std[i] * accel.std[i] * (n - 1.0);
+            self.pool.ss[i + 3] += gyro.std[i] * gyro.std[i] * (n - 1.0);
+        }
+        for d in &mut self.pool.ss_dof {
+            *d += n - 1.0;
+        }
+        if self.pool.ss_dof[0] < self.pool.refit_at || self.pool.refit_at > MAX_POOLED_DOF {
+            return;
+        }
+        self.pool.refit_at *= 2.0;
+        for c in 0..6 {
+            let mean_var = 1.0 / (self.inv_var[c] * self.inv_rho[c]);
+            let var = (self.pool.ss[c] / self.pool.ss_dof[c]).max(self.pool.floor_var[c]);
+            self.inv_var[c] = 1.0 / var;
+            self.inv_rho[c] = (var / mean_var).min(1.0);
+        }
+        self.set_quantiles();
+    }
+
+    /// Fills the window with the batches the detector learned from (oldest first; the last
+    /// `window` of them are kept), so that the batch after learning is decided on a full
+    /// window: a rest is a rest from its learning on, not a window later.
+    pub fn seed(&mut self, batches: impl Iterator<Item = BatchSums>) {
+        for b in batches {
+            self.push(b);
+        }
+    }
+
+    fn push(&mut self, b: BatchSums) {
+        let k = self.ring.len();
+        self.ring[self.head] = b;
+        self.head = (self.head + 1) % k;
+        self.filled = (self.filled + 1).min(k);
+    }
+
+    /// Turns the gravity reference with the body over one batch (gyroscope mean less the bias
+    /// reference, over the batch's duration), and counts the time and angle since the last rest.
+    fn carry_gravity(&mut self, gyro: &WindowStats) {
+        if self.channels == 3 {
+            // Nothing turns the reference: it stays as tight as the last rests left it.
+            return;
+        }
+        let dt = super::batch_duration_s(gyro);
+        self.moving_s += dt;
+        // The turn's own noise (the batch means' noise over the batch: an angle random walk)
+        // adds to the reference's uncertainty across gravity, at rest too.
+        let g2 = (0..3).map(|i| self.reference[i] * self.reference[i]).sum::<f64>();
+        let mean_var = (3..6)
+            .map(|c| 1.0 / (gyro.n as f64 * self.inv_var[c] * self.inv_rho[c]))
+            .fold(0.0, f64::max);
+        self.across_var += g2 * mean_var * dt * dt;
+        let omega = Vector3::from_fn(|i, _| gyro.mean[i] - self.reference[i + 3]);
+        self.turned_rad += omega * dt;
+        if omega.norm() > 0.0 {
+            // The body turns by exp(omega dt); a vector fixed in the world turns the other way
+            // in the body's frame.
+            let turn = Rotation3::new(-omega * dt);
+            let g = turn * Vector3::new(self.reference[0], self.reference[1], self.reference[2]);
+            self.reference[..3].copy_from_slice(g.as_slice());
+        }
+    }
+
+    /// Variance per axis of the gravity reference across gravity now, (m/s^2)^2: what the last
+    /// rests left, and the turn the gyroscope's bias error (the bias reference's own noise
+    /// over the learned rest) and its scale and cross-axis errors add since.
+    fn across_var_now(&self) -> f64 {
+        let g = Vector3::new(self.reference[0], self.reference[1], self.reference[2]).norm();
+        let drift =
+            g * (self.bias_sigma_rps * self.moving_s + self.turn_error * self.turned_rad.norm());
+        self.across_var + drift * drift
     }
 
     /// Adds the batch to the window and decides; not at rest until the window is full.
     pub fn decide(&mut self, accel: &WindowStats, gyro: &WindowStats) -> Decision {
-        let k = self.ring.len();
-        self.ring[self.head] = BatchSums::new(accel, gyro);
-        self.head = (self.head + 1) % k;
-        self.filled = (self.filled + 1).min(k);
+        self.carry_gravity(gyro);
+        self.push(BatchSums::new(accel, gyro));
 
         // Window statistics: pooled means, and within-batch plus between-batch sums of squares.
         let n: f64 = self.ring[..self.filled].iter().map(|b| b.n).sum();
@@ -216,14 +409,17 @@ impl GlrtRule {
                 between[c] += b.n * d * d;
             }
         }
-        let mut t_mean = 0.0;
+        // The window mean's variance about each reference: its own noise plus the reference's
+        // drift since it was learned.
+        let var: [f64; 6] =
+            std::array::from_fn(|c| 1.0 / (n * self.inv_var[c] * self.inv_rho[c]) + self.drift_var[c]);
+        let mut t_mean = self.accel_mean_statistic(&mean, &var);
         let mut t_scatter = 0.0;
         for c in 0..self.channels {
-            let d = mean[c] - self.reference[c];
-            // The window mean's variance about the reference: its own noise plus the
-            // reference's drift since it was learned.
-            let var = 1.0 / (n * self.inv_var[c] * self.inv_rho[c]) + self.drift_var[c];
-            t_mean += d * d / var;
+            if c >= 3 {
+                let d = mean[c] - self.reference[c];
+                t_mean += d * d / var[c];
+            }
             t_scatter +=
                 (within[c] * self.dof_factor[c] + between[c] * self.inv_rho[c]) * self.inv_var[c];
         }
@@ -233,19 +429,52 @@ impl GlrtRule {
             }
             GlrtStatistic::Combined => t_mean + t_scatter <= self.combined_quantile,
         };
+        let rest = quiet && self.filled == self.ring.len();
+        self.rest_run = if rest { self.rest_run + 1 } else { 0 };
         Decision {
-            rest: quiet && self.filled == k,
+            rest,
             mean_mps2: [mean[0], mean[1], mean[2]],
             std_mps2: std::array::from_fn(|i| ((within[i] + between[i]) / (n - 1.0)).sqrt()),
         }
     }
 
-    /// Keeps gravity and the gyroscope bias current with a rest batch (running-mean gain).
+    /// The accelerometer's part of `T_mean` (3 degrees of freedom): the window mean's distance
+    /// from the gravity reference along it, against the mean's noise `var` (per axis), and
+    /// across it, against that noise plus the reference's own uncertainty across gravity.
+    fn accel_mean_statistic(&self, mean: &[f64; 6], var: &[f64; 6]) -> f64 {
+        let reference = Vector3::new(self.reference[0], self.reference[1], self.reference[2]);
+        let u = reference.normalize();
+        let d = Vector3::new(mean[0], mean[1], mean[2]) - reference;
+        let along = d.dot(&u);
+        let across = (d - u * along).norm_squared();
+        let var_along: f64 = (0..3).map(|i| u[i] * u[i] * var[i]).sum();
+        let var_across = (var[0] + var[1] + var[2] - var_along) / 2.0 + self.across_var_now();
+        along * along / var_along + across / var_across
+    }
+
+    /// Keeps gravity and the gyroscope bias current with a rest batch: the gyroscope bias and
+    /// gravity's magnitude as running means of gain `gain`, gravity's direction with the gain
+    /// of a Kalman update on what the gyroscope left uncertain (at least `gain`).
     pub fn update(&mut self, accel: &WindowStats, gyro: &WindowStats, gain: f64) {
-        for i in 0..3 {
-            self.reference[i] += gain * (accel.mean[i] - self.reference[i]);
-            self.reference[i + 3] += gain * (gyro.mean[i] - self.reference[i + 3]);
+        let reference = Vector3::new(self.reference[0], self.reference[1], self.reference[2]);
+        let u = reference.normalize();
+        let d = Vector3::from_fn(|i, _| accel.mean[i] - reference[i]);
+        let along = u * d.dot(&u);
+        let batch_var = (0..3)
+            .map(|i| 1.0 / (accel.n as f64 * self.inv_var[i] * self.inv_rho[i]))
+            .sum::<f64>()
+            / 3.0;
+        let prior = self.across_var_now();
+        let k = (prior / (prior + batch_var)).max(gain);
+        let g = reference + along * gain + (d - along) * k;
+        self.reference[..3].copy_from_slice(g.as_slice());
+        self.across_var = (1.0 - k) * prior;
+        self.moving_s = 0.0;
+        self.turned_rad = Vector3::zeros();
+        for i in 3..6 {
+            self.reference[i] += gain * (gyro.mean[i - 3] - self.reference[i]);
         }
+        self.pool_rest(accel, gyro);
     }
 
     /// Gives the window's storage back (for the next session).
@@ -259,7 +488,7 @@ impl GlrtRule {
         self.filled = 0;
     }
 
-    /// The gravity reference, m/s^2.
+    /// The gravity reference where the body is now, m/s^2.
     pub fn accel_mean_mps2(&self) -> [f64; 3] {
         [self.reference[0], self.reference[1], self.reference[2]]
     }
@@ -267,5 +496,50 @@ impl GlrtRule {
     /// The gyroscope bias reference, rad/s.
     pub fn gyro_mean_rps(&self) -> [f64; 3] {
         [self.reference[3], self.reference[4], self.reference[5]]
+    }
+}
+
+/// Pooled degrees of freedom past which the sigmas are no longer refitted: the F quantiles are
+/// then within a percent of the chi-squared's, and each refit (three inverse F distributions,
+/// on the hot path) costs more as they grow.
+const MAX_POOLED_DOF: f64 = 1e5;
+
+/// The noise pooled over rest: within-batch sums of squares and their nominal degrees of
+/// freedom per channel, from the learned rest on.
+#[derive(Debug, Clone, Copy)]
+struct Pool {
+    ss: [f64; 6],
+    ss_dof: [f64; 6],
+    /// Degrees of freedom of the learned correlations (the learned batches less one).
+    mean_dof: f64,
+    /// The variance each sigma was installed at least with (the noise floor), or 0.
+    floor_var: [f64; 6],
+    /// Pooled degrees of freedom at which the sigmas are next set from the pool.
+    refit_at: f64,
+    false_alarm: f64,
+}
+
+impl Pool {
+    /// The pool of the learned rest `learned`; `installed` is it after the noise floor.
+    fn new(installed: &StaticReference, learned: &StaticReference, false_alarm: f64) -> Self {
+        let nominal = learned.batches as f64 * (BATCH_LEN - 1) as f64;
+        let sigma = |r: &StaticReference, c: usize| {
+            if c < 3 {
+                r.accel_sigma_mps2[c]
+            } else {
+                r.gyro_sigma_rps[c - 3]
+            }
+        };
+        Self {
+            ss: std::array::from_fn(|c| sigma(learned, c).powi(2) * nominal),
+            ss_dof: [nominal; 6],
+            mean_dof: learned.batches as f64 - 1.0,
+            floor_var: std::array::from_fn(|c| {
+                let (i, l) = (sigma(installed, c), sigma(learned, c));
+                if i > l { i * i } else { 0.0 }
+            }),
+            refit_at: 2.0 * nominal,
+            false_alarm,
+        }
     }
 }

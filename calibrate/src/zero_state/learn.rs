@@ -80,7 +80,7 @@ pub struct LearnConfig {
 }
 
 impl LearnConfig {
-    /// Defaults: 5 s, 5% of gravity (a calibrated sensor is within 0.5%), correlation 3 (white
+    /// Defaults: 5 s (at least two batches at any rate), 5% of gravity (a calibrated sensor is within 0.5%), correlation 3 (white
     /// noise gives 1 +- 0.1 over 250 batches), batch-mean correlation 0.35, noise ratio 1.5.
     pub fn new(gravity_mps2: f64) -> Self {
         Self {
@@ -125,6 +125,13 @@ pub struct StaticReference {
     pub duration_s: f64,
     /// Time of the learned interval's first sample, ns.
     pub t_start_ns: u64,
+}
+
+impl StaticReference {
+    /// The stream's sample rate over the learned interval, Hz.
+    pub fn rate_hz(&self) -> f64 {
+        (self.batches * super::BATCH_LEN) as f64 / self.duration_s
+    }
 }
 
 /// Why a learning window was refused.
@@ -274,6 +281,14 @@ impl StaticLearner {
     /// How many learning windows were refused, and why the last one was.
     pub fn rejections(&self) -> (usize, Option<LearnRejection>) {
         (self.refused, self.last_rejection)
+    }
+
+    /// The window's batches, oldest first, as the GLRT keeps them.
+    pub(crate) fn window(&self) -> impl Iterator<Item = super::glrt::BatchSums> + '_ {
+        (0..self.len).map(|i| {
+            let b = self.batch(i);
+            super::glrt::BatchSums::from_parts(b.n as f64, b.mean, b.ss)
+        })
     }
 
     /// The `i`-th batch of the window, oldest first.

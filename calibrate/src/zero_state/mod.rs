@@ -122,8 +122,7 @@ impl NoiseFloor {
     /// stream's rate (from the learned batches) is within 10% of the floor's; the scatter of
     /// the batch means (`correlation sigma^2`) is kept as learned.
     pub fn apply(&self, mut reference: StaticReference) -> StaticReference {
-        let rate = (reference.batches * BATCH_LEN) as f64 / reference.duration_s;
-        if (rate / self.sample_rate_hz - 1.0).abs() > 0.1 {
+        if (reference.rate_hz() / self.sample_rate_hz - 1.0).abs() > 0.1 {
             return reference;
         }
         let raise = |sigma: &mut f64, correlation: &mut f64, floor: Option<f64>| {
@@ -264,7 +263,7 @@ impl ZeroStateDetector {
     /// A detector with `config`, not yet learned.
     ///
     /// # Panics
-    /// If the false-alarm rate is not in (0, 1), the GLRT window is shorter than one batch, the
+    /// If the false-alarm rate is not in (0, 1), the GLRT window is not positive, the
     /// SHOE window is not 2..=[`BATCH_LEN`] samples or the memory is not positive.
     pub fn new(config: DetectorConfig) -> Self {
         assert!(
@@ -289,8 +288,9 @@ impl ZeroStateDetector {
             "the SHOE window must be 2..={BATCH_LEN} samples, got {window}"
         );
         assert!(
-            config.glrt.window_batches >= 1,
-            "the GLRT window needs at least one batch"
+            config.glrt.window_s > 0.0,
+            "the GLRT window must be > 0 s, got {}",
+            config.glrt.window_s
         );
         Self {
             config,
@@ -301,7 +301,7 @@ impl ZeroStateDetector {
                 .then(|| Rule::Shoe(shoe::ShoeRule::new(config.shoe, config.learn.gravity_mps2))),
             learned: None,
             rest_s: 0.0,
-            ring: Vec::with_capacity(config.glrt.window_batches),
+            ring: Vec::with_capacity(config.glrt.max_window_batches()),
         }
     }
 
@@ -351,6 +351,8 @@ impl ZeroStateDetector {
     /// references). SHOE learns nothing and ignores it.
     pub fn resume(&mut self, reference: &StaticReference, rest_seen_s: f64) {
         if self.config.kind != DetectorKind::Shoe {
+            // Nothing learned here is part of the resumed rest.
+            self.learner.clear();
             self.install(*reference);
             self.rest_s = rest_seen_s;
         }
@@ -367,12 +369,16 @@ impl ZeroStateDetector {
         self.rule = Some(match self.config.kind {
             DetectorKind::Yu => Rule::Yu(yu::YuRule::new(&reference, &self.config.yu)),
             kind @ (DetectorKind::Glrt | DetectorKind::GlrtAccel) => {
-                Rule::Glrt(glrt::GlrtRule::new(
+                let mut rule = glrt::GlrtRule::new(
                     &reference,
+                    &learned,
                     &self.config.glrt,
                     ring,
                     kind == DetectorKind::GlrtAccel,
-                ))
+                );
+                // The batches just learned from (none when resumed) are a rest already.
+                rule.seed(self.learner.window());
+                Rule::Glrt(rule)
             }
             DetectorKind::Shoe => unreachable!("SHOE is ready from the start"),
         });

@@ -340,7 +340,7 @@ fn steal_ms() -> Result<Vec<f64>> {
 /// The stages' options for a drive at `rate_hz`: the 4 kHz MPU-9250 has no gyroscope.
 fn stage_args(rate_hz: u64) -> Vec<&'static str> {
     if rate_hz > 1000 {
-        vec!["--detector", "glrt-accel", "--glrt-window", "100"]
+        vec!["--detector", "glrt-accel"]
     } else {
         vec![]
     }

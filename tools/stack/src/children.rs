@@ -74,27 +74,13 @@ pub fn specs(
     specs
 }
 
-/// Window of the accelerometer-only GLRT, s: 0.5 s, as the GLRT's default at 1 kHz (measured
-/// at 4 kHz in docs/detectors.md).
-const ACCEL_GLRT_WINDOW_S: f64 = 0.5;
-
 /// `mems-calibrate serve`'s detector arguments for `cli`: the one asked for, else the GLRT, on
-/// the accelerometer alone over [`ACCEL_GLRT_WINDOW_S`] above 1000 Hz (no gyroscope there).
+/// the accelerometer alone above 1000 Hz (no gyroscope there; its window is the default 0.5 s
+/// at any rate).
 fn detector_args(cli: &Cli) -> Vec<String> {
     match &cli.detector {
         Some(d) => vec!["--detector".into(), d.name().into()],
-        None if cli.rate > 1000 => {
-            // Batches of 20 samples (calibrate::zero_state::BATCH_LEN).
-            let batches = (ACCEL_GLRT_WINDOW_S * f64::from(cli.rate) / 20.0)
-                .round()
-                .max(1.0);
-            vec![
-                "--detector".into(),
-                "glrt-accel".into(),
-                "--glrt-window".into(),
-                batches.to_string(),
-            ]
-        }
+        None if cli.rate > 1000 => vec!["--detector".into(), "glrt-accel".into()],
         None => vec!["--detector".into(), "glrt".into()],
     }
 }
@@ -165,13 +151,11 @@ mod tests {
     #[test]
     fn the_detector_needs_no_gyro_above_1_khz() {
         let detector = |args: &[&str]| detector_args(&Cli::parse_args(args));
-        // 4 kHz is accelerometer-only: the accelerometer GLRT over 0.5 s = 100 batches of 20.
+        // 4 kHz is accelerometer-only: the accelerometer GLRT.
         let at_4k = detector(&["--rate", "4000"]);
-        assert_eq!(value(&at_4k, "--detector"), Some("glrt-accel"));
-        assert_eq!(value(&at_4k, "--glrt-window"), Some("100"));
+        assert_eq!(at_4k, vec!["--detector".to_string(), "glrt-accel".to_string()]);
         let at_1k = detector(&["--rate", "1000"]);
-        assert_eq!(value(&at_1k, "--detector"), Some("glrt"));
-        assert_eq!(value(&at_1k, "--glrt-window"), None);
+        assert_eq!(at_1k, vec!["--detector".to_string(), "glrt".to_string()]);
         let asked = detector(&["--rate", "4000", "--detector", "yu"]);
         assert_eq!(asked, vec!["--detector".to_string(), "yu".to_string()]);
     }

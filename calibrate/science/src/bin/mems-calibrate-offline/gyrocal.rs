@@ -24,7 +24,7 @@ use anyhow::{Context, Result, bail};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig, Settler, calib_id};
 use calibrate::zero_state::args::DetectorArgs;
-use calibrate::zero_state::{BATCH_LEN, DetectorConfig, DetectorKind};
+use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use calibrate_science::gyrocal::{GyroCalConfig, GyroCalibration, calibrate_gyro};
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, raw_flags};
 use nalgebra::Matrix3;
@@ -37,7 +37,7 @@ pub struct GyroCalArgs {
     #[arg(long)]
     calib: Option<PathBuf>,
     /// The detector marking the static poses (the vehicle profile's GLRT by default; its
-    /// window fits the poses' rate unless --glrt-window is given); the session starts at rest
+    /// window is 1 s unless --glrt-window-s is given); the session starts at rest
     /// for `--learn-s`.
     #[command(flatten)]
     detector: DetectorArgs,
@@ -64,17 +64,6 @@ const POSE_ACCEL_TOLERANCE_MPS2: f64 = 1e3;
 /// Length of the GLRT's window, s: long enough that the gyro's window mean resolves a slow
 /// start of a rotation, short against a pose's hold.
 const POSE_WINDOW_S: f64 = 1.0;
-
-/// The GLRT's window in batches of [`BATCH_LEN`] samples for [`POSE_WINDOW_S`] at the
-/// session's mean sample rate (at least one batch).
-fn window_batches(samples: &[RawImuSample]) -> usize {
-    let (Some(first), Some(last)) = (samples.first(), samples.last()) else {
-        return 1;
-    };
-    let span_s = last.stamps.sample_ns.saturating_sub(first.stamps.sample_ns) as f64 * 1e-9;
-    let rate_hz = (samples.len() - 1) as f64 / span_s.max(f64::MIN_POSITIVE);
-    ((POSE_WINDOW_S * rate_hz / BATCH_LEN as f64).round() as usize).max(1)
-}
 
 /// Largest 1-sigma of an entry of the correction that is accepted (dimensionless): a fifth of
 /// the MPU-9250's 1% scale error, so that a stored correction always improves on none.
@@ -192,8 +181,8 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
         );
     }
     detector.glrt.accel_tolerance_mps2 = POSE_ACCEL_TOLERANCE_MPS2;
-    if args.detector.glrt_window.is_none() {
-        detector.glrt.window_batches = window_batches(&recording.samples);
+    if args.detector.glrt_window_s.is_none() {
+        detector.glrt.window_s = POSE_WINDOW_S;
     }
     let corrected = correct_session(&args, calib_path, &file, detector, &recording.samples)?;
     let rest = corrected
