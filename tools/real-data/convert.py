@@ -430,11 +430,15 @@ def broad_truth(arrays, where):
     }, _path_length([p[:2] for p in seen], 0.01)
 
 
-def pf_pose_truth(text, where):
+def pf_pose_truth(text, where, t0_ns):
     """Lidar particle-filter poses on a known map (FrictionMaps pfPoseData.csv, x and y in m):
     the last pose relative to the first, and the track's length. The map frame's heading is
-    not the odometry's, so only the distance is a truth."""
-    points = [(v["x"], v["y"]) for _, v in _stamped_rows(text, where, {"x": "x", "y": "y"})]
+    not the odometry's, so only the distance is a truth. The track itself is kept (`track`:
+    [t_s, x, y] with t_s on the recording's clock, seconds after its first IMU sample at
+    `t0_ns`), so that bench.py can measure from the pose where the odometry aligned (a car
+    that drives off at once aligns at its first stop)."""
+    rows = list(_stamped_rows(text, where, {"x": "x", "y": "y"}))
+    points = [(v["x"], v["y"]) for _, v in rows]
     if len(points) < 2:
         raise ConvertError(where, None, None, "fewer than two poses")
     end = [points[-1][0] - points[0][0], points[-1][1] - points[0][1]]
@@ -445,6 +449,7 @@ def pf_pose_truth(text, where):
         "end_distance_m": math.hypot(*end),
         "end_displacement_map_m": end,
         "poses": len(points),
+        "track": [[round((ns - t0_ns) * 1e-9, 6), v["x"], v["y"]] for ns, v in rows],
         "source": "pfPoseData.csv: the particle filter's last pose minus its first (map frame, lidar on a known map); the odometry's heading is fixed at its alignment, so only the distance is a truth",
     }, _path_length(points, 0.1)
 
@@ -624,8 +629,10 @@ def convert_recording(rec, source, git_dir, out_dir):
         samples, notes, arrays = parse_broad_mat(git_show(git_dir, commit, paths[0]), loc)
         truth, distance = broad_truth(arrays, loc)
     elif fmt == "vesc_f1tenth_csv":
-        samples, notes, hints = parse_vesc_f1tenth(text_of(0), text_of(1), loc, where(1))
-        truth, distance = pf_pose_truth(text_of(2), where(2))
+        imu_text = text_of(0)
+        samples, notes, hints = parse_vesc_f1tenth(imu_text, text_of(1), loc, where(1))
+        t0_ns = next(_stamped_rows(imu_text, loc, {}))[0]
+        truth, distance = pf_pose_truth(text_of(2), where(2), t0_ns)
     else:
         raise ConvertError("corpus.json", None, rec["id"], f"unknown format {fmt!r}")
     if not samples:
@@ -836,8 +843,9 @@ def self_test():
     expect_error(lambda: parse_vesc_f1tenth(imu.replace("0.98,1.5", "0.98,x", 1), odom, "i.csv", "o.csv"),
                  "i.csv", "line 2", "'wx'")
     pf = ",s,ns,x,y,q.x,q.y,q.z,q.w\n0,100,0,1.0,1.0,0,0,0,1\n0,100,5,1.05,1.0,0,0,0,1\n0,101,0,4.0,5.0,0,0,0,1\n"
-    truth, walked = pf_pose_truth(pf, "p.csv")
+    truth, walked = pf_pose_truth(pf, "p.csv", 100 * 1_000_000_000)
     close(truth["end_distance_m"], 5.0)
+    assert truth["track"][2] == [1.0, 4.0, 5.0], truth["track"]
     close(walked, 5.0)  # the 5 cm step is under the 0.1 m floor: measured from (1, 1)
 
     # MCAP: records in order, JSON messages with the wire field names, times strictly increasing.
