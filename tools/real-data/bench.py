@@ -35,7 +35,8 @@ candidate with the smallest median over the class's recordings from the other so
 S's recordings run with it; the median of those runs over the class. A class with a single
 source has no other source to choose on: its recordings are run with the defaults (the
 values the binary uses without flags), and the table says so. A failed run counts as an
-infinite error. Runs are cached by (recording, arguments).
+infinite error, as does a run with no distance after its alignment. Runs are cached by
+(recording, arguments).
 
 Usage: bench.py [--bin PATH] [--calib TOML] [--data DIR] [--only ID ...] [--json] [--timeout S] [--loso]
 """
@@ -281,14 +282,15 @@ def table(rows):
 
 
 def pct_upper(row):
-    """The row's % of distance, upper end of its interval; infinite for a failed run."""
+    """The row's % of distance, upper end of its interval; infinite for a failed run and for
+    one with no distance to divide by (a run that aligned at its very end)."""
     if row.get("error") or row["result"]["pct_of_distance"][1] is None:
         return math.inf
     return row["result"]["pct_of_distance"][1]
 
 
 def fmt_pct(value):
-    return "failed" if value == math.inf else f"{value:.2f} %"
+    return "inf" if value == math.inf else f"{value:.2f} %"
 
 
 def summary(rows):
@@ -312,9 +314,9 @@ def summary(rows):
         cov = sum(1 for r in ok if r["result"]["covered"] == "yes")
         sources = sorted({r["sidecar"]["source"]["repo"] for r in group if r.get("sidecar")})
         med = statistics.median(pct_upper(r) for r in group)
-        lines.append(f"{platform}: {len(ok)} of {len(group)} runs gave a position, {cov} covered; median "
-                     f"{fmt_pct(med)} of distance (upper end; a failed run counts as infinite; "
-                     f"{len(group)} runs, {len(sources)} source{'s' if len(sources) != 1 else ''})")
+        lines.append(f"{platform}: {len(ok)} of {len(group)} runs gave a position, {cov} covered; median % of "
+                     f"distance (upper end; failed or unmeasured runs infinite): {fmt_pct(med)}; "
+                     f"{len(sources)} source{'s' if len(sources) != 1 else ''}")
     return lines
 
 
