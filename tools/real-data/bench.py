@@ -168,21 +168,31 @@ def footprints_in_our_frame(truth, rests):
 TRACK_MIN_STEP_M = 0.1
 
 
+def heading_at(track, t_s):
+    """The track's heading (rad, its 4th column) at the last pose at or before t_s."""
+    best = track[0]
+    for q in track:
+        if q[0] > t_s:
+            break
+        best = q
+    return best[3]
+
+
 def track_at(track, t_s):
     """The track's (x, y) at time t_s (linear between its poses, clamped to its ends)."""
     if t_s <= track[0][0]:
-        return track[0][1:]
+        return track[0][1:3]
     for a, b in zip(track, track[1:]):
         if a[0] <= t_s <= b[0]:
             f = (t_s - a[0]) / (b[0] - a[0]) if b[0] > a[0] else 0.0
             return [a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2])]
-    return track[-1][1:]
+    return track[-1][1:3]
 
 
 def track_length(track, t_s):
     """The track's length from time t_s to its end, over steps of at least 0.1 m (as
     convert.py measures the whole track)."""
-    points = [track_at(track, t_s)] + [q[1:] for q in track if q[0] > t_s]
+    points = [track_at(track, t_s)] + [q[1:3] for q in track if q[0] > t_s]
     walked, last = 0.0, points[0]
     for q in points[1:]:
         step = math.dist(q, last)
@@ -207,10 +217,20 @@ def evaluate(side, out):
         # A track on the recording's clock (particle-filter poses): the truth counts from the
         # pose where the odometry aligned, as our position does.
         start = track_at(truth["track"], out["aligned_at_s"])
-        end = truth["track"][-1][1:]
-        t = math.dist(start, end)
-        ours = math.hypot(p[0], p[1])
-        lo, hi = abs(ours - t), ours + t
+        end = truth["track"][-1][1:3]
+        yaw_on_body = truth.get("sensor_yaw_on_body_deg")
+        if yaw_on_body is not None and len(truth["track"][0]) > 3:
+            # Our heading is the sensor's x axis at alignment (eskf::align: the smallest turn
+            # of the measured up onto z), which is the car's heading plus the IMU's yaw on it.
+            psi = heading_at(truth["track"], out["aligned_at_s"]) + math.radians(yaw_on_body)
+            dx, dy = end[0] - start[0], end[1] - start[1]
+            c, s_ = math.cos(psi), math.sin(psi)
+            t_vec = [c * dx + s_ * dy, -s_ * dx + c * dy]
+            lo = hi = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
+        else:
+            t = math.dist(start, end)
+            ours = math.hypot(p[0], p[1])
+            lo, hi = abs(ours - t), ours + t
     elif (turned := footprints_in_our_frame(truth, out.get("rests", []))) is not None:
         t_vec = turned["end_m"]
         err = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])

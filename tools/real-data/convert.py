@@ -435,9 +435,11 @@ def pf_pose_truth(text, where, t0_ns):
     the last pose relative to the first, and the track's length. The map frame's heading is
     not the odometry's, so only the distance is a truth. The track itself is kept (`track`:
     [t_s, x, y] with t_s on the recording's clock, seconds after its first IMU sample at
-    `t0_ns`), so that bench.py can measure from the pose where the odometry aligned (a car
-    that drives off at once aligns at its first stop)."""
-    rows = list(_stamped_rows(text, where, {"x": "x", "y": "y"}))
+    `t0_ns`, and the car's heading, rad, from the pose's quaternion z and w: the filter's poses
+    are planar), so that bench.py can measure from the pose where the odometry aligned (a car
+    that drives off at once aligns at its first stop) and turn the truth into the odometry's
+    frame when the IMU's yaw on the car is known."""
+    rows = list(_stamped_rows(text, where, {"x": "x", "y": "y", "qz": "q.z", "qw": "q.w"}))
     points = [(v["x"], v["y"]) for _, v in rows]
     if len(points) < 2:
         raise ConvertError(where, None, None, "fewer than two poses")
@@ -449,7 +451,7 @@ def pf_pose_truth(text, where, t0_ns):
         "end_distance_m": math.hypot(*end),
         "end_displacement_map_m": end,
         "poses": len(points),
-        "track": [[round((ns - t0_ns) * 1e-9, 6), v["x"], v["y"]] for ns, v in rows],
+        "track": [[round((ns - t0_ns) * 1e-9, 6), v["x"], v["y"], 2 * math.atan2(v["qz"], v["qw"])] for ns, v in rows],
         "source": "pfPoseData.csv: the particle filter's last pose minus its first (map frame, lidar on a known map); the odometry's heading is fixed at its alignment, so only the distance is a truth",
     }, _path_length(points, 0.1)
 
@@ -633,6 +635,7 @@ def convert_recording(rec, source, git_dir, out_dir):
         samples, notes, hints = parse_vesc_f1tenth(imu_text, text_of(1), loc, where(1))
         t0_ns = next(_stamped_rows(imu_text, loc, {}))[0]
         truth, distance = pf_pose_truth(text_of(2), where(2), t0_ns)
+        truth["sensor_yaw_on_body_deg"] = source.get("sensor_yaw_on_body_deg")
     else:
         raise ConvertError("corpus.json", None, rec["id"], f"unknown format {fmt!r}")
     if not samples:
@@ -842,10 +845,11 @@ def self_test():
     close(hints[0]["t_s"], 0.05)
     expect_error(lambda: parse_vesc_f1tenth(imu.replace("0.98,1.5", "0.98,x", 1), odom, "i.csv", "o.csv"),
                  "i.csv", "line 2", "'wx'")
-    pf = ",s,ns,x,y,q.x,q.y,q.z,q.w\n0,100,0,1.0,1.0,0,0,0,1\n0,100,5,1.05,1.0,0,0,0,1\n0,101,0,4.0,5.0,0,0,0,1\n"
+    pf = ",s,ns,x,y,q.x,q.y,q.z,q.w\n0,100,0,1.0,1.0,0,0,0,1\n0,100,5,1.05,1.0,0,0,0,1\n0,101,0,4.0,5.0,0,0,0.7071067811865476,0.7071067811865476\n"
     truth, walked = pf_pose_truth(pf, "p.csv", 100 * 1_000_000_000)
     close(truth["end_distance_m"], 5.0)
-    assert truth["track"][2] == [1.0, 4.0, 5.0], truth["track"]
+    assert truth["track"][2][:3] == [1.0, 4.0, 5.0], truth["track"]
+    close(truth["track"][2][3], math.pi / 2)
     close(walked, 5.0)  # the 5 cm step is under the 0.1 m floor: measured from (1, 1)
 
     # MCAP: records in order, JSON messages with the wire field names, times strictly increasing.
