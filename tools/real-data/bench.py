@@ -492,6 +492,17 @@ def loso_tables(report, runs):
     return "\n".join(out)
 
 
+def finite(value):
+    """`value` with every infinite float (a failed run's % of distance) as null: valid JSON."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite(v) for v in value]
+    return value
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--bin", default=str(REPO / "target" / "release" / "mems-odometry"), help="mems-odometry binary")
@@ -524,7 +535,7 @@ def main():
         if report is not None:
             doc["loso"] = report
             doc["runs"] = len(runner.cache)
-        json.dump(doc, sys.stdout, indent=1, default=lambda v: None)
+        json.dump(finite(doc), sys.stdout, indent=1)
         print()
     else:
         print(table(rows))
