@@ -21,10 +21,28 @@ alignment):
   that figure rounded up). With an interval: yes if its upper end is covered, no if its lower
   end is not, `?` otherwise.
 
-Usage: bench.py [--bin PATH] [--calib TOML] [--data DIR] [--only ID ...] [--json] [--timeout S]
+Summaries are per platform class (corpus.json: foot, wheeled, vehicle, handheld, arm): runs
+that gave a position, 1-sigma coverage, and the median % of distance (upper end of the
+interval where the truth is a distance only).
+
+Leave one source out (`--loso`): corpus.json's `tuning` section lists the `mems-odometry
+offline` flags whose values were (or would be) chosen on the corpus, each with its candidate
+values and the platform classes it applies to. Per class, the candidates are searched as a
+joint grid when it has at most MAX_GRID points, else one flag at a time from the defaults.
+In-sample: the candidate with the smallest median % of distance over all of the class's
+recordings, and that median. Leave one source out: for each source S of the class, the
+candidate with the smallest median over the class's recordings from the other sources, then
+S's recordings run with it; the median of those runs over the class. A class with a single
+source has no other source to choose on: its recordings are run with the defaults (the
+values the binary uses without flags), and the table says so. A failed run counts as an
+infinite error, as does a run with no distance after its alignment. Runs are cached by
+(recording, arguments).
+
+Usage: bench.py [--bin PATH] [--calib TOML] [--data DIR] [--only ID ...] [--json] [--timeout S] [--loso]
 """
 
 import argparse
+import itertools
 import json
 import math
 import os
@@ -147,6 +165,43 @@ def footprints_in_our_frame(truth, rests):
     }
 
 
+TRACK_MIN_STEP_M = 0.1
+
+
+def heading_at(track, t_s):
+    """The track's heading (rad, its 4th column) at the last pose at or before t_s."""
+    best = track[0]
+    for q in track:
+        if q[0] > t_s:
+            break
+        best = q
+    return best[3]
+
+
+def track_at(track, t_s):
+    """The track's (x, y) at time t_s (linear between its poses, clamped to its ends)."""
+    if t_s <= track[0][0]:
+        return track[0][1:3]
+    for a, b in zip(track, track[1:]):
+        if a[0] <= t_s <= b[0]:
+            f = (t_s - a[0]) / (b[0] - a[0]) if b[0] > a[0] else 0.0
+            return [a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2])]
+    return track[-1][1:3]
+
+
+def track_length(track, t_s):
+    """The track's length from time t_s to its end, over steps of at least 0.1 m (as
+    convert.py measures the whole track)."""
+    points = [track_at(track, t_s)] + [q[1:3] for q in track if q[0] > t_s]
+    walked, last = 0.0, points[0]
+    for q in points[1:]:
+        step = math.dist(q, last)
+        if step >= TRACK_MIN_STEP_M:
+            walked += step
+            last = q
+    return walked
+
+
 def evaluate(side, out):
     """The row's figures from the sidecar (truth) and the odometry's JSON."""
     p = out["end_displacement_m"]
@@ -158,6 +213,24 @@ def evaluate(side, out):
     if truth.get("frame") in ("any", "nav") and t_vec is not None:
         err = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
         lo = hi = err
+    elif truth.get("track") and out.get("aligned_at_s") is not None:
+        # A track on the recording's clock (particle-filter poses): the truth counts from the
+        # pose where the odometry aligned, as our position does.
+        start = track_at(truth["track"], out["aligned_at_s"])
+        end = truth["track"][-1][1:3]
+        yaw_on_body = truth.get("sensor_yaw_on_body_deg")
+        if yaw_on_body is not None and len(truth["track"][0]) > 3:
+            # Our heading is the sensor's x axis at alignment (eskf::align: the smallest turn
+            # of the measured up onto z), which is the car's heading plus the IMU's yaw on it.
+            psi = heading_at(truth["track"], out["aligned_at_s"]) + math.radians(yaw_on_body)
+            dx, dy = end[0] - start[0], end[1] - start[1]
+            c, s_ = math.cos(psi), math.sin(psi)
+            t_vec = [c * dx + s_ * dy, -s_ * dx + c * dy]
+            lo = hi = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
+        else:
+            t = math.dist(start, end)
+            ours = math.hypot(p[0], p[1])
+            lo, hi = abs(ours - t), ours + t
     elif (turned := footprints_in_our_frame(truth, out.get("rests", []))) is not None:
         t_vec = turned["end_m"]
         err = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
@@ -173,6 +246,8 @@ def evaluate(side, out):
     else:
         covered = "?"
     distance = side.get("distance_m")
+    if truth.get("track") and out.get("aligned_at_s") is not None:
+        distance = track_length(truth["track"], out["aligned_at_s"])
     ours_distance = distance is None
     if ours_distance:
         distance = out.get("distance_m")
@@ -226,22 +301,206 @@ def table(rows):
     return "\n".join(out)
 
 
+def pct_upper(row):
+    """The row's % of distance, upper end of its interval; infinite for a failed run and for
+    one with no distance to divide by (a run that aligned at its very end)."""
+    if row.get("error") or row["result"]["pct_of_distance"][1] is None:
+        return math.inf
+    return row["result"]["pct_of_distance"][1]
+
+
+def fmt_pct(value):
+    return "inf" if value == math.inf else f"{value:.2f} %"
+
+
 def summary(rows):
     done = [r for r in rows if not r.get("error")]
     covered = sum(1 for r in done if r["result"]["covered"] == "yes")
     undecided = sum(1 for r in done if r["result"]["covered"] == "?")
     loops = [r["result"]["pct_of_distance"][1] for r in done
              if r["sidecar"]["platform"] == "foot" and r["sidecar"]["truth"]["kind"] == "closed_loop"]
-    foot = [r["result"]["pct_of_distance"] for r in done if r["sidecar"]["platform"] == "foot"]
     lines = [
         f"positions produced: {len(done)} of {len(rows)}",
         f"1-sigma covers the error (r68): {covered} of {len(rows)} ({undecided} undecided: truth known as a distance only)",
     ]
     if loops:
         lines.append(f"median end error over the foot-mounted closed loops: {statistics.median(loops):.2f} % of distance ({len(loops)} runs)")
-    if foot:
-        lines.append(f"median over all foot-mounted runs, upper end of the interval: {statistics.median(p[1] for p in foot):.2f} % ({len(foot)} runs)")
+    classes = {}
+    for r in rows:
+        platform = (r.get("sidecar") or {}).get("platform", "-")
+        classes.setdefault(platform, []).append(r)
+    for platform, group in classes.items():
+        ok = [r for r in group if not r.get("error")]
+        cov = sum(1 for r in ok if r["result"]["covered"] == "yes")
+        sources = sorted({r["sidecar"]["source"]["repo"] for r in group if r.get("sidecar")})
+        med = statistics.median(pct_upper(r) for r in group)
+        lines.append(f"{platform}: {len(ok)} of {len(group)} runs gave a position, {cov} covered; median % of "
+                     f"distance (upper end; failed or unmeasured runs infinite): {fmt_pct(med)}; "
+                     f"{len(sources)} source{'s' if len(sources) != 1 else ''}")
     return lines
+
+
+class Runner:
+    """Runs `mems-odometry offline` on a recording with given extra arguments, once per
+    (recording, arguments)."""
+
+    def __init__(self, binary, calib, data, timeout, quiet):
+        self.binary, self.calib, self.data, self.timeout, self.quiet = binary, calib, data, timeout, quiet
+        self.cache = {}
+
+    def row(self, rec, extra):
+        key = (rec["id"], tuple(extra))
+        if key in self.cache:
+            return self.cache[key]
+        row = {"id": rec["id"], "args": list(extra)}
+        side_path = self.data / f"{rec['id']}.json"
+        if not side_path.is_file():
+            row["error"] = f"not converted: no {side_path} (run convert.py)"
+            self.cache[key] = row
+            return row
+        side = json.loads(side_path.read_text())
+        path = self.data / side.get("input", side.get("csv", ""))
+        row["sidecar"] = side
+        if not path.is_file():
+            row["error"] = f"not converted: no {path} (run convert.py)"
+            self.cache[key] = row
+            return row
+        out, err, cmd, stderr = run_one(self.binary, self.calib, path, extra, self.timeout)
+        row["command"] = cmd
+        row["stderr"] = stderr
+        if err:
+            row["error"] = err
+        else:
+            row["odometry"] = out
+            row["result"] = evaluate(side, out)
+        if not self.quiet:
+            print(f"{rec['id']} {' '.join(extra)}: {'failed: ' + err if err else 'done'}", file=sys.stderr)
+        self.cache[key] = row
+        return row
+
+
+MAX_GRID = 24
+
+
+def tuning_args(params, combo):
+    """The flags of one candidate: a flag whose value is its default (what the binary uses
+    without it) is left out, so that the defaults' runs are the plain bench's."""
+    args = []
+    for param, value in zip(params, combo):
+        if value != param["default"]:
+            args += [param["flag"], str(value)]
+    return args
+
+
+def candidates(params, score):
+    """Candidate combinations of `params` to search with `score` (lower is better): the joint
+    grid when small, else one flag at a time from the defaults (each flag's best value kept
+    before the next flag is searched). Returns (best combo, combos tried)."""
+    defaults = tuple(p["default"] for p in params)
+    size = 1
+    for p in params:
+        size *= len(p["candidates"])
+    if size <= MAX_GRID:
+        grid = list(itertools.product(*(p["candidates"] for p in params)))
+        # Ties go to the defaults, then to the earlier candidate.
+        best = min(grid, key=lambda c: (score(c), c != defaults))
+        return best, len(grid)
+    best, tried = list(defaults), 0
+    for i, p in enumerate(params):
+        trial = []
+        for v in p["candidates"]:
+            combo = tuple(best[:i] + [v] + best[i + 1:])
+            trial.append(combo)
+            tried += 1
+        best = list(min(trial, key=lambda c: (score(c), c[i] != defaults[i])))
+    return tuple(best), tried
+
+
+def loso(corpus, runner, only):
+    """The leave-one-source-out report (see the module docstring): per class, the in-sample
+    candidate and median, the per-source held-out candidates and runs, the LOSO median."""
+    tuning = corpus.get("tuning", {}).get("parameters", [])
+    recs = [r for r in corpus["recordings"] if not only or r["id"] in only]
+    classes = {}
+    for rec in recs:
+        classes.setdefault(rec["platform"], []).append(rec)
+    report = []
+    for platform, group in classes.items():
+        params = [p for p in tuning if platform in p["classes"]]
+
+        def args_for(rec, combo):
+            return list(rec.get("extra_args", [])) + tuning_args(params, combo)
+
+        def score(subset, combo):
+            return statistics.median(pct_upper(runner.row(r, args_for(r, combo))) for r in subset)
+
+        defaults = tuple(p["default"] for p in params)
+        if params:
+            best_all, tried = candidates(params, lambda c: score(group, c))
+        else:
+            best_all, tried = defaults, 1
+        in_sample = {r["id"]: pct_upper(runner.row(r, args_for(r, best_all))) for r in group}
+        sources = []
+        for source in dict.fromkeys(r["source"] for r in group):
+            mine = [r for r in group if r["source"] == source]
+            others = [r for r in group if r["source"] != source]
+            if params and others:
+                choice, _ = candidates(params, lambda c: score(others, c))
+                how = "chosen on the other sources"
+            else:
+                choice = defaults
+                how = "no other source in the class: the defaults" if params else "no tuned flag applies"
+            held = {r["id"]: pct_upper(runner.row(r, args_for(r, choice))) for r in mine}
+            sources.append({"source": source, "choice": dict(zip((p["flag"] for p in params), choice)),
+                            "how": how, "runs": held})
+        held_out = {k: v for s in sources for k, v in s["runs"].items()}
+        med_in = statistics.median(in_sample.values())
+        med_out = statistics.median(held_out.values())
+        report.append({
+            "platform": platform,
+            "flags": [p["flag"] for p in params],
+            "candidates_per_search": tried,
+            "in_sample_choice": dict(zip((p["flag"] for p in params), best_all)),
+            "in_sample": in_sample,
+            "in_sample_median": med_in,
+            "sources": sources,
+            "loso_median": med_out,
+            "ratio": (med_out / med_in) if med_in not in (0, math.inf) and med_out != math.inf else None,
+            "recordings": len(group),
+        })
+    return report
+
+
+def loso_tables(report, runs):
+    head = ["platform", "recordings", "sources", "flags searched", "in-sample choice", "in-sample median",
+            "LOSO median", "LOSO / in-sample"]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for c in report:
+        choice = ", ".join(f"{k} {v}" for k, v in c["in_sample_choice"].items()) or "-"
+        ratio = f"{c['ratio']:.2f}" if c["ratio"] is not None else "-"
+        out.append("| " + " | ".join([c["platform"], str(c["recordings"]), str(len(c["sources"])),
+                                      ", ".join(c["flags"]) or "-", choice, fmt_pct(c["in_sample_median"]),
+                                      fmt_pct(c["loso_median"]), ratio]) + " |")
+    out += ["", "| platform | held-out source | its choice | how | its runs (% of distance, upper end) |",
+            "|---|---|---|---|---|"]
+    for c in report:
+        for s in c["sources"]:
+            choice = ", ".join(f"{k} {v}" for k, v in s["choice"].items()) or "-"
+            held = ", ".join(f"{k} {fmt_pct(v)}" for k, v in s["runs"].items())
+            out.append(f"| {c['platform']} | {s['source']} | {choice} | {s['how']} | {held} |")
+    out += ["", f"runs of mems-odometry offline: {runs}"]
+    return "\n".join(out)
+
+
+def finite(value):
+    """`value` with every infinite float (a failed run's % of distance) as null: valid JSON."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite(v) for v in value]
+    return value
 
 
 def main():
@@ -252,6 +511,7 @@ def main():
     p.add_argument("--only", action="append", metavar="ID", help="run only this recording (repeatable)")
     p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
     p.add_argument("--timeout", type=float, default=900.0, help="per-run limit, s")
+    p.add_argument("--loso", action="store_true", help="also tune corpus.json's `tuning` flags per platform class, in sample and leaving each source out, and print both")
     args = p.parse_args()
 
     binary = Path(args.bin)
@@ -263,39 +523,28 @@ def main():
         calib = Path(args.calib) if args.calib else Path(tmp) / "identity.toml"
         if not args.calib:
             calib.write_text(identity_calibration())
+        runner = Runner(binary, calib, data, args.timeout, quiet=args.json)
         rows = []
         for rec in corpus["recordings"]:
             if args.only and rec["id"] not in args.only:
                 continue
-            row = {"id": rec["id"]}
-            side_path = data / f"{rec['id']}.json"
-            csv = data / f"{rec['id']}.csv"
-            if not side_path.is_file() or not csv.is_file():
-                row["error"] = f"not converted: no {side_path} (run convert.py)"
-                rows.append(row)
-                continue
-            side = json.loads(side_path.read_text())
-            row["sidecar"] = side
-            extra = rec.get("extra_args", side.get("extra_args", []))
-            out, err, cmd, stderr = run_one(binary, calib, csv, extra, args.timeout)
-            row["command"] = cmd
-            row["stderr"] = stderr
-            if err:
-                row["error"] = err
-            else:
-                row["odometry"] = out
-                row["result"] = evaluate(side, out)
-            rows.append(row)
-            if not args.json:
-                print(f"{rec['id']}: {'failed: ' + err if err else 'done'}", file=sys.stderr)
+            rows.append(runner.row(rec, list(rec.get("extra_args", []))))
+        report = loso(corpus, runner, args.only) if args.loso else None
     if args.json:
-        json.dump({"rows": rows, "summary": summary(rows)}, sys.stdout, indent=1)
+        doc = {"rows": rows, "summary": summary(rows)}
+        if report is not None:
+            doc["loso"] = report
+            doc["runs"] = len(runner.cache)
+        json.dump(finite(doc), sys.stdout, indent=1)
         print()
     else:
         print(table(rows))
         print()
         for line in summary(rows):
             print(line)
+        if report is not None:
+            print()
+            print(loso_tables(report, len(runner.cache)))
     return 0
 
 

@@ -252,6 +252,77 @@ def parse_xsens_dot_csv(text, where):
     return out, notes
 
 
+def parse_broad_mat(buf, where):
+    """BROAD trial (MAT v5): imu_acc m/s^2, imu_gyr rad/s at `sampling_rate` Hz, no time column
+    (t = i / rate); the optical reference `opt_pos` (m, NaN where the markers were not seen).
+    Returns (samples, notes, arrays) so that the truth is taken from the same file."""
+    arrays = read_mat(buf, where)
+    acc = mat_matrix(arrays, "imu_acc", where)
+    gyr = mat_matrix(arrays, "imu_gyr", where)
+    rate = mat_matrix(arrays, "sampling_rate", where)[0][0]
+    if len(acc) != len(gyr) or not acc or len(acc[0]) != 3 or len(gyr[0]) != 3:
+        raise ConvertError(where, None, "imu_acc", f"expected two N x 3 arrays, got {len(acc)} and {len(gyr)} rows")
+    if not (rate > 0 and math.isfinite(rate)):
+        raise ConvertError(where, None, "sampling_rate", f"{rate} is not a rate")
+    out = []
+    for i, (a, w) in enumerate(zip(acc, gyr)):
+        values = list(a) + list(w)
+        if not all(math.isfinite(v) for v in values):
+            raise ConvertError(where, None, "imu_acc" if not all(math.isfinite(v) for v in a) else "imu_gyr",
+                               f"sample {i} (0-based) is not finite")
+        out.append((i / rate, a[0] / G0, a[1] / G0, a[2] / G0, w[0] * DEG, w[1] * DEG, w[2] * DEG))
+    return out, [f"no time column: t_s = sample index / sampling_rate ({rate:.6g} Hz)",
+                 "imu_acc m/s^2 -> g (/9.80665), imu_gyr rad/s -> deg/s"], arrays
+
+
+def _stamped_rows(text, where, names):
+    """Rows of a FrictionMaps stateLogger CSV (first column a pandas index, then `s` and `ns`):
+    (t in s as a float of s + ns * 1e-9, {key: number}) with the integer stamp kept exact."""
+    wanted = {"s": "s", "ns": "ns", **names}
+    for v in _named_rows(text, where, wanted):
+        if v["ns"] < 0 or v["ns"] >= 1e9 or v["s"] != int(v["s"]) or v["ns"] != int(v["ns"]):
+            raise ConvertError(where, None, "ns", f"stamp {v['s']} s {v['ns']} ns is not a ROS time")
+        yield int(v["s"]) * 1_000_000_000 + int(v["ns"]), v
+
+
+# Hints from the VESC's odometry (forward speed from the motor's electrical RPM): the robot is
+# called stationary only after this long at exactly zero speed, as the simulated encoder
+# controller of docs/hints.md does (no tick for 0.1 s).
+VESC_STATIONARY_AFTER_S = 0.1
+VESC_SPEED_SIGMA_MPS = 0.05
+HINT_STATIONARY, HINT_SOURCE_ENCODERS, HINT_SPEED_VALID = 1, 4, 8
+
+
+def parse_vesc_f1tenth(imu_text, odom_text, where_imu, where_odom):
+    """FrictionMaps stateLogger: imuData.csv (the VESC's IMU: ax..az in g, wx..wz in deg/s
+    whatever the dataset README says, see corpus.json) and odomData.csv (vx, m/s, from the
+    VESC's motor speed) -> samples and robot hints on the same clock (ROS time, s + ns).
+    Times are made relative to the first IMU sample."""
+    names = {"ax": "ax", "ay": "ay", "az": "az", "wx": "wx", "wy": "wy", "wz": "wz"}
+    rows = list(_stamped_rows(imu_text, where_imu, names))
+    if not rows:
+        raise ConvertError(where_imu, None, None, "no samples")
+    t0 = rows[0][0]
+    samples = [((ns - t0) * 1e-9, v["ax"], v["ay"], v["az"], v["wx"], v["wy"], v["wz"]) for ns, v in rows]
+    hints = []
+    zero_since = None
+    for ns, v in _stamped_rows(odom_text, where_odom, {"vx": "vx"}):
+        t = (ns - t0) * 1e-9
+        if v["vx"] == 0.0:
+            zero_since = t if zero_since is None else zero_since
+        else:
+            zero_since = None
+        flags = HINT_SPEED_VALID
+        if zero_since is not None and t - zero_since >= VESC_STATIONARY_AFTER_S:
+            flags |= HINT_STATIONARY | HINT_SOURCE_ENCODERS
+        hints.append({"t_s": t, "forward_speed_mps": v["vx"], "forward_speed_sigma_mps": VESC_SPEED_SIGMA_MPS,
+                      "flags": flags})
+    notes = ["imuData ax..az already g (+1 g on z at rest), wx..wz already deg/s; t_s = ROS stamp (s + ns) minus the first IMU sample's",
+             f"robot hints from odomData vx (m/s): speed valid, 1-sigma {VESC_SPEED_SIGMA_MPS} m/s; stationary (encoders) after "
+             f"{VESC_STATIONARY_AFTER_S} s at exactly 0 m/s; published at their own stamp (no latency known)"]
+    return samples, notes, hints
+
+
 # ---------------------------------------------------------------------------------------------
 # Truth.
 
@@ -322,6 +393,69 @@ def gnss_truth(text, where):
     }, walked
 
 
+def _path_length(points, min_step):
+    """Length of a track over points at least `min_step` apart (noise at rest adds none)."""
+    walked, last = 0.0, points[0]
+    for q in points[1:]:
+        step = math.dist(q, last)
+        if step >= min_step:
+            walked += step
+            last = q
+    return walked
+
+
+def broad_truth(arrays, where):
+    """BROAD's optical reference: the trial starts and ends at rest in the same place; the
+    end's offset from the start (first and last seen marker positions, m) and the track's
+    length. Returned as a closed loop (the offset is millimetres) with the measured offset
+    kept as the tolerance."""
+    pos = mat_matrix(arrays, "opt_pos", where)
+    seen = [p for p in pos if len(p) == 3 and all(math.isfinite(v) for v in p)]
+    if len(seen) < 2:
+        raise ConvertError(where, None, "opt_pos", "fewer than two positions seen")
+    end = [seen[-1][k] - seen[0][k] for k in range(3)]
+    offset = math.hypot(end[0], end[1])
+    if offset > 0.05:
+        raise ConvertError(where, None, "opt_pos", f"the trial ends {offset:.3f} m from its start: not a closed loop")
+    return {
+        "kind": "closed_loop",
+        "frame": "any",
+        "end_displacement_m": [0.0, 0.0],
+        "end_distance_m": 0.0,
+        "tolerance_m": offset,
+        "end_offset_mocap_m": end,
+        "positions_seen": len(seen),
+        "positions_missing": len(pos) - len(seen),
+        "source": "opt_pos (OptiTrack, m): the last seen position minus the first; the box rests in the same place at both ends (offset in tolerance_m)",
+    }, _path_length([p[:2] for p in seen], 0.01)
+
+
+def pf_pose_truth(text, where, t0_ns):
+    """Lidar particle-filter poses on a known map (FrictionMaps pfPoseData.csv, x and y in m):
+    the last pose relative to the first, and the track's length. The map frame's heading is
+    not the odometry's, so only the distance is a truth. The track itself is kept (`track`:
+    [t_s, x, y] with t_s on the recording's clock, seconds after its first IMU sample at
+    `t0_ns`, and the car's heading, rad, from the pose's quaternion z and w: the filter's poses
+    are planar), so that bench.py can measure from the pose where the odometry aligned (a car
+    that drives off at once aligns at its first stop) and turn the truth into the odometry's
+    frame when the IMU's yaw on the car is known."""
+    rows = list(_stamped_rows(text, where, {"x": "x", "y": "y", "qz": "q.z", "qw": "q.w"}))
+    points = [(v["x"], v["y"]) for _, v in rows]
+    if len(points) < 2:
+        raise ConvertError(where, None, None, "fewer than two poses")
+    end = [points[-1][0] - points[0][0], points[-1][1] - points[0][1]]
+    return {
+        "kind": "pf_endpoints",
+        "frame": "unknown_heading",
+        "end_displacement_m": None,
+        "end_distance_m": math.hypot(*end),
+        "end_displacement_map_m": end,
+        "poses": len(points),
+        "track": [[round((ns - t0_ns) * 1e-9, 6), v["x"], v["y"], 2 * math.atan2(v["qz"], v["qw"])] for ns, v in rows],
+        "source": "pfPoseData.csv: the particle filter's last pose minus its first (map frame, lidar on a known map); the odometry's heading is fixed at its alignment, so only the distance is a truth",
+    }, _path_length(points, 0.1)
+
+
 # ---------------------------------------------------------------------------------------------
 # Conversion driver.
 
@@ -366,50 +500,172 @@ def write_csv(path, samples, comments):
             f.write("%.9f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n" % s)
 
 
+# MCAP (https://mcap.dev/spec): magic, Header, then Schema, Channel and Message records
+# (unchunked), DataEnd and Footer (no summary; CRCs 0, which the specification reads as "not
+# computed"), magic. Messages are JSON with a JSON Schema, one of the two encodings
+# tools/recording reads (its older recordings' encoding), on the topics and with the schema
+# names of `mems.RawImuSample` and `mems.RobotHint` (ipc-types/src/wire.rs field names).
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+MCAP_OP = {"header": 0x01, "footer": 0x02, "schema": 0x03, "channel": 0x04, "message": 0x05, "data_end": 0x0F}
+RAW_TOPIC, HINT_TOPIC = "mems/imu/raw", "mems/robot/hint"
+RAW_GYRO_VALID = 1 << 4
+# Offset of every time in an MCAP written here: times start at 1 s, not 0 (0 is the stamps'
+# "not set").
+MCAP_T0_NS = 1_000_000_000
+
+
+def _mcap_str(text):
+    b = text.encode()
+    return struct.pack("<I", len(b)) + b
+
+
+def _mcap_record(op, body):
+    return struct.pack("<BQ", MCAP_OP[op], len(body)) + body
+
+
+def _counts(value, lsb):
+    return max(-32768, min(32767, round(value * lsb)))
+
+
+def mcap_messages(samples, hints):
+    """(log time ns, topic, JSON bytes) of the raw samples and hints in time order. Raw times
+    must strictly increase in an MCAP run (tools/recording refuses a repeat): a sample whose
+    time does not increase is dropped and counted."""
+    out, dropped, last = [], 0, None
+    for s in samples:
+        ns = MCAP_T0_NS + round(s[0] * 1e9)
+        if last is not None and ns <= last:
+            dropped += 1
+            continue
+        last = ns
+        msg = {"stamps": {"sample_ns": ns, "acquired_ns": ns, "calibrated_ns": 0, "odometry_ns": 0},
+               "seq": 0, "accel_g": list(s[1:4]), "gyro_dps": list(s[4:7]), "temp_c": 0.0,
+               "accel_counts": [_counts(v, 16384) for v in s[1:4]],
+               "gyro_counts": [_counts(v, 131) for v in s[4:7]], "temp_counts": 0,
+               "flags": RAW_GYRO_VALID, "lost_before": 0, "undelivered": 0}
+        out.append((ns, 0, RAW_TOPIC, msg))
+    for h in hints:
+        ns = MCAP_T0_NS + round(h["t_s"] * 1e9)
+        if ns < MCAP_T0_NS:
+            continue
+        msg = {"stamps": {"sample_ns": ns, "acquired_ns": ns, "calibrated_ns": 0, "odometry_ns": 0},
+               "seq": 0, "forward_speed_mps": h["forward_speed_mps"],
+               "forward_speed_sigma_mps": h["forward_speed_sigma_mps"], "yaw_rate_rps": 0.0,
+               "yaw_rate_sigma_rps": 0.0, "flags": h["flags"], "reserved16": 0, "reserved": 0}
+        out.append((ns, 1, HINT_TOPIC, msg))
+    out.sort(key=lambda m: (m[0], m[1]))
+    seqs = {RAW_TOPIC: 0, HINT_TOPIC: 0}
+    messages = []
+    for ns, _, topic, msg in out:
+        msg["seq"] = seqs[topic]
+        seqs[topic] += 1
+        messages.append((ns, topic, json.dumps(msg, separators=(",", ":")).encode()))
+    return messages, dropped
+
+
+def mcap_bytes(messages):
+    """An MCAP file holding `messages` ((log time ns, topic, JSON bytes)) on JSON channels."""
+    schemas = {RAW_TOPIC: "mems.RawImuSample", HINT_TOPIC: "mems.RobotHint"}
+    out = [MCAP_MAGIC, _mcap_record("header", _mcap_str("") + _mcap_str("tools/real-data/convert.py"))]
+    ids = {}
+    for i, (topic, name) in enumerate(schemas.items(), start=1):
+        schema = json.dumps({"title": name, "type": "object"}).encode()
+        out.append(_mcap_record("schema", struct.pack("<H", i) + _mcap_str(name) + _mcap_str("jsonschema")
+                                + struct.pack("<I", len(schema)) + schema))
+        out.append(_mcap_record("channel", struct.pack("<HH", i, i) + _mcap_str(topic) + _mcap_str("json")
+                                + struct.pack("<I", 0)))
+        ids[topic] = i
+    seq = {t: 0 for t in ids}
+    for ns, topic, data in messages:
+        out.append(_mcap_record("message", struct.pack("<HIQQ", ids[topic], seq[topic], ns, ns) + data))
+        seq[topic] += 1
+    out.append(_mcap_record("data_end", struct.pack("<I", 0)))
+    out.append(_mcap_record("footer", struct.pack("<QQI", 0, 0, 0)))
+    out.append(MCAP_MAGIC)
+    return b"".join(out)
+
+
+def read_mcap_records(buf):
+    """(opcode, body) of every record of an MCAP file (for the self-test)."""
+    assert buf.startswith(MCAP_MAGIC) and buf.endswith(MCAP_MAGIC), "no MCAP magic"
+    pos, end, records = len(MCAP_MAGIC), len(buf) - len(MCAP_MAGIC), []
+    while pos < end:
+        op, n = struct.unpack_from("<BQ", buf, pos)
+        records.append((op, buf[pos + 9: pos + 9 + n]))
+        pos += 9 + n
+    assert pos == end, "records overrun the file"
+    return records
+
+
 def convert_recording(rec, source, git_dir, out_dir):
     commit = source["commit"]
     fmt = source["format"]
     paths = rec["paths"]
     loc = f"{source['repo']}@{commit}:{paths[0]}"
-    raw = git_show(git_dir, commit, paths[0])
-    where = loc
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        raise ConvertError(where, None, None, f"not UTF-8 text: {e}") from None
+
+    def where(i):
+        return f"{source['repo']}@{commit}:{paths[i]}"
+
+    def text_of(i):
+        try:
+            return git_show(git_dir, commit, paths[i]).decode("utf-8-sig")
+        except UnicodeDecodeError as e:
+            raise ConvertError(where(i), None, None, f"not UTF-8 text: {e}") from None
+
     truth = dict(rec["truth"])
     distance = rec.get("distance_m")
     distance_source = rec.get("distance_source")
+    hints = None
     if fmt == "xio_csv":
-        samples, notes = parse_xio_csv(text, where)
+        samples, notes = parse_xio_csv(text_of(0), loc)
     elif fmt == "openshoe_txt":
-        samples, notes = parse_openshoe_txt(text, where, rec["rate_hz"])
+        samples, notes = parse_openshoe_txt(text_of(0), loc, rec["rate_hz"])
     elif fmt == "sensorconnect_csv":
-        samples, notes = parse_sensorconnect_csv(text, where)
-        mat_where = f"{source['repo']}@{commit}:{paths[1]}"
-        truth, distance = gcp_truth(git_show(git_dir, commit, paths[1]), mat_where)
+        samples, notes = parse_sensorconnect_csv(text_of(0), loc)
+        truth, distance = gcp_truth(git_show(git_dir, commit, paths[1]), where(1))
     elif fmt == "xsens_dot_csv":
-        samples, notes = parse_xsens_dot_csv(text, where)
-        gnss_where = f"{source['repo']}@{commit}:{paths[1]}"
-        gnss = git_show(git_dir, commit, paths[1]).decode("utf-8-sig")
-        truth, distance = gnss_truth(gnss, gnss_where)
+        samples, notes = parse_xsens_dot_csv(text_of(0), loc)
+        truth, distance = gnss_truth(text_of(1), where(1))
+    elif fmt == "broad_mat":
+        samples, notes, arrays = parse_broad_mat(git_show(git_dir, commit, paths[0]), loc)
+        truth, distance = broad_truth(arrays, loc)
+    elif fmt == "vesc_f1tenth_csv":
+        imu_text = text_of(0)
+        samples, notes, hints = parse_vesc_f1tenth(imu_text, text_of(1), loc, where(1))
+        t0_ns = next(_stamped_rows(imu_text, loc, {}))[0]
+        truth, distance = pf_pose_truth(text_of(2), where(2), t0_ns)
+        truth["sensor_yaw_on_body_deg"] = source.get("sensor_yaw_on_body_deg")
     else:
         raise ConvertError("corpus.json", None, rec["id"], f"unknown format {fmt!r}")
     if not samples:
-        raise ConvertError(where, None, None, "no samples")
+        raise ConvertError(loc, None, None, "no samples")
     if truth.get("kind") == "closed_loop":
         truth.setdefault("end_distance_m", 0.0)
     stats = sample_stats(samples, rec["rate_hz"])
-    csv_path = out_dir / f"{rec['id']}.csv"
-    write_csv(csv_path, samples, [
-        f"{rec['id']}: converted by tools/real-data/convert.py",
-        f"source: {source['repo']}@{commit}: {', '.join(paths)}",
-        f"licence: {source['licence']}",
-        f"imu: {source['imu']}; platform: {rec['platform']}",
-    ])
+    if hints is None:
+        input_path = out_dir / f"{rec['id']}.csv"
+        write_csv(input_path, samples, [
+            f"{rec['id']}: converted by tools/real-data/convert.py",
+            f"source: {source['repo']}@{commit}: {', '.join(paths)}",
+            f"licence: {source['licence']}",
+            f"imu: {source['imu']}; platform: {rec['platform']}",
+        ])
+    else:
+        # The canonical CSV has no hint columns: a recording with robot hints is written as
+        # an MCAP run, which `mems-odometry offline` reads with its hints.
+        messages, dropped = mcap_messages(samples, hints)
+        input_path = out_dir / f"{rec['id']}.mcap"
+        input_path.write_bytes(mcap_bytes(messages))
+        stats["hints"] = sum(1 for m in messages if m[1] == HINT_TOPIC)
+        stats["hints_stationary"] = sum(1 for h in hints if h["flags"] & HINT_STATIONARY)
+        stats["samples_dropped_non_increasing_time"] = dropped
+        notes.append(f"written as MCAP (JSON messages on {RAW_TOPIC} and {HINT_TOPIC}), times offset by "
+                     f"{MCAP_T0_NS * 1e-9:g} s; {dropped} samples with a non-increasing time dropped")
     sidecar = {
         "id": rec["id"],
-        "csv": csv_path.name,
+        "csv": input_path.name,
+        "input": input_path.name,
         "source": {"repo": source["repo"], "commit": commit, "paths": paths},
         "licence": source["licence"],
         "imu": source["imu"],
@@ -458,8 +714,9 @@ def convert_all(args):
             print(f"convert.py: {rec['id']}: {e}", file=sys.stderr)
             continue
         c = side["conversion"]
+        extra = f", {c['hints']} robot hints" if "hints" in c else ""
         print(f"{rec['id']}: {c['samples']} samples, {c['duration_s']:.1f} s, "
-              f"{c['repeated_rows']} repeated rows, {c['equal_timestamps']} equal timestamps -> {out_dir / side['csv']}")
+              f"{c['repeated_rows']} repeated rows, {c['equal_timestamps']} equal timestamps{extra} -> {out_dir / side['input']}")
     return 1 if failures else 0
 
 
@@ -553,7 +810,63 @@ def self_test():
     close(truth["end_distance_m"], 0.001 * (111132.954 - 1.175), 1e-6)
     close(walked, truth["end_distance_m"])
     expect_error(lambda: gnss_truth(gnss + "0.3,north,10\n", "n.csv"), "n.csv", "line 5", "Lat_GNSS")
-    print("convert.py self-test: ok (xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv, MAT v5 GCP, GNSS)")
+
+    # BROAD: column-major N x 3 arrays; opt_pos with an unseen (NaN) first row; closes within 2 mm.
+    nan = float("nan")
+    broad = _mat_bytes({"imu_acc": (2, 3, [0.0, 0.0, 0.0, 0.0, 9.80665, -9.80665]),
+                        "imu_gyr": (2, 3, [0.0174532925199433, 0.0, 0.0, 0.0, 0.0, 0.0]),
+                        "sampling_rate": (1, 1, [200.0]),
+                        "opt_pos": (3, 3, [nan, 0.5, 0.502, nan, 0.2, 0.2, nan, 1.0, 1.0])}, True)
+    s, _, arrays = parse_broad_mat(broad, "b.mat")
+    assert len(s) == 2, s
+    close(s[0][3], 1.0)
+    close(s[1][3], -1.0)
+    close(s[0][4], 1.0)
+    close(s[1][0], 0.005)
+    truth, walked = broad_truth(arrays, "b.mat")
+    close(truth["tolerance_m"], 0.002)
+    assert truth["kind"] == "closed_loop" and truth["positions_missing"] == 1, truth
+    bad = _mat_bytes({"opt_pos": (2, 3, [0.0, 1.0, 0.0, 0.0, 0.0, 0.0])}, False)
+    expect_error(lambda: broad_truth(read_mat(bad, "b.mat"), "b.mat"), "b.mat", "opt_pos", "not a closed loop")
+    expect_error(lambda: parse_broad_mat(_mat_bytes({"imu_acc": (1, 3, [0.0, 0.0, 9.8])}, False), "b.mat"),
+                 "b.mat", "imu_gyr", "missing")
+
+    # FrictionMaps stateLogger: IMU in g and deg/s; hints from vx, stationary after 0.1 s at 0.
+    imu = (",s,ns,phi_r,phi_p,phi_y,ax,ay,az,wx,wy,wz,q.x,q.y,q.z,q.w\n"
+           "0,100,900000000,0,0,0,0.01,0.02,0.98,1.5,0,-2,0,0,0,1\n"
+           "0,101,0,0,0,0,0.01,0.02,0.98,1.5,0,-2,0,0,0,1\n")
+    odom = (",s,ns,vx,vy,vz,wx,wy,wz,x,y,q.x,q.y,q.z,q.w\n"
+            "0,100,950000000,0.5,0,0,0.5,0,0,0,0,0,0,0,1\n0,101,0,0.0,0,0,0,0,0,0,0,0,0,0,1\n"
+            "0,101,50000000,0.0,0,0,0,0,0,0,0,0,0,0,1\n0,101,150000000,0.0,0,0,0,0,0,0,0,0,0,0,1\n")
+    s, _, hints = parse_vesc_f1tenth(imu, odom, "i.csv", "o.csv")
+    close(s[1][0], 0.1)
+    assert s[0][1:] == (0.01, 0.02, 0.98, 1.5, 0.0, -2.0), s[0]
+    assert [h["flags"] for h in hints] == [8, 8, 8, 13], hints
+    close(hints[0]["t_s"], 0.05)
+    expect_error(lambda: parse_vesc_f1tenth(imu.replace("0.98,1.5", "0.98,x", 1), odom, "i.csv", "o.csv"),
+                 "i.csv", "line 2", "'wx'")
+    pf = ",s,ns,x,y,q.x,q.y,q.z,q.w\n0,100,0,1.0,1.0,0,0,0,1\n0,100,5,1.05,1.0,0,0,0,1\n0,101,0,4.0,5.0,0,0,0.7071067811865476,0.7071067811865476\n"
+    truth, walked = pf_pose_truth(pf, "p.csv", 100 * 1_000_000_000)
+    close(truth["end_distance_m"], 5.0)
+    assert truth["track"][2][:3] == [1.0, 4.0, 5.0], truth["track"]
+    close(truth["track"][2][3], math.pi / 2)
+    close(walked, 5.0)  # the 5 cm step is under the 0.1 m floor: measured from (1, 1)
+
+    # MCAP: records in order, JSON messages with the wire field names, times strictly increasing.
+    messages, dropped = mcap_messages(s + [s[-1]], hints)
+    assert dropped == 1, dropped
+    records = read_mcap_records(mcap_bytes(messages))
+    ops = [op for op, _ in records]
+    assert ops[:5] == [1, 3, 4, 3, 4] and ops[-2:] == [0x0F, 0x02] and ops.count(5) == 6, ops
+    bodies = [b for op, b in records if op == 5]
+    raw = json.loads(bodies[0][22:])
+    assert struct.unpack_from("<HIQQ", bodies[0]) == (1, 0, MCAP_T0_NS, MCAP_T0_NS), struct.unpack_from("<HIQQ", bodies[0])
+    assert raw["accel_g"] == [0.01, 0.02, 0.98] and raw["gyro_counts"] == [196, 0, -262] and raw["flags"] == 16, raw
+    hint = json.loads(bodies[-1][22:])
+    assert hint["flags"] == 13 and hint["seq"] == 3 and hint["stamps"]["sample_ns"] == MCAP_T0_NS + 250_000_000, hint
+    channel = records[2][1]
+    assert channel[4:8] == struct.pack("<I", len(RAW_TOPIC)) and RAW_TOPIC.encode() in channel, channel
+    print("convert.py self-test: ok (xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv, broad_mat, vesc_f1tenth_csv, MAT v5 GCP, GNSS, MCAP with hints)")
     return 0
 
 
