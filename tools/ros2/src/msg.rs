@@ -48,8 +48,15 @@ impl Definition {
 
 /// A ROS 2 message type.
 pub trait RosMessage: Serialize {
-    /// Its full name, `pkg/msg/Type`: the MCAP schema's name and, in DDS form, its type name.
+    /// Its full name, `pkg/msg/Type`: the MCAP schema's name.
     const TYPE_NAME: &'static str;
+    /// Its type name as DDS declares it, `pkg::msg::dds_::Type_` (rmw_zenoh's key expressions
+    /// carry it).
+    const DDS_TYPE_NAME: &'static str;
+    /// Its type hash (REP 2011 `RIHS01_` and the SHA-256 of its type description), as rosidl
+    /// generates it for ROS 2 Jazzy: the test computes it from [`RosMessage::DEFINITION`] with
+    /// rosbags and compares it with rosbags' copy of the Jazzy interfaces.
+    const TYPE_HASH: &'static str;
     /// Its definition.
     const DEFINITION: &'static Definition;
 }
@@ -244,6 +251,9 @@ pub struct Imu {
 
 impl RosMessage for Imu {
     const TYPE_NAME: &'static str = "sensor_msgs/msg/Imu";
+    const DDS_TYPE_NAME: &'static str = "sensor_msgs::msg::dds_::Imu_";
+    const TYPE_HASH: &'static str =
+        "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b";
     const DEFINITION: &'static Definition = &IMU;
 }
 
@@ -298,6 +308,9 @@ pub struct Odometry {
 
 impl RosMessage for Odometry {
     const TYPE_NAME: &'static str = "nav_msgs/msg/Odometry";
+    const DDS_TYPE_NAME: &'static str = "nav_msgs::msg::dds_::Odometry_";
+    const TYPE_HASH: &'static str =
+        "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0";
     const DEFINITION: &'static Definition = &ODOMETRY;
 }
 
@@ -330,6 +343,9 @@ pub struct TfMessage {
 
 impl RosMessage for TfMessage {
     const TYPE_NAME: &'static str = "tf2_msgs/msg/TFMessage";
+    const DDS_TYPE_NAME: &'static str = "tf2_msgs::msg::dds_::TFMessage_";
+    const TYPE_HASH: &'static str =
+        "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087";
     const DEFINITION: &'static Definition = &TF_MESSAGE;
 }
 

@@ -6,7 +6,8 @@
 //! (`recording::mcap::run::RunReader`) gives for the recording's corrected samples and states,
 //! mapped as docs/recording.md ("ROS 2") says: computed here independently of the crate, the
 //! velocity's rotation into the body frame and its covariance to within float rounding, every
-//! other value exactly.
+//! other value exactly. The types the bag defines are the ROS 2 interfaces' (Jazzy and Humble
+//! fields), with the RIHS01 hashes `mems_ros2::msg` states.
 //!
 //! Without the Python packages the test fails in CI (`CI=true`; `.ci/run` installs them) and is
 //! skipped loudly elsewhere.
@@ -16,6 +17,7 @@ use std::process::Command;
 
 use integration_tests::{path_arg, run_ok, unique_namespace};
 use ipc_types::{CorrectedImuSample, OdometryState, odometry_flags};
+use mems_ros2::msg::{Imu, Odometry, RosMessage, TfMessage};
 use recording::clock::WallClock;
 use recording::mcap::run::RunReader;
 use serde_json::{Value, json};
@@ -73,6 +75,13 @@ fn rosbags_and_mcap_ros2_read_every_message_as_our_reader_does() {
     let expected = expected(&states);
 
     assert_eq!(report["profile"], "ros2");
+    for (type_name, hash) in [
+        (Imu::TYPE_NAME, Imu::TYPE_HASH),
+        (Odometry::TYPE_NAME, Odometry::TYPE_HASH),
+        (TfMessage::TYPE_NAME, TfMessage::TYPE_HASH),
+    ] {
+        assert_eq!(report["types"][type_name], hash, "{type_name}'s RIHS01");
+    }
     for (topic, type_name) in [
         ("/imu/data", "sensor_msgs/msg/Imu"),
         ("/odom", "nav_msgs/msg/Odometry"),
