@@ -9,26 +9,16 @@
 //! `SERVICE carried N lost M` (and for `in` the latency from the original publication,
 //! meaningful where both ends share a clock).
 
-use std::ops::ControlFlow;
-use std::time::Duration;
-
 use anyhow::{Context as _, Result, anyhow, bail};
 use clap::{Parser, ValueEnum};
 use hdrhistogram::Histogram;
-use ipc_types::wake::{self, WaitMode};
+use ipc_types::wake;
 use ipc_types::{CorrectedImuSample, Message, OdometryState, RawImuSample, RobotHint, service};
-use mems_bridge::ros2::{self, Ros2Topic, node_token, publisher_token, topic_key};
+use mems_bridge::relay::{self, QUEUE, TICK};
+use mems_bridge::ros2;
 use mems_bridge::{Carried, Counts, from_bytes, key, missing, to_bytes, zenoh_config};
-use recording::clock::WallClock;
 use zenoh::Wait;
 use zenoh::handlers::FifoChannel;
-use zenoh::liveliness::LivelinessToken;
-use zenoh::qos::CongestionControl;
-
-/// Messages buffered per service between iceoryx2 and Zenoh: 16 s at 1 kHz.
-const QUEUE: usize = 16_384;
-/// Longest wait between two checks for SIGINT/SIGTERM.
-const TICK: Duration = Duration::from_millis(100);
 
 /// Carries mems services between machines over Zenoh.
 #[derive(Parser)]
@@ -90,7 +80,7 @@ fn run(cli: Cli) -> Result<()> {
         .wait()
         .map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
     let node = match cli.direction {
-        Direction::Ros2 => Some(RosNode::declare(
+        Direction::Ros2 => Some(ros2::Node::declare(
             &session,
             domain(cli.domain_id)?,
             &cli.node_name,
@@ -144,7 +134,7 @@ struct Ends<'a> {
     namespace: String,
     prefix: &'a str,
     /// `ros2`: the node the topics are published under.
-    node: Option<&'a RosNode>,
+    node: Option<&'a ros2::Node>,
 }
 
 impl Ends<'_> {
@@ -155,10 +145,12 @@ impl Ends<'_> {
         let counts = Counts::default();
         let latency = match (self.node, carried) {
             (Some(node), Carried::Corrected) => {
-                ros2::<CorrectedImuSample>(self.session, node, entity, &name, &counts)?
+                ros2::publish::<CorrectedImuSample>(self.session, node, entity, &name, &counts)?;
+                String::new()
             }
             (Some(node), Carried::Odometry) => {
-                ros2::<OdometryState>(self.session, node, entity, &name, &counts)?
+                ros2::publish::<OdometryState>(self.session, node, entity, &name, &counts)?;
+                String::new()
             }
             (Some(_), _) => bail!("no ROS 2 topic carries {}", carried.base()),
             (None, Carried::Raw) => self.bridge::<RawImuSample>(carried, &name, &counts)?,
@@ -186,129 +178,18 @@ impl Ends<'_> {
         match self.direction {
             Direction::In => into::<T>(self.session, &key, name, counts),
             _ => {
-                let publisher = publisher(self.session, &key)?;
-                drain::<T>(name, counts, |message| {
+                let publisher = relay::publisher(self.session, &key)?;
+                relay::drain::<T>(name, counts, |message| {
                     publisher
                         .put(to_bytes(&message))
                         .wait()
-                        .map_err(|e| anyhow!("cannot put on {key}: {e}"))
+                        .map_err(|e| anyhow!("cannot put on {key}: {e}"))?;
+                    Ok(true)
                 })?;
                 Ok(String::new())
             }
         }
     }
-}
-
-/// The ROS 2 node of `mems-bridge ros2`: its liveliness token, declared for as long as it
-/// lives, and what its publishers need.
-struct RosNode {
-    domain: u32,
-    /// The Zenoh session's id, as rmw_zenoh writes it in tokens.
-    zid: String,
-    name: String,
-    /// Shifts the samples' `CLOCK_MONOTONIC` times to the Unix times of their header stamps.
-    clock: WallClock,
-    _token: LivelinessToken,
-}
-
-impl RosNode {
-    fn declare(session: &zenoh::Session, domain: u32, name: &str) -> Result<Self> {
-        let zid = session.zid().to_string();
-        let token = node_token(domain, &zid, name);
-        Ok(Self {
-            domain,
-            _token: declare_token(session, token)?,
-            zid,
-            name: name.into(),
-            clock: WallClock::now(),
-        })
-    }
-}
-
-fn declare_token(session: &zenoh::Session, token: String) -> Result<LivelinessToken> {
-    session
-        .liveliness()
-        .declare_token(token.clone())
-        .wait()
-        .map_err(|e| anyhow!("cannot declare the liveliness token {token}: {e}"))
-}
-
-/// A reliable Zenoh publisher on `key` that blocks when the network is congested.
-fn publisher<'a>(session: &'a zenoh::Session, key: &str) -> Result<zenoh::pubsub::Publisher<'a>> {
-    session
-        .declare_publisher(key.to_string())
-        .congestion_control(CongestionControl::Block)
-        .wait()
-        .map_err(|e| anyhow!("cannot declare a Zenoh publisher on {key}: {e}"))
-}
-
-/// iceoryx2 service `name` -> ROS 2 topic `T::TOPIC` as publisher `entity` of `node`
-/// (`mems_bridge::ros2`): each message converted, CDR-encoded and put with its attachment.
-fn ros2<T: Ros2Topic + Send>(
-    session: &zenoh::Session,
-    node: &RosNode,
-    entity: u32,
-    name: &str,
-    counts: &Counts,
-) -> Result<String> {
-    let key = topic_key::<T::Ros>(node.domain, T::TOPIC);
-    let token = publisher_token::<T::Ros>(node.domain, &node.zid, &node.name, entity, T::TOPIC);
-    let gid = ros2::gid(&token);
-    let publisher = publisher(session, &key)?;
-    let _token = declare_token(session, token)?;
-    let (mut sequence, mut buf) = (0i64, Vec::new());
-    drain::<T>(name, counts, |message| {
-        let Some(ros) = message.to_ros(&node.clock) else {
-            return Ok(());
-        };
-        mems_ros2::cdr::encode(&ros, &mut buf).map_err(|e| anyhow!("{key}: {e}"))?;
-        sequence += 1;
-        let now = WallClock::now().realtime_ns;
-        let attachment = ros2::attachment(sequence, now as i64, &gid);
-        publisher
-            .put(buf.clone())
-            .attachment(attachment.to_vec())
-            .wait()
-            .map_err(|e| anyhow!("cannot put on {key}: {e}"))
-    })?;
-    Ok(String::new())
-}
-
-/// Drains iceoryx2 service `name` at once into a bounded queue (a message that finds it full is
-/// lost and counted) and hands each message to `send` on a thread of its own, counting it
-/// carried, until SIGINT/SIGTERM.
-fn drain<T: Message + Send>(
-    name: &str,
-    counts: &Counts,
-    mut send: impl FnMut(T) -> Result<()> + Send,
-) -> Result<()> {
-    let node = service::node()?;
-    let subscriber = service::subscriber(&service::open::<T>(&node, name)?)?;
-    let listener = wake::listener(&node, name, WaitMode::Event)?;
-    let (tx, rx) = std::sync::mpsc::sync_channel::<T>(QUEUE);
-    std::thread::scope(|scope| {
-        let sender = scope.spawn(move || -> Result<()> {
-            for message in rx {
-                send(message)?;
-                counts.carry();
-            }
-            Ok(())
-        });
-        let step = || -> Result<ControlFlow<(), bool>> {
-            let mut any = false;
-            while let Some(sample) = subscriber.receive()? {
-                any = true;
-                if tx.try_send(*sample).is_err() {
-                    counts.lose(1);
-                }
-            }
-            Ok(ControlFlow::Continue(any))
-        };
-        let served = wake::serve_loop(&[listener], TICK, step);
-        drop(tx);
-        let sent = sender.join().map_err(|_| anyhow!("the sender panicked"))?;
-        served.and(sent).map(|_| ())
-    })
 }
 
 /// Zenoh -> iceoryx2: each message is published (and its subscribers woken) as it arrives;

@@ -22,12 +22,17 @@
 //! ours is the first 16 bytes of the SHA-256 of the publisher's token ([`gid`]), unique per
 //! publisher and session.
 
+use anyhow::{Result, anyhow};
 use ipc_types::{CorrectedImuSample, Message, OdometryState};
 use mems_ros2::convert;
 use mems_ros2::export::{IMU_TOPIC, ODOM_TOPIC};
 use mems_ros2::msg::{Imu, Odometry, RosMessage, Time};
 use recording::clock::WallClock;
 use sha2::{Digest, Sha256};
+use zenoh::Wait;
+use zenoh::liveliness::LivelinessToken;
+
+use crate::{Counts, relay};
 
 /// The admin space of rmw_zenoh's liveliness tokens.
 const ADMIN_SPACE: &str = "@ros2_lv";
@@ -124,6 +129,74 @@ pub fn attachment(sequence: i64, timestamp_ns: i64, gid: &[u8; 16]) -> [u8; 33] 
     out[16] = 16;
     out[17..].copy_from_slice(gid);
     out
+}
+
+/// The ROS 2 node of `mems-bridge ros2`: its liveliness token, declared for as long as it
+/// lives, and what its publishers need.
+pub struct Node {
+    domain: u32,
+    /// The Zenoh session's id, as rmw_zenoh writes it in tokens.
+    zid: String,
+    name: String,
+    /// Shifts the samples' `CLOCK_MONOTONIC` times to the Unix times of their header stamps.
+    clock: WallClock,
+    _token: LivelinessToken,
+}
+
+impl Node {
+    /// Declares node `name` of domain `domain` on `session`; its header stamps use the wall
+    /// clock read now.
+    pub fn declare(session: &zenoh::Session, domain: u32, name: &str) -> Result<Self> {
+        let zid = session.zid().to_string();
+        let token = node_token(domain, &zid, name);
+        Ok(Self {
+            domain,
+            _token: declare_token(session, token)?,
+            zid,
+            name: name.into(),
+            clock: WallClock::now(),
+        })
+    }
+}
+
+fn declare_token(session: &zenoh::Session, token: String) -> Result<LivelinessToken> {
+    session
+        .liveliness()
+        .declare_token(token.clone())
+        .wait()
+        .map_err(|e| anyhow!("cannot declare the liveliness token {token}: {e}"))
+}
+
+/// iceoryx2 service `name` -> ROS 2 topic `T::TOPIC` as publisher `entity` of `node`
+/// until SIGINT/SIGTERM: each message converted, CDR-encoded and put with its attachment.
+pub fn publish<T: Ros2Topic + Send>(
+    session: &zenoh::Session,
+    node: &Node,
+    entity: u32,
+    name: &str,
+    counts: &Counts,
+) -> Result<()> {
+    let key = topic_key::<T::Ros>(node.domain, T::TOPIC);
+    let token = publisher_token::<T::Ros>(node.domain, &node.zid, &node.name, entity, T::TOPIC);
+    let gid = gid(&token);
+    let publisher = relay::publisher(session, &key)?;
+    let _token = declare_token(session, token)?;
+    let (mut sequence, mut buf) = (0i64, Vec::new());
+    relay::drain::<T>(name, counts, |message| {
+        let Some(ros) = message.to_ros(&node.clock) else {
+            return Ok(false);
+        };
+        mems_ros2::cdr::encode(&ros, &mut buf).map_err(|e| anyhow!("{key}: {e}"))?;
+        sequence += 1;
+        let now = WallClock::now().realtime_ns;
+        let attachment = attachment(sequence, now as i64, &gid);
+        publisher
+            .put(buf.clone())
+            .attachment(attachment.to_vec())
+            .wait()
+            .map_err(|e| anyhow!("cannot put on {key}: {e}"))?;
+        Ok(true)
+    })
 }
 
 #[cfg(test)]
