@@ -1,6 +1,7 @@
 //! Our recordings as ROS 2 messages: `mems-ros2 export RUN.mcap --out BAG.mcap` rewrites a run
-//! as a ROS 2 bag in one MCAP file (profile `ros2`, CDR messages, `ros2msg` schemas), which
-//! `ros2 bag play`, `rosbags` and Foxglove read without a `metadata.yaml`.
+//! as a ROS 2 bag in one MCAP file (profile `ros2`, CDR messages, `ros2msg` schemas), laid out
+//! as rosbag2's MCAP storage writes it, so that `ros2 bag play` opens it without a
+//! `metadata.yaml`; `rosbags` and `mcap-ros2-support` read it back in the tests.
 //!
 //! - [`msg`]: the ROS 2 message types we write and their complete definitions.
 //! - [`cdr`]: a message as ROS 2 serializes it (little-endian plain CDR with its header).
