@@ -9,10 +9,16 @@
 //! the type name with its version, [`key`], so a mismatch never decodes). Key expressions:
 //! `PREFIX/SERVICE/TYPE`, e.g. `robot1/mems/odometry/state/mems::OdometryState.v2`.
 //!
-//! The robot is never held back by the network: `out` drains its subscriber at once into a
-//! bounded queue that a sender thread empties onto Zenoh (reliable, blocking congestion
-//! control); a message that finds the queue full is dropped and counted ([`Counts`]). `in`
+//! `mems-bridge ros2` publishes the corrected samples and the odometry as ROS 2 topics in
+//! rmw_zenoh's layout instead ([`ros2`]), for ROS 2 nodes on `rmw_zenoh_cpp`.
+//!
+//! The robot is never held back by the network: `out` and `ros2` drain their subscriber at once
+//! into a bounded queue that a sender thread empties onto Zenoh (reliable, blocking congestion
+//! control; [`relay`]); a message that finds the queue full is dropped and counted ([`Counts`]). `in`
 //! counts the sequence numbers that never arrived.
+
+pub mod relay;
+pub mod ros2;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 

@@ -1,28 +1,24 @@
-//! `mems-bridge out|in --service S [--service S ...]`: carries mems services to other machines
-//! over Zenoh (see the library). On the robot:
+//! `mems-bridge out|in|ros2 --service S [--service S ...]`: carries mems services to other
+//! machines over Zenoh (see the library). On the robot:
 //! `mems-bridge out --service odometry --listen tcp/0.0.0.0:7447`; on the base station:
 //! `mems-bridge in --service odometry --connect tcp/ROBOT:7447`, whose iceoryx2 services any
-//! local client then reads. Stops on SIGINT/SIGTERM and prints, per service, one line on
-//! stdout: `SERVICE carried N lost M` (and for `in` the latency from the original publication,
+//! local client then reads. `mems-bridge ros2 --service odometry --service corrected --connect
+//! tcp/localhost:7447` publishes them as ROS 2 topics (/odom, /imu/data) to a ROS 2 graph on
+//! rmw_zenoh (its router, `ros2 run rmw_zenoh_cpp rmw_zenohd`, listens there;
+//! `mems_bridge::ros2`). Stops on SIGINT/SIGTERM and prints, per service, one line on stdout:
+//! `SERVICE carried N lost M` (and for `in` the latency from the original publication,
 //! meaningful where both ends share a clock).
 
-use std::ops::ControlFlow;
-use std::time::Duration;
-
-use anyhow::{Context as _, Result, anyhow};
+use anyhow::{Context as _, Result, anyhow, bail};
 use clap::{Parser, ValueEnum};
 use hdrhistogram::Histogram;
-use ipc_types::wake::{self, WaitMode};
+use ipc_types::wake;
 use ipc_types::{CorrectedImuSample, Message, OdometryState, RawImuSample, RobotHint, service};
+use mems_bridge::relay::{self, QUEUE, TICK};
+use mems_bridge::ros2;
 use mems_bridge::{Carried, Counts, from_bytes, key, missing, to_bytes, zenoh_config};
 use zenoh::Wait;
 use zenoh::handlers::FifoChannel;
-use zenoh::qos::CongestionControl;
-
-/// Messages buffered per service between iceoryx2 and Zenoh: 16 s at 1 kHz.
-const QUEUE: usize = 16_384;
-/// Longest wait between two checks for SIGINT/SIGTERM.
-const TICK: Duration = Duration::from_millis(100);
 
 /// Carries mems services between machines over Zenoh.
 #[derive(Parser)]
@@ -45,12 +41,21 @@ struct Cli {
     /// iceoryx2 service namespace on this machine (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
+    /// `ros2`: the ROS 2 domain (default: $ROS_DOMAIN_ID, else 0).
+    #[arg(long)]
+    domain_id: Option<u32>,
+    /// `ros2`: the ROS 2 node name the topics are published under.
+    #[arg(long, default_value = "mems_bridge")]
+    node_name: String,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum Direction {
     Out,
     In,
+    /// This machine's services as ROS 2 topics, as rmw_zenoh publishes them: `corrected` on
+    /// /imu/data (sensor_msgs/Imu), `odometry` on /odom (nav_msgs/Odometry, live states).
+    Ros2,
 }
 
 fn main() -> std::process::ExitCode {
@@ -60,34 +65,41 @@ fn main() -> std::process::ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     ipc_types::stop::install()?;
+    if cli.direction == Direction::Ros2
+        && let Some(s) = cli
+            .services
+            .iter()
+            .find(|s| !matches!(s, Carried::Corrected | Carried::Odometry))
+    {
+        bail!(
+            "no ROS 2 topic carries {}: ros2 takes corrected and odometry",
+            s.base()
+        );
+    }
     let session = zenoh::open(zenoh_config(&cli.listen, &cli.connect)?)
         .wait()
         .map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
-    let namespace = service::namespace(cli.namespace.as_deref());
+    let node = match cli.direction {
+        Direction::Ros2 => Some(ros2::Node::declare(
+            &session,
+            domain(cli.domain_id)?,
+            &cli.node_name,
+        )?),
+        _ => None,
+    };
+    let ends = Ends {
+        direction: cli.direction,
+        session: &session,
+        namespace: service::namespace(cli.namespace.as_deref()),
+        prefix: &cli.prefix,
+        node: node.as_ref(),
+    };
     let results: Vec<Result<String>> = std::thread::scope(|scope| {
-        let threads: Vec<_> = cli
-            .services
-            .iter()
-            .map(|&carried| {
-                let (session, namespace, prefix) = (&session, &namespace, &cli.prefix);
-                scope.spawn(move || match carried {
-                    Carried::Raw => {
-                        carry::<RawImuSample>(cli.direction, session, namespace, prefix, carried)
-                    }
-                    Carried::Corrected => carry::<CorrectedImuSample>(
-                        cli.direction,
-                        session,
-                        namespace,
-                        prefix,
-                        carried,
-                    ),
-                    Carried::Odometry => {
-                        carry::<OdometryState>(cli.direction, session, namespace, prefix, carried)
-                    }
-                    Carried::Hint => {
-                        carry::<RobotHint>(cli.direction, session, namespace, prefix, carried)
-                    }
-                })
+        let threads: Vec<_> = (1..)
+            .zip(&cli.services)
+            .map(|(entity, &carried)| {
+                let ends = &ends;
+                scope.spawn(move || ends.carry(carried, entity))
             })
             .collect();
         threads
@@ -104,73 +116,80 @@ fn run(cli: Cli) -> Result<()> {
     Ok(())
 }
 
-/// Carries service `carried` of payload `T` in `direction` until SIGINT/SIGTERM; returns its
-/// summary line.
-fn carry<T: Message + Send>(
-    direction: Direction,
-    session: &zenoh::Session,
-    namespace: &str,
-    prefix: &str,
-    carried: Carried,
-) -> Result<String> {
-    let base = carried.base();
-    let key = key::<T>(prefix, base);
-    let name = service::full_name(namespace, base);
-    let counts = Counts::default();
-    let latency = match direction {
-        Direction::Out => {
-            out::<T>(session, &key, &name, &counts)?;
-            String::new()
-        }
-        Direction::In => into::<T>(session, &key, &name, &counts)?,
-    };
-    let (carried, lost) = counts.get();
-    Ok(format!("{base} carried {carried} lost {lost}{latency}"))
+/// The ROS 2 domain: `--domain-id`, else `$ROS_DOMAIN_ID`, else 0.
+fn domain(given: Option<u32>) -> Result<u32> {
+    match (given, std::env::var("ROS_DOMAIN_ID")) {
+        (Some(domain), _) => Ok(domain),
+        (None, Ok(value)) => value
+            .parse()
+            .with_context(|| format!("ROS_DOMAIN_ID={value:?} is not a domain id")),
+        (None, Err(_)) => Ok(0),
+    }
 }
 
-/// iceoryx2 -> Zenoh: the subscriber is drained at once into a bounded queue; a sender thread
-/// puts each message on Zenoh.
-fn out<T: Message + Send>(
-    session: &zenoh::Session,
-    key: &str,
-    name: &str,
-    counts: &Counts,
-) -> Result<()> {
-    let publisher = session
-        .declare_publisher(key.to_string())
-        .congestion_control(CongestionControl::Block)
-        .wait()
-        .map_err(|e| anyhow!("cannot declare a Zenoh publisher on {key}: {e}"))?;
-    let node = service::node()?;
-    let subscriber = service::subscriber(&service::open::<T>(&node, name)?)?;
-    let listener = wake::listener(&node, name, WaitMode::Event)?;
-    let (tx, rx) = std::sync::mpsc::sync_channel::<T>(QUEUE);
-    std::thread::scope(|scope| {
-        let sender = scope.spawn(|| -> Result<()> {
-            for message in rx {
-                publisher
-                    .put(to_bytes(&message))
-                    .wait()
-                    .map_err(|e| anyhow!("cannot put on {key}: {e}"))?;
-                counts.carry();
+/// What every service's thread shares.
+struct Ends<'a> {
+    direction: Direction,
+    session: &'a zenoh::Session,
+    namespace: String,
+    prefix: &'a str,
+    /// `ros2`: the node the topics are published under.
+    node: Option<&'a ros2::Node>,
+}
+
+impl Ends<'_> {
+    /// Carries service `carried` until SIGINT/SIGTERM (`ros2`: as publisher `entity` of the
+    /// node); returns its summary line.
+    fn carry(&self, carried: Carried, entity: u32) -> Result<String> {
+        let name = service::full_name(&self.namespace, carried.base());
+        let counts = Counts::default();
+        let latency = match (self.node, carried) {
+            (Some(node), Carried::Corrected) => {
+                ros2::publish::<CorrectedImuSample>(self.session, node, entity, &name, &counts)?;
+                String::new()
             }
-            Ok(())
-        });
-        let step = || -> Result<ControlFlow<(), bool>> {
-            let mut any = false;
-            while let Some(sample) = subscriber.receive()? {
-                any = true;
-                if tx.try_send(*sample).is_err() {
-                    counts.lose(1);
-                }
+            (Some(node), Carried::Odometry) => {
+                ros2::publish::<OdometryState>(self.session, node, entity, &name, &counts)?;
+                String::new()
             }
-            Ok(ControlFlow::Continue(any))
+            (Some(_), _) => bail!("no ROS 2 topic carries {}", carried.base()),
+            (None, Carried::Raw) => self.bridge::<RawImuSample>(carried, &name, &counts)?,
+            (None, Carried::Corrected) => {
+                self.bridge::<CorrectedImuSample>(carried, &name, &counts)?
+            }
+            (None, Carried::Odometry) => self.bridge::<OdometryState>(carried, &name, &counts)?,
+            (None, Carried::Hint) => self.bridge::<RobotHint>(carried, &name, &counts)?,
         };
-        let served = wake::serve_loop(&[listener], TICK, step);
-        drop(tx);
-        let sent = sender.join().map_err(|_| anyhow!("the sender panicked"))?;
-        served.and(sent).map(|_| ())
-    })
+        let (n, lost) = counts.get();
+        Ok(format!(
+            "{} carried {n} lost {lost}{latency}",
+            carried.base()
+        ))
+    }
+
+    /// `out` or `in` of service `name` carrying `T`; returns the latency part of the summary.
+    fn bridge<T: Message + Send>(
+        &self,
+        carried: Carried,
+        name: &str,
+        counts: &Counts,
+    ) -> Result<String> {
+        let key = key::<T>(self.prefix, carried.base());
+        match self.direction {
+            Direction::In => into::<T>(self.session, &key, name, counts),
+            _ => {
+                let publisher = relay::publisher(self.session, &key)?;
+                relay::drain::<T>(name, counts, |message| {
+                    publisher
+                        .put(to_bytes(&message))
+                        .wait()
+                        .map_err(|e| anyhow!("cannot put on {key}: {e}"))?;
+                    Ok(true)
+                })?;
+                Ok(String::new())
+            }
+        }
+    }
 }
 
 /// Zenoh -> iceoryx2: each message is published (and its subscribers woken) as it arrives;
