@@ -3,9 +3,9 @@
 //!
 //! Compatibility: every field added after format version 1 must carry `#[serde(default)]` (an
 //! `Option` or a section that defaults to empty), so files written by older versions still load.
-//! Unknown keys are refused, in every table (a misspelt key would otherwise be a term silently
-//! left out); a file that needs a newer reader says so by its `format_version`, which changes
-//! when a field is added or its *meaning* changes. Optional sections ([`NoiseSection`],
+//! Unknown keys are refused, in every table: a misspelt key would otherwise be a term silently
+//! left out, and a reader older than a file's new key names that key. `format_version` changes
+//! only when a field's *meaning* changes. Optional sections ([`NoiseSection`],
 //! [`TemperatureTerms`], ...) may be absent.
 //!
 //! Units: parameters in g (biases) and dimensionless (`S`), see [`crate::model`]; the
