@@ -2,10 +2,11 @@
 //! refers to, and what it was fitted from.
 //!
 //! Compatibility: every field added after format version 1 must carry `#[serde(default)]` (an
-//! `Option` or a section that defaults to empty), so files written by older versions still load;
-//! unknown keys are ignored, so older readers accept newer files. `format_version` changes only
-//! when a field's *meaning* changes. Optional sections ([`NoiseSection`], [`TemperatureTerms`],
-//! ...) may be absent.
+//! `Option` or a section that defaults to empty), so files written by older versions still load.
+//! Unknown keys are refused, in every table: a misspelt key would otherwise be a term silently
+//! left out, and a reader older than a file's new key names that key. `format_version` changes
+//! only when a field's *meaning* changes. Optional sections ([`NoiseSection`],
+//! [`TemperatureTerms`], ...) may be absent.
 //!
 //! Units: parameters in g (biases) and dimensionless (`S`), see [`crate::model`]; the
 //! covariance in the 12-parameter layout (`param_names`); gravity in m/s^2; temperatures in
@@ -19,6 +20,50 @@ use crate::model::{AccelModel, ModelKind, N_PARAMS, PARAM_NAMES, ParamCovariance
 
 /// Format version written by this code.
 pub const FORMAT_VERSION: u32 = 1;
+
+/// The local gravity a file may state, m/s^2: every place on the Earth's surface. Normal
+/// gravity at sea level runs from 9.7803 (equator) to 9.8322 (poles) (WGS 84, Somigliana's
+/// formula) and falls by 3.1e-6 m/s^2 per metre of height; the lowest surface value, on the
+/// summit of Huascaran (6768 m, 9 deg S), is 9.7639 and the highest, on the Arctic Ocean, 9.8337.
+/// A value outside is a typo or a damaged file (1e6, 9.81e3 in mm/s^2, 1.0 in g).
+pub const GRAVITY_RANGE_MPS2: (f64, f64) = (9.76, 9.84);
+
+/// Checks that `value` (a local gravity, m/s^2) is within [`GRAVITY_RANGE_MPS2`]; the error
+/// says what is wrong with the value, for the caller to name where it came from.
+pub fn check_gravity(value: f64) -> Result<(), String> {
+    let (lo, hi) = GRAVITY_RANGE_MPS2;
+    if value >= lo && value <= hi {
+        return Ok(());
+    }
+    Err(format!(
+        "{value:?} m/s^2 is not the gravity of any place on Earth ({lo} to {hi} m/s^2)"
+    ))
+}
+
+/// Where the parse error at byte `span` of `text` is: `line L of [table]` (the last table
+/// header before it), or `line L` at the top level.
+fn parse_location(text: &str, span: Option<std::ops::Range<usize>>) -> String {
+    let Some(span) = span else {
+        return "the file".into();
+    };
+    let start = span.start.min(text.len());
+    let line = text[..start].matches('\n').count() + 1;
+    // Up to the end of the error's line: a table's error starts at its own header.
+    let end = text[start..].find('\n').map_or(text.len(), |n| start + n);
+    match text[..end].lines().rev().find_map(table_header) {
+        Some(table) => format!("line {line} of [{table}]"),
+        None => format!("line {line}"),
+    }
+}
+
+/// The table a line such as `[noise.accel.x]` opens, or `None` for any other line (a key, or
+/// a row of a multi-line array such as `[0.0, 1.0],`).
+fn table_header(line: &str) -> Option<&str> {
+    let (name, rest) = line.trim().strip_prefix('[')?.split_once(']')?;
+    let rest = rest.trim();
+    let named = name.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_' || c == '"');
+    (named && !name.contains(',') && (rest.is_empty() || rest.starts_with('#'))).then_some(name)
+}
 
 /// How poses are weighted (see `calibrate_science::fit`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -52,6 +97,7 @@ pub enum FitMethod {
 
 /// What the calibration was fitted from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SourceSection {
     /// The input file, as given on the command line.
     pub file: String,
@@ -66,6 +112,7 @@ pub struct SourceSection {
 
 /// Residual statistics of the fit.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ResidualSection {
     /// Root-mean-square residual per axis (labelled) or of the magnitude (label-free, all three
     /// entries equal), g.
@@ -106,16 +153,48 @@ where
     {
         return Ok(None);
     }
-    toml::Value::Table(table)
+    toml::Value::Table(table.clone())
         .try_into::<NoiseSection>()
         .map(Some)
-        .map_err(|e| D::Error::custom(format!("[noise]: {}", e.message())))
+        .map_err(|e| {
+            D::Error::custom(format!(
+                "in [{}]: {}",
+                failing_noise_table(&table),
+                e.message()
+            ))
+        })
+}
+
+/// The innermost table of a `[noise]` table that fails to read on its own, as a TOML path
+/// (`noise.accel.z`): the one an error of the whole table is about.
+fn failing_noise_table(table: &toml::Table) -> String {
+    use crate::noise_params::{AxisNoise, SensorNoise};
+    for sensor in ["accel", "gyro"] {
+        let Some(toml::Value::Table(t)) = table.get(sensor) else {
+            continue;
+        };
+        for axis in ["x", "y", "z"] {
+            if let Some(v) = t.get(axis)
+                && v.clone().try_into::<AxisNoise>().is_err()
+            {
+                return format!("noise.{sensor}.{axis}");
+            }
+        }
+        if toml::Value::Table(t.clone())
+            .try_into::<SensorNoise>()
+            .is_err()
+        {
+            return format!("noise.{sensor}");
+        }
+    }
+    "noise".into()
 }
 
 /// Temperature terms of the model (empty until a fit estimates them, e.g. `mems-calibrate
 /// diagnose --out`): with `dT = T_die - reference_c`, the reading is
 /// `a' = (S + diag(scale_per_c) dT) a + b + bias_g_per_c dT` (see [`crate::terms`]).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TemperatureTerms {
     /// Reference temperature of the terms, degC.
     #[serde(default)]
@@ -133,6 +212,7 @@ pub struct TemperatureTerms {
 /// (see [`crate::terms`]). The drift is held at its value at `drift_max_s`, the longest time the
 /// fit saw, rather than extrapolated.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct TimeTerms {
     /// Linear bias drift, g/s.
     #[serde(default)]
@@ -151,6 +231,7 @@ pub struct TimeTerms {
 /// Scale nonlinearity: the reading gains `quadratic_g_per_g2 * a_i^2` on each axis `i`, with
 /// `a` the true specific force in g (see [`crate::terms`]).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct NonlinearityTerms {
     /// Quadratic coefficient per axis, g/g^2.
     #[serde(default)]
@@ -159,6 +240,7 @@ pub struct NonlinearityTerms {
 
 /// Gyroscope terms (optional: present once a gyroscope calibration estimates them).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct GyroSection {
     /// Zero-rate bias, deg/s, sensor frame: subtracted from every reading.
     #[serde(default)]
@@ -175,6 +257,7 @@ pub struct GyroSection {
 
 /// The calibration file's contents.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CalibrationFile {
     /// File format version ([`FORMAT_VERSION`]).
     pub format_version: u32,
@@ -238,13 +321,15 @@ pub enum CalibFileError {
         /// The OS error.
         error: std::io::Error,
     },
-    /// The TOML is malformed or misses a field.
-    #[error("{path}: {error}")]
+    /// The TOML is malformed, misses a key or has one this reader does not know.
+    #[error("{path}: {location}: {message}")]
     Parse {
         /// The file.
         path: String,
-        /// The parser's message (with line and column).
-        error: toml::de::Error,
+        /// Where: the line and the table (`line 12 of [gyro]`).
+        location: String,
+        /// The parser's message.
+        message: String,
     },
     /// The contents are inconsistent.
     #[error("{path}: {message}")]
@@ -393,6 +478,7 @@ impl CalibrationFile {
                 ));
             }
         }
+        plausibility::covariance(&self.covariance)?;
         if let Some(bias) = self.gyro.bias_dps
             && let Some(i) = bias
                 .iter()
@@ -423,13 +509,8 @@ impl CalibrationFile {
                 "covariance must be {N_PARAMS} rows of {N_PARAMS} values"
             ));
         }
-        if !(self.gravity_mps2 > 9.7 && self.gravity_mps2 < 9.9) {
-            return Err(format!(
-                "gravity_mps2 = {} is not a terrestrial gravity",
-                self.gravity_mps2
-            ));
-        }
-        Ok(())
+        check_gravity(self.gravity_mps2)
+            .map_err(|e| format!("gravity_mps2 = {e}: set it to your site's gravity"))
     }
 
     /// Checks that the optional terms are finite (and the gyro correction's sigmas >= 0).
@@ -490,7 +571,8 @@ impl CalibrationFile {
         })?;
         let file: Self = toml::from_str(&text).map_err(|error| CalibFileError::Parse {
             path: name.clone(),
-            error,
+            location: parse_location(&text, error.span()),
+            message: error.message().to_owned(),
         })?;
         let invalid = |message: String| CalibFileError::Invalid {
             path: name.clone(),
@@ -512,7 +594,9 @@ impl CalibrationFile {
 
 /// The bounds [`CalibrationFile::check_plausible`] holds a file to.
 pub mod plausibility {
-    use nalgebra::Matrix3;
+    use nalgebra::{DMatrix, Matrix3};
+
+    use crate::model::PARAM_NAMES;
 
     /// Bounds on the parameters of a real part.
     #[derive(Debug, Clone, Copy, PartialEq)]
@@ -540,6 +624,48 @@ pub mod plausibility {
         accel_bias_g: 0.5,
         gyro_bias_dps: 50.0,
     };
+
+    /// Relative tolerance of the covariance checks, as a fraction of its largest variance:
+    /// far above the rounding of a fit's `V diag(1/s^2) V^T` (1e-16) and of a TOML round trip
+    /// (exact), far below any real correlation.
+    const COVARIANCE_TOLERANCE: f64 = 1e-9;
+
+    /// Checks that the parameter covariance `c` (square, finite, rows in `PARAM_NAMES` order)
+    /// is symmetric and positive semi-definite, as every covariance is: a damaged or hand-made
+    /// one would give some combination of parameters a negative variance. The zero matrix of
+    /// an identity calibration passes.
+    pub fn covariance(c: &[Vec<f64>]) -> Result<(), String> {
+        let n = c.len();
+        let m = DMatrix::from_fn(n, n, |r, k| c[r][k]);
+        let tol = COVARIANCE_TOLERANCE * m.diagonal().amax();
+        for r in 0..n {
+            for k in r + 1..n {
+                if (m[(r, k)] - m[(k, r)]).abs() > tol {
+                    return Err(format!(
+                        "covariance is not symmetric: covariance[{r}][{k}] = {:?} but \
+                         covariance[{k}][{r}] = {:?}",
+                        m[(r, k)],
+                        m[(k, r)]
+                    ));
+                }
+            }
+        }
+        let eigen = m.symmetric_eigen();
+        let (i, smallest) = eigen.eigenvalues.argmin();
+        if smallest < -tol {
+            let v = eigen.eigenvectors.column(i);
+            let along: Vec<&str> = (0..n)
+                .filter(|&k| v[k].abs() > 0.3)
+                .map(|k| PARAM_NAMES.get(k).copied().unwrap_or("?"))
+                .collect();
+            return Err(format!(
+                "covariance is not positive semi-definite: a combination of {} has the variance \
+                 {smallest:.3e} (no variance is negative)",
+                along.join(" and ")
+            ));
+        }
+        Ok(())
+    }
 
     /// Whether `v` is a number of magnitude at most `limit` (false for NaN).
     pub fn within(v: f64, limit: f64) -> bool {
@@ -734,7 +860,7 @@ mod tests {
     }
 
     #[test]
-    fn older_files_without_optional_sections_load_and_unknown_keys_are_ignored() {
+    fn older_files_without_optional_sections_load_and_unknown_keys_are_refused() {
         let mut value: toml::Table = toml::from_str(&example().to_toml()).unwrap();
         value.remove("noise");
         value.remove("temperature");
@@ -742,7 +868,6 @@ mod tests {
         value.remove("gyro");
         value.remove("time");
         value.remove("nonlinearity");
-        value.insert("future_term".into(), toml::Value::Float(1.0));
         let text = toml::to_string(&value).unwrap();
         let back: CalibrationFile = toml::from_str(&text).unwrap();
         assert_eq!(back.noise, None);
@@ -750,6 +875,86 @@ mod tests {
         assert_eq!(back.gyro, GyroSection::default());
         assert_eq!(back.time, TimeTerms::default());
         assert_eq!(back.nonlinearity, NonlinearityTerms::default());
+
+        // A key no table has, at the top, in a table, and deep in [noise]: refused naming the
+        // file, the line, the table and the key.
+        let dir = std::env::temp_dir().join(format!("calibfile-keys-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("keys.toml");
+        let mut with_noise = example();
+        with_noise.noise = Some(crate::noise_params::tests::sample());
+        let good = with_noise.to_toml();
+        let cases = [
+            (
+                good.replacen("gravity_mps2 =", "gravity = 9.8\ngravity_mps2 =", 1),
+                "keys.toml: line 6: unknown field `gravity`",
+            ),
+            (
+                good.replacen("[source]\n", "[source]\nfiles = 2\n", 1),
+                "of [source]: unknown field `files`",
+            ),
+            (
+                good.replacen(
+                    "[noise.accel.y.white_noise_density]\n",
+                    "[noise.accel.y.white_noise_density]\nvalu = 1.0\n",
+                    1,
+                ),
+                "of [noise]: in [noise.accel.y]: unknown field `valu`",
+            ),
+        ];
+        for (text, expected) in cases {
+            std::fs::write(&path, text).unwrap();
+            let err = CalibrationFile::load(&path).unwrap_err().to_string();
+            assert!(err.contains(expected), "{err}");
+        }
+        std::fs::write(&path, good).unwrap();
+        assert_eq!(CalibrationFile::load(&path).unwrap(), with_noise);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn gravity_and_covariance_are_checked_on_load() {
+        let dir = std::env::temp_dir().join(format!("calibfile-cov-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("cov.toml");
+        type Spoil = fn(&mut CalibrationFile);
+        let cases: [(&str, Spoil); 5] = [
+            ("gravity_mps2 = 1000000.0 m/s^2 is not the gravity", |f| {
+                f.gravity_mps2 = 1e6
+            }),
+            ("gravity_mps2 = 9.7 m/s^2", |f| f.gravity_mps2 = 9.7),
+            ("gravity_mps2 = 1.0 m/s^2", |f| f.gravity_mps2 = 1.0),
+            ("covariance[1][5] = 1e-9 but covariance[5][1] = 0.0", |f| {
+                f.covariance[1][5] = 1e-9
+            }),
+            // Each variance positive, the correlation of b_x and b_y beyond 1.
+            (
+                "a combination of b_x and b_y has the variance -1.010e-8",
+                |f| {
+                    f.covariance[0][1] = 2e-8;
+                    f.covariance[1][0] = 2e-8;
+                },
+            ),
+        ];
+        for (expected, spoil) in cases {
+            let mut f = example();
+            spoil(&mut f);
+            f.save(&path).unwrap();
+            let err = CalibrationFile::load(&path).unwrap_err().to_string();
+            assert!(
+                err.contains("cov.toml: ") && err.contains(expected),
+                "{err}"
+            );
+        }
+        // The sites at the ends of the range, and a fitted covariance with its rounding, load.
+        for g in [9.7639, 9.8337] {
+            let mut f = example();
+            f.gravity_mps2 = g;
+            f.covariance[0][3] *= 1.0 + 1e-15;
+            f.save(&path).unwrap();
+            CalibrationFile::load(&path).unwrap();
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -31,6 +31,7 @@ use serde::{Deserialize, Serialize};
 
 /// An estimate with its 1-sigma, in the unit of the field holding it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Estimate {
     /// The value.
     pub value: f64,
@@ -40,6 +41,7 @@ pub struct Estimate {
 
 /// 2-sigma upper limits of unresolved terms (units as the terms').
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct UpperLimits {
     /// Limit on `N`, u/sqrt(Hz).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -61,6 +63,7 @@ impl UpperLimits {
 
 /// The noise of one axis (see the module documentation for units).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct AxisNoise {
     /// White noise density `N`, u/sqrt(Hz).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -92,7 +95,10 @@ impl AxisNoise {
         ]
     }
 
-    fn check(&self, path: &str) -> Result<(), ParamsError> {
+    /// Checks the axis at `path` (e.g. `accel.x`) whose white noise density must lie within
+    /// `white` (u/sqrt(Hz)): every estimate positive with a non-negative sigma, every limit
+    /// non-negative, and neither the density nor its limit below the band.
+    fn check(&self, path: &str, white: (f64, f64)) -> Result<(), ParamsError> {
         let estimates = [
             ("white_noise_density", self.white_noise_density),
             ("bias_instability", self.bias_instability),
@@ -100,10 +106,28 @@ impl AxisNoise {
         ];
         for (name, estimate) in estimates {
             if let Some(e) = estimate {
-                for (part, v) in [("value", e.value), ("sigma", e.sigma)] {
-                    non_negative(&format!("{path}.{name}.{part}"), v)?;
-                }
+                positive(&format!("{path}.{name}.value"), e.value)?;
+                non_negative(&format!("{path}.{name}.sigma"), e.sigma)?;
             }
+        }
+        let (lo, hi) = white;
+        if let Some(n) = self.white_noise_density.map(|e| e.value)
+            && !(lo..=hi).contains(&n)
+        {
+            return Err(ParamsError {
+                field: format!("{path}.white_noise_density.value"),
+                problem: format!(
+                    "{n:?} is not a MEMS sensor's white noise density ({lo:.1e} to {hi:.1e})"
+                ),
+            });
+        }
+        if let Some(n) = self.upper_limits.white_noise_density
+            && n < lo
+        {
+            return Err(ParamsError {
+                field: format!("{path}.upper_limits.white_noise_density"),
+                problem: format!("{n:?} is below any MEMS sensor's white noise density ({lo:.1e})"),
+            });
         }
         let limits = [
             ("white_noise_density", self.upper_limits.white_noise_density),
@@ -121,6 +145,7 @@ impl AxisNoise {
 
 /// The noise of one sensor's three axes.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SensorNoise {
     /// The unit `u` of the sensor's values: `m/s^2` (accelerometer) or `rad/s` (gyro).
     pub unit: String,
@@ -141,6 +166,7 @@ impl SensorNoise {
 
 /// The noise parameters of an IMU and the record they came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct NoiseParams {
     /// The recording analysed.
     pub source: String,
@@ -170,6 +196,27 @@ pub struct ParamsError {
     pub problem: String,
 }
 
+/// The white noise density a `[noise]` table may state, (lowest, highest): for the
+/// accelerometer in m/s^2/sqrt(Hz), for the gyro in rad/s/sqrt(Hz). The MPU-9250's datasheet
+/// figures (PS-MPU-9250A-01 rev 1.1, tables 3.1 and 3.2: 300 ug/sqrt(Hz) = 2.94e-3 m/s^2/sqrt(Hz)
+/// and 0.01 deg/s/sqrt(Hz) = 1.75e-4 rad/s/sqrt(Hz)) divided and multiplied by 100: wide enough
+/// for tactical-grade MEMS parts below (about 15 ug/sqrt(Hz) and 0.002 deg/s/sqrt(Hz)) and the
+/// cheapest consumer parts above (about 1000 ug/sqrt(Hz) and 0.05 deg/s/sqrt(Hz)); the thesis's
+/// MPU-9250 measures 1.9e-3 to 4.1e-3 m/s^2/sqrt(Hz) (docs/noise.md). A zero or 1e-12 density
+/// would make the odometry filter trust every sample exactly.
+pub const WHITE_NOISE_DENSITY_RANGE: [(f64, f64); 2] = [(2.94e-5, 0.294), (1.75e-6, 1.75e-2)];
+
+fn positive(field: &str, v: f64) -> Result<(), ParamsError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(ParamsError {
+            field: field.to_owned(),
+            problem: format!("{v:?} is not a finite positive number"),
+        })
+    }
+}
+
 fn non_negative(field: &str, v: f64) -> Result<(), ParamsError> {
     if v.is_finite() && v >= 0.0 {
         Ok(())
@@ -182,13 +229,18 @@ fn non_negative(field: &str, v: f64) -> Result<(), ParamsError> {
 }
 
 impl NoiseParams {
-    /// Checks the values a consumer relies on: positive rate, length and gravity, finite
-    /// non-negative estimates and limits, and the expected units.
+    /// Checks the values a consumer relies on: positive rate and length, a gravity of the
+    /// Earth's surface ([`crate::calibfile::GRAVITY_RANGE_MPS2`]), positive estimates with
+    /// non-negative sigmas, non-negative limits, white noise densities within
+    /// [`WHITE_NOISE_DENSITY_RANGE`], and the expected units.
     pub fn validate(&self) -> Result<(), ParamsError> {
+        crate::calibfile::check_gravity(self.gravity_mps2).map_err(|problem| ParamsError {
+            field: "gravity_mps2".into(),
+            problem,
+        })?;
         for (field, v) in [
             ("sample_rate_hz", self.sample_rate_hz),
             ("record_length_s", self.record_length_s),
-            ("gravity_mps2", self.gravity_mps2),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(ParamsError {
@@ -201,7 +253,7 @@ impl NoiseParams {
             ("accel", Some(&self.accel), "m/s^2"),
             ("gyro", self.gyro.as_ref(), "rad/s"),
         ];
-        for (name, sensor, unit) in sensors {
+        for ((name, sensor, unit), white) in sensors.into_iter().zip(WHITE_NOISE_DENSITY_RANGE) {
             let Some(sensor) = sensor else { continue };
             if sensor.unit != unit {
                 return Err(ParamsError {
@@ -210,7 +262,7 @@ impl NoiseParams {
                 });
             }
             for (axis, noise) in ["x", "y", "z"].iter().zip(sensor.axes()) {
-                noise.check(&format!("{name}.{axis}"))?;
+                noise.check(&format!("{name}.{axis}"), white)?;
             }
         }
         Ok(())
@@ -237,10 +289,11 @@ impl NoiseParams {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn sample() -> NoiseParams {
+    /// Noise parameters of a plausible MPU-9250 accelerometer (no gyro).
+    pub(crate) fn sample() -> NoiseParams {
         let axis = AxisNoise {
             white_noise_density: Some(Estimate {
                 value: 2.1e-3,
@@ -311,5 +364,59 @@ mod tests {
         );
         let err = NoiseParams::from_toml("source = 3").unwrap_err();
         assert!(err.problem.contains("invalid type"), "{err}");
+    }
+
+    #[test]
+    fn noise_outside_a_mems_sensors_band_is_refused() {
+        type Spoil = fn(&mut NoiseParams);
+        let cases: [(&str, Spoil); 6] = [
+            ("accel.x.white_noise_density.value", |p| {
+                p.accel.x.white_noise_density.as_mut().unwrap().value = 0.0
+            }),
+            ("accel.y.white_noise_density.value", |p| {
+                p.accel.y.white_noise_density.as_mut().unwrap().value = 1e-12
+            }),
+            ("accel.x.white_noise_density.value", |p| {
+                p.accel.x.white_noise_density.as_mut().unwrap().value = 0.5
+            }),
+            ("accel.z.upper_limits.white_noise_density", |p| {
+                p.accel.z.upper_limits.white_noise_density = Some(1e-9)
+            }),
+            ("accel.x.bias_instability.value", |p| {
+                p.accel.x.bias_instability.as_mut().unwrap().value = 0.0
+            }),
+            ("gravity_mps2", |p| p.gravity_mps2 = 1e6),
+        ];
+        for (field, spoil) in cases {
+            let mut bad = sample();
+            spoil(&mut bad);
+            assert_eq!(bad.validate().unwrap_err().field, field);
+        }
+        // The band's ends: 300 ug/sqrt(Hz) and 0.01 deg/s/sqrt(Hz) divided and multiplied by 100.
+        let mut edges = sample();
+        edges.accel.x.white_noise_density.as_mut().unwrap().value = 2.94e-5;
+        edges.accel.y.white_noise_density.as_mut().unwrap().value = 0.294;
+        edges.gyro = Some(SensorNoise {
+            unit: "rad/s".into(),
+            x: AxisNoise {
+                white_noise_density: Some(Estimate {
+                    value: 1.75e-6,
+                    sigma: 0.0,
+                }),
+                ..AxisNoise::default()
+            },
+            y: AxisNoise::default(),
+            z: AxisNoise::default(),
+        });
+        edges.validate().unwrap();
+        edges.gyro.as_mut().unwrap().x.white_noise_density = Some(Estimate {
+            value: 0.05,
+            sigma: 0.0,
+        });
+        assert_eq!(
+            edges.validate().unwrap_err().field,
+            "gyro.x.white_noise_density.value",
+            "2.9 deg/s/sqrt(Hz)"
+        );
     }
 }

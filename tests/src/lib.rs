@@ -103,12 +103,26 @@ impl Proc {
         Self::start(name, command)
     }
 
+    /// Starts binary `name` with `args`, stdout captured, stderr written to the file `log`.
+    pub fn spawn_logged(name: &str, args: &[&str], log: &std::path::Path) -> Self {
+        let file = std::fs::File::create(log)
+            .unwrap_or_else(|e| panic!("cannot create {}: {e}", log.display()));
+        let mut command = Command::new(bin(name));
+        command.args(args);
+        Self::start_with(name, command, file.into())
+    }
+
     /// Starts `command` (stdout captured, stderr inherited); `name` is for messages.
-    pub fn start(name: &str, mut command: Command) -> Self {
+    pub fn start(name: &str, command: Command) -> Self {
+        Self::start_with(name, command, Stdio::inherit())
+    }
+
+    /// Starts `command` with stdout captured and stderr to `stderr`.
+    fn start_with(name: &str, mut command: Command, stderr: Stdio) -> Self {
         let child = command
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
+            .stderr(stderr)
             .spawn()
             .unwrap_or_else(|e| panic!("cannot start {name}: {e}"));
         Self {

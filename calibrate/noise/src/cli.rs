@@ -70,8 +70,9 @@ impl Args {
 
     /// The analysis options these arguments select; errors on values that make no sense.
     pub fn options(&self) -> Result<Options> {
+        calibrate::calibfile::check_gravity(self.gravity_mps2())
+            .map_err(|e| anyhow::anyhow!("--gravity {e}"))?;
         let positive = [
-            ("--gravity", self.gravity_mps2()),
             ("--floor-s", self.floor_s),
             ("--accel-lsb-per-g", self.accel_lsb_per_g),
             ("--gyro-lsb-per-dps", self.gyro_lsb_per_dps),

@@ -12,6 +12,7 @@
 //! sample times are nanoseconds, durations seconds (names ending in `_s`); displacement
 //! evaluation is in SI (m/s^2, m).
 
+pub mod coverage;
 pub mod diagnose;
 pub mod drerror;
 pub mod fit;

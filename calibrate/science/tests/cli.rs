@@ -264,3 +264,67 @@ fn thesis_six_position_file() {
     assert!(!dir.join("refused.toml").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A six-position means file of a part with the thesis's large z bias, without the poses of
+/// `drop` (e.g. `["-x"]`), each pose's mean off the model by a few mg.
+fn means_file(name: &str, drop: &[&str]) -> PathBuf {
+    let truth = common::true_model(&sensor_model().accel);
+    let mut text =
+        "x_true (g),x_mean (g),x_std,y_true (g),y_mean (g),y_std,z_true (g),z_mean (g),z_std\n"
+            .to_string();
+    let poses = [("+z", 2, 1.0), ("-z", 2, -1.0), ("+y", 1, 1.0)];
+    let poses = poses
+        .into_iter()
+        .chain([("-y", 1, -1.0), ("+x", 0, 1.0), ("-x", 0, -1.0)]);
+    for (k, (label, axis, sign)) in poses.enumerate() {
+        if drop.contains(&label) {
+            continue;
+        }
+        let mut t = nalgebra::Vector3::zeros();
+        t[axis] = sign;
+        let m = truth.measure(&t);
+        let cells: Vec<String> = (0..3)
+            .map(|i| {
+                let off = 0.003 * ((3 * k + i) as f64 * 1.7).sin();
+                format!("{},{},0.003", t[i], m[i] + off)
+            })
+            .collect();
+        text.push_str(&cells.join(","));
+        text.push('\n');
+    }
+    let dir = std::env::temp_dir().join(format!("calibrate-cli-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(format!("{name}.csv"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// A six-position session without its -x pose: `fit` succeeds and warns that the -x pose is
+/// missing, that the +x pose alone determines S_xx, S_yx and S_zx, and that each axis' 1-sigma
+/// rests on one residual; the complete session warns of nothing.
+#[test]
+fn a_session_missing_a_pose_warns_what_is_poorly_determined() {
+    let five = means_file("five", &["-x"]);
+    let (output, _) = fit(&five, &[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    for expected in [
+        "mems-calibrate: warning: ",
+        "five.csv: a six-position session without a pose with -x up (5 of the 6 axis directions)",
+        "five.csv: S_xx, S_yx, S_zx rest on pose 5 (+x up) alone",
+        "five.csv: S_xx, S_xy, S_xz, b_x (x axis) have a 1-sigma scaled by a single residual: \
+         one time in 20 it is 16 times too small",
+    ] {
+        assert!(stderr.contains(expected), "{expected}\n{stderr}");
+    }
+    let six = means_file("six-means", &[]);
+    let (output, _) = fit(&six, &[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        output.status.success() && !stderr.contains("warning"),
+        "{stderr}"
+    );
+    for f in [five, six] {
+        std::fs::remove_dir_all(f.parent().unwrap()).unwrap();
+    }
+}

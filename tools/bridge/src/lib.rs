@@ -82,9 +82,69 @@ pub fn from_bytes<T: Message>(bytes: &[u8]) -> Option<T> {
     })
 }
 
+/// The endpoint `out` listens on and `in` connects to when given neither `--listen` nor
+/// `--connect`: this machine only.
+pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
+
+/// Whether Zenoh endpoint `endpoint` (`PROTO/HOST:PORT[?...][#...]`) names this machine only:
+/// a loopback address or `localhost`. An unspecified address (`0.0.0.0`, `[::]`) or any other
+/// host is reachable from other machines.
+pub fn is_loopback(endpoint: &str) -> bool {
+    let address = endpoint.split_once('/').map_or(endpoint, |(_, a)| a);
+    let address = address.split(['?', '#']).next().unwrap_or_default();
+    let host = address.rsplit_once(':').map_or(address, |(h, _)| h);
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    host == "localhost"
+        || host
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
+}
+
+/// Zenoh's user-password authentication from a credentials file: one `USER:PASSWORD` line per
+/// accepted user (Zenoh's dictionary format), the first being the one this end presents.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Credentials {
+    /// The file, the dictionary of accepted users.
+    pub file: std::path::PathBuf,
+    /// The user this end presents.
+    pub user: String,
+    /// Its password.
+    pub password: String,
+}
+
+impl Credentials {
+    /// Reads the credentials file `file`; the error names the file and what is wrong.
+    pub fn load(file: &std::path::Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(file)
+            .map_err(|e| anyhow::anyhow!("--auth {}: {e}", file.display()))?;
+        let first = text.lines().find(|l| !l.trim().is_empty()).unwrap_or("");
+        let (user, password) = first
+            .split_once(':')
+            .map(|(u, p)| (u.trim(), p.trim()))
+            .filter(|(u, p)| !u.is_empty() && !p.is_empty())
+            .ok_or_else(|| {
+                anyhow::anyhow!(
+                    "--auth {}: the first line must be USER:PASSWORD (both non-empty)",
+                    file.display()
+                )
+            })?;
+        Ok(Self {
+            file: file.to_path_buf(),
+            user: user.to_owned(),
+            password: password.to_owned(),
+        })
+    }
+}
+
 /// A Zenoh peer configuration: listening on and connecting to the given endpoints (e.g.
-/// `tcp/0.0.0.0:7447`), multicast scouting off so that only the named peers connect.
-pub fn zenoh_config(listen: &[String], connect: &[String]) -> anyhow::Result<zenoh::Config> {
+/// `tcp/127.0.0.1:7447`), multicast scouting off so that only the named peers connect, and
+/// with `auth` Zenoh's user-password authentication: this end presents the credentials' user,
+/// and a peer that presents none of the file's users is refused.
+pub fn zenoh_config(
+    listen: &[String],
+    connect: &[String],
+    auth: Option<&Credentials>,
+) -> anyhow::Result<zenoh::Config> {
     let list = |eps: &[String]| {
         let quoted: Vec<String> = eps.iter().map(|e| format!("{e:?}")).collect();
         format!("[{}]", quoted.join(","))
@@ -93,12 +153,31 @@ pub fn zenoh_config(listen: &[String], connect: &[String]) -> anyhow::Result<zen
     let set = |config: &mut zenoh::Config, key: &str, value: &str| {
         config
             .insert_json5(key, value)
-            .map_err(|e| anyhow::anyhow!("zenoh config {key} = {value}: {e}"))
+            .map_err(|e| anyhow::anyhow!("zenoh config {key}: {e}"))
     };
     set(&mut config, "mode", "\"peer\"")?;
     set(&mut config, "scouting/multicast/enabled", "false")?;
     set(&mut config, "listen/endpoints", &list(listen))?;
     set(&mut config, "connect/endpoints", &list(connect))?;
+    if let Some(auth) = auth {
+        let usrpwd = "transport/auth/usrpwd";
+        set(
+            &mut config,
+            &format!("{usrpwd}/user"),
+            &format!("{:?}", auth.user),
+        )?;
+        set(
+            &mut config,
+            &format!("{usrpwd}/password"),
+            &format!("{:?}", auth.password),
+        )?;
+        let dictionary = format!("{:?}", auth.file.display().to_string());
+        set(
+            &mut config,
+            &format!("{usrpwd}/dictionary_file"),
+            &dictionary,
+        )?;
+    }
     Ok(config)
 }
 
@@ -173,6 +252,50 @@ mod tests {
             key::<RawImuSample>("", service::RAW),
             "mems/imu/raw/mems-RawImuSample.v1"
         );
+    }
+
+    #[test]
+    fn only_loopback_endpoints_are_this_machine_only() {
+        for local in [
+            "tcp/127.0.0.1:7447",
+            "tcp/127.0.0.2:1",
+            "tcp/[::1]:7447",
+            "tcp/localhost:7447",
+            "tcp/127.0.0.1:7447?so_sndbuf=65000",
+        ] {
+            assert!(is_loopback(local), "{local}");
+        }
+        for open in [
+            "tcp/0.0.0.0:7447",
+            "tcp/[::]:7447",
+            "tcp/192.168.1.20:7447",
+            "tcp/robot.local:7447",
+            "tcp/localhost.example.com:7447",
+        ] {
+            assert!(!is_loopback(open), "{open}");
+        }
+    }
+
+    #[test]
+    fn credentials_take_the_first_line_and_name_a_bad_file() {
+        let dir = std::env::temp_dir().join(format!("bridge-auth-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("bridge.auth");
+        std::fs::write(&file, "\nrobot:s3cret:x\nstation:other\n").unwrap();
+        let c = Credentials::load(&file).unwrap();
+        assert_eq!(
+            (c.user.as_str(), c.password.as_str()),
+            ("robot", "s3cret:x")
+        );
+        for bad in ["robot\n", "robot:\n", ":pw\n", ""] {
+            std::fs::write(&file, bad).unwrap();
+            let err = Credentials::load(&file).unwrap_err().to_string();
+            assert!(
+                err.contains("bridge.auth") && err.contains("USER:PASSWORD"),
+                "{err}"
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -1,13 +1,18 @@
 //! `mems-bridge out|in|ros2 --service S [--service S ...]`: carries mems services to other
-//! machines over Zenoh (see the library). On the robot:
-//! `mems-bridge out --service odometry --listen tcp/0.0.0.0:7447`; on the base station:
-//! `mems-bridge in --service odometry --connect tcp/ROBOT:7447`, whose iceoryx2 services any
-//! local client then reads. `mems-bridge ros2 --service odometry --service corrected --connect
-//! tcp/localhost:7447` publishes them as ROS 2 topics (/odom, /imu/data) to a ROS 2 graph on
-//! rmw_zenoh (its router, `ros2 run rmw_zenoh_cpp rmw_zenohd`, listens there;
-//! `mems_bridge::ros2`). Stops on SIGINT/SIGTERM and prints, per service, one line on stdout:
-//! `SERVICE carried N lost M` (and for `in` the latency from the original publication,
-//! meaningful where both ends share a clock).
+//! machines over Zenoh (see the library). Closed by default: without `--listen` or
+//! `--connect`, `out` listens on and `in` and `ros2` connect to `tcp/127.0.0.1:7447`, this
+//! machine only; an endpoint that other machines can reach needs `--auth FILE` (Zenoh's
+//! user-password authentication, the same file on both hosts) or an explicit `--no-auth`. On
+//! the robot: `mems-bridge out --service odometry --listen tcp/0.0.0.0:7447 --auth
+//! bridge.auth`; on the base station: `mems-bridge in --service odometry --connect
+//! tcp/ROBOT:7447 --auth bridge.auth`, whose iceoryx2 services any local client then reads.
+//! `mems-bridge ros2 --service odometry --service corrected` publishes them as ROS 2 topics
+//! (/odom, /imu/data) to a ROS 2 graph on rmw_zenoh (its router, `ros2 run rmw_zenoh_cpp
+//! rmw_zenohd`, listens on 7447; `mems_bridge::ros2`). Stops on SIGINT/SIGTERM and prints, per
+//! service, one line on stdout: `SERVICE carried N lost M` (and for `in` the latency from the
+//! original publication, meaningful where both ends share a clock).
+
+use std::path::PathBuf;
 
 use anyhow::{Context as _, Result, anyhow, bail};
 use clap::{Parser, ValueEnum};
@@ -16,7 +21,10 @@ use ipc_types::wake;
 use ipc_types::{CorrectedImuSample, Message, OdometryState, RawImuSample, RobotHint, service};
 use mems_bridge::relay::{self, QUEUE, TICK};
 use mems_bridge::ros2;
-use mems_bridge::{Carried, Counts, from_bytes, key, missing, to_bytes, zenoh_config};
+use mems_bridge::{
+    Carried, Counts, Credentials, DEFAULT_ENDPOINT, from_bytes, is_loopback, key, missing,
+    to_bytes, zenoh_config,
+};
 use zenoh::Wait;
 use zenoh::handlers::FifoChannel;
 
@@ -29,12 +37,23 @@ struct Cli {
     /// A service to carry (repeat for several).
     #[arg(long = "service", required = true)]
     services: Vec<Carried>,
-    /// Zenoh endpoint to listen on, e.g. `tcp/0.0.0.0:7447` (repeatable).
+    /// Zenoh endpoint to listen on, e.g. `tcp/0.0.0.0:7447` (repeatable). Without `--listen`
+    /// and `--connect`, `out` listens on `tcp/127.0.0.1:7447`.
     #[arg(long)]
     listen: Vec<String>,
-    /// Zenoh endpoint of the other end, e.g. `tcp/robot.local:7447` (repeatable).
+    /// Zenoh endpoint of the other end, e.g. `tcp/robot.local:7447` (repeatable). Without
+    /// `--listen` and `--connect`, `in` connects to `tcp/127.0.0.1:7447`.
     #[arg(long)]
     connect: Vec<String>,
+    /// Credentials file, one `USER:PASSWORD` line per accepted user (the first is the one this
+    /// end presents); give both hosts the same file. A peer without a user of the file is
+    /// refused.
+    #[arg(long, value_name = "FILE")]
+    auth: Option<PathBuf>,
+    /// Accept endpoints that other machines reach without `--auth`: any peer that reaches
+    /// them can then read and publish the carried services.
+    #[arg(long, conflicts_with = "auth")]
+    no_auth: bool,
     /// Key prefix naming the robot, so that one Zenoh network carries several.
     #[arg(long, default_value = "")]
     prefix: String,
@@ -63,7 +82,36 @@ fn main() -> std::process::ExitCode {
     mems_log::exit(run(Cli::parse()))
 }
 
+/// The endpoints to listen on and connect to: those given, or by default this machine's
+/// [`DEFAULT_ENDPOINT`] (`out` listens, `in` connects). One that other machines reach is
+/// refused without `--auth`, unless `--no-auth` accepts it.
+fn endpoints(cli: &Cli) -> Result<(Vec<String>, Vec<String>)> {
+    let (mut listen, mut connect) = (cli.listen.clone(), cli.connect.clone());
+    if listen.is_empty() && connect.is_empty() {
+        match cli.direction {
+            Direction::Out => listen.push(DEFAULT_ENDPOINT.into()),
+            Direction::In | Direction::Ros2 => connect.push(DEFAULT_ENDPOINT.into()),
+        }
+    }
+    let flagged = listen
+        .iter()
+        .map(|e| ("--listen", e))
+        .chain(connect.iter().map(|e| ("--connect", e)));
+    for (flag, endpoint) in flagged {
+        if !is_loopback(endpoint) && cli.auth.is_none() && !cli.no_auth {
+            bail!(
+                "{flag} {endpoint} is reachable from other machines and no --auth is given: \
+                 any peer that reaches it could read and publish the carried services; give \
+                 --auth FILE (docs/latency.md, Off the robot), or --no-auth to accept that"
+            );
+        }
+    }
+    Ok((listen, connect))
+}
+
 fn run(cli: Cli) -> Result<()> {
+    let (listen, connect) = endpoints(&cli)?;
+    let auth = cli.auth.as_deref().map(Credentials::load).transpose()?;
     ipc_types::stop::install()?;
     if cli.direction == Direction::Ros2
         && let Some(s) = cli
@@ -76,7 +124,7 @@ fn run(cli: Cli) -> Result<()> {
             s.base()
         );
     }
-    let session = zenoh::open(zenoh_config(&cli.listen, &cli.connect)?)
+    let session = zenoh::open(zenoh_config(&listen, &connect, auth.as_ref())?)
         .wait()
         .map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
     let node = match cli.direction {

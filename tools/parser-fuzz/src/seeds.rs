@@ -2,9 +2,12 @@
 //! has them (so the seeds follow the formats as they change), and by hand where the format comes
 //! from elsewhere (the thesis's files). Each exercises the optional parts of its format: gyro,
 //! temperature, flags and truth columns; several MCAP topics and chunks; every optional section
-//! of a calibration file.
+//! of a calibration file. Beside them, the committed corpus (`corpus/PARSER/`, see
+//! [`corpus_dir`]) holds files the writers here do not make: a logger's CSV with repeated rows,
+//! a fitted calibration with a `[noise]` table, the identity file `tools/real-data/bench.py`
+//! writes, ...
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use calibrate::calibfile::CalibrationFile;
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps, raw_flags};
@@ -12,14 +15,41 @@ use recording::Truth;
 
 use crate::Parser;
 
-/// The seed files of `parser`'s format, as bytes (`dir` holds the files the writers need).
+/// The seed files of `parser`'s format, as bytes: those the writers make now (`dir` holds the
+/// files they need), then the committed corpus.
 pub fn for_parser(parser: Parser, dir: &Path) -> std::io::Result<Vec<Vec<u8>>> {
-    match parser {
-        Parser::Csv => Ok(vec![canonical_csv(dir)?, thesis_series()]),
-        Parser::Mcap => Ok(vec![mcap(dir)?]),
-        Parser::Calib => Ok(vec![calibration().into_bytes()]),
-        Parser::Means => Ok(vec![means()]),
+    let mut seeds = match parser {
+        Parser::Csv => vec![canonical_csv(dir)?, thesis_series()],
+        Parser::Mcap => vec![mcap(dir)?],
+        Parser::Calib => vec![calibration().into_bytes()],
+        Parser::Means => vec![means()],
+    };
+    for path in corpus(&corpus_dir(parser))? {
+        seeds.push(std::fs::read(path)?);
     }
+    Ok(seeds)
+}
+
+/// The committed corpus of `parser`: `tools/parser-fuzz/corpus/NAME/`, files its reader accepts.
+pub fn corpus_dir(parser: Parser) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("corpus")
+        .join(parser.name())
+}
+
+/// The files of corpus directory `dir`, by name.
+pub fn corpus(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let entries = std::fs::read_dir(dir)
+        .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", dir.display())))?;
+    let mut files = Vec::new();
+    for entry in entries {
+        let path = entry?.path();
+        if path.is_file() {
+            files.push(path);
+        }
+    }
+    files.sort();
+    Ok(files)
 }
 
 /// `n` raw samples of a level sensor at 1 kHz with a little motion, gyro and temperature valid.

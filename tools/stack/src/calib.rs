@@ -6,17 +6,21 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use anyhow::{Context, Result, bail};
+use calibrate::calibfile::CalibrationFile;
 
 use crate::cli::Cli;
 
 /// The calibration file the stack runs with: `--calib`, or for a simulated source one
-/// calibrated now in `work`.
+/// calibrated now in `work`; loaded and checked here ([`CalibrationFile::load`]), so that a
+/// file the stages would refuse stops the stack before anything starts.
 pub fn calibration(cli: &Cli, bins: &Path, work: &Path) -> Result<PathBuf> {
-    Ok(match (&cli.calib, cli.source.as_str()) {
+    let path = match (&cli.calib, cli.source.as_str()) {
         (Some(c), _) => c.clone(),
         (None, "sim" | "sim-spi") => calibrate_sim(bins, work, cli.seed)?,
         (None, other) => bail!("--calib is required for source {other}"),
-    })
+    };
+    CalibrationFile::load(&path)?;
+    Ok(path)
 }
 
 /// Calibrates the simulated part in `work` with the binaries in `bins`

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Result, bail};
+use anyhow::{Result, anyhow, bail};
 use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
 use calibrate::model::{AccelModel, ParamCovariance};
 use calibrate_science::diagnose::{
@@ -92,12 +92,7 @@ fn load(paths: &[PathBuf], what: &str) -> Result<Vec<SessionInput>> {
 
 /// `mems-calibrate diagnose`.
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
-    if !(args.gravity > 9.7 && args.gravity < 9.9) {
-        bail!(
-            "--gravity {} m/s^2 is not a terrestrial gravity (expected 9.7..9.9)",
-            args.gravity
-        );
-    }
+    calibrate::calibfile::check_gravity(args.gravity).map_err(|e| anyhow!("--gravity {e}"))?;
     if !(args.block_s > 0.0 && args.block_s.is_finite()) {
         bail!("--block-s must be > 0, got {}", args.block_s);
     }

@@ -12,9 +12,12 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{Context, Result, bail};
-use calibrate::calibfile::{CalibrationFile, FitMethod, ResidualSection, SourceSection};
+use anyhow::{Context, Result, anyhow, bail};
+use calibrate::calibfile::{
+    CalibrationFile, CovarianceMode, FitMethod, ResidualSection, SourceSection,
+};
 use calibrate::model::{ModelKind, PARAM_NAMES};
+use calibrate_science::coverage;
 use calibrate_science::fit::{Pose, Weighting, fit_labelled};
 use calibrate_science::labelfree::fit_label_free;
 use calibrate_science::plots::plot_pose_residuals;
@@ -302,9 +305,7 @@ fn fit(args: FitArgs) -> Result<()> {
     if !(min_segment_s > 0.0 && min_segment_s.is_finite()) {
         bail!("--min-segment-s must be > 0, got {min_segment_s}");
     }
-    if !(gravity > 9.7 && gravity < 9.9) {
-        bail!("--gravity {gravity} m/s^2 is not a terrestrial gravity (expected 9.7..9.9)");
-    }
+    calibrate::calibfile::check_gravity(gravity).map_err(|e| anyhow!("--gravity {e}"))?;
     let weighting = if weighted {
         Weighting::PoseStd
     } else {
@@ -326,7 +327,9 @@ fn fit(args: FitArgs) -> Result<()> {
         }
         label_free_file(&input, &fp.poses, weighting, gravity, source)?
     } else {
-        labelled_file(&input, &fp.poses, model, weighting, gravity, source)?
+        let file = labelled_file(&input, &fp.poses, model, weighting, gravity, source)?;
+        warn_poorly_determined(&input, &fp.poses, &file);
+        file
     };
     file.temperature_range_c = fp.temperature_range_c;
     print_summary(&file);
@@ -344,6 +347,49 @@ fn fit(args: FitArgs) -> Result<()> {
         tracing::info!("wrote {}", plot.display());
     }
     Ok(())
+}
+
+/// Warns of what the poses of a labelled fit leave poorly determined
+/// ([`calibrate_science::coverage`]): axis directions a six-position session lacks, parameters
+/// that rest on one pose alone, and 1-sigmas scaled by a single residual.
+fn warn_poorly_determined(input: &Path, poses: &[Pose], file: &CalibrationFile) {
+    let input = input.display();
+    if let Some(missing) = coverage::missing_directions(poses)
+        && !missing.is_empty()
+    {
+        tracing::warn!(
+            "{input}: a six-position session without a pose with {} up ({} of the 6 axis \
+             directions): the parameters of those axes are seen from one side only; record \
+             the missing poses",
+            missing.join(", "),
+            6 - missing.len()
+        );
+    }
+    for sole in coverage::sole_poses(poses, file.model) {
+        let direction = coverage::direction(&poses[sole.pose].truth_g).map_or(String::new(), |d| {
+            format!(" ({} up)", coverage::DIRECTIONS[d])
+        });
+        tracing::warn!(
+            "{input}: {} rest on pose {}{direction} alone: the fit passes through it exactly, \
+             so no residual checks them and their 1-sigma leaves out that pose's error",
+            sole.params.join(", "),
+            sole.pose + 1
+        );
+    }
+    if file.covariance_mode != CovarianceMode::ResidualScaled {
+        return;
+    }
+    for (axis, &dof) in file.residuals.dof.iter().enumerate() {
+        if dof == 1 {
+            let (name, params) = coverage::axis_parameters(file.model, axis);
+            tracing::warn!(
+                "{input}: {} ({name} axis) have a 1-sigma scaled by a single residual: one time \
+                 in 20 it is {:.0} times too small",
+                params.join(", "),
+                coverage::sigma_shortfall(dof)
+            );
+        }
+    }
 }
 
 /// Poses for a label-free fit (labels unused).
