@@ -9,6 +9,10 @@
 //!   directory, a symbolic link, even a dangling one) is refused, before the run and again at
 //!   the rename (`renameat2(RENAME_NOREPLACE)`); with it, the rename replaces what is there (a
 //!   symbolic link is replaced, never followed).
+//! - [`OutputPath`]: the same for a file that a library writes by path (a plot): a path in a
+//!   private temporary directory beside the output, renamed there (0600) when committed.
+//! - [`refuse_existing`]: the check of an output path before a long run, so that it fails
+//!   early.
 //! - [`create_new`]: a file written in place as it grows (the recorder's, which a killed
 //!   recorder must leave at its path): created exclusively (`O_CREAT | O_EXCL`, which never
 //!   follows a symbolic link), 0600.
@@ -18,7 +22,7 @@
 
 use std::fs::{DirBuilder, File, OpenOptions};
 use std::io::{self, Write};
-use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt};
+use std::os::unix::fs::{DirBuilderExt, OpenOptionsExt, PermissionsExt};
 use std::path::{Path, PathBuf};
 
 use tempfile::{NamedTempFile, TempDir};
@@ -95,20 +99,10 @@ impl Output {
         existing: Existing,
     ) -> Result<Self, Error> {
         let path = path.as_ref();
-        if existing == Existing::Refuse && path.symlink_metadata().is_ok() {
-            return Err(Error::exists(path, flag));
+        if existing == Existing::Refuse {
+            refuse_existing(path, flag)?;
         }
-        let name = path.file_name().ok_or_else(|| {
-            let io = io::Error::new(io::ErrorKind::InvalidInput, "is not a file name");
-            Error::new(path, flag, io)
-        })?;
-        let dir = match path.parent() {
-            Some(dir) if !dir.as_os_str().is_empty() => dir,
-            _ => Path::new("."),
-        };
-        let mut prefix = std::ffi::OsString::from(".");
-        prefix.push(name);
-        prefix.push(".");
+        let (dir, prefix) = beside(path, flag)?;
         let temp = tempfile::Builder::new()
             .prefix(&prefix)
             .suffix(".partial")
@@ -144,13 +138,114 @@ impl Output {
             Existing::Replace => self.temp.persist(&path),
             Existing::Refuse => self.temp.persist_noclobber(&path),
         };
-        match persisted {
-            Ok(_) => Ok(()),
-            Err(e) if e.error.kind() == io::ErrorKind::AlreadyExists => {
-                Err(Error::exists(&path, flag))
-            }
-            Err(e) => Err(Error::new(&path, flag, e.error)),
+        persisted
+            .map(drop)
+            .map_err(|e| renamed_error(&path, flag, e.error))
+    }
+}
+
+/// A command's output file that a library writes by path: [`OutputPath::temp_path`] is in a
+/// private temporary directory beside the output, and [`OutputPath::commit`] makes the file
+/// 0600 and renames it to the output's path (over what is there only with
+/// [`Existing::Replace`]). Dropped uncommitted, it leaves nothing.
+#[derive(Debug)]
+pub struct OutputPath {
+    path: PathBuf,
+    flag: Option<&'static str>,
+    existing: Existing,
+    dir: TempDir,
+    temp: PathBuf,
+}
+
+impl OutputPath {
+    /// Starts the output at `path`, given by option `flag`, or refuses it (as
+    /// [`Output::create`]).
+    pub fn create(
+        path: impl AsRef<Path>,
+        flag: Option<&'static str>,
+        existing: Existing,
+    ) -> Result<Self, Error> {
+        let path = path.as_ref();
+        if existing == Existing::Refuse {
+            refuse_existing(path, flag)?;
         }
+        let (parent, prefix) = beside(path, flag)?;
+        let dir = tempfile::Builder::new()
+            .prefix(&prefix)
+            .suffix(".partial")
+            .tempdir_in(parent)
+            .map_err(|e| Error::new(path, flag, e))?;
+        let temp = dir
+            .path()
+            .join(path.file_name().expect("checked by beside"));
+        Ok(Self {
+            path: path.to_path_buf(),
+            flag,
+            existing,
+            dir,
+            temp,
+        })
+    }
+
+    /// Where to write the file.
+    pub fn temp_path(&self) -> &Path {
+        &self.temp
+    }
+
+    /// Makes the written file 0600 and renames it to its path.
+    pub fn commit(self) -> Result<(), Error> {
+        let (path, flag) = (&self.path, self.flag);
+        let private = std::fs::Permissions::from_mode(FILE_MODE);
+        std::fs::set_permissions(&self.temp, private).map_err(|e| Error::new(path, flag, e))?;
+        let renamed = match self.existing {
+            Existing::Replace => std::fs::rename(&self.temp, path),
+            Existing::Refuse => {
+                // A hard link fails on an existing path; the temporary name goes with the dir.
+                std::fs::hard_link(&self.temp, path)
+            }
+        };
+        renamed.map_err(|e| renamed_error(path, flag, e))?;
+        drop(self.dir);
+        Ok(())
+    }
+}
+
+/// The error of renaming an output to `path`.
+fn renamed_error(path: &Path, flag: Option<&'static str>, io: io::Error) -> Error {
+    match io.kind() {
+        io::ErrorKind::AlreadyExists => Error::exists(path, flag),
+        _ => Error::new(path, flag, io),
+    }
+}
+
+/// The directory of output `path` and the prefix of a temporary name beside it
+/// (`.NAME.`); errors if `path` has no file name.
+fn beside<'a>(
+    path: &'a Path,
+    flag: Option<&'static str>,
+) -> Result<(&'a Path, std::ffi::OsString), Error> {
+    let name = path.file_name().ok_or_else(|| {
+        let io = io::Error::new(io::ErrorKind::InvalidInput, "is not a file name");
+        Error::new(path, flag, io)
+    })?;
+    let dir = match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir,
+        _ => Path::new("."),
+    };
+    let mut prefix = std::ffi::OsString::from(".");
+    prefix.push(name);
+    prefix.push(".");
+    Ok((dir, prefix))
+}
+
+/// Refuses an existing `path` (a file, a directory or a symbolic link, dangling or not), with
+/// an error that names it, `flag` and `--force`: the check before a run whose output would be
+/// refused at its end.
+pub fn refuse_existing(path: impl AsRef<Path>, flag: Option<&'static str>) -> Result<(), Error> {
+    let path = path.as_ref();
+    match path.symlink_metadata() {
+        Ok(_) => Err(Error::exists(path, flag)),
+        Err(_) => Ok(()),
     }
 }
 
