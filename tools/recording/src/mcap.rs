@@ -1741,9 +1741,16 @@ impl Reader {
 /// Iterator over the messages of a [`Reader`].
 pub struct Messages<'a> {
     path: &'a Path,
-    stream: scan::Scanner<&'a [u8]>,
+    stream: scan::Scanner<std::io::Cursor<&'a [u8]>>,
     read: u64,
     done: bool,
+}
+
+impl Messages<'_> {
+    /// The damaged records skipped so far ([`scan::Damage`]).
+    pub fn damaged(&self) -> &[scan::Damage] {
+        self.stream.damaged()
+    }
 }
 
 impl<'a> Iterator for Messages<'a> {
@@ -1893,8 +1900,10 @@ pub struct Contents {
 pub struct SegmentRead {
     /// The file.
     pub path: PathBuf,
-    /// Set when the file ends early or is damaged.
+    /// Set when the file ends early or its record framing is damaged.
     pub truncation: Option<Truncation>,
+    /// Damaged records skipped (the read went on after each), with what they held.
+    pub damaged: Vec<scan::Damage>,
 }
 
 impl Contents {
@@ -2016,10 +2025,11 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
         if n > 0 && !continues_run(segment, n)? {
             break;
         }
-        let truncation = read_segment(segment, &mut contents)?;
+        let (truncation, damaged) = read_segment(segment, &mut contents)?;
         contents.segments.push(SegmentRead {
             path: segment.to_path_buf(),
             truncation: truncation.clone(),
+            damaged,
         });
         contents.truncation = truncation;
     }
@@ -2043,16 +2053,21 @@ pub(crate) fn continues_run(path: &Path, n: usize) -> Result<bool> {
     })
 }
 
-/// Appends the messages of one file to `contents`; returns its truncation, if any.
-fn read_segment(path: &Path, contents: &mut Contents) -> Result<Option<Truncation>> {
+/// Appends the messages of one file to `contents`; returns its truncation, if any, and the
+/// damaged records skipped.
+fn read_segment(
+    path: &Path,
+    contents: &mut Contents,
+) -> Result<(Option<Truncation>, Vec<scan::Damage>)> {
     let reader = Reader::open(path)?;
-    for message in reader.messages()? {
+    let mut messages = reader.messages()?;
+    while let Some(message) = messages.next() {
         let message = match message {
             Ok(message) => message,
             Err(Error {
                 kind: ErrorKind::Truncated(truncation),
                 ..
-            }) => return Ok(Some(truncation)),
+            }) => return Ok((Some(truncation), messages.damaged().to_vec())),
             Err(e) => return Err(e),
         };
         if let Some(sample) = message.decode::<RawImuSample>() {
@@ -2084,7 +2099,7 @@ fn read_segment(path: &Path, contents: &mut Contents) -> Result<Option<Truncatio
             contents.other_messages += 1;
         }
     }
-    Ok(None)
+    Ok((None, messages.damaged().to_vec()))
 }
 
 /// The last sequence number of each service in one MCAP file (odometry revisions excluded),
