@@ -173,6 +173,7 @@ impl OutputPath {
         let dir = tempfile::Builder::new()
             .prefix(&prefix)
             .suffix(".partial")
+            .permissions(std::fs::Permissions::from_mode(DIR_MODE))
             .tempdir_in(parent)
             .map_err(|e| Error::new(path, flag, e))?;
         let temp = dir
@@ -280,10 +281,11 @@ pub fn create_new(path: impl AsRef<Path>, flag: Option<&'static str>) -> Result<
 }
 
 /// A new private temporary directory under `$TMPDIR`, named `prefix` and random characters
-/// (0700; removed with everything in it when dropped, unless kept with [`TempDir::keep`]).
+/// (0700, set explicitly: `tempfile` leaves a directory's mode to the umask; removed with everything in it when dropped, unless kept with [`TempDir::keep`]).
 pub fn private_dir(prefix: &str) -> Result<TempDir, Error> {
     tempfile::Builder::new()
         .prefix(prefix)
+        .permissions(std::fs::Permissions::from_mode(DIR_MODE))
         .tempdir()
         .map_err(|e| Error::new(&std::env::temp_dir().join(prefix), None, e))
 }

@@ -365,7 +365,7 @@ impl<R: Read + Seek> Scanner<R> {
     /// its framing is intact: notes it ([`Self::note_damaged`]) and reads on from the record
     /// after it. Errors with `reason` (the read ends there) otherwise.
     fn skip_damaged(&mut self, reason: String) -> Result<(), String> {
-        let Some((start, end, _)) = self.record_holding(self.fed) else {
+        let Some((_, end)) = self.record_holding(self.fed) else {
             return Err(reason);
         };
         if end <= self.restarted_at || end > self.len {
@@ -379,14 +379,13 @@ impl<R: Read + Seek> Scanner<R> {
         self.input.set_limit(self.len - end);
         self.reader = linear_reader(self.record_limit, false);
         (self.fed, self.restarted_at) = (end, end);
-        debug_assert!(start < end);
         Ok(())
     }
 
     /// Keeps the top-level record that holds the last byte read as damaged for `reason`, with
     /// what the message indexes after it say it held, then puts the input back where it was.
     fn note_damaged(&mut self, reason: String) {
-        let Some((offset, end, _)) = self.record_holding(self.fed) else {
+        let Some((offset, end)) = self.record_holding(self.fed) else {
             return;
         };
         let mut lost: Vec<(String, u64)> = Vec::new();
@@ -422,9 +421,9 @@ impl<R: Read + Seek> Scanner<R> {
         let _ = self.input.get_mut().seek(SeekFrom::Start(self.fed));
     }
 
-    /// The top-level record (offset, end, opcode) that holds the byte before `pos`, by the
-    /// file's record framing; `None` if the framing breaks before it.
-    fn record_holding(&mut self, pos: u64) -> Option<(u64, u64, u8)> {
+    /// The top-level record (offset, end) that holds the byte before `pos`, by the file's
+    /// record framing; `None` if the framing breaks before it.
+    fn record_holding(&mut self, pos: u64) -> Option<(u64, u64)> {
         let last = pos.checked_sub(1)?;
         let mut at = MAGIC.len() as u64;
         let mut head = [0u8; 9];
@@ -433,7 +432,7 @@ impl<R: Read + Seek> Scanner<R> {
             let end = at.checked_add(9)?.checked_add(len)?;
             if last < end {
                 let _ = self.input.get_mut().seek(SeekFrom::Start(self.fed));
-                return (last >= at).then_some((at, end, head[0]));
+                return (last >= at).then_some((at, end));
             }
             at = end;
         }
