@@ -209,13 +209,20 @@ fn a_damaged_chunk_size_ends_the_read_as_a_truncation_without_aborting() {
     assert!(contents.raw.is_empty());
     // The streamed read walks the framing with seeks and stops at the same place.
     assert_eq!(streamed(&path), (0, Some(cut)));
-    // A size a little too large for the data is the crate's own error, also a truncation.
+    // A size a little too large for the data is the crate's own error: the chunk's framing
+    // is intact, so it is skipped and reported, and the read goes on.
     let mut short = clean.clone();
     short[fields[0] + 1] ^= 0x01;
     std::fs::write(&path, &short).unwrap();
     let contents = recording::mcap::read_all(&path).unwrap();
-    assert!(contents.truncation.is_some());
-    assert_eq!(streamed(&path), (contents.raw.len(), contents.truncation));
+    assert_eq!(contents.truncation, None);
+    assert_eq!(
+        contents.segments[0].damaged.len(),
+        1,
+        "{:?}",
+        contents.segments
+    );
+    assert_eq!(streamed(&path), (contents.raw.len(), None));
 }
 
 /// A chunk with a changed data byte (its CRC fails) or a changed opcode is skipped and reported

@@ -133,16 +133,16 @@ fn pad_header(len: u64) -> [u8; 9] {
 
 /// The file's ending: an empty padding record, the data-end record (no data CRC), a footer
 /// with no summary (no CRC) and the magic.
-fn ending() -> Vec<u8> {
-    let mut out = Vec::with_capacity(ENDING_LEN as usize);
-    out.extend_from_slice(&pad_header(0));
-    out.push(0x0f);
-    out.extend_from_slice(&4u64.to_le_bytes());
-    out.extend_from_slice(&0u32.to_le_bytes());
-    out.push(0x02);
-    out.extend_from_slice(&20u64.to_le_bytes());
-    out.extend_from_slice(&[0; 20]);
-    out.extend_from_slice(MAGIC);
+fn ending() -> [u8; ENDING_LEN as usize] {
+    let mut out = [0u8; ENDING_LEN as usize];
+    out[..9].copy_from_slice(&pad_header(0));
+    out[9] = 0x0f;
+    out[10..18].copy_from_slice(&4u64.to_le_bytes());
+    // The data-end record's CRC (4 bytes) stays 0.
+    out[22] = 0x02;
+    out[23..31].copy_from_slice(&20u64.to_le_bytes());
+    // The footer's summary start, summary-offset start and CRC (20 bytes) stay 0.
+    out[51..].copy_from_slice(MAGIC);
     out
 }
 
