@@ -186,8 +186,8 @@ fn drive_is_written_and_its_file_truth_integrates_to_its_positions() {
         ..DriveParams::new(90.0)
     };
     let want = expected(Drive::new(&params, 6).unwrap(), 0.5, 6, 100.0);
-    for name in ["drive.csv", "drive.mcap"] {
-        let out = tmp(name);
+    let (csv, mcap) = (tmp("drive.csv"), tmp("drive.mcap"));
+    for out in [&csv, &mcap] {
         ok(&[
             "drive",
             "--duration",
@@ -205,15 +205,12 @@ fn drive_is_written_and_its_file_truth_integrates_to_its_positions() {
             "--out",
             out.to_str().unwrap(),
         ]);
-        check_file(&out, &want);
+        check_file(out, &want);
     }
     // The truth read back from the file: trapezoid integration of its accelerations
     // (R f + g_nav) at the file's rate reproduces its velocities and positions within the rule's
     // own error, 2 h^2 / 6 max|jerk| and 2 h^2 / 6 max|a| (derived in tests/scenarios.rs).
-    let truth = recording::load_raw(tmp("drive.csv"))
-        .unwrap()
-        .truth
-        .unwrap();
+    let truth = recording::load_raw(&csv).unwrap().truth.unwrap();
     let h = 0.01;
     let a: Vec<Vector3<f64>> = truth
         .iter()
