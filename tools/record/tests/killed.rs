@@ -44,10 +44,12 @@ fn python_count(path: &Path) -> usize {
 /// Messages the `mcap` crate reads from `path`, every one without error.
 fn mcap_crate_count(path: &Path) -> usize {
     let bytes = std::fs::read(path).unwrap();
-    ::mcap::MessageStream::new(&bytes)
-        .unwrap()
-        .map(|m| m.unwrap_or_else(|e| panic!("{}: {e}", path.display())))
-        .count()
+    let mut count = 0;
+    for message in ::mcap::MessageStream::new(&bytes).unwrap() {
+        message.unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        count += 1;
+    }
+    count
 }
 
 /// Messages our reader reads from `path`, which must read whole (no truncation), and its raw

@@ -590,7 +590,7 @@ fn main() -> Result<()> {
     for seed in 1..=o.seeds {
         // One part per seed, calibrated from its own six-position session, then driven.
         tracing::info!("seed {seed}: calibrating and simulating the drive ...");
-        let (drive, calib, truth) = simulate(&bins, &work, seed, o.seconds)?;
+        let (drive, calib, truth) = simulate(&bins, work, seed, o.seconds)?;
         for (k, (fault, outcomes)) in results.iter_mut().enumerate() {
             tracing::info!("seed {seed}, {} ...", fault.label());
             let tag = format!("{seed}-{k}");

@@ -204,10 +204,12 @@ mod tests {
 
     /// Messages the `mcap` crate's own reader reads from `bytes`, which must be whole.
     fn messages(bytes: &[u8]) -> usize {
-        ::mcap::MessageStream::new(bytes)
-            .expect("magic")
-            .map(|m| m.expect("a whole file"))
-            .count()
+        let mut count = 0;
+        for message in ::mcap::MessageStream::new(bytes).expect("magic") {
+            message.expect("a whole file");
+            count += 1;
+        }
+        count
     }
 
     /// Writes `chunks` flushed chunks of `per_chunk` messages of `size` bytes each.
