@@ -1,5 +1,5 @@
 //! The file of `mems-calibrate serve --state`: the calibration stage's [`WarmState`] as JSON,
-//! written atomically (a temporary file beside it, renamed over it) so that a process killed
+//! written atomically (a private temporary file beside it, renamed over it) so that a process killed
 //! while writing leaves the previous state, and read back by its successor.
 
 use std::path::Path;
@@ -16,10 +16,15 @@ pub fn load(path: &Path) -> Result<WarmState> {
         .with_context(|| format!("{}: not a calibration stage state", path.display()))
 }
 
-/// Writes `state` to `path` atomically.
+/// Writes `state` to `path` atomically (`mems_files`: a private file beside it, 0600, renamed
+/// over it; a symbolic link there is replaced, not followed).
 pub fn save(path: &Path, state: &WarmState) -> Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, serde_json::to_string_pretty(state)?)
-        .with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot replace {}", path.display()))
+    let json = serde_json::to_string_pretty(state)?;
+    let replace = mems_files::Existing::Replace;
+    Ok(mems_files::write(
+        path,
+        Some("--state"),
+        replace,
+        json.as_bytes(),
+    )?)
 }

@@ -119,3 +119,32 @@ fn absurd_samples_and_calibrations_stop_the_offline_run_naming_file_line_and_fie
 
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A run that fails leaves no `--out` file (nor its temporary file) behind.
+#[test]
+fn a_failed_run_leaves_no_out_file() {
+    let dir = scratch();
+    let calib = dir.join("calib.toml");
+    CalibrationFile::identity(9.80665).save(&calib).unwrap();
+    let input = dir.join("failing.csv");
+    csv(&input, |k, cells| {
+        if k == BAD_ROW {
+            cells[2] = "1e300".to_owned();
+        }
+    });
+    let out_dir = dir.join("failed-out");
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let out = out_dir.join("states.mcap");
+    let run = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
+        .args(["offline", "--input"])
+        .arg(&input)
+        .arg("--calib")
+        .arg(&calib)
+        .args(["--learn-s", "1", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_refused(&run, &["failing.csv"]);
+    let left: Vec<_> = std::fs::read_dir(&out_dir).unwrap().flatten().collect();
+    assert!(left.is_empty(), "a failed run left {left:?}");
+}

@@ -250,10 +250,20 @@ fn a_killed_stack_takes_its_children_and_the_next_start_cleans_up() {
         nodes = per_process.into_iter().flatten().collect();
         all
     });
-    let work = std::env::temp_dir().join(format!("mems-stack-{}", stack.pid()));
-    assert!(
-        work.is_dir(),
-        "{} exists while the stack runs",
+    // The stack's private work directory: mems-stack-PID- and random characters, 0700.
+    let prefix = format!("mems-stack-{}-", stack.pid());
+    let work = std::fs::read_dir(std::env::temp_dir())
+        .unwrap()
+        .flatten()
+        .find(|e| e.file_name().to_string_lossy().starts_with(&prefix))
+        .map(|e| e.path())
+        .unwrap_or_else(|| panic!("no {prefix}* directory while the stack runs"));
+    let meta = work.symlink_metadata().unwrap();
+    assert!(meta.is_dir());
+    assert_eq!(
+        std::os::unix::fs::PermissionsExt::mode(&meta.permissions()) & 0o777,
+        0o700,
+        "{} is private",
         work.display()
     );
 

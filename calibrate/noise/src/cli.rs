@@ -35,6 +35,10 @@ pub struct Args {
     /// Write the noise parameters (the calibration file's `[noise]` table) as TOML here.
     #[arg(long, value_name = "OUT.toml")]
     pub toml: Option<PathBuf>,
+    /// Replace the files at --toml and --kalibr (atomically; a symbolic link there is
+    /// replaced, not followed). Without it an existing file is refused. Files are 0600.
+    #[arg(long)]
+    pub force: bool,
     /// Gravity converting g to m/s^2 (the thesis used 9.797); default: standard gravity, or
     /// the gravity of the calibration file the parameters are stored into.
     #[arg(long, value_name = "M_S2")]
@@ -137,12 +141,18 @@ pub fn run_allan_to(args: &Args, out: &mut impl Write) -> Result<Report> {
         out.write_all(render(&report).as_bytes())?;
     }
     if let Some(path) = &args.toml {
-        std::fs::write(path, report.params.to_toml())
-            .with_context(|| format!("writing {}", path.display()))?;
+        let existing = mems_files::Existing::force(args.force);
+        mems_files::write(
+            path,
+            Some("--toml"),
+            existing,
+            report.params.to_toml().as_bytes(),
+        )?;
     }
     if let Some(path) = &args.kalibr {
         let text = kalibr::imu_yaml(&report.params, &args.rostopic)?;
-        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+        let existing = mems_files::Existing::force(args.force);
+        mems_files::write(path, Some("--kalibr"), existing, text.as_bytes())?;
     }
     if let Some(path) = &args.plot {
         let title = match args.input.as_slice() {

@@ -66,7 +66,9 @@ pub fn write_png(path: &Path, title: &str, channels: &[ChannelReport]) -> Result
         return Err(anyhow!("nothing to plot"));
     }
     let height = PANEL.1 * sensors.len() as u32;
-    let root = BitMapBackend::new(path, (PANEL.0, height)).into_drawing_area();
+    let out = mems_files::OutputPath::create(path, None, mems_files::Existing::Replace)?;
+    let temp = out.temp_path().to_path_buf();
+    let root = BitMapBackend::new(&temp, (PANEL.0, height)).into_drawing_area();
     let draw_error = |e: &dyn std::fmt::Display| anyhow!("drawing {}: {e}", path.display());
     root.fill(&WHITE).map_err(|e| draw_error(&e))?;
     let panels = root.split_evenly((sensors.len(), 1));
@@ -135,7 +137,8 @@ pub fn write_png(path: &Path, title: &str, channels: &[ChannelReport]) -> Result
     }
     root.present()
         .map_err(|e| draw_error(&e))
-        .with_context(|| format!("writing {}", path.display()))
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(out.commit()?)
 }
 
 /// Points with vertical 1-sigma error bars (and caps).

@@ -48,7 +48,10 @@ pub fn plot_pose_residuals(
 ) -> Result<(), PlotError> {
     register_font();
     let e = err(path);
-    let root = BitMapBackend::new(path, (900, 500)).into_drawing_area();
+    let out = mems_files::OutputPath::create(path, None, mems_files::Existing::Replace)
+        .map_err(|x| e(x.io.to_string()))?;
+    let temp = out.temp_path().to_path_buf();
+    let root = BitMapBackend::new(&temp, (900, 500)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
     let max = residuals_g
         .iter()
@@ -97,7 +100,8 @@ pub fn plot_pose_residuals(
         .background_style(WHITE.mix(0.8))
         .draw()
         .map_err(|x| e(x.to_string()))?;
-    root.present().map_err(|x| e(x.to_string()))
+    root.present().map_err(|x| e(x.to_string()))?;
+    out.commit().map_err(|x| e(x.io.to_string()))
 }
 
 /// Displacement over time of each method and axis (rows: thesis_full, best; columns: x, y, z),
@@ -105,7 +109,10 @@ pub fn plot_pose_residuals(
 pub fn plot_static_displacement(path: &Path, report: &StaticEvalReport) -> Result<(), PlotError> {
     register_font();
     let e = err(path);
-    let root = BitMapBackend::new(path, (1500, 800)).into_drawing_area();
+    let out = mems_files::OutputPath::create(path, None, mems_files::Existing::Replace)
+        .map_err(|x| e(x.io.to_string()))?;
+    let temp = out.temp_path().to_path_buf();
+    let root = BitMapBackend::new(&temp, (1500, 800)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
     let panels = root.split_evenly((2, 3));
     for (p, area) in panels.iter().enumerate() {
@@ -172,5 +179,6 @@ pub fn plot_static_displacement(path: &Path, report: &StaticEvalReport) -> Resul
                 .map_err(|x| e(x.to_string()))?;
         }
     }
-    root.present().map_err(|x| e(x.to_string()))
+    root.present().map_err(|x| e(x.to_string()))?;
+    out.commit().map_err(|x| e(x.io.to_string()))
 }

@@ -141,7 +141,7 @@ fn six_position_raw_session_auto_labels_and_label_free_refusal() {
     assert_eq!(file.source.kind, "canonical_csv");
     assert_within(&file, &common::true_model(&sensor_model().accel), 4.0);
 
-    let (output, _) = fit(&csv, &["--labels", "none"]);
+    let (output, _) = fit(&csv, &["--labels", "none", "--force"]);
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(

@@ -35,6 +35,10 @@ pub struct FileInfo {
     /// Why reading stopped early (a killed recorder's file ends without its summary), if it
     /// did; the messages before the cut are counted.
     pub truncated: Option<String>,
+    /// Damaged records skipped (the read went on after each), with the messages each held.
+    pub damaged: Vec<recording::mcap::scan::Damage>,
+    /// Messages lost in the damaged records, all topics (as their message indexes count them).
+    pub messages_lost: u64,
 }
 
 /// One topic of the run.
@@ -387,6 +391,8 @@ impl RunInfo {
                 bytes,
                 messages,
                 truncated: segment.truncation.as_ref().map(ToString::to_string),
+                damaged: segment.damaged.clone(),
+                messages_lost: segment.damaged.iter().map(|d| d.messages_lost()).sum(),
             });
         }
         for topic in info.topics.values_mut() {
@@ -431,6 +437,9 @@ impl RunInfo {
                 f.bytes as f64 / 1e6,
                 f.messages
             );
+            for damage in &f.damaged {
+                let _ = writeln!(s, "    {damage}");
+            }
         }
         match &self.wall_clock {
             Some(c) => {

@@ -26,6 +26,11 @@ fn main() -> std::process::ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     let info = mems_info::RunInfo::read(&cli.file)?;
+    for file in &info.files {
+        for damage in &file.damaged {
+            tracing::warn!("{}: {damage}", file.path.display());
+        }
+    }
     let text = if cli.json {
         serde_json::to_string_pretty(&info)? + "\n"
     } else {

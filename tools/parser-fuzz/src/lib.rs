@@ -161,8 +161,14 @@ impl Campaign {
     /// Runs the campaign. Panics inside the reader are caught and counted; the panic hook is
     /// silenced for the duration and restored after.
     pub fn run(&self) -> std::io::Result<Report> {
-        std::fs::create_dir_all(&self.dir)?;
+        mems_files::create_dir(&self.dir, Some("--dir")).map_err(|e| e.io)?;
         let path = self.dir.join(format!("input-{}.bin", self.parser.name()));
+        // Created here (0600, never through a symbolic link), rewritten for each input.
+        match std::fs::remove_file(&path) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
+            _ => {}
+        }
+        let file = mems_files::create_new(&path, None).map_err(|e| e.io)?;
         let seeds = seeds::for_parser(self.parser, &self.dir)?;
         let mut report = Report::default();
         let previous_hook = std::panic::take_hook();
@@ -176,7 +182,8 @@ impl Campaign {
         for index in self.start..self.start + self.runs {
             let mut rng = rng_for(self.parser, self.seed, index);
             let input = mutate::mutate(&seeds, &mut rng);
-            std::fs::write(&path, &input)?;
+            file.set_len(0)?;
+            std::os::unix::fs::FileExt::write_all_at(&file, &input, 0)?;
             CURRENT_INDEX.store(index, Ordering::Relaxed);
             let t0 = Instant::now();
             alloc_count::set_limit(self.allocation_limit);

@@ -13,7 +13,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Result, anyhow};
 use ipc_types::{CorrectedImuSample, OdometryState, corrected_flags, odometry_flags};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -186,7 +186,9 @@ fn draw_err(path: &Path) -> impl Fn(String) -> anyhow::Error + '_ {
 fn draw_panels(path: &Path, title: &str, t_range: Range<f64>, panels: &[Panel]) -> Result<()> {
     register_font();
     let e = draw_err(path);
-    let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+    let out = mems_files::OutputPath::create(path, None, mems_files::Existing::Replace)?;
+    let temp = out.temp_path().to_path_buf();
+    let root = BitMapBackend::new(&temp, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
     let root = root
         .titled(title, ("sans-serif", 26))
@@ -196,7 +198,7 @@ fn draw_panels(path: &Path, title: &str, t_range: Range<f64>, panels: &[Panel]) 
         draw_panel(area, &t_range, panel).map_err(|x| e(x.to_string()))?;
     }
     root.present().map_err(|x| e(x.to_string()))?;
-    Ok(())
+    Ok(out.commit()?)
 }
 
 fn draw_panel(
@@ -529,8 +531,7 @@ pub fn plot_recording(
     };
     let t1_ns = last.iter().flatten().max().copied().unwrap_or(t0_ns);
     let end_s = seconds(t1_ns, t0_ns).max(1e-3);
-    std::fs::create_dir_all(out_dir)
-        .with_context(|| format!("cannot create {}", out_dir.display()))?;
+    mems_files::create_dir(out_dir, Some("--out"))?;
     Figure::ALL
         .iter()
         .map(|&figure| {

@@ -22,7 +22,6 @@
 //! those columns exist and `SATURATED` when a count is at either end of its range. Stamps other
 //! than `sample_ns` are not stored and read back as 0.
 
-use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
@@ -309,12 +308,15 @@ pub fn write_log(
     write_rows(path, samples, truth)
 }
 
-/// Writes validated samples and truth.
+/// Writes validated samples and truth: a private file (0600) that replaces any file at `path`
+/// once complete (`mems_files::Output`; a symbolic link there is replaced, not followed).
 fn write_rows(path: &Path, samples: &[RawImuSample], truth: Option<&[Truth]>) -> Result<()> {
     let gyro = samples.iter().any(|s| s.flags & raw_flags::GYRO_VALID != 0);
     let temp = samples.iter().any(|s| s.flags & raw_flags::TEMP_VALID != 0);
 
-    let file = File::create(path).map_err(|e| Error::io(path, e))?;
+    let mut output = mems_files::Output::create(path, None, mems_files::Existing::Replace)
+        .map_err(|e| Error::io(path, e.io))?;
+    let file = output.file().try_clone().map_err(|e| Error::io(path, e))?;
     let mut out = ::csv::WriterBuilder::new().from_writer(BufWriter::new(file));
     let mut header: Vec<&str> = vec![TIME];
     header.extend(ACCEL);
@@ -361,7 +363,8 @@ fn write_rows(path: &Path, samples: &[RawImuSample], truth: Option<&[Truth]>) ->
     let mut writer = out
         .into_inner()
         .map_err(|e| Error::io(path, e.into_error()))?;
-    writer.flush().map_err(|e| Error::io(path, e))
+    writer.flush().map_err(|e| Error::io(path, e))?;
+    output.commit().map_err(|e| Error::io(path, e.io))
 }
 
 /// Checks what [`write_raw`] would otherwise write into a file it cannot read back.

@@ -24,12 +24,18 @@
 //! round-trip form parsed with `serde_json`'s `float_roundtrip` (JSON cannot hold NaN or
 //! infinity: a JSON writer refuses them).
 //!
-//! A writer killed mid-recording leaves a file without summary or footer. [`Reader`] scans
-//! linearly and yields every message of every complete chunk before the cut, then reports the
-//! truncation ([`ErrorKind::Truncated`]); [`read_all`] returns it in [`Contents::truncation`].
-//! [`Writer::flush`] closes the current chunk, bounding what a kill can lose.
+//! Files: [`Writer::create`] and [`Writer::create_new`] write a private temporary file beside
+//! the path and rename it there when [`Writer::finish`]ed (`mems_files::Output`), so a run
+//! that fails leaves no file. The recorder's file ([`Writer::create_new_compacting`]) is
+//! written in place instead and is a whole MCAP file after every [`Writer::flush`] ([`durable`]):
+//! a recorder killed at any point leaves a file that every reader opens, with every message
+//! flushed before the kill. A file cut short some other way (a copy interrupted, a full disk)
+//! is read up to the cut: [`Reader`] scans linearly and yields every message of every complete
+//! chunk before it, then reports the truncation ([`ErrorKind::Truncated`]); [`read_all`]
+//! returns it in [`Contents::truncation`].
 
 pub mod derived;
+pub mod durable;
 pub mod proto;
 pub mod run;
 pub mod scan;
@@ -39,7 +45,7 @@ use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
 use std::fmt;
 use std::fs::File;
-use std::io::{BufWriter, Read};
+use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
 
@@ -1230,8 +1236,50 @@ impl<M> Clone for FoxgloveChannel<M> {
 
 impl<M> Copy for FoxgloveChannel<M> {}
 
-/// The `mcap` crate's writer on a buffered file.
-type McapWriter = ::mcap::Writer<BufWriter<File>>;
+/// The `mcap` crate's writer on a file.
+type McapWriter = ::mcap::Writer<Sink>;
+
+/// Where an `mcap` writer writes: a buffered file, or the recorder's flushed file, which is
+/// whole after every flush ([`durable`]).
+enum Sink {
+    Buffered(BufWriter<File>),
+    Durable(durable::DurableFile<File>),
+}
+
+impl Write for Sink {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        match self {
+            Self::Buffered(w) => w.write(buf),
+            Self::Durable(w) => w.write(buf),
+        }
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        match self {
+            Self::Buffered(w) => w.flush(),
+            Self::Durable(w) => w.flush(),
+        }
+    }
+}
+
+impl Seek for Sink {
+    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
+        match self {
+            Self::Buffered(w) => w.seek(to),
+            Self::Durable(w) => w.seek(to),
+        }
+    }
+}
+
+impl Sink {
+    /// Flushes what is buffered and returns the file.
+    fn into_file(self) -> std::io::Result<File> {
+        match self {
+            Self::Buffered(w) => w.into_inner().map_err(|e| e.into_error()),
+            Self::Durable(w) => Ok(w.into_inner()),
+        }
+    }
+}
 
 /// zstd level of the compact copy a recorder writes beside its file
 /// ([`Writer::create_new_compacting`]), measured on a 60 s, 1 kHz stack run (docs/recording.md,
@@ -1246,9 +1294,14 @@ pub const COMPACT_CHUNK_BYTES: u64 = 4 << 20;
 /// Writes an MCAP recording to a file: zstd chunks, protobuf messages (or JSON, for files in
 /// the older encoding: [`Writer::with_encoding`]).
 ///
-/// Dropping the writer finishes the file but ignores errors; call [`Writer::finish`].
+/// Only [`Writer::finish`] completes the file: a writer dropped unfinished (a failed run)
+/// leaves no file at its path, except the recorder's ([`Writer::create_new_compacting`]),
+/// which holds what was flushed.
 pub struct Writer {
     inner: McapWriter,
+    /// The private temporary file renamed to the path at [`Writer::finish`]; `None` for the
+    /// recorder's file, written in place.
+    output: Option<mems_files::Output>,
     /// The compact copy of a recorder's file, if it writes one
     /// ([`Writer::create_new_compacting`]).
     compact: Option<Compact>,
@@ -1265,38 +1318,40 @@ pub struct Writer {
 }
 
 impl Writer {
-    /// Creates (or truncates) the file at `path` and writes the MCAP header.
+    /// Starts the file at `path`, which replaces any file there when finished (atomically:
+    /// the file is written beside it and renamed; a symbolic link there is replaced, not
+    /// followed), and writes the MCAP header.
     pub fn create(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        let file = File::create(path).map_err(|e| Error::io(path, e))?;
-        Self::on(path, file)
+        let replace = mems_files::Existing::Replace;
+        Self::staged(path.as_ref(), replace, 0, DEFAULT_CHUNK_BYTES)
     }
 
-    /// Creates the file at `path`, which must not exist (an existing file is never
-    /// overwritten: the error names it), and writes the MCAP header.
+    /// Starts the file at `path`, which must not exist (an existing file or symbolic link is
+    /// never overwritten: the error names it and `--force`), as [`Writer::create`] does.
     pub fn create_new(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        let file = File::options()
-            .write(true)
-            .create_new(true)
-            .open(path)
-            .map_err(|e| Error::io(path, e))?;
-        Self::on(path, file)
+        let refuse = mems_files::Existing::Refuse;
+        Self::staged(path.as_ref(), refuse, 0, DEFAULT_CHUNK_BYTES)
     }
 
-    /// Creates the file at `path` as [`Writer::create_new`] does, for a recorder that flushes
-    /// it often (every flush closes a chunk, so that a killed recorder loses little), and a
-    /// compact copy of it beside it ([`compacting_path`]): the same records, in chunks of
-    /// [`COMPACT_CHUNK_BYTES`] at zstd level [`COMPACT_LEVEL`], which [`Writer::flush`] leaves
-    /// alone. [`Writer::finish`] finishes both and renames the copy
-    /// over the file, so a finished recording is the compact one; a recorder killed before that
-    /// leaves its flushed file as it was (and a copy that [`remove_stale_copy`] removes).
+    /// The recorder's file: created at `path`, which must not exist (0600), and written in
+    /// place, each [`Writer::flush`] closing a chunk and leaving a whole MCAP file
+    /// ([`durable`]), so that a killed recorder loses little and leaves a file every reader
+    /// opens; and a compact copy beside it ([`compacting_path`]): the same records, in chunks
+    /// of [`COMPACT_CHUNK_BYTES`] at zstd level [`COMPACT_LEVEL`], which [`Writer::flush`]
+    /// leaves alone. [`Writer::finish`] finishes both and renames the copy over the file, so
+    /// a finished recording is the compact one; a recorder killed before that leaves its
+    /// flushed file (and a copy that [`remove_stale_copy`] removes).
     pub fn create_new_compacting(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let mut writer = Self::create_new(path)?;
+        let file = mems_files::create_new(path, None).map_err(|e| Error::io(path, e.io))?;
+        let sink = Sink::Durable(durable::DurableFile::new(file));
+        let mut writer = Self::on(path, sink, None, 0, DEFAULT_CHUNK_BYTES)?;
+        // The header, committed: the file is whole from the start.
+        writer.flush()?;
         let temp = compacting_path(path);
-        let file = File::create(&temp).map_err(|e| Error::io(&temp, e))?;
-        let copy = mcap_writer(&temp, file, COMPACT_LEVEL, COMPACT_CHUNK_BYTES)?;
+        let file = mems_files::create_new(&temp, None).map_err(|e| Error::io(&temp, e.io))?;
+        let sink = Sink::Buffered(BufWriter::new(file));
+        let copy = mcap_writer(&temp, sink, COMPACT_LEVEL, COMPACT_CHUNK_BYTES)?;
         writer.compact = Some(Compact {
             writer: Some(copy),
             temp,
@@ -1304,25 +1359,40 @@ impl Writer {
         Ok(writer)
     }
 
-    /// Creates (or truncates) the file at `path` with chunks of `chunk_bytes` (uncompressed)
-    /// compressed at zstd level `level` (0: zstd's default, 3), and writes the MCAP header:
-    /// for measuring what they cost (`examples/encoding_cost.rs`).
+    /// Starts the file at `path` as [`Writer::create`] does, with chunks of `chunk_bytes`
+    /// (uncompressed) compressed at zstd level `level` (0: zstd's default, 3): for measuring
+    /// what they cost (`examples/encoding_cost.rs`).
     pub fn create_tuned(path: impl AsRef<Path>, level: u32, chunk_bytes: u64) -> Result<Self> {
-        let path = path.as_ref();
-        let file = File::create(path).map_err(|e| Error::io(path, e))?;
-        Self::with_options(path, file, level, chunk_bytes)
+        let replace = mems_files::Existing::Replace;
+        Self::staged(path.as_ref(), replace, level, chunk_bytes)
     }
 
-    /// Writes the MCAP header to `file`, newly created at `path`.
-    fn on(path: &Path, file: File) -> Result<Self> {
-        Self::with_options(path, file, 0, WriteOptions::DEFAULT_CHUNK_SIZE)
+    /// A writer on a private temporary file renamed to `path` when finished.
+    fn staged(
+        path: &Path,
+        existing: mems_files::Existing,
+        level: u32,
+        chunk_bytes: u64,
+    ) -> Result<Self> {
+        let mut output =
+            mems_files::Output::create(path, None, existing).map_err(|e| Error::io(path, e.io))?;
+        let file = output.file().try_clone().map_err(|e| Error::io(path, e))?;
+        let sink = Sink::Buffered(BufWriter::new(file));
+        Self::on(path, sink, Some(output), level, chunk_bytes)
     }
 
-    /// Writes the MCAP header to `file`, newly created at `path`, for chunks of `chunk_bytes`
-    /// compressed at zstd level `level`.
-    fn with_options(path: &Path, file: File, level: u32, chunk_bytes: u64) -> Result<Self> {
+    /// Writes the MCAP header to `sink`, for chunks of `chunk_bytes` compressed at zstd level
+    /// `level`.
+    fn on(
+        path: &Path,
+        sink: Sink,
+        output: Option<mems_files::Output>,
+        level: u32,
+        chunk_bytes: u64,
+    ) -> Result<Self> {
         Ok(Self {
-            inner: mcap_writer(path, file, level, chunk_bytes)?,
+            inner: mcap_writer(path, sink, level, chunk_bytes)?,
+            output,
             compact: None,
             path: path.to_path_buf(),
             encoding: MessageEncoding::Protobuf,
@@ -1496,25 +1566,31 @@ impl Writer {
 
     /// Closes the current chunk and hands everything written so far to the operating system,
     /// so that a killed process loses nothing written before this call (the compact copy, if
-    /// any, keeps its chunk open).
+    /// any, keeps its chunk open); the recorder's file is whole after it ([`durable`]).
     pub fn flush(&mut self) -> Result<()> {
         self.inner
             .flush()
             .map_err(|e| self.fail(ErrorKind::Mcap(e)))
     }
 
-    /// Writes the summary and footer and closes the file; with a compact copy, finishes it
-    /// too and renames it over the file.
+    /// Writes the summary and footer and renames the file to its path; the recorder's file
+    /// gets its last chunk (it has no summary: readers read it from its start), and its
+    /// compact copy is finished and renamed over it.
     pub fn finish(mut self) -> Result<()> {
-        self.inner
-            .finish()
-            .map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
-        let compact = self.compact.take();
+        let closed = match self.output {
+            Some(_) => self.inner.finish().map(drop),
+            None => self.inner.flush(),
+        };
+        closed.map_err(|e| self.fail(ErrorKind::Mcap(e)))?;
+        let (compact, output) = (self.compact.take(), self.output.take());
         let path = self.path.clone();
         self.inner
             .into_inner()
-            .into_inner()
-            .map_err(|e| Error::io(&path, e.into_error()))?;
+            .into_file()
+            .map_err(|e| Error::io(&path, e))?;
+        if let Some(output) = output {
+            output.commit().map_err(|e| Error::io(&path, e.io))?;
+        }
         compact.map_or(Ok(()), |c| c.finish(&path))
     }
 
@@ -1523,14 +1599,20 @@ impl Writer {
     }
 }
 
+/// Uncompressed size of a chunk, unless a writer is tuned: the `mcap` crate's default (1 MiB).
+const DEFAULT_CHUNK_BYTES: u64 = WriteOptions::DEFAULT_CHUNK_SIZE;
+
 /// The `mcap` crate's writer of zstd chunks of `chunk_bytes` (uncompressed) at `level` on
-/// `file`, newly created at `path` (named in its error), with the MCAP header written.
-fn mcap_writer(path: &Path, file: File, level: u32, chunk_bytes: u64) -> Result<McapWriter> {
+/// `sink`, a new file at `path` (named in its error), with the MCAP header written. On the
+/// recorder's flushed file ([`Sink::Durable`]) it keeps each chunk in memory until it closes.
+fn mcap_writer(path: &Path, sink: Sink, level: u32, chunk_bytes: u64) -> Result<McapWriter> {
+    let durable = matches!(sink, Sink::Durable(_));
     WriteOptions::new()
         .compression(Some(Compression::Zstd))
         .compression_level(level)
         .chunk_size(Some(chunk_bytes))
-        .create(BufWriter::new(file))
+        .disable_seeking(durable)
+        .create(sink)
         .map_err(|e| Error::file(path, ErrorKind::Mcap(e)))
 }
 
@@ -1553,8 +1635,8 @@ impl Compact {
             .map_err(|e| Error::file(&self.temp, ErrorKind::Mcap(e)))?;
         let file = writer
             .into_inner()
-            .into_inner()
-            .map_err(|e| Error::io(&self.temp, e.into_error()))?;
+            .into_file()
+            .map_err(|e| Error::io(&self.temp, e))?;
         file.sync_all().map_err(|e| Error::io(&self.temp, e))?;
         std::fs::rename(&self.temp, target).map_err(|e| Error::io(target, e))
     }
@@ -1611,7 +1693,7 @@ impl fmt::Display for Truncation {
 pub fn has_magic(path: &Path) -> Result<bool> {
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
     let mut start = Vec::with_capacity(MAGIC.len());
-    file.by_ref()
+    Read::by_ref(&mut file)
         .take(MAGIC.len() as u64)
         .read_to_end(&mut start)
         .map_err(|e| Error::io(path, e))?;
@@ -1659,9 +1741,16 @@ impl Reader {
 /// Iterator over the messages of a [`Reader`].
 pub struct Messages<'a> {
     path: &'a Path,
-    stream: scan::Scanner<&'a [u8]>,
+    stream: scan::Scanner<std::io::Cursor<&'a [u8]>>,
     read: u64,
     done: bool,
+}
+
+impl Messages<'_> {
+    /// The damaged records skipped so far ([`scan::Damage`]).
+    pub fn damaged(&self) -> &[scan::Damage] {
+        self.stream.damaged()
+    }
 }
 
 impl<'a> Iterator for Messages<'a> {
@@ -1811,8 +1900,10 @@ pub struct Contents {
 pub struct SegmentRead {
     /// The file.
     pub path: PathBuf,
-    /// Set when the file ends early or is damaged.
+    /// Set when the file ends early or its record framing is damaged.
     pub truncation: Option<Truncation>,
+    /// Damaged records skipped (the read went on after each), with what they held.
+    pub damaged: Vec<scan::Damage>,
 }
 
 impl Contents {
@@ -1934,10 +2025,11 @@ pub fn read_all(path: impl AsRef<Path>) -> Result<Contents> {
         if n > 0 && !continues_run(segment, n)? {
             break;
         }
-        let truncation = read_segment(segment, &mut contents)?;
+        let (truncation, damaged) = read_segment(segment, &mut contents)?;
         contents.segments.push(SegmentRead {
             path: segment.to_path_buf(),
             truncation: truncation.clone(),
+            damaged,
         });
         contents.truncation = truncation;
     }
@@ -1961,16 +2053,21 @@ pub(crate) fn continues_run(path: &Path, n: usize) -> Result<bool> {
     })
 }
 
-/// Appends the messages of one file to `contents`; returns its truncation, if any.
-fn read_segment(path: &Path, contents: &mut Contents) -> Result<Option<Truncation>> {
+/// Appends the messages of one file to `contents`; returns its truncation, if any, and the
+/// damaged records skipped.
+fn read_segment(
+    path: &Path,
+    contents: &mut Contents,
+) -> Result<(Option<Truncation>, Vec<scan::Damage>)> {
     let reader = Reader::open(path)?;
-    for message in reader.messages()? {
+    let mut messages = reader.messages()?;
+    while let Some(message) = messages.next() {
         let message = match message {
             Ok(message) => message,
             Err(Error {
                 kind: ErrorKind::Truncated(truncation),
                 ..
-            }) => return Ok(Some(truncation)),
+            }) => return Ok((Some(truncation), messages.damaged().to_vec())),
             Err(e) => return Err(e),
         };
         if let Some(sample) = message.decode::<RawImuSample>() {
@@ -2002,7 +2099,7 @@ fn read_segment(path: &Path, contents: &mut Contents) -> Result<Option<Truncatio
             contents.other_messages += 1;
         }
     }
-    Ok(None)
+    Ok((None, messages.damaged().to_vec()))
 }
 
 /// The last sequence number of each service in one MCAP file (odometry revisions excluded),
@@ -2404,6 +2501,6 @@ mod tests {
         let err = writer.write(h, &hint, 0).unwrap_err();
         assert!(err.to_string().contains("mems/robot/hint"), "{err}");
         drop(writer);
-        std::fs::remove_file(&path).unwrap();
+        assert!(!path.exists(), "an unfinished writer leaves no file");
     }
 }

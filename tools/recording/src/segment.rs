@@ -8,7 +8,6 @@
 //! [`crate::mcap::read_all`] reads all segments of a run as one.
 
 use std::ffi::OsString;
-use std::fs::OpenOptions;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, ErrorKind, Result};
@@ -80,11 +79,8 @@ pub fn check_target(base: &Path, force: bool) -> Result<Vec<PathBuf>> {
     }
     // Writable: create (and remove) a probe file in the directory.
     let probe = dir.join(format!(".mems-record-probe-{}", std::process::id()));
-    OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&probe)
-        .map_err(|e| fail(format!("cannot write in {}: {e}", dir.display())))?;
+    mems_files::create_new(&probe, None)
+        .map_err(|e| fail(format!("cannot write in {}: {}", dir.display(), e.io)))?;
     let _ = std::fs::remove_file(&probe);
     Ok(existing)
 }

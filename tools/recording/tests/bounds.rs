@@ -209,11 +209,77 @@ fn a_damaged_chunk_size_ends_the_read_as_a_truncation_without_aborting() {
     assert!(contents.raw.is_empty());
     // The streamed read walks the framing with seeks and stops at the same place.
     assert_eq!(streamed(&path), (0, Some(cut)));
-    // A size a little too large for the data is the crate's own error, also a truncation.
+    // A size a little too large for the data is the crate's own error: the chunk's framing
+    // is intact, so it is skipped and reported, and the read goes on.
     let mut short = clean.clone();
     short[fields[0] + 1] ^= 0x01;
     std::fs::write(&path, &short).unwrap();
     let contents = recording::mcap::read_all(&path).unwrap();
-    assert!(contents.truncation.is_some());
-    assert_eq!(streamed(&path), (contents.raw.len(), contents.truncation));
+    assert_eq!(contents.truncation, None);
+    assert_eq!(
+        contents.segments[0].damaged.len(),
+        1,
+        "{:?}",
+        contents.segments
+    );
+    assert_eq!(streamed(&path), (contents.raw.len(), None));
+}
+
+/// A chunk with a changed data byte (its CRC fails) or a changed opcode is skipped and reported
+/// with its offset and the messages it held, by both readers, and the read goes on after it.
+#[test]
+fn a_damaged_chunk_is_skipped_and_reported_with_what_it_held() {
+    let samples = live_samples(3000, 11);
+    let path = tmp("chunks.mcap");
+    let mut writer = recording::mcap::Writer::create_tuned(&path, 0, 16 << 10).unwrap();
+    let raw = writer.add_channel::<RawImuSample>().unwrap();
+    for s in &samples {
+        writer.write(raw, s, s.stamps.sample_ns).unwrap();
+    }
+    writer.finish().unwrap();
+    let clean = std::fs::read(&path).unwrap();
+    let chunks: Vec<usize> = chunk_size_fields(&clean).iter().map(|f| f - 25).collect();
+    assert!(chunks.len() > 3, "{} chunks", chunks.len());
+    let at = chunks[1];
+    for (name, spoil) in [("crc", at + 200), ("opcode", at)] {
+        let mut bytes = clean.clone();
+        bytes[spoil] ^= 0x55;
+        let damaged = tmp(&format!("damaged-{name}.mcap"));
+        std::fs::write(&damaged, &bytes).unwrap();
+
+        let contents = recording::mcap::read_all(&damaged).unwrap();
+        assert_eq!(
+            contents.truncation, None,
+            "{name}: read on after the damage"
+        );
+        let [segment] = &contents.segments[..] else {
+            panic!("one file")
+        };
+        let [damage] = &segment.damaged[..] else {
+            panic!("{name}: one damaged record, got {:?}", segment.damaged)
+        };
+        assert_eq!(damage.offset, at as u64, "{name}: {damage}");
+        let lost = damage.messages_lost() as usize;
+        assert!(lost > 0, "{name}: {damage}");
+        assert_eq!(damage.lost[0].0, "mems/imu/raw", "{name}: {damage}");
+        assert!(damage.log_time_ns.is_some(), "{name}: {damage}");
+        assert_eq!(contents.raw.len() + lost, samples.len(), "{name}: {damage}");
+        assert!(
+            damage.to_string().contains(&format!("at byte {at}")),
+            "{damage}"
+        );
+
+        let mut run = RunReader::open(&damaged).unwrap();
+        let mut n = 0;
+        while let Some(m) = run.next() {
+            m.unwrap();
+            n += 1;
+        }
+        assert_eq!(n + lost, samples.len(), "{name}: streamed");
+        assert_eq!(
+            run.segments()[0].damaged,
+            segment.damaged,
+            "{name}: streamed"
+        );
+    }
 }

@@ -53,7 +53,6 @@ fn write_in(
     let mut writer = Writer::create(path).unwrap().with_encoding(encoding);
     let raw = writer.add_channel::<RawImuSample>().unwrap();
     let truth_channel = writer.add_channel::<Truth>().unwrap();
-    let mut boundaries = Vec::new();
     for (i, sample) in samples.iter().enumerate() {
         writer.write(raw, sample, log_time(i)).unwrap();
         writer
@@ -61,11 +60,29 @@ fn write_in(
             .unwrap();
         if (i + 1) % flush_every == 0 {
             writer.flush().unwrap();
-            boundaries.push(std::fs::metadata(path).unwrap().len());
         }
     }
     writer.finish().unwrap();
-    boundaries
+    flush_boundaries(&std::fs::read(path).unwrap())
+}
+
+/// Where each chunk's message indexes end in the MCAP file `bytes` (the file is written
+/// beside its path and renamed when finished: these are the lengths it had after each flush).
+fn flush_boundaries(bytes: &[u8]) -> Vec<u64> {
+    let (mut at, mut in_chunk, mut ends) = (8, false, Vec::new());
+    while at + 9 <= bytes.len() {
+        let opcode = bytes[at];
+        if in_chunk && opcode != 0x07 {
+            ends.push(at as u64);
+            in_chunk = false;
+        }
+        if opcode == 0x0f {
+            break;
+        }
+        in_chunk |= opcode == 0x06;
+        at += 9 + u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap()) as usize;
+    }
+    ends
 }
 
 /// In both encodings (protobuf as written now, JSON as in older recordings).
@@ -557,10 +574,6 @@ fn a_run_continues_in_its_successor_segment() {
     std::fs::write(&base, &bytes[..boundaries[0] as usize + 20]).unwrap();
     // The restarted recorder missed samples 100..120.
     let mut writer = Writer::create_new(&second).unwrap();
-    assert!(
-        Writer::create_new(&second).is_err(),
-        "an existing segment is never overwritten"
-    );
     let events = writer.add_channel::<RecorderEvent>().unwrap();
     let raw = writer.add_channel::<RawImuSample>().unwrap();
     let split = RecorderEvent {
@@ -575,6 +588,10 @@ fn a_run_continues_in_its_successor_segment() {
         writer.write(raw, s, log_time(i)).unwrap();
     }
     writer.finish().unwrap();
+    assert!(
+        Writer::create_new(&second).is_err(),
+        "an existing segment is never overwritten"
+    );
 
     let contents = read_all(&base).unwrap();
     let expected: Vec<RawImuSample> = samples[..100]

@@ -26,6 +26,7 @@
 //! runs the faults whose label contains TEXT.
 
 use std::ops::ControlFlow;
+use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -173,6 +174,8 @@ struct Launcher<'a> {
     calib: &'a str,
     /// Where the calibration stage keeps its learned state for its restart, as in mems-stack.
     state: &'a str,
+    /// The private work directory, for the stages' logs.
+    work: &'a Path,
 }
 
 impl Launcher<'_> {
@@ -192,7 +195,8 @@ impl Launcher<'_> {
         let log = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
-            .open(std::env::temp_dir().join(format!("{}-{stage}.log", self.ns)))?;
+            .mode(mems_files::FILE_MODE)
+            .open(self.work.join(format!("{}-{stage}.log", self.ns)))?;
         Command::new(self.bins.join(stage))
             .args(args)
             .args(["--namespace", self.ns])
@@ -359,9 +363,10 @@ impl Judge<'_> {
     }
 }
 
-/// One replay of `drive` through the stages with `fault`, at `speed` times real time.
+/// One replay of `drive` through the stages with `fault`, at `speed` times real time, with the
+/// programs in `bins` and logs and state in the private directory `work`.
 fn one_run(
-    bins: &Path,
+    (bins, work): (&Path, &Path),
     drive: &Path,
     truth: &[Truth],
     calib: &Path,
@@ -376,13 +381,14 @@ fn one_run(
     let svc = service::open::<OdometryState>(&node, &name)?;
     let sub = service::subscriber(&svc)?;
     let listener = wake::listener(&node, &name, WaitMode::Event)?;
-    let state = std::env::temp_dir().join(format!("{ns}-calibrate-state.json"));
+    let state = work.join(format!("{ns}-calibrate-state.json"));
     std::fs::remove_file(&state).ok();
     let launch = Launcher {
         bins,
         ns: &ns,
         calib: calib.to_str().context("calibration path is not UTF-8")?,
         state: state.to_str().context("state path is not UTF-8")?,
+        work,
     };
     let mut stages = Stages(vec![
         ("mems-odometry", launch.spawn("mems-odometry")?),
@@ -395,8 +401,9 @@ fn one_run(
         .args(["--speed", &speed.to_string(), "--wait-subscribers", "1"])
         .args(["--namespace", &ns])
         .stdout(Stdio::null())
-        .stderr(std::fs::File::create(
-            std::env::temp_dir().join(format!("{ns}-mems-replay.log")),
+        .stderr(mems_files::create_new(
+            work.join(format!("{ns}-mems-replay.log")),
+            None,
         )?)
         .spawn()
         .context("cannot start mems-replay")?;
@@ -573,8 +580,8 @@ fn main() -> Result<()> {
     mems_log::init("faults");
     let o = options()?;
     let bins = common::bin_dir()?;
-    let work = std::env::temp_dir().join(format!("mems-faults-{}", std::process::id()));
-    std::fs::create_dir_all(&work)?;
+    let work_dir = mems_files::private_dir("mems-faults-")?;
+    let work = work_dir.path();
     let mut results: Vec<(Fault, Vec<Outcome>)> = Fault::ALL
         .iter()
         .filter(|f| o.only.is_empty() || o.only.iter().any(|t| f.label().contains(t.as_str())))
@@ -583,15 +590,17 @@ fn main() -> Result<()> {
     for seed in 1..=o.seeds {
         // One part per seed, calibrated from its own six-position session, then driven.
         tracing::info!("seed {seed}: calibrating and simulating the drive ...");
-        let (drive, calib, truth) = simulate(&bins, &work, seed, o.seconds)?;
+        let (drive, calib, truth) = simulate(&bins, work, seed, o.seconds)?;
         for (k, (fault, outcomes)) in results.iter_mut().enumerate() {
             tracing::info!("seed {seed}, {} ...", fault.label());
             let tag = format!("{seed}-{k}");
-            let run = one_run(&bins, &drive, &truth, &calib, *fault, o.speed, &tag)?;
+            let run = one_run((&bins, work), &drive, &truth, &calib, *fault, o.speed, &tag)?;
             if let Some(dir) = &o.dump {
-                std::fs::create_dir_all(dir)?;
+                mems_files::create_dir(dir, Some("--dump"))?;
                 let name = format!("seed{seed}-{}.csv", fault.label().replace(' ', "_"));
-                std::fs::write(dir.join(name), run.trace.join("\n"))?;
+                let trace = run.trace.join("\n");
+                let replace = mems_files::Existing::Replace;
+                mems_files::write(dir.join(name), Some("--dump"), replace, trace.as_bytes())?;
             }
             outcomes.push(run);
         }
@@ -604,7 +613,7 @@ fn main() -> Result<()> {
     for (fault, outcomes) in &results {
         summary.insert(fault.label(), summarize(*fault, outcomes));
     }
-    std::fs::remove_dir_all(&work).ok();
+    drop(work_dir);
     if o.as_json {
         println!("{}", serde_json::Value::Object(summary));
     }

@@ -721,8 +721,8 @@ struct Inputs {
 /// aligns: a 1 kHz and a 4 kHz drive for the real-time runs, a longer one for throughput, and
 /// the six-position session its calibration is fitted from.
 fn inputs(bins: &Path, o: &Options) -> Result<Inputs> {
-    let work = std::env::temp_dir().join(format!("mems-latency-{}", std::process::id()));
-    std::fs::create_dir_all(&work)?;
+    // Private (0700, a new random name); removed at the end of the benchmark.
+    let work = mems_files::private_dir("mems-latency-")?.keep();
     let path = |name: &str| work.join(name);
     let i = Inputs {
         drive: path("drive.mcap"),

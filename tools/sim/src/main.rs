@@ -125,9 +125,15 @@ enum Command {
 /// Options of every scenario.
 #[derive(Args)]
 struct Common {
-    /// Output file: `.csv` (canonical CSV with truth columns) or `.mcap`.
+    /// Output file: `.csv` (canonical CSV with truth columns) or `.mcap`; private (0600),
+    /// written when the scenario is complete. An existing file there is refused unless
+    /// `--force` is given.
     #[arg(long)]
     out: PathBuf,
+    /// Replace the file at `--out` (atomically; a symbolic link there is replaced, never
+    /// followed).
+    #[arg(long)]
+    force: bool,
     /// Seed of every random choice (scenario, sensor, vibration).
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -608,6 +614,9 @@ fn simulate(
         .transpose()?;
     let mut sim = SimSensor::new(scenario, &model, vibration, common.seed)?;
     sim.set_dlpf(dlpf.map(DlpfGrid::from_power_on));
+    if !common.force {
+        mems_files::refuse_existing(&common.out, Some("--out"))?;
+    }
     let mut sink = Sink::create(&common.out, !hints.is_empty())?;
     let mut next_hint = 0;
     let (mut distance, mut saturated, mut rest, mut rows) = (0.0, 0u64, 0u64, 0u64);

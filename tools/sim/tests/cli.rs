@@ -15,10 +15,13 @@ use mems_sim::{DlpfGrid, SimSensor};
 use nalgebra::{UnitQuaternion, Vector3};
 use recording::{Format, Truth};
 
+/// A path for a test's output, nothing there (mems-sim refuses an existing --out).
 fn tmp(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("mems-sim-cli");
     std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    let path = dir.join(name);
+    let _ = std::fs::remove_file(&path);
+    path
 }
 
 fn mems_sim(args: &[&str]) -> Output {
@@ -183,8 +186,8 @@ fn drive_is_written_and_its_file_truth_integrates_to_its_positions() {
         ..DriveParams::new(90.0)
     };
     let want = expected(Drive::new(&params, 6).unwrap(), 0.5, 6, 100.0);
-    for name in ["drive.csv", "drive.mcap"] {
-        let out = tmp(name);
+    let (csv, mcap) = (tmp("drive.csv"), tmp("drive.mcap"));
+    for out in [&csv, &mcap] {
         ok(&[
             "drive",
             "--duration",
@@ -202,15 +205,12 @@ fn drive_is_written_and_its_file_truth_integrates_to_its_positions() {
             "--out",
             out.to_str().unwrap(),
         ]);
-        check_file(&out, &want);
+        check_file(out, &want);
     }
     // The truth read back from the file: trapezoid integration of its accelerations
     // (R f + g_nav) at the file's rate reproduces its velocities and positions within the rule's
     // own error, 2 h^2 / 6 max|jerk| and 2 h^2 / 6 max|a| (derived in tests/scenarios.rs).
-    let truth = recording::load_raw(tmp("drive.csv"))
-        .unwrap()
-        .truth
-        .unwrap();
+    let truth = recording::load_raw(&csv).unwrap().truth.unwrap();
     let h = 0.01;
     let a: Vec<Vector3<f64>> = truth
         .iter()
@@ -577,4 +577,40 @@ fn walk_is_written_with_truth_that_closes_the_loop() {
             .iter()
             .all(|s| s.flags & ipc_types::raw_flags::SATURATED == 0)
     );
+}
+
+/// An existing --out, or a symbolic link planted there, is refused without --force (the error
+/// names the path and the flag; the link's target untouched); with --force the link itself is
+/// replaced; the file is 0600.
+#[test]
+fn an_existing_or_planted_out_is_refused_without_force() {
+    use std::os::unix::fs::PermissionsExt;
+    let out = tmp("planted.csv");
+    let victim = tmp("victim.txt");
+    std::fs::write(&victim, "precious").unwrap();
+    std::os::unix::fs::symlink(&victim, &out).unwrap();
+    let args = |force: bool| {
+        let mut a = vec!["six-position", "--preset", "datasheet", "--rate", "100"];
+        a.extend(["--out", out.to_str().unwrap()]);
+        if force {
+            a.push("--force");
+        }
+        a
+    };
+    let refused = mems_sim(&args(false));
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "a planted link is refused");
+    assert!(
+        err.contains("--out") && err.contains(out.to_str().unwrap()) && err.contains("--force"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
+
+    ok(&args(true));
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
+    let meta = std::fs::symlink_metadata(&out).unwrap();
+    assert!(meta.is_file(), "the link was replaced by the file");
+    assert_eq!(meta.permissions().mode() & 0o777, 0o600);
+    let again = mems_sim(&args(false));
+    assert!(!again.status.success(), "an existing file is refused");
 }

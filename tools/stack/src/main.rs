@@ -38,7 +38,8 @@ fn run(cli: Cli) -> Result<()> {
     work::clean_stale();
     let namespace = service::namespace(cli.namespace.as_deref());
     let bins = children::bin_dir()?;
-    let work = work::create()?;
+    let work_dir = work::create()?;
+    let work = work_dir.path().to_path_buf();
     let calib = calib::calibration(&cli, &bins, &work)?;
     let calib = calib.to_str().context("calibration path is not UTF-8")?;
     let recorder_losses = cli.record.is_some().then(RecorderLosses::default);
@@ -61,7 +62,7 @@ fn run(cli: Cli) -> Result<()> {
         .map(|(n, c)| format!("{n} {c}"))
         .collect();
     supervisor.shutdown(Duration::from_secs(3));
-    let _ = std::fs::remove_dir_all(&work);
+    drop(work_dir);
     // The summary goes to stdout (the live status is on stderr), for scripts and tests: for a
     // person, then the status line.
     let elapsed_s = start.elapsed().as_secs_f64();

@@ -1,19 +1,20 @@
-//! The stack's work directory (under the temporary directory, named by the stack's process id),
-//! and the cleaning up of what stacks killed with SIGKILL left behind.
+//! The stack's work directory (private, under the temporary directory, named by the stack's
+//! process id and random characters), and the cleaning up of what stacks killed with SIGKILL
+//! left behind.
 
-use std::path::PathBuf;
-
-use anyhow::{Context, Result};
+use anyhow::Result;
 use ipc_types::service;
+use tempfile::TempDir;
 
 /// Name of a stack's work directory under the temporary directory, before its process id.
 const WORK_DIR_PREFIX: &str = "mems-stack-";
 
-/// Creates this stack's work directory.
-pub fn create() -> Result<PathBuf> {
-    let work = std::env::temp_dir().join(format!("{WORK_DIR_PREFIX}{}", std::process::id()));
-    std::fs::create_dir_all(&work).with_context(|| format!("cannot create {}", work.display()))?;
-    Ok(work)
+/// Creates this stack's work directory, `mems-stack-PID-` and random characters: a new
+/// directory, 0700, never an existing path (a planted directory or symbolic link is not
+/// used); removed when dropped.
+pub fn create() -> Result<TempDir> {
+    let prefix = format!("{WORK_DIR_PREFIX}{}-", std::process::id());
+    Ok(mems_files::private_dir(&prefix)?)
 }
 
 /// Removes what a previous stack killed with SIGKILL left behind: the iceoryx2 resources of
@@ -33,7 +34,8 @@ pub fn clean_stale() {
         let Some(pid) = name
             .to_str()
             .and_then(|n| n.strip_prefix(WORK_DIR_PREFIX))
-            .and_then(|p| p.parse::<i32>().ok())
+            .and_then(|rest| rest.split_once('-'))
+            .and_then(|(pid, _)| pid.parse::<i32>().ok())
         else {
             continue;
         };

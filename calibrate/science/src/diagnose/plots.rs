@@ -46,9 +46,9 @@ const REGRESSORS: [Regressor; 4] = [
 
 /// Writes every plot into `dir` (created if needed) and returns the files written.
 pub fn write_all(dir: &Path, d: &Diagnosis) -> Result<Vec<PathBuf>, PlotError> {
-    std::fs::create_dir_all(dir).map_err(|e| PlotError {
+    mems_files::create_dir(dir, Some("--plot-dir")).map_err(|e| PlotError {
         path: dir.display().to_string(),
-        message: e.to_string(),
+        message: e.io.to_string(),
     })?;
     let mut written = Vec::new();
     for r in &REGRESSORS {
@@ -84,7 +84,10 @@ fn residual_scatter(path: &Path, d: &Diagnosis, r: &Regressor) -> Result<(), Plo
     register_font();
     let e = err(path);
     let n_axes = axes(d);
-    let root = BitMapBackend::new(path, (1200, 330 * n_axes as u32 + 40)).into_drawing_area();
+    let out = mems_files::OutputPath::create(path, None, mems_files::Existing::Replace)
+        .map_err(|x| e(x.io.to_string()))?;
+    let temp = out.temp_path().to_path_buf();
+    let root = BitMapBackend::new(&temp, (1200, 330 * n_axes as u32 + 40)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
     let (title, body) = root.split_vertically(40);
     title
@@ -158,7 +161,8 @@ fn residual_scatter(path: &Path, d: &Diagnosis, r: &Regressor) -> Result<(), Plo
                 .map_err(|x| e(x.to_string()))?;
         }
     }
-    root.present().map_err(|x| e(x.to_string()))
+    root.present().map_err(|x| e(x.to_string()))?;
+    out.commit().map_err(|x| e(x.io.to_string()))
 }
 
 /// Means of `points` (x, y) in 24 equal bins of x over `[x0, x1]` (empty bins skipped), at the
@@ -220,7 +224,10 @@ fn standard_normal() -> impl Iterator<Item = (f64, f64)> {
 fn standardized_histogram(path: &Path, d: &Diagnosis) -> Result<(), PlotError> {
     register_font();
     let e = err(path);
-    let root = BitMapBackend::new(path, (900, 500)).into_drawing_area();
+    let out = mems_files::OutputPath::create(path, None, mems_files::Existing::Replace)
+        .map_err(|x| e(x.io.to_string()))?;
+    let temp = out.temp_path().to_path_buf();
+    let root = BitMapBackend::new(&temp, (900, 500)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
     let hb = standardized_density(&d.baseline_points);
     let hf = standardized_density(&d.final_points);
@@ -271,7 +278,8 @@ fn standardized_histogram(path: &Path, d: &Diagnosis) -> Result<(), PlotError> {
         .background_style(WHITE.mix(0.8))
         .draw()
         .map_err(|x| e(x.to_string()))?;
-    root.present().map_err(|x| e(x.to_string()))
+    root.present().map_err(|x| e(x.to_string()))?;
+    out.commit().map_err(|x| e(x.io.to_string()))
 }
 
 fn sample_histogram(path: &Path, d: &Diagnosis) -> Result<(), PlotError> {
@@ -280,7 +288,10 @@ fn sample_histogram(path: &Path, d: &Diagnosis) -> Result<(), PlotError> {
     };
     register_font();
     let e = err(path);
-    let root = BitMapBackend::new(path, (1500, 480)).into_drawing_area();
+    let out = mems_files::OutputPath::create(path, None, mems_files::Existing::Replace)
+        .map_err(|x| e(x.io.to_string()))?;
+    let temp = out.temp_path().to_path_buf();
+    let root = BitMapBackend::new(&temp, (1500, 480)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
     let panels = root.split_evenly((1, 3));
     let end = h.start_counts + h.bin_counts * h.raw[0].len() as f64;
@@ -336,5 +347,6 @@ fn sample_histogram(path: &Path, d: &Diagnosis) -> Result<(), PlotError> {
             .draw()
             .map_err(|x| e(x.to_string()))?;
     }
-    root.present().map_err(|x| e(x.to_string()))
+    root.present().map_err(|x| e(x.to_string()))?;
+    out.commit().map_err(|x| e(x.io.to_string()))
 }

@@ -88,11 +88,13 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             summary.state(*s, &mut truth.borrow_mut());
         }
     });
-    let read = Read::new(&args.input, &inputs, repairs, config.align_s);
+    let mut read = Read::new(&args.input, &inputs, repairs, config.align_s);
     let no_gyro = chain.second.stats().first_no_gyro_seq;
-    summary::report_input(&read, &mut source, no_gyro);
-    if let Some(out) = out.into_inner() {
-        out.finish()?;
+    read.segments = summary::report_input(&read, &mut source, no_gyro);
+    summary.finish(ran, &read, &chain, &mut truth.borrow_mut(), args.json)?;
+    // Only a run that succeeded leaves its --out file (a failed one drops it unwritten).
+    match out.into_inner() {
+        Some(out) => out.finish(),
+        None => Ok(()),
     }
-    summary.finish(ran, &read, &chain, &mut truth.borrow_mut(), args.json)
 }

@@ -31,14 +31,23 @@ pub struct Out {
 }
 
 impl Out {
-    /// Creates the file at `path`, anchored to `clock` if given; an existing recording there
-    /// is refused unless `force`.
+    /// Starts the file at `path`, anchored to `clock` if given; an existing recording there
+    /// is refused unless `force`. The file is private (0600) and appears at `path` only when
+    /// [`Out::finish`] succeeds (replacing the recording there with `force`): a run that fails
+    /// leaves none.
     pub fn create(path: &Path, force: bool, clock: Option<WallClock>) -> Result<Self> {
+        // A replaced recording's successor segments would be read with the new file.
         for old in recording::segment::check_target(path, force)? {
-            std::fs::remove_file(&old)
-                .with_context(|| format!("cannot remove {}", old.display()))?;
+            if old != path {
+                std::fs::remove_file(&old)
+                    .with_context(|| format!("cannot remove {}", old.display()))?;
+            }
         }
-        let mut writer = Writer::create_new(path)?;
+        let mut writer = if force {
+            Writer::create(path)?
+        } else {
+            Writer::create_new(path)?
+        };
         if let Some(clock) = clock {
             writer.anchor(clock)?;
         }

@@ -150,8 +150,9 @@ impl RunReader {
         Ok(())
     }
 
-    /// The files read so far, each with its truncation (a file that ends early or is damaged
-    /// is read up to the cut, and the run goes on with its successor).
+    /// The files read so far, each with its truncation (a file that ends early or whose
+    /// framing is damaged is read up to the cut, and the run goes on with its successor) and
+    /// the damaged records skipped in it.
     pub fn segments(&self) -> &[SegmentRead] {
         &self.segments
     }
@@ -204,6 +205,7 @@ impl RunReader {
                     self.segments.push(SegmentRead {
                         path: current.path.clone(),
                         truncation,
+                        damaged: current.scanner.damaged().to_vec(),
                     });
                     if let Err(e) = self.advance() {
                         self.pending = Vec::new().into_iter();

@@ -10,10 +10,17 @@
 //! are parsed here with every length checked against its record (MCAP specification,
 //! "Records"): little-endian integers, a string is a `u32` length and UTF-8 bytes, a byte array
 //! a `u32` length and bytes. Other records are skipped unparsed.
+//!
+//! A damaged record whose framing is intact (a chunk whose data does not decompress or fails
+//! its CRC, a record whose opcode was changed, a record whose fields do not parse) is skipped
+//! and reported ([`Damage`]: where it is, why, and what it held according to the message
+//! indexes after it), and the read goes on after it; damage to the framing itself (a length
+//! beyond the file) ends the read there, reported as a truncation.
 
 use std::collections::{BTreeMap, HashMap};
+use std::fmt;
 use std::fs::File;
-use std::io::{BufReader, Read, Seek, SeekFrom, Take};
+use std::io::{BufReader, Cursor, Read, Seek, SeekFrom, Take};
 use std::rc::Rc;
 
 use ::mcap::MAGIC;
@@ -30,8 +37,60 @@ mod op {
     pub const CHANNEL: u8 = 0x04;
     pub const MESSAGE: u8 = 0x05;
     pub const CHUNK: u8 = 0x06;
+    pub const MESSAGE_INDEX: u8 = 0x07;
     pub const METADATA: u8 = 0x0c;
     pub const DATA_END: u8 = 0x0f;
+    /// The first opcode of the private range, which readers skip.
+    pub const PRIVATE: u8 = 0x80;
+}
+
+/// A damaged record that was skipped, and what it cost.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct Damage {
+    /// Its offset in the file, bytes.
+    pub offset: u64,
+    /// Its length in the file, bytes.
+    pub bytes: u64,
+    /// What was wrong with it.
+    pub reason: String,
+    /// The messages it held, per topic, as the message indexes after it count them (none
+    /// when they are missing: a record that was not a chunk, or a chunk without indexes).
+    pub lost: Vec<(String, u64)>,
+    /// The log times of its first and last message, ns, as its chunk header gives them.
+    pub log_time_ns: Option<(u64, u64)>,
+}
+
+impl Damage {
+    /// Messages lost, all topics.
+    pub fn messages_lost(&self) -> u64 {
+        self.lost.iter().map(|(_, n)| n).sum()
+    }
+}
+
+impl fmt::Display for Damage {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "damaged record of {} bytes at byte {} skipped ({}): ",
+            self.bytes, self.offset, self.reason
+        )?;
+        if self.lost.is_empty() {
+            write!(f, "no message index tells what it held")?;
+        } else {
+            let topics: Vec<String> = self.lost.iter().map(|(t, n)| format!("{t} {n}")).collect();
+            write!(
+                f,
+                "{} messages lost ({})",
+                self.messages_lost(),
+                topics.join(", ")
+            )?;
+        }
+        if let Some((start, end)) = self.log_time_ns {
+            let span = end.saturating_sub(start) as f64 * 1e-9;
+            write!(f, ", {span:.3} s of log time from {start} ns")?;
+        }
+        Ok(())
+    }
 }
 
 /// What the reader may read and allocate for one MCAP file.
@@ -144,25 +203,41 @@ pub struct RawMessage {
 }
 
 /// The messages of an MCAP file in file order, read from `R` (the file in memory, or the file
-/// itself); an error (a message for the truncation) ends them.
+/// itself); damaged records are skipped and kept ([`Scanner::damaged`]); an error (a message
+/// for the truncation) ends them.
 pub struct Scanner<R> {
     input: Take<R>,
     reader: LinearReader,
     cut: Option<String>,
+    /// Bytes of the file read ([`ReadBounds::len`]).
+    len: u64,
+    /// [`ReadBounds::record_limit`].
+    record_limit: usize,
+    /// Offset in the file of the next byte to hand to `reader`.
+    fed: u64,
+    /// Where the read last started over after a damaged record.
+    restarted_at: u64,
+    damaged: Vec<Damage>,
+    catalog: Catalog,
+    past_data_end: bool,
+    done: bool,
+}
+
+/// What a file's records define for its messages.
+#[derive(Default)]
+struct Catalog {
     /// Name and encoding of each schema.
     schemas: HashMap<u16, (String, String)>,
     channels: HashMap<u16, Rc<ChannelInfo>>,
     /// The metadata records read so far: name and fields.
     metadata: Vec<(String, BTreeMap<String, String>)>,
-    past_data_end: bool,
-    done: bool,
 }
 
-impl<'a> Scanner<&'a [u8]> {
+impl<'a> Scanner<Cursor<&'a [u8]>> {
     /// A scanner over a whole file (magic included), within its [`ReadBounds`]; chunk CRCs
     /// are checked.
     pub fn new(bytes: &'a [u8]) -> Self {
-        Self::with_bounds(bytes, ReadBounds::of(bytes))
+        Self::with_bounds(Cursor::new(bytes), ReadBounds::of(bytes))
     }
 }
 
@@ -179,18 +254,29 @@ impl Scanner<BufReader<File>> {
     }
 }
 
-impl<R: Read> Scanner<R> {
+/// The `mcap` crate's reader of record framing: each chunk's CRC checked before any of its
+/// records is read (a damaged chunk gives none of its messages), records up to `limit` bytes,
+/// from the file's start (`from_start`: with the magic) or from a record.
+fn linear_reader(limit: usize, from_start: bool) -> LinearReader {
+    let options = LinearReaderOptions::default()
+        .with_prevalidate_chunk_crcs(true)
+        .with_record_length_limit(limit)
+        .with_skip_start_magic(!from_start);
+    LinearReader::new_with_options(options)
+}
+
+impl<R: Read + Seek> Scanner<R> {
     fn with_bounds(input: R, bounds: ReadBounds) -> Self {
-        let options = LinearReaderOptions::default()
-            .with_validate_chunk_crcs(true)
-            .with_record_length_limit(bounds.record_limit);
         Self {
             input: input.take(bounds.len as u64),
-            reader: LinearReader::new_with_options(options),
+            reader: linear_reader(bounds.record_limit, true),
             cut: bounds.cut,
-            schemas: HashMap::new(),
-            channels: HashMap::new(),
-            metadata: Vec::new(),
+            len: bounds.len as u64,
+            record_limit: bounds.record_limit,
+            fed: 0,
+            restarted_at: 0,
+            damaged: Vec::new(),
+            catalog: Catalog::default(),
             past_data_end: false,
             done: false,
         }
@@ -198,7 +284,12 @@ impl<R: Read> Scanner<R> {
 
     /// The metadata records read so far (name and fields), in file order.
     pub fn metadata(&self) -> &[(String, BTreeMap<String, String>)] {
-        &self.metadata
+        &self.catalog.metadata
+    }
+
+    /// The damaged records skipped so far, in file order.
+    pub fn damaged(&self) -> &[Damage] {
+        &self.damaged
     }
 
     /// The next message into `data` (its storage reused: no allocation per message once it
@@ -225,7 +316,8 @@ impl<R: Read> Scanner<R> {
         }
     }
 
-    /// The next message into `data`, `Ok(None)` at the end of the data.
+    /// The next message into `data`, `Ok(None)` at the end of the data; a damaged record is
+    /// skipped ([`Self::skip_damaged`]).
     fn read_into(
         &mut self,
         data: &mut Vec<u8>,
@@ -233,7 +325,10 @@ impl<R: Read> Scanner<R> {
         loop {
             let event = match self.reader.next_event() {
                 None => return Ok(None),
-                Some(Err(e)) => return Err(e.to_string()),
+                Some(Err(e)) => {
+                    self.skip_damaged(e.to_string())?;
+                    continue;
+                }
                 Some(Ok(event)) => event,
             };
             let (opcode, body) = match event {
@@ -241,74 +336,184 @@ impl<R: Read> Scanner<R> {
                     let n = read_full(&mut self.input, self.reader.insert(need))
                         .map_err(|e| format!("reading failed: {e}"))?;
                     self.reader.notify_read(n);
+                    self.fed += n as u64;
                     continue;
                 }
                 LinearReadEvent::Record { data, opcode } => (opcode, data),
             };
-            // The summary section repeats schemas and channels: not re-read.
-            match opcode {
-                op::DATA_END => self.past_data_end = true,
-                _ if self.past_data_end => {}
-                op::SCHEMA => {
-                    let mut r = Fields::new(body, "schema");
-                    let id = r.u16()?;
-                    let name = r.string()?;
-                    let encoding = r.string()?;
-                    if id == 0 {
-                        return Err("a schema record has the reserved id 0".into());
-                    }
-                    self.schemas.insert(id, (name, encoding));
+            let unknown = !(0x01..=op::DATA_END).contains(&opcode) && opcode < op::PRIVATE;
+            let read = match opcode {
+                _ if unknown => Err(format!("opcode {opcode:#04x} is no MCAP record's")),
+                // The summary section repeats schemas and channels: not re-read.
+                op::DATA_END => {
+                    self.past_data_end = true;
+                    Ok(None)
                 }
-                op::CHANNEL => {
-                    let mut r = Fields::new(body, "channel");
-                    let id = r.u16()?;
-                    let schema_id = r.u16()?;
-                    let topic = r.string()?;
-                    let encoding = r.string()?;
-                    let (schema_name, schema_encoding) = match schema_id {
-                        0 => (String::new(), String::new()),
-                        id => self.schemas.get(&id).cloned().ok_or_else(|| {
-                            format!(
-                                "channel {topic:?} refers to schema {id}, not defined before it"
-                            )
-                        })?,
-                    };
-                    let info = ChannelInfo {
-                        topic,
-                        schema_name,
-                        encoding,
-                        schema_encoding,
-                    };
-                    self.channels.insert(id, Rc::new(info));
-                }
-                op::METADATA => {
-                    let mut r = Fields::new(body, "metadata");
-                    let name = r.string()?;
-                    let len = r.u32()? as usize;
-                    let mut map = Fields::new(r.take(len)?, "metadata");
-                    let mut fields = BTreeMap::new();
-                    while !map.body.is_empty() {
-                        let key = map.string()?;
-                        fields.insert(key, map.string()?);
-                    }
-                    self.metadata.push((name, fields));
-                }
-                op::MESSAGE => {
-                    let mut r = Fields::new(body, "message");
-                    let channel_id = r.u16()?;
-                    let _sequence = r.u32()?;
-                    let log_time_ns = r.u64()?;
-                    let publish_time_ns = r.u64()?;
-                    let channel = self.channels.get(&channel_id).cloned().ok_or_else(|| {
-                        format!("a message on channel {channel_id}, not defined before it")
-                    })?;
-                    data.clear();
-                    data.extend_from_slice(r.rest());
-                    return Ok(Some((channel, log_time_ns, publish_time_ns)));
-                }
-                _ => {}
+                _ if self.past_data_end => Ok(None),
+                _ => self.catalog.record(opcode, body, data),
+            };
+            match read {
+                Ok(Some(message)) => return Ok(Some(message)),
+                Ok(None) => {}
+                Err(reason) if unknown => self.note_damaged(reason),
+                Err(reason) => self.skip_damaged(reason)?,
             }
         }
+    }
+
+    /// Skips the top-level record that holds the last byte read, damaged for `reason`, if
+    /// its framing is intact: notes it ([`Self::note_damaged`]) and reads on from the record
+    /// after it. Errors with `reason` (the read ends there) otherwise.
+    fn skip_damaged(&mut self, reason: String) -> Result<(), String> {
+        let Some((_, end)) = self.record_holding(self.fed) else {
+            return Err(reason);
+        };
+        if end <= self.restarted_at || end > self.len {
+            return Err(reason);
+        }
+        self.note_damaged(reason);
+        self.input
+            .get_mut()
+            .seek(SeekFrom::Start(end))
+            .map_err(|e| format!("reading failed: {e}"))?;
+        self.input.set_limit(self.len - end);
+        self.reader = linear_reader(self.record_limit, false);
+        (self.fed, self.restarted_at) = (end, end);
+        Ok(())
+    }
+
+    /// Keeps the top-level record that holds the last byte read as damaged for `reason`, with
+    /// what the message indexes after it say it held, then puts the input back where it was.
+    fn note_damaged(&mut self, reason: String) {
+        let Some((offset, end)) = self.record_holding(self.fed) else {
+            return;
+        };
+        let mut lost: Vec<(String, u64)> = Vec::new();
+        let mut at = end;
+        let mut head = [0u8; 15];
+        while at + 15 <= self.len && self.read_at(at, &mut head) && head[0] == op::MESSAGE_INDEX {
+            let channel = u16::from_le_bytes([head[9], head[10]]);
+            let entries = u64::from(u32::from_le_bytes(head[11..15].try_into().expect("4")) / 16);
+            let topic = self
+                .catalog
+                .channels
+                .get(&channel)
+                .map_or_else(|| format!("channel {channel}"), |c| c.topic.clone());
+            match lost.iter_mut().find(|(t, _)| *t == topic) {
+                Some((_, n)) => *n += entries,
+                None => lost.push((topic, entries)),
+            }
+            at = at.saturating_add(9 + u64::from_le_bytes(head[1..9].try_into().expect("8")));
+        }
+        // Only a chunk is followed by message indexes; its body starts with its log times.
+        let mut times = [0u8; 16];
+        let log_time_ns = (!lost.is_empty() && self.read_at(offset + 9, &mut times)).then(|| {
+            let t = |i: usize| u64::from_le_bytes(times[i..i + 8].try_into().expect("8"));
+            (t(0), t(8))
+        });
+        self.damaged.push(Damage {
+            offset,
+            bytes: end - offset,
+            reason,
+            lost,
+            log_time_ns,
+        });
+        let _ = self.input.get_mut().seek(SeekFrom::Start(self.fed));
+    }
+
+    /// The top-level record (offset, end) that holds the byte before `pos`, by the file's
+    /// record framing; `None` if the framing breaks before it.
+    fn record_holding(&mut self, pos: u64) -> Option<(u64, u64)> {
+        let last = pos.checked_sub(1)?;
+        let mut at = MAGIC.len() as u64;
+        let mut head = [0u8; 9];
+        while at + 9 <= self.len && self.read_at(at, &mut head) {
+            let len = u64::from_le_bytes(head[1..9].try_into().expect("8 bytes"));
+            let end = at.checked_add(9)?.checked_add(len)?;
+            if last < end {
+                let _ = self.input.get_mut().seek(SeekFrom::Start(self.fed));
+                return (last >= at).then_some((at, end));
+            }
+            at = end;
+        }
+        let _ = self.input.get_mut().seek(SeekFrom::Start(self.fed));
+        None
+    }
+
+    /// Fills `out` from offset `at` of the file (false if it cannot).
+    fn read_at(&mut self, at: u64, out: &mut [u8]) -> bool {
+        let input = self.input.get_mut();
+        input.seek(SeekFrom::Start(at)).is_ok() && input.read_exact(out).is_ok()
+    }
+}
+
+impl Catalog {
+    /// Reads one record of the data section: a message (into `data`) or what messages need.
+    fn record(
+        &mut self,
+        opcode: u8,
+        body: &[u8],
+        data: &mut Vec<u8>,
+    ) -> Result<Option<(Rc<ChannelInfo>, u64, u64)>, String> {
+        match opcode {
+            op::SCHEMA => {
+                let mut r = Fields::new(body, "schema");
+                let id = r.u16()?;
+                let name = r.string()?;
+                let encoding = r.string()?;
+                if id == 0 {
+                    return Err("a schema record has the reserved id 0".into());
+                }
+                self.schemas.insert(id, (name, encoding));
+            }
+            op::CHANNEL => {
+                let mut r = Fields::new(body, "channel");
+                let id = r.u16()?;
+                let schema_id = r.u16()?;
+                let topic = r.string()?;
+                let encoding = r.string()?;
+                let (schema_name, schema_encoding) = match schema_id {
+                    0 => (String::new(), String::new()),
+                    id => self.schemas.get(&id).cloned().ok_or_else(|| {
+                        format!("channel {topic:?} refers to schema {id}, not defined before it")
+                    })?,
+                };
+                let info = ChannelInfo {
+                    topic,
+                    schema_name,
+                    encoding,
+                    schema_encoding,
+                };
+                self.channels.insert(id, Rc::new(info));
+            }
+            op::METADATA => {
+                let mut r = Fields::new(body, "metadata");
+                let name = r.string()?;
+                let len = r.u32()? as usize;
+                let mut map = Fields::new(r.take(len)?, "metadata");
+                let mut fields = BTreeMap::new();
+                while !map.body.is_empty() {
+                    let key = map.string()?;
+                    fields.insert(key, map.string()?);
+                }
+                self.metadata.push((name, fields));
+            }
+            op::MESSAGE => {
+                let mut r = Fields::new(body, "message");
+                let channel_id = r.u16()?;
+                let _sequence = r.u32()?;
+                let log_time_ns = r.u64()?;
+                let publish_time_ns = r.u64()?;
+                let channel = self.channels.get(&channel_id).cloned().ok_or_else(|| {
+                    format!("a message on channel {channel_id}, not defined before it")
+                })?;
+                data.clear();
+                data.extend_from_slice(r.rest());
+                return Ok(Some((channel, log_time_ns, publish_time_ns)));
+            }
+            _ => {}
+        }
+        Ok(None)
     }
 }
 
@@ -326,7 +531,7 @@ fn read_full(input: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
     Ok(n)
 }
 
-impl<R: Read> Iterator for Scanner<R> {
+impl<R: Read + Seek> Iterator for Scanner<R> {
     type Item = Result<RawMessage, String>;
 
     /// The next message; after the last, the reason the file was cut short, if it was.

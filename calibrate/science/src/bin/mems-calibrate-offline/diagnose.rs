@@ -37,9 +37,12 @@ pub struct DiagnoseArgs {
     plot_dir: Option<PathBuf>,
     /// Write the final model (baseline plus the selected effect, fitted on the calibration
     /// data; without reference_tilt and gaps, which are not the sensor's) as a calibration
-    /// file.
+    /// file (private, 0600); an existing file is refused unless --force.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Replace the file at --out (atomically; a symbolic link there is replaced, not followed).
+    #[arg(long)]
+    force: bool,
     /// With a static baseline (no S, b of its own): the calibration file the fitted terms are
     /// added to for --out.
     #[arg(long)]
@@ -92,6 +95,9 @@ fn load(paths: &[PathBuf], what: &str) -> Result<Vec<SessionInput>> {
 
 /// `mems-calibrate diagnose`.
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
+    if let (Some(out), false) = (&args.out, args.force) {
+        mems_files::refuse_existing(out, Some("--out"))?;
+    }
     calibrate::calibfile::check_gravity(args.gravity).map_err(|e| anyhow!("--gravity {e}"))?;
     if !(args.block_s > 0.0 && args.block_s.is_finite()) {
         bail!("--block-s must be > 0, got {}", args.block_s);
@@ -454,7 +460,7 @@ fn write_calibration(args: &DiagnoseArgs, d: &Diagnosis, out: &Path) -> Result<(
     if let Some(k) = t.quadratic_g_per_g2 {
         file.nonlinearity.quadratic_g_per_g2 = Some(k.into());
     }
-    file.save(out)?;
+    super::save(&file, out, "--out", mems_files::Existing::force(args.force))?;
     // Read it back: the file must load (and so drive the live stage).
     CalibrationFile::load(out)?;
     tracing::info!("wrote {}", out.display());

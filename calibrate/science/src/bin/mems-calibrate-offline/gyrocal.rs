@@ -215,7 +215,7 @@ pub fn run(args: GyroCalArgs) -> Result<()> {
     if let (Some(path), Some(target)) = (&args.into, target.as_mut()) {
         target.gyro.correction = Some(rows(&cal.correction));
         target.gyro.correction_sigma = Some(rows(&cal.correction_sigma));
-        target.save(path)?;
+        super::save(target, path, "--into", mems_files::Existing::Replace)?;
         tracing::info!("wrote the gyro correction into {} [gyro]", path.display());
     }
     Ok(())

@@ -26,6 +26,7 @@ use calibrate_science::session::{
     Input, all_axis_aligned, label_axis_aligned, load_input, poses_from_six, raw_poses,
 };
 use clap::{Parser, Subcommand, ValueEnum};
+use mems_files::Existing;
 
 mod diagnose;
 mod gyrocal;
@@ -70,9 +71,12 @@ struct FitArgs {
     /// Local gravity, m/s^2, recorded in the file for converting g to m/s^2.
     #[arg(long, default_value_t = ipc_types::units::STANDARD_GRAVITY_MPS2)]
     gravity: f64,
-    /// Output calibration file.
+    /// Output calibration file (private, 0600); an existing file is refused unless --force.
     #[arg(long)]
     out: PathBuf,
+    /// Replace the file at --out (atomically; a symbolic link there is replaced, not followed).
+    #[arg(long)]
+    force: bool,
     /// Also draw the per-pose residuals to this PNG.
     #[arg(long)]
     plot: Option<PathBuf>,
@@ -148,7 +152,7 @@ fn allan(mut args: AllanArgs) -> Result<()> {
     let report = noise::cli::run_allan_to(&args.analysis, &mut stdout.lock())?;
     if let (Some(path), Some(file)) = (&args.into, calib.as_mut()) {
         file.noise = Some(report.params);
-        file.save(path)?;
+        save(file, path, "--into", Existing::Replace)?;
         tracing::info!("wrote the noise parameters into {} [noise]", path.display());
     }
     Ok(())
@@ -299,6 +303,7 @@ fn fit(args: FitArgs) -> Result<()> {
         labels,
         gravity,
         out,
+        force,
         plot,
         min_segment_s,
     } = args;
@@ -311,6 +316,9 @@ fn fit(args: FitArgs) -> Result<()> {
     } else {
         Weighting::Unweighted
     };
+    if !force {
+        mems_files::refuse_existing(&out, Some("--out"))?;
+    }
     let loaded = load_input(&input)?;
     let fp = fit_poses(&input, &loaded, labels, min_segment_s)?;
     let source = SourceSection {
@@ -333,7 +341,7 @@ fn fit(args: FitArgs) -> Result<()> {
     };
     file.temperature_range_c = fp.temperature_range_c;
     print_summary(&file);
-    file.save(&out)?;
+    save(&file, &out, "--out", Existing::force(force))?;
     tracing::info!("wrote {}", out.display());
     if let Some(plot) = plot {
         let title = format!(
@@ -419,4 +427,15 @@ fn print_summary(file: &CalibrationFile) {
         "  residual rms {:.3e} {:.3e} {:.3e} g over {} poses",
         r[0], r[1], r[2], file.source.poses
     );
+}
+
+/// Writes `file` to `path`, given by option `flag`: a private file (0600) renamed into place
+/// once complete, over an existing file only with `existing` = `Replace` (`mems_files`).
+fn save(file: &CalibrationFile, path: &Path, flag: &'static str, existing: Existing) -> Result<()> {
+    Ok(mems_files::write(
+        path,
+        Some(flag),
+        existing,
+        file.to_toml().as_bytes(),
+    )?)
 }

@@ -18,6 +18,7 @@ use mems_stage::Chain;
 use mems_stage::offline::Stop;
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
 use odometry::session::OdometrySession;
+use recording::mcap::SegmentRead;
 use recording::{LogRepairs, Truth};
 use serde_json::json;
 
@@ -197,6 +198,7 @@ impl Summary {
                 "repeats_dropped": read.repairs.repeats_dropped,
                 "times_rebuilt": read.repairs.times_rebuilt,
             },
+            "input_damage": damage_json(&read.segments),
             "hints": {
                 "in_recording": read.hints_seen,
                 "late": read.hints_late,
@@ -244,6 +246,9 @@ pub struct Read<'a> {
     pub repairs: LogRepairs,
     /// The rest the odometry aligns on, s (for the message).
     pub align_s: f64,
+    /// The files of a streamed run, with their truncations and damaged records (after the
+    /// run: [`report_input`]).
+    pub segments: Vec<SegmentRead>,
 }
 
 impl<'a> Read<'a> {
@@ -257,18 +262,49 @@ impl<'a> Read<'a> {
             hints_late: inputs.hints_late,
             repairs,
             align_s,
+            segments: Vec::new(),
         }
     }
 }
 
+/// The damaged records skipped in the input's files: each with its file, offset, length,
+/// reason and the messages it held per topic, and the messages lost in all.
+fn damage_json(segments: &[SegmentRead]) -> serde_json::Value {
+    let records: Vec<serde_json::Value> = segments
+        .iter()
+        .flat_map(|s| s.damaged.iter().map(move |d| (s, d)))
+        .map(|(s, d)| {
+            json!({
+                "file": s.path,
+                "offset": d.offset,
+                "bytes": d.bytes,
+                "reason": d.reason,
+                "lost": d.lost,
+                "log_time_ns": d.log_time_ns,
+            })
+        })
+        .collect();
+    let lost: u64 = segments
+        .iter()
+        .flat_map(|s| &s.damaged)
+        .map(|d| d.messages_lost())
+        .sum();
+    json!({ "records": records, "messages_lost": lost })
+}
+
 /// Says on stderr what the input held that the result does not show: truncated segments,
-/// robot hints recorded too late to be merged in order, and samples without a gyroscope
-/// (`no_gyro`: the first one's seq; navigated at a held attitude: `NoGyro::HoldAttitude`).
-pub fn report_input(read: &Read, source: &mut Source, no_gyro: Option<u64>) {
+/// damaged records skipped, robot hints recorded too late to be merged in order, and samples
+/// without a gyroscope (`no_gyro`: the first one's seq; navigated at a held attitude:
+/// `NoGyro::HoldAttitude`). Returns the files read, for the JSON result.
+pub fn report_input(read: &Read, source: &mut Source, no_gyro: Option<u64>) -> Vec<SegmentRead> {
     let input = read.input.display();
-    for segment in source.segments() {
+    let segments = source.segments();
+    for segment in &segments {
         if let Some(t) = &segment.truncation {
             tracing::warn!("{}: {t}", segment.path.display());
+        }
+        for damage in &segment.damaged {
+            tracing::warn!("{}: {damage}", segment.path.display());
         }
     }
     if read.hints_late > 0 {
@@ -287,6 +323,7 @@ pub fn report_input(read: &Read, source: &mut Source, no_gyro: Option<u64>) {
              samples (NO_GYRO)"
         );
     }
+    segments
 }
 
 /// Why the odometry never aligned: the detector never learned (with the learner's last
