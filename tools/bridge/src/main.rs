@@ -24,11 +24,20 @@ const QUEUE: usize = 16_384;
 /// Longest wait between two checks for SIGINT/SIGTERM.
 const TICK: Duration = Duration::from_millis(100);
 
-/// Carries mems services between machines over Zenoh.
+/// Carries mems services between machines over Zenoh, and publishes them there on iceoryx2
+/// again.
+///
+/// On the robot, `mems-bridge out --service odometry --listen tcp/0.0.0.0:7447` puts its
+/// odometry states on Zenoh; on the base station, `mems-bridge in --service odometry --connect
+/// tcp/ROBOT:7447` publishes them on its own iceoryx2 service, which any local client reads.
+/// Stops on SIGINT or SIGTERM and prints one line per service: `SERVICE carried N lost M`
+/// (with `in`, also the latency from the original publication, meaningful where both
+/// machines share a clock).
 #[derive(Parser)]
-#[command(version, about)]
+#[command(version)]
 struct Cli {
-    /// `out`: this machine's services onto Zenoh; `in`: from Zenoh onto this machine's.
+    /// `out` carries this machine's iceoryx2 services onto Zenoh; `in` carries them from Zenoh
+    /// onto this machine's iceoryx2 services.
     direction: Direction,
     /// A service to carry (repeat for several).
     #[arg(long = "service", required = true)]
@@ -117,6 +126,10 @@ fn carry<T: Message + Send>(
     let key = key::<T>(prefix, base);
     let name = service::full_name(namespace, base);
     let counts = Counts::default();
+    match direction {
+        Direction::Out => tracing::info!("carrying {name} out to Zenoh key {key}"),
+        Direction::In => tracing::info!("carrying Zenoh key {key} in to {name}"),
+    }
     let latency = match direction {
         Direction::Out => {
             out::<T>(session, &key, &name, &counts)?;
