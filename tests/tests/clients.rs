@@ -251,7 +251,7 @@ fn the_rust_subscriber_has_help_says_what_it_waits_for_and_marks_unaligned_state
 
     let ns = unique_namespace("subscriber-wait");
     let name = service::full_name(&ns, service::ODOMETRY);
-    let mut client = Command::new(&subscriber)
+    let client = Command::new(&subscriber)
         .args(["2", "--namespace", &ns])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

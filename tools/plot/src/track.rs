@@ -3,6 +3,7 @@
 //! the ground truth where the recording carries one. The axes cover the live path and the
 //! truth; the revised path and the ellipses are clipped to the plot area ([`clip`]).
 
+use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::Path;
 
@@ -215,7 +216,7 @@ pub(crate) fn draw_path(
 pub struct Track<'a> {
     /// Live (not revised) states in time order.
     pub live: Vec<&'a OdometryState>,
-    /// Revised states in time order.
+    /// The last revision of each revised sample time, in time order.
     pub revised: Vec<&'a OdometryState>,
     /// The truth in the odometry's frame (empty without one).
     pub truth: Vec<Point>,
@@ -232,8 +233,14 @@ impl<'a> Track<'a> {
             .filter(aligned)
             .collect();
         let first = *live.first()?;
-        let mut revised: Vec<&OdometryState> = odometry.iter().filter(|s| is_revision(s)).collect();
-        revised.sort_by_key(|s| s.stamps.sample_ns);
+        // A sample time may be revised more than once: its last revision is the best estimate
+        // (earlier ones drawn with it would zigzag between passes).
+        let revised: BTreeMap<u64, &OdometryState> = odometry
+            .iter()
+            .filter(|s| is_revision(s))
+            .map(|s| (s.stamps.sample_ns, s))
+            .collect();
+        let revised = revised.into_values().collect();
         Some(Self {
             live,
             revised,

@@ -269,8 +269,8 @@ fn a_file_that_is_not_mcap_is_an_error_naming_it() {
 }
 
 /// A 20 s curve at 50 Hz, aligned from the start, its truth 10 % longer, and revisions of
-/// every fifth state 30 times as far from the origin (far outside the axes, which cover the
-/// live path and the truth).
+/// every fifth state swinging six times as far sideways (out of the axes, which cover the live
+/// path and the truth, and back).
 fn write_track(path: &Path) {
     let mut w = Writer::create(path).unwrap();
     let odo_ch = w.add_channel::<OdometryState>().unwrap();
@@ -301,7 +301,7 @@ fn write_track(path: &Path) {
         w.write(odo_ch, &state, sample_ns).unwrap();
         if i % 5 == 0 {
             let revised = OdometryState {
-                position_m: [30.0 * x, 30.0 * y - 40.0, 0.0],
+                position_m: [x, 6.0 * y, 0.0],
                 flags: odometry_flags::ALIGNED | odometry_flags::REVISION,
                 ..state
             };
