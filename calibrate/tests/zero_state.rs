@@ -461,7 +461,10 @@ fn a_half_second_rest_is_enough_to_learn_and_rest_follows_at_once() {
 
 #[test]
 fn a_rest_after_a_tilt_is_rest_and_a_tilt_the_gyro_did_not_see_is_not() {
-    for (seen, what) in [(true, "tilted by 20 deg, the gyro saw it"), (false, "no rotation seen")] {
+    for (seen, what) in [
+        (true, "tilted by 20 deg, the gyro saw it"),
+        (false, "no rotation seen"),
+    ] {
         let mut det = ZeroStateDetector::new(DetectorConfig::new(DetectorKind::Glrt, G));
         let mut rng = ChaCha8Rng::seed_from_u64(12);
         let mut k = 0;
@@ -471,7 +474,13 @@ fn a_rest_after_a_tilt_is_rest_and_a_tilt_the_gyro_did_not_see_is_not() {
         // Tilt by 20 degrees about x over 1 s, from t = 5 s; then rest there.
         let end = 20f64.to_radians();
         let tilt = move |t: f64| end * (t - 5.0).clamp(0.0, 1.0);
-        let rate = move |t: f64| if seen && (5.0..6.0).contains(&t) { end } else { 0.0 };
+        let rate = move |t: f64| {
+            if seen && (5.0..6.0).contains(&t) {
+                end
+            } else {
+                0.0
+            }
+        };
         feed_tilting(&mut det, &mut rng, &mut k, RATE_HZ, 1.0, tilt, rate);
         let rest = feed_tilting(&mut det, &mut rng, &mut k, RATE_HZ, 3.0, tilt, rate);
         // The window needs half a second of the new rest.

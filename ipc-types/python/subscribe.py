@@ -7,6 +7,9 @@ woken, so a message is printed as soon as it is sent and an idle subscriber uses
     python3 ipc-types/python/subscribe.py mems/odometry/state [--namespace NS] [--count N]
 
 Exits 0 after --count messages (or on Ctrl-C), 1 if none arrived within --timeout seconds.
+It says once on stderr which service and namespace it waits on. An odometry state's
+position is meaningful only once its ALIGNED flag is set (before gravity alignment it is
+held at zero): it says on stderr when the stream is not aligned yet, and when it aligns.
 """
 
 import argparse
@@ -36,6 +39,14 @@ def to_dict(value):
     return value
 
 
+def aligned(payload):
+    """Whether a message's position means something: an odometry state before gravity
+    alignment holds it at zero (other services have no position)."""
+    if not isinstance(payload, mems_ipc.OdometryState):
+        return True
+    return bool(payload.flags & mems_ipc.ODOMETRY_ALIGNED)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("service", choices=sorted(TYPES))
@@ -52,10 +63,18 @@ def main():
     subscriber = service.subscriber_builder().buffer_size(mems_ipc.SUBSCRIBER_BUFFER).create()
     event = mems_ipc.open_event(node, name)
     listener = event.listener_builder().create()
+    print(
+        f"subscribe.py: waiting for messages on {name} (namespace {args.namespace!r}; "
+        "start mems-stack with the same namespace)",
+        file=sys.stderr,
+        flush=True,
+    )
     waitset = iox2.WaitSetBuilder.new().create(iox2.ServiceType.Ipc)
     guard = waitset.attach_notification(listener)
 
     received = 0
+    # The stream's alignment as last said on stderr (said again when it changes).
+    was_aligned = True
     started = time.monotonic()
     # The longest sleep without a notification (only to check the timeout).
     tick = iox2.Duration.from_millis(100)
@@ -66,7 +85,12 @@ def main():
             sample = subscriber.receive()
             if sample is None:
                 break
-            print(json.dumps(to_dict(sample.payload().contents)), flush=True)
+            message = sample.payload().contents
+            if aligned(message) != was_aligned:
+                was_aligned = aligned(message)
+                said = "aligned" if was_aligned else "not aligned yet (position held at zero)"
+                print(f"seq {message.seq}: {said}", file=sys.stderr, flush=True)
+            print(json.dumps(to_dict(message)), flush=True)
             received += 1
         if args.count and received >= args.count:
             break

@@ -55,6 +55,11 @@ pub fn open_event(
         .map_err(|e| ServiceError(format!("cannot open event service {name:?}: {e:?}")))
 }
 
+/// The event a woken [`Output`] notifies when it is dropped: its publisher leaves cleanly,
+/// having sent everything. A process that dies notifies nothing, so a listener (the recorder)
+/// tells a stopped publisher from a lost one. Samples notify iceoryx2's default event id, 0.
+pub const LEAVING: EventId = EventId::new(1);
+
 /// The notifier a publisher on the data service `name` wakes its subscribers with.
 pub struct Waker {
     notifier: Notifier<ipc::Service>,
@@ -78,6 +83,14 @@ impl Waker {
     pub fn notify(&self) -> Result<(), ServiceError> {
         self.notifier
             .notify()
+            .map(|_| ())
+            .map_err(|e| ServiceError(format!("cannot notify {:?}: {e:?}", self.name)))
+    }
+
+    /// Tells every listener of the service that its publisher leaves ([`LEAVING`]).
+    pub fn leave(&self) -> Result<(), ServiceError> {
+        self.notifier
+            .notify_with_custom_event_id(LEAVING)
             .map(|_| ())
             .map_err(|e| ServiceError(format!("cannot notify {:?}: {e:?}", self.name)))
     }
@@ -207,6 +220,17 @@ impl<T: core::fmt::Debug + ZeroCopySend + Copy + 'static> Output<T> {
     }
 }
 
+impl<T: core::fmt::Debug + ZeroCopySend + 'static> Drop for Output<T> {
+    /// Announces the clean departure ([`LEAVING`]) before the publisher is released.
+    fn drop(&mut self) {
+        if let Some(waker) = &self.waker
+            && let Err(e) = waker.leave()
+        {
+            tracing::warn!("{e}");
+        }
+    }
+}
+
 /// A listener on the event service of the data service `name` (none in [`WaitMode::Spin`]).
 pub fn listener(
     node: &Node<ipc::Service>,
@@ -245,10 +269,25 @@ type IpcReactor = <ipc::Service as iceoryx2::service::Service>::Reactor;
 pub fn serve_loop<E: From<ServiceError>>(
     listeners: &[Option<Listener<ipc::Service>>],
     tick: Duration,
+    step: impl FnMut() -> Result<ControlFlow<(), bool>, E>,
+) -> Result<Exit, E> {
+    serve_loop_with_events(listeners, tick, |_, _| {}, step)
+}
+
+/// [`serve_loop`], which also passes every event id it consumes to `on_event`, with the index
+/// of its listener in `listeners` (such as [`LEAVING`]).
+pub fn serve_loop_with_events<E: From<ServiceError>>(
+    listeners: &[Option<Listener<ipc::Service>>],
+    tick: Duration,
+    mut on_event: impl FnMut(usize, EventId),
     mut step: impl FnMut() -> Result<ControlFlow<(), bool>, E>,
 ) -> Result<Exit, E> {
     crate::stop::install()?;
-    let listeners: Vec<&Listener<ipc::Service>> = listeners.iter().flatten().collect();
+    let listeners: Vec<(usize, &Listener<ipc::Service>)> = listeners
+        .iter()
+        .enumerate()
+        .filter_map(|(i, l)| Some((i, l.as_ref()?)))
+        .collect();
     if listeners.is_empty() {
         return spin(step);
     }
@@ -259,7 +298,7 @@ pub fn serve_loop<E: From<ServiceError>>(
         ReactorBuilder::create(builder).map_err(|e| err("cannot create an epoll reactor", &e))?;
     let _guards = listeners
         .iter()
-        .map(|l| Reactor::attach(&reactor, *l))
+        .map(|(_, l)| Reactor::attach(&reactor, *l))
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| err("cannot attach a listener to the reactor", &e))?;
     loop {
@@ -268,8 +307,8 @@ pub fn serve_loop<E: From<ServiceError>>(
             return Ok(Exit::Signal);
         }
         // Consume the notifications first: a sample sent after this is notified again.
-        for l in &listeners {
-            l.try_wait(|_| {})
+        for (i, l) in &listeners {
+            l.try_wait(|a| on_event(*i, a.id))
                 .map_err(|e| err("cannot read a listener", &e))?;
         }
         if step()?.is_break() {

@@ -2,7 +2,9 @@
 //! a Zenoh TCP link between the processes): every odometry state published on the robot's side
 //! arrives on the other side's iceoryx2 service, in order and bit for bit, and both ends count
 //! nothing lost. With `--auth`, only a peer with the credentials receives anything; an endpoint
-//! that other machines reach is refused without `--auth`.
+//! that other machines reach is refused without `--auth`. A bridge whose stderr is a file says
+//! which service it carries, in plain text (no terminal colour codes), and its `--help` has
+//! whole sentences.
 
 use std::time::{Duration, Instant};
 
@@ -10,7 +12,7 @@ use std::path::Path;
 
 use iceoryx2::prelude::PortFactory;
 use integration_tests::{
-    Proc, bin, free_port, odometry_state, path_arg, unique_namespace, wait_until,
+    Proc, bin, free_port, odometry_state, path_arg, run_ok, unique_namespace, wait_until,
 };
 use ipc_types::{OdometryState, service};
 
@@ -251,4 +253,48 @@ fn an_endpoint_other_machines_reach_needs_auth() {
             && stderr.contains("--no-auth"),
         "{stderr}"
     );
+}
+
+#[test]
+fn a_bridge_logging_to_a_file_names_its_service_without_colour_codes() {
+    let dir = std::env::temp_dir().join(format!("mems-bridge-log-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join("stderr.log");
+    let namespace = unique_namespace("bridge-log");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut command = std::process::Command::new(bin("mems-bridge"));
+    command
+        .args(["out", "--service", "odometry", "--listen", &endpoint])
+        .args(["--namespace", &namespace])
+        .stderr(std::fs::File::create(&log).unwrap());
+    // `Proc::start` would send stderr to the terminal: start it here, stdout captured.
+    let mut child = command.stdout(std::process::Stdio::null()).spawn().unwrap();
+    let service = service::full_name(&namespace, service::ODOMETRY);
+    wait_until(WAIT, "the bridge's start line", || {
+        std::fs::read_to_string(&log).is_ok_and(|s| s.contains(&service))
+    });
+    // SAFETY: kill(2) on our own child's pid.
+    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGTERM) }, 0);
+    assert!(child.wait().unwrap().success());
+    let stderr = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        stderr.contains(&format!("mems-bridge: carrying {service} out to Zenoh key")),
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains('\x1b'),
+        "colour codes in a file: {stderr:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_bridge_help_has_whole_sentences() {
+    let help = run_ok("mems-bridge", &["--help"]);
+    assert!(
+        help.contains("onto this machine's iceoryx2 services"),
+        "{help}"
+    );
+    assert!(help.contains("On the robot, `mems-bridge out"), "{help}");
+    assert!(help.contains("carried N lost M"), "{help}");
 }

@@ -8,19 +8,23 @@
 //!   lying still: the states count the hints applied while each publisher runs, and report the
 //!   hints stale once it has stopped.
 //!
+//! - the Rust subscriber alone: `--help` works, it names the service and namespace it waits
+//!   on, and prints "not aligned yet" for a state before alignment.
+//!
 //! The Python halves skip, loudly, only when `python3` cannot import iceoryx2 (`.ci/run`
 //! installs it).
 
-use std::process::Command;
+use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use iceoryx2::prelude::PortFactory;
 use integration_tests::{
-    Proc, calibrate_sim_part, example, path_arg, python_iceoryx2, unique_namespace, wait_until,
-    workspace_root,
+    Proc, calibrate_sim_part, example, odometry_state, path_arg, python_iceoryx2, unique_namespace,
+    wait_until, workspace_root,
 };
-use ipc_types::{OdometryState, odometry_flags, service};
+use ipc_types::{OdometryState, odometry_flags, service, wake};
 
 const WAIT: Duration = Duration::from_secs(40);
 
@@ -236,4 +240,47 @@ fn rust_and_python_hint_publishers_are_applied_by_live_odometry() {
     }
     drop(latest);
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn the_rust_subscriber_has_help_says_what_it_waits_for_and_marks_unaligned_states() {
+    let subscriber = example("ipc-types", "subscribe_odometry");
+    let help = Command::new(&subscriber).arg("--help").output().unwrap();
+    assert!(help.status.success(), "--help: {help:?}");
+    assert!(String::from_utf8_lossy(&help.stdout).contains("--namespace"));
+
+    let ns = unique_namespace("subscriber-wait");
+    let name = service::full_name(&ns, service::ODOMETRY);
+    let client = Command::new(&subscriber)
+        .args(["2", "--namespace", &ns])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let node = service::node().unwrap();
+    let svc = service::open::<OdometryState>(&node, &name).unwrap();
+    wait_until(WAIT, "the subscriber", || {
+        svc.dynamic_config().number_of_subscribers() >= 1
+    });
+    let mut out = wake::Output::new(&node, &svc, &name).unwrap();
+    let mut unaligned = odometry_state(0);
+    unaligned.flags &= !odometry_flags::ALIGNED;
+    let mut aligned = odometry_state(1);
+    aligned.flags |= odometry_flags::ALIGNED;
+    for state in [unaligned, aligned] {
+        out.send(state);
+        out.end_of_input().unwrap();
+    }
+    let done = client.wait_with_output().unwrap();
+    assert!(done.status.success(), "{done:?}");
+    let printed = String::from_utf8(done.stdout).unwrap();
+    let lines: Vec<&str> = printed.lines().collect();
+    assert_eq!(lines.len(), 2, "{printed}");
+    assert!(lines[0].ends_with(": not aligned yet"), "{printed}");
+    assert!(lines[1].contains("position ("), "{printed}");
+    let said = String::from_utf8(done.stderr).unwrap();
+    assert!(
+        said.contains(&format!("waiting for states on {name} (namespace {ns:?}")),
+        "{said}"
+    );
 }

@@ -362,7 +362,9 @@ impl GlrtRule {
         self.moving_s += dt;
         // The turn's own noise (the batch means' noise over the batch: an angle random walk)
         // adds to the reference's uncertainty across gravity, at rest too.
-        let g2 = (0..3).map(|i| self.reference[i] * self.reference[i]).sum::<f64>();
+        let g2 = (0..3)
+            .map(|i| self.reference[i] * self.reference[i])
+            .sum::<f64>();
         let mean_var = (3..6)
             .map(|c| 1.0 / (gyro.n as f64 * self.inv_var[c] * self.inv_rho[c]))
             .fold(0.0, f64::max);
@@ -411,8 +413,9 @@ impl GlrtRule {
         }
         // The window mean's variance about each reference: its own noise plus the reference's
         // drift since it was learned.
-        let var: [f64; 6] =
-            std::array::from_fn(|c| 1.0 / (n * self.inv_var[c] * self.inv_rho[c]) + self.drift_var[c]);
+        let var: [f64; 6] = std::array::from_fn(|c| {
+            1.0 / (n * self.inv_var[c] * self.inv_rho[c]) + self.drift_var[c]
+        });
         let mut t_mean = self.accel_mean_statistic(&mean, &var);
         let mut t_scatter = 0.0;
         for c in 0..self.channels {

@@ -1,7 +1,8 @@
 //! The C client example (`ipc-types/examples/c/subscribe_odometry.c`) compiled with the
 //! system's C compiler against `include/mems_client.h` and `libmems_client.so`, run as its own
 //! process: it receives the states this test publishes (event-driven: each send notifies),
-//! prints every live one and skips revisions; SIGTERM ends a client that is waiting, exit 0.
+//! prints every live one ("not aligned yet" before alignment) and skips revisions, after one
+//! line on stderr naming the service and namespace it waits on; SIGTERM ends a client that is waiting, exit 0.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -65,6 +66,7 @@ fn start(program: &Path, namespace: &str, count: &str) -> Child {
         .arg(count)
         .env("MEMS_NAMESPACE", namespace)
         .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
         .spawn()
         .unwrap()
 }
@@ -107,23 +109,38 @@ fn the_c_client_prints_every_live_state() {
     let mut out = Output::new(&node, &svc, &name).unwrap();
     let mut expected = String::new();
     for seq in 0..40 {
-        let s = state(seq, 0);
+        let mut s = state(seq, 0);
+        if seq < 3 {
+            s.flags &= !odometry_flags::ALIGNED;
+        }
         out.send(s);
         if seq % 10 == 9 {
             out.send(state(seq - 1, odometry_flags::REVISION));
         }
         out.end_of_input().unwrap();
         let (p, e) = (s.position_m, s.position_sigma_m);
-        expected += &format!(
-            "seq {seq} position ({:+.3}, {:+.3}, {:+.3}) m +- ({:.3}, {:.3}, {:.3})\n",
-            p[0], p[1], p[2], e[0], e[1], e[2]
-        );
+        expected += &if seq < 3 {
+            format!("seq {seq} not aligned yet\n")
+        } else {
+            format!(
+                "seq {seq} position ({:+.3}, {:+.3}, {:+.3}) m +- ({:.3}, {:.3}, {:.3})\n",
+                p[0], p[1], p[2], e[0], e[1], e[2]
+            )
+        };
         std::thread::sleep(Duration::from_millis(2));
     }
     let status = wait_exit(&mut client);
     let printed = std::io::read_to_string(client.stdout.take().unwrap()).unwrap();
+    let said = std::io::read_to_string(client.stderr.take().unwrap()).unwrap();
     assert!(status.success(), "{status}");
     assert_eq!(printed, expected);
+    assert_eq!(
+        said,
+        format!(
+            "subscribe_odometry: waiting for states on {name} (namespace \"{namespace}\"; \
+             start mems-stack with the same namespace)\n"
+        )
+    );
 }
 
 #[test]

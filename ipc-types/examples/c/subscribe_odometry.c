@@ -1,5 +1,7 @@
 /* A robot process's view of mems-odometry, in C: subscribe to the odometry state, sleep on its
- * event, print each live state's position with its 1-sigma (revisions skipped).
+ * event, print each live state's position with its 1-sigma (revisions skipped; "not aligned
+ * yet" before the odometry's gravity alignment, when the position is held at zero). It says
+ * once on stderr which service and namespace it waits on.
  *
  *   cargo build --release -p mems-client-c
  *   cc -O2 -I ipc-types/include ipc-types/examples/c/subscribe_odometry.c \
@@ -18,6 +20,11 @@ int main(int argc, char **argv) {
         fprintf(stderr, "subscribe_odometry: %s\n", mems_last_error());
         return 1;
     }
+    const char *ns = getenv("MEMS_NAMESPACE");
+    fprintf(stderr,
+            "subscribe_odometry: waiting for states on %s%smems/odometry/state (namespace \"%s\"; "
+            "start mems-stack with the same namespace)\n",
+            ns ? ns : "", ns && *ns ? "/" : "", ns ? ns : "");
     long seen = 0;
     int status = 0;
     while (count < 0 || seen < count) {
@@ -34,6 +41,11 @@ int main(int argc, char **argv) {
         int32_t got;
         while ((count < 0 || seen < count) && (got = mems_odometry_receive(sub, &s)) == 1) {
             if (s.flags & MEMS_ODOMETRY_REVISION) {
+                continue;
+            }
+            if (!(s.flags & MEMS_ODOMETRY_ALIGNED)) {
+                printf("seq %llu not aligned yet\n", (unsigned long long)s.seq);
+                seen++;
                 continue;
             }
             printf("seq %llu position (%+.3f, %+.3f, %+.3f) m +- (%.3f, %.3f, %.3f)\n",

@@ -14,6 +14,9 @@
 //! mems-odometry: error: cannot load calibration: calib.toml: No such file or directory (os error 2)
 //! ```
 //!
+//! Colour (tracing-subscriber's ANSI styling of field names) is used only when stderr is a
+//! terminal, so a file, a pipe or the journal receives plain text.
+//!
 //! Info lines carry the program's name only; other levels add `warning:`, `error:`, `debug:`
 //! or `trace:`; an event's fields follow its message as `key=value`. The level is `info`
 //! unless `RUST_LOG` sets another (`RUST_LOG=warn` keeps warnings and errors; per-crate
@@ -25,6 +28,7 @@
 //! the file, line or device at fault, and a backtrace would only bury it.
 
 use std::fmt;
+use std::io::IsTerminal as _;
 use std::process::ExitCode;
 use std::sync::OnceLock;
 
@@ -45,6 +49,7 @@ pub fn init(program: &'static str) {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
         .event_format(Line { program })
         .try_init();
 }

@@ -28,11 +28,22 @@ use mems_bridge::{
 use zenoh::Wait;
 use zenoh::handlers::FifoChannel;
 
-/// Carries mems services between machines over Zenoh.
+/// Carries mems services between machines over Zenoh, and publishes them there on iceoryx2
+/// again.
+///
+/// On the robot, `mems-bridge out --service odometry --listen tcp/0.0.0.0:7447 --auth
+/// bridge.auth` puts its odometry states on Zenoh; on the base station, `mems-bridge in
+/// --service odometry --connect tcp/ROBOT:7447 --auth bridge.auth` publishes them on its own
+/// iceoryx2 service, which any local client reads. Without `--listen` or `--connect` it stays
+/// on this machine (tcp/127.0.0.1:7447). `ros2` publishes them as ROS 2 topics over rmw_zenoh.
+/// Stops on SIGINT or SIGTERM and prints one line per service: `SERVICE carried N lost M`
+/// (with `in`, also the latency from the original publication, meaningful where both
+/// machines share a clock).
 #[derive(Parser)]
-#[command(version, about)]
+#[command(version)]
 struct Cli {
-    /// `out`: this machine's services onto Zenoh; `in`: from Zenoh onto this machine's.
+    /// `out` carries this machine's iceoryx2 services onto Zenoh; `in` carries them from Zenoh
+    /// onto this machine's iceoryx2 services.
     direction: Direction,
     /// A service to carry (repeat for several).
     #[arg(long = "service", required = true)]
@@ -223,6 +234,10 @@ impl Ends<'_> {
         counts: &Counts,
     ) -> Result<String> {
         let key = key::<T>(self.prefix, carried.base());
+        match self.direction {
+            Direction::In => tracing::info!("carrying Zenoh key {key} in to {name}"),
+            _ => tracing::info!("carrying {name} out to Zenoh key {key}"),
+        }
         match self.direction {
             Direction::In => into::<T>(self.session, &key, name, counts),
             _ => {

@@ -54,8 +54,11 @@ pub struct TopicInfo {
     pub first_log_ns: u64,
     /// See `first_log_ns`.
     pub last_log_ns: u64,
-    /// Messages per second of log time ((count - 1) over the span; 0 for fewer than two).
-    pub rate_hz: f64,
+    /// Messages per second of log time, (count - 1) over the span, when the span is at least
+    /// [`MIN_RATE_SPAN_S`]; `None` (`-` in the table) otherwise: two messages a few
+    /// microseconds apart (a burst of revised poses, the recorder's closing events) have no
+    /// rate worth printing.
+    pub rate_hz: Option<f64>,
     /// Whether the messages carry a sequence number (the pose and truth topics do not); the
     /// three counts below are 0 without one.
     pub sequenced: bool,
@@ -69,6 +72,17 @@ pub struct TopicInfo {
     pub revisions: u64,
     /// Messages of a JSON channel that did not decode as JSON with the expected fields.
     pub undecodable: u64,
+}
+
+/// The shortest span of log time over which a topic's rate is given, s.
+pub const MIN_RATE_SPAN_S: f64 = 1.0;
+
+impl TopicInfo {
+    /// The topic's rate, Hz, if its messages span at least [`MIN_RATE_SPAN_S`].
+    fn rate(&self) -> Option<f64> {
+        let span_s = self.last_log_ns.saturating_sub(self.first_log_ns) as f64 * 1e-9;
+        (self.count > 1 && span_s >= MIN_RATE_SPAN_S).then(|| (self.count - 1) as f64 / span_s)
+    }
 }
 
 /// The raw sample stream's own account of its losses.
@@ -396,10 +410,7 @@ impl RunInfo {
             });
         }
         for topic in info.topics.values_mut() {
-            let span_s = (topic.last_log_ns - topic.first_log_ns) as f64 * 1e-9;
-            if topic.count > 1 && span_s > 0.0 {
-                topic.rate_hz = (topic.count - 1) as f64 / span_s;
-            }
+            topic.rate_hz = topic.rate();
         }
         if let (Some(s), Some(e)) = (info.start_ns, info.end_ns) {
             info.duration_s = (e - s) as f64 * 1e-9;
@@ -486,10 +497,11 @@ impl RunInfo {
             } else {
                 "no sequence numbers".to_string()
             };
+            let rate = t.rate_hz.map_or("-".to_string(), |r| format!("{r:.1}"));
             let _ = writeln!(
                 s,
-                "  {name:width$}  {:>9} msgs {:>9.1} Hz  {} ({})  {sequence}{revisions}{undecodable}",
-                t.count, t.rate_hz, t.schema, t.encoding
+                "  {name:width$}  {:>9} msgs {rate:>9} Hz  {} ({})  {sequence}{revisions}{undecodable}",
+                t.count, t.schema, t.encoding
             );
         }
     }

@@ -130,7 +130,8 @@ fn counts_match_the_official_reader() {
     let dir = temp_dir("counts");
     let path = dir.join("run.mcap");
     let mut writer = Writer::create(&path).unwrap();
-    write_samples(&mut writer, 0..200);
+    // 1.2 s: a rate is given over a span of at least a second.
+    write_samples(&mut writer, 0..1200);
     writer.finish().unwrap();
 
     let info = mems_info(&path);
@@ -141,7 +142,7 @@ fn counts_match_the_official_reader() {
         assert_eq!(topics[topic]["count"], *count, "{topic}");
     }
     let raw = &topics["mems/imu/raw"];
-    assert_eq!(raw["count"], 200);
+    assert_eq!(raw["count"], 1200);
     assert!(
         (raw["rate_hz"].as_f64().unwrap() - 1000.0).abs() < 1e-6,
         "{raw}"
@@ -152,11 +153,11 @@ fn counts_match_the_official_reader() {
     );
     assert_eq!(info["raw"]["lost_at_sensor"], 3);
     assert_eq!(
-        info["raw"]["undelivered"], 3,
-        "the last running total (seq 199 / 50)"
+        info["raw"]["undelivered"], 23,
+        "the last running total (seq 1199 / 50)"
     );
     assert_eq!(info["raw"]["gyro"], true);
-    assert_eq!(topics["mems/odometry/state"]["revisions"], 19);
+    assert_eq!(topics["mems/odometry/state"]["revisions"], 119);
     assert_eq!(
         topics["mems/odometry/state"]["seq_gaps"], 0,
         "revisions are no gaps"
@@ -284,5 +285,48 @@ fn an_anchored_run_has_wall_clock_start_and_end() {
     write_samples(&mut writer, 0..10);
     writer.finish().unwrap();
     assert!(mems_info(&old)["wall_clock"].is_null());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Two messages 20 us apart (a burst of revised poses) have no rate: `-` in the table, null in
+/// JSON, where a rate over their span would be 50 000 Hz.
+#[test]
+fn a_topic_without_a_second_of_span_has_no_rate() {
+    let dir = temp_dir("no-rate");
+    let path = dir.join("run.mcap");
+    let mut writer = Writer::create(&path).unwrap();
+    let raw_ch = writer.add_channel::<RawImuSample>().unwrap();
+    for seq in 0..1200 {
+        writer
+            .write(raw_ch, &raw(seq), 1_000_200_000 + seq * 1_000_000)
+            .unwrap();
+    }
+    let pose_ch = writer.add_channel::<PoseInFrame>().unwrap();
+    let state = OdometryState {
+        attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
+        ..OdometryState::default()
+    };
+    for log_ns in [2_000_000_000, 2_000_020_000] {
+        writer
+            .write(pose_ch, &PoseInFrame::from_state(&state), log_ns)
+            .unwrap();
+    }
+    writer.finish().unwrap();
+
+    let info = mems_info(&path);
+    assert_eq!(info["topics"]["mems/odometry/pose"]["count"], 2);
+    assert_eq!(info["topics"]["mems/odometry/pose"]["rate_hz"], Value::Null);
+    let table = Command::new(env!("CARGO_BIN_EXE_mems-info"))
+        .arg(&path)
+        .output()
+        .unwrap();
+    let table = String::from_utf8(table.stdout).unwrap();
+    let pose = table
+        .lines()
+        .find(|l| l.contains("mems/odometry/pose"))
+        .unwrap_or_else(|| panic!("{table}"));
+    assert!(pose.contains("msgs         - Hz"), "{pose}");
+    let raw = table.lines().find(|l| l.contains("mems/imu/raw")).unwrap();
+    assert!(raw.contains("msgs    1000.0 Hz"), "{raw}");
     std::fs::remove_dir_all(&dir).unwrap();
 }

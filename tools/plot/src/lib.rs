@@ -1,5 +1,6 @@
 //! The plots behind `mems-plot`: PNGs of an MCAP recording's acceleration (raw and corrected),
-//! zero-state, and position with its 1-sigma band, against time.
+//! zero-state, and position with its 1-sigma band, against time, and its horizontal track
+//! (x against y, with 1-sigma ellipses and the truth where the recording has one: [`track`]).
 //!
 //! Time axes are seconds since the recording's first sample time (`stamps.sample_ns`, ns
 //! `CLOCK_MONOTONIC`). Raw specific force is in g and corrected specific force in m/s^2, both in
@@ -8,6 +9,8 @@
 //! spikes stay visible in long recordings.
 
 #![warn(missing_docs)]
+
+pub mod track;
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -45,11 +48,18 @@ pub enum Figure {
     ZeroState,
     /// Position per axis with its 1-sigma band; revised states on top.
     Position,
+    /// The horizontal path with 1-sigma ellipses, the revised path and the truth ([`track`]).
+    Track,
 }
 
 impl Figure {
     /// Every figure, in the order they are written.
-    pub const ALL: [Figure; 3] = [Figure::Acceleration, Figure::ZeroState, Figure::Position];
+    pub const ALL: [Figure; 4] = [
+        Figure::Acceleration,
+        Figure::ZeroState,
+        Figure::Position,
+        Figure::Track,
+    ];
 
     /// The file name suffix, e.g. `acceleration` in `drive-acceleration.png`.
     pub fn name(self) -> &'static str {
@@ -57,6 +67,7 @@ impl Figure {
             Figure::Acceleration => "acceleration",
             Figure::ZeroState => "zero-state",
             Figure::Position => "position",
+            Figure::Track => "track",
         }
     }
 }
@@ -246,14 +257,13 @@ fn draw_panel(
         chart.draw_series(std::iter::once(Polygon::new(polygon, band.colour.filled())))?;
     }
     for line in &panel.lines {
-        let colour = line.colour;
-        chart
-            .draw_series(LineSeries::new(
-                line.points.iter().copied(),
-                colour.stroke_width(2),
-            ))?
-            .label(line.label.as_str())
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(3)));
+        // Clipped to the panel: plotters draws a line wherever its points map to.
+        track::draw_path(
+            &mut chart,
+            &line.points,
+            line.colour.stroke_width(2),
+            &line.label,
+        )?;
     }
     if !panel.lines.is_empty() {
         chart
@@ -488,6 +498,15 @@ fn position(contents: &Contents, t0_ns: u64, t_range: Range<f64>, path: &Path) -
     Ok(Outcome::Written(path.to_path_buf()))
 }
 
+/// The track figure ([`track::Track`]), if the recording has an aligned state.
+fn track(contents: &Contents, t0_ns: u64, path: &Path) -> Result<Outcome> {
+    let Some(track) = track::Track::new(&contents.odometry, &contents.truth) else {
+        return Ok(Outcome::Skipped("no aligned odometry state".into()));
+    };
+    track.draw(path, t0_ns)?;
+    Ok(Outcome::Written(path.to_path_buf()))
+}
+
 /// One band edge reduced to about `max_points`: per bucket the outermost value (`pick` is
 /// `f64::max` for the upper edge, `f64::min` for the lower), so that the band never shrinks.
 fn band_edge(
@@ -541,6 +560,7 @@ pub fn plot_recording(
                 Figure::Acceleration => acceleration(contents, t0_ns, t_range, &path),
                 Figure::ZeroState => zero_state(contents, t0_ns, t_range, &path),
                 Figure::Position => position(contents, t0_ns, t_range, &path),
+                Figure::Track => track(contents, t0_ns, &path),
             }?;
             Ok((figure, outcome))
         })

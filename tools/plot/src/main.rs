@@ -1,5 +1,5 @@
-//! `mems-plot FILE.mcap [--out DIR]`: PNGs of a recording's acceleration, zero-state and
-//! position with its 1-sigma band.
+//! `mems-plot FILE.mcap [--out DIR] [--truth SIM.mcap]`: PNGs of a recording's acceleration,
+//! zero-state, position with its 1-sigma band, and horizontal track.
 
 use std::path::PathBuf;
 
@@ -15,6 +15,10 @@ struct Cli {
     /// Directory for the PNGs (default: the recording's directory).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Take the ground truth for the track from this recording (the `mems-sim` file a
+    /// `mems-odometry offline --out` run was made from) instead of FILE's own.
+    #[arg(long)]
+    truth: Option<PathBuf>,
 }
 
 fn main() -> std::process::ExitCode {
@@ -23,7 +27,10 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run(cli: Cli) -> Result<()> {
-    let contents = recording::mcap::read_all(&cli.file)?;
+    let mut contents = recording::mcap::read_all(&cli.file)?;
+    if let Some(truth) = &cli.truth {
+        contents.truth = recording::mcap::read_all(truth)?.truth;
+    }
     if let Some(truncation) = &contents.truncation {
         tracing::warn!(
             "{}: {truncation}; plotting what was read",

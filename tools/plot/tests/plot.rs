@@ -1,5 +1,6 @@
 //! `mems-plot` on recordings with known content: the PNGs exist, have the documented size, and
-//! show the series, bands and shading the data calls for (checked by pixel colour).
+//! show the series, bands and shading the data calls for (checked by pixel colour); the track
+//! draws the path, its ellipses, the truth and the revised path, clipped to its plot area.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -9,8 +10,10 @@ use ipc_types::{
     CorrectedImuSample, OdometryState, RawImuSample, Stamps, corrected_flags, odometry_flags,
     raw_flags,
 };
+use mems_plot::track::{TRACK_COLOUR, TRUTH_COLOUR};
 use mems_plot::{AXIS_COLOURS, REST_COLOUR, REVISED_COLOUR, SIZE};
 use plotters::style::RGBColor;
+use recording::Truth;
 use recording::mcap::Writer;
 
 const G: f64 = 9.80665;
@@ -168,7 +171,7 @@ fn a_full_recording_gives_three_figures_with_their_series() {
     write_drive(&file, true, true);
     let (ok, stdout, stderr) = mems_plot(&file, &dir);
     assert!(ok, "{stderr}");
-    for name in ["acceleration", "zero-state", "position"] {
+    for name in ["acceleration", "zero-state", "position", "track"] {
         let png = dir.join(format!("drive-{name}.png"));
         assert!(
             stdout.contains(&format!("wrote {}", png.display())),
@@ -248,6 +251,10 @@ fn a_raw_only_recording_gives_the_acceleration_and_says_why_not_the_rest() {
         assert!(count(&accel, colour, 0..SIZE.1) > 100, "{colour:?}");
     }
     assert!(!dir.join("raw-position.png").exists());
+    assert!(
+        stdout.contains("skipped track: no aligned odometry state"),
+        "{stdout}"
+    );
 }
 
 #[test]
@@ -259,4 +266,88 @@ fn a_file_that_is_not_mcap_is_an_error_naming_it() {
     assert!(!ok);
     assert!(stderr.contains(&file.display().to_string()), "{stderr}");
     assert!(stderr.contains("MCAP magic"), "{stderr}");
+}
+
+/// A 20 s curve at 50 Hz, aligned from the start, its truth 10 % longer, and revisions of
+/// every fifth state swinging six times as far sideways (out of the axes, which cover the live
+/// path and the truth, and back).
+fn write_track(path: &Path) {
+    let mut w = Writer::create(path).unwrap();
+    let odo_ch = w.add_channel::<OdometryState>().unwrap();
+    let truth_ch = w.add_channel::<Truth>().unwrap();
+    for i in 0..1000_u64 {
+        let t = i as f64 * 0.02;
+        let sample_ns = 5_000_000_000 + i * 20_000_000;
+        let (x, y) = (t, 3.0 * (0.3 * t).sin());
+        let truth = Truth {
+            t_ns: sample_ns,
+            position_m: [1.1 * x, 1.1 * y, 0.0],
+            attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
+            ..Truth::default()
+        };
+        w.write(truth_ch, &truth, sample_ns).unwrap();
+        let state = OdometryState {
+            stamps: Stamps {
+                sample_ns,
+                ..Stamps::default()
+            },
+            seq: i,
+            position_m: [x, y, 0.0],
+            position_sigma_m: [0.05 + 0.05 * t, 0.05 + 0.03 * t, 0.1],
+            attitude_wxyz: [1.0, 0.0, 0.0, 0.0],
+            flags: odometry_flags::ALIGNED,
+            ..OdometryState::default()
+        };
+        w.write(odo_ch, &state, sample_ns).unwrap();
+        if i % 5 == 0 {
+            let revised = OdometryState {
+                position_m: [x, 6.0 * y, 0.0],
+                flags: odometry_flags::ALIGNED | odometry_flags::REVISION,
+                ..state
+            };
+            w.write(odo_ch, &revised, sample_ns).unwrap();
+        }
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn the_track_shows_path_ellipses_truth_and_revisions_inside_its_plot_area() {
+    let dir = dir("track");
+    let file = dir.join("curve.mcap");
+    write_track(&file);
+    let (ok, stdout, stderr) = mems_plot(&file, &dir);
+    assert!(ok, "{stderr}");
+    let png = dir.join("curve-track.png");
+    assert!(
+        stdout.contains(&format!("wrote {}", png.display())),
+        "{stdout}"
+    );
+    let track = load(&png);
+    let h = SIZE.1;
+    assert!(count(&track, TRACK_COLOUR, 0..h) > 500, "the live path");
+    assert!(count(&track, TRUTH_COLOUR, 0..h) > 500, "the truth");
+    assert!(
+        count(&track, over_white(TRACK_COLOUR, 0.5), 0..h) > 500,
+        "the 1-sigma ellipses"
+    );
+    assert!(count(&track, REVISED_COLOUR, 0..h) > 20, "the revised path");
+    // Outside the plot area (the title above it, the axis labels left of and below it) no
+    // line is drawn: the revised path leaves the axes and is cut at their edges.
+    let margins = |colour| {
+        count(&track, colour, 0..45)
+            + count(&track, colour, h - 50..h)
+            + (0..h)
+                .flat_map(|y| (0..90).map(move |x| (x, y)))
+                .filter(|&(x, y)| {
+                    *track.get_pixel(x, y) == image::Rgb([colour.0, colour.1, colour.2])
+                })
+                .count()
+    };
+    assert_eq!(
+        margins(REVISED_COLOUR),
+        0,
+        "revisions outside the plot area"
+    );
+    assert_eq!(margins(TRACK_COLOUR), 0, "ellipses outside the plot area");
 }

@@ -2,6 +2,11 @@
 //! through the `recording` crate, with the pose derived from each odometry state for Foxglove
 //! and explicit events for lost sequence numbers and vanished publishers.
 //!
+//! A publisher that stops cleanly announces it (`ipc_types::wake::LEAVING`, sent when its
+//! `wake::Output` is dropped), so a clean stop of the stack (source first, the recorder last)
+//! records no lost publisher; one that dies (kill -9, a crash) announces nothing and is
+//! recorded as `publisher_lost`. The hint publishers wake nobody and cannot announce it.
+//!
 //! Times: each message's MCAP `log_time` is its receive time, its `publish_time` the message's
 //! own sample time, both taken as ns `CLOCK_MONOTONIC` and written as Unix ns (UTC) through the
 //! wall clock read at start (`recording::clock::WallClock`, stored in the file's `mems.clock`
@@ -21,6 +26,7 @@
 
 #![warn(missing_docs)]
 
+use std::cell::Cell;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
@@ -29,6 +35,7 @@ use std::time::{Duration, Instant};
 use alloc_count::pool::Counts;
 use alloc_count::steady::SteadyState;
 use anyhow::{Context, Result};
+use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory as _;
@@ -136,6 +143,8 @@ pub struct SeqTracker {
     first_seq: Option<u64>,
     had_publisher: bool,
     lost: bool,
+    /// A publisher announced that it leaves cleanly ([`wake::LEAVING`]).
+    leaving: bool,
 }
 
 impl SeqTracker {
@@ -147,6 +156,7 @@ impl SeqTracker {
             first_seq: None,
             had_publisher: false,
             lost: false,
+            leaving: false,
         }
     }
 
@@ -220,10 +230,22 @@ impl SeqTracker {
         }
     }
 
+    /// Accounts for a publisher's announcement that it leaves cleanly, having sent everything
+    /// ([`wake::LEAVING`]): the next publisher count of 0 is a stop, not a loss.
+    pub fn leaving(&mut self) {
+        self.leaving = true;
+    }
+
     /// Accounts for the service's publisher count at `t_ns`: [`EventKind::PublisherLost`] when
-    /// it is 0 after a publisher was seen (counted, or proven by a message),
-    /// [`EventKind::PublisherBack`] when one appears again after that.
+    /// it is 0 after a publisher was seen (counted, or proven by a message) unless the
+    /// publisher announced that it leaves ([`SeqTracker::leaving`]: nothing is recorded, and a
+    /// new publisher is a start, not a return), [`EventKind::PublisherBack`] when one appears
+    /// again after a loss.
     pub fn publishers(&mut self, count: usize, t_ns: u64) -> Option<RecorderEvent> {
+        if count == 0 && std::mem::take(&mut self.leaving) {
+            self.had_publisher = false;
+            return None;
+        }
         let kind = if count == 0 && self.had_publisher && !self.lost {
             self.lost = true;
             EventKind::PublisherLost
@@ -246,6 +268,10 @@ trait Stream {
     /// Compares the publisher count with the last one; returns the events written (with those
     /// of the messages drained on the way).
     fn check_publishers(&mut self, writer: &mut Writer) -> Result<Vec<RecorderEvent>>;
+    /// The service's publisher count.
+    fn publishers(&self) -> usize;
+    /// Accounts for a publisher's announcement that it leaves ([`SeqTracker::leaving`]).
+    fn leaving(&mut self);
     /// Writes what was lost since the previous segment ended, given the last sequence number
     /// of each service there (see [`SeqTracker::continues_from`]); returns the events written.
     fn continues_from(
@@ -336,8 +362,16 @@ impl<T: Topic + Message> Stream for Subscription<T> {
         Ok(events)
     }
 
+    fn publishers(&self) -> usize {
+        self.service.dynamic_config().number_of_publishers()
+    }
+
+    fn leaving(&mut self) {
+        self.tracker.leaving();
+    }
+
     fn check_publishers(&mut self, writer: &mut Writer) -> Result<Vec<RecorderEvent>> {
-        let count = self.service.dynamic_config().number_of_publishers();
+        let count = self.publishers();
         let mut events = Vec::new();
         if count == 0 {
             // Whatever the departed publishers sent is queued before they left: take it all
@@ -551,7 +585,14 @@ fn record_loop(
         .collect::<Result<Vec<_>, _>>()?;
     // Removes the resources of kill -9'd nodes, so that their publishers stop counting.
     let _cleanup = service::DeadNodeCleanup::start(PUBLISHER_CHECK_PERIOD)?;
-    let exit = wake::serve_loop(&listeners, POLL_PERIOD, || -> Result<_> {
+    // Per stream: whether its publisher announced that it leaves (wake::LEAVING).
+    let leaving: Vec<Cell<bool>> = streams.iter().map(|_| Cell::new(false)).collect();
+    let on_event = |i: usize, id: EventId| {
+        if id == wake::LEAVING {
+            leaving[i].set(true);
+        }
+    };
+    let exit = wake::serve_loop_with_events(&listeners, POLL_PERIOD, on_event, || -> Result<_> {
         if drain(writer, streams, summary)? {
             oldest_unflushed.get_or_insert_with(Instant::now);
         }
@@ -575,8 +616,16 @@ fn record_loop(
         }
         if last_check.is_none_or(|t| t.elapsed() >= PUBLISHER_CHECK_PERIOD) {
             last_check = Some(Instant::now());
-            for stream in streams.iter_mut() {
+            for (i, stream) in streams.iter_mut().enumerate() {
                 let (_, before) = stream.received();
+                if stream.publishers() == 0 {
+                    // A publisher announces its departure before it releases its port: the
+                    // announcement is queued by now, if not taken at the last wake-up.
+                    take_leaving(listeners[i].as_ref(), &leaving[i])?;
+                }
+                if leaving[i].take() {
+                    stream.leaving();
+                }
                 let events = stream.check_publishers(writer)?;
                 if !events.is_empty() || stream.received().1 > before {
                     oldest_unflushed.get_or_insert_with(Instant::now);
@@ -598,6 +647,21 @@ fn record_loop(
         // After a signal this last drain takes everything queued: a queue holds at most
         // SUBSCRIBER_BUFFER = MAX_BATCH messages.
         drain(writer, streams, summary)?;
+    }
+    Ok(())
+}
+
+/// Sets `leaving` if `listener` has a [`wake::LEAVING`] notification pending (and consumes
+/// its pending notifications: the caller checks the stream's publishers, which drains it).
+fn take_leaving(listener: Option<&Listener<ipc::Service>>, leaving: &Cell<bool>) -> Result<()> {
+    if let Some(listener) = listener {
+        listener
+            .try_wait(|a| {
+                if a.id == wake::LEAVING {
+                    leaving.set(true);
+                }
+            })
+            .map_err(|e| anyhow::anyhow!("cannot read a listener: {e:?}"))?;
     }
     Ok(())
 }
@@ -678,6 +742,20 @@ mod tests {
         assert_eq!((back.from_seq, back.to_seq), (Some(7), Some(7)));
         assert_eq!(t.publishers(1, 7), None);
         assert_eq!(t.observe(8, false, 8), vec![], "already reported back");
+    }
+
+    /// A publisher that announced its departure is stopped, not lost; the next one is a start,
+    /// and a later departure without an announcement is a loss again.
+    #[test]
+    fn an_announced_departure_is_no_loss() {
+        let mut t = SeqTracker::new(service::RAW);
+        assert_eq!(t.publishers(1, 1), None);
+        t.observe(7, false, 2);
+        t.leaving();
+        assert_eq!(t.publishers(1, 3), None, "announced, port not yet released");
+        assert_eq!(t.publishers(0, 4), None, "a clean stop");
+        assert_eq!(t.publishers(1, 5), None, "a start, not a return");
+        assert_eq!(t.publishers(0, 6).unwrap().kind, EventKind::PublisherLost);
     }
 
     /// A restarted stage's first message arrives before the publisher check notices it: the

@@ -23,8 +23,9 @@ fn events_in(path: &std::path::Path) -> Vec<RecorderEvent> {
 }
 
 /// A CSV replayed with `mems-replay --max` arrives in the recording complete and bit-exact
-/// (but for `acquired_ns`, the publish time), with no gap; the replay's exit is recorded as a
-/// lost publisher, and SIGTERM finishes the file with its summary.
+/// (but for `acquired_ns`, the publish time), with no gap; the replay's clean exit (its
+/// publisher announces that it leaves) is no lost publisher, and SIGTERM finishes the file with
+/// its summary.
 #[test]
 fn csv_replayed_at_max_speed_is_recorded_bit_exact() {
     let ns = namespace("roundtrip");
@@ -56,11 +57,10 @@ fn csv_replayed_at_max_speed_is_recorded_bit_exact() {
     let after_ns = monotonic_ns();
     assert!(status.success(), "mems-replay failed: {stdout}");
     assert!(stdout.contains("sent 8000 of 8000 samples"), "{stdout}");
-    wait_until(
-        WAIT,
-        "all samples and the lost publisher in the file",
-        || raw_in(&mcap) == 8000 && !events_in(&mcap).is_empty(),
-    );
+    wait_until(WAIT, "all samples in the file", || raw_in(&mcap) == 8000);
+    // Five publisher checks after the replay left: a loss would be in the file by now (a slow
+    // machine can only make this pass without a check, never fail).
+    std::thread::sleep(5 * mems_record::PUBLISHER_CHECK_PERIOD);
     recorder.signal(libc::SIGTERM);
     let (status, stdout) = recorder.wait(WAIT);
     assert!(status.success(), "mems-record failed: {stdout}");
@@ -81,17 +81,7 @@ fn csv_replayed_at_max_speed_is_recorded_bit_exact() {
         acquired[0] > before_ns && acquired[7999] < after_ns,
         "stamped at publication"
     );
-    assert_eq!(
-        contents.events,
-        [RecorderEvent {
-            kind: EventKind::PublisherLost,
-            service: service::RAW.into(),
-            from_seq: Some(7999),
-            to_seq: Some(7999),
-            t_ns: contents.events[0].t_ns,
-        }]
-    );
-    assert!(contents.events[0].t_ns > acquired[7999]);
+    assert_eq!(contents.events, [], "a clean stop is no loss");
 
     // log_time is the receive time (after publication), publish_time the sample time, both
     // shifted to Unix time by the clock in the file's metadata.

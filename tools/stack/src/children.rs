@@ -153,7 +153,10 @@ mod tests {
         let detector = |args: &[&str]| detector_args(&Cli::parse_args(args));
         // 4 kHz is accelerometer-only: the accelerometer GLRT.
         let at_4k = detector(&["--rate", "4000"]);
-        assert_eq!(at_4k, vec!["--detector".to_string(), "glrt-accel".to_string()]);
+        assert_eq!(
+            at_4k,
+            vec!["--detector".to_string(), "glrt-accel".to_string()]
+        );
         let at_1k = detector(&["--rate", "1000"]);
         assert_eq!(at_1k, vec!["--detector".to_string(), "glrt".to_string()]);
         let asked = detector(&["--rate", "4000", "--detector", "yu"]);
