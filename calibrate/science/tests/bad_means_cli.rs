@@ -38,7 +38,7 @@ fn an_absurd_mean_stops_the_fit_naming_file_line_and_column() {
         Command::new(env!("CARGO_BIN_EXE_mems-calibrate-offline"))
             .args(["fit", "--input"])
             .arg(&means)
-            .args(["--model", "full", "--out"])
+            .args(["--model", "full", "--force", "--out"])
             .arg(dir.join("fit.toml"))
             .output()
             .unwrap()

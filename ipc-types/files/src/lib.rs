@@ -99,10 +99,7 @@ impl Output {
         existing: Existing,
     ) -> Result<Self, Error> {
         let path = path.as_ref();
-        if existing == Existing::Refuse {
-            refuse_existing(path, flag)?;
-        }
-        let (dir, prefix) = beside(path, flag)?;
+        let (dir, prefix) = staging(path, flag, existing)?;
         let temp = tempfile::Builder::new()
             .prefix(&prefix)
             .suffix(".partial")
@@ -166,10 +163,7 @@ impl OutputPath {
         existing: Existing,
     ) -> Result<Self, Error> {
         let path = path.as_ref();
-        if existing == Existing::Refuse {
-            refuse_existing(path, flag)?;
-        }
-        let (parent, prefix) = beside(path, flag)?;
+        let (parent, prefix) = staging(path, flag, existing)?;
         let dir = tempfile::Builder::new()
             .prefix(&prefix)
             .suffix(".partial")
@@ -217,6 +211,19 @@ fn renamed_error(path: &Path, flag: Option<&'static str>, io: io::Error) -> Erro
         io::ErrorKind::AlreadyExists => Error::exists(path, flag),
         _ => Error::new(path, flag, io),
     }
+}
+
+/// Refuses an existing `path` unless `existing` replaces it; then where its temporary file
+/// goes and the prefix of its name (as [`beside`]).
+fn staging<'a>(
+    path: &'a Path,
+    flag: Option<&'static str>,
+    existing: Existing,
+) -> Result<(&'a Path, std::ffi::OsString), Error> {
+    if existing == Existing::Refuse {
+        refuse_existing(path, flag)?;
+    }
+    beside(path, flag)
 }
 
 /// The directory of output `path` and the prefix of a temporary name beside it
