@@ -206,7 +206,8 @@ fn sigkilled_recorder_loses_at_most_100_ms() {
 }
 
 /// A publisher killed with SIGKILL and replaced by one further along the sequence shows in the
-/// recording as: publisher lost, publisher back, and the gap of the numbers never sent.
+/// recording as: publisher lost, publisher back, and the gap of the numbers never sent; the
+/// second one's clean end is no loss.
 #[test]
 fn sigkilled_publisher_shows_as_lost_back_and_gap() {
     let ns = namespace("gap");
@@ -249,6 +250,8 @@ fn sigkilled_publisher_shows_as_lost_back_and_gap() {
             .iter()
             .any(|e| e.kind == EventKind::PublisherLost)
     });
+    // The first replay is dead: what it delivered is all in the file.
+    let delivered = raw_in(&mcap);
     let replay = spawn(
         &replay_bin,
         &[
@@ -262,12 +265,9 @@ fn sigkilled_publisher_shows_as_lost_back_and_gap() {
     );
     let (status, stdout) = replay.wait(WAIT);
     assert!(status.success(), "second mems-replay failed: {stdout}");
-    wait_until(WAIT, "the second replay's end noticed", || {
-        events_in(&mcap)
-            .iter()
-            .filter(|e| e.kind == EventKind::PublisherLost)
-            .count()
-            == 2
+    // The second replay ends cleanly and announces its departure: no loss is recorded for it.
+    wait_until(WAIT, "the second replay's samples", || {
+        raw_in(&mcap) >= delivered + 400
     });
     recorder.signal(libc::SIGINT);
     let (status, stdout) = recorder.wait(WAIT);
@@ -293,7 +293,6 @@ fn sigkilled_publisher_shows_as_lost_back_and_gap() {
             (EventKind::PublisherLost, Some(k), Some(k)),
             (EventKind::PublisherBack, Some(k), Some(k)),
             (EventKind::Gap, Some(k + 1), Some(5999)),
-            (EventKind::PublisherLost, Some(6399), Some(6399)),
         ]
     );
     assert!(contents.events.iter().all(|e| e.service == service::RAW));
