@@ -236,12 +236,6 @@ impl GlrtRule {
             inv_rho[i + 3] = 1.0 / r.gyro_correlation[i];
         }
         let pool = Pool::new(r, learned, config.false_alarm);
-        // The learned mean's own noise, per axis on average.
-        let learned_n = (r.batches * BATCH_LEN) as f64;
-        let across_var = (0..3)
-            .map(|i| 1.0 / (learned_n * inv_var[i] * inv_rho[i]))
-            .sum::<f64>()
-            / 3.0;
         let mut rule = Self {
             statistic: config.statistic,
             channels,
@@ -250,12 +244,10 @@ impl GlrtRule {
             inv_rho,
             dof_factor,
             drift_var,
-            across_var,
+            across_var: 0.0,
             moving_s: 0.0,
             turned_rad: Vector3::zeros(),
-            bias_sigma_rps: (3..6)
-                .map(|c| (1.0 / (learned_n * inv_var[c] * inv_rho[c])).sqrt())
-                .fold(0.0, f64::max),
+            bias_sigma_rps: 0.0,
             turn_error: config.turn_error,
             rest_run: 0,
             mean_quantile: 0.0,
@@ -270,8 +262,25 @@ impl GlrtRule {
             head: 0,
             filled: 0,
         };
+        // The learned means' own noise: the gravity reference's across gravity (per axis on
+        // average) and the gyroscope bias reference's (largest axis).
+        let learned_n = (r.batches * BATCH_LEN) as f64;
+        rule.across_var = (0..3).map(|c| rule.mean_var(c, learned_n)).sum::<f64>() / 3.0;
+        rule.bias_sigma_rps = (3..6)
+            .map(|c| rule.mean_var(c, learned_n).sqrt())
+            .fold(0.0, f64::max);
         rule.set_quantiles();
         rule
+    }
+
+    /// Variance at rest of a mean of `n` samples of channel `c` (its noise and correlation).
+    fn mean_var(&self, c: usize, n: f64) -> f64 {
+        1.0 / (n * self.inv_var[c] * self.inv_rho[c])
+    }
+
+    /// The gravity reference where the body is now, m/s^2, sensor frame.
+    fn gravity(&self) -> Vector3<f64> {
+        Vector3::new(self.reference[0], self.reference[1], self.reference[2])
     }
 
     /// The three quantiles for the window and the pooled noise's degrees of freedom.
@@ -304,30 +313,31 @@ impl GlrtRule {
         self.combined_quantile = quantile(dof * k * BATCH_LEN as f64, sigma_dof, a);
     }
 
-    /// Pools a rest batch's within-batch scatter into the noise levels, when the rest has held
-    /// for two windows (a false rest at a motion's start or end is short, and its vibration
-    /// must not loosen the test); once the pooled degrees of freedom have doubled since the
+    /// Pools the rest batch just decided (the window's newest) into the noise levels, when the
+    /// rest has held for two windows (a false rest at a motion's start or end is short, and its
+    /// vibration must not loosen the test); once the pooled degrees of freedom have doubled since the
     /// last refit, the sigmas (at least the floor they were installed with) and the quantiles
     /// are set from the pool. The mean's variance per sample, `rho sigma^2`, is kept as
     /// learned.
-    fn pool_rest(&mut self, accel: &WindowStats, gyro: &WindowStats) {
-        if self.rest_run < 2 * self.ring.len() {
+    fn pool_rest(&mut self) {
+        let k = self.ring.len();
+        if self.rest_run < 2 * k {
             return;
         }
-        let n = accel.n as f64;
-        for i in 0..3 {
-            self.pool.ss[i] += accel.std[i] * accel.std[i] * (n - 1.0);
-            self.pool.ss[i + 3] += gyro.std[i] * gyro.std[i] * (n - 1.0);
+        // The batch just decided, as `decide` put it in the window.
+        let newest = self.ring[(self.head + k - 1) % k];
+        for (pooled, ss) in self.pool.ss.iter_mut().zip(&newest.ss) {
+            *pooled += ss;
         }
         for d in &mut self.pool.ss_dof {
-            *d += n - 1.0;
+            *d += newest.n - 1.0;
         }
         if self.pool.ss_dof[0] < self.pool.refit_at || self.pool.refit_at > MAX_POOLED_DOF {
             return;
         }
         self.pool.refit_at *= 2.0;
         for c in 0..6 {
-            let mean_var = 1.0 / (self.inv_var[c] * self.inv_rho[c]);
+            let mean_var = self.mean_var(c, 1.0);
             let var = (self.pool.ss[c] / self.pool.ss_dof[c]).max(self.pool.floor_var[c]);
             self.inv_var[c] = 1.0 / var;
             self.inv_rho[c] = (var / mean_var).min(1.0);
@@ -362,11 +372,9 @@ impl GlrtRule {
         self.moving_s += dt;
         // The turn's own noise (the batch means' noise over the batch: an angle random walk)
         // adds to the reference's uncertainty across gravity, at rest too.
-        let g2 = (0..3)
-            .map(|i| self.reference[i] * self.reference[i])
-            .sum::<f64>();
+        let g2 = self.gravity().norm_squared();
         let mean_var = (3..6)
-            .map(|c| 1.0 / (gyro.n as f64 * self.inv_var[c] * self.inv_rho[c]))
+            .map(|c| self.mean_var(c, gyro.n as f64))
             .fold(0.0, f64::max);
         self.across_var += g2 * mean_var * dt * dt;
         let omega = Vector3::from_fn(|i, _| gyro.mean[i] - self.reference[i + 3]);
@@ -375,7 +383,7 @@ impl GlrtRule {
             // The body turns by exp(omega dt); a vector fixed in the world turns the other way
             // in the body's frame.
             let turn = Rotation3::new(-omega * dt);
-            let g = turn * Vector3::new(self.reference[0], self.reference[1], self.reference[2]);
+            let g = turn * self.gravity();
             self.reference[..3].copy_from_slice(g.as_slice());
         }
     }
@@ -384,7 +392,7 @@ impl GlrtRule {
     /// rests left, and the turn the gyroscope's bias error (the bias reference's own noise
     /// over the learned rest) and its scale and cross-axis errors add since.
     fn across_var_now(&self) -> f64 {
-        let g = Vector3::new(self.reference[0], self.reference[1], self.reference[2]).norm();
+        let g = self.gravity().norm();
         let drift =
             g * (self.bias_sigma_rps * self.moving_s + self.turn_error * self.turned_rad.norm());
         self.across_var + drift * drift
@@ -413,9 +421,7 @@ impl GlrtRule {
         }
         // The window mean's variance about each reference: its own noise plus the reference's
         // drift since it was learned.
-        let var: [f64; 6] = std::array::from_fn(|c| {
-            1.0 / (n * self.inv_var[c] * self.inv_rho[c]) + self.drift_var[c]
-        });
+        let var: [f64; 6] = std::array::from_fn(|c| self.mean_var(c, n) + self.drift_var[c]);
         let mut t_mean = self.accel_mean_statistic(&mean, &var);
         let mut t_scatter = 0.0;
         for c in 0..self.channels {
@@ -445,7 +451,7 @@ impl GlrtRule {
     /// from the gravity reference along it, against the mean's noise `var` (per axis), and
     /// across it, against that noise plus the reference's own uncertainty across gravity.
     fn accel_mean_statistic(&self, mean: &[f64; 6], var: &[f64; 6]) -> f64 {
-        let reference = Vector3::new(self.reference[0], self.reference[1], self.reference[2]);
+        let reference = self.gravity();
         let u = reference.normalize();
         let d = Vector3::new(mean[0], mean[1], mean[2]) - reference;
         let along = d.dot(&u);
@@ -459,12 +465,12 @@ impl GlrtRule {
     /// gravity's magnitude as running means of gain `gain`, gravity's direction with the gain
     /// of a Kalman update on what the gyroscope left uncertain (at least `gain`).
     pub fn update(&mut self, accel: &WindowStats, gyro: &WindowStats, gain: f64) {
-        let reference = Vector3::new(self.reference[0], self.reference[1], self.reference[2]);
+        let reference = self.gravity();
         let u = reference.normalize();
         let d = Vector3::from_fn(|i, _| accel.mean[i] - reference[i]);
         let along = u * d.dot(&u);
         let batch_var = (0..3)
-            .map(|i| 1.0 / (accel.n as f64 * self.inv_var[i] * self.inv_rho[i]))
+            .map(|i| self.mean_var(i, accel.n as f64))
             .sum::<f64>()
             / 3.0;
         let prior = self.across_var_now();
@@ -477,7 +483,7 @@ impl GlrtRule {
         for i in 3..6 {
             self.reference[i] += gain * (gyro.mean[i - 3] - self.reference[i]);
         }
-        self.pool_rest(accel, gyro);
+        self.pool_rest();
     }
 
     /// Gives the window's storage back (for the next session).
