@@ -80,8 +80,9 @@ pub struct LearnConfig {
 }
 
 impl LearnConfig {
-    /// Defaults: 5 s (at least two batches at any rate), 5% of gravity (a calibrated sensor is within 0.5%), correlation 3 (white
-    /// noise gives 1 +- 0.1 over 250 batches), batch-mean correlation 0.35, noise ratio 1.5.
+    /// Defaults: 5 s (at least two batches at any rate), 5% of gravity (a calibrated sensor is
+    /// within 0.5%), correlation 3 (white noise gives 1 +- 0.1 over 250 batches), batch-mean
+    /// correlation 0.35, noise ratio 1.5.
     pub fn new(gravity_mps2: f64) -> Self {
         Self {
             duration_s: 5.0,
