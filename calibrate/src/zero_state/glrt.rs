@@ -315,10 +315,10 @@ impl GlrtRule {
 
     /// Pools the rest batch just decided (the window's newest) into the noise levels, when the
     /// rest has held for two windows (a false rest at a motion's start or end is short, and its
-    /// vibration must not loosen the test); once the pooled degrees of freedom have doubled since the
-    /// last refit, the sigmas (at least the floor they were installed with) and the quantiles
-    /// are set from the pool. The mean's variance per sample, `rho sigma^2`, is kept as
-    /// learned.
+    /// vibration must not loosen the test); once the pooled degrees of freedom have doubled
+    /// since the last refit, the sigmas (at least the floor they were installed with) and the
+    /// quantiles are set from the pool. The mean's variance per sample, `rho sigma^2`, is kept
+    /// as learned.
     fn pool_rest(&mut self) {
         let k = self.ring.len();
         if self.rest_run < 2 * k {

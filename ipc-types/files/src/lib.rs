@@ -288,7 +288,8 @@ pub fn create_new(path: impl AsRef<Path>, flag: Option<&'static str>) -> Result<
 }
 
 /// A new private temporary directory under `$TMPDIR`, named `prefix` and random characters
-/// (0700, set explicitly: `tempfile` leaves a directory's mode to the umask; removed with everything in it when dropped, unless kept with [`TempDir::keep`]).
+/// (0700, set explicitly: `tempfile` leaves a directory's mode to the umask; removed with
+/// everything in it when dropped, unless kept with [`TempDir::keep`]).
 pub fn private_dir(prefix: &str) -> Result<TempDir, Error> {
     tempfile::Builder::new()
         .prefix(prefix)
