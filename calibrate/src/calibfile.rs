@@ -20,31 +20,15 @@ mod tests;
 
 use std::path::Path;
 
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+pub use crate::gravity::{GRAVITY_RANGE_MPS2, check_gravity};
 use crate::model::{AccelModel, ModelKind, N_PARAMS, PARAM_NAMES, ParamCovariance};
+use crate::terms::{ReadingTerms, TermsError};
 
 /// Format version written by this code.
 pub const FORMAT_VERSION: u32 = 1;
-
-/// The local gravity a file may state, m/s^2: every place on the Earth's surface. Normal
-/// gravity at sea level runs from 9.7803 (equator) to 9.8322 (poles) (WGS 84, Somigliana's
-/// formula) and falls by 3.1e-6 m/s^2 per metre of height; the lowest surface value, on the
-/// summit of Huascaran (6768 m, 9 deg S), is 9.7639 and the highest, on the Arctic Ocean, 9.8337.
-/// A value outside is a typo or a damaged file (1e6, 9.81e3 in mm/s^2, 1.0 in g).
-pub const GRAVITY_RANGE_MPS2: (f64, f64) = (9.76, 9.84);
-
-/// Checks that `value` (a local gravity, m/s^2) is within [`GRAVITY_RANGE_MPS2`]; the error
-/// says what is wrong with the value, for the caller to name where it came from.
-pub fn check_gravity(value: f64) -> Result<(), String> {
-    let (lo, hi) = GRAVITY_RANGE_MPS2;
-    if value >= lo && value <= hi {
-        return Ok(());
-    }
-    Err(format!(
-        "{value:?} m/s^2 is not the gravity of any place on Earth ({lo} to {hi} m/s^2)"
-    ))
-}
 
 /// Where the parse error at byte `span` of `text` is: `line L of [table]` (the last table
 /// header before it), or `line L` at the top level.
@@ -587,7 +571,7 @@ impl CalibrationFile {
         file.check_layout().map_err(invalid)?;
         file.accel_model().map_err(|e| invalid(e.to_string()))?;
         file.check_terms_finite().map_err(invalid)?;
-        crate::terms::ReadingTerms::from_file(&file).map_err(|e| invalid(e.to_string()))?;
+        ReadingTerms::from_file(&file).map_err(|e| invalid(e.to_string()))?;
         file.check_plausible().map_err(invalid)?;
         if let Some(noise) = &file.noise {
             noise
@@ -595,5 +579,49 @@ impl CalibrationFile {
                 .map_err(|e| invalid(format!("noise.{}: {}", e.field, e.problem)))?;
         }
         Ok(file)
+    }
+}
+
+impl ReadingTerms {
+    /// The terms of a calibration file, checking that the parts of each term come together
+    /// (a temperature term with its `reference_c`, the drift with `drift_max_s`, the warm-up
+    /// with a positive time constant).
+    pub fn from_file(file: &CalibrationFile) -> Result<Self, TermsError> {
+        let t = &file.temperature;
+        let any_temperature = t.bias_g_per_c.is_some() || t.scale_per_c.is_some();
+        if any_temperature != t.reference_c.is_some() {
+            return Err(TermsError(
+                "temperature: bias_g_per_c or scale_per_c and reference_c must be given together"
+                    .into(),
+            ));
+        }
+        let time = &file.time;
+        let drift = match (time.drift_g_per_s, time.drift_max_s) {
+            (None, None) => None,
+            (Some(r), Some(t_max)) if t_max > 0.0 => Some((Vector3::from(r), t_max)),
+            _ => {
+                return Err(TermsError(
+                    "time: drift_g_per_s and drift_max_s (> 0 s) must be given together".into(),
+                ));
+            }
+        };
+        let warm_up = match (time.warm_up_g, time.warm_up_time_constant_s) {
+            (None, None) => None,
+            (Some(w), Some(tau)) if tau > 0.0 => Some((Vector3::from(w), tau)),
+            _ => {
+                return Err(TermsError(
+                    "time: warm_up_g and warm_up_time_constant_s (> 0 s) must be given together"
+                        .into(),
+                ));
+            }
+        };
+        Ok(Self {
+            reference_c: t.reference_c,
+            temp_bias_g_per_c: t.bias_g_per_c.map(Vector3::from),
+            temp_scale_per_c: t.scale_per_c.map(Vector3::from),
+            drift,
+            warm_up,
+            quadratic_g_per_g2: file.nonlinearity.quadratic_g_per_g2.map(Vector3::from),
+        })
     }
 }

@@ -59,6 +59,7 @@ pub mod scan;
 mod tests;
 mod writer;
 
+pub use crate::error::Truncation;
 pub use checks::RawChecks;
 pub use codec::events::{EVENTS_TOPIC, EventKind, RecorderEvent};
 pub use codec::pose::{
@@ -67,7 +68,7 @@ pub use codec::pose::{
 };
 pub use codec::{MessageEncoding, TRUTH_TOPIC, Topic};
 pub use contents::{Contents, last_seqs, read_all};
-pub use reader::{Messages, Reader, Recorded, SegmentRead, Truncation, has_magic};
+pub use reader::{Messages, Reader, Recorded, SegmentRead, has_magic};
 pub use writer::{
     COMPACT_CHUNK_BYTES, COMPACT_LEVEL, Channel, FoxgloveChannel, Writer, compacting_path,
     remove_stale_copy,

@@ -9,10 +9,10 @@ use super::checks::RawChecks;
 use super::codec::Topic;
 use super::codec::events::RecorderEvent;
 use super::codec::pose::PoseInFrame;
-use super::reader::{Reader, SegmentRead, Truncation};
+use super::reader::{Reader, SegmentRead};
 use super::run::continues_run;
 use super::scan;
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, ErrorKind, Result, Truncation};
 use crate::{Format, Recording, Truth};
 
 /// Everything [`read_all`] found in a file.

@@ -1,7 +1,6 @@
 //! The MCAP reader of one file: its messages in file order, up to a truncation, past damaged
 //! records.
 
-use std::fmt;
 use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -10,26 +9,7 @@ use ::mcap::MAGIC;
 
 use super::codec::{MessageEncoding, Topic};
 use super::scan;
-use crate::error::{Error, ErrorKind, Result};
-
-/// Where a truncated or damaged MCAP file stops being readable.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Truncation {
-    /// Complete messages read before the cut (all topics).
-    pub messages_read: u64,
-    /// What the MCAP reader found at the cut.
-    pub reason: String,
-}
-
-impl fmt::Display for Truncation {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "the file ends early or is damaged after {} complete messages ({})",
-            self.messages_read, self.reason
-        )
-    }
-}
+use crate::error::{Error, ErrorKind, Result, Truncation};
 
 /// Whether the file starts with the MCAP magic bytes.
 pub fn has_magic(path: &Path) -> Result<bool> {

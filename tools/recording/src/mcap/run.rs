@@ -17,11 +17,11 @@ use ipc_types::{RawImuSample, RobotHint};
 use super::checks::RawChecks;
 use super::codec::events::{EventKind, RecorderEvent};
 use super::codec::{MessageEncoding, Topic};
-use super::reader::{SegmentRead, Truncation, decode_as};
+use super::reader::{SegmentRead, decode_as};
 use super::scan::{ChannelInfo, Scanner};
 use crate::Truth;
 use crate::clock::WallClock;
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, ErrorKind, Result, Truncation};
 
 /// One message of a run, borrowed from the reader until its next message.
 #[derive(Debug)]
