@@ -81,8 +81,7 @@ impl Summary {
             .collect();
         tracing::info!(
             "published {} samples in {:.1} s; reads {}, failed {}, overflows {}, \
-             gaps {}, lost {}, bus errors {}, re-inits {}; discarded for stalled subscribers {}{}; \
-             small-block pool: peak {} of {N} blocks, {} requests found it empty",
+             gaps {}, lost {}, bus errors {}, re-inits {}; discarded for stalled subscribers {}{}; {}",
             stats.published,
             self.elapsed.as_secs_f64(),
             stats.reads,
@@ -98,8 +97,7 @@ impl Summary {
             } else {
                 format!(" ({})", per_subscriber.join(", "))
             },
-            pool.peak_blocks(),
-            pool.fallbacks()
+            pool.summary()
         );
     }
 }
