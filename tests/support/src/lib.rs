@@ -31,7 +31,7 @@ pub fn shared_data(relative: &str) -> Option<PathBuf> {
         path.display()
     );
     assert!(!in_ci(), "{message}: CI is set, so tests that need it fail");
-    eprintln!("SKIPPED: {message}; set CI=1 to make this a failure");
+    eprintln!("SKIPPED: {message}; CI=true makes this a failure");
     None
 }
 
