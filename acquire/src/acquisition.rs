@@ -304,7 +304,10 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
         };
         if let Some(resume) = self.resume.take() {
             let first = &mut self.buffer[0];
-            let period_ns = self.driver.config().map_or(1e6, |c| 1e9 / c.output_rate_hz());
+            let period_ns = self
+                .driver
+                .config()
+                .map_or(1e6, |c| 1e9 / c.output_rate_hz());
             let hole_ns = first.stamps.sample_ns.saturating_sub(resume.last_sample_ns);
             let lost = ((hole_ns as f64 / period_ns).round() as u64).saturating_sub(1);
             let lost_before = u64::from(first.lost_before) + lost;

@@ -85,7 +85,11 @@ fn a_restart_continues_the_session_with_a_counted_hole() {
         second.windows(2).all(|w| w[1].seq == w[0].seq + 1),
         "numbered on"
     );
-    assert!(second[1..].iter().all(|s| s.flags & raw_flags::RESUMED == 0));
+    assert!(
+        second[1..]
+            .iter()
+            .all(|s| s.flags & raw_flags::RESUMED == 0)
+    );
     // The ramp went on in wall time: 0.01 g/s, so the first sample after the hole is about
     // 0.01 g/s x the hole above the last one before it (the simulation did not start again).
     let rise_g = s.accel_g[0] - last.accel_g[0];

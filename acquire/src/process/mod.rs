@@ -4,6 +4,7 @@
 //! ([`Publish`]) and its summary ([`Summary`]).
 
 mod publish;
+mod reads;
 mod summary;
 
 pub use publish::Publish;
@@ -21,8 +22,8 @@ use nalgebra::UnitQuaternion;
 
 use crate::acquisition::SourceSpec;
 use crate::clock::{MonotonicClock, SimClock};
-use crate::session::Session;
 use crate::driver::{self, Mpu9250};
+use crate::session::Session;
 use crate::sim::{SimConfig, SimMpu9250};
 use crate::spi::SpiRegisters;
 

@@ -1,9 +1,10 @@
-//! The publishing loop of `mems-acquire`: FIFO reads on an absolute schedule, every sample
-//! published on `mems/imu/raw`, until the duration is over or SIGINT/SIGTERM arrives.
+//! The publishing of `mems-acquire`: its service and publisher opened, the sensor session
+//! placed, then FIFO reads on an absolute schedule run by the source driver
+//! (`mems_stage::source::produce`, see `super::reads`), every sample published on
+//! `mems/imu/raw`, until the duration is over or SIGINT/SIGTERM arrives.
 
-use std::convert::Infallible;
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use alloc_count::pool::BlockPool;
 use anyhow::Result;
@@ -11,6 +12,7 @@ use embedded_hal::i2c::I2c;
 use ipc_types::wake::Output;
 use ipc_types::{RawImuSample, service};
 
+use super::reads::{RawOut, Reads};
 use super::{SimPart, Summary};
 use crate::acquisition::{Acquisition, SourceSpec, fifo_fill_ns};
 use crate::clock::Clock;
@@ -77,9 +79,9 @@ impl<const N: usize> Publish<'_, N> {
         let stall_wait = Duration::from_nanos(fifo_fill_ns(&self.config) / 8);
         let (publisher, undelivered) = service::publisher_waiting_at_most(&raw, stall_wait)?;
         // Wakes the subscribers after a read's first sample and after its last.
-        let mut out = Output::with_publisher(&node, publisher, &name)?;
+        let out = Output::with_publisher(&node, publisher, &name)?;
 
-        let mut acq = Acquisition::start(driver, clock, self.config, self.read_interval_ns)
+        let acq = Acquisition::start(driver, clock, self.config, self.read_interval_ns)
             .map_err(|e| anyhow::anyhow!("{e}"))?
             .in_session(session);
         tracing::info!(
@@ -89,34 +91,13 @@ impl<const N: usize> Publish<'_, N> {
             self.config.output_rate_hz(),
             self.read_interval_ns as f64 * 1e-6
         );
-        let start = Instant::now();
-        let deadline = self.duration_s.map(Duration::from_secs_f64);
+        let mut reads = Reads::new(acq, self.duration_s.map(Duration::from_secs_f64));
+        let mut sink = RawOut { out, undelivered };
         // Start-up is over: from here on small blocks come from the pool.
         self.pool.arm();
-        loop {
-            // An absolute-deadline sleep (a relative one would add any preemption between
-            // reading the clock and sleeping); then SIGINT/SIGTERM ends the loop: the clean way
-            // out.
-            acq.clock().sleep_until(acq.next_read_ns());
-            if ipc_types::stop::requested() {
-                break;
-            }
-            let Ok(read) = acq.read_and_publish(&mut |s| {
-                out.send(RawImuSample {
-                    undelivered: u32::try_from(undelivered.total()).unwrap_or(u32::MAX),
-                    ..*s
-                });
-                Ok::<_, Infallible>(())
-            });
-            out.end_of_input()?;
-            if let Err(e) = read {
-                tracing::warn!("read failed, device re-initialising: {e}");
-            }
-            if deadline.is_some_and(|d| start.elapsed() >= d) {
-                break;
-            }
-        }
-        Summary::of(&acq, &undelivered, start.elapsed()).log(self.pool);
+        mems_stage::source::produce::<_, _, anyhow::Error>(&mut reads, &mut sink)?;
+        let elapsed = reads.start.elapsed();
+        Summary::of(&reads.acq, &sink.undelivered, elapsed).log(self.pool);
         Ok(())
     }
 }
