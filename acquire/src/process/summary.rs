@@ -74,6 +74,12 @@ impl Summary {
                 driver.pair_mismatches
             );
         }
+        if let Some((seq, lost)) = stats.resumed {
+            tracing::info!(
+                "continued the sensor session from seq {seq}: {lost} samples not read while no \
+                 acquisition ran"
+            );
+        }
         let per_subscriber: Vec<String> = self
             .per_subscriber
             .iter()

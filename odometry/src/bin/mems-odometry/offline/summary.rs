@@ -17,12 +17,13 @@ use ipc_types::{OdometryState, odometry_flags};
 use mems_stage::Chain;
 use mems_stage::offline::Stop;
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
+use odometry::arrival::HINT_WINDOW_NS;
 use odometry::session::OdometrySession;
 use recording::mcap::SegmentRead;
 use recording::{LogRepairs, Truth};
 use serde_json::json;
 
-use super::source::{HINT_WINDOW_NS, Inputs, Source};
+use super::source::{Feed, Source};
 
 /// The offline chain: the calibration stage, then the odometry session.
 pub type OfflineChain = Chain<CalibrationStage, OdometrySession>;
@@ -252,14 +253,14 @@ pub struct Read<'a> {
 }
 
 impl<'a> Read<'a> {
-    /// What `inputs` read of `input` (with the text reader's `repairs`), and the rest the
+    /// What `feed` read of `input` (with the text reader's `repairs`), and the rest the
     /// odometry aligns on, `align_s`.
-    pub fn new(input: &'a Path, inputs: &Inputs, repairs: LogRepairs, align_s: f64) -> Self {
+    pub fn new(input: &'a Path, feed: &Feed, repairs: LogRepairs, align_s: f64) -> Self {
         Self {
             input,
-            first_ns: inputs.first_ns,
-            hints_seen: inputs.hints_seen,
-            hints_late: inputs.hints_late,
+            first_ns: feed.first_ns,
+            hints_seen: feed.arrival.hints(),
+            hints_late: feed.arrival.late_hints(),
             repairs,
             align_s,
             segments: Vec::new(),
