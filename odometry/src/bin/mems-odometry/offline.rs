@@ -9,6 +9,7 @@
 
 mod source;
 mod summary;
+mod truth;
 
 use std::path::PathBuf;
 

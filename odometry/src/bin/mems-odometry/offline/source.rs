@@ -16,7 +16,7 @@ use recording::mcap::SegmentRead;
 use recording::mcap::run::{Item, RawRun};
 
 use super::OfflineArgs;
-use super::summary::TruthQueue;
+use super::truth::TruthQueue;
 use crate::out::Out;
 
 /// Items a reader thread sends at a time, and blocks in flight: what the streamed path holds
