@@ -9,6 +9,7 @@
 
 pub mod config;
 pub mod eskf;
+mod hindsight;
 pub mod hints;
 mod navigator;
 pub mod profile;

@@ -16,9 +16,10 @@ use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, odometry_flags, ra
 use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
 use mems_stage::Stage;
+use odometry::config::OdometryConfig;
 use odometry::hints::HintConfig;
 use odometry::session::{HINT_QUEUE, Input, NoGyro, OdometrySession, Refusal};
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::stage::OdometryStage;
 
 /// A 60 s drive with turns at 100 Hz (white samples), and its encoder hints.
 fn drive() -> (Vec<CorrectedImuSample>, Vec<RobotHint>) {
