@@ -87,44 +87,20 @@ pub use crate::hindsight::REPLAY_PER_CALL;
 use crate::hindsight::{Hindsight, Input};
 use crate::hints::{HintConfig, HintConfigError, HintError, HintStats, Ring, check_hint};
 use crate::navigator::Navigator;
+use ipc_types::stream::{self, Holes, SampleError, Step, TimeLine};
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, corrected_flags, limits, odometry_flags,
+    raw_flags,
 };
 use nalgebra::UnitQuaternion;
 
 /// Input the stage refuses; the message names the sample.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum OdometryError {
-    /// A sample's time is not after the previous one's.
-    #[error("sample seq {seq}: time {t_ns} ns is not after the previous sample's {prev_ns} ns")]
-    TimeNotIncreasing {
-        /// Sequence number of the offending sample.
-        seq: u64,
-        /// Its time.
-        t_ns: u64,
-        /// The previous sample's time.
-        prev_ns: u64,
-    },
-    /// A sample holds NaN or infinity.
-    #[error("sample seq {seq}: field {field} is not finite")]
-    NotFinite {
-        /// Sequence number of the offending sample.
-        seq: u64,
-        /// The field.
-        field: &'static str,
-    },
-    /// A sample holds a value no calibrated sensor produces.
-    #[error("sample seq {seq}: field {field} holds {value}, beyond the limit {limit}")]
-    OutOfRange {
-        /// Sequence number of the offending sample.
-        seq: u64,
-        /// The field.
-        field: &'static str,
-        /// The offending value, in the field's unit.
-        value: f64,
-        /// The limit of its magnitude.
-        limit: f64,
-    },
+    /// The stream contract refuses the sample ([`ipc_types::stream`]): a value not finite or
+    /// beyond the calibrated bounds, or a time not after the previous sample's.
+    #[error(transparent)]
+    Sample(#[from] SampleError),
     /// A sample's time is more than [`limits::MAX_STEP_S`] after the previous one's: no
     /// dead reckoning bridges it; the caller starts a new stage.
     #[error(
@@ -139,6 +115,24 @@ pub enum OdometryError {
         t_ns: u64,
         /// The previous sample's time.
         prev_ns: u64,
+    },
+    /// Nothing was observed for longer than the odometry bridges
+    /// ([`crate::eskf::Manoeuvre::bridge_limit_s`]): the heading after it is unknown.
+    #[error(
+        "sample seq {seq}: nothing observed for {:.3} s before it (time {t_ns} ns), longer \
+         than the {limit_s:.2} s the odometry bridges (then the heading is wholly unknown: \
+         pi over the manoeuvre's rotation rate)",
+        (*t_ns - *prev_ns) as f64 * 1e-9
+    )]
+    HoleBeyondBridge {
+        /// Sequence number of the sample after the hole.
+        seq: u64,
+        /// Its time.
+        t_ns: u64,
+        /// The previous sample's time.
+        prev_ns: u64,
+        /// The longest interval bridged, s.
+        limit_s: f64,
     },
 }
 
@@ -184,7 +178,12 @@ pub struct OdometryStage {
     /// unsettled (the settled navigator took it before them, the live one after), or
     /// `revisions` was full.
     out_of_step: bool,
-    last_ns: Option<u64>,
+    /// The stream's time line ([`ipc_types::stream`]).
+    time: TimeLine,
+    /// Holes in it: unmarked gaps, bridged as marked ones.
+    holes: Holes,
+    /// [`crate::eskf::Manoeuvre::bridge_limit_s`], ns.
+    bridge_ns: u64,
     revisions_emitted: u64,
 }
 
@@ -233,7 +232,9 @@ impl OdometryStage {
             },
             ahead,
             unsettled: Ring::new(UNSETTLED),
-            last_ns: None,
+            time: TimeLine::default(),
+            holes: Holes::default(),
+            bridge_ns: (cfg.manoeuvre.bridge_limit_s() * 1e9) as u64,
             revisions_emitted: 0,
         })
     }
@@ -268,6 +269,12 @@ impl OdometryStage {
     /// Whether alignment is done.
     pub fn aligned(&self) -> bool {
         self.ahead.aligned()
+    }
+
+    /// The holes in the time line so far (unmarked gaps, found here or marked
+    /// [`corrected_flags::HOLE_BEFORE`] by the calibration stage), each bridged as a gap.
+    pub fn holes(&self) -> Holes {
+        self.holes
     }
 
     /// Number of republished (revised) states so far.
@@ -310,9 +317,9 @@ impl OdometryStage {
         s: &CorrectedImuSample,
         emit: &mut impl FnMut(&OdometryState),
     ) -> Result<(), OdometryError> {
-        check_finite(s)?;
-        self.check_time(s)?;
-        self.last_ns = Some(s.stamps.sample_ns);
+        stream::check_corrected(s)?;
+        let s = &self.check_time(s)?;
+        self.time.accept(s.stamps.sample_ns);
         let mut budget = REPLAY_PER_CALL;
         let budget = &mut budget;
         let state = self.navigate_ahead(s);
@@ -337,30 +344,38 @@ impl OdometryStage {
         Ok(())
     }
 
-    /// Refuses a sample whose time does not increase, or jumps by more than
-    /// [`limits::MAX_STEP_NS`].
+    /// Refuses a sample whose time does not increase, jumps by more than
+    /// [`limits::MAX_STEP_NS`] or follows a hole longer than the odometry bridges; returns the
+    /// sample, marked as a gap after an unmarked hole in the time line (counted).
     #[inline]
-    fn check_time(&self, s: &CorrectedImuSample) -> Result<(), OdometryError> {
+    fn check_time(&mut self, s: &CorrectedImuSample) -> Result<CorrectedImuSample, OdometryError> {
         let t_ns = s.stamps.sample_ns;
-        if let Some(prev_ns) = self.last_ns
-            && t_ns <= prev_ns
-        {
-            return Err(OdometryError::TimeNotIncreasing {
-                seq: s.seq,
-                t_ns,
-                prev_ns,
-            });
-        }
-        if let Some(prev_ns) = self.last_ns
-            && t_ns > prev_ns.saturating_add(limits::MAX_STEP_NS)
-        {
+        stream::check_increasing(s.seq, t_ns, self.time.prev_ns())?;
+        let prev_ns = self.time.prev_ns().unwrap_or(t_ns);
+        if t_ns - prev_ns > limits::MAX_STEP_NS {
             return Err(OdometryError::TimeStep {
                 seq: s.seq,
                 t_ns,
                 prev_ns,
             });
         }
-        Ok(())
+        let marked = s.raw_flags & raw_flags::GAP_BEFORE != 0;
+        if (marked || self.time.step(t_ns) != Step::Regular) && t_ns - prev_ns > self.bridge_ns {
+            return Err(OdometryError::HoleBeyondBridge {
+                seq: s.seq,
+                t_ns,
+                prev_ns,
+                limit_s: self.bridge_ns as f64 * 1e-9,
+            });
+        }
+        let mut s = *s;
+        let hole = matches!(self.time.step(t_ns), Step::Hole { .. });
+        if hole && !marked || s.flags & corrected_flags::HOLE_BEFORE != 0 {
+            s.raw_flags |= raw_flags::GAP_BEFORE;
+            s.flags |= corrected_flags::HOLE_BEFORE;
+            self.holes.record(s.seq, t_ns, t_ns - prev_ns);
+        }
+        Ok(s)
     }
 
     /// The live navigator's state for `s`. Its motion-end revisions come again, on settled
@@ -395,13 +410,12 @@ impl OdometryStage {
         emit: &mut impl FnMut(&OdometryState),
     ) {
         // Older samples than those `s` settles were cut from their batch: final as they are.
-        let settles = (s.settles as usize).min(self.unsettled.len());
-        const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
+        let settles = stream::settled_by(s, self.unsettled.len());
         let n = self.unsettled.len();
         let verdict_changed = (n - settles..n).any(|i| {
             self.unsettled
                 .oldest(i)
-                .is_some_and(|u| u.s.flags & VERDICT != s.flags & VERDICT)
+                .is_some_and(|u| u.s.flags & stream::VERDICT != s.flags & stream::VERDICT)
         });
         if verdict_changed || self.out_of_step {
             self.leave_step();
@@ -412,12 +426,7 @@ impl OdometryStage {
             diverged |= self.settle(&old, budget, emit);
         }
         while let Some(mut u) = self.unsettled.pop() {
-            let flags =
-                (u.s.flags & !(VERDICT | corrected_flags::PROVISIONAL)) | (s.flags & VERDICT);
-            diverged |= flags & VERDICT != u.s.flags & VERDICT;
-            u.s.flags = flags;
-            u.s.zs_mean_mps2 = s.zs_mean_mps2;
-            u.s.zs_std_mps2 = s.zs_std_mps2;
+            diverged |= stream::settle(&mut u.s, s);
             diverged |= self.settle(&u, budget, emit);
         }
         diverged |= self.settle(sample, budget, emit);
@@ -626,41 +635,6 @@ impl Settled {
     }
 }
 
-/// Largest calibrated specific force per axis, m/s^2: twice the raw bound
-/// ([`limits::ACCEL_LIMIT_G`]) in standard gravities, room for any plausible calibration's
-/// scale and bias (`calibrate::calibfile::plausibility`).
-pub const ACCEL_LIMIT_MPS2: f64 =
-    2.0 * limits::ACCEL_LIMIT_G * ipc_types::units::STANDARD_GRAVITY_MPS2;
-
-/// Largest calibrated angular rate per axis, rad/s: twice the raw bound
-/// ([`limits::GYRO_LIMIT_DPS`]), as for [`ACCEL_LIMIT_MPS2`].
-pub const GYRO_LIMIT_RPS: f64 = 2.0 * limits::GYRO_LIMIT_DPS * std::f64::consts::PI / 180.0;
-
-/// Checks the values the filter takes: finite, and within [`ACCEL_LIMIT_MPS2`] and
-/// [`GYRO_LIMIT_RPS`] (a value beyond them would drive the filter's state to infinity and NaN).
-fn check_finite(s: &CorrectedImuSample) -> Result<(), OdometryError> {
-    let fields: [(&'static str, &[f64], f64); 4] = [
-        ("accel_mps2", &s.accel_mps2, ACCEL_LIMIT_MPS2),
-        ("gyro_rps", &s.gyro_rps, GYRO_LIMIT_RPS),
-        ("zs_mean_mps2", &s.zs_mean_mps2, ACCEL_LIMIT_MPS2),
-        ("zs_std_mps2", &s.zs_std_mps2, ACCEL_LIMIT_MPS2),
-    ];
-    for (field, values, limit) in fields {
-        if values.iter().any(|v| !v.is_finite()) {
-            return Err(OdometryError::NotFinite { seq: s.seq, field });
-        }
-        if let Some(&value) = values.iter().find(|v| v.abs() > limit) {
-            return Err(OdometryError::OutOfRange {
-                seq: s.seq,
-                field,
-                value,
-                limit,
-            });
-        }
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -717,7 +691,13 @@ mod tests {
             assert!(values.copied().all(f64::is_finite), "{o:?}");
         }
         let e = stage.process(&sample(799), &mut |_| {}).unwrap_err();
-        assert!(matches!(e, OdometryError::TimeNotIncreasing { .. }), "{e}");
+        assert!(
+            matches!(
+                e,
+                OdometryError::Sample(SampleError::TimeNotIncreasing { .. })
+            ),
+            "{e}"
+        );
         let mut big = sample(800);
         big.accel_mps2[0] = 1e300;
         let e = stage.process(&big, &mut |_| {}).unwrap_err();
