@@ -500,7 +500,7 @@ mod tests {
         let err = channels(&samples, 9.8).unwrap_err();
         assert_eq!(
             err.to_string(),
-            "sample 3 (seq 3): accel_g[2] is not finite"
+            "sample 3 (seq 3): accel_g[2] = NaN is not finite"
         );
     }
 
