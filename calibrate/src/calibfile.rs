@@ -237,7 +237,7 @@ pub struct GyroSection {
     pub bias_dps: Option<[f64; 3]>,
     /// Scale and misalignment correction `C`, row-major, dimensionless: the angular rate is
     /// `omega = C w` with `w` the bias-free reading, sensor frame (as
-    /// `odometry::stage::OdometryConfig::gyro_correction`; `mems-odometry gyrocal --into`).
+    /// `odometry::config::OdometryConfig::gyro_correction`; `mems-odometry gyrocal --into`).
     #[serde(default)]
     pub correction: Option<[[f64; 3]; 3]>,
     /// 1-sigma of each entry of `correction`, row-major, dimensionless.

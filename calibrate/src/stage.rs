@@ -48,6 +48,7 @@
 //! The gyroscope's has none: a turn-on bias of 0.3-1 deg/s that no file can know is measured to
 //! 0.01 deg/s by one second of rest.
 
+use ipc_types::stream::{self, Continuity, Holes, Step, TimeLine};
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, limits, raw_flags};
 use mems_stage::Stage;
 use nalgebra::Vector3;
@@ -177,6 +178,8 @@ pub struct StageStats {
     pub gaps: u64,
     /// New streams seen (sequence number not increasing).
     pub restarts: u64,
+    /// Holes in the time line that nothing marked ([`ipc_types::stream`]), each a gap too.
+    pub holes: Holes,
 }
 
 /// The stable identifier of a calibration: 64-bit FNV-1a over the model name and the
@@ -365,6 +368,8 @@ pub struct CalibrationStage {
     /// The latest verdict's flags and `zs_*` fields, carried over to provisional samples.
     carried: Carried,
     last: Option<(u64, u64)>,
+    /// The stream's time line (its nominal period and holes, [`ipc_types::stream`]).
+    time: TimeLine,
     /// Whether `last` comes from [`CalibrationStage::resume`] and no sample has confirmed it.
     resumed: bool,
     /// Whether the previous sample was dropped for a time step beyond the bound.
@@ -405,6 +410,7 @@ impl CalibrationStage {
             batch_gyro: true,
             carried: Carried::default(),
             last: None,
+            time: TimeLine::default(),
             resumed: false,
             jumped: false,
             stats: StageStats::default(),
@@ -463,6 +469,7 @@ impl CalibrationStage {
         r.refined = state.refined;
         self.stream_start_ns = Some(state.stream_start_ns);
         self.last = Some((state.last_seq, state.last_ns));
+        self.time.accept(state.last_ns);
         self.resumed = true;
         Ok(())
     }
@@ -574,57 +581,62 @@ impl CalibrationStage {
         };
     }
 
-    /// Places `raw` in the stream: a resumed state that `raw` does not continue, a sequence
-    /// that starts again or a confirmed time jump start over; a time that does not increase or
-    /// a first jump is refused. Returns whether samples are missing before it (a gap).
+    /// Places `raw` in the stream by the stream contract ([`stream::continuity`]): a resumed
+    /// state that `raw` does not continue, a sequence that starts again or a confirmed time
+    /// jump start a new session; a time that does not increase or a first jump is refused.
+    /// Returns how `raw` continues the stream (a gap: samples are missing before it, marked
+    /// or a hole in the time line).
     #[inline]
-    fn sequence(&mut self, raw: &RawImuSample) -> Result<bool, StageError> {
+    fn sequence(&mut self, raw: &RawImuSample) -> Result<Continuity, StageError> {
+        let t_ns = raw.stamps.sample_ns;
         if std::mem::take(&mut self.resumed)
             && self
                 .last
-                .is_some_and(|(seq, ns)| raw.seq <= seq || raw.stamps.sample_ns <= ns)
+                .is_some_and(|(seq, ns)| raw.seq <= seq || t_ns <= ns)
         {
             // Not the stream the resumed state was made on (a new power-on): start over.
             self.start_over();
             self.last = None;
+            self.time.restart();
+            return Ok(Continuity::NewSession);
         }
-        let jump = self.last.is_some_and(|(_, prev_ns)| {
-            raw.stamps.sample_ns > prev_ns.saturating_add(limits::MAX_STEP_NS)
-        });
-        if jump && !self.jumped {
+        let step = self.time.step(t_ns);
+        if step == Step::Beyond && !self.jumped {
             // One stamp far ahead is a corrupted stamp until the next one agrees.
             self.jumped = true;
             return Err(StageError::TimeStep {
                 seq: raw.seq,
-                t_ns: raw.stamps.sample_ns,
+                t_ns,
                 prev_ns: self.last.map_or(0, |(_, ns)| ns),
             });
         }
         self.jumped = false;
-        let mut gap = false;
-        match self.last {
-            Some((prev_seq, _)) if raw.seq <= prev_seq || jump => self.start_over(),
-            Some((prev_seq, prev_ns)) if raw.stamps.sample_ns <= prev_ns => {
+        let marked = raw.lost_before > 0 || raw.flags & raw_flags::GAP_BEFORE != 0;
+        let continuity = stream::continuity(self.last.map(|(seq, _)| seq), raw.seq, marked, step);
+        match (continuity, self.last) {
+            (Continuity::NewSession, _) => {
+                self.start_over();
+                self.time.restart();
+            }
+            (_, Some((prev_seq, prev_ns))) if matches!(step, Step::Back | Step::Repeat) => {
                 return Err(StageError::TimeNotIncreasing {
                     seq: raw.seq,
-                    t_ns: raw.stamps.sample_ns,
+                    t_ns,
                     prev_seq,
                     prev_ns,
                 });
             }
-            Some((prev_seq, _))
-                if raw.seq != prev_seq + 1
-                    || raw.lost_before > 0
-                    || raw.flags & raw_flags::GAP_BEFORE != 0 =>
-            {
+            (Continuity::Gap, _) => {
+                if let Step::Hole { dt_ns } = step {
+                    self.stats.holes.record(raw.seq, t_ns, dt_ns);
+                }
                 self.cut_batch();
                 self.detector.interrupt();
                 self.stats.gaps += 1;
-                gap = true;
             }
-            _ => {}
+            (Continuity::Next, _) => {}
         }
-        Ok(gap)
+        Ok(continuity)
     }
 
     /// The corrected sample of `raw` (flagged by the detector later), the corrected
@@ -719,8 +731,11 @@ impl Stage for CalibrationStage {
         let has_gyro = raw.flags & raw_flags::GYRO_VALID != 0;
         let has_temp = raw.flags & raw_flags::TEMP_VALID != 0;
         self.check(raw, has_gyro, has_temp)?;
-        let gap = self.sequence(raw)?;
+        let continuity = self.sequence(raw)?;
+        let gap = continuity == Continuity::Gap;
+        let hole = gap && matches!(self.time.step(raw.stamps.sample_ns), Step::Hole { .. });
         self.last = Some((raw.seq, raw.stamps.sample_ns));
+        self.time.accept(raw.stamps.sample_ns);
         self.stats.accepted += 1;
         self.stream_start_ns.get_or_insert(raw.stamps.sample_ns);
 
@@ -730,6 +745,12 @@ impl Stage for CalibrationStage {
         self.carried.apply(&mut out, self.refine.refined);
         if provisional {
             out.flags |= corrected_flags::PROVISIONAL;
+        }
+        if continuity == Continuity::NewSession {
+            out.flags |= corrected_flags::NEW_SESSION;
+        }
+        if hole {
+            out.flags |= corrected_flags::HOLE_BEFORE;
         }
         self.stats.released += 1;
         emit(&out);
@@ -807,17 +828,13 @@ impl Settler {
             self.len += 1;
             return;
         }
-        let settled = (s.settles as usize).min(self.len);
         // Samples older than those settled were cut from their batch: final as they are.
-        let cut = self.len - settled;
+        let cut = self.len - stream::settled_by(s, self.len);
         for h in &self.held[..cut] {
             emit(h);
         }
-        const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
         for h in &mut self.held[cut..self.len] {
-            h.flags = (h.flags & !(VERDICT | corrected_flags::PROVISIONAL)) | (s.flags & VERDICT);
-            h.zs_mean_mps2 = s.zs_mean_mps2;
-            h.zs_std_mps2 = s.zs_std_mps2;
+            stream::settle(h, s);
             emit(h);
         }
         self.len = 0;

@@ -432,14 +432,60 @@ fn a_restarted_publisher_starts_a_new_session_and_a_gap_leaves_the_partial_batch
     assert_eq!(st.stats().restarts, 1);
     assert!(!st.detector().is_ready(), "learning starts again");
     assert!(!st.refinement().2, "refinement starts again");
+    // The new session is marked on its first sample only (the odometry follows the mark).
+    assert_ne!(released[0].flags & corrected_flags::NEW_SESSION, 0);
     assert!(
         released
             .iter()
-            .all(|o| o.flags & !corrected_flags::PROVISIONAL == 0)
+            .all(|o| o.flags & !(corrected_flags::PROVISIONAL | corrected_flags::NEW_SESSION) == 0)
+    );
+    assert!(
+        released[1..]
+            .iter()
+            .all(|o| o.flags & corrected_flags::NEW_SESSION == 0)
+    );
+    assert!(
+        out.iter()
+            .all(|o| o.flags & corrected_flags::NEW_SESSION == 0)
     );
     out.extend(released);
     st.finish(&mut |_| {});
     assert_eq!(out.len(), first.len() + after_gap.len() + second.len());
+}
+
+#[test]
+fn an_unmarked_hole_in_the_time_line_is_a_counted_gap_marked_as_a_hole() {
+    let file = calibration();
+    let mut st = stage(&file, DetectorKind::Glrt);
+    let samples = still(&file, Vector3::z(), Vector3::zeros(), [0.0; 3], 3.0, 7);
+    // Sequence numbers run on; 2 s of sample times are missing before sample 2000.
+    let mut holed = samples.clone();
+    for s in &mut holed[2000..] {
+        s.stamps.sample_ns += 2_000_000_000;
+    }
+    let out = run(&mut st, &holed);
+    let holes = st.stats().holes;
+    assert_eq!(
+        (holes.count, st.stats().gaps, st.stats().restarts),
+        (1, 1, 0)
+    );
+    let longest = holes.longest.unwrap();
+    assert_eq!(longest.seq, holed[2000].seq);
+    assert_eq!(longest.dt_ns, 2_001_000_000);
+    let marked: Vec<usize> = (0..out.len())
+        .filter(|&i| out[i].flags & corrected_flags::HOLE_BEFORE != 0)
+        .collect();
+    assert_eq!(marked, [2000]);
+    assert_ne!(out[2000].raw_flags & raw_flags::GAP_BEFORE, 0);
+    assert_eq!(out[1999].raw_flags & raw_flags::GAP_BEFORE, 0);
+    // Without the hole nothing is marked.
+    let mut plain = stage(&file, DetectorKind::Glrt);
+    let out = run(&mut plain, &samples);
+    assert_eq!(plain.stats().holes.count, 0);
+    assert!(
+        out.iter()
+            .all(|o| o.flags & corrected_flags::HOLE_BEFORE == 0)
+    );
 }
 
 #[test]
@@ -671,6 +717,10 @@ fn a_warm_state_from_another_stream_or_calibration_is_not_used() {
             .all(|o| o.flags & corrected_flags::DETECTOR_READY == 0)
     );
     assert_eq!(resumed.stats().restarts, 1);
+    // A new session, marked on its first sample; otherwise what a fresh stage gives.
+    let mut out = out;
+    assert_ne!(out[0].flags & corrected_flags::NEW_SESSION, 0);
+    out[0].flags &= !corrected_flags::NEW_SESSION;
     assert_eq!(
         out,
         run(&mut stage(&file, DetectorKind::Glrt), &samples[..2_000])

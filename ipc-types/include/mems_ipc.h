@@ -36,6 +36,8 @@
 #define MEMS_CORRECTED_DETECTOR_READY (1u << 1)
 #define MEMS_CORRECTED_BIAS_REFINED (1u << 2)
 #define MEMS_CORRECTED_PROVISIONAL (1u << 3)
+#define MEMS_CORRECTED_NEW_SESSION (1u << 4)
+#define MEMS_CORRECTED_HOLE_BEFORE (1u << 5)
 
 /* OdometryState.flags */
 #define MEMS_ODOMETRY_ZERO_VELOCITY (1u << 0)

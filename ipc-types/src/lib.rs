@@ -18,6 +18,7 @@ pub mod clock;
 pub mod limits;
 pub mod service;
 pub mod stop;
+pub mod stream;
 pub mod units;
 pub mod wake;
 mod wire;

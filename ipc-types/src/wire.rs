@@ -100,6 +100,14 @@ pub mod corrected_flags {
     /// settles (its batch was cut by a gap, a new stream or the end of the stream) keeps these
     /// flags as final.
     pub const PROVISIONAL: u16 = 1 << 3;
+    /// The first sample of a new sensor session (a publisher that started its sequence
+    /// numbers again, or a new time base): nothing before it belongs to the same power-on
+    /// and clock. Set by the calibration stage on the first sample of every session after the
+    /// stream's first (`crate::stream`: the rule); consumers follow it.
+    pub const NEW_SESSION: u16 = 1 << 4;
+    /// Samples are missing before this one that nothing marked: the time line has a hole
+    /// (`crate::stream::TimeLine`). `raw_flags::GAP_BEFORE` is set too.
+    pub const HOLE_BEFORE: u16 = 1 << 5;
 }
 
 /// One calibrated sample: sensor frame, SI units.

@@ -110,7 +110,7 @@ fn facts() -> Vec<Fact> {
             reserved
         ]
     );
-    let flags: [(&str, u16); 25] = [
+    let flags: [(&str, u16); 27] = [
         ("MEMS_RAW_GAP_BEFORE", raw_flags::GAP_BEFORE),
         ("MEMS_RAW_FIFO_OVERFLOW", raw_flags::FIFO_OVERFLOW),
         ("MEMS_RAW_SATURATED", raw_flags::SATURATED),
@@ -125,6 +125,8 @@ fn facts() -> Vec<Fact> {
         ),
         ("MEMS_CORRECTED_BIAS_REFINED", corrected_flags::BIAS_REFINED),
         ("MEMS_CORRECTED_PROVISIONAL", corrected_flags::PROVISIONAL),
+        ("MEMS_CORRECTED_NEW_SESSION", corrected_flags::NEW_SESSION),
+        ("MEMS_CORRECTED_HOLE_BEFORE", corrected_flags::HOLE_BEFORE),
         ("MEMS_ODOMETRY_ZERO_VELOCITY", odometry_flags::ZERO_VELOCITY),
         ("MEMS_ODOMETRY_ALIGNED", odometry_flags::ALIGNED),
         ("MEMS_ODOMETRY_REVISION", odometry_flags::REVISION),

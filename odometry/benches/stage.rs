@@ -22,7 +22,8 @@ use common::{Case, Simulation, live_calibration_stage, live_detector};
 use hdrhistogram::Histogram;
 use ipc_types::CorrectedImuSample;
 use mems_sim::model::G_MPS2;
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::config::OdometryConfig;
+use odometry::stage::OdometryStage;
 
 fn corrected_drive() -> Vec<CorrectedImuSample> {
     let c = Case {

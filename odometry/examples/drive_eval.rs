@@ -23,9 +23,9 @@ use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, corrected_flags, o
 use mems_sim::hints::{HintParams, RestSource};
 use mems_stage::Stage;
 use nalgebra::{Matrix2, Matrix3, Vector2};
+use odometry::config::OdometryConfig;
 use odometry::hints::HintConfig;
 use odometry::session::{Input, NoGyro, OdometrySession};
-use odometry::stage::OdometryConfig;
 use statrs::statistics::{Data, Max, Median, OrderStatistics};
 
 /// Where the gyro correction comes from.

@@ -1,4 +1,5 @@
-//! The odometry configuration a calibration file implies: its local gravity, the gyro's scale
+//! The odometry stage's configuration ([`OdometryConfig`], MPU-9250 defaults) and the one a
+//! calibration file implies: its local gravity, the gyro's scale
 //! and misalignment correction from its `[gyro]` table (`mems-odometry gyrocal --into`, the
 //! identity when absent) and the noise model from its `[noise]` table (`mems-calibrate allan
 //! --into`, see docs/noise.md), with the MPU-9250 defaults of [`OdometryConfig::mpu9250`] for
@@ -21,7 +22,154 @@ use calibrate::calibfile::CalibrationFile;
 use calibrate::noise_params::{AxisNoise, Estimate, SensorNoise};
 use nalgebra::Matrix3;
 
-use crate::stage::OdometryConfig;
+use crate::eskf::{Manoeuvre, NoiseModel};
+
+/// Configuration of the stage. Noise figures come from the calibration file's noise parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryConfig {
+    /// Local gravity magnitude, m/s^2.
+    pub gravity_mps2: f64,
+    /// Sensor noise model.
+    pub noise: NoiseModel,
+    /// Gyro correction `C` applied to every angular rate before the filter (`omega = C w`,
+    /// sensor frame): the inverse of the gyro's scale and misalignment, from
+    /// `calibrate_science::gyrocal::calibrate_gyro`; identity for an uncalibrated gyro. (The calibration
+    /// stage corrects the accelerometer only, so the gyro's correction is applied here.)
+    pub gyro_correction: Matrix3<f64>,
+    /// 1-sigma of each entry of the corrected gyro's residual scale and misalignment error,
+    /// fraction (row: corrected axis, column: raw axis). The filter does not estimate it; it
+    /// widens the reported 1-sigma as the body turns (`eskf::ConsiderModel`). For a fitted
+    /// correction, the fit's own sigma ([`Self::with_gyro_calibration`]).
+    pub gyro_correction_sigma: Matrix3<f64>,
+    /// 1-sigma of the accelerometer bias left after calibration (turn-on repeatability),
+    /// m/s^2 per sensor axis.
+    pub accel_bias_sigma_mps2: [f64; 3],
+    /// 1-sigma of the accelerometer's residual scale and misalignment after calibration,
+    /// fraction. Under gravity it reads as a bias of about `g` times this on every axis (a
+    /// misalignment of 0.1% puts 10 mm/s^2 of gravity on a horizontal axis), which the
+    /// alignment's bias uncertainty includes; its effect on the specific force's changes
+    /// since alignment widens the reported 1-sigma (`eskf::ConsiderModel`).
+    pub accel_residual_scale: f64,
+    /// Zero-angular-rate gate: the gyro bias is updated at rest only while the reading is
+    /// within this many predicted standard deviations of the bias estimate.
+    pub zaru_gate_sigma: f64,
+    /// 1-sigma of the zero-velocity pseudo-measurement, m/s.
+    pub zupt_sigma_mps: f64,
+    /// Whether a rest's successive samples count as effective samples of the sensor's noise
+    /// rather than as independent ones, with the mean-variance factors (`crate::rest_noise`)
+    /// estimated from the samples of the rest the filter aligns on (1 for white samples): each
+    /// zero-velocity update's variance is `zupt_sigma_mps^2` times the accelerometer's factor
+    /// (its largest axis'), and the alignment's gyro-bias variance (the rest's sample variance
+    /// over `n`) is multiplied by the gyro's factor per axis. A sensor whose own low-pass
+    /// filter correlates successive samples (an MPU-9250 at 1 kHz with its 20 Hz DLPF: about
+    /// 15) then gets from a rest the information of its effective number of samples, as the
+    /// detector's thresholds do (docs/odometry.md).
+    pub effective_samples: bool,
+    /// Rest needed before alignment, s.
+    pub align_s: f64,
+    /// Time after the end of a motion interval over which corrections are gathered before the
+    /// interval is republished, s.
+    pub revision_delay_s: f64,
+    /// Longest motion interval whose history is kept for revision, s (at `max_rate_hz`).
+    pub max_motion_s: f64,
+    /// Highest sample rate the history is sized for, Hz.
+    pub max_rate_hz: f64,
+    /// Republished states per second of motion (the history is decimated to this rate).
+    pub revision_rate_hz: f64,
+    /// How long the IMU's rest flag must be followed by rest for its zero-velocity update to
+    /// stand, s (see the module documentation); 0 (or less) takes every flag as it comes.
+    pub rest_hindsight_s: f64,
+    /// Shortest run of motion flags that withdraws the rest flags before it, s: a shorter one
+    /// followed by `rest_hindsight_s` of rest (a bump, a glitch, a detector's false alarm on a
+    /// static sensor) leaves them standing.
+    pub motion_confirm_s: f64,
+    /// What the platform can do while samples are missing (a gap, flagged by the raw stream
+    /// or a skipped sequence number): the reported 1-sigma grows with it across the gap
+    /// (`Eskf::missed`).
+    pub manoeuvre: Manoeuvre,
+    /// Longest time between two propagations of the filter's covariance, s: the covariance is
+    /// propagated from the transition and noise accumulated over the samples since the last
+    /// one (`eskf::Eskf::with_propagation_interval`), and at rest the zero-velocity and
+    /// zero-rate updates are made once per propagation with the information of one per
+    /// sample (`rest_window_drift`). The reported 1-sigma is the last propagation's plus the
+    /// process noise accumulated since (`eskf::Eskf::position_sigma`). 0 propagates and
+    /// updates at every sample.
+    pub propagation_interval_s: f64,
+    /// Largest share of a rest window's zero-velocity update variance (`zupt_sigma_mps^2`
+    /// over its `n` samples) that the velocity noise accumulated over the window may reach
+    /// before the window's updates are made: the `n` per-sample updates are one of variance
+    /// `zupt_sigma_mps^2 / n` only while the velocity error stays put over the window. At
+    /// 0.05 the rest's steady velocity variance right after an update is 11 % below the limit
+    /// that updates at every sample approach as the sample interval shrinks, `sqrt(q r T)`,
+    /// and 12 % above it just before (a random walk of intensity `q` under updates of
+    /// variance `r` every `T` settles after the update at the root of
+    /// `x^2 + q T x - q T r = 0`, before it at `x + q T`). 0 updates at every rest sample.
+    pub rest_window_drift: f64,
+    /// Whether rest flags, once aligned, give zero-velocity and zero-rate updates (`false`: a
+    /// diagnostic that integrates freely after alignment, as `mems-odometry offline
+    /// --no-zupt`).
+    pub rest_updates: bool,
+}
+
+impl OdometryConfig {
+    /// Defaults for an MPU-9250 after calibration: datasheet noise densities, the thesis's
+    /// measured turn-on repeatability (4.5 / 2.5 / 6.1 mm/s^2), and `gravity_mps2`.
+    pub fn mpu9250(gravity_mps2: f64) -> Self {
+        Self {
+            gravity_mps2,
+            noise: NoiseModel {
+                accel_noise_density: 300e-6 * gravity_mps2,
+                gyro_noise_density: 0.01_f64.to_radians(),
+                accel_bias_random_walk: 1e-4,
+                gyro_bias_random_walk: 1e-6,
+                vibration_accel_density_per_mps: 0.0,
+                vibration_gyro_density_per_mps: 0.0,
+            },
+            gyro_correction: Matrix3::identity(),
+            gyro_correction_sigma: datasheet_gyro_error_sigma(),
+            accel_bias_sigma_mps2: [4.5e-3, 2.5e-3, 6.1e-3],
+            accel_residual_scale: 1e-3,
+            zaru_gate_sigma: 5.0,
+            zupt_sigma_mps: 2e-3,
+            effective_samples: true,
+            align_s: 1.0,
+            revision_delay_s: 0.2,
+            max_motion_s: 120.0,
+            max_rate_hz: 4000.0,
+            revision_rate_hz: 100.0,
+            rest_hindsight_s: 0.5,
+            motion_confirm_s: 0.5,
+            // A ground robot: 1 m/s^2 and 30 deg/s reached in half a second, about level.
+            manoeuvre: Manoeuvre {
+                accel: 1.0,
+                rate: 0.5,
+                tilt: 0.05,
+                duration_s: 0.5,
+            },
+            propagation_interval_s: 0.01,
+            rest_window_drift: 0.05,
+            rest_updates: true,
+        }
+    }
+
+    /// `self` with the gyro correction fitted by `calibrate_science::gyrocal::calibrate_gyro`
+    /// and its 1-sigma.
+    pub fn with_gyro_calibration(mut self, correction: Matrix3<f64>, sigma: Matrix3<f64>) -> Self {
+        self.gyro_correction = correction;
+        self.gyro_correction_sigma = sigma;
+        self
+    }
+}
+
+/// 1-sigma of an uncalibrated MPU-9250 gyro's scale and cross-axis errors: the product
+/// specification (PS-MPU-9250A-01 rev. 1.1, table 1, "Gyroscope Specifications") gives a
+/// sensitivity scale factor tolerance of +-3 % and a cross-axis sensitivity of +-2 %. With no
+/// distribution stated, a bound `a` is taken as uniform, sigma `a / sqrt(3)` (GUM, JCGM
+/// 100:2008, 4.3.7): 1.7 % on the diagonal, 1.2 % off it.
+pub fn datasheet_gyro_error_sigma() -> Matrix3<f64> {
+    let (scale, cross) = (0.03 / 3f64.sqrt(), 0.02 / 3f64.sqrt());
+    Matrix3::from_fn(|r, c| if r == c { scale } else { cross })
+}
 
 /// An odometry configuration and the noise figures in it that are defaults.
 #[derive(Debug, Clone, PartialEq)]

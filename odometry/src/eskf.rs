@@ -104,6 +104,21 @@ pub struct Manoeuvre {
     pub duration_s: f64,
 }
 
+impl Manoeuvre {
+    /// Longest unobserved interval (a gap or a hole in the time line) the odometry bridges,
+    /// s: `pi / rate`. Across an interval `t` with no accelerometer or gyro the platform may
+    /// have done anything within its envelope ([`Eskf::missed`]): its velocity is known to
+    /// `accel t`, its position to `accel t^2 / 2` (1-sigma, each axis), and its heading to
+    /// `rate t`. Once `rate t` reaches pi the heading is wholly unknown: the track after the
+    /// interval can no longer be placed in the frame of the track before it (any direction is
+    /// as likely), so a position that went on across it would be a number without meaning.
+    /// A ground robot's default (0.5 rad/s) bridges 6.3 s; then the position's 1-sigma has
+    /// grown by about 20 m, the velocity's by 6 m/s.
+    pub fn bridge_limit_s(&self) -> f64 {
+        std::f64::consts::PI / self.rate
+    }
+}
+
 /// The nominal (full) navigation state.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Nominal {

@@ -11,6 +11,7 @@
 pub mod arrival;
 pub mod config;
 pub mod eskf;
+mod hindsight;
 pub mod hints;
 mod navigator;
 pub mod profile;

@@ -4,12 +4,12 @@
 //! newest inputs and one on settled flags (and replays on final flags); this module holds what
 //! each of them does. The module documentation of [`crate::stage`] describes the behaviour.
 
+use crate::config::OdometryConfig;
 use crate::eskf::{ConsiderModel, Eskf, Imu, KS, align};
 use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
 use crate::rest_noise::RestNoise;
-use crate::stage::OdometryConfig;
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
     odometry_flags, raw_flags,

@@ -4,8 +4,8 @@
 
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
 
+use crate::config::OdometryConfig;
 use crate::eskf::Manoeuvre;
-use crate::stage::OdometryConfig;
 
 /// A platform's motion profile.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]

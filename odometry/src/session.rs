@@ -8,23 +8,29 @@
 //!   samples use it. So the states do not depend on how hints and samples interleave in
 //!   transport, and a replay gives the same states. A hint is checked when it arrives
 //!   ([`check_hint`]): a refused one never reaches the queue.
-//! - **Sensor sessions.** Sequence numbers that go back mean a new sensor session (a restarted
-//!   acquire), and so does a time step longer than [`MAX_STEP_NS`] (no dead reckoning bridges
-//!   it): the old stage's revisions are completed and a new stage aligns again.
+//! - **Sensor sessions.** The calibration stage decides where a new sensor session starts (the
+//!   rule: [`ipc_types::stream`]) and marks its first sample
+//!   [`corrected_flags::NEW_SESSION`]; the session follows the mark: the old stage's revisions
+//!   are completed and a new stage aligns again.
+//! - **Holes beyond the bridge.** A sample after more than
+//!   [`crate::eskf::Manoeuvre::bridge_limit_s`] with nothing observed is refused (the offline
+//!   run stops there, naming it; the live process drops it, counted), and the stage starts
+//!   again from the next sample: the heading across such a hole is unknown, so the track after
+//!   it is a new one (counted in [`SessionStats::unbridged`]).
 //! - **Samples without a gyroscope** (`raw_flags::GYRO_VALID` clear: an accelerometer-only
 //!   sensor mode, the MPU-9250 at 4 kHz): nothing tracks the attitude, so what they give is
 //!   configuration ([`NoGyro`]).
 
 use std::collections::VecDeque;
 
-use ipc_types::limits::MAX_STEP_NS;
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags, raw_flags,
 };
 use mems_stage::Stage;
 
+use crate::config::OdometryConfig;
 use crate::hints::{HintConfig, HintConfigError, HintError, HintStats, check_hint};
-use crate::stage::{OdometryConfig, OdometryError, OdometryStage};
+use crate::stage::{OdometryError, OdometryStage};
 
 /// Hints the session holds for samples still to come: a hint rate 20 times the 50 Hz of a
 /// wheel controller for a second. The live driver takes no hint while the queue is full (it
@@ -88,6 +94,8 @@ pub struct SessionStats {
     pub no_gyro: u64,
     /// The first of them, by sequence number.
     pub first_no_gyro_seq: Option<u64>,
+    /// Holes longer than the odometry bridges (each refused, then a new stage).
+    pub unbridged: u64,
 }
 
 /// The odometry stage with the policies of every process (module documentation).
@@ -98,8 +106,6 @@ pub struct OdometrySession {
     stage: OdometryStage,
     /// Hints waiting for their samples, in publication order.
     waiting: VecDeque<RobotHint>,
-    /// The previous sample's sequence number and time, ns.
-    last: Option<(u64, u64)>,
     stats: SessionStats,
 }
 
@@ -117,7 +123,6 @@ impl OdometrySession {
             hint_config,
             no_gyro,
             waiting: VecDeque::with_capacity(HINT_QUEUE),
-            last: None,
             stats: SessionStats::default(),
         })
     }
@@ -155,24 +160,23 @@ impl OdometrySession {
         Ok(())
     }
 
-    /// Starts a new stage when `s` begins a new sensor session, completing the old one's
+    /// Starts a new stage when `s` begins a new sensor session (marked
+    /// [`corrected_flags::NEW_SESSION`] by the calibration stage), completing the old one's
     /// revisions first.
     fn new_session(&mut self, s: &CorrectedImuSample, emit: &mut impl FnMut(&OdometryState)) {
-        let t = s.stamps.sample_ns;
-        let restart = match self.last {
-            None => {
-                self.stats.sessions = 1;
-                false
-            }
-            Some((seq, ns)) => s.seq <= seq || t > ns.saturating_add(MAX_STEP_NS),
-        };
-        if restart {
-            self.stage.finish(emit);
-            self.stage = OdometryStage::with_hints(self.config, self.hint_config)
-                .expect("validated when the session was made");
+        if self.stats.sessions == 0 {
+            self.stats.sessions = 1;
+        } else if s.flags & corrected_flags::NEW_SESSION != 0 {
+            self.restart(emit);
             self.stats.sessions += 1;
         }
-        self.last = Some((s.seq, t));
+    }
+
+    /// Completes the stage's revisions and starts a new one.
+    fn restart(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        self.stage.finish(emit);
+        self.stage = OdometryStage::with_hints(self.config, self.hint_config)
+            .expect("validated when the session was made");
     }
 }
 
@@ -214,7 +218,14 @@ impl Stage for OdometrySession {
                 return Ok(());
             }
         }
-        Ok(self.stage.process(s, emit)?)
+        match self.stage.process(s, emit) {
+            Err(e @ OdometryError::HoleBeyondBridge { .. }) => {
+                self.restart(emit);
+                self.stats.unbridged += 1;
+                Err(e.into())
+            }
+            taken => Ok(taken?),
+        }
     }
 
     /// Completes a replay of the hindsight still under way.

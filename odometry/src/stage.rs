@@ -81,194 +81,26 @@
 //! the stream. Rest decided by a fresh
 //! robot hint is not withdrawn (the controller knows).
 
-use crate::eskf::{Eskf, Manoeuvre, NoiseModel};
+use crate::config::OdometryConfig;
+use crate::eskf::Eskf;
+pub use crate::hindsight::REPLAY_PER_CALL;
+use crate::hindsight::{Hindsight, Input};
 use crate::hints::{HintConfig, HintConfigError, HintError, HintStats, Ring, check_hint};
 use crate::navigator::Navigator;
+use ipc_types::stream::{self, Holes, SampleError, Step, TimeLine};
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, corrected_flags, limits, odometry_flags,
+    raw_flags,
 };
-use nalgebra::{Matrix3, UnitQuaternion};
-
-/// Configuration of the stage. Noise figures come from the calibration file's noise parameters.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct OdometryConfig {
-    /// Local gravity magnitude, m/s^2.
-    pub gravity_mps2: f64,
-    /// Sensor noise model.
-    pub noise: NoiseModel,
-    /// Gyro correction `C` applied to every angular rate before the filter (`omega = C w`,
-    /// sensor frame): the inverse of the gyro's scale and misalignment, from
-    /// `calibrate_science::gyrocal::calibrate_gyro`; identity for an uncalibrated gyro. (The calibration
-    /// stage corrects the accelerometer only, so the gyro's correction is applied here.)
-    pub gyro_correction: Matrix3<f64>,
-    /// 1-sigma of each entry of the corrected gyro's residual scale and misalignment error,
-    /// fraction (row: corrected axis, column: raw axis). The filter does not estimate it; it
-    /// widens the reported 1-sigma as the body turns (`eskf::ConsiderModel`). For a fitted
-    /// correction, the fit's own sigma ([`Self::with_gyro_calibration`]).
-    pub gyro_correction_sigma: Matrix3<f64>,
-    /// 1-sigma of the accelerometer bias left after calibration (turn-on repeatability),
-    /// m/s^2 per sensor axis.
-    pub accel_bias_sigma_mps2: [f64; 3],
-    /// 1-sigma of the accelerometer's residual scale and misalignment after calibration,
-    /// fraction. Under gravity it reads as a bias of about `g` times this on every axis (a
-    /// misalignment of 0.1% puts 10 mm/s^2 of gravity on a horizontal axis), which the
-    /// alignment's bias uncertainty includes; its effect on the specific force's changes
-    /// since alignment widens the reported 1-sigma (`eskf::ConsiderModel`).
-    pub accel_residual_scale: f64,
-    /// Zero-angular-rate gate: the gyro bias is updated at rest only while the reading is
-    /// within this many predicted standard deviations of the bias estimate.
-    pub zaru_gate_sigma: f64,
-    /// 1-sigma of the zero-velocity pseudo-measurement, m/s.
-    pub zupt_sigma_mps: f64,
-    /// Whether a rest's successive samples count as effective samples of the sensor's noise
-    /// rather than as independent ones, with the mean-variance factors (`crate::rest_noise`)
-    /// estimated from the samples of the rest the filter aligns on (1 for white samples): each
-    /// zero-velocity update's variance is `zupt_sigma_mps^2` times the accelerometer's factor
-    /// (its largest axis'), and the alignment's gyro-bias variance (the rest's sample variance
-    /// over `n`) is multiplied by the gyro's factor per axis. A sensor whose own low-pass
-    /// filter correlates successive samples (an MPU-9250 at 1 kHz with its 20 Hz DLPF: about
-    /// 15) then gets from a rest the information of its effective number of samples, as the
-    /// detector's thresholds do (docs/odometry.md).
-    pub effective_samples: bool,
-    /// Rest needed before alignment, s.
-    pub align_s: f64,
-    /// Time after the end of a motion interval over which corrections are gathered before the
-    /// interval is republished, s.
-    pub revision_delay_s: f64,
-    /// Longest motion interval whose history is kept for revision, s (at `max_rate_hz`).
-    pub max_motion_s: f64,
-    /// Highest sample rate the history is sized for, Hz.
-    pub max_rate_hz: f64,
-    /// Republished states per second of motion (the history is decimated to this rate).
-    pub revision_rate_hz: f64,
-    /// How long the IMU's rest flag must be followed by rest for its zero-velocity update to
-    /// stand, s (see the module documentation); 0 (or less) takes every flag as it comes.
-    pub rest_hindsight_s: f64,
-    /// Shortest run of motion flags that withdraws the rest flags before it, s: a shorter one
-    /// followed by `rest_hindsight_s` of rest (a bump, a glitch, a detector's false alarm on a
-    /// static sensor) leaves them standing.
-    pub motion_confirm_s: f64,
-    /// What the platform can do while samples are missing (a gap, flagged by the raw stream
-    /// or a skipped sequence number): the reported 1-sigma grows with it across the gap
-    /// (`Eskf::missed`).
-    pub manoeuvre: Manoeuvre,
-    /// Longest time between two propagations of the filter's covariance, s: the covariance is
-    /// propagated from the transition and noise accumulated over the samples since the last
-    /// one (`eskf::Eskf::with_propagation_interval`), and at rest the zero-velocity and
-    /// zero-rate updates are made once per propagation with the information of one per
-    /// sample (`rest_window_drift`). The reported 1-sigma is the last propagation's plus the
-    /// process noise accumulated since (`eskf::Eskf::position_sigma`). 0 propagates and
-    /// updates at every sample.
-    pub propagation_interval_s: f64,
-    /// Largest share of a rest window's zero-velocity update variance (`zupt_sigma_mps^2`
-    /// over its `n` samples) that the velocity noise accumulated over the window may reach
-    /// before the window's updates are made: the `n` per-sample updates are one of variance
-    /// `zupt_sigma_mps^2 / n` only while the velocity error stays put over the window. At
-    /// 0.05 the rest's steady velocity variance right after an update is 11 % below the limit
-    /// that updates at every sample approach as the sample interval shrinks, `sqrt(q r T)`,
-    /// and 12 % above it just before (a random walk of intensity `q` under updates of
-    /// variance `r` every `T` settles after the update at the root of
-    /// `x^2 + q T x - q T r = 0`, before it at `x + q T`). 0 updates at every rest sample.
-    pub rest_window_drift: f64,
-    /// Whether rest flags, once aligned, give zero-velocity and zero-rate updates (`false`: a
-    /// diagnostic that integrates freely after alignment, as `mems-odometry offline
-    /// --no-zupt`).
-    pub rest_updates: bool,
-}
-
-impl OdometryConfig {
-    /// Defaults for an MPU-9250 after calibration: datasheet noise densities, the thesis's
-    /// measured turn-on repeatability (4.5 / 2.5 / 6.1 mm/s^2), and `gravity_mps2`.
-    pub fn mpu9250(gravity_mps2: f64) -> Self {
-        Self {
-            gravity_mps2,
-            noise: NoiseModel {
-                accel_noise_density: 300e-6 * gravity_mps2,
-                gyro_noise_density: 0.01_f64.to_radians(),
-                accel_bias_random_walk: 1e-4,
-                gyro_bias_random_walk: 1e-6,
-                vibration_accel_density_per_mps: 0.0,
-                vibration_gyro_density_per_mps: 0.0,
-            },
-            gyro_correction: Matrix3::identity(),
-            gyro_correction_sigma: datasheet_gyro_error_sigma(),
-            accel_bias_sigma_mps2: [4.5e-3, 2.5e-3, 6.1e-3],
-            accel_residual_scale: 1e-3,
-            zaru_gate_sigma: 5.0,
-            zupt_sigma_mps: 2e-3,
-            effective_samples: true,
-            align_s: 1.0,
-            revision_delay_s: 0.2,
-            max_motion_s: 120.0,
-            max_rate_hz: 4000.0,
-            revision_rate_hz: 100.0,
-            rest_hindsight_s: 0.5,
-            motion_confirm_s: 0.5,
-            // A ground robot: 1 m/s^2 and 30 deg/s reached in half a second, about level.
-            manoeuvre: Manoeuvre {
-                accel: 1.0,
-                rate: 0.5,
-                tilt: 0.05,
-                duration_s: 0.5,
-            },
-            propagation_interval_s: 0.01,
-            rest_window_drift: 0.05,
-            rest_updates: true,
-        }
-    }
-
-    /// `self` with the gyro correction fitted by `calibrate_science::gyrocal::calibrate_gyro`
-    /// and its 1-sigma.
-    pub fn with_gyro_calibration(mut self, correction: Matrix3<f64>, sigma: Matrix3<f64>) -> Self {
-        self.gyro_correction = correction;
-        self.gyro_correction_sigma = sigma;
-        self
-    }
-}
-
-/// 1-sigma of an uncalibrated MPU-9250 gyro's scale and cross-axis errors: the product
-/// specification (PS-MPU-9250A-01 rev. 1.1, table 1, "Gyroscope Specifications") gives a
-/// sensitivity scale factor tolerance of +-3 % and a cross-axis sensitivity of +-2 %. With no
-/// distribution stated, a bound `a` is taken as uniform, sigma `a / sqrt(3)` (GUM, JCGM
-/// 100:2008, 4.3.7): 1.7 % on the diagonal, 1.2 % off it.
-pub fn datasheet_gyro_error_sigma() -> Matrix3<f64> {
-    let (scale, cross) = (0.03 / 3f64.sqrt(), 0.02 / 3f64.sqrt());
-    Matrix3::from_fn(|r, c| if r == c { scale } else { cross })
-}
+use nalgebra::UnitQuaternion;
 
 /// Input the stage refuses; the message names the sample.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum OdometryError {
-    /// A sample's time is not after the previous one's.
-    #[error("sample seq {seq}: time {t_ns} ns is not after the previous sample's {prev_ns} ns")]
-    TimeNotIncreasing {
-        /// Sequence number of the offending sample.
-        seq: u64,
-        /// Its time.
-        t_ns: u64,
-        /// The previous sample's time.
-        prev_ns: u64,
-    },
-    /// A sample holds NaN or infinity.
-    #[error("sample seq {seq}: field {field} is not finite")]
-    NotFinite {
-        /// Sequence number of the offending sample.
-        seq: u64,
-        /// The field.
-        field: &'static str,
-    },
-    /// A sample holds a value no calibrated sensor produces.
-    #[error("sample seq {seq}: field {field} holds {value}, beyond the limit {limit}")]
-    OutOfRange {
-        /// Sequence number of the offending sample.
-        seq: u64,
-        /// The field.
-        field: &'static str,
-        /// The offending value, in the field's unit.
-        value: f64,
-        /// The limit of its magnitude.
-        limit: f64,
-    },
+    /// The stream contract refuses the sample ([`ipc_types::stream`]): a value not finite or
+    /// beyond the calibrated bounds, or a time not after the previous sample's.
+    #[error(transparent)]
+    Sample(#[from] SampleError),
     /// A sample's time is more than [`limits::MAX_STEP_S`] after the previous one's: no
     /// dead reckoning bridges it; the caller starts a new stage.
     #[error(
@@ -284,405 +116,25 @@ pub enum OdometryError {
         /// The previous sample's time.
         prev_ns: u64,
     },
-}
-
-/// One input of the stage, kept in arrival order while a replay may need it.
-#[derive(Debug, Clone, Copy)]
-enum Input {
-    /// A sample whose `ZERO_STATE` flag is the one in force (the detector's, or cleared when
-    /// withdrawn), and the detector's own flag.
-    Sample {
-        s: CorrectedImuSample,
-        imu_rest: bool,
+    /// Nothing was observed for longer than the odometry bridges
+    /// ([`crate::eskf::Manoeuvre::bridge_limit_s`]): the heading after it is unknown.
+    #[error(
+        "sample seq {seq}: nothing observed for {:.3} s before it (time {t_ns} ns), longer \
+         than the {limit_s:.2} s the odometry bridges (then the heading is wholly unknown: \
+         pi over the manoeuvre's rotation rate)",
+        (*t_ns - *prev_ns) as f64 * 1e-9
+    )]
+    HoleBeyondBridge {
+        /// Sequence number of the sample after the hole.
+        seq: u64,
+        /// Its time.
+        t_ns: u64,
+        /// The previous sample's time.
+        prev_ns: u64,
+        /// The longest interval bridged, s.
+        limit_s: f64,
     },
-    Hint(RobotHint),
 }
-
-impl Default for Input {
-    /// Filler for the ring's unused storage.
-    fn default() -> Self {
-        Self::Hint(RobotHint::default())
-    }
-}
-
-/// A copy of the settled navigator taken after it had taken the journal's inputs up to an
-/// absolute position, with the flags then in force.
-#[derive(Debug, Clone, Copy)]
-struct Checkpoint {
-    /// Inputs the copy has taken since the start.
-    pos: u64,
-    /// Its navigator in [`Hindsight::pool`].
-    slot: usize,
-}
-
-/// The inputs of the last `2 rest_hindsight_s + motion_confirm_s` (as long as flags can
-/// change) and a navigator state from before them to navigate them again from.
-///
-/// That state, the base, is what a navigator that took every input with its final flags had
-/// at the journal's front. The settled navigator takes every input, on the flags in force
-/// when it takes it (or the live navigator does in its stead, `OdometryStage::in_step`); most
-/// of the time they stay so. So copies of it are kept every [`CHECKPOINT_EVERY`] inputs: a
-/// copy whose inputs have all become final with no flag changed since it was taken holds
-/// what a navigator on final flags would, and becomes the base; a change of the flags drops
-/// the copies that took a changed input. The base is only fed inputs itself when the journal
-/// is full (no copy became final in time).
-struct Hindsight {
-    /// [`OdometryConfig::rest_hindsight_s`], ns.
-    lag_ns: u64,
-    /// [`OdometryConfig::motion_confirm_s`], ns.
-    confirm_ns: u64,
-    /// The navigator state after the inputs before the journal's front, on final flags.
-    base: Navigator,
-    /// Absolute position (inputs since the start) of the journal's front.
-    base_pos: u64,
-    /// Absolute position of the first input whose flags are not final yet.
-    final_pos: u64,
-    /// The inputs from `base_pos` on, in arrival order, with the flags in force.
-    journal: Ring<Input>,
-    /// Copies of the settled navigator not yet final, oldest first.
-    checkpoints: Vec<Checkpoint>,
-    /// Storage of the copies, allocated up front.
-    pool: Vec<Navigator>,
-    /// Slots of `pool` not in use.
-    free: Vec<usize>,
-    /// The navigator replaying the journal after a change of the flags in force, from the
-    /// base's state, a bounded number of inputs per call.
-    redo: Navigator,
-    /// Absolute position of the next input `redo` takes; `None` when no replay is under way.
-    redo_pos: Option<u64>,
-    /// Samples that became final with their rest flag withdrawn.
-    withdrawn: u64,
-    /// Start of the current run of IMU motion flags, ns.
-    motion_since_ns: u64,
-    /// When the hindsight of rest will have followed a short run of motion flags that ended
-    /// (its withdrawals are then undone), ns.
-    reinstate_at_ns: Option<u64>,
-}
-
-impl Hindsight {
-    /// Hindsight of `lag_s` and `confirm_s` for `cfg`, its storage allocated here.
-    fn new(cfg: OdometryConfig, hints: HintConfig, lag_s: f64, confirm_s: f64) -> Self {
-        let window = ((2.0 * lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize;
-        let copies = window.div_ceil(CHECKPOINT_EVERY) + 4;
-        Self {
-            lag_ns: (lag_s * 1e9).round() as u64,
-            confirm_ns: (confirm_s * 1e9).round() as u64,
-            base: Navigator::new(cfg, hints),
-            base_pos: 0,
-            final_pos: 0,
-            journal: Ring::new(window + 2 * CHECKPOINT_EVERY + hints.capacity + 2),
-            checkpoints: Vec::with_capacity(copies),
-            pool: (0..copies).map(|_| Navigator::new(cfg, hints)).collect(),
-            free: (0..copies).rev().collect(),
-            redo: Navigator::new(cfg, hints),
-            redo_pos: None,
-            withdrawn: 0,
-            motion_since_ns: 0,
-            reinstate_at_ns: None,
-        }
-    }
-
-    /// Follows the runs of IMU motion flags (`flipped`: the flag changed at this sample, now
-    /// `imu_rest`); whether, at `t_ns`, a short run that ended has been followed by the
-    /// hindsight of rest, so that its withdrawals are to be undone.
-    fn reinstatement_due(&mut self, t_ns: u64, imu_rest: bool, flipped: bool) -> bool {
-        if flipped {
-            if imu_rest {
-                self.reinstate_at_ns =
-                    (t_ns - self.motion_since_ns < self.confirm_ns).then_some(t_ns + self.lag_ns);
-            } else {
-                self.motion_since_ns = t_ns;
-                self.reinstate_at_ns = None;
-            }
-        }
-        let due = self.reinstate_at_ns.is_some_and(|r| t_ns >= r);
-        if due {
-            self.reinstate_at_ns = None;
-        }
-        due
-    }
-
-    /// Absolute position after the newest input.
-    fn end_pos(&self) -> u64 {
-        self.base_pos + self.journal.len() as u64
-    }
-
-    /// The input at absolute position `pos`, if the journal holds it.
-    fn at(&self, pos: u64) -> Option<&Input> {
-        self.journal
-            .oldest(pos.checked_sub(self.base_pos)? as usize)
-    }
-
-    /// Keeps `input`; when the journal is full, its oldest input goes to the base navigator
-    /// (above `max_rate_hz`, early, with its flags as they stand).
-    fn keep(&mut self, input: Input, emit: &mut impl FnMut(&OdometryState)) {
-        if self.journal.is_full() {
-            self.pop_front(emit);
-        }
-        self.journal.push(input);
-    }
-
-    /// Gives the journal's oldest input to the base navigator, making it final if it was not
-    /// (a replay under way takes it first if it has not yet, so that every state it changes is
-    /// republished).
-    fn pop_front(&mut self, emit: &mut impl FnMut(&OdometryState)) {
-        if self.final_pos == self.base_pos {
-            self.finalise_next(emit);
-        }
-        if let Some(input) = self.journal.pop() {
-            feed(&mut self.base, &input, &mut |_| {});
-            self.base_pos += 1;
-        }
-        while self
-            .checkpoints
-            .first()
-            .is_some_and(|c| c.pos <= self.base_pos)
-        {
-            let c = self.checkpoints.remove(0);
-            self.free.push(c.slot);
-        }
-    }
-
-    /// Makes the input at `final_pos` final: a replay that has not taken it takes it first,
-    /// and a withdrawn rest flag is counted.
-    fn finalise_next(&mut self, emit: &mut impl FnMut(&OdometryState)) {
-        let Some(input) = self.at(self.final_pos).copied() else {
-            return;
-        };
-        if self.redo_pos == Some(self.final_pos) {
-            self.redo_step(emit);
-        }
-        if let Input::Sample { s, imu_rest: true } = input
-            && s.flags & corrected_flags::ZERO_STATE == 0
-        {
-            self.withdrawn += 1;
-        }
-        self.final_pos += 1;
-    }
-
-    /// The replay takes its next journal input, its states republished as `REVISION`.
-    fn redo_step(&mut self, emit: &mut impl FnMut(&OdometryState)) {
-        let Some(p) = self.redo_pos else { return };
-        let Some(input) = self.at(p).copied() else {
-            return;
-        };
-        feed(&mut self.redo, &input, &mut |o| {
-            emit(&OdometryState {
-                flags: o.flags | odometry_flags::REVISION,
-                ..*o
-            })
-        });
-        self.redo_pos = Some(p + 1);
-        self.checkpoint_redo();
-    }
-
-    /// Advances the replay by at most `*budget` inputs (counted down); whether it has caught
-    /// up with the newest input (then `redo` holds the final state and the replay is over).
-    fn redo_advance(&mut self, budget: &mut usize, emit: &mut impl FnMut(&OdometryState)) -> bool {
-        while let Some(p) = self.redo_pos {
-            if p >= self.end_pos() {
-                self.redo_pos = None;
-                return true;
-            }
-            if *budget == 0 {
-                return false;
-            }
-            *budget -= 1;
-            self.redo_step(emit);
-        }
-        false
-    }
-
-    /// Journals one sample with settled flags (`flipped`: its IMU rest flag differs from the
-    /// previous one; `imu_transition`: and the detector, not a hint, decided that one) and
-    /// starts a replay when the flags in force changed.
-    fn journal(
-        &mut self,
-        s: &CorrectedImuSample,
-        imu_rest: bool,
-        flipped: bool,
-        imu_transition: bool,
-        emit: &mut impl FnMut(&OdometryState),
-    ) {
-        let t_ns = s.stamps.sample_ns;
-        let reinstate = self.reinstatement_due(t_ns, imu_rest, flipped);
-        self.keep(Input::Sample { s: *s, imu_rest }, emit);
-        self.catch_up(t_ns, emit);
-        if (imu_transition || reinstate) && self.resolve().is_some() {
-            // Flags in force changed: navigate the journal again from the state on final
-            // flags (starting over if a replay was under way).
-            self.start_replay();
-        }
-    }
-
-    /// Starts a replay of the inputs whose flags are not final, from the state a navigator
-    /// on final flags has before them: the base, taken through the final inputs after it
-    /// (their states unchanged, so not republished).
-    fn start_replay(&mut self) {
-        self.redo.copy_from(&self.base);
-        for pos in self.base_pos..self.final_pos {
-            let input = *self.at(pos).expect("final inputs are journalled");
-            feed(&mut self.redo, &input, &mut |_| {});
-            self.redo_pos = Some(pos + 1);
-            self.checkpoint_redo();
-        }
-        self.redo_pos = Some(self.final_pos);
-    }
-
-    /// Makes final every input up to the last sample whose rest flag is final at `t_ns`: a
-    /// motion starting within the hindsight after it is confirmed or not at the latest the
-    /// confirmation time plus the hindsight after its start. The newest checkpoint whose
-    /// inputs are all final becomes the base.
-    fn catch_up(&mut self, t_ns: u64, emit: &mut impl FnMut(&OdometryState)) {
-        while let Some(input) = self.at(self.final_pos).copied() {
-            if let Input::Sample { s, .. } = input
-                && s.stamps.sample_ns + 2 * self.lag_ns + self.confirm_ns > t_ns
-            {
-                break;
-            }
-            self.finalise_next(emit);
-        }
-        while self
-            .checkpoints
-            .first()
-            .is_some_and(|c| c.pos <= self.final_pos)
-        {
-            let c = self.checkpoints.remove(0);
-            std::mem::swap(&mut self.base, &mut self.pool[c.slot]);
-            self.free.push(c.slot);
-            while self.base_pos < c.pos {
-                self.journal.pop();
-                self.base_pos += 1;
-            }
-        }
-    }
-
-    /// Makes `nav` the settled navigator as it is after the newest input (no replay under way):
-    /// the newest copy (or the base) taken through the journal's inputs after it.
-    fn rebuild(&self, nav: &mut Navigator) {
-        let (from, pos) = match self.checkpoints.last() {
-            Some(c) => (&self.pool[c.slot], c.pos),
-            None => (&self.base, self.base_pos),
-        };
-        nav.copy_from(from);
-        for p in pos..self.end_pos() {
-            let input = self
-                .at(p)
-                .expect("the journal holds the inputs after its copies");
-            feed(nav, input, &mut |_| {});
-        }
-    }
-
-    /// Keeps a copy of `settled`, which has taken every input with the flags in force, if the
-    /// last copy is [`CHECKPOINT_EVERY`] inputs old.
-    fn checkpoint(&mut self, settled: &Navigator) {
-        if let Some(slot) = self.checkpoint_slot(self.end_pos()) {
-            self.pool[slot].copy_from(settled);
-        }
-    }
-
-    /// The same for the replay, which has taken the inputs before `redo_pos` with the flags in
-    /// force: after a change of the flags, the copies it leaves keep the replays that follow
-    /// short.
-    fn checkpoint_redo(&mut self) {
-        let Some(pos) = self.redo_pos else { return };
-        if let Some(slot) = self.checkpoint_slot(pos) {
-            self.pool[slot].copy_from(&self.redo);
-        }
-    }
-
-    /// A free slot for the copy of a navigator that has taken the inputs before `pos`,
-    /// registered, if the newest copy (or the base) is [`CHECKPOINT_EVERY`] inputs older.
-    fn checkpoint_slot(&mut self, pos: u64) -> Option<usize> {
-        let last = self.checkpoints.last().map_or(self.base_pos, |c| c.pos);
-        if pos < last + CHECKPOINT_EVERY as u64 {
-            return None;
-        }
-        let slot = self.free.pop()?;
-        self.checkpoints.push(Checkpoint { pos, slot });
-        Some(slot)
-    }
-
-    /// Sets the flag in force of every sample whose flags are not final by the rule (module
-    /// docs): a detector rest flag stands unless a confirmed motion starts within the
-    /// hindsight after it. A run of motion flags is confirmed unless it lasts less than the
-    /// confirmation time and is followed by at least the hindsight of rest flags (so a run
-    /// still going on, or one whose rest after it is younger than the hindsight, counts as
-    /// confirmed for now). Returns the absolute position of the oldest sample whose flag
-    /// changed, and drops the checkpoints that took it.
-    fn resolve(&mut self) -> Option<u64> {
-        let mut oldest_changed = None;
-        // Backwards: the newest sample's time, the start of the nearest later confirmed run
-        // and of the nearest later run, the time of the first rest sample after the run being
-        // crossed (None: it runs to the newest sample), and whether a run is being crossed.
-        let mut newest: Option<u64> = None;
-        let mut confirmed_start: Option<u64> = None;
-        let mut later_start: Option<u64> = None;
-        let mut run_end: Option<u64> = None;
-        let mut in_run = false;
-        let mut run_start = 0u64;
-        let first = (self.final_pos - self.base_pos) as usize;
-        for i in (first..self.journal.len()).rev() {
-            let Some(Input::Sample { s, imu_rest }) = self.journal.oldest_mut(i) else {
-                continue;
-            };
-            let t = s.stamps.sample_ns;
-            let newest = *newest.get_or_insert(t);
-            if !*imu_rest {
-                in_run = true;
-                run_start = t;
-                continue;
-            }
-            if in_run {
-                // The run crossed started at `run_start` and ended before `run_end`.
-                in_run = false;
-                let confirmed = run_end.is_none_or(|end| {
-                    end - run_start >= self.confirm_ns
-                        || later_start.unwrap_or(newest) - end < self.lag_ns
-                });
-                if confirmed {
-                    confirmed_start = Some(run_start);
-                }
-                later_start = Some(run_start);
-            }
-            run_end = Some(t);
-            let rest = confirmed_start.is_none_or(|m| m - t >= self.lag_ns);
-            let flags = if rest {
-                s.flags | corrected_flags::ZERO_STATE
-            } else {
-                s.flags & !corrected_flags::ZERO_STATE
-            };
-            if flags != s.flags {
-                oldest_changed = Some(self.base_pos + i as u64);
-            }
-            s.flags = flags;
-        }
-        let changed = oldest_changed?;
-        while self.checkpoints.last().is_some_and(|c| c.pos > changed) {
-            let c = self.checkpoints.pop().expect("checked");
-            self.free.push(c.slot);
-        }
-        Some(changed)
-    }
-}
-
-/// Gives one input to a navigator.
-fn feed(nav: &mut Navigator, input: &Input, emit: &mut impl FnMut(&OdometryState)) {
-    match input {
-        Input::Sample { s, .. } => nav.process(s, emit),
-        Input::Hint(h) => nav.hint(h),
-    }
-}
-
-/// Most journal inputs a replay after a change of the flags in force navigates again in one
-/// call of [`OdometryStage::process`] (a replay needs up to `2 rest_hindsight_s +
-/// motion_confirm_s` of inputs, 1 500 at 1 kHz, 6 000 at 4 kHz).
-pub const REPLAY_PER_CALL: usize = 64;
-
-/// Inputs between two copies of the settled navigator kept by the hindsight: a replay first
-/// navigates at most about this many final inputs at once (in the call that starts it), and
-/// each copy costs a navigator's storage in use (its motion history).
-const CHECKPOINT_EVERY: usize = 4 * REPLAY_PER_CALL;
 
 /// Provisional samples the stage holds until their batch is settled: more than the two
 /// batches a calibration stage can leave unsettled (a batch cut by a gap, then a new one).
@@ -726,7 +178,12 @@ pub struct OdometryStage {
     /// unsettled (the settled navigator took it before them, the live one after), or
     /// `revisions` was full.
     out_of_step: bool,
-    last_ns: Option<u64>,
+    /// The stream's time line ([`ipc_types::stream`]).
+    time: TimeLine,
+    /// Holes in it: unmarked gaps, bridged as marked ones.
+    holes: Holes,
+    /// [`crate::eskf::Manoeuvre::bridge_limit_s`], ns.
+    bridge_ns: u64,
     revisions_emitted: u64,
 }
 
@@ -775,7 +232,9 @@ impl OdometryStage {
             },
             ahead,
             unsettled: Ring::new(UNSETTLED),
-            last_ns: None,
+            time: TimeLine::default(),
+            holes: Holes::default(),
+            bridge_ns: (cfg.manoeuvre.bridge_limit_s() * 1e9) as u64,
             revisions_emitted: 0,
         })
     }
@@ -810,6 +269,12 @@ impl OdometryStage {
     /// Whether alignment is done.
     pub fn aligned(&self) -> bool {
         self.ahead.aligned()
+    }
+
+    /// The holes in the time line so far (unmarked gaps, found here or marked
+    /// [`corrected_flags::HOLE_BEFORE`] by the calibration stage), each bridged as a gap.
+    pub fn holes(&self) -> Holes {
+        self.holes
     }
 
     /// Number of republished (revised) states so far.
@@ -852,9 +317,9 @@ impl OdometryStage {
         s: &CorrectedImuSample,
         emit: &mut impl FnMut(&OdometryState),
     ) -> Result<(), OdometryError> {
-        check_finite(s)?;
-        self.check_time(s)?;
-        self.last_ns = Some(s.stamps.sample_ns);
+        stream::check_corrected(s)?;
+        let s = &self.check_time(s)?;
+        self.time.accept(s.stamps.sample_ns);
         let mut budget = REPLAY_PER_CALL;
         let budget = &mut budget;
         let state = self.navigate_ahead(s);
@@ -879,30 +344,38 @@ impl OdometryStage {
         Ok(())
     }
 
-    /// Refuses a sample whose time does not increase, or jumps by more than
-    /// [`limits::MAX_STEP_NS`].
+    /// Refuses a sample whose time does not increase, jumps by more than
+    /// [`limits::MAX_STEP_NS`] or follows a hole longer than the odometry bridges; returns the
+    /// sample, marked as a gap after an unmarked hole in the time line (counted).
     #[inline]
-    fn check_time(&self, s: &CorrectedImuSample) -> Result<(), OdometryError> {
+    fn check_time(&mut self, s: &CorrectedImuSample) -> Result<CorrectedImuSample, OdometryError> {
         let t_ns = s.stamps.sample_ns;
-        if let Some(prev_ns) = self.last_ns
-            && t_ns <= prev_ns
-        {
-            return Err(OdometryError::TimeNotIncreasing {
-                seq: s.seq,
-                t_ns,
-                prev_ns,
-            });
-        }
-        if let Some(prev_ns) = self.last_ns
-            && t_ns > prev_ns.saturating_add(limits::MAX_STEP_NS)
-        {
+        stream::check_increasing(s.seq, t_ns, self.time.prev_ns())?;
+        let prev_ns = self.time.prev_ns().unwrap_or(t_ns);
+        if t_ns - prev_ns > limits::MAX_STEP_NS {
             return Err(OdometryError::TimeStep {
                 seq: s.seq,
                 t_ns,
                 prev_ns,
             });
         }
-        Ok(())
+        let marked = s.raw_flags & raw_flags::GAP_BEFORE != 0;
+        if (marked || self.time.step(t_ns) != Step::Regular) && t_ns - prev_ns > self.bridge_ns {
+            return Err(OdometryError::HoleBeyondBridge {
+                seq: s.seq,
+                t_ns,
+                prev_ns,
+                limit_s: self.bridge_ns as f64 * 1e-9,
+            });
+        }
+        let mut s = *s;
+        let hole = matches!(self.time.step(t_ns), Step::Hole { .. });
+        if hole && !marked || s.flags & corrected_flags::HOLE_BEFORE != 0 {
+            s.raw_flags |= raw_flags::GAP_BEFORE;
+            s.flags |= corrected_flags::HOLE_BEFORE;
+            self.holes.record(s.seq, t_ns, t_ns - prev_ns);
+        }
+        Ok(s)
     }
 
     /// The live navigator's state for `s`. Its motion-end revisions come again, on settled
@@ -937,13 +410,12 @@ impl OdometryStage {
         emit: &mut impl FnMut(&OdometryState),
     ) {
         // Older samples than those `s` settles were cut from their batch: final as they are.
-        let settles = (s.settles as usize).min(self.unsettled.len());
-        const VERDICT: u16 = corrected_flags::ZERO_STATE | corrected_flags::DETECTOR_READY;
+        let settles = stream::settled_by(s, self.unsettled.len());
         let n = self.unsettled.len();
         let verdict_changed = (n - settles..n).any(|i| {
             self.unsettled
                 .oldest(i)
-                .is_some_and(|u| u.s.flags & VERDICT != s.flags & VERDICT)
+                .is_some_and(|u| u.s.flags & stream::VERDICT != s.flags & stream::VERDICT)
         });
         if verdict_changed || self.out_of_step {
             self.leave_step();
@@ -954,12 +426,7 @@ impl OdometryStage {
             diverged |= self.settle(&old, budget, emit);
         }
         while let Some(mut u) = self.unsettled.pop() {
-            let flags =
-                (u.s.flags & !(VERDICT | corrected_flags::PROVISIONAL)) | (s.flags & VERDICT);
-            diverged |= flags & VERDICT != u.s.flags & VERDICT;
-            u.s.flags = flags;
-            u.s.zs_mean_mps2 = s.zs_mean_mps2;
-            u.s.zs_std_mps2 = s.zs_std_mps2;
+            diverged |= stream::settle(&mut u.s, s);
             diverged |= self.settle(&u, budget, emit);
         }
         diverged |= self.settle(sample, budget, emit);
@@ -1168,41 +635,6 @@ impl Settled {
     }
 }
 
-/// Largest calibrated specific force per axis, m/s^2: twice the raw bound
-/// ([`limits::ACCEL_LIMIT_G`]) in standard gravities, room for any plausible calibration's
-/// scale and bias (`calibrate::calibfile::plausibility`).
-pub const ACCEL_LIMIT_MPS2: f64 =
-    2.0 * limits::ACCEL_LIMIT_G * ipc_types::units::STANDARD_GRAVITY_MPS2;
-
-/// Largest calibrated angular rate per axis, rad/s: twice the raw bound
-/// ([`limits::GYRO_LIMIT_DPS`]), as for [`ACCEL_LIMIT_MPS2`].
-pub const GYRO_LIMIT_RPS: f64 = 2.0 * limits::GYRO_LIMIT_DPS * std::f64::consts::PI / 180.0;
-
-/// Checks the values the filter takes: finite, and within [`ACCEL_LIMIT_MPS2`] and
-/// [`GYRO_LIMIT_RPS`] (a value beyond them would drive the filter's state to infinity and NaN).
-fn check_finite(s: &CorrectedImuSample) -> Result<(), OdometryError> {
-    let fields: [(&'static str, &[f64], f64); 4] = [
-        ("accel_mps2", &s.accel_mps2, ACCEL_LIMIT_MPS2),
-        ("gyro_rps", &s.gyro_rps, GYRO_LIMIT_RPS),
-        ("zs_mean_mps2", &s.zs_mean_mps2, ACCEL_LIMIT_MPS2),
-        ("zs_std_mps2", &s.zs_std_mps2, ACCEL_LIMIT_MPS2),
-    ];
-    for (field, values, limit) in fields {
-        if values.iter().any(|v| !v.is_finite()) {
-            return Err(OdometryError::NotFinite { seq: s.seq, field });
-        }
-        if let Some(&value) = values.iter().find(|v| v.abs() > limit) {
-            return Err(OdometryError::OutOfRange {
-                seq: s.seq,
-                field,
-                value,
-                limit,
-            });
-        }
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1259,7 +691,13 @@ mod tests {
             assert!(values.copied().all(f64::is_finite), "{o:?}");
         }
         let e = stage.process(&sample(799), &mut |_| {}).unwrap_err();
-        assert!(matches!(e, OdometryError::TimeNotIncreasing { .. }), "{e}");
+        assert!(
+            matches!(
+                e,
+                OdometryError::Sample(SampleError::TimeNotIncreasing { .. })
+            ),
+            "{e}"
+        );
         let mut big = sample(800);
         big.accel_mps2[0] = 1e300;
         let e = stage.process(&big, &mut |_| {}).unwrap_err();

@@ -8,9 +8,10 @@
 
 use ipc_types::{CorrectedImuSample, Stamps, corrected_flags, raw_flags};
 use nalgebra::Vector3;
+use odometry::config::OdometryConfig;
 use odometry::eskf::{Eskf, Imu, NoiseModel, align};
 use odometry::rest_noise::RestNoise;
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::stage::OdometryStage;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};

@@ -8,7 +8,8 @@ use calibrate_science::gyrocal::{GyroCalConfig, calibrate_gyro};
 use common::{Case, Simulation};
 use ipc_types::{OdometryState, odometry_flags};
 use mems_sim::model::G_MPS2;
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::config::OdometryConfig;
+use odometry::stage::OdometryStage;
 
 /// Runs a drive with turns at 50 Hz whose samples from `gap_from_s` (after the drive's start)
 /// for `gap_s` are dropped; returns (state, truth position) at the first sample after the gap

@@ -5,6 +5,7 @@ mod common;
 
 use calibrate_science::gyrocal::{GyroCalConfig, GyroCalError, MIN_POSES, calibrate_gyro};
 use common::{Case, SESSION_HOLD_S, Simulation};
+use ipc_types::stream::SampleError;
 use ipc_types::{CorrectedImuSample, Stamps, corrected_flags};
 use mems_sim::SimSensor;
 use mems_sim::model::{G_MPS2, SensorModel};
@@ -150,7 +151,10 @@ fn too_few_poses_and_bad_samples_are_refused() {
     session[700].stamps.sample_ns = session[699].stamps.sample_ns;
     let err = calibrate_gyro(&session, &cfg()).unwrap_err();
     assert!(
-        matches!(err, GyroCalError::TimeNotIncreasing { seq: 700, .. }),
+        matches!(
+            err,
+            GyroCalError::Sample(SampleError::TimeNotIncreasing { seq: 700, .. })
+        ),
         "{err}"
     );
 }

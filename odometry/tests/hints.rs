@@ -19,8 +19,9 @@ use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, corrected_flags, o
 use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
 use nalgebra::{UnitQuaternion, Vector2};
+use odometry::config::OdometryConfig;
 use odometry::hints::HintConfig;
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::stage::OdometryStage;
 use recording::Truth;
 
 /// A drive's samples (perfect rest flags) and truth, and the configuration with the gyro

@@ -11,9 +11,10 @@ use ipc_types::{RobotHint, odometry_flags};
 use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
 use mems_stage::Stage;
+use odometry::config::OdometryConfig;
 use odometry::hints::HintConfig;
 use odometry::session::{Input, NoGyro, OdometrySession};
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::stage::OdometryStage;
 
 #[global_allocator]
 static ALLOCATOR: alloc_count::Counting = alloc_count::Counting;

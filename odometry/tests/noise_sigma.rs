@@ -12,8 +12,9 @@ use std::path::{Path, PathBuf};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::noise_params::{AxisNoise, Estimate, NoiseParams, SensorNoise};
 use ipc_types::{CorrectedImuSample, OdometryState, Stamps, corrected_flags};
+use odometry::config::OdometryConfig;
 use odometry::config::from_calibration;
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::stage::OdometryStage;
 
 const G: f64 = 9.797;
 const RATE: f64 = 200.0;

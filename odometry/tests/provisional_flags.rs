@@ -25,7 +25,8 @@ use calibrate::stage::Settler;
 use common::{Case, Simulation, live_calibration_stage, live_detector};
 use ipc_types::{CorrectedImuSample, OdometryState, corrected_flags, odometry_flags};
 use mems_sim::model::G_MPS2;
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::config::OdometryConfig;
+use odometry::stage::OdometryStage;
 
 /// The calibration stage's output on a 3-minute drive at 200 Hz with turns, in emission order.
 fn calibrated_drive() -> Vec<CorrectedImuSample> {

@@ -20,7 +20,8 @@ use std::collections::BTreeMap;
 use common::{Case, Simulation};
 use ipc_types::{CorrectedImuSample, OdometryState, corrected_flags, odometry_flags};
 use mems_sim::model::G_MPS2;
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::config::OdometryConfig;
+use odometry::stage::OdometryStage;
 
 /// How long the simulated detector keeps saying rest after a motion has started, s.
 const LATE_S: f64 = 0.4;

@@ -13,7 +13,8 @@ mod common;
 use common::{Case, Simulation};
 use ipc_types::{OdometryState, odometry_flags};
 use mems_sim::model::G_MPS2;
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::config::OdometryConfig;
+use odometry::stage::OdometryStage;
 
 /// The last live state of the stage over the drive, the last live state of every rest, and
 /// the filter's gyro bias estimate and its 1-sigma at the end (rad/s, x axis).

@@ -3,8 +3,8 @@
 //! - hints that arrive at any time before the samples they precede give exactly the states of
 //!   the stage handed each hint just before the first sample taken at or after its
 //!   publication;
-//! - a sequence number that goes back starts a new stage (which aligns again), after the old
-//!   one's revisions;
+//! - a sample the calibration stage marked `NEW_SESSION` starts a new stage (which aligns
+//!   again), after the old one's revisions;
 //! - a sample without a gyroscope gives a `NO_GYRO` state without position (live) or is
 //!   navigated at the held attitude (offline);
 //! - a malformed hint, and a hint beyond the queue, are refused and change nothing.
@@ -12,13 +12,16 @@
 mod common;
 
 use common::{Case, Simulation};
-use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, odometry_flags, raw_flags};
+use ipc_types::{
+    CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags, raw_flags,
+};
 use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
 use mems_stage::Stage;
+use odometry::config::OdometryConfig;
 use odometry::hints::HintConfig;
 use odometry::session::{HINT_QUEUE, Input, NoGyro, OdometrySession, Refusal};
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::stage::OdometryStage;
 
 /// A 60 s drive with turns at 100 Hz (white samples), and its encoder hints.
 fn drive() -> (Vec<CorrectedImuSample>, Vec<RobotHint>) {
@@ -112,7 +115,7 @@ fn hints_arriving_early_give_the_states_of_hints_handed_over_at_their_time() {
 }
 
 #[test]
-fn a_sequence_that_goes_back_starts_a_new_stage_that_aligns_again() {
+fn a_new_session_mark_starts_a_new_stage_that_aligns_again() {
     let (samples, _) = drive();
     let mut s = session(NoGyro::Unnavigated);
     let mut first = Vec::new();
@@ -121,13 +124,24 @@ fn a_sequence_that_goes_back_starts_a_new_stage_that_aligns_again() {
             .unwrap();
     }
     assert!(first.last().unwrap().flags & odometry_flags::ALIGNED != 0);
-    // The acquisition restarts: its sequence starts again at 0, its clock goes on.
+    // The acquisition restarts: its sequence starts again at 0, its clock goes on, and the
+    // calibration stage marks the new session on its first sample.
     let offset = samples.last().unwrap().stamps.sample_ns + 10_000_000;
+    let restarted: Vec<CorrectedImuSample> = samples
+        .iter()
+        .enumerate()
+        .map(|(i, x)| {
+            let mut x = *x;
+            x.stamps.sample_ns += offset;
+            if i == 0 {
+                x.flags |= corrected_flags::NEW_SESSION;
+            }
+            x
+        })
+        .collect();
     let mut second = Vec::new();
-    for x in &samples {
-        let mut x = *x;
-        x.stamps.sample_ns += offset;
-        s.process(&Input::Sample(x), &mut |o| second.push(*o))
+    for x in &restarted {
+        s.process(&Input::Sample(*x), &mut |o| second.push(*o))
             .unwrap();
     }
     assert_eq!(s.stats().sessions, 2);
@@ -139,18 +153,7 @@ fn a_sequence_that_goes_back_starts_a_new_stage_that_aligns_again() {
     assert_eq!(live[0].flags & odometry_flags::ALIGNED, 0, "aligns again");
     // The new stage's states are those of a fresh session on the same samples (the old
     // stage's pending revisions come first, flagged as such).
-    let fresh = through_session(
-        &samples
-            .iter()
-            .map(|x| {
-                let mut x = *x;
-                x.stamps.sample_ns += offset;
-                x
-            })
-            .collect::<Vec<_>>(),
-        &[],
-        0,
-    );
+    let fresh = through_session(&restarted, &[], 0);
     let fresh_live: Vec<_> = fresh
         .iter()
         .filter(|o| o.flags & odometry_flags::REVISION == 0)

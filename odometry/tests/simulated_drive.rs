@@ -9,7 +9,8 @@ use common::{Case, Simulation};
 use ipc_types::{CorrectedImuSample, OdometryState, Stamps, corrected_flags, odometry_flags};
 use mems_sim::model::G_MPS2;
 use nalgebra::{UnitQuaternion, Vector3};
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::config::OdometryConfig;
+use odometry::stage::OdometryStage;
 
 /// Runs the stage over a drive, with the gyro calibrated from the session before it; returns
 /// the last live state, the truth at the end and the distance travelled (horizontal, from the

@@ -19,8 +19,8 @@ use iceoryx2::service::port_factory::PortFactory as _;
 use ipc_types::{CorrectedImuSample, OdometryState, RobotHint, odometry_flags, service};
 use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
+use odometry::config::OdometryConfig;
 use odometry::hints::HintConfig;
-use odometry::stage::OdometryConfig;
 
 /// The serve process, killed when the test ends (unless it was stopped cleanly).
 struct Serve(Option<Child>);

@@ -5,7 +5,8 @@
 //! history must be closer to the truth than the forward estimate.
 
 use ipc_types::{CorrectedImuSample, OdometryState, Stamps, corrected_flags, odometry_flags};
-use odometry::stage::{OdometryConfig, OdometryStage};
+use odometry::config::OdometryConfig;
+use odometry::stage::OdometryStage;
 use std::f64::consts::PI;
 
 const G: f64 = 9.81;

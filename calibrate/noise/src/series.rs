@@ -99,15 +99,16 @@ pub enum SeriesError {
         /// The previous sample's `stamps.sample_ns`.
         previous_ns: u64,
     },
-    /// A value is NaN or infinite.
-    #[error("sample {index} (seq {seq}): {field} is not finite")]
+    /// A value is not finite or beyond the part's bounds (the stream contract's check,
+    /// [`ipc_types::limits::check_raw`]).
+    #[error("sample {index} (seq {seq}): {bad}")]
     NotFinite {
         /// Index of the offending sample.
         index: usize,
         /// Its sequence number.
         seq: u64,
-        /// The field, e.g. `accel_g[2]`.
-        field: String,
+        /// The field, its value and the bound.
+        bad: ipc_types::limits::OutOfBounds,
     },
 }
 
@@ -262,11 +263,11 @@ impl Columns {
                         previous_ns: p.stamps.sample_ns,
                     });
                 }
-                if let Some(field) = non_finite_field(s) {
+                if let Err(bad) = check_values(s) {
                     return Err(SeriesError::NotFinite {
                         index,
                         seq: s.seq,
-                        field,
+                        bad,
                     });
                 }
                 columns.times_ns.push(s.stamps.sample_ns);
@@ -398,33 +399,25 @@ pub fn channels(samples: &[RawImuSample], gravity_mps2: f64) -> Result<Vec<Chann
         .collect())
 }
 
-/// Errors on the first non-finite accelerometer value, or gyro value of a sample with
-/// `GYRO_VALID`.
+/// Errors on the first accelerometer value, or gyro value of a sample with `GYRO_VALID`, that is
+/// not finite or beyond the part's bounds.
 fn check_finite(samples: &[RawImuSample]) -> Result<(), SeriesError> {
     for (index, s) in samples.iter().enumerate() {
-        if let Some(field) = non_finite_field(s) {
+        if let Err(bad) = check_values(s) {
             return Err(SeriesError::NotFinite {
                 index,
                 seq: s.seq,
-                field,
+                bad,
             });
         }
     }
     Ok(())
 }
 
-/// The first non-finite field of a sample (gyro fields only with `GYRO_VALID`).
-fn non_finite_field(s: &RawImuSample) -> Option<String> {
+/// The stream contract's value check of a sample (gyro fields only with `GYRO_VALID`).
+fn check_values(s: &RawImuSample) -> Result<(), ipc_types::limits::OutOfBounds> {
     let gyro = s.flags & raw_flags::GYRO_VALID != 0;
-    (0..3).find_map(|axis| {
-        if !s.accel_g[axis].is_finite() {
-            Some(format!("accel_g[{axis}]"))
-        } else if gyro && !s.gyro_dps[axis].is_finite() {
-            Some(format!("gyro_dps[{axis}]"))
-        } else {
-            None
-        }
-    })
+    ipc_types::limits::check_raw(&s.accel_g, gyro.then_some(&s.gyro_dps), None)
 }
 
 /// Whether every sample holds a gyro measurement.
@@ -507,7 +500,7 @@ mod tests {
         let err = channels(&samples, 9.8).unwrap_err();
         assert_eq!(
             err.to_string(),
-            "sample 3 (seq 3): accel_g[2] is not finite"
+            "sample 3 (seq 3): accel_g[2] = NaN is not finite"
         );
     }
 

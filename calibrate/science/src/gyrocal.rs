@@ -91,24 +91,10 @@ pub struct GyroCalibration {
 /// Why a session cannot calibrate the gyro.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum GyroCalError {
-    /// A sample's time is not after the previous one's.
-    #[error("sample seq {seq}: time {t_ns} ns is not after the previous sample's {prev_ns} ns")]
-    TimeNotIncreasing {
-        /// Sequence number of the offending sample.
-        seq: u64,
-        /// Its time.
-        t_ns: u64,
-        /// The previous sample's time.
-        prev_ns: u64,
-    },
-    /// A sample holds NaN or infinity.
-    #[error("sample seq {seq}: field {field} is not finite")]
-    NotFinite {
-        /// Sequence number of the offending sample.
-        seq: u64,
-        /// The field.
-        field: &'static str,
-    },
+    /// A sample the stream contract refuses (not finite, beyond the calibrated bounds, or its
+    /// time not after the previous one's): the same check and message as the odometry stage's.
+    #[error(transparent)]
+    Sample(#[from] ipc_types::stream::SampleError),
     /// Too few static poses.
     #[error(
         "the session has {found} static poses of at least {min_static_s} s; the gyro fit needs \
@@ -260,23 +246,13 @@ fn check_condition(j: &OMatrix<f64, Dyn, U18>) -> Result<(), GyroCalError> {
     Ok(())
 }
 
+/// Checks every sample by the stream contract ([`ipc_types::stream`]).
 fn check_samples(samples: &[CorrectedImuSample]) -> Result<(), GyroCalError> {
+    let mut prev_ns = None;
     for s in samples {
-        for (field, values) in [("accel_mps2", &s.accel_mps2), ("gyro_rps", &s.gyro_rps)] {
-            if values.iter().any(|v| !v.is_finite()) {
-                return Err(GyroCalError::NotFinite { seq: s.seq, field });
-            }
-        }
-    }
-    for pair in samples.windows(2) {
-        let (prev_ns, t_ns) = (pair[0].stamps.sample_ns, pair[1].stamps.sample_ns);
-        if t_ns <= prev_ns {
-            return Err(GyroCalError::TimeNotIncreasing {
-                seq: pair[1].seq,
-                t_ns,
-                prev_ns,
-            });
-        }
+        ipc_types::stream::check_corrected(s)?;
+        ipc_types::stream::check_increasing(s.seq, s.stamps.sample_ns, prev_ns)?;
+        prev_ns = Some(s.stamps.sample_ns);
     }
     Ok(())
 }

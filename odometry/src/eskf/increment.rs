@@ -20,7 +20,7 @@
 //!   are summed on their own blocks and their effect on the other errors within the
 //!   interval `T` is left out (it enters from the next propagation on): on the velocity it is
 //!   `q_ba T^3 / 3` against the white noise's `q_v T` kept, some 1e-8 of it over 10 ms with
-//!   the MPU-9250's figures (`crate::stage::OdometryConfig::mpu9250`), and the largest term
+//!   the MPU-9250's figures (`crate::config::OdometryConfig::mpu9250`), and the largest term
 //!   left out, the velocity/bias cross-covariance, is `q_ba T^2 / 2`;
 //! - the sensitivity's increment `G <- F G + B` (zero at the start), non-zero on the
 //!   position, velocity and attitude rows.

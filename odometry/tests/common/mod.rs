@@ -28,9 +28,9 @@ use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, 
 use mems_sim::vibration::{Vibration, VibrationModel};
 use mems_stage::Stage;
 use nalgebra::{Matrix3, Vector3};
+use odometry::config::OdometryConfig;
 use odometry::hints::HintConfig;
 use odometry::session::{Input, NoGyro, OdometrySession};
-use odometry::stage::OdometryConfig;
 use recording::Truth;
 
 /// Number of attitudes in the calibration session.

@@ -17,6 +17,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use ipc_types::stream::{Holes, Step, TimeLine};
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
 use ipc_types::{odometry_flags, raw_flags, service};
 use recording::mcap::run::{Message, RunReader};
@@ -101,6 +102,10 @@ pub struct RawInfo {
     pub undelivered: u64,
     /// Samples flagged `SATURATED`.
     pub saturated: u64,
+    /// Holes in the sample times that nothing marked, measured against the stream's nominal
+    /// period (`ipc_types::stream`): count, total and the longest, with the seq and sample time
+    /// of the sample after it.
+    pub holes: Holes,
 }
 
 /// The recorder's events, by kind.
@@ -270,6 +275,8 @@ struct RawTrack {
     session: Option<(u64, u64, u64)>,
     /// The longest session's sample count and rate, Hz.
     longest: (u64, f64),
+    /// The current session's time line.
+    time: TimeLine,
 }
 
 impl RawTrack {
@@ -278,6 +285,7 @@ impl RawTrack {
         if new_session || self.session.is_none() {
             self.close_session();
             self.info.sessions += 1;
+            self.time.restart();
         }
         let flags = f.flags.unwrap_or(0);
         self.info.gyro |= flags & raw_flags::GYRO_VALID != 0;
@@ -285,6 +293,13 @@ impl RawTrack {
         self.info.lost_at_sensor += u64::from(f.lost_before.unwrap_or(0));
         self.session_undelivered = u64::from(f.undelivered.unwrap_or(0));
         let t = f.stamps.as_ref().map_or(0, |s| s.sample_ns);
+        let marked = flags & raw_flags::GAP_BEFORE != 0 || f.lost_before.unwrap_or(0) > 0;
+        if let Step::Hole { dt_ns } = self.time.step(t)
+            && !marked
+        {
+            self.info.holes.record(f.seq.unwrap_or(0), t, dt_ns);
+        }
+        self.time.accept(t);
         self.session = Some(match self.session {
             Some((first, _, n)) => (first, t, n + 1),
             None => (t, t, 1),
@@ -522,6 +537,12 @@ impl RunInfo {
                 r.lost_at_sensor,
                 r.undelivered,
                 r.saturated
+            );
+            let holes = r.holes.describe(self.start_ns.unwrap_or(0));
+            let _ = writeln!(
+                s,
+                "holes:     {}",
+                holes.unwrap_or_else(|| "0 (no unmarked hole in the sample times)".into())
             );
         }
         let e = &self.events;

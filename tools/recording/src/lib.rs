@@ -97,6 +97,10 @@ pub struct LogRepairs {
     pub times_rebuilt: u64,
     /// The nominal period used, ns (0 when nothing was rebuilt).
     pub period_ns: u64,
+    /// Holes in the rows' times that nothing marked (`lost_before`, `GAP_BEFORE`), measured
+    /// against the file's nominal period ([`ipc_types::stream`]), with the line after each;
+    /// found under every policy and not repaired: the stages bridge them as gaps.
+    pub holes: ipc_types::stream::Holes,
 }
 
 impl LogRepairs {

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use ::csv::{ReaderBuilder, StringRecord, Trim};
 use ipc_types::limits;
+use ipc_types::stream::{HoleAt, Holes, Step, TimeLine};
 use ipc_types::units::{self, AccelRange, GyroRange};
 use ipc_types::{RawImuSample, Stamps, raw_flags};
 
@@ -184,6 +185,9 @@ pub(crate) struct SampleBuilder {
     samples: Vec<RawImuSample>,
     policy: LogPolicy,
     repeats_dropped: u64,
+    /// The time line of the rows so far, and its holes ([`ipc_types::stream`]).
+    time: TimeLine,
+    holes: Holes,
 }
 
 /// The column names a reader reports a row's errors under.
@@ -236,6 +240,8 @@ impl SampleBuilder {
             samples: Vec::new(),
             policy,
             repeats_dropped: 0,
+            time: TimeLine::default(),
+            holes: Holes::default(),
         }
     }
 
@@ -292,6 +298,7 @@ impl SampleBuilder {
                 return Err(Error::line(path, line, Some(time_column), kind));
             }
         }
+        self.measure_time(line, &row);
         let accel_lsb = AccelRange::G2.lsb_per_g();
         let gyro_lsb = GyroRange::Dps250.lsb_per_dps();
         let accel_counts = row.accel_g.map(|g| units::quantize(g * accel_lsb));
@@ -341,6 +348,25 @@ impl SampleBuilder {
         Ok(true)
     }
 
+    /// Measures the row's time against the time line: an unmarked hole before it is counted
+    /// with its line.
+    fn measure_time(&mut self, line: u64, row: &Row) {
+        if let Step::Hole { dt_ns } = self.time.step(row.t_ns)
+            && row.lost_before == 0
+            && row.flags.is_none_or(|f| f & raw_flags::GAP_BEFORE == 0)
+        {
+            self.holes.record_at(HoleAt {
+                seq: self.samples.len() as u64,
+                line: Some(line),
+                t_ns: row.t_ns,
+                dt_ns,
+            });
+        }
+        if self.time.prev_ns().is_none_or(|p| row.t_ns > p) {
+            self.time.accept(row.t_ns);
+        }
+    }
+
     /// The finished samples and what was repaired: times that did not increase are rebuilt
     /// from the nominal period (the median, over consecutive distinct times, of their step per
     /// row), in the samples and in `truth` (one per sample) alike.
@@ -351,6 +377,7 @@ impl SampleBuilder {
     ) -> Result<(Vec<RawImuSample>, LogRepairs)> {
         let mut repairs = LogRepairs {
             repeats_dropped: self.repeats_dropped,
+            holes: self.holes,
             ..LogRepairs::default()
         };
         let times: Vec<u64> = self.samples.iter().map(|s| s.stamps.sample_ns).collect();

@@ -9,8 +9,8 @@ use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::zero_state::DetectorConfig;
 use calibrate::zero_state::args::DetectorArgs;
+use odometry::config::OdometryConfig;
 use odometry::profile::Profile;
-use odometry::stage::OdometryConfig;
 use recording::LogPolicy;
 
 /// The odometry configuration a calibration file implies ([`odometry::config::from_calibration`]:

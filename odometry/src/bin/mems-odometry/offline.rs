@@ -89,6 +89,9 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             }
         });
     let mut read = Read::new(&args.input, &feed, repairs, config.align_s);
+    if read.holes.count == 0 {
+        read.holes = chain.first.stats().holes;
+    }
     let no_gyro = chain.second.stats().first_no_gyro_seq;
     read.segments = summary::report_input(&read, &mut feed.source, no_gyro);
     summary.finish(ran, &read, &chain, &mut feed.truth, args.json)?;

@@ -28,6 +28,9 @@ pub fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
         accel,
         gyro
     );
+    if let Some(holes) = s.holes.describe(0) {
+        tracing::warn!("{holes}; each bridged as a gap (GAP_BEFORE and HOLE_BEFORE)");
+    }
     tracing::info!("{}; {}", steady.summary(), crate::ALLOCATOR.summary());
 }
 

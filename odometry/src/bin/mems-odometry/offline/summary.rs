@@ -12,6 +12,7 @@ use std::path::Path;
 
 use anyhow::{Result, bail};
 use calibrate::stage::CalibrationStage;
+use ipc_types::stream::Holes;
 use ipc_types::{OdometryState, odometry_flags};
 use mems_stage::Chain;
 use mems_stage::offline::Stop;
@@ -124,7 +125,19 @@ impl Summary {
     ) -> Result<()> {
         let input = read.input.display();
         match ran {
-            Err(Stop::Refused { refusal, .. }) => bail!("{input}: {refusal}"),
+            Err(Stop::Refused { refusal, .. }) => {
+                // A hole the odometry does not bridge: name its line and time too.
+                let refusal = refusal.to_string();
+                let t0 = read.first_ns.unwrap_or(0);
+                if let Some(h) = read.holes.longest
+                    && refusal.starts_with(&format!("sample seq {}:", h.seq))
+                {
+                    let line = h.line.map_or(String::new(), |l| format!(":{l}"));
+                    let t_s = h.t_ns.saturating_sub(t0) as f64 * 1e-9;
+                    bail!("{input}{line}: at t {t_s:.3} s: {refusal}");
+                }
+                bail!("{input}: {refusal}")
+            }
             Err(Stop::Input(e)) => return Err(e),
             Ok(_) => {}
         }
@@ -181,6 +194,7 @@ impl Summary {
                 "times_rebuilt": read.repairs.times_rebuilt,
             },
             "input_damage": damage_json(&read.segments),
+            "input_holes": holes_json(&read.holes, read.first_ns.unwrap_or(0)),
             "hints": {
                 "in_recording": read.hints_seen,
                 "late": read.hints_late,
@@ -228,6 +242,9 @@ pub struct Read<'a> {
     pub repairs: LogRepairs,
     /// The rest the odometry aligns on, s (for the message).
     pub align_s: f64,
+    /// Holes in the time line that nothing marked: the text reader's (with lines), else the
+    /// calibration stage's (after the run: [`report_input`]).
+    pub holes: Holes,
     /// The files of a streamed run, with their truncations and damaged records (after the
     /// run: [`report_input`]).
     pub segments: Vec<SegmentRead>,
@@ -242,11 +259,28 @@ impl<'a> Read<'a> {
             first_ns: feed.first_ns,
             hints_seen: feed.arrival.hints(),
             hints_late: feed.arrival.late_hints(),
+            holes: repairs.holes,
             repairs,
             align_s,
             segments: Vec::new(),
         }
     }
+}
+
+/// The holes in the input's time line: count, total and longest (seconds; the longest's
+/// seq, line when a text file's, and time from the first sample).
+fn holes_json(holes: &Holes, t0_ns: u64) -> serde_json::Value {
+    let s = |ns: u64| ns as f64 * 1e-9;
+    json!({
+        "count": holes.count,
+        "total_s": s(holes.total_ns),
+        "longest": holes.longest.map(|h| json!({
+            "seq": h.seq,
+            "line": h.line,
+            "t_s": s(h.t_ns.saturating_sub(t0_ns)),
+            "length_s": s(h.dt_ns),
+        })),
+    })
 }
 
 /// The damaged records skipped in the input's files: each with its file, offset, length,
@@ -288,6 +322,12 @@ pub fn report_input(read: &Read, source: &mut Source, no_gyro: Option<u64>) -> V
         for damage in &segment.damaged {
             tracing::warn!("{}: {damage}", segment.path.display());
         }
+    }
+    if let Some(holes) = read.holes.describe(read.first_ns.unwrap_or(0)) {
+        tracing::warn!(
+            "{input}: {holes}; each bridged as a gap: the 1-sigma grows across it as over an \
+             unobserved interval (docs/input-checks.md)"
+        );
     }
     if read.hints_late > 0 {
         tracing::warn!(

@@ -76,12 +76,15 @@ impl Watch {
     pub fn report(&self, counts: &Counts, session: &OdometrySession) {
         let stats = session.stats();
         tracing::info!(
-            "received {}, published {} (revisions included), refused {}, sessions {}, discarded \
-             for stalled subscribers {}; hints received {}, this session: {}",
+            "received {}, published {} (revisions included), refused {}, sessions {}, holes \
+             bridged {} (this session), beyond the bridge {}, discarded for stalled subscribers \
+             {}; hints received {}, this session: {}",
             counts.received,
             counts.published,
             counts.refused,
             stats.sessions,
+            session.stage().holes().count,
+            stats.unbridged,
             service::stalled_discards(),
             stats.hints,
             session.hint_stats()

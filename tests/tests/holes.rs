@@ -1,0 +1,146 @@
+//! Holes in the time line: a simulated 120 s drive (`mems-sim drive`, canonical CSV at 200 Hz)
+//! with rows cut out, nothing marking the cut, run through `mems-odometry offline` as a user
+//! would. A hole of 3 or 5 s (at a rest, and while moving) is warned on stderr with its line,
+//! length and time, counted in the JSON result (`input_holes`), bridged as a gap, and the end
+//! error stays within 3 sigma on every axis; a hole of 30 s is beyond what the odometry bridges
+//! (`Manoeuvre::bridge_limit_s`, 6.28 s for a ground robot) and the run is refused with the
+//! file's line and the time. `mems-info` shows the hole of the raw samples that the offline
+//! run wrote to its `--out` recording.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use integration_tests::{bin, path_arg, run_ok, unique_namespace};
+
+/// The identity calibration the real-data bench uses (the simulated `calibrated` preset needs
+/// no correction).
+fn identity_calibration() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tools/parser-fuzz/corpus/calib/identity-bench.toml")
+}
+
+/// `src` without the rows whose time lies strictly within `start_s` .. `start_s + length_s`.
+fn cut(src: &Path, dst: &Path, start_s: f64, length_s: f64) {
+    let text = std::fs::read_to_string(src).unwrap();
+    let mut out = String::with_capacity(text.len());
+    for (i, line) in text.lines().enumerate() {
+        let t: f64 = if i == 0 {
+            f64::NAN
+        } else {
+            line.split(',').next().unwrap().parse().unwrap()
+        };
+        if !(t > start_s && t < start_s + length_s) {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    std::fs::write(dst, out).unwrap();
+}
+
+/// The line (1-based) of the first row at or after `t_s`.
+fn line_at(src: &Path, t_s: f64) -> usize {
+    let text = std::fs::read_to_string(src).unwrap();
+    text.lines()
+        .enumerate()
+        .skip(1)
+        .find(|(_, l)| l.split(',').next().unwrap().parse::<f64>().unwrap() >= t_s)
+        .unwrap()
+        .0
+        + 1
+}
+
+#[test]
+fn holes_are_bridged_with_an_honest_sigma_or_refused_naming_line_and_time() {
+    let dir = std::env::temp_dir().join(unique_namespace("holes"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let drive = dir.join("drive.csv");
+    run_ok(
+        "mems-sim",
+        &[
+            "drive",
+            "--duration",
+            "120",
+            "--rate",
+            "200",
+            "--seed",
+            "3",
+            "--out",
+            path_arg(&drive),
+        ],
+    );
+    let calib = identity_calibration();
+    // The drive rests 0-10 s, 37.7-39.2 s, 69.2-86.6 s and from 105.9 s; it moves between.
+    for (start_s, length_s) in [
+        (72.0, 3.0),
+        (20.0, 3.0),
+        (72.0, 5.0),
+        (20.0, 5.0),
+        (72.0, 30.0),
+        (20.0, 30.0),
+    ] {
+        let holed = dir.join(format!("hole-{start_s}-{length_s}.csv"));
+        cut(&drive, &holed, start_s, length_s);
+        let line = line_at(&holed, start_s + length_s);
+        let states = dir.join(format!("states-{start_s}-{length_s}.mcap"));
+        let out = Command::new(bin("mems-odometry"))
+            .args(["offline", "--json", "--calib", path_arg(&calib), "--input"])
+            .arg(&holed)
+            .arg("--out")
+            .arg(&states)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let name = holed.file_name().unwrap().to_str().unwrap();
+        let what = format!("hole of {length_s} s at {start_s} s");
+        assert!(
+            stderr.contains(&format!(
+                "{name}: 1 hole in the time line that nothing marked"
+            )) && stderr.contains(&format!("ending at line {line}"))
+                && stderr.contains(&format!("the longest {length_s:.3} s")),
+            "{what}: the warning names the hole, its line and length: {stderr}"
+        );
+        // The ground robot's bridge limit: pi over its 0.5 rad/s.
+        if length_s > std::f64::consts::TAU {
+            assert!(!out.status.success(), "{what}: refused");
+            let t = start_s + length_s;
+            assert!(
+                stderr.contains(&format!("{name}:{line}: at t {t:.3} s"))
+                    && stderr.contains("longer than the 6.28 s the odometry bridges"),
+                "{what}: the refusal names the line and time: {stderr}"
+            );
+            assert!(!states.exists(), "{what}: a refused run leaves no --out");
+            continue;
+        }
+        assert!(out.status.success(), "{what}: {stderr}");
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["input_holes"]["count"], 1, "{what}: {v}");
+        assert_eq!(v["input_holes"]["longest"]["line"], line, "{what}: {v}");
+        let length = v["input_holes"]["longest"]["length_s"].as_f64().unwrap();
+        assert!((length - length_s).abs() < 0.01, "{what}: {length}");
+        let error: Vec<f64> = serde_json::from_value(v["truth_error_m"].clone()).unwrap();
+        let sigma: Vec<f64> = serde_json::from_value(v["sigma_m"].clone()).unwrap();
+        for axis in 0..3 {
+            assert!(
+                error[axis].abs() <= 3.0 * sigma[axis],
+                "{what}: axis {axis} error {} m beyond 3 sigma ({} m)",
+                error[axis],
+                sigma[axis]
+            );
+        }
+        // The bridge widened the 1-sigma by the hole's physics: at least the position an
+        // unobserved acceleration of 1 m/s^2 (the default manoeuvre) gives over the hole.
+        let grown = 0.5 * length_s * length_s;
+        assert!(
+            sigma[0] > 0.8 * grown,
+            "{what}: sigma {sigma:?}, expected ~{grown} m"
+        );
+        // mems-info reads the hole from the raw samples the run recorded.
+        let info = run_ok("mems-info", &["--json", path_arg(&states)]);
+        let info: serde_json::Value = serde_json::from_str(info.trim()).unwrap();
+        let holes = &info["raw"]["holes"];
+        assert_eq!(holes["count"], 1, "{what}: {info}");
+        let dt = holes["longest"]["dt_ns"].as_f64().unwrap() * 1e-9;
+        assert!((dt - length_s).abs() < 0.01, "{what}: mems-info {holes}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
