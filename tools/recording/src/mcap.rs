@@ -538,7 +538,6 @@ impl Topic for OdometryState {
         proto::fill_f32(&mut p.attitude_wxyz, &self.attitude_wxyz, quantum::ATTITUDE);
         p.distance_m = Some(proto::quantize(self.distance_m, quantum::POSITION_M));
         p.flags = self.flags.into();
-        p.reserved16 = self.reserved16.into();
         p.rest_count = self.rest_count;
         p.hints_applied = self.hints_applied;
         p.hint_disagreements = self.hint_disagreements;
@@ -572,7 +571,7 @@ impl Topic for OdometryState {
             )?,
             distance_m: proto::scalar_f32(p.distance_m, p.distance_m_f64),
             flags: proto::narrow("flags", p.flags)?,
-            reserved16: proto::narrow("reserved16", p.reserved16)?,
+            reserved16: 0,
             rest_count: p.rest_count,
             hints_applied: p.hints_applied,
             hint_disagreements: p.hint_disagreements,
@@ -638,7 +637,6 @@ impl Topic for OdometryState {
                     "flags",
                     uint("ipc-types odometry_flags bits.", u16::MAX.into()),
                 ),
-                ("reserved16", uint("Zero.", u16::MAX.into())),
                 (
                     "rest_count",
                     uint("Rest intervals since alignment.", u32::MAX.into()),
@@ -695,8 +693,6 @@ impl Topic for RobotHint {
         p.yaw_rate_rps = self.yaw_rate_rps;
         p.yaw_rate_sigma_rps = self.yaw_rate_sigma_rps;
         p.flags = self.flags.into();
-        p.reserved16 = self.reserved16.into();
-        p.reserved = self.reserved;
     }
 
     fn from_proto(p: Self::Proto) -> std::result::Result<Self, String> {
@@ -708,8 +704,8 @@ impl Topic for RobotHint {
             yaw_rate_rps: p.yaw_rate_rps,
             yaw_rate_sigma_rps: p.yaw_rate_sigma_rps,
             flags: proto::narrow("flags", p.flags)?,
-            reserved16: proto::narrow("reserved16", p.reserved16)?,
-            reserved: p.reserved,
+            reserved16: 0,
+            reserved: 0,
         })
     }
 
@@ -742,8 +738,6 @@ impl Topic for RobotHint {
                     number("1-sigma of yaw_rate_rps, rad/s."),
                 ),
                 ("flags", uint("ipc-types hint_flags bits.", u16::MAX.into())),
-                ("reserved16", uint("Zero.", u16::MAX.into())),
-                ("reserved", uint("Zero.", u32::MAX.into())),
             ],
         )
     }
@@ -2185,7 +2179,7 @@ mod tests {
             attitude_wxyz: [(); 4].map(|_| finite(rng)),
             distance_m: finite(rng),
             flags: rng.random(),
-            reserved16: rng.random(),
+            reserved16: 0,
             rest_count: rng.random(),
             hints_applied: rng.random(),
             hint_disagreements: rng.random(),
@@ -2201,8 +2195,8 @@ mod tests {
             yaw_rate_rps: finite(rng),
             yaw_rate_sigma_rps: finite(rng),
             flags: rng.random(),
-            reserved16: rng.random(),
-            reserved: rng.random(),
+            reserved16: 0,
+            reserved: 0,
         }
     }
 
