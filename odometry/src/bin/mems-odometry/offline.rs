@@ -80,14 +80,17 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     let out = RefCell::new(out);
     let mut summary = Summary::default();
     let mut inputs = Inputs::new(&mut source, &truth, &out);
+    let progress = mems_log::progress::bar(None, "mems-odometry offline", "states");
     let ran = mems_stage::offline::run(&mut chain, &mut inputs, &mut |o| {
         source::write(&out, o);
         if let Either::Second(s) = o
             && s.flags & odometry_flags::REVISION == 0
         {
+            progress.inc(1);
             summary.state(*s, &mut truth.borrow_mut());
         }
     });
+    progress.finish_and_clear();
     let mut read = Read::new(&args.input, &inputs, repairs, config.align_s);
     let no_gyro = chain.second.stats().first_no_gyro_seq;
     read.segments = summary::report_input(&read, &mut source, no_gyro);
