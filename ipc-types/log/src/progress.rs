@@ -32,6 +32,9 @@ mod tests {
         bar.inc(3);
         assert_eq!(bar.is_hidden(), off_terminal);
         assert_eq!(bar.position(), 3);
-        assert_eq!(super::bar(None, "test", "samples").is_hidden(), off_terminal);
+        assert_eq!(
+            super::bar(None, "test", "samples").is_hidden(),
+            off_terminal
+        );
     }
 }
