@@ -206,7 +206,9 @@ pub struct OdometryState {
     pub distance_m: f64,
     /// Bits from [`odometry_flags`].
     pub flags: u16,
-    /// Zero; keeps the layout free of implicit padding.
+    /// Zero; keeps the layout free of implicit padding. Not in the serde form (nor in any
+    /// recording's schema): it carries nothing.
+    #[serde(skip)]
     pub reserved16: u16,
     /// Number of rest intervals seen since alignment.
     pub rest_count: u32,
@@ -258,9 +260,12 @@ pub struct RobotHint {
     pub yaw_rate_sigma_rps: f64,
     /// Bits from [`hint_flags`].
     pub flags: u16,
-    /// Zero; keeps the layout free of implicit padding.
+    /// Zero; keeps the layout free of implicit padding. Not in the serde form (nor in any
+    /// recording's schema): it carries nothing.
+    #[serde(skip)]
     pub reserved16: u16,
-    /// Zero; keeps the layout free of implicit padding.
+    /// Zero; keeps the layout free of implicit padding. Not in the serde form.
+    #[serde(skip)]
     pub reserved: u32,
 }
 

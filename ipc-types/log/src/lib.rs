@@ -27,6 +27,8 @@
 //! line), written by [`exit`] whatever `RUST_LOG` says, without a backtrace: the error names
 //! the file, line or device at fault, and a backtrace would only bury it.
 
+pub mod progress;
+
 use std::fmt;
 use std::io::IsTerminal as _;
 use std::process::ExitCode;

@@ -2,31 +2,44 @@
 //! Foxglove's official SDK (`mems-foxglove`, started by `mems-stack --foxglove ADDR`), as
 //! foxglove_bridge does for ROS.
 //!
-//! Channels (Foxglove's well-known schemas are protobuf; ours are JSON with the JSON Schema
-//! the recordings use, so a panel reads the same fields live and from an MCAP file):
-//! - `/mems/odometry/pose` (`foxglove.PoseInFrame`, frame `nav`): the pose of the first live
-//!   state in each [`DISPLAY_STEP_NS`] of sample time (50 Hz, as the recording has it);
-//! - `/mems/odometry/revised_pose` (`foxglove.PoseInFrame`): states republished with
+//! Every channel has the topic, message encoding and schema its recording has, so one
+//! Foxglove layout opens the live view and a recorded file alike (`tests/tests/stack_foxglove.rs`
+//! compares the two):
+//! - `mems/imu/raw`, `mems/imu/corrected`, `mems/odometry/state`, `mems/robot/hint`:
+//!   every message as published, protobuf with the recording's schemas
+//!   (`recording::mcap::proto`, sigmas included);
+//! - `mems/odometry/pose` (`foxglove.PoseInFrame`, frame `nav`): the pose of the first live
+//!   state in each [`DISPLAY_STEP_NS`] of sample time (50 Hz);
+//! - `mems/odometry/revised_pose` (`foxglove.PoseInFrame`): states republished with
 //!   `REVISION` (history corrected in hindsight), likewise at most one per
 //!   [`DISPLAY_STEP_NS`], apart, so the live pose's times never go back;
-//! - `/tf` (`foxglove.FrameTransform`): `nav` -> `body` with each pose, for the 3D panel;
-//! - `/mems/odometry/path` (`foxglove.PosesInFrame`): the live track, one pose per
+//! - `mems/odometry/tf` (`foxglove.FrameTransform`): `nav` -> `body` with each pose, for the
+//!   3D panel (which takes transforms from every `foxglove.FrameTransform` topic);
+//! - `mems/odometry/path` (`foxglove.PosesInFrame`): the live track, one pose per
 //!   [`PATH_STEP_NS`] of sample time, the last [`PATH_LEN`] of them, sent every
-//!   [`PATH_EVERY_NS`];
-//! - `/mems/odometry/state`, `/mems/imu/corrected` (JSON, `mems.OdometryState`,
-//!   `mems.CorrectedImuSample`): every message as published, sigma included.
+//!   [`PATH_EVERY_NS`].
+//!
+//! The derived messages are `recording::mcap::derived`'s, as the recorder writes them.
 //!
 //! Times: our messages carry `CLOCK_MONOTONIC` ns; Foxglove places messages by Unix time, so
-//! each time is shifted by `CLOCK_REALTIME - CLOCK_MONOTONIC` measured once at start
-//! ([`WallClock`], the recorder's too). The JSON messages keep their own monotonic stamps.
+//! each message is logged at its own time ([`Topic::publish_time_ns`]) shifted by
+//! `CLOCK_REALTIME - CLOCK_MONOTONIC` measured once at start ([`WallClock`], the recorder's
+//! too); the messages keep their own monotonic stamps.
+
+pub mod hints;
+pub mod live;
+pub mod parameters;
+pub mod subprotocol;
 
 use std::sync::Arc;
 
 use foxglove::messages::{FrameTransform, PoseInFrame, PosesInFrame};
 use foxglove::{Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema};
-use ipc_types::{CorrectedImuSample, OdometryState};
-use recording::mcap::Topic;
-use recording::mcap::derived::{Derived, Out};
+use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
+use recording::mcap::derived::{
+    Derived, Out, PATH_TOPIC, POSE_TOPIC, REVISED_POSE_TOPIC, TF_TOPIC,
+};
+use recording::mcap::{MessageEncoding, Topic};
 
 pub use recording::mcap::derived::{
     BODY_FRAME, DISPLAY_STEP_NS, NAV_FRAME, PATH_EVERY_NS, PATH_LEN, PATH_STEP_NS,
@@ -34,14 +47,41 @@ pub use recording::mcap::derived::{
 
 pub use recording::clock::WallClock;
 
-/// A JSON channel whose schema is the recording's for `T`.
-fn json_channel<T: Topic>(ctx: &Arc<Context>) -> anyhow::Result<Arc<RawChannel>> {
-    let schema = serde_json::to_vec(&T::json_schema())?;
-    Ok(ChannelBuilder::new(format!("/{}", T::TOPIC))
-        .context(ctx)
-        .message_encoding("json")
-        .schema(Schema::new(T::SCHEMA_NAME, "jsonschema", schema))
-        .build_raw()?)
+/// The channel of one of our message types, protobuf as its recording has it.
+pub struct Proto<T: Topic> {
+    channel: Arc<RawChannel>,
+    proto: T::Proto,
+    buf: Vec<u8>,
+}
+
+impl<T: Topic> Proto<T> {
+    /// Creates the channel `T::TOPIC` in `ctx`, with the recording's schema for `T`.
+    pub fn new(ctx: &Arc<Context>) -> anyhow::Result<Self> {
+        let encoding = MessageEncoding::Protobuf;
+        let schema = Schema::new(T::SCHEMA_NAME, encoding.schema(), T::proto_schema());
+        let channel = ChannelBuilder::new(T::TOPIC)
+            .context(ctx)
+            .message_encoding(encoding.message())
+            .schema(schema)
+            .build_raw()?;
+        Ok(Self {
+            channel,
+            proto: T::Proto::default(),
+            buf: Vec::new(),
+        })
+    }
+
+    /// Logs `m` at its own time on `clock`; nothing is encoded while no client subscribes.
+    pub fn log(&mut self, m: &T, clock: &WallClock) {
+        if !self.channel.has_sinks() {
+            return;
+        }
+        m.fill_proto(&mut self.proto);
+        self.buf.clear();
+        prost::Message::encode(&self.proto, &mut self.buf).expect("a Vec grows to any message");
+        let meta = PartialMetadata::with_log_time(clock.unix_ns(m.publish_time_ns()));
+        self.channel.log_with_meta(&self.buf, meta);
+    }
 }
 
 /// The channels of the live view and the path it keeps.
@@ -52,9 +92,10 @@ pub struct View {
     revised: Channel<PoseInFrame>,
     tf: Channel<FrameTransform>,
     path: Channel<PosesInFrame>,
-    state: Arc<RawChannel>,
-    corrected: Arc<RawChannel>,
-    json: Vec<u8>,
+    state: Proto<OdometryState>,
+    corrected: Proto<CorrectedImuSample>,
+    raw: Proto<RawImuSample>,
+    hint: Proto<RobotHint>,
 }
 
 impl View {
@@ -64,24 +105,21 @@ impl View {
         Ok(Self {
             clock,
             derived: Derived::new(Some(clock)),
-            pose: typed("/mems/odometry/pose").build(),
-            revised: typed("/mems/odometry/revised_pose").build(),
-            tf: typed("/tf").build(),
-            path: typed("/mems/odometry/path").build(),
-            state: json_channel::<OdometryState>(ctx)?,
-            corrected: json_channel::<CorrectedImuSample>(ctx)?,
-            json: Vec::new(),
+            pose: typed(POSE_TOPIC).build(),
+            revised: typed(REVISED_POSE_TOPIC).build(),
+            tf: typed(TF_TOPIC).build(),
+            path: typed(PATH_TOPIC).build(),
+            state: Proto::new(ctx)?,
+            corrected: Proto::new(ctx)?,
+            raw: Proto::new(ctx)?,
+            hint: Proto::new(ctx)?,
         })
     }
 
-    /// Logs one odometry state on its channels, at its sample time (the derived messages of
-    /// `recording::mcap::derived`, as the recorder writes them).
-    pub fn state(&mut self, s: &OdometryState) -> anyhow::Result<()> {
-        let t_ns = s.stamps.sample_ns;
-        let meta = PartialMetadata::with_log_time(self.clock.unix_ns(t_ns));
-        self.json.clear();
-        serde_json::to_writer(&mut self.json, s)?;
-        self.state.log_with_meta(&self.json, meta);
+    /// Logs one odometry state and the messages derived from it, at its sample time.
+    pub fn state(&mut self, s: &OdometryState) {
+        self.state.log(s, &self.clock);
+        let meta = PartialMetadata::with_log_time(self.clock.unix_ns(s.stamps.sample_ns));
         let Self {
             derived,
             pose,
@@ -90,7 +128,7 @@ impl View {
             path,
             ..
         } = self;
-        derived.state(s, |out| {
+        let logged = derived.state(s, |out| {
             match out {
                 Out::Pose(m) => pose.log_with_meta(m, meta),
                 Out::RevisedPose(m) => revised.log_with_meta(m, meta),
@@ -98,16 +136,22 @@ impl View {
                 Out::Path(m) => path.log_with_meta(m, meta),
             }
             Ok::<(), std::convert::Infallible>(())
-        })?;
-        Ok(())
+        });
+        let Ok(()) = logged;
     }
 
     /// Logs one corrected sample, at its sample time.
-    pub fn corrected(&mut self, c: &CorrectedImuSample) -> anyhow::Result<()> {
-        self.json.clear();
-        serde_json::to_writer(&mut self.json, c)?;
-        let meta = PartialMetadata::with_log_time(self.clock.unix_ns(c.stamps.sample_ns));
-        self.corrected.log_with_meta(&self.json, meta);
-        Ok(())
+    pub fn corrected(&mut self, c: &CorrectedImuSample) {
+        self.corrected.log(c, &self.clock);
+    }
+
+    /// Logs one raw sample, at its sample time.
+    pub fn raw(&mut self, r: &RawImuSample) {
+        self.raw.log(r, &self.clock);
+    }
+
+    /// Logs one robot hint, at the time it describes.
+    pub fn hint(&mut self, h: &RobotHint) {
+        self.hint.log(h, &self.clock);
     }
 }

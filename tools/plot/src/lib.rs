@@ -526,11 +526,13 @@ fn band_edge(
 
 /// Writes every [`Figure`] of a recording's `contents` into `out_dir`, named
 /// `<stem>-<figure>.png`; figures whose data the recording lacks are skipped. A truncated
-/// recording is plotted up to the cut (the caller reports `Contents::truncation`).
+/// recording is plotted up to the cut (the caller reports `Contents::truncation`). `done` is
+/// called after each figure (`mems-plot`'s progress).
 pub fn plot_recording(
     contents: &Contents,
     stem: &str,
     out_dir: &Path,
+    mut done: impl FnMut(Figure),
 ) -> Result<Vec<(Figure, Outcome)>> {
     let first = [
         contents.raw.first().map(|s| s.stamps.sample_ns),
@@ -562,6 +564,7 @@ pub fn plot_recording(
                 Figure::Position => position(contents, t0_ns, t_range, &path),
                 Figure::Track => track(contents, t0_ns, &path),
             }?;
+            done(figure);
             Ok((figure, outcome))
         })
         .collect()

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use mems_plot::{Outcome, plot_recording};
+use mems_plot::{Figure, Outcome, plot_recording};
 
 #[derive(Parser)]
 #[command(version, about)]
@@ -27,9 +27,14 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run(cli: Cli) -> Result<()> {
+    // One step per file read and per figure drawn.
+    let steps = 1 + u64::from(cli.truth.is_some()) + Figure::ALL.len() as u64;
+    let progress = mems_log::progress::bar(Some(steps), "mems-plot", "steps");
     let mut contents = recording::mcap::read_all(&cli.file)?;
+    progress.inc(1);
     if let Some(truth) = &cli.truth {
         contents.truth = recording::mcap::read_all(truth)?.truth;
+        progress.inc(1);
     }
     if let Some(truncation) = &contents.truncation {
         tracing::warn!(
@@ -48,7 +53,9 @@ fn run(cli: Cli) -> Result<()> {
         .file_stem()
         .context("the recording's path has no file name")?
         .to_string_lossy();
-    for (figure, outcome) in plot_recording(&contents, &stem, &out)? {
+    let figures = plot_recording(&contents, &stem, &out, |_| progress.inc(1))?;
+    progress.finish_and_clear();
+    for (figure, outcome) in figures {
         match outcome {
             Outcome::Written(path) => println!("mems-plot: wrote {}", path.display()),
             Outcome::Skipped(why) => println!("mems-plot: skipped {}: {why}", figure.name()),

@@ -650,7 +650,9 @@ fn simulate(
     let (mut distance, mut saturated, mut rest, mut rows) = (0.0, 0u64, 0u64, 0u64);
     let mut last: Option<Vector3<f64>> = None;
     let mut logged = Vec::with_capacity(2);
+    let progress = mems_log::progress::bar(Some(count - first), "mems-sim", "samples");
     for k in first..count {
+        progress.inc(1);
         let t_s = k as f64 / rate;
         let (analog, truth) = sim.sample_with_truth(t_s, rate);
         let raw = quantize_sample(&analog, accel_range, gyro_range, ns_from_s(t_s), k);
@@ -676,6 +678,7 @@ fn simulate(
             rows += 1;
         }
     }
+    progress.finish_and_clear();
     let count = count - first;
     for h in &hints[next_hint..] {
         sink.push_hint(h)?;

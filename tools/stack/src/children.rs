@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use clap::ValueEnum;
 
 use crate::cli::Cli;
 use crate::losses::RecorderLosses;
@@ -53,10 +54,23 @@ pub fn specs(
         });
     }
     if let Some(addr) = &cli.foxglove {
-        let args = vec!["--listen".into(), addr.clone()];
+        let mut args = vec!["--listen".into(), addr.clone()];
+        for setting in &cli.settings {
+            args.extend(["--parameter".into(), setting.clone()]);
+        }
         specs.push(spec("foxglove", "mems-foxglove", args));
     }
-    let args = vec!["serve".into(), "--calib".into(), calib.clone()];
+    let profile = cli
+        .profile
+        .to_possible_value()
+        .expect("every profile has a name");
+    let args = vec![
+        "serve".into(),
+        "--calib".into(),
+        calib.clone(),
+        "--profile".into(),
+        profile.get_name().into(),
+    ];
     specs.push(spec("odometry", "mems-odometry", args));
     // A restarted calibration stage goes on from what the killed one had learned, in the
     // stack's work directory (a new stack starts afresh).
@@ -81,15 +95,10 @@ pub fn specs(
     specs
 }
 
-/// `mems-calibrate serve`'s detector arguments for `cli`: the one asked for, else the GLRT, on
-/// the accelerometer alone above 1000 Hz (no gyroscope there; its window is the default 0.5 s
-/// at any rate).
+/// `mems-calibrate serve`'s detector arguments for `cli` ([`crate::cli::detector`]; the
+/// accelerometer-only GLRT's window is the default 0.5 s at any rate).
 fn detector_args(cli: &Cli) -> Vec<String> {
-    match &cli.detector {
-        Some(d) => vec!["--detector".into(), d.name().into()],
-        None if cli.rate > 1000 => vec!["--detector".into(), "glrt-accel".into()],
-        None => vec!["--detector".into(), "glrt".into()],
-    }
+    vec!["--detector".into(), crate::cli::detector(cli).name().into()]
 }
 
 /// `mems-acquire`'s arguments for `cli` (the namespace is added by the caller): the source,

@@ -6,10 +6,15 @@ use acquire::acquisition::SourceSpec;
 use anyhow::{Context, Result, bail};
 use calibrate::zero_state::DetectorKind;
 use clap::Parser;
+use odometry::profile::Profile;
 
 #[derive(Parser)]
-#[command(version, about)]
+#[command(version, about, args_override_self = true)]
 pub struct Cli {
+    /// Read settings from this TOML file first (every flag is a key, its long name: see
+    /// `packaging/mems-stack.toml`); flags given here override it.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
     /// `sim` (the simulated MPU-9250 on simulated I2C), `sim-spi` (the same on simulated SPI),
     /// `i2c:/dev/i2c-N[@0x68]` or `spi:/dev/spidevB.C`.
     #[arg(long, default_value = "sim")]
@@ -62,6 +67,14 @@ pub struct Cli {
     /// anyone who can connect sees the robot's odometry.
     #[arg(long, value_name = "HOST:PORT")]
     pub foxglove: Option<String>,
+    /// Motion profile, passed to `mems-odometry serve --profile` (the names of `mems-odometry
+    /// offline --profile`): `vehicle`, or `pedestrian` for a foot-mounted sensor, whose
+    /// default detector is then SHOE.
+    #[arg(long, value_enum, default_value_t)]
+    pub profile: Profile,
+    /// Every setting in effect, `NAME=VALUE` (`config::settings`), for the live view.
+    #[arg(skip)]
+    pub settings: Vec<String>,
 }
 
 impl Cli {
@@ -90,6 +103,18 @@ impl Cli {
     }
 }
 
+/// The detector of the calibration stage: the one asked for, else the profile's (the GLRT for
+/// a vehicle, on the accelerometer alone above 1000 Hz, where the sensor samples no gyroscope;
+/// SHOE for a pedestrian).
+pub fn detector(cli: &Cli) -> DetectorKind {
+    match (cli.detector, cli.profile) {
+        (Some(d), _) => d,
+        (None, Profile::Pedestrian) => DetectorKind::Shoe,
+        (None, Profile::Vehicle) if cli.rate > 1000 => DetectorKind::GlrtAccel,
+        (None, Profile::Vehicle) => DetectorKind::Glrt,
+    }
+}
+
 /// Refuses, before anything starts, a source that cannot be parsed, a rate its bus cannot
 /// carry (acquire's own check, with its arithmetic: 4 kHz needs SPI), and a detector that needs
 /// the gyroscope above 1000 Hz, where the sensor runs accelerometer-only.
@@ -98,10 +123,8 @@ fn check_source(cli: &Cli) -> Result<()> {
     source
         .check_rate(cli.rate)
         .map_err(|e| anyhow::anyhow!("--source {} --rate {}: {e}", cli.source, cli.rate))?;
-    if let Some(d) = cli.detector
-        && d.needs_gyro()
-        && cli.rate > 1000
-    {
+    let d = detector(cli);
+    if d.needs_gyro() && cli.rate > 1000 {
         bail!(
             "--detector {} needs the gyroscope, which the sensor does not sample above 1000 Hz \
              (--rate {}): use glrt-accel or yu",

@@ -6,6 +6,7 @@
 mod calib;
 mod children;
 mod cli;
+mod config;
 mod live;
 mod losses;
 mod monitor;
@@ -16,7 +17,7 @@ mod work;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use clap::Parser;
+use clap::{CommandFactory, FromArgMatches};
 use ipc_types::service;
 
 use cli::Cli;
@@ -27,7 +28,17 @@ use supervisor::Supervisor;
 
 fn main() -> std::process::ExitCode {
     mems_log::init("mems-stack");
-    mems_log::exit(run(Cli::parse()))
+    mems_log::exit(parse().and_then(run))
+}
+
+/// The command line, after the settings of its `--config` file (clap's own errors and
+/// `--help` exit as clap does).
+fn parse() -> Result<Cli> {
+    let args = config::expand(std::env::args_os().collect())?;
+    let matches = Cli::command().get_matches_from(args);
+    let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    cli.settings = config::settings(&matches);
+    Ok(cli)
 }
 
 /// Checks the options, calibrates a simulated part when no `--calib` is given, starts the

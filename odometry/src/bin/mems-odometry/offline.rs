@@ -79,15 +79,18 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     let out = Out::for_input(args.out.as_deref(), &args.input, args.force)?;
     let mut feed = Feed::new(source, out);
     let mut summary = Summary::default();
+    let progress = mems_log::progress::bar(None, "mems-odometry offline", "states");
     let ran =
         mems_stage::offline::run_with(&mut chain, &mut feed, Feed::next_input, &mut |feed, o| {
             feed.write(o);
             if let Either::Second(s) = o
                 && s.flags & odometry_flags::REVISION == 0
             {
+                progress.inc(1);
                 summary.state(*s, &mut feed.truth);
             }
         });
+    progress.finish_and_clear();
     let mut read = Read::new(&args.input, &feed, repairs, config.align_s);
     if read.holes.count == 0 {
         read.holes = chain.first.stats().holes;

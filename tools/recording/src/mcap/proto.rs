@@ -143,8 +143,6 @@ pub struct OdometryState {
     pub distance_m_f64: f64,
     #[prost(uint32, tag = 10)]
     pub flags: u32,
-    #[prost(uint32, tag = 11)]
-    pub reserved16: u32,
     #[prost(uint32, tag = 12)]
     pub rest_count: u32,
     #[prost(uint32, tag = 13)]
@@ -184,10 +182,6 @@ pub struct RobotHint {
     pub yaw_rate_sigma_rps: f64,
     #[prost(uint32, tag = 7)]
     pub flags: u32,
-    #[prost(uint32, tag = 8)]
-    pub reserved16: u32,
-    #[prost(uint32, tag = 9)]
-    pub reserved: u32,
 }
 
 /// [`crate::Truth`].
@@ -255,7 +249,7 @@ enum Kind {
 struct Table {
     name: &'static str,
     fields: &'static [(&'static str, i32, Kind)],
-    reserved: Option<(i32, i32)>,
+    reserved: &'static [(i32, i32)],
 }
 
 /// Every message of `mems.proto`.
@@ -270,7 +264,7 @@ const MESSAGES: &[Table] = {
                 ("calibrated_ns", 3, U64),
                 ("odometry_ns", 4, U64),
             ],
-            reserved: None,
+            reserved: &[],
         },
         Table {
             name: "RawImuSample",
@@ -290,7 +284,7 @@ const MESSAGES: &[Table] = {
                 ("gyro_lsb_per_dps", 13, F64),
                 ("temp_from_counts", 14, Bool),
             ],
-            reserved: None,
+            reserved: &[],
         },
         Table {
             name: "CorrectedImuSample",
@@ -307,7 +301,7 @@ const MESSAGES: &[Table] = {
                 ("zs_mean_mps2", 15, F32s),
                 ("zs_std_mps2", 16, F32s),
             ],
-            reserved: Some((3, 7)),
+            reserved: &[(3, 7)],
         },
         Table {
             name: "OdometryState",
@@ -315,7 +309,6 @@ const MESSAGES: &[Table] = {
                 ("stamps", 1, Stamps),
                 ("seq", 2, U64),
                 ("flags", 10, U32),
-                ("reserved16", 11, U32),
                 ("rest_count", 12, U32),
                 ("hints_applied", 13, U32),
                 ("hint_disagreements", 14, U32),
@@ -327,7 +320,7 @@ const MESSAGES: &[Table] = {
                 ("attitude_wxyz", 20, F32s),
                 ("distance_m", 21, OptF32),
             ],
-            reserved: Some((3, 9)),
+            reserved: &[(3, 9), (11, 11)],
         },
         Table {
             name: "RobotHint",
@@ -339,10 +332,8 @@ const MESSAGES: &[Table] = {
                 ("yaw_rate_rps", 5, F64),
                 ("yaw_rate_sigma_rps", 6, F64),
                 ("flags", 7, U32),
-                ("reserved16", 8, U32),
-                ("reserved", 9, U32),
             ],
-            reserved: None,
+            reserved: &[],
         },
         Table {
             name: "Truth",
@@ -355,7 +346,7 @@ const MESSAGES: &[Table] = {
                 ("angular_rate_rps", 6, F64s),
                 ("at_rest", 7, Bool),
             ],
-            reserved: None,
+            reserved: &[],
         },
         Table {
             name: "RecorderEvent",
@@ -366,7 +357,7 @@ const MESSAGES: &[Table] = {
                 ("to_seq", 4, OptU64),
                 ("t_ns", 5, U64),
             ],
-            reserved: None,
+            reserved: &[],
         },
     ]
 };
@@ -414,11 +405,11 @@ fn message(table: &Table) -> DescriptorProto {
     // A reserved range's end is exclusive in the descriptor.
     let reserved_range = table
         .reserved
-        .map(|(start, end)| ReservedRange {
+        .iter()
+        .map(|&(start, end)| ReservedRange {
             start: Some(start),
             end: Some(end + 1),
         })
-        .into_iter()
         .collect();
     DescriptorProto {
         name: Some(table.name.into()),
@@ -682,7 +673,6 @@ mod tests {
             attitude_wxyz: [1.0; 4],
             distance_m: 1.0,
             flags: 1,
-            reserved16: 1,
             rest_count: 1,
             hints_applied: 1,
             hint_disagreements: 1,
@@ -694,7 +684,7 @@ mod tests {
         let mut tags = field_tags(&p.encode_to_vec());
         tags.sort();
         assert_eq!(tags, fields);
-        assert_eq!(reserved, [3, 4, 5, 6, 7, 8, 9]);
+        assert_eq!(reserved, [3, 4, 5, 6, 7, 8, 9, 11]);
     }
 
     /// A raw sample whose values are what its counts give writes none of them, and reads

@@ -57,7 +57,7 @@ fn odometry(rng: &mut ChaCha8Rng) -> OdometryState {
         attitude_wxyz: [(); 4].map(|_| finite(rng)),
         distance_m: finite(rng),
         flags: rng.random(),
-        reserved16: rng.random(),
+        reserved16: 0,
         rest_count: rng.random(),
         hints_applied: rng.random(),
         hint_disagreements: rng.random(),
@@ -73,8 +73,8 @@ fn hint(rng: &mut ChaCha8Rng) -> RobotHint {
         yaw_rate_rps: finite(rng),
         yaw_rate_sigma_rps: finite(rng),
         flags: rng.random(),
-        reserved16: rng.random(),
-        reserved: rng.random(),
+        reserved16: 0,
+        reserved: 0,
     }
 }
 

@@ -378,7 +378,6 @@ impl Topic for OdometryState {
         proto::fill_f32(&mut p.attitude_wxyz, &self.attitude_wxyz, quantum::ATTITUDE);
         p.distance_m = Some(proto::quantize(self.distance_m, quantum::POSITION_M));
         p.flags = self.flags.into();
-        p.reserved16 = self.reserved16.into();
         p.rest_count = self.rest_count;
         p.hints_applied = self.hints_applied;
         p.hint_disagreements = self.hint_disagreements;
@@ -412,7 +411,7 @@ impl Topic for OdometryState {
             )?,
             distance_m: proto::scalar_f32(p.distance_m, p.distance_m_f64),
             flags: proto::narrow("flags", p.flags)?,
-            reserved16: proto::narrow("reserved16", p.reserved16)?,
+            reserved16: 0,
             rest_count: p.rest_count,
             hints_applied: p.hints_applied,
             hint_disagreements: p.hint_disagreements,
@@ -478,7 +477,6 @@ impl Topic for OdometryState {
                     "flags",
                     uint("ipc-types odometry_flags bits.", u16::MAX.into()),
                 ),
-                ("reserved16", uint("Zero.", u16::MAX.into())),
                 (
                     "rest_count",
                     uint("Rest intervals since alignment.", u32::MAX.into()),
@@ -535,8 +533,6 @@ impl Topic for RobotHint {
         p.yaw_rate_rps = self.yaw_rate_rps;
         p.yaw_rate_sigma_rps = self.yaw_rate_sigma_rps;
         p.flags = self.flags.into();
-        p.reserved16 = self.reserved16.into();
-        p.reserved = self.reserved;
     }
 
     fn from_proto(p: Self::Proto) -> std::result::Result<Self, String> {
@@ -548,8 +544,8 @@ impl Topic for RobotHint {
             yaw_rate_rps: p.yaw_rate_rps,
             yaw_rate_sigma_rps: p.yaw_rate_sigma_rps,
             flags: proto::narrow("flags", p.flags)?,
-            reserved16: proto::narrow("reserved16", p.reserved16)?,
-            reserved: p.reserved,
+            reserved16: 0,
+            reserved: 0,
         })
     }
 
@@ -582,8 +578,6 @@ impl Topic for RobotHint {
                     number("1-sigma of yaw_rate_rps, rad/s."),
                 ),
                 ("flags", uint("ipc-types hint_flags bits.", u16::MAX.into())),
-                ("reserved16", uint("Zero.", u16::MAX.into())),
-                ("reserved", uint("Zero.", u32::MAX.into())),
             ],
         )
     }
