@@ -1,0 +1,3 @@
+"""Sections of the pages other than docs/odometry.md's drive tables."""
+
+SECTIONS = []

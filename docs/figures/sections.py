@@ -1,0 +1,38 @@
+"""The registry: every section of docs/figures.py, its page, its regions and its run time.
+
+`estimate` is the full run's wall time on the 2-core development machine with nothing else
+running (a loaded machine takes up to twice as long).
+"""
+
+from dataclasses import dataclass
+from typing import Callable
+
+import odometry
+import pages
+from common import Context  # noqa: F401  (re-exported for docs/figures.py)
+
+
+@dataclass
+class Section:
+    name: str
+    page: str
+    regions: list
+    estimate: str
+    generate: Callable
+
+
+SECTIONS = {
+    s.name: s
+    for s in [
+        Section("odometry-live", "odometry.md", ["odometry-live", "odometry-live-flags"], "35 min", odometry.live),
+        Section("odometry-hindsight", "odometry.md", ["odometry-hindsight"], "8 min", odometry.hindsight),
+        Section("odometry-perfect", "odometry.md", ["odometry-perfect"], "5 min", odometry.perfect),
+        Section("odometry-variants", "odometry.md", ["odometry-variants"], "12 min", odometry.variants),
+        Section("odometry-default-legs", "odometry.md", ["odometry-default-legs"], "5 min", odometry.default_legs),
+        Section("odometry-budget", "odometry.md", ["odometry-budget"], "5 min", odometry.budget),
+        Section("odometry-cost", "odometry.md", ["odometry-cost"], "2 min", odometry.cost),
+        Section("odometry-faults", "odometry.md", ["odometry-faults"], "12 min", odometry.faults),
+        Section("hints", "hints.md", ["hints-smooth-floor"], "10 min", odometry.hints),
+    ]
+    + pages.SECTIONS
+}
