@@ -2,12 +2,27 @@
 
 import re
 import shlex
+from dataclasses import dataclass
+from typing import Callable
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent.parent
+
+
+@dataclass
+class Section:
+    """One section: the page it writes, its regions, its full run's wall time on the 2-core
+    development machine with nothing else running, and the function that runs it (a Context
+    in, region name -> region body out)."""
+
+    name: str
+    page: str
+    regions: list
+    estimate: str
+    generate: Callable
 
 
 class Failed(Exception):

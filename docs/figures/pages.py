@@ -1,3 +1,156 @@
-"""Sections of the pages other than docs/odometry.md's drive tables."""
+"""Sections of the pages other than docs/odometry.md and docs/hints.md."""
 
-SECTIONS = []
+import json
+import re
+
+from common import Failed, Section, one_table, table
+
+SHARED = "../shared/data/capstone"
+
+
+def markdown(out, what, drop=()):
+    """A command's markdown output as a region body: its tables and text, headings made bold
+    (a region sits inside a page's own headings), JSON lines and tables whose first header cell
+    is in `drop` left out."""
+    kept, skipping = [], False
+    for line in out.splitlines():
+        if line.startswith("{"):
+            continue
+        if line.startswith("|"):
+            if not skipping and kept and not kept[-1].startswith("|"):
+                skipping = line.strip("| ").split("|")[0].strip() in drop
+            if not skipping:
+                kept.append(line)
+            continue
+        skipping = False
+        m = re.match(r"#+ (.*)", line)
+        kept.append(f"**{m.group(1)}**" if m else line)
+    text = re.sub(r"\n{3,}", "\n\n", "\n".join(kept)).strip()
+    if "|" not in text:
+        raise Failed(f"{what}: no table in its output")
+    return text
+
+
+def detectors(ctx):
+    """docs/detectors.md: the detectors on labelled drives, at 1 kHz and at 4 kHz without gyro."""
+    seeds = 1 if ctx.quick else 10
+    ctx.region = "detectors-1khz"
+    out, _ = ctx.cargo_example("calibrate", "detectors", ["--seeds", seeds, "--vibration", "1,0"])
+    ctx.region = "detectors-4khz"
+    out4, _ = ctx.cargo_example("calibrate", "detectors", ["--rate", 4000, "--no-gyro", "--seeds", seeds, "--vibration", "1,0"])
+    if ctx.dry:
+        return {}
+    return {"detectors-1khz": table(*one_table(out, "detectors")), "detectors-4khz": table(*one_table(out4, "detectors --rate 4000"))}
+
+
+def real_data(ctx):
+    """docs/real-data.md: the real-data bench and its leave-one-source-out tables (one run of
+    `bench.py --loso`, which prints the bench's table first)."""
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "odometry"])
+    only = ["--only", "xio-short-walk", "--only", "gdin-34"] if ctx.quick else []
+    out, _ = ctx.run(["python3", "tools/real-data/bench.py", "--loso"] + only)
+    if ctx.dry:
+        return {}
+    lines = out.splitlines()
+    starts = [i for i, l in enumerate(lines) if l.startswith("|") and (i == 0 or not lines[i - 1].startswith("|"))]
+    if len(starts) < 2:
+        raise Failed("bench.py --loso: expected the results table and the leave-one-source-out tables")
+    bench = "\n".join(lines[starts[0] : starts[1]]).strip().splitlines()
+    rows = [l for l in bench if l.startswith("|")]
+    summary = ["    " + l for l in bench if l.strip() and not l.startswith("|")]
+    loso = "\n".join(lines[starts[1] :])
+    return {
+        "real-data-bench": "\n".join(rows) + "\n\n" + "\n".join(summary),
+        "real-data-loso": markdown(loso, "bench.py --loso"),
+    }
+
+
+def latency(ctx):
+    """docs/latency.md: the live pipeline's latency, CPU and throughput, and the bridge."""
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-replay", "-p", "mems-sim", "-p", "calibrate",
+             "-p", "calibrate-science", "-p", "odometry"])
+    ctx.region = "latency"
+    args = ["--seconds", 1, "--cpu-seconds", 3] if ctx.quick else ["--seconds", 5]
+    out, _ = ctx.cargo_example("mems-replay", "latency", args + ["--json"])
+    ctx.region = "latency-bridge"
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-bridge"])
+    bridge, _ = ctx.cargo_example("mems-bridge", "loopback", ["--seconds", 3 if ctx.quick else 60, "--rate", 1000])
+    if ctx.dry:
+        return {}
+    last = out.strip().splitlines()[-1]
+    try:
+        headline = json.loads(last)
+    except json.JSONDecodeError:
+        raise Failed("latency --json: the last line is not JSON")
+    keys = ["bare_chain3_p99_us", "pipeline_p99_us", "pinned_pipeline_p99_us", "idle_under_1_percent", "stages_1khz_under_10_percent"]
+    head = table(["figure", "value"], [[k, headline.get(k, "-")] for k in keys])
+    body = markdown(out, "latency", drop=("state", "publish ns", "#"))
+    return {"latency": head + "\n\n" + body, "latency-bridge": "\n".join("    " + l for l in bridge.strip().splitlines())}
+
+
+def noise(ctx):
+    """docs/noise.md: the thesis's static recordings, the Monte Carlo check, the Allan bench."""
+    ctx.region = "noise-thesis"
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "calibrate-science", "--bin", "mems-calibrate-offline"])
+    out, _ = ctx.cargo_example("noise", "thesis_noise", [SHARED, "/tmp/figures-noise-pooled.png"])
+    ctx.region = "noise-monte-carlo"
+    mc, mc_err = ctx.run(["cargo", "test", "--release", "-q", "-p", "noise", "--test", "monte_carlo", "--", "--nocapture"])
+    ctx.region = "noise-allan-bench"
+    bench, _ = ctx.run(["cargo", "bench", "-q", "-p", "noise", "--bench", "allan"])
+    if ctx.dry:
+        return {}
+    mc_lines = [l for l in (mc + mc_err).splitlines() if re.search(r"within|cover|resolved", l)]
+    if not mc_lines:
+        raise Failed("monte_carlo: no coverage lines in its output")
+    bench_lines = [l for l in bench.splitlines() if l.strip() and not l.startswith("test ")]
+    return {
+        "noise-thesis": markdown(out, "thesis_noise"),
+        "noise-monte-carlo": "\n".join("    " + l for l in mc_lines),
+        "noise-allan-bench": "\n".join("    " + l for l in bench_lines),
+    }
+
+
+SECTIONS = [
+    Section("detectors", "detectors.md", ["detectors-1khz", "detectors-4khz"], "4 min", detectors),
+    Section("real-data", "real-data.md", ["real-data-bench", "real-data-loso"], "2 min", real_data),
+    Section("latency", "latency.md", ["latency", "latency-bridge"], "5 min", latency),
+    Section("noise", "noise.md", ["noise-thesis", "noise-monte-carlo", "noise-allan-bench"], "3 min", noise),
+]
+
+
+def datasheet_drive(ctx):
+    """docs/detectors.md: the datasheet-level part's 10-minute drive through the live stages'
+    defaults, calibrated as `mems-stack` calibrates it, with white samples."""
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-sim", "-p", "calibrate", "-p", "odometry"])
+    tmp = "/tmp/figures-datasheet-drive"
+    b = "target/release/"
+    duration = "120" if ctx.quick else "600"
+    ctx.run(["mkdir", "-p", tmp])
+    ctx.run([b + "mems-sim", "six-position", "--preset", "datasheet", "--seed", "1001", "--rate", "200", "--dlpf", "off", "--out", f"{tmp}/six.csv"])
+    ctx.run([b + "mems-calibrate", "fit", "--input", f"{tmp}/six.csv", "--model", "full", "--out", f"{tmp}/cal.toml"])
+    ctx.run([b + "mems-sim", "orientations", "--n", "16", "--preset", "datasheet", "--seed", "2001", "--rate", "200", "--dlpf", "off", "--out", f"{tmp}/ori.csv"])
+    ctx.run([b + "mems-odometry", "gyrocal", "--input", f"{tmp}/ori.csv", "--calib", f"{tmp}/cal.toml", "--into", f"{tmp}/cal.toml"])
+    ctx.run([b + "mems-sim", "drive", "--duration", duration, "--turns", "on", "--preset", "datasheet", "--rate", "200", "--seed", "1", "--dlpf", "off", "--out", f"{tmp}/drive.mcap"])
+    out, _ = ctx.run([b + "mems-odometry", "offline", "--calib", f"{tmp}/cal.toml", "--input", f"{tmp}/drive.mcap", "--json"])
+    if ctx.dry:
+        return {}
+    try:
+        r = json.loads(out.strip().splitlines()[-1])
+    except (json.JSONDecodeError, IndexError):
+        raise Failed("mems-odometry offline --json: no JSON result")
+    err, dist = r.get("truth_error_m"), r.get("truth_distance_m")
+    if err is None or not dist:
+        raise Failed("mems-odometry offline --json: no truth error (the drive carries its truth)")
+    horizontal = (err[0] ** 2 + err[1] ** 2) ** 0.5
+    rests = r.get("rests")
+    last_rest = max((x.get("end_s", x.get("t_s", 0)) for x in r.get("rest_intervals") or [] if isinstance(x, dict)), default=None)
+    rows = [
+        ["distance (truth)", f"{dist:.1f} m"],
+        ["end error, horizontal", f"{horizontal:.2f} m ({100 * horizontal / dist:.2f} % of distance)"],
+        ["rests found", rests if rests is not None else "-"],
+        ["last rest found at", f"{last_rest:.0f} s" if last_rest is not None else "-"],
+    ]
+    return {"detectors-datasheet-drive": table(["figure", "value"], rows)}
+
+
+SECTIONS.append(Section("detectors-drive", "detectors.md", ["detectors-datasheet-drive"], "2 min", datasheet_drive))

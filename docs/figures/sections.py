@@ -4,21 +4,9 @@
 running (a loaded machine takes up to twice as long).
 """
 
-from dataclasses import dataclass
-from typing import Callable
-
 import odometry
 import pages
-from common import Context  # noqa: F401  (re-exported for docs/figures.py)
-
-
-@dataclass
-class Section:
-    name: str
-    page: str
-    regions: list
-    estimate: str
-    generate: Callable
+from common import Context, Section  # noqa: F401  (Context: for docs/figures.py)
 
 
 SECTIONS = {
