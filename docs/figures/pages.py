@@ -8,7 +8,7 @@ from common import Failed, Section, one_table, table
 SHARED = "../shared/data/capstone"
 
 
-def markdown(out, what, drop=()):
+def markdown(out, what, drop=(), edit=lambda line: line):
     """A command's markdown output as a region body: its tables and text, headings made bold
     (a region sits inside a page's own headings), JSON lines and tables whose first header cell
     is in `drop` left out."""
@@ -23,6 +23,7 @@ def markdown(out, what, drop=()):
                 kept.append(line)
             continue
         skipping = False
+        line = edit(line)
         m = re.match(r"#+ (.*)", line)
         kept.append(f"**{m.group(1)}**" if m else line)
     text = re.sub(r"\n{3,}", "\n\n", "\n".join(kept)).strip()
@@ -84,14 +85,66 @@ def latency(ctx):
         raise Failed("latency --json: the last line is not JSON")
     keys = ["bare_chain3_p99_us", "pipeline_p99_us", "pinned_pipeline_p99_us", "idle_under_1_percent", "stages_1khz_under_10_percent"]
     head = table(["figure", "value"], [[k, headline.get(k, "-")] for k in keys])
-    body = markdown(out, "latency", drop=("state", "publish ns", "#"))
+    body = markdown(out, "latency", drop=("published ns",), edit=latency_line)
     return {"latency": head + "\n\n" + body, "latency-bridge": "\n".join("    " + l for l in bridge.strip().splitlines())}
+
+
+def latency_line(line):
+    """A latency text line without its run's process ids and clock readings."""
+    m = re.match(r"Live states arrived from .*?\. (CPU over .*)", line)
+    if m:
+        return m.group(1)
+    return re.sub(r"; the first \d+ \(publish time CLOCK_MONOTONIC ns; hops in us\):", ".", line)
+
+
+def allan_json(ctx, path):
+    """`mems-calibrate-offline allan --json` of one thesis file, as a dict."""
+    out, _ = ctx.run(["target/release/mems-calibrate-offline", "allan", "--gravity", "9.797", "--json", "--input", path])
+    if ctx.dry:
+        return None
+    try:
+        return json.loads(out)
+    except json.JSONDecodeError:
+        raise Failed(f"allan --json {path}: not JSON")
+
+
+def sampling_row(name, r):
+    """A row of the sampling and repair table from an allan report."""
+    t = r["timing"]
+    torn = r.get("torn") or {}
+    repaired = ", ".join(str(a["repaired"]) for a in torn.get("accel", [])) or "-"
+    return [
+        name,
+        r["samples"],
+        f"{1e3 * t['mean_interval_s']:.3f} / {1e3 * t['median_interval_s']:.3f} ms",
+        f"{t['gaps']} (longest {1e3 * t['longest_interval_s']:.0f} ms)",
+        t["splits"],
+        r["repeats"]["repeats"],
+        repaired,
+    ]
 
 
 def noise(ctx):
     """docs/noise.md: the thesis's static recordings, the Monte Carlo check, the Allan bench."""
-    ctx.region = "noise-thesis"
+    ctx.region = "noise-sampling"
     ctx.run(["cargo", "build", "--release", "-q", "-p", "calibrate-science", "--bin", "mems-calibrate-offline"])
+    six = SHARED + "/Six-Position-Test/data/trial_{0}/six_position_test_data_{0}.csv"
+    runs = SHARED + "/Preliminary-Tests/Start-Up-Shut-Down/Data/start_up_data_{}.csv"
+    rows, split_runs = [], []
+    for t in (1, 2, 3):
+        r = allan_json(ctx, six.format(t))
+        if r:
+            rows.append(sampling_row(f"trial {t}", r))
+    for k in range(1, 3 if ctx.quick else 61):
+        r = allan_json(ctx, runs.format(k))
+        if r and r["timing"]["splits"]:
+            split_runs.append(f"run {k} ({r['timing']['splits']} split, longest interval {r['timing']['longest_interval_s']:.2f} s)")
+    allan = "target/release/mems-calibrate-offline allan --gravity 9.797 --json --input"
+    ctx.shown["noise-sampling"] = ctx.shown["noise-sampling"][:1] + [
+        f"for t in 1 2 3; do {allan} {six.format('$t')}; done",
+        f"for k in $(seq 60); do {allan} {runs.format('$k')}; done",
+    ]
+    ctx.region = "noise-thesis"
     out, _ = ctx.cargo_example("noise", "thesis_noise", [SHARED, "/tmp/figures-noise-pooled.png"])
     ctx.region = "noise-monte-carlo"
     mc, mc_err = ctx.run(["cargo", "test", "--release", "-q", "-p", "noise", "--test", "monte_carlo", "--", "--nocapture"])
@@ -103,7 +156,10 @@ def noise(ctx):
     if not mc_lines:
         raise Failed("monte_carlo: no coverage lines in its output")
     bench_lines = [l for l in bench.splitlines() if l.strip() and not l.startswith("test ")]
+    header = ["file", "samples", "mean / median interval", "gaps (>2x)", "splits (>10x)", "repeats", "torn reads repaired x, y, z"]
+    sampling = table(header, rows) + "\n\nStart-up runs split by a gap: " + ("; ".join(split_runs) or "none") + "."
     return {
+        "noise-sampling": sampling,
         "noise-thesis": markdown(out, "thesis_noise"),
         "noise-monte-carlo": "\n".join("    " + l for l in mc_lines),
         "noise-allan-bench": "\n".join("    " + l for l in bench_lines),
@@ -114,7 +170,7 @@ SECTIONS = [
     Section("detectors", "detectors.md", ["detectors-1khz", "detectors-4khz"], "4 min", detectors),
     Section("real-data", "real-data.md", ["real-data-bench", "real-data-loso"], "2 min", real_data),
     Section("latency", "latency.md", ["latency", "latency-bridge"], "5 min", latency),
-    Section("noise", "noise.md", ["noise-thesis", "noise-monte-carlo", "noise-allan-bench"], "3 min", noise),
+    Section("noise", "noise.md", ["noise-sampling", "noise-thesis", "noise-monte-carlo", "noise-allan-bench"], "5 min", noise),
 ]
 
 
