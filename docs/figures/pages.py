@@ -210,3 +210,25 @@ def datasheet_drive(ctx):
 
 
 SECTIONS.append(Section("detectors-drive", "detectors.md", ["detectors-datasheet-drive"], "2 min", datasheet_drive))
+
+
+def offline_throughput(ctx):
+    """docs/offline.md: one hour of a simulated drive at 1 kHz and at 4 kHz read, run through
+    the stages and through `mems-odometry offline`, and read by the official Python reader."""
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "odometry", "-p", "mems-sim"])
+    tmp = "/tmp/figures-offline"
+    ctx.run(["mkdir", "-p", tmp])
+    duration = "60" if ctx.quick else "3600"
+    blocks = []
+    for rate in ([1000] if ctx.quick else [1000, 4000]):
+        path = f"{tmp}/drive{rate // 1000}k.mcap"
+        ctx.run(["target/release/mems-sim", "drive", "--duration", duration, "--turns", "on", "--rate", str(rate), "--out", path, "--force"])
+        out, _ = ctx.cargo_example("odometry", "throughput", ["--input", path, "--python", "python3"])
+        blocks.append("\n".join("    " + l for l in out.strip().splitlines()))
+    ctx.run(["rm", "-rf", tmp])
+    if ctx.dry:
+        return {}
+    return {"offline-throughput": "\n\n".join(blocks)}
+
+
+SECTIONS.append(Section("offline", "offline.md", ["offline-throughput"], "12 min", offline_throughput))
