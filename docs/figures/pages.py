@@ -1,9 +1,10 @@
 """Sections of the pages other than docs/odometry.md and docs/hints.md."""
 
 import json
+import os
 import re
 
-from common import Failed, Section, one_table, table
+from common import Failed, Section, number, one_table, table, tables
 
 SHARED = "../shared/data/capstone"
 
@@ -232,3 +233,75 @@ def offline_throughput(ctx):
 
 
 SECTIONS.append(Section("offline", "offline.md", ["offline-throughput"], "12 min", offline_throughput))
+
+
+def time_v(err, what):
+    """Wall s, CPU s and peak RSS MB from `/usr/bin/time -v`'s stderr."""
+    m = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (?:(\d+):)?(\d+):([0-9.]+)", err)
+    if not m:
+        raise Failed(f"{what}: no /usr/bin/time -v report")
+    wall = 3600 * float(m.group(1) or 0) + 60 * float(m.group(2)) + float(m.group(3))
+    cpu = number(r"User time \(seconds\): ([0-9.]+)", err, what) + number(r"System time \(seconds\): ([0-9.]+)", err, what)
+    rss = number(r"Maximum resident set size \(kbytes\): (\d+)", err, what) / 1024
+    return wall, cpu, rss
+
+
+def recording_run(ctx):
+    """docs/recording.md: a 60 s run of the full stack recorded, its size per layout and topic."""
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-stack", "-p", "mems-record", "-p", "odometry", "-p", "calibrate",
+             "-p", "acquire", "-p", "mems-info", "-p", "calibrate-science", "-p", "mems-sim"])
+    tmp = "/tmp/figures-recording"
+    run = f"{tmp}/run.mcap"
+    ctx.run(["mkdir", "-p", tmp])
+    ctx.run(["target/release/mems-stack", "--duration", "10" if ctx.quick else "60", "--record", run, "--force", "--namespace", "figures-size"])
+    info, _ = ctx.run(["target/release/mems-info", run, "--json"])
+    ctx.run(["python3", "tools/recording/python/read_recording.py", run])
+    ctx.region = "recording-layouts"
+    cost, _ = ctx.cargo_example("recording", "encoding_cost", [run])
+    ctx.run(["rm", "-rf", tmp])
+    if ctx.dry:
+        return {}
+    i = json.loads(info)
+    files = i.get("files") or []
+    topics = i.get("topics") or {}
+    revisions = sum(t.get("revisions", 0) for t in topics.values())
+    size = table(
+        ["recording", "bytes", "messages", "revisions"],
+        [["`run.mcap` (protobuf, finished)", sum(f["bytes"] for f in files), sum(f["messages"] for f in files), revisions]],
+    )
+    found = tables(cost)
+    if len(found) != 2:
+        raise Failed("encoding_cost: expected the layout table and the topic table")
+    return {"recording-size": size, "recording-layouts": table(*found[0]), "recording-topics": table(*found[1])}
+
+
+def recording_drive(ctx):
+    """docs/recording.md: the tour's 600 s, 1 kHz drive exported to ROS 2 and replayed."""
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-sim", "-p", "odometry", "-p", "mems-ros2", "-p", "mems-replay"])
+    tmp = "/tmp/figures-drive"
+    b = "target/release/"
+    ctx.run(["mkdir", "-p", tmp])
+    drive, states, bag = f"{tmp}/drive.mcap", f"{tmp}/states.mcap", f"{tmp}/states-ros2.mcap"
+    ctx.run([b + "mems-sim", "drive", "--preset", "datasheet", "--duration", "60" if ctx.quick else "600", "--turns", "on", "--out", drive, "--force"])
+    ctx.run([b + "mems-odometry", "offline", "--input", drive, "--out", states, "--force"])
+    ctx.region = "recording-ros2-export"
+    _, err = ctx.run(["/usr/bin/time", "-v", b + "mems-ros2", "export", states, "--out", bag, "--force"])
+    sizes = {}
+    if not ctx.dry:
+        sizes = {p: os.path.getsize(p) for p in (drive, states, bag)}
+    export = time_v(err, "mems-ros2 export") if not ctx.dry else None
+    ctx.region = "recording-replay"
+    _, err = ctx.run(["/usr/bin/time", "-v", b + "mems-replay", drive, "--max"])
+    ctx.run(["rm", "-rf", tmp])
+    if ctx.dry:
+        return {}
+    replay = time_v(err, "mems-replay --max")
+    header = ["input", "input MB", "output MB", "wall s", "CPU s", "peak RSS MB"]
+    return {
+        "recording-ros2-export": table(header, [["states.mcap", f"{sizes[states] / 1e6:.1f}", f"{sizes[bag] / 1e6:.1f}"] + [f"{v:.1f}" for v in export]]),
+        "recording-replay": table(["input", "input MB", "wall s", "CPU s", "peak RSS MB"], [["drive.mcap", f"{sizes[drive] / 1e6:.1f}"] + [f"{v:.2f}" for v in replay]]),
+    }
+
+
+SECTIONS.append(Section("recording-run", "recording.md", ["recording-size", "recording-layouts", "recording-topics"], "3 min", recording_run))
+SECTIONS.append(Section("recording-drive", "recording.md", ["recording-ros2-export", "recording-replay"], "2 min", recording_drive))
