@@ -4,6 +4,7 @@
 running (a loaded machine takes up to twice as long).
 """
 
+import acquisition
 import odometry
 import pages
 from common import Context, Section  # noqa: F401  (Context: for docs/figures.py)
@@ -23,4 +24,5 @@ SECTIONS = {
         Section("hints", "hints.md", ["hints-smooth-floor"], "10 min", odometry.hints),
     ]
     + pages.SECTIONS
+    + acquisition.SECTIONS
 }
