@@ -305,3 +305,60 @@ def recording_drive(ctx):
 
 SECTIONS.append(Section("recording-run", "recording.md", ["recording-size", "recording-layouts", "recording-topics"], "3 min", recording_run))
 SECTIONS.append(Section("recording-drive", "recording.md", ["recording-ros2-export", "recording-replay"], "2 min", recording_drive))
+
+
+FUZZ = re.compile(
+    r"^(?P<reader>\w+): (?P<n>\d+) executions in (?P<wall>[0-9.]+) s \([0-9]+/s\): (?P<acc>\d+) accepted, "
+    r"(?P<ref>\d+) refused with a named error, (?P<panics>\d+) panics, (?P<other>\d+) errors without the file; "
+    r"largest allocation (?P<alloc>\d+) bytes",
+    re.M,
+)
+
+
+def fuzz(ctx):
+    """docs/input-checks.md: a million mutated inputs per file reader (seed 1)."""
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "parser-fuzz"])
+    runs = "2000" if ctx.quick else "1000000"
+    out, err = ctx.run(["/usr/bin/time", "-v", "target/release/parser-fuzz", "--runs", runs, "--seed", "1"])
+    if ctx.dry:
+        return {}
+    rows = [
+        [m["reader"], f"{int(m['n']):,}", f"{int(m['acc']):,}", f"{int(m['ref']):,}", m["panics"], m["other"],
+         f"{int(m['alloc']) / 1024:.0f} KiB", f"{float(m['wall']):.0f} s"]
+        for m in FUZZ.finditer(out)
+    ]
+    if not rows:
+        raise Failed("parser-fuzz: no campaign line")
+    wall, cpu, rss = time_v(err, "parser-fuzz")
+    header = ["reader", "inputs", "accepted", "refused, file named", "panics", "other failures", "largest allocation", "wall time"]
+    return {"input-checks-fuzz": table(header, rows) + f"\n\nAll four readers: {cpu:.0f} s of CPU, peak resident memory {rss:.1f} MB."}
+
+
+def offline_refusal(ctx):
+    """docs/input-checks.md: `mems-odometry offline`'s refusal of a canonical CSV whose line
+    1502 holds `ay_g` = 1e300."""
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "odometry", "-p", "mems-sim"])
+    tmp = "/tmp/figures-bad"
+    script = f"""set -euo pipefail
+mkdir -p {tmp}
+target/release/mems-sim drive --duration 20 --out {tmp}/good.csv --force > /dev/null
+python3 -c '
+import csv, sys
+rows = list(csv.reader(open("{tmp}/good.csv")))
+rows[1501][rows[0].index("ay_g")] = "1e300"
+csv.writer(open("{tmp}/bad.csv", "w", newline=""), lineterminator="\\n").writerows(rows)'
+cd {tmp}
+status=0
+$OLDPWD/target/release/mems-odometry offline --input bad.csv 2>&1 || status=$?
+echo "exit status $status"
+[ "$status" -ne 0 ]
+"""
+    out, _ = ctx.run(["bash", "-c", script])
+    ctx.run(["rm", "-rf", tmp])
+    if ctx.dry:
+        return {}
+    return {"input-checks-offline": "\n".join("    " + l for l in out.strip().splitlines())}
+
+
+SECTIONS.append(Section("input-checks-fuzz", "input-checks.md", ["input-checks-fuzz"], "5 min", fuzz))
+SECTIONS.append(Section("input-checks-offline", "input-checks.md", ["input-checks-offline"], "10 s", offline_refusal))
