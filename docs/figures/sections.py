@@ -5,6 +5,7 @@ running (a loaded machine takes up to twice as long).
 """
 
 import acquisition
+import diagnosis
 import odometry
 import pages
 from common import Context, Section  # noqa: F401  (Context: for docs/figures.py)
@@ -25,4 +26,5 @@ SECTIONS = {
     ]
     + pages.SECTIONS
     + acquisition.SECTIONS
+    + diagnosis.SECTIONS
 }
