@@ -20,6 +20,7 @@ Usage (from anywhere; `docs/figures.sh` is the same):
     docs/figures.py --quick SECTION  # a reduced run (fewer seeds, shorter runs), printed, not written
     docs/figures.py --check          # no run: every region has a section and every section's
                                      # regions exist; no page carries a date or a commit hash
+    docs/figures.py --self-test      # the output parsers and the check on hand-made input
 
 Each command is printed with its wall time. A failing command stops the script with its exit
 status and stderr; no region is written for a section unless all of its commands succeeded
@@ -50,6 +51,11 @@ DATE = re.compile(r"\b202[0-9]-[01][0-9]-[0-3][0-9]\b")
 COMMIT = re.compile(r"\b(?:at|on|commit|of)\s+[0-9a-f]{7,40}\b")
 
 
+def rel(page):
+    """A page's path as shown in messages: relative to the repository when inside it."""
+    return page.relative_to(REPO) if page.is_relative_to(REPO) else page
+
+
 def regions(text):
     """The (name, body) of every generated region of a page's text, in order."""
     out = []
@@ -68,10 +74,10 @@ def page_regions():
         opened = re.findall(r"<!-- figures:([a-z0-9-]+) -->", text)
         found = [n for n, _ in regions(text)]
         if sorted(opened) != sorted(found):
-            raise Failed(f"{page.relative_to(REPO)}: unclosed or malformed region among {opened}")
+            raise Failed(f"{rel(page)}: unclosed or malformed region among {opened}")
         for name in found:
             if name in where:
-                raise Failed(f"region {name} is in {where[name]} and {page.relative_to(REPO)}")
+                raise Failed(f"region {name} is in {where[name]} and {rel(page)}")
             where[name] = page
     return where
 
@@ -95,13 +101,13 @@ def check():
                 problems.append(f"section {s.name}: region {r} is in {where[r].name}, not {s.page}")
     for r, page in where.items():
         if r not in owned:
-            problems.append(f"{page.relative_to(REPO)}: region {r} has no section in docs/figures")
+            problems.append(f"{rel(page)}: region {r} has no section in docs/figures")
     for page in PAGES:
         for i, line in enumerate(page.read_text().splitlines(), 1):
             for pattern, what in ((DATE, "a date"), (COMMIT, "a commit")):
                 m = pattern.search(line)
                 if m:
-                    problems.append(f"{page.relative_to(REPO)}:{i}: {what} ({m.group(0)!r})")
+                    problems.append(f"{rel(page)}:{i}: {what} ({m.group(0)!r})")
     return problems
 
 
@@ -168,7 +174,13 @@ def main():
     p.add_argument("--list", action="store_true", help="list sections and their regions")
     p.add_argument("--quick", action="store_true", help="reduced runs, printed, pages untouched")
     p.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    p.add_argument("--self-test", action="store_true", help="the parsers and the check on hand-made input")
     a = p.parse_args()
+    if a.self_test:
+        import selftest
+
+        selftest.run(sys.modules[__name__])
+        return
     if a.check:
         problems = check()
         for x in problems:
