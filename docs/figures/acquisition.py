@@ -60,7 +60,8 @@ def spi(ctx):
 
 def soak(ctx):
     """The full stack at 4 kHz over simulated SPI for 10 minutes, recorded, then reported."""
-    ctx.run(["cargo", "build", "--release", "-q", "--workspace"])
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-stack", "-p", "mems-record", "-p", "acquire", "-p", "calibrate",
+             "-p", "calibrate-science", "-p", "odometry", "-p", "mems-sim"])
     ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-record", "--example", "recording_report"])
     duration = 20 if ctx.quick else 600
     out, err = shell(ctx, f"""
