@@ -14,11 +14,6 @@ def verbatim(text):
     return "\n".join("    " + l for l in text.strip().splitlines())
 
 
-def shell(ctx, script):
-    """Runs a bash script (set -euo pipefail) from the repository root; its stdout and stderr."""
-    return ctx.run(["bash", "-c", "set -euo pipefail\n" + script.strip()])
-
-
 def topic_and_acquire(ctx, ns, acquire_args, seconds):
     """`mems-topic hz --json` on the raw service while `mems-acquire` publishes for `seconds`."""
     script = f"""
@@ -30,7 +25,7 @@ wait $topic
 cat /tmp/{ns}-topic.json
 rm -f /tmp/{ns}-topic.json
 """
-    out, err = shell(ctx, script)
+    out, err = ctx.shell(script)
     return out, err
 
 
@@ -51,7 +46,7 @@ def spi(ctx):
     ctx.run(["cargo", "build", "--release", "-q", "-p", "acquire", "-p", "mems-topic"])
     out, err = topic_and_acquire(ctx, "figures-spi", "--source sim-spi --rate 4000", 3 if ctx.quick else 10)
     summary = [l for l in err.splitlines() if "published" in l or "FIFO" in l or "lateness" in l or "gaps" in l]
-    refused, _ = shell(ctx, f"{B}mems-acquire --namespace figures-i2c --source sim --rate 4000 --duration 1 2>&1 && exit 1 || true")
+    refused, _ = ctx.shell(f"{B}mems-acquire --namespace figures-i2c --source sim --rate 4000 --duration 1 2>&1 && exit 1 || true")
     return {
         "acquisition-spi": verbatim("\n".join(summary[-4:]) + "\n" + out),
         "acquisition-i2c-refusal": verbatim(refused),
@@ -64,7 +59,7 @@ def soak(ctx):
              "-p", "calibrate-science", "-p", "odometry", "-p", "mems-sim"])
     ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-record", "--example", "recording_report"])
     duration = 20 if ctx.quick else 600
-    out, err = shell(ctx, f"""
+    out, err = ctx.shell(f"""
 MEMS_NAMESPACE=figures-soak {B}mems-stack --source sim-spi --rate 4000 --duration {duration} --record /tmp/figures-soak.mcap --force > /dev/null
 {B}examples/recording_report /tmp/figures-soak.mcap
 rm -f /tmp/figures-soak*.mcap
@@ -103,7 +98,7 @@ def kills(ctx):
              "-p", "calibrate-science", "-p", "odometry", "-p", "mems-sim"])
     ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-record", "--example", "recording_report"])
     ctx.region = "acquisition-recorder-kill"
-    rec, _ = shell(ctx, f"""
+    rec, _ = ctx.shell(f"""
 rm -f /tmp/figures-kill.mcap /tmp/figures-kill.*.mcap
 {B}mems-stack --duration {20 if ctx.quick else 60} --record /tmp/figures-kill.mcap --namespace figures-killrec > /dev/null 2>&1 &
 stack=$!; sleep {8 if ctx.quick else 20}
@@ -113,7 +108,7 @@ wait $stack
 rm -f /tmp/figures-kill.mcap /tmp/figures-kill.*.mcap
 """)
     ctx.region = "acquisition-stack-kill"
-    stack, _ = shell(ctx, f"""
+    stack, _ = ctx.shell(f"""
 {B}mems-stack --namespace figures-killstack > /dev/null 2>&1 &
 stack=$!; sleep 10; kids=$(cat /proc/$stack/task/$stack/children)
 kill -KILL $stack; t0=$(date +%s%N)

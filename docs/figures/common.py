@@ -45,9 +45,10 @@ class Context:
             return tagged
         return [c for cmds in self.shown.values() for c in cmds]
 
-    def run(self, argv, timeout=None, stdin=None):
-        """Runs argv from the repository root; (stdout, stderr); Failed on a non-zero exit."""
-        shown = " ".join(shlex.quote(a) for a in argv)
+    def run(self, argv, timeout=None, stdin=None, shown=None):
+        """Runs argv from the repository root; (stdout, stderr); Failed on a non-zero exit.
+        `shown` is how the command is written in the region (default: argv, quoted)."""
+        shown = shown or " ".join(shlex.quote(a) for a in argv)
         self.shown.setdefault(self.region, []).append(shown)
         print(f"   $ {shown}", flush=True)
         if self.dry:
@@ -69,6 +70,12 @@ class Context:
         """`cargo run --release -p PACKAGE --example EXAMPLE -- ARGS`."""
         argv = ["cargo", "run", "--release", "-q", "-p", package, "--example", example, "--"]
         return self.run(argv + [str(a) for a in args], **kw)
+
+    def shell(self, script):
+        """Runs a bash script (`set -euo pipefail` first) from the repository root; shown as
+        the script itself."""
+        script = script.strip()
+        return self.run(["bash", "-c", "set -euo pipefail\n" + script], shown=script)
 
 
 def tables(text):

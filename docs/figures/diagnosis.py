@@ -86,7 +86,7 @@ def generate(ctx):
     d("start-up runs -> the static files", "--input", U, "--apply", "torn_reads", "--test", *[STATIC.format(t) for t in (1, 2, 3)])
     loop = ("for k in 1 30 31 32 35 40 60; do awk -F, -v k=$k 'NR>1{x+=$2;z+=$4;n++}END{printf \"run %d: x %.1f z %.1f counts\\n\",k,x/n*16384,z/n*16384}' "
             + U + "/start_up_data_$k.csv; done")
-    means, _ = ctx.run(["bash", "-c", loop])
+    means, _ = ctx.shell(loop)
     d.lines.setdefault("diagnosis-drift", []).append("run means (x and z, counts):\n" + "\n".join("  " + l for l in means.splitlines()))
     # 4. Block lengths.
     ctx.region = "diagnosis-blocks"
