@@ -171,7 +171,7 @@ SECTIONS = [
     Section("detectors", "detectors.md", ["detectors-1khz", "detectors-4khz"], "10 min", detectors),
     Section("real-data", "real-data.md", ["real-data-bench", "real-data-loso"], "2 min", real_data),
     Section("latency", "latency.md", ["latency", "latency-bridge"], "5 min", latency),
-    Section("noise", "noise.md", ["noise-sampling", "noise-thesis", "noise-monte-carlo", "noise-allan-bench"], "5 min", noise),
+    Section("noise", "noise.md", ["noise-sampling", "noise-thesis", "noise-monte-carlo", "noise-allan-bench"], "2 min", noise),
 ]
 
 
@@ -314,6 +314,11 @@ FUZZ = re.compile(
 )
 
 
+def seconds(s):
+    """A wall time for a table: whole seconds from 10 s up, else one decimal."""
+    return f"{s:.0f} s" if s >= 10 else f"{s:.1f} s"
+
+
 def fuzz(ctx):
     """docs/input-checks.md: a million mutated inputs per file reader (seed 1)."""
     ctx.run(["cargo", "build", "--release", "-q", "-p", "parser-fuzz"])
@@ -323,7 +328,7 @@ def fuzz(ctx):
         return {}
     rows = [
         [m["reader"], f"{int(m['n']):,}", f"{int(m['acc']):,}", f"{int(m['ref']):,}", m["panics"], m["other"],
-         f"{int(m['alloc']) / 1024:.0f} KiB", f"{float(m['wall']):.0f} s"]
+         f"{int(m['alloc']) / 1024:.0f} KiB", seconds(float(m["wall"]))]
         for m in FUZZ.finditer(out)
     ]
     if not rows:
@@ -359,5 +364,5 @@ echo "exit status $status"
     return {"input-checks-offline": "\n".join("    " + l for l in out.strip().splitlines())}
 
 
-SECTIONS.append(Section("input-checks-fuzz", "input-checks.md", ["input-checks-fuzz"], "5 min", fuzz))
+SECTIONS.append(Section("input-checks-fuzz", "input-checks.md", ["input-checks-fuzz"], "8 min", fuzz))
 SECTIONS.append(Section("input-checks-offline", "input-checks.md", ["input-checks-offline"], "10 s", offline_refusal))
