@@ -190,8 +190,12 @@ def main():
         print(f"figures --check: {len(sections.SECTIONS)} sections, regions and pages consistent")
         return
     if a.list:
+        total = 0.0
         for s in sections.SECTIONS.values():
             print(f"{s.name:24} {s.page:18} about {s.estimate:10} {', '.join(s.regions)}")
+            n, unit = s.estimate.split()
+            total += float(n) * (60 if unit == "min" else 1)
+        print(f"all sections: about {total / 3600:.1f} h")
         return
     unknown = [n for n in a.sections if n not in sections.SECTIONS]
     if unknown:

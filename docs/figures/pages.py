@@ -169,8 +169,8 @@ def noise(ctx):
 
 SECTIONS = [
     Section("detectors", "detectors.md", ["detectors-1khz", "detectors-4khz"], "10 min", detectors),
-    Section("real-data", "real-data.md", ["real-data-bench", "real-data-loso"], "2 min", real_data),
-    Section("latency", "latency.md", ["latency", "latency-bridge"], "5 min", latency),
+    Section("real-data", "real-data.md", ["real-data-bench", "real-data-loso"], "3 min", real_data),
+    Section("latency", "latency.md", ["latency", "latency-bridge"], "10 min", latency),
     Section("noise", "noise.md", ["noise-sampling", "noise-thesis", "noise-monte-carlo", "noise-allan-bench"], "2 min", noise),
 ]
 
@@ -231,7 +231,7 @@ def offline_throughput(ctx):
     return {"offline-throughput": "\n\n".join(blocks)}
 
 
-SECTIONS.append(Section("offline", "offline.md", ["offline-throughput"], "12 min", offline_throughput))
+SECTIONS.append(Section("offline", "offline.md", ["offline-throughput"], "20 min", offline_throughput))
 
 
 def time_v(err, what):
