@@ -44,8 +44,10 @@ def clock(ctx):
 def spi(ctx):
     """4 kHz over the simulated SPI part through iceoryx2, and the refusal of 4 kHz on I2C."""
     ctx.run(["cargo", "build", "--release", "-q", "-p", "acquire", "-p", "mems-topic"])
+    ctx.region = "acquisition-spi"
     out, err = topic_and_acquire(ctx, "figures-spi", "--source sim-spi --rate 4000", 3 if ctx.quick else 10)
     summary = [l for l in err.splitlines() if "published" in l or "FIFO" in l or "lateness" in l or "gaps" in l]
+    ctx.region = "acquisition-i2c-refusal"
     refused, _ = ctx.shell(f"{B}mems-acquire --namespace figures-i2c --source sim --rate 4000 --duration 1 2>&1 && exit 1 || true")
     return {
         "acquisition-spi": verbatim("\n".join(summary[-4:]) + "\n" + out),

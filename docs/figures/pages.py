@@ -276,13 +276,19 @@ def recording_run(ctx):
 
 def recording_drive(ctx):
     """docs/recording.md: the tour's 600 s, 1 kHz drive exported to ROS 2 and replayed."""
-    ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-sim", "-p", "odometry", "-p", "mems-ros2", "-p", "mems-replay"])
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-sim", "-p", "odometry", "-p", "mems-ros2", "-p", "mems-replay", "-p", "calibrate"])
     tmp = "/tmp/figures-drive"
     b = "target/release/"
     ctx.run(["mkdir", "-p", tmp])
     drive, states, bag = f"{tmp}/drive.mcap", f"{tmp}/states.mcap", f"{tmp}/states-ros2.mcap"
+    calib, six, poses = f"{tmp}/calib.toml", f"{tmp}/six.csv", f"{tmp}/poses.csv"
+    # The README tour's calibration of the simulated part, then its drive through offline.
+    ctx.run([b + "mems-sim", "six-position", "--preset", "datasheet", "--rate", "1000", "--out", six])
+    ctx.run([b + "mems-calibrate", "fit", "--input", six, "--model", "full", "--out", calib])
+    ctx.run([b + "mems-sim", "orientations", "--n", "16", "--preset", "datasheet", "--out", poses])
+    ctx.run([b + "mems-odometry", "gyrocal", "--input", poses, "--calib", calib, "--into", calib])
     ctx.run([b + "mems-sim", "drive", "--preset", "datasheet", "--duration", "60" if ctx.quick else "600", "--turns", "on", "--out", drive, "--force"])
-    ctx.run([b + "mems-odometry", "offline", "--input", drive, "--out", states, "--force"])
+    ctx.run([b + "mems-odometry", "offline", "--calib", calib, "--input", drive, "--out", states, "--force"])
     ctx.region = "recording-ros2-export"
     _, err = ctx.run(["/usr/bin/time", "-v", b + "mems-ros2", "export", states, "--out", bag, "--force"])
     sizes = {}
