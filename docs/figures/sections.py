@@ -22,7 +22,7 @@ SECTIONS = {
         Section("odometry-default-legs", "odometry.md", ["odometry-default-legs"], "4 min", odometry.default_legs),
         Section("odometry-budget", "odometry.md", ["odometry-budget"], "4 min", odometry.budget),
         Section("odometry-cost", "odometry.md", ["odometry-cost"], "2 min", odometry.cost),
-        Section("odometry-faults", "odometry.md", ["odometry-faults"], "15 min", odometry.faults),
+        Section("odometry-faults", "odometry.md", ["odometry-faults"], "30 min", odometry.faults),
         Section("hints", "hints.md", ["hints-smooth-floor"], "9 min", odometry.hints),
     ]
     + pages.SECTIONS
