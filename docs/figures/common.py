@@ -79,16 +79,30 @@ class Context:
 
 
 def tables(text):
-    """Every markdown table in text: a list of (header cells, rows of cells)."""
+    """Every markdown table in text: a list of (header cells, rows of cells). Two tables
+    printed without a line between them are two tables (a separator row starts a new one)."""
     out, block = [], []
+
+    def close(rows):
+        if len(rows) >= 2 and is_separator(rows[1]):
+            out.append((rows[0], rows[2:]))
+
     for line in text.splitlines() + [""]:
         if line.startswith("|"):
-            block.append([c.strip() for c in line.strip().strip("|").split("|")])
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            if is_separator(cells) and len(block) >= 3:
+                close(block[:-1])
+                block = block[-1:]
+            block.append(cells)
             continue
-        if len(block) >= 2 and set("".join(block[1])) <= set("-: "):
-            out.append((block[0], block[2:]))
+        close(block)
         block = []
     return out
+
+
+def is_separator(cells):
+    """Whether a row's cells are a markdown table's header separator (`---`, `:--`)."""
+    return all(c and set(c) <= set("-: ") for c in cells)
 
 
 def table(header, rows):

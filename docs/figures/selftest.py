@@ -65,6 +65,8 @@ def parsers():
     md = pages.markdown("## Title\n\n| a | b |\n| --- | --- |\n| 1 | 2 |\n{\"json\": 1}\n", "t")
     expect(md.startswith("**Title**") and "json" not in md, f"markdown: {md!r}")
     expect(len(tables(md)) == 1, "tables")
+    two = "| a |\n|---|\n| 1 |\n| b | c |\n|---|---|\n| 2 | 3 |\n"
+    expect([h for h, _ in tables(two)] == [["a"], ["b", "c"]], f"tables back to back: {tables(two)}")
 
 
 def check(figures):
