@@ -4,11 +4,12 @@
 
 use embedded_hal::i2c::I2c;
 use hdrhistogram::Histogram;
-use ipc_types::RawImuSample;
+use ipc_types::{RawImuSample, raw_flags};
 
 use crate::clock::Clock;
 use crate::driver::{self, Mpu9250};
 use crate::registers as reg;
+use crate::session::{Resume, Session};
 
 /// Samples one FIFO read can return at most: a full FIFO of the smallest frame (6 bytes).
 pub const READ_BUFFER: usize = reg::FIFO_SIZE / 6 + 1;
@@ -160,6 +161,10 @@ pub struct LoopStats {
     /// overflowed are left out (its newest frames were dropped, so its newest sample is old).
     /// `None` before the first sample.
     pub sample_time_excursion_ns: Option<(i64, i64)>,
+    /// When this process continued a sensor session: the first sequence number it published
+    /// (the next of the session) and the samples not read while no process ran (its first
+    /// sample's `lost_before`).
+    pub resumed: Option<(u64, u64)>,
 }
 
 /// The acquisition loop's state: the driver, the clock, and a buffer allocated once.
@@ -168,6 +173,9 @@ pub struct Acquisition<I2C: I2c, C: Clock> {
     clock: C,
     buffer: Vec<RawImuSample>,
     next_seq: u64,
+    session: Session,
+    /// Where the continued session stood, until the first sample places this process in it.
+    resume: Option<Resume>,
     read_interval_ns: u64,
     next_read_ns: u64,
     stats: LoopStats,
@@ -188,11 +196,14 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
         driver.probe()?;
         driver.init(config, &clock)?;
         let next_read_ns = clock.now_ns() + read_interval_ns;
+        let session = Session::transient(clock.now_ns());
         Ok(Self {
             driver,
             clock,
             buffer: vec![RawImuSample::default(); READ_BUFFER],
             next_seq: 0,
+            session,
+            resume: None,
             read_interval_ns,
             next_read_ns,
             stats: LoopStats::default(),
@@ -200,6 +211,14 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
             lateness: Histogram::new_with_bounds(1, 100_000_000_000, 2)
                 .expect("valid histogram bounds"),
         })
+    }
+
+    /// Publishes in `session` (see [`crate::session`]): numbered from where it stands, when it
+    /// is continued, else from 0.
+    pub fn in_session(mut self, session: Session) -> Self {
+        self.resume = session.resume();
+        self.session = session;
+        self
     }
 
     /// The time the next read is due, ns on the loop's clock.
@@ -255,9 +274,8 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
         let (delay, period) = self.driver.config().map_or((0, 0), |c| {
             (c.filter_delay_ns(), (1e9 / c.fifo_rate_hz()) as i64)
         });
+        self.number(n);
         for sample in &mut self.buffer[..n] {
-            sample.seq = self.next_seq;
-            self.next_seq += 1;
             sample.stamps.acquired_ns = self.clock.now_ns();
             publish(sample)?;
             self.stats.published += 1;
@@ -274,6 +292,38 @@ impl<I2C: I2c, C: Clock> Acquisition<I2C, C> {
             self.stats.sample_time_excursion_ns = Some((a.max(ahead), b.max(behind)));
         }
         Ok(Ok(n))
+    }
+
+    /// Numbers the first `n` samples of the buffer in the session and notes them in its file
+    /// before they are published (a process killed after the note skips numbers, never
+    /// reuses one). The first sample of a continued session follows the hole since the
+    /// killed process's newest sample: `lost_before` counts the sample periods in it.
+    fn number(&mut self, n: usize) {
+        let Some(newest_ns) = self.buffer[..n].last().map(|s| s.stamps.sample_ns) else {
+            return;
+        };
+        if let Some(resume) = self.resume.take() {
+            let first = &mut self.buffer[0];
+            let period_ns = self
+                .driver
+                .config()
+                .map_or(1e6, |c| 1e9 / c.output_rate_hz());
+            let hole_ns = first.stamps.sample_ns.saturating_sub(resume.last_sample_ns);
+            let lost = ((hole_ns as f64 / period_ns).round() as u64).saturating_sub(1);
+            let lost_before = u64::from(first.lost_before) + lost;
+            first.lost_before = u32::try_from(lost_before).unwrap_or(u32::MAX);
+            first.flags |= raw_flags::GAP_BEFORE | raw_flags::RESUMED;
+            self.next_seq = resume.next_seq;
+            self.stats.resumed = Some((self.next_seq, lost_before));
+        }
+        for sample in &mut self.buffer[..n] {
+            sample.seq = self.next_seq;
+            self.next_seq += 1;
+        }
+        if let Err(e) = self.session.note(self.next_seq, newest_ns) {
+            tracing::warn!("{e}: a restart will not continue this sensor session");
+            self.session = Session::transient(self.session.origin_ns());
+        }
     }
 }
 

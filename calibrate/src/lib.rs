@@ -12,6 +12,7 @@
 //! nanoseconds, durations seconds (names ending in `_s`); corrected output is in SI (m/s^2).
 
 pub mod calibfile;
+pub mod gravity;
 pub mod model;
 pub mod noise_level;
 pub mod noise_params;

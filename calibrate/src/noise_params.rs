@@ -230,11 +230,11 @@ fn non_negative(field: &str, v: f64) -> Result<(), ParamsError> {
 
 impl NoiseParams {
     /// Checks the values a consumer relies on: positive rate and length, a gravity of the
-    /// Earth's surface ([`crate::calibfile::GRAVITY_RANGE_MPS2`]), positive estimates with
+    /// Earth's surface ([`crate::gravity::GRAVITY_RANGE_MPS2`]), positive estimates with
     /// non-negative sigmas, non-negative limits, white noise densities within
     /// [`WHITE_NOISE_DENSITY_RANGE`], and the expected units.
     pub fn validate(&self) -> Result<(), ParamsError> {
-        crate::calibfile::check_gravity(self.gravity_mps2).map_err(|problem| ParamsError {
+        crate::gravity::check_gravity(self.gravity_mps2).map_err(|problem| ParamsError {
             field: "gravity_mps2".into(),
             problem,
         })?;

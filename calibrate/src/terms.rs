@@ -23,7 +23,6 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::calibfile::CalibrationFile;
 use crate::model::AccelModel;
 
 /// Fixed-point steps of the nonlinearity inversion: each multiplies the error by about
@@ -34,7 +33,7 @@ pub const NONLINEARITY_ITERATIONS: usize = 8;
 /// Why the terms of a calibration file are inconsistent.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{0}")]
-pub struct TermsError(String);
+pub struct TermsError(pub(crate) String);
 
 /// The optional terms of a calibration file, ready to apply (see the module documentation).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -54,48 +53,6 @@ pub struct ReadingTerms {
 }
 
 impl ReadingTerms {
-    /// The terms of a calibration file, checking that the parts of each term come together
-    /// (a temperature term with its `reference_c`, the drift with `drift_max_s`, the warm-up
-    /// with a positive time constant).
-    pub fn from_file(file: &CalibrationFile) -> Result<Self, TermsError> {
-        let t = &file.temperature;
-        let any_temperature = t.bias_g_per_c.is_some() || t.scale_per_c.is_some();
-        if any_temperature != t.reference_c.is_some() {
-            return Err(TermsError(
-                "temperature: bias_g_per_c or scale_per_c and reference_c must be given together"
-                    .into(),
-            ));
-        }
-        let time = &file.time;
-        let drift = match (time.drift_g_per_s, time.drift_max_s) {
-            (None, None) => None,
-            (Some(r), Some(t_max)) if t_max > 0.0 => Some((Vector3::from(r), t_max)),
-            _ => {
-                return Err(TermsError(
-                    "time: drift_g_per_s and drift_max_s (> 0 s) must be given together".into(),
-                ));
-            }
-        };
-        let warm_up = match (time.warm_up_g, time.warm_up_time_constant_s) {
-            (None, None) => None,
-            (Some(w), Some(tau)) if tau > 0.0 => Some((Vector3::from(w), tau)),
-            _ => {
-                return Err(TermsError(
-                    "time: warm_up_g and warm_up_time_constant_s (> 0 s) must be given together"
-                        .into(),
-                ));
-            }
-        };
-        Ok(Self {
-            reference_c: t.reference_c,
-            temp_bias_g_per_c: t.bias_g_per_c.map(Vector3::from),
-            temp_scale_per_c: t.scale_per_c.map(Vector3::from),
-            drift,
-            warm_up,
-            quadratic_g_per_g2: file.nonlinearity.quadratic_g_per_g2.map(Vector3::from),
-        })
-    }
-
     /// Whether the correction needs the die temperature.
     pub fn needs_temperature(&self) -> bool {
         self.reference_c.is_some()

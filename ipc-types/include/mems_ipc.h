@@ -29,6 +29,7 @@
 #define MEMS_RAW_REPAIRED (1u << 3)
 #define MEMS_RAW_GYRO_VALID (1u << 4)
 #define MEMS_RAW_TEMP_VALID (1u << 5)
+#define MEMS_RAW_RESUMED (1u << 6)
 
 /* CorrectedImuSample.flags */
 #define MEMS_CORRECTED_ZERO_STATE (1u << 0)

@@ -40,6 +40,10 @@ pub mod raw_flags {
     pub const GYRO_VALID: u16 = 1 << 4;
     /// `temp_c` / `temp_counts` hold a measurement.
     pub const TEMP_VALID: u16 = 1 << 5;
+    /// The first sample of a restarted acquisition process that continues the sensor session
+    /// (same part, same clock): set with `GAP_BEFORE`, and `lost_before` counts the samples
+    /// not read while no process ran.
+    pub const RESUMED: u16 = 1 << 6;
 }
 
 /// One raw IMU sample as the sensor produced it, in the sensor frame and the sensor's units.
@@ -53,7 +57,10 @@ pub mod raw_flags {
 pub struct RawImuSample {
     /// Per-stage timestamps; `stamps.sample_ns` is the sample's own time.
     pub stamps: Stamps,
-    /// Publisher sequence number: consecutive, starting at 0, one per sample.
+    /// Sequence number in the sensor session: consecutive from 0, one per sample published
+    /// (samples the sensor lost are counted by `lost_before`, not numbered). A restarted
+    /// acquisition that continues the session continues its numbers (`RESUMED`); a number
+    /// that goes back starts a new session.
     pub seq: u64,
     /// Specific force in g, sensor frame.
     pub accel_g: [f64; 3],

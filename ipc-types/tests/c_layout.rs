@@ -110,13 +110,14 @@ fn facts() -> Vec<Fact> {
             reserved
         ]
     );
-    let flags: [(&str, u16); 24] = [
+    let flags: [(&str, u16); 25] = [
         ("MEMS_RAW_GAP_BEFORE", raw_flags::GAP_BEFORE),
         ("MEMS_RAW_FIFO_OVERFLOW", raw_flags::FIFO_OVERFLOW),
         ("MEMS_RAW_SATURATED", raw_flags::SATURATED),
         ("MEMS_RAW_REPAIRED", raw_flags::REPAIRED),
         ("MEMS_RAW_GYRO_VALID", raw_flags::GYRO_VALID),
         ("MEMS_RAW_TEMP_VALID", raw_flags::TEMP_VALID),
+        ("MEMS_RAW_RESUMED", raw_flags::RESUMED),
         ("MEMS_CORRECTED_ZERO_STATE", corrected_flags::ZERO_STATE),
         (
             "MEMS_CORRECTED_DETECTOR_READY",

@@ -4,9 +4,11 @@
 //! by the live process and the offline runner. The gyro's scale and misalignment, which the
 //! calibration stage does not correct, are fitted from a pose session by
 //! `calibrate_science::gyrocal`. Robot
-//! hints (the controller's rest and speed knowledge, [`hints`]) feed the same stage.
+//! hints (the controller's rest and speed knowledge, [`hints`]) feed the same stage; over a
+//! recording they reach it in the order a live pipeline receives them ([`arrival`]).
 //! Measured accuracy on simulated drives: docs/odometry.md.
 
+pub mod arrival;
 pub mod config;
 pub mod eskf;
 pub mod hints;

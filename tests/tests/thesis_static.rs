@@ -8,14 +8,7 @@ use std::path::PathBuf;
 use integration_tests::{run_ok, unique_namespace};
 
 fn data_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/capstone/Six-Position-Test/data");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("skipping: the thesis data is not at {}", dir.display());
-        None
-    }
+    test_support::shared_data("data/capstone/Six-Position-Test/data")
 }
 
 fn end_displacement(calib: &str, input: &str, zupt: bool) -> [f64; 3] {

@@ -45,6 +45,11 @@ struct Cli {
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
+    /// The sensor session's state file: a restart with the same part and options continues
+    /// the session in it (numbering and clock; the simulated motion in wall time), the hole
+    /// counted as lost samples. Default: every start is a new session.
+    #[arg(long)]
+    session: Option<std::path::PathBuf>,
     #[command(flatten)]
     realtime: Realtime,
     #[command(flatten)]
@@ -65,6 +70,7 @@ fn acquire(cli: Cli) -> Result<()> {
         read_interval_ns: process::read_interval_ns(cli.read_interval_ms, &config)?,
         config,
         pool: &ALLOCATOR,
+        session_file: cli.session,
     };
     process::run(&cli.source, &cli.sim, &publish)
 }

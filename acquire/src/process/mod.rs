@@ -4,6 +4,7 @@
 //! ([`Publish`]) and its summary ([`Summary`]).
 
 mod publish;
+mod reads;
 mod summary;
 
 pub use publish::Publish;
@@ -22,6 +23,7 @@ use nalgebra::UnitQuaternion;
 use crate::acquisition::SourceSpec;
 use crate::clock::{MonotonicClock, SimClock};
 use crate::driver::{self, Mpu9250};
+use crate::session::Session;
 use crate::sim::{SimConfig, SimMpu9250};
 use crate::spi::SpiRegisters;
 
@@ -121,6 +123,7 @@ pub fn run<const N: usize>(
     sim: &SimPart,
     publish: &Publish<'_, N>,
 ) -> Result<()> {
+    let session = publish.session(source, sim)?;
     match source {
         SourceSpec::Sim | SourceSpec::SimSpi => {
             let spi = *source == SourceSpec::SimSpi;
@@ -134,14 +137,14 @@ pub fn run<const N: usize>(
                     let drive = Drive::new(&params, sim.seed)?;
                     let vibration = VibrationModel::moderate(1.0);
                     let sensor = SimSensor::new(drive, &model, &vibration, sim.seed)?;
-                    run_sim(sensor, spi, sim, publish)
+                    run_sim(sensor, spi, sim, publish, session)
                 }
                 Scenario::Static => {
                     let g = mems_sim::model::G_MPS2;
                     let pose = PoseSession::static_pose(UnitQuaternion::identity(), horizon_s, g)?;
                     let vibration = VibrationModel::moderate(0.0);
                     let sensor = SimSensor::new(pose, &model, &vibration, sim.seed)?;
-                    run_sim(sensor, spi, sim, publish)
+                    run_sim(sensor, spi, sim, publish, session)
                 }
             }
         }
@@ -149,9 +152,9 @@ pub fn run<const N: usize>(
             let bus = linux_embedded_hal::I2cdev::new(device)
                 .with_context(|| format!("cannot open I2C bus {device}"))?;
             let driver = Mpu9250::new(bus, device.as_str(), *address);
-            publish.run(driver, MonotonicClock)
+            publish.run(driver, MonotonicClock, session)
         }
-        SourceSpec::Spi { device } => publish.run(open_spi(device)?, MonotonicClock),
+        SourceSpec::Spi { device } => publish.run(open_spi(device)?, MonotonicClock, session),
     }
 }
 
@@ -171,25 +174,28 @@ pub fn open_spi(device: &str) -> Result<Mpu9250<SpiRegisters<SpidevDevice>>> {
 }
 
 /// Publishes from the simulated part measuring `sensor`, on the simulated I2C bus or (`spi`)
-/// SPI, paced in real time.
+/// SPI, paced in real time, in `session` (the part powered on at its origin, so that a
+/// continued session's motion goes on in wall time).
 fn run_sim<S: SampleSource, const N: usize>(
     sensor: S,
     spi: bool,
     sim: &SimPart,
     publish: &Publish<'_, N>,
+    session: Session,
 ) -> Result<()> {
     let clock = SimClock::real_time();
     let device_config = SimConfig {
         rate_error_ppm: sim.sim_clock_ppm,
+        power_on_ns: Some(session.origin_ns()),
         ..SimConfig::default()
     };
     let address = device_config.address;
     let device = SimMpu9250::new(sensor, clock.clone(), device_config);
     if spi {
         let driver: Mpu9250<SpiRegisters<_>> = Mpu9250::new_spi(device, "sim-spi");
-        publish.run(driver, clock)
+        publish.run(driver, clock, session)
     } else {
         let driver = Mpu9250::new(device, "sim", address);
-        publish.run(driver, clock)
+        publish.run(driver, clock, session)
     }
 }

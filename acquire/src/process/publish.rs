@@ -1,8 +1,10 @@
-//! The publishing loop of `mems-acquire`: FIFO reads on an absolute schedule, every sample
-//! published on `mems/imu/raw`, until the duration is over or SIGINT/SIGTERM arrives.
+//! The publishing of `mems-acquire`: its service and publisher opened, the sensor session
+//! placed, then FIFO reads on an absolute schedule run by the source driver
+//! (`mems_stage::source::produce`, see `super::reads`), every sample published on
+//! `mems/imu/raw`, until the duration is over or SIGINT/SIGTERM arrives.
 
-use std::convert::Infallible;
-use std::time::{Duration, Instant};
+use std::path::PathBuf;
+use std::time::Duration;
 
 use alloc_count::pool::BlockPool;
 use anyhow::Result;
@@ -10,10 +12,12 @@ use embedded_hal::i2c::I2c;
 use ipc_types::wake::Output;
 use ipc_types::{RawImuSample, service};
 
-use super::Summary;
-use crate::acquisition::{Acquisition, fifo_fill_ns};
+use super::reads::{RawOut, Reads};
+use super::{SimPart, Summary};
+use crate::acquisition::{Acquisition, SourceSpec, fifo_fill_ns};
 use crate::clock::Clock;
 use crate::driver::{self, Mpu9250};
+use crate::session::Session;
 
 /// How the samples are published: where, for how long, at what configuration and read
 /// interval, and the process's small-block pool (armed once the loop starts).
@@ -28,12 +32,41 @@ pub struct Publish<'a, const N: usize> {
     pub read_interval_ns: u64,
     /// The process's global allocator: small blocks come from it once the loop starts.
     pub pool: &'a BlockPool<N>,
+    /// The sensor session's state file, which a restarted process continues (see
+    /// [`crate::session`]; `None`: every start is a new session).
+    pub session_file: Option<PathBuf>,
 }
 
 impl<const N: usize> Publish<'_, N> {
-    /// Publishes what `driver` reads, on `clock`, until the duration is over or SIGINT/SIGTERM
-    /// arrives; then logs the run's [`Summary`].
-    pub fn run<I2C: I2c, C: Clock>(&self, driver: Mpu9250<I2C>, clock: C) -> Result<()> {
+    /// The sensor session of `source` (`sim` describing a simulated part) at this
+    /// configuration: the one the session file holds for that part, continued, or a new one.
+    pub fn session(&self, source: &SourceSpec, sim: &SimPart) -> Result<Session> {
+        let now_ns = ipc_types::clock::monotonic_ns();
+        let Some(path) = &self.session_file else {
+            return Ok(Session::transient(now_ns));
+        };
+        let part = format!("{source:?}, {:?}, {sim:?}", self.config);
+        let session = Session::open(path, &part, now_ns)?;
+        if let Some(resume) = session.resume() {
+            tracing::info!(
+                "continuing the sensor session of {}: next sample seq {}, {:.3} s after its \
+                 newest sample",
+                path.display(),
+                resume.next_seq,
+                now_ns.saturating_sub(resume.last_sample_ns) as f64 * 1e-9
+            );
+        }
+        Ok(session)
+    }
+
+    /// Publishes what `driver` reads, on `clock`, in `session`, until the duration is over or
+    /// SIGINT/SIGTERM arrives; then logs the run's [`Summary`].
+    pub fn run<I2C: I2c, C: Clock>(
+        &self,
+        driver: Mpu9250<I2C>,
+        clock: C,
+        session: Session,
+    ) -> Result<()> {
         let namespace = service::namespace(self.namespace.as_deref());
         let name = service::full_name(&namespace, service::RAW);
         // Before any port exists: a SIGINT/SIGTERM is kept from then on.
@@ -46,10 +79,11 @@ impl<const N: usize> Publish<'_, N> {
         let stall_wait = Duration::from_nanos(fifo_fill_ns(&self.config) / 8);
         let (publisher, undelivered) = service::publisher_waiting_at_most(&raw, stall_wait)?;
         // Wakes the subscribers after a read's first sample and after its last.
-        let mut out = Output::with_publisher(&node, publisher, &name)?;
+        let out = Output::with_publisher(&node, publisher, &name)?;
 
-        let mut acq = Acquisition::start(driver, clock, self.config, self.read_interval_ns)
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let acq = Acquisition::start(driver, clock, self.config, self.read_interval_ns)
+            .map_err(|e| anyhow::anyhow!("{e}"))?
+            .in_session(session);
         tracing::info!(
             "{} ({}) at {} Hz on {name}, reading every {:.2} ms",
             acq.driver().bus_label(),
@@ -57,34 +91,13 @@ impl<const N: usize> Publish<'_, N> {
             self.config.output_rate_hz(),
             self.read_interval_ns as f64 * 1e-6
         );
-        let start = Instant::now();
-        let deadline = self.duration_s.map(Duration::from_secs_f64);
+        let mut reads = Reads::new(acq, self.duration_s.map(Duration::from_secs_f64));
+        let mut sink = RawOut { out, undelivered };
         // Start-up is over: from here on small blocks come from the pool.
         self.pool.arm();
-        loop {
-            // An absolute-deadline sleep (a relative one would add any preemption between
-            // reading the clock and sleeping); then SIGINT/SIGTERM ends the loop: the clean way
-            // out.
-            acq.clock().sleep_until(acq.next_read_ns());
-            if ipc_types::stop::requested() {
-                break;
-            }
-            let Ok(read) = acq.read_and_publish(&mut |s| {
-                out.send(RawImuSample {
-                    undelivered: u32::try_from(undelivered.total()).unwrap_or(u32::MAX),
-                    ..*s
-                });
-                Ok::<_, Infallible>(())
-            });
-            out.end_of_input()?;
-            if let Err(e) = read {
-                tracing::warn!("read failed, device re-initialising: {e}");
-            }
-            if deadline.is_some_and(|d| start.elapsed() >= d) {
-                break;
-            }
-        }
-        Summary::of(&acq, &undelivered, start.elapsed()).log(self.pool);
+        mems_stage::source::produce::<_, _, anyhow::Error>(&mut reads, &mut sink)?;
+        let elapsed = reads.start.elapsed();
+        Summary::of(&reads.acq, &sink.undelivered, elapsed).log(self.pool);
         Ok(())
     }
 }

@@ -74,6 +74,12 @@ impl Summary {
                 driver.pair_mismatches
             );
         }
+        if let Some((seq, lost)) = stats.resumed {
+            tracing::info!(
+                "continued the sensor session from seq {seq}: {lost} samples not read while no \
+                 acquisition ran"
+            );
+        }
         let per_subscriber: Vec<String> = self
             .per_subscriber
             .iter()
@@ -81,8 +87,7 @@ impl Summary {
             .collect();
         tracing::info!(
             "published {} samples in {:.1} s; reads {}, failed {}, overflows {}, \
-             gaps {}, lost {}, bus errors {}, re-inits {}; discarded for stalled subscribers {}{}; \
-             small-block pool: peak {} of {N} blocks, {} requests found it empty",
+             gaps {}, lost {}, bus errors {}, re-inits {}; discarded for stalled subscribers {}{}; {}",
             stats.published,
             self.elapsed.as_secs_f64(),
             stats.reads,
@@ -98,8 +103,7 @@ impl Summary {
             } else {
                 format!(" ({})", per_subscriber.join(", "))
             },
-            pool.peak_blocks(),
-            pool.fallbacks()
+            pool.summary()
         );
     }
 }

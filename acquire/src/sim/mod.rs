@@ -156,6 +156,11 @@ pub struct SimConfig {
     pub gyro_startup_offset_dps: f64,
     /// The SPI timing model (when the device is used through its SPI interface).
     pub spi: SpiTiming,
+    /// When the part was powered on, ns on its clock: the origin of its source's time (its
+    /// motion and warm-up). `None`: when the device is created. A restarted acquisition that
+    /// continues a sensor session gives the session's origin, so the motion goes on in wall
+    /// time instead of starting again.
+    pub power_on_ns: Option<u64>,
 }
 
 impl Default for SimConfig {
@@ -171,6 +176,7 @@ impl Default for SimConfig {
             gyro_startup_ns: reg::GYRO_STARTUP_TYPICAL_NS,
             gyro_startup_offset_dps: 20.0,
             spi: SpiTiming::DATASHEET,
+            power_on_ns: None,
         }
     }
 }
@@ -228,6 +234,8 @@ pub struct SimMpu9250<S: SampleSource> {
     source: S,
     present: bool,
     created_ns: u64,
+    /// The origin of the source's time, ns ([`SimConfig::power_on_ns`]).
+    power_on_ns: u64,
     /// Register file; data registers live in `internal` / `shadow`, WHO_AM_I in `config`.
     regs: [u8; 128],
     internal: [u8; reg::SENSOR_DATA_LEN],
@@ -264,6 +272,7 @@ impl<S: SampleSource> SimMpu9250<S> {
     /// `source`, on `clock`.
     pub fn new(source: S, clock: SimClock, config: SimConfig) -> Self {
         let now = clock.now_ns();
+        let power_on_ns = config.power_on_ns.unwrap_or(now).min(now);
         let history = VecDeque::with_capacity(config.history_len);
         let mut sim = Self {
             config,
@@ -271,6 +280,7 @@ impl<S: SampleSource> SimMpu9250<S> {
             source,
             present: true,
             created_ns: now,
+            power_on_ns,
             regs: [0; 128],
             internal: [0; reg::SENSOR_DATA_LEN],
             shadow: [0; reg::SENSOR_DATA_LEN],
@@ -446,7 +456,7 @@ impl<S: SampleSource> SimMpu9250<S> {
                     r(reg::CONFIG) & reg::CONFIG_DLPF_CFG_MASK,
                 ),
             },
-            start_s: start_ns.saturating_sub(self.created_ns) as f64 * 1e-9,
+            start_s: start_ns.saturating_sub(self.power_on_ns) as f64 * 1e-9,
             clock_scale: 1.0 + self.config.rate_error_ppm * 1e-6,
         };
         if new_grid || self.dlpf.map(|d| d.config) != Some(grid.config) {
@@ -490,7 +500,7 @@ impl<S: SampleSource> SimMpu9250<S> {
             self.accel_held = Some(n);
             rate_hz = reg::ACCEL_BYPASS_RATE_HZ * (1.0 + self.config.rate_error_ppm * 1e-6);
         }
-        let t_s = (t_ns - self.created_ns) as f64 * 1e-9;
+        let t_s = (t_ns - self.power_on_ns) as f64 * 1e-9;
         let analog = self.source.sample(t_s, rate_hz);
         let accel_range = AccelRange::from_bits(
             self.regs[usize::from(reg::ACCEL_CONFIG)] >> reg::ACCEL_FS_SEL_SHIFT,

@@ -13,13 +13,7 @@ use noise::floor::{measured_static_displacement, static_displacement_sigma};
 use noise::repair::{RepairConfig, repair_torn_reads};
 
 fn data_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/capstone");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("skipped: {} is absent", dir.display());
-        None
-    }
+    test_support::shared_data("data/capstone")
 }
 
 fn load(path: PathBuf) -> Vec<RawImuSample> {

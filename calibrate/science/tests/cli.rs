@@ -204,16 +204,9 @@ fn unreadable_input_names_the_file() {
 }
 
 fn thesis_six(trial: usize) -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/capstone");
-    let path = dir.join(format!(
-        "Six-Position-Test/data/trial_{trial}/six_position_data_{trial}.csv"
-    ));
-    if path.is_file() {
-        Some(path)
-    } else {
-        eprintln!("SKIPPED: capstone data not found at {}", dir.display());
-        None
-    }
+    test_support::shared_data(&format!(
+        "data/capstone/Six-Position-Test/data/trial_{trial}/six_position_data_{trial}.csv"
+    ))
 }
 
 /// On the thesis's six-position file: the unweighted fit written by the CLI equals the stored

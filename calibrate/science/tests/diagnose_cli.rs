@@ -280,13 +280,7 @@ fn bad_input_is_refused_with_a_clear_message() {
 }
 
 fn capstone() -> Option<PathBuf> {
-    let d = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/capstone");
-    if d.is_dir() {
-        Some(d)
-    } else {
-        eprintln!("SKIPPED: capstone data not found at {}", d.display());
-        None
-    }
+    test_support::shared_data("data/capstone")
 }
 
 fn json_of(args: &[&str]) -> serde_json::Value {

@@ -10,13 +10,8 @@ use calibrate_science::session::poses_from_six;
 use calibrate_science::thesis_eval::{METHODS, TABLE_A2_M, trial_paths};
 
 fn data_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/capstone");
-    if dir.join("Six-Position-Test").is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("SKIPPED: capstone data not found at {}", dir.display());
-        None
-    }
+    test_support::shared_data("data/capstone/Six-Position-Test")
+        .map(|six| six.parent().expect("under capstone").to_path_buf())
 }
 
 /// Our unweighted fits reproduce the thesis's stored parameters (`optim_params_N.csv`, fitted

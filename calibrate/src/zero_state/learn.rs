@@ -284,11 +284,13 @@ impl StaticLearner {
         (self.refused, self.last_rejection)
     }
 
-    /// The window's batches, oldest first, as the GLRT keeps them.
-    pub(crate) fn window(&self) -> impl Iterator<Item = super::glrt::BatchSums> + '_ {
+    /// The window's batches, oldest first: each one's sample count, per-channel means and
+    /// within-batch sums of squares (accelerometer x, y, z then gyroscope x, y, z), the parts
+    /// of the GLRT's batches.
+    pub(crate) fn window(&self) -> impl Iterator<Item = (f64, [f64; 6], [f64; 6])> + '_ {
         (0..self.len).map(|i| {
             let b = self.batch(i);
-            super::glrt::BatchSums::from_parts(b.n as f64, b.mean, b.ss)
+            (b.n as f64, b.mean, b.ss)
         })
     }
 

@@ -377,7 +377,11 @@ impl ZeroStateDetector {
                     kind == DetectorKind::GlrtAccel,
                 );
                 // The batches just learned from (none when resumed) are a rest already.
-                rule.seed(self.learner.window());
+                rule.seed(
+                    self.learner
+                        .window()
+                        .map(|(n, mean, ss)| glrt::BatchSums::from_parts(n, mean, ss)),
+                );
                 Rule::Glrt(rule)
             }
             DetectorKind::Shoe => unreachable!("SHOE is ready from the start"),

@@ -1,6 +1,7 @@
 //! The one shape of every mems-odometry stage, and the two drivers that run any stage: live
 //! ([`live::serve`]: iceoryx2 in, iceoryx2 out, woken by events) and offline ([`offline::run`]:
-//! inputs from a file, outputs to a sink).
+//! inputs from a file, outputs to a sink); beside it the shape of a source, which brings the
+//! samples in, and its live driver ([`source`]).
 //!
 //! A stage is a pure state machine, Copper's task discipline without its code generation: it
 //! takes one input at a time and emits its outputs through a callback, with no I/O, no clock
@@ -11,6 +12,7 @@
 
 pub mod live;
 pub mod offline;
+pub mod source;
 
 /// A stage: inputs in, outputs out, no I/O.
 pub trait Stage {

@@ -1,4 +1,5 @@
-//! The offline driver: a stage over inputs read from a file, its outputs to a sink.
+//! The offline driver: a stage over inputs read from a file, its outputs to a sink ([`run`]),
+//! or with a context both take in turn ([`run_with`]).
 
 use crate::Stage;
 
@@ -41,15 +42,28 @@ pub fn run<S: Stage, E>(
     inputs: impl IntoIterator<Item = Result<S::Input, E>>,
     sink: &mut impl FnMut(&S::Output),
 ) -> Result<u64, Stop<S::Refusal, E>> {
+    let mut inputs = inputs.into_iter();
+    run_with(stage, &mut inputs, Iterator::next, &mut |_, o| sink(o))
+}
+
+/// [`run`] with a context that the inputs and the sink take in turn, for what both use (an
+/// output file both write to, truth the inputs read and the sink compares against) without
+/// shared cells: `next` gives the next input (`None`: the end), `sink` takes each output.
+pub fn run_with<S: Stage, C, E>(
+    stage: &mut S,
+    context: &mut C,
+    mut next: impl FnMut(&mut C) -> Option<Result<S::Input, E>>,
+    sink: &mut impl FnMut(&mut C, &S::Output),
+) -> Result<u64, Stop<S::Refusal, E>> {
     let mut index = 0;
-    for input in inputs {
+    while let Some(input) = next(context) {
         let input = input.map_err(Stop::Input)?;
         stage
-            .process(&input, sink)
+            .process(&input, &mut |o| sink(context, o))
             .map_err(|refusal| Stop::Refused { index, refusal })?;
         index += 1;
     }
-    stage.finish(sink);
+    stage.finish(&mut |o| sink(context, o));
     Ok(index)
 }
 
@@ -102,5 +116,27 @@ mod tests {
         assert_eq!(out, [1, 1]);
         let stop = run(&mut Twice, [Ok(1), Err("unreadable")], &mut |_| {});
         assert_eq!(stop.unwrap_err().to_string(), "unreadable");
+    }
+
+    #[test]
+    fn the_inputs_and_the_sink_take_the_context_in_turn() {
+        // The context: inputs still to come, and a log both write to.
+        let mut context = (vec![2, 1], Vec::new());
+        let n = run_with(
+            &mut Twice,
+            &mut context,
+            |(inputs, log): &mut (Vec<u32>, Vec<String>)| {
+                let x = inputs.pop()?;
+                log.push(format!("in {x}"));
+                Some(Ok::<_, ()>(x))
+            },
+            &mut |(_, log), o| log.push(format!("out {o}")),
+        )
+        .unwrap();
+        assert_eq!(n, 2);
+        assert_eq!(
+            context.1,
+            ["in 1", "out 1", "out 1", "in 2", "out 2", "out 2", "out 99"]
+        );
     }
 }

@@ -151,6 +151,16 @@ impl<const N: usize> BlockPool<N> {
         }
     }
 
+    /// One line for a process's summary: the most blocks in use at once, of the pool's `N`,
+    /// and the requests that found it empty.
+    pub fn summary(&self) -> String {
+        format!(
+            "small-block pool: peak {} of {N} blocks, {} requests found it empty",
+            self.peak_blocks(),
+            self.fallbacks()
+        )
+    }
+
     /// The most blocks that were ever in use at once (a block is taken from the never-used
     /// tail only when no freed one is available): how much of the pool start-up and the loop
     /// need.

@@ -155,88 +155,19 @@ pub(crate) fn read_body(
     let mut truth = layout.truth.map(|_| Vec::new());
     while let Some((line, row)) = rows.next_row()? {
         text::check_width(&path, line, row, &columns)?;
-        let cell = |i: usize| (columns[i], &row[i]);
-        let number = |i: usize| {
-            let (column, text) = cell(i);
-            text::parse_f64(&path, line, column, text)
+        let cells = Cells {
+            path: &path,
+            line,
+            columns: &columns,
+            row,
         };
-        let vector = |idx: [usize; 3]| -> Result<[f64; 3]> {
-            Ok([number(idx[0])?, number(idx[1])?, number(idx[2])?])
-        };
-        let (time_column, time_text) = cell(layout.time);
-        let t_ns = text::parse_seconds(&path, line, time_column, time_text)?;
-        let flags = match layout.flags {
-            Some(i) => {
-                let (column, text) = cell(i);
-                let flags: u16 =
-                    text::parse_uint(&path, line, column, text, "flags (an integer 0..=65535)")?;
-                let claims = |bit: u16, present: bool, what: &str| {
-                    if flags & bit != 0 && !present {
-                        let message = format!(
-                            "flags {flags} mark {what} valid, but the file has no {what} columns"
-                        );
-                        return Err(Error::line(
-                            &path,
-                            line,
-                            Some(column),
-                            ErrorKind::Invalid(message),
-                        ));
-                    }
-                    Ok(())
-                };
-                claims(raw_flags::GYRO_VALID, layout.gyro.is_some(), "gyro")?;
-                claims(raw_flags::TEMP_VALID, layout.temp.is_some(), "temperature")?;
-                Some(flags)
-            }
-            None => None,
-        };
-        let lost_before = match layout.lost {
-            Some(i) => {
-                let (column, text) = cell(i);
-                text::parse_uint(
-                    &path,
-                    line,
-                    column,
-                    text,
-                    "a count (an integer 0..=4294967295)",
-                )?
-            }
-            None => 0,
-        };
-        let parsed = Row {
-            t_ns,
-            accel_g: vector(layout.accel)?,
-            gyro_dps: layout.gyro.map(vector).transpose()?,
-            temp_c: layout.temp.map(number).transpose()?,
-            flags,
-            lost_before,
-        };
+        let parsed = cells.sample(&layout)?;
+        let t_ns = parsed.t_ns;
         if !samples.push(&path, line, &NAMES, parsed)? {
             continue;
         }
         if let (Some(idx), Some(truth)) = (layout.truth, truth.as_mut()) {
-            let v = |k: usize| number(idx[k]);
-            let (rest_column, rest_text) = cell(idx[16]);
-            let at_rest = match rest_text {
-                "0" => false,
-                "1" => true,
-                _ => {
-                    let kind = ErrorKind::Parse {
-                        text: rest_text.to_owned(),
-                        expected: "0 or 1",
-                    };
-                    return Err(Error::line(&path, line, Some(rest_column), kind));
-                }
-            };
-            truth.push(Truth {
-                t_ns,
-                position_m: [v(0)?, v(1)?, v(2)?],
-                velocity_mps: [v(3)?, v(4)?, v(5)?],
-                attitude_wxyz: [v(6)?, v(7)?, v(8)?, v(9)?],
-                specific_force_mps2: [v(10)?, v(11)?, v(12)?],
-                angular_rate_rps: [v(13)?, v(14)?, v(15)?],
-                at_rest,
-            });
+            truth.push(cells.truth(&idx, t_ns)?);
         }
     }
     let (samples, repairs) = samples.finish(&path, truth.as_mut())?;
@@ -248,6 +179,118 @@ pub(crate) fn read_body(
         truncation: None,
         repairs,
     })
+}
+
+/// One data row of a canonical CSV: its cells parsed, errors naming the file, the line and the
+/// column.
+struct Cells<'a> {
+    path: &'a Path,
+    line: u64,
+    columns: &'a [&'a str],
+    row: &'a ::csv::StringRecord,
+}
+
+impl Cells<'_> {
+    /// The column name and text of cell `i`.
+    fn cell(&self, i: usize) -> (&str, &str) {
+        (self.columns[i], &self.row[i])
+    }
+
+    fn number(&self, i: usize) -> Result<f64> {
+        let (column, text) = self.cell(i);
+        text::parse_f64(self.path, self.line, column, text)
+    }
+
+    fn vector(&self, idx: [usize; 3]) -> Result<[f64; 3]> {
+        Ok([
+            self.number(idx[0])?,
+            self.number(idx[1])?,
+            self.number(idx[2])?,
+        ])
+    }
+
+    /// The row's sample: time, flags, losses, then the values.
+    fn sample(&self, layout: &Layout) -> Result<Row> {
+        let (time_column, time_text) = self.cell(layout.time);
+        let t_ns = text::parse_seconds(self.path, self.line, time_column, time_text)?;
+        let flags = layout.flags.map(|i| self.flags(i, layout)).transpose()?;
+        let lost_before = match layout.lost {
+            Some(i) => {
+                let (column, text) = self.cell(i);
+                text::parse_uint(
+                    self.path,
+                    self.line,
+                    column,
+                    text,
+                    "a count (an integer 0..=4294967295)",
+                )?
+            }
+            None => 0,
+        };
+        Ok(Row {
+            t_ns,
+            accel_g: self.vector(layout.accel)?,
+            gyro_dps: layout.gyro.map(|idx| self.vector(idx)).transpose()?,
+            temp_c: layout.temp.map(|i| self.number(i)).transpose()?,
+            flags,
+            lost_before,
+        })
+    }
+
+    /// The flags in cell `i`, refused when they mark valid a sensor the file has no columns
+    /// for.
+    fn flags(&self, i: usize, layout: &Layout) -> Result<u16> {
+        let (column, text) = self.cell(i);
+        let flags: u16 = text::parse_uint(
+            self.path,
+            self.line,
+            column,
+            text,
+            "flags (an integer 0..=65535)",
+        )?;
+        let claims = |bit: u16, present: bool, what: &str| {
+            if flags & bit != 0 && !present {
+                let message =
+                    format!("flags {flags} mark {what} valid, but the file has no {what} columns");
+                return Err(Error::line(
+                    self.path,
+                    self.line,
+                    Some(column),
+                    ErrorKind::Invalid(message),
+                ));
+            }
+            Ok(())
+        };
+        claims(raw_flags::GYRO_VALID, layout.gyro.is_some(), "gyro")?;
+        claims(raw_flags::TEMP_VALID, layout.temp.is_some(), "temperature")?;
+        Ok(flags)
+    }
+
+    /// The row's truth, from the cells `idx` of the truth columns.
+    fn truth(&self, idx: &[usize; 17], t_ns: u64) -> Result<Truth> {
+        let v = |k: usize| self.number(idx[k]);
+        let (rest_column, rest_text) = self.cell(idx[16]);
+        let at_rest = match rest_text {
+            "0" => false,
+            "1" => true,
+            _ => {
+                let kind = ErrorKind::Parse {
+                    text: rest_text.to_owned(),
+                    expected: "0 or 1",
+                };
+                return Err(Error::line(self.path, self.line, Some(rest_column), kind));
+            }
+        };
+        Ok(Truth {
+            t_ns,
+            position_m: [v(0)?, v(1)?, v(2)?],
+            velocity_mps: [v(3)?, v(4)?, v(5)?],
+            attitude_wxyz: [v(6)?, v(7)?, v(8)?, v(9)?],
+            specific_force_mps2: [v(10)?, v(11)?, v(12)?],
+            angular_rate_rps: [v(13)?, v(14)?, v(15)?],
+            at_rest,
+        })
+    }
 }
 
 /// Reads a canonical CSV file (see the module documentation for the format).

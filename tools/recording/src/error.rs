@@ -1,8 +1,8 @@
 //! The crate's one error type: every failure names the file and, where it applies, the 1-based
 //! line (or MCAP message) and the field (column name) it was found in.
 
-use std::io;
 use std::path::{Path, PathBuf};
+use std::{fmt, io};
 
 /// Where in a file an error was found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -155,7 +155,7 @@ pub enum ErrorKind {
     /// An MCAP file ends early (a killed writer) or is damaged; messages before the cut were
     /// readable.
     #[error("{0}")]
-    Truncated(crate::mcap::Truncation),
+    Truncated(Truncation),
     /// The MCAP library rejected the file or a write.
     #[error("MCAP: {0}")]
     Mcap(::mcap::McapError),
@@ -223,4 +223,23 @@ fn location(position: &Option<Position>, field: &Option<String>) -> String {
 /// Formats integer nanoseconds as exact decimal seconds, e.g. `12.000000345`.
 pub(crate) fn seconds(ns: u64) -> String {
     format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000)
+}
+
+/// Where a truncated or damaged MCAP file stops being readable.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Truncation {
+    /// Complete messages read before the cut (all topics).
+    pub messages_read: u64,
+    /// What the MCAP reader found at the cut.
+    pub reason: String,
+}
+
+impl fmt::Display for Truncation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "the file ends early or is damaged after {} complete messages ({})",
+            self.messages_read, self.reason
+        )
+    }
 }

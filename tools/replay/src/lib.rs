@@ -29,6 +29,7 @@
 #![warn(missing_docs)]
 
 mod deliveries;
+mod paced;
 pub mod ports;
 pub mod progress;
 pub mod source;
@@ -213,25 +214,25 @@ pub const DEAD_NODE_CLEANUP_PERIOD: Duration = Duration::from_millis(250);
 
 /// When each message of one pass is due, and how much recorded time the pass has covered.
 #[derive(Debug, Default)]
-struct Pacer {
+pub(crate) struct Pacer {
     /// The epoch, a replay time in it and when that time was (or would have been) due.
     anchor: Option<(u32, u64, Instant)>,
     /// Recorded time covered by the epochs before the anchor's, ns.
     before_ns: u64,
     /// Recorded time covered so far, ns.
-    covered_ns: u64,
+    pub(crate) covered_ns: u64,
 }
 
 impl Pacer {
     /// When the message at `place` is due at `speed` (pacing starts over with each epoch).
-    fn due(&mut self, place: Place, speed: f64) -> Instant {
+    pub(crate) fn due(&mut self, place: Place, speed: f64) -> Instant {
         let (_, anchor_ns, anchor) = self.place(place);
         let offset_ns = place.time_ns.saturating_sub(anchor_ns) as f64 / speed;
         anchor + Duration::from_nanos(offset_ns.round() as u64)
     }
 
     /// Notes `place` and returns the anchor of its epoch.
-    fn place(&mut self, place: Place) -> (u32, u64, Instant) {
+    pub(crate) fn place(&mut self, place: Place) -> (u32, u64, Instant) {
         let anchor = match self.anchor {
             Some(a) if a.0 == place.epoch => a,
             _ => {
@@ -247,8 +248,10 @@ impl Pacer {
     }
 }
 
-/// Sends one pass of `messages` through `ports`, counting in `summary` (short deliveries
-/// through `deliveries`); `Ok(false)` if SIGINT or SIGTERM stopped it.
+/// Sends one pass of `messages` through `ports` with the source driver
+/// (`mems_stage::source::produce`: [`paced::Pass`] into [`paced::Published`]), counting in
+/// `summary` (short deliveries through `deliveries`); `Ok(false)` if SIGINT or SIGTERM stopped
+/// it.
 fn pass(
     ports: &mut Ports,
     messages: Merge<'_>,
@@ -258,28 +261,16 @@ fn pass(
     start: Instant,
     progress: &mut dyn FnMut(&ReplaySummary),
 ) -> Result<bool, ReplayError> {
-    let mut pacer = Pacer::default();
-    for message in messages {
-        let (place, payload) = message?;
-        match options.pace {
-            Pace::RealTime { speed } => {
-                let due = pacer.due(place, speed);
-                stop::sleep(due.saturating_duration_since(Instant::now()));
-            }
-            Pace::Max => _ = pacer.place(place),
-        }
-        if stop::requested() {
-            return Ok(false);
-        }
-        if let Some(delivery) = ports.send(&payload)? {
-            deliveries.note(ports, payload.topic(), delivery, summary);
-        }
-        summary.sent[payload.topic().index()] += 1;
-        summary.pass_recorded_ns = pacer.covered_ns;
-        summary.elapsed = start.elapsed();
-        progress(summary);
-    }
-    Ok(true)
+    let mut source = paced::Pass::new(messages, options.pace);
+    let mut sink = paced::Published {
+        ports,
+        deliveries,
+        summary,
+        start,
+        progress,
+    };
+    mems_stage::source::produce::<_, _, ReplayError>(&mut source, &mut sink)?;
+    Ok(!stop::requested())
 }
 
 /// Publishes `topics` of `recording` (within `window`, if given) on their services under

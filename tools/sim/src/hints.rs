@@ -188,9 +188,31 @@ pub fn drive_hints(
     let unit = Normal::new(0.0, 1.0).expect("unit normal");
     let speed_scale = params.speed_scale_sigma * unit.sample(&mut rng);
     let duration = drive.params().duration_s;
-    let window = 1.0 / params.rate_hz;
+    let bursts = loss_bursts(params, duration, &mut rng);
+    let mut controller = Controller::new(drive, params, speed_scale, t0_s);
+    let count = (duration * params.rate_hz).floor() as u64;
+    let mut hints = Vec::with_capacity(count as usize);
+    let mut lost = 0;
+    for k in 1..=count {
+        let (hint, published_s) = controller.window(k, &mut rng, &unit);
+        let in_burst = bursts.iter().any(|&(s, e)| (s..e).contains(&published_s));
+        let dropped = rng.random::<f64>() < params.drop_fraction;
+        if in_burst || dropped {
+            lost += 1;
+        } else {
+            hints.push(hint);
+        }
+    }
+    Ok(HintStream {
+        hints,
+        lost,
+        speed_scale,
+    })
+}
 
-    // Loss bursts over the drive.
+/// The loss bursts over a drive of `duration` s, as (start, end) in s: a Poisson process of
+/// `bursts_per_min`, each lasting a length drawn uniformly from `burst_s`.
+fn loss_bursts(params: &HintParams, duration: f64, rng: &mut impl Rng) -> Vec<(f64, f64)> {
     let mut bursts: Vec<(f64, f64)> = Vec::new();
     if params.bursts_per_min > 0.0 {
         let mean_gap = 60.0 / params.bursts_per_min;
@@ -209,23 +231,60 @@ pub fn drive_hints(
             bursts.push((t, t + len));
         }
     }
+    bursts
+}
 
-    let count = (duration * params.rate_hz).floor() as u64;
-    let mut hints = Vec::with_capacity(count as usize);
-    let (mut path, mut ticks_prev, mut published_prev, mut lost) = (0.0, 0i64, 0u64, 0usize);
-    let tick_believed = params.tick_m * (1.0 + speed_scale);
-    // Windows since the last tick.
-    let still_windows = ((params.stationary_window_s / window).round() as u64).max(1);
-    let mut since_tick = u64::MAX;
-    let quantisation_sigma = params.tick_m / (window * 6f64.sqrt());
-    for k in 1..=count {
+/// The controller's encoder count and publication clock, from one window to the next.
+struct Controller<'a> {
+    drive: &'a Drive,
+    params: &'a HintParams,
+    /// Offset of the drive on the sample clock, s.
+    t0_s: f64,
+    /// The window, s.
+    window: f64,
+    /// The tick length the controller believes in, m.
+    tick_believed: f64,
+    /// Windows without a tick after which the encoders say "stationary".
+    still_windows: u64,
+    /// 1-sigma of a window's speed from the tick quantisation, m/s.
+    quantisation_sigma: f64,
+    /// Forward path travelled, m.
+    path: f64,
+    ticks_prev: i64,
+    /// Windows since the last tick.
+    since_tick: u64,
+    /// The previous hint's publication time, ns.
+    published_prev: u64,
+}
+
+impl<'a> Controller<'a> {
+    fn new(drive: &'a Drive, params: &'a HintParams, speed_scale: f64, t0_s: f64) -> Self {
+        let window = 1.0 / params.rate_hz;
+        Self {
+            drive,
+            params,
+            t0_s,
+            window,
+            tick_believed: params.tick_m * (1.0 + speed_scale),
+            still_windows: ((params.stationary_window_s / window).round() as u64).max(1),
+            quantisation_sigma: params.tick_m / (window * 6f64.sqrt()),
+            path: 0.0,
+            ticks_prev: 0,
+            since_tick: u64::MAX,
+            published_prev: 0,
+        }
+    }
+
+    /// The hint of window `k` (1-based) and when it is published, s of the drive.
+    fn window(&mut self, k: u64, rng: &mut impl Rng, unit: &Normal<f64>) -> (RobotHint, f64) {
+        let (params, drive, window) = (self.params, self.drive, self.window);
         let (a, b) = ((k - 1) as f64 * window, k as f64 * window);
-        path += path_m(drive, a, b);
-        let ticks = (path / params.tick_m).floor() as i64;
-        let counted = ticks - ticks_prev;
-        ticks_prev = ticks;
-        since_tick = if counted == 0 {
-            since_tick.saturating_add(1)
+        self.path += path_m(drive, a, b);
+        let ticks = (self.path / params.tick_m).floor() as i64;
+        let counted = ticks - self.ticks_prev;
+        self.ticks_prev = ticks;
+        self.since_tick = if counted == 0 {
+            self.since_tick.saturating_add(1)
         } else {
             0
         };
@@ -235,11 +294,40 @@ pub fn drive_hints(
         let speed = if counted == 0 {
             0.0
         } else {
-            counted as f64 * tick_believed / window + slip * unit.sample(&mut rng)
+            counted as f64 * self.tick_believed / window + slip * unit.sample(rng)
         };
+        let [lo, hi] = params.latency_s;
+        let latency = if hi > lo {
+            rng.random_range(lo..=hi)
+        } else {
+            lo
+        };
+        let published = ns_from_s(self.t0_s + b + latency).max(self.published_prev + 1);
+        self.published_prev = published;
+        let hint = RobotHint {
+            stamps: Stamps {
+                sample_ns: ns_from_s(self.t0_s + mid),
+                acquired_ns: published,
+                ..Stamps::default()
+            },
+            seq: k - 1,
+            forward_speed_mps: speed,
+            forward_speed_sigma_mps: self.quantisation_sigma.hypot(slip),
+            yaw_rate_rps: yaw_rate + params.yaw_rate_noise_rps * unit.sample(rng),
+            yaw_rate_sigma_rps: params.yaw_rate_noise_rps.max(1e-6),
+            flags: self.flags(mid),
+            reserved16: 0,
+            reserved: 0,
+        };
+        (hint, b + latency)
+    }
+
+    /// The flags of the hint about the window with midpoint `mid` s.
+    fn flags(&self, mid: f64) -> u16 {
+        let params = self.params;
         let stationary = match params.rest_source {
-            RestSource::Encoders => since_tick >= still_windows,
-            RestSource::Commanded => plan_at_rest(drive, mid + params.command_lead_s),
+            RestSource::Encoders => self.since_tick >= self.still_windows,
+            RestSource::Commanded => plan_at_rest(self.drive, mid + params.command_lead_s),
         };
         let mut flags = hint_flags::SPEED_VALID
             | hint_flags::YAW_RATE_VALID
@@ -250,43 +338,8 @@ pub fn drive_hints(
         if stationary {
             flags |= hint_flags::STATIONARY;
         }
-        let [lo, hi] = params.latency_s;
-        let latency = if hi > lo {
-            rng.random_range(lo..=hi)
-        } else {
-            lo
-        };
-        let published = ns_from_s(t0_s + b + latency).max(published_prev + 1);
-        published_prev = published;
-        let hint = RobotHint {
-            stamps: Stamps {
-                sample_ns: ns_from_s(t0_s + mid),
-                acquired_ns: published,
-                ..Stamps::default()
-            },
-            seq: k - 1,
-            forward_speed_mps: speed,
-            forward_speed_sigma_mps: quantisation_sigma.hypot(slip),
-            yaw_rate_rps: yaw_rate + params.yaw_rate_noise_rps * unit.sample(&mut rng),
-            yaw_rate_sigma_rps: params.yaw_rate_noise_rps.max(1e-6),
-            flags,
-            reserved16: 0,
-            reserved: 0,
-        };
-        let published_s = b + latency;
-        let in_burst = bursts.iter().any(|&(s, e)| (s..e).contains(&published_s));
-        let dropped = rng.random::<f64>() < params.drop_fraction;
-        if in_burst || dropped {
-            lost += 1;
-        } else {
-            hints.push(hint);
-        }
+        flags
     }
-    Ok(HintStream {
-        hints,
-        lost,
-        speed_scale,
-    })
 }
 
 #[cfg(test)]

@@ -270,6 +270,34 @@ struct HintArgs {
     hint_command_lead_ms: f64,
 }
 
+impl HintArgs {
+    /// The hints of `drive` that reach the odometry (none when hints are off), with what was
+    /// published and lost printed.
+    fn received(&self, drive: &Drive, seed: u64) -> Result<Vec<RobotHint>> {
+        let source = match self.hints {
+            HintSource::Off => return Ok(Vec::new()),
+            HintSource::Commanded => RestSource::Commanded,
+            HintSource::Encoders => RestSource::Encoders,
+        };
+        let p = HintParams {
+            rate_hz: self.hint_rate,
+            drop_fraction: self.hint_drop,
+            bursts_per_min: self.hint_bursts_per_min,
+            latency_s: self.hint_latency_ms.map(|ms| ms * 1e-3),
+            command_lead_s: self.hint_command_lead_ms * 1e-3,
+            ..HintParams::new(source)
+        };
+        let stream = drive_hints(drive, &p, seed, 0.0)?;
+        println!(
+            "robot hints: {} published, {} lost, encoder scale error {:+.2}%",
+            stream.hints.len() + stream.lost,
+            stream.lost,
+            100.0 * stream.speed_scale
+        );
+        Ok(stream.hints)
+    }
+}
+
 /// Source of the hints' stationary flag on the command line.
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum HintSource {
@@ -723,34 +751,7 @@ fn run(cli: Cli) -> Result<()> {
                 bail!("--vibration {vibration}: the level must be finite and >= 0");
             }
             let drive = Drive::new(&params, common.seed)?;
-            let stream = match hints.hints {
-                HintSource::Off => None,
-                HintSource::Commanded | HintSource::Encoders => {
-                    let source = if hints.hints == HintSource::Commanded {
-                        RestSource::Commanded
-                    } else {
-                        RestSource::Encoders
-                    };
-                    let p = HintParams {
-                        rate_hz: hints.hint_rate,
-                        drop_fraction: hints.hint_drop,
-                        bursts_per_min: hints.hint_bursts_per_min,
-                        latency_s: hints.hint_latency_ms.map(|ms| ms * 1e-3),
-                        command_lead_s: hints.hint_command_lead_ms * 1e-3,
-                        ..HintParams::new(source)
-                    };
-                    Some(drive_hints(&drive, &p, common.seed, 0.0)?)
-                }
-            };
-            if let Some(s) = &stream {
-                println!(
-                    "robot hints: {} published, {} lost, encoder scale error {:+.2}%",
-                    s.hints.len() + s.lost,
-                    s.lost,
-                    100.0 * s.speed_scale
-                );
-            }
-            let hint_list = stream.map(|s| s.hints).unwrap_or_default();
+            let hint_list = hints.received(&drive, common.seed)?;
             simulate(
                 drive,
                 &VibrationModel::moderate(vibration),

@@ -70,7 +70,14 @@ pub fn specs(
     ];
     let args = args.into_iter().chain(detector_args(cli)).collect();
     specs.push(spec("calibrate", "mems-calibrate", args));
-    specs.push(spec("acquire", "mems-acquire", acquire_args(cli)));
+    // A restarted acquisition continues the sensor session (numbering, clock, simulated
+    // motion) kept in the work directory: the stages see one session with a counted hole.
+    let session = work.join("acquire.session").display().to_string();
+    let args = acquire_args(cli)
+        .into_iter()
+        .chain(["--session".into(), session])
+        .collect();
+    specs.push(spec("acquire", "mems-acquire", args));
     specs
 }
 

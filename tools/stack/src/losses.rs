@@ -6,7 +6,7 @@
 
 use std::sync::{Arc, Mutex};
 
-use ipc_types::RawImuSample;
+use ipc_types::{RawImuSample, raw_flags};
 
 use crate::supervisor::LineSink;
 
@@ -39,16 +39,26 @@ impl SourceLosses {
         }
     }
 
-    /// Accounts for one raw sample. A sequence number that does not increase is a new acquire
-    /// process (it counts from 0 again).
+    /// Accounts for one raw sample. A restarted acquire process either continues the sensor
+    /// session (its first sample is flagged `RESUMED`, and `lost_before` counts what the
+    /// restart lost) or starts a new one (a sequence number that does not increase: the
+    /// sample periods between the two processes' samples were lost).
     pub fn observe(&mut self, s: &RawImuSample) {
-        self.fifo += u64::from(s.lost_before);
         let t = s.stamps.sample_ns;
-        if let Some((seq, last_t)) = self.last
-            && s.seq <= seq
-        {
+        let resumed = s.flags & raw_flags::RESUMED != 0;
+        if resumed {
+            self.restarts += u64::from(s.lost_before);
+        } else {
+            self.fifo += u64::from(s.lost_before);
+        }
+        let new_session = self.last.is_some_and(|(seq, _)| s.seq <= seq);
+        if resumed || new_session {
             self.undelivered_before += self.undelivered_now;
             self.undelivered_now = 0;
+        }
+        if let Some((_, last_t)) = self.last
+            && new_session
+        {
             let periods = (t.saturating_sub(last_t) as f64 / self.period_ns).round() as u64;
             self.restarts += periods.saturating_sub(1);
         }
@@ -132,6 +142,21 @@ mod tests {
         assert_eq!(l.restarts, 229);
         l.observe(&sample(1, 343, 0, 0));
         assert_eq!(l.restarts, 229);
+    }
+
+    #[test]
+    fn a_restart_that_continues_the_session_counts_its_flagged_hole() {
+        let mut l = SourceLosses::new(1000);
+        for (i, t) in (100..110).enumerate() {
+            l.observe(&sample(i as u64, t, 0, 7));
+        }
+        // Acquire restarted and continued the session: the next number, 229 periods lost.
+        let mut first = sample(10, 339, 229, 0);
+        first.flags = raw_flags::GAP_BEFORE | raw_flags::RESUMED;
+        l.observe(&first);
+        l.observe(&sample(11, 340, 0, 2));
+        assert_eq!((l.fifo, l.restarts), (0, 229));
+        assert_eq!(l.undelivered(), 9, "the new process counts from 0 again");
     }
 
     #[test]

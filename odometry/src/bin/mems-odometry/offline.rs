@@ -3,13 +3,14 @@
 //! run live, chained (`mems_stage::Chain`) and run by the offline driver
 //! (`mems_stage::offline`). An MCAP recording's robot hints (topic `mems/robot/hint`) go to the
 //! odometry session, which orders them as it does live, unless `--no-hints`. An MCAP run is
-//! streamed through the stages as it is read (`source`); truth (recordings from `mems-sim`) is
-//! compared as `summary` says.
+//! streamed through the stages as it is read (`source`), its raw samples and hints put in the
+//! order a live pipeline receives them (`odometry::arrival`); truth (recordings from
+//! `mems-sim`) is compared as `summary` says.
 
 mod source;
 mod summary;
+mod truth;
 
-use std::cell::RefCell;
 use std::path::PathBuf;
 
 use anyhow::{Result, anyhow};
@@ -20,8 +21,8 @@ use odometry::session::{NoGyro, OdometrySession};
 
 use crate::load::odometry_config;
 use crate::out::Out;
-use source::{Inputs, Source};
-use summary::{Read, Summary, TruthQueue};
+use source::{Feed, Source};
+use summary::{Read, Summary};
 
 /// Options of `mems-odometry offline`.
 #[derive(clap::Args)]
@@ -65,7 +66,7 @@ pub struct OfflineArgs {
 /// Runs the pipeline and prints the result.
 pub fn run(args: OfflineArgs) -> Result<()> {
     let (file, detector) = args.stage.load()?;
-    let (mut source, repairs) = Source::open(&args)?;
+    let (source, repairs) = Source::open(&args)?;
     let calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
         .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
     let mut config = args.stage.profile.odometry(odometry_config(&file));
@@ -75,25 +76,24 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         first: calibration,
         second: session,
     };
-    let truth = RefCell::new(TruthQueue::default());
     let out = Out::for_input(args.out.as_deref(), &args.input, args.force)?;
-    let out = RefCell::new(out);
+    let mut feed = Feed::new(source, out);
     let mut summary = Summary::default();
-    let mut inputs = Inputs::new(&mut source, &truth, &out);
-    let ran = mems_stage::offline::run(&mut chain, &mut inputs, &mut |o| {
-        source::write(&out, o);
-        if let Either::Second(s) = o
-            && s.flags & odometry_flags::REVISION == 0
-        {
-            summary.state(*s, &mut truth.borrow_mut());
-        }
-    });
-    let mut read = Read::new(&args.input, &inputs, repairs, config.align_s);
+    let ran =
+        mems_stage::offline::run_with(&mut chain, &mut feed, Feed::next_input, &mut |feed, o| {
+            feed.write(o);
+            if let Either::Second(s) = o
+                && s.flags & odometry_flags::REVISION == 0
+            {
+                summary.state(*s, &mut feed.truth);
+            }
+        });
+    let mut read = Read::new(&args.input, &feed, repairs, config.align_s);
     let no_gyro = chain.second.stats().first_no_gyro_seq;
-    read.segments = summary::report_input(&read, &mut source, no_gyro);
-    summary.finish(ran, &read, &chain, &mut truth.borrow_mut(), args.json)?;
+    read.segments = summary::report_input(&read, &mut feed.source, no_gyro);
+    summary.finish(ran, &read, &chain, &mut feed.truth, args.json)?;
     // Only a run that succeeded leaves its --out file (a failed one drops it unwritten).
-    match out.into_inner() {
+    match feed.out {
         Some(out) => out.finish(),
         None => Ok(()),
     }

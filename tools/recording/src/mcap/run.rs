@@ -14,11 +14,14 @@ use std::rc::Rc;
 
 use ipc_types::{RawImuSample, RobotHint};
 
+use super::checks::RawChecks;
+use super::codec::events::{EventKind, RecorderEvent};
+use super::codec::{MessageEncoding, Topic};
+use super::reader::{SegmentRead, decode_as};
 use super::scan::{ChannelInfo, Scanner};
-use super::{MessageEncoding, RawChecks, SegmentRead, Topic, Truncation, decode_as};
 use crate::Truth;
 use crate::clock::WallClock;
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, ErrorKind, Result, Truncation};
 
 /// One message of a run, borrowed from the reader until its next message.
 #[derive(Debug)]
@@ -131,7 +134,7 @@ impl RunReader {
         let Some((n, path)) = self.pending.next() else {
             return Ok(());
         };
-        if n > 0 && !super::continues_run(&path, n)? {
+        if n > 0 && !continues_run(&path, n)? {
             self.pending = Vec::new().into_iter();
             return Ok(());
         }
@@ -328,4 +331,21 @@ impl Iterator for RawRun {
         }
         item
     }
+}
+
+/// Whether the file at `path` is segment `n` of a run: its first message is the recorder's
+/// [`EventKind::Segment`] event numbered `n` (a file that merely has a successor's name is
+/// not read with the run).
+pub(crate) fn continues_run(path: &Path, n: usize) -> Result<bool> {
+    let mut run = RunReader::one(path)?;
+    Ok(match run.next() {
+        Some(Ok(message)) => match message.decode::<RecorderEvent>() {
+            Some(event) => {
+                let event = event?;
+                event.kind == EventKind::Segment && event.from_seq == Some(n as u64)
+            }
+            None => false,
+        },
+        _ => false,
+    })
 }

@@ -21,16 +21,7 @@ pub fn tmp(name: &str) -> PathBuf {
 /// The thesis data folder beside the repository (`../shared/data/capstone`), or `None` with a
 /// message when it is absent.
 pub fn capstone_dir() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/capstone");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "SKIPPED: thesis data not found at {} (expected ../shared/data/capstone beside the repo)",
-            dir.display()
-        );
-        None
-    }
+    test_support::shared_data("data/capstone")
 }
 
 /// Samples as a live sensor would produce them: random counts, values = counts / sensitivity,

@@ -28,12 +28,7 @@ pub fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
         accel,
         gyro
     );
-    tracing::info!(
-        "{}; small-block pool: peak {} of 1024 blocks, {} requests found it empty",
-        steady.summary(),
-        crate::ALLOCATOR.peak_blocks(),
-        crate::ALLOCATOR.fallbacks()
-    );
+    tracing::info!("{}; {}", steady.summary(), crate::ALLOCATOR.summary());
 }
 
 /// The steady-state allocation count, and the `--state` file kept up to date.

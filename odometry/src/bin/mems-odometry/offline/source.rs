@@ -1,9 +1,8 @@
 //! The inputs of an offline run: the recording's items read (an MCAP run streamed by a reader
 //! thread, or a text recording in memory), then put in the order a live pipeline would have
-//! received them ([`Inputs`]).
+//! received them (`odometry::arrival`), with the truth and the `--out` recording they feed
+//! ([`Feed`]).
 
-use std::cell::RefCell;
-use std::collections::VecDeque;
 use std::path::Path;
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
@@ -11,17 +10,14 @@ use std::thread::JoinHandle;
 use anyhow::Result;
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample};
 use mems_stage::Either;
+use odometry::arrival::Arrival;
 use odometry::session::Input;
 use recording::mcap::SegmentRead;
 use recording::mcap::run::{Item, RawRun};
 
 use super::OfflineArgs;
-use super::summary::TruthQueue;
+use super::truth::TruthQueue;
 use crate::out::Out;
-
-/// How long a raw sample is held back for the robot hints recorded after it, ns: a hint
-/// recorded later than this after its publication reaches the stage late (counted).
-pub const HINT_WINDOW_NS: u64 = 2_000_000_000;
 
 /// Items a reader thread sends at a time, and blocks in flight: what the streamed path holds
 /// between the reader and the stages.
@@ -164,101 +160,80 @@ impl Source {
 /// the odometry session.
 pub type ChainInput = Either<RawImuSample, Input>;
 
-/// The source's items as the chain's inputs, in the order a live pipeline receives them: a
-/// hint as soon as it is read (the session orders hints by publication), a raw sample held
-/// back [`HINT_WINDOW_NS`] of sample time, so that the hints recorded after it but published
-/// before it reach the session first. Truth goes to `truth`; raw samples and hints are
-/// written to `out` as they leave.
-pub struct Inputs<'a> {
-    pub source: &'a mut Source,
-    pub truth: &'a RefCell<TruthQueue>,
-    pub out: &'a RefCell<Option<Out>>,
-    held: VecDeque<RawImuSample>,
-    /// Time of the newest raw sample read, ns (`None` at the end of the input).
-    newest_ns: Option<u64>,
-    /// Time of the last raw sample released, ns.
-    released_ns: Option<u64>,
+/// What the offline driver's inputs and sink share (`mems_stage::offline::run_with`): the
+/// source, its items put in live order ([`Arrival`]: hints at once, raw samples held back for
+/// the hints logged after them), the truth read so far, and the `--out` recording, which gets
+/// raw samples and hints as they leave and what the chain emits.
+pub struct Feed {
+    /// The recording read.
+    pub source: Source,
+    /// Raw samples held back for the hints logged after them.
+    pub arrival: Arrival,
+    /// Truth read and not yet passed by the states.
+    pub truth: TruthQueue,
+    /// The `--out` recording.
+    pub out: Option<Out>,
     /// The first raw sample's time, ns.
     pub first_ns: Option<u64>,
-    /// Hints read, and those recorded too late for their place (see [`HINT_WINDOW_NS`]).
-    pub hints_seen: u64,
-    pub hints_late: u64,
+    /// Whether the source has ended.
+    ended: bool,
 }
 
-impl<'a> Inputs<'a> {
-    pub fn new(
-        source: &'a mut Source,
-        truth: &'a RefCell<TruthQueue>,
-        out: &'a RefCell<Option<Out>>,
-    ) -> Self {
+impl Feed {
+    /// Reads `source`, writing to `out`.
+    pub fn new(source: Source, out: Option<Out>) -> Self {
         Self {
             source,
-            truth,
+            arrival: Arrival::new(),
+            truth: TruthQueue::default(),
             out,
-            held: VecDeque::new(),
-            newest_ns: Some(0),
-            released_ns: None,
             first_ns: None,
-            hints_seen: 0,
-            hints_late: 0,
+            ended: false,
         }
     }
 
-    /// The oldest held raw sample, once the input has passed its time by the window (or
-    /// ended).
-    fn due(&mut self) -> Option<RawImuSample> {
-        let newest = self.newest_ns;
-        let front = self.held.front()?;
-        if newest.is_some_and(|n| front.stamps.sample_ns + HINT_WINDOW_NS > n) {
-            return None;
-        }
-        let raw = self.held.pop_front()?;
-        self.released_ns = Some(raw.stamps.sample_ns);
-        if let Some(out) = self.out.borrow_mut().as_mut() {
-            out.raw(&raw);
-        }
-        Some(raw)
-    }
-}
-
-impl Iterator for Inputs<'_> {
-    type Item = Result<ChainInput>;
-
-    fn next(&mut self) -> Option<Self::Item> {
+    /// The chain's next input, in the order a live pipeline receives them (`None`: the end).
+    pub fn next_input(&mut self) -> Option<Result<ChainInput>> {
         loop {
-            if let Some(raw) = self.due() {
+            if let Some(raw) = self.arrival.release() {
+                if let Some(out) = self.out.as_mut() {
+                    out.raw(&raw);
+                }
                 return Some(Ok(Either::First(raw)));
             }
-            self.newest_ns?;
+            if self.ended {
+                return None;
+            }
             match self.source.next() {
-                None => self.newest_ns = None,
+                None => {
+                    self.ended = true;
+                    self.arrival.end();
+                }
                 Some(Err(e)) => return Some(Err(e.into())),
                 Some(Ok(Item::Raw(raw))) => {
-                    self.newest_ns = Some(raw.stamps.sample_ns);
                     self.first_ns.get_or_insert(raw.stamps.sample_ns);
-                    self.held.push_back(raw);
+                    self.arrival.raw(raw);
                 }
                 Some(Ok(Item::Hint(h))) => {
-                    if let Some(out) = self.out.borrow_mut().as_mut() {
+                    if let Some(out) = self.out.as_mut() {
                         out.hint(&h);
                     }
-                    self.hints_seen += 1;
-                    self.hints_late +=
-                        u64::from(self.released_ns.is_some_and(|r| h.stamps.acquired_ns <= r));
+                    self.arrival.hint(&h);
                     return Some(Ok(Either::Second(Input::Hint(h))));
                 }
-                Some(Ok(Item::Truth(t))) => self.truth.borrow_mut().push(t),
+                Some(Ok(Item::Truth(t))) => self.truth.push(t),
             }
         }
     }
-}
 
-/// What the chain emits, written to `out`: corrected samples and states (revisions included).
-pub fn write(out: &RefCell<Option<Out>>, o: &Either<CorrectedImuSample, OdometryState>) {
-    if let Some(out) = out.borrow_mut().as_mut() {
-        match o {
-            Either::First(c) => out.corrected(c),
-            Either::Second(s) => out.state(s),
+    /// Writes what the chain emits to `--out`: corrected samples and states (revisions
+    /// included).
+    pub fn write(&mut self, o: &Either<CorrectedImuSample, OdometryState>) {
+        if let Some(out) = self.out.as_mut() {
+            match o {
+                Either::First(c) => out.corrected(c),
+                Either::Second(s) => out.state(s),
+            }
         }
     }
 }

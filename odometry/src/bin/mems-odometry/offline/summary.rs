@@ -8,7 +8,6 @@
 //! only: a roll or pitch difference is our own tilt error and stays in the error), and the
 //! truth positions are expressed in our frame relative to the truth position there.
 
-use std::collections::VecDeque;
 use std::path::Path;
 
 use anyhow::{Result, bail};
@@ -17,12 +16,14 @@ use ipc_types::{OdometryState, odometry_flags};
 use mems_stage::Chain;
 use mems_stage::offline::Stop;
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
+use odometry::arrival::HINT_WINDOW_NS;
 use odometry::session::OdometrySession;
 use recording::mcap::SegmentRead;
 use recording::{LogRepairs, Truth};
 use serde_json::json;
 
-use super::source::{HINT_WINDOW_NS, Inputs, Source};
+use super::source::{Feed, Source};
+use super::truth::TruthQueue;
 
 /// The offline chain: the calibration stage, then the odometry session.
 pub type OfflineChain = Chain<CalibrationStage, OdometrySession>;
@@ -51,25 +52,6 @@ impl TruthFrame {
 
     fn position(&self, truth: &Truth) -> Vector3<f64> {
         self.to_ours * (Vector3::from(truth.position_m) - self.origin)
-    }
-}
-
-/// Truth records not yet passed by the states, in time order.
-#[derive(Default)]
-pub struct TruthQueue(VecDeque<Truth>);
-
-impl TruthQueue {
-    /// Takes the next truth record (they come in time order).
-    pub fn push(&mut self, t: Truth) {
-        self.0.push_back(t);
-    }
-
-    /// The truth at `t_ns`, dropping every earlier one (states come in time order).
-    pub fn at(&mut self, t_ns: u64) -> Option<&Truth> {
-        while self.0.front().is_some_and(|t| t.t_ns < t_ns) {
-            self.0.pop_front();
-        }
-        self.0.front().filter(|t| t.t_ns == t_ns)
     }
 }
 
@@ -252,14 +234,14 @@ pub struct Read<'a> {
 }
 
 impl<'a> Read<'a> {
-    /// What `inputs` read of `input` (with the text reader's `repairs`), and the rest the
+    /// What `feed` read of `input` (with the text reader's `repairs`), and the rest the
     /// odometry aligns on, `align_s`.
-    pub fn new(input: &'a Path, inputs: &Inputs, repairs: LogRepairs, align_s: f64) -> Self {
+    pub fn new(input: &'a Path, feed: &Feed, repairs: LogRepairs, align_s: f64) -> Self {
         Self {
             input,
-            first_ns: inputs.first_ns,
-            hints_seen: inputs.hints_seen,
-            hints_late: inputs.hints_late,
+            first_ns: feed.first_ns,
+            hints_seen: feed.arrival.hints(),
+            hints_late: feed.arrival.late_hints(),
             repairs,
             align_s,
             segments: Vec::new(),

@@ -86,11 +86,6 @@ impl Watch {
             stats.hints,
             session.hint_stats()
         );
-        tracing::info!(
-            "{}; small-block pool: peak {} of 1024 blocks, {} requests found it empty",
-            self.steady.summary(),
-            crate::ALLOCATOR.peak_blocks(),
-            crate::ALLOCATOR.fallbacks()
-        );
+        tracing::info!("{}; {}", self.steady.summary(), crate::ALLOCATOR.summary());
     }
 }
