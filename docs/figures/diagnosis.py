@@ -59,7 +59,8 @@ def before_after(texts):
 
 def generate(ctx):
     ctx.run(["cargo", "build", "--release", "-q", "-p", "calibrate", "-p", "calibrate-science"])
-    ctx.run(["mkdir", "-p", "/tmp/figures-diag"])
+    ctx.run(["rm", "-rf", "/tmp/figures-diag"])  # a fresh private directory: no stale or planted files
+    ctx.run(["mkdir", "-m", "700", "/tmp/figures-diag"])
     d = Diagnoser(ctx)
     trials = (1,) if ctx.quick else (1, 2, 3)
     # 1. Torn reads.

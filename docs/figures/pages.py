@@ -182,7 +182,8 @@ def datasheet_drive(ctx):
     tmp = "/tmp/figures-datasheet-drive"
     b = "target/release/"
     duration = "120" if ctx.quick else "600"
-    ctx.run(["mkdir", "-p", tmp])
+    ctx.run(["rm", "-rf", tmp])  # a fresh private directory: no stale or planted files
+    ctx.run(["mkdir", "-m", "700", tmp])
     ctx.run([b + "mems-sim", "six-position", "--preset", "datasheet", "--seed", "1001", "--rate", "200", "--dlpf", "off", "--out", f"{tmp}/six.csv"])
     ctx.run([b + "mems-calibrate", "fit", "--input", f"{tmp}/six.csv", "--model", "full", "--out", f"{tmp}/cal.toml"])
     ctx.run([b + "mems-sim", "orientations", "--n", "16", "--preset", "datasheet", "--seed", "2001", "--rate", "200", "--dlpf", "off", "--out", f"{tmp}/ori.csv"])
@@ -217,7 +218,8 @@ def offline_throughput(ctx):
     the stages and through `mems-odometry offline`, and read by the official Python reader."""
     ctx.run(["cargo", "build", "--release", "-q", "-p", "odometry", "-p", "mems-sim"])
     tmp = "/tmp/figures-offline"
-    ctx.run(["mkdir", "-p", tmp])
+    ctx.run(["rm", "-rf", tmp])  # a fresh private directory: no stale or planted files
+    ctx.run(["mkdir", "-m", "700", tmp])
     duration = "60" if ctx.quick else "3600"
     blocks = []
     for rate in ([1000] if ctx.quick else [1000, 4000]):
@@ -251,7 +253,8 @@ def recording_run(ctx):
              "-p", "acquire", "-p", "mems-info", "-p", "calibrate-science", "-p", "mems-sim"])
     tmp = "/tmp/figures-recording"
     run = f"{tmp}/run.mcap"
-    ctx.run(["mkdir", "-p", tmp])
+    ctx.run(["rm", "-rf", tmp])  # a fresh private directory: no stale or planted files
+    ctx.run(["mkdir", "-m", "700", tmp])
     ctx.run(["target/release/mems-stack", "--duration", "10" if ctx.quick else "60", "--record", run, "--force", "--namespace", "figures-size"])
     info, _ = ctx.run(["target/release/mems-info", run, "--json"])
     ctx.run(["python3", "tools/recording/python/read_recording.py", run])
@@ -279,7 +282,8 @@ def recording_drive(ctx):
     ctx.run(["cargo", "build", "--release", "-q", "-p", "mems-sim", "-p", "odometry", "-p", "mems-ros2", "-p", "mems-replay", "-p", "calibrate"])
     tmp = "/tmp/figures-drive"
     b = "target/release/"
-    ctx.run(["mkdir", "-p", tmp])
+    ctx.run(["rm", "-rf", tmp])  # a fresh private directory: no stale or planted files
+    ctx.run(["mkdir", "-m", "700", tmp])
     drive, states, bag = f"{tmp}/drive.mcap", f"{tmp}/states.mcap", f"{tmp}/states-ros2.mcap"
     calib, six, poses = f"{tmp}/calib.toml", f"{tmp}/six.csv", f"{tmp}/poses.csv"
     # The README tour's calibration of the simulated part, then its drive through offline.
