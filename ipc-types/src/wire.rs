@@ -174,6 +174,15 @@ pub mod odometry_flags {
     /// skipped): the filter predicted across the gap and widened its 1-sigma for the motion
     /// the platform could have made in it (`manoeuvre_accel_mps2`, `manoeuvre_rate_rps`).
     pub const GAP_BEFORE: u16 = 1 << 8;
+    /// Wheeled platform without hints: the zero-state detector flagged rest, but the window
+    /// that decided it vibrated more than the platform did standing at alignment
+    /// (`OdometryConfig::rest_vibration_factor` times its standard deviation): the sample is
+    /// taken as motion (no zero-velocity update), never silently as rest.
+    pub const REST_VIBRATING: u16 = 1 << 11;
+    /// Wheeled platform: the non-holonomic constraint (zero lateral and vertical body
+    /// velocity) disagreed with the filter's velocity by more than its gate at this sample
+    /// (a skid, a wrong mounting, or a drifting velocity): it was not applied.
+    pub const NONHOLONOMIC_REJECTED: u16 = 1 << 12;
 }
 
 /// The odometry estimate at one sample time.

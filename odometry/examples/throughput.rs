@@ -171,11 +171,11 @@ fn main() -> Result<()> {
 /// The calibration stage's start-up, then the time each stage takes over the recording.
 fn stages(input: &Path, block: usize) -> Result<(Times, Times, Times)> {
     let file = CalibrationFile::identity(ipc_types::units::STANDARD_GRAVITY_MPS2);
-    let detector = Profile::Vehicle.detector(file.gravity_mps2);
+    let detector = Profile::Other.detector(file.gravity_mps2);
     let (calibration, startup) =
         Times::of(|| CalibrationStage::new(&file, detector, RefineConfig::default()))?;
     let mut calibration = calibration?;
-    let config = Profile::Vehicle.odometry(odometry::config::from_calibration(&file).config);
+    let config = Profile::Other.odometry(odometry::config::from_calibration(&file).config);
     let mut odometry = OdometryStage::new(config);
 
     let mut raw: Vec<RawImuSample> = Vec::with_capacity(block);

@@ -109,6 +109,15 @@ pub struct OdometryConfig {
     /// diagnostic that integrates freely after alignment, as `mems-odometry offline
     /// --no-zupt`).
     pub rest_updates: bool,
+    /// Wheeled platforms without hints: 1-sigma of the non-holonomic constraint (zero lateral
+    /// and vertical body velocity, Brossard et al., "AI-IMU Dead-Reckoning", IEEE T-IV 2020),
+    /// m/s, over one second of driving (its updates, one per covariance propagation, each
+    /// carry `sigma * sqrt(1 s / interval)`: skid and lever arm are not white). 0: off.
+    pub imu_nonholonomic_sigma_mps: f64,
+    /// Wheeled platforms: a rest flag whose detector window's specific-force standard
+    /// deviation exceeds this many times the alignment rest's is taken as motion and flagged
+    /// `REST_VIBRATING`. 0: off.
+    pub rest_vibration_factor: f64,
 }
 
 impl OdometryConfig {
@@ -149,6 +158,8 @@ impl OdometryConfig {
             propagation_interval_s: 0.01,
             rest_window_drift: 0.05,
             rest_updates: true,
+            imu_nonholonomic_sigma_mps: 0.0,
+            rest_vibration_factor: 0.0,
         }
     }
 

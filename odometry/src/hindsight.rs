@@ -82,6 +82,16 @@ pub(crate) struct Hindsight {
 }
 
 impl Hindsight {
+    /// Every navigator takes `cfg` ([`Navigator::reconfigure`]); the hindsight's own lag and
+    /// confirmation stay.
+    pub(crate) fn reconfigure(&mut self, cfg: OdometryConfig) {
+        self.base.reconfigure(cfg);
+        self.redo.reconfigure(cfg);
+        for nav in &mut self.pool {
+            nav.reconfigure(cfg);
+        }
+    }
+
     /// Hindsight of `lag_s` and `confirm_s` for `cfg`, its storage allocated here.
     pub(crate) fn new(cfg: OdometryConfig, hints: HintConfig, lag_s: f64, confirm_s: f64) -> Self {
         let window = ((2.0 * lag_s + confirm_s) * cfg.max_rate_hz).ceil() as usize;

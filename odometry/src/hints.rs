@@ -32,6 +32,10 @@ pub struct HintConfig {
     /// estimated from the first drive ([`MountingEstimator`]); speed hints are only used once
     /// it is known (stationary hints need no mounting).
     pub mounting: Option<UnitQuaternion<f64>>,
+    /// The mounting the IMU-only non-holonomic constraint of a wheeled platform uses
+    /// ([`crate::nonholonomic`]): the one the user gave, else `None`, estimated from the first
+    /// drive (the hints' identity default is no statement about the mounting).
+    pub imu_mounting: Option<UnitQuaternion<f64>>,
     /// Path length of forward driving the mounting estimate gathers before it is used, m.
     pub mounting_min_path_m: f64,
     /// 1-sigma of the non-holonomic constraint (zero lateral and vertical body velocity), m/s;
@@ -59,6 +63,7 @@ impl Default for HintConfig {
             max_age_s: 0.25,
             delivery_s: 0.005,
             mounting: Some(UnitQuaternion::identity()),
+            imu_mounting: None,
             mounting_min_path_m: 3.0,
             nonholonomic_sigma_mps: 0.02,
             speed_scale_sigma: 0.02,

@@ -14,6 +14,8 @@ pub mod eskf;
 mod hindsight;
 pub mod hints;
 mod navigator;
+pub mod nonholonomic;
+pub mod platform;
 pub mod profile;
 pub mod rest_noise;
 pub mod session;

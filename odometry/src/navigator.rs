@@ -9,6 +9,7 @@ use crate::eskf::{ConsiderModel, Eskf, Imu, KS, align};
 use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
+use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::rest_noise::RestNoise;
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
@@ -212,6 +213,11 @@ pub(crate) struct Navigator {
     /// Whether the last sample's rest decision was the IMU's zero-state flag (no fresh hint
     /// with a rest source).
     imu_decided: bool,
+    /// The IMU-only non-holonomic constraint (wheeled platforms).
+    nhc: Option<ImuConstraint>,
+    /// Standard deviation of the specific force's norm over the alignment rest (the root of
+    /// the three axes' variances summed), m/s^2.
+    standing_accel_sd: f64,
 }
 
 impl Navigator {
@@ -252,6 +258,9 @@ impl Navigator {
             rest_count: 0,
             distance_m: 0.0,
             imu_decided: true,
+            nhc: (cfg.imu_nonholonomic_sigma_mps > 0.0)
+                .then(|| ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)),
+            standing_accel_sd: 0.0,
         }
     }
 
@@ -273,6 +282,30 @@ impl Navigator {
         self.rest_count = other.rest_count;
         self.distance_m = other.distance_m;
         self.imu_decided = other.imu_decided;
+        self.nhc = other.nhc;
+        self.standing_accel_sd = other.standing_accel_sd;
+    }
+
+    /// Takes `cfg` from the next sample on (a profile recognized from the data): its rest
+    /// handling, manoeuvre and wheeled constraint. An alignment already made keeps its
+    /// effective-sample factor on the zero-velocity sigma.
+    pub fn reconfigure(&mut self, cfg: OdometryConfig) {
+        let factor = self.zupt_sigma_mps / self.cfg.zupt_sigma_mps;
+        self.zupt_sigma_mps = cfg.zupt_sigma_mps * if cfg.effective_samples { factor } else { 1.0 };
+        self.nhc = match (cfg.imu_nonholonomic_sigma_mps > 0.0, self.nhc) {
+            (false, _) => None,
+            (true, Some(nhc)) => Some(nhc),
+            (true, None) => Some(ImuConstraint::new(
+                cfg.imu_nonholonomic_sigma_mps,
+                self.hints.cfg.imu_mounting,
+            )),
+        };
+        self.cfg = cfg;
+    }
+
+    /// The IMU-only non-holonomic constraint, on a wheeled platform.
+    pub fn imu_constraint(&self) -> Option<&ImuConstraint> {
+        self.nhc.as_ref()
     }
 
     /// Takes a (checked) robot hint. It waits (in a buffer allocated up front) until a sample
@@ -350,6 +383,7 @@ impl Navigator {
             return;
         }
         let dt = (t_ns - prev_ns.unwrap_or(t_ns)) as f64 * 1e-9;
+        let imu_rest = imu_rest && !self.vibrating(s, &mut d.sample);
         let rest = self.rest_decision(&d, imu_rest);
         if !rest {
             // The rest ended at the previous sample: its last updates are made there.
@@ -421,6 +455,24 @@ impl Navigator {
             hs.flags |= odometry_flags::GAP_BEFORE;
         }
         (kf.x.p - p_before).xy().norm()
+    }
+
+    /// Whether the detector window that flagged this sample rest vibrated more than
+    /// `rest_vibration_factor` times the alignment rest (flagged `REST_VIBRATING`).
+    #[inline]
+    fn vibrating(&self, s: &CorrectedImuSample, hs: &mut HintSample) -> bool {
+        let factor = self.cfg.rest_vibration_factor;
+        if factor <= 0.0 || s.flags & corrected_flags::ZERO_STATE == 0 {
+            return false;
+        }
+        // A floor of 1 mg: a quantised part can show no variance at all standing.
+        let floor = 1e-3 * self.cfg.gravity_mps2;
+        let window_sd = Vector3::from(s.zs_std_mps2).norm();
+        let vibrating = window_sd > factor * self.standing_accel_sd.max(floor);
+        if vibrating {
+            hs.flags |= odometry_flags::REST_VIBRATING;
+        }
+        vibrating
     }
 
     /// Whether the aligned filter takes this sample as rest (decided before its prediction).
@@ -527,6 +579,13 @@ impl Navigator {
                     hints.stats.speed_updates += 1;
                 } else {
                     hints.stats.speed_skipped += 1;
+                }
+            }
+            if let Some(nhc) = self.nhc.as_mut().filter(|_| hs.flags & odometry_flags::HINT_SPEED == 0)
+            {
+                let interval = self.cfg.propagation_interval_s.max(dt);
+                if nhc.apply(kf, dt, interval) == Some(Outcome::Rejected) {
+                    hs.flags |= odometry_flags::NONHOLONOMIC_REJECTED;
                 }
             }
         }
@@ -638,6 +697,7 @@ impl Navigator {
             self.zupt_sigma_mps *= a.accel.mean_variance_factor().max().sqrt();
         }
         let w_sigma = w_var.map(f64::sqrt);
+        self.standing_accel_sd = a.accel.variance().sum().sqrt();
         let g = self.cfg.gravity_mps2;
         let scale_as_bias = g * self.cfg.accel_residual_scale;
         let bias_sigma =

@@ -6,32 +6,76 @@ use calibrate::zero_state::{DetectorConfig, DetectorKind};
 
 use crate::config::OdometryConfig;
 use crate::eskf::Manoeuvre;
+use crate::platform::Platform;
 
 /// A platform's motion profile.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Profile {
+    /// Recognize the platform from the data ([`crate::platform`]) and take its profile:
+    /// `pedestrian` for a foot, `vehicle` for wheeled motion, `other` for anything else.
+    #[default]
+    Auto,
     /// Wheeled robot or vehicle: the GLRT against the references learned at rest (5 s), rest
     /// flags taken in hindsight (a gentle start is flagged rest by a window that still holds
-    /// the rest before it).
-    #[default]
+    /// the rest before it), the non-holonomic constraint without hints
+    /// ([`crate::nonholonomic`]) and rests that vibrate refused.
+    #[value(alias = "wheeled")]
     Vehicle,
     /// Foot-mounted sensor: the SHOE stance detector (no learning, 5-sample windows), every
     /// stance flag taken as it comes, a zero-velocity update of 0.01 m/s, alignment on half a
     /// second of standing.
     Pedestrian,
+    /// Anything else (an arm, a hand-held box): the vehicle's detector and rest handling,
+    /// without the non-holonomic constraint.
+    Other,
 }
 
+/// 1-sigma of the IMU-only non-holonomic constraint over a second of driving, m/s: skid and the
+/// lever arm of an IMU off the rear axle (`omega x r`: 0.3 m at 20 deg/s is 0.1 m/s).
+pub const WHEELED_NONHOLONOMIC_SIGMA_MPS: f64 = 0.1;
+
+/// A rest whose detector window vibrates by more than this many times the alignment rest's
+/// standard deviation is refused on a wheeled platform: a robot standing vibrates by 5-10 mg,
+/// driving at walking pace on a smooth floor by 50-90 mg (an LSM9DS1 on a home-robot base).
+pub const WHEELED_REST_VIBRATION_FACTOR: f64 = 3.0;
+
 impl Profile {
-    /// The zero-state detector settings for local gravity `gravity_mps2`.
+    /// The profile for a recognized platform.
+    pub fn for_platform(platform: Platform) -> Self {
+        match platform {
+            Platform::Foot => Self::Pedestrian,
+            Platform::Wheeled => Self::Vehicle,
+            Platform::Other => Self::Other,
+        }
+    }
+
+    /// Its name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Vehicle => "vehicle",
+            Self::Pedestrian => "pedestrian",
+            Self::Other => "other",
+        }
+    }
+
+    /// The zero-state detector settings for local gravity `gravity_mps2` (`Auto` before the
+    /// platform is known: the GLRT).
     pub fn detector(self, gravity_mps2: f64) -> DetectorConfig {
         match self {
-            Self::Vehicle => DetectorConfig::new(DetectorKind::Glrt, gravity_mps2),
             Self::Pedestrian => DetectorConfig::new(DetectorKind::Shoe, gravity_mps2),
+            Self::Auto | Self::Vehicle | Self::Other => {
+                DetectorConfig::new(DetectorKind::Glrt, gravity_mps2)
+            }
         }
     }
 
     /// `config` with this profile's rest handling.
     pub fn odometry(self, mut config: OdometryConfig) -> OdometryConfig {
+        if self == Self::Vehicle {
+            config.imu_nonholonomic_sigma_mps = WHEELED_NONHOLONOMIC_SIGMA_MPS;
+            config.rest_vibration_factor = WHEELED_REST_VIBRATION_FACTOR;
+        }
         if self == Self::Pedestrian {
             // SHOE's windows are 5 samples: no window holds the rest into a step, so there
             // is nothing to withdraw, and a stance is shorter than any confirmation.

@@ -20,6 +20,12 @@
 //! - **Samples without a gyroscope** (`raw_flags::GYRO_VALID` clear: an accelerometer-only
 //!   sensor mode, the MPU-9250 at 4 kHz): nothing tracks the attitude, so what they give is
 //!   configuration ([`NoGyro`]).
+//! - **The platform from the data** ([`OdometrySession::auto`], `--profile auto` live): the
+//!   session runs the `other` profile's rest handling (no platform assumed) and feeds every
+//!   sample to [`crate::platform::Classifier`]; after [`AUTO_DECIDE_MOVING_S`] seconds of
+//!   motion it decides, says so on stderr, and from the next sample on runs the recognized
+//!   profile's ([`OdometryStage::reconfigure`]). The decision depends on the samples alone, so a
+//!   replay decides at the same sample.
 
 use std::collections::VecDeque;
 
@@ -29,6 +35,8 @@ use ipc_types::{
 use mems_stage::Stage;
 
 use crate::config::OdometryConfig;
+use crate::platform::{Classifier, Features};
+use crate::profile::Profile;
 use crate::hints::{HintConfig, HintConfigError, HintError, HintStats, check_hint};
 use crate::stage::{OdometryError, OdometryStage};
 
@@ -36,6 +44,29 @@ use crate::stage::{OdometryError, OdometryStage};
 /// wheel controller for a second. The live driver takes no hint while the queue is full (it
 /// stays in the subscriber's queue).
 pub const HINT_QUEUE: usize = 1024;
+
+/// Seconds of motion after which a session with `--profile auto` decides its platform.
+pub const AUTO_DECIDE_MOVING_S: f64 = 10.0;
+
+/// The platform a session recognized (`--profile auto`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AutoChoice {
+    /// What the classifier measured and the class.
+    pub features: Features,
+    /// The profile taken.
+    pub profile: Profile,
+    /// The sample time of the decision, ns.
+    pub at_ns: u64,
+}
+
+/// The recognition under way or done.
+#[derive(Debug, Clone, Copy)]
+struct Auto {
+    classifier: Classifier,
+    /// The configuration the profiles adjust.
+    base: OdometryConfig,
+    choice: Option<AutoChoice>,
+}
 
 /// What a sample without a gyroscope gives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -107,6 +138,7 @@ pub struct OdometrySession {
     /// Hints waiting for their samples, in publication order.
     waiting: VecDeque<RobotHint>,
     stats: SessionStats,
+    auto: Option<Auto>,
 }
 
 impl OdometrySession {
@@ -124,7 +156,67 @@ impl OdometrySession {
             no_gyro,
             waiting: VecDeque::with_capacity(HINT_QUEUE),
             stats: SessionStats::default(),
+            auto: None,
         })
+    }
+
+    /// A session that recognizes its platform from the samples (module documentation):
+    /// `base` is the configuration the profiles adjust (a calibration file's).
+    pub fn auto(
+        base: OdometryConfig,
+        hint_config: HintConfig,
+        no_gyro: NoGyro,
+    ) -> Result<Self, HintConfigError> {
+        let mut session = Self::new(Profile::Other.odometry(base), hint_config, no_gyro)?;
+        session.auto = Some(Auto {
+            classifier: Classifier::default(),
+            base,
+            choice: None,
+        });
+        Ok(session)
+    }
+
+    /// The platform recognized, once decided (`--profile auto`).
+    pub fn auto_choice(&self) -> Option<AutoChoice> {
+        self.auto.and_then(|a| a.choice)
+    }
+
+    /// Feeds the classifier and, at the decision, takes the recognized profile.
+    fn recognize(&mut self, s: &CorrectedImuSample) {
+        let Some(auto) = self.auto.as_mut().filter(|a| a.choice.is_none()) else {
+            return;
+        };
+        if s.raw_flags & raw_flags::GYRO_VALID != 0 {
+            let g = auto.base.gravity_mps2;
+            let accel_g = s.accel_mps2.map(|a| a / g);
+            let gyro_dps = s.gyro_rps.map(f64::to_degrees);
+            auto.classifier.push(s.stamps.sample_ns, accel_g, gyro_dps);
+        }
+        if auto.classifier.moving_s() < AUTO_DECIDE_MOVING_S {
+            return;
+        }
+        let features = auto.classifier.features();
+        let profile = Profile::for_platform(features.platform);
+        auto.choice = Some(AutoChoice {
+            features,
+            profile,
+            at_ns: s.stamps.sample_ns,
+        });
+        tracing::info!(
+            "--profile auto: {} platform after {:.0} s of motion (sample seq {}): profile {} from \
+             here on (tilt rate {:.1} deg/s, principal-axis share {:.2} at {:.0} deg from \
+             gravity, {:.1} impacts/min)",
+            features.platform.name(),
+            features.moving_s,
+            s.seq,
+            profile.name(),
+            features.tilt_rate_dps,
+            features.principal_share,
+            features.principal_axis_deg,
+            features.impacts_per_min
+        );
+        self.config = profile.odometry(auto.base);
+        self.stage.reconfigure(self.config);
     }
 
     /// The current sensor session's stage.
@@ -135,6 +227,11 @@ impl OdometrySession {
     /// The current sensor session's hint counters.
     pub fn hint_stats(&self) -> HintStats {
         self.stage.hint_stats()
+    }
+
+    /// The current sensor session's IMU-only non-holonomic constraint (a wheeled profile).
+    pub fn imu_constraint(&self) -> Option<crate::nonholonomic::ImuConstraint> {
+        self.stage.imu_constraint()
     }
 
     /// The session's counters.
@@ -224,7 +321,11 @@ impl Stage for OdometrySession {
                 self.stats.unbridged += 1;
                 Err(e.into())
             }
-            taken => Ok(taken?),
+            taken => {
+                taken?;
+                self.recognize(s);
+                Ok(())
+            }
         }
     }
 

@@ -266,6 +266,23 @@ impl OdometryStage {
         self.ahead.mounting()
     }
 
+    /// Takes `cfg` from the next sample on: every navigator's rest handling, manoeuvre and
+    /// wheeled constraint (a profile recognized from the data). The hindsight's lag and
+    /// confirmation, the history sizes and the bridge limit stay those the stage was built
+    /// with.
+    pub fn reconfigure(&mut self, cfg: OdometryConfig) {
+        self.ahead.reconfigure(cfg);
+        self.settled.live.reconfigure(cfg);
+        if let Some(h) = self.settled.hindsight.as_mut() {
+            h.reconfigure(cfg);
+        }
+    }
+
+    /// The IMU-only non-holonomic constraint (a wheeled profile): its counters and mounting.
+    pub fn imu_constraint(&self) -> Option<crate::nonholonomic::ImuConstraint> {
+        self.ahead.imu_constraint().copied()
+    }
+
     /// Whether alignment is done.
     pub fn aligned(&self) -> bool {
         self.ahead.aligned()

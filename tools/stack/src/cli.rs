@@ -68,8 +68,9 @@ pub struct Cli {
     #[arg(long, value_name = "HOST:PORT")]
     pub foxglove: Option<String>,
     /// Motion profile, passed to `mems-odometry serve --profile` (the names of `mems-odometry
-    /// offline --profile`): `vehicle`, or `pedestrian` for a foot-mounted sensor, whose
-    /// default detector is then SHOE.
+    /// offline --profile`): `auto` (the platform recognized from the first 10 s of motion; the
+    /// calibration stage's detector is then the GLRT), `vehicle`, `other`, or `pedestrian` for
+    /// a foot-mounted sensor, whose default detector is then SHOE.
     #[arg(long, value_enum, default_value_t)]
     pub profile: Profile,
     /// Every setting in effect, `NAME=VALUE` (`config::settings`), for the live view.
@@ -110,8 +111,8 @@ pub fn detector(cli: &Cli) -> DetectorKind {
     match (cli.detector, cli.profile) {
         (Some(d), _) => d,
         (None, Profile::Pedestrian) => DetectorKind::Shoe,
-        (None, Profile::Vehicle) if cli.rate > 1000 => DetectorKind::GlrtAccel,
-        (None, Profile::Vehicle) => DetectorKind::Glrt,
+        (None, _) if cli.rate > 1000 => DetectorKind::GlrtAccel,
+        (None, Profile::Auto | Profile::Vehicle | Profile::Other) => DetectorKind::Glrt,
     }
 }
 

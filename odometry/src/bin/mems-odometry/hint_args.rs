@@ -15,9 +15,11 @@ pub struct HintArgs {
     pub hint_delivery_ms: f64,
     /// IMU mounting on the robot: `R,P,Y` in degrees (roll, pitch, yaw of the rotation from
     /// the sensor frame to the body frame, x forward, y left, z up), or `estimate` (from the
-    /// first 3 m of forward driving; speed hints are used once it is known).
-    #[arg(long, default_value = "0,0,0")]
-    pub mount: String,
+    /// first 3 m of forward driving; speed hints are used once it is known). Without it, speed
+    /// hints take the identity and a wheeled platform's IMU-only non-holonomic constraint
+    /// estimates the mounting from its first drive.
+    #[arg(long)]
+    pub mount: Option<String>,
     /// 1-sigma of the zero lateral and vertical body velocity (non-holonomic constraint), m/s.
     #[arg(long, default_value_t = 0.02)]
     pub nonholonomic_sigma: f64,
@@ -29,29 +31,17 @@ pub struct HintArgs {
 impl HintArgs {
     /// The stage's hint configuration; an error names the option.
     pub fn config(&self) -> Result<HintConfig> {
-        let mounting = if self.mount.trim() == "estimate" {
-            None
-        } else {
-            let parts: Vec<&str> = self.mount.split(',').collect();
-            let [r, p, y] = parts.as_slice() else {
-                bail!(
-                    "--mount {:?}: expected `estimate` or three comma-separated angles R,P,Y in degrees",
-                    self.mount
-                );
-            };
-            let mut angles = [0.0; 3];
-            for (a, text) in angles.iter_mut().zip([r, p, y]) {
-                *a = text.trim().parse::<f64>().map_err(|e| {
-                    anyhow::anyhow!("--mount {:?}: {text:?} is not a number: {e}", self.mount)
-                })?;
-            }
-            let [r, p, y] = angles.map(f64::to_radians);
-            Some(UnitQuaternion::from_euler_angles(r, p, y))
+        let given = self.mount.as_deref();
+        let mounting = match given.map(str::trim) {
+            None => Some(UnitQuaternion::identity()),
+            Some("estimate") => None,
+            Some(text) => Some(parse_mount(text)?),
         };
         let config = HintConfig {
             max_age_s: self.hint_max_age_s,
             delivery_s: self.hint_delivery_ms * 1e-3,
             mounting,
+            imu_mounting: given.and(mounting),
             nonholonomic_sigma_mps: self.nonholonomic_sigma,
             speed_scale_sigma: self.speed_scale_sigma,
             ..HintConfig::default()
@@ -59,4 +49,21 @@ impl HintArgs {
         config.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
         Ok(config)
     }
+}
+
+/// `R,P,Y` in degrees as the rotation from the sensor frame to the body frame.
+fn parse_mount(mount: &str) -> Result<UnitQuaternion<f64>> {
+    let parts: Vec<&str> = mount.split(',').collect();
+    let [r, p, y] = parts.as_slice() else {
+        bail!("--mount {mount:?}: expected `estimate` or three comma-separated angles R,P,Y in degrees");
+    };
+    let mut angles = [0.0; 3];
+    for (a, text) in angles.iter_mut().zip([r, p, y]) {
+        *a = text
+            .trim()
+            .parse::<f64>()
+            .map_err(|e| anyhow::anyhow!("--mount {mount:?}: {text:?} is not a number: {e}"))?;
+    }
+    let [r, p, y] = angles.map(f64::to_radians);
+    Ok(UnitQuaternion::from_euler_angles(r, p, y))
 }

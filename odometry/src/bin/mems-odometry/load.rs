@@ -39,16 +39,17 @@ pub struct StageArgs {
     /// profile's.
     #[command(flatten)]
     pub detector: DetectorArgs,
-    /// Motion profile: the detector and rest handling for the platform.
-    #[arg(long, value_enum, default_value_t = Profile::Vehicle)]
+    /// Motion profile: the detector and rest handling for the platform; `auto` recognizes the
+    /// platform from the recording (foot, wheeled or other, `odometry::platform`).
+    #[arg(long, value_enum, default_value_t = Profile::Auto)]
     pub profile: Profile,
 }
 
 impl StageArgs {
     /// The calibration file (or the identity when none is given, said once on stderr) and the
-    /// detector settings these options give; refuses a `learn_s` that is not positive and
-    /// finite.
-    pub fn load(&self) -> Result<(CalibrationFile, DetectorConfig)> {
+    /// detector settings these options give with `profile` (the resolved one); refuses a
+    /// `learn_s` that is not positive and finite.
+    pub fn load(&self, profile: Profile) -> Result<(CalibrationFile, DetectorConfig)> {
         let file = match &self.calib {
             Some(path) => CalibrationFile::load(path).context("cannot load calibration")?,
             None => {
@@ -62,7 +63,7 @@ impl StageArgs {
         };
         let detector = self
             .detector
-            .apply(self.profile.detector(file.gravity_mps2))
+            .apply(profile.detector(file.gravity_mps2))
             .map_err(anyhow::Error::msg)?;
         Ok((file, detector))
     }

@@ -7,6 +7,7 @@
 //! order a live pipeline receives them (`odometry::arrival`); truth (recordings from
 //! `mems-sim`) is compared as `summary` says.
 
+mod platform;
 mod source;
 mod summary;
 mod truth;
@@ -65,11 +66,13 @@ pub struct OfflineArgs {
 
 /// Runs the pipeline and prints the result.
 pub fn run(args: OfflineArgs) -> Result<()> {
-    let (file, detector) = args.stage.load()?;
+    let is_mcap = recording::mcap::has_magic(&args.input)?;
+    let choice = platform::choose(args.stage.profile, &args.input, is_mcap)?;
+    let (file, detector) = args.stage.load(choice.profile)?;
     let (source, repairs) = Source::open(&args)?;
     let calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
         .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
-    let mut config = args.stage.profile.odometry(odometry_config(&file));
+    let mut config = choice.profile.odometry(odometry_config(&file));
     config.rest_updates = !args.no_zupt;
     let session = OdometrySession::new(config, args.hints.config()?, NoGyro::HoldAttitude)?;
     let mut chain = Chain {
@@ -91,7 +94,7 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             }
         });
     progress.finish_and_clear();
-    let mut read = Read::new(&args.input, &feed, repairs, config.align_s);
+    let mut read = Read::new(&args.input, &feed, repairs, config.align_s, choice);
     if read.holes.count == 0 {
         read.holes = chain.first.stats().holes;
     }

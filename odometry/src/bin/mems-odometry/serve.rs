@@ -29,6 +29,7 @@ use calibrate::calibfile::CalibrationFile;
 use ipc_types::service;
 use ipc_types::wake::{self, Output, WaitMode};
 use ipc_types::{OdometryState, RobotHint};
+use odometry::profile::Profile;
 use odometry::session::{NoGyro, OdometrySession};
 
 use hooks::{Inputs, Watch};
@@ -46,9 +47,11 @@ pub struct ServeArgs {
     /// until the calibration stage's event wakes the process.
     #[arg(long)]
     spin: bool,
-    /// Motion profile (its rest handling; the detector is `mems-calibrate serve`'s).
+    /// Motion profile (its rest handling; the detector is `mems-calibrate serve`'s). `auto`
+    /// runs `other` until it has seen 10 s of motion, then the recognized platform's
+    /// (`odometry::session::AUTO_DECIDE_MOVING_S`), said on stderr.
     #[arg(long, value_enum, default_value_t)]
-    profile: odometry::profile::Profile,
+    profile: Profile,
     #[command(flatten)]
     hints: crate::hint_args::HintArgs,
 }
@@ -56,8 +59,12 @@ pub struct ServeArgs {
 /// Runs until SIGINT/SIGTERM.
 pub fn run(args: ServeArgs) -> Result<()> {
     let file = CalibrationFile::load(&args.calib).context("cannot load calibration")?;
-    let config = args.profile.odometry(crate::load::odometry_config(&file));
-    let mut session = OdometrySession::new(config, args.hints.config()?, NoGyro::Unnavigated)?;
+    let base = crate::load::odometry_config(&file);
+    let hints = args.hints.config()?;
+    let mut session = match args.profile {
+        Profile::Auto => OdometrySession::auto(base, hints, NoGyro::Unnavigated)?,
+        p => OdometrySession::new(p.odometry(base), hints, NoGyro::Unnavigated)?,
+    };
     let ns = service::namespace(args.namespace.as_deref());
     let name = |base| service::full_name(&ns, base);
     // Before any port exists: a SIGINT/SIGTERM is kept from then on.
@@ -76,7 +83,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
     };
     // Only samples wake the process: hints wait for them anyway.
     let listener = wake::listener(&node, &name(service::CORRECTED), mode)?;
-    let mut watch = Watch::new()?;
+    let mut watch = Watch::new(args.profile)?;
     // Start-up is over: from here on small blocks come from the pool.
     crate::ALLOCATOR.arm();
     let counts = mems_stage::live::serve(&mut session, &mut input, &mut out, listener, &mut watch)?;

@@ -23,6 +23,7 @@ use recording::mcap::SegmentRead;
 use recording::{LogRepairs, Truth};
 use serde_json::json;
 
+use super::platform::Choice;
 use super::source::{Feed, Source};
 use super::truth::TruthQueue;
 
@@ -68,6 +69,9 @@ pub struct Summary {
     rest_errors: Vec<serde_json::Value>,
     truth_distance: f64,
     prev_truth: Option<Vector3<f64>>,
+    /// States flagged `REST_VIBRATING` and `NONHOLONOMIC_REJECTED`.
+    rest_vibrating: u64,
+    nonholonomic_rejected: u64,
 }
 
 impl Summary {
@@ -76,6 +80,9 @@ impl Summary {
         if self.aligned_ns.is_none() && state.flags & odometry_flags::ALIGNED != 0 {
             self.aligned_ns = Some(state.stamps.sample_ns);
         }
+        self.rest_vibrating += u64::from(state.flags & odometry_flags::REST_VIBRATING != 0);
+        self.nonholonomic_rejected +=
+            u64::from(state.flags & odometry_flags::NONHOLONOMIC_REJECTED != 0);
         let new_rest = self.last.is_some_and(|l| state.rest_count > l.rest_count);
         if new_rest {
             self.rests.push(json!({
@@ -161,7 +168,9 @@ impl Summary {
         let truth_error = self.truth_error(&end, truth);
         if json {
             let speed_updates = chain.second.hint_stats().speed_updates;
-            let result = self.json(&end, truth_error, aligned_at_s, read, speed_updates);
+            let mut result = self.json(&end, truth_error, aligned_at_s, read, speed_updates);
+            result["profile"] = read.choice.json();
+            result["wheeled"] = self.wheeled_json(&chain.second);
             println!("{result}");
         } else {
             self.print(&end, truth_error);
@@ -202,6 +211,25 @@ impl Summary {
                 "disagreements": end.hint_disagreements,
                 "speed_updates": speed_updates,
             },
+        })
+    }
+
+    /// What the wheeled profile's IMU-only handling did: the non-holonomic constraint's
+    /// updates and mounting, and the rests it refused (`null` for other profiles).
+    fn wheeled_json(&self, session: &OdometrySession) -> serde_json::Value {
+        let Some(nhc) = session.imu_constraint() else {
+            return serde_json::Value::Null;
+        };
+        let mounting = nhc.mounting().map(|q| {
+            let (r, p, y) = q.euler_angles();
+            [r.to_degrees(), p.to_degrees(), y.to_degrees()]
+        });
+        json!({
+            "nonholonomic_updates": nhc.applied,
+            "nonholonomic_rejected": nhc.rejected,
+            "mounting_rpy_deg": mounting,
+            "rest_vibrating_states": self.rest_vibrating,
+            "nonholonomic_rejected_states": self.nonholonomic_rejected,
         })
     }
 
@@ -248,12 +276,20 @@ pub struct Read<'a> {
     /// The files of a streamed run, with their truncations and damaged records (after the
     /// run: [`report_input`]).
     pub segments: Vec<SegmentRead>,
+    /// The profile the run used and how it was chosen.
+    pub choice: Choice,
 }
 
 impl<'a> Read<'a> {
     /// What `feed` read of `input` (with the text reader's `repairs`), and the rest the
     /// odometry aligns on, `align_s`.
-    pub fn new(input: &'a Path, feed: &Feed, repairs: LogRepairs, align_s: f64) -> Self {
+    pub fn new(
+        input: &'a Path,
+        feed: &Feed,
+        repairs: LogRepairs,
+        align_s: f64,
+        choice: Choice,
+    ) -> Self {
         Self {
             input,
             first_ns: feed.first_ns,
@@ -263,6 +299,7 @@ impl<'a> Read<'a> {
             repairs,
             align_s,
             segments: Vec::new(),
+            choice,
         }
     }
 }

@@ -9,6 +9,7 @@ use iceoryx2::prelude::ipc;
 use ipc_types::service::{self, ServiceError};
 use ipc_types::{CorrectedImuSample, RobotHint};
 use mems_stage::live::{Counts, Hooks, Receive};
+use odometry::profile::Profile;
 use odometry::session::{Input, OdometrySession};
 
 /// The session's inputs: each hint that has arrived (while the session has room for it),
@@ -40,6 +41,8 @@ impl Receive<OdometrySession> for Inputs {
 pub struct Watch {
     steady: SteadyState,
     warned_no_gyro: bool,
+    /// The profile asked for, for the summary.
+    profile: Profile,
 }
 
 impl Hooks<OdometrySession> for Watch {
@@ -63,8 +66,9 @@ impl Hooks<OdometrySession> for Watch {
 
 impl Watch {
     /// Counts from the process's allocator, as `SteadyState::from_env` configures.
-    pub fn new() -> Result<Self> {
+    pub fn new(profile: Profile) -> Result<Self> {
         Ok(Self {
+            profile,
             steady: SteadyState::from_env(|| crate::ALLOCATOR.counts())
                 .map_err(anyhow::Error::msg)?,
             warned_no_gyro: false,
@@ -89,6 +93,19 @@ impl Watch {
             stats.hints,
             session.hint_stats()
         );
+        match (self.profile, session.auto_choice()) {
+            (Profile::Auto, Some(c)) => tracing::info!(
+                "profile auto: {} platform, ran profile {} from sample time {:.3} s",
+                c.features.platform.name(),
+                c.profile.name(),
+                c.at_ns as f64 * 1e-9
+            ),
+            (Profile::Auto, None) => tracing::info!(
+                "profile auto: undecided (less than {} s of motion): ran profile other",
+                odometry::session::AUTO_DECIDE_MOVING_S
+            ),
+            (p, _) => tracing::info!("profile {}", p.name()),
+        }
         tracing::info!("{}; {}", self.steady.summary(), crate::ALLOCATOR.summary());
     }
 }

@@ -1,0 +1,127 @@
+//! The non-holonomic constraint from the IMU alone, for wheeled platforms without speed
+//! hints: a wheeled robot or vehicle that does not skid moves along its body x axis, so its
+//! lateral and vertical body velocities are zero (Brossard, Barrau, Bonnabel, "AI-IMU
+//! Dead-Reckoning", IEEE T-IV 2020, section III: the pseudo-measurements `v_lat = v_up = 0`).
+//!
+//! Frames as in [`crate::hints`]: body x forward, y left, z up; `R_bs` rotates sensor-frame
+//! vectors into it. The mounting is the one given (`--mount`), else estimated from the first
+//! drive: body z is the gravity-up direction in the sensor frame, body x the direction of the
+//! sensor-frame displacement over the first [`MOUNTING_PATH_M`] of driving (the filter's own
+//! velocity, unrevised: the first metres after a rest drift least). Until then only the
+//! vertical velocity is constrained. The constraint says nothing about the sign of the
+//! forward axis, so a drive that starts in reverse estimates the same mounting.
+//!
+//! Each update is gated: a residual beyond [`GATE_SIGMA`] standard deviations of its
+//! prediction (the filter's velocity 1-sigma and the constraint's, in quadrature) is not
+//! applied and the sample is flagged `NONHOLONOMIC_REJECTED`.
+
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+
+use crate::eskf::Eskf;
+use crate::hints::{MountingEstimator, mounting_from};
+
+/// Path of driving the mounting estimate gathers before the lateral constraint starts, m.
+pub const MOUNTING_PATH_M: f64 = 2.0;
+/// Residuals beyond this many standard deviations are rejected.
+pub const GATE_SIGMA: f64 = 5.0;
+/// 1-sigma given to the unconstrained forward component, m/s (no information).
+const FREE_MPS: f64 = 1e3;
+
+/// The IMU-only constraint's state.
+#[derive(Debug, Clone, Copy)]
+pub struct ImuConstraint {
+    /// 1-sigma over one second of driving, m/s.
+    sigma_mps: f64,
+    /// `R_bs`, given or estimated; `None` while estimating.
+    r_bs: Option<Matrix3<f64>>,
+    estimator: MountingEstimator,
+    /// Updates applied and rejected.
+    pub applied: u64,
+    /// Updates rejected by the gate.
+    pub rejected: u64,
+}
+
+/// What one call did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// The constraint was applied.
+    Applied,
+    /// The gate rejected it.
+    Rejected,
+}
+
+impl ImuConstraint {
+    /// A constraint of 1-sigma `sigma_mps` (over a second) with the mounting `mounting`
+    /// (sensor to body), or estimated when `None`.
+    pub fn new(sigma_mps: f64, mounting: Option<UnitQuaternion<f64>>) -> Self {
+        Self {
+            sigma_mps,
+            r_bs: mounting.map(|q| q.to_rotation_matrix().into_inner()),
+            estimator: MountingEstimator::default(),
+            applied: 0,
+            rejected: 0,
+        }
+    }
+
+    /// The mounting in use (given or estimated), `None` while estimating.
+    pub fn mounting(&self) -> Option<UnitQuaternion<f64>> {
+        self.r_bs.map(|r| {
+            UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r))
+        })
+    }
+
+    /// Applies the constraint to `kf` after a covariance propagation spanning `interval_s`;
+    /// `dt_s` is the last sample's interval (for the mounting estimate, fed at every call).
+    pub fn apply(&mut self, kf: &mut Eskf, dt_s: f64, interval_s: f64) -> Option<Outcome> {
+        let up_s = kf.x.q.inverse_transform_vector(&Vector3::z());
+        if self.r_bs.is_none() {
+            self.estimator
+                .add(&kf.x.q.inverse_transform_vector(&kf.x.v), dt_s);
+            if self.estimator.path_m() >= MOUNTING_PATH_M {
+                self.r_bs = self
+                    .estimator
+                    .mounting(&up_s)
+                    .map(|q| q.to_rotation_matrix().into_inner());
+            }
+        }
+        if !kf.propagated() || interval_s <= 0.0 {
+            return None;
+        }
+        let sigma = self.sigma_mps * (1.0 / interval_s).sqrt();
+        let (r_bs, lateral) = match self.r_bs {
+            Some(r) => (r, sigma),
+            None => (up_only(&up_s)?, FREE_MPS),
+        };
+        let v_b = kf.body_velocity(&r_bs);
+        let sigma_v = kf.velocity_sigma().norm();
+        let gate = |s: f64| GATE_SIGMA * s.hypot(sigma_v);
+        if v_b.z.abs() > gate(sigma) || (lateral < FREE_MPS && v_b.y.abs() > gate(lateral)) {
+            self.rejected += 1;
+            return Some(Outcome::Rejected);
+        }
+        let residual = Vector3::new(0.0, -v_b.y, -v_b.z);
+        kf.body_velocity_update(&r_bs, residual, Vector3::new(FREE_MPS, lateral, sigma));
+        self.applied += 1;
+        Some(Outcome::Applied)
+    }
+}
+
+/// A mounting whose body z is `up_s` and whose x is any perpendicular axis (for the vertical
+/// constraint alone).
+fn up_only(up_s: &Vector3<f64>) -> Option<Matrix3<f64>> {
+    let i = up_s.iamin();
+    let any = Vector3::from_fn(|r, _| if r == i { 1.0 } else { 0.0 });
+    mounting_from(&any, up_s).map(|q| q.to_rotation_matrix().into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn up_only_keeps_body_z_on_up() {
+        let up = Vector3::new(0.1, -0.2, 0.97).normalize();
+        let r = up_only(&up).unwrap();
+        assert!((r * up - Vector3::z()).norm() < 1e-12);
+    }
+}

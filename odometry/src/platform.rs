@@ -1,0 +1,288 @@
+//! The platform from the data: foot-mounted gait, wheeled motion or anything else (an arm, a
+//! hand-held box), recognized from the IMU's own samples for `--profile auto`.
+//!
+//! Method. The samples are cut into windows of [`WINDOW_S`] seconds (by time, at any rate). A
+//! window is *moving* when its gyro rms exceeds [`MOVING_GYRO_DPS`] or the standard deviation
+//! of its specific-force magnitude exceeds [`MOVING_ACCEL_G`] (a robot at walking pace on a
+//! smooth floor vibrates by 50-90 mg and 2-4 deg/s, a standing one by 5-10 mg and 0.2 deg/s);
+//! resting windows are not counted. With `g` the mean specific-force direction over every
+//! sample so far (up, sensor frame: a platform that keeps its attitude, as a foot between
+//! strides or a vehicle, holds it; a window's own mean would hold a turning car's centripetal
+//! acceleration), over the moving windows:
+//! - *tilt rate*: the rms of the angular rate's component perpendicular to `g`, deg/s (pitch and
+//!   roll rates of a level platform);
+//! - *principal-axis share*: the largest eigenvalue of the angular rate's second-moment matrix
+//!   over its trace (1 when every rotation is about one sensor axis, 1/3 when isotropic), and
+//!   the *principal axis's angle* to `g`, degrees (0-90);
+//! - *impacts per minute*: crossings of `|f| >` [`IMPACT_G`] at least [`IMPACT_GAP_S`] apart.
+//!
+//! Foot-mounted gait swings the foot about one horizontal axis (the ankle's) at hundreds of
+//! deg/s and strikes the ground once per stride with several g; wheeled motion turns about
+//! gravity and barely pitches or rolls (a small racing car on a bumpy floor strikes too). The
+//! rule (thresholds read off the corpus of docs/real-data.md, where the classes are far apart:
+//! feet 0.84-0.91 share about a horizontal axis, 168-307 deg/s tilt, 68-116 impacts/min; cars
+//! 2 deg/s tilt; hand-held 0.45-0.67 share):
+//! - foot: share >= [`FOOT_MIN_SHARE`] about an axis at least [`FOOT_MIN_AXIS_DEG`] from `g`,
+//!   tilt rate >= [`FOOT_MIN_TILT_DPS`] and impacts/min >= [`FOOT_MIN_IMPACTS_PER_MIN`];
+//! - wheeled: tilt rate <= [`WHEELED_MAX_TILT_DPS`] without impacts, or share >=
+//!   [`WHEELED_MIN_SHARE`] about an axis within [`WHEELED_MAX_AXIS_DEG`] of `g` (turning about
+//!   gravity);
+//! - other: anything else, or fewer than [`MIN_MOVING_S`] seconds of motion.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+/// Window length, s.
+pub const WINDOW_S: f64 = 1.0;
+/// Gyro rms above which a window is moving, deg/s.
+pub const MOVING_GYRO_DPS: f64 = 5.0;
+/// Standard deviation of `|f|` above which a window is moving, g.
+pub const MOVING_ACCEL_G: f64 = 0.02;
+/// Specific-force magnitude of an impact, g.
+pub const IMPACT_G: f64 = 2.0;
+/// Impacts closer than this are one, s.
+pub const IMPACT_GAP_S: f64 = 0.25;
+/// Fewest moving seconds a decision is made on.
+pub const MIN_MOVING_S: f64 = 5.0;
+/// Principal-axis share a foot reaches.
+pub const FOOT_MIN_SHARE: f64 = 0.78;
+/// Tilt rate a foot reaches, deg/s.
+pub const FOOT_MIN_TILT_DPS: f64 = 60.0;
+/// Impacts per moving minute a walk reaches (one per stride at 0.5-1 Hz is 30-60).
+pub const FOOT_MIN_IMPACTS_PER_MIN: f64 = 20.0;
+/// Tilt rate a wheeled platform stays under, deg/s.
+pub const WHEELED_MAX_TILT_DPS: f64 = 10.0;
+/// Angle from gravity a foot's principal rotation axis exceeds, degrees.
+pub const FOOT_MIN_AXIS_DEG: f64 = 45.0;
+/// Principal-axis share of a platform turning about gravity.
+pub const WHEELED_MIN_SHARE: f64 = 0.85;
+/// Angle from gravity of a wheeled platform's principal rotation axis, at most, degrees.
+pub const WHEELED_MAX_AXIS_DEG: f64 = 30.0;
+
+/// A platform class.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Platform {
+    /// Foot-mounted sensor on a walking person.
+    Foot,
+    /// Wheeled robot, cart or road vehicle.
+    Wheeled,
+    /// Anything else: an arm, a hand-held box, or too little motion to tell.
+    Other,
+}
+
+impl Platform {
+    /// Its name as printed (`foot`, `wheeled`, `other`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Foot => "foot",
+            Self::Wheeled => "wheeled",
+            Self::Other => "other",
+        }
+    }
+}
+
+/// What the classifier measured, and the class it gives.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Features {
+    /// Moving time, s (moving windows times [`WINDOW_S`]).
+    pub moving_s: f64,
+    /// Rms of the angular rate perpendicular to gravity over the moving windows, deg/s.
+    pub tilt_rate_dps: f64,
+    /// Largest eigenvalue of the angular rate's second moment over its trace.
+    pub principal_share: f64,
+    /// Angle between that eigenvalue's axis and gravity, degrees (0-90).
+    pub principal_axis_deg: f64,
+    /// Impacts per moving minute.
+    pub impacts_per_min: f64,
+    /// The class the rule gives.
+    pub platform: Platform,
+}
+
+/// One window's sums.
+#[derive(Debug, Clone, Copy, Default)]
+struct Window {
+    start_ns: u64,
+    n: u32,
+    f_sum: Vector3<f64>,
+    f_norm_sum: f64,
+    f_norm_sq: f64,
+    w_sum_sq: f64,
+    ww: Matrix3<f64>,
+    impacts: u32,
+}
+
+/// The classifier: feed it samples in time order ([`Classifier::push`]), read
+/// [`Classifier::features`] at any time. It holds a few sums (no allocation).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Classifier {
+    window: Window,
+    last_impact_ns: Option<u64>,
+    moving_windows: u32,
+    moving_samples: u64,
+    /// Sum of every sample's specific force, g.
+    f_all: Vector3<f64>,
+    ww: Matrix3<f64>,
+    impacts: u64,
+}
+
+impl Classifier {
+    /// Takes one sample: time `t_ns` (ns, increasing), specific force `f_g` (g, sensor frame),
+    /// angular rate `w_dps` (deg/s, sensor frame).
+    pub fn push(&mut self, t_ns: u64, f_g: [f64; 3], w_dps: [f64; 3]) {
+        let window_ns = (WINDOW_S * 1e9) as u64;
+        if self.window.n > 0 && t_ns.saturating_sub(self.window.start_ns) >= window_ns {
+            self.close_window();
+        }
+        self.f_all += Vector3::from(f_g);
+        let w = &mut self.window;
+        if w.n == 0 {
+            w.start_ns = t_ns;
+        }
+        let f = Vector3::from(f_g);
+        let r = Vector3::from(w_dps);
+        let norm = f.norm();
+        w.n += 1;
+        w.f_sum += f;
+        w.f_norm_sum += norm;
+        w.f_norm_sq += norm * norm;
+        w.w_sum_sq += r.norm_squared();
+        w.ww += r * r.transpose();
+        if norm > IMPACT_G {
+            let gap_ns = (IMPACT_GAP_S * 1e9) as u64;
+            if self
+                .last_impact_ns
+                .is_none_or(|t| t_ns.saturating_sub(t) > gap_ns)
+            {
+                w.impacts += 1;
+            }
+            self.last_impact_ns = Some(t_ns);
+        }
+    }
+
+    fn close_window(&mut self) {
+        let w = std::mem::take(&mut self.window);
+        let n = f64::from(w.n);
+        if w.n < 2 {
+            return;
+        }
+        let mean_norm = w.f_norm_sum / n;
+        let norm_sd = (w.f_norm_sq / n - mean_norm * mean_norm).max(0.0).sqrt();
+        let gyro_rms = (w.w_sum_sq / n).sqrt();
+        if gyro_rms <= MOVING_GYRO_DPS && norm_sd <= MOVING_ACCEL_G {
+            return;
+        }
+        self.ww += w.ww;
+        self.moving_windows += 1;
+        self.moving_samples += u64::from(w.n);
+        self.impacts += u64::from(w.impacts);
+    }
+
+    /// Moving time seen so far, s (closed windows only).
+    pub fn moving_s(&self) -> f64 {
+        f64::from(self.moving_windows) * WINDOW_S
+    }
+
+    /// The features over the windows closed so far, and the class they give. Call
+    /// [`Classifier::finish`] first at the end of a recording to count its last window.
+    pub fn features(&self) -> Features {
+        let moving_s = self.moving_s();
+        let n = self.moving_samples.max(1) as f64;
+        let up = self.f_all.try_normalize(1e-12).unwrap_or_else(Vector3::z);
+        let trace = self.ww.trace();
+        let yaw_sq = (up.transpose() * self.ww * up)[(0, 0)];
+        let eigen = SymmetricEigen::new(self.ww);
+        let i = eigen.eigenvalues.imax();
+        let axis = eigen.eigenvectors.column(i).into_owned();
+        let (principal_share, principal_axis_deg) = if trace > 0.0 {
+            let cos = axis.dot(&up).abs().min(1.0);
+            (eigen.eigenvalues[i] / trace, cos.acos().to_degrees())
+        } else {
+            (0.0, 0.0)
+        };
+        let mut f = Features {
+            moving_s,
+            tilt_rate_dps: ((trace - yaw_sq).max(0.0) / n).sqrt(),
+            principal_share,
+            principal_axis_deg,
+            impacts_per_min: self.impacts as f64 / moving_s.max(WINDOW_S) * 60.0,
+            platform: Platform::Other,
+        };
+        f.platform = classify(&f);
+        f
+    }
+
+    /// Closes the window in progress (the end of a recording).
+    pub fn finish(&mut self) {
+        if self.window.n > 0 {
+            self.close_window();
+        }
+    }
+}
+
+/// The rule of the module documentation.
+fn classify(f: &Features) -> Platform {
+    if f.moving_s < MIN_MOVING_S {
+        return Platform::Other;
+    }
+    if f.principal_share >= FOOT_MIN_SHARE
+        && f.principal_axis_deg >= FOOT_MIN_AXIS_DEG
+        && f.tilt_rate_dps >= FOOT_MIN_TILT_DPS
+        && f.impacts_per_min >= FOOT_MIN_IMPACTS_PER_MIN
+    {
+        return Platform::Foot;
+    }
+    let level = f.tilt_rate_dps <= WHEELED_MAX_TILT_DPS && f.impacts_per_min == 0.0;
+    let turning = f.principal_share >= WHEELED_MIN_SHARE
+        && f.principal_axis_deg <= WHEELED_MAX_AXIS_DEG;
+    if level || turning {
+        return Platform::Wheeled;
+    }
+    Platform::Other
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Feeds `seconds` of `f(t)` at 100 Hz.
+    fn feed(c: &mut Classifier, seconds: f64, f: impl Fn(f64) -> ([f64; 3], [f64; 3])) {
+        for i in 0..(seconds * 100.0) as u64 {
+            let t = i as f64 / 100.0;
+            let (a, w) = f(t);
+            c.push(i * 10_000_000, a, w);
+        }
+        c.finish();
+    }
+
+    #[test]
+    fn standing_still_is_too_little_motion() {
+        let mut c = Classifier::default();
+        feed(&mut c, 30.0, |_| ([0.0, 0.0, 1.0], [0.1, -0.1, 0.0]));
+        let f = c.features();
+        assert_eq!((f.moving_s, f.platform), (0.0, Platform::Other));
+    }
+
+    #[test]
+    fn turning_about_gravity_with_vibration_is_wheeled() {
+        let mut c = Classifier::default();
+        feed(&mut c, 20.0, |t| {
+            let buzz = 0.05 * (t * 2.0 * std::f64::consts::PI * 31.0).sin();
+            ([0.0, buzz, 1.0 + buzz], [0.5, -0.5, 20.0 * (t * 0.3).sin()])
+        });
+        let f = c.features();
+        assert!(f.moving_s >= 19.0, "{f:?}");
+        assert_eq!(f.platform, Platform::Wheeled, "{f:?}");
+    }
+
+    #[test]
+    fn swinging_about_one_axis_with_strikes_is_a_foot() {
+        let mut c = Classifier::default();
+        feed(&mut c, 20.0, |t| {
+            let phase = t % 1.0;
+            let strike = if phase < 0.02 { 3.0 } else { 0.0 };
+            let swing = 300.0 * (t * 2.0 * std::f64::consts::PI).sin();
+            ([0.0, 0.0, 1.0 + strike], [5.0, swing, 2.0])
+        });
+        assert_eq!(c.features().platform, Platform::Foot, "{:?}", c.features());
+    }
+}
