@@ -9,6 +9,7 @@ import acquisition
 import diagnosis
 import odometry
 import pages
+import auto_profile
 from common import Context, Section  # noqa: F401  (Context: for docs/figures.py)
 
 
@@ -26,6 +27,7 @@ SECTIONS = {
         Section("hints", "hints.md", ["hints-smooth-floor"], "9 min", odometry.hints),
     ]
     + pages.SECTIONS
+    + auto_profile.SECTIONS
     + acquisition.SECTIONS
     + diagnosis.SECTIONS
 }

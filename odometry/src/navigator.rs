@@ -581,7 +581,10 @@ impl Navigator {
                     hints.stats.speed_skipped += 1;
                 }
             }
-            if let Some(nhc) = self.nhc.as_mut().filter(|_| hs.flags & odometry_flags::HINT_SPEED == 0)
+            if let Some(nhc) = self
+                .nhc
+                .as_mut()
+                .filter(|_| hs.flags & odometry_flags::HINT_SPEED == 0)
             {
                 let interval = self.cfg.propagation_interval_s.max(dt);
                 if nhc.apply(kf, dt, interval) == Some(Outcome::Rejected) {

@@ -42,7 +42,7 @@ pub const IMPACT_G: f64 = 2.0;
 /// Impacts closer than this are one, s.
 pub const IMPACT_GAP_S: f64 = 0.25;
 /// Fewest moving seconds a decision is made on.
-pub const MIN_MOVING_S: f64 = 5.0;
+pub const MIN_MOVING_S: f64 = 2.0;
 /// Principal-axis share a foot reaches.
 pub const FOOT_MIN_SHARE: f64 = 0.78;
 /// Tilt rate a foot reaches, deg/s.
@@ -232,8 +232,8 @@ fn classify(f: &Features) -> Platform {
         return Platform::Foot;
     }
     let level = f.tilt_rate_dps <= WHEELED_MAX_TILT_DPS && f.impacts_per_min == 0.0;
-    let turning = f.principal_share >= WHEELED_MIN_SHARE
-        && f.principal_axis_deg <= WHEELED_MAX_AXIS_DEG;
+    let turning =
+        f.principal_share >= WHEELED_MIN_SHARE && f.principal_axis_deg <= WHEELED_MAX_AXIS_DEG;
     if level || turning {
         return Platform::Wheeled;
     }

@@ -35,9 +35,9 @@ use ipc_types::{
 use mems_stage::Stage;
 
 use crate::config::OdometryConfig;
+use crate::hints::{HintConfig, HintConfigError, HintError, HintStats, check_hint};
 use crate::platform::{Classifier, Features};
 use crate::profile::Profile;
-use crate::hints::{HintConfig, HintConfigError, HintError, HintStats, check_hint};
 use crate::stage::{OdometryError, OdometryStage};
 
 /// Hints the session holds for samples still to come: a hint rate 20 times the 50 Hz of a

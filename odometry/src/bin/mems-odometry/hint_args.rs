@@ -55,7 +55,9 @@ impl HintArgs {
 fn parse_mount(mount: &str) -> Result<UnitQuaternion<f64>> {
     let parts: Vec<&str> = mount.split(',').collect();
     let [r, p, y] = parts.as_slice() else {
-        bail!("--mount {mount:?}: expected `estimate` or three comma-separated angles R,P,Y in degrees");
+        bail!(
+            "--mount {mount:?}: expected `estimate` or three comma-separated angles R,P,Y in degrees"
+        );
     };
     let mut angles = [0.0; 3];
     for (a, text) in angles.iter_mut().zip([r, p, y]) {
