@@ -2,10 +2,11 @@
 //! hand-held box), recognized from the IMU's own samples for `--profile auto`.
 //!
 //! Method. The samples are cut into windows of [`WINDOW_S`] seconds (by time, at any rate). A
-//! window is *moving* when its gyro rms exceeds [`MOVING_GYRO_DPS`] or the standard deviation
-//! of its specific-force magnitude exceeds [`MOVING_ACCEL_G`] (a robot at walking pace on a
-//! smooth floor vibrates by 50-90 mg and 2-4 deg/s, a standing one by 5-10 mg and 0.2 deg/s);
-//! resting windows are not counted. With `g` the mean specific-force direction over every
+//! window is *moving* when its gyro rms exceeds [`MOVING_GYRO_DPS`], the standard deviation
+//! of its specific-force magnitude exceeds [`MOVING_ACCEL_G`], or either spread (the gyro's
+//! about its window mean) exceeds [`MOVING_FACTOR`] times the quietest window's so far (a robot
+//! at walking pace on a smooth floor vibrates by 50-90 mg and 2-4 deg/s, a standing one by 5-10
+//! mg and 0.2 deg/s); resting windows are not counted. With `g` the mean specific-force direction over every
 //! sample so far (up, sensor frame: a platform that keeps its attitude, as a foot between
 //! strides or a vehicle, holds it; a window's own mean would hold a turning car's centripetal
 //! acceleration), over the moving windows:
@@ -37,6 +38,10 @@ pub const WINDOW_S: f64 = 1.0;
 pub const MOVING_GYRO_DPS: f64 = 5.0;
 /// Standard deviation of `|f|` above which a window is moving, g.
 pub const MOVING_ACCEL_G: f64 = 0.02;
+/// A window whose spread exceeds this many times the quietest window's moves.
+pub const MOVING_FACTOR: f64 = 3.0;
+/// Floors of the quietest spreads (a quantised part can show none): gyro deg/s, |f| g.
+const QUIET_FLOOR: (f64, f64) = (0.05, 1e-3);
 /// Specific-force magnitude of an impact, g.
 pub const IMPACT_G: f64 = 2.0;
 /// Impacts closer than this are one, s.
@@ -106,6 +111,7 @@ struct Window {
     f_sum: Vector3<f64>,
     f_norm_sum: f64,
     f_norm_sq: f64,
+    w_sum: Vector3<f64>,
     w_sum_sq: f64,
     ww: Matrix3<f64>,
     impacts: u32,
@@ -121,6 +127,8 @@ pub struct Classifier {
     moving_samples: u64,
     /// Sum of every sample's specific force, g.
     f_all: Vector3<f64>,
+    /// The quietest window's gyro and |f| spreads so far, deg/s and g.
+    quietest: Option<(f64, f64)>,
     ww: Matrix3<f64>,
     impacts: u64,
 }
@@ -145,6 +153,7 @@ impl Classifier {
         w.f_sum += f;
         w.f_norm_sum += norm;
         w.f_norm_sq += norm * norm;
+        w.w_sum += r;
         w.w_sum_sq += r.norm_squared();
         w.ww += r * r.transpose();
         if norm > IMPACT_G {
@@ -168,7 +177,16 @@ impl Classifier {
         let mean_norm = w.f_norm_sum / n;
         let norm_sd = (w.f_norm_sq / n - mean_norm * mean_norm).max(0.0).sqrt();
         let gyro_rms = (w.w_sum_sq / n).sqrt();
-        if gyro_rms <= MOVING_GYRO_DPS && norm_sd <= MOVING_ACCEL_G {
+        let gyro_sd = (w.w_sum_sq / n - (w.w_sum / n).norm_squared())
+            .max(0.0)
+            .sqrt();
+        let spread = (gyro_sd.max(QUIET_FLOOR.0), norm_sd.max(QUIET_FLOOR.1));
+        let louder = self
+            .quietest
+            .is_some_and(|(g, a)| spread.0 > MOVING_FACTOR * g || spread.1 > MOVING_FACTOR * a);
+        let quietest = self.quietest.get_or_insert(spread);
+        *quietest = (quietest.0.min(spread.0), quietest.1.min(spread.1));
+        if gyro_rms <= MOVING_GYRO_DPS && norm_sd <= MOVING_ACCEL_G && !louder {
             return;
         }
         self.ww += w.ww;

@@ -1,8 +1,9 @@
 //! `--profile auto` (the default) through the real binaries: `mems-odometry offline` recognizes
 //! the platform of simulated recordings written by `mems-sim`: a walk with the IMU on a foot is
-//! a foot (profile pedestrian), a drive with turns is wheeled (profile vehicle), and a sensor
-//! turned by hand or an arm through orientations, held 6 s each, is neither (profile other).
-//! The choice and its figures are in the `--json` result.
+//! a foot (profile pedestrian, from the whole recording), a drive with turns is wheeled
+//! (profile vehicle, decided as live after 10 s of motion), and a sensor turned by hand or an
+//! arm through orientations, held 6 s each, is neither (profile other). The choice and its
+//! figures are in the `--json` result.
 
 use integration_tests::{path_arg, run_ok, unique_namespace};
 
@@ -28,7 +29,7 @@ fn auto_tells_a_foot_a_wheeled_robot_and_an_arm_apart() {
     let drive = profile_of(
         &dir,
         "drive",
-        &["drive", "--duration", "120", "--turns", "on"],
+        &["drive", "--duration", "300", "--turns", "on"],
     );
     let arm = profile_of(&dir, "arm", &["orientations", "--n", "10", "--hold", "6"]);
     for (v, platform, profile) in [
@@ -36,7 +37,7 @@ fn auto_tells_a_foot_a_wheeled_robot_and_an_arm_apart() {
         (&drive, "wheeled", "vehicle"),
         (&arm, "other", "other"),
     ] {
-        assert_eq!(v["chosen_by"], "auto", "{v}");
+        assert!(v["chosen_by"].as_str().unwrap().starts_with("auto"), "{v}");
         assert_eq!(v["platform"]["platform"], platform, "{v}");
         assert_eq!(v["profile"], profile, "{v}");
     }

@@ -104,9 +104,9 @@ impl Cli {
     }
 }
 
-/// The detector of the calibration stage: the one asked for, else the profile's (the GLRT for
-/// a vehicle, on the accelerometer alone above 1000 Hz, where the sensor samples no gyroscope;
-/// SHOE for a pedestrian).
+/// The detector of the calibration stage: the one asked for, else the profile's (SHOE for a
+/// pedestrian; otherwise, `auto` included, the GLRT, on the accelerometer alone above 1000 Hz,
+/// where the sensor samples no gyroscope).
 pub fn detector(cli: &Cli) -> DetectorKind {
     match (cli.detector, cli.profile) {
         (Some(d), _) => d,

@@ -18,6 +18,7 @@ use anyhow::{Result, anyhow};
 use calibrate::stage::{CalibrationStage, RefineConfig};
 use ipc_types::odometry_flags;
 use mems_stage::{Chain, Either};
+use odometry::profile::Profile;
 use odometry::session::{NoGyro, OdometrySession};
 
 use crate::load::odometry_config;
@@ -72,9 +73,22 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     let (source, repairs) = Source::open(&args)?;
     let calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
         .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
-    let mut config = choice.profile.odometry(odometry_config(&file));
-    config.rest_updates = !args.no_zupt;
-    let session = OdometrySession::new(config, args.hints.config()?, NoGyro::HoldAttitude)?;
+    let mut base = odometry_config(&file);
+    base.rest_updates = !args.no_zupt;
+    let hints = args.hints.config()?;
+    let (config, session) = match choice.profile {
+        Profile::Auto => (
+            Profile::Other.odometry(base),
+            OdometrySession::auto(base, hints, NoGyro::HoldAttitude)?,
+        ),
+        p => {
+            let config = p.odometry(base);
+            (
+                config,
+                OdometrySession::new(config, hints, NoGyro::HoldAttitude)?,
+            )
+        }
+    };
     let mut chain = Chain {
         first: calibration,
         second: session,

@@ -1,37 +1,50 @@
 //! `--profile auto` offline: the platform recognized from the whole recording
-//! (`odometry::platform`) before the stages run, since the profile sets the calibration stage's
-//! detector as well as the odometry's rest handling.
+//! (`odometry::platform`) before the stages run. A foot runs the pedestrian profile from the
+//! start (its SHOE detector is the calibration stage's, which a live stack cannot change once
+//! running); any other recording runs as `mems-odometry serve --profile auto` does (the GLRT,
+//! the session deciding after 10 s of motion, `odometry::session`), so that offline and live
+//! give the same states.
 
 use std::path::Path;
 
 use anyhow::Result;
 use ipc_types::{RawImuSample, raw_flags};
-use odometry::platform::{Classifier, Features};
+use odometry::platform::{Classifier, Features, Platform};
 use odometry::profile::Profile;
+use odometry::session::AutoChoice;
 use recording::mcap::run::{Item, RawRun};
 
 /// The profile a run uses and how it was chosen.
 #[derive(Debug, Clone, Copy)]
 pub struct Choice {
-    /// The profile the stages run with.
+    /// The profile the stages start with: `Auto` when the session decides as live.
     pub profile: Profile,
     /// What the recognition measured, when `--profile auto` asked for it.
     pub features: Option<Features>,
 }
 
 impl Choice {
-    /// The JSON record of the choice.
-    pub fn json(&self) -> serde_json::Value {
+    /// The JSON record of the choice, with the session's decision `live` (the live rule's).
+    pub fn json(&self, live: Option<AutoChoice>) -> serde_json::Value {
+        let (profile, chosen_by) = match (self.features, self.profile, live) {
+            (None, p, _) => (p, "flag"),
+            (Some(_), Profile::Auto, Some(c)) => (c.profile, "auto: after 10 s of motion"),
+            (Some(_), Profile::Auto, None) => (Profile::Other, "auto: undecided"),
+            (Some(_), p, _) => (p, "auto: whole recording"),
+        };
         serde_json::json!({
-            "profile": self.profile.name(),
-            "chosen_by": if self.features.is_some() { "auto" } else { "flag" },
+            "profile": profile.name(),
+            "chosen_by": chosen_by,
             "platform": self.features,
+            "decided_at_s": live.map(|c| c.at_ns as f64 * 1e-9),
+            "live_rule_platform": live.map(|c| c.features),
         })
     }
 }
 
-/// The profile for `asked` at `input`: itself, or for `Auto` the one the recognized platform
-/// takes (said on stderr with its figures).
+/// The profile for `asked` at `input`: itself, or for `Auto` the pedestrian profile when the
+/// whole recording is a foot's and otherwise `Auto` (the session decides as live), said on
+/// stderr with the figures.
 pub fn choose(asked: Profile, input: &Path, mcap: bool) -> Result<Choice> {
     if asked != Profile::Auto {
         return Ok(Choice {
@@ -57,12 +70,20 @@ pub fn choose(asked: Profile, input: &Path, mcap: bool) -> Result<Choice> {
     }
     c.finish();
     let f = c.features();
-    let profile = Profile::for_platform(f.platform);
+    // Only a foot needs a detector of its own; the rest decide as live.
+    let profile = match f.platform {
+        Platform::Foot => Profile::Pedestrian,
+        Platform::Wheeled | Platform::Other => Profile::Auto,
+    };
     tracing::info!(
-        "--profile auto: {} platform, profile {} (over {:.0} s of motion: tilt rate {:.1} deg/s, \
+        "--profile auto: the whole recording looks {} ({}) (over {:.0} s of motion: tilt rate {:.1} deg/s, \
          principal-axis share {:.2} at {:.0} deg from gravity, {:.1} impacts/min)",
         f.platform.name(),
-        profile.name(),
+        if profile == Profile::Auto {
+            "not a foot: the odometry decides as live, after 10 s of motion"
+        } else {
+            "profile pedestrian"
+        },
         f.moving_s,
         f.tilt_rate_dps,
         f.principal_share,

@@ -169,7 +169,7 @@ impl Summary {
         if json {
             let speed_updates = chain.second.hint_stats().speed_updates;
             let mut result = self.json(&end, truth_error, aligned_at_s, read, speed_updates);
-            result["profile"] = read.choice.json();
+            result["profile"] = read.choice.json(chain.second.auto_choice());
             result["wheeled"] = self.wheeled_json(&chain.second);
             println!("{result}");
         } else {
