@@ -24,23 +24,30 @@ def result(out, what):
 
 
 def features_row(name, truth, r):
-    """A table row: what the recording is, what auto chose and the figures it chose on."""
+    """A table row: what the recording is, what auto found over the whole recording and the
+    figures it found it on, the profile the run used and how it was chosen."""
     p = r["profile"]
     f = p.get("platform") or {}
+    live = p.get("live_rule_platform")
+    how = p["chosen_by"].replace("auto: ", "")
+    if live:
+        how += f" ({live['platform']}, at {p['decided_at_s']:.0f} s)"
     return [
         name,
         truth,
         f.get("platform", "-"),
-        p["profile"],
         f"{f.get('moving_s', 0):.0f}",
         f"{f.get('tilt_rate_dps', 0):.1f}",
         f"{f.get('principal_share', 0):.2f}",
         f"{f.get('principal_axis_deg', 0):.0f}",
         f"{f.get('impacts_per_min', 0):.1f}",
+        p["profile"],
+        how,
     ]
 
 
-HEADER = ["recording", "class", "auto: platform", "profile", "moving s", "tilt rate deg/s", "principal share", "axis from gravity deg", "impacts/min"]
+HEADER = ["recording", "class", "whole recording", "moving s", "tilt rate deg/s", "principal share", "axis from gravity deg", "impacts/min", "profile used", "chosen"]
+PROFILE_OF_CLASS = {"foot": "pedestrian", "wheeled": "vehicle", "vehicle": "vehicle", "handheld": "other", "arm": "other", "other": "other"}
 
 
 def auto(ctx):
@@ -71,8 +78,10 @@ def auto(ctx):
             raise Failed(f"bench.py: {r['id']} gave no result")
         rows.append(features_row(r["id"], r["sidecar"]["platform"], r["odometry"]))
     rows += [features_row(name, truth, result(out, name)) for name, truth, out in outs]
-    right = sum(1 for r in rows if r[1] == r[2] or (r[1] in ("vehicle", "wheeled") and r[2] == "wheeled") or (r[1] in ("handheld", "arm") and r[2] == "other"))
-    return {"platform-auto": table(HEADER, rows) + f"\n\nRecognized as their class: {right} of {len(rows)}."}
+    whole = sum(1 for r in rows if PROFILE_OF_CLASS[r[1]] == PROFILE_OF_CLASS[r[2]])
+    used = sum(1 for r in rows if PROFILE_OF_CLASS[r[1]] == r[8])
+    counts = f"The whole recording recognized as its class: {whole} of {len(rows)}; the profile used is its class's: {used} of {len(rows)}."
+    return {"platform-auto": table(HEADER, rows) + "\n\n" + counts}
 
 
 def wheeled(ctx):
