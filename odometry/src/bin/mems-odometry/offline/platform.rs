@@ -1,5 +1,5 @@
 //! `--profile auto` offline: the platform recognized from the whole recording
-//! (`odometry::platform`) before the stages run. A foot runs the pedestrian profile from the
+//! (`odometry::platform`; up to its first 120 s of motion) before the stages run. A foot runs the pedestrian profile from the
 //! start (its SHOE detector is the calibration stage's, which a live stack cannot change once
 //! running); any other recording runs as `mems-odometry serve --profile auto` does (the GLRT,
 //! the session deciding after 10 s of motion, `odometry::session`), so that offline and live
@@ -13,6 +13,9 @@ use odometry::platform::{Classifier, Features, Platform};
 use odometry::profile::Profile;
 use odometry::session::AutoChoice;
 use recording::mcap::run::{Item, RawRun};
+
+/// Motion after which the look at the recording stops, s.
+const PREPASS_MOVING_S: f64 = 120.0;
 
 /// The profile a run uses and how it was chosen.
 #[derive(Debug, Clone, Copy)]
@@ -53,20 +56,29 @@ pub fn choose(asked: Profile, input: &Path, mcap: bool) -> Result<Choice> {
         });
     }
     let mut c = Classifier::default();
+    // Feeds a sample; `true` once enough motion has been seen.
     let mut push = |r: &RawImuSample| {
         if r.flags & raw_flags::GYRO_VALID != 0 {
             c.push(r.stamps.sample_ns, r.accel_g, r.gyro_dps);
         }
+        c.moving_s() >= PREPASS_MOVING_S
     };
+    // Stops at PREPASS_MOVING_S of motion: enough to tell, and a long run is not read twice.
     if mcap {
         for item in RawRun::open(input, false)? {
-            if let Item::Raw(r) = item? {
-                push(&r);
+            if let Item::Raw(r) = item?
+                && push(&r)
+            {
+                break;
             }
         }
     } else {
         let recording = recording::load_raw_with(input, recording::LogPolicy::Repair)?;
-        recording.samples.iter().for_each(&mut push);
+        for r in &recording.samples {
+            if push(r) {
+                break;
+            }
+        }
     }
     c.finish();
     let f = c.features();
