@@ -43,3 +43,71 @@ fn auto_tells_a_foot_a_wheeled_robot_and_an_arm_apart() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Live: a simulated drive replayed (`mems-replay --max`) into `mems-calibrate serve` ->
+/// `mems-odometry serve` (no `--profile`: auto) is recognized as wheeled after 10 s of motion,
+/// said on the odometry process's stderr, and its exit summary names the profile it ran.
+#[test]
+fn live_auto_decides_wheeled_on_a_replayed_drive_and_says_so() {
+    use integration_tests::{Proc, calibrate_sim_part};
+    use std::time::Duration;
+    let ns = unique_namespace("platform-live");
+    let dir = std::env::temp_dir().join(&ns);
+    std::fs::create_dir_all(&dir).unwrap();
+    let calib = calibrate_sim_part(&dir, 78);
+    let calib = path_arg(&calib);
+    let drive = dir.join("drive.mcap");
+    run_ok(
+        "mems-sim",
+        &[
+            "drive",
+            "--duration",
+            "300",
+            "--turns",
+            "on",
+            "--rate",
+            "200",
+            "--seed",
+            "1",
+            "--out",
+            path_arg(&drive),
+        ],
+    );
+    let log = dir.join("odometry.log");
+    let ns_args = ["--namespace", ns.as_str()];
+    let odometry = Proc::spawn_logged(
+        "mems-odometry",
+        &[&["serve", "--calib", calib][..], &ns_args].concat(),
+        &log,
+    );
+    let calibrate = Proc::spawn(
+        "mems-calibrate",
+        &[&["serve", "--calib", calib][..], &ns_args].concat(),
+    );
+    let (status, out) = Proc::spawn(
+        "mems-replay",
+        &[
+            &[path_arg(&drive), "--max", "--wait-subscribers", "1"][..],
+            &ns_args,
+        ]
+        .concat(),
+    )
+    .wait(Duration::from_secs(120));
+    assert!(status.success(), "mems-replay failed: {status}: {out}");
+    std::thread::sleep(Duration::from_millis(2000));
+    for p in [calibrate, odometry] {
+        p.signal(libc::SIGTERM);
+        let (status, _) = p.wait(Duration::from_secs(20));
+        assert!(status.success(), "a stage failed: {status}");
+    }
+    let stderr = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        stderr.contains("--profile auto: wheeled platform after 10 s of motion"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("profile auto: wheeled platform, ran profile vehicle"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
