@@ -94,17 +94,19 @@ fn live_auto_decides_wheeled_on_a_replayed_drive_and_says_so() {
     )
     .wait(Duration::from_secs(120));
     assert!(status.success(), "mems-replay failed: {status}: {out}");
-    std::thread::sleep(Duration::from_millis(2000));
+    // The decision comes at the drive's tenth second of motion, long before its end: wait for
+    // the odometry to reach it (it may lag the replay on a loaded machine).
+    let decided = "--profile auto: wheeled platform after 10 s of motion";
+    integration_tests::wait_until(Duration::from_secs(60), "the live decision", || {
+        std::fs::read_to_string(&log).is_ok_and(|s| s.contains(decided))
+    });
     for p in [calibrate, odometry] {
         p.signal(libc::SIGTERM);
         let (status, _) = p.wait(Duration::from_secs(20));
         assert!(status.success(), "a stage failed: {status}");
     }
     let stderr = std::fs::read_to_string(&log).unwrap();
-    assert!(
-        stderr.contains("--profile auto: wheeled platform after 10 s of motion"),
-        "{stderr}"
-    );
+    assert!(stderr.contains(decided), "{stderr}");
     assert!(
         stderr.contains("profile auto: wheeled platform, ran profile vehicle"),
         "{stderr}"
