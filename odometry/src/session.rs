@@ -200,7 +200,7 @@ impl Stage for OdometrySession {
         while let Some(h) = self.waiting.front()
             && h.stamps.acquired_ns <= s.stamps.sample_ns
         {
-            let checked = self.stage.hint(h);
+            let checked = self.stage.hint(h, emit);
             debug_assert!(checked.is_ok(), "checked when queued");
             self.waiting.pop_front();
         }
@@ -233,10 +233,14 @@ impl Stage for OdometrySession {
         self.stage.finish(emit);
     }
 
-    /// A sample that settles a zero-state batch is followed by that batch's settling and
-    /// revisions (a few hundred us) after its live state.
-    fn work_follows(input: &Input, output: &OdometryState) -> bool {
-        matches!(input, Input::Sample(s) if s.flags & corrected_flags::PROVISIONAL == 0)
-            && output.flags & odometry_flags::REVISION == 0
+    /// A sample that settled a zero-state batch: that batch's settling and revisions (a few
+    /// hundred us) are due.
+    fn postprocess_due(&self) -> bool {
+        self.stage.postprocess_due()
+    }
+
+    /// The stage's settling and revisions ([`OdometryStage::postprocess`]).
+    fn postprocess(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        self.stage.postprocess(emit);
     }
 }
