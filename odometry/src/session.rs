@@ -282,8 +282,9 @@ impl Stage for OdometrySession {
     type Output = OdometryState;
     type Refusal = Refusal;
 
-    /// A sample: the hints published by its time go to the stage, then the sample; its state
-    /// first, then any revisions. A hint: queued.
+    /// A sample: the previous sample's settling if no driver did it ([`Self::postprocess`]),
+    /// then the hints published by its time go to the stage, then the sample: its live state.
+    /// A hint: queued.
     fn process(
         &mut self,
         input: &Input,
@@ -293,11 +294,13 @@ impl Stage for OdometrySession {
             Input::Hint(h) => return self.queue(h),
             Input::Sample(s) => s,
         };
+        // Before anything here can change the stage (a new session, a recognized platform).
+        self.stage.postprocess(emit);
         self.new_session(s, emit);
         while let Some(h) = self.waiting.front()
             && h.stamps.acquired_ns <= s.stamps.sample_ns
         {
-            let checked = self.stage.hint(h);
+            let checked = self.stage.hint(h, emit);
             debug_assert!(checked.is_ok(), "checked when queued");
             self.waiting.pop_front();
         }
@@ -334,10 +337,14 @@ impl Stage for OdometrySession {
         self.stage.finish(emit);
     }
 
-    /// A sample that settles a zero-state batch is followed by that batch's settling and
-    /// revisions (a few hundred us) after its live state.
-    fn work_follows(input: &Input, output: &OdometryState) -> bool {
-        matches!(input, Input::Sample(s) if s.flags & corrected_flags::PROVISIONAL == 0)
-            && output.flags & odometry_flags::REVISION == 0
+    /// A sample that settled a zero-state batch: that batch's settling and revisions (a few
+    /// hundred us) are due.
+    fn postprocess_due(&self) -> bool {
+        self.stage.postprocess_due()
+    }
+
+    /// The stage's settling and revisions ([`OdometryStage::postprocess`]).
+    fn postprocess(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        self.stage.postprocess(emit);
     }
 }

@@ -73,6 +73,11 @@
 //! a hint came while samples were unsettled) its state is rebuilt from the newest copy and the
 //! inputs since, and it runs until the two agree again. Every sample is therefore navigated
 //! about once, but around the changes of the flags.
+//!
+//! The settling is the stage's postprocess ([`OdometryStage::postprocess`], Copper's
+//! `postprocess` after `process`): the live driver calls it after the sample's state is
+//! published and its subscribers woken, the offline driver right after `process`; the next
+//! input does it first if nothing did, so the outputs and their order are the same either way.
 //! The replay is spread
 //! over calls, at most [`REPLAY_PER_CALL`] inputs per call, so that no call holds up the
 //! samples behind it for long: meanwhile the live navigator goes on with the flags it had (its
@@ -81,6 +86,7 @@
 //! the stream. Rest decided by a fresh
 //! robot hint is not withdrawn (the controller knows).
 
+use crate::axes::{AxesCheck, AxesReport};
 use crate::config::OdometryConfig;
 use crate::eskf::Eskf;
 pub use crate::hindsight::REPLAY_PER_CALL;
@@ -185,6 +191,11 @@ pub struct OdometryStage {
     /// [`crate::eskf::Manoeuvre::bridge_limit_s`], ns.
     bridge_ns: u64,
     revisions_emitted: u64,
+    /// A final sample whose live state is emitted and whose batch is not settled yet: the
+    /// work [`OdometryStage::postprocess`] does (or the next call that takes an input).
+    pending: Option<Unsettled>,
+    /// Whether the accelerometer's and gyroscope's axes agree.
+    axes: AxesCheck,
 }
 
 /// The stage on settled flags: hindsight and the navigator whose states are final.
@@ -236,14 +247,22 @@ impl OdometryStage {
             holes: Holes::default(),
             bridge_ns: (cfg.manoeuvre.bridge_limit_s() * 1e9) as u64,
             revisions_emitted: 0,
+            pending: None,
+            axes: AxesCheck::default(),
         })
     }
 
     /// Takes a robot hint. It waits (in a buffer allocated up front) until a sample taken at
     /// least [`HintConfig::delivery_s`] after its publication, which then uses it. A refused
-    /// hint changes nothing.
-    pub fn hint(&mut self, h: &RobotHint) -> Result<(), HintError> {
+    /// hint changes nothing. The batch settling left from the previous sample is done first
+    /// (its revisions go to `emit`).
+    pub fn hint(
+        &mut self,
+        h: &RobotHint,
+        emit: &mut impl FnMut(&OdometryState),
+    ) -> Result<(), HintError> {
         check_hint(h)?;
+        self.postprocess(emit);
         if let Some(hs) = self.settled.hindsight.as_mut() {
             // Only above `max_rate_hz` does this push an input out of the journal; a replay
             // that had not taken it then does not republish its state.
@@ -294,6 +313,12 @@ impl OdometryStage {
         self.holes
     }
 
+    /// Whether the accelerometer's and gyroscope's axes agreed at the turns between still
+    /// moments so far ([`crate::axes`]).
+    pub fn axes(&self) -> AxesReport {
+        self.axes.report()
+    }
+
     /// Number of republished (revised) states so far.
     pub fn revisions_emitted(&self) -> u64 {
         self.revisions_emitted
@@ -325,20 +350,21 @@ impl OdometryStage {
         self.ahead.filter()
     }
 
-    /// Processes one sample: emits its state first, then any revised states (a motion
-    /// interval's drift removed, rest flags withdrawn or reinstated in hindsight, a batch's
-    /// verdict that changed the states navigated on its provisional flags), through `emit`. A
-    /// refused sample changes nothing.
+    /// Processes one sample: emits its live state. What its subscribers do not wait for, the
+    /// revised states (a motion interval's drift removed, rest flags withdrawn or reinstated
+    /// in hindsight, a batch's verdict that changed the states navigated on its provisional
+    /// flags), comes from [`OdometryStage::postprocess`]; if that was not called, this call
+    /// does it first. A refused sample changes nothing but that.
     pub fn process(
         &mut self,
         s: &CorrectedImuSample,
         emit: &mut impl FnMut(&OdometryState),
     ) -> Result<(), OdometryError> {
+        self.postprocess(emit);
         stream::check_corrected(s)?;
         let s = &self.check_time(s)?;
         self.time.accept(s.stamps.sample_ns);
-        let mut budget = REPLAY_PER_CALL;
-        let budget = &mut budget;
+        self.axes.take(s);
         let state = self.navigate_ahead(s);
         emit(&state);
         let sample = Unsettled {
@@ -353,12 +379,29 @@ impl OdometryStage {
             }
             if let Some(old) = self.unsettled.push(sample) {
                 // Never settled in time: final as it stands.
-                self.settle(&old, budget, emit);
+                let mut budget = REPLAY_PER_CALL;
+                self.settle(&old, &mut budget, emit);
             }
             return Ok(());
         }
-        self.settle_batch(s, &sample, budget, emit);
+        self.pending = Some(sample);
         Ok(())
+    }
+
+    /// Whether [`OdometryStage::postprocess`] has work: the last sample was final, and the
+    /// batch it ends is still to settle.
+    pub fn postprocess_due(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// Settles the batch the last final sample ended (see the module documentation), after
+    /// its live state was published: emits the revised states, at most [`REPLAY_PER_CALL`]
+    /// inputs of a replay at a time.
+    pub fn postprocess(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        if let Some(sample) = self.pending.take() {
+            let mut budget = REPLAY_PER_CALL;
+            self.settle_batch(&sample.s, &sample, &mut budget, emit);
+        }
     }
 
     /// Refuses a sample whose time does not increase, jumps by more than
@@ -494,6 +537,7 @@ impl OdometryStage {
     /// emitted for them (their flags stand, as [`calibrate::stage::Settler::finish`] leaves
     /// them). The stage can take more samples afterwards.
     pub fn finish(&mut self, emit: &mut impl FnMut(&OdometryState)) {
+        self.postprocess(emit);
         let revisions = &mut self.revisions_emitted;
         if self.settled.finish(&mut |o| {
             *revisions += 1;

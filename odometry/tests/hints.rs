@@ -328,7 +328,7 @@ fn states_do_not_depend_on_how_hints_and_samples_interleave() {
     let just_in_time = run_with_hints(cfg, hint_cfg, &samples, &hints);
     let mut stage = OdometryStage::with_hints(cfg, hint_cfg).unwrap();
     for h in &hints {
-        stage.hint(h).unwrap();
+        stage.hint(h, &mut |_| {}).unwrap();
     }
     let mut upfront = Vec::new();
     for s in &samples {

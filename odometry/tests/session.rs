@@ -93,7 +93,9 @@ fn hints_arriving_early_give_the_states_of_hints_handed_over_at_their_time() {
     let mut next = 0;
     for x in &samples {
         while next < hints.len() && hints[next].stamps.acquired_ns <= x.stamps.sample_ns {
-            stage.hint(&hints[next]).unwrap();
+            stage
+                .hint(&hints[next], &mut |o| expected.push(*o))
+                .unwrap();
             next += 1;
         }
         stage.process(x, &mut |o| expected.push(*o)).unwrap();

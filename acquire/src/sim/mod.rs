@@ -14,7 +14,7 @@
 //!   standby bits only start the gyro start-up transient when cleared (disabled axes keep
 //!   sampling).
 //! - Sample rate (the rate of the data registers and of FIFO writes; RM-MPU-9250A-00 register
-//!   25: "the FIFO ... [is] written at the Sample Rate", and register 35): with the gyro DLPF
+//!   25: "the FIFO ... \[is\] written at the Sample Rate", and register 35): with the gyro DLPF
 //!   on (GYRO_CONFIG.FCHOICE_B = 0 and DLPF_CFG 1-6), 1 kHz / (1 + SMPLRT_DIV); otherwise
 //!   8 kHz. With ACCEL_CONFIG2.accel_fchoice_b = 1 the accelerometer itself samples at 4 kHz
 //!   (register 29) on the same clock: a FIFO write carries the latest accelerometer sample, so

@@ -34,12 +34,19 @@ pub trait Stage {
     /// The end of the input: emits what was held back for inputs that will not come.
     fn finish(&mut self, emit: &mut impl FnMut(&Self::Output));
 
-    /// Whether work the subscribers do not wait for follows `output` in the call that takes
-    /// `input` (the live driver then yields its core after publishing it, so that a
-    /// subscriber woken onto that core runs first).
-    fn work_follows(_input: &Self::Input, _output: &Self::Output) -> bool {
+    /// Whether the last input left work its outputs' subscribers do not wait for
+    /// ([`Stage::postprocess`]).
+    fn postprocess_due(&self) -> bool {
         false
     }
+
+    /// Does the work the last input left that its outputs' subscribers do not wait for
+    /// (Copper's `postprocess`: the odometry's revisions of earlier states). The live driver
+    /// calls it after the input's outputs are published and their subscribers woken, the
+    /// offline driver right after [`Stage::process`]. A stage whose `postprocess` was not
+    /// called does that work first in the next `process` or `finish`, so the outputs and their
+    /// order do not depend on the driver.
+    fn postprocess(&mut self, _emit: &mut impl FnMut(&Self::Output)) {}
 }
 
 /// Two stages in one, the first's outputs the second's inputs; an input may go to either (a
@@ -109,6 +116,23 @@ where
                 .process(b, &mut |out| emit(&Either::Second(out.clone())))
                 .map_err(Either::Second),
         }
+    }
+
+    fn postprocess_due(&self) -> bool {
+        self.first.postprocess_due() || self.second.postprocess_due()
+    }
+
+    /// The first's postprocess (its outputs going through the second), then the second's.
+    fn postprocess(&mut self, emit: &mut impl FnMut(&Self::Output)) {
+        let second = &mut self.second;
+        self.first.postprocess(&mut |out: &A::Output| {
+            emit(&Either::First(out.clone()));
+            // Work left from an input already taken: a refusal has no input left to stop.
+            let _ = second.process(&B::Input::from(out.clone()), &mut |b| {
+                emit(&Either::Second(b.clone()))
+            });
+        });
+        second.postprocess(&mut |out| emit(&Either::Second(out.clone())));
     }
 
     fn finish(&mut self, emit: &mut impl FnMut(&Self::Output)) {

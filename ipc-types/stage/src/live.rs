@@ -1,7 +1,8 @@
 //! The live driver: a stage between iceoryx2 services. It sleeps on its input's event service
 //! until a publisher notifies it (or polls, [`WaitMode::Spin`](ipc_types::wake::WaitMode)),
 //! hands each input to the stage as it arrives, publishes each output at once (stamped with
-//! the time it leaves the process, [`Stamp`]) and wakes its subscribers, counts and reports
+//! the time it leaves the process, [`Stamp`]) and wakes its subscribers, then runs the
+//! stage's postprocess (work the subscribers do not wait for), counts and reports
 //! what the stage refused (a live process drops a bad input and goes on), and at
 //! SIGINT/SIGTERM finishes the stage. It allocates nothing per input.
 
@@ -105,12 +106,7 @@ where
             any = true;
             counts.received += 1;
             hooks.input();
-            let taken = stage.process(&x, &mut |o| {
-                send(out, o);
-                if S::work_follows(&x, o) {
-                    std::thread::yield_now();
-                }
-            });
+            let taken = stage.process(&x, &mut |o| send(out, o));
             if let Err(e) = taken {
                 counts.refused += 1;
                 if counts.refused <= REPORTED_REFUSALS {
@@ -121,6 +117,12 @@ where
                 }
             }
             out.end_of_input()?;
+            if stage.postprocess_due() {
+                // The subscribers just woken run first if one was woken onto this core.
+                std::thread::yield_now();
+                stage.postprocess(&mut |o| send(out, o));
+                out.end_of_input()?;
+            }
         }
         hooks.drained(stage)?;
         Ok(ControlFlow::Continue(any))

@@ -61,6 +61,7 @@ pub fn run_with<S: Stage, C, E>(
         stage
             .process(&input, &mut |o| sink(context, o))
             .map_err(|refusal| Stop::Refused { index, refusal })?;
+        stage.postprocess(&mut |o| sink(context, o));
         index += 1;
     }
     stage.finish(&mut |o| sink(context, o));

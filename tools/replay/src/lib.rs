@@ -24,7 +24,9 @@
 //! pacing starts over with them. A window ([`source::Window`]) keeps part of the recording;
 //! looping ([`ReplayOptions::looping`]) replays it again and again: each pass sends the same
 //! sequence numbers and sample times again, which our processes take for a new acquisition
-//! session (the calibration starts over, the odometry aligns again).
+//! session (the calibration starts over, the odometry aligns again); a pass's first corrected
+//! sample carries `NEW_SESSION`, as the calibration stage would mark it, so that an odometry
+//! fed the corrected topic directly starts over too.
 
 #![warn(missing_docs)]
 
@@ -261,7 +263,7 @@ fn pass(
     start: Instant,
     progress: &mut dyn FnMut(&ReplaySummary),
 ) -> Result<bool, ReplayError> {
-    let mut source = paced::Pass::new(messages, options.pace);
+    let mut source = paced::Pass::new(messages, options.pace, summary.passes > 1);
     let mut sink = paced::Published {
         ports,
         deliveries,

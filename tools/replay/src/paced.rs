@@ -5,6 +5,7 @@
 
 use std::time::Instant;
 
+use ipc_types::corrected_flags;
 use mems_stage::source::{Flow, Sink, Source};
 
 use crate::deliveries::Deliveries;
@@ -26,16 +27,20 @@ pub(crate) struct Pass<'a> {
     pace: Pace,
     pacer: Pacer,
     next: Option<recording::Result<Paced>>,
+    /// Whether the pass's first corrected sample is still to be marked as the start of a new
+    /// sensor session (every pass after the first: its sequence numbers and times start over).
+    mark_session: bool,
 }
 
 impl<'a> Pass<'a> {
-    /// A pass over `messages` at `pace`.
-    pub(crate) fn new(messages: Merge<'a>, pace: Pace) -> Self {
+    /// A pass over `messages` at `pace`; `again`: a pass after the first.
+    pub(crate) fn new(messages: Merge<'a>, pace: Pace, again: bool) -> Self {
         Self {
             messages,
             pace,
             pacer: Pacer::default(),
             next: None,
+            mark_session: again,
         }
     }
 }
@@ -69,7 +74,15 @@ impl Source for Pass<'_> {
         match self.next.take() {
             None => Ok(Flow::End),
             Some(message) => {
-                emit(&message?);
+                let mut message = message?;
+                if let Payload::Corrected(s) = &mut message.payload
+                    && std::mem::take(&mut self.mark_session)
+                {
+                    // As the calibration stage marks a new session (`ipc_types::stream`):
+                    // a consumer of corrected samples follows the mark.
+                    s.flags |= corrected_flags::NEW_SESSION;
+                }
+                emit(&message);
                 Ok(Flow::Continue)
             }
         }

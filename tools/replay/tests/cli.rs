@@ -10,8 +10,8 @@ use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
 use ipc_types::{
-    CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps, odometry_flags, raw_flags,
-    service,
+    CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps, corrected_flags,
+    odometry_flags, raw_flags, service,
 };
 use recording::clock::WallClock;
 use recording::mcap::{Contents, Writer, read_all};
@@ -268,6 +268,40 @@ fn loop_replays_until_sigterm_and_exits_cleanly() {
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("no pass count in {stdout}"));
     assert!(passes >= 2, "{stdout}");
+}
+
+/// `--loop` of the corrected topic: the first sample of every pass after the first carries
+/// `NEW_SESSION` (its seq and time start over), so that an odometry fed the corrected topic
+/// directly starts a new session instead of refusing times that go back.
+#[test]
+fn a_looped_corrected_topic_marks_each_new_pass_as_a_new_session() {
+    let path = tmp("loop-corrected.mcap");
+    write_run(&path, 100);
+    let n = read_all(&path).unwrap().corrected.len();
+    let ns = namespace("loop-corrected");
+    let sub = subscribe::<CorrectedImuSample>(&ns, service::CORRECTED, 2 * n);
+    let child = Command::new(env!("CARGO_BIN_EXE_mems-replay"))
+        .arg(&path)
+        .args(["--loop", "--topics", "mems/imu/corrected"])
+        .args(["--wait-subscribers", "1", "--namespace", &ns])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let got = sub.join().unwrap();
+    // SAFETY: kill(2) on the child's pid; the child is not reaped before wait below.
+    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGTERM) }, 0);
+    let out = child.wait_with_output().unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let marked: Vec<usize> = got
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.flags & corrected_flags::NEW_SESSION != 0)
+        .map(|(i, _)| i)
+        .collect();
+    assert_eq!(marked, [n], "only the second pass's first sample is marked");
+    assert_eq!(got[n].seq, got[0].seq, "the second pass starts over");
 }
 
 /// Environment variable that makes [`subscriber_process`] act: the namespace to subscribe in.

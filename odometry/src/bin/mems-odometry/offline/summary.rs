@@ -18,6 +18,7 @@ use mems_stage::Chain;
 use mems_stage::offline::Stop;
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
 use odometry::arrival::HINT_WINDOW_NS;
+use odometry::axes::AxesReport;
 use odometry::session::OdometrySession;
 use recording::mcap::SegmentRead;
 use recording::{LogRepairs, Truth};
@@ -165,10 +166,16 @@ impl Summary {
              position counts from there",
             read.align_s
         );
+        let axes = chain.second.stage().axes();
+        if axes.disagree() {
+            tracing::warn!(
+                "{input}: {}",
+                describe_axes(&axes, read.first_ns.unwrap_or(0))
+            );
+        }
         let truth_error = self.truth_error(&end, truth);
         if json {
-            let speed_updates = chain.second.hint_stats().speed_updates;
-            let mut result = self.json(&end, truth_error, aligned_at_s, read, speed_updates);
+            let mut result = self.json(&end, truth_error, aligned_at_s, read, chain);
             result["profile"] = read.choice.json(chain.second.auto_choice());
             result["wheeled"] = self.wheeled_json(&chain.second);
             println!("{result}");
@@ -179,15 +186,17 @@ impl Summary {
     }
 
     /// The JSON result from the end state `end` (with `truth_error`), when it aligned, what
-    /// the run read and the hints' speed updates.
+    /// the run read and what the chain counted.
     fn json(
         &self,
         end: &OdometryState,
         truth_error: Option<[f64; 3]>,
         aligned_at_s: f64,
         read: &Read,
-        speed_updates: u64,
+        chain: &OfflineChain,
     ) -> serde_json::Value {
+        let speed_updates = chain.second.hint_stats().speed_updates;
+        let chain_axes = chain.second.stage().axes();
         json!({
             "end_displacement_m": end.position_m,
             "sigma_m": end.position_sigma_m,
@@ -204,6 +213,7 @@ impl Summary {
             },
             "input_damage": damage_json(&read.segments),
             "input_holes": holes_json(&read.holes, read.first_ns.unwrap_or(0)),
+            "axes_check": axes_json(&chain_axes, read.first_ns.unwrap_or(0)),
             "hints": {
                 "in_recording": read.hints_seen,
                 "late": read.hints_late,
@@ -302,6 +312,37 @@ impl<'a> Read<'a> {
             choice,
         }
     }
+}
+
+/// What the axes check found ([`odometry::axes`]): turns between still moments checked and those that
+/// disagreed, the worst (degrees, and its time in seconds from the first sample).
+fn axes_json(axes: &AxesReport, t0_ns: u64) -> serde_json::Value {
+    json!({
+        "checked": axes.checked,
+        "disagreed": axes.disagreed,
+        "disagree": axes.disagree(),
+        "worst": axes.worst.map(|(off, turned, t_ns)| json!({
+            "off_deg": off.to_degrees(),
+            "turned_deg": turned.to_degrees(),
+            "t_s": t_ns.saturating_sub(t0_ns) as f64 * 1e-9,
+        })),
+    })
+}
+
+/// The warning for axes that disagree.
+fn describe_axes(axes: &AxesReport, t0_ns: u64) -> String {
+    let (off, turned, t_ns) = axes.worst.unwrap_or_default();
+    format!(
+        "the accelerometer's and the gyroscope's axes disagree: at {} of {} turns between \
+         still moments, gravity's direction in the sensor frame turned other than the integrated \
+         gyroscope says (worst {:.0} deg off after a {:.0} deg turn, at t {:.1} s); are two \
+         columns swapped, or an axis's sign or the axis mapping wrong?",
+        axes.disagreed,
+        axes.checked,
+        off.to_degrees(),
+        turned.to_degrees(),
+        t_ns.saturating_sub(t0_ns) as f64 * 1e-9
+    )
 }
 
 /// The holes in the input's time line: count, total and longest (seconds; the longest's

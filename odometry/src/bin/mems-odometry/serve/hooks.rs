@@ -79,10 +79,12 @@ impl Watch {
     /// sessions and hints, and the steady-state and small-block pool counts.
     pub fn report(&self, counts: &Counts, session: &OdometrySession) {
         let stats = session.stats();
+        let axes = session.stage().axes();
         tracing::info!(
             "received {}, published {} (revisions included), refused {}, sessions {}, holes \
              bridged {} (this session), beyond the bridge {}, discarded for stalled subscribers \
-             {}; hints received {}, this session: {}",
+             {}; hints received {}, this session: {}; axes: gravity turned as the gyroscope \
+             says at {} of {} turns between still moments",
             counts.received,
             counts.published,
             counts.refused,
@@ -91,8 +93,15 @@ impl Watch {
             stats.unbridged,
             service::stalled_discards(),
             stats.hints,
-            session.hint_stats()
+            session.hint_stats(),
+            axes.checked - axes.disagreed,
+            axes.checked
         );
+        if axes.disagree() {
+            tracing::warn!(
+                "the accelerometer's and the gyroscope's axes disagree (odometry::axes): {axes:?}"
+            );
+        }
         match (self.profile, session.auto_choice()) {
             (Profile::Auto, Some(c)) => tracing::info!(
                 "profile auto: {} platform, ran profile {} from sample time {:.3} s",
