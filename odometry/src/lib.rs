@@ -18,3 +18,4 @@ pub mod profile;
 pub mod rest_noise;
 pub mod session;
 pub mod stage;
+mod untrusted;

@@ -10,6 +10,7 @@ use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
 use crate::rest_noise::RestNoise;
+use crate::untrusted::{Untrusted, Verdict};
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
     odometry_flags, raw_flags,
@@ -212,6 +213,8 @@ pub(crate) struct Navigator {
     /// Whether the last sample's rest decision was the IMU's zero-state flag (no fresh hint
     /// with a rest source).
     imu_decided: bool,
+    /// Clipped and implausible stretches in progress.
+    untrusted: Untrusted,
 }
 
 impl Navigator {
@@ -252,6 +255,7 @@ impl Navigator {
             rest_count: 0,
             distance_m: 0.0,
             imu_decided: true,
+            untrusted: Untrusted::default(),
         }
     }
 
@@ -273,6 +277,7 @@ impl Navigator {
         self.rest_count = other.rest_count;
         self.distance_m = other.distance_m;
         self.imu_decided = other.imu_decided;
+        self.untrusted = other.untrusted;
     }
 
     /// Takes a (checked) robot hint. It waits (in a buffer allocated up front) until a sample
@@ -322,9 +327,14 @@ impl Navigator {
     /// any revised states that the end of a motion interval made available, through `emit`.
     pub fn process(&mut self, s: &CorrectedImuSample, emit: &mut impl FnMut(&OdometryState)) {
         let t_ns = s.stamps.sample_ns;
-        let m = Imu {
-            f: Vector3::from(s.accel_mps2),
-            w: self.cfg.gyro_correction * Vector3::from(s.gyro_rps),
+        let verdict = Verdict::of(s, &self.cfg);
+        let m = match self.last {
+            // Not a measurement: the previous reading is held across it.
+            Some((_, _, held)) if verdict.implausible => held,
+            _ => Imu {
+                f: Vector3::from(s.accel_mps2),
+                w: self.cfg.gyro_correction * Vector3::from(s.gyro_rps),
+            },
         };
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
         let prev = self
@@ -345,7 +355,11 @@ impl Navigator {
             // output still carries the turn-on bias it is about to subtract, and a filter
             // aligned on it would take that step for rotation.
             let ready = detector_ready || d.rest.is_none();
-            self.accumulate_alignment(t_ns, &m, rest && ready);
+            // An implausible sample is no reading of the rest: skipped; a clipped one is no
+            // rest.
+            if !verdict.implausible {
+                self.accumulate_alignment(t_ns, &m, rest && ready && verdict.clipped == 0);
+            }
             emit(&self.unaligned_state(s, rest, d.sample));
             return;
         }
@@ -356,6 +370,10 @@ impl Navigator {
             self.close_rest_window();
         }
         let moved = self.predict(m, dt, gap, &mut d.sample);
+        let kf = self.kf.as_mut().expect("aligned");
+        if self.untrusted.widen(kf, &m, dt, verdict, &self.cfg) {
+            d.sample.flags |= odometry_flags::UNTRUSTED_INPUT;
+        }
         self.count_hint_use(&d);
         self.track_motion(t_ns, prev_ns, rest, emit);
         self.update(t_ns, dt, &m, rest, moved, &mut d.sample);

@@ -179,7 +179,7 @@ impl Summary {
         read: &Read,
         speed_updates: u64,
     ) -> serde_json::Value {
-        json!({
+        let mut result = json!({
             "end_displacement_m": end.position_m,
             "sigma_m": end.position_sigma_m,
             "distance_m": end.distance_m,
@@ -202,7 +202,11 @@ impl Summary {
                 "disagreements": end.hint_disagreements,
                 "speed_updates": speed_updates,
             },
-        })
+        });
+        if let (Some(r), Some(t)) = (result.as_object_mut(), read.trust.as_object()) {
+            r.extend(t.clone());
+        }
+        result
     }
 
     /// The human-readable result: the end displacement with its 1-sigma, and the error
@@ -248,6 +252,9 @@ pub struct Read<'a> {
     /// The files of a streamed run, with their truncations and damaged records (after the
     /// run: [`report_input`]).
     pub segments: Vec<SegmentRead>,
+    /// The ranges, clipped and implausible samples (after the run: `super::trust::json`), an
+    /// object whose fields go into the JSON result.
+    pub trust: serde_json::Value,
 }
 
 impl<'a> Read<'a> {
@@ -263,6 +270,7 @@ impl<'a> Read<'a> {
             repairs,
             align_s,
             segments: Vec::new(),
+            trust: serde_json::Value::Null,
         }
     }
 }
