@@ -850,6 +850,51 @@ fn saturated_samples_are_flagged() {
     );
 }
 
+#[test]
+fn the_driver_reports_its_ranges_and_which_axes_clip() {
+    use ipc_types::units::{AccelRange, GyroRange};
+    for (accel, gyro, accel_g, gyro_dps) in [
+        (AccelRange::G2, GyroRange::Dps250, 2.0, 250.0),
+        (AccelRange::G16, GyroRange::Dps2000, 16.0, 2000.0),
+    ] {
+        let mut source = NoisySource::new(13);
+        // Beyond +-250 deg/s on y only, and beyond +-2 g on z only: clipped at the small
+        // ranges, not at the large ones.
+        source.accel_g = [0.0, 0.0, -2.5];
+        source.gyro_dps = [10.0, 300.0, -20.0];
+        let sim = SimMpu9250::new(source, SimClock::new_virtual(0), common::white_config());
+        let config = Config {
+            accel_range: accel,
+            gyro_range: gyro,
+            ..imu_1k()
+        };
+        let (mut drv, clock) = started_spi(sim, config);
+        let ranges = drv.ranges().unwrap();
+        // The register map's sensitivities: 32768 counts span the range (the datasheet's
+        // 131 and 16.4 LSB/(deg/s) round, so the ends are 250.1 and 1998 deg/s).
+        let (a, g) = (
+            ranges.accel_g.value.unwrap(),
+            ranges.gyro_dps.value.unwrap(),
+        );
+        assert!((a - accel_g).abs() < 1e-9, "{a} g");
+        assert!((g - gyro_dps).abs() / gyro_dps < 0.002, "{g} deg/s");
+        let samples = read_for(&mut drv, &clock, 20_000_000, 5_000_000);
+        assert!(!samples.is_empty());
+        let small = accel == AccelRange::G2;
+        for s in &samples {
+            let expected = if small {
+                raw_flags::SATURATED | raw_flags::saturated_axis(2) | raw_flags::saturated_axis(4)
+            } else {
+                0
+            };
+            let mask = raw_flags::SATURATED | raw_flags::SATURATED_AXES;
+            assert_eq!(s.flags & mask, expected, "{:?} {:?}", s.accel_g, s.gyro_dps);
+            // What the driver flags is what the range rule says of the values.
+            assert_eq!(ranges.clipped_axes(s), s.flags & raw_flags::SATURATED_AXES);
+        }
+    }
+}
+
 /// A bus that silently ignores writes to one register (a stuck register on a faulty part).
 struct IgnoresWritesTo<B> {
     inner: B,

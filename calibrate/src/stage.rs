@@ -48,6 +48,7 @@
 //! The gyroscope's has none: a turn-on bias of 0.3-1 deg/s that no file can know is measured to
 //! 0.01 deg/s by one second of rest.
 
+use ipc_types::stream::range::Clipping;
 use ipc_types::stream::{self, Continuity, Holes, Step, TimeLine};
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, limits, raw_flags};
 use mems_stage::Stage;
@@ -180,6 +181,9 @@ pub struct StageStats {
     pub restarts: u64,
     /// Holes in the time line that nothing marked ([`ipc_types::stream`]), each a gap too.
     pub holes: Holes,
+    /// Samples with an axis at the end of its range (`raw_flags::SATURATED`, passed on as
+    /// `corrected_flags::CLIPPED`), per axis.
+    pub clipped: Clipping,
 }
 
 /// The stable identifier of a calibration: 64-bit FNV-1a over the model name and the
@@ -752,6 +756,10 @@ impl Stage for CalibrationStage {
         if hole {
             out.flags |= corrected_flags::HOLE_BEFORE;
         }
+        if raw.flags & raw_flags::SATURATED != 0 {
+            out.flags |= corrected_flags::CLIPPED;
+        }
+        self.stats.clipped.count(raw.flags);
         self.stats.released += 1;
         emit(&out);
         Ok(())

@@ -376,3 +376,19 @@ echo "exit status $status"
 
 SECTIONS.append(Section("input-checks-fuzz", "input-checks.md", ["input-checks-fuzz"], "8 min", fuzz))
 SECTIONS.append(Section("input-checks-offline", "input-checks.md", ["input-checks-offline"], "10 s", offline_refusal))
+
+
+def clipping(ctx):
+    """docs/input-checks.md: the corpus's foot walks clipped at +-250 deg/s and at +-2 g
+    (tools/real-data/clipped.py), unclipped, clipped and flagged, clipped and integrated as
+    measured."""
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "odometry"])
+    only = ["--only", "xio-short-walk", "--only", "gdin-34"] if ctx.quick else []
+    gyro, _ = ctx.run(["python3", "tools/real-data/clipped.py", "--gyro-dps", "250"] + only)
+    accel, _ = ctx.run(["python3", "tools/real-data/clipped.py", "--accel-g", "2"] + only)
+    if ctx.dry:
+        return {}
+    return {"input-checks-clipping": gyro.strip() + "\n\n" + accel.strip()}
+
+
+SECTIONS.append(Section("input-checks-clipping", "input-checks.md", ["input-checks-clipping"], "2 min", clipping))

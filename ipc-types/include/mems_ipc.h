@@ -30,6 +30,7 @@
 #define MEMS_RAW_GYRO_VALID (1u << 4)
 #define MEMS_RAW_TEMP_VALID (1u << 5)
 #define MEMS_RAW_RESUMED (1u << 6)
+#define MEMS_RAW_SATURATED_AXES (0x3fu << 7)
 
 /* CorrectedImuSample.flags */
 #define MEMS_CORRECTED_ZERO_STATE (1u << 0)
@@ -38,6 +39,8 @@
 #define MEMS_CORRECTED_PROVISIONAL (1u << 3)
 #define MEMS_CORRECTED_NEW_SESSION (1u << 4)
 #define MEMS_CORRECTED_HOLE_BEFORE (1u << 5)
+#define MEMS_CORRECTED_CLIPPED (1u << 6)
+#define MEMS_CORRECTED_IMPLAUSIBLE (1u << 7)
 
 /* OdometryState.flags */
 #define MEMS_ODOMETRY_ZERO_VELOCITY (1u << 0)
@@ -49,6 +52,7 @@
 #define MEMS_ODOMETRY_HINT_DISAGREE (1u << 6)
 #define MEMS_ODOMETRY_NO_GYRO (1u << 7)
 #define MEMS_ODOMETRY_GAP_BEFORE (1u << 8)
+#define MEMS_ODOMETRY_UNTRUSTED_INPUT (1u << 9)
 
 /* RobotHint.flags */
 #define MEMS_HINT_STATIONARY (1u << 0)

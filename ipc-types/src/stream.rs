@@ -30,7 +30,14 @@
 //! - **Settling**: a provisional corrected sample's verdict (`ZERO_STATE`, `DETECTOR_READY`,
 //!   `zs_*`) is final once a later sample settles it ([`settled_by`]).
 //!
+//! - **Trust**: a value at the end of the part's full-scale range is clipped ([`range`]); a
+//!   value no platform of the profile makes is implausible ([`plausible`]). Both are flagged
+//!   and counted, and the filter does not take them for measurements.
+//!
 //! Units: nanoseconds for times, seconds where a name ends in `_s`.
+
+pub mod plausible;
+pub mod range;
 
 use crate::limits::{self, OutOfBounds};
 use crate::{CorrectedImuSample, corrected_flags};

@@ -44,6 +44,14 @@ pub mod raw_flags {
     /// (same part, same clock): set with `GAP_BEFORE`, and `lost_before` counts the samples
     /// not read while no process ran.
     pub const RESUMED: u16 = 1 << 6;
+    /// Which axes are at the end of their full-scale range, one bit each with `SATURATED`:
+    /// accelerometer x, y, z then gyroscope x, y, z ([`saturated_axis`]).
+    pub const SATURATED_AXES: u16 = 0x3f << 7;
+
+    /// The `SATURATED_AXES` bit of axis `i`: 0-2 accelerometer x, y, z; 3-5 gyroscope x, y, z.
+    pub const fn saturated_axis(i: usize) -> u16 {
+        1 << (7 + i)
+    }
 }
 
 /// One raw IMU sample as the sensor produced it, in the sensor frame and the sensor's units.
@@ -108,6 +116,14 @@ pub mod corrected_flags {
     /// Samples are missing before this one that nothing marked: the time line has a hole
     /// (`crate::stream::TimeLine`). `raw_flags::GAP_BEFORE` is set too.
     pub const HOLE_BEFORE: u16 = 1 << 5;
+    /// An axis of the raw sample sat at the end of its full-scale range
+    /// (`raw_flags::SATURATED`; which axes: `raw_flags::SATURATED_AXES`): the true value was
+    /// at least as large, by an unknown amount.
+    pub const CLIPPED: u16 = 1 << 6;
+    /// The sample fails the plausibility test of `crate::stream::plausible`: no platform of
+    /// the profile makes such a specific force or rate. Set by the odometry stage, which knows
+    /// the profile; the filter does not integrate it.
+    pub const IMPLAUSIBLE: u16 = 1 << 7;
 }
 
 /// One calibrated sample: sensor frame, SI units.
@@ -174,6 +190,11 @@ pub mod odometry_flags {
     /// skipped): the filter predicted across the gap and widened its 1-sigma for the motion
     /// the platform could have made in it (`manoeuvre_accel_mps2`, `manoeuvre_rate_rps`).
     pub const GAP_BEFORE: u16 = 1 << 8;
+    /// Clipped or implausible input reached the filter at or before this sample since the
+    /// last one without: the filter bridged what it did not see (an implausible sample as
+    /// unobserved, a clipped axis with the unseen excess in its 1-sigma), so the state rests
+    /// on less than the sensor's word.
+    pub const UNTRUSTED_INPUT: u16 = 1 << 9;
     /// Wheeled platform without hints: the zero-state detector flagged rest, but the window
     /// that decided it vibrated more than the platform did standing at alignment
     /// (`OdometryConfig::rest_vibration_factor` times its standard deviation): the sample is

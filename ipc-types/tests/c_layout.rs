@@ -110,7 +110,7 @@ fn facts() -> Vec<Fact> {
             reserved
         ]
     );
-    let flags: [(&str, u16); 27] = [
+    let flags: [(&str, u16); 31] = [
         ("MEMS_RAW_GAP_BEFORE", raw_flags::GAP_BEFORE),
         ("MEMS_RAW_FIFO_OVERFLOW", raw_flags::FIFO_OVERFLOW),
         ("MEMS_RAW_SATURATED", raw_flags::SATURATED),
@@ -118,6 +118,7 @@ fn facts() -> Vec<Fact> {
         ("MEMS_RAW_GYRO_VALID", raw_flags::GYRO_VALID),
         ("MEMS_RAW_TEMP_VALID", raw_flags::TEMP_VALID),
         ("MEMS_RAW_RESUMED", raw_flags::RESUMED),
+        ("MEMS_RAW_SATURATED_AXES", raw_flags::SATURATED_AXES),
         ("MEMS_CORRECTED_ZERO_STATE", corrected_flags::ZERO_STATE),
         (
             "MEMS_CORRECTED_DETECTOR_READY",
@@ -127,6 +128,8 @@ fn facts() -> Vec<Fact> {
         ("MEMS_CORRECTED_PROVISIONAL", corrected_flags::PROVISIONAL),
         ("MEMS_CORRECTED_NEW_SESSION", corrected_flags::NEW_SESSION),
         ("MEMS_CORRECTED_HOLE_BEFORE", corrected_flags::HOLE_BEFORE),
+        ("MEMS_CORRECTED_CLIPPED", corrected_flags::CLIPPED),
+        ("MEMS_CORRECTED_IMPLAUSIBLE", corrected_flags::IMPLAUSIBLE),
         ("MEMS_ODOMETRY_ZERO_VELOCITY", odometry_flags::ZERO_VELOCITY),
         ("MEMS_ODOMETRY_ALIGNED", odometry_flags::ALIGNED),
         ("MEMS_ODOMETRY_REVISION", odometry_flags::REVISION),
@@ -139,6 +142,10 @@ fn facts() -> Vec<Fact> {
         ("MEMS_ODOMETRY_HINT_DISAGREE", odometry_flags::HINT_DISAGREE),
         ("MEMS_ODOMETRY_NO_GYRO", odometry_flags::NO_GYRO),
         ("MEMS_ODOMETRY_GAP_BEFORE", odometry_flags::GAP_BEFORE),
+        (
+            "MEMS_ODOMETRY_UNTRUSTED_INPUT",
+            odometry_flags::UNTRUSTED_INPUT,
+        ),
         ("MEMS_HINT_STATIONARY", hint_flags::STATIONARY),
         ("MEMS_HINT_SOURCE_COMMANDED", hint_flags::SOURCE_COMMANDED),
         ("MEMS_HINT_SOURCE_ENCODERS", hint_flags::SOURCE_ENCODERS),

@@ -20,6 +20,8 @@
 
 use calibrate::calibfile::CalibrationFile;
 use calibrate::noise_params::{AxisNoise, Estimate, SensorNoise};
+use ipc_types::stream::plausible::Envelope;
+use ipc_types::units::STANDARD_GRAVITY_MPS2;
 use nalgebra::Matrix3;
 
 use crate::eskf::{Manoeuvre, NoiseModel};
@@ -87,6 +89,13 @@ pub struct OdometryConfig {
     /// or a skipped sequence number): the reported 1-sigma grows with it across the gap
     /// (`Eskf::missed`).
     pub manoeuvre: Manoeuvre,
+    /// What no platform of the profile does to the sensor: a sample beyond it is implausible
+    /// (`ipc_types::stream::plausible`), flagged, counted and not integrated.
+    pub plausible: Envelope,
+    /// Whether clipped and implausible samples are integrated as measured (`true`: the
+    /// behaviour before they were recognised, for comparison, `mems-odometry offline
+    /// --trust-clipped`); they are flagged and counted either way.
+    pub trust_untrusted: bool,
     /// Longest time between two propagations of the filter's covariance, s: the covariance is
     /// propagated from the transition and noise accumulated over the samples since the last
     /// one (`eskf::Eskf::with_propagation_interval`), and at rest the zero-velocity and
@@ -155,6 +164,8 @@ impl OdometryConfig {
                 tilt: 0.05,
                 duration_s: 0.5,
             },
+            plausible: DEFAULT_ENVELOPE,
+            trust_untrusted: false,
             propagation_interval_s: 0.01,
             rest_window_drift: 0.05,
             rest_updates: true,
@@ -171,6 +182,18 @@ impl OdometryConfig {
         self
     }
 }
+
+/// What the default profile's platforms (vehicles, robots, and the hand-held recordings that
+/// run with it) do to the sensor. Peak: 16 g, the MPU-9250's largest range (PS-MPU-9250A-01
+/// table 3.2; the corpus's fastest hand-held run, BROAD 18, peaks at 10.7 g) and 2000 deg/s
+/// (table 3.1; the corpus peaks at 739 deg/s). Sustained: 8 g from gravity as a 0.5 s mean
+/// (the BROAD fast runs reach 4.8 g; a car brakes at 1 g).
+pub const DEFAULT_ENVELOPE: Envelope = Envelope {
+    peak_force_mps2: 16.0 * STANDARD_GRAVITY_MPS2,
+    peak_rate_rps: 2000.0 * std::f64::consts::PI / 180.0,
+    sustained_force_mps2: 8.0 * STANDARD_GRAVITY_MPS2,
+    sustained_s: 0.5,
+};
 
 /// 1-sigma of an uncalibrated MPU-9250 gyro's scale and cross-axis errors: the product
 /// specification (PS-MPU-9250A-01 rev. 1.1, table 1, "Gyroscope Specifications") gives a

@@ -119,6 +119,20 @@ impl Manoeuvre {
     }
 }
 
+/// The variances an unobserved interval of `t` seconds adds ([`Eskf::missed`]): position and
+/// velocity (each axis), tilt and heading; each grows with `t`.
+fn envelope(t: f64, m: &Manoeuvre) -> [f64; 4] {
+    let share = (t / m.duration_s).min(1.0);
+    let a = m.accel * share;
+    let turn = m.rate * share * t;
+    [
+        (a * t * t / 2.0).powi(2),
+        (a * t).powi(2),
+        turn.min(m.tilt).powi(2),
+        turn.min(std::f64::consts::PI).powi(2),
+    ]
+}
+
 /// The nominal (full) navigation state.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Nominal {
@@ -318,13 +332,17 @@ impl Eskf {
     /// correlated, as a constant acceleration would make them, it did, and the 1-sigma at the
     /// end of a simulated drive fell below its error).
     pub fn missed(&mut self, t: f64, m: &Manoeuvre) {
+        self.unobserved(0.0, t, m);
+    }
+
+    /// Widens the covariance as [`Self::missed`] does for an unobserved stretch that grows from
+    /// `t0` to `t1` seconds (samples the filter did not integrate, one at a time: implausible
+    /// ones): the widening of `t1` less that of `t0`, so a stretch bridged sample by sample
+    /// ends as wide as one gap of its length.
+    pub fn unobserved(&mut self, t0: f64, t1: f64, m: &Manoeuvre) {
         self.propagate();
-        let share = (t / m.duration_s).min(1.0);
-        let a = m.accel * share;
-        let (pp, vv) = ((a * t * t / 2.0).powi(2), (a * t).powi(2));
-        let turn = m.rate * share * t;
-        let yaw = turn.min(std::f64::consts::PI).powi(2);
-        let tilt = turn.min(m.tilt).powi(2);
+        let (e0, e1) = (envelope(t0, m), envelope(t1, m));
+        let [pp, vv, tilt, yaw] = std::array::from_fn(|i| (e1[i] - e0[i]).max(0.0));
         for i in 0..3 {
             self.cov[(P + i, P + i)] += pp;
             self.cov[(V + i, V + i)] += vv;
@@ -335,6 +353,26 @@ impl Eskf {
         let local = r.transpose() * nav * r;
         let mut th = self.cov.fixed_view_mut::<3, 3>(TH, TH);
         th += local;
+        self.refresh_sigma();
+    }
+
+    /// Widens the covariance for what clipped axes hid: `var[i]` is the variance of the unseen
+    /// velocity along accelerometer axis `i` (0-2, (m/s)^2) or of the unseen rotation about
+    /// gyroscope axis `i - 3` (3-5, rad^2), sensor frame (`crate::untrusted` sizes them). A
+    /// gyroscope axis's share goes to the attitude error about that sensor axis; an
+    /// accelerometer axis's to the velocity along it, in the navigation frame.
+    pub fn clipped(&mut self, var: &[f64; 6]) {
+        self.propagate();
+        let r = self.x.q.to_rotation_matrix().into_inner();
+        for (i, var) in var.iter().enumerate().filter(|(_, v)| **v > 0.0) {
+            if i < 3 {
+                let along = r.column(i).into_owned();
+                let mut vv = self.cov.fixed_view_mut::<3, 3>(V, V);
+                vv += along * along.transpose() * *var;
+            } else {
+                self.cov[(TH + i - 3, TH + i - 3)] += var;
+            }
+        }
         self.refresh_sigma();
     }
 

@@ -21,3 +21,4 @@ pub mod profile;
 pub mod rest_noise;
 pub mod session;
 pub mod stage;
+mod untrusted;

@@ -11,6 +11,7 @@ use crate::hints::{
 };
 use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::rest_noise::RestNoise;
+use crate::untrusted::{Untrusted, Verdict};
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
     odometry_flags, raw_flags,
@@ -218,6 +219,8 @@ pub(crate) struct Navigator {
     /// Standard deviation of the specific force's norm over the alignment rest (the root of
     /// the three axes' variances summed), m/s^2.
     standing_accel_sd: f64,
+    /// Clipped and implausible stretches in progress.
+    untrusted: Untrusted,
 }
 
 impl Navigator {
@@ -261,6 +264,7 @@ impl Navigator {
             nhc: (cfg.imu_nonholonomic_sigma_mps > 0.0)
                 .then(|| ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)),
             standing_accel_sd: 0.0,
+            untrusted: Untrusted::default(),
         }
     }
 
@@ -284,6 +288,7 @@ impl Navigator {
         self.imu_decided = other.imu_decided;
         self.nhc = other.nhc;
         self.standing_accel_sd = other.standing_accel_sd;
+        self.untrusted = other.untrusted;
     }
 
     /// Takes `cfg` from the next sample on (a profile recognized from the data): its rest
@@ -355,9 +360,14 @@ impl Navigator {
     /// any revised states that the end of a motion interval made available, through `emit`.
     pub fn process(&mut self, s: &CorrectedImuSample, emit: &mut impl FnMut(&OdometryState)) {
         let t_ns = s.stamps.sample_ns;
-        let m = Imu {
-            f: Vector3::from(s.accel_mps2),
-            w: self.cfg.gyro_correction * Vector3::from(s.gyro_rps),
+        let verdict = Verdict::of(s, &self.cfg);
+        let m = match self.last {
+            // Not a measurement: the previous reading is held across it.
+            Some((_, _, held)) if verdict.implausible => held,
+            _ => Imu {
+                f: Vector3::from(s.accel_mps2),
+                w: self.cfg.gyro_correction * Vector3::from(s.gyro_rps),
+            },
         };
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
         let prev = self
@@ -378,7 +388,11 @@ impl Navigator {
             // output still carries the turn-on bias it is about to subtract, and a filter
             // aligned on it would take that step for rotation.
             let ready = detector_ready || d.rest.is_none();
-            self.accumulate_alignment(t_ns, &m, rest && ready);
+            // An implausible sample is no reading of the rest: skipped; a clipped one is no
+            // rest.
+            if !verdict.implausible {
+                self.accumulate_alignment(t_ns, &m, rest && ready && verdict.clipped == 0);
+            }
             emit(&self.unaligned_state(s, rest, d.sample));
             return;
         }
@@ -390,6 +404,10 @@ impl Navigator {
             self.close_rest_window();
         }
         let moved = self.predict(m, dt, gap, &mut d.sample);
+        let kf = self.kf.as_mut().expect("aligned");
+        if self.untrusted.widen(kf, &m, dt, verdict, &self.cfg) {
+            d.sample.flags |= odometry_flags::UNTRUSTED_INPUT;
+        }
         self.count_hint_use(&d);
         self.track_motion(t_ns, prev_ns, rest, emit);
         self.update(t_ns, dt, &m, rest, moved, &mut d.sample);

@@ -3,6 +3,8 @@
 //! gently; a foot rests for 0.2-0.5 s at every step and is not quite still while it does.
 
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
+use ipc_types::stream::plausible::Envelope;
+use ipc_types::units::STANDARD_GRAVITY_MPS2;
 
 use crate::config::OdometryConfig;
 use crate::eskf::Manoeuvre;
@@ -108,6 +110,13 @@ impl Profile {
                 rate: 10.0,
                 tilt: 1.0,
                 duration_s: 0.1,
+            };
+            // A heel strike: the OpenShoe figure-8 walk peaks at 19.3 g (magnitude), the
+            // corpus's walks hold at most 2.7 g from gravity over 0.5 s.
+            config.plausible = Envelope {
+                peak_force_mps2: 24.0 * STANDARD_GRAVITY_MPS2,
+                sustained_force_mps2: 6.0 * STANDARD_GRAVITY_MPS2,
+                ..config.plausible
             };
         }
         config

@@ -17,6 +17,10 @@
 //!   run stops there, naming it; the live process drops it, counted), and the stage starts
 //!   again from the next sample: the heading across such a hole is unknown, so the track after
 //!   it is a new one (counted in [`SessionStats::unbridged`]).
+//! - **Values no platform makes.** Every sample is tested against the profile's envelope
+//!   (`OdometryConfig::plausible`, the rule: `ipc_types::stream::plausible`); one that fails
+//!   is marked `corrected_flags::IMPLAUSIBLE` and counted (with the clipped ones,
+//!   [`SessionStats::clipped`]) before the stage, whose filter bridges it as unobserved.
 //! - **Samples without a gyroscope** (`raw_flags::GYRO_VALID` clear: an accelerometer-only
 //!   sensor mode, the MPU-9250 at 4 kHz): nothing tracks the attitude, so what they give is
 //!   configuration ([`NoGyro`]).
@@ -29,6 +33,7 @@
 
 use std::collections::VecDeque;
 
+use ipc_types::stream::{self, plausible::Plausibility, range::Clipping};
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, corrected_flags, odometry_flags, raw_flags,
 };
@@ -127,6 +132,12 @@ pub struct SessionStats {
     pub first_no_gyro_seq: Option<u64>,
     /// Holes longer than the odometry bridges (each refused, then a new stage).
     pub unbridged: u64,
+    /// Samples with an axis at the end of its range (`corrected_flags::CLIPPED`), per axis.
+    pub clipped: Clipping,
+    /// Samples the plausibility test refused (`corrected_flags::IMPLAUSIBLE`).
+    pub implausible: u64,
+    /// The first of them: sequence number and time, ns.
+    pub first_implausible: Option<(u64, u64)>,
 }
 
 /// The odometry stage with the policies of every process (module documentation).
@@ -139,6 +150,8 @@ pub struct OdometrySession {
     waiting: VecDeque<RobotHint>,
     stats: SessionStats,
     auto: Option<Auto>,
+    /// The plausibility test (`ipc_types::stream::plausible`) with the profile's envelope.
+    plausibility: Plausibility,
 }
 
 impl OdometrySession {
@@ -157,6 +170,7 @@ impl OdometrySession {
             waiting: VecDeque::with_capacity(HINT_QUEUE),
             stats: SessionStats::default(),
             auto: None,
+            plausibility: Plausibility::new(config.plausible, config.gravity_mps2),
         })
     }
 
@@ -217,6 +231,7 @@ impl OdometrySession {
         );
         self.config = profile.odometry(auto.base);
         self.stage.reconfigure(self.config);
+        self.plausibility = Plausibility::new(self.config.plausible, self.config.gravity_mps2);
     }
 
     /// The current sensor session's stage.
@@ -266,7 +281,29 @@ impl OdometrySession {
         } else if s.flags & corrected_flags::NEW_SESSION != 0 {
             self.restart(emit);
             self.stats.sessions += 1;
+            self.plausibility.restart();
         }
+    }
+
+    /// `s` marked `IMPLAUSIBLE` when the plausibility test fails it (a value the stream
+    /// contract refuses is left to the stage to refuse); clipped and implausible samples
+    /// counted.
+    fn judge(&mut self, s: &CorrectedImuSample) -> CorrectedImuSample {
+        let mut s = *s;
+        if stream::check_corrected(&s).is_err() {
+            return s;
+        }
+        if s.flags & corrected_flags::CLIPPED != 0 {
+            // A source that did not say which axes counts as SATURATED alone.
+            self.stats.clipped.count(s.raw_flags | raw_flags::SATURATED);
+        }
+        let (t_ns, f, w) = (s.stamps.sample_ns, s.accel_mps2, s.gyro_rps);
+        if self.plausibility.check(t_ns, &f, &w).is_some() {
+            s.flags |= corrected_flags::IMPLAUSIBLE;
+            self.stats.implausible += 1;
+            self.stats.first_implausible.get_or_insert((s.seq, t_ns));
+        }
+        s
     }
 
     /// Completes the stage's revisions and starts a new one.
@@ -297,6 +334,7 @@ impl Stage for OdometrySession {
         // Before anything here can change the stage (a new session, a recognized platform).
         self.stage.postprocess(emit);
         self.new_session(s, emit);
+        let s = &self.judge(s);
         while let Some(h) = self.waiting.front()
             && h.stamps.acquired_ns <= s.stamps.sample_ns
         {

@@ -54,7 +54,8 @@ pub use error::Error;
 use embedded_hal::i2c::{Error as _, ErrorKind, I2c, NoAcknowledgeSource};
 use ipc_types::RawImuSample;
 use ipc_types::raw_flags;
-use ipc_types::units::{is_saturated, temp_c_from_counts};
+use ipc_types::stream::range;
+use ipc_types::units::{AccelRange, GyroRange, is_saturated, temp_c_from_counts};
 
 use crate::clock::Clock;
 use crate::registers as reg;
@@ -216,6 +217,28 @@ impl<I2C: I2c> Mpu9250<I2C> {
     /// The configuration last applied by [`Mpu9250::init`].
     pub fn config(&self) -> Option<Config> {
         self.config
+    }
+
+    /// The full-scale ranges the device is set to, read back from its registers: GYRO_CONFIG
+    /// (27) and ACCEL_CONFIG (28) bits `[4:3]`, `GYRO_FS_SEL` and `ACCEL_FS_SEL` (register map
+    /// RM-MPU-9250A-00 rev 1.6, sections 4.6-4.7: +-250/500/1000/2000 deg/s, +-2/4/8/16 g; the
+    /// Linux driver drivers/iio/imu/inv_mpu6050/inv_mpu_core.c reads the same bits into its
+    /// `gyro_fs`/`accl_fs`). An axis at the end of these is clipped
+    /// (`ipc_types::stream::range`).
+    pub fn ranges(&mut self) -> Result<range::Ranges, Error<I2C::Error>> {
+        let mut config = [0u8; 2];
+        self.read_registers(
+            reg::GYRO_CONFIG,
+            &mut config,
+            "reading the full-scale ranges",
+        )?;
+        let gyro = GyroRange::from_bits(config[0] >> reg::GYRO_FS_SEL_SHIFT);
+        let accel = AccelRange::from_bits(config[1] >> reg::ACCEL_FS_SEL_SHIFT);
+        // The largest count over the sensitivity: +-32768 counts span the range.
+        Ok(range::Ranges {
+            accel_g: range::Range::given(Some(32768.0 / accel.lsb_per_g())),
+            gyro_dps: range::Range::given(Some(32768.0 / gyro.lsb_per_dps())),
+        })
     }
 
     /// The bus (for inspection, e.g. the simulated device's statistics).
@@ -763,7 +786,11 @@ fn decode(config: &Config, frame: &[u8], t_ns: f64, temp_counts: Option<i16>) ->
         s.flags |= raw_flags::TEMP_VALID;
     }
     if saturated {
-        s.flags |= raw_flags::SATURATED;
+        // Which axes: an output at -32768 or +32767 counts is the end of the range
+        // `ACCEL_FS_SEL`/`GYRO_FS_SEL` set (register map RM-MPU-9250A-00 rev 1.6, registers
+        // 27-28; Linux drivers/iio/imu/inv_mpu6050 scales the same 16-bit words).
+        let clipped = range::clipped_axes_from_counts(&s);
+        range::mark_clipped(&mut s, clipped);
     }
     s
 }

@@ -17,9 +17,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use ipc_types::stream::range::Clipping;
 use ipc_types::stream::{Holes, Step, TimeLine};
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
-use ipc_types::{odometry_flags, raw_flags, service};
+use ipc_types::{corrected_flags, odometry_flags, raw_flags, service};
 use recording::mcap::run::{Message, RunReader};
 use recording::mcap::{EventKind, MessageEncoding, RecorderEvent};
 use serde::{Deserialize, Serialize};
@@ -71,6 +72,9 @@ pub struct TopicInfo {
     pub seq_restarts: u64,
     /// Odometry states flagged `REVISION` (republished history; not part of the sequence).
     pub revisions: u64,
+    /// Messages that say their input was not taken at its word: corrected samples flagged
+    /// `CLIPPED` or `IMPLAUSIBLE`, odometry states flagged `UNTRUSTED_INPUT`.
+    pub untrusted: u64,
     /// Messages of a JSON channel that did not decode as JSON with the expected fields.
     pub undecodable: u64,
 }
@@ -102,6 +106,9 @@ pub struct RawInfo {
     pub undelivered: u64,
     /// Samples flagged `SATURATED`.
     pub saturated: u64,
+    /// The same per axis (`SATURATED_AXES`; a sample whose source did not say which axes
+    /// counts in `samples` only).
+    pub clipped: Clipping,
     /// Holes in the sample times that nothing marked, measured against the stream's nominal
     /// period (`ipc_types::stream`): count, total and the longest, with the seq and sample time
     /// of the sample after it.
@@ -290,6 +297,7 @@ impl RawTrack {
         let flags = f.flags.unwrap_or(0);
         self.info.gyro |= flags & raw_flags::GYRO_VALID != 0;
         self.info.saturated += u64::from(flags & raw_flags::SATURATED != 0);
+        self.info.clipped.count(flags);
         self.info.lost_at_sensor += u64::from(f.lost_before.unwrap_or(0));
         self.session_undelivered = u64::from(f.undelivered.unwrap_or(0));
         let t = f.stamps.as_ref().map_or(0, |s| s.sample_ns);
@@ -366,6 +374,14 @@ impl Tally {
             topic.revisions += 1;
             return;
         }
+        let flags = fields.flags.unwrap_or(0);
+        topic.untrusted += u64::from(match channel.topic.as_str() {
+            service::CORRECTED => {
+                flags & (corrected_flags::CLIPPED | corrected_flags::IMPLAUSIBLE) != 0
+            }
+            service::ODOMETRY => flags & odometry_flags::UNTRUSTED_INPUT != 0,
+            _ => false,
+        });
         topic.sequenced |= fields.seq.is_some();
         let restart = fields.seq.is_some_and(|seq| {
             self.sequences
@@ -494,11 +510,18 @@ impl RunInfo {
         let _ = writeln!(s, "topics:");
         let width = self.topics.keys().map(String::len).max().unwrap_or(0);
         for (name, t) in &self.topics {
-            let revisions = if t.revisions > 0 {
+            let mut revisions = if t.revisions > 0 {
                 format!(", {} revisions", t.revisions)
             } else {
                 String::new()
             };
+            if t.untrusted > 0 {
+                let _ = write!(
+                    revisions,
+                    ", {} untrusted (clipped or implausible input)",
+                    t.untrusted
+                );
+            }
             let undecodable = if t.undecodable > 0 {
                 format!(", {} undecodable", t.undecodable)
             } else {
@@ -538,6 +561,14 @@ impl RunInfo {
                 r.undelivered,
                 r.saturated
             );
+            if r.clipped.samples > 0 {
+                let _ = writeln!(
+                    s,
+                    "clipped:   {} samples at the end of their range ({})",
+                    r.clipped.samples,
+                    r.clipped.per_axis_text()
+                );
+            }
             let holes = r.holes.describe(self.start_ns.unwrap_or(0));
             let _ = writeln!(
                 s,

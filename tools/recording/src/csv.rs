@@ -19,7 +19,8 @@
 //! Reading derives what the file does not hold: `seq` is the row index (from 0); counts are
 //! computed from the values at +-2 g and +-250 deg/s (the file holds g and deg/s, the counts are
 //! the nearest integers); without a `flags` column, `GYRO_VALID` / `TEMP_VALID` are set when
-//! those columns exist and `SATURATED` when a count is at either end of its range. Stamps other
+//! those columns exist (`SATURATED` is not: the counts are derived at a range that need not be
+//! the file's; the caller marks clipping, `ipc_types::stream::range`). Stamps other
 //! than `sample_ns` are not stored and read back as 0.
 
 use std::io::{BufWriter, Write};

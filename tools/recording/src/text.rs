@@ -255,7 +255,8 @@ impl SampleBuilder {
     /// Counts are derived from the values at the ranges the thesis and the defaults use:
     /// accel at +-2 g (16384 counts/g), gyro at +-250 deg/s (131 counts/(deg/s)), temperature
     /// by the datasheet formula. Without stored flags, `GYRO_VALID` / `TEMP_VALID` are set when
-    /// the row has those values and `SATURATED` when a count sits at either end of its range.
+    /// the row has those values; `SATURATED` is not (the file's range is the caller's to know
+    /// or infer: `ipc_types::stream::range`).
     pub(crate) fn push(
         &mut self,
         path: &Path,
@@ -306,6 +307,9 @@ impl SampleBuilder {
         let gyro_counts = gyro_dps.map(|w| units::quantize(w * gyro_lsb));
         let temp_c = row.temp_c.unwrap_or_default();
         let temp_counts = row.temp_c.map_or(0, units::temp_counts_from_c);
+        // Without stored flags nothing says a value was clipped: the file's range is not the
+        // +-2 g and +-250 deg/s the counts are derived at, so the caller marks clipping from
+        // the range it knows or infers (`ipc_types::stream::range`).
         let flags = row.flags.unwrap_or_else(|| {
             let mut flags = 0;
             if row.gyro_dps.is_some() {
@@ -313,19 +317,6 @@ impl SampleBuilder {
             }
             if row.temp_c.is_some() {
                 flags |= raw_flags::TEMP_VALID;
-            }
-            if accel_counts
-                .iter()
-                .chain(
-                    row.gyro_dps
-                        .is_some()
-                        .then_some(&gyro_counts)
-                        .into_iter()
-                        .flatten(),
-                )
-                .any(|&c| units::is_saturated(c))
-            {
-                flags |= raw_flags::SATURATED;
             }
             flags
         });

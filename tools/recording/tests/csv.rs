@@ -76,10 +76,11 @@ fn minimal_file_derives_seq_counts_and_flags() {
     // 16384 counts/g: 0.25 g = 4096, -0.5 g = -8192, 1 g = 16384.
     assert_eq!(a.accel_counts, [4096, -8192, 16384]);
     assert_eq!(a.flags, 0);
-    // 2.5 g is beyond +-2 g: the count saturates and the sample is flagged;
+    // 2.5 g is beyond +-2 g: the derived count saturates, but the file's range is not known
+    // to be +-2 g, so nothing is flagged (the caller marks clipping from the range it knows);
     // 0.0000305 g * 16384 = 0.4997 rounds to 0.
     assert_eq!(b.accel_counts, [i16::MAX, 0, -16384]);
-    assert_eq!(b.flags, raw_flags::SATURATED);
+    assert_eq!(b.flags, 0);
     assert_eq!(b.accel_g, [2.5, 0.0000305, -1.0]);
     assert!(rec.truth.is_none());
 }

@@ -1,6 +1,7 @@
 //! The ADC: quantization and saturation of analog samples into raw samples, exactly as the
 //! register-level device and the `mems-sim` writer both do it.
 
+use ipc_types::stream::range;
 use ipc_types::units::{self, AccelRange, GyroRange};
 use ipc_types::{RawImuSample, Stamps, raw_flags};
 
@@ -10,7 +11,7 @@ use crate::AnalogSample;
 /// number `seq` and sample time `sample_ns`: counts are `round(value * LSB)` saturated to i16
 /// (`units::quantize`), scaled values are `counts / LSB`, the temperature goes through
 /// TEMP_OUT's formula, and `SATURATED` is set when any accelerometer or gyroscope axis sits
-/// at either end of the 16-bit range. Gyroscope and temperature are flagged valid.
+/// at either end of the 16-bit range, with that axis's `SATURATED_AXES` bit. Gyroscope and temperature are flagged valid.
 pub fn quantize_sample(
     analog: &AnalogSample,
     accel_range: AccelRange,
@@ -23,15 +24,7 @@ pub fn quantize_sample(
     let accel_counts = analog.accel_g.map(|a| units::quantize(a * a_lsb));
     let gyro_counts = analog.gyro_dps.map(|g| units::quantize(g * g_lsb));
     let temp_counts = units::temp_counts_from_c(analog.temp_c);
-    let saturated = accel_counts
-        .iter()
-        .chain(gyro_counts.iter())
-        .any(|c| units::is_saturated(*c));
-    let mut flags = raw_flags::GYRO_VALID | raw_flags::TEMP_VALID;
-    if saturated {
-        flags |= raw_flags::SATURATED;
-    }
-    RawImuSample {
+    let mut raw = RawImuSample {
         stamps: Stamps {
             sample_ns,
             ..Stamps::default()
@@ -43,8 +36,11 @@ pub fn quantize_sample(
         accel_counts,
         gyro_counts,
         temp_counts,
-        flags,
+        flags: raw_flags::GYRO_VALID | raw_flags::TEMP_VALID,
         lost_before: 0,
         undelivered: 0,
-    }
+    };
+    let clipped = range::clipped_axes_from_counts(&raw);
+    range::mark_clipped(&mut raw, clipped);
+    raw
 }

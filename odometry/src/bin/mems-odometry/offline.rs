@@ -10,6 +10,7 @@
 mod platform;
 mod source;
 mod summary;
+mod trust;
 mod truth;
 
 use std::path::PathBuf;
@@ -55,6 +56,8 @@ pub struct OfflineArgs {
     repair_torn_reads: bool,
     #[command(flatten)]
     hints: crate::hint_args::HintArgs,
+    #[command(flatten)]
+    ranges: trust::RangeArgs,
     /// Also write the run as a live run's recording to this MCAP file: raw samples and hints
     /// as read, corrected samples, odometry states (revisions included) and poses, each logged
     /// at its own time (`crate::out`).
@@ -70,11 +73,12 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     let is_mcap = recording::mcap::has_magic(&args.input)?;
     let choice = platform::choose(args.stage.profile, &args.input, is_mcap)?;
     let (file, detector) = args.stage.load(choice.profile)?;
-    let (source, repairs) = Source::open(&args)?;
+    let (source, repairs, ranges) = Source::open(&args)?;
     let calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
         .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
     let mut base = odometry_config(&file);
     base.rest_updates = !args.no_zupt;
+    base.trust_untrusted = args.ranges.trust_clipped;
     let hints = args.hints.config()?;
     let (config, session) = match choice.profile {
         Profile::Auto => (
@@ -94,7 +98,7 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         second: session,
     };
     let out = Out::for_input(args.out.as_deref(), &args.input, args.force)?;
-    let mut feed = Feed::new(source, out);
+    let mut feed = Feed::new(source, out, ranges);
     let mut summary = Summary::default();
     let progress = mems_log::progress::bar(None, "mems-odometry offline", "states");
     let ran =
@@ -114,6 +118,10 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     }
     let no_gyro = chain.second.stats().first_no_gyro_seq;
     read.segments = summary::report_input(&read, &mut feed.source, no_gyro);
+    let t0 = read.first_ns.unwrap_or(0);
+    let stats = chain.second.stats();
+    trust::report(&args.input, &ranges, &stats, t0, args.ranges.trust_clipped);
+    read.trust = trust::json(&ranges, &stats, t0);
     summary.finish(ran, &read, &chain, &mut feed.truth, args.json)?;
     // Only a run that succeeded leaves its --out file (a failed one drops it unwritten).
     match feed.out {

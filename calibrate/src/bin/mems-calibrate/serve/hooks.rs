@@ -31,6 +31,13 @@ pub fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
     if let Some(holes) = s.holes.describe(0) {
         tracing::warn!("{holes}; each bridged as a gap (GAP_BEFORE and HOLE_BEFORE)");
     }
+    if s.clipped.samples > 0 {
+        tracing::warn!(
+            "clipped {} samples at the end of their range ({}); marked CLIPPED",
+            s.clipped.samples,
+            s.clipped.per_axis_text()
+        );
+    }
     tracing::info!("{}; {}", steady.summary(), crate::ALLOCATOR.summary());
 }
 

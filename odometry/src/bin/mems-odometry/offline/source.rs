@@ -8,6 +8,7 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
 use anyhow::Result;
+use ipc_types::stream::range::Ranges;
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample};
 use mems_stage::Either;
 use odometry::arrival::Arrival;
@@ -71,8 +72,9 @@ fn read_run(
 }
 
 impl Source {
-    /// Opens the input; also returns the log repairs of a text recording.
-    pub fn open(args: &OfflineArgs) -> Result<(Self, recording::LogRepairs)> {
+    /// Opens the input; also returns the log repairs of a text recording and the ranges its
+    /// samples are marked clipped at (given, or inferred from a text recording's samples).
+    pub fn open(args: &OfflineArgs) -> Result<(Self, recording::LogRepairs, Ranges)> {
         let is_mcap = recording::mcap::has_magic(&args.input)?;
         if is_mcap && !args.repair_torn_reads {
             let (tx, blocks) = sync_channel(BLOCKS_IN_FLIGHT);
@@ -85,7 +87,8 @@ impl Source {
                 block: Vec::new().into_iter(),
                 reader: Some(reader),
             };
-            return Ok((source, recording::LogRepairs::default()));
+            let ranges = args.ranges.ranges(None)?;
+            return Ok((source, recording::LogRepairs::default(), ranges));
         }
         let policy = if args.strict_time {
             recording::LogPolicy::Strict
@@ -108,6 +111,7 @@ impl Source {
                 report.gyro.map(|g| g.map(|a| a.repaired))
             );
         }
+        let ranges = args.ranges.ranges(Some(&recording.samples))?;
         // Hints first (the merge orders them by publication), then truth and samples by time.
         let mut items: Vec<Item> = if is_mcap && !args.no_hints {
             let hints = recording::mcap::read_all(&args.input)?.hints;
@@ -125,7 +129,7 @@ impl Source {
             items.push(Item::Raw(raw));
         }
         items.extend(truth.map(Item::Truth));
-        Ok((Self::Memory(items.into_iter()), recording.repairs))
+        Ok((Self::Memory(items.into_iter()), recording.repairs, ranges))
     }
 
     fn next(&mut self) -> Option<recording::Result<Item>> {
@@ -177,11 +181,13 @@ pub struct Feed {
     pub first_ns: Option<u64>,
     /// Whether the source has ended.
     ended: bool,
+    /// The ranges raw samples are marked clipped at as they leave.
+    ranges: Ranges,
 }
 
 impl Feed {
-    /// Reads `source`, writing to `out`.
-    pub fn new(source: Source, out: Option<Out>) -> Self {
+    /// Reads `source`, writing to `out`, marking raw samples clipped at `ranges`.
+    pub fn new(source: Source, out: Option<Out>, ranges: Ranges) -> Self {
         Self {
             source,
             arrival: Arrival::new(),
@@ -189,13 +195,15 @@ impl Feed {
             out,
             first_ns: None,
             ended: false,
+            ranges,
         }
     }
 
     /// The chain's next input, in the order a live pipeline receives them (`None`: the end).
     pub fn next_input(&mut self) -> Option<Result<ChainInput>> {
         loop {
-            if let Some(raw) = self.arrival.release() {
+            if let Some(mut raw) = self.arrival.release() {
+                super::trust::mark(&mut raw, &self.ranges);
                 if let Some(out) = self.out.as_mut() {
                     out.raw(&raw);
                 }

@@ -197,7 +197,7 @@ impl Summary {
     ) -> serde_json::Value {
         let speed_updates = chain.second.hint_stats().speed_updates;
         let chain_axes = chain.second.stage().axes();
-        json!({
+        let mut result = json!({
             "end_displacement_m": end.position_m,
             "sigma_m": end.position_sigma_m,
             "distance_m": end.distance_m,
@@ -221,7 +221,11 @@ impl Summary {
                 "disagreements": end.hint_disagreements,
                 "speed_updates": speed_updates,
             },
-        })
+        });
+        if let (Some(r), Some(t)) = (result.as_object_mut(), read.trust.as_object()) {
+            r.extend(t.clone());
+        }
+        result
     }
 
     /// What the wheeled profile's IMU-only handling did: the non-holonomic constraint's
@@ -288,6 +292,9 @@ pub struct Read<'a> {
     pub segments: Vec<SegmentRead>,
     /// The profile the run used and how it was chosen.
     pub choice: Choice,
+    /// The ranges, clipped and implausible samples (after the run: `super::trust::json`), an
+    /// object whose fields go into the JSON result.
+    pub trust: serde_json::Value,
 }
 
 impl<'a> Read<'a> {
@@ -310,6 +317,7 @@ impl<'a> Read<'a> {
             align_s,
             segments: Vec::new(),
             choice,
+            trust: serde_json::Value::Null,
         }
     }
 }

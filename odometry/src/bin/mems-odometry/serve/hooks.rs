@@ -115,6 +115,14 @@ impl Watch {
             ),
             (p, _) => tracing::info!("profile {}", p.name()),
         }
+        if stats.clipped.samples > 0 || stats.implausible > 0 {
+            tracing::warn!(
+                "clipped {} samples ({}), implausible {}: bridged as unobserved and counted in the 1-sigma (states flagged UNTRUSTED_INPUT)",
+                stats.clipped.samples,
+                stats.clipped.per_axis_text(),
+                stats.implausible
+            );
+        }
         tracing::info!("{}; {}", self.steady.summary(), crate::ALLOCATOR.summary());
     }
 }
