@@ -216,13 +216,16 @@ impl GlrtRule {
     /// The test from the start-up reference `r` (after the noise floor; `learned` before it),
     /// its window in batches at the reference's rate; `ring` (capacity at least
     /// [`GlrtConfig::max_window_batches`]) becomes the window, so that learning allocates
-    /// nothing. `accel_only` leaves the gyroscope out.
+    /// nothing. `accel_only` leaves the gyroscope out. `prior_batches`: the batches of rest
+    /// the part's known noise (the calibration file's `[noise]` table or the datasheet's, at
+    /// this rate) stands for in the mean test's quantile, 0 when it is not known.
     pub fn new(
         r: &StaticReference,
         learned: &StaticReference,
         config: &GlrtConfig,
         mut ring: Vec<BatchSums>,
         accel_only: bool,
+        prior_batches: f64,
     ) -> Self {
         let channels = if accel_only { 3 } else { 6 };
         let k = config.window_batches(r.rate_hz());
@@ -244,7 +247,7 @@ impl GlrtRule {
             inv_rho[i] = 1.0 / r.accel_correlation[i];
             inv_rho[i + 3] = 1.0 / r.gyro_correlation[i];
         }
-        let pool = Pool::new(r, learned, config.false_alarm);
+        let pool = Pool::new(r, learned, config.false_alarm, prior_batches);
         let mut rule = Self {
             statistic: config.statistic,
             channels,
@@ -551,8 +554,14 @@ struct Pool {
 }
 
 impl Pool {
-    /// The pool of the learned rest `learned`; `installed` is it after the noise floor.
-    fn new(installed: &StaticReference, learned: &StaticReference, false_alarm: f64) -> Self {
+    /// The pool of the learned rest `learned`; `installed` is it after the noise floor;
+    /// `prior_batches` the batches the part's known noise stands for (0 when unknown).
+    fn new(
+        installed: &StaticReference,
+        learned: &StaticReference,
+        false_alarm: f64,
+        prior_batches: f64,
+    ) -> Self {
         let nominal = learned.batches as f64 * (BATCH_LEN - 1) as f64;
         let sigma = |r: &StaticReference, c: usize| {
             if c < 3 {
@@ -564,7 +573,7 @@ impl Pool {
         Self {
             ss: std::array::from_fn(|c| sigma(learned, c).powi(2) * nominal),
             ss_dof: [nominal; 6],
-            mean_dof: learned.batches as f64 - 1.0,
+            mean_dof: (learned.batches as f64).max(prior_batches) - 1.0,
             floor_var: std::array::from_fn(|c| {
                 let (i, l) = (sigma(installed, c), sigma(learned, c));
                 if i > l { i * i } else { 0.0 }

@@ -174,6 +174,13 @@ pub struct DetectorConfig {
     pub shoe: ShoeConfig,
     /// The sensor's noise from the calibration file, a floor for the learned levels.
     pub noise: Option<NoiseFloor>,
+    /// Rest the part's noise is known from beyond the learning, s (0: only what was learned):
+    /// the GLRT's mean test takes its quantile with the degrees of freedom of at least this
+    /// much rest, so that a short learning (whose few batches leave the F quantile loose) does
+    /// not let motion through. The vehicle profile sets 5 s (`odometry::profile`): the part's
+    /// noise is the calibration file's `[noise]` table or the datasheet's, and what the first
+    /// second of rest shows is taken at that confidence until pooled rests exceed it.
+    pub noise_prior_s: f64,
 }
 
 impl DetectorConfig {
@@ -195,6 +202,7 @@ impl DetectorConfig {
             glrt: GlrtConfig::default(),
             shoe: ShoeConfig::default(),
             noise: None,
+            noise_prior_s: 0.0,
         }
     }
 }
@@ -358,6 +366,12 @@ impl ZeroStateDetector {
         }
     }
 
+    /// The batches of rest [`DetectorConfig::noise_prior_s`] stands for at the rate `learned`
+    /// was learned at.
+    fn prior_batches(&self, learned: &StaticReference) -> f64 {
+        self.config.noise_prior_s * learned.rate_hz() / BATCH_LEN as f64
+    }
+
     /// Makes `reference` (after the noise floor) the rule's.
     fn install(&mut self, learned: StaticReference) -> StaticReference {
         let reference = self.config.noise.map_or(learned, |f| f.apply(learned));
@@ -375,6 +389,7 @@ impl ZeroStateDetector {
                     &self.config.glrt,
                     ring,
                     kind == DetectorKind::GlrtAccel,
+                    self.prior_batches(&learned),
                 );
                 // The batches just learned from (none when resumed) are a rest already.
                 rule.seed(

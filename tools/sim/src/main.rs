@@ -83,6 +83,8 @@ enum Command {
         #[arg(long, value_name = "R,P,Y", value_parser = parse_triple, default_value = "0,0,0")]
         mount_deg: [f64; 3],
         #[command(flatten)]
+        plan: PlanArgs,
+        #[command(flatten)]
         hints: HintArgs,
         #[command(flatten)]
         common: Common,
@@ -120,6 +122,27 @@ enum Command {
         #[arg(long, default_value = "calibrated")]
         preset: Preset,
     },
+}
+
+/// The drive's plan (a stop-and-go robot: `--rests 1,2 --legs 2,4`; a car stopping on slopes:
+/// `--max-slope-deg 5`).
+#[derive(Args)]
+struct PlanArgs {
+    /// Length of each rest between motions, s.
+    #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "1,30")]
+    rests: [f64; 2],
+    /// Cruise speed of each leg, m/s.
+    #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "0.2,1")]
+    cruise: [f64; 2],
+    /// Length of each constant-speed leg, s.
+    #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "2,10")]
+    legs: [f64; 2],
+    /// Longest motion between two rests, s.
+    #[arg(long, default_value_t = 30.0)]
+    max_motion: f64,
+    /// Largest grade of the road at each stop, degrees (0: a flat, level floor).
+    #[arg(long, default_value_t = 0.0)]
+    max_slope_deg: f64,
 }
 
 /// Options of every scenario.
@@ -739,11 +762,17 @@ fn run(cli: Cli) -> Result<()> {
             in_place_turns,
             initial_rest,
             mount_deg,
+            plan,
             hints,
             common,
         } => {
             let params = DriveParams {
                 initial_rest_s: initial_rest,
+                rest_s: plan.rests,
+                cruise_speed_mps: plan.cruise,
+                leg_s: plan.legs,
+                max_motion_s: plan.max_motion,
+                max_slope_deg: plan.max_slope_deg,
                 turns: turns == OnOff::On,
                 in_place_turns: in_place_turns == OnOff::On,
                 mounting: rotation_deg(mount_deg),
