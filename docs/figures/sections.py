@@ -9,6 +9,7 @@ import acquisition
 import diagnosis
 import odometry
 import pages
+import rests
 from common import Context, Section  # noqa: F401  (Context: for docs/figures.py)
 
 
@@ -28,4 +29,5 @@ SECTIONS = {
     + pages.SECTIONS
     + acquisition.SECTIONS
     + diagnosis.SECTIONS
+    + rests.SECTIONS
 }

@@ -27,9 +27,9 @@ pub const VEHICLE_NOISE_PRIOR_S: f64 = 5.0;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Profile {
     /// Wheeled robot or vehicle: the GLRT against the references learned from the first
-    /// second of rest ([`VEHICLE_LEARN_S`], taken with the confidence of
-    /// [`VEHICLE_NOISE_PRIOR_S`] of rest; the noise is pooled over the rests that follow), rest flags taken in hindsight (a gentle start is flagged rest by a window that
-    /// still holds the rest before it).
+    /// second of rest (taken with the confidence of 5 s of rest; the noise is pooled over the
+    /// rests that follow), rest flags taken in hindsight (a gentle start is flagged rest by a
+    /// window that still holds the rest before it).
     #[default]
     Vehicle,
     /// Foot-mounted sensor: the SHOE stance detector (no learning, 5-sample windows), every
