@@ -7,22 +7,6 @@ use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use crate::config::OdometryConfig;
 use crate::eskf::Manoeuvre;
 
-/// Start-up learning of the vehicle profile, s: a robot's first rest of a second (the
-/// odometry aligns on one second of rest after it, `OdometryConfig::align_s`). The GLRT
-/// takes what it learned with the confidence of [`VEHICLE_NOISE_PRIOR_S`] of rest, and pools
-/// its noise over the rests that follow (`calibrate::zero_state::glrt`).
-pub const VEHICLE_LEARN_S: f64 = 1.0;
-
-/// Rest the part's noise counts for in the vehicle profile's GLRT beyond its one second of
-/// learning, s (`DetectorConfig::noise_prior_s`): the 5 s of learning it replaces. Without it,
-/// the F quantile of one second's 9 batches at 200 Hz let a robot's motions through as rest: a
-/// simulated stop-and-go robot
-/// (`mems-sim drive --duration 120 --initial-rest 7 --rests 1,2 --legs 2,4 --max-motion 10
-/// --cruise 0.2,0.5 --seed 1 --rate 200`, offline without a calibration file) ended 3.2 m off
-/// after 24 m, and 0.05 m with it (0.012 m with 5 s of learning, which its 1-2 s rests never
-/// give again once it has started).
-pub const VEHICLE_NOISE_PRIOR_S: f64 = 5.0;
-
 /// A platform's motion profile.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Profile {
@@ -42,12 +26,7 @@ impl Profile {
     /// The zero-state detector settings for local gravity `gravity_mps2`.
     pub fn detector(self, gravity_mps2: f64) -> DetectorConfig {
         match self {
-            Self::Vehicle => {
-                let mut config = DetectorConfig::new(DetectorKind::Glrt, gravity_mps2);
-                config.learn.duration_s = VEHICLE_LEARN_S;
-                config.noise_prior_s = VEHICLE_NOISE_PRIOR_S;
-                config
-            }
+            Self::Vehicle => DetectorConfig::robot(gravity_mps2),
             Self::Pedestrian => DetectorConfig::new(DetectorKind::Shoe, gravity_mps2),
         }
     }
