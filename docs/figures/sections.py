@@ -10,6 +10,7 @@ import diagnosis
 import odometry
 import pages
 import auto_profile
+import rests
 from common import Context, Section  # noqa: F401  (Context: for docs/figures.py)
 
 
@@ -30,4 +31,5 @@ SECTIONS = {
     + auto_profile.SECTIONS
     + acquisition.SECTIONS
     + diagnosis.SECTIONS
+    + rests.SECTIONS
 }

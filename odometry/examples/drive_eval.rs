@@ -152,6 +152,9 @@ struct Args {
     /// (a diagnostic: the odometry then sees the gyro as if the stage did not refine it).
     #[arg(long)]
     undo_gyro_refinement: bool,
+    /// With `--rest imu`: the detector's options (default: the vehicle profile's).
+    #[command(flatten)]
+    detector: calibrate::zero_state::args::DetectorArgs,
 }
 
 /// A `--dlpf-cfg` value.
@@ -602,15 +605,20 @@ impl HintFeed<'_> {
 }
 
 /// The calibration stage that flags rest with `--rest imu`.
-fn rest_detector_stage(c: &Case) -> calibrate::stage::CalibrationStage {
-    let mut detector = live_detector();
+fn rest_detector_stage(c: &Case, args: &Args) -> calibrate::stage::CalibrationStage {
+    let mut detector = args
+        .detector
+        .apply(live_detector())
+        .expect("valid detector options");
     if let Some(mg) = c.accel_turn_on_mg {
         // An uncalibrated part: the start-up learning accepts a gravity magnitude off by up to
-        // 5 sigma of the bias on every axis (the default 5% refuses some).
+        // 5 sigma of the bias on every axis (the default 5% refuses some), and the gravity
+        // reference holds a bias of that sigma.
         detector.learn.max_gravity_error = detector
             .learn
             .max_gravity_error
             .max(5.0 * 3f64.sqrt() * mg * 1e-3);
+        detector.glrt.accel_bias_sigma_mps2 = mg * 1e-3 * mems_sim::model::G_MPS2;
     }
     live_calibration_stage(detector)
 }
@@ -631,7 +639,7 @@ fn drive(
             track.step(s, truth, stage);
         }),
         Rest::Imu => {
-            let mut calibration = rest_detector_stage(c);
+            let mut calibration = rest_detector_stage(c, args);
             // Each sample leaves the calibration stage in the call that takes it.
             sim.drive_raw(|raw, truth| {
                 feed.feed(raw.stamps.sample_ns, stage);

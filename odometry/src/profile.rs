@@ -17,10 +17,11 @@ pub enum Profile {
     /// `pedestrian` for a foot, `vehicle` for wheeled motion, `other` for anything else.
     #[default]
     Auto,
-    /// Wheeled robot or vehicle: the GLRT against the references learned at rest (5 s), rest
-    /// flags taken in hindsight (a gentle start is flagged rest by a window that still holds
-    /// the rest before it), the non-holonomic constraint without hints
-    /// ([`crate::nonholonomic`]) and rests that vibrate refused.
+    /// Wheeled robot or vehicle: the GLRT against the references learned from the first
+    /// second of rest (taken with the confidence of 5 s of rest; the noise is pooled over the
+    /// rests that follow), rest flags taken in hindsight (a gentle start is flagged rest by a
+    /// window that still holds the rest before it), the non-holonomic constraint without
+    /// hints ([`crate::nonholonomic`]) and rests that vibrate refused.
     #[value(alias = "wheeled")]
     Vehicle,
     /// Foot-mounted sensor: the SHOE stance detector (no learning, 5-sample windows), every
@@ -66,9 +67,9 @@ impl Profile {
     pub fn detector(self, gravity_mps2: f64) -> DetectorConfig {
         match self {
             Self::Pedestrian => DetectorConfig::new(DetectorKind::Shoe, gravity_mps2),
-            Self::Auto | Self::Vehicle | Self::Other => {
-                DetectorConfig::new(DetectorKind::Glrt, gravity_mps2)
-            }
+            // The live calibration stage's default too (`mems-calibrate serve`), so that live
+            // and offline agree under any of these.
+            Self::Auto | Self::Vehicle | Self::Other => DetectorConfig::robot(gravity_mps2),
         }
     }
 

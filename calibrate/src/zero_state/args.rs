@@ -17,7 +17,8 @@ pub struct DetectorArgs {
     /// one).
     #[arg(long, value_name = "SECONDS")]
     pub glrt_window_s: Option<f64>,
-    /// Length of the start-up rest the detector learns its thresholds from, s (default 5; the
+    /// Length of the start-up rest the detector learns its thresholds from, s (default: the
+    /// process's, 1 for `mems-calibrate serve` and `mems-odometry`'s vehicle profile; the
     /// first rest of this length anywhere in the data, at least two batches of 20 samples).
     #[arg(long)]
     pub learn_s: Option<f64>,

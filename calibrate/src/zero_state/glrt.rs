@@ -100,6 +100,11 @@ pub struct GlrtConfig {
     /// MPU-9250 has +-2 % of cross-axis sensitivity (PS-MPU-9250A-01 rev. 1.1, table 1), 1.2 %
     /// as a uniform bound's sigma.
     pub turn_error: f64,
+    /// 1-sigma per axis of the accelerometer bias the learned gravity reference holds, m/s^2.
+    /// The bias is fixed in the sensor frame, but carrying the reference turns it with the
+    /// body: after a turn by `theta` the reference is off by `(R(theta) - I) b`, up to
+    /// `2 sin(theta / 2) |b|` across gravity, which a rest after a turn must be allowed.
+    pub accel_bias_sigma_mps2: f64,
 }
 
 impl GlrtConfig {
@@ -118,7 +123,9 @@ impl GlrtConfig {
 impl Default for GlrtConfig {
     /// False-alarm rate 1e-2 per window, 0.5 s (25 batches at 1 kHz), split statistic: the
     /// best trade-off measured on simulated drives (docs/detectors.md); reference tolerances of
-    /// 0 for the accelerometer and 0.02 deg/s for the gyroscope; 1.2 % per radian turned.
+    /// 0 for the accelerometer and 0.02 deg/s for the gyroscope; 1.2 % per radian turned; an
+    /// accelerometer bias of 6.1 mm/s^2 (the thesis's turn-on repeatability of a calibrated
+    /// MPU-9250, its largest axis; `odometry::config::OdometryConfig::mpu9250`).
     fn default() -> Self {
         Self {
             false_alarm: 1e-2,
@@ -127,6 +134,7 @@ impl Default for GlrtConfig {
             accel_tolerance_mps2: 0.0,
             gyro_tolerance_rps: 0.02_f64.to_radians(),
             turn_error: 0.012,
+            accel_bias_sigma_mps2: 6.1e-3,
         }
     }
 }
@@ -190,6 +198,7 @@ pub(crate) struct GlrtRule {
     /// 1-sigma of the gyroscope bias reference, rad/s (the learned mean's noise, largest axis).
     bias_sigma_rps: f64,
     turn_error: f64,
+    accel_bias_sigma_mps2: f64,
     /// Consecutive rest decisions up to the last batch.
     rest_run: usize,
     mean_quantile: f64,
@@ -207,13 +216,16 @@ impl GlrtRule {
     /// The test from the start-up reference `r` (after the noise floor; `learned` before it),
     /// its window in batches at the reference's rate; `ring` (capacity at least
     /// [`GlrtConfig::max_window_batches`]) becomes the window, so that learning allocates
-    /// nothing. `accel_only` leaves the gyroscope out.
+    /// nothing. `accel_only` leaves the gyroscope out. `prior_batches`: the batches of rest
+    /// the part's known noise (the calibration file's `[noise]` table or the datasheet's, at
+    /// this rate) stands for in the mean test's quantile, 0 when it is not known.
     pub fn new(
         r: &StaticReference,
         learned: &StaticReference,
         config: &GlrtConfig,
         mut ring: Vec<BatchSums>,
         accel_only: bool,
+        prior_batches: f64,
     ) -> Self {
         let channels = if accel_only { 3 } else { 6 };
         let k = config.window_batches(r.rate_hz());
@@ -235,7 +247,7 @@ impl GlrtRule {
             inv_rho[i] = 1.0 / r.accel_correlation[i];
             inv_rho[i + 3] = 1.0 / r.gyro_correlation[i];
         }
-        let pool = Pool::new(r, learned, config.false_alarm);
+        let pool = Pool::new(r, learned, config.false_alarm, prior_batches);
         let mut rule = Self {
             statistic: config.statistic,
             channels,
@@ -249,6 +261,7 @@ impl GlrtRule {
             turned_rad: Vector3::zeros(),
             bias_sigma_rps: 0.0,
             turn_error: config.turn_error,
+            accel_bias_sigma_mps2: config.accel_bias_sigma_mps2,
             rest_run: 0,
             mean_quantile: 0.0,
             scatter_quantile: 0.0,
@@ -389,13 +402,15 @@ impl GlrtRule {
     }
 
     /// Variance per axis of the gravity reference across gravity now, (m/s^2)^2: what the last
-    /// rests left, and the turn the gyroscope's bias error (the bias reference's own noise
-    /// over the learned rest) and its scale and cross-axis errors add since.
+    /// rests left, the turn the gyroscope's bias error (the bias reference's own noise over
+    /// the learned rest) and its scale and cross-axis errors add since, and the accelerometer
+    /// bias the turn carried with gravity (`2 sin(theta / 2)` of it, `theta` the angle turned).
     fn across_var_now(&self) -> f64 {
         let g = self.gravity().norm();
-        let drift =
-            g * (self.bias_sigma_rps * self.moving_s + self.turn_error * self.turned_rad.norm());
-        self.across_var + drift * drift
+        let theta = self.turned_rad.norm();
+        let drift = g * (self.bias_sigma_rps * self.moving_s + self.turn_error * theta);
+        let bias = self.accel_bias_sigma_mps2 * 2.0 * (0.5 * theta.min(std::f64::consts::PI)).sin();
+        self.across_var + drift * drift + bias * bias
     }
 
     /// Adds the batch to the window and decides; not at rest until the window is full.
@@ -450,12 +465,16 @@ impl GlrtRule {
     /// The accelerometer's part of `T_mean` (3 degrees of freedom): the window mean's distance
     /// from the gravity reference along it, against the mean's noise `var` (per axis), and
     /// across it, against that noise plus the reference's own uncertainty across gravity.
+    /// Along is the difference of the magnitudes: a turn keeps a vector's magnitude, so the
+    /// accelerometer bias that carrying turned with gravity (it tilts the reference by
+    /// `|b| / g`) does not leak into the magnitude test.
     fn accel_mean_statistic(&self, mean: &[f64; 6], var: &[f64; 6]) -> f64 {
         let reference = self.gravity();
         let u = reference.normalize();
-        let d = Vector3::new(mean[0], mean[1], mean[2]) - reference;
-        let along = d.dot(&u);
-        let across = (d - u * along).norm_squared();
+        let m = Vector3::new(mean[0], mean[1], mean[2]);
+        let d = m - reference;
+        let along = m.norm() - reference.norm();
+        let across = (d.norm_squared() - along * along).max(0.0);
         let var_along: f64 = (0..3).map(|i| u[i] * u[i] * var[i]).sum();
         let var_across = (var[0] + var[1] + var[2] - var_along) / 2.0 + self.across_var_now();
         along * along / var_along + across / var_across
@@ -469,13 +488,19 @@ impl GlrtRule {
         let u = reference.normalize();
         let d = Vector3::from_fn(|i, _| accel.mean[i] - reference[i]);
         let along = u * d.dot(&u);
+        let m_norm = |m: &[f64; 3]| Vector3::from(*m).norm();
         let batch_var = (0..3)
             .map(|i| self.mean_var(i, accel.n as f64))
             .sum::<f64>()
             / 3.0;
         let prior = self.across_var_now();
         let k = (prior / (prior + batch_var)).max(gain);
-        let g = reference + along * gain + (d - along) * k;
+        // Direction and magnitude apart: a step across gravity alone would lengthen the
+        // reference by `|step|^2 / 2 g` (a rest after a turn that carried a 20 mg bias with
+        // gravity: 0.4 m/s^2 across, 0.01 m/s^2 longer), which the magnitude test then holds
+        // against every later rest.
+        let magnitude = reference.norm() + gain * (m_norm(&accel.mean) - reference.norm());
+        let g = (reference + (d - along) * k).normalize() * magnitude;
         self.reference[..3].copy_from_slice(g.as_slice());
         self.across_var = (1.0 - k) * prior;
         self.moving_s = 0.0;
@@ -529,8 +554,14 @@ struct Pool {
 }
 
 impl Pool {
-    /// The pool of the learned rest `learned`; `installed` is it after the noise floor.
-    fn new(installed: &StaticReference, learned: &StaticReference, false_alarm: f64) -> Self {
+    /// The pool of the learned rest `learned`; `installed` is it after the noise floor;
+    /// `prior_batches` the batches the part's known noise stands for (0 when unknown).
+    fn new(
+        installed: &StaticReference,
+        learned: &StaticReference,
+        false_alarm: f64,
+        prior_batches: f64,
+    ) -> Self {
         let nominal = learned.batches as f64 * (BATCH_LEN - 1) as f64;
         let sigma = |r: &StaticReference, c: usize| {
             if c < 3 {
@@ -542,7 +573,7 @@ impl Pool {
         Self {
             ss: std::array::from_fn(|c| sigma(learned, c).powi(2) * nominal),
             ss_dof: [nominal; 6],
-            mean_dof: learned.batches as f64 - 1.0,
+            mean_dof: (learned.batches as f64).max(prior_batches) - 1.0,
             floor_var: std::array::from_fn(|c| {
                 let (i, l) = (sigma(installed, c), sigma(learned, c));
                 if i > l { i * i } else { 0.0 }

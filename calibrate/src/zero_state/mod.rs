@@ -174,6 +174,13 @@ pub struct DetectorConfig {
     pub shoe: ShoeConfig,
     /// The sensor's noise from the calibration file, a floor for the learned levels.
     pub noise: Option<NoiseFloor>,
+    /// Rest the part's noise is known from beyond the learning, s (0: only what was learned):
+    /// the GLRT's mean test takes its quantile with the degrees of freedom of at least this
+    /// much rest, so that a short learning (whose few batches leave the F quantile loose) does
+    /// not let motion through. The vehicle profile sets 5 s (`odometry::profile`): the part's
+    /// noise is the calibration file's `[noise]` table or the datasheet's, and what the first
+    /// second of rest shows is taken at that confidence until pooled rests exceed it.
+    pub noise_prior_s: f64,
 }
 
 impl DetectorConfig {
@@ -195,7 +202,33 @@ impl DetectorConfig {
             glrt: GlrtConfig::default(),
             shoe: ShoeConfig::default(),
             noise: None,
+            noise_prior_s: 0.0,
         }
+    }
+}
+
+/// Start-up learning of a robot's detector, s: its first rest of a second (the odometry
+/// aligns on the second of rest after it).
+pub const ROBOT_LEARN_S: f64 = 1.0;
+
+/// Rest the part's noise counts for in a robot's detector beyond its second of learning, s
+/// ([`DetectorConfig::noise_prior_s`]): the 5 s of learning it replaces. Without it, the F
+/// quantile of one second's 9 batches at 200 Hz let a robot's motions through as rest: a
+/// simulated stop-and-go robot (`mems-sim drive --duration 120 --initial-rest 7 --rests 1,2
+/// --legs 2,4 --max-motion 10 --cruise 0.2,0.5 --seed 1 --rate 200`, `mems-odometry offline`
+/// without a calibration file) ended 3.2 m off after 24 m, and 0.05 m with it (0.012 m with
+/// 5 s of learning, which its 1-2 s rests never give again once it has started).
+pub const ROBOT_NOISE_PRIOR_S: f64 = 5.0;
+
+impl DetectorConfig {
+    /// A wheeled robot's or vehicle's detector, live (`mems-calibrate serve`) and offline
+    /// (`mems-odometry`'s vehicle profile) alike: the GLRT learning from [`ROBOT_LEARN_S`]
+    /// with a prior of [`ROBOT_NOISE_PRIOR_S`], the rest as [`DetectorConfig::new`].
+    pub fn robot(gravity_mps2: f64) -> Self {
+        let mut config = Self::new(DetectorKind::Glrt, gravity_mps2);
+        config.learn.duration_s = ROBOT_LEARN_S;
+        config.noise_prior_s = ROBOT_NOISE_PRIOR_S;
+        config
     }
 }
 
@@ -358,6 +391,12 @@ impl ZeroStateDetector {
         }
     }
 
+    /// The batches of rest [`DetectorConfig::noise_prior_s`] stands for at the rate `learned`
+    /// was learned at.
+    fn prior_batches(&self, learned: &StaticReference) -> f64 {
+        self.config.noise_prior_s * learned.rate_hz() / BATCH_LEN as f64
+    }
+
     /// Makes `reference` (after the noise floor) the rule's.
     fn install(&mut self, learned: StaticReference) -> StaticReference {
         let reference = self.config.noise.map_or(learned, |f| f.apply(learned));
@@ -375,6 +414,7 @@ impl ZeroStateDetector {
                     &self.config.glrt,
                     ring,
                     kind == DetectorKind::GlrtAccel,
+                    self.prior_batches(&learned),
                 );
                 // The batches just learned from (none when resumed) are a rest already.
                 rule.seed(

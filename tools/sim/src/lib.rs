@@ -110,6 +110,11 @@ pub(crate) mod streams {
     pub const WALK_PLAN: u64 = 7;
     /// A walker's tremor phases.
     pub const WALK_TREMOR: u64 = 8;
+    /// The grade of each stop of a drive on slopes (its own stream, so that drives without
+    /// slopes draw as before).
+    pub const DRIVE_SLOPES: u64 = 9;
+    /// The waypoints, moves and pauses of an arm's path.
+    pub const ARM_PLAN: u64 = 40;
 }
 
 /// A ChaCha8 generator for stream `stream` of `seed` (see [`streams`] and the model's streams).

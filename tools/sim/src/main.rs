@@ -14,7 +14,8 @@ use mems_sim::dlpf::DlpfConfig;
 use mems_sim::hints::{HintParams, RestSource, drive_hints};
 use mems_sim::model::{Preset, SensorModel};
 use mems_sim::scenario::{
-    Drive, DriveParams, PoseParams, PoseSession, Scenario, Walk, WalkParams, ns_from_s,
+    Arm, ArmParams, Drive, DriveParams, PoseParams, PoseSession, Scenario, Walk, WalkParams,
+    ns_from_s,
 };
 use mems_sim::vibration::VibrationModel;
 use mems_sim::{DlpfGrid, SimSensor};
@@ -83,6 +84,8 @@ enum Command {
         #[arg(long, value_name = "R,P,Y", value_parser = parse_triple, default_value = "0,0,0")]
         mount_deg: [f64; 3],
         #[command(flatten)]
+        plan: PlanArgs,
+        #[command(flatten)]
         hints: HintArgs,
         #[command(flatten)]
         common: Common,
@@ -114,12 +117,88 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// An industrial arm: a rest, then moves between random waypoints of its workspace with
+    /// short pauses, back to the start.
+    Arm {
+        #[command(flatten)]
+        arm: ArmArgs,
+        #[command(flatten)]
+        common: Common,
+    },
     /// Prints a preset's error model as TOML (edit it and pass it back with --model).
     PrintModel {
         /// The preset to print.
         #[arg(long, default_value = "calibrated")]
         preset: Preset,
     },
+}
+
+/// The drive's plan (a stop-and-go robot: `--rests 1,2 --legs 2,4`; a car stopping on slopes:
+/// `--max-slope-deg 5`).
+#[derive(Args)]
+struct PlanArgs {
+    /// Length of each rest between motions, s.
+    #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "1,30")]
+    rests: [f64; 2],
+    /// Cruise speed of each leg, m/s.
+    #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "0.2,1")]
+    cruise: [f64; 2],
+    /// Length of each constant-speed leg, s.
+    #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "2,10")]
+    legs: [f64; 2],
+    /// Longest motion between two rests, s.
+    #[arg(long, default_value_t = 30.0)]
+    max_motion: f64,
+    /// Largest grade of the road at each stop, degrees (0: a flat, level floor).
+    #[arg(long, default_value_t = 0.0)]
+    max_slope_deg: f64,
+}
+
+/// An arm's path.
+#[derive(Args)]
+struct ArmArgs {
+    /// Moves (the last one returns to the start).
+    #[arg(long, default_value_t = 12)]
+    moves: usize,
+    /// Pause after each move, s.
+    #[arg(long, value_name = "MIN,MAX", value_parser = parse_pair, default_value = "0.2,0.6")]
+    pauses: [f64; 2],
+    /// Length of each move, s.
+    #[arg(long = "move-s", value_name = "MIN,MAX", value_parser = parse_pair, default_value = "0.8,2")]
+    move_s: [f64; 2],
+    /// Rest at the start, s.
+    #[arg(long, default_value_t = 1.6)]
+    initial_rest: f64,
+    /// Half-width of the workspace, m.
+    #[arg(long, default_value_t = 0.5)]
+    reach: f64,
+}
+
+impl ArmArgs {
+    fn params(&self, gravity_mps2: f64) -> ArmParams {
+        ArmParams {
+            pause_s: self.pauses,
+            move_s: self.move_s,
+            initial_rest_s: self.initial_rest,
+            reach_m: self.reach,
+            gravity_mps2,
+            ..ArmParams::new(self.moves)
+        }
+    }
+}
+
+impl PlanArgs {
+    /// `params` with this plan.
+    fn apply(&self, params: DriveParams) -> DriveParams {
+        DriveParams {
+            rest_s: self.rests,
+            cruise_speed_mps: self.cruise,
+            leg_s: self.legs,
+            max_motion_s: self.max_motion,
+            max_slope_deg: self.max_slope_deg,
+            ..params
+        }
+    }
 }
 
 /// Options of every scenario.
@@ -739,17 +818,18 @@ fn run(cli: Cli) -> Result<()> {
             in_place_turns,
             initial_rest,
             mount_deg,
+            plan,
             hints,
             common,
         } => {
-            let params = DriveParams {
+            let params = plan.apply(DriveParams {
                 initial_rest_s: initial_rest,
                 turns: turns == OnOff::On,
                 in_place_turns: in_place_turns == OnOff::On,
                 mounting: rotation_deg(mount_deg),
                 gravity_mps2: common.gravity,
                 ..DriveParams::new(duration)
-            };
+            });
             if !(vibration.is_finite() && vibration >= 0.0) {
                 bail!("--vibration {vibration}: the level must be finite and >= 0");
             }
@@ -783,6 +863,10 @@ fn run(cli: Cli) -> Result<()> {
                 ..WalkParams::new(laps)
             };
             simulate(Walk::new(&params, common.seed)?, &still, &common, &[])
+        }
+        Command::Arm { arm, common } => {
+            let params = arm.params(common.gravity);
+            simulate(Arm::new(&params, common.seed)?, &still, &common, &[])
         }
         Command::PrintModel { preset } => {
             print!("{}", toml::to_string(&preset.model())?);

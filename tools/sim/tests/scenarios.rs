@@ -7,7 +7,7 @@
 
 use mems_sim::SimSensor;
 use mems_sim::model::{G_MPS2, SensorModel};
-use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario};
+use mems_sim::scenario::{Arm, ArmParams, Drive, DriveParams, PoseParams, PoseSession, Scenario};
 use mems_sim::vibration::VibrationModel;
 use nalgebra::{UnitQuaternion, Vector3};
 use recording::Truth;
@@ -54,10 +54,9 @@ fn max_rate_of_change(x: &[Vector3<f64>], h: f64) -> f64 {
 /// of the velocity error, `h^2 / 12 (a(t) - a(0) - jerk(0) t)`; the drive starts at rest
 /// (`a(0) = jerk(0) = 0`), so at most `h^2 / 6 max|a|`. The profiles' accelerations have three
 /// continuous derivatives, so the next terms are O(h^4); a factor 2 of margin covers them.
-fn trapezoid_errors(s: &Drive, rate_hz: f64) -> ([f64; 2], [f64; 2]) {
+fn trapezoid_errors(s: &impl Scenario, g: f64, rate_hz: f64) -> ([f64; 2], [f64; 2]) {
     let h = 1.0 / rate_hz;
     let tr = truths(s, rate_hz);
-    let g = s.params().gravity_mps2;
     let a: Vec<Vector3<f64>> = tr.iter().map(|t| nav_accel(t, g)).collect();
     let mut v = Vector3::from(tr[0].velocity_mps);
     let mut p = Vector3::from(tr[0].position_m);
@@ -89,8 +88,9 @@ fn drive_accelerations_integrate_to_truth_velocity_and_position() {
         distance > 30.0,
         "the drive should go somewhere: {distance} m"
     );
-    let (e100, tol100) = trapezoid_errors(&drive, 100.0);
-    let (e200, tol200) = trapezoid_errors(&drive, 200.0);
+    let g = drive.params().gravity_mps2;
+    let (e100, tol100) = trapezoid_errors(&drive, g, 100.0);
+    let (e200, tol200) = trapezoid_errors(&drive, g, 200.0);
     eprintln!("100 Hz: errors {e100:?} tolerances {tol100:?}; 200 Hz: {e200:?} {tol200:?}");
     for i in 0..2 {
         assert!(e100[i] <= tol100[i], "100 Hz: {:?} > {:?}", e100, tol100);
@@ -461,4 +461,43 @@ fn static_pose_holds_still() {
         assert!((Vector3::from(t.specific_force_mps2) - want).norm() < 1e-12);
         assert_eq!(t.t_ns, (t_s * 1e9).round() as u64);
     }
+}
+
+#[test]
+fn slopes_and_arms_are_consistent_truths() {
+    // A drive whose stops are on grades of up to 8 deg, and an arm: accelerations integrate
+    // to the truth's velocity and position, rates to its attitude, and the slope drive climbs
+    // and rests pitched.
+    let slopes = Drive::new(
+        &DriveParams {
+            max_slope_deg: 8.0,
+            ..drive_params(180.0)
+        },
+        5,
+    )
+    .unwrap();
+    let arm = Arm::new(&ArmParams::new(10), 5).unwrap();
+    let g = slopes.params().gravity_mps2;
+    let (e, tol) = trapezoid_errors(&slopes, g, 200.0);
+    assert!(e[0] <= tol[0] && e[1] <= tol[1], "slopes: {e:?} > {tol:?}");
+    let (e, tol) = trapezoid_errors(&arm, g, 200.0);
+    assert!(e[0] <= tol[0] && e[1] <= tol[1], "arm: {e:?} > {tol:?}");
+    for (name, tr) in [
+        ("slopes", truths(&slopes, 100.0)),
+        ("arm", truths(&arm, 100.0)),
+    ] {
+        let (err, tol) = attitude_error(&tr, 100.0);
+        assert!(err <= tol, "{name}: attitude {err} > {tol}");
+    }
+    let tr = truths(&slopes, 10.0);
+    let climbed = tr.iter().map(|t| t.position_m[2].abs()).fold(0.0, f64::max);
+    assert!(
+        climbed > 0.5,
+        "the slope drive stays within {climbed} m of its start's height"
+    );
+    let tilted_rest = tr.iter().filter(|t| t.at_rest).any(|t| {
+        let f = Vector3::from(t.specific_force_mps2);
+        f.x.abs() > 0.01 * f.z
+    });
+    assert!(tilted_rest, "no rest on a slope");
 }

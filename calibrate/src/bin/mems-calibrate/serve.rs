@@ -42,7 +42,8 @@ pub struct ServeArgs {
     /// Calibration file (TOML) written by `mems-calibrate fit`.
     #[arg(long)]
     calib: PathBuf,
-    /// The zero-state detector (default: glrt, learning from the first 5 s of rest).
+    /// The zero-state detector (default: glrt, learning from the first second of rest with
+    /// the confidence of 5 s, as `mems-odometry`'s vehicle profile).
     #[command(flatten)]
     detector: DetectorArgs,
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).

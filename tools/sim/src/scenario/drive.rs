@@ -1,5 +1,5 @@
-//! A ground robot driving on a flat, level floor: accelerate, cruise, turn, change speed, brake,
-//! rest, repeat.
+//! A ground robot driving on a flat, level floor, or a vehicle whose stops are on slopes:
+//! accelerate, cruise, turn, change speed, brake, rest, repeat.
 
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::Rng;
@@ -60,6 +60,11 @@ pub struct DriveParams {
     pub mounting: UnitQuaternion<f64>,
     /// Local gravity, m/s^2.
     pub gravity_mps2: f64,
+    /// Largest grade of the road where each motion ends, degrees (nose up positive): while it
+    /// brakes, the body pitches from the grade it started on to one drawn uniformly from
+    /// `[-max, max]` (from a stream of its own), and climbs or descends with it (velocity
+    /// along the body's x axis). 0: a flat, level floor.
+    pub max_slope_deg: f64,
 }
 
 impl DriveParams {
@@ -84,6 +89,7 @@ impl DriveParams {
             track_width_m: 0.3,
             mounting: UnitQuaternion::identity(),
             gravity_mps2: ipc_types::units::STANDARD_GRAVITY_MPS2,
+            max_slope_deg: 0.0,
         }
     }
 
@@ -138,6 +144,13 @@ impl DriveParams {
                 reason: format!("must be finite and >= 0, got {w}"),
             });
         }
+        let slope = self.max_slope_deg;
+        if !(slope.is_finite() && (0.0..45.0).contains(&slope)) {
+            return Err(ScenarioError {
+                field: "max_slope_deg".into(),
+                reason: format!("must be in [0, 45), got {slope}"),
+            });
+        }
         check_positive("gravity_mps2", self.gravity_mps2)
     }
 }
@@ -162,8 +175,12 @@ pub struct DriveSegment {
     pub heading_change_rad: f64,
     /// Whether this is a rest (zero speed and yaw rate throughout).
     pub at_rest: bool,
-    /// Horizontal position at the start and then every `KNOT_S`, m (navigation x, y).
-    knots: Vec<[f64; 2]>,
+    /// Pitch (grade) at the start, rad, nose up positive.
+    pub pitch0_rad: f64,
+    /// Change of pitch over the segment, rad (same ramp).
+    pub pitch_change_rad: f64,
+    /// Position at the start and then every `KNOT_S`, m (navigation x, y, z).
+    knots: Vec<[f64; 3]>,
 }
 
 impl DriveSegment {
@@ -179,25 +196,36 @@ impl DriveSegment {
         )
     }
 
-    /// Navigation-frame horizontal velocity at `s` seconds into the segment, m/s.
-    fn velocity(&self, s: f64) -> [f64; 2] {
-        let (v, _, psi, _) = self.profile(s);
-        [v * psi.cos(), v * psi.sin()]
+    /// Pitch (rad) and pitch rate (rad/s) at `s` seconds into the segment.
+    fn pitch(&self, s: f64) -> (f64, f64) {
+        let (p, dp) = ramp(s / self.duration_s);
+        (
+            self.pitch0_rad + self.pitch_change_rad * p,
+            self.pitch_change_rad * dp / self.duration_s,
+        )
     }
 
-    /// Horizontal position at `s` seconds into the segment, m.
-    fn position(&self, s: f64) -> [f64; 2] {
+    /// Navigation-frame velocity at `s` seconds into the segment, m/s: the forward speed is
+    /// the horizontal one, and the body climbs at its grade (`v tan(pitch)`).
+    fn velocity(&self, s: f64) -> [f64; 3] {
+        let (v, _, psi, _) = self.profile(s);
+        let (pitch, _) = self.pitch(s);
+        [v * psi.cos(), v * psi.sin(), v * pitch.tan()]
+    }
+
+    /// Position at `s` seconds into the segment, m.
+    fn position(&self, s: f64) -> [f64; 3] {
         let k = ((s / KNOT_S).floor() as usize).min(self.knots.len() - 1);
         let base = self.knots[k];
         if self.at_rest {
             return base;
         }
-        let [dx, dy] = gauss_legendre(k as f64 * KNOT_S, s, |u| self.velocity(u));
-        [base[0] + dx, base[1] + dy]
+        let d = gauss_legendre(k as f64 * KNOT_S, s, |u| self.velocity(u));
+        std::array::from_fn(|i| base[i] + d[i])
     }
 
     /// Fills the stored positions from the start position `p0`.
-    fn integrate_knots(&mut self, p0: [f64; 2]) {
+    fn integrate_knots(&mut self, p0: [f64; 3]) {
         self.knots = vec![p0];
         if self.at_rest {
             return;
@@ -205,10 +233,10 @@ impl DriveSegment {
         let count = (self.duration_s / KNOT_S).floor() as usize;
         for k in 1..=count {
             let prev = self.knots[k - 1];
-            let [dx, dy] = gauss_legendre((k - 1) as f64 * KNOT_S, k as f64 * KNOT_S, |u| {
+            let d = gauss_legendre((k - 1) as f64 * KNOT_S, k as f64 * KNOT_S, |u| {
                 self.velocity(u)
             });
-            self.knots.push([prev[0] + dx, prev[1] + dy]);
+            self.knots.push(std::array::from_fn(|i| prev[i] + d[i]));
         }
     }
 }
@@ -281,9 +309,19 @@ impl Drive {
             _ => steps.push(Step::rest(remaining)),
         }
 
+        let mut slopes = stream_rng(seed, streams::DRIVE_SLOPES);
+        let max_slope = params.max_slope_deg.to_radians();
         let mut segments = Vec::with_capacity(steps.len());
-        let (mut start, mut speed, mut heading, mut pos) = (0.0, 0.0, 0.0, [0.0, 0.0]);
+        let (mut start, mut speed, mut heading, mut pos) = (0.0, 0.0, 0.0, [0.0; 3]);
+        let mut pitch = 0.0;
         for step in steps {
+            // A braking step (to a stop, from a speed) ends on the next stop's grade.
+            let braking = !step.at_rest && step.speed_after_mps == 0.0 && speed > 0.0;
+            let next_pitch = if braking && max_slope > 0.0 {
+                uniform(&mut slopes, [-max_slope, max_slope])
+            } else {
+                pitch
+            };
             let mut seg = DriveSegment {
                 start_s: start,
                 duration_s: step.duration_s,
@@ -292,10 +330,13 @@ impl Drive {
                 heading0_rad: heading,
                 heading_change_rad: step.heading_change_rad,
                 at_rest: step.at_rest,
+                pitch0_rad: pitch,
+                pitch_change_rad: next_pitch - pitch,
                 knots: Vec::new(),
             };
             seg.integrate_knots(pos);
             pos = seg.position(step.duration_s);
+            pitch = next_pitch;
             start += step.duration_s;
             speed = step.speed_after_mps;
             heading += step.heading_change_rad;
@@ -409,19 +450,26 @@ impl Scenario for Drive {
     fn truth(&self, t_s: f64) -> Truth {
         let (seg, s) = self.locate(t_s);
         let (v, dv, psi, dpsi) = seg.profile(s);
+        let (pitch, dpitch) = seg.pitch(s);
         let (sin, cos) = psi.sin_cos();
-        let [x, y] = seg.position(s);
-        let body = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), psi);
+        let tan = pitch.tan();
+        let yaw = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), psi);
+        // Nose up is a negative turn about body y (left) in this z-up frame.
+        let body = yaw * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -pitch);
         Kinematics {
-            position: Vector3::new(x, y, 0.0),
-            velocity: Vector3::new(v * cos, v * sin, 0.0),
-            // d/dt (v cos psi, v sin psi).
-            accel: Vector3::new(dv * cos - v * dpsi * sin, dv * sin + v * dpsi * cos, 0.0),
+            position: Vector3::from(seg.position(s)),
+            velocity: Vector3::new(v * cos, v * sin, v * tan),
+            // d/dt (v cos psi, v sin psi, v tan pitch).
+            accel: Vector3::new(
+                dv * cos - v * dpsi * sin,
+                dv * sin + v * dpsi * cos,
+                dv * tan + v * dpitch / (pitch.cos() * pitch.cos()),
+            ),
             attitude: body * self.params.mounting,
-            rate: Vector3::new(0.0, 0.0, dpsi),
+            rate: Vector3::new(0.0, 0.0, dpsi) + yaw * Vector3::new(0.0, -dpitch, 0.0),
             // Rest segments (where speed and yaw rate are exactly zero by construction), and
             // the instants where a motion starts or ends.
-            at_rest: seg.at_rest || (v == 0.0 && dpsi == 0.0),
+            at_rest: seg.at_rest || (v == 0.0 && dpsi == 0.0 && dpitch == 0.0),
         }
         .truth(t_s, self.params.gravity_mps2)
     }

@@ -8,10 +8,12 @@
 //! acceleration and turn rate), and the truth is evaluated in closed form or by high-order
 //! quadrature, so it is exact to rounding error at any time.
 
+mod arm;
 mod drive;
 mod pose;
 mod walk;
 
+pub use arm::{Arm, ArmParams};
 pub use drive::{Drive, DriveParams, DriveSegment};
 pub use pose::{PoseParams, PoseSession};
 pub use walk::{Walk, WalkParams};

@@ -3,7 +3,7 @@
 use anyhow::{Context, Result};
 use calibrate::calibfile::CalibrationFile;
 use calibrate::stage::{CalibrationStage, RefineConfig};
-use calibrate::zero_state::{DetectorConfig, DetectorKind};
+use calibrate::zero_state::DetectorConfig;
 
 use super::ServeArgs;
 
@@ -12,7 +12,7 @@ use super::ServeArgs;
 pub fn stage(args: &ServeArgs, file: &CalibrationFile) -> Result<CalibrationStage> {
     let config = args
         .detector
-        .apply(DetectorConfig::new(DetectorKind::Glrt, file.gravity_mps2))
+        .apply(DetectorConfig::robot(file.gravity_mps2))
         .map_err(anyhow::Error::msg)?;
     let mut stage = CalibrationStage::new(file, config, RefineConfig::default())
         .with_context(|| args.calib.display().to_string())?;
