@@ -357,6 +357,12 @@ pub fn workspace_root() -> PathBuf {
         .to_path_buf()
 }
 
+/// The identity calibration the real-data bench uses (bias 0, S = I, standard gravity): the
+/// simulated `calibrated` preset needs no correction.
+pub fn identity_calibration() -> PathBuf {
+    workspace_root().join("tools/parser-fuzz/corpus/calib/identity-bench.toml")
+}
+
 /// Whether `python3` can import the iceoryx2 Python package. When it cannot, the tests that
 /// need it print why, loudly, and skip; `.ci/run` installs it.
 pub fn python_iceoryx2() -> bool {

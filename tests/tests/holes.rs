@@ -7,17 +7,10 @@
 //! file's line and the time. `mems-info` shows the hole of the raw samples that the offline
 //! run wrote to its `--out` recording.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-use integration_tests::{bin, path_arg, run_ok, unique_namespace};
-
-/// The identity calibration the real-data bench uses (the simulated `calibrated` preset needs
-/// no correction).
-fn identity_calibration() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../tools/parser-fuzz/corpus/calib/identity-bench.toml")
-}
+use integration_tests::{bin, identity_calibration, path_arg, run_ok, unique_namespace};
 
 /// `src` without the rows whose time lies strictly within `start_s` .. `start_s + length_s`.
 fn cut(src: &Path, dst: &Path, start_s: f64, length_s: f64) {

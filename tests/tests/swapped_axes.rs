@@ -4,16 +4,10 @@
 //! about on stderr (how many turns disagreed, the worst, the likely cause) and the JSON
 //! result's `axes_check` says so; the file as written is not.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-use integration_tests::{bin, path_arg, run_ok, unique_namespace};
-
-/// The identity calibration the real-data bench uses.
-fn identity_calibration() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../tools/parser-fuzz/corpus/calib/identity-bench.toml")
-}
+use integration_tests::{bin, identity_calibration, path_arg, run_ok, unique_namespace};
 
 /// `src` with the header names `a` and `b` exchanged (the data rows as they are).
 fn swap_header(src: &Path, dst: &Path, a: &str, b: &str) {

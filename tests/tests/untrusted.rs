@@ -14,12 +14,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use integration_tests::{bin, path_arg, run_ok, unique_namespace};
-
-fn identity_calibration() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../tools/parser-fuzz/corpus/calib/identity-bench.toml")
-}
+use integration_tests::{bin, identity_calibration, path_arg, run_ok, unique_namespace};
 
 /// `mems-odometry offline --json` on `input` with `args`: the JSON result and stderr.
 fn offline(input: &Path, args: &[&str]) -> (serde_json::Value, String) {

@@ -294,13 +294,17 @@ fn a_looped_corrected_topic_marks_each_new_pass_as_a_new_session() {
     let out = child.wait_with_output().unwrap();
     std::fs::remove_file(&path).unwrap();
     assert!(out.status.success(), "{}", text(&out.stderr));
-    let marked: Vec<usize> = got
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| s.flags & corrected_flags::NEW_SESSION != 0)
-        .map(|(i, _)| i)
-        .collect();
-    assert_eq!(marked, [n], "only the second pass's first sample is marked");
+    // The subscriber may have taken part of a third pass too.
+    assert!(got.len() >= 2 * n, "{} of {}", got.len(), 2 * n);
+    for (i, s) in got.iter().enumerate() {
+        let first_of_a_later_pass = i > 0 && i % n == 0;
+        assert_eq!(
+            s.flags & corrected_flags::NEW_SESSION != 0,
+            first_of_a_later_pass,
+            "sample {i} (seq {}): only the first sample of a pass after the first is marked",
+            s.seq
+        );
+    }
     assert_eq!(got[n].seq, got[0].seq, "the second pass starts over");
 }
 
