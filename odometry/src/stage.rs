@@ -400,7 +400,7 @@ impl OdometryStage {
     pub fn postprocess(&mut self, emit: &mut impl FnMut(&OdometryState)) {
         if let Some(sample) = self.pending.take() {
             let mut budget = REPLAY_PER_CALL;
-            self.settle_batch(&sample.s, &sample, &mut budget, emit);
+            self.settle_batch(&sample, &mut budget, emit);
         }
     }
 
@@ -458,17 +458,17 @@ impl OdometryStage {
         state
     }
 
-    /// Settles the batch that final sample `s` (`sample`, with its live state) ends: the
+    /// Settles the batch that final sample `sample` (with its live state) ends: the
     /// unsettled samples take its verdict, and the live navigator the settled one's state
     /// when a verdict changed.
     #[inline]
     fn settle_batch(
         &mut self,
-        s: &CorrectedImuSample,
         sample: &Unsettled,
         budget: &mut usize,
         emit: &mut impl FnMut(&OdometryState),
     ) {
+        let s = &sample.s;
         // Older samples than those `s` settles were cut from their batch: final as they are.
         let settles = stream::settled_by(s, self.unsettled.len());
         let n = self.unsettled.len();
