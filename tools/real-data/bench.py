@@ -189,14 +189,15 @@ def track_at(track, t_s):
     return track[-1][1:3]
 
 
-def track_length(track, t_s):
-    """The track's length from time t_s to its end, over steps of at least 0.1 m (as
-    convert.py measures the whole track)."""
+def track_length(track, t_s, min_step=TRACK_MIN_STEP_M):
+    """The track's length from time t_s to its end, over steps of at least `min_step` m (the
+    truth's `track_min_step_m` where it has one: 0.5 m for GNSS fixes; else 0.1 m, as
+    convert.py measures the particle filter's whole track)."""
     points = [track_at(track, t_s)] + [q[1:3] for q in track if q[0] > t_s]
     walked, last = 0.0, points[0]
     for q in points[1:]:
         step = math.dist(q, last)
-        if step >= TRACK_MIN_STEP_M:
+        if step >= min_step:
             walked += step
             last = q
     return walked
@@ -247,7 +248,7 @@ def evaluate(side, out):
         covered = "?"
     distance = side.get("distance_m")
     if truth.get("track") and out.get("aligned_at_s") is not None:
-        distance = track_length(truth["track"], out["aligned_at_s"])
+        distance = track_length(truth["track"], out["aligned_at_s"], truth.get("track_min_step_m", TRACK_MIN_STEP_M))
     ours_distance = distance is None
     if ours_distance:
         distance = out.get("distance_m")
