@@ -10,11 +10,12 @@ Figures (horizontal plane, metres; our navigation frame has z up, origin and hea
 alignment):
 - end error: |e| with e = estimated end displacement minus true end displacement. A closed loop
   ends where it started (truth 0 in every frame). For truths known only as a distance from the
-  start in a frame whose heading is not ours (footprints, GNSS), |e| lies in
+  start in a frame whose heading is not ours (footprints, GNSS, RTK), |e| lies in
   [ | |p| - |t| |, |p| + |t| ] with p our end displacement and t the truth's; the table prints
   that interval.
 - % of distance: end error over the true distance (our own estimated distance, marked *, where
-  the source publishes none).
+  the source publishes none). A truth given as a track on the recording's clock (a particle
+  filter's poses, a robot's GNSS fixes) counts from the pose at our alignment, distance included.
 - 1-sigma: sqrt((sx^2 + sy^2) / 2) of the reported position sigma (per-axis rms).
 - covered: error <= r68 = 1.515 * sqrt((sx^2 + sy^2) / 2), the radius holding 68 % of a circular
   2-D Gaussian with that per-axis sigma (r = sigma sqrt(-2 ln 0.32) = 1.5096 sigma; 1.515 is
@@ -189,14 +190,15 @@ def track_at(track, t_s):
     return track[-1][1:3]
 
 
-def track_length(track, t_s):
-    """The track's length from time t_s to its end, over steps of at least 0.1 m (as
-    convert.py measures the whole track)."""
+def track_length(track, t_s, min_step=TRACK_MIN_STEP_M):
+    """The track's length from time t_s to its end, over steps of at least `min_step` m (the
+    truth's `track_min_step_m` where it has one: 0.5 m for GNSS fixes; else 0.1 m, as
+    convert.py measures the particle filter's whole track)."""
     points = [track_at(track, t_s)] + [q[1:3] for q in track if q[0] > t_s]
     walked, last = 0.0, points[0]
     for q in points[1:]:
         step = math.dist(q, last)
-        if step >= TRACK_MIN_STEP_M:
+        if step >= min_step:
             walked += step
             last = q
     return walked
@@ -214,8 +216,8 @@ def evaluate(side, out):
         err = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
         lo = hi = err
     elif truth.get("track") and out.get("aligned_at_s") is not None:
-        # A track on the recording's clock (particle-filter poses): the truth counts from the
-        # pose where the odometry aligned, as our position does.
+        # A track on the recording's clock (particle-filter poses, a robot's GNSS fixes): the
+        # truth counts from the pose where the odometry aligned, as our position does.
         start = track_at(truth["track"], out["aligned_at_s"])
         end = truth["track"][-1][1:3]
         yaw_on_body = truth.get("sensor_yaw_on_body_deg")
@@ -247,7 +249,7 @@ def evaluate(side, out):
         covered = "?"
     distance = side.get("distance_m")
     if truth.get("track") and out.get("aligned_at_s") is not None:
-        distance = track_length(truth["track"], out["aligned_at_s"])
+        distance = track_length(truth["track"], out["aligned_at_s"], truth.get("track_min_step_m", TRACK_MIN_STEP_M))
     ours_distance = distance is None
     if ours_distance:
         distance = out.get("distance_m")

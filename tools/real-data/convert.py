@@ -14,8 +14,8 @@ Output, per recording, in the output directory (default $MEMS_REAL_DATA or /work
 Rows are converted as published: repeated rows, equal or irregular timestamps are kept (the
 odometry must cope with them) and counted in the sidecar. Only rows that are not samples are
 dropped (an Xsens DOT export's all-zero placeholder before the first packet), and the sidecar
-says so. Python standard library only (MAT-files are read by the small level-5 reader below,
-because numpy/scipy are not a dependency of this repository).
+says so. Python standard library only (MAT-files, .npy arrays and ROS bags are read by the small
+readers of containers.py, because numpy/scipy/rosbag are not dependencies of this repository).
 
 Usage:
   convert.py [--git-dir SOURCE=DIR ...] [--mirrors DIR] [--out DIR] [--only ID ...]
@@ -30,26 +30,19 @@ import statistics
 import struct
 import subprocess
 import sys
-import zlib
 from pathlib import Path
+
+import containers
+from containers import (HINT_TOPIC, MCAP_T0_NS, RAW_TOPIC, ConvertError, bag_bytes, bag_messages, decode_imu,
+                        decode_navsatfix, decode_odometry, imu_message, mat_bytes, mat_matrix, mcap_bytes,
+                        mcap_messages, navsatfix_message, npy_bytes, odometry_message, read_mat, read_mcap_records,
+                        read_npy)
 
 G0 = 9.80665  # standard gravity, m/s^2 per g (the canonical CSV's g)
 DEG = 180.0 / math.pi
 HERE = Path(__file__).resolve().parent
 WGS84_A = 6378137.0
 WGS84_E2 = 6.69437999014e-3
-
-
-class ConvertError(Exception):
-    """A malformed input: names the file, the line (1-based) and the field where known."""
-
-    def __init__(self, where, line, field, message):
-        parts = [str(where)]
-        if line is not None:
-            parts.append(f"line {line}")
-        if field is not None:
-            parts.append(f"field {field!r}")
-        super().__init__(": ".join(parts) + ": " + message)
 
 
 def number(text, where, line, field):
@@ -61,81 +54,6 @@ def number(text, where, line, field):
     if not math.isfinite(value):
         raise ConvertError(where, line, field, f"{text.strip()!r} is not finite")
     return value
-
-
-# ---------------------------------------------------------------------------------------------
-# MAT-file level 5 (MATLAB 5.0 format, "MAT-File Format", MathWorks, 2013; sections 1-3):
-# a 128-byte header, then data elements of (type u32, byte count u32, data padded to 8 bytes),
-# a small element packing type and count in one u32; miCOMPRESSED (15) elements hold zlib
-# streams of further elements; miMATRIX (14) holds array flags, dimensions, name and the real
-# part. Only numeric and logical arrays are decoded (all this corpus needs).
-
-MAT_TYPES = {1: "b", 2: "B", 3: "h", 4: "H", 5: "i", 6: "I", 7: "f", 9: "d", 12: "q", 13: "Q"}
-MI_MATRIX, MI_COMPRESSED = 14, 15
-NUMERIC_CLASSES = set(range(6, 16))
-
-
-def _mat_elements(buf, pos, end, where):
-    while pos + 8 <= end:
-        kind, size = struct.unpack_from("<II", buf, pos)
-        if kind >> 16:  # small data element: size in the upper half, data in the tag's 2nd word
-            yield kind & 0xFFFF, buf[pos + 4 : pos + 4 + (kind >> 16)]
-            pos += 8
-            continue
-        if pos + 8 + size > end:
-            raise ConvertError(where, None, None, f"MAT element at byte {pos} runs past the end")
-        yield kind, buf[pos + 8 : pos + 8 + size]
-        pos += 8 + size + ((-size) % 8 if kind != MI_COMPRESSED else 0)
-
-
-def _mat_array(data, where):
-    subs = list(_mat_elements(data, 0, len(data), where))
-    if len(subs) < 3:
-        raise ConvertError(where, None, None, "MAT array without flags, dimensions and name")
-    cls = struct.unpack_from("<I", subs[0][1])[0] & 0xFF
-    dims = struct.unpack("<%di" % (len(subs[1][1]) // 4), subs[1][1])
-    name = subs[2][1].decode("latin-1")
-    if cls not in NUMERIC_CLASSES or len(subs) < 4:
-        return name, dims, None
-    kind, raw = subs[3]
-    code = MAT_TYPES.get(kind)
-    if code is None:
-        raise ConvertError(where, None, name, f"MAT data type {kind} is not supported")
-    values = struct.unpack("<%d%s" % (len(raw) // struct.calcsize(code), code), raw)
-    return name, dims, values
-
-
-def read_mat(buf, where):
-    """The numeric arrays of a level-5 MAT-file: {name: (dims, column-major values)}."""
-    if len(buf) < 128 or not buf.startswith(b"MATLAB 5.0 MAT-file"):
-        raise ConvertError(where, None, None, "not a MATLAB 5.0 MAT-file (v7.3/HDF5 is not read)")
-    if buf[126:128] != b"IM":
-        raise ConvertError(where, None, None, "big-endian MAT-files are not read")
-    arrays = {}
-
-    def walk(b, pos, end):
-        for kind, data in _mat_elements(b, pos, end, where):
-            if kind == MI_COMPRESSED:
-                try:
-                    inner = zlib.decompress(data)
-                except zlib.error as e:
-                    raise ConvertError(where, None, None, f"corrupt compressed element: {e}")
-                walk(inner, 0, len(inner))
-            elif kind == MI_MATRIX:
-                name, dims, values = _mat_array(data, where)
-                arrays[name] = (dims, values)
-
-    walk(buf, 128, len(buf))
-    return arrays
-
-
-def mat_matrix(arrays, name, where):
-    """Array `name` as a list of rows (MAT stores columns first)."""
-    if name not in arrays or arrays[name][1] is None:
-        raise ConvertError(where, None, name, "numeric array missing")
-    dims, values = arrays[name]
-    rows, cols = dims[0], dims[1]
-    return [[values[c * rows + r] for c in range(cols)] for r in range(rows)]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -323,6 +241,61 @@ def parse_vesc_f1tenth(imu_text, odom_text, where_imu, where_odom):
     return samples, notes, hints
 
 
+# Hints from a ROS robot's wheel odometry (nav_msgs/Odometry of its velocity controller): the
+# forward speed of the base from the wheel encoders, stationary (encoders) once the base has
+# been at rest for 0.1 s, as the simulated encoder controller of docs/hints.md calls it. At
+# rest the controller reports round-off (1e-15 m/s), hence a threshold far below one count.
+ODOM_STILL_MPS, ODOM_STILL_RPS = 1e-3, 1e-3
+ODOM_STATIONARY_AFTER_S = 0.1
+ODOM_SPEED_SIGMA_MPS = 0.05
+
+
+def odometry_hints(rows):
+    """Robot hints from (t_s, forward speed m/s, yaw rate rad/s) wheel-odometry rows."""
+    hints, still_since = [], None
+    for t, speed, yaw_rate in rows:
+        if abs(speed) < ODOM_STILL_MPS and abs(yaw_rate) < ODOM_STILL_RPS:
+            still_since = t if still_since is None else still_since
+        else:
+            still_since = None
+        flags = HINT_SPEED_VALID
+        if still_since is not None and t - still_since >= ODOM_STATIONARY_AFTER_S:
+            flags |= HINT_STATIONARY | HINT_SOURCE_ENCODERS
+        hints.append({"t_s": t, "forward_speed_mps": speed, "forward_speed_sigma_mps": ODOM_SPEED_SIGMA_MPS, "flags": flags})
+    return hints
+
+
+def parse_ros_robot_bag(buf, where, topics):
+    """A ROS 1 bag of a wheeled robot: `topics` {"imu", "odom", "fix"} name its sensor_msgs/Imu
+    (rad/s, m/s^2, REP 103), nav_msgs/Odometry (wheel odometry) and sensor_msgs/NavSatFix
+    topics. Times are the messages' header stamps minus the first IMU sample's. Returns
+    (samples, notes, hints, fixes) with fixes as (t_s, latitude deg, longitude deg, east-east
+    covariance m^2), those without a fix (status < 0) left out."""
+    imu, odom, fixes, no_fix = [], [], [], 0
+    for topic, kind, data in bag_messages(buf, where, set(topics.values())):
+        if topic == topics["imu"]:
+            imu.append(decode_imu(data, where, topic))
+        elif topic == topics["odom"]:
+            odom.append(decode_odometry(data, where, topic))
+        else:
+            stamp, status, lat, lon, cov = decode_navsatfix(data, where, topic)
+            if status < 0:
+                no_fix += 1
+                continue
+            fixes.append((stamp, lat, lon, cov))
+    for key, rows in (("imu", imu), ("odom", odom), ("fix", fixes)):
+        if not rows:
+            raise ConvertError(where, None, topics[key], "no messages on this topic")
+    t0 = imu[0][0]
+    samples = [((s - t0) * 1e-9, a[0] / G0, a[1] / G0, a[2] / G0, w[0] * DEG, w[1] * DEG, w[2] * DEG) for s, w, a in imu]
+    hints = odometry_hints([((s - t0) * 1e-9, v, wz) for s, v, wz in odom])
+    notes = [f"{topics['imu']}: linear_acceleration m/s^2 -> g (/9.80665), angular_velocity rad/s -> deg/s; t_s = header stamp minus the first IMU sample's",
+             f"robot hints from {topics['odom']} twist.linear.x (m/s, wheel encoders): speed valid, 1-sigma {ODOM_SPEED_SIGMA_MPS} m/s; "
+             f"stationary (encoders) after {ODOM_STATIONARY_AFTER_S} s below {ODOM_STILL_MPS} m/s and {ODOM_STILL_RPS} rad/s",
+             f"{topics['fix']}: {len(fixes)} fixes, {no_fix} without a fix left out"]
+    return samples, notes, hints, [((s - t0) * 1e-9, lat, lon, cov) for s, lat, lon, cov in fixes]
+
+
 # ---------------------------------------------------------------------------------------------
 # Truth.
 
@@ -352,6 +325,18 @@ def gcp_truth(buf, where):
     }, walked
 
 
+def local_east_north(fixes):
+    """(east, north) in m of every (latitude, longitude) fix in degrees, relative to the
+    first: a local tangent plane with the meridian and prime-vertical radii of curvature of
+    WGS-84 at the first fix, exact to well under 1 cm over the few hundred metres here."""
+    lat0 = math.radians(fixes[0][0])
+    s2 = math.sin(lat0) ** 2
+    r_n = WGS84_A * (1 - WGS84_E2) / (1 - WGS84_E2 * s2) ** 1.5
+    r_e = WGS84_A / math.sqrt(1 - WGS84_E2 * s2)
+    return [(math.radians(lon - fixes[0][1]) * r_e * math.cos(lat0), math.radians(lat - fixes[0][0]) * r_n)
+            for lat, lon in fixes]
+
+
 def gnss_truth(text, where):
     """RTK GNSS log: the last fix relative to the first (local east/north) and the track length."""
     lines = _lines(text)
@@ -362,17 +347,7 @@ def gnss_truth(text, where):
         fixes.append((number(cells[idx["lat"]], where, ln, "Lat_GNSS"), number(cells[idx["lon"]], where, ln, "Long_GNSS")))
     if len(fixes) < 2:
         raise ConvertError(where, None, None, "fewer than two fixes")
-    lat0 = math.radians(fixes[0][0])
-    # Meridian and prime-vertical radii of curvature (WGS-84) at the first fix: a local
-    # east/north tangent plane, exact to well under 1 cm over the few hundred metres here.
-    s2 = math.sin(lat0) ** 2
-    r_n = WGS84_A * (1 - WGS84_E2) / (1 - WGS84_E2 * s2) ** 1.5
-    r_e = WGS84_A / math.sqrt(1 - WGS84_E2 * s2)
-
-    def enu(fix):
-        return (math.radians(fix[1] - fixes[0][1]) * r_e * math.cos(lat0), math.radians(fix[0] - fixes[0][0]) * r_n)
-
-    points = [enu(f) for f in fixes]
+    points = local_east_north(fixes)
     # Track length over points at least 0.5 m apart, so that fix noise at standstill
     # (1e-7 degree steps) does not add length.
     walked, last = 0.0, points[0]
@@ -428,6 +403,55 @@ def broad_truth(arrays, where):
         "positions_missing": len(pos) - len(seen),
         "source": "opt_pos (OptiTrack, m): the last seen position minus the first; the box rests in the same place at both ends (offset in tolerance_m)",
     }, _path_length([p[:2] for p in seen], 0.01)
+
+
+GNSS_TRACK_MIN_STEP_M = 0.5
+
+
+def gnss_track_truth(fixes, where):
+    """A robot's own GNSS fixes (t_s on the recording's clock, latitude, longitude, east-east
+    covariance m^2): the track in local east/north metres (`track`: [t_s, east, north]) so that
+    bench.py can measure from the fix where the odometry aligned, the last fix's distance from
+    the first, and the track's length over steps of at least 0.5 m (fix noise at rest adds
+    none). Our heading is not north, so only distances are a truth."""
+    if len(fixes) < 2:
+        raise ConvertError(where, None, None, "fewer than two fixes")
+    points = local_east_north([(lat, lon) for _, lat, lon, _ in fixes])
+    sigmas = sorted(math.sqrt(max(cov, 0.0)) for *_, cov in fixes)
+    return {
+        "kind": "gnss_track",
+        "frame": "unknown_heading",
+        "end_displacement_m": None,
+        "end_distance_m": math.hypot(*points[-1]),
+        "end_displacement_enu_m": list(points[-1]),
+        "fixes": len(fixes),
+        "fix_sigma_east_median_m": sigmas[len(sigmas) // 2],
+        "track": [[round(t, 6), round(e, 4), round(n, 4)] for (t, *_), (e, n) in zip(fixes, points)],
+        "track_min_step_m": GNSS_TRACK_MIN_STEP_M,
+        "source": "GNSS fixes (sensor_msgs/NavSatFix) on the recording's clock, local east/north: bench.py measures from the fix at the odometry's alignment to the last; the heading is not ours, so only distances are a truth",
+    }, _path_length(points, GNSS_TRACK_MIN_STEP_M)
+
+
+RTK_TRACK_MIN_STEP_M = 0.1
+
+
+def rtk_ned_truth(buf, where):
+    """RTK positions as a .npy N x 3 array (north, east, down in m, relative to the start):
+    the last position's horizontal distance from the first and the track's length over steps
+    of at least 0.1 m. The heading is not ours, so only the distance is a truth."""
+    ned = read_npy(buf, where)
+    if len(ned) < 2 or len(ned[0]) != 3:
+        raise ConvertError(where, None, "shape", f"expected N x 3 (north, east, down) with N >= 2, got {len(ned)} x {len(ned[0]) if ned else 0}")
+    end = [ned[-1][k] - ned[0][k] for k in range(3)]
+    return {
+        "kind": "rtk_endpoints",
+        "frame": "unknown_heading",
+        "end_displacement_m": None,
+        "end_distance_m": math.hypot(end[0], end[1]),
+        "end_displacement_ned_m": end,
+        "positions": len(ned),
+        "source": "RTK positions (north, east, down): the last minus the first; the odometry's heading is fixed at its alignment, not north, so only the distance is a truth",
+    }, _path_length([p[:2] for p in ned], RTK_TRACK_MIN_STEP_M)
 
 
 def pf_pose_truth(text, where, t0_ns):
@@ -500,144 +524,84 @@ def write_csv(path, samples, comments):
             f.write("%.9f,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n" % s)
 
 
-# MCAP (https://mcap.dev/spec): magic, Header, then Schema, Channel and Message records
-# (unchunked), DataEnd and Footer (no summary; CRCs 0, which the specification reads as "not
-# computed"), magic. Messages are JSON with a JSON Schema, one of the two encodings
-# tools/recording reads (its older recordings' encoding), on the topics and with the schema
-# names of `mems.RawImuSample` and `mems.RobotHint` (ipc-types/src/wire.rs field names).
+class SourceFiles:
+    """The files of one recording, read from the source's snapshot with `git show COMMIT:PATH`."""
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-MCAP_OP = {"header": 0x01, "footer": 0x02, "schema": 0x03, "channel": 0x04, "message": 0x05, "data_end": 0x0F}
-RAW_TOPIC, HINT_TOPIC = "mems/imu/raw", "mems/robot/hint"
-RAW_GYRO_VALID = 1 << 4
-# Offset of every time in an MCAP written here: times start at 1 s, not 0 (0 is the stamps'
-# "not set").
-MCAP_T0_NS = 1_000_000_000
+    def __init__(self, source, paths, git_dir):
+        self.repo, self.commit, self.paths, self.git_dir = source["repo"], source["commit"], paths, git_dir
 
+    def where(self, i):
+        return f"{self.repo}@{self.commit}:{self.paths[i]}"
 
-def _mcap_str(text):
-    b = text.encode()
-    return struct.pack("<I", len(b)) + b
+    def raw(self, i):
+        return git_show(self.git_dir, self.commit, self.paths[i])
 
-
-def _mcap_record(op, body):
-    return struct.pack("<BQ", MCAP_OP[op], len(body)) + body
+    def text(self, i):
+        try:
+            return self.raw(i).decode("utf-8-sig")
+        except UnicodeDecodeError as e:
+            raise ConvertError(self.where(i), None, None, f"not UTF-8 text: {e}") from None
 
 
-def _counts(value, lsb):
-    return max(-32768, min(32767, round(value * lsb)))
+# Per source format: (recording, source, files) -> (samples, notes, truth, distance, hints);
+# truth and distance None where corpus.json states them, hints None without robot hints.
+def _load_xio(rec, source, f):
+    return (*parse_xio_csv(f.text(0), f.where(0)), None, None, None)
 
 
-def mcap_messages(samples, hints):
-    """(log time ns, topic, JSON bytes) of the raw samples and hints in time order. Raw times
-    must strictly increase in an MCAP run (tools/recording refuses a repeat): a sample whose
-    time does not increase is dropped and counted."""
-    out, dropped, last = [], 0, None
-    for s in samples:
-        ns = MCAP_T0_NS + round(s[0] * 1e9)
-        if last is not None and ns <= last:
-            dropped += 1
-            continue
-        last = ns
-        msg = {"stamps": {"sample_ns": ns, "acquired_ns": ns, "calibrated_ns": 0, "odometry_ns": 0},
-               "seq": 0, "accel_g": list(s[1:4]), "gyro_dps": list(s[4:7]), "temp_c": 0.0,
-               "accel_counts": [_counts(v, 16384) for v in s[1:4]],
-               "gyro_counts": [_counts(v, 131) for v in s[4:7]], "temp_counts": 0,
-               "flags": RAW_GYRO_VALID, "lost_before": 0, "undelivered": 0}
-        out.append((ns, 0, RAW_TOPIC, msg))
-    for h in hints:
-        ns = MCAP_T0_NS + round(h["t_s"] * 1e9)
-        if ns < MCAP_T0_NS:
-            continue
-        msg = {"stamps": {"sample_ns": ns, "acquired_ns": ns, "calibrated_ns": 0, "odometry_ns": 0},
-               "seq": 0, "forward_speed_mps": h["forward_speed_mps"],
-               "forward_speed_sigma_mps": h["forward_speed_sigma_mps"], "yaw_rate_rps": 0.0,
-               "yaw_rate_sigma_rps": 0.0, "flags": h["flags"], "reserved16": 0, "reserved": 0}
-        out.append((ns, 1, HINT_TOPIC, msg))
-    out.sort(key=lambda m: (m[0], m[1]))
-    seqs = {RAW_TOPIC: 0, HINT_TOPIC: 0}
-    messages = []
-    for ns, _, topic, msg in out:
-        msg["seq"] = seqs[topic]
-        seqs[topic] += 1
-        messages.append((ns, topic, json.dumps(msg, separators=(",", ":")).encode()))
-    return messages, dropped
+def _load_openshoe(rec, source, f):
+    return (*parse_openshoe_txt(f.text(0), f.where(0), rec["rate_hz"]), None, None, None)
 
 
-def mcap_bytes(messages):
-    """An MCAP file holding `messages` ((log time ns, topic, JSON bytes)) on JSON channels."""
-    schemas = {RAW_TOPIC: "mems.RawImuSample", HINT_TOPIC: "mems.RobotHint"}
-    out = [MCAP_MAGIC, _mcap_record("header", _mcap_str("") + _mcap_str("tools/real-data/convert.py"))]
-    ids = {}
-    for i, (topic, name) in enumerate(schemas.items(), start=1):
-        schema = json.dumps({"title": name, "type": "object"}).encode()
-        out.append(_mcap_record("schema", struct.pack("<H", i) + _mcap_str(name) + _mcap_str("jsonschema")
-                                + struct.pack("<I", len(schema)) + schema))
-        out.append(_mcap_record("channel", struct.pack("<HH", i, i) + _mcap_str(topic) + _mcap_str("json")
-                                + struct.pack("<I", 0)))
-        ids[topic] = i
-    seq = {t: 0 for t in ids}
-    for ns, topic, data in messages:
-        out.append(_mcap_record("message", struct.pack("<HIQQ", ids[topic], seq[topic], ns, ns) + data))
-        seq[topic] += 1
-    out.append(_mcap_record("data_end", struct.pack("<I", 0)))
-    out.append(_mcap_record("footer", struct.pack("<QQI", 0, 0, 0)))
-    out.append(MCAP_MAGIC)
-    return b"".join(out)
+def _load_sensorconnect(rec, source, f):
+    return (*parse_sensorconnect_csv(f.text(0), f.where(0)), *gcp_truth(f.raw(1), f.where(1)), None)
 
 
-def read_mcap_records(buf):
-    """(opcode, body) of every record of an MCAP file (for the self-test)."""
-    assert buf.startswith(MCAP_MAGIC) and buf.endswith(MCAP_MAGIC), "no MCAP magic"
-    pos, end, records = len(MCAP_MAGIC), len(buf) - len(MCAP_MAGIC), []
-    while pos < end:
-        op, n = struct.unpack_from("<BQ", buf, pos)
-        records.append((op, buf[pos + 9: pos + 9 + n]))
-        pos += 9 + n
-    assert pos == end, "records overrun the file"
-    return records
+def _load_xsens_dot(rec, source, f):
+    return (*parse_xsens_dot_csv(f.text(0), f.where(0)), *gnss_truth(f.text(1), f.where(1)), None)
+
+
+def _load_xsens_dot_rtk(rec, source, f):
+    return (*parse_xsens_dot_csv(f.text(0), f.where(0)), *rtk_ned_truth(f.raw(1), f.where(1)), None)
+
+
+def _load_broad(rec, source, f):
+    samples, notes, arrays = parse_broad_mat(f.raw(0), f.where(0))
+    return (samples, notes, *broad_truth(arrays, f.where(0)), None)
+
+
+def _load_vesc(rec, source, f):
+    imu_text = f.text(0)
+    samples, notes, hints = parse_vesc_f1tenth(imu_text, f.text(1), f.where(0), f.where(1))
+    t0_ns = next(_stamped_rows(imu_text, f.where(0), {}))[0]
+    truth, distance = pf_pose_truth(f.text(2), f.where(2), t0_ns)
+    truth["sensor_yaw_on_body_deg"] = source.get("sensor_yaw_on_body_deg")
+    return samples, notes, truth, distance, hints
+
+
+def _load_ros_bag(rec, source, f):
+    samples, notes, hints, fixes = parse_ros_robot_bag(f.raw(0), f.where(0), source["topics"])
+    return (samples, notes, *gnss_track_truth(fixes, f.where(0)), hints)
+
+
+LOADERS = {
+    "xio_csv": _load_xio, "openshoe_txt": _load_openshoe, "sensorconnect_csv": _load_sensorconnect,
+    "xsens_dot_csv": _load_xsens_dot, "xsens_dot_rtk_npy": _load_xsens_dot_rtk, "broad_mat": _load_broad,
+    "vesc_f1tenth_csv": _load_vesc, "ros1_bag_robot": _load_ros_bag,
+}
 
 
 def convert_recording(rec, source, git_dir, out_dir):
     commit = source["commit"]
-    fmt = source["format"]
     paths = rec["paths"]
     loc = f"{source['repo']}@{commit}:{paths[0]}"
-
-    def where(i):
-        return f"{source['repo']}@{commit}:{paths[i]}"
-
-    def text_of(i):
-        try:
-            return git_show(git_dir, commit, paths[i]).decode("utf-8-sig")
-        except UnicodeDecodeError as e:
-            raise ConvertError(where(i), None, None, f"not UTF-8 text: {e}") from None
-
-    truth = dict(rec["truth"])
-    distance = rec.get("distance_m")
+    loader = LOADERS.get(source["format"])
+    if loader is None:
+        raise ConvertError("corpus.json", None, rec["id"], f"unknown format {source['format']!r}")
+    samples, notes, truth, distance, hints = loader(rec, source, SourceFiles(source, paths, git_dir))
+    if truth is None:
+        truth, distance = dict(rec["truth"]), rec.get("distance_m")
     distance_source = rec.get("distance_source")
-    hints = None
-    if fmt == "xio_csv":
-        samples, notes = parse_xio_csv(text_of(0), loc)
-    elif fmt == "openshoe_txt":
-        samples, notes = parse_openshoe_txt(text_of(0), loc, rec["rate_hz"])
-    elif fmt == "sensorconnect_csv":
-        samples, notes = parse_sensorconnect_csv(text_of(0), loc)
-        truth, distance = gcp_truth(git_show(git_dir, commit, paths[1]), where(1))
-    elif fmt == "xsens_dot_csv":
-        samples, notes = parse_xsens_dot_csv(text_of(0), loc)
-        truth, distance = gnss_truth(text_of(1), where(1))
-    elif fmt == "broad_mat":
-        samples, notes, arrays = parse_broad_mat(git_show(git_dir, commit, paths[0]), loc)
-        truth, distance = broad_truth(arrays, loc)
-    elif fmt == "vesc_f1tenth_csv":
-        imu_text = text_of(0)
-        samples, notes, hints = parse_vesc_f1tenth(imu_text, text_of(1), loc, where(1))
-        t0_ns = next(_stamped_rows(imu_text, loc, {}))[0]
-        truth, distance = pf_pose_truth(text_of(2), where(2), t0_ns)
-        truth["sensor_yaw_on_body_deg"] = source.get("sensor_yaw_on_body_deg")
-    else:
-        raise ConvertError("corpus.json", None, rec["id"], f"unknown format {fmt!r}")
     if not samples:
         raise ConvertError(loc, None, None, "no samples")
     if truth.get("kind") == "closed_loop":
@@ -724,37 +688,22 @@ def convert_all(args):
 # Self-test: every source format on a tiny inline sample, and malformed input naming the line.
 
 
-def _mat_bytes(arrays, compress):
-    """A level-5 MAT-file holding double arrays {name: (rows, cols, column-major values)}."""
-    def element(kind, data):
-        return struct.pack("<II", kind, len(data)) + data + b"\0" * ((-len(data)) % 8)
-
-    body = b""
-    for name, (rows, cols, values) in arrays.items():
-        matrix = (element(6, struct.pack("<II", 6, 0)) + element(5, struct.pack("<ii", rows, cols))
-                  + element(1, name.encode()) + element(9, struct.pack("<%dd" % len(values), *values)))
-        item = element(MI_MATRIX, matrix)
-        if compress:
-            z = zlib.compress(item)
-            item = struct.pack("<II", MI_COMPRESSED, len(z)) + z
-        body += item
-    header = b"MATLAB 5.0 MAT-file, self-test".ljust(116) + b"\0" * 8 + struct.pack("<H", 0x0100) + b"IM"
-    return header + body
+def _close(a, b, tol=1e-9):
+    assert abs(a - b) <= tol * max(1.0, abs(b)), (a, b)
 
 
-def self_test():
-    def close(a, b, tol=1e-9):
-        assert abs(a - b) <= tol * max(1.0, abs(b)), (a, b)
+def _expect_error(fn, *needles):
+    try:
+        fn()
+    except ConvertError as e:
+        for n in needles:
+            assert n in str(e), (str(e), n)
+        return
+    raise AssertionError("no error raised")
 
-    def expect_error(fn, *needles):
-        try:
-            fn()
-        except ConvertError as e:
-            for n in needles:
-                assert n in str(e), (str(e), n)
-            return
-        raise AssertionError("no error raised")
 
+def _test_text_formats():
+    """xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv on inline samples."""
     xio = ("Time (s),Gyroscope X (deg/s),Gyroscope Y (deg/s),Gyroscope Z (deg/s),Accelerometer X (g),"
            "Accelerometer Y (g),Accelerometer Z (g)\n0,1,2,3,0.1,0.2,0.9\n0.0025,1,2,3,0.1,0.2,0.9\n"
            "0.0025,1,2,3,0.1,0.2,0.9\n")
@@ -762,22 +711,22 @@ def self_test():
     assert s[0] == (0.0, 0.1, 0.2, 0.9, 1.0, 2.0, 3.0) and s[1] == s[2]
     st = sample_stats(s, 400)
     assert st["repeated_rows"] == 1 and st["equal_timestamps"] == 1
-    expect_error(lambda: parse_xio_csv(xio.replace("0.0025,1,2,3,0.1,0.2,0.9\n0.0025", "0.0025,1,2,x,0.1,0.2,0.9\n0.0025", 1), "x.csv"),
+    _expect_error(lambda: parse_xio_csv(xio.replace("0.0025,1,2,3,0.1,0.2,0.9\n0.0025", "0.0025,1,2,x,0.1,0.2,0.9\n0.0025", 1), "x.csv"),
                  "x.csv", "line 3", "Gyroscope Z (deg/s)", "'x' is not a number")
 
     s, _ = parse_openshoe_txt("0,0,-9.80665,3.14159265358979,0,0\n0,0,-9.80665,0,0,0\n", "o.txt", 820)
-    close(s[0][3], -1.0)
-    close(s[0][4], 180.0, 1e-6)
-    close(s[1][0], 1 / 820)
-    expect_error(lambda: parse_openshoe_txt("1,2,3\n", "o.txt", 820), "o.txt", "line 1", "3 fields, expected 6")
+    _close(s[0][3], -1.0)
+    _close(s[0][4], 180.0, 1e-6)
+    _close(s[1][0], 1 / 820)
+    _expect_error(lambda: parse_openshoe_txt("1,2,3\n", "o.txt", 820), "o.txt", "line 1", "3 fields, expected 6")
 
     sc = ("Time,inertial-1:scaledAccelX,inertial-1:scaledAccelY,inertial-1:scaledAccelZ,inertial-1:scaledGyroX,"
           "inertial-1:scaledGyroY,inertial-1:scaledGyroZ\n0,0.1,0.2,-0.97,0.0174532925199433,0,0\n0.005,0.1,0.2,-0.97,0,0,0\n")
     s, _ = parse_sensorconnect_csv(sc, "s.csv")
-    close(s[0][4], 1.0)
-    close(s[1][0], 0.005)
+    _close(s[0][4], 1.0)
+    _close(s[1][0], 0.005)
     assert s[0][3] == -0.97
-    expect_error(lambda: parse_sensorconnect_csv(sc.replace("scaledGyroZ", "scaledMagZ"), "s.csv"), "s.csv", "line 1", "scaledGyroZ", "missing")
+    _expect_error(lambda: parse_sensorconnect_csv(sc.replace("scaledGyroZ", "scaledMagZ"), "s.csv"), "s.csv", "line 1", "scaledGyroZ", "missing")
 
     dot = ("sep=,\nPacketCounter,SampleTimeFine,Euler_X,Euler_Y,Euler_Z,Acc_X,Acc_Y,Acc_Z,Gyr_X,Gyr_Y,Gyr_Z,\n"
            "0, 4294960000, 0, 0, 0, 0, 0, 0, 0, 0, 0, \n"
@@ -785,52 +734,58 @@ def self_test():
            "2, 3037, 1, 2, 3, 0, 0, 9.80665, 0.5, 0, 0, \n")
     s, notes = parse_xsens_dot_csv(dot, "d.csv")
     assert len(s) == 2 and any("dropped line 3" in n for n in notes), notes
-    close(s[0][3], 1.0)
-    close(s[1][0], 8333e-6)
-    expect_error(lambda: parse_xsens_dot_csv(dot.replace("2, 3037, 1", "2, 3037"), "d.csv"), "d.csv", "line 5")
+    _close(s[0][3], 1.0)
+    _close(s[1][0], 8333e-6)
+    _expect_error(lambda: parse_xsens_dot_csv(dot.replace("2, 3037, 1", "2, 3037"), "d.csv"), "d.csv", "line 5")
 
+
+def _test_mat_formats():
+    """MAT v5 footprints (GCP), the GNSS log and BROAD."""
     for compress in (False, True):
-        mat = _mat_bytes({"GCP_exist_and_correct": (1, 1, [1.0]),
+        mat = mat_bytes({"GCP_exist_and_correct": (1, 1, [1.0]),
                           "GCP_meters": (3, 2, [0.0, 3.0, 3.0, 0.0, 0.0, 4.0]),
                           "tile_edge_length": (1, 1, [0.4])}, compress)
         truth, walked = gcp_truth(mat, "g.mat")
-        close(truth["end_distance_m"], 5.0)
-        close(walked, 7.0)
+        _close(truth["end_distance_m"], 5.0)
+        _close(walked, 7.0)
         if truth["footprints_m"] != [[0.0, 0.0], [3.0, 0.0], [3.0, 4.0]]:
             raise AssertionError(f"footprints_m {truth['footprints_m']}")
-    bad = _mat_bytes({"GCP_exist_and_correct": (1, 1, [0.0]), "GCP_meters": (1, 2, [0.0, 0.0])}, True)
-    expect_error(lambda: gcp_truth(bad, "g.mat"), "g.mat", "GCP_exist_and_correct")
-    expect_error(lambda: read_mat(b"MATLAB 7.3 MAT-file" + b"\0" * 200, "h.mat"), "h.mat", "not a MATLAB 5.0")
+    bad = mat_bytes({"GCP_exist_and_correct": (1, 1, [0.0]), "GCP_meters": (1, 2, [0.0, 0.0])}, True)
+    _expect_error(lambda: gcp_truth(bad, "g.mat"), "g.mat", "GCP_exist_and_correct")
+    _expect_error(lambda: read_mat(b"MATLAB 7.3 MAT-file" + b"\0" * 200, "h.mat"), "h.mat", "not a MATLAB 5.0")
 
     # 0.001 degree of latitude north: an independent figure for the local tangent plane, the
     # length of a degree of latitude 111132.954 - 559.822 cos(2 phi) + 1.175 cos(4 phi) m
     # (the standard WGS-84 series), 111131.779 m at 45 N.
     gnss = "Timestamp,Lat_GNSS,Long_GNSS\n0,45.0,10.0\n0.1,45.001,10.0\n0.2,45.001,10.0\n"
     truth, walked = gnss_truth(gnss, "n.csv")
-    close(truth["end_distance_m"], 0.001 * (111132.954 - 1.175), 1e-6)
-    close(walked, truth["end_distance_m"])
-    expect_error(lambda: gnss_truth(gnss + "0.3,north,10\n", "n.csv"), "n.csv", "line 5", "Lat_GNSS")
+    _close(truth["end_distance_m"], 0.001 * (111132.954 - 1.175), 1e-6)
+    _close(walked, truth["end_distance_m"])
+    _expect_error(lambda: gnss_truth(gnss + "0.3,north,10\n", "n.csv"), "n.csv", "line 5", "Lat_GNSS")
 
     # BROAD: column-major N x 3 arrays; opt_pos with an unseen (NaN) first row; closes within 2 mm.
     nan = float("nan")
-    broad = _mat_bytes({"imu_acc": (2, 3, [0.0, 0.0, 0.0, 0.0, 9.80665, -9.80665]),
+    broad = mat_bytes({"imu_acc": (2, 3, [0.0, 0.0, 0.0, 0.0, 9.80665, -9.80665]),
                         "imu_gyr": (2, 3, [0.0174532925199433, 0.0, 0.0, 0.0, 0.0, 0.0]),
                         "sampling_rate": (1, 1, [200.0]),
                         "opt_pos": (3, 3, [nan, 0.5, 0.502, nan, 0.2, 0.2, nan, 1.0, 1.0])}, True)
     s, _, arrays = parse_broad_mat(broad, "b.mat")
     assert len(s) == 2, s
-    close(s[0][3], 1.0)
-    close(s[1][3], -1.0)
-    close(s[0][4], 1.0)
-    close(s[1][0], 0.005)
+    _close(s[0][3], 1.0)
+    _close(s[1][3], -1.0)
+    _close(s[0][4], 1.0)
+    _close(s[1][0], 0.005)
     truth, walked = broad_truth(arrays, "b.mat")
-    close(truth["tolerance_m"], 0.002)
+    _close(truth["tolerance_m"], 0.002)
     assert truth["kind"] == "closed_loop" and truth["positions_missing"] == 1, truth
-    bad = _mat_bytes({"opt_pos": (2, 3, [0.0, 1.0, 0.0, 0.0, 0.0, 0.0])}, False)
-    expect_error(lambda: broad_truth(read_mat(bad, "b.mat"), "b.mat"), "b.mat", "opt_pos", "not a closed loop")
-    expect_error(lambda: parse_broad_mat(_mat_bytes({"imu_acc": (1, 3, [0.0, 0.0, 9.8])}, False), "b.mat"),
+    bad = mat_bytes({"opt_pos": (2, 3, [0.0, 1.0, 0.0, 0.0, 0.0, 0.0])}, False)
+    _expect_error(lambda: broad_truth(read_mat(bad, "b.mat"), "b.mat"), "b.mat", "opt_pos", "not a closed loop")
+    _expect_error(lambda: parse_broad_mat(mat_bytes({"imu_acc": (1, 3, [0.0, 0.0, 9.8])}, False), "b.mat"),
                  "b.mat", "imu_gyr", "missing")
 
+
+def _test_vesc_and_mcap():
+    """The FrictionMaps stateLogger (IMU, hints, particle filter) and the MCAP writer."""
     # FrictionMaps stateLogger: IMU in g and deg/s; hints from vx, stationary after 0.1 s at 0.
     imu = (",s,ns,phi_r,phi_p,phi_y,ax,ay,az,wx,wy,wz,q.x,q.y,q.z,q.w\n"
            "0,100,900000000,0,0,0,0.01,0.02,0.98,1.5,0,-2,0,0,0,1\n"
@@ -839,18 +794,18 @@ def self_test():
             "0,100,950000000,0.5,0,0,0.5,0,0,0,0,0,0,0,1\n0,101,0,0.0,0,0,0,0,0,0,0,0,0,0,1\n"
             "0,101,50000000,0.0,0,0,0,0,0,0,0,0,0,0,1\n0,101,150000000,0.0,0,0,0,0,0,0,0,0,0,0,1\n")
     s, _, hints = parse_vesc_f1tenth(imu, odom, "i.csv", "o.csv")
-    close(s[1][0], 0.1)
+    _close(s[1][0], 0.1)
     assert s[0][1:] == (0.01, 0.02, 0.98, 1.5, 0.0, -2.0), s[0]
     assert [h["flags"] for h in hints] == [8, 8, 8, 13], hints
-    close(hints[0]["t_s"], 0.05)
-    expect_error(lambda: parse_vesc_f1tenth(imu.replace("0.98,1.5", "0.98,x", 1), odom, "i.csv", "o.csv"),
+    _close(hints[0]["t_s"], 0.05)
+    _expect_error(lambda: parse_vesc_f1tenth(imu.replace("0.98,1.5", "0.98,x", 1), odom, "i.csv", "o.csv"),
                  "i.csv", "line 2", "'wx'")
     pf = ",s,ns,x,y,q.x,q.y,q.z,q.w\n0,100,0,1.0,1.0,0,0,0,1\n0,100,5,1.05,1.0,0,0,0,1\n0,101,0,4.0,5.0,0,0,0.7071067811865476,0.7071067811865476\n"
     truth, walked = pf_pose_truth(pf, "p.csv", 100 * 1_000_000_000)
-    close(truth["end_distance_m"], 5.0)
+    _close(truth["end_distance_m"], 5.0)
     assert truth["track"][2][:3] == [1.0, 4.0, 5.0], truth["track"]
-    close(truth["track"][2][3], math.pi / 2)
-    close(walked, 5.0)  # the 5 cm step is under the 0.1 m floor: measured from (1, 1)
+    _close(truth["track"][2][3], math.pi / 2)
+    _close(walked, 5.0)  # the 5 cm step is under the 0.1 m floor: measured from (1, 1)
 
     # MCAP: records in order, JSON messages with the wire field names, times strictly increasing.
     messages, dropped = mcap_messages(s + [s[-1]], hints)
@@ -866,7 +821,53 @@ def self_test():
     assert hint["flags"] == 13 and hint["seq"] == 3 and hint["stamps"]["sample_ns"] == MCAP_T0_NS + 250_000_000, hint
     channel = records[2][1]
     assert channel[4:8] == struct.pack("<I", len(RAW_TOPIC)) and RAW_TOPIC.encode() in channel, channel
-    print("convert.py self-test: ok (xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv, broad_mat, vesc_f1tenth_csv, MAT v5 GCP, GNSS, MCAP with hints)")
+
+
+def _test_ros_bag():
+    """A wheeled robot's ROS bag: IMU, wheel-odometry hints and GNSS fixes."""
+    # ROS bag of a wheeled robot: IMU in rad/s and m/s^2; hints from the wheel odometry,
+    # stationary after 0.1 s below 1 mm/s; fixes without a fix (status -1) left out.
+    s0 = 1_600_000_000_000_000_000
+    ms = 1_000_000
+    bag = [("/imu", "sensor_msgs/Imu", s0, imu_message(s0, (math.pi / 180, 0.0, 0.0), (0.0, G0, 0.0))),
+           ("/imu", "sensor_msgs/Imu", s0 + 40 * ms, imu_message(s0 + 40 * ms, (0.0, 0.0, 0.0), (0.0, G0, 0.0)))]
+    bag += [("/odom", "nav_msgs/Odometry", s0 + k * 50 * ms, odometry_message(s0 + k * 50 * ms, v, 0.0))
+            for k, v in enumerate([1.0, 1e-15, 0.0, 0.0, 0.0])]
+    bag += [("/fix", "sensor_msgs/NavSatFix", s0 + k * ms, navsatfix_message(s0 + k * ms, st, lat, 10.0, 0.81))
+            for k, st, lat in [(1, 1, 45.0), (2, -1, 46.0), (3, 1, 45.001)]]
+    topics = {"imu": "/imu", "odom": "/odom", "fix": "/fix"}
+    s, _, hints, fixes = parse_ros_robot_bag(bag_bytes(bag, True), "r.bag", topics)
+    assert len(s) == 2 and s[0][2] == 1.0 and s[1][0] == 0.04, s
+    _close(s[0][4], 1.0)
+    assert [h["flags"] for h in hints] == [8, 8, 8, 13, 13], hints
+    assert [f[1] for f in fixes] == [45.0, 45.001], fixes
+    truth, walked = gnss_track_truth(fixes, "r.bag")
+    _close(truth["end_distance_m"], 0.001 * (111132.954 - 1.175), 1e-6)
+    _close(walked, truth["end_distance_m"])
+    assert truth["track"][1][0] == 0.003 and truth["track_min_step_m"] == 0.5, truth
+    _expect_error(lambda: parse_ros_robot_bag(bag_bytes(bag[:2], False), "r.bag", topics), "r.bag", "'/odom'", "no messages")
+
+
+def _test_rtk_npy():
+    """RTK positions as .npy."""
+    # RTK positions as .npy (north, east, down): 3-4-5 m, the 5 cm step under the 0.1 m floor.
+    truth, walked = rtk_ned_truth(npy_bytes([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0], [3.0, 4.0, 0.1]]), "n.npy")
+    _close(truth["end_distance_m"], 5.0)
+    _close(walked, 5.0)
+    _expect_error(lambda: rtk_ned_truth(npy_bytes([[0.0, 0.0], [1.0, 1.0]]), "n.npy"), "n.npy", "'shape'", "N x 3")
+
+
+def self_test():
+    """Every source format and container on small inline samples, and malformed input naming
+    the file, line and field; no data or network needed."""
+    _test_text_formats()
+    _test_mat_formats()
+    _test_vesc_and_mcap()
+    _test_ros_bag()
+    _test_rtk_npy()
+    checked = containers.self_test()
+    print("convert.py self-test: ok (xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv, broad_mat, vesc_f1tenth_csv, "
+          "ros1_bag_robot, xsens_dot_rtk_npy, MAT v5 GCP, GNSS, MCAP with hints, " + ", ".join(checked) + ")")
     return 0
 
 
