@@ -230,9 +230,11 @@ def parse_vesc_f1tenth(imu_text, odom_text, where_imu, where_odom):
             zero_since = t if zero_since is None else zero_since
         else:
             zero_since = None
-        flags = HINT_SPEED_VALID
+        # The source bit on every hint, moving or not: the encoders say whether the car moves
+        # (ipc_types::hint_flags), so a moving hint overrules an IMU rest flag.
+        flags = HINT_SPEED_VALID | HINT_SOURCE_ENCODERS
         if zero_since is not None and t - zero_since >= VESC_STATIONARY_AFTER_S:
-            flags |= HINT_STATIONARY | HINT_SOURCE_ENCODERS
+            flags |= HINT_STATIONARY
         hints.append({"t_s": t, "forward_speed_mps": v["vx"], "forward_speed_sigma_mps": VESC_SPEED_SIGMA_MPS,
                       "flags": flags})
     notes = ["imuData ax..az already g (+1 g on z at rest), wx..wz already deg/s; t_s = ROS stamp (s + ns) minus the first IMU sample's",
@@ -258,9 +260,9 @@ def odometry_hints(rows):
             still_since = t if still_since is None else still_since
         else:
             still_since = None
-        flags = HINT_SPEED_VALID
+        flags = HINT_SPEED_VALID | HINT_SOURCE_ENCODERS
         if still_since is not None and t - still_since >= ODOM_STATIONARY_AFTER_S:
-            flags |= HINT_STATIONARY | HINT_SOURCE_ENCODERS
+            flags |= HINT_STATIONARY
         hints.append({"t_s": t, "forward_speed_mps": speed, "forward_speed_sigma_mps": ODOM_SPEED_SIGMA_MPS, "flags": flags})
     return hints
 
@@ -796,7 +798,7 @@ def _test_vesc_and_mcap():
     s, _, hints = parse_vesc_f1tenth(imu, odom, "i.csv", "o.csv")
     _close(s[1][0], 0.1)
     assert s[0][1:] == (0.01, 0.02, 0.98, 1.5, 0.0, -2.0), s[0]
-    assert [h["flags"] for h in hints] == [8, 8, 8, 13], hints
+    assert [h["flags"] for h in hints] == [12, 12, 12, 13], hints
     _close(hints[0]["t_s"], 0.05)
     _expect_error(lambda: parse_vesc_f1tenth(imu.replace("0.98,1.5", "0.98,x", 1), odom, "i.csv", "o.csv"),
                  "i.csv", "line 2", "'wx'")
@@ -839,7 +841,7 @@ def _test_ros_bag():
     s, _, hints, fixes = parse_ros_robot_bag(bag_bytes(bag, True), "r.bag", topics)
     assert len(s) == 2 and s[0][2] == 1.0 and s[1][0] == 0.04, s
     _close(s[0][4], 1.0)
-    assert [h["flags"] for h in hints] == [8, 8, 8, 13, 13], hints
+    assert [h["flags"] for h in hints] == [12, 12, 12, 13, 13], hints
     assert [f[1] for f in fixes] == [45.0, 45.001], fixes
     truth, walked = gnss_track_truth(fixes, "r.bag")
     _close(truth["end_distance_m"], 0.001 * (111132.954 - 1.175), 1e-6)
