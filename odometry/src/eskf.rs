@@ -51,7 +51,8 @@ type VecN = SVector<f64, N>;
 pub const NC: usize = 18;
 
 const P: usize = 0;
-const V: usize = 3;
+/// Index of the (navigation-frame) velocity error in the error state.
+pub const V: usize = 3;
 const TH: usize = 6;
 const BA: usize = 9;
 const BG: usize = 12;

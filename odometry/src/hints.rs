@@ -36,6 +36,11 @@ pub struct HintConfig {
     /// ([`crate::nonholonomic`]): the one the user gave, else `None`, estimated from the first
     /// drive (the hints' identity default is no statement about the mounting).
     pub imu_mounting: Option<UnitQuaternion<f64>>,
+    /// How a mounting that is not given is estimated: `false`, from the revised velocities
+    /// of the first drives after a rest ([`MountingEstimator`]); `true`, from the horizontal
+    /// specific force against the speed hints' changes and turns
+    /// ([`crate::cruise::ForwardAxis`]), which needs no known velocity (a start in motion).
+    pub mounting_from_turns: bool,
     /// Path length of forward driving the mounting estimate gathers before it is used, m.
     pub mounting_min_path_m: f64,
     /// 1-sigma of the non-holonomic constraint (zero lateral and vertical body velocity), m/s;
@@ -55,7 +60,8 @@ pub struct HintConfig {
 
 impl Default for HintConfig {
     /// Stale after 0.25 s (12 periods of a 50 Hz controller), delivery 5 ms, the IMU mounted
-    /// aligned with the body, 3 m of forward driving for an estimated mounting, a
+    /// aligned with the body (estimated, when `mounting` is set to `None`, from revised
+    /// velocities), 3 m of forward driving for an estimated mounting, a
     /// non-holonomic 1-sigma of 0.02 m/s, a speed scale 1-sigma of 2%, a fallback rest gate
     /// of 5 sigma, 256 waiting hints.
     fn default() -> Self {
@@ -64,6 +70,7 @@ impl Default for HintConfig {
             delivery_s: 0.005,
             mounting: Some(UnitQuaternion::identity()),
             imu_mounting: None,
+            mounting_from_turns: false,
             mounting_min_path_m: 3.0,
             nonholonomic_sigma_mps: 0.02,
             speed_scale_sigma: 0.02,

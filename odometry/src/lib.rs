@@ -11,6 +11,7 @@
 pub mod arrival;
 pub mod axes;
 pub mod config;
+pub mod cruise;
 pub mod eskf;
 mod hindsight;
 pub mod hints;

@@ -5,7 +5,8 @@
 //! each of them does. The module documentation of [`crate::stage`] describes the behaviour.
 
 use crate::config::OdometryConfig;
-use crate::eskf::{ConsiderModel, Eskf, Imu, KS, align};
+use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, initial_velocity};
+use crate::eskf::{ConsiderModel, Eskf, Imu, KS, V, align};
 use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
@@ -107,7 +108,11 @@ struct Hints {
     newest_used: Option<u64>,
     /// Sensor-to-body rotation `R_bs`, once known.
     r_bs: Option<Matrix3<f64>>,
+    /// 1-sigma of `r_bs`'s yaw when [`ForwardAxis`] estimated it, rad (0 otherwise).
+    yaw_sigma_rad: f64,
     estimator: MountingEstimator,
+    /// The forward axis from the speed hints' changes (mounting not given).
+    forward: ForwardAxis,
     /// Body velocity minus corrections, one per sample since the mounting is known.
     history: Ring<BodyVelocity>,
     /// Sum of the body-velocity changes every update has made since the mounting is known,
@@ -129,7 +134,9 @@ impl Hints {
         self.speed.clone_from(&other.speed);
         self.newest_used = other.newest_used;
         self.r_bs = other.r_bs;
+        self.yaw_sigma_rad = other.yaw_sigma_rad;
         self.estimator = other.estimator;
+        self.forward = other.forward;
         self.history.clone_from(&other.history);
         self.corrections = other.corrections;
         self.applied = other.applied;
@@ -179,10 +186,12 @@ impl Hints {
             -predicted.z,
         );
         let nh = self.cfg.nonholonomic_sigma_mps;
+        // A mounting yaw known to `yaw_sigma_rad` puts that much of the speed sideways.
+        let lateral = nh.hypot(h.forward_speed_mps * self.yaw_sigma_rad);
         kf.body_velocity_update(
             &r_bs,
             residual,
-            Vector3::new(h.forward_speed_sigma_mps, nh, nh),
+            Vector3::new(h.forward_speed_sigma_mps, lateral, nh),
         );
         true
     }
@@ -195,6 +204,11 @@ pub(crate) struct Navigator {
     cfg: OdometryConfig,
     hints: Hints,
     align: AlignSums,
+    /// The cruise window gathered while unaligned ([`crate::cruise`]).
+    cruise: CruiseWindow,
+    /// The mean hint speed of the cruise window the filter aligned on, m/s; `None` when it
+    /// aligned at rest (or not yet).
+    aligned_in_motion: Option<f64>,
     /// 1-sigma of one sample's zero-velocity update, m/s: the configured one, widened by the
     /// square root of the alignment rest's accelerometer mean-variance factor when
     /// `effective_samples` is set.
@@ -241,7 +255,9 @@ impl Navigator {
                 speed: Ring::new(SPEED_QUEUE),
                 newest_used: None,
                 r_bs: hints.mounting.map(|q| q.to_rotation_matrix().into_inner()),
+                yaw_sigma_rad: 0.0,
                 estimator: MountingEstimator::default(),
+                forward: ForwardAxis::default(),
                 history: Ring::new(velocity_capacity),
                 corrections: Vector3::zeros(),
                 applied: 0,
@@ -249,6 +265,8 @@ impl Navigator {
                 stats: HintStats::default(),
             },
             align: AlignSums::default(),
+            cruise: CruiseWindow::default(),
+            aligned_in_motion: None,
             zupt_sigma_mps: cfg.zupt_sigma_mps,
             kf: None,
             rest_window: RestWindow::default(),
@@ -274,6 +292,8 @@ impl Navigator {
         self.cfg = other.cfg;
         self.hints.copy_from(&other.hints);
         self.align = other.align;
+        self.cruise = other.cruise;
+        self.aligned_in_motion = other.aligned_in_motion;
         self.zupt_sigma_mps = other.zupt_sigma_mps;
         self.kf.clone_from(&other.kf);
         self.rest_window = other.rest_window;
@@ -345,6 +365,12 @@ impl Navigator {
         self.kf.is_some()
     }
 
+    /// The mean hint speed of the cruise window the filter aligned on, m/s; `None` when it
+    /// aligned at rest or has not aligned ([`crate::cruise`]).
+    pub fn aligned_in_motion(&self) -> Option<f64> {
+        self.aligned_in_motion
+    }
+
     /// Whether the last sample's rest decision was the IMU's zero-state flag (no fresh hint
     /// with a rest source decided it).
     pub fn imu_decided(&self) -> bool {
@@ -392,6 +418,8 @@ impl Navigator {
             // rest.
             if !verdict.implausible {
                 self.accumulate_alignment(t_ns, &m, rest && ready && verdict.clipped == 0);
+                let still = imu_rest && detector_ready && verdict.clipped == 0;
+                self.accumulate_cruise(t_ns, &m, d.fresh.filter(|_| still));
             }
             emit(&self.unaligned_state(s, rest, d.sample));
             return;
@@ -590,7 +618,27 @@ impl Navigator {
             self.distance_m += moved;
             let kf = self.kf.as_mut().expect("aligned");
             let hints = &mut self.hints;
+            if hints.r_bs.is_none() && hints.cfg.mounting_from_turns {
+                let up_s = kf.x.q.inverse_transform_vector(&Vector3::z());
+                hints
+                    .forward
+                    .sample(&(m.f - kf.x.b_a), &(m.w - kf.x.b_g), &up_s);
+            }
             while let Some(h) = hints.speed.pop() {
+                let up_s = kf.x.q.inverse_transform_vector(&Vector3::z());
+                if hints.r_bs.is_none()
+                    && hints.cfg.mounting_from_turns
+                    && let Some((q, sigma)) =
+                        hints
+                            .forward
+                            .hint(h.stamps.sample_ns, h.forward_speed_mps, &up_s)
+                {
+                    hints.r_bs = Some(q.to_rotation_matrix().into_inner());
+                    hints.yaw_sigma_rad = sigma;
+                    if let Some(nhc) = self.nhc.as_mut() {
+                        nhc.adopt(q);
+                    }
+                }
                 if hints.apply_speed(kf, &h, t_ns) {
                     hs.flags |= odometry_flags::HINT_SPEED;
                     hints.applied += 1;
@@ -737,6 +785,93 @@ impl Navigator {
         self.at_rest = true;
     }
 
+    /// Gathers the cruise window of an unaligned filter ([`crate::cruise`]): `fresh` is the
+    /// fresh hint when the IMU's detector flags the sample still (else `None`); a hint that
+    /// does not say the robot moves at [`MIN_SPEED_MPS`] or more empties the window, as does a
+    /// full window whose speed is not steady ([`CruiseWindow::steady`]).
+    /// Aligns in motion once the window spans `OdometryConfig::align_s`.
+    fn accumulate_cruise(&mut self, t_ns: u64, m: &Imu, fresh: Option<RobotHint>) {
+        let moving = |h: &RobotHint| {
+            has_rest_source(h)
+                && h.flags & hint_flags::STATIONARY == 0
+                && h.flags & hint_flags::SPEED_VALID != 0
+                && h.forward_speed_mps >= MIN_SPEED_MPS
+        };
+        let Some(h) = fresh.filter(moving).filter(|_| self.kf.is_none()) else {
+            self.cruise = CruiseWindow::default();
+            return;
+        };
+        let c = &mut self.cruise;
+        c.push(
+            t_ns,
+            &m.f,
+            &m.w,
+            h.forward_speed_mps,
+            h.forward_speed_sigma_mps,
+        );
+        let span_s = c.span_s(t_ns);
+        if span_s < self.cfg.align_s || c.accel.len() < 2 {
+            return;
+        }
+        if c.steady() {
+            self.align_in_motion(span_s, m);
+        } else {
+            // Accelerating or braking: the next window starts afresh.
+            self.cruise = CruiseWindow::default();
+        }
+    }
+
+    /// Aligns on the cruise window of `span_s` seconds, `m` its last sample (see
+    /// [`crate::cruise`] for what is assumed and how the sigmas carry it).
+    fn align_in_motion(&mut self, span_s: f64, m: &Imu) {
+        let c = std::mem::take(&mut self.cruise);
+        let n = c.accel.len() as f64;
+        let f_mean = c.accel.mean();
+        let mut w_var = c.gyro.variance() / n;
+        if self.cfg.effective_samples {
+            w_var.component_mul_assign(&c.gyro.mean_variance_factor());
+        }
+        // A turn as slow as the mean's own 1-sigma is not seen: in quadrature with it.
+        let w_sigma = (w_var * 2.0).map(f64::sqrt);
+        let g = self.cfg.gravity_mps2;
+        let hidden = c.hidden_accel(&w_sigma);
+        let scale_as_bias = g * self.cfg.accel_residual_scale;
+        let bias_sigma = Vector3::from(self.cfg.accel_bias_sigma_mps2)
+            .map(|s| s.hypot(scale_as_bias).hypot(hidden));
+        let (mut x, mut cov) = align(f_mean, c.gyro.mean(), g, bias_sigma, w_sigma);
+        cov[(KS, KS)] = self.hints.cfg.speed_scale_sigma.powi(2);
+        let (speed, hint_sigma) = c.speed();
+        let forward_sigma = hint_sigma
+            .hypot(speed * self.hints.cfg.speed_scale_sigma)
+            .hypot((c.speed_max - c.speed_min) / 2.0);
+        let (v, v_cov) = initial_velocity(
+            &x.q,
+            self.hints.r_bs.as_ref(),
+            speed,
+            forward_sigma,
+            self.hints.cfg.nonholonomic_sigma_mps,
+            c.speed_max + hint_sigma,
+        );
+        x.v = v;
+        cov.fixed_view_mut::<3, 3>(V, V).copy_from(&v_cov);
+        // No standing spread was seen: the noise model's white noise over the band the
+        // window's rate passes (Nyquist), all three axes.
+        let rate_hz = (n - 1.0) / span_s;
+        self.standing_accel_sd = self.cfg.noise.accel_noise_density * (1.5 * rate_hz).sqrt();
+        self.zupt_sigma_mps = self.cfg.zupt_sigma_mps;
+        let consider = ConsiderModel {
+            gyro: self.cfg.gyro_correction_sigma,
+            accel: Matrix3::repeat(self.cfg.accel_residual_scale),
+        };
+        self.kf = Some(
+            Eskf::new(x, cov, g, self.cfg.noise, *m)
+                .with_consider(consider, f_mean)
+                .with_propagation_interval(self.cfg.propagation_interval_s),
+        );
+        self.aligned_in_motion = Some(speed);
+        self.at_rest = false;
+    }
+
     fn unaligned_state(&self, s: &CorrectedImuSample, rest: bool, hs: HintSample) -> OdometryState {
         OdometryState {
             stamps: s.stamps,
@@ -833,7 +968,11 @@ impl Navigator {
         let a = (3.0 * dp - dv * big_t) / (big_t * big_t);
         let b = (dv * big_t - 2.0 * dp) / (big_t * big_t * big_t);
         let g = self.cfg.gravity_mps2;
-        let estimating = self.hints.r_bs.is_none();
+        // Revised velocities tell the forward axis only when the velocity was known at the
+        // alignment (a rest), and only when asked to (not `mounting_from_turns`).
+        let estimating = self.hints.r_bs.is_none()
+            && self.aligned_in_motion.is_none()
+            && !self.hints.cfg.mounting_from_turns;
         for (i, h) in self.history.iter().enumerate() {
             let s = (h.t_ns.saturating_sub(t0)) as f64 * 1e-9;
             let p = h.p + a * s * s + b * s * s * s;

@@ -70,6 +70,14 @@ impl ImuConstraint {
         })
     }
 
+    /// Takes `mounting` (sensor to body) when none is given or estimated yet (the speed
+    /// hints' forward axis, [`crate::cruise::ForwardFromSpeedChanges`]).
+    pub fn adopt(&mut self, mounting: UnitQuaternion<f64>) {
+        if self.r_bs.is_none() {
+            self.r_bs = Some(mounting.to_rotation_matrix().into_inner());
+        }
+    }
+
     /// Applies the constraint to `kf` after a covariance propagation spanning `interval_s`;
     /// `dt_s` is the last sample's interval (for the mounting estimate, fed at every call).
     pub fn apply(&mut self, kf: &mut Eskf, dt_s: f64, interval_s: f64) -> Option<Outcome> {

@@ -307,6 +307,12 @@ impl OdometryStage {
         self.ahead.aligned()
     }
 
+    /// The mean hint speed of the steady cruise the filter aligned on, m/s; `None` when it
+    /// aligned at rest or has not aligned ([`crate::cruise`]).
+    pub fn aligned_in_motion(&self) -> Option<f64> {
+        self.ahead.aligned_in_motion()
+    }
+
     /// The holes in the time line so far (unmarked gaps, found here or marked
     /// [`corrected_flags::HOLE_BEFORE`] by the calibration stage), each bridged as a gap.
     pub fn holes(&self) -> Holes {

@@ -15,9 +15,11 @@ pub struct HintArgs {
     pub hint_delivery_ms: f64,
     /// IMU mounting on the robot: `R,P,Y` in degrees (roll, pitch, yaw of the rotation from
     /// the sensor frame to the body frame, x forward, y left, z up), or `estimate` (from the
-    /// first 3 m of forward driving; speed hints are used once it is known). Without it, speed
-    /// hints take the identity and a wheeled platform's IMU-only non-holonomic constraint
-    /// estimates the mounting from its first drive.
+    /// first 3 m of forward driving after a rest; speed hints are used once it is known).
+    /// Without it, the mounting is estimated from the horizontal acceleration against the
+    /// speed hints' changes and turns (`odometry::cruise::ForwardAxis`; a speed hint along a
+    /// wrong axis is worse than none, so they wait for it); a wheeled platform's IMU-only
+    /// non-holonomic constraint estimates its own from its first drive.
     #[arg(long)]
     pub mount: Option<String>,
     /// 1-sigma of the zero lateral and vertical body velocity (non-holonomic constraint), m/s.
@@ -33,8 +35,7 @@ impl HintArgs {
     pub fn config(&self) -> Result<HintConfig> {
         let given = self.mount.as_deref();
         let mounting = match given.map(str::trim) {
-            None => Some(UnitQuaternion::identity()),
-            Some("estimate") => None,
+            None | Some("estimate") => None,
             Some(text) => Some(parse_mount(text)?),
         };
         let config = HintConfig {
@@ -42,6 +43,7 @@ impl HintArgs {
             delivery_s: self.hint_delivery_ms * 1e-3,
             mounting,
             imu_mounting: given.and(mounting),
+            mounting_from_turns: given.is_none(),
             nonholonomic_sigma_mps: self.nonholonomic_sigma,
             speed_scale_sigma: self.speed_scale_sigma,
             ..HintConfig::default()

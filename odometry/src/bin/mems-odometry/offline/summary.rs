@@ -161,11 +161,20 @@ impl Summary {
         let aligned_at_s = self
             .aligned_ns
             .map_or(0.0, |t| (t - read.first_ns.unwrap_or(0)) as f64 * 1e-9);
-        tracing::info!(
-            "aligned {aligned_at_s:.2} s into the recording (at its first rest of {} s); the \
-             position counts from there",
-            read.align_s
-        );
+        let in_motion = chain.second.stage().aligned_in_motion();
+        match in_motion {
+            None => tracing::info!(
+                "aligned {aligned_at_s:.2} s into the recording (at its first rest of {} s); the \
+                 position counts from there",
+                read.align_s
+            ),
+            Some(speed) => tracing::info!(
+                "aligned {aligned_at_s:.2} s into the recording in motion (a steady cruise of \
+                 {} s at {speed:.2} m/s by the speed hints, the IMU still); the position counts \
+                 from there",
+                read.align_s
+            ),
+        }
         let axes = chain.second.stage().axes();
         if axes.disagree() {
             tracing::warn!(
@@ -178,6 +187,7 @@ impl Summary {
             let mut result = self.json(&end, truth_error, aligned_at_s, read, chain);
             result["profile"] = read.choice.json(chain.second.auto_choice());
             result["wheeled"] = self.wheeled_json(&chain.second);
+            result["aligned_in_motion"] = json!(in_motion.map(|s| json!({ "speed_mps": s })));
             println!("{result}");
         } else {
             self.print(&end, truth_error);
@@ -220,6 +230,7 @@ impl Summary {
                 "applied": end.hints_applied,
                 "disagreements": end.hint_disagreements,
                 "speed_updates": speed_updates,
+                "mounting_rpy_deg": hint_mounting(chain),
             },
         });
         if let (Some(r), Some(t)) = (result.as_object_mut(), read.trust.as_object()) {
@@ -432,6 +443,15 @@ pub fn report_input(read: &Read, source: &mut Source, no_gyro: Option<u64>) -> V
         );
     }
     segments
+}
+
+/// The mounting the speed hints use (sensor to body, roll, pitch, yaw in degrees), given or
+/// estimated; `None` while unknown.
+fn hint_mounting(chain: &OfflineChain) -> Option<[f64; 3]> {
+    chain.second.stage().mounting().map(|q| {
+        let (r, p, y) = q.euler_angles();
+        [r.to_degrees(), p.to_degrees(), y.to_degrees()]
+    })
 }
 
 /// Why the odometry never aligned: the detector never learned (with the learner's last

@@ -1,0 +1,310 @@
+//! Alignment on a steady cruise, for a wheeled robot that starts in motion, and the forward
+//! axis from the speed hints' changes when the mounting is not given.
+//!
+//! A cruise window: the filter is not aligned, the IMU's detector flags the sample still (no
+//! acceleration and no rotation beyond its noise: on a wheeled robot, straight driving at a
+//! constant speed), and a fresh speed hint from a source that knows about rest (encoders or
+//! commands, `hint_flags::SOURCE_*`) says the robot moves at [`MIN_SPEED_MPS`] or more, within
+//! the hints' noise band of the window's other hints ([`CruiseWindow::push`]). After `OdometryConfig::align_s` of such samples
+//! the filter aligns as on a rest (roll and pitch from the mean specific force, the gyro bias
+//! from the mean rate), with what a cruise is not assumed away but carried in the sigmas:
+//! - the window's mean acceleration along the road (its hints' speed slope and that slope's
+//!   1-sigma) and
+//!   across it (the speed times the rate the gyro's mean cannot tell from bias) is
+//!   indistinguishable from a horizontal accelerometer bias: it is added to the bias sigma
+//!   the alignment turns into its tilt sigma;
+//! - a turn slower than the gyro mean's own 1-sigma is not seen: the gyro bias sigma is the
+//!   rest's times `sqrt(2)` (such a turn and the noise, in quadrature).
+//!
+//! Frames and signs as in [`crate::hints`]: body x forward, y left, z up; `R_bs` sensor to
+//! body; navigation frame z up, heading fixed at alignment. The velocity starts from the hint's
+//! speed along body x when the mounting is known (`--mount`): forward 1-sigma the hint's own,
+//! its scale error's and half the window's speed spread, in quadrature; lateral and vertical
+//! the non-holonomic 1-sigma. When the mounting is not known the direction of travel is not:
+//! the horizontal velocity starts at zero with a 1-sigma per axis of the largest speed of the
+//! window (covering any direction), vertical the non-holonomic 1-sigma, and the speed hints wait
+//! for the forward axis ([`ForwardAxis`]). No zero-velocity update comes from a
+//! cruise window.
+
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+
+use crate::hints::mounting_from;
+use crate::rest_noise::RestNoise;
+
+/// Slowest hint speed a cruise window takes, m/s (below it, a hint's noise is the speed).
+pub const MIN_SPEED_MPS: f64 = 0.1;
+/// Smallest band (max minus min) the hint speeds of one cruise window may spread over, m/s.
+pub const STEADY_MPS: f64 = 0.15;
+/// Largest least-squares slope of the hint speeds over a cruise window, m/s^2 (an
+/// acceleration hidden in the mean specific force tilts the alignment by `a / g`: 0.9 deg).
+pub const MAX_ACCEL_MPS2: f64 = 0.15;
+/// Intervals the forward-axis estimate gathers before use (30 s at one per half second: its
+/// 1-sigma from fewer came out optimistic on the Husky recording of the corpus).
+pub const FORWARD_MIN_INTERVALS: u32 = 60;
+/// Largest 1-sigma of the forward-axis fit's direction for use, rad (10 degrees); the speed
+/// hints' lateral 1-sigma then covers it ([`ForwardAxis`]).
+pub const FORWARD_MAX_SIGMA_RAD: f64 = 0.175;
+/// Shortest interval between two speed hints the forward-axis estimate compares, s.
+pub const FORWARD_INTERVAL_S: f64 = 0.5;
+
+/// The cruise window being gathered.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct CruiseWindow {
+    /// Time of its first sample, ns.
+    pub t0_ns: u64,
+    /// Specific force, m/s^2, sensor frame.
+    pub accel: RestNoise,
+    /// Rate, rad/s, sensor frame.
+    pub gyro: RestNoise,
+    /// Smallest hint speed, m/s.
+    pub speed_min: f64,
+    /// Largest hint speed, m/s.
+    pub speed_max: f64,
+    /// Sums for the mean speed and its least-squares slope over time (`t` s from `t0_ns`,
+    /// speeds m/s): `n`, `t`, `t^2`, `s`, `t s`; and the hint 1-sigmas' sum.
+    sums: [f64; 5],
+    sigma_sum: f64,
+}
+
+impl CruiseWindow {
+    /// Adds a sample with the hint speed `speed` (1-sigma `sigma`); a speed outside the
+    /// window's band (its smallest and largest speed at most [`STEADY_MPS`] or six hint
+    /// 1-sigmas apart: the hints' own noise) starts a new window with it.
+    pub fn push(&mut self, t_ns: u64, f: &Vector3<f64>, w: &Vector3<f64>, speed: f64, sigma: f64) {
+        let band = STEADY_MPS.max(6.0 * sigma);
+        let steady = speed.max(self.speed_max) - speed.min(self.speed_min) <= band;
+        if self.accel.is_empty() || !steady {
+            *self = Self {
+                t0_ns: t_ns,
+                speed_min: speed,
+                speed_max: speed,
+                ..Self::default()
+            };
+        }
+        self.accel.push(*f);
+        self.gyro.push(*w);
+        self.speed_min = self.speed_min.min(speed);
+        self.speed_max = self.speed_max.max(speed);
+        let t = self.span_s(t_ns);
+        for (sum, x) in self.sums.iter_mut().zip([1.0, t, t * t, speed, t * speed]) {
+            *sum += x;
+        }
+        self.sigma_sum += sigma;
+    }
+
+    /// The window's span at `t_ns`, s.
+    pub fn span_s(&self, t_ns: u64) -> f64 {
+        t_ns.saturating_sub(self.t0_ns) as f64 * 1e-9
+    }
+
+    /// Mean hint speed and mean hint 1-sigma, m/s.
+    pub fn speed(&self) -> (f64, f64) {
+        let n = self.sums[0].max(1.0);
+        (self.sums[3] / n, self.sigma_sum / n)
+    }
+
+    /// The least-squares slope of the hint speeds over the window and its 1-sigma (from the
+    /// hints' mean 1-sigma), m/s^2; `None` with fewer than two distinct times.
+    pub fn slope(&self) -> Option<(f64, f64)> {
+        let [n, t, tt, s, ts] = self.sums;
+        let sxx = tt - t * t / n;
+        if n < 2.0 || sxx <= 0.0 {
+            return None;
+        }
+        let (_, sigma) = self.speed();
+        Some(((ts - t * s / n) / sxx, sigma / sxx.sqrt()))
+    }
+
+    /// Whether the window's speed slope is at most [`MAX_ACCEL_MPS2`].
+    pub fn steady(&self) -> bool {
+        self.slope().is_some_and(|(a, _)| a.abs() <= MAX_ACCEL_MPS2)
+    }
+
+    /// The acceleration the window may hide, m/s^2: along the road its speed slope plus that
+    /// slope's 1-sigma, across it the largest speed times the rate `w_sigma`.
+    pub fn hidden_accel(&self, w_sigma: &Vector3<f64>) -> f64 {
+        let along = self.slope().map_or(0.0, |(a, s)| a.abs() + s);
+        along.hypot(self.speed_max * w_sigma.norm())
+    }
+}
+
+/// The initial velocity (navigation frame, m/s) and its covariance after a cruise window of
+/// mean speed `speed` (1-sigma `forward_sigma`), with the mounting `r_bs` when known and the
+/// attitude `q` (sensor to navigation); `lateral_sigma` for the non-holonomic directions,
+/// `speed_max` the window's largest speed (see the module documentation).
+pub fn initial_velocity(
+    q: &UnitQuaternion<f64>,
+    r_bs: Option<&Matrix3<f64>>,
+    speed: f64,
+    forward_sigma: f64,
+    lateral_sigma: f64,
+    speed_max: f64,
+) -> (Vector3<f64>, Matrix3<f64>) {
+    match r_bs {
+        Some(r_bs) => {
+            // Columns: the body axes in the navigation frame.
+            let r_nb = q.to_rotation_matrix().into_inner() * r_bs.transpose();
+            let var = Vector3::new(forward_sigma, lateral_sigma, lateral_sigma).map(|s| s * s);
+            let v = r_nb * Vector3::new(speed, 0.0, 0.0);
+            (v, r_nb * Matrix3::from_diagonal(&var) * r_nb.transpose())
+        }
+        None => {
+            let h = speed_max * speed_max;
+            let var = Vector3::new(h, h, lateral_sigma * lateral_sigma);
+            (Vector3::zeros(), Matrix3::from_diagonal(&var))
+        }
+    }
+}
+
+/// The forward axis in the sensor frame from the horizontal specific force and the speed
+/// hints. A wheeled robot that does not skid accelerates along its forward axis `x` by the
+/// speed's rate `ds/dt` and towards its left axis `y = z x x` by the centripetal `s w_z`
+/// (`w_z` the yaw rate about body up; standard planar vehicle kinematics, e.g. Gillespie,
+/// "Fundamentals of Vehicle Dynamics", SAE 1992, ch. 6): in the horizontal plane of the sensor
+/// frame, written as complex numbers on a basis `(e1, e2)` with `e1 x e2 = up`, the mean
+/// horizontal specific force over an interval is `A = F (ds/dt + i s w_z)` with `F` the forward
+/// axis. The least-squares `F = sum(A conj(B)) / sum(|B|^2)`, `B = ds/dt + i s w_z`, keeps the
+/// sign (a displacement cannot tell forward from reverse) and does not depend on the filter's
+/// velocity, which a start in motion leaves unknown. Intervals run between speed hints at
+/// least [`FORWARD_INTERVAL_S`] apart; the estimate is used once [`FORWARD_MIN_INTERVALS`]
+/// intervals are gathered and the direction's 1-sigma from the fit's residuals is at most
+/// [`FORWARD_MAX_SIGMA_RAD`]; the speed hints then take a lateral 1-sigma that covers it
+/// (`s` times that angle, with the non-holonomic one). Body z is the gravity-up direction
+/// (a level floor).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ForwardAxis {
+    /// Time (ns) and speed (m/s) of the hint that opened the current interval.
+    anchor: Option<(u64, f64)>,
+    /// The current interval's sums: horizontal specific force (sensor frame, m/s^2), rate
+    /// about up (rad/s), samples.
+    f_sum: Vector3<f64>,
+    w_up_sum: f64,
+    n: u32,
+    /// Basis of the horizontal plane (sensor frame) fixed at the first interval.
+    basis: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// `sum(A conj B)` as (re, im), `sum |A|^2`, `sum |B|^2`, intervals.
+    cross: (f64, f64),
+    aa: f64,
+    bb: f64,
+    intervals: u32,
+}
+
+impl ForwardAxis {
+    /// Adds a sample's (bias-corrected) specific force `f_s` (m/s^2) and rate `w_s` (rad/s),
+    /// sensor frame, with the up direction `up_s` (unit, sensor frame).
+    pub fn sample(&mut self, f_s: &Vector3<f64>, w_s: &Vector3<f64>, up_s: &Vector3<f64>) {
+        if self.anchor.is_none() {
+            return;
+        }
+        self.f_sum += f_s - up_s * up_s.dot(f_s);
+        self.w_up_sum += w_s.dot(up_s);
+        self.n += 1;
+    }
+
+    /// Takes a speed hint of `speed` m/s at `t_ns` with the up direction `up_s`; returns the
+    /// mounting (sensor to body) and its yaw 1-sigma (rad) once known.
+    pub fn hint(
+        &mut self,
+        t_ns: u64,
+        speed: f64,
+        up_s: &Vector3<f64>,
+    ) -> Option<(UnitQuaternion<f64>, f64)> {
+        let Some((t0, s0)) = self.anchor else {
+            self.anchor = Some((t_ns, speed));
+            return None;
+        };
+        let dt = t_ns.saturating_sub(t0) as f64 * 1e-9;
+        if dt < FORWARD_INTERVAL_S {
+            return None;
+        }
+        let n = f64::from(self.n.max(1));
+        let (f, w_up) = (self.f_sum / n, self.w_up_sum / n);
+        let had = self.n > 0;
+        *self = Self {
+            anchor: Some((t_ns, speed)),
+            ..*self
+        };
+        (self.f_sum, self.w_up_sum, self.n) = (Vector3::zeros(), 0.0, 0);
+        if !had {
+            return None;
+        }
+        let (e1, e2) = *self.basis.get_or_insert_with(|| horizontal_basis(up_s));
+        let a = (f.dot(&e1), f.dot(&e2));
+        let b = ((speed - s0) / dt, 0.5 * (speed + s0) * w_up);
+        // A conj(B).
+        self.cross.0 += a.0 * b.0 + a.1 * b.1;
+        self.cross.1 += a.1 * b.0 - a.0 * b.1;
+        self.aa += a.0 * a.0 + a.1 * a.1;
+        self.bb += b.0 * b.0 + b.1 * b.1;
+        self.intervals += 1;
+        let sigma = self.angle_sigma_rad();
+        if self.intervals < FORWARD_MIN_INTERVALS || sigma > FORWARD_MAX_SIGMA_RAD {
+            return None;
+        }
+        let forward = e1 * self.cross.0 + e2 * self.cross.1;
+        mounting_from(&forward, up_s).map(|q| (q, sigma))
+    }
+}
+
+impl ForwardAxis {
+    /// 1-sigma of the fit's direction, rad: the residuals' variance per interval
+    /// (`(sum|A|^2 - |sum A conj B|^2 / sum|B|^2) / (k - 1)` over `k` intervals) over
+    /// `sum|B|^2`, square-rooted, relative to `|F|`; infinite before two intervals.
+    fn angle_sigma_rad(&self) -> f64 {
+        let k = f64::from(self.intervals);
+        let cross2 = self.cross.0 * self.cross.0 + self.cross.1 * self.cross.1;
+        if k < 2.0 || self.bb <= 0.0 || cross2 <= 0.0 {
+            return f64::INFINITY;
+        }
+        let residual = (self.aa - cross2 / self.bb).max(0.0) / (k - 1.0);
+        let f_norm = cross2.sqrt() / self.bb;
+        // Per component of the complex fit: half the residual variance.
+        (0.5 * residual / self.bb).sqrt() / f_norm
+    }
+}
+
+/// Two unit vectors spanning the plane normal to `up` with `e1 x e2 = up`.
+fn horizontal_basis(up: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    let i = up.iamin();
+    let any = Vector3::from_fn(|r, _| if r == i { 1.0 } else { 0.0 });
+    let e1 = (any - up * up.dot(&any)).normalize();
+    (e1, up.cross(&e1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn forward_axis_from_speed_changes_and_turns_keeps_its_sign() {
+        // IMU mounted +y up, -z forward, -x left (the Husky's).
+        let (fwd_s, up_s) = (Vector3::new(0.0, 0.0, -1.0), Vector3::new(0.0, 1.0, 0.0));
+        let left_s = up_s.cross(&fwd_s);
+        let truth = mounting_from(&fwd_s, &up_s).unwrap();
+        let mut est = ForwardAxis::default();
+        let mut got = None;
+        // Slowing down and turning both ways, 0.5 s between hints, 10 samples each.
+        for k in 0..40 {
+            let t = f64::from(k) * 0.5;
+            let (speed, accel, yaw_rate) = (1.5 - 0.02 * t, -0.04, 0.3 * (0.4 * t).sin());
+            let f = fwd_s * accel + left_s * speed * yaw_rate + up_s * 9.81;
+            got = est.hint((t * 1e9) as u64, speed, &up_s).or(got);
+            for _ in 0..10 {
+                est.sample(&f, &(up_s * yaw_rate), &up_s);
+            }
+        }
+        let (q, sigma) = got.unwrap();
+        assert!(q.angle_to(&truth) < 0.01 && sigma < 0.01, "{q:?} {sigma}");
+    }
+
+    #[test]
+    fn unknown_direction_is_covered_by_the_speed() {
+        let q = UnitQuaternion::identity();
+        let (v, cov) = initial_velocity(&q, None, 1.0, 0.05, 0.02, 1.1);
+        assert_eq!(v, Vector3::zeros());
+        assert!((cov[(0, 0)].sqrt() - 1.1).abs() < 1e-12 && cov[(2, 2)].sqrt() < 0.03);
+        let r_bs = Matrix3::identity();
+        let (v, cov) = initial_velocity(&q, Some(&r_bs), 1.0, 0.05, 0.02, 1.1);
+        assert!((v - Vector3::x()).norm() < 1e-12 && (cov[(0, 0)].sqrt() - 0.05).abs() < 1e-12);
+    }
+}
