@@ -28,7 +28,9 @@
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
-use crate::hints::mounting_from;
+use crate::config::OdometryConfig;
+use crate::eskf::{Cov, KS, Nominal, V, align};
+use crate::hints::{HintConfig, mounting_from};
 use crate::rest_noise::RestNoise;
 
 /// Slowest hint speed a cruise window takes, m/s (below it, a hint's noise is the speed).
@@ -153,6 +155,64 @@ pub fn initial_velocity(
             let var = Vector3::new(h, h, lateral_sigma * lateral_sigma);
             (Vector3::zeros(), Matrix3::from_diagonal(&var))
         }
+    }
+}
+
+/// The filter's start from a cruise window.
+pub struct CruiseStart {
+    /// Initial state.
+    pub x: Nominal,
+    /// Its covariance.
+    pub cov: Cov,
+    /// The standing spread of the specific force's norm the vibration check compares against,
+    /// m/s^2: none was seen, so the noise model's white noise over the band the window's rate
+    /// passes (Nyquist), all three axes.
+    pub standing_accel_sd: f64,
+}
+
+/// The initial state and covariance from the cruise window `c` of `span_s` seconds (see the
+/// module documentation for what is assumed and how the sigmas carry it), with the mounting
+/// `r_bs` when known.
+pub fn cruise_start(
+    c: &CruiseWindow,
+    span_s: f64,
+    cfg: &OdometryConfig,
+    hints: &HintConfig,
+    r_bs: Option<Matrix3<f64>>,
+) -> CruiseStart {
+    let n = c.accel.len() as f64;
+    let mut w_var = c.gyro.variance() / n;
+    if cfg.effective_samples {
+        w_var.component_mul_assign(&c.gyro.mean_variance_factor());
+    }
+    // A turn as slow as the mean's own 1-sigma is not seen: in quadrature with it.
+    let w_sigma = (w_var * 2.0).map(f64::sqrt);
+    let g = cfg.gravity_mps2;
+    let hidden = c.hidden_accel(&w_sigma);
+    let scale_as_bias = g * cfg.accel_residual_scale;
+    let bias_sigma =
+        Vector3::from(cfg.accel_bias_sigma_mps2).map(|s| s.hypot(scale_as_bias).hypot(hidden));
+    let (mut x, mut cov) = align(c.accel.mean(), c.gyro.mean(), g, bias_sigma, w_sigma);
+    cov[(KS, KS)] = hints.speed_scale_sigma.powi(2);
+    let (speed, hint_sigma) = c.speed();
+    let forward_sigma = hint_sigma
+        .hypot(speed * hints.speed_scale_sigma)
+        .hypot((c.speed_max - c.speed_min) / 2.0);
+    let (v, v_cov) = initial_velocity(
+        &x.q,
+        r_bs.as_ref(),
+        speed,
+        forward_sigma,
+        hints.nonholonomic_sigma_mps,
+        c.speed_max + hint_sigma,
+    );
+    x.v = v;
+    cov.fixed_view_mut::<3, 3>(V, V).copy_from(&v_cov);
+    let rate_hz = (n - 1.0) / span_s;
+    CruiseStart {
+        x,
+        cov,
+        standing_accel_sd: cfg.noise.accel_noise_density * (1.5 * rate_hz).sqrt(),
     }
 }
 
@@ -284,10 +344,12 @@ mod tests {
         let mut est = ForwardAxis::default();
         let mut got = None;
         // Slowing down and turning both ways, 0.5 s between hints, 10 samples each.
-        for k in 0..40 {
+        for k in 0..80 {
             let t = f64::from(k) * 0.5;
-            let (speed, accel, yaw_rate) = (1.5 - 0.02 * t, -0.04, 0.3 * (0.4 * t).sin());
-            let f = fwd_s * accel + left_s * speed * yaw_rate + up_s * 9.81;
+            let (speed, accel, yaw_rate) = (1.5 - 0.02 * t, -0.02, 0.3 * (0.4 * t).sin());
+            // Over the interval that this hint opens: the mean speed is the mid-interval one.
+            let mid = speed - 0.02 * 0.25;
+            let f = fwd_s * accel + left_s * mid * yaw_rate + up_s * 9.81;
             got = est.hint((t * 1e9) as u64, speed, &up_s).or(got);
             for _ in 0..10 {
                 est.sample(&f, &(up_s * yaw_rate), &up_s);

@@ -5,8 +5,8 @@
 //! each of them does. The module documentation of [`crate::stage`] describes the behaviour.
 
 use crate::config::OdometryConfig;
-use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, initial_velocity};
-use crate::eskf::{ConsiderModel, Eskf, Imu, KS, V, align};
+use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
+use crate::eskf::{ConsiderModel, Eskf, Imu, KS, align};
 use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
@@ -825,50 +825,25 @@ impl Navigator {
     /// [`crate::cruise`] for what is assumed and how the sigmas carry it).
     fn align_in_motion(&mut self, span_s: f64, m: &Imu) {
         let c = std::mem::take(&mut self.cruise);
-        let n = c.accel.len() as f64;
-        let f_mean = c.accel.mean();
-        let mut w_var = c.gyro.variance() / n;
-        if self.cfg.effective_samples {
-            w_var.component_mul_assign(&c.gyro.mean_variance_factor());
-        }
-        // A turn as slow as the mean's own 1-sigma is not seen: in quadrature with it.
-        let w_sigma = (w_var * 2.0).map(f64::sqrt);
-        let g = self.cfg.gravity_mps2;
-        let hidden = c.hidden_accel(&w_sigma);
-        let scale_as_bias = g * self.cfg.accel_residual_scale;
-        let bias_sigma = Vector3::from(self.cfg.accel_bias_sigma_mps2)
-            .map(|s| s.hypot(scale_as_bias).hypot(hidden));
-        let (mut x, mut cov) = align(f_mean, c.gyro.mean(), g, bias_sigma, w_sigma);
-        cov[(KS, KS)] = self.hints.cfg.speed_scale_sigma.powi(2);
-        let (speed, hint_sigma) = c.speed();
-        let forward_sigma = hint_sigma
-            .hypot(speed * self.hints.cfg.speed_scale_sigma)
-            .hypot((c.speed_max - c.speed_min) / 2.0);
-        let (v, v_cov) = initial_velocity(
-            &x.q,
-            self.hints.r_bs.as_ref(),
-            speed,
-            forward_sigma,
-            self.hints.cfg.nonholonomic_sigma_mps,
-            c.speed_max + hint_sigma,
-        );
-        x.v = v;
-        cov.fixed_view_mut::<3, 3>(V, V).copy_from(&v_cov);
-        // No standing spread was seen: the noise model's white noise over the band the
-        // window's rate passes (Nyquist), all three axes.
-        let rate_hz = (n - 1.0) / span_s;
-        self.standing_accel_sd = self.cfg.noise.accel_noise_density * (1.5 * rate_hz).sqrt();
+        let start = cruise_start(&c, span_s, &self.cfg, &self.hints.cfg, self.hints.r_bs);
+        self.standing_accel_sd = start.standing_accel_sd;
         self.zupt_sigma_mps = self.cfg.zupt_sigma_mps;
         let consider = ConsiderModel {
             gyro: self.cfg.gyro_correction_sigma,
             accel: Matrix3::repeat(self.cfg.accel_residual_scale),
         };
         self.kf = Some(
-            Eskf::new(x, cov, g, self.cfg.noise, *m)
-                .with_consider(consider, f_mean)
-                .with_propagation_interval(self.cfg.propagation_interval_s),
+            Eskf::new(
+                start.x,
+                start.cov,
+                self.cfg.gravity_mps2,
+                self.cfg.noise,
+                *m,
+            )
+            .with_consider(consider, c.accel.mean())
+            .with_propagation_interval(self.cfg.propagation_interval_s),
         );
-        self.aligned_in_motion = Some(speed);
+        self.aligned_in_motion = Some(c.speed().0);
         self.at_rest = false;
     }
 

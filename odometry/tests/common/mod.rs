@@ -69,6 +69,8 @@ pub struct Case {
     pub off: Vec<String>,
     /// IMU mounting on the robot, sensor to body (the drive's default is the identity).
     pub mounting: nalgebra::UnitQuaternion<f64>,
+    /// Rest at the drive's start, s (0: it starts by driving off).
+    pub initial_rest_s: f64,
     /// Longest motion between two rests, s (see `DriveParams::max_motion_s`).
     pub max_motion_s: f64,
     /// The part's digital low-pass filters (the default: our driver's at 200 Hz, DLPF_CFG =
@@ -97,6 +99,7 @@ impl Case {
             turn_angle_deg: [30.0, 120.0],
             peak_yaw_rate_dps: 45.0,
             mounting: nalgebra::UnitQuaternion::identity(),
+            initial_rest_s: DriveParams::new(600.0).initial_rest_s,
             max_motion_s: DriveParams::new(600.0).max_motion_s,
             dlpf: Some(mems_sim::dlpf::DlpfConfig::driver(200.0)),
         }
@@ -182,6 +185,7 @@ impl Case {
         p.leg_s = self.leg_s;
         p.peak_yaw_rate_dps = self.peak_yaw_rate_dps;
         p.mounting = self.mounting;
+        p.initial_rest_s = self.initial_rest_s;
         p.max_motion_s = self.max_motion_s;
         Drive::new(&p, seed).expect("valid drive parameters")
     }
