@@ -513,6 +513,29 @@ fn sessions_of_one_power_on_must_follow_each_other() {
         err.contains("calib") && err.contains("--same-power-on") && err.contains("not after"),
         "{err}"
     );
+    // A means file has no sample times to share.
+    let poses = (0..6)
+        .map(|c| {
+            let up = calibrate_science::diagnose::class_axis(c);
+            calibrate_science::fit::Pose {
+                truth_g: up,
+                mean_g: up,
+                std_g: nalgebra::Vector3::repeat(2e-3),
+                n: None,
+            }
+        })
+        .collect();
+    let means = SessionInput::Means {
+        name: "six.csv".into(),
+        poses,
+    };
+    let err = diagnose(&[means], &[raw("test", &s.test)], &cfg)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("six.csv") && err.contains("no sample times"),
+        "{err}"
+    );
 }
 
 /// Poses held 1.5 s, one six-position session, no test data: diagnosed by default (held-out

@@ -7,10 +7,10 @@
 //! carries its white-noise variance predicted from the samples themselves (`sigma^2 / n`, with
 //! `sigma` the session's robust per-sample noise, [`difference_sigma`] over its static
 //! segments, which torn reads and slow drifts do not inflate; or the file's `std^2 / n`, pooled
-//! per axis over its poses), its
-//! elapsed time since its time origin (s: the session's first sample, or the first sample of
-//! the power-on it shares with other sessions, see [`share_power_on`]), its mean die temperature (degC, when
-//! every sample has one), its gravity label and orientation class, and its validation fold.
+//! per axis over its poses), its elapsed time since its time origin (s: the session's first
+//! sample, or the first sample of the power-on it shares with other sessions, see
+//! `share_power_on`), its mean die temperature (degC, when every sample has one), its gravity
+//! label and orientation class, and its validation fold.
 
 use ipc_types::{RawImuSample, raw_flags};
 use nalgebra::Vector3;
@@ -225,7 +225,7 @@ pub(crate) struct RawSession {
     pub name: String,
     pub t_ns: Vec<u64>,
     /// The time origin of the elapsed times, ns on the samples' clock: the first sample, or
-    /// the first sample of the power-on the session belongs to ([`share_power_on`]).
+    /// the first sample of the power-on the session belongs to (`share_power_on`).
     pub t0_ns: u64,
     pub a_raw: Vec<[f64; 3]>,
     pub a_repaired: Vec<[f64; 3]>,
@@ -680,7 +680,8 @@ pub(crate) struct Obs {
     pub session: usize,
     /// Index of the static pose (segment or row) over all sessions.
     pub pose: usize,
-    /// Mean elapsed time since the time origin (the session's first sample, or its power-on's), s.
+    /// Mean elapsed time since the time origin (the session's first sample, or its
+    /// power-on's), s.
     pub t_s: Option<f64>,
     /// Mean die temperature, degC.
     pub temp_c: Option<f64>,

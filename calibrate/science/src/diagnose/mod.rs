@@ -6,7 +6,10 @@
 //!
 //! **Data.** Each session is cut into observations ([`data`]): block means of `block_s`
 //! seconds inside static segments (raw recordings) or the poses of a six-position means file,
-//! each with the white-noise variance of its mean that the samples themselves predict. What
+//! each with the white-noise variance of its mean that the samples themselves predict, and its
+//! elapsed time (s) since a time origin: the session's first sample, or with
+//! [`DiagnoseConfig::same_power_on`] the first sample of the first session (the sessions are
+//! then one power-on on one clock, so a drift or warm-up continues from file to file). What
 //! the samples show about the acquisition is reported per session: torn reads, outliers at a
 //! fixed count offset, samples repeating the previous one, gaps.
 //!
