@@ -11,7 +11,9 @@
 //! above [`Settings::threshold`] (12 white-noise units: about 1e-3 false alarms per
 //! candidate of three parameters) and its fitted effect exceeds what the odometry already
 //! carries for it ([`Settings::beyond_model`] times the configuration's 1-sigma on some axis,
-//! and as many of its own 1-sigma). "Unexplained": the rows' chi-square after the selection,
+//! and as many of its own 1-sigma) and is plausible for a real part (within the bounds
+//! `calibrate::calibfile::plausibility::PLAUSIBLE` puts on a calibration file: a fit beyond
+//! them, such as a gyro scale of -100 %, is a candidate explaining something else). "Unexplained": the rows' chi-square after the selection,
 //! with each row's noise and the model's carried 1-sigma added in quadrature, has a p-value
 //! below [`Settings::unexplained_p`].
 
@@ -70,6 +72,8 @@ pub struct Score {
     pub sigma: [f64; 3],
     /// Whether the effect exceeds what the model carries.
     pub beyond_model: bool,
+    /// Whether its parameters are plausible for a real part.
+    pub plausible: bool,
 }
 
 /// Residual statistics of one kind of row.
@@ -161,6 +165,12 @@ fn testable(c: Candidate, rows: &[Row], ev: &Evidence, s: &Settings) -> Option<S
     }
 }
 
+/// The span of the rests' temperatures, degC (NaN or negative without any).
+fn temp_span(ev: &Evidence) -> f64 {
+    let temps = ev.rests.iter().map(|r| r.temp_c).filter(|t| t.is_finite());
+    temps.clone().fold(f64::NEG_INFINITY, f64::max) - temps.fold(f64::INFINITY, f64::min)
+}
+
 /// The model's carried 1-sigma for each parameter of `c` (zero: the model has no such term).
 fn carried(c: Candidate, config: &OdometryConfig) -> [f64; 3] {
     match c {
@@ -172,6 +182,19 @@ fn carried(c: Candidate, config: &OdometryConfig) -> [f64; 3] {
         Candidate::AccelTempBias => [0.0; 3],
         Candidate::GyroScale => std::array::from_fn(|i| config.gyro_correction_sigma[(i, i)]),
     }
+}
+
+/// Whether the fitted parameters of the candidate at `slot` in `f` are plausible for a real
+/// part (`PLAUSIBLE`: scale errors, bias; a temperature bias over `span_c` as a bias).
+fn plausible(f: &fit::Fit, slot: usize, config: &OdometryConfig, span_c: f64) -> bool {
+    let bounds = calibrate::calibfile::plausibility::PLAUSIBLE;
+    let bias = bounds.accel_bias_g * config.gravity_mps2;
+    let limit = match f.candidates[slot] {
+        Candidate::AccelBias => bias,
+        Candidate::AccelScale | Candidate::GyroScale => bounds.scale_error,
+        Candidate::AccelTempBias => bias / span_c.max(1.0),
+    };
+    (0..3).all(|i| f.theta[3 * slot + i].abs() <= limit)
 }
 
 /// Whether the fitted parameters of the candidate at `slot` in `f` exceed the model.
@@ -218,6 +241,7 @@ pub fn diagnose(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64, s: &Settin
         .into_iter()
         .filter(|r| r.sigma > 0.0 && r.r.is_finite())
         .collect();
+    let span = temp_span(ev);
     let open: Vec<Candidate> = Candidate::ALL
         .into_iter()
         .filter(|&c| testable(c, &rows, ev, s).is_none())
@@ -238,10 +262,11 @@ pub fn diagnose(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64, s: &Settin
                 params,
                 sigma,
                 beyond_model: f.as_ref().is_some_and(|f| beyond(f, 0, config, s)),
+                plausible: f.as_ref().is_some_and(|f| plausible(f, 0, config, span)),
             }
         })
         .collect();
-    let (chosen, fitted) = select(&rows, &open, config, s);
+    let (chosen, fitted) = select(&rows, &open, config, s, span);
     let after = fitted.as_ref().map_or_else(
         || rows.iter().map(|r| r.r).collect(),
         |f| f.residuals.clone(),
@@ -286,6 +311,7 @@ fn select(
     open: &[Candidate],
     config: &OdometryConfig,
     s: &Settings,
+    span_c: f64,
 ) -> (Vec<Candidate>, Option<fit::Fit>) {
     let mut chosen: Vec<Candidate> = Vec::new();
     let mut current: Option<fit::Fit> = None;
@@ -298,7 +324,10 @@ fn select(
                 let mut set = chosen.clone();
                 set.push(c);
                 let f = fit::fit(rows, &set)?;
-                let ok = f.gain - base > s.threshold && beyond(&f, set.len() - 1, config, s);
+                let slot = set.len() - 1;
+                let ok = f.gain - base > s.threshold
+                    && beyond(&f, slot, config, s)
+                    && plausible(&f, slot, config, span_c);
                 ok.then_some((c, f))
             })
             .max_by(|a, b| a.1.gain.total_cmp(&b.1.gain));

@@ -3,11 +3,37 @@
 use std::fmt::Write;
 use std::path::Path;
 
-use odometry::diagnose::Diagnosis;
+use odometry::diagnose::{Diagnosis, Score};
 use serde_json::Value;
 
 fn num(v: &Value, unit: &str) -> String {
     v.as_f64().map_or("-".into(), |x| format!("{x:.4} {unit}"))
+}
+
+/// One candidate's line: its score, parameters and how they compare with the model.
+fn candidate(c: &Score) -> String {
+    let name = c.candidate.name();
+    if let Some(why) = &c.untestable {
+        return format!("{name:<16} not testable: {why}");
+    }
+    let p = |v: &[f64; 3], prec: usize| v.map(|x| format!("{x:.prec$e}")).join(", ");
+    format!(
+        "{name:<16} score {:>10.1}  params [{}] +- [{}] {}  {} model's 1-sigma{}",
+        c.gain,
+        p(&c.params, 3),
+        p(&c.sigma, 1),
+        c.candidate.unit(),
+        if c.beyond_model {
+            "beyond the"
+        } else {
+            "within the"
+        },
+        if c.plausible {
+            ""
+        } else {
+            ", implausible for a real part"
+        }
+    )
 }
 
 /// The report for `input`: the diagnosis `d` and the figures of `report` (the JSON form).
@@ -36,31 +62,7 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
         d.tilt.rms_noise * 1e3
     );
     for c in &d.scores {
-        let name = c.candidate.name();
-        match &c.untestable {
-            Some(why) => {
-                let _ = writeln!(s, "    {name:<16} not testable: {why}");
-            }
-            None => {
-                let _ = writeln!(
-                    s,
-                    "    {name:<16} score {:>10.1}  params [{:.3e}, {:.3e}, {:.3e}] +- [{:.1e}, {:.1e}, {:.1e}] {}  {}",
-                    c.gain,
-                    c.params[0],
-                    c.params[1],
-                    c.params[2],
-                    c.sigma[0],
-                    c.sigma[1],
-                    c.sigma[2],
-                    c.candidate.unit(),
-                    if c.beyond_model {
-                        "beyond the model's 1-sigma"
-                    } else {
-                        "within the model's 1-sigma"
-                    }
-                );
-            }
-        }
+        let _ = writeln!(s, "    {}", candidate(c));
     }
     let names: Vec<&str> = d.selected.iter().map(|(c, _)| c.name()).collect();
     let _ = writeln!(
