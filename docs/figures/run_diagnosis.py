@@ -80,9 +80,15 @@ def diagnose(ctx, run, calib, extra=(), closed=True):
         raise Failed(f"{' '.join(argv)}: no JSON ({e})")
 
 
+def unexplained(report):
+    """yes / no, and why when the rerun refuted the selection."""
+    if report["confirmed"] is False:
+        return "yes (the rerun refutes the selection)"
+    return "yes" if report["unexplained"] else "no"
+
+
 def sim_row(label, effect, calib_label, r):
-    d = r["diagnosis"]
-    return [label, effect, calib_label, selected(r), "yes" if d["unexplained"] else "no",
+    return [label, effect, calib_label, selected(r), unexplained(r),
             before_after(r, "rest_innovation_rms_mps"), before_after(r, "end_error_m"), before_after(r, "truth_error_m")]
 
 
@@ -127,7 +133,7 @@ def corpus(ctx, identity_path):
         scores = ", ".join(f"{c['candidate']} {c['gain']:.0f}" for c in d["scores"] if not c["untestable"]) or "none testable"
         rows.append([s["id"], s["platform"], d["rests"], f"{d['motions']} ({d['motions_gyro_clipped']})",
                      f"{1e3 * m['rms_before']:.1f} / {1e3 * m['rms_noise']:.1f}", f"{1e3 * t['rms_before']:.1f} / {1e3 * t['rms_noise']:.1f}",
-                     scores, selected(r), "yes" if d["unexplained"] else "no",
+                     scores, selected(r), unexplained(r),
                      before_after(r, "rest_innovation_rms_mps"), before_after(r, "end_error_m", 2) if closed else "-"])
     header = ["recording", "platform", "rests", "motions (gyro clipped)", "magnitude rms / noise (mm/s^2)", "tilt rms / noise (mrad)",
               "held-out scores", "selected", "unexplained", "rest innovation rms (m/s) before -> after", "closed-loop end error (m)"]

@@ -159,7 +159,8 @@ fn each_effect_is_found_undeclared_and_left_alone_declared() {
     for (effect, model, declared) in cases {
         let found = diagnose(dir.path(), effect, &model, None);
         assert_eq!(selected(&found), [effect], "undeclared {effect}: {found:#}");
-        assert_eq!(found["diagnosis"]["unexplained"], false, "{found:#}");
+        assert_eq!(found["unexplained"], false, "{found:#}");
+        assert_eq!(found["confirmed"], true, "{found:#}");
         for (key, ratio) in [
             ("truth_error_m", 0.7),
             ("end_error_m", 0.7),
@@ -188,7 +189,7 @@ fn a_clean_run_selects_nothing_and_an_uncovered_effect_is_unexplained() {
     let base = run_ok("mems-sim", &["print-model", "--preset", "calibrated"]);
     let clean = diagnose(dir.path(), "clean", &base, None);
     assert!(selected(&clean).is_empty(), "{clean:#}");
-    assert_eq!(clean["diagnosis"]["unexplained"], false, "{clean:#}");
+    assert_eq!(clean["unexplained"], false, "{clean:#}");
     assert!(
         clean["diagnosis"]["rests"].as_u64().unwrap() >= 20,
         "{clean:#}"
@@ -200,6 +201,6 @@ fn a_clean_run_selects_nothing_and_an_uncovered_effect_is_unexplained() {
         "[[0.0, 0.08, 0.0], [0.08, 0.0, 0.0], [0.0, 0.0, 0.0]]",
     );
     let unknown = diagnose(dir.path(), "cross-axis", &cross, None);
-    assert_eq!(unknown["diagnosis"]["unexplained"], true, "{unknown:#}");
+    assert_eq!(unknown["unexplained"], true, "{unknown:#}");
     assert!(selected(&unknown).is_empty(), "{unknown:#}");
 }

@@ -27,7 +27,7 @@ pub struct Rest {
     /// Variance of that mean per axis from the samples' own noise, (m/s^2)^2, with their
     /// correlation counted (lag-1, [`mean_variance`]).
     pub accel_mean_var: Vector3<f64>,
-    /// Mean bias-free-to-be angular rate `C w`, rad/s (the gyro's bias at this rest).
+    /// Mean angular rate `C w`, rad/s (the gyro's bias, if the rest is still).
     pub gyro_rps: Vector3<f64>,
     /// Variance of that mean per axis, (rad/s)^2.
     pub gyro_mean_var: Vector3<f64>,
@@ -40,7 +40,8 @@ pub struct Rest {
 pub struct Interval {
     /// Index of the rest it starts from (it ends at the next).
     pub from: usize,
-    /// Samples from the first rest's trimmed end to the second's trimmed start.
+    /// Samples from the middle of the first rest to the middle of the second (each rest's
+    /// mean gravity direction is its attitude there, also when it still turns a little).
     pub samples: std::ops::Range<usize>,
     /// Samples in it whose gyro sat at the end of its range.
     pub gyro_clipped: usize,
@@ -75,6 +76,22 @@ pub struct Evidence {
     /// The filter's velocity just before each rest's first zero-velocity update after the
     /// first rest (the update's innovation), m/s, short rests included.
     pub innovations_mps: Vec<Vector3<f64>>,
+    /// The gyro's bias, rad/s: per axis the median of the rests' mean rates (a rest that
+    /// still turns, such as a foot's stance ending, does not move it).
+    pub gyro_bias_rps: Vector3<f64>,
+}
+
+/// The per-axis median of `v` (zero when empty).
+fn median(v: &[Vector3<f64>]) -> Vector3<f64> {
+    Vector3::from_fn(|i, _| {
+        let mut x: Vec<f64> = v.iter().map(|r| r[i]).collect();
+        x.sort_by(f64::total_cmp);
+        match x.len() {
+            0 => 0.0,
+            n if n % 2 == 1 => x[n / 2],
+            n => (x[n / 2 - 1] + x[n / 2]) / 2.0,
+        }
+    })
 }
 
 /// Variance of the mean of `x` with the correlation of successive values counted: `s^2 / n`
@@ -150,7 +167,8 @@ impl Evidence {
             .windows(2)
             .enumerate()
             .map(|(from, w)| {
-                let range = w[0].samples.end..w[1].samples.start;
+                let mid = |r: &Rest| (r.samples.start + r.samples.end) / 2;
+                let range = mid(&w[0])..mid(&w[1]);
                 let clipped = |mask: u16| {
                     samples[range.clone()]
                         .iter()
@@ -167,20 +185,21 @@ impl Evidence {
                 }
             })
             .collect();
+        let gyro_bias_rps = median(&rests.iter().map(|r| r.gyro_rps).collect::<Vec<_>>());
         Self {
             samples,
             rests,
             intervals,
             innovations_mps,
+            gyro_bias_rps,
         }
     }
 
     /// The rotation the gyro carried over `interval` with its rate scaled by `I + diag(k)`
-    /// and the bias (the mean of the two rests' rates) removed: sensor frame at the end to
-    /// sensor frame at the start.
+    /// and the bias ([`Evidence::gyro_bias_rps`]) removed: sensor frame at the end to sensor
+    /// frame at the start.
     pub fn carried(&self, interval: &Interval, k: &Vector3<f64>) -> UnitQuaternion<f64> {
-        let (a, b) = (&self.rests[interval.from], &self.rests[interval.from + 1]);
-        let bias = (a.gyro_rps + b.gyro_rps) / 2.0;
+        let bias = self.gyro_bias_rps;
         let scale = Matrix3::from_diagonal(&(Vector3::repeat(1.0) + k));
         let mut q = UnitQuaternion::identity();
         let s = &self.samples;

@@ -41,8 +41,9 @@ pub struct Settings {
     pub unexplained_p: f64,
     /// Temperature span across the rests the temperature candidate needs, degC.
     pub min_temp_span_c: f64,
-    /// Rests (and motions) a candidate needs.
-    pub min_groups: usize,
+    /// Rows per parameter a candidate needs once a rest (or motion) is held out: 7 rests
+    /// for an accelerometer candidate (one row each), 4 motions for the gyro's (two each).
+    pub min_rows_per_param: usize,
 }
 
 impl Default for Settings {
@@ -52,7 +53,7 @@ impl Default for Settings {
             beyond_model: 3.0,
             unexplained_p: 1e-3,
             min_temp_span_c: 1.0,
-            min_groups: 4,
+            min_rows_per_param: 2,
         }
     }
 }
@@ -141,22 +142,23 @@ fn testable(c: Candidate, rows: &[Row], ev: &Evidence, s: &Settings) -> Option<S
         g.dedup();
         g.len()
     };
-    let temps = ev.rests.iter().map(|r| r.temp_c).filter(|t| t.is_finite());
-    let span =
-        temps.clone().fold(f64::NEG_INFINITY, f64::max) - temps.fold(f64::INFINITY, f64::min);
+    // Groups needed so that, one held out, the rest give `min_rows_per_param` rows per
+    // parameter (three), with `per_group` rows each.
+    let needed = |per_group: usize| (3 * s.min_rows_per_param).div_ceil(per_group) + 1;
+    let span = temp_span(ev);
     match c {
-        Candidate::GyroScale if groups(Kind::Tilt) < s.min_groups => Some(format!(
+        Candidate::GyroScale if groups(Kind::Tilt) < needed(2) => Some(format!(
             "{} motions between rests with the gyro unclipped (needs {})",
             groups(Kind::Tilt),
-            s.min_groups
+            needed(2)
         )),
         Candidate::GyroScale => None,
-        _ if groups(Kind::Magnitude) < s.min_groups => Some(format!(
+        _ if groups(Kind::Magnitude) < needed(1) => Some(format!(
             "{} rests (needs {})",
             groups(Kind::Magnitude),
-            s.min_groups
+            needed(1)
         )),
-        Candidate::AccelTempBias if !(span >= s.min_temp_span_c) => Some(format!(
+        Candidate::AccelTempBias if span.is_nan() || span < s.min_temp_span_c => Some(format!(
             "the rests' temperatures span {:.2} degC (needs {})",
             span.max(0.0),
             s.min_temp_span_c

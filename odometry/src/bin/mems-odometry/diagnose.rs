@@ -6,7 +6,8 @@
 //! innovation rms always (the filter's velocity just before each rest's first zero-velocity
 //! update, m/s), the end error where the end is known (`--end`, `--closed-loop`: the distance
 //! from the end displacement to it, m, navigation frame) and against a simulated recording's
-//! truth.
+//! truth. The rerun confirms the selection when its rest innovation rms is no larger; one that
+//! does not is reported, and what the selection claimed to explain counts as unexplained.
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -157,10 +158,17 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         let again = diagnose::diagnose(&run.evidence, &config, d.t_ref_c, &Settings::default());
         Some((run, again))
     };
+    // The rerun confirms the selection when the rest innovations do not grow.
+    let confirmed = after.as_ref().map(|(r, _)| {
+        let (b, a) = (before.innovation_rms(), r.innovation_rms());
+        a.zip(b).is_none_or(|(a, b)| a <= b)
+    });
     let report = json!({
         "input": args.run,
         "before": before.figures(end),
         "diagnosis": d,
+        "confirmed": confirmed,
+        "unexplained": d.unexplained || confirmed == Some(false),
         "after": after.as_ref().map(|(r, again)| json!({
             "figures": r.figures(end),
             "magnitude_rms_mps2": again.magnitude.rms_before,

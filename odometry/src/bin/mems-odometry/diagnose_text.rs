@@ -86,6 +86,13 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
             "explained"
         }
     );
+    if report["confirmed"] == false {
+        let _ = writeln!(
+            s,
+            "  the rerun does not confirm the selection (its rest innovation rms is larger): \
+             unexplained"
+        );
+    }
     let before = &report["before"];
     let after = &report["after"]["figures"];
     for (label, key, unit) in [
