@@ -16,7 +16,7 @@ use serde_json::Value;
 
 /// The identity calibration at standard gravity (as tools/real-data/bench.py writes it).
 fn identity() -> String {
-    let zeros12 = format!("[{}]", vec!["0.0"; 12].join(", "));
+    let zeros12 = format!("[{}]", ["0.0"; 12].join(", "));
     format!(
         "format_version = 1\nmodel = \"full\"\nmethod = \"labelled\"\nweighting = \"unweighted\"\n\
          covariance_mode = \"residual_scaled\"\ngravity_mps2 = 9.80665\nbias_g = [0.0, 0.0, 0.0]\n\
@@ -24,7 +24,7 @@ fn identity() -> String {
          param_names = [\"b_x\", \"b_y\", \"b_z\", \"S_xx\", \"S_xy\", \"S_xz\", \"S_yx\", \"S_yy\", \"S_yz\", \"S_zx\", \"S_zy\", \"S_zz\"]\n\
          covariance = [{}]\nsigma = {zeros12}\n\n[source]\nfile = \"identity\"\nkind = \"none\"\nposes = 0\n\n\
          [residuals]\nrms_g = [0.0, 0.0, 0.0]\nmax_abs_g = 0.0\ndof = [0, 0, 0]\nchi2 = [0.0, 0.0, 0.0]\nper_pose_g = []\n",
-        vec![zeros12.as_str(); 12].join(", ")
+        [zeros12.as_str(); 12].join(", ")
     )
 }
 
