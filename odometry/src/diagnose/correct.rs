@@ -64,3 +64,69 @@ pub fn apply(
     out.scale = rows(&scale);
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use approx::assert_relative_eq;
+
+    use super::*;
+
+    /// What the calibration stage makes of reading `a'` (g) with `file` (no temperature):
+    /// `S^-1 (a' - b)`.
+    fn corrected(file: &CalibrationFile, reading: Vector3<f64>) -> Vector3<f64> {
+        let s = matrix(&file.scale);
+        s.try_inverse().unwrap() * (reading - Vector3::from(file.bias_g))
+    }
+
+    #[test]
+    fn bias_and_scale_found_in_the_output_are_undone() {
+        let mut file = CalibrationFile::identity(9.8);
+        file.scale = [[1.01, 0.002, 0.0], [0.0, 0.99, 0.0], [0.0, 0.0, 1.0]];
+        file.bias_g = [0.01, 0.0, -0.02];
+        let (s, beta) = (
+            Vector3::new(0.02, -0.01, 0.005),
+            Vector3::new(0.003, -0.004, 0.001),
+        );
+        let truth = Vector3::new(0.3, -0.5, 0.8);
+        // A part whose calibrated output reads (I + diag(s)) a + beta.
+        let output = truth.component_mul(&(Vector3::repeat(1.0) + s)) + beta;
+        let reading = matrix(&file.scale) * output + Vector3::from(file.bias_g);
+        let effects = [
+            (Candidate::AccelBias, beta * 9.8),
+            (Candidate::AccelScale, s),
+        ];
+        let fixed = apply(&file, &effects, f64::NAN);
+        assert_relative_eq!(corrected(&fixed, reading), truth, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn gyro_scale_multiplies_the_correction() {
+        let mut file = CalibrationFile::identity(9.8);
+        file.gyro.correction = Some([[0.98, 0.01, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.02]]);
+        let k = Vector3::new(0.05, -0.02, 0.0);
+        let fixed = apply(&file, &[(Candidate::GyroScale, k)], f64::NAN);
+        let c = matrix(&file.gyro.correction.unwrap());
+        let expected = Matrix3::from_diagonal(&(Vector3::repeat(1.0) + k)) * c;
+        assert_relative_eq!(
+            matrix(&fixed.gyro.correction.unwrap()),
+            expected,
+            epsilon = 1e-12
+        );
+    }
+
+    #[test]
+    fn a_temperature_bias_keeps_the_file_reference() {
+        let mut file = CalibrationFile::identity(9.8);
+        file.temperature.reference_c = Some(30.0);
+        let c = Vector3::new(0.0098, 0.0, 0.0); // m/s^2/degC: 1 mg/degC
+        let fixed = apply(&file, &[(Candidate::AccelTempBias, c)], 25.0);
+        assert_eq!(fixed.temperature.reference_c, Some(30.0));
+        assert_relative_eq!(
+            fixed.temperature.bias_g_per_c.unwrap()[0],
+            1e-3,
+            epsilon = 1e-12
+        );
+        // c (T - 25) = c (T - 30) + 5 c: 5 mg into the bias.
+        assert_relative_eq!(fixed.bias_g[0], 5e-3, epsilon = 1e-12);
+    }
+}

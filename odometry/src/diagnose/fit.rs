@@ -32,13 +32,17 @@ fn design(rows: &[Row], candidates: &[Candidate]) -> DMatrix<f64> {
     })
 }
 
-/// Solves the weighted normal equations `(X' W X + ridge) theta = X' W r`; columns that the
-/// rows do not constrain (a candidate with no rows: all zero) get a tiny ridge and stay 0.
-fn solve(xtwx: &DMatrix<f64>, xtwr: &DVector<f64>) -> Option<DVector<f64>> {
+/// `X' W X` with a tiny ridge: columns the rows do not constrain (a candidate with no rows:
+/// all zero) stay 0, with a huge sigma.
+fn regularized(xtwx: &DMatrix<f64>) -> DMatrix<f64> {
     let n = xtwx.nrows();
     let scale = (0..n).map(|i| xtwx[(i, i)]).fold(0.0, f64::max).max(1e-300);
-    let a = xtwx + DMatrix::identity(n, n) * (scale * 1e-12);
-    a.cholesky().map(|c| c.solve(xtwr))
+    xtwx + DMatrix::identity(n, n) * (scale * 1e-12)
+}
+
+/// Solves the weighted normal equations `(X' W X + ridge) theta = X' W r`.
+fn solve(xtwx: &DMatrix<f64>, xtwr: &DVector<f64>) -> Option<DVector<f64>> {
+    regularized(xtwx).cholesky().map(|c| c.solve(xtwr))
 }
 
 /// Fits `candidates` to `rows` and scores the fit on held-out groups.
@@ -50,7 +54,7 @@ pub fn fit(rows: &[Row], candidates: &[Candidate]) -> Option<Fit> {
     let xtwx = &xt_w * &x;
     let xtwr = &xt_w * &r;
     let theta = solve(&xtwx, &xtwr)?;
-    let cov = xtwx.clone().try_inverse()?;
+    let cov = regularized(&xtwx).cholesky()?.inverse();
     let sigma = DVector::from_iterator(
         cov.nrows(),
         (0..cov.nrows()).map(|i| cov[(i, i)].max(0.0).sqrt()),
@@ -85,4 +89,74 @@ pub fn fit(rows: &[Row], candidates: &[Candidate]) -> Option<Fit> {
         gain,
         residuals,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector3;
+
+    use super::*;
+    use crate::diagnose::rows::Kind;
+
+    /// Magnitude rows of rests in spread attitudes, whose residual is a bias `b` along each
+    /// rest's gravity direction plus a deterministic +-`noise` pattern.
+    fn rows(b: Vector3<f64>, noise: f64) -> Vec<Row> {
+        (0..24)
+            .map(|k| {
+                let a = k as f64 * 0.7;
+                let u = Vector3::new(
+                    a.cos() * (0.3 * a).sin(),
+                    a.sin() * (0.3 * a).sin(),
+                    (0.3 * a).cos(),
+                )
+                .normalize();
+                let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+                Row {
+                    kind: Kind::Magnitude,
+                    group: k,
+                    r: u.dot(&b) + sign * noise,
+                    sigma: noise.max(1e-6),
+                    floor: 0.0,
+                    design: [
+                        u,
+                        u.component_mul(&u) * 9.8,
+                        Vector3::zeros(),
+                        Vector3::zeros(),
+                    ],
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_bias_is_recovered_and_scores_on_held_out_rests() {
+        let b = Vector3::new(0.05, -0.03, 0.02);
+        let f = fit(&rows(b, 1e-3), &[Candidate::AccelBias]).unwrap();
+        for i in 0..3 {
+            assert!(
+                (f.theta[i] - b[i]).abs() < 3e-3,
+                "{} against {}",
+                f.theta[i],
+                b[i]
+            );
+        }
+        assert!(f.gain > 1000.0, "gain {}", f.gain);
+    }
+
+    #[test]
+    fn noise_alone_gains_nothing_held_out() {
+        let f = fit(&rows(Vector3::zeros(), 1e-3), &[Candidate::AccelBias]).unwrap();
+        assert!(f.gain < 12.0, "gain {}", f.gain);
+    }
+
+    #[test]
+    fn a_candidate_without_rows_stays_zero() {
+        let f = fit(
+            &rows(Vector3::new(0.05, 0.0, 0.0), 1e-3),
+            &[Candidate::GyroScale],
+        )
+        .unwrap();
+        assert!(f.theta.iter().all(|t| *t == 0.0), "{:?}", f.theta);
+        assert!(f.gain.abs() < 1e-9);
+    }
 }
