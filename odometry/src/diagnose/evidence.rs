@@ -76,22 +76,11 @@ pub struct Evidence {
     /// The filter's velocity just before each rest's first zero-velocity update after the
     /// first rest (the update's innovation), m/s, short rests included.
     pub innovations_mps: Vec<Vector3<f64>>,
-    /// The gyro's bias, rad/s: per axis the median of the rests' mean rates (a rest that
-    /// still turns, such as a foot's stance ending, does not move it).
+    /// The gyro's bias, rad/s: the mean rate of the longest rest (a short rest may still
+    /// turn, as a foot rolls through its stance; the longest is the stillest).
     pub gyro_bias_rps: Vector3<f64>,
-}
-
-/// The per-axis median of `v` (zero when empty).
-fn median(v: &[Vector3<f64>]) -> Vector3<f64> {
-    Vector3::from_fn(|i, _| {
-        let mut x: Vec<f64> = v.iter().map(|r| r[i]).collect();
-        x.sort_by(f64::total_cmp);
-        match x.len() {
-            0 => 0.0,
-            n if n % 2 == 1 => x[n / 2],
-            n => (x[n / 2 - 1] + x[n / 2]) / 2.0,
-        }
-    })
+    /// The variance of that bias per axis, (rad/s)^2.
+    pub gyro_bias_var: Vector3<f64>,
 }
 
 /// Variance of the mean of `x` with the correlation of successive values counted: `s^2 / n`
@@ -185,13 +174,16 @@ impl Evidence {
                 }
             })
             .collect();
-        let gyro_bias_rps = median(&rests.iter().map(|r| r.gyro_rps).collect::<Vec<_>>());
+        let longest = rests.iter().max_by_key(|r| r.samples.len());
+        let gyro_bias_rps = longest.map_or_else(Vector3::zeros, |r| r.gyro_rps);
+        let gyro_bias_var = longest.map_or_else(Vector3::zeros, |r| r.gyro_mean_var);
         Self {
             samples,
             rests,
             intervals,
             innovations_mps,
             gyro_bias_rps,
+            gyro_bias_var,
         }
     }
 

@@ -13,8 +13,8 @@
 //!   fraction per axis), leaves `-J k` in it, `J` its numerical derivative in `k`.
 //!
 //! Each row's `sigma` is what the samples' own noise predicts (white and low-pass
-//! correlated, `evidence::mean_variance`; for tilt also the gyro's angle random walk and its
-//! bias uncertainty over the motion); `floor` what the odometry's model already carries for
+//! correlated, `evidence::mean_variance`; for tilt also the gyro's angle random walk and the
+//! uncertainty of its bias, taken from the longest rest, over the motion); `floor` what the odometry's model already carries for
 //! it (the configuration's accelerometer bias and residual scale 1-sigma, the gyro correction's
 //! 1-sigma times the angle turned).
 
@@ -157,7 +157,7 @@ pub fn rows(evidence: &Evidence, config: &OdometryConfig, t_ref_c: f64) -> Vec<R
         let noise = &config.noise;
         let var = (a.accel_mean_var.sum() + b.accel_mean_var.sum()) / (3.0 * g * g)
             + noise.gyro_noise_density.powi(2) * duration
-            + (a.gyro_mean_var.sum() + b.gyro_mean_var.sum()) / 12.0 * duration * duration;
+            + evidence.gyro_bias_var.sum() / 3.0 * duration * duration;
         let c = &config.gyro_correction_sigma;
         let scale_sigma = c[(0, 0)].max(c[(1, 1)]).max(c[(2, 2)]);
         for axis in [across1, across2] {
