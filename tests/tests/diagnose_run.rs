@@ -204,3 +204,29 @@ fn a_clean_run_selects_nothing_and_an_uncovered_effect_is_unexplained() {
     assert_eq!(unknown["unexplained"], true, "{unknown:#}");
     assert!(selected(&unknown).is_empty(), "{unknown:#}");
 }
+
+#[test]
+fn bad_input_is_refused_with_what_is_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("missing.mcap");
+    let out = std::process::Command::new(integration_tests::bin("mems-odometry"))
+        .args(["diagnose", path_arg(&missing)])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("missing.mcap") && stderr.contains("No such file"),
+        "{stderr}"
+    );
+    let out = std::process::Command::new(integration_tests::bin("mems-odometry"))
+        .args(["diagnose", path_arg(&missing), "--end", "1,2"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("--end") && stderr.contains("X,Y,Z"),
+        "{stderr}"
+    );
+}

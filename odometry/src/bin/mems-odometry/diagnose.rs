@@ -30,14 +30,8 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     calib: Option<PathBuf>,
     /// The run's true end point, m, in the navigation frame (origin and heading at alignment).
-    #[arg(
-        long,
-        value_name = "X,Y,Z",
-        value_delimiter = ',',
-        num_args = 3,
-        conflicts_with = "closed_loop"
-    )]
-    end: Option<Vec<f64>>,
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, conflicts_with = "closed_loop")]
+    end: Option<[f64; 3]>,
     /// The run ends where it aligned (end point 0,0,0).
     #[arg(long)]
     closed_loop: bool,
@@ -47,6 +41,18 @@ pub struct DiagnoseArgs {
     /// Further `mems-odometry offline` options for both runs (after `--`: `--profile arm`).
     #[arg(last = true)]
     offline: Vec<OsString>,
+}
+
+/// Parses `X,Y,Z` (m).
+fn parse_point(text: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!("{text:?}: three finite numbers X,Y,Z (m) expected")),
+    }
 }
 
 /// What one offline run gave.
@@ -112,10 +118,18 @@ fn offline(
     cmd.args(&args.offline);
     let output = cmd.output().context("cannot run mems-odometry offline")?;
     if !output.status.success() {
+        // Its error is its last line (notes come first).
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        let last = stderr
+            .lines()
+            .rev()
+            .find(|l| !l.trim().is_empty())
+            .unwrap_or("");
         bail!(
-            "mems-odometry offline on {} ({name} run) failed: {}",
+            "mems-odometry offline on {} ({name} run) failed ({}): {}",
             args.run.display(),
-            String::from_utf8_lossy(&output.stderr).trim()
+            output.status,
+            last.trim_start_matches("mems-odometry: error: ")
         );
     }
     let json: Value = serde_json::from_slice(&output.stdout)
@@ -136,7 +150,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         None => CalibrationFile::identity(ipc_types::units::STANDARD_GRAVITY_MPS2),
     };
     let end = match (&args.end, args.closed_loop) {
-        (Some(e), _) => Some(Vector3::new(e[0], e[1], e[2])),
+        (Some(e), _) => Some(Vector3::from(*e)),
         (None, true) => Some(Vector3::zeros()),
         (None, false) => None,
     };
