@@ -9,6 +9,7 @@ import diagnosis
 import drive_eval
 import odometry
 import pages
+import run_diagnosis
 from common import Context, tables
 
 DRIVE_EVAL_OUT = """seeds 0-1, 200 Hz, motions of up to two 2-6 s legs, gyro correction: from the session, rest flags: IMU detector (GLRT) (hindsight 0.5 s), hints: all
@@ -75,8 +76,23 @@ def parsers():
     md = pages.markdown("## Title\n\n| a | b |\n| --- | --- |\n| 1 | 2 |\n{\"json\": 1}\n", "t")
     expect(md.startswith("**Title**") and "json" not in md, f"markdown: {md!r}")
     expect(len(tables(md)) == 1, "tables")
+    run_diagnose()
     two = "| a |\n|---|\n| 1 |\n| b | c |\n|---|---|\n| 2 | 3 |\n"
     expect([h for h, _ in tables(two)] == [["a"], ["b", "c"]], f"tables back to back: {tables(two)}")
+
+
+def run_diagnose():
+    """`mems-odometry diagnose` reports and the model edits of the diagnosis-run section."""
+    model = "[accel]\nbias = [0.0, 0.0, 0.0]\n\n[gyro]\nbias = [0.0, 0.0, 0.0]\n"
+    edited = run_diagnosis.set_key(model, [("gyro", "bias", "[1.0, 0.0, 0.0]")])
+    expect(edited == "[accel]\nbias = [0.0, 0.0, 0.0]\n\n[gyro]\nbias = [1.0, 0.0, 0.0]\n", f"set_key: {edited!r}")
+    report = {"before": {"end_error_m": 2.0, "truth_error_m": None}, "after": {"figures": {"end_error_m": 0.5}},
+              "diagnosis": {"selected": [["accel_bias", [0.1, 0.0, 0.0]]]}, "confirmed": False, "unexplained": True}
+    expect(run_diagnosis.before_after(report, "end_error_m", 2) == "2.00 -> 0.50", "before_after")
+    expect(run_diagnosis.before_after(report, "truth_error_m") == "- -> -", "before_after without figures")
+    expect(run_diagnosis.selected(report) == "accel_bias", "selected")
+    expect(run_diagnosis.unexplained(report).startswith("yes (the rerun refutes"), "refuted")
+    expect(run_diagnosis.declare("a = 1\n", ("a = 1", "a = 2")) == "a = 2\n", "declare by replacement")
 
 
 def check(figures):

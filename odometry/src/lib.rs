@@ -11,6 +11,7 @@
 pub mod arrival;
 pub mod axes;
 pub mod config;
+pub mod diagnose;
 pub mod eskf;
 mod hindsight;
 pub mod hints;
