@@ -25,6 +25,7 @@ use ipc_types::units::STANDARD_GRAVITY_MPS2;
 use nalgebra::Matrix3;
 
 use crate::eskf::{Manoeuvre, NoiseModel};
+use crate::uncalibrated::UncalibratedAccel;
 
 /// Configuration of the stage. Noise figures come from the calibration file's noise parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -52,6 +53,9 @@ pub struct OdometryConfig {
     /// alignment's bias uncertainty includes; its effect on the specific force's changes
     /// since alignment widens the reported 1-sigma (`eskf::ConsiderModel`).
     pub accel_residual_scale: f64,
+    /// How an accelerometer whose first rest reads gravity off is treated (its bias prior
+    /// widened, its scale carried in the 1-sigma: [`crate::uncalibrated`]).
+    pub uncalibrated: UncalibratedAccel,
     /// Zero-angular-rate gate: the gyro bias is updated at rest only while the reading is
     /// within this many predicted standard deviations of the bias estimate.
     pub zaru_gate_sigma: f64,
@@ -147,6 +151,7 @@ impl OdometryConfig {
             gyro_correction_sigma: datasheet_gyro_error_sigma(),
             accel_bias_sigma_mps2: [4.5e-3, 2.5e-3, 6.1e-3],
             accel_residual_scale: 1e-3,
+            uncalibrated: UncalibratedAccel::default(),
             zaru_gate_sigma: 5.0,
             zupt_sigma_mps: 2e-3,
             effective_samples: true,
