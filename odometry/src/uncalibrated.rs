@@ -7,65 +7,35 @@
 //! uncalibrated one (cheap MPU-6050 boards read |g| 2-4 % low; the thesis's uncalibrated
 //! MPU-9250 had 0.1-0.2 g offsets) contradicts that prior at its first rest: there the measured
 //! specific force `f` (sensor frame, m/s^2) gives `|f| - g`, the error *along gravity*, and
-//! nothing else. When `| |f| / g - 1 |` exceeds [`UncalibratedAccel::trigger`], or the
+//! nothing else. When `| |f| / g - 1 |` exceeds [`crate::config::UncalibratedAccel::trigger`], or the
 //! calibration stage flagged the samples `GRAVITY_OFF` (its learned rest read gravity that far
 //! off; its bias refinement then removes the error along gravity before the odometry sees it),
 //! the filter:
 //! - takes that error as an accelerometer bias along the measured up direction (the alignment's
 //!   vertical bias, `eskf::align`: the same as today, only larger). At one attitude a bias and a
 //!   scale error along gravity read the same; which it was shows only when the sensor turns;
-//! - widens the prior of the bias across gravity to [`UncalibratedAccel::bias_sigma_mps2`] per
+//! - widens the prior of the bias across gravity to [`crate::config::UncalibratedAccel::bias_sigma_mps2`] per
 //!   axis (it is indistinguishable from tilt at that rest, and the alignment correlates the two
 //!   exactly), so that later rests at other attitudes (a foot's or a hand's rests, a turn between
 //!   zero-velocity updates) estimate it instead of forcing it into the attitude;
 //! - carries the sensitivity error it cannot estimate (scale and cross-axis, the filter has no
 //!   state for them) as consider parameters ([`crate::eskf::ConsiderModel`]) of
-//!   [`UncalibratedAccel::scale_sigma`] and [`UncalibratedAccel::cross_axis_sigma`], so the
+//!   [`crate::config::UncalibratedAccel::scale_sigma`] and [`crate::config::UncalibratedAccel::cross_axis_sigma`], so the
 //!   reported 1-sigma holds them.
 //!
 //! A part within the trigger keeps the calibrated prior unchanged. What the filter holds of the
 //! bias at the end ([`AccelEstimate`]) goes to the offline JSON and the logs.
+//!
+//! The bias converges over the first rests and what the track did before is lost, so
+//! `mems-odometry offline` runs such a part twice: the second pass with the first pass's bias
+//! removed from the calibration ([`remove_bias`]) and the same wide prior around it
+//! ([`crate::config::UncalibratedAccel::removed_bias_mps2`]).
 
 use calibrate::calibfile::CalibrationFile;
 use nalgebra::{Matrix3, Vector3};
 
 use crate::config::OdometryConfig;
 use crate::eskf::Eskf;
-
-/// How an accelerometer that reads gravity off at its first rest is treated (see the module
-/// documentation).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct UncalibratedAccel {
-    /// Largest `| |f| / g - 1 |` at the alignment rest taken as a calibrated part's
-    /// (`calibrate::zero_state::learn::CALIBRATED_GRAVITY_ERROR`, 2 %: the corpus's
-    /// factory-calibrated parts read 0.1-1.3 % off).
-    pub trigger: f64,
-    /// 1-sigma of the zero-g offset per axis, m/s^2: 0.1 g (MPU-6050 datasheet: +-50 mg x, y,
-    /// +-80 mg z; the thesis's uncalibrated MPU-9250: 0.1-0.2 g).
-    pub bias_sigma_mps2: f64,
-    /// 1-sigma of the sensitivity error of each axis, fraction: 3 % (MPU-6050 and MPU-9250
-    /// datasheets, "initial tolerance" +-3 %).
-    pub scale_sigma: f64,
-    /// 1-sigma of the cross-axis sensitivity, fraction: 2 % (the same datasheets, +-2 %).
-    pub cross_axis_sigma: f64,
-    /// The bias an earlier pass over the same recording estimated and removed from the
-    /// samples, m/s^2, sensor frame (`mems-odometry offline`, [`remove_bias`]): the filter then
-    /// starts from the calibrated bias prior, carries the sensitivity error as for an
-    /// uncalibrated part, and reports the bias as this plus its own estimate.
-    pub removed_bias_mps2: Option<[f64; 3]>,
-}
-
-impl Default for UncalibratedAccel {
-    fn default() -> Self {
-        Self {
-            trigger: calibrate::zero_state::learn::CALIBRATED_GRAVITY_ERROR,
-            bias_sigma_mps2: 0.1 * ipc_types::units::STANDARD_GRAVITY_MPS2,
-            scale_sigma: 0.03,
-            cross_axis_sigma: 0.02,
-            removed_bias_mps2: None,
-        }
-    }
-}
 
 /// The accelerometer prior the filter aligns with.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -96,16 +66,8 @@ impl AccelPrior {
         let u = &cfg.uncalibrated;
         let mut consider = Matrix3::repeat(u.cross_axis_sigma);
         consider.fill_diagonal(u.scale_sigma);
-        if u.removed_bias_mps2.is_some() {
-            return Self {
-                bias_sigma_mps2: calibrated,
-                consider,
-                gravity_error,
-                uncalibrated: true,
-                flagged: gravity_off,
-            };
-        }
-        if !gravity_off && gravity_error.abs() <= u.trigger {
+        let removed = u.removed_bias_mps2.is_some();
+        if !gravity_off && !removed && gravity_error.abs() <= u.trigger {
             return Self {
                 bias_sigma_mps2: calibrated,
                 consider: Matrix3::repeat(cfg.accel_residual_scale),
@@ -148,7 +110,7 @@ pub struct AccelEstimate {
 
 impl AccelEstimate {
     /// The estimate of filter `kf` aligned with `prior`, with the bias `removed` before it
-    /// ([`UncalibratedAccel::removed_bias_mps2`]) added back.
+    /// ([`crate::config::UncalibratedAccel::removed_bias_mps2`]) added back.
     pub fn of(kf: &Eskf, prior: &AccelPrior, removed: Option<[f64; 3]>) -> Self {
         let b = kf.x.b_a + Vector3::from(removed.unwrap_or_default());
         let sigma = kf.accel_bias_sigma();
@@ -256,7 +218,7 @@ mod tests {
         second.uncalibrated.removed_bias_mps2 = Some([1.0, 0.0, 0.0]);
         let rerun = AccelPrior::at_rest(&second, &Vector3::new(0.0, 0.0, 9.8), false);
         assert!(rerun.uncalibrated);
-        assert_eq!(rerun.bias_sigma_mps2, calibrated.bias_sigma_mps2);
+        assert_eq!(rerun.bias_sigma_mps2, off.bias_sigma_mps2);
         assert_eq!(rerun.consider, off.consider);
     }
 }

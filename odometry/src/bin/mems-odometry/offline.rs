@@ -90,7 +90,7 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     tracing::warn!(
         "second pass: {second}: further than {:.2} m/s^2 from the first pass's, which is no \
          estimate; the result is the first pass's",
-        odometry::uncalibrated::UncalibratedAccel::default().bias_sigma_mps2
+        odometry::config::UncalibratedAccel::default().bias_sigma_mps2
     );
     pass(&args, &choice, &file, detector, Pass::Only).map(|_| ())
 }
