@@ -12,9 +12,16 @@
 //! attitude, where a sensitivity error and a bias along gravity read the same, and a 4 %
 //! sensitivity error on every axis makes every leg 4 % long, which no rest shows (the track
 //! is the true one scaled). Its bound adds 4 % of the distance driven to the walk's.
+//!
+//! Live, the real processes without a calibration file (`mems-acquire`'s simulated datasheet
+//! part, whose rest reads gravity about 6 % off): `mems-calibrate serve` learns the rest, flags
+//! every sample after it `GRAVITY_OFF` and removes the error along gravity, and `mems-odometry
+//! serve` reports the bias it estimated as an uncalibrated part's in its summary.
 
-use integration_tests::{path_arg, run_ok, unique_namespace};
+use integration_tests::{Proc, path_arg, run_ok, unique_namespace};
+use ipc_types::{CorrectedImuSample, corrected_flags, service};
 use std::path::Path;
+use std::time::Duration;
 
 /// Smallest error the uncalibrated run is compared against, m.
 const FLOOR_M: f64 = 0.2;
@@ -129,4 +136,88 @@ fn an_uncalibrated_part_driven_on_a_robot_runs_and_says_what_it_estimated() {
     ];
     compare(&dir, "drive", &drive, 0.04);
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_live_part_without_a_calibration_file_is_flagged_and_its_bias_reported() {
+    let ns = unique_namespace("uncal-live");
+    let dir = std::env::temp_dir().join(&ns);
+    std::fs::create_dir_all(&dir).unwrap();
+    let node = service::node().unwrap();
+    let corrected =
+        service::open::<CorrectedImuSample>(&node, &service::full_name(&ns, service::CORRECTED))
+            .unwrap();
+    let sub = service::subscriber(&corrected).unwrap();
+    let mut cor: Vec<CorrectedImuSample> = Vec::new();
+    let drain = |cor: &mut Vec<CorrectedImuSample>| {
+        while let Some(s) = sub.receive().unwrap() {
+            cor.push(*s.payload());
+        }
+    };
+    let log = dir.join("odometry.log");
+    let odometry = Proc::spawn_logged("mems-odometry", &["serve", "--namespace", &ns], &log);
+    let serve = Proc::spawn(
+        "mems-calibrate",
+        &["serve", "--namespace", &ns, "--learn-s", "1"],
+    );
+    std::thread::sleep(Duration::from_millis(700));
+    let acquire = Proc::spawn(
+        "mems-acquire",
+        &[
+            "--source",
+            "sim",
+            "--rate",
+            "1000",
+            "--duration",
+            "5",
+            "--namespace",
+            &ns,
+        ],
+    );
+    let waiter = std::thread::spawn(move || acquire.wait(Duration::from_secs(60)));
+    while !waiter.is_finished() {
+        drain(&mut cor);
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let (status, _) = waiter.join().unwrap();
+    assert!(status.success(), "mems-acquire failed: {status}");
+    for _ in 0..500 {
+        drain(&mut cor);
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    serve.signal(libc::SIGTERM);
+    let (status, _) = serve.wait(Duration::from_secs(20));
+    assert!(status.success(), "mems-calibrate serve: {status}");
+    odometry.signal(libc::SIGTERM);
+    let (status, _) = odometry.wait(Duration::from_secs(20));
+    assert!(status.success(), "mems-odometry serve: {status}");
+    let summary = std::fs::read_to_string(&log).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+
+    let ready = cor
+        .iter()
+        .position(|c| c.flags & corrected_flags::DETECTOR_READY != 0)
+        .expect("the detector learned the rest");
+    let flagged = |c: &CorrectedImuSample| c.flags & corrected_flags::GRAVITY_OFF != 0;
+    assert!(!cor[..ready].iter().any(flagged), "flagged before learning");
+    assert!(
+        cor[ready..].iter().all(flagged),
+        "not flagged after learning"
+    );
+    // The refinement took the learned rest whole: the corrected rest reads gravity.
+    let rest: Vec<_> = cor[ready..]
+        .iter()
+        .filter(|c| c.flags & corrected_flags::ZERO_STATE != 0)
+        .collect();
+    assert!(rest.len() > 1000, "{} rest samples", rest.len());
+    let mean = |i: usize| rest.iter().map(|c| c.accel_mps2[i]).sum::<f64>() / rest.len() as f64;
+    let magnitude = (0..3).map(|i| mean(i).powi(2)).sum::<f64>().sqrt();
+    assert!(
+        (magnitude - 9.80665).abs() < 0.03,
+        "corrected |a| at rest {magnitude} m/s^2"
+    );
+    assert!(
+        summary.contains("accelerometer bias") && summary.contains("uncalibrated"),
+        "mems-odometry serve's summary: {summary}"
+    );
 }
