@@ -22,4 +22,5 @@ pub mod profile;
 pub mod rest_noise;
 pub mod session;
 pub mod stage;
+pub mod uncalibrated;
 mod untrusted;

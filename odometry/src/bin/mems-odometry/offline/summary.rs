@@ -166,6 +166,10 @@ impl Summary {
              position counts from there",
             read.align_s
         );
+        let accel = chain.second.stage().accel_estimate();
+        if let Some(a) = &accel {
+            tracing::info!("{a}");
+        }
         let axes = chain.second.stage().axes();
         if axes.disagree() {
             tracing::warn!(
@@ -178,6 +182,7 @@ impl Summary {
             let mut result = self.json(&end, truth_error, aligned_at_s, read, chain);
             result["profile"] = read.choice.json(chain.second.auto_choice());
             result["wheeled"] = self.wheeled_json(&chain.second);
+            result["accel_error"] = json!(accel);
             println!("{result}");
         } else {
             self.print(&end, truth_error);
