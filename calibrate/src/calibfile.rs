@@ -413,6 +413,13 @@ impl CalibrationFile {
         )
     }
 
+    /// Whether the accelerometer model was fitted to poses: `false` for
+    /// [`CalibrationFile::identity`] (no fit behind it), whose part may read gravity several
+    /// percent off (`zero_state::learn::UNCALIBRATED_GRAVITY_ERROR`).
+    pub fn accel_fitted(&self) -> bool {
+        self.source.poses > 0
+    }
+
     /// The model described by the file.
     pub fn accel_model(&self) -> Result<AccelModel, crate::model::ModelError> {
         let s = nalgebra::Matrix3::from_fn(|r, c| self.scale[r][c]);

@@ -38,7 +38,9 @@
 //!   indistinguishable from a tilt of `u`. The stage corrects that component only: with rest
 //!   mean `m`, `d += k (|m - d| - g) (m - d) / |m - d|`. At one attitude this is the running
 //!   mean of `|m| - g` along `u`; rests at other attitudes correct other components and leave
-//!   the rest of `d` as it was.
+//!   the rest of `d` as it was. A learned rest that reads gravity more than
+//!   [`crate::zero_state::learn::CALIBRATED_GRAVITY_ERROR`] off (an uncalibrated part) is taken
+//!   with no prior, and every sample after it is flagged `GRAVITY_OFF`.
 //!
 //! Only a detector whose rest means still refines ([`crate::zero_state::DetectorKind::rest_is_still`]:
 //! not SHOE, whose stances roll). Both are running means over rest time (the learning interval
@@ -59,7 +61,7 @@ use crate::model::AccelModel;
 use crate::terms::ReadingTerms;
 use crate::zero_state::{
     BATCH_LEN, DetectorConfig, NoiseFloor, StaticReference, Verdict, ZeroStateDetector,
-    batch_duration_s, rest_gain,
+    batch_duration_s, learn, rest_gain,
 };
 
 /// Settings of the bias refinement.
@@ -559,7 +561,14 @@ impl CalibrationStage {
     fn decide(&mut self, v: &Verdict) {
         let gyro = self.batch_gyro.then_some(v.gyro.mean);
         if let Some(learned) = &v.learned {
-            // The start-up interval was at rest by assumption: the first refinement.
+            // The start-up interval was at rest by assumption: the first refinement. A part
+            // that reads gravity further off than a calibrated one is not what the file says:
+            // its bias is worth nothing against the rest, which is taken whole.
+            if (learned.magnitude_mps2 / self.gravity_mps2 - 1.0).abs()
+                > learn::CALIBRATED_GRAVITY_ERROR
+            {
+                self.refine.accel_seen_s = 0.0;
+            }
             let gyro = self.batch_gyro.then_some(learned.gyro_mean_rps);
             self.refine.update(
                 learned.accel_mean_mps2,
@@ -575,8 +584,12 @@ impl CalibrationStage {
                 self.gravity_mps2,
             );
         }
+        let g = self.gravity_mps2;
         self.carried = Carried {
             ready: v.ready,
+            gravity_off: self.detector.reference().is_some_and(|r| {
+                (r.magnitude_mps2 / g - 1.0).abs() > learn::CALIBRATED_GRAVITY_ERROR
+            }),
             rest: v.rest,
             zs_mean_mps2: std::array::from_fn(|i| {
                 v.decided_mean_mps2[i] - self.refine.accel_mps2[i]
@@ -778,6 +791,8 @@ impl Stage for CalibrationStage {
 #[derive(Debug, Clone, Copy, Default)]
 struct Carried {
     ready: bool,
+    /// The learned rest read gravity off (`corrected_flags::GRAVITY_OFF`).
+    gravity_off: bool,
     rest: bool,
     zs_mean_mps2: [f64; 3],
     zs_std_mps2: [f64; 3],
@@ -792,6 +807,9 @@ impl Carried {
         }
         if self.ready {
             flags |= corrected_flags::DETECTOR_READY;
+        }
+        if self.gravity_off {
+            flags |= corrected_flags::GRAVITY_OFF;
         }
         if self.rest {
             flags |= corrected_flags::ZERO_STATE;

@@ -380,15 +380,31 @@ SECTIONS.append(Section("input-checks-offline", "input-checks.md", ["input-check
 
 def clipping(ctx):
     """docs/input-checks.md: the corpus's foot walks clipped at +-250 deg/s and at +-2 g
-    (tools/real-data/clipped.py), unclipped, clipped and flagged, clipped and integrated as
+    (tools/real-data/perturb.py), unclipped, clipped and flagged, clipped and integrated as
     measured."""
     ctx.run(["cargo", "build", "--release", "-q", "-p", "odometry"])
     only = ["--only", "xio-short-walk", "--only", "gdin-34"] if ctx.quick else []
-    gyro, _ = ctx.run(["python3", "tools/real-data/clipped.py", "--gyro-dps", "250"] + only)
-    accel, _ = ctx.run(["python3", "tools/real-data/clipped.py", "--accel-g", "2"] + only)
+    gyro, _ = ctx.run(["python3", "tools/real-data/perturb.py", "--gyro-dps", "250"] + only)
+    accel, _ = ctx.run(["python3", "tools/real-data/perturb.py", "--accel-g", "2"] + only)
     if ctx.dry:
         return {}
     return {"input-checks-clipping": gyro.strip() + "\n\n" + accel.strip()}
 
 
 SECTIONS.append(Section("input-checks-clipping", "input-checks.md", ["input-checks-clipping"], "2 min", clipping))
+
+
+def uncalibrated(ctx):
+    """docs/real-data.md: every corpus recording with an uncalibrated accelerometer's errors
+    added (tools/real-data/perturb.py: 4 % scale, 0.15 g bias on every axis), clean against
+    perturbed."""
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "odometry"])
+    only = ["--only", "xio-short-walk", "--only", "gdin-34"] if ctx.quick else []
+    out, _ = ctx.run(["python3", "tools/real-data/perturb.py", "--accel-scale", "0.04",
+                      "--accel-bias-g", "0.15"] + only)
+    if ctx.dry:
+        return {}
+    return {"real-data-uncalibrated": out.strip()}
+
+
+SECTIONS.append(Section("real-data-uncalibrated", "real-data.md", ["real-data-uncalibrated"], "4 min", uncalibrated))

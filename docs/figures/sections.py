@@ -11,6 +11,7 @@ import odometry
 import pages
 import auto_profile
 import rests
+import run_diagnosis
 from common import Context, Section  # noqa: F401  (Context: for docs/figures.py)
 
 
@@ -31,5 +32,6 @@ SECTIONS = {
     + auto_profile.SECTIONS
     + acquisition.SECTIONS
     + diagnosis.SECTIONS
+    + run_diagnosis.SECTIONS
     + rests.SECTIONS
 }

@@ -41,6 +41,7 @@
 #define MEMS_CORRECTED_HOLE_BEFORE (1u << 5)
 #define MEMS_CORRECTED_CLIPPED (1u << 6)
 #define MEMS_CORRECTED_IMPLAUSIBLE (1u << 7)
+#define MEMS_CORRECTED_GRAVITY_OFF (1u << 8)
 
 /* OdometryState.flags */
 #define MEMS_ODOMETRY_ZERO_VELOCITY (1u << 0)

@@ -124,6 +124,11 @@ pub mod corrected_flags {
     /// the profile makes such a specific force or rate. Set by the odometry stage, which knows
     /// the profile; the filter does not integrate it.
     pub const IMPLAUSIBLE: u16 = 1 << 7;
+    /// The rest the detector learned from read gravity's magnitude further off than a
+    /// calibrated accelerometer does (`calibrate::zero_state::learn::CALIBRATED_GRAVITY_ERROR`):
+    /// the part is uncalibrated. The stage's bias refinement removes the error along gravity
+    /// from the samples; the odometry widens its accelerometer prior (`odometry::uncalibrated`).
+    pub const GRAVITY_OFF: u16 = 1 << 8;
 }
 
 /// One calibrated sample: sensor frame, SI units.

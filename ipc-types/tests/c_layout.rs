@@ -110,7 +110,7 @@ fn facts() -> Vec<Fact> {
             reserved
         ]
     );
-    let flags: [(&str, u16); 31] = [
+    let flags: [(&str, u16); 32] = [
         ("MEMS_RAW_GAP_BEFORE", raw_flags::GAP_BEFORE),
         ("MEMS_RAW_FIFO_OVERFLOW", raw_flags::FIFO_OVERFLOW),
         ("MEMS_RAW_SATURATED", raw_flags::SATURATED),
@@ -130,6 +130,7 @@ fn facts() -> Vec<Fact> {
         ("MEMS_CORRECTED_HOLE_BEFORE", corrected_flags::HOLE_BEFORE),
         ("MEMS_CORRECTED_CLIPPED", corrected_flags::CLIPPED),
         ("MEMS_CORRECTED_IMPLAUSIBLE", corrected_flags::IMPLAUSIBLE),
+        ("MEMS_CORRECTED_GRAVITY_OFF", corrected_flags::GRAVITY_OFF),
         ("MEMS_ODOMETRY_ZERO_VELOCITY", odometry_flags::ZERO_VELOCITY),
         ("MEMS_ODOMETRY_ALIGNED", odometry_flags::ALIGNED),
         ("MEMS_ODOMETRY_REVISION", odometry_flags::REVISION),

@@ -52,6 +52,9 @@ pub struct OdometryConfig {
     /// alignment's bias uncertainty includes; its effect on the specific force's changes
     /// since alignment widens the reported 1-sigma (`eskf::ConsiderModel`).
     pub accel_residual_scale: f64,
+    /// How an accelerometer whose first rest reads gravity off is treated (its bias prior
+    /// widened, its scale carried in the 1-sigma: [`crate::uncalibrated`]).
+    pub uncalibrated: UncalibratedAccel,
     /// Zero-angular-rate gate: the gyro bias is updated at rest only while the reading is
     /// within this many predicted standard deviations of the bias estimate.
     pub zaru_gate_sigma: f64,
@@ -147,6 +150,7 @@ impl OdometryConfig {
             gyro_correction_sigma: datasheet_gyro_error_sigma(),
             accel_bias_sigma_mps2: [4.5e-3, 2.5e-3, 6.1e-3],
             accel_residual_scale: 1e-3,
+            uncalibrated: UncalibratedAccel::default(),
             zaru_gate_sigma: 5.0,
             zupt_sigma_mps: 2e-3,
             effective_samples: true,
@@ -237,6 +241,43 @@ impl CalibratedConfig {
         });
         let notes: Vec<String> = gyro.into_iter().chain(noise).collect();
         (!notes.is_empty()).then(|| notes.join("; "))
+    }
+}
+
+/// How an accelerometer that reads gravity off at its first rest is treated (see
+/// [`crate::uncalibrated`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UncalibratedAccel {
+    /// Largest `| |f| / g - 1 |` at the alignment rest taken as a calibrated part's
+    /// (`calibrate::zero_state::learn::CALIBRATED_GRAVITY_ERROR`, 2 %: the corpus's
+    /// factory-calibrated parts read 0.1-1.3 % off).
+    pub trigger: f64,
+    /// 1-sigma of the zero-g offset per axis, m/s^2: 0.1 g (MPU-6050 datasheet: +-50 mg x, y,
+    /// +-80 mg z; the thesis's uncalibrated MPU-9250: 0.1-0.2 g).
+    pub bias_sigma_mps2: f64,
+    /// 1-sigma of the sensitivity error of each axis, fraction: 3 % (MPU-6050 and MPU-9250
+    /// datasheets, "initial tolerance" +-3 %).
+    pub scale_sigma: f64,
+    /// 1-sigma of the cross-axis sensitivity, fraction: 2 % (the same datasheets, +-2 %).
+    pub cross_axis_sigma: f64,
+    /// The bias an earlier pass over the same recording estimated and removed from the
+    /// samples, m/s^2, sensor frame (`mems-odometry offline`,
+    /// [`crate::uncalibrated::remove_bias`]): the filter then starts from it with the
+    /// uncalibrated prior (the earlier pass's own sigma holds nothing of what its model lacks:
+    /// on a real wheeled run a calibrated prior around it ended further off than one pass) and
+    /// reports the bias as this plus its own estimate.
+    pub removed_bias_mps2: Option<[f64; 3]>,
+}
+
+impl Default for UncalibratedAccel {
+    fn default() -> Self {
+        Self {
+            trigger: calibrate::zero_state::learn::CALIBRATED_GRAVITY_ERROR,
+            bias_sigma_mps2: 0.1 * ipc_types::units::STANDARD_GRAVITY_MPS2,
+            scale_sigma: 0.03,
+            cross_axis_sigma: 0.02,
+            removed_bias_mps2: None,
+        }
     }
 }
 

@@ -29,9 +29,10 @@
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::config::OdometryConfig;
-use crate::eskf::{Cov, KS, Nominal, V, align};
+use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, V, align};
 use crate::hints::{HintConfig, mounting_from};
 use crate::rest_noise::RestNoise;
+use crate::uncalibrated::AccelPrior;
 
 /// Slowest hint speed a cruise window takes, m/s (below it, a hint's noise is the speed).
 pub const MIN_SPEED_MPS: f64 = 0.1;
@@ -170,15 +171,36 @@ pub struct CruiseStart {
     pub standing_accel_sd: f64,
 }
 
+impl CruiseStart {
+    /// The filter from this start, with the accelerometer prior's consider model and the
+    /// window's mean specific force `f_mean`; `m` is the window's last sample.
+    pub fn filter(
+        &self,
+        cfg: &OdometryConfig,
+        prior: &AccelPrior,
+        f_mean: Vector3<f64>,
+        m: &Imu,
+    ) -> Eskf {
+        let consider = ConsiderModel {
+            gyro: cfg.gyro_correction_sigma,
+            accel: prior.consider,
+        };
+        Eskf::new(self.x, self.cov, cfg.gravity_mps2, cfg.noise, *m)
+            .with_consider(consider, f_mean)
+            .with_propagation_interval(cfg.propagation_interval_s)
+    }
+}
+
 /// The initial state and covariance from the cruise window `c` of `span_s` seconds (see the
 /// module documentation for what is assumed and how the sigmas carry it), with the mounting
-/// `r_bs` when known.
+/// `r_bs` when known and the accelerometer bias prior of `prior` (as at a rest).
 pub fn cruise_start(
     c: &CruiseWindow,
     span_s: f64,
     cfg: &OdometryConfig,
     hints: &HintConfig,
     r_bs: Option<Matrix3<f64>>,
+    prior: &AccelPrior,
 ) -> CruiseStart {
     let n = c.accel.len() as f64;
     let mut w_var = c.gyro.variance() / n;
@@ -189,9 +211,7 @@ pub fn cruise_start(
     let w_sigma = (w_var * 2.0).map(f64::sqrt);
     let g = cfg.gravity_mps2;
     let hidden = c.hidden_accel(&w_sigma);
-    let scale_as_bias = g * cfg.accel_residual_scale;
-    let bias_sigma =
-        Vector3::from(cfg.accel_bias_sigma_mps2).map(|s| s.hypot(scale_as_bias).hypot(hidden));
+    let bias_sigma = prior.bias_sigma_mps2.map(|s| s.hypot(hidden));
     let (mut x, mut cov) = align(c.accel.mean(), c.gyro.mean(), g, bias_sigma, w_sigma);
     cov[(KS, KS)] = hints.speed_scale_sigma.powi(2);
     let (speed, hint_sigma) = c.speed();

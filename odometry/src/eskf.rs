@@ -556,6 +556,12 @@ impl Eskf {
         (self.var.0 + self.inc.noise_variance().0).map(f64::sqrt)
     }
 
+    /// 1-sigma of the accelerometer bias, m/s^2, sensor frame, as of the last propagation or
+    /// update (the filter's covariance alone: the consider parameters are not biases).
+    pub fn accel_bias_sigma(&self) -> Vector3<f64> {
+        Vector3::from_fn(|i, _| self.cov[(BA + i, BA + i)].max(0.0).sqrt())
+    }
+
     /// 1-sigma of velocity, m/s, navigation frame, as [`Self::position_sigma`].
     pub fn velocity_sigma(&self) -> Vector3<f64> {
         (self.var.1 + self.inc.noise_variance().1).map(f64::sqrt)

@@ -12,6 +12,7 @@ use crate::hints::{
 };
 use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::rest_noise::RestNoise;
+use crate::uncalibrated::{AccelEstimate, AccelPrior};
 use crate::untrusted::{Untrusted, Verdict};
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
@@ -35,6 +36,9 @@ struct HistoryEntry {
 #[derive(Debug, Clone, Copy, Default)]
 struct AlignSums {
     t0_ns: u64,
+    /// A sample of the rest was flagged `GRAVITY_OFF` (the calibration stage's learned rest
+    /// read gravity off before its refinement removed that from the samples).
+    gravity_off: bool,
     accel: RestNoise,
     gyro: RestNoise,
 }
@@ -235,6 +239,8 @@ pub(crate) struct Navigator {
     standing_accel_sd: f64,
     /// Clipped and implausible stretches in progress.
     untrusted: Untrusted,
+    /// The accelerometer prior the filter aligned with.
+    accel_prior: Option<AccelPrior>,
 }
 
 impl Navigator {
@@ -283,6 +289,7 @@ impl Navigator {
                 .then(|| ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)),
             standing_accel_sd: 0.0,
             untrusted: Untrusted::default(),
+            accel_prior: None,
         }
     }
 
@@ -309,6 +316,7 @@ impl Navigator {
         self.nhc = other.nhc;
         self.standing_accel_sd = other.standing_accel_sd;
         self.untrusted = other.untrusted;
+        self.accel_prior = other.accel_prior;
     }
 
     /// Takes `cfg` from the next sample on (a profile recognized from the data): its rest
@@ -382,6 +390,16 @@ impl Navigator {
         self.kf.as_ref()
     }
 
+    /// What the filter holds of the accelerometer's error, once aligned.
+    pub fn accel_estimate(&self) -> Option<AccelEstimate> {
+        let removed = self.cfg.uncalibrated.removed_bias_mps2;
+        Some(AccelEstimate::of(
+            self.kf.as_ref()?,
+            self.accel_prior.as_ref()?,
+            removed,
+        ))
+    }
+
     /// Processes one (checked: finite, later than the previous) sample: emits its state, and
     /// any revised states that the end of a motion interval made available, through `emit`.
     pub fn process(&mut self, s: &CorrectedImuSample, emit: &mut impl FnMut(&OdometryState)) {
@@ -417,7 +435,9 @@ impl Navigator {
             // An implausible sample is no reading of the rest: skipped; a clipped one is no
             // rest.
             if !verdict.implausible {
-                self.accumulate_alignment(t_ns, &m, rest && ready && verdict.clipped == 0);
+                let gravity_off = s.flags & corrected_flags::GRAVITY_OFF != 0;
+                let rest = rest && ready && verdict.clipped == 0;
+                self.accumulate_alignment(t_ns, &m, rest, gravity_off);
                 let still = imu_rest && detector_ready && verdict.clipped == 0;
                 self.accumulate_cruise(t_ns, &m, d.fresh.filter(|_| still));
             }
@@ -738,7 +758,7 @@ impl Navigator {
         }
     }
 
-    fn accumulate_alignment(&mut self, t_ns: u64, m: &Imu, rest: bool) {
+    fn accumulate_alignment(&mut self, t_ns: u64, m: &Imu, rest: bool, gravity_off: bool) {
         if !rest {
             self.align = AlignSums::default();
             return;
@@ -749,6 +769,7 @@ impl Navigator {
         }
         a.accel.push(m.f);
         a.gyro.push(m.w);
+        a.gravity_off |= gravity_off;
         if (t_ns - a.t0_ns) as f64 * 1e-9 < self.cfg.align_s || a.accel.len() < 2 {
             return;
         }
@@ -768,14 +789,13 @@ impl Navigator {
         let w_sigma = w_var.map(f64::sqrt);
         self.standing_accel_sd = a.accel.variance().sum().sqrt();
         let g = self.cfg.gravity_mps2;
-        let scale_as_bias = g * self.cfg.accel_residual_scale;
-        let bias_sigma =
-            Vector3::from(self.cfg.accel_bias_sigma_mps2).map(|s| s.hypot(scale_as_bias));
-        let (x, mut cov) = align(f_mean, w_mean, g, bias_sigma, w_sigma);
+        let prior = AccelPrior::at_rest(&self.cfg, &f_mean, a.gravity_off);
+        self.accel_prior = Some(prior);
+        let (x, mut cov) = align(f_mean, w_mean, g, prior.bias_sigma_mps2, w_sigma);
         cov[(KS, KS)] = self.hints.cfg.speed_scale_sigma.powi(2);
         let consider = ConsiderModel {
             gyro: self.cfg.gyro_correction_sigma,
-            accel: Matrix3::repeat(self.cfg.accel_residual_scale),
+            accel: prior.consider,
         };
         self.kf = Some(
             Eskf::new(x, cov, self.cfg.gravity_mps2, self.cfg.noise, *m)
@@ -785,11 +805,8 @@ impl Navigator {
         self.at_rest = true;
     }
 
-    /// Gathers the cruise window of an unaligned filter ([`crate::cruise`]): `fresh` is the
-    /// fresh hint when the IMU's detector flags the sample still (else `None`); a hint that
-    /// does not say the robot moves at [`MIN_SPEED_MPS`] or more empties the window, as does a
-    /// full window whose speed is not steady ([`CruiseWindow::steady`]).
-    /// Aligns in motion once the window spans `OdometryConfig::align_s`.
+    /// Gathers the cruise window of an unaligned filter ([`crate::cruise`]; `fresh` is the fresh
+    /// hint when the detector flags the sample still) and aligns in motion once it is full.
     fn accumulate_cruise(&mut self, t_ns: u64, m: &Imu, fresh: Option<RobotHint>) {
         let moving = |h: &RobotHint| {
             has_rest_source(h)
@@ -825,24 +842,19 @@ impl Navigator {
     /// [`crate::cruise`] for what is assumed and how the sigmas carry it).
     fn align_in_motion(&mut self, span_s: f64, m: &Imu) {
         let c = std::mem::take(&mut self.cruise);
-        let start = cruise_start(&c, span_s, &self.cfg, &self.hints.cfg, self.hints.r_bs);
+        let prior = AccelPrior::at_rest(&self.cfg, &c.accel.mean(), false);
+        let start = cruise_start(
+            &c,
+            span_s,
+            &self.cfg,
+            &self.hints.cfg,
+            self.hints.r_bs,
+            &prior,
+        );
+        self.kf = Some(start.filter(&self.cfg, &prior, c.accel.mean(), m));
+        self.accel_prior = Some(prior);
         self.standing_accel_sd = start.standing_accel_sd;
         self.zupt_sigma_mps = self.cfg.zupt_sigma_mps;
-        let consider = ConsiderModel {
-            gyro: self.cfg.gyro_correction_sigma,
-            accel: Matrix3::repeat(self.cfg.accel_residual_scale),
-        };
-        self.kf = Some(
-            Eskf::new(
-                start.x,
-                start.cov,
-                self.cfg.gravity_mps2,
-                self.cfg.noise,
-                *m,
-            )
-            .with_consider(consider, c.accel.mean())
-            .with_propagation_interval(self.cfg.propagation_interval_s),
-        );
         self.aligned_in_motion = Some(c.speed().0);
         self.at_rest = false;
     }

@@ -351,6 +351,14 @@ impl OdometryStage {
         self.ahead.zupt_sigma_mps()
     }
 
+    /// What the settled filter holds of the accelerometer's error, once aligned
+    /// ([`crate::uncalibrated`]).
+    pub fn accel_estimate(&self) -> Option<crate::uncalibrated::AccelEstimate> {
+        // In step, the live navigator stands for the settled one (not run meanwhile).
+        let settled = (!self.in_step).then(|| self.settled.live.accel_estimate());
+        settled.flatten().or_else(|| self.ahead.accel_estimate())
+    }
+
     /// The filter, once aligned (for diagnostics and tests).
     pub fn filter(&self) -> Option<&Eskf> {
         self.ahead.filter()

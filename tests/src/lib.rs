@@ -60,6 +60,14 @@ pub fn path_arg(p: &std::path::Path) -> &str {
     p.to_str().expect("UTF-8 path")
 }
 
+/// Runs `mems-sim ARGS --out DIR/FILE` (the file's extension picks CSV or MCAP) and returns
+/// the recording's path.
+pub fn simulate(dir: &std::path::Path, file: &str, args: &[&str]) -> PathBuf {
+    let out = dir.join(file);
+    run_ok("mems-sim", &[args, &["--out", path_arg(&out)][..]].concat());
+    out
+}
+
 /// Calibrates the simulated datasheet-level MPU-9250 of power-on `seed` the way a user would,
 /// and as `mems-stack` does: the commands of [`mems_sim::calibration::recipe`] (a six-position
 /// session fitted with model 3, then the gyro's scale and misalignment from 16 orientations),

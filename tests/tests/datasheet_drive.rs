@@ -6,16 +6,17 @@
 //! the self-heating drift, no rest was found after 173 s and the position diverged to tens of
 //! kilometres (docs/detectors.md).
 
-use integration_tests::{calibrate_sim_part, path_arg, run_ok, unique_namespace};
+use integration_tests::{calibrate_sim_part, path_arg, run_ok, simulate, unique_namespace};
 
 #[test]
 fn the_detector_follows_the_temperature_drift_of_an_uncompensated_part() {
     let dir = std::env::temp_dir().join(unique_namespace("datasheet-drive"));
     std::fs::create_dir_all(&dir).unwrap();
     let calib = calibrate_sim_part(&dir, 1001);
-    let (calib, drive) = (path_arg(&calib), dir.join("drive.mcap"));
-    run_ok(
-        "mems-sim",
+    let calib = path_arg(&calib);
+    let drive = simulate(
+        &dir,
+        "drive.mcap",
         &[
             "drive",
             "--duration",
@@ -28,8 +29,6 @@ fn the_detector_follows_the_temperature_drift_of_an_uncompensated_part() {
             "200",
             "--seed",
             "1",
-            "--out",
-            path_arg(&drive),
         ],
     );
     let out = run_ok(

@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-use integration_tests::{bin, path_arg, run_ok, unique_namespace};
+use integration_tests::{bin, path_arg, simulate, unique_namespace};
 
 /// `mems-odometry offline` on `input` with `args`, `RUST_LOG` as given (unset with `None`) and
 /// backtraces asked for (a user error must not print one even then).
@@ -25,20 +25,10 @@ fn offline(input: &Path, args: &[&str], rust_log: Option<&str>) -> Output {
 fn drive() -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(unique_namespace("diagnostics"));
     std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("drive.csv");
-    run_ok(
-        "mems-sim",
-        &[
-            "drive",
-            "--duration",
-            "20",
-            "--rate",
-            "200",
-            "--seed",
-            "3",
-            "--out",
-            path_arg(&path),
-        ],
+    let path = simulate(
+        &dir,
+        "drive.csv",
+        &["drive", "--duration", "20", "--rate", "200", "--seed", "3"],
     );
     path
 }

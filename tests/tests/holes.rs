@@ -10,7 +10,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use integration_tests::{bin, identity_calibration, path_arg, run_ok, unique_namespace};
+use integration_tests::{bin, identity_calibration, path_arg, run_ok, simulate, unique_namespace};
 
 /// `src` without the rows whose time lies strictly within `start_s` .. `start_s + length_s`.
 fn cut(src: &Path, dst: &Path, start_s: f64, length_s: f64) {
@@ -46,20 +46,10 @@ fn line_at(src: &Path, t_s: f64) -> usize {
 fn holes_are_bridged_with_an_honest_sigma_or_refused_naming_line_and_time() {
     let dir = std::env::temp_dir().join(unique_namespace("holes"));
     std::fs::create_dir_all(&dir).unwrap();
-    let drive = dir.join("drive.csv");
-    run_ok(
-        "mems-sim",
-        &[
-            "drive",
-            "--duration",
-            "120",
-            "--rate",
-            "200",
-            "--seed",
-            "3",
-            "--out",
-            path_arg(&drive),
-        ],
+    let drive = simulate(
+        &dir,
+        "drive.csv",
+        &["drive", "--duration", "120", "--rate", "200", "--seed", "3"],
     );
     let calib = identity_calibration();
     // The drive rests 0-10 s, 37.7-39.2 s, 69.2-86.6 s and from 105.9 s; it moves between.

@@ -15,7 +15,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use integration_tests::{Proc, bin, calibrate_sim_part, path_arg, run_ok, unique_namespace};
+use integration_tests::{Proc, bin, calibrate_sim_part, path_arg, simulate, unique_namespace};
 
 /// Inputs before the steady-state count starts: the calibration stage's 2 s of learning and
 /// the odometry's alignment, at 1 kHz, and a margin.
@@ -98,10 +98,10 @@ fn live_processes_allocate_nothing_per_sample_in_steady_state() {
     let dir = std::env::temp_dir().join(unique_namespace("live-alloc"));
     std::fs::create_dir_all(&dir).unwrap();
     let calib = calibrate_sim_part(&dir, 1);
-    let drive = dir.join("drive.mcap");
     // The calibrated part (datasheet preset, seed 1) driving: 4 s of rest, then motions.
-    run_ok(
-        "mems-sim",
+    let drive = simulate(
+        &dir,
+        "drive.mcap",
         &[
             "drive",
             "--duration",
@@ -114,8 +114,6 @@ fn live_processes_allocate_nothing_per_sample_in_steady_state() {
             "datasheet",
             "--seed",
             "1",
-            "--out",
-            path_arg(&drive),
         ],
     );
     let ns = unique_namespace("live-alloc");

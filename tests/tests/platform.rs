@@ -5,14 +5,13 @@
 //! arm through orientations, held 6 s each, is neither (profile other). The choice and its
 //! figures are in the `--json` result.
 
-use integration_tests::{path_arg, run_ok, unique_namespace};
+use integration_tests::{path_arg, run_ok, simulate, unique_namespace};
 
 /// Writes `mems-sim ARGS --rate 100 --seed 2 --out DIR/NAME.mcap` and returns what
 /// `mems-odometry offline --json` says of its profile.
 fn profile_of(dir: &std::path::Path, name: &str, args: &[&str]) -> serde_json::Value {
-    let out = dir.join(format!("{name}.mcap"));
-    let common = ["--rate", "100", "--seed", "2", "--out", path_arg(&out)];
-    run_ok("mems-sim", &[args, &common[..]].concat());
+    let common = ["--rate", "100", "--seed", "2"];
+    let out = simulate(dir, &format!("{name}.mcap"), &[args, &common[..]].concat());
     let json = run_ok(
         "mems-odometry",
         &["offline", "--input", path_arg(&out), "--json"],
@@ -56,9 +55,9 @@ fn live_auto_decides_wheeled_on_a_replayed_drive_and_says_so() {
     std::fs::create_dir_all(&dir).unwrap();
     let calib = calibrate_sim_part(&dir, 78);
     let calib = path_arg(&calib);
-    let drive = dir.join("drive.mcap");
-    run_ok(
-        "mems-sim",
+    let drive = simulate(
+        &dir,
+        "drive.mcap",
         &[
             "drive",
             "--duration",
@@ -69,8 +68,6 @@ fn live_auto_decides_wheeled_on_a_replayed_drive_and_says_so() {
             "200",
             "--seed",
             "1",
-            "--out",
-            path_arg(&drive),
         ],
     );
     let log = dir.join("odometry.log");

@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-use integration_tests::{bin, path_arg, run_ok, unique_namespace};
+use integration_tests::{bin, path_arg, run_ok, simulate, unique_namespace};
 
 fn offline(args: &[&str]) -> Output {
     Command::new(bin("mems-odometry"))
@@ -22,12 +22,8 @@ fn json(out: &Output) -> serde_json::Value {
 }
 
 fn drive(dir: &Path, name: &str, extra: &[&str]) -> std::path::PathBuf {
-    let path = dir.join(name);
-    let mut args = vec!["drive", "--duration", "120", "--rate", "200", "--seed", "3"];
-    args.extend_from_slice(extra);
-    args.extend_from_slice(&["--out", path_arg(&path)]);
-    run_ok("mems-sim", &args);
-    path
+    let common = ["drive", "--duration", "120", "--rate", "200", "--seed", "3"];
+    simulate(dir, name, &[&common[..], extra].concat())
 }
 
 #[test]

@@ -10,7 +10,7 @@
 //! - A car whose stops are on slopes of up to 5 degrees (it pitches while it brakes) has a rest
 //!   flagged at every stop: the rest test does not compare with the start's gravity direction.
 
-use integration_tests::{path_arg, run_ok, unique_namespace};
+use integration_tests::{path_arg, run_ok, simulate, unique_namespace};
 
 /// Times (s) of the truth's rests in a `mems-sim` CSV: `(start, end)` of each run of rows with
 /// `truth_rest` set.
@@ -46,11 +46,7 @@ fn drive_and_run(
     name: &str,
     args: &[&str],
 ) -> (Vec<(f64, f64)>, serde_json::Value) {
-    let csv = dir.join(format!("{name}.csv"));
-    let mut sim = vec!["drive"];
-    sim.extend_from_slice(args);
-    sim.extend_from_slice(&["--out", path_arg(&csv)]);
-    run_ok("mems-sim", &sim);
+    let csv = simulate(dir, &format!("{name}.csv"), &[&["drive"], args].concat());
     let out = run_ok(
         "mems-odometry",
         &["offline", "--input", path_arg(&csv), "--json"],

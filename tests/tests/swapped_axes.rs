@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use integration_tests::{bin, identity_calibration, path_arg, run_ok, unique_namespace};
+use integration_tests::{bin, identity_calibration, simulate, unique_namespace};
 
 /// `src` with the header names `a` and `b` exchanged (the data rows as they are).
 fn swap_header(src: &Path, dst: &Path, a: &str, b: &str) {
@@ -42,9 +42,9 @@ fn offline(csv: &Path) -> (serde_json::Value, String) {
 fn swapped_accelerometer_columns_are_reported() {
     let dir = std::env::temp_dir().join(unique_namespace("swapped-axes"));
     std::fs::create_dir_all(&dir).unwrap();
-    let drive = dir.join("drive.csv");
-    run_ok(
-        "mems-sim",
+    let drive = simulate(
+        &dir,
+        "drive.csv",
         &[
             "drive",
             "--duration",
@@ -57,8 +57,6 @@ fn swapped_accelerometer_columns_are_reported() {
             "on",
             "--in-place-turns",
             "on",
-            "--out",
-            path_arg(&drive),
         ],
     );
     let (v, stderr) = offline(&drive);

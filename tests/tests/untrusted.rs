@@ -11,10 +11,10 @@
 //!   within 3 sigma (as the unspoiled drive's) where integrating them as measured ends 6 m
 //!   and 512 m off.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-use integration_tests::{bin, identity_calibration, path_arg, run_ok, unique_namespace};
+use integration_tests::{bin, identity_calibration, path_arg, run_ok, simulate, unique_namespace};
 
 /// `mems-odometry offline --json` on `input` with `args`: the JSON result and stderr.
 fn offline(input: &Path, args: &[&str]) -> (serde_json::Value, String) {
@@ -63,20 +63,12 @@ fn rewrite(src: &Path, dst: &Path, edit: impl Fn(&[&str], &mut Vec<String>)) {
     std::fs::write(dst, out).unwrap();
 }
 
-fn sim(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
-    let out = dir.join(name);
-    let mut all = args.to_vec();
-    all.extend(["--out", path_arg(&out)]);
-    run_ok("mems-sim", &all);
-    out
-}
-
 #[test]
 fn a_walk_clipped_at_250_dps_is_flagged_counted_and_widened() {
     let dir = std::env::temp_dir().join(unique_namespace("clipped-walk"));
     std::fs::create_dir_all(&dir).unwrap();
     let walk = |name, range| {
-        sim(
+        simulate(
             &dir,
             name,
             &[
@@ -147,7 +139,7 @@ fn a_walk_clipped_at_250_dps_is_flagged_counted_and_widened() {
 fn a_range_is_inferred_from_a_logger_file_without_flags() {
     let dir = std::env::temp_dir().join(unique_namespace("inferred-range"));
     std::fs::create_dir_all(&dir).unwrap();
-    let walk = sim(
+    let walk = simulate(
         &dir,
         "walk.csv",
         &[
@@ -207,7 +199,7 @@ fn a_range_is_inferred_from_a_logger_file_without_flags() {
 fn absurd_specific_forces_are_flagged_counted_and_covered() {
     let dir = std::env::temp_dir().join(unique_namespace("absurd"));
     std::fs::create_dir_all(&dir).unwrap();
-    let drive = sim(
+    let drive = simulate(
         &dir,
         "drive.csv",
         &["drive", "--duration", "120", "--rate", "200", "--seed", "3"],

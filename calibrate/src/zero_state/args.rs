@@ -28,6 +28,11 @@ pub struct DetectorArgs {
     /// SHOE detector: the adaptive threshold's factor on the recent minimum (0: fixed).
     #[arg(long)]
     pub shoe_factor: Option<f64>,
+    /// Largest relative difference between the learned rest's specific force and local
+    /// gravity (default 0.05 with a calibration file, 0.25 without one:
+    /// `zero_state::learn::UNCALIBRATED_GRAVITY_ERROR`).
+    #[arg(long, value_name = "FRACTION")]
+    pub max_gravity_error: Option<f64>,
 }
 
 impl DetectorArgs {
@@ -56,6 +61,9 @@ impl DetectorArgs {
                 return Err(format!("--shoe-factor must be >= 0, got {factor}"));
             }
             config.shoe.adaptive_factor = factor;
+        }
+        if let Some(e) = self.max_gravity_error {
+            config.learn.max_gravity_error = positive("max-gravity-error", e)?;
         }
         Ok(config)
     }

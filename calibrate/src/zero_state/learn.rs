@@ -6,7 +6,8 @@
 //! takes the first window that passes its checks, so a recording that starts in motion is
 //! learned from its first rest of that length. The checks:
 //! - the mean specific force must have the magnitude of local gravity (within
-//!   `max_gravity_error`);
+//!   `max_gravity_error`: 5 % for a calibrated accelerometer, [`UNCALIBRATED_GRAVITY_ERROR`]
+//!   for one without a calibration, `--max-gravity-error` either way);
 //! - the batch means must be *steady*. Their scatter against what the within-batch noise
 //!   predicts, `R = var(batch mean) n / sigma^2`, is 1 for white noise. A real sensor's own
 //!   low-pass filter (the MPU-9250's DLPF, other IMUs' internal filters) correlates successive
@@ -49,6 +50,19 @@ pub const GYRO_SIGMA_FLOOR_RPS: f64 =
 
 /// Highest sample rate the learning window is sized for, Hz (the MPU-9250's gyro at 8 kHz).
 pub const MAX_RATE_HZ: f64 = 8000.0;
+
+/// Largest relative difference between a rest's specific force and local gravity that a
+/// calibrated accelerometer shows: 2 % (the corpus's factory-calibrated parts read 0.1-1.3 % off
+/// with no calibration of ours; a fitted part is within 0.5 %). Beyond it the calibration stage
+/// flags its samples `GRAVITY_OFF`.
+pub const CALIBRATED_GRAVITY_ERROR: f64 = 0.02;
+
+/// Largest relative difference between a rest's specific force and local gravity that an
+/// accelerometer without a calibration is learned with: a sensitivity error of up to 4 % (the
+/// MPU-6050 and MPU-9250 datasheets give +-3 %; cheap MPU-6050 boards read |g| 2-4 % low) and a
+/// zero-g offset of up to 0.2 g (the thesis's uncalibrated MPU-9250 read 0.1-0.2 g off) add to
+/// 24 %.
+pub const UNCALIBRATED_GRAVITY_ERROR: f64 = 0.25;
 
 /// Standard normal quantile of the steadiness test's false alarm (1e-3, one-sided).
 const STEADY_Z: f64 = 3.09;
@@ -142,6 +156,10 @@ pub enum LearnRejection {
     Gravity {
         /// Learned magnitude, m/s^2.
         magnitude_mps2: f64,
+        /// Local gravity, m/s^2.
+        gravity_mps2: f64,
+        /// The largest relative difference allowed.
+        limit: f64,
     },
     /// The batch means of channel `channel` (0-2 accelerometer x, y, z; 3-5 gyroscope x, y,
     /// z) scatter more than white noise and follow each other as motion does.
@@ -181,9 +199,17 @@ impl std::fmt::Display for LearnRejection {
             "accel x", "accel y", "accel z", "gyro x", "gyro y", "gyro z",
         ];
         match self {
-            Self::Gravity { magnitude_mps2 } => write!(
+            Self::Gravity {
+                magnitude_mps2,
+                gravity_mps2,
+                limit,
+            } => write!(
                 f,
-                "mean specific force {magnitude_mps2:.4} m/s^2 is not local gravity"
+                "mean specific force {magnitude_mps2:.4} m/s^2 is not local gravity \
+                 ({gravity_mps2} m/s^2, {:+.1} % off, at most {:.0} %: --max-gravity-error \
+                 widens that)",
+                100.0 * (magnitude_mps2 / gravity_mps2 - 1.0),
+                100.0 * limit
             ),
             Self::Unsteady {
                 channel,
@@ -376,6 +402,8 @@ impl StaticLearner {
         if (magnitude - g).abs() > self.config.max_gravity_error * g {
             return Err(LearnRejection::Gravity {
                 magnitude_mps2: magnitude,
+                gravity_mps2: g,
+                limit: self.config.max_gravity_error,
             });
         }
         let magnitude_var =

@@ -207,6 +207,21 @@ impl DetectorConfig {
     }
 }
 
+impl DetectorConfig {
+    /// `self` with the learning's gravity check for the calibration `file`: widened to
+    /// [`learn::UNCALIBRATED_GRAVITY_ERROR`] when its accelerometer was not fitted
+    /// ([`crate::calibfile::CalibrationFile::accel_fitted`]).
+    pub fn for_file(mut self, file: &crate::calibfile::CalibrationFile) -> Self {
+        if !file.accel_fitted() {
+            self.learn.max_gravity_error = self
+                .learn
+                .max_gravity_error
+                .max(learn::UNCALIBRATED_GRAVITY_ERROR);
+        }
+        self
+    }
+}
+
 /// Start-up learning of a robot's detector, s: its first rest of a second (the odometry
 /// aligns on the second of rest after it).
 pub const ROBOT_LEARN_S: f64 = 1.0;

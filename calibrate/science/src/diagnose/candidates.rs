@@ -115,11 +115,15 @@ impl Diagnoser<'_> {
                 };
                 let t0 = r.t_ns[0];
                 let duration = (r.t_ns[r.t_ns.len() - 1] - t0) as f64 * 1e-9;
+                // Elapsed times count from the time origin, which may precede the session.
+                let start = (t0 - r.t0_ns) as f64 * 1e-9;
                 let t = o.t_s.expect("raw sessions have times");
                 o.gap_index = r
                     .gap_at
                     .iter()
-                    .map(|&g| ((r.t_ns[g] - t0) as f64 * 1e-9 + fraction * duration) % duration)
+                    .map(|&g| {
+                        start + ((r.t_ns[g] - t0) as f64 * 1e-9 + fraction * duration) % duration
+                    })
                     .filter(|&p| p <= t)
                     .count();
             }

@@ -7,9 +7,10 @@
 //! carries its white-noise variance predicted from the samples themselves (`sigma^2 / n`, with
 //! `sigma` the session's robust per-sample noise, [`difference_sigma`] over its static
 //! segments, which torn reads and slow drifts do not inflate; or the file's `std^2 / n`, pooled
-//! per axis over its poses), its
-//! elapsed time since the session's first sample (s), its mean die temperature (degC, when
-//! every sample has one), its gravity label and orientation class, and its validation fold.
+//! per axis over its poses), its elapsed time since its time origin (s: the session's first
+//! sample, or the first sample of the power-on it shares with other sessions, see
+//! `share_power_on`), its mean die temperature (degC, when every sample has one), its gravity
+//! label and orientation class, and its validation fold.
 
 use ipc_types::{RawImuSample, raw_flags};
 use nalgebra::Vector3;
@@ -51,6 +52,11 @@ impl SessionInput {
     }
 }
 
+/// Shortest static segment (pose) the diagnosis uses by default, s: multi-position protocols
+/// (imu_tk, Tedaldi et al.) hold each pose 1-4 s, and a 2 s hold leaves a segment of about
+/// 1.5 s once the windows at its edges are trimmed.
+pub const DEFAULT_MIN_SEGMENT_S: f64 = 1.0;
+
 /// Settings of the data preparation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DataConfig {
@@ -80,7 +86,7 @@ impl Default for DataConfig {
             pose_samples: 5400,
             gap_factor: 10.0,
             gap_min_s: 0.05,
-            segments: SegmentConfig::default(),
+            segments: SegmentConfig::with_min_duration(DEFAULT_MIN_SEGMENT_S),
             accel_lsb_per_g: AccelRange::G2.lsb_per_g(),
         }
     }
@@ -135,13 +141,25 @@ pub enum DataError {
     },
     /// No static segment long enough.
     #[error(
-        "{name}: no static segment of at least {min_s} s (the diagnosis needs the sensor at rest)"
+        "{name}: no static segment of at least {min_s} s (the diagnosis needs the sensor at rest; \
+         --min-segment-s sets the shortest pose it uses)"
     )]
     NoRest {
         /// The session.
         name: String,
         /// Shortest segment accepted, s.
         min_s: f64,
+    },
+    /// Sessions said to share a power-on are not on one running clock.
+    #[error(
+        "{name}: --same-power-on needs the sessions of one power-on in time order on one clock \
+         (the samples' stamps): {reason}"
+    )]
+    PowerOn {
+        /// The session.
+        name: String,
+        /// What is wrong.
+        reason: String,
     },
     /// A means file holds a non-finite value or a zero std.
     #[error("{name}: pose {pose} has a non-finite value or a std that is not > 0")]
@@ -206,6 +224,9 @@ pub struct AcquisitionFindings {
 pub(crate) struct RawSession {
     pub name: String,
     pub t_ns: Vec<u64>,
+    /// The time origin of the elapsed times, ns on the samples' clock: the first sample, or
+    /// the first sample of the power-on the session belongs to (`share_power_on`).
+    pub t0_ns: u64,
     pub a_raw: Vec<[f64; 3]>,
     pub a_repaired: Vec<[f64; 3]>,
     pub temp_c: Option<Vec<f64>>,
@@ -497,6 +518,7 @@ pub(crate) fn prepare_raw(
     };
     Ok(RawSession {
         name: name.to_string(),
+        t0_ns: t_ns[0],
         t_ns,
         a_raw,
         a_repaired: repaired.a,
@@ -507,6 +529,43 @@ pub(crate) fn prepare_raw(
         segments: repaired.segments,
         findings,
     })
+}
+
+/// Gives `sessions` (in the order given: calibration, then test) one time origin, the first
+/// sample of the first: they are recordings of one power-on, so a bias that drifts from
+/// power-on continues from one to the next. Their stamps must be on one clock (the live
+/// driver's `CLOCK_MONOTONIC`), each session starting after the previous one ends; a means
+/// file (no sample times) or a session that starts before the previous one ends is refused.
+pub(crate) fn share_power_on(sessions: &mut [Session]) -> Result<(), DataError> {
+    let mut origin_and_end: Option<(u64, u64, String)> = None;
+    for s in sessions.iter_mut() {
+        let r = match s {
+            Session::Raw(r) => r,
+            Session::Means { name, .. } => {
+                return Err(DataError::PowerOn {
+                    name: name.clone(),
+                    reason: "a means file has no sample times".into(),
+                });
+            }
+        };
+        let (first, last) = (r.t_ns[0], r.t_ns[r.t_ns.len() - 1]);
+        match &origin_and_end {
+            Some((_, end, previous)) if first <= *end => {
+                return Err(DataError::PowerOn {
+                    name: r.name.clone(),
+                    reason: format!(
+                        "its first sample at {:.3} s is not after the last of {previous} at {:.3} s",
+                        first as f64 * 1e-9,
+                        *end as f64 * 1e-9
+                    ),
+                });
+            }
+            Some((origin, ..)) => r.t0_ns = *origin,
+            None => {}
+        }
+        origin_and_end = Some((r.t0_ns, last, r.name.clone()));
+    }
+    Ok(())
 }
 
 /// Probability that two successive samples repeat on all three axes under white noise
@@ -621,7 +680,8 @@ pub(crate) struct Obs {
     pub session: usize,
     /// Index of the static pose (segment or row) over all sessions.
     pub pose: usize,
-    /// Mean elapsed time since the session's first sample, s.
+    /// Mean elapsed time since the time origin (the session's first sample, or its
+    /// power-on's), s.
     pub t_s: Option<f64>,
     /// Mean die temperature, degC.
     pub temp_c: Option<f64>,
@@ -724,7 +784,7 @@ fn raw_observations(
     let a = if fixes.torn { &r.a_repaired } else { &r.a_raw };
     let use_sample = |k: usize| !(fixes.dedup && r.repeat[k]);
     let sigma = r.sigma[fixes.index()];
-    let t0 = r.t_ns[0];
+    let t0 = r.t0_ns;
     let block_ns = (cfg.block_s * 1e9) as u64;
     let mut gap_iter = r.gap_at.iter().peekable();
     let mut gaps_before = 0usize;

@@ -15,7 +15,8 @@ pub enum Effect {
     /// Scale factor linear in the die temperature: `c_s,i (T - T_ref) a_i` on axis `i`, with
     /// `a` the specific force (3 parameters).
     TemperatureScale,
-    /// Bias linear in the elapsed time since the session's first sample: `r t` (3).
+    /// Bias linear in the elapsed time since the time origin (the session's first sample, or
+    /// the first of its power-on with `--same-power-on`): `r t` (3).
     BiasDrift,
     /// Warm-up transient after power-on: `w exp(-t / tau)` (3 + the time constant, chosen
     /// on the training data from a grid).

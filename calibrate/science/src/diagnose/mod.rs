@@ -6,7 +6,10 @@
 //!
 //! **Data.** Each session is cut into observations ([`data`]): block means of `block_s`
 //! seconds inside static segments (raw recordings) or the poses of a six-position means file,
-//! each with the white-noise variance of its mean that the samples themselves predict. What
+//! each with the white-noise variance of its mean that the samples themselves predict, and its
+//! elapsed time (s) since a time origin: the session's first sample, or with
+//! [`DiagnoseConfig::same_power_on`] the first sample of the first session (the sessions are
+//! then one power-on on one clock, so a drift or warm-up continues from file to file). What
 //! the samples show about the acquisition is reported per session: torn reads, outliers at a
 //! fixed count offset, samples repeating the previous one, gaps.
 //!
@@ -82,7 +85,8 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 pub use data::{
-    AcquisitionFindings, DataConfig, DataError, SessionInput, class_axis, orientation_class,
+    AcquisitionFindings, DEFAULT_MIN_SEGMENT_S, DataConfig, DataError, SessionInput, class_axis,
+    orientation_class,
 };
 pub use effects::Effect;
 
@@ -135,6 +139,11 @@ pub struct DiagnoseConfig {
     pub unexplained_p: f64,
     /// Local gravity for reporting in m/s^2.
     pub gravity_mps2: f64,
+    /// Whether the raw sessions (calibration, then test, in the order given) are recordings
+    /// of one power-on: they then share one time origin, the first sample of the first, so
+    /// that the time terms (bias drift, warm-up) continue from file to file (see
+    /// `data::share_power_on`).
+    pub same_power_on: bool,
     /// Number of warm-up time constants tried (log-spaced from twice the block length to
     /// twice the longest elapsed time).
     pub warm_up_grid: usize,
@@ -151,6 +160,7 @@ impl Default for DiagnoseConfig {
             unexplained_p: 1e-3,
             gravity_mps2: ipc_types::units::STANDARD_GRAVITY_MPS2,
             warm_up_grid: 16,
+            same_power_on: false,
         }
     }
 }
@@ -259,7 +269,7 @@ pub struct ResidualPoint {
     pub resid_g: [f64; 3],
     /// White-noise sigma of each residual, g.
     pub sigma_g: [f64; 3],
-    /// Elapsed time since the session's first sample, s.
+    /// Elapsed time since the time origin (the session's first sample, or its power-on's), s.
     pub t_s: Option<f64>,
     /// Die temperature, degC.
     pub temp_c: Option<f64>,
@@ -444,6 +454,9 @@ pub fn diagnose(
     }
     for s in test {
         sessions.push(prepare(s)?);
+    }
+    if cfg.same_power_on {
+        data::share_power_on(&mut sessions)?;
     }
     let n_calib = calib.len();
     let kind = choose_kind(&sessions[..n_calib])?;

@@ -24,7 +24,7 @@ struct Regressor {
 const REGRESSORS: [Regressor; 4] = [
     Regressor {
         file: "residuals_vs_time.png",
-        label: "elapsed time since the session's first sample (s)",
+        label: "elapsed time since the time origin (s)",
         x: |p, _| p.t_s,
     },
     Regressor {

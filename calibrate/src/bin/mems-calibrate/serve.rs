@@ -39,9 +39,12 @@ use hooks::Watch;
 /// Options of `mems-calibrate serve`.
 #[derive(clap::Args)]
 pub struct ServeArgs {
-    /// Calibration file (TOML) written by `mems-calibrate fit`.
+    /// Calibration file (TOML) written by `mems-calibrate fit`. Without it, the identity at
+    /// standard gravity: a part taken as it reads, whose error along gravity the bias
+    /// refinement removes at rest (an uncalibrated part's rest may read gravity up to 25 % off,
+    /// `calibrate::zero_state::learn::UNCALIBRATED_GRAVITY_ERROR`).
     #[arg(long)]
-    calib: PathBuf,
+    calib: Option<PathBuf>,
     /// The zero-state detector (default: glrt, learning from the first second of rest with
     /// the confidence of 5 s, as `mems-odometry`'s vehicle profile).
     #[command(flatten)]
@@ -59,9 +62,22 @@ pub struct ServeArgs {
     state: Option<PathBuf>,
 }
 
+impl ServeArgs {
+    /// What `--calib` names, for messages.
+    fn calib_name(&self) -> String {
+        self.calib.as_ref().map_or_else(
+            || "no calibration file (the identity)".into(),
+            |p| p.display().to_string(),
+        )
+    }
+}
+
 /// Runs the service until SIGINT/SIGTERM.
 pub fn serve(args: &ServeArgs) -> Result<()> {
-    let file = CalibrationFile::load(&args.calib)?;
+    let file = match &args.calib {
+        Some(path) => CalibrationFile::load(path)?,
+        None => CalibrationFile::identity(ipc_types::units::STANDARD_GRAVITY_MPS2),
+    };
     let mut stage = start::stage(args, &file)?;
     let ns = service::namespace(args.namespace.as_deref());
     let raw_name = service::full_name(&ns, service::RAW);
@@ -80,7 +96,7 @@ pub fn serve(args: &ServeArgs) -> Result<()> {
     let mut out = Output::new(&node, &corrected, &corrected_name)?;
     tracing::info!(
         "{} ({} model, calib_id {:016x}), {} detector, {raw_name} -> {corrected_name}{}",
-        args.calib.display(),
+        args.calib_name(),
         file.model,
         stage.calib_id(),
         stage.detector().config().kind.name(),

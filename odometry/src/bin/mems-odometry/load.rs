@@ -63,7 +63,7 @@ impl StageArgs {
         };
         let detector = self
             .detector
-            .apply(profile.detector(file.gravity_mps2))
+            .apply(profile.detector(file.gravity_mps2).for_file(&file))
             .map_err(anyhow::Error::msg)?;
         Ok((file, detector))
     }

@@ -4,7 +4,11 @@
 //! processes run, with the recording's robot hints). `gyrocal` fits the gyro's scale and
 //! misalignment correction from a recorded pose session into the calibration file: it is
 //! `mems-calibrate gyrocal`, run by `mems-calibrate-offline` (package calibrate-science).
+//! `diagnose` runs `offline` on a recording, tests effects the model lacks on its rests and
+//! reruns with those the data support.
 
+mod diagnose;
+mod diagnose_text;
 mod hint_args;
 mod load;
 mod offline;
@@ -34,6 +38,9 @@ enum Command {
     Serve(serve::ServeArgs),
     /// Run calibration and odometry over a raw recording (CSV or MCAP).
     Offline(offline::OfflineArgs),
+    /// Diagnose a run: test effects the model lacks on its rests, rerun with what the data
+    /// support, print the error before and after (`odometry::diagnose`).
+    Diagnose(diagnose::DiagnoseArgs),
     /// Fit the gyro's scale and misalignment correction from a recorded pose session and
     /// optionally store it in the calibration file's [gyro] table (`mems-calibrate gyrocal`:
     /// see its --help).
@@ -50,6 +57,7 @@ fn main() -> ExitCode {
     mems_log::exit(match Cli::parse().command {
         Command::Serve(args) => serve::run(args),
         Command::Offline(args) => offline::run(args),
+        Command::Diagnose(args) => diagnose::run(args),
         Command::Gyrocal { args } => Err(calibrate::offline::exec_offline(
             std::iter::once("gyrocal".as_ref()).chain(args.iter().map(|a| a.as_os_str())),
         )),

@@ -21,6 +21,7 @@ use ipc_types::odometry_flags;
 use mems_stage::{Chain, Either};
 use odometry::profile::Profile;
 use odometry::session::{NoGyro, OdometrySession};
+use odometry::uncalibrated::AccelEstimate;
 
 use crate::load::odometry_config;
 use crate::out::Out;
@@ -68,15 +69,79 @@ pub struct OfflineArgs {
     force: bool,
 }
 
-/// Runs the pipeline and prints the result.
+/// Runs the pipeline and prints the result. A part whose accelerometer the run found
+/// uncalibrated (`odometry::uncalibrated`) is run a second time with the bias the first run
+/// estimated removed from its samples, and only the second run's result is printed and
+/// written; should the second run move the bias further than an uncalibrated part's bias
+/// sigma, the first estimate was not one, and the recording is run once more as the first run
+/// was, that result standing.
 pub fn run(args: OfflineArgs) -> Result<()> {
     let is_mcap = recording::mcap::has_magic(&args.input)?;
     let choice = platform::choose(args.stage.profile, &args.input, is_mcap)?;
     let (file, detector) = args.stage.load(choice.profile)?;
-    let (source, repairs, ranges) = Source::open(&args)?;
-    let calibration = CalibrationStage::new(&file, detector, RefineConfig::default())
+    let Some(first) = pass(&args, &choice, &file, detector, Pass::First)? else {
+        return Ok(());
+    };
+    tracing::info!("first pass: {first}; running the recording again with that bias removed");
+    let removed = odometry::uncalibrated::remove_bias(&file, &first.bias_mps2);
+    let Some(second) = pass(&args, &choice, &removed, detector, Pass::Second(first))? else {
+        return Ok(());
+    };
+    tracing::warn!(
+        "second pass: {second}: further than {:.2} m/s^2 from the first pass's, which is no \
+         estimate; the result is the first pass's",
+        odometry::config::UncalibratedAccel::default().bias_sigma_mps2
+    );
+    pass(&args, &choice, &file, detector, Pass::Only).map(|_| ())
+}
+
+/// Which run of the recording [`pass`] makes.
+#[derive(Clone, Copy)]
+enum Pass {
+    /// The first: it ends early, with the accelerometer's estimate, when that is uncalibrated.
+    First,
+    /// The second, with the first's estimated bias removed: it ends early, with its estimate,
+    /// when that moved the bias further than the uncalibrated prior's sigma.
+    Second(AccelEstimate),
+    /// The only one whose result stands whatever it estimates.
+    Only,
+}
+
+impl Pass {
+    /// Whether the run ends early with `estimate` instead of reporting.
+    fn ends_early(
+        self,
+        estimate: &AccelEstimate,
+        config: &odometry::config::OdometryConfig,
+    ) -> bool {
+        match self {
+            Self::First => estimate.uncalibrated,
+            Self::Second(first) => {
+                let limit = config.uncalibrated.bias_sigma_mps2;
+                (0..3).any(|i| (estimate.bias_mps2[i] - first.bias_mps2[i]).abs() > limit)
+            }
+            Self::Only => false,
+        }
+    }
+}
+
+/// One run of the pipeline over the recording with the calibration `file` (see [`Pass`]).
+/// Returns what the filter estimated of the accelerometer, without printing or writing
+/// anything, when the run ends early; else prints the result and writes `--out`.
+fn pass(
+    args: &OfflineArgs,
+    choice: &platform::Choice,
+    file: &calibrate::calibfile::CalibrationFile,
+    detector: calibrate::zero_state::DetectorConfig,
+    which: Pass,
+) -> Result<Option<AccelEstimate>> {
+    let (source, repairs, ranges) = Source::open(args)?;
+    let calibration = CalibrationStage::new(file, detector, RefineConfig::default())
         .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
-    let mut base = odometry_config(&file);
+    let mut base = odometry_config(file);
+    if let Pass::Second(first) = which {
+        base.uncalibrated.removed_bias_mps2 = Some(first.bias_mps2);
+    }
     base.rest_updates = !args.no_zupt;
     base.trust_untrusted = args.ranges.trust_clipped;
     let hints = args.hints.config()?;
@@ -112,7 +177,11 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             }
         });
     progress.finish_and_clear();
-    let mut read = Read::new(&args.input, &feed, repairs, config.align_s, choice);
+    let estimate = chain.second.stage().accel_estimate();
+    if let Some(e) = estimate.filter(|e| ran.is_ok() && which.ends_early(e, &config)) {
+        return Ok(Some(e));
+    }
+    let mut read = Read::new(&args.input, &feed, repairs, config.align_s, *choice);
     if read.holes.count == 0 {
         read.holes = chain.first.stats().holes;
     }
@@ -125,7 +194,7 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     summary.finish(ran, &read, &chain, &mut feed.truth, args.json)?;
     // Only a run that succeeded leaves its --out file (a failed one drops it unwritten).
     match feed.out {
-        Some(out) => out.finish(),
-        None => Ok(()),
+        Some(out) => out.finish().map(|_| None),
+        None => Ok(None),
     }
 }

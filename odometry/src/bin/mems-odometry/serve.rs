@@ -38,8 +38,9 @@ use hooks::{Inputs, Watch};
 #[derive(clap::Args)]
 pub struct ServeArgs {
     /// Calibration file (TOML): its gravity and noise parameters configure the filter.
+    /// Without it, standard gravity and the MPU-9250's datasheet noise.
     #[arg(long)]
-    calib: PathBuf,
+    calib: Option<PathBuf>,
     /// Namespace prefix for service names (default: $MEMS_NAMESPACE).
     #[arg(long)]
     namespace: Option<String>,
@@ -58,7 +59,10 @@ pub struct ServeArgs {
 
 /// Runs until SIGINT/SIGTERM.
 pub fn run(args: ServeArgs) -> Result<()> {
-    let file = CalibrationFile::load(&args.calib).context("cannot load calibration")?;
+    let file = match &args.calib {
+        Some(path) => CalibrationFile::load(path).context("cannot load calibration")?,
+        None => CalibrationFile::identity(ipc_types::units::STANDARD_GRAVITY_MPS2),
+    };
     let base = crate::load::odometry_config(&file);
     let hints = args.hints.config()?;
     let mut session = match args.profile {

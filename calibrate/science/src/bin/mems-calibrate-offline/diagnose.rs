@@ -53,9 +53,15 @@ pub struct DiagnoseArgs {
     /// Block length, s.
     #[arg(long, default_value_t = 1.0)]
     block_s: f64,
-    /// Shortest static segment (pose) used, s; windows of a quarter of it (at most 0.5 s).
-    #[arg(long, default_value_t = 5.0)]
+    /// Shortest static segment (pose) used, s; windows of a quarter of it (at most 0.5 s). The
+    /// default takes poses held 2 s (multi-position protocols hold each 1-4 s).
+    #[arg(long, default_value_t = calibrate_science::diagnose::DEFAULT_MIN_SEGMENT_S)]
     min_segment_s: f64,
+    /// The raw recordings (--input, then --test, in the order given) are of one power-on, in
+    /// time order on one clock (the live driver's stamps): one time origin for all, so a bias
+    /// drift or warm-up fitted on the calibration data continues into the test data.
+    #[arg(long)]
+    same_power_on: bool,
     /// Validation folds when no test data is given.
     #[arg(long, default_value_t = 5)]
     folds: usize,
@@ -113,6 +119,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let mut cfg = DiagnoseConfig {
         apply: args.apply.clone(),
         gravity_mps2: args.gravity,
+        same_power_on: args.same_power_on,
         ..DiagnoseConfig::default()
     };
     cfg.data.block_s = args.block_s;

@@ -12,10 +12,10 @@ use super::ServeArgs;
 pub fn stage(args: &ServeArgs, file: &CalibrationFile) -> Result<CalibrationStage> {
     let config = args
         .detector
-        .apply(DetectorConfig::robot(file.gravity_mps2))
+        .apply(DetectorConfig::robot(file.gravity_mps2).for_file(file))
         .map_err(anyhow::Error::msg)?;
     let mut stage = CalibrationStage::new(file, config, RefineConfig::default())
-        .with_context(|| args.calib.display().to_string())?;
+        .with_context(|| args.calib_name())?;
     if let Some(path) = args.state.as_deref().filter(|p| p.exists()) {
         let state = calibrate::warm_file::load(path)?;
         stage

@@ -175,6 +175,10 @@ impl Summary {
                 read.align_s
             ),
         }
+        let accel = chain.second.stage().accel_estimate();
+        if let Some(a) = &accel {
+            tracing::info!("{a}");
+        }
         let axes = chain.second.stage().axes();
         if axes.disagree() {
             tracing::warn!(
@@ -188,6 +192,7 @@ impl Summary {
             result["profile"] = read.choice.json(chain.second.auto_choice());
             result["wheeled"] = self.wheeled_json(&chain.second);
             result["aligned_in_motion"] = json!(in_motion.map(|s| json!({ "speed_mps": s })));
+            result["accel_error"] = json!(accel);
             println!("{result}");
         } else {
             self.print(&end, truth_error);

@@ -97,6 +97,9 @@ impl Watch {
             axes.checked - axes.disagreed,
             axes.checked
         );
+        if let Some(a) = session.stage().accel_estimate() {
+            tracing::info!("{a}");
+        }
         if axes.disagree() {
             tracing::warn!(
                 "the accelerometer's and the gyroscope's axes disagree (odometry::axes): {axes:?}"

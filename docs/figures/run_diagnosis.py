@@ -1,0 +1,160 @@
+"""docs/diagnosis.md, "The residual loop on an odometry run": `mems-odometry diagnose` on
+simulated arm runs (each effect undeclared and declared, a clean run, an effect no candidate
+covers) and on every recording of the real-data corpus (/work/real-data, run as
+tools/real-data/bench.py runs them: the identity calibration, the sidecar's extra arguments)."""
+
+import json
+import os
+import sys
+from pathlib import Path
+
+from common import REPO, Failed, Section, table
+
+sys.path.insert(0, str(REPO / "tools" / "real-data"))
+from bench import identity_calibration  # noqa: E402
+
+B = "target/release/mems-odometry"
+SIM = "target/release/mems-sim"
+DIR = "/tmp/figures-rundiag"
+DATA = Path(os.environ.get("MEMS_REAL_DATA", "/work/real-data"))
+ARM = ["arm", "--moves", "24", "--pauses", "1,2", "--rate", "200", "--seed", "3"]
+IDENTITY_SCALE = "scale = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"
+
+# (case, model changes (table, key, value), what the calibration file declares).
+EFFECTS = [
+    ("accel_bias", [("accel", "bias", "[0.006, -0.005, 0.0]")], ("bias_g = [0.0, 0.0, 0.0]", "bias_g = [0.006, -0.005, 0.0]")),
+    ("accel_scale", [("accel", "scale", "[0.012, -0.01, 0.001]")],
+     (IDENTITY_SCALE, "scale = [[1.012, 0.0, 0.0], [0.0, 0.99, 0.0], [0.0, 0.0, 1.001]]")),
+    ("gyro_scale", [("gyro", "scale", "[0.08, -0.07, 0.01]")],
+     "\n[gyro]\ncorrection = [[%r, 0.0, 0.0], [0.0, %r, 0.0], [0.0, 0.0, %r]]\n" % (1 / 1.08, 1 / 0.93, 1 / 1.01)),
+    ("accel_temp_bias", [("accel", "bias_temp_coeff", "[0.002, -0.0015, 0.0]"), ("thermal", "ambient_drift_c_per_s", "0.15"),
+                         ("thermal", "self_heating_c", "0.0")],
+     "\n[temperature]\nreference_c = 25.0\nbias_g_per_c = [0.002, -0.0015, 0.0]\n"),
+]
+UNCOVERED = ("gyro cross-axis 8 % (x-y)", [("gyro", "misalignment", "[[0.0, 0.08, 0.0], [0.08, 0.0, 0.0], [0.0, 0.0, 0.0]]")])
+
+
+def set_key(model, changes):
+    """The `print-model` TOML with each (table, key, value) set."""
+    out, table_name = [], ""
+    for line in model.splitlines():
+        if line.startswith("["):
+            table_name = line.strip("[]")
+        for t, k, v in changes:
+            if t == table_name and line.startswith(k + " = "):
+                line = f"{k} = {v}"
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def declare(identity, declared):
+    """The identity calibration with an effect declared: a replacement or an appended table."""
+    if isinstance(declared, tuple):
+        return identity.replace(*declared)
+    return identity + declared
+
+
+def fmt(v, digits=3):
+    return "-" if v is None else f"{v:.{digits}f}"
+
+
+def before_after(report, key, digits=3):
+    after = (report.get("after") or {}).get("figures", {}).get(key)
+    return f"{fmt(report['before'].get(key), digits)} -> {fmt(after, digits)}"
+
+
+def selected(report):
+    names = [s[0] for s in report["diagnosis"]["selected"]]
+    return ", ".join(names) if names else "none"
+
+
+def diagnose(ctx, run, calib, extra=(), closed=True):
+    argv = [B, "diagnose", run, "--calib", calib, "--json"] + (["--closed-loop"] if closed else [])
+    argv += ["--", *extra] if extra else []
+    out, _ = ctx.run(argv, timeout=600)
+    if ctx.dry:
+        return None
+    try:
+        return json.loads(out)
+    except json.JSONDecodeError as e:
+        raise Failed(f"{' '.join(argv)}: no JSON ({e})")
+
+
+def unexplained(report):
+    """yes / no, and why when the rerun refuted the selection."""
+    if report["confirmed"] is False:
+        return "yes (the rerun refutes the selection)"
+    return "yes" if report["unexplained"] else "no"
+
+
+def sim_row(label, effect, calib_label, r):
+    return [label, effect, calib_label, selected(r), unexplained(r),
+            before_after(r, "rest_innovation_rms_mps"), before_after(r, "end_error_m"), before_after(r, "truth_error_m")]
+
+
+def simulated(ctx, identity_path, identity):
+    ctx.region = "diagnosis-run-sim"
+    model, _ = ctx.run([SIM, "print-model", "--preset", "calibrated"])
+    rows = []
+
+    def case(name, changes, calib_text, label, effect, calib_label):
+        mpath, run, cpath = f"{DIR}/{name}.model.toml", f"{DIR}/{name}.mcap", f"{DIR}/{name}.calib.toml"
+        if not ctx.dry:
+            Path(mpath).write_text(set_key(model, changes))
+            Path(cpath).write_text(calib_text)
+        ctx.run([SIM, *ARM, "--model", mpath, "--out", run, "--force"])
+        r = diagnose(ctx, run, cpath)
+        if r is not None:
+            rows.append(sim_row(label, effect, calib_label, r))
+
+    case("clean", [], identity, "clean", "none", "identity")
+    for name, changes, declared in EFFECTS:
+        effect = "; ".join(f"{t}.{k} = {v}" for t, k, v in changes)
+        case(name, changes, identity, f"{name}, undeclared", effect, "identity")
+        case(name + "-declared", changes, declare(identity, declared), f"{name}, declared", effect, "the effect")
+    case("uncovered", UNCOVERED[1], identity, "uncovered", UNCOVERED[0], "identity")
+    header = ["run", "effect in the simulated part", "calibration", "selected", "unexplained",
+              "rest innovation rms (m/s) before -> after", "closed-loop end error (m)", "truth end error (m)"]
+    return table(header, rows)
+
+
+def corpus(ctx, identity_path):
+    ctx.region = "diagnosis-run-corpus"
+    rows = []
+    for side in sorted(DATA.glob("*.json")):
+        s = json.loads(side.read_text())
+        run = str(DATA / (s.get("input") or s["csv"]))
+        closed = s["truth"]["kind"] == "closed_loop"
+        r = diagnose(ctx, run, identity_path, s.get("extra_args") or [], closed)
+        if r is None:
+            continue
+        d = r["diagnosis"]
+        m, t = d["magnitude"], d["tilt"]
+        scores = ", ".join(f"{c['candidate']} {c['gain']:.0f}" for c in d["scores"] if not c["untestable"]) or "none testable"
+        rows.append([s["id"], s["platform"], d["rests"], f"{d['motions']} ({d['motions_gyro_clipped']})",
+                     f"{1e3 * m['rms_before']:.1f} / {1e3 * m['rms_noise']:.1f}", f"{1e3 * t['rms_before']:.1f} / {1e3 * t['rms_noise']:.1f}",
+                     scores, selected(r), unexplained(r),
+                     before_after(r, "rest_innovation_rms_mps"), before_after(r, "end_error_m", 2) if closed else "-"])
+    header = ["recording", "platform", "rests", "motions (gyro clipped)", "magnitude rms / noise (mm/s^2)", "tilt rms / noise (mrad)",
+              "held-out scores", "selected", "unexplained", "rest innovation rms (m/s) before -> after", "closed-loop end error (m)"]
+    return table(header, rows)
+
+
+def generate(ctx):
+    ctx.region = "diagnosis-run-sim"
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "odometry", "-p", "mems-sim"])
+    ctx.run(["rm", "-rf", DIR])  # a fresh private directory: no stale or planted files
+    ctx.run(["mkdir", "-m", "700", DIR])
+    identity = identity_calibration()
+    identity_path = f"{DIR}/identity.toml"
+    if not ctx.dry:
+        Path(identity_path).write_text(identity)
+    sim = simulated(ctx, identity_path, identity)
+    real = corpus(ctx, identity_path)
+    ctx.run(["rm", "-rf", DIR])
+    if ctx.dry:
+        return {}
+    return {"diagnosis-run-sim": sim, "diagnosis-run-corpus": real}
+
+
+SECTIONS = [Section("diagnosis-run", "diagnosis.md", ["diagnosis-run-sim", "diagnosis-run-corpus"], "3 min", generate)]

@@ -1,0 +1,198 @@
+//! `mems-odometry diagnose RUN`: the residual loop on a run (`odometry::diagnose`). It runs
+//! `mems-odometry offline` on the recording (this executable, with `--out` to a private
+//! directory, so that the run is exactly what `offline` gives), reads back its corrected
+//! samples and states, diagnoses them, writes the selected effects into a copy of the
+//! calibration file and reruns with it, then prints the error before and after: the rest
+//! innovation rms always (the filter's velocity just before each rest's first zero-velocity
+//! update, m/s), the end error where the end is known (`--end`, `--closed-loop`: the distance
+//! from the end displacement to it, m, navigation frame) and against a simulated recording's
+//! truth. The rerun confirms the selection when its rest innovation rms is no larger; one that
+//! does not is reported, and what the selection claimed to explain counts as unexplained.
+
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{Context, Result, anyhow, bail};
+use calibrate::calibfile::CalibrationFile;
+use nalgebra::Vector3;
+use odometry::diagnose::{self, Settings, evidence::Evidence};
+use serde_json::{Value, json};
+
+use crate::load::odometry_config;
+
+/// Options of `mems-odometry diagnose`.
+#[derive(clap::Args)]
+pub struct DiagnoseArgs {
+    /// Raw recording: canonical CSV, thesis CSV or MCAP (as `offline --input`).
+    run: PathBuf,
+    /// Calibration file (as `offline --calib`; default the identity at standard gravity).
+    #[arg(long)]
+    calib: Option<PathBuf>,
+    /// The run's true end point, m, in the navigation frame (origin and heading at alignment).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, conflicts_with = "closed_loop")]
+    end: Option<[f64; 3]>,
+    /// The run ends where it aligned (end point 0,0,0).
+    #[arg(long)]
+    closed_loop: bool,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
+    /// Further `mems-odometry offline` options for both runs (after `--`: `--profile arm`).
+    #[arg(last = true)]
+    offline: Vec<OsString>,
+}
+
+/// Parses `X,Y,Z` (m).
+fn parse_point(text: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!("{text:?}: three finite numbers X,Y,Z (m) expected")),
+    }
+}
+
+/// What one offline run gave.
+struct Run {
+    json: Value,
+    evidence: Evidence,
+}
+
+impl Run {
+    fn innovation_rms(&self) -> Option<f64> {
+        let v = &self.evidence.innovations_mps;
+        (!v.is_empty())
+            .then(|| (v.iter().map(|x| x.norm_squared()).sum::<f64>() / v.len() as f64).sqrt())
+    }
+
+    fn end_error(&self, end: Option<Vector3<f64>>) -> Option<f64> {
+        let p = self.json["end_displacement_m"].as_array()?;
+        let p = Vector3::from_fn(|i, _| p[i].as_f64().unwrap_or(f64::NAN));
+        end.map(|e| (p - e).norm())
+    }
+
+    fn truth_error(&self) -> Option<f64> {
+        let e = self.json["truth_error_m"].as_array()?;
+        Some(
+            e.iter()
+                .filter_map(Value::as_f64)
+                .map(|x| x * x)
+                .sum::<f64>()
+                .sqrt(),
+        )
+    }
+
+    fn figures(&self, end: Option<Vector3<f64>>) -> Value {
+        json!({
+            "rest_innovation_rms_mps": self.innovation_rms(),
+            "end_error_m": self.end_error(end),
+            "truth_error_m": self.truth_error(),
+            "sigma_m": self.json["sigma_m"],
+        })
+    }
+}
+
+/// Runs `mems-odometry offline` on `args.run` with `calib` (none: the identity), reading its
+/// `--out` recording back.
+fn offline(
+    args: &DiagnoseArgs,
+    calib: Option<&Path>,
+    dir: &Path,
+    name: &str,
+    config: &odometry::config::OdometryConfig,
+) -> Result<Run> {
+    let out = dir.join(format!("{name}.mcap"));
+    let mut cmd = Command::new(std::env::current_exe()?);
+    cmd.arg("offline")
+        .arg("--input")
+        .arg(&args.run)
+        .arg("--json")
+        .arg("--out")
+        .arg(&out);
+    if let Some(c) = calib {
+        cmd.arg("--calib").arg(c);
+    }
+    cmd.args(&args.offline);
+    let output = cmd.output().context("cannot run mems-odometry offline")?;
+    if !output.status.success() {
+        // Its error is its last line (notes come first).
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        let last = stderr
+            .lines()
+            .rev()
+            .find(|l| !l.trim().is_empty())
+            .unwrap_or("");
+        bail!(
+            "mems-odometry offline on {} ({name} run) failed ({}): {}",
+            args.run.display(),
+            output.status,
+            last.trim_start_matches("mems-odometry: error: ")
+        );
+    }
+    let json: Value = serde_json::from_slice(&output.stdout)
+        .with_context(|| format!("{name} run: offline printed no JSON"))?;
+    let contents = recording::mcap::read_all(&out)?;
+    let evidence = Evidence::gather(
+        &contents.corrected,
+        &contents.odometry,
+        &config.gyro_correction,
+    );
+    Ok(Run { json, evidence })
+}
+
+/// Runs the diagnosis and prints it.
+pub fn run(args: DiagnoseArgs) -> Result<()> {
+    let file = match &args.calib {
+        Some(p) => CalibrationFile::load(p).context("cannot load calibration")?,
+        None => CalibrationFile::identity(ipc_types::units::STANDARD_GRAVITY_MPS2),
+    };
+    let end = match (&args.end, args.closed_loop) {
+        (Some(e), _) => Some(Vector3::from(*e)),
+        (None, true) => Some(Vector3::zeros()),
+        (None, false) => None,
+    };
+    let dir = mems_files::private_dir("mems-diagnose")?;
+    let config = odometry_config(&file);
+    let before = offline(&args, args.calib.as_deref(), dir.path(), "before", &config)?;
+    let t_ref = file.temperature.reference_c.unwrap_or(f64::NAN);
+    let d = diagnose::diagnose(&before.evidence, &config, t_ref, &Settings::default());
+    let after = if d.selected.is_empty() {
+        None
+    } else {
+        let corrected = diagnose::correct::apply(&file, &d.effects(), d.t_ref_c);
+        let path = dir.path().join("corrected.toml");
+        corrected
+            .save(&path)
+            .map_err(|e| anyhow!("cannot write the corrected calibration: {e}"))?;
+        let config = odometry_config(&corrected);
+        let run = offline(&args, Some(&path), dir.path(), "after", &config)?;
+        let again = diagnose::diagnose(&run.evidence, &config, d.t_ref_c, &Settings::default());
+        Some((run, again))
+    };
+    // The rerun confirms the selection when the rest innovations do not grow.
+    let confirmed = after.as_ref().map(|(r, _)| {
+        let (b, a) = (before.innovation_rms(), r.innovation_rms());
+        a.zip(b).is_none_or(|(a, b)| a <= b)
+    });
+    let report = json!({
+        "input": args.run,
+        "before": before.figures(end),
+        "diagnosis": d,
+        "confirmed": confirmed,
+        "unexplained": d.unexplained || confirmed == Some(false),
+        "after": after.as_ref().map(|(r, again)| json!({
+            "figures": r.figures(end),
+            "magnitude_rms_mps2": again.magnitude.rms_before,
+            "tilt_rms_rad": again.tilt.rms_before,
+        })),
+    });
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", crate::diagnose_text::text(&args.run, &d, &report));
+    }
+    Ok(())
+}

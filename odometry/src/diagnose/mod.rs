@@ -1,0 +1,344 @@
+//! The residual loop on an odometry run (`mems-odometry diagnose`): from the run's rests
+//! ([`evidence`]) it forms residuals the model should leave at its noise ([`rows`]: each
+//! rest's specific-force magnitude against gravity, each motion's tilt from one rest to the
+//! next against what the gyro carried), tests candidate effects the model lacks on them
+//! ([`fit`]: held-out chi-square gain), selects what the data support, and says when what
+//! remains still exceeds the noise and what the model carries ("unexplained"). The selection
+//! is written into a calibration file ([`correct`]) for a rerun.
+//!
+//! Selection, as `mems-calibrate diagnose` selects (docs/diagnosis.md): forward, one candidate
+//! at a time, the one with the largest held-out gain over the current set, if that gain is
+//! above [`Settings::threshold`] (12 white-noise units: about 1e-3 false alarms per
+//! candidate of three parameters) and its fitted effect exceeds what the odometry already
+//! carries for it ([`Settings::beyond_model`] times the configuration's 1-sigma on some axis,
+//! and as many of its own 1-sigma) and is plausible for a real part (within the bounds
+//! `calibrate::calibfile::plausibility::PLAUSIBLE` puts on a calibration file: a fit beyond
+//! them, such as a gyro scale of -100 %, is a candidate explaining something else). "Unexplained": the rows' chi-square after the selection,
+//! with each row's noise and the model's carried 1-sigma added in quadrature, has a p-value
+//! below [`Settings::unexplained_p`].
+
+pub mod correct;
+pub mod evidence;
+pub mod fit;
+pub mod rows;
+
+use nalgebra::Vector3;
+use serde::Serialize;
+use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+use crate::config::OdometryConfig;
+use evidence::Evidence;
+use rows::{Candidate, Kind, Row};
+
+/// How the diagnosis decides.
+#[derive(Debug, Clone, Copy)]
+pub struct Settings {
+    /// Held-out chi-square gain a candidate needs.
+    pub threshold: f64,
+    /// How many of the model's carried 1-sigma (and of its own) an effect must reach.
+    pub beyond_model: f64,
+    /// p-value below which what remains is unexplained.
+    pub unexplained_p: f64,
+    /// Temperature span across the rests the temperature candidate needs, degC.
+    pub min_temp_span_c: f64,
+    /// Rows per parameter a candidate needs once a rest (or motion) is held out: 7 rests
+    /// for an accelerometer candidate (one row each), 4 motions for the gyro's (two each).
+    pub min_rows_per_param: usize,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            threshold: 12.0,
+            beyond_model: 3.0,
+            unexplained_p: 1e-3,
+            min_temp_span_c: 1.0,
+            min_rows_per_param: 2,
+        }
+    }
+}
+
+/// One candidate's test in the first round (against no correction).
+#[derive(Debug, Clone, Serialize)]
+pub struct Score {
+    /// The candidate.
+    pub candidate: Candidate,
+    /// Why it could not be tested, if so.
+    pub untestable: Option<String>,
+    /// Held-out chi-square gain.
+    pub gain: f64,
+    /// Its fitted parameters alone (unit: [`Candidate::unit`]).
+    pub params: [f64; 3],
+    /// Their 1-sigma.
+    pub sigma: [f64; 3],
+    /// Whether the effect exceeds what the model carries.
+    pub beyond_model: bool,
+    /// Whether its parameters are plausible for a real part.
+    pub plausible: bool,
+}
+
+/// Residual statistics of one kind of row.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct Residuals {
+    /// Rows.
+    pub rows: usize,
+    /// Rms before any correction (m/s^2 or rad).
+    pub rms_before: f64,
+    /// Rms after the selection's fit.
+    pub rms_after: f64,
+    /// Rms the rows' noise predicts.
+    pub rms_noise: f64,
+}
+
+/// The diagnosis of a run.
+#[derive(Debug, Clone, Serialize)]
+pub struct Diagnosis {
+    /// Rests used.
+    pub rests: usize,
+    /// Motions between them, and those left out because the gyro clipped in them.
+    pub motions: usize,
+    /// Motions with clipped gyro samples (left out of the tilt rows).
+    pub motions_gyro_clipped: usize,
+    /// Samples with any axis clipped.
+    pub clipped_samples: usize,
+    /// Reference temperature of the temperature candidate, degC (NaN without temperatures).
+    pub t_ref_c: f64,
+    /// First-round scores.
+    pub scores: Vec<Score>,
+    /// Selected effects and their parameters from the joint fit.
+    pub selected: Vec<(Candidate, [f64; 3])>,
+    /// Specific-force magnitude rows (m/s^2).
+    pub magnitude: Residuals,
+    /// Tilt rows (rad).
+    pub tilt: Residuals,
+    /// Chi-square of what remains (noise and carried 1-sigma), its degrees of freedom and
+    /// p-value.
+    pub chi2: f64,
+    /// Degrees of freedom of `chi2`.
+    pub dof: usize,
+    /// p-value of `chi2`.
+    pub p: f64,
+    /// What remains exceeds noise and the model: no candidate explains it.
+    pub unexplained: bool,
+}
+
+impl Diagnosis {
+    /// The selected effects as [`correct::apply`] takes them.
+    pub fn effects(&self) -> Vec<(Candidate, Vector3<f64>)> {
+        self.selected
+            .iter()
+            .map(|(c, p)| (*c, Vector3::from(*p)))
+            .collect()
+    }
+}
+
+fn testable(c: Candidate, rows: &[Row], ev: &Evidence, s: &Settings) -> Option<String> {
+    let groups = |kind| {
+        let mut g: Vec<usize> = rows
+            .iter()
+            .filter(|r| r.kind == kind)
+            .map(|r| r.group)
+            .collect();
+        g.dedup();
+        g.len()
+    };
+    // Groups needed so that, one held out, the rest give `min_rows_per_param` rows per
+    // parameter (three), with `per_group` rows each.
+    let needed = |per_group: usize| (3 * s.min_rows_per_param).div_ceil(per_group) + 1;
+    let span = temp_span(ev);
+    match c {
+        Candidate::GyroScale if groups(Kind::Tilt) < needed(2) => Some(format!(
+            "{} motions between rests with the gyro unclipped (needs {})",
+            groups(Kind::Tilt),
+            needed(2)
+        )),
+        Candidate::GyroScale => None,
+        _ if groups(Kind::Magnitude) < needed(1) => Some(format!(
+            "{} rests (needs {})",
+            groups(Kind::Magnitude),
+            needed(1)
+        )),
+        Candidate::AccelTempBias if span.is_nan() || span < s.min_temp_span_c => Some(format!(
+            "the rests' temperatures span {:.2} degC (needs {})",
+            span.max(0.0),
+            s.min_temp_span_c
+        )),
+        _ => None,
+    }
+}
+
+/// The span of the rests' temperatures, degC (NaN or negative without any).
+fn temp_span(ev: &Evidence) -> f64 {
+    let temps = ev.rests.iter().map(|r| r.temp_c).filter(|t| t.is_finite());
+    temps.clone().fold(f64::NEG_INFINITY, f64::max) - temps.fold(f64::INFINITY, f64::min)
+}
+
+/// The model's carried 1-sigma for each parameter of `c` (zero: the model has no such term).
+fn carried(c: Candidate, config: &OdometryConfig) -> [f64; 3] {
+    match c {
+        // The residual scale and misalignment read as a bias of g times it under gravity.
+        Candidate::AccelBias => config
+            .accel_bias_sigma_mps2
+            .map(|b| b.hypot(config.gravity_mps2 * config.accel_residual_scale)),
+        Candidate::AccelScale => [config.accel_residual_scale; 3],
+        Candidate::AccelTempBias => [0.0; 3],
+        Candidate::GyroScale => std::array::from_fn(|i| config.gyro_correction_sigma[(i, i)]),
+    }
+}
+
+/// Whether the fitted parameters of the candidate at `slot` in `f` are plausible for a real
+/// part (`PLAUSIBLE`: scale errors, bias; a temperature bias over `span_c` as a bias).
+fn plausible(f: &fit::Fit, slot: usize, config: &OdometryConfig, span_c: f64) -> bool {
+    let bounds = calibrate::calibfile::plausibility::PLAUSIBLE;
+    let bias = bounds.accel_bias_g * config.gravity_mps2;
+    let limit = match f.candidates[slot] {
+        Candidate::AccelBias => bias,
+        Candidate::AccelScale | Candidate::GyroScale => bounds.scale_error,
+        Candidate::AccelTempBias => bias / span_c.max(1.0),
+    };
+    (0..3).all(|i| f.theta[3 * slot + i].abs() <= limit)
+}
+
+/// Whether the fitted parameters of the candidate at `slot` in `f` exceed the model.
+fn beyond(f: &fit::Fit, slot: usize, config: &OdometryConfig, s: &Settings) -> bool {
+    let floor = carried(f.candidates[slot], config);
+    (0..3).any(|i| {
+        let (p, sd) = (f.theta[3 * slot + i].abs(), f.sigma[3 * slot + i]);
+        p > s.beyond_model * floor[i] && p > s.beyond_model * sd
+    })
+}
+
+fn params(f: &fit::Fit, slot: usize) -> ([f64; 3], [f64; 3]) {
+    (
+        std::array::from_fn(|i| f.theta[3 * slot + i]),
+        std::array::from_fn(|i| f.sigma[3 * slot + i]),
+    )
+}
+
+fn residuals(rows: &[Row], after: &[f64], kind: Kind) -> Residuals {
+    let idx: Vec<usize> = (0..rows.len()).filter(|&i| rows[i].kind == kind).collect();
+    let rms = |f: &dyn Fn(usize) -> f64| {
+        if idx.is_empty() {
+            return 0.0;
+        }
+        (idx.iter().map(|&i| f(i).powi(2)).sum::<f64>() / idx.len() as f64).sqrt()
+    };
+    Residuals {
+        rows: idx.len(),
+        rms_before: rms(&|i| rows[i].r),
+        rms_after: rms(&|i| after[i]),
+        rms_noise: rms(&|i| rows[i].sigma),
+    }
+}
+
+/// Diagnoses the run whose evidence is `ev`, under configuration `config`; `t_ref_c` is the
+/// temperature candidate's reference (NaN: the first rest's).
+pub fn diagnose(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64, s: &Settings) -> Diagnosis {
+    let t_ref_c = if t_ref_c.is_finite() {
+        t_ref_c
+    } else {
+        ev.rests.first().map_or(f64::NAN, |r| r.temp_c)
+    };
+    let rows: Vec<Row> = rows::rows(ev, config, t_ref_c)
+        .into_iter()
+        .filter(|r| r.sigma > 0.0 && r.r.is_finite())
+        .collect();
+    let span = temp_span(ev);
+    let open: Vec<Candidate> = Candidate::ALL
+        .into_iter()
+        .filter(|&c| testable(c, &rows, ev, s).is_none())
+        .collect();
+    let scores = Candidate::ALL
+        .iter()
+        .map(|&c| {
+            let untestable = testable(c, &rows, ev, s);
+            let f = untestable
+                .is_none()
+                .then(|| fit::fit(&rows, &[c]))
+                .flatten();
+            let (params, sigma) = f.as_ref().map_or(([0.0; 3], [0.0; 3]), |f| params(f, 0));
+            Score {
+                candidate: c,
+                untestable,
+                gain: f.as_ref().map_or(0.0, |f| f.gain),
+                params,
+                sigma,
+                beyond_model: f.as_ref().is_some_and(|f| beyond(f, 0, config, s)),
+                plausible: f.as_ref().is_some_and(|f| plausible(f, 0, config, span)),
+            }
+        })
+        .collect();
+    let (chosen, fitted) = select(&rows, &open, config, s, span);
+    let after = fitted.as_ref().map_or_else(
+        || rows.iter().map(|r| r.r).collect(),
+        |f| f.residuals.clone(),
+    );
+    let chi2: f64 = rows
+        .iter()
+        .zip(&after)
+        .map(|(r, e)| e * e / (r.sigma.powi(2) + r.floor.powi(2)))
+        .sum();
+    let dof = rows.len().saturating_sub(3 * chosen.len()).max(1);
+    let p = ChiSquared::new(dof as f64).map_or(1.0, |d| d.sf(chi2));
+    let selected = match &fitted {
+        Some(f) => (0..chosen.len())
+            .map(|k| (chosen[k], params(f, k).0))
+            .collect(),
+        None => Vec::new(),
+    };
+    Diagnosis {
+        rests: ev.rests.len(),
+        motions: ev.intervals.len(),
+        motions_gyro_clipped: ev.intervals.iter().filter(|i| i.gyro_clipped > 0).count(),
+        clipped_samples: ev
+            .samples
+            .iter()
+            .filter(|x| x.raw_flags & ipc_types::raw_flags::SATURATED_AXES != 0)
+            .count(),
+        t_ref_c,
+        scores,
+        selected,
+        magnitude: residuals(&rows, &after, Kind::Magnitude),
+        tilt: residuals(&rows, &after, Kind::Tilt),
+        chi2,
+        dof,
+        p,
+        unexplained: p < s.unexplained_p,
+    }
+}
+
+/// Forward selection among `open`: the chosen candidates and their joint fit.
+fn select(
+    rows: &[Row],
+    open: &[Candidate],
+    config: &OdometryConfig,
+    s: &Settings,
+    span_c: f64,
+) -> (Vec<Candidate>, Option<fit::Fit>) {
+    let mut chosen: Vec<Candidate> = Vec::new();
+    let mut current: Option<fit::Fit> = None;
+    loop {
+        let base = current.as_ref().map_or(0.0, |f| f.gain);
+        let best = open
+            .iter()
+            .filter(|c| !chosen.contains(c))
+            .filter_map(|&c| {
+                let mut set = chosen.clone();
+                set.push(c);
+                let f = fit::fit(rows, &set)?;
+                let slot = set.len() - 1;
+                let ok = f.gain - base > s.threshold
+                    && beyond(&f, slot, config, s)
+                    && plausible(&f, slot, config, span_c);
+                ok.then_some((c, f))
+            })
+            .max_by(|a, b| a.1.gain.total_cmp(&b.1.gain));
+        match best {
+            Some((c, f)) => {
+                chosen.push(c);
+                current = Some(f);
+            }
+            None => return (chosen, current),
+        }
+    }
+}

@@ -1,0 +1,180 @@
+//! The residuals the diagnosis explains, one row each, with their noise and what every
+//! candidate effect predicts for them per unit of its parameters.
+//!
+//! - Magnitude rows, one per rest: `r = |f| - g` (m/s^2), the specific force's magnitude
+//!   against local gravity. With `u = f / |f|`, an accelerometer bias `b` (m/s^2, sensor axes)
+//!   adds `u . b`, a scale error `s` (fraction per axis, `f = (I + diag(s)) f_true`) adds
+//!   `g sum_i s_i u_i^2`, and a bias linear in temperature `c` (m/s^2/degC) adds
+//!   `(T - T_ref) u . c`.
+//! - Tilt rows, two per motion between rests: the gravity direction measured at the second
+//!   rest against the one the gyro carried from the first, `e = u_carried x u_measured` (rad,
+//!   sensor frame at the second rest), on two axes across gravity (about gravity a rest says
+//!   nothing). A gyro scale error, corrected by `omega_true = (I + diag(k)) omega` (`k`
+//!   fraction per axis), leaves `-J k` in it, `J` its numerical derivative in `k`.
+//!
+//! Each row's `sigma` is what the samples' own noise predicts (white and low-pass
+//! correlated, `evidence::mean_variance`; for tilt also the gyro's angle random walk and the
+//! uncertainty of its bias, taken from the longest rest, over the motion); `floor` what the odometry's model already carries for
+//! it (the configuration's accelerometer bias and residual scale 1-sigma, the gyro correction's
+//! 1-sigma times the angle turned).
+
+use nalgebra::Vector3;
+
+use super::evidence::Evidence;
+use crate::config::OdometryConfig;
+
+/// A candidate effect the odometry's model lacks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Candidate {
+    /// Accelerometer bias, m/s^2 per sensor axis.
+    AccelBias,
+    /// Accelerometer scale error, fraction per sensor axis.
+    AccelScale,
+    /// Accelerometer bias linear in die temperature, m/s^2/degC per sensor axis.
+    AccelTempBias,
+    /// Gyro scale error, fraction per sensor axis.
+    GyroScale,
+}
+
+impl Candidate {
+    /// Every candidate, in report order.
+    pub const ALL: [Candidate; 4] = [
+        Candidate::AccelBias,
+        Candidate::AccelScale,
+        Candidate::AccelTempBias,
+        Candidate::GyroScale,
+    ];
+
+    /// The candidate's name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::AccelBias => "accel_bias",
+            Self::AccelScale => "accel_scale",
+            Self::AccelTempBias => "accel_temp_bias",
+            Self::GyroScale => "gyro_scale",
+        }
+    }
+
+    /// The unit of its parameters.
+    pub fn unit(self) -> &'static str {
+        match self {
+            Self::AccelBias => "m/s^2",
+            Self::AccelScale | Self::GyroScale => "",
+            Self::AccelTempBias => "m/s^2/degC",
+        }
+    }
+}
+
+/// Rows of one kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// A rest's specific-force magnitude.
+    Magnitude,
+    /// A motion's tilt.
+    Tilt,
+}
+
+/// One residual.
+#[derive(Debug, Clone)]
+pub struct Row {
+    /// What it measures.
+    pub kind: Kind,
+    /// Rows that are left out together (one rest, one motion).
+    pub group: usize,
+    /// The residual (m/s^2 or rad).
+    pub r: f64,
+    /// Its 1-sigma from the samples' noise.
+    pub sigma: f64,
+    /// Its 1-sigma from what the model already carries.
+    pub floor: f64,
+    /// Per candidate in [`Candidate::ALL`] order, the residual each of its three parameters
+    /// adds per unit (zero where the candidate does not act on the row).
+    pub design: [Vector3<f64>; 4],
+}
+
+/// Step of the numerical derivative of a tilt row in a gyro scale parameter.
+const GYRO_SCALE_STEP: f64 = 1e-3;
+
+/// The rows of `evidence` for a run with configuration `config`; `t_ref_c` is the reference
+/// temperature of the temperature candidate. Motions during which the gyro clipped are left
+/// out (their rotation was not measured).
+pub fn rows(evidence: &Evidence, config: &OdometryConfig, t_ref_c: f64) -> Vec<Row> {
+    let g = config.gravity_mps2;
+    let mut out = Vec::new();
+    for (k, rest) in evidence.rests.iter().enumerate() {
+        let f = rest.accel_mps2;
+        let u = f / f.norm();
+        let var = u.component_mul(&u).dot(&rest.accel_mean_var);
+        let bias = Vector3::from(config.accel_bias_sigma_mps2);
+        let floor2 = u.component_mul(&u).dot(&bias.component_mul(&bias))
+            + (g * config.accel_residual_scale).powi(2);
+        let dt = if rest.temp_c.is_finite() {
+            rest.temp_c - t_ref_c
+        } else {
+            0.0
+        };
+        out.push(Row {
+            kind: Kind::Magnitude,
+            group: k,
+            r: f.norm() - g,
+            sigma: var.sqrt(),
+            floor: floor2.sqrt(),
+            design: [u, u.component_mul(&u) * g, u * dt, Vector3::zeros()],
+        });
+    }
+    let groups = evidence.rests.len();
+    for (j, interval) in evidence.intervals.iter().enumerate() {
+        if interval.gyro_clipped > 0 || interval.samples.len() < 2 {
+            continue;
+        }
+        let (a, b) = (
+            &evidence.rests[interval.from],
+            &evidence.rests[interval.from + 1],
+        );
+        let tilt = |k: &Vector3<f64>| {
+            let q = evidence.carried(interval, k);
+            let carried = q.inverse_transform_vector(&a.accel_mps2.normalize());
+            carried.cross(&b.accel_mps2.normalize())
+        };
+        let e0 = tilt(&Vector3::zeros());
+        let u = b.accel_mps2.normalize();
+        let across1 = u
+            .cross(&Vector3::x())
+            .try_normalize(1e-3)
+            .unwrap_or_else(|| u.cross(&Vector3::y()).normalize());
+        let across2 = u.cross(&across1);
+        let derivative: Vec<Vector3<f64>> = (0..3)
+            .map(|i| {
+                let mut k = Vector3::zeros();
+                k[i] = GYRO_SCALE_STEP;
+                (tilt(&k) - e0) / GYRO_SCALE_STEP
+            })
+            .collect();
+        let duration = evidence.samples[interval.samples.end - 1].t_s
+            - evidence.samples[interval.samples.start].t_s;
+        let angle = evidence.carried(interval, &Vector3::zeros()).angle();
+        let noise = &config.noise;
+        let var = (a.accel_mean_var.sum() + b.accel_mean_var.sum()) / (3.0 * g * g)
+            + noise.gyro_noise_density.powi(2) * duration
+            + evidence.gyro_bias_var.sum() / 3.0 * duration * duration;
+        let c = &config.gyro_correction_sigma;
+        let scale_sigma = c[(0, 0)].max(c[(1, 1)]).max(c[(2, 2)]);
+        for axis in [across1, across2] {
+            out.push(Row {
+                kind: Kind::Tilt,
+                group: groups + j,
+                r: e0.dot(&axis),
+                sigma: var.sqrt(),
+                floor: scale_sigma * angle,
+                design: [
+                    Vector3::zeros(),
+                    Vector3::zeros(),
+                    Vector3::zeros(),
+                    Vector3::from_fn(|i, _| -derivative[i].dot(&axis)),
+                ],
+            });
+        }
+    }
+    out
+}

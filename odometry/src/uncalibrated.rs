@@ -1,0 +1,224 @@
+//! An accelerometer whose rest reads gravity off: the prior the filter aligns with, and what it
+//! estimated of the error.
+//!
+//! A calibrated part reads local gravity's magnitude within a few tenths of a percent at rest,
+//! and the filter starts from the calibration's small bias and scale uncertainty
+//! ([`crate::config::OdometryConfig::accel_bias_sigma_mps2`], `accel_residual_scale`). An
+//! uncalibrated one (cheap MPU-6050 boards read |g| 2-4 % low; the thesis's uncalibrated
+//! MPU-9250 had 0.1-0.2 g offsets) contradicts that prior at its first rest: there the measured
+//! specific force `f` (sensor frame, m/s^2) gives `|f| - g`, the error *along gravity*, and
+//! nothing else. When `| |f| / g - 1 |` exceeds [`crate::config::UncalibratedAccel::trigger`], or the
+//! calibration stage flagged the samples `GRAVITY_OFF` (its learned rest read gravity that far
+//! off; its bias refinement then removes the error along gravity before the odometry sees it),
+//! the filter:
+//! - takes that error as an accelerometer bias along the measured up direction (the alignment's
+//!   vertical bias, `eskf::align`: the same as today, only larger). At one attitude a bias and a
+//!   scale error along gravity read the same; which it was shows only when the sensor turns;
+//! - widens the prior of the bias across gravity to [`crate::config::UncalibratedAccel::bias_sigma_mps2`] per
+//!   axis (it is indistinguishable from tilt at that rest, and the alignment correlates the two
+//!   exactly), so that later rests at other attitudes (a foot's or a hand's rests, a turn between
+//!   zero-velocity updates) estimate it instead of forcing it into the attitude;
+//! - carries the sensitivity error it cannot estimate (scale and cross-axis, the filter has no
+//!   state for them) as consider parameters ([`crate::eskf::ConsiderModel`]) of
+//!   [`crate::config::UncalibratedAccel::scale_sigma`] and [`crate::config::UncalibratedAccel::cross_axis_sigma`], so the
+//!   reported 1-sigma holds them.
+//!
+//! A part within the trigger keeps the calibrated prior unchanged. What the filter holds of the
+//! bias at the end ([`AccelEstimate`]) goes to the offline JSON and the logs.
+//!
+//! The bias converges over the first rests and what the track did before is lost, so
+//! `mems-odometry offline` runs such a part twice: the second pass with the first pass's bias
+//! removed from the calibration ([`remove_bias`]) and the same wide prior around it
+//! ([`crate::config::UncalibratedAccel::removed_bias_mps2`]).
+
+use calibrate::calibfile::CalibrationFile;
+use nalgebra::{Matrix3, Vector3};
+
+use crate::config::OdometryConfig;
+use crate::eskf::Eskf;
+
+/// The accelerometer prior the filter aligns with.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AccelPrior {
+    /// 1-sigma of the bias per sensor axis before alignment, m/s^2 (the alignment removes the
+    /// part along gravity, which it measures).
+    pub bias_sigma_mps2: Vector3<f64>,
+    /// 1-sigma of each entry of the accelerometer's residual error matrix, fraction.
+    pub consider: Matrix3<f64>,
+    /// `|f| / g - 1` at the alignment rest.
+    pub gravity_error: f64,
+    /// Whether the rest read gravity beyond the trigger or was flagged `GRAVITY_OFF` (the
+    /// uncalibrated prior).
+    pub uncalibrated: bool,
+    /// Whether the calibration stage flagged the rest `GRAVITY_OFF`.
+    pub flagged: bool,
+}
+
+impl AccelPrior {
+    /// The prior for a rest whose mean specific force is `f_mean` (m/s^2, sensor frame);
+    /// `gravity_off`: the calibration stage flagged the part (`corrected_flags::GRAVITY_OFF`),
+    /// whose bias refinement may already have brought `|f_mean|` to gravity.
+    pub fn at_rest(cfg: &OdometryConfig, f_mean: &Vector3<f64>, gravity_off: bool) -> Self {
+        let g = cfg.gravity_mps2;
+        let gravity_error = f_mean.norm() / g - 1.0;
+        let scale_as_bias = g * cfg.accel_residual_scale;
+        let calibrated = Vector3::from(cfg.accel_bias_sigma_mps2).map(|s| s.hypot(scale_as_bias));
+        let u = &cfg.uncalibrated;
+        let mut consider = Matrix3::repeat(u.cross_axis_sigma);
+        consider.fill_diagonal(u.scale_sigma);
+        let removed = u.removed_bias_mps2.is_some();
+        if !gravity_off && !removed && gravity_error.abs() <= u.trigger {
+            return Self {
+                bias_sigma_mps2: calibrated,
+                consider: Matrix3::repeat(cfg.accel_residual_scale),
+                gravity_error,
+                uncalibrated: false,
+                flagged: false,
+            };
+        }
+        Self {
+            bias_sigma_mps2: calibrated.map(|s| s.max(u.bias_sigma_mps2)),
+            consider,
+            gravity_error,
+            uncalibrated: true,
+            flagged: gravity_off,
+        }
+    }
+}
+
+/// What the filter holds of the accelerometer's error.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct AccelEstimate {
+    /// Whether the uncalibrated prior was used (see the module documentation).
+    pub uncalibrated: bool,
+    /// Whether the calibration stage flagged the part `GRAVITY_OFF` (its bias refinement then
+    /// removed the error along gravity before the alignment rest, `gravity_error` is what is
+    /// left of it).
+    pub flagged: bool,
+    /// `|f| / g - 1` at the alignment rest.
+    pub gravity_error: f64,
+    /// The bias estimate, m/s^2, sensor frame (with the bias an earlier pass removed).
+    pub bias_mps2: [f64; 3],
+    /// Whether an earlier pass estimated and removed most of it.
+    pub two_passes: bool,
+    /// Its 1-sigma, m/s^2.
+    pub bias_sigma_mps2: [f64; 3],
+    /// The 1-sigma of the sensitivity error carried in the position's 1-sigma, not estimated,
+    /// fraction (per axis).
+    pub scale_sigma: f64,
+}
+
+impl AccelEstimate {
+    /// The estimate of filter `kf` aligned with `prior`, with the bias `removed` before it
+    /// ([`crate::config::UncalibratedAccel::removed_bias_mps2`]) added back.
+    pub fn of(kf: &Eskf, prior: &AccelPrior, removed: Option<[f64; 3]>) -> Self {
+        let b = kf.x.b_a + Vector3::from(removed.unwrap_or_default());
+        let sigma = kf.accel_bias_sigma();
+        Self {
+            uncalibrated: prior.uncalibrated,
+            flagged: prior.flagged,
+            gravity_error: prior.gravity_error,
+            bias_mps2: [b.x, b.y, b.z],
+            two_passes: removed.is_some(),
+            bias_sigma_mps2: [sigma.x, sigma.y, sigma.z],
+            scale_sigma: prior.consider[(0, 0)],
+        }
+    }
+}
+
+impl std::fmt::Display for AccelEstimate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let b = &self.bias_mps2;
+        let s = &self.bias_sigma_mps2;
+        write!(
+            f,
+            "accelerometer bias ({:+.3}, {:+.3}, {:+.3}) +- ({:.3}, {:.3}, {:.3}) m/s^2 (sensor \
+             frame)",
+            b[0], b[1], b[2], s[0], s[1], s[2]
+        )?;
+        if self.two_passes {
+            write!(
+                f,
+                ", a first pass's estimate (removed from the samples) and this pass's"
+            )?;
+        }
+        write!(
+            f,
+            "; the alignment rest read gravity {:+.1} % off",
+            100.0 * self.gravity_error
+        )?;
+        if self.flagged {
+            write!(
+                f,
+                " after the calibration stage's refinement (its learned rest read gravity more \
+                 than {:.0} % off)",
+                100.0 * calibrate::zero_state::learn::CALIBRATED_GRAVITY_ERROR
+            )?;
+        }
+        if self.uncalibrated {
+            write!(
+                f,
+                ": uncalibrated, scale error of {:.0} % per axis carried in the 1-sigma",
+                100.0 * self.scale_sigma
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// `file` with the accelerometer bias `bias_mps2` (sensor frame, m/s^2, as the filter estimates
+/// it from the file's corrected samples) removed: the calibration stage corrects
+/// `a = g S^-1 (a' - b)`, so a corrected sample that reads `bias_mps2` too much is corrected
+/// with `b + S bias_mps2 / g` (g units, raw frame).
+pub fn remove_bias(file: &CalibrationFile, bias_mps2: &[f64; 3]) -> CalibrationFile {
+    let s = Matrix3::from_fn(|r, c| file.scale[r][c]);
+    let shift = s * Vector3::from(*bias_mps2) / file.gravity_mps2;
+    let mut out = file.clone();
+    for (b, d) in out.bias_g.iter_mut().zip(shift.iter()) {
+        *b += d;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_removed_bias_moves_the_raw_bias_through_the_scale() {
+        let mut file = CalibrationFile::identity(9.8);
+        file.scale[0][0] = 1.02;
+        file.bias_g = [0.01, 0.0, 0.0];
+        let out = remove_bias(&file, &[0.98, 0.49, -0.98]);
+        let want = [0.01 + 1.02 * 0.1, 0.05, -0.1];
+        for (b, w) in out.bias_g.iter().zip(want) {
+            assert!((b - w).abs() < 1e-12, "{:?}", out.bias_g);
+        }
+        assert_eq!(out.scale, file.scale);
+    }
+
+    #[test]
+    fn only_a_rest_beyond_the_trigger_or_flagged_gets_the_uncalibrated_prior() {
+        let cfg = OdometryConfig::mpu9250(9.8);
+        let calibrated = AccelPrior::at_rest(&cfg, &Vector3::new(0.0, 0.0, 9.8 * 1.015), false);
+        assert!(!calibrated.uncalibrated);
+        assert!(calibrated.bias_sigma_mps2.max() < 0.02);
+        assert_eq!(
+            calibrated.consider,
+            Matrix3::repeat(cfg.accel_residual_scale)
+        );
+        let off = AccelPrior::at_rest(&cfg, &Vector3::new(0.0, 0.0, 9.8 * 1.025), false);
+        assert!(off.uncalibrated && !off.flagged);
+        assert!(off.bias_sigma_mps2.min() >= cfg.uncalibrated.bias_sigma_mps2);
+        assert_eq!(off.consider[(0, 0)], cfg.uncalibrated.scale_sigma);
+        assert_eq!(off.consider[(0, 1)], cfg.uncalibrated.cross_axis_sigma);
+        let flagged = AccelPrior::at_rest(&cfg, &Vector3::new(0.0, 0.0, 9.8), true);
+        assert!(flagged.uncalibrated && flagged.flagged);
+        let mut second = cfg;
+        second.uncalibrated.removed_bias_mps2 = Some([1.0, 0.0, 0.0]);
+        let rerun = AccelPrior::at_rest(&second, &Vector3::new(0.0, 0.0, 9.8), false);
+        assert!(rerun.uncalibrated);
+        assert_eq!(rerun.bias_sigma_mps2, off.bias_sigma_mps2);
+        assert_eq!(rerun.consider, off.consider);
+    }
+}

@@ -1,0 +1,223 @@
+//! An uncalibrated accelerometer in the field: a simulated part whose accelerometer reads 4 %
+//! high with a 0.15 g bias on every axis (at rest it reads gravity 8-21 % off, where a
+//! calibrated part is within 0.5 %), walked on a foot and driven on a robot, run through
+//! `mems-odometry offline` without a calibration file, as the same walk and drive of a
+//! calibrated part are. Both give a position (the drive was refused before: "mean specific
+//! force 11.85 m/s^2 is not local gravity"), inside the 68 % radius of their 1-sigma, and the
+//! run says what it estimated of the accelerometer (`accel_error` in the JSON: uncalibrated,
+//! with a bias and its sigma), which the calibrated part's does not.
+//!
+//! The walk (closed loops) ends within 1.5x of the calibrated part's error (at least 0.2 m:
+//! below that the calibrated error is luck). The drive cannot: a level robot rests at one
+//! attitude, where a sensitivity error and a bias along gravity read the same, and a 4 %
+//! sensitivity error on every axis makes every leg 4 % long, which no rest shows (the track
+//! is the true one scaled). Its bound adds 4 % of the distance driven to the walk's.
+//!
+//! Live, the real processes without a calibration file (`mems-acquire`'s simulated datasheet
+//! part, whose rest reads gravity about 6 % off): `mems-calibrate serve` learns the rest, flags
+//! every sample after it `GRAVITY_OFF` and removes the error along gravity, and `mems-odometry
+//! serve` reports the bias it estimated as an uncalibrated part's in its summary.
+
+use integration_tests::{Proc, path_arg, run_ok, unique_namespace};
+use ipc_types::{CorrectedImuSample, corrected_flags, service};
+use std::path::Path;
+use std::time::Duration;
+
+/// Smallest error the uncalibrated run is compared against, m.
+const FLOOR_M: f64 = 0.2;
+/// Radius holding 68 % of a circular 2-D Gaussian, per-axis sigmas (bench.py's `R68_FACTOR`).
+const R68_FACTOR: f64 = 1.515;
+
+/// The calibrated preset's error model with the accelerometer's bias and scale of a cheap,
+/// uncalibrated part, written to `dir` for `mems-sim --model`.
+fn uncalibrated_model(dir: &Path) -> std::path::PathBuf {
+    let text = run_ok("mems-sim", &["print-model", "--preset", "calibrated"]);
+    let mut model: toml::Table = text.parse().unwrap();
+    let accel = model["accel"].as_table_mut().unwrap();
+    let triple = |v: f64| toml::Value::Array(vec![toml::Value::Float(v); 3]);
+    accel.insert("bias".into(), triple(0.15));
+    accel.insert("scale".into(), triple(0.04));
+    let path = dir.join("uncalibrated.toml");
+    std::fs::write(&path, toml::to_string(&model).unwrap()).unwrap();
+    path
+}
+
+/// Horizontal end error and per-axis rms horizontal 1-sigma (m) of an offline run, its
+/// `accel_error` and the distance travelled (truth, m).
+fn run(input: &Path) -> (f64, f64, serde_json::Value, f64) {
+    let out = run_ok(
+        "mems-odometry",
+        &["offline", "--input", path_arg(input), "--json"],
+    );
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    let e = |i: usize| v["truth_error_m"][i].as_f64().unwrap();
+    let s = |i: usize| v["sigma_m"][i].as_f64().unwrap();
+    let sigma = ((s(0) * s(0) + s(1) * s(1)) / 2.0).sqrt();
+    let distance = v["truth_distance_m"].as_f64().unwrap();
+    (e(0).hypot(e(1)), sigma, v["accel_error"].clone(), distance)
+}
+
+/// Simulates `scenario` (mems-sim arguments) for the calibrated part and the uncalibrated one
+/// and checks the uncalibrated run against the calibrated one (see the module documentation).
+/// `unobservable` is the share of the distance the error may grow by beyond 1.5x the calibrated
+/// part's error.
+fn compare(dir: &Path, name: &str, scenario: &[&str], unobservable: f64) {
+    let model = uncalibrated_model(dir);
+    let clean = dir.join(format!("{name}-clean.csv"));
+    let uncal = dir.join(format!("{name}-uncalibrated.csv"));
+    let sim = |out: &Path, extra: &[&str]| {
+        let mut args = scenario.to_vec();
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", path_arg(out)]);
+        run_ok("mems-sim", &args);
+    };
+    sim(&clean, &[]);
+    sim(&uncal, &["--model", path_arg(&model)]);
+    let (clean_error, clean_sigma, clean_accel, _) = run(&clean);
+    let (error, sigma, accel, distance) = run(&uncal);
+    eprintln!(
+        "{name}: calibrated {clean_error:.3} m (1-sigma {clean_sigma:.3} m), uncalibrated \
+         {error:.3} m (1-sigma {sigma:.3} m); {accel}"
+    );
+    assert_eq!(clean_accel["uncalibrated"], false, "{clean_accel}");
+    assert_eq!(accel["uncalibrated"], true, "{accel}");
+    let bias_sigma = accel["bias_sigma_mps2"].as_array().unwrap();
+    assert!(
+        bias_sigma.iter().all(|s| s.as_f64().unwrap() > 0.0),
+        "{accel}"
+    );
+    let bound = 1.5 * clean_error.max(FLOOR_M) + unobservable * distance;
+    assert!(
+        error <= bound,
+        "{name}: uncalibrated error {error:.3} m against {clean_error:.3} m calibrated \
+         (at most {bound:.3} m)"
+    );
+    assert!(
+        error <= R68_FACTOR * sigma,
+        "{name}: uncalibrated error {error:.3} m outside the 68 % radius of its 1-sigma {sigma:.3} m"
+    );
+}
+
+#[test]
+fn an_uncalibrated_part_walked_on_a_foot_runs_and_says_what_it_estimated() {
+    let dir = std::env::temp_dir().join(unique_namespace("uncalibrated-walk"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let walk = [
+        "walk",
+        "--laps",
+        "2",
+        "--rate",
+        "200",
+        "--seed",
+        "3",
+        "--accel-range",
+        "16",
+        "--gyro-range",
+        "2000",
+    ];
+    compare(&dir, "walk", &walk, 0.0);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn an_uncalibrated_part_driven_on_a_robot_runs_and_says_what_it_estimated() {
+    let dir = std::env::temp_dir().join(unique_namespace("uncalibrated-drive"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let drive = [
+        "drive",
+        "--duration",
+        "120",
+        "--turns",
+        "on",
+        "--rate",
+        "200",
+        "--seed",
+        "1",
+    ];
+    compare(&dir, "drive", &drive, 0.04);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_live_part_without_a_calibration_file_is_flagged_and_its_bias_reported() {
+    let ns = unique_namespace("uncal-live");
+    let dir = std::env::temp_dir().join(&ns);
+    std::fs::create_dir_all(&dir).unwrap();
+    let node = service::node().unwrap();
+    let corrected =
+        service::open::<CorrectedImuSample>(&node, &service::full_name(&ns, service::CORRECTED))
+            .unwrap();
+    let sub = service::subscriber(&corrected).unwrap();
+    let mut cor: Vec<CorrectedImuSample> = Vec::new();
+    let drain = |cor: &mut Vec<CorrectedImuSample>| {
+        while let Some(s) = sub.receive().unwrap() {
+            cor.push(*s.payload());
+        }
+    };
+    let log = dir.join("odometry.log");
+    let odometry = Proc::spawn_logged("mems-odometry", &["serve", "--namespace", &ns], &log);
+    let serve = Proc::spawn(
+        "mems-calibrate",
+        &["serve", "--namespace", &ns, "--learn-s", "1"],
+    );
+    std::thread::sleep(Duration::from_millis(700));
+    let acquire = Proc::spawn(
+        "mems-acquire",
+        &[
+            "--source",
+            "sim",
+            "--rate",
+            "1000",
+            "--duration",
+            "5",
+            "--namespace",
+            &ns,
+        ],
+    );
+    let waiter = std::thread::spawn(move || acquire.wait(Duration::from_secs(60)));
+    while !waiter.is_finished() {
+        drain(&mut cor);
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let (status, _) = waiter.join().unwrap();
+    assert!(status.success(), "mems-acquire failed: {status}");
+    for _ in 0..500 {
+        drain(&mut cor);
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    serve.signal(libc::SIGTERM);
+    let (status, _) = serve.wait(Duration::from_secs(20));
+    assert!(status.success(), "mems-calibrate serve: {status}");
+    odometry.signal(libc::SIGTERM);
+    let (status, _) = odometry.wait(Duration::from_secs(20));
+    assert!(status.success(), "mems-odometry serve: {status}");
+    let summary = std::fs::read_to_string(&log).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+
+    let ready = cor
+        .iter()
+        .position(|c| c.flags & corrected_flags::DETECTOR_READY != 0)
+        .expect("the detector learned the rest");
+    let flagged = |c: &CorrectedImuSample| c.flags & corrected_flags::GRAVITY_OFF != 0;
+    assert!(!cor[..ready].iter().any(flagged), "flagged before learning");
+    assert!(
+        cor[ready..].iter().all(flagged),
+        "not flagged after learning"
+    );
+    // The refinement took the learned rest whole: the corrected rest reads gravity.
+    let rest: Vec<_> = cor[ready..]
+        .iter()
+        .filter(|c| c.flags & corrected_flags::ZERO_STATE != 0)
+        .collect();
+    assert!(rest.len() > 1000, "{} rest samples", rest.len());
+    let mean = |i: usize| rest.iter().map(|c| c.accel_mps2[i]).sum::<f64>() / rest.len() as f64;
+    let magnitude = (0..3).map(|i| mean(i).powi(2)).sum::<f64>().sqrt();
+    assert!(
+        (magnitude - 9.80665).abs() < 0.03,
+        "corrected |a| at rest {magnitude} m/s^2"
+    );
+    assert!(
+        summary.contains("accelerometer bias") && summary.contains("uncalibrated"),
+        "mems-odometry serve's summary: {summary}"
+    );
+}

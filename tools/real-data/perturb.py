@@ -1,0 +1,253 @@
+#!/usr/bin/env python3
+"""Corpus recordings with a cheap part's errors added, run as bench.py runs them: a table of
+the end error and 1-sigma of each recording as converted (clean) and perturbed, with what the
+odometry reported of the perturbation.
+
+The perturbation, applied to every sample in this order (sensor frame, the units of the
+converted files: accelerometer in g, gyroscope in deg/s):
+1. accelerometer errors of an uncalibrated part: `a' = (1 + s) a + b` with `s` from
+   `--accel-scale` (a fraction, the same on every axis: 0.04 reads 4 % high) and `b` from
+   `--accel-bias-g` (g, the same on every axis, or three comma-separated values x,y,z);
+2. the range of a cheap part: every gyroscope column capped at +-DPS deg/s (`--gyro-dps`) and
+   every accelerometer column at +-G g (`--accel-g`), as a part with that range outputs its
+   end of range for anything beyond.
+Nothing tells the odometry of either: it infers a range from the readings stuck at the
+file's extreme (ipc_types::stream::range) and an accelerometer error from its rests
+(docs/odometry.md, "An uncalibrated accelerometer"). A CSV recording is rewritten row by row;
+an MCAP recording (convert.py's JSON messages) message by message, its raw samples' `accel_g`,
+`gyro_dps` and counts. Errors and coverage are bench.py's (`evaluate`: horizontal end error,
+covered when within the 68 % radius).
+
+With a range (clipping), the foot walks are run, a third column integrates the clipped samples
+as measured (`--trust-clipped`, the behaviour before the check) and a run passes within 2x of
+its clean error; otherwise every corpus recording is run and a run passes within 1.5x (at
+least 5 cm: below that the clean error is noise).
+
+Usage: perturb.py [--gyro-dps DPS] [--accel-g G] [--accel-scale S] [--accel-bias-g B[,B,B]]
+                  [--bin PATH] [--data DIR] [--only ID ...] [--json]
+"""
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench  # noqa: E402
+import convert  # noqa: E402
+
+ACCEL, GYRO = ("ax_g", "ay_g", "az_g"), ("gx_dps", "gy_dps", "gz_dps")
+# Smallest error a perturbed run is measured against: a clean error below it is luck.
+FLOOR_M = 0.05
+
+
+class Perturbation:
+    """The errors of one part (see the module documentation)."""
+
+    def __init__(self, args):
+        self.scale = 1.0 + (args.accel_scale or 0.0)
+        bias = [float(b) for b in (args.accel_bias_g or "0").split(",")]
+        if len(bias) not in (1, 3):
+            raise SystemExit(f"--accel-bias-g {args.accel_bias_g}: one value or three (x,y,z), g")
+        self.bias = bias * 3 if len(bias) == 1 else bias
+        self.accel_g, self.gyro_dps = args.accel_g, args.gyro_dps
+
+    @property
+    def clips(self):
+        return self.accel_g is not None or self.gyro_dps is not None
+
+    def apply(self, accel, gyro):
+        """The perturbed (accel g, gyro deg/s) and whether a value was capped."""
+        accel = [self.scale * a + b for a, b in zip(accel, self.bias)]
+        capped = False
+        for values, limit in ((accel, self.accel_g), (gyro, self.gyro_dps)):
+            if limit is None:
+                continue
+            for i, v in enumerate(values):
+                if abs(v) > limit:
+                    values[i] = limit if v > 0 else -limit
+                    capped = True
+        return accel, gyro, capped
+
+    def describe(self):
+        parts = []
+        if self.scale != 1.0 or any(self.bias):
+            parts.append(f"accelerometer scale {100 * (self.scale - 1):+g} %, bias "
+                         f"{', '.join(f'{b:g}' for b in self.bias)} g")
+        if self.gyro_dps is not None:
+            parts.append(f"clipped at +-{self.gyro_dps:g} deg/s (gyro)")
+        if self.accel_g is not None:
+            parts.append(f"clipped at +-{self.accel_g:g} g (accel)")
+        return "; ".join(parts)
+
+
+def perturb_csv(src, dst, p):
+    """Writes `src` to `dst` perturbed by `p`; returns the rows capped."""
+    capped = 0
+    with open(src) as fin, open(dst, "w") as fout:
+        header = None
+        for line in fin:
+            if line.startswith("#") or not line.strip():
+                fout.write(line)
+                continue
+            cells = line.rstrip("\n").split(",")
+            if header is None:
+                header = cells
+                ia, ig = [header.index(c) for c in ACCEL], [header.index(c) for c in GYRO]
+                fout.write(line)
+                continue
+            accel, gyro, hit = p.apply([float(cells[i]) for i in ia], [float(cells[i]) for i in ig])
+            if p.scale != 1.0 or any(p.bias) or hit:
+                for i, v in zip(ia + ig, accel + gyro):
+                    cells[i] = repr(v)
+            capped += hit
+            fout.write(",".join(cells) + "\n")
+    return capped
+
+
+def perturb_mcap(src, dst, p):
+    """Writes convert.py's MCAP `src` to `dst` with its raw samples perturbed by `p`; returns
+    the samples capped."""
+    buf = src.read_bytes()
+    out, capped = [convert.MCAP_MAGIC], 0
+    for op, body in convert.read_mcap_records(buf):
+        if op == convert.MCAP_OP["message"]:
+            head, msg = body[:22], json.loads(body[22:])
+            if "accel_g" in msg:
+                accel, gyro, hit = p.apply(msg["accel_g"], msg["gyro_dps"])
+                capped += hit
+                msg["accel_g"], msg["gyro_dps"] = accel, gyro
+                msg["accel_counts"] = [convert._counts(v, 16384) for v in accel]
+                msg["gyro_counts"] = [convert._counts(v, 131) for v in gyro]
+                body = head + json.dumps(msg, separators=(",", ":")).encode()
+        out.append(convert.struct.pack("<BQ", op, len(body)) + body)
+    out.append(convert.MCAP_MAGIC)
+    dst.write_bytes(b"".join(out))
+    return capped
+
+
+def figures(row):
+    """(horizontal error upper end, m; 1-sigma, m; covered; clipped samples; the accelerometer
+    error the odometry reported) of a run, None if it failed."""
+    if "error" in row:
+        return None
+    r, out = row["result"], row["odometry"]
+    return r["error_m"][1], r["sigma_h_m"], r["covered"], out.get("clipped_samples"), out.get("accel_error")
+
+
+def run_all(args, p, recordings):
+    data = Path(args.data)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        calib = tmp / "identity.toml"
+        calib.write_text(bench.identity_calibration())
+        changed = tmp / "perturbed"
+        changed.mkdir()
+        plain = bench.Runner(Path(args.bin), calib, data, 900.0, quiet=True)
+        perturbed = bench.Runner(Path(args.bin), calib, changed, 900.0, quiet=True)
+        for rec in recordings:
+            side = json.loads((data / f"{rec['id']}.json").read_text())
+            name = side.get("input", side["csv"])
+            (changed / f"{rec['id']}.json").write_text(json.dumps(side))
+            write = perturb_mcap if name.endswith(".mcap") else perturb_csv
+            capped = write(data / name, changed / name, p)
+            extra = list(rec.get("extra_args", []))
+            row = {
+                "id": rec["id"],
+                "rows_capped": capped,
+                "clean": figures(plain.row(rec, extra)),
+                "perturbed": figures(perturbed.row(rec, extra)),
+            }
+            if p.clips:
+                row["trusted"] = figures(perturbed.row(rec, extra + ["--trust-clipped"]))
+            rows.append(row)
+            print(f"{rec['id']}: done", file=sys.stderr)
+    return rows
+
+
+def fmt(f):
+    return "failed" if f is None else f"{f[0]:.2f} / {f[1]:.2f}"
+
+
+def clipping_table(p, rows):
+    """The table of a run with a range (clipped.py's, as docs/input-checks.md shows it)."""
+    print(f"Foot walks {p.describe()}; horizontal end error / 1-sigma, m")
+    print()
+    print("| walk | rows clipped | unclipped | clipped, flagged and bridged | covered | clipped, integrated as measured | within 2x of unclipped |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    good = covered = 0
+    for r in rows:
+        u, c, t = r["clean"], r["perturbed"], r["trusted"]
+        within = u is not None and c is not None and c[0] <= 2 * max(u[0], 0.0)
+        good += within
+        covered += c is not None and c[2] == "yes"
+        print(f"| {r['id']} | {r['rows_capped']} ({c[3] if c else '?'} flagged) | {fmt(u)} | {fmt(c)} | "
+              f"{c[2] if c else '-'} | {fmt(t)} | {'yes' if within else 'no'} |")
+    print()
+    print(f"{good} of {len(rows)} within 2x of their unclipped error; {covered} of {len(rows)} covered by the 1-sigma")
+
+
+def describe_estimate(e):
+    """The accelerometer bias the odometry estimated (m/s^2, sensor frame, +- 1-sigma), as the
+    table shows it; `uncalibrated` when it used the uncalibrated prior."""
+    if not e:
+        return "-"
+    b, s = e["bias_mps2"], e["bias_sigma_mps2"]
+    text = ", ".join(f"{v:+.2f} +- {d:.2f}" for v, d in zip(b, s))
+    return f"{'uncalibrated: ' if e['uncalibrated'] else ''}({text})"
+
+
+def error_table(p, rows):
+    """The table of a run with accelerometer errors only."""
+    print(f"Corpus recordings with {p.describe()}; horizontal end error / 1-sigma, m")
+    print()
+    print("| recording | clean | perturbed | covered | clipped | accelerometer bias estimated, m/s^2 | within 1.5x of clean |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    good = covered = ran = 0
+    for r in rows:
+        u, c = r["clean"], r["perturbed"]
+        within = u is not None and c is not None and c[0] <= 1.5 * max(u[0], FLOOR_M)
+        good += within
+        ran += c is not None
+        covered += c is not None and c[2] == "yes"
+        print(f"| {r['id']} | {fmt(u)} | {fmt(c)} | {c[2] if c else '-'} | {c[3] if c else '-'} | "
+              f"{describe_estimate(c[4]) if c else '-'} | {'yes' if within else 'no'} |")
+    print()
+    print(f"{ran} of {len(rows)} gave a position; {good} within 1.5x of their clean error (at least "
+          f"{FLOOR_M} m); {covered} of {len(rows)} covered by the 1-sigma")
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--gyro-dps", type=float, help="clip the gyroscope at +-DPS deg/s")
+    p.add_argument("--accel-g", type=float, help="clip the accelerometer at +-G g")
+    p.add_argument("--accel-scale", type=float, help="accelerometer scale error, fraction (0.04: 4 %% high)")
+    p.add_argument("--accel-bias-g", help="accelerometer bias, g: one value for every axis or x,y,z")
+    p.add_argument("--bin", default=str(bench.REPO / "target" / "release" / "mems-odometry"))
+    p.add_argument("--data", default=os.environ.get("MEMS_REAL_DATA", "/work/real-data"))
+    p.add_argument("--only", action="append", metavar="ID")
+    p.add_argument("--json", action="store_true")
+    args = p.parse_args()
+    perturbation = Perturbation(args)
+    if not perturbation.describe():
+        p.error("nothing to perturb: give --gyro-dps, --accel-g, --accel-scale or --accel-bias-g")
+    corpus = json.loads((bench.HERE / "corpus.json").read_text())
+    recordings = [r for r in corpus["recordings"]
+                  if (not perturbation.clips or r.get("platform") == "foot")
+                  and (not args.only or r["id"] in args.only)]
+    rows = run_all(args, perturbation, recordings)
+    if args.json:
+        json.dump(rows, sys.stdout, indent=1)
+        print()
+    elif perturbation.clips:
+        clipping_table(perturbation, rows)
+    else:
+        error_table(perturbation, rows)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
