@@ -1,11 +1,10 @@
 //! Compiles a C program against `include/mems_ipc.h` with gcc and checks that every size,
 //! alignment, field offset, flag value, service name and type name agrees with the Rust types.
 
+mod flag_list;
+
 use core::mem::{align_of, offset_of, size_of};
-use ipc_types::{
-    CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps, corrected_flags,
-    hint_flags, odometry_flags, raw_flags, service,
-};
+use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps, service};
 use std::fmt::Write as _;
 use std::process::Command;
 
@@ -110,52 +109,9 @@ fn facts() -> Vec<Fact> {
             reserved
         ]
     );
-    let flags: [(&str, u16); 32] = [
-        ("MEMS_RAW_GAP_BEFORE", raw_flags::GAP_BEFORE),
-        ("MEMS_RAW_FIFO_OVERFLOW", raw_flags::FIFO_OVERFLOW),
-        ("MEMS_RAW_SATURATED", raw_flags::SATURATED),
-        ("MEMS_RAW_REPAIRED", raw_flags::REPAIRED),
-        ("MEMS_RAW_GYRO_VALID", raw_flags::GYRO_VALID),
-        ("MEMS_RAW_TEMP_VALID", raw_flags::TEMP_VALID),
-        ("MEMS_RAW_RESUMED", raw_flags::RESUMED),
-        ("MEMS_RAW_SATURATED_AXES", raw_flags::SATURATED_AXES),
-        ("MEMS_CORRECTED_ZERO_STATE", corrected_flags::ZERO_STATE),
-        (
-            "MEMS_CORRECTED_DETECTOR_READY",
-            corrected_flags::DETECTOR_READY,
-        ),
-        ("MEMS_CORRECTED_BIAS_REFINED", corrected_flags::BIAS_REFINED),
-        ("MEMS_CORRECTED_PROVISIONAL", corrected_flags::PROVISIONAL),
-        ("MEMS_CORRECTED_NEW_SESSION", corrected_flags::NEW_SESSION),
-        ("MEMS_CORRECTED_HOLE_BEFORE", corrected_flags::HOLE_BEFORE),
-        ("MEMS_CORRECTED_CLIPPED", corrected_flags::CLIPPED),
-        ("MEMS_CORRECTED_IMPLAUSIBLE", corrected_flags::IMPLAUSIBLE),
-        ("MEMS_CORRECTED_GRAVITY_OFF", corrected_flags::GRAVITY_OFF),
-        ("MEMS_ODOMETRY_ZERO_VELOCITY", odometry_flags::ZERO_VELOCITY),
-        ("MEMS_ODOMETRY_ALIGNED", odometry_flags::ALIGNED),
-        ("MEMS_ODOMETRY_REVISION", odometry_flags::REVISION),
-        (
-            "MEMS_ODOMETRY_HINT_STATIONARY",
-            odometry_flags::HINT_STATIONARY,
-        ),
-        ("MEMS_ODOMETRY_HINT_SPEED", odometry_flags::HINT_SPEED),
-        ("MEMS_ODOMETRY_HINT_STALE", odometry_flags::HINT_STALE),
-        ("MEMS_ODOMETRY_HINT_DISAGREE", odometry_flags::HINT_DISAGREE),
-        ("MEMS_ODOMETRY_NO_GYRO", odometry_flags::NO_GYRO),
-        ("MEMS_ODOMETRY_GAP_BEFORE", odometry_flags::GAP_BEFORE),
-        (
-            "MEMS_ODOMETRY_UNTRUSTED_INPUT",
-            odometry_flags::UNTRUSTED_INPUT,
-        ),
-        ("MEMS_HINT_STATIONARY", hint_flags::STATIONARY),
-        ("MEMS_HINT_SOURCE_COMMANDED", hint_flags::SOURCE_COMMANDED),
-        ("MEMS_HINT_SOURCE_ENCODERS", hint_flags::SOURCE_ENCODERS),
-        ("MEMS_HINT_SPEED_VALID", hint_flags::SPEED_VALID),
-        ("MEMS_HINT_YAW_RATE_VALID", hint_flags::YAW_RATE_VALID),
-    ];
-    for (name, value) in flags {
+    for (name, value) in flag_list::all() {
         f.push(Fact {
-            c_expr: format!("(unsigned)({name})"),
+            c_expr: format!("(unsigned)(MEMS_{name})"),
             rust: value.to_string(),
         });
     }

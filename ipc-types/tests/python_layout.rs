@@ -1,6 +1,8 @@
 //! The Python ctypes mirror (`python/mems_ipc.py`) has the Rust layout: python3 prints every
 //! struct's size, alignment and field offsets and its type name, and each must equal Rust's.
 
+mod flag_list;
+
 use core::mem::{align_of, offset_of, size_of};
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps};
@@ -109,30 +111,19 @@ for t in mems_ipc.ALL_TYPES:
 }
 
 #[test]
-fn python_odometry_flags_match_rust() {
-    use ipc_types::odometry_flags as f;
-    let expected = [
-        ("ODOMETRY_ZERO_VELOCITY", f::ZERO_VELOCITY),
-        ("ODOMETRY_ALIGNED", f::ALIGNED),
-        ("ODOMETRY_REVISION", f::REVISION),
-        ("ODOMETRY_HINT_STATIONARY", f::HINT_STATIONARY),
-        ("ODOMETRY_HINT_SPEED", f::HINT_SPEED),
-        ("ODOMETRY_HINT_STALE", f::HINT_STALE),
-        ("ODOMETRY_HINT_DISAGREE", f::HINT_DISAGREE),
-        ("ODOMETRY_NO_GYRO", f::NO_GYRO),
-        ("ODOMETRY_GAP_BEFORE", f::GAP_BEFORE),
-    ];
-    // Every ODOMETRY_* constant the module defines, so that one Rust lacks is caught too.
+fn python_flags_match_rust() {
+    // Every RAW_/CORRECTED_/ODOMETRY_/HINT_ constant the module defines, so that one Rust
+    // lacks is caught too.
     let script = r#"
 import sys
 sys.path.insert(0, sys.argv[1])
 import mems_ipc
 for name in sorted(dir(mems_ipc)):
-    if name.startswith("ODOMETRY_") and isinstance(getattr(mems_ipc, name), int):
+    if name.split("_")[0] in ("RAW", "CORRECTED", "ODOMETRY", "HINT") and isinstance(getattr(mems_ipc, name), int):
         print(name, getattr(mems_ipc, name))
 "#;
     let stdout = run_python(script);
-    let mut expected: Vec<String> = expected
+    let mut expected: Vec<String> = flag_list::all()
         .iter()
         .map(|(name, value)| format!("{name} {value}"))
         .collect();

@@ -1,0 +1,143 @@
+//! The navigator's hint state: the hints waiting for their delivery time, the newest one, the
+//! speed hints still to apply and the body-velocity history they are applied against (see
+//! [`crate::stage`] for the behaviour, [`crate::hints`] for frames and times).
+
+use crate::cruise::ForwardAxis;
+use crate::eskf::Eskf;
+use crate::hints::{HintConfig, HintStats, MountingEstimator, Ring};
+use ipc_types::RobotHint;
+use nalgebra::{Matrix3, Vector3};
+
+/// Speed hints that can wait for the next sample's update (more arrive at once only at sample
+/// rates below the hint rate).
+pub(super) const SPEED_QUEUE: usize = 8;
+
+/// One sample's body velocity minus the corrections made up to it (see the module docs).
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct BodyVelocity {
+    pub(super) t_ns: u64,
+    pub(super) uncorrected: Vector3<f64>,
+}
+
+/// What the hints did at the current sample.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct HintSample {
+    pub(super) flags: u16,
+}
+
+/// What the hints delivered by a sample's time say about it.
+pub(super) struct HintDecision {
+    /// The newest delivered hint, if not older than the maximum age.
+    pub(super) fresh: Option<RobotHint>,
+    /// The fresh hint's rest decision, if it has a rest source.
+    pub(super) rest: Option<bool>,
+    /// Hints were received, but none is fresh.
+    pub(super) stale: bool,
+    /// The flags the hints set on this sample's state.
+    pub(super) sample: HintSample,
+}
+
+/// Hint state of the stage.
+pub(super) struct Hints {
+    pub(super) cfg: HintConfig,
+    pub(super) delivery_ns: u64,
+    pub(super) max_age_ns: u64,
+    /// Hints waiting for their delivery time, in arrival order.
+    pub(super) waiting: Ring<RobotHint>,
+    /// The newest delivered hint.
+    pub(super) newest: Option<RobotHint>,
+    /// Delivered speed hints not yet applied, oldest first (several can be delivered at one
+    /// sample when their latencies differ).
+    pub(super) speed: Ring<RobotHint>,
+    /// Sequence number of the last hint counted as applied for its rest decision.
+    pub(super) newest_used: Option<u64>,
+    /// Sensor-to-body rotation `R_bs`, once known.
+    pub(super) r_bs: Option<Matrix3<f64>>,
+    /// 1-sigma of `r_bs`'s yaw when [`ForwardAxis`] estimated it, rad (0 otherwise).
+    pub(super) yaw_sigma_rad: f64,
+    pub(super) estimator: MountingEstimator,
+    /// The forward axis from the speed hints' changes (mounting not given).
+    pub(super) forward: ForwardAxis,
+    /// Body velocity minus corrections, one per sample since the mounting is known.
+    pub(super) history: Ring<BodyVelocity>,
+    /// Sum of the body-velocity changes every update has made since the mounting is known,
+    /// m/s.
+    pub(super) corrections: Vector3<f64>,
+    pub(super) applied: u32,
+    pub(super) disagreements: u32,
+    pub(super) stats: HintStats,
+}
+
+impl Hints {
+    /// Makes this a copy of `other`, reusing the rings' storage (see [`Navigator::copy_from`]).
+    pub(super) fn copy_from(&mut self, other: &Self) {
+        self.cfg = other.cfg;
+        self.delivery_ns = other.delivery_ns;
+        self.max_age_ns = other.max_age_ns;
+        self.waiting.clone_from(&other.waiting);
+        self.newest = other.newest;
+        self.speed.clone_from(&other.speed);
+        self.newest_used = other.newest_used;
+        self.r_bs = other.r_bs;
+        self.yaw_sigma_rad = other.yaw_sigma_rad;
+        self.estimator = other.estimator;
+        self.forward = other.forward;
+        self.history.clone_from(&other.history);
+        self.corrections = other.corrections;
+        self.applied = other.applied;
+        self.disagreements = other.disagreements;
+        self.stats = other.stats;
+    }
+
+    /// The body velocity minus corrections at `t_ns`, interpolated between the stored samples
+    /// around it (the newest one for a time after it); `None` when `t_ns` is older than the
+    /// history.
+    pub(super) fn uncorrected_at(&self, t_ns: u64) -> Option<Vector3<f64>> {
+        let mut newer: Option<&BodyVelocity> = None;
+        for i in 0..self.history.len() {
+            let e = self.history.newest(i)?;
+            if e.t_ns <= t_ns {
+                return Some(match newer {
+                    None => e.uncorrected,
+                    Some(n) => {
+                        let f = (t_ns - e.t_ns) as f64 / (n.t_ns - e.t_ns) as f64;
+                        e.uncorrected + (n.uncorrected - e.uncorrected) * f
+                    }
+                });
+            }
+            newer = Some(e);
+        }
+        None
+    }
+
+    /// Applies a speed hint as a body-velocity measurement at the hint's time; `false` when it
+    /// cannot be (mounting unknown, or the hint stale at `t_ns` or older than the velocity
+    /// history).
+    pub(super) fn apply_speed(&mut self, kf: &mut Eskf, h: &RobotHint, t_ns: u64) -> bool {
+        let Some(r_bs) = self.r_bs else {
+            return false;
+        };
+        if t_ns.saturating_sub(h.stamps.sample_ns) > self.max_age_ns {
+            return false;
+        }
+        let Some(then) = self.uncorrected_at(h.stamps.sample_ns) else {
+            return false;
+        };
+        // The body velocity the filter now believes it had at the hint's time.
+        let predicted = then + self.corrections;
+        let residual = Vector3::new(
+            h.forward_speed_mps - (1.0 + kf.x.k) * predicted.x,
+            -predicted.y,
+            -predicted.z,
+        );
+        let nh = self.cfg.nonholonomic_sigma_mps;
+        // A mounting yaw known to `yaw_sigma_rad` puts that much of the speed sideways.
+        let lateral = nh.hypot(h.forward_speed_mps * self.yaw_sigma_rad);
+        kf.body_velocity_update(
+            &r_bs,
+            residual,
+            Vector3::new(h.forward_speed_sigma_mps, lateral, nh),
+        );
+        true
+    }
+}
