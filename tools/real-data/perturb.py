@@ -30,13 +30,14 @@ Usage: perturb.py [--gyro-dps DPS] [--accel-g G] [--accel-scale S] [--accel-bias
 import argparse
 import json
 import os
+import struct
 import sys
 import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench  # noqa: E402
-import convert  # noqa: E402
+import containers  # noqa: E402
 
 ACCEL, GYRO = ("ax_g", "ay_g", "az_g"), ("gx_dps", "gy_dps", "gz_dps")
 # Smallest error a perturbed run is measured against: a clean error below it is luck.
@@ -111,19 +112,19 @@ def perturb_mcap(src, dst, p):
     """Writes convert.py's MCAP `src` to `dst` with its raw samples perturbed by `p`; returns
     the samples capped."""
     buf = src.read_bytes()
-    out, capped = [convert.MCAP_MAGIC], 0
-    for op, body in convert.read_mcap_records(buf):
-        if op == convert.MCAP_OP["message"]:
+    out, capped = [containers.MCAP_MAGIC], 0
+    for op, body in containers.read_mcap_records(buf):
+        if op == containers.MCAP_OP["message"]:
             head, msg = body[:22], json.loads(body[22:])
             if "accel_g" in msg:
                 accel, gyro, hit = p.apply(msg["accel_g"], msg["gyro_dps"])
                 capped += hit
                 msg["accel_g"], msg["gyro_dps"] = accel, gyro
-                msg["accel_counts"] = [convert._counts(v, 16384) for v in accel]
-                msg["gyro_counts"] = [convert._counts(v, 131) for v in gyro]
+                msg["accel_counts"] = [containers._counts(v, 16384) for v in accel]
+                msg["gyro_counts"] = [containers._counts(v, 131) for v in gyro]
                 body = head + json.dumps(msg, separators=(",", ":")).encode()
-        out.append(convert.struct.pack("<BQ", op, len(body)) + body)
-    out.append(convert.MCAP_MAGIC)
+        out.append(struct.pack("<BQ", op, len(body)) + body)
+    out.append(containers.MCAP_MAGIC)
     dst.write_bytes(b"".join(out))
     return capped
 
