@@ -221,6 +221,42 @@ def error_table(p, rows):
           f"{FLOOR_M} m); {covered} of {len(rows)} covered by the 1-sigma")
 
 
+def self_test():
+    """Perturbs a two-sample CSV and the same samples as convert.py's MCAP (with a hint) and
+    checks the values read back; no data needed."""
+    p = Perturbation(argparse.Namespace(accel_scale=0.04, accel_bias_g="0.15", accel_g=None, gyro_dps=250.0))
+    samples = [(0.0, 0.0, 0.0, 1.0, 10.0, 300.0, -300.0), (0.01, 0.5, -0.5, 1.0, 0.0, 0.0, 0.0)]
+    expected = [([0.15, 0.15, 1.19], [10.0, 250.0, -250.0]), ([0.67, -0.37, 1.19], [0.0, 0.0, 0.0])]
+    hint = {"t_s": 0.0, "forward_speed_mps": 1.0, "forward_speed_sigma_mps": 0.05, "flags": 12}
+
+    def close(got, want):
+        return all(abs(a - b) < 1e-9 for a, b in zip(got, want))
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src, dst = Path(tmp) / "in.csv", Path(tmp) / "out.csv"
+        src.write_text("# test\nt_s," + ",".join(ACCEL + GYRO) + "\n"
+                       + "".join(",".join(map(repr, row)) + "\n" for row in samples))
+        assert perturb_csv(src, dst, p) == 1, "CSV: one row capped"
+        rows = [line.split(",") for line in dst.read_text().splitlines()[2:]]
+        for row, (accel, gyro) in zip(rows, expected):
+            assert close([float(v) for v in row[1:4]], accel) and close([float(v) for v in row[4:7]], gyro), row
+        messages, _ = containers.mcap_messages(samples, [hint])
+        src, dst = Path(tmp) / "in.mcap", Path(tmp) / "out.mcap"
+        src.write_bytes(containers.mcap_bytes(messages))
+        assert perturb_mcap(src, dst, p) == 1, "MCAP: one sample capped"
+        raw, hints = [], []
+        for op, body in containers.read_mcap_records(dst.read_bytes()):
+            if op == containers.MCAP_OP["message"]:
+                msg = json.loads(body[22:])
+                (raw if "accel_g" in msg else hints).append(msg)
+        assert len(raw) == 2 and len(hints) == 1 and hints[0]["forward_speed_mps"] == 1.0, (raw, hints)
+        for msg, (accel, gyro) in zip(raw, expected):
+            assert close(msg["accel_g"], accel) and close(msg["gyro_dps"], gyro), msg
+            assert msg["accel_counts"] == [round(v * 16384) for v in accel], msg
+            assert msg["gyro_counts"] == [round(v * 131) for v in gyro], msg
+    print("perturb.py self-test: ok (CSV, MCAP)")
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--gyro-dps", type=float, help="clip the gyroscope at +-DPS deg/s")
@@ -231,7 +267,11 @@ def main():
     p.add_argument("--data", default=os.environ.get("MEMS_REAL_DATA", "/work/real-data"))
     p.add_argument("--only", action="append", metavar="ID")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--self-test", action="store_true", help="check the CSV and MCAP perturbation on inline samples (no data) and exit")
     args = p.parse_args()
+    if args.self_test:
+        self_test()
+        return 0
     perturbation = Perturbation(args)
     if not perturbation.describe():
         p.error("nothing to perturb: give --gyro-dps, --accel-g, --accel-scale or --accel-bias-g")
