@@ -8,9 +8,8 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{Case, Simulation};
+use common::{Case, drive_with_encoder_hints};
 use ipc_types::{OdometryState, RawImuSample, RobotHint};
-use mems_sim::hints::{HintParams, RestSource};
 use recording::Truth;
 use recording::mcap::{EventKind, RecorderEvent, Writer, quantum};
 
@@ -37,29 +36,8 @@ fn drive() -> Vec<Message> {
         turns: true,
         ..Case::straight()
     };
-    let mut sim = Simulation::new(&case, 3);
-    sim.session();
-    let mut raw = Vec::new();
-    // The truth on the samples' clock, as `mems-sim drive` records it.
-    sim.drive_raw(|r, t| {
-        let t = Truth {
-            t_ns: r.stamps.sample_ns,
-            ..*t
-        };
-        raw.push((*r, t))
-    });
-    // The hints' times count from the drive's start, the samples' from the session's.
-    let t0_ns = raw[0].0.stamps.sample_ns;
-    let mut hints = case
-        .hints(3, &HintParams::new(RestSource::Encoders))
-        .hints
-        .into_iter()
-        .map(|mut h| {
-            h.stamps.sample_ns += t0_ns;
-            h.stamps.acquired_ns += t0_ns;
-            h
-        })
-        .peekable();
+    let (raw, hints) = drive_with_encoder_hints(&case, 3);
+    let mut hints = hints.into_iter().peekable();
     let mut messages = Vec::new();
     for (r, t) in raw {
         while let Some(h) =

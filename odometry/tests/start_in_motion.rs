@@ -13,9 +13,8 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{Case, Simulation};
+use common::{Case, drive_with_encoder_hints};
 use ipc_types::{RawImuSample, RobotHint};
-use mems_sim::hints::{HintParams, RestSource};
 use recording::Truth;
 use recording::mcap::Writer;
 
@@ -37,28 +36,7 @@ fn write_drive(path: &Path) {
         initial_rest_s: 0.0,
         ..Case::straight()
     };
-    let mut sim = Simulation::new(&case, 5);
-    sim.session();
-    let mut raw: Vec<(RawImuSample, Truth)> = Vec::new();
-    sim.drive_raw(|r, t| {
-        let t = Truth {
-            t_ns: r.stamps.sample_ns,
-            ..*t
-        };
-        raw.push((*r, t));
-    });
-    // The hints' times count from the drive's start, the samples' from the session's.
-    let t0_ns = raw[0].0.stamps.sample_ns;
-    let hints: Vec<RobotHint> = case
-        .hints(5, &HintParams::new(RestSource::Encoders))
-        .hints
-        .into_iter()
-        .map(|mut h| {
-            h.stamps.sample_ns += t0_ns;
-            h.stamps.acquired_ns += t0_ns;
-            h
-        })
-        .collect();
+    let (raw, hints) = drive_with_encoder_hints(&case, 5);
     let mut w = Writer::create(path).unwrap();
     let raw_ch = w.add_channel::<RawImuSample>().unwrap();
     let truth_ch = w.add_channel::<Truth>().unwrap();

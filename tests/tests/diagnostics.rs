@@ -25,12 +25,11 @@ fn offline(input: &Path, args: &[&str], rust_log: Option<&str>) -> Output {
 fn drive() -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(unique_namespace("diagnostics"));
     std::fs::create_dir_all(&dir).unwrap();
-    let path = simulate(
+    simulate(
         &dir,
         "drive.csv",
         &["drive", "--duration", "20", "--rate", "200", "--seed", "3"],
-    );
-    path
+    )
 }
 
 #[test]

@@ -22,7 +22,7 @@ use ipc_types::{
 };
 use mems_sim::SimSensor;
 use mems_sim::adc::quantize_sample;
-use mems_sim::hints::{HintParams, HintStream, drive_hints};
+use mems_sim::hints::{HintParams, HintStream, RestSource, drive_hints};
 use mems_sim::model::{G_MPS2, SensorModel};
 use mems_sim::scenario::{Drive, DriveParams, PoseParams, PoseSession, Scenario, ns_from_s};
 use mems_sim::vibration::{Vibration, VibrationModel};
@@ -489,4 +489,35 @@ pub fn live_detector() -> DetectorConfig {
 pub fn live_calibration_stage(detector: DetectorConfig) -> CalibrationStage {
     CalibrationStage::new(&identity_calibration(), detector, RefineConfig::default())
         .expect("identity calibration")
+}
+
+/// The drive of `case` (power-on `seed`, after its calibration session) as raw samples with
+/// the truth on the samples' clock, as `mems-sim drive` records it, and its encoder hints
+/// moved onto the same clock (the hints' times count from the drive's start).
+pub fn drive_with_encoder_hints(
+    case: &Case,
+    seed: u64,
+) -> (Vec<(RawImuSample, Truth)>, Vec<RobotHint>) {
+    let mut sim = Simulation::new(case, seed);
+    sim.session();
+    let mut raw = Vec::new();
+    sim.drive_raw(|r, t| {
+        let t = Truth {
+            t_ns: r.stamps.sample_ns,
+            ..*t
+        };
+        raw.push((*r, t));
+    });
+    let t0_ns = raw[0].0.stamps.sample_ns;
+    let hints = case
+        .hints(seed, &HintParams::new(RestSource::Encoders))
+        .hints
+        .into_iter()
+        .map(|mut h| {
+            h.stamps.sample_ns += t0_ns;
+            h.stamps.acquired_ns += t0_ns;
+            h
+        })
+        .collect();
+    (raw, hints)
 }
