@@ -81,7 +81,15 @@ fn serve_falls_back_when_hints_stop_and_resumes_without_a_gap() {
 
     let mut serve = Serve(Some(
         Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
-            .args(["serve", "--calib", calib.to_str().unwrap()])
+            // The identity mounting, as `HintConfig::default()` below (without `--mount` the
+            // process estimates the speed hints' forward axis first).
+            .args([
+                "serve",
+                "--calib",
+                calib.to_str().unwrap(),
+                "--mount",
+                "0,0,0",
+            ])
             .env(service::NAMESPACE_ENV, &namespace)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
