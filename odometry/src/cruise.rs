@@ -67,6 +67,9 @@ pub struct CruiseWindow {
     /// speeds m/s): `n`, `t`, `t^2`, `s`, `t s`; and the hint 1-sigmas' sum.
     sums: [f64; 5],
     sigma_sum: f64,
+    /// A sample of the window was flagged `GRAVITY_OFF` (the calibration stage found the part
+    /// reading gravity off: `crate::uncalibrated`).
+    pub gravity_off: bool,
 }
 
 impl CruiseWindow {

@@ -308,7 +308,7 @@ impl Navigator {
                 let rest = rest && ready && verdict.clipped == 0;
                 self.accumulate_alignment(t_ns, &m, rest, gravity_off);
                 let still = imu_rest && detector_ready && verdict.clipped == 0;
-                self.accumulate_cruise(t_ns, &m, d.fresh.filter(|_| still));
+                self.accumulate_cruise(t_ns, &m, d.fresh.filter(|_| still), gravity_off);
             }
             emit(&self.unaligned_state(s, rest, d.sample));
             return;
@@ -676,7 +676,13 @@ impl Navigator {
 
     /// Gathers the cruise window of an unaligned filter ([`crate::cruise`]; `fresh` is the fresh
     /// hint when the detector flags the sample still) and aligns in motion once it is full.
-    fn accumulate_cruise(&mut self, t_ns: u64, m: &Imu, fresh: Option<RobotHint>) {
+    fn accumulate_cruise(
+        &mut self,
+        t_ns: u64,
+        m: &Imu,
+        fresh: Option<RobotHint>,
+        gravity_off: bool,
+    ) {
         let moving = |h: &RobotHint| {
             has_rest_source(h)
                 && h.flags & hint_flags::STATIONARY == 0
@@ -695,6 +701,7 @@ impl Navigator {
             h.forward_speed_mps,
             h.forward_speed_sigma_mps,
         );
+        c.gravity_off |= gravity_off;
         let span_s = c.span_s(t_ns);
         if span_s < self.cfg.align_s || c.accel.len() < 2 {
             return;
@@ -711,7 +718,7 @@ impl Navigator {
     /// [`crate::cruise`] for what is assumed and how the sigmas carry it).
     fn align_in_motion(&mut self, span_s: f64, m: &Imu) {
         let c = std::mem::take(&mut self.cruise);
-        let prior = AccelPrior::at_rest(&self.cfg, &c.accel.mean(), false);
+        let prior = AccelPrior::at_rest(&self.cfg, &c.accel.mean(), c.gravity_off);
         let start = cruise_start(
             &c,
             span_s,
