@@ -420,6 +420,14 @@ impl CalibrationFile {
         self.source.poses > 0
     }
 
+    /// An error seen in the corrected output, `error_mps2` (m/s^2, sensor frame), as the raw
+    /// reading's bias it comes from: the stage corrects `a = g S^-1 (a' - b)`, so an output
+    /// reading `error_mps2` too much is a raw bias of `S error_mps2 / g` (g).
+    pub fn raw_bias_g(&self, error_mps2: &Vector3<f64>) -> Vector3<f64> {
+        let s = nalgebra::Matrix3::from_fn(|r, c| self.scale[r][c]);
+        s * error_mps2 / self.gravity_mps2
+    }
+
     /// The model described by the file.
     pub fn accel_model(&self) -> Result<AccelModel, crate::model::ModelError> {
         let s = nalgebra::Matrix3::from_fn(|r, c| self.scale[r][c]);

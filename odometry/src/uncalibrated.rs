@@ -171,8 +171,7 @@ impl std::fmt::Display for AccelEstimate {
 /// `a = g S^-1 (a' - b)`, so a corrected sample that reads `bias_mps2` too much is corrected
 /// with `b + S bias_mps2 / g` (g units, raw frame).
 pub fn remove_bias(file: &CalibrationFile, bias_mps2: &[f64; 3]) -> CalibrationFile {
-    let s = Matrix3::from_fn(|r, c| file.scale[r][c]);
-    let shift = s * Vector3::from(*bias_mps2) / file.gravity_mps2;
+    let shift = file.raw_bias_g(&Vector3::from(*bias_mps2));
     let mut out = file.clone();
     for (b, d) in out.bias_g.iter_mut().zip(shift.iter()) {
         *b += d;

@@ -31,18 +31,17 @@ pub fn apply(
     t_ref_c: f64,
 ) -> CalibrationFile {
     let mut out = file.clone();
-    let g = file.gravity_mps2;
     let s = matrix(&file.scale);
     let mut bias = Vector3::from(file.bias_g);
     let mut scale = s;
     for &(candidate, p) in selected {
         match candidate {
-            Candidate::AccelBias => bias += s * (p / g),
+            Candidate::AccelBias => bias += file.raw_bias_g(&p),
             Candidate::AccelScale => {
                 scale = s * Matrix3::from_diagonal(&(Vector3::repeat(1.0) + p));
             }
             Candidate::AccelTempBias => {
-                let per_c = s * (p / g);
+                let per_c = file.raw_bias_g(&p);
                 let reference = file.temperature.reference_c.unwrap_or(t_ref_c);
                 // c (T - T_ref) = c (T - reference) + c (reference - T_ref).
                 bias += per_c * (reference - t_ref_c);
