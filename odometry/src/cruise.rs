@@ -29,7 +29,7 @@
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::config::OdometryConfig;
-use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, V, align};
+use crate::eskf::{Cov, KS, Nominal, V, align};
 use crate::hints::{HintConfig, mounting_from};
 use crate::rest_noise::RestNoise;
 use crate::uncalibrated::AccelPrior;
@@ -174,26 +174,6 @@ pub struct CruiseStart {
     pub standing_accel_sd: f64,
 }
 
-impl CruiseStart {
-    /// The filter from this start, with the accelerometer prior's consider model and the
-    /// window's mean specific force `f_mean`; `m` is the window's last sample.
-    pub fn filter(
-        &self,
-        cfg: &OdometryConfig,
-        prior: &AccelPrior,
-        f_mean: Vector3<f64>,
-        m: &Imu,
-    ) -> Eskf {
-        let consider = ConsiderModel {
-            gyro: cfg.gyro_correction_sigma,
-            accel: prior.consider,
-        };
-        Eskf::new(self.x, self.cov, cfg.gravity_mps2, cfg.noise, *m)
-            .with_consider(consider, f_mean)
-            .with_propagation_interval(cfg.propagation_interval_s)
-    }
-}
-
 /// The initial state and covariance from the cruise window `c` of `span_s` seconds (see the
 /// module documentation for what is assumed and how the sigmas carry it), with the mounting
 /// `r_bs` when known and the accelerometer bias prior of `prior` (as at a rest).
@@ -206,12 +186,8 @@ pub fn cruise_start(
     prior: &AccelPrior,
 ) -> CruiseStart {
     let n = c.accel.len() as f64;
-    let mut w_var = c.gyro.variance() / n;
-    if cfg.effective_samples {
-        w_var.component_mul_assign(&c.gyro.mean_variance_factor());
-    }
     // A turn as slow as the mean's own 1-sigma is not seen: in quadrature with it.
-    let w_sigma = (w_var * 2.0).map(f64::sqrt);
+    let w_sigma = (c.gyro.mean_variance(cfg.effective_samples) * 2.0).map(f64::sqrt);
     let g = cfg.gravity_mps2;
     let hidden = c.hidden_accel(&w_sigma);
     let bias_sigma = prior.bias_sigma_mps2.map(|s| s.hypot(hidden));

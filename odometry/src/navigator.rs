@@ -6,7 +6,7 @@
 
 use crate::config::OdometryConfig;
 use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
-use crate::eskf::{ConsiderModel, Eskf, Imu, KS, align};
+use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
 use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
@@ -642,26 +642,38 @@ impl Navigator {
         if (t_ns - a.t0_ns) as f64 * 1e-9 < self.cfg.align_s || a.accel.len() < 2 {
             return;
         }
-        let n = a.accel.len() as f64;
         let f_mean = a.accel.mean();
         let w_mean = a.gyro.mean();
-        // Gyro bias from the rest mean: its variance is the sample variance over n, times the
-        // samples' mean-variance factor when they count as effective samples; each
-        // zero-velocity update then counts for one effective sample of the accelerometer's
-        // noise (`OdometryConfig::effective_samples`).
-        let mut w_var = a.gyro.variance() / n;
+        // Gyro bias from the rest mean, with its mean's variance; each zero-velocity update
+        // then counts for one effective sample of the accelerometer's noise
+        // (`OdometryConfig::effective_samples`).
+        let w_sigma = a
+            .gyro
+            .mean_variance(self.cfg.effective_samples)
+            .map(f64::sqrt);
         self.zupt_sigma_mps = self.cfg.zupt_sigma_mps;
         if self.cfg.effective_samples {
-            w_var.component_mul_assign(&a.gyro.mean_variance_factor());
             self.zupt_sigma_mps *= a.accel.mean_variance_factor().max().sqrt();
         }
-        let w_sigma = w_var.map(f64::sqrt);
         self.standing_accel_sd = a.accel.variance().sum().sqrt();
         let g = self.cfg.gravity_mps2;
         let prior = AccelPrior::at_rest(&self.cfg, &f_mean, a.gravity_off);
-        self.accel_prior = Some(prior);
         let (x, mut cov) = align(f_mean, w_mean, g, prior.bias_sigma_mps2, w_sigma);
         cov[(KS, KS)] = self.hints.cfg.speed_scale_sigma.powi(2);
+        self.start_filter(x, cov, prior, f_mean, m);
+        self.at_rest = true;
+    }
+
+    /// Starts the filter at `x`, `cov` (an alignment at rest or in motion) with the
+    /// accelerometer prior `prior` and the window's mean specific force `f_mean`.
+    fn start_filter(
+        &mut self,
+        x: Nominal,
+        cov: Cov,
+        prior: AccelPrior,
+        f_mean: Vector3<f64>,
+        m: &Imu,
+    ) {
         let consider = ConsiderModel {
             gyro: self.cfg.gyro_correction_sigma,
             accel: prior.consider,
@@ -671,7 +683,7 @@ impl Navigator {
                 .with_consider(consider, f_mean)
                 .with_propagation_interval(self.cfg.propagation_interval_s),
         );
-        self.at_rest = true;
+        self.accel_prior = Some(prior);
     }
 
     /// Gathers the cruise window of an unaligned filter ([`crate::cruise`]; `fresh` is the fresh
@@ -727,8 +739,7 @@ impl Navigator {
             self.hints.r_bs,
             &prior,
         );
-        self.kf = Some(start.filter(&self.cfg, &prior, c.accel.mean(), m));
-        self.accel_prior = Some(prior);
+        self.start_filter(start.x, start.cov, prior, c.accel.mean(), m);
         self.standing_accel_sd = start.standing_accel_sd;
         self.zupt_sigma_mps = self.cfg.zupt_sigma_mps;
         self.aligned_in_motion = Some(c.speed().0);

@@ -138,6 +138,18 @@ impl RestNoise {
             (1.0 + 2.0 * r1[i].min(1.0) / (1.0 - f)).min(MAX_FACTOR)
         })
     }
+
+    /// The variance of the mean per axis: the sample variance over `n`, times
+    /// [`RestNoise::mean_variance_factor`] when the samples count as effective samples
+    /// (`OdometryConfig::effective_samples`).
+    pub fn mean_variance(&self, effective_samples: bool) -> Vector3<f64> {
+        let v = self.variance() / self.len() as f64;
+        if effective_samples {
+            v.component_mul(&self.mean_variance_factor())
+        } else {
+            v
+        }
+    }
 }
 
 #[cfg(test)]
