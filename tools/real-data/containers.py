@@ -11,6 +11,7 @@ them to check the readers on small inline samples.
 import ast
 import bz2
 import json
+import math
 import struct
 import zlib
 
@@ -32,11 +33,14 @@ class ConvertError(Exception):
 # a 128-byte header, then data elements of (type u32, byte count u32, data padded to 8 bytes),
 # a small element packing type and count in one u32; miCOMPRESSED (15) elements hold zlib
 # streams of further elements; miMATRIX (14) holds array flags, dimensions, name and the real
-# part. Only numeric and logical arrays are decoded (all this corpus needs).
+# part. Numeric and logical arrays are decoded, and the fields of 1 x 1 structs (section 1-17:
+# after the name, the field-name length as one int32, the names NUL-padded to it, then one
+# unnamed miMATRIX per field), stored as "variable.field.subfield" (all this corpus needs).
 
 MAT_TYPES = {1: "b", 2: "B", 3: "h", 4: "H", 5: "i", 6: "I", 7: "f", 9: "d", 12: "q", 13: "Q"}
 MI_MATRIX, MI_COMPRESSED = 14, 15
 NUMERIC_CLASSES = set(range(6, 16))
+STRUCT_CLASS = 2
 
 
 def _mat_elements(buf, pos, end, where):
@@ -52,26 +56,50 @@ def _mat_elements(buf, pos, end, where):
         pos += 8 + size + ((-size) % 8 if kind != MI_COMPRESSED else 0)
 
 
-def _mat_array(data, where):
+def _mat_struct_fields(subs, name, where):
+    """(field name, miMATRIX data) of a 1 x 1 struct's elements `subs` (flags, dims, name
+    first)."""
+    if len(subs) < 5:
+        raise ConvertError(where, None, name, "MAT struct without field names")
+    width = struct.unpack_from("<i", subs[3][1])[0]
+    raw = subs[4][1]
+    if width <= 0:
+        raise ConvertError(where, None, name, f"MAT struct field-name length {width}")
+    fields = [raw[i : i + width].split(b"\0")[0].decode("latin-1") for i in range(0, len(raw), width)]
+    return [(field, data) for field, (kind, data) in zip(fields, subs[5:]) if kind == MI_MATRIX]
+
+
+def _mat_array(data, where, arrays, name=None):
+    """Stores the numeric array in miMATRIX `data` in `arrays` ({name: (dims, values)}, values
+    None where not numeric), and a 1 x 1 struct's fields under "name.field"."""
     subs = list(_mat_elements(data, 0, len(data), where))
     if len(subs) < 3:
         raise ConvertError(where, None, None, "MAT array without flags, dimensions and name")
     cls = struct.unpack_from("<I", subs[0][1])[0] & 0xFF
     dims = struct.unpack("<%di" % (len(subs[1][1]) // 4), subs[1][1])
-    name = subs[2][1].decode("latin-1")
+    name = subs[2][1].decode("latin-1") if name is None else name
+    if cls == STRUCT_CLASS and math.prod(dims) == 1:
+        for field, sub in _mat_struct_fields(subs, name, where):
+            _mat_array(sub, where, arrays, f"{name}.{field}")
+        return
+    arrays[name] = (dims, _mat_values(subs, cls, name, where))
+
+
+def _mat_values(subs, cls, name, where):
     if cls not in NUMERIC_CLASSES or len(subs) < 4:
-        return name, dims, None
+        return None
     kind, raw = subs[3]
     code = MAT_TYPES.get(kind)
     if code is None:
         raise ConvertError(where, None, name, f"MAT data type {kind} is not supported")
-    values = struct.unpack("<%d%s" % (len(raw) // struct.calcsize(code), code), raw)
-    return name, dims, values
+    return struct.unpack("<%d%s" % (len(raw) // struct.calcsize(code), code), raw)
 
 
 def read_mat(buf, where):
     """The numeric arrays of a level-5 MAT-file: {name: (dims, column-major values)}."""
-    if len(buf) < 128 or not buf.startswith(b"MATLAB 5.0 MAT-file"):
+    # The header's first 116 bytes are free text (MATLAB writes "MATLAB 5.0 MAT-file", other
+    # writers their own); the version (0x0100) at byte 124 is what marks a level-5 file.
+    if len(buf) < 128 or struct.unpack_from("<H", buf, 124)[0] != 0x0100:
         raise ConvertError(where, None, None, "not a MATLAB 5.0 MAT-file (v7.3/HDF5 is not read)")
     if buf[126:128] != b"IM":
         raise ConvertError(where, None, None, "big-endian MAT-files are not read")
@@ -86,8 +114,7 @@ def read_mat(buf, where):
                     raise ConvertError(where, None, None, f"corrupt compressed element: {e}")
                 walk(inner, 0, len(inner))
             elif kind == MI_MATRIX:
-                name, dims, values = _mat_array(data, where)
-                arrays[name] = (dims, values)
+                _mat_array(data, where, arrays)
 
     walk(buf, 128, len(buf))
     return arrays
@@ -477,8 +504,9 @@ def navsatfix_message(stamp_ns, status, lat, lon, cov_east):
 
 
 def self_test():
-    """The .npy and ROS bag readers on containers written by the builders above, and their
-    errors on malformed input. Returns the names checked; raises AssertionError."""
+    """The MAT struct, .npy and ROS bag readers on containers written here or by the builders
+    above, and their errors on malformed input. Returns the names checked; raises
+    AssertionError."""
     def expect_error(fn, *needles):
         try:
             fn()
@@ -486,6 +514,26 @@ def self_test():
             assert all(n in str(e) for n in needles), (str(e), needles)
             return
         raise AssertionError("no error raised")
+
+    # A MAT-file struct as QTM writes one: s.FrameRate and s.Body.Positions (1 x 3 x 2), a
+    # char field left undecoded, a free-text header.
+    def element(kind, data):
+        return struct.pack("<II", kind, len(data)) + data + b"\0" * ((-len(data)) % 8)
+
+    def matrix(cls, dims, name, *rest):
+        head = element(6, struct.pack("<II", cls, 0)) + element(5, struct.pack("<%di" % len(dims), *dims)) + element(1, name)
+        return element(MI_MATRIX, head + b"".join(rest))
+
+    def fields(*names):
+        return element(5, struct.pack("<i", 16)) + element(1, b"".join(n.ljust(16, b"\0") for n in names))
+
+    body = matrix(STRUCT_CLASS, (1, 1), b"Body", fields(b"Positions"),
+                  matrix(6, (1, 3, 2), b"", element(9, struct.pack("<6d", 1, 2, 3, 4, 5, 6))))
+    qtm = matrix(STRUCT_CLASS, (1, 1), b"s", fields(b"Name", b"FrameRate", b"Body"), matrix(4, (1, 2), b"", element(4, b"ab")),
+                 matrix(6, (1, 1), b"", element(9, struct.pack("<d", 60.0))), body)
+    got = read_mat(b"QTM_ver 2.10, Level 5 MAT-file".ljust(124) + struct.pack("<H", 0x0100) + b"IM" + qtm, "q.mat")
+    assert got == {"s.Name": ((1, 2), None), "s.FrameRate": ((1, 1), (60.0,)), "s.Body.Positions": ((1, 3, 2), (1.0, 2.0, 3.0, 4.0, 5.0, 6.0))}, got
+    expect_error(lambda: read_mat(b"MATLAB 7.3 MAT-file".ljust(124) + struct.pack("<H", 0x0200) + b"IM", "h.mat"), "h.mat", "v7.3")
 
     rows = [[0.0, 1.0, 2.0], [3.0, 4.0, 5.0]]
     assert read_npy(npy_bytes(rows), "a.npy") == rows
@@ -510,4 +558,4 @@ def self_test():
     odd = bag_bytes(messages, False).replace(ROS_TYPES["sensor_msgs/Imu"].encode(), b"0" * 32)
     expect_error(lambda: list(bag_messages(odd, "b.bag", {"/imu"})), "b.bag", "'/imu'", "not read")
     expect_error(lambda: list(bag_messages(b"#ROSBAG V1.2\n", "b.bag", {"/imu"})), "b.bag", "format 2.0")
-    return ["npy", "ROS bag (none, bz2)"]
+    return ["MAT v5 struct (QTM)", "npy", "ROS bag (none, bz2)"]

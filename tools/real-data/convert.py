@@ -32,7 +32,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import comma2k19
 import containers
+import tyrex_attitude
 from containers import (HINT_TOPIC, MCAP_T0_NS, RAW_TOPIC, ConvertError, bag_bytes, bag_messages, decode_imu,
                         decode_navsatfix, decode_odometry, imu_message, mat_bytes, mat_matrix, mcap_bytes,
                         mcap_messages, navsatfix_message, npy_bytes, odometry_message, read_mat, read_mcap_records,
@@ -586,10 +588,31 @@ def _load_ros_bag(rec, source, f):
     return (samples, notes, *gnss_track_truth(fixes, f.where(0)), hints)
 
 
+def _load_comma2k19(rec, source, f):
+    arrays = [read_npy(f.raw(i), f.where(i)) for i in range(9)]
+    samples, speeds, t0, notes = comma2k19.segment(arrays[:6], [f.where(i) for i in range(6)])
+    # The CAN speed has no yaw rate: the car is called stationary on the speed alone.
+    hints = odometry_hints([(t, v, 0.0) for t, v in speeds])
+    notes.append(f"robot hints from {rec['paths'][5]} (CAN speed, m/s): speed valid, 1-sigma {ODOM_SPEED_SIGMA_MPS} m/s; "
+                 f"stationary (encoders) after {ODOM_STATIONARY_AFTER_S} s below {ODOM_STILL_MPS} m/s")
+    truth, distance = comma2k19.pose_track_truth(*arrays[6:9], t0, [f.where(i) for i in range(6, 9)])
+    truth["sensor_yaw_on_body_deg"] = source.get("sensor_yaw_on_body_deg")
+    return samples, notes, truth, distance, hints
+
+
+def _load_tyrex(rec, source, f):
+    samples, start, notes = tyrex_attitude.samples_from_logs(f.text(0), f.text(1), [f.where(0), f.where(1)])
+    offset = tyrex_attitude.time_offset(f.text(2), f.where(2))
+    truth, distance = tyrex_attitude.mocap_track_truth(read_mat(f.raw(3), f.where(3)), offset, start, samples[-1][0], f.where(3))
+    truth["sensor_yaw_on_body_deg"] = source.get("sensor_yaw_on_body_deg")
+    return samples, notes, truth, distance, None
+
+
 LOADERS = {
     "xio_csv": _load_xio, "openshoe_txt": _load_openshoe, "sensorconnect_csv": _load_sensorconnect,
     "xsens_dot_csv": _load_xsens_dot, "xsens_dot_rtk_npy": _load_xsens_dot_rtk, "broad_mat": _load_broad,
-    "vesc_f1tenth_csv": _load_vesc, "ros1_bag_robot": _load_ros_bag,
+    "vesc_f1tenth_csv": _load_vesc, "ros1_bag_robot": _load_ros_bag, "comma2k19_npy": _load_comma2k19,
+    "tyrex_android_qtm": _load_tyrex,
 }
 
 
@@ -867,7 +890,7 @@ def self_test():
     _test_vesc_and_mcap()
     _test_ros_bag()
     _test_rtk_npy()
-    checked = containers.self_test()
+    checked = [comma2k19.self_test(), tyrex_attitude.self_test(), *containers.self_test()]
     print("convert.py self-test: ok (xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv, broad_mat, vesc_f1tenth_csv, "
           "ros1_bag_robot, xsens_dot_rtk_npy, MAT v5 GCP, GNSS, MCAP with hints, " + ", ".join(checked) + ")")
     return 0
