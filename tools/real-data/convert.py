@@ -601,7 +601,9 @@ def _load_comma2k19(rec, source, f):
 
 
 def _load_tyrex(rec, source, f):
-    samples, start, notes = tyrex_attitude.samples_from_logs(f.text(0), f.text(1), [f.where(0), f.where(1)])
+    os_name = "ios" if source["format"] == "tyrex_ios_qtm" else "android"
+    zero = tyrex_attitude.boot_time(f.text(4), f.where(4)) if os_name == "ios" else 0.0
+    samples, start, notes = tyrex_attitude.samples_from_logs(f.text(0), f.text(1), [f.where(0), f.where(1)], os_name, zero)
     offset = tyrex_attitude.time_offset(f.text(2), f.where(2))
     truth, distance = tyrex_attitude.mocap_track_truth(read_mat(f.raw(3), f.where(3)), offset, start, samples[-1][0], f.where(3))
     truth["sensor_yaw_on_body_deg"] = source.get("sensor_yaw_on_body_deg")
@@ -612,7 +614,7 @@ LOADERS = {
     "xio_csv": _load_xio, "openshoe_txt": _load_openshoe, "sensorconnect_csv": _load_sensorconnect,
     "xsens_dot_csv": _load_xsens_dot, "xsens_dot_rtk_npy": _load_xsens_dot_rtk, "broad_mat": _load_broad,
     "vesc_f1tenth_csv": _load_vesc, "ros1_bag_robot": _load_ros_bag, "comma2k19_npy": _load_comma2k19,
-    "tyrex_android_qtm": _load_tyrex,
+    "tyrex_android_qtm": _load_tyrex, "tyrex_ios_qtm": _load_tyrex,
 }
 
 

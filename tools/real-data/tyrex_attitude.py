@@ -2,7 +2,9 @@
 IMU logs as samples and the Qualisys motion capture of its handler as the truth.
 
 Per session, datasets/android/SESSION/ holds space-separated text logs, one event per line, the
-first column the time in s from the start of the record:
+first column the time in s from the start of the record (datasets/ios/SESSION/ alike, with times
+from the phone's boot, description.txt's BootTime, and the accelerometer in g of acceleration,
+-1 on the axis pointing up at rest, which is negated here; its gyroscope.txt is t, x, y, z):
   accelerometer.txt   t, x, y, z: specific force in m/s^2 (Android: +9.8 on the axis pointing up
                       at rest), the phone's axes (x right, y up the screen, z out of it);
   gyroscope.txt       t, x, y, z, and the driver's drift estimate x, y, z: the uncalibrated
@@ -51,12 +53,33 @@ def _rows(text, where, width):
     return rows
 
 
-def samples_from_logs(acc_text, gyro_text, wheres):
+# Accelerometer units to g of specific force: Android logs m/s^2 of specific force (+9.8 up);
+# iOS (CoreMotion) logs g of acceleration with gravity's sign (-1 on the axis pointing up), which
+# the authors' loadiOSDataset.m negates.
+ACCEL_TO_G = {"android": 1.0 / G0, "ios": -1.0}
+
+
+def boot_time(text, where):
+    """description.txt of an iOS session ("[Time]", "BootTime = s"): the boot time its log
+    times count from (the authors' loadiOSDataset.m subtracts it)."""
+    for n, line in enumerate(text.splitlines(), 1):
+        key, sep, value = line.partition("=")
+        if sep and key.strip() == "BootTime":
+            try:
+                return float(value)
+            except ValueError:
+                raise ConvertError(where, n, "BootTime", f"not a number: {value.strip()!r}") from None
+    raise ConvertError(where, None, "BootTime", "missing")
+
+
+def samples_from_logs(acc_text, gyro_text, wheres, os_name, time_zero=0.0):
     """Samples (t_s, ax_g, ay_g, az_g, gx_dps, gy_dps, gz_dps) at the accelerometer's events,
-    t_s from the first kept one, the gyro interpolated linearly; returns (samples, phone time of
-    the first sample, notes)."""
-    acc = _rows(acc_text, wheres[0], 4)
-    gyr = _rows(gyro_text, wheres[1], 4)
+    t_s from the first kept one, the gyro interpolated linearly; the logs' times count from
+    `time_zero` (an iOS session's boot time). Returns (samples, phone time of the first sample,
+    notes)."""
+    to_g = ACCEL_TO_G[os_name]
+    acc = [[r[0] - time_zero, *r[1:]] for r in _rows(acc_text, wheres[0], 4)]
+    gyr = [[r[0] - time_zero, *r[1:]] for r in _rows(gyro_text, wheres[1], 4)]
     kept, j = [], 0
     for t, ax, ay, az in acc:
         if t < gyr[0][0] or t > gyr[-1][0]:
@@ -66,13 +89,14 @@ def samples_from_logs(acc_text, gyro_text, wheres):
         (t0, *w0), (t1, *w1) = gyr[j], gyr[j + 1]
         f = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
         w = [(a + f * (b - a)) * DEG for a, b in zip(w0, w1)]
-        kept.append((t, ax / G0, ay / G0, az / G0, *w))
+        kept.append((t, ax * to_g, ay * to_g, az * to_g, *w))
     if not kept:
         raise ConvertError(wheres[0], None, "t", "no accelerometer event within the gyro's span")
     start = kept[0][0]
-    notes = [f"accelerometer m/s^2 -> g (/9.80665), gyroscope (uncalibrated, first three values) rad/s -> deg/s; one sample per accelerometer event, "
+    unit = "m/s^2 -> g (/9.80665)" if os_name == "android" else "g of acceleration -> g of specific force (negated)"
+    notes = [f"accelerometer {unit}, gyroscope (first three values) rad/s -> deg/s; one sample per accelerometer event, "
              f"the gyro interpolated linearly to it ({len(acc) - len(kept)} accelerometer events outside the gyro's span dropped); "
-             "t_s = phone time minus the first kept event's"]
+             f"t_s = phone time (log time minus {time_zero} s) minus the first kept event's"]
     return [(t - start, *rest) for t, *rest in kept], start, notes
 
 
@@ -172,14 +196,18 @@ def self_test():
     that runs backwards names the file, line and field."""
     acc = "0.10 0 0 9.80665\n0.20 0 4.903325 0\n0.50 1 1 1\n"
     gyr = "0.05 0 0 0 9 9 9\n0.15 0 0 0.2 9 9 9\n0.25 0 0 0.4 9 9 9\n"
-    samples, start, _ = samples_from_logs(acc, gyr, ["a.txt", "g.txt"])
+    samples, start, _ = samples_from_logs(acc, gyr, ["a.txt", "g.txt"], "android")
     assert start == 0.1 and len(samples) == 2 and samples[0][:4] == (0.0, 0.0, 0.0, 1.0), samples
     assert abs(samples[0][6] - 0.1 * DEG) < 1e-9 and abs(samples[1][6] - 0.3 * DEG) < 1e-9 and abs(samples[1][2] - 0.5) < 1e-12, samples
     try:
-        samples_from_logs(acc, gyr.replace("0.15", "0.01"), ["a.txt", "g.txt"])
+        samples_from_logs(acc, gyr.replace("0.15", "0.01"), ["a.txt", "g.txt"], "android")
         raise AssertionError("a gyro time running backwards was taken")
     except ConvertError as e:
         assert "g.txt" in str(e) and "line 2" in str(e) and "'t'" in str(e), e
+    # iOS: g with gravity's sign, times from boot.
+    ios, start, _ = samples_from_logs("100.10 0 0 -1\n100.12 0.5 0 -1\n", "100.05 0 0 0\n100.15 0 0 0\n", ["a.txt", "g.txt"], "ios",
+                                      boot_time("[Time]\nBootTime = 100.0", "d.txt"))
+    assert ios[0][1:4] == (-0.0, -0.0, 1.0) and ios[1][1] == -0.5 and abs(start - 0.1) < 1e-9, (ios, start)
     assert time_offset("  -2.35e+00\n", "o.txt") == -2.35
     try:
         time_offset("1 2", "o.txt")
