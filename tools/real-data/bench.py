@@ -33,9 +33,11 @@ joint grid when it has at most MAX_GRID points, else one flag at a time from the
 In-sample: the candidate with the smallest median % of distance over all of the class's
 recordings, and that median. Leave one source out: for each source S of the class, the
 candidate with the smallest median over the class's recordings from the other sources, then
-S's recordings run with it; the median of those runs over the class. A class with a single
-source has no other source to choose on: its recordings are run with the defaults (the
-values the binary uses without flags), and the table says so. A failed run counts as an
+S's recordings run with it; the median of those runs over the class. A source here is a
+repository: corpus.json sources from one repository (the same sessions logged by two phones)
+are held out together. A class with a single source has no other source to choose on: its
+recordings are run with the defaults (the values the binary uses without flags), and the
+table says so. A failed run counts as an
 infinite error, as does a run with no distance after its alignment. Runs are cached by
 (recording, arguments).
 
@@ -418,6 +420,16 @@ def candidates(params, score):
     return tuple(best), tried
 
 
+def held_out_groups(group, corpus):
+    """The class's recordings by repository, each group labelled by its corpus.json sources
+    joined with '+': sources from one repository (two phones in the same sessions) come from
+    one data set and are held out together."""
+    groups = {}
+    for rec in group:
+        groups.setdefault(corpus["sources"][rec["source"]]["repo"], []).append(rec)
+    return [("+".join(dict.fromkeys(r["source"] for r in recs)), recs) for recs in groups.values()]
+
+
 def loso(corpus, runner, only):
     """The leave-one-source-out report (see the module docstring): per class, the in-sample
     candidate and median, the per-source held-out candidates and runs, the LOSO median."""
@@ -443,9 +455,8 @@ def loso(corpus, runner, only):
             best_all, tried = defaults, 1
         in_sample = {r["id"]: pct_upper(runner.row(r, args_for(r, best_all))) for r in group}
         sources = []
-        for source in dict.fromkeys(r["source"] for r in group):
-            mine = [r for r in group if r["source"] == source]
-            others = [r for r in group if r["source"] != source]
+        for source, mine in held_out_groups(group, corpus):
+            others = [r for r in group if r not in mine]
             if params and others:
                 choice, _ = candidates(params, lambda c: score(others, c))
                 how = "chosen on the other sources"

@@ -589,14 +589,13 @@ def _load_ros_bag(rec, source, f):
 
 
 def _load_comma2k19(rec, source, f):
-    arrays = [read_npy(f.raw(i), f.where(i)) for i in range(9)]
+    arrays = [read_npy(f.raw(i), f.where(i)) for i in range(8)]
     samples, speeds, t0, notes = comma2k19.segment(arrays[:6], [f.where(i) for i in range(6)])
     # The CAN speed has no yaw rate: the car is called stationary on the speed alone.
     hints = odometry_hints([(t, v, 0.0) for t, v in speeds])
     notes.append(f"robot hints from {rec['paths'][5]} (CAN speed, m/s): speed valid, 1-sigma {ODOM_SPEED_SIGMA_MPS} m/s; "
                  f"stationary (encoders) after {ODOM_STATIONARY_AFTER_S} s below {ODOM_STILL_MPS} m/s")
-    truth, distance = comma2k19.pose_track_truth(*arrays[6:9], t0, [f.where(i) for i in range(6, 9)])
-    truth["sensor_yaw_on_body_deg"] = source.get("sensor_yaw_on_body_deg")
+    truth, distance = comma2k19.pose_track_truth(*arrays[6:8], t0, [f.where(i) for i in range(6, 8)])
     return samples, notes, truth, distance, hints
 
 
