@@ -153,7 +153,10 @@ fn hand_model(dir: &Path) -> std::path::PathBuf {
     accel.insert("bias".into(), triple(HAND_BIAS_G));
     accel.insert("scale".into(), triple(HAND_SCALE));
     let zero = triple([0.0; 3]);
-    accel.insert("misalignment".into(), toml::Value::Array(vec![zero.clone(); 3]));
+    accel.insert(
+        "misalignment".into(),
+        toml::Value::Array(vec![zero.clone(); 3]),
+    );
     // Nor a turn-on bias or a bias with temperature: the bias is `HAND_BIAS_G`.
     accel.insert("turn_on_bias_std".into(), zero.clone());
     accel.insert("bias_temp_coeff".into(), zero);

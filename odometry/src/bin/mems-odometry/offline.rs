@@ -98,7 +98,7 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             odometry::uncalibrated::remove_bias(&file, &first.bias_mps2)
         }
     };
-    let Some(second) = pass(&args, &choice, &removed, detector, Pass::Second(first))? else {
+    let Some(second) = pass(&args, &choice, &removed, detector, Pass::Second(&first))? else {
         return Ok(());
     };
     tracing::warn!(
@@ -111,17 +111,18 @@ pub fn run(args: OfflineArgs) -> Result<()> {
 
 /// Which run of the recording [`pass`] makes.
 #[derive(Clone, Copy)]
-enum Pass {
+enum Pass<'a> {
     /// The first: it ends early, with the accelerometer's estimate, when that is uncalibrated.
     First,
-    /// The second, with the first's estimated bias removed: it ends early, with its estimate,
+    /// The second, with the first's estimated bias removed (or its per-axis fit applied): it
+    /// ends early, with its estimate,
     /// when that moved the bias further than the uncalibrated prior's sigma.
-    Second(AccelEstimate),
+    Second(&'a AccelEstimate),
     /// The only one whose result stands whatever it estimates.
     Only,
 }
 
-impl Pass {
+impl Pass<'_> {
     /// Whether the run ends early with `estimate` instead of reporting.
     fn ends_early(
         self,
@@ -148,7 +149,7 @@ fn pass(
     choice: &platform::Choice,
     file: &calibrate::calibfile::CalibrationFile,
     detector: calibrate::zero_state::DetectorConfig,
-    which: Pass,
+    which: Pass<'_>,
 ) -> Result<Option<AccelEstimate>> {
     let (source, repairs, ranges) = Source::open(args)?;
     let calibration = CalibrationStage::new(file, detector, RefineConfig::default())
