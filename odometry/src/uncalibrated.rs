@@ -257,11 +257,14 @@ impl std::fmt::Display for AccelEstimate {
 impl AccelEstimate {
     /// The rest attitudes and the per-axis fit, for [`std::fmt::Display`].
     fn fmt_attitudes(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "; {} rest attitudes, {:.0} deg apart at most",
-            self.attitudes, self.attitude_spread_deg
-        )?;
+        match self.attitudes {
+            1 => write!(f, "; 1 rest attitude")?,
+            n => write!(
+                f,
+                "; {n} rest attitudes, {:.0} deg apart at most",
+                self.attitude_spread_deg
+            )?,
+        }
         let Some(fit) = &self.per_axis else {
             return write!(
                 f,

@@ -16,7 +16,11 @@
 //! Live, the real processes without a calibration file (`mems-acquire`'s simulated datasheet
 //! part, whose rest reads gravity about 6 % off): `mems-calibrate serve` learns the rest, flags
 //! every sample after it `GRAVITY_OFF` and removes the error along gravity, and `mems-odometry
-//! serve` reports the bias it estimated as an uncalibrated part's in its summary.
+//! serve` reports the bias it estimated as an uncalibrated part's in its summary, with the rest
+//! attitudes it saw (one: no per-axis scale).
+//!
+//! A hand-held part set down at 14 attitudes: the per-axis scale and bias its rests determine
+//! (`odometry::attitudes`), applied by the offline second pass.
 
 use integration_tests::{Proc, path_arg, run_ok, unique_namespace};
 use ipc_types::{CorrectedImuSample, corrected_flags, service};
@@ -328,6 +332,11 @@ fn a_live_part_without_a_calibration_file_is_flagged_and_its_bias_reported() {
     );
     assert!(
         summary.contains("accelerometer bias") && summary.contains("uncalibrated"),
+        "mems-odometry serve's summary: {summary}"
+    );
+    // The part rested at one attitude: no per-axis scale, and the summary says why.
+    assert!(
+        summary.contains("1 rest attitude") && summary.contains("no per-axis scale"),
         "mems-odometry serve's summary: {summary}"
     );
 }
