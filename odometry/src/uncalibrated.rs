@@ -24,12 +24,17 @@
 //!   reported 1-sigma holds them.
 //!
 //! A part within the trigger keeps the calibrated prior unchanged. What the filter holds of the
-//! bias at the end ([`AccelEstimate`]) goes to the offline JSON and the logs.
+//! bias at the end, with the sigma of what its rests could not observe added, and the per-axis
+//! fit of its rest attitudes ([`crate::attitudes`]) if they allow one ([`AccelEstimate`]) go to
+//! the offline JSON, the logs and the serve summary.
 //!
 //! The bias converges over the first rests and what the track did before is lost, so
-//! `mems-odometry offline` runs such a part twice: the second pass with the first pass's bias
-//! removed from the calibration ([`remove_bias`]) and the same wide prior around it
-//! ([`crate::config::UncalibratedAccel::removed_bias_mps2`]).
+//! `mems-odometry offline` runs such a part twice: the second pass with the first pass's
+//! per-axis fit applied to the calibration ([`apply_fit`], its sigmas as the prior:
+//! [`crate::config::UncalibratedAccel::fitted`]) where its rests allowed one, else with its bias
+//! removed ([`remove_bias`]) and the same wide prior around it
+//! ([`crate::config::UncalibratedAccel::removed_bias_mps2`]). Live, the one pass reports the fit
+//! its rests allow and applies nothing.
 
 use calibrate::calibfile::CalibrationFile;
 use nalgebra::{Matrix3, Vector3};
