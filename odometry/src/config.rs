@@ -267,6 +267,11 @@ pub struct UncalibratedAccel {
     /// on a real wheeled run a calibrated prior around it ended further off than one pass) and
     /// reports the bias as this plus its own estimate.
     pub removed_bias_mps2: Option<[f64; 3]>,
+    /// The per-axis bias and scale an earlier pass fitted to its rests at several attitudes
+    /// and corrected the samples with ([`crate::attitudes`], `mems-odometry offline`): the
+    /// filter then starts from the fit's sigmas (bias per axis, scale per axis in the consider
+    /// parameters; the cross-axis sensitivity, not applied, keeps `cross_axis_sigma`).
+    pub fitted: Option<crate::attitudes::AttitudeFit>,
 }
 
 impl Default for UncalibratedAccel {
@@ -277,6 +282,7 @@ impl Default for UncalibratedAccel {
             scale_sigma: 0.03,
             cross_axis_sigma: 0.02,
             removed_bias_mps2: None,
+            fitted: None,
         }
     }
 }

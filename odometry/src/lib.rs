@@ -9,6 +9,7 @@
 //! Measured accuracy on simulated drives: docs/odometry.md.
 
 pub mod arrival;
+pub mod attitudes;
 pub mod axes;
 pub mod config;
 pub mod cruise;

@@ -4,6 +4,7 @@
 //! newest inputs and one on settled flags (and replays on final flags); this module holds what
 //! each of them does. The module documentation of [`crate::stage`] describes the behaviour.
 
+use crate::attitudes::RestAttitudes;
 use crate::config::OdometryConfig;
 use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
 use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
@@ -110,6 +111,8 @@ pub(crate) struct Navigator {
     untrusted: Untrusted,
     /// The accelerometer prior the filter aligned with.
     accel_prior: Option<AccelPrior>,
+    /// The rest samples by attitude (`crate::attitudes`).
+    attitudes: RestAttitudes,
 }
 
 impl Navigator {
@@ -159,6 +162,7 @@ impl Navigator {
             standing_accel_sd: 0.0,
             untrusted: Untrusted::default(),
             accel_prior: None,
+            attitudes: RestAttitudes::default(),
         }
     }
 
@@ -261,11 +265,12 @@ impl Navigator {
 
     /// What the filter holds of the accelerometer's error, once aligned.
     pub fn accel_estimate(&self) -> Option<AccelEstimate> {
-        let removed = self.cfg.uncalibrated.removed_bias_mps2;
         Some(AccelEstimate::of(
             self.kf.as_ref()?,
             self.accel_prior.as_ref()?,
-            removed,
+            &self.cfg.uncalibrated,
+            &self.attitudes,
+            self.cfg.gravity_mps2,
         ))
     }
 
@@ -306,6 +311,7 @@ impl Navigator {
             if !verdict.implausible {
                 let gravity_off = s.flags & corrected_flags::GRAVITY_OFF != 0;
                 let rest = rest && ready && verdict.clipped == 0;
+                self.gather_attitude(&m, rest);
                 self.accumulate_alignment(t_ns, &m, rest, gravity_off);
                 let still = imu_rest && detector_ready && verdict.clipped == 0;
                 self.accumulate_cruise(t_ns, &m, d.fresh.filter(|_| still), gravity_off);
@@ -316,6 +322,7 @@ impl Navigator {
         let dt = (t_ns - prev_ns.unwrap_or(t_ns)) as f64 * 1e-9;
         let imu_rest = imu_rest && !self.vibrating(s, &mut d.sample);
         let rest = self.rest_decision(&d, imu_rest);
+        self.gather_attitude(&m, rest && !verdict.implausible && verdict.clipped == 0);
         if !rest {
             // The rest ended at the previous sample: its last updates are made there.
             self.close_rest_window();
@@ -340,6 +347,14 @@ impl Navigator {
             && (t_ns - pending.end_ns) as f64 * 1e-9 >= self.cfg.revision_delay_s
         {
             self.republish(pending, emit);
+        }
+    }
+
+    /// Gathers a rest sample's specific force by attitude (`crate::attitudes`; no allocation).
+    #[inline]
+    fn gather_attitude(&mut self, m: &Imu, rest: bool) {
+        if rest {
+            self.attitudes.push(&m.f);
         }
     }
 

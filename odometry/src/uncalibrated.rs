@@ -24,17 +24,23 @@
 //!   reported 1-sigma holds them.
 //!
 //! A part within the trigger keeps the calibrated prior unchanged. What the filter holds of the
-//! bias at the end ([`AccelEstimate`]) goes to the offline JSON and the logs.
+//! bias at the end, with the sigma of what its rests could not observe added, and the per-axis
+//! fit of its rest attitudes ([`crate::attitudes`]) if they allow one ([`AccelEstimate`]) go to
+//! the offline JSON, the logs and the serve summary.
 //!
 //! The bias converges over the first rests and what the track did before is lost, so
-//! `mems-odometry offline` runs such a part twice: the second pass with the first pass's bias
-//! removed from the calibration ([`remove_bias`]) and the same wide prior around it
-//! ([`crate::config::UncalibratedAccel::removed_bias_mps2`]).
+//! `mems-odometry offline` runs such a part twice: the second pass with the first pass's
+//! per-axis fit applied to the calibration ([`apply_fit`], its sigmas as the prior:
+//! [`crate::config::UncalibratedAccel::fitted`]) where its rests allowed one, else with its bias
+//! removed ([`remove_bias`]) and the same wide prior around it
+//! ([`crate::config::UncalibratedAccel::removed_bias_mps2`]). Live, the one pass reports the fit
+//! its rests allow and applies nothing.
 
 use calibrate::calibfile::CalibrationFile;
 use nalgebra::{Matrix3, Vector3};
 
-use crate::config::OdometryConfig;
+use crate::attitudes::{AttitudeFit, RestAttitudes};
+use crate::config::{OdometryConfig, UncalibratedAccel};
 use crate::eskf::Eskf;
 
 /// The accelerometer prior the filter aligns with.
@@ -52,6 +58,9 @@ pub struct AccelPrior {
     pub uncalibrated: bool,
     /// Whether the calibration stage flagged the rest `GRAVITY_OFF`.
     pub flagged: bool,
+    /// Gravity's direction at the alignment rest, unit vector, sensor frame (up: the specific
+    /// force at rest points away from the Earth).
+    pub up: Vector3<f64>,
 }
 
 impl AccelPrior {
@@ -64,9 +73,10 @@ impl AccelPrior {
         let scale_as_bias = g * cfg.accel_residual_scale;
         let calibrated = Vector3::from(cfg.accel_bias_sigma_mps2).map(|s| s.hypot(scale_as_bias));
         let u = &cfg.uncalibrated;
+        let up = f_mean.try_normalize(1e-9).unwrap_or_else(Vector3::z);
         let mut consider = Matrix3::repeat(u.cross_axis_sigma);
         consider.fill_diagonal(u.scale_sigma);
-        let removed = u.removed_bias_mps2.is_some();
+        let removed = u.removed_bias_mps2.is_some() || u.fitted.is_some();
         if !gravity_off && !removed && gravity_error.abs() <= u.trigger {
             return Self {
                 bias_sigma_mps2: calibrated,
@@ -74,14 +84,24 @@ impl AccelPrior {
                 gravity_error,
                 uncalibrated: false,
                 flagged: false,
+                up,
             };
         }
+        let mut bias_sigma_mps2 = calibrated.map(|s| s.max(u.bias_sigma_mps2));
+        if let Some(fit) = &u.fitted {
+            // The samples are corrected with the fit: what is left is its uncertainty.
+            bias_sigma_mps2 = calibrated.zip_map(&Vector3::from(fit.bias_sigma_mps2), f64::max);
+            for i in 0..3 {
+                consider[(i, i)] = fit.scale_sigma[i].max(cfg.accel_residual_scale);
+            }
+        }
         Self {
-            bias_sigma_mps2: calibrated.map(|s| s.max(u.bias_sigma_mps2)),
+            bias_sigma_mps2,
             consider,
             gravity_error,
             uncalibrated: true,
             flagged: gravity_off,
+            up,
         }
     }
 }
@@ -101,30 +121,99 @@ pub struct AccelEstimate {
     pub bias_mps2: [f64; 3],
     /// Whether an earlier pass estimated and removed most of it.
     pub two_passes: bool,
-    /// Its 1-sigma, m/s^2.
+    /// Its 1-sigma, m/s^2: the filter's ([`Self::filter_bias_sigma_mps2`]) and, for an
+    /// uncalibrated part, what its rests could not tell ([`AccelEstimate::of`]).
     pub bias_sigma_mps2: [f64; 3],
-    /// The 1-sigma of the sensitivity error carried in the position's 1-sigma, not estimated,
-    /// fraction (per axis).
-    pub scale_sigma: f64,
+    /// The filter's own 1-sigma of the bias, m/s^2 (given its model, which has no scale).
+    pub filter_bias_sigma_mps2: [f64; 3],
+    /// The 1-sigma of each axis's sensitivity error carried in the position's 1-sigma, not
+    /// estimated by the filter, fraction.
+    pub scale_sigma: [f64; 3],
+    /// Rest attitudes gathered (poses of [`crate::attitudes`]).
+    pub attitudes: usize,
+    /// Largest angle between two of them, degrees.
+    pub attitude_spread_deg: f64,
+    /// The per-axis bias and scale fitted to the rest attitudes: the one that corrected this
+    /// pass's samples ([`Self::per_axis_applied`]), else this pass's own (reported only).
+    pub per_axis: Option<AttitudeFit>,
+    /// Whether `per_axis` corrected this pass's samples (an earlier pass fitted it).
+    pub per_axis_applied: bool,
 }
 
 impl AccelEstimate {
-    /// The estimate of filter `kf` aligned with `prior`, with the bias `removed` before it
-    /// ([`crate::config::UncalibratedAccel::removed_bias_mps2`]) added back.
-    pub fn of(kf: &Eskf, prior: &AccelPrior, removed: Option<[f64; 3]>) -> Self {
-        let b = kf.x.b_a + Vector3::from(removed.unwrap_or_default());
-        let sigma = kf.accel_bias_sigma();
+    /// The estimate of filter `kf` aligned with `prior` under `cfg` (its removed bias or
+    /// applied fit added back), with the rest attitudes `attitudes` of the pass, for local
+    /// gravity `g` (m/s^2).
+    ///
+    /// The bias sigma of an uncalibrated part adds what the filter's cannot hold: the filter
+    /// has no scale state, so what it calls bias along gravity holds the scale error times g
+    /// (`scale_sigma g` along the alignment's up); across gravity, where no rest at least
+    /// [`crate::attitudes::OBSERVED_SPREAD_DEG`] from another was seen, the bias is the
+    /// alignment's tilt's and keeps its prior sigma; where one was, it carries the scale's
+    /// share too. With a fit applied, the fit's sigma is added instead.
+    pub fn of(
+        kf: &Eskf,
+        prior: &AccelPrior,
+        cfg: &UncalibratedAccel,
+        attitudes: &RestAttitudes,
+        g: f64,
+    ) -> Self {
+        let applied = cfg.fitted;
+        let mut b = kf.x.b_a + Vector3::from(cfg.removed_bias_mps2.unwrap_or_default());
+        if let Some(fit) = &applied {
+            b += Vector3::from(fit.bias_mps2);
+        }
+        let filter = kf.accel_bias_sigma();
+        let observed = attitudes.observed_across_gravity();
+        let extra = match (&applied, prior.uncalibrated) {
+            (_, false) => Matrix3::zeros(),
+            (Some(fit), true) => {
+                Matrix3::from_diagonal(&Vector3::from(fit.bias_sigma_mps2).map(|s| s * s))
+            }
+            (None, true) => {
+                let uu = prior.up * prior.up.transpose();
+                let along = (cfg.scale_sigma * g).powi(2);
+                let across = if observed {
+                    along
+                } else {
+                    cfg.bias_sigma_mps2.powi(2)
+                };
+                uu * along + (Matrix3::identity() - uu) * across
+            }
+        };
+        let sigma = filter.zip_map(&extra.diagonal(), |f, e| (f * f + e).sqrt());
+        let per_axis = applied.or_else(|| attitudes.fit(g).ok().filter(|f| usable(f, cfg)));
         Self {
             uncalibrated: prior.uncalibrated,
             flagged: prior.flagged,
             gravity_error: prior.gravity_error,
             bias_mps2: [b.x, b.y, b.z],
-            two_passes: removed.is_some(),
+            two_passes: cfg.removed_bias_mps2.is_some() || applied.is_some(),
             bias_sigma_mps2: [sigma.x, sigma.y, sigma.z],
-            scale_sigma: prior.consider[(0, 0)],
+            filter_bias_sigma_mps2: [filter.x, filter.y, filter.z],
+            scale_sigma: [0, 1, 2].map(|i| prior.consider[(i, i)]),
+            attitudes: attitudes.poses_count(),
+            attitude_spread_deg: attitudes.spread_deg(),
+            per_axis,
+            per_axis_applied: applied.is_some(),
         }
     }
 }
+
+/// Whether `fit` says more than the prior `cfg` and is a plausible part's: every scale sigma
+/// below the prior's, every scale within [`PLAUSIBLE_SCALE`] and every bias within three
+/// prior sigmas (beyond, the rests were no rests).
+pub fn usable(fit: &AttitudeFit, cfg: &UncalibratedAccel) -> bool {
+    (0..3).all(|i| {
+        fit.scale_sigma[i] < cfg.scale_sigma
+            && fit.scale[i].abs() <= PLAUSIBLE_SCALE
+            && fit.bias_mps2[i].abs() <= 3.0 * cfg.bias_sigma_mps2
+    })
+}
+
+/// Largest scale error per axis taken from a fit, fraction (the datasheets' +-3 % initial
+/// tolerance, with room for a part out of specification).
+pub const PLAUSIBLE_SCALE: f64 = 0.1;
 
 impl std::fmt::Display for AccelEstimate {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -156,13 +245,56 @@ impl std::fmt::Display for AccelEstimate {
             )?;
         }
         if self.uncalibrated {
+            let c = &self.scale_sigma;
             write!(
                 f,
-                ": uncalibrated, scale error of {:.0} % per axis carried in the 1-sigma",
-                100.0 * self.scale_sigma
+                ": uncalibrated, scale error of ({:.1}, {:.1}, {:.1}) % per axis carried in the \
+                 1-sigma",
+                100.0 * c[0],
+                100.0 * c[1],
+                100.0 * c[2]
             )?;
         }
-        Ok(())
+        self.fmt_attitudes(f)
+    }
+}
+
+impl AccelEstimate {
+    /// The rest attitudes and the per-axis fit, for [`std::fmt::Display`].
+    fn fmt_attitudes(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.attitudes {
+            1 => write!(f, "; 1 rest attitude")?,
+            n => write!(
+                f,
+                "; {n} rest attitudes, {:.0} deg apart at most",
+                self.attitude_spread_deg
+            )?,
+        }
+        let Some(fit) = &self.per_axis else {
+            return write!(
+                f,
+                " (no per-axis scale: it needs {} well-spread ones)",
+                calibrate_science::labelfree::MIN_POSES
+            );
+        };
+        let (k, e) = (&fit.scale, &fit.scale_sigma);
+        write!(
+            f,
+            "; per-axis scale error ({:+.2}, {:+.2}, {:+.2}) +- ({:.2}, {:.2}, {:.2}) % from {} \
+             attitudes{}",
+            100.0 * k[0],
+            100.0 * k[1],
+            100.0 * k[2],
+            100.0 * e[0],
+            100.0 * e[1],
+            100.0 * e[2],
+            fit.poses,
+            if self.per_axis_applied {
+                ", applied to this pass's samples with its bias"
+            } else {
+                ", estimated, not applied (offline applies it in a second pass)"
+            }
+        )
     }
 }
 
@@ -175,6 +307,27 @@ pub fn remove_bias(file: &CalibrationFile, bias_mps2: &[f64; 3]) -> CalibrationF
     let mut out = file.clone();
     for (b, d) in out.bias_g.iter_mut().zip(shift.iter()) {
         *b += d;
+    }
+    out
+}
+
+/// `file` with the per-axis fit `fit` (of samples `file` corrected, [`crate::attitudes`])
+/// applied: the stage corrects `c = g S0^-1 (a' - b0)`; the fit says `c / g = S1 a + b1` with
+/// `S1 = I + diag(fit.scale)`, `b1 = fit.bias_mps2 / g`; so `a = (S0 S1)^-1 (a' - b0 - S0 b1)`.
+/// Only the diagonal of the fit's scale is applied (its cross terms stay in the consider
+/// parameters); a bias-only file becomes a scale model.
+pub fn apply_fit(file: &CalibrationFile, fit: &AttitudeFit) -> CalibrationFile {
+    let s0 = Matrix3::from_fn(|r, c| file.scale[r][c]);
+    let s1 = Matrix3::from_diagonal(&Vector3::from(fit.scale).add_scalar(1.0));
+    let shift = file.raw_bias_g(&Vector3::from(fit.bias_mps2));
+    let s = s0 * s1;
+    let mut out = file.clone();
+    out.scale = [0, 1, 2].map(|r| [0, 1, 2].map(|c| s[(r, c)]));
+    for (b, d) in out.bias_g.iter_mut().zip(shift.iter()) {
+        *b += d;
+    }
+    if out.model == calibrate::model::ModelKind::Bias {
+        out.model = calibrate::model::ModelKind::Scale;
     }
     out
 }

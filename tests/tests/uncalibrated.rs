@@ -16,7 +16,11 @@
 //! Live, the real processes without a calibration file (`mems-acquire`'s simulated datasheet
 //! part, whose rest reads gravity about 6 % off): `mems-calibrate serve` learns the rest, flags
 //! every sample after it `GRAVITY_OFF` and removes the error along gravity, and `mems-odometry
-//! serve` reports the bias it estimated as an uncalibrated part's in its summary.
+//! serve` reports the bias it estimated as an uncalibrated part's in its summary, with the rest
+//! attitudes it saw (one: no per-axis scale).
+//!
+//! A hand-held part set down at 14 attitudes: the per-axis scale and bias its rests determine
+//! (`odometry::attitudes`), applied by the offline second pass.
 
 use integration_tests::{Proc, path_arg, run_ok, unique_namespace};
 use ipc_types::{CorrectedImuSample, corrected_flags, service};
@@ -138,6 +142,116 @@ fn an_uncalibrated_part_driven_on_a_robot_runs_and_says_what_it_estimated() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// A hand-held sensor's errors: a different scale and bias on each axis, no cross-axis
+/// sensitivity (so that the diagonal the fit reports is the whole truth).
+const HAND_SCALE: [f64; 3] = [0.04, -0.03, 0.02];
+const HAND_BIAS_G: [f64; 3] = [0.15, -0.1, 0.12];
+
+/// The calibrated preset's error model with [`HAND_SCALE`] and [`HAND_BIAS_G`], no
+/// misalignment, written to `dir`.
+fn hand_model(dir: &Path) -> std::path::PathBuf {
+    let text = run_ok("mems-sim", &["print-model", "--preset", "calibrated"]);
+    let mut model: toml::Table = text.parse().unwrap();
+    let accel = model["accel"].as_table_mut().unwrap();
+    let triple = |v: [f64; 3]| toml::Value::Array(v.map(toml::Value::Float).to_vec());
+    accel.insert("bias".into(), triple(HAND_BIAS_G));
+    accel.insert("scale".into(), triple(HAND_SCALE));
+    let zero = triple([0.0; 3]);
+    accel.insert(
+        "misalignment".into(),
+        toml::Value::Array(vec![zero.clone(); 3]),
+    );
+    // Nor a turn-on bias or a bias with temperature: the bias is `HAND_BIAS_G`.
+    accel.insert("turn_on_bias_std".into(), zero.clone());
+    accel.insert("bias_temp_coeff".into(), zero);
+    let path = dir.join("hand.toml");
+    std::fs::write(&path, toml::to_string(&model).unwrap()).unwrap();
+    path
+}
+
+/// A hand-held sensor set down at 14 attitudes (`mems-sim orientations`, 3 s each): the first
+/// pass's rests determine the per-axis scale and bias (`odometry::attitudes`), the second
+/// pass applies them; the fit recovers each axis's scale within its 1-sigma (and the bias within
+/// two), and the position (the sensor is turned in place) is covered by its 1-sigma. The stance
+/// detector (`--detector shoe`) finds the rests: the vehicle's GLRT, whose gravity reference
+/// allows a calibrated part's bias only, takes an uncalibrated part's rest at another attitude
+/// for motion.
+#[test]
+fn a_hand_held_part_at_several_attitudes_recovers_its_per_axis_scale() {
+    let dir = std::env::temp_dir().join(unique_namespace("uncalibrated-hand"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let model = hand_model(&dir);
+    let csv = dir.join("hand.csv");
+    run_ok(
+        "mems-sim",
+        &[
+            "orientations",
+            "--n",
+            "14",
+            "--hold",
+            "3",
+            "--rotate",
+            "2",
+            "--rate",
+            "200",
+            "--seed",
+            "2",
+            "--model",
+            path_arg(&model),
+            "--out",
+            path_arg(&csv),
+        ],
+    );
+    let out = run_ok(
+        "mems-odometry",
+        &[
+            "offline",
+            "--input",
+            path_arg(&csv),
+            "--detector",
+            "shoe",
+            "--json",
+        ],
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    let accel = &v["accel_error"];
+    eprintln!("hand-held: {accel}");
+    let fit = &accel["per_axis"];
+    assert_eq!(accel["per_axis_applied"], true, "{accel}");
+    assert!(fit["poses"].as_u64().unwrap() >= 9, "{fit}");
+    let g = 9.80665;
+    for i in 0..3 {
+        let (k, dk) = (
+            fit["scale"][i].as_f64().unwrap(),
+            fit["scale_sigma"][i].as_f64().unwrap(),
+        );
+        assert!(dk > 0.0 && dk < 0.01, "axis {i}: scale sigma {dk}");
+        assert!(
+            (k - HAND_SCALE[i]).abs() <= dk,
+            "axis {i}: scale {k:.5} +- {dk:.5}, true {}",
+            HAND_SCALE[i]
+        );
+        let (b, db) = (
+            fit["bias_mps2"][i].as_f64().unwrap(),
+            fit["bias_sigma_mps2"][i].as_f64().unwrap(),
+        );
+        let truth = HAND_BIAS_G[i] * g;
+        assert!(
+            (b - truth).abs() <= 3.0 * db,
+            "axis {i}: bias {b:.4} +- {db:.4}, true {truth:.4}"
+        );
+    }
+    let e = |i: usize| v["truth_error_m"][i].as_f64().unwrap();
+    let s = |i: usize| v["sigma_m"][i].as_f64().unwrap();
+    let sigma = ((s(0) * s(0) + s(1) * s(1)) / 2.0).sqrt();
+    let error = e(0).hypot(e(1));
+    assert!(
+        error <= R68_FACTOR * sigma,
+        "hand-held: error {error:.3} m outside the 68 % radius of its 1-sigma {sigma:.3} m"
+    );
+}
+
 #[test]
 fn a_live_part_without_a_calibration_file_is_flagged_and_its_bias_reported() {
     let ns = unique_namespace("uncal-live");
@@ -218,6 +332,11 @@ fn a_live_part_without_a_calibration_file_is_flagged_and_its_bias_reported() {
     );
     assert!(
         summary.contains("accelerometer bias") && summary.contains("uncalibrated"),
+        "mems-odometry serve's summary: {summary}"
+    );
+    // The part rested at one attitude: no per-axis scale, and the summary says why.
+    assert!(
+        summary.contains("1 rest attitude") && summary.contains("no per-axis scale"),
         "mems-odometry serve's summary: {summary}"
     );
 }

@@ -192,33 +192,43 @@ def clipping_table(p, rows):
 
 
 def describe_estimate(e):
-    """The accelerometer bias the odometry estimated (m/s^2, sensor frame, +- 1-sigma), as the
-    table shows it; `uncalibrated` when it used the uncalibrated prior."""
+    """The accelerometer bias the odometry estimated (m/s^2, sensor frame, +- 1-sigma) and,
+    where its rests at several attitudes gave one, the per-axis scale error (%, +- 1-sigma),
+    as the table shows them; `uncalibrated` when it used the uncalibrated prior."""
     if not e:
         return "-"
     b, s = e["bias_mps2"], e["bias_sigma_mps2"]
     text = ", ".join(f"{v:+.2f} +- {d:.2f}" for v, d in zip(b, s))
-    return f"{'uncalibrated: ' if e['uncalibrated'] else ''}({text})"
+    fit = e.get("per_axis")
+    scale = ""
+    if fit:
+        k = ", ".join(f"{100 * v:+.2f} +- {100 * d:.2f}" for v, d in zip(fit["scale"], fit["scale_sigma"]))
+        scale = f"; scale % ({k}) from {fit['poses']} attitudes"
+    return f"{'uncalibrated: ' if e['uncalibrated'] else ''}({text}){scale}"
 
 
 def error_table(p, rows):
     """The table of a run with accelerometer errors only."""
     print(f"Corpus recordings with {p.describe()}; horizontal end error / 1-sigma, m")
     print()
-    print("| recording | clean | perturbed | covered | clipped | accelerometer bias estimated, m/s^2 | within 1.5x of clean |")
+    print("| recording | clean | perturbed | covered | clipped | accelerometer error estimated: bias, m/s^2; per-axis scale | within 1.5x of clean |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
-    good = covered = ran = 0
+    good = covered = ran = clean_covered = both = 0
     for r in rows:
         u, c = r["clean"], r["perturbed"]
         within = u is not None and c is not None and c[0] <= 1.5 * max(u[0], FLOOR_M)
         good += within
         ran += c is not None
         covered += c is not None and c[2] == "yes"
+        if u is not None and u[2] == "yes":
+            clean_covered += 1
+            both += c is not None and c[2] == "yes"
         print(f"| {r['id']} | {fmt(u)} | {fmt(c)} | {c[2] if c else '-'} | {c[3] if c else '-'} | "
               f"{describe_estimate(c[4]) if c else '-'} | {'yes' if within else 'no'} |")
     print()
     print(f"{ran} of {len(rows)} gave a position; {good} within 1.5x of their clean error (at least "
-          f"{FLOOR_M} m); {covered} of {len(rows)} covered by the 1-sigma")
+          f"{FLOOR_M} m); {covered} of {len(rows)} covered by the 1-sigma ({both} of the {clean_covered} "
+          f"whose clean run is)")
 
 
 def self_test():

@@ -71,7 +71,8 @@ pub struct OfflineArgs {
 
 /// Runs the pipeline and prints the result. A part whose accelerometer the run found
 /// uncalibrated (`odometry::uncalibrated`) is run a second time with the bias the first run
-/// estimated removed from its samples, and only the second run's result is printed and
+/// estimated removed from its samples (or, where its rests at several attitudes gave a
+/// per-axis fit, `odometry::attitudes`, with that fit's bias and scale applied), and only the second run's result is printed and
 /// written; should the second run move the bias further than an uncalibrated part's bias
 /// sigma, the first estimate was not one, and the recording is run once more as the first run
 /// was, that result standing.
@@ -82,9 +83,22 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     let Some(first) = pass(&args, &choice, &file, detector, Pass::First)? else {
         return Ok(());
     };
-    tracing::info!("first pass: {first}; running the recording again with that bias removed");
-    let removed = odometry::uncalibrated::remove_bias(&file, &first.bias_mps2);
-    let Some(second) = pass(&args, &choice, &removed, detector, Pass::Second(first))? else {
+    let removed = match &first.per_axis {
+        Some(fit) => {
+            tracing::info!(
+                "first pass: {first}; running the recording again with that per-axis bias and \
+                 scale applied"
+            );
+            odometry::uncalibrated::apply_fit(&file, fit)
+        }
+        None => {
+            tracing::info!(
+                "first pass: {first}; running the recording again with that bias removed"
+            );
+            odometry::uncalibrated::remove_bias(&file, &first.bias_mps2)
+        }
+    };
+    let Some(second) = pass(&args, &choice, &removed, detector, Pass::Second(&first))? else {
         return Ok(());
     };
     tracing::warn!(
@@ -97,17 +111,18 @@ pub fn run(args: OfflineArgs) -> Result<()> {
 
 /// Which run of the recording [`pass`] makes.
 #[derive(Clone, Copy)]
-enum Pass {
+enum Pass<'a> {
     /// The first: it ends early, with the accelerometer's estimate, when that is uncalibrated.
     First,
-    /// The second, with the first's estimated bias removed: it ends early, with its estimate,
+    /// The second, with the first's estimated bias removed (or its per-axis fit applied): it
+    /// ends early, with its estimate,
     /// when that moved the bias further than the uncalibrated prior's sigma.
-    Second(AccelEstimate),
+    Second(&'a AccelEstimate),
     /// The only one whose result stands whatever it estimates.
     Only,
 }
 
-impl Pass {
+impl Pass<'_> {
     /// Whether the run ends early with `estimate` instead of reporting.
     fn ends_early(
         self,
@@ -118,7 +133,8 @@ impl Pass {
             Self::First => estimate.uncalibrated,
             Self::Second(first) => {
                 let limit = config.uncalibrated.bias_sigma_mps2;
-                (0..3).any(|i| (estimate.bias_mps2[i] - first.bias_mps2[i]).abs() > limit)
+                let removed = first.per_axis.map_or(first.bias_mps2, |f| f.bias_mps2);
+                (0..3).any(|i| (estimate.bias_mps2[i] - removed[i]).abs() > limit)
             }
             Self::Only => false,
         }
@@ -133,14 +149,17 @@ fn pass(
     choice: &platform::Choice,
     file: &calibrate::calibfile::CalibrationFile,
     detector: calibrate::zero_state::DetectorConfig,
-    which: Pass,
+    which: Pass<'_>,
 ) -> Result<Option<AccelEstimate>> {
     let (source, repairs, ranges) = Source::open(args)?;
     let calibration = CalibrationStage::new(file, detector, RefineConfig::default())
         .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
     let mut base = odometry_config(file);
     if let Pass::Second(first) = which {
-        base.uncalibrated.removed_bias_mps2 = Some(first.bias_mps2);
+        match first.per_axis {
+            Some(fit) => base.uncalibrated.fitted = Some(fit),
+            None => base.uncalibrated.removed_bias_mps2 = Some(first.bias_mps2),
+        }
     }
     base.rest_updates = !args.no_zupt;
     base.trust_untrusted = args.ranges.trust_clipped;
