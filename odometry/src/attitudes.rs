@@ -4,14 +4,14 @@
 //! gravity direction in the sensor frame times local `g`). One attitude gives `|f| - g`, one
 //! number. Rests at attitudes that put gravity along different sensor axes give more: the
 //! six-position calibration's constraint `|S^-1 (f - b)| = g`, which the label-free fit of
-//! `calibrate_science::labelfree` solves for 3 biases and the 6 entries of an upper-triangular
+//! `calibrate_fit::labelfree` solves for 3 biases and the 6 entries of an upper-triangular
 //! `S^-1` once there are at least 9 well-spread attitudes (it refuses fewer, or attitudes in
 //! one plane or a narrow cone: its Jacobian's condition number above
-//! `calibrate_science::labelfree::MAX_CONDITION`). The fit is reused here, unchanged.
+//! `calibrate_fit::labelfree::MAX_CONDITION`). The fit is reused here, unchanged.
 //!
 //! [`RestAttitudes`] gathers the rest samples (corrected specific force, m/s^2, sensor frame)
 //! into at most [`CAPACITY`] attitude bins, a sample joining the bin whose mean direction is
-//! within `calibrate_science::labelfree::DISTINCT_ANGLE_DEG` of its own: a fixed array, no
+//! within `calibrate_fit::labelfree::DISTINCT_ANGLE_DEG` of its own: a fixed array, no
 //! allocation per sample (the live stage gathers them too). A bin of at least
 //! [`MIN_SAMPLES`] samples is one pose of the fit. [`RestAttitudes::fit`] (allocates; once,
 //! after a pass) returns the bias and the diagonal of `S` with their 1-sigma from the fit's
@@ -22,8 +22,8 @@
 //! scale as a fraction (`S_ii - 1`: `+0.04` reads 4 % high), both in the frame of the samples
 //! the stage corrected.
 
-use calibrate_science::fit::{Pose, Weighting};
-use calibrate_science::labelfree::{
+use calibrate_fit::fit::{Pose, Weighting};
+use calibrate_fit::labelfree::{
     DISTINCT_ANGLE_DEG, LabelFreeError, MIN_POSES, distinct_orientations, fit_label_free,
 };
 use nalgebra::Vector3;

@@ -133,6 +133,8 @@ pub struct AccelEstimate {
     pub attitudes: usize,
     /// Largest angle between two of them, degrees.
     pub attitude_spread_deg: f64,
+    /// Rest samples at an attitude beyond the bins' capacity, not gathered.
+    pub attitude_samples_missed: u64,
     /// The per-axis bias and scale fitted to the rest attitudes: the one that corrected this
     /// pass's samples ([`Self::per_axis_applied`]), else this pass's own (reported only).
     pub per_axis: Option<AttitudeFit>,
@@ -194,6 +196,7 @@ impl AccelEstimate {
             scale_sigma: [0, 1, 2].map(|i| prior.consider[(i, i)]),
             attitudes: attitudes.poses_count(),
             attitude_spread_deg: attitudes.spread_deg(),
+            attitude_samples_missed: attitudes.missed(),
             per_axis,
             per_axis_applied: applied.is_some(),
         }
@@ -274,7 +277,7 @@ impl AccelEstimate {
             return write!(
                 f,
                 " (no per-axis scale: it needs {} well-spread ones)",
-                calibrate_science::labelfree::MIN_POSES
+                calibrate_fit::labelfree::MIN_POSES
             );
         };
         let (k, e) = (&fit.scale, &fit.scale_sigma);

@@ -1,5 +1,5 @@
 //! The offline calibration science of mems-odometry: fitting error models with their
-//! uncertainty (labelled in [`fit`], label-free in [`labelfree`]), static-segment detection
+//! uncertainty (labelled in [`fit`], label-free in [`labelfree`], both from `calibrate-fit`), static-segment detection
 //! ([`segments`]) and calibration inputs ([`session`]), the gyro's scale and misalignment from a
 //! pose session ([`gyrocal`]), the residual diagnosis ([`diagnose`]),
 //! the evaluations of `mems-eval` ([`thesis_eval`], [`static_eval`], with [`integrate`] and
@@ -12,13 +12,13 @@
 //! sample times are nanoseconds, durations seconds (names ending in `_s`); displacement
 //! evaluation is in SI (m/s^2, m).
 
+pub use calibrate_fit::{fit, labelfree};
+
 pub mod coverage;
 pub mod diagnose;
 pub mod drerror;
-pub mod fit;
 pub mod gyrocal;
 pub mod integrate;
-pub mod labelfree;
 pub mod plots;
 pub mod segments;
 pub mod session;

@@ -159,7 +159,7 @@ pub fn residual_rms(residuals: &[Vector3<f64>]) -> [f64; 3] {
 }
 
 /// Columns of one axis' design matrix, as indices into the full parameter layout.
-pub(crate) fn axis_params(kind: ModelKind, axis: usize) -> Vec<usize> {
+pub fn axis_params(kind: ModelKind, axis: usize) -> Vec<usize> {
     match kind {
         ModelKind::Bias => vec![axis],
         ModelKind::Scale => vec![scale_index(axis, axis), axis],
@@ -197,9 +197,9 @@ fn check_poses(poses: &[Pose], kind: ModelKind) -> Result<(), FitError> {
 }
 
 /// One axis' weighted least-squares problem: design matrix, observations and weights.
-pub(crate) struct AxisProblem {
+pub struct AxisProblem {
     /// The design matrix, one row per pose, columns as [`axis_params`].
-    pub(crate) x: DMatrix<f64>,
+    pub x: DMatrix<f64>,
     y: DVector<f64>,
     w: DVector<f64>,
 }
@@ -207,7 +207,7 @@ pub(crate) struct AxisProblem {
 /// The least-squares problem of `axis` for `kind` (columns as [`axis_params`]); weights
 /// `1 / s^2` with `s` each pose's standard error (`absolute`) or standard deviation when
 /// weighting by pose std, else 1.
-pub(crate) fn axis_problem(
+pub fn axis_problem(
     poses: &[Pose],
     kind: ModelKind,
     axis: usize,
