@@ -27,11 +27,23 @@ EFFECTS = [
      (IDENTITY_SCALE, "scale = [[1.012, 0.0, 0.0], [0.0, 0.99, 0.0], [0.0, 0.0, 1.001]]")),
     ("gyro_scale", [("gyro", "scale", "[0.08, -0.07, 0.01]")],
      "\n[gyro]\ncorrection = [[%r, 0.0, 0.0], [0.0, %r, 0.0], [0.0, 0.0, %r]]\n" % (1 / 1.08, 1 / 0.93, 1 / 1.01)),
+    # (I + M)^-1 of a symmetric x-y cross-axis M (0.08) and of a rotation M = [phi]x, phi = 0.05 rad about x.
+    ("gyro_cross_axis", [("gyro", "misalignment", "[[0.0, 0.08, 0.0], [0.08, 0.0, 0.0], [0.0, 0.0, 0.0]]")],
+     "\n[gyro]\ncorrection = [[%r, %r, 0.0], [%r, %r, 0.0], [0.0, 0.0, 1.0]]\n" % (1 / (1 - 0.08**2), -0.08 / (1 - 0.08**2),
+                                                                           -0.08 / (1 - 0.08**2), 1 / (1 - 0.08**2))),
+    ("gyro_rotation", [("gyro", "misalignment", "[[0.0, 0.0, 0.0], [0.0, 0.0, -0.05], [0.0, 0.05, 0.0]]")],
+     "\n[gyro]\ncorrection = [[1.0, 0.0, 0.0], [0.0, %r, %r], [0.0, %r, %r]]\n" % (1 / (1 + 0.05**2), 0.05 / (1 + 0.05**2),
+                                                                           -0.05 / (1 + 0.05**2), 1 / (1 + 0.05**2))),
     ("accel_temp_bias", [("accel", "bias_temp_coeff", "[0.002, -0.0015, 0.0]"), ("thermal", "ambient_drift_c_per_s", "0.15"),
                          ("thermal", "self_heating_c", "0.0")],
      "\n[temperature]\nreference_c = 25.0\nbias_g_per_c = [0.002, -0.0015, 0.0]\n"),
 ]
-UNCOVERED = ("gyro cross-axis 8 % (x-y)", [("gyro", "misalignment", "[[0.0, 0.08, 0.0], [0.08, 0.0, 0.0], [0.0, 0.0, 0.0]]")])
+# The uncovered effect: a gyro nonlinearity (deg/s read as u + k u^2) on a part whose gyro is calibrated (scale and
+# misalignment zero, declared to 0.1 %); "calibrated gyro" is the same part without it.
+CALIBRATED_GYRO = [("gyro", "scale", "[0.0, 0.0, 0.0]"), ("gyro", "misalignment", "[[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]")]
+GYRO_DECLARED = ("\n[gyro]\ncorrection = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\n"
+                 "correction_sigma = [[0.001, 0.001, 0.001], [0.001, 0.001, 0.001], [0.001, 0.001, 0.001]]\n")
+UNCOVERED = [("gyro", "nonlinearity", "[0.0001, -0.0001, 0.0001]")]
 
 
 def set_key(model, changes):
@@ -112,7 +124,10 @@ def simulated(ctx, identity_path, identity):
         effect = "; ".join(f"{t}.{k} = {v}" for t, k, v in changes)
         case(name, changes, identity, f"{name}, undeclared", effect, "identity")
         case(name + "-declared", changes, declare(identity, declared), f"{name}, declared", effect, "the effect")
-    case("uncovered", UNCOVERED[1], identity, "uncovered", UNCOVERED[0], "identity")
+    gyro_label = "gyro calibrated to 0.1 %"
+    case("calibrated-gyro", CALIBRATED_GYRO, identity + GYRO_DECLARED, "calibrated gyro", "gyro.scale and misalignment zero", gyro_label)
+    case("uncovered", CALIBRATED_GYRO + UNCOVERED, identity + GYRO_DECLARED, "uncovered",
+         "the same; gyro.nonlinearity = [0.0001, -0.0001, 0.0001]", gyro_label)
     header = ["run", "effect in the simulated part", "calibration", "selected", "unexplained",
               "rest innovation rms (m/s) before -> after", "closed-loop end error (m)", "truth end error (m)"]
     return table(header, rows)

@@ -187,12 +187,12 @@ impl Evidence {
         }
     }
 
-    /// The rotation the gyro carried over `interval` with its rate scaled by `I + diag(k)`
-    /// and the bias ([`Evidence::gyro_bias_rps`]) removed: sensor frame at the end to sensor
-    /// frame at the start.
-    pub fn carried(&self, interval: &Interval, k: &Vector3<f64>) -> UnitQuaternion<f64> {
+    /// The rotation the gyro carried over `interval` with its rate corrected by `I + n` and
+    /// the bias ([`Evidence::gyro_bias_rps`]) removed: sensor frame at the end to sensor frame
+    /// at the start.
+    pub fn carried(&self, interval: &Interval, n: &Matrix3<f64>) -> UnitQuaternion<f64> {
         let bias = self.gyro_bias_rps;
-        let scale = Matrix3::from_diagonal(&(Vector3::repeat(1.0) + k));
+        let scale = Matrix3::identity() + n;
         let mut q = UnitQuaternion::identity();
         let s = &self.samples;
         for i in interval.samples.start.max(1)..interval.samples.end {

@@ -122,6 +122,8 @@ mod tests {
                         u.component_mul(&u) * 9.8,
                         Vector3::zeros(),
                         Vector3::zeros(),
+                        Vector3::zeros(),
+                        Vector3::zeros(),
                     ],
                 }
             })

@@ -2,7 +2,9 @@
 //! ([`evidence`]) it forms residuals the model should leave at its noise ([`rows`]: each
 //! rest's specific-force magnitude against gravity, each motion's tilt from one rest to the
 //! next against what the gyro carried), tests candidate effects the model lacks on them
-//! ([`fit`]: held-out chi-square gain), selects what the data support, and says when what
+//! ([`fit`]: held-out chi-square gain; [`rows::Candidate`]: the accelerometer's bias, scale
+//! and bias with temperature, the gyro's scale, cross-axis sensitivity and rotation against
+//! the accelerometer), selects what the data support, and says when what
 //! remains still exceeds the noise and what the model carries ("unexplained"). The selection
 //! is written into a calibration file ([`correct`]) for a rerun.
 //!
@@ -147,12 +149,12 @@ fn testable(c: Candidate, rows: &[Row], ev: &Evidence, s: &Settings) -> Option<S
     let needed = |per_group: usize| (3 * s.min_rows_per_param).div_ceil(per_group) + 1;
     let span = temp_span(ev);
     match c {
-        Candidate::GyroScale if groups(Kind::Tilt) < needed(2) => Some(format!(
+        _ if c.is_gyro() && groups(Kind::Tilt) < needed(2) => Some(format!(
             "{} motions between rests with the gyro unclipped (needs {})",
             groups(Kind::Tilt),
             needed(2)
         )),
-        Candidate::GyroScale => None,
+        _ if c.is_gyro() => None,
         _ if groups(Kind::Magnitude) < needed(1) => Some(format!(
             "{} rests (needs {})",
             groups(Kind::Magnitude),
@@ -173,7 +175,9 @@ fn temp_span(ev: &Evidence) -> f64 {
     temps.clone().fold(f64::NEG_INFINITY, f64::max) - temps.fold(f64::INFINITY, f64::min)
 }
 
-/// The model's carried 1-sigma for each parameter of `c` (zero: the model has no such term).
+/// The model's carried 1-sigma for each parameter of `c` (zero: the model has no such term):
+/// for the gyro's, the configuration's `gyro_correction_sigma` (diagonal for the scale, the
+/// larger of a pair's two off-diagonal entries for the cross-axis and rotation).
 fn carried(c: Candidate, config: &OdometryConfig) -> [f64; 3] {
     match c {
         // The residual scale and misalignment read as a bias of g times it under gravity.
@@ -183,6 +187,12 @@ fn carried(c: Candidate, config: &OdometryConfig) -> [f64; 3] {
         Candidate::AccelScale => [config.accel_residual_scale; 3],
         Candidate::AccelTempBias => [0.0; 3],
         Candidate::GyroScale => std::array::from_fn(|i| config.gyro_correction_sigma[(i, i)]),
+        // Parameter i acts on the pair of axes other than i (both entries of the pair).
+        Candidate::GyroCrossAxis | Candidate::GyroRotation => std::array::from_fn(|i| {
+            let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+            let s = &config.gyro_correction_sigma;
+            s[(j, k)].max(s[(k, j)])
+        }),
     }
 }
 
@@ -195,6 +205,8 @@ fn plausible(f: &fit::Fit, slot: usize, config: &OdometryConfig, span_c: f64) ->
         Candidate::AccelBias => bias,
         Candidate::AccelScale | Candidate::GyroScale => bounds.scale_error,
         Candidate::AccelTempBias => bias / span_c.max(1.0),
+        // A rotation between the triads of one part is as small as its axes' misalignment.
+        Candidate::GyroCrossAxis | Candidate::GyroRotation => bounds.cross_axis,
     };
     (0..3).all(|i| f.theta[3 * slot + i].abs() <= limit)
 }

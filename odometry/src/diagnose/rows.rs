@@ -9,8 +9,13 @@
 //! - Tilt rows, two per motion between rests: the gravity direction measured at the second
 //!   rest against the one the gyro carried from the first, `e = u_carried x u_measured` (rad,
 //!   sensor frame at the second rest), on two axes across gravity (about gravity a rest says
-//!   nothing). A gyro scale error, corrected by `omega_true = (I + diag(k)) omega` (`k`
-//!   fraction per axis), leaves `-J k` in it, `J` its numerical derivative in `k`.
+//!   nothing). A gyro error corrected by `omega_true = (I + N(p)) omega` leaves `-J p` in it,
+//!   `J` its numerical derivative in `p` ([`Candidate::gyro_perturbation`]): a scale error
+//!   (`N = diag(k)`, `k` fraction per axis), a cross-axis sensitivity (`N` symmetric with zero
+//!   diagonal, `N_yz = N_zy = m_x`, `N_xz = N_zx = m_y`, `N_xy = N_yx = m_z`, fraction: the
+//!   gyro's axes are not orthogonal) or a rotation of the gyro's axes against the
+//!   accelerometer's (`N = [phi]x`, `phi` rad in the sensor frame: `omega_true = omega + phi x
+//!   omega`). Together they are the gyro's full linear correction `C` of the calibration file.
 //!
 //! Each row's `sigma` is what the samples' own noise predicts (white and low-pass
 //! correlated, `evidence::mean_variance`; for tilt also the gyro's angle random walk and the
@@ -18,7 +23,7 @@
 //! it (the configuration's accelerometer bias and residual scale 1-sigma, the gyro correction's
 //! 1-sigma times the angle turned).
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
 use super::evidence::Evidence;
 use crate::config::OdometryConfig;
@@ -35,15 +40,21 @@ pub enum Candidate {
     AccelTempBias,
     /// Gyro scale error, fraction per sensor axis.
     GyroScale,
+    /// Gyro cross-axis sensitivity (non-orthogonal axes), fraction per axis pair `yz, xz, xy`.
+    GyroCrossAxis,
+    /// Rotation of the gyro's axes against the accelerometer's, rad per sensor axis.
+    GyroRotation,
 }
 
 impl Candidate {
     /// Every candidate, in report order.
-    pub const ALL: [Candidate; 4] = [
+    pub const ALL: [Candidate; 6] = [
         Candidate::AccelBias,
         Candidate::AccelScale,
         Candidate::AccelTempBias,
         Candidate::GyroScale,
+        Candidate::GyroCrossAxis,
+        Candidate::GyroRotation,
     ];
 
     /// The candidate's name in reports.
@@ -53,6 +64,31 @@ impl Candidate {
             Self::AccelScale => "accel_scale",
             Self::AccelTempBias => "accel_temp_bias",
             Self::GyroScale => "gyro_scale",
+            Self::GyroCrossAxis => "gyro_cross_axis",
+            Self::GyroRotation => "gyro_rotation",
+        }
+    }
+
+    /// Whether it acts on the gyro (its rows are the tilt rows).
+    pub fn is_gyro(self) -> bool {
+        matches!(
+            self,
+            Self::GyroScale | Self::GyroCrossAxis | Self::GyroRotation
+        )
+    }
+
+    /// For a gyro candidate, `N(p)` of `omega_true = (I + N(p)) omega` (module documentation);
+    /// zero for the others.
+    pub fn gyro_perturbation(self, p: &Vector3<f64>) -> Matrix3<f64> {
+        match self {
+            Self::GyroScale => Matrix3::from_diagonal(p),
+            Self::GyroCrossAxis => Matrix3::new(
+                0.0, p.z, p.y, //
+                p.z, 0.0, p.x, //
+                p.y, p.x, 0.0,
+            ),
+            Self::GyroRotation => p.cross_matrix(),
+            _ => Matrix3::zeros(),
         }
     }
 
@@ -60,8 +96,9 @@ impl Candidate {
     pub fn unit(self) -> &'static str {
         match self {
             Self::AccelBias => "m/s^2",
-            Self::AccelScale | Self::GyroScale => "",
+            Self::AccelScale | Self::GyroScale | Self::GyroCrossAxis => "",
             Self::AccelTempBias => "m/s^2/degC",
+            Self::GyroRotation => "rad",
         }
     }
 }
@@ -90,11 +127,11 @@ pub struct Row {
     pub floor: f64,
     /// Per candidate in [`Candidate::ALL`] order, the residual each of its three parameters
     /// adds per unit (zero where the candidate does not act on the row).
-    pub design: [Vector3<f64>; 4],
+    pub design: [Vector3<f64>; Candidate::ALL.len()],
 }
 
-/// Step of the numerical derivative of a tilt row in a gyro scale parameter.
-const GYRO_SCALE_STEP: f64 = 1e-3;
+/// Step of the numerical derivative of a tilt row in a gyro parameter.
+const GYRO_STEP: f64 = 1e-3;
 
 /// The rows of `evidence` for a run with configuration `config`; `t_ref_c` is the reference
 /// temperature of the temperature candidate. Motions during which the gyro clipped are left
@@ -120,7 +157,14 @@ pub fn rows(evidence: &Evidence, config: &OdometryConfig, t_ref_c: f64) -> Vec<R
             r: f.norm() - g,
             sigma: var.sqrt(),
             floor: floor2.sqrt(),
-            design: [u, u.component_mul(&u) * g, u * dt, Vector3::zeros()],
+            design: [
+                u,
+                u.component_mul(&u) * g,
+                u * dt,
+                Vector3::zeros(),
+                Vector3::zeros(),
+                Vector3::zeros(),
+            ],
         });
     }
     let groups = evidence.rests.len();
@@ -132,28 +176,31 @@ pub fn rows(evidence: &Evidence, config: &OdometryConfig, t_ref_c: f64) -> Vec<R
             &evidence.rests[interval.from],
             &evidence.rests[interval.from + 1],
         );
-        let tilt = |k: &Vector3<f64>| {
-            let q = evidence.carried(interval, k);
+        let tilt = |n: &Matrix3<f64>| {
+            let q = evidence.carried(interval, n);
             let carried = q.inverse_transform_vector(&a.accel_mps2.normalize());
             carried.cross(&b.accel_mps2.normalize())
         };
-        let e0 = tilt(&Vector3::zeros());
+        let e0 = tilt(&Matrix3::zeros());
         let u = b.accel_mps2.normalize();
         let across1 = u
             .cross(&Vector3::x())
             .try_normalize(1e-3)
             .unwrap_or_else(|| u.cross(&Vector3::y()).normalize());
         let across2 = u.cross(&across1);
-        let derivative: Vec<Vector3<f64>> = (0..3)
-            .map(|i| {
-                let mut k = Vector3::zeros();
-                k[i] = GYRO_SCALE_STEP;
-                (tilt(&k) - e0) / GYRO_SCALE_STEP
+        // Per candidate, the derivative of the tilt in each of its three parameters.
+        let derivative = Candidate::ALL.map(|c| {
+            if !c.is_gyro() {
+                return [Vector3::zeros(); 3];
+            }
+            std::array::from_fn(|i| {
+                let step = Vector3::from_fn(|j, _| if i == j { GYRO_STEP } else { 0.0 });
+                (tilt(&c.gyro_perturbation(&step)) - e0) / GYRO_STEP
             })
-            .collect();
+        });
         let duration = evidence.samples[interval.samples.end - 1].t_s
             - evidence.samples[interval.samples.start].t_s;
-        let angle = evidence.carried(interval, &Vector3::zeros()).angle();
+        let angle = evidence.carried(interval, &Matrix3::zeros()).angle();
         let noise = &config.noise;
         let var = (a.accel_mean_var.sum() + b.accel_mean_var.sum()) / (3.0 * g * g)
             + noise.gyro_noise_density.powi(2) * duration
@@ -167,12 +214,7 @@ pub fn rows(evidence: &Evidence, config: &OdometryConfig, t_ref_c: f64) -> Vec<R
                 r: e0.dot(&axis),
                 sigma: var.sqrt(),
                 floor: scale_sigma * angle,
-                design: [
-                    Vector3::zeros(),
-                    Vector3::zeros(),
-                    Vector3::zeros(),
-                    Vector3::from_fn(|i, _| -derivative[i].dot(&axis)),
-                ],
+                design: derivative.map(|d| Vector3::from_fn(|i, _| -d[i].dot(&axis))),
             });
         }
     }
