@@ -4,6 +4,7 @@ covers) and on every recording of the real-data corpus (/work/real-data, run as
 tools/real-data/bench.py runs them: the identity calibration, the sidecar's extra arguments)."""
 
 import json
+import math
 import os
 import sys
 from pathlib import Path
@@ -18,6 +19,7 @@ SIM = "target/release/mems-sim"
 DIR = "/tmp/figures-rundiag"
 DATA = Path(os.environ.get("MEMS_REAL_DATA", "/work/real-data"))
 ARM = ["arm", "--moves", "24", "--pauses", "1,2", "--rate", "200", "--seed", "3"]
+LONG_ARM = ["arm", "--moves", "60", "--pauses", "1,2", "--rate", "200", "--seed", "3"]
 IDENTITY_SCALE = "scale = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"
 
 # (case, model changes (table, key, value), what the calibration file declares).
@@ -99,9 +101,22 @@ def unexplained(report):
     return "yes" if report["unexplained"] else "no"
 
 
+def saturation(report):
+    """The saturation candidate: found or not, the rate hidden on the axes that clipped (deg/s) and the clipped motions'
+    tilt rms before -> after (mrad); `-` where it could not be tested."""
+    s = report["diagnosis"]["saturation"]
+    if s["untestable"]:
+        return f"- ({s['motions']} clipped motions)"
+    hidden = ", ".join(f"{'xyz'[i]} {math.degrees(h):.1f}" for i, h in enumerate(s["hidden_rps"]) if h != 0.0)
+    verdict = "found" if s["found"] else "not found"
+    return (f"{verdict} ({s['motions']} clipped motions): {hidden} deg/s; tilt {1e3 * s['rms_before']:.1f} -> "
+            f"{1e3 * s['rms_after']:.1f} mrad")
+
+
 def sim_row(label, effect, calib_label, r):
     return [label, effect, calib_label, selected(r), unexplained(r),
-            before_after(r, "rest_innovation_rms_mps"), before_after(r, "end_error_m"), before_after(r, "truth_error_m")]
+            before_after(r, "rest_innovation_rms_mps"), before_after(r, "end_error_m"), before_after(r, "truth_error_m"),
+            saturation(r)]
 
 
 def simulated(ctx, identity_path, identity):
@@ -109,12 +124,12 @@ def simulated(ctx, identity_path, identity):
     model, _ = ctx.run([SIM, "print-model", "--preset", "calibrated"])
     rows = []
 
-    def case(name, changes, calib_text, label, effect, calib_label):
+    def case(name, changes, calib_text, label, effect, calib_label, arm=ARM):
         mpath, run, cpath = f"{DIR}/{name}.model.toml", f"{DIR}/{name}.mcap", f"{DIR}/{name}.calib.toml"
         if not ctx.dry:
             Path(mpath).write_text(set_key(model, changes))
             Path(cpath).write_text(calib_text)
-        ctx.run([SIM, *ARM, "--model", mpath, "--out", run, "--force"])
+        ctx.run([SIM, *arm, "--model", mpath, "--out", run, "--force"])
         r = diagnose(ctx, run, cpath)
         if r is not None:
             rows.append(sim_row(label, effect, calib_label, r))
@@ -128,8 +143,12 @@ def simulated(ctx, identity_path, identity):
     case("calibrated-gyro", CALIBRATED_GYRO, identity + GYRO_DECLARED, "calibrated gyro", "gyro.scale and misalignment zero", gyro_label)
     case("uncovered", CALIBRATED_GYRO + UNCOVERED, identity + GYRO_DECLARED, "uncovered",
          "the same; gyro.nonlinearity = [0.0001, -0.0001, 0.0001]", gyro_label)
+    case("saturation", [], identity, "60 moves, +-250 deg/s", "the gyro clips", "identity", arm=LONG_ARM)
+    case("saturation-wide", [], identity, "60 moves, +-500 deg/s", "nothing clips", "identity",
+         arm=[*LONG_ARM, "--gyro-range", "500"])
     header = ["run", "effect in the simulated part", "calibration", "selected", "unexplained",
-              "rest innovation rms (m/s) before -> after", "closed-loop end error (m)", "truth end error (m)"]
+              "rest innovation rms (m/s) before -> after", "closed-loop end error (m)", "truth end error (m)",
+              "gyro saturation"]
     return table(header, rows)
 
 

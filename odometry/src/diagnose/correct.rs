@@ -58,6 +58,8 @@ pub fn apply(
                 let n = Matrix3::identity() + candidate.gyro_perturbation(&p);
                 out.gyro.correction = Some(rows(&(n * c)));
             }
+            // No calibration term restores what a clip hid.
+            Candidate::GyroSaturation => {}
         }
     }
     out.bias_g = bias.into();

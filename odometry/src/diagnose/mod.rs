@@ -6,7 +6,9 @@
 //! and bias with temperature, the gyro's scale, cross-axis sensitivity and rotation against
 //! the accelerometer), selects what the data support, and says when what
 //! remains still exceeds the noise and what the model carries ("unexplained"). The selection
-//! is written into a calibration file ([`correct`]) for a rerun.
+//! is written into a calibration file ([`correct`]) for a rerun. Saturation, which no
+//! calibration term models, is tested apart on the motions during which the gyro clipped
+//! ([`saturation`]).
 //!
 //! Selection, as `mems-calibrate diagnose` selects (docs/diagnosis.md): forward, one candidate
 //! at a time, the one with the largest held-out gain over the current set, if that gain is
@@ -23,6 +25,7 @@ pub mod correct;
 pub mod evidence;
 pub mod fit;
 pub mod rows;
+pub mod saturation;
 
 use nalgebra::Vector3;
 use serde::Serialize;
@@ -122,6 +125,8 @@ pub struct Diagnosis {
     pub p: f64,
     /// What remains exceeds noise and the model: no candidate explains it.
     pub unexplained: bool,
+    /// The saturation candidate on the motions during which the gyro clipped.
+    pub saturation: saturation::Saturation,
 }
 
 impl Diagnosis {
@@ -185,7 +190,8 @@ fn carried(c: Candidate, config: &OdometryConfig) -> [f64; 3] {
             .accel_bias_sigma_mps2
             .map(|b| b.hypot(config.gravity_mps2 * config.accel_residual_scale)),
         Candidate::AccelScale => [config.accel_residual_scale; 3],
-        Candidate::AccelTempBias => [0.0; 3],
+        // The model has no such term; saturation is tested apart (`saturation`).
+        Candidate::AccelTempBias | Candidate::GyroSaturation => [0.0; 3],
         Candidate::GyroScale => std::array::from_fn(|i| config.gyro_correction_sigma[(i, i)]),
         // Parameter i acts on the pair of axes other than i (both entries of the pair).
         Candidate::GyroCrossAxis | Candidate::GyroRotation => std::array::from_fn(|i| {
@@ -207,6 +213,7 @@ fn plausible(f: &fit::Fit, slot: usize, config: &OdometryConfig, span_c: f64) ->
         Candidate::AccelTempBias => bias / span_c.max(1.0),
         // A rotation between the triads of one part is as small as its axes' misalignment.
         Candidate::GyroCrossAxis | Candidate::GyroRotation => bounds.cross_axis,
+        Candidate::GyroSaturation => f64::INFINITY,
     };
     (0..3).all(|i| f.theta[3 * slot + i].abs() <= limit)
 }
@@ -251,18 +258,18 @@ pub fn diagnose(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64, s: &Settin
     } else {
         ev.rests.first().map_or(f64::NAN, |r| r.temp_c)
     };
-    let rows: Vec<Row> = rows::rows(ev, config, t_ref_c)
+    let (clipped, rows): (Vec<Row>, Vec<Row>) = rows::rows(ev, config, t_ref_c)
         .into_iter()
         .filter(|r| r.sigma > 0.0 && r.r.is_finite())
-        .collect();
+        .partition(|r| r.kind == Kind::ClippedTilt);
     let span = temp_span(ev);
-    let open: Vec<Candidate> = Candidate::ALL
-        .into_iter()
+    let correctable = Candidate::ALL.into_iter().filter(|c| c.is_correctable());
+    let open: Vec<Candidate> = correctable
+        .clone()
         .filter(|&c| testable(c, &rows, ev, s).is_none())
         .collect();
-    let scores = Candidate::ALL
-        .iter()
-        .map(|&c| {
+    let scores = correctable
+        .map(|c| {
             let untestable = testable(c, &rows, ev, s);
             let f = untestable
                 .is_none()
@@ -316,6 +323,7 @@ pub fn diagnose(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64, s: &Settin
         dof,
         p,
         unexplained: p < s.unexplained_p,
+        saturation: saturation::test(&clipped, &chosen, fitted.as_ref(), s),
     }
 }
 

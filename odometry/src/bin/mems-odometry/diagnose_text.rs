@@ -3,6 +3,7 @@
 use std::fmt::Write;
 use std::path::Path;
 
+use odometry::diagnose::saturation::Saturation;
 use odometry::diagnose::{Diagnosis, Score};
 use serde_json::Value;
 
@@ -36,6 +37,33 @@ fn candidate(c: &Score) -> String {
     )
 }
 
+/// The saturation candidate's line: its score, the hidden rate (deg/s) and the clipped
+/// motions' tilt before and after.
+fn saturation(sat: &Saturation) -> String {
+    let name = "gyro_saturation";
+    if let Some(why) = &sat.untestable {
+        return format!("{name:<16} not testable: {why}");
+    }
+    let deg = |v: &[f64; 3]| v.map(|x| format!("{:.1}", x.to_degrees())).join(", ");
+    format!(
+        "{name:<16} score {:>10.1}  hidden rate [{}] +- [{}] deg/s beyond the range; {} clipped \
+         motions' tilt rms {:.3} mrad before, {:.3} after (noise {:.3}, p {:.2e}): {}",
+        sat.gain,
+        deg(&sat.hidden_rps),
+        deg(&sat.sigma_rps),
+        sat.motions,
+        sat.rms_before * 1e3,
+        sat.rms_after * 1e3,
+        sat.rms_noise * 1e3,
+        sat.p_after,
+        if sat.found {
+            "found (remedy: a wider gyro range)"
+        } else {
+            "not found"
+        }
+    )
+}
+
 /// The report for `input`: the diagnosis `d` and the figures of `report` (the JSON form).
 pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
     let mut s = String::new();
@@ -64,6 +92,7 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
     for c in &d.scores {
         let _ = writeln!(s, "    {}", candidate(c));
     }
+    let _ = writeln!(s, "    {}", saturation(&d.saturation));
     let names: Vec<&str> = d.selected.iter().map(|(c, _)| c.name()).collect();
     let _ = writeln!(
         s,
