@@ -105,11 +105,12 @@ def saturation(report):
     """The saturation candidate: found or not, the rate hidden on the axes that clipped (deg/s) and the clipped motions'
     tilt rms before -> after (mrad); `-` where it could not be tested."""
     s = report["diagnosis"]["saturation"]
+    motions = f"{s['motions']} clipped motion" + ("" if s["motions"] == 1 else "s")
     if s["untestable"]:
-        return f"- ({s['motions']} clipped motions)"
+        return f"- ({motions})"
     hidden = ", ".join(f"{'xyz'[i]} {math.degrees(h):.1f}" for i, h in enumerate(s["hidden_rps"]) if h != 0.0)
     verdict = "found" if s["found"] else "not found"
-    return (f"{verdict} ({s['motions']} clipped motions): {hidden} deg/s; tilt {1e3 * s['rms_before']:.1f} -> "
+    return (f"{verdict} ({motions}): {hidden} deg/s; tilt {1e3 * s['rms_before']:.1f} -> "
             f"{1e3 * s['rms_after']:.1f} mrad")
 
 

@@ -100,9 +100,9 @@ pub struct Residuals {
 pub struct Diagnosis {
     /// Rests used.
     pub rests: usize,
-    /// Motions between them, and those left out because the gyro clipped in them.
+    /// Motions between them.
     pub motions: usize,
-    /// Motions with clipped gyro samples (left out of the tilt rows).
+    /// Motions with clipped gyro samples (left out of the tilt rows, tested for saturation).
     pub motions_gyro_clipped: usize,
     /// Samples with any axis clipped.
     pub clipped_samples: usize,

@@ -69,7 +69,7 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{}: {} rests, {} motions between them ({} with the gyro clipped, left out of the tilt rows), {} clipped samples",
+        "{}: {} rests, {} motions between them ({} with the gyro clipped, tested apart for saturation), {} clipped samples",
         input.display(),
         d.rests,
         d.motions,
