@@ -108,7 +108,7 @@ def saturation(report):
     motions = f"{s['motions']} clipped motion" + ("" if s["motions"] == 1 else "s")
     if s["untestable"]:
         return f"- ({motions})"
-    hidden = ", ".join(f"{'xyz'[i]} {math.degrees(h):.1f}" for i, h in enumerate(s["hidden_rps"]) if h != 0.0)
+    hidden = ", ".join(f"{'xyz'[i]} {math.degrees(h):.1f}" for i, h in enumerate(s["hidden_rps"]) if s["clipped_axes"][i])
     verdict = "found" if s["found"] else "not found"
     return (f"{verdict} ({motions}): {hidden} deg/s; tilt {1e3 * s['rms_before']:.1f} -> "
             f"{1e3 * s['rms_after']:.1f} mrad")

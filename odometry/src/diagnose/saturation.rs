@@ -23,6 +23,8 @@ use super::rows::{Candidate, Kind, Row};
 pub struct Saturation {
     /// Motions between rests during which the gyro clipped.
     pub motions: usize,
+    /// The gyro axes that clipped in them (x, y, z): the others' rates are not determined.
+    pub clipped_axes: [bool; 3],
     /// Why it could not be tested, if so.
     pub untestable: Option<String>,
     /// Held-out chi-square gain.
@@ -30,7 +32,7 @@ pub struct Saturation {
     /// The rate each clipped sample hid beyond the range, rad/s per sensor axis (0 on an axis
     /// that never clipped).
     pub hidden_rps: [f64; 3],
-    /// Its 1-sigma (large on an axis that never clipped).
+    /// Its 1-sigma (0 on an axis that never clipped).
     pub sigma_rps: [f64; 3],
     /// Whether the data support it.
     pub found: bool,
@@ -71,16 +73,16 @@ pub fn test(all: &[Row], chosen: &[Candidate], fitted: Option<&Fit>, s: &Setting
     let mut groups: Vec<usize> = rows.iter().map(|r| r.group).collect();
     groups.dedup();
     // Axes that clipped: the parameters the rows determine.
-    let axes = (0..3)
-        .filter(|&i| {
-            rows.iter()
-                .any(|r| r.design[slot(&Candidate::GyroSaturation)][i] != 0.0)
-        })
-        .count();
+    let clipped_axes: [bool; 3] = std::array::from_fn(|i| {
+        rows.iter()
+            .any(|r| r.design[slot(&Candidate::GyroSaturation)][i] != 0.0)
+    });
+    let axes = clipped_axes.iter().filter(|&&c| c).count();
     let needed = (axes * s.min_rows_per_param).div_ceil(2) + 1;
     let before = rms(rows.iter().map(|r| r.r));
     let mut out = Saturation {
         motions: groups.len(),
+        clipped_axes,
         untestable: None,
         gain: 0.0,
         hidden_rps: [0.0; 3],
@@ -104,11 +106,11 @@ pub fn test(all: &[Row], chosen: &[Candidate], fitted: Option<&Fit>, s: &Setting
     };
     out.gain = f.gain;
     out.hidden_rps = std::array::from_fn(|i| f.theta[i]);
-    out.sigma_rps = std::array::from_fn(|i| f.sigma[i]);
+    out.sigma_rps = std::array::from_fn(|i| if clipped_axes[i] { f.sigma[i] } else { 0.0 });
     let (h, sd) = (out.hidden_rps, out.sigma_rps);
     out.found = f.gain > s.threshold
-        && (0..3).any(|i| h[i] > s.beyond_model * sd[i])
-        && (0..3).all(|i| h[i] > -s.beyond_model * sd[i]);
+        && (0..3).any(|i| clipped_axes[i] && h[i] > s.beyond_model * sd[i])
+        && (0..3).all(|i| !clipped_axes[i] || h[i] > -s.beyond_model * sd[i]);
     let after: Vec<f64> = if out.found {
         f.residuals.clone()
     } else {

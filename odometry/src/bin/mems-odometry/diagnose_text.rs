@@ -44,13 +44,22 @@ fn saturation(sat: &Saturation) -> String {
     if let Some(why) = &sat.untestable {
         return format!("{name:<16} not testable: {why}");
     }
-    let deg = |v: &[f64; 3]| v.map(|x| format!("{:.1}", x.to_degrees())).join(", ");
+    let hidden: Vec<String> = (0..3)
+        .filter(|&i| sat.clipped_axes[i])
+        .map(|i| {
+            format!(
+                "{} {:.1} +- {:.1}",
+                ["x", "y", "z"][i],
+                sat.hidden_rps[i].to_degrees(),
+                sat.sigma_rps[i].to_degrees()
+            )
+        })
+        .collect();
     format!(
-        "{name:<16} score {:>10.1}  hidden rate [{}] +- [{}] deg/s beyond the range; {} clipped \
+        "{name:<16} score {:>10.1}  hidden rate {} deg/s beyond the range; {} clipped \
          motions' tilt rms {:.3} mrad before, {:.3} after (noise {:.3}, p {:.2e}): {}",
         sat.gain,
-        deg(&sat.hidden_rps),
-        deg(&sat.sigma_rps),
+        hidden.join(", "),
         sat.motions,
         sat.rms_before * 1e3,
         sat.rms_after * 1e3,
