@@ -4,6 +4,7 @@ covers) and on every recording of the real-data corpus (/work/real-data, run as
 tools/real-data/bench.py runs them: the identity calibration, the sidecar's extra arguments)."""
 
 import json
+import math
 import os
 import sys
 from pathlib import Path
@@ -18,6 +19,7 @@ SIM = "target/release/mems-sim"
 DIR = "/tmp/figures-rundiag"
 DATA = Path(os.environ.get("MEMS_REAL_DATA", "/work/real-data"))
 ARM = ["arm", "--moves", "24", "--pauses", "1,2", "--rate", "200", "--seed", "3"]
+LONG_ARM = ["arm", "--moves", "60", "--pauses", "1,2", "--rate", "200", "--seed", "3"]
 IDENTITY_SCALE = "scale = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"
 
 # (case, model changes (table, key, value), what the calibration file declares).
@@ -27,11 +29,23 @@ EFFECTS = [
      (IDENTITY_SCALE, "scale = [[1.012, 0.0, 0.0], [0.0, 0.99, 0.0], [0.0, 0.0, 1.001]]")),
     ("gyro_scale", [("gyro", "scale", "[0.08, -0.07, 0.01]")],
      "\n[gyro]\ncorrection = [[%r, 0.0, 0.0], [0.0, %r, 0.0], [0.0, 0.0, %r]]\n" % (1 / 1.08, 1 / 0.93, 1 / 1.01)),
+    # (I + M)^-1 of a symmetric x-y cross-axis M (0.08) and of a rotation M = [phi]x, phi = 0.05 rad about x.
+    ("gyro_cross_axis", [("gyro", "misalignment", "[[0.0, 0.08, 0.0], [0.08, 0.0, 0.0], [0.0, 0.0, 0.0]]")],
+     "\n[gyro]\ncorrection = [[%r, %r, 0.0], [%r, %r, 0.0], [0.0, 0.0, 1.0]]\n" % (1 / (1 - 0.08**2), -0.08 / (1 - 0.08**2),
+                                                                           -0.08 / (1 - 0.08**2), 1 / (1 - 0.08**2))),
+    ("gyro_rotation", [("gyro", "misalignment", "[[0.0, 0.0, 0.0], [0.0, 0.0, -0.05], [0.0, 0.05, 0.0]]")],
+     "\n[gyro]\ncorrection = [[1.0, 0.0, 0.0], [0.0, %r, %r], [0.0, %r, %r]]\n" % (1 / (1 + 0.05**2), 0.05 / (1 + 0.05**2),
+                                                                           -0.05 / (1 + 0.05**2), 1 / (1 + 0.05**2))),
     ("accel_temp_bias", [("accel", "bias_temp_coeff", "[0.002, -0.0015, 0.0]"), ("thermal", "ambient_drift_c_per_s", "0.15"),
                          ("thermal", "self_heating_c", "0.0")],
      "\n[temperature]\nreference_c = 25.0\nbias_g_per_c = [0.002, -0.0015, 0.0]\n"),
 ]
-UNCOVERED = ("gyro cross-axis 8 % (x-y)", [("gyro", "misalignment", "[[0.0, 0.08, 0.0], [0.08, 0.0, 0.0], [0.0, 0.0, 0.0]]")])
+# The uncovered effect: a gyro nonlinearity (deg/s read as u + k u^2) on a part whose gyro is calibrated (scale and
+# misalignment zero, declared to 0.1 %); "calibrated gyro" is the same part without it.
+CALIBRATED_GYRO = [("gyro", "scale", "[0.0, 0.0, 0.0]"), ("gyro", "misalignment", "[[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]")]
+GYRO_DECLARED = ("\n[gyro]\ncorrection = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\n"
+                 "correction_sigma = [[0.001, 0.001, 0.001], [0.001, 0.001, 0.001], [0.001, 0.001, 0.001]]\n")
+UNCOVERED = [("gyro", "nonlinearity", "[0.0001, -0.0001, 0.0001]")]
 
 
 def set_key(model, changes):
@@ -87,9 +101,23 @@ def unexplained(report):
     return "yes" if report["unexplained"] else "no"
 
 
+def saturation(report):
+    """The saturation candidate: found or not, the rate hidden on the axes that clipped (deg/s) and the clipped motions'
+    tilt rms before -> after (mrad); `-` where it could not be tested."""
+    s = report["diagnosis"]["saturation"]
+    motions = f"{s['motions']} clipped motion" + ("" if s["motions"] == 1 else "s")
+    if s["untestable"]:
+        return f"- ({motions})"
+    hidden = ", ".join(f"{'xyz'[i]} {math.degrees(h):.1f}" for i, h in enumerate(s["hidden_rps"]) if s["clipped_axes"][i])
+    verdict = "found" if s["found"] else "not found"
+    return (f"{verdict} ({motions}): {hidden} deg/s; tilt {1e3 * s['rms_before']:.1f} -> "
+            f"{1e3 * s['rms_after']:.1f} mrad")
+
+
 def sim_row(label, effect, calib_label, r):
     return [label, effect, calib_label, selected(r), unexplained(r),
-            before_after(r, "rest_innovation_rms_mps"), before_after(r, "end_error_m"), before_after(r, "truth_error_m")]
+            before_after(r, "rest_innovation_rms_mps"), before_after(r, "end_error_m"), before_after(r, "truth_error_m"),
+            saturation(r)]
 
 
 def simulated(ctx, identity_path, identity):
@@ -97,12 +125,12 @@ def simulated(ctx, identity_path, identity):
     model, _ = ctx.run([SIM, "print-model", "--preset", "calibrated"])
     rows = []
 
-    def case(name, changes, calib_text, label, effect, calib_label):
+    def case(name, changes, calib_text, label, effect, calib_label, arm=ARM):
         mpath, run, cpath = f"{DIR}/{name}.model.toml", f"{DIR}/{name}.mcap", f"{DIR}/{name}.calib.toml"
         if not ctx.dry:
             Path(mpath).write_text(set_key(model, changes))
             Path(cpath).write_text(calib_text)
-        ctx.run([SIM, *ARM, "--model", mpath, "--out", run, "--force"])
+        ctx.run([SIM, *arm, "--model", mpath, "--out", run, "--force"])
         r = diagnose(ctx, run, cpath)
         if r is not None:
             rows.append(sim_row(label, effect, calib_label, r))
@@ -112,9 +140,16 @@ def simulated(ctx, identity_path, identity):
         effect = "; ".join(f"{t}.{k} = {v}" for t, k, v in changes)
         case(name, changes, identity, f"{name}, undeclared", effect, "identity")
         case(name + "-declared", changes, declare(identity, declared), f"{name}, declared", effect, "the effect")
-    case("uncovered", UNCOVERED[1], identity, "uncovered", UNCOVERED[0], "identity")
+    gyro_label = "gyro calibrated to 0.1 %"
+    case("calibrated-gyro", CALIBRATED_GYRO, identity + GYRO_DECLARED, "calibrated gyro", "gyro.scale and misalignment zero", gyro_label)
+    case("uncovered", CALIBRATED_GYRO + UNCOVERED, identity + GYRO_DECLARED, "uncovered",
+         "the same; gyro.nonlinearity = [0.0001, -0.0001, 0.0001]", gyro_label)
+    case("saturation", [], identity, "60 moves, +-250 deg/s", "the gyro clips", "identity", arm=LONG_ARM)
+    case("saturation-wide", [], identity, "60 moves, +-500 deg/s", "nothing clips", "identity",
+         arm=[*LONG_ARM, "--gyro-range", "500"])
     header = ["run", "effect in the simulated part", "calibration", "selected", "unexplained",
-              "rest innovation rms (m/s) before -> after", "closed-loop end error (m)", "truth end error (m)"]
+              "rest innovation rms (m/s) before -> after", "closed-loop end error (m)", "truth end error (m)",
+              "gyro saturation"]
     return table(header, rows)
 
 

@@ -7,9 +7,10 @@
 //!   smaller rest innovation rms (by 10 %).
 //! - Declared (a calibration file that models the effect): nothing is selected.
 //! - A clean run: nothing is selected, nothing is unexplained.
-//! - An effect no candidate covers (a gyro cross-axis sensitivity of 8 %): "unexplained".
+//! - An effect no candidate covers (a gyro scale nonlinearity): "unexplained".
+//! - Gyro saturation, tested apart: found where the gyro clipped, with the rate its clips hid.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use integration_tests::{path_arg, run_ok};
 use serde_json::Value;
@@ -47,39 +48,39 @@ fn set(model: &str, section: &str, key: &str, value: &str) -> String {
         .join("\n")
 }
 
-/// Simulates an arm run with `model` and diagnoses it with `calib` (TOML text, or the
-/// identity when `None`).
-fn diagnose(dir: &Path, name: &str, model: &str, calib: Option<String>) -> Value {
+/// Simulates an arm run of `moves` moves with `model` (and `extra` `mems-sim` options) into
+/// `name.ext`.
+fn simulate(
+    dir: &Path,
+    name: &str,
+    model: &str,
+    moves: &str,
+    extra: &[&str],
+    ext: &str,
+) -> PathBuf {
     let (model_path, run) = (
         dir.join(format!("{name}.model.toml")),
-        dir.join(format!("{name}.mcap")),
+        dir.join(format!("{name}.{ext}")),
     );
     std::fs::write(&model_path, model).unwrap();
-    run_ok(
-        "mems-sim",
-        &[
-            "arm",
-            "--moves",
-            "24",
-            "--pauses",
-            "1,2",
-            "--rate",
-            "200",
-            "--seed",
-            "3",
-            "--model",
-            path_arg(&model_path),
-            "--out",
-            path_arg(&run),
-        ],
-    );
+    let mut args = vec![
+        "arm", "--moves", moves, "--pauses", "1,2", "--rate", "200", "--seed", "3",
+    ];
+    args.extend_from_slice(extra);
+    args.extend(["--model", path_arg(&model_path), "--out", path_arg(&run)]);
+    run_ok("mems-sim", &args);
+    run
+}
+
+/// Diagnoses `run` with `calib` (TOML text, or the identity when `None`).
+fn diagnose_file(dir: &Path, name: &str, run: &Path, calib: Option<String>) -> Value {
     let calib_path = dir.join(format!("{name}.calib.toml"));
     std::fs::write(&calib_path, calib.unwrap_or_else(identity)).unwrap();
     let out = run_ok(
         "mems-odometry",
         &[
             "diagnose",
-            path_arg(&run),
+            path_arg(run),
             "--calib",
             path_arg(&calib_path),
             "--closed-loop",
@@ -87,6 +88,13 @@ fn diagnose(dir: &Path, name: &str, model: &str, calib: Option<String>) -> Value
         ],
     );
     serde_json::from_str(&out).unwrap()
+}
+
+/// Simulates a 24-move arm run with `model` and diagnoses it with `calib` (TOML text, or the
+/// identity when `None`).
+fn diagnose(dir: &Path, name: &str, model: &str, calib: Option<String>) -> Value {
+    let run = simulate(dir, name, model, "24", &[], "mcap");
+    diagnose_file(dir, name, &run, calib)
 }
 
 fn selected(v: &Value) -> Vec<String> {
@@ -109,53 +117,24 @@ fn figure(v: &Value, run: &str, key: &str) -> f64 {
         .unwrap_or_else(|| panic!("{run} {key} missing: {v}"))
 }
 
-#[test]
-fn each_effect_is_found_undeclared_and_left_alone_declared() {
+/// The calibration that declares a gyro whose reading is `(I + M) omega`: the identity with
+/// the `[gyro] correction` `(I + M)^-1`.
+fn gyro_declared(m: nalgebra::Matrix3<f64>) -> String {
+    let c = (nalgebra::Matrix3::identity() + m).try_inverse().unwrap();
+    let row = |r: usize| format!("[{:?}, {:?}, {:?}]", c[(r, 0)], c[(r, 1)], c[(r, 2)]);
+    format!(
+        "{}\n[gyro]\ncorrection = [{}, {}, {}]\n",
+        identity(),
+        row(0),
+        row(1),
+        row(2)
+    )
+}
+
+/// Each case (effect, model, declaring calibration): undeclared it is selected alone, the
+/// rerun confirms it and ends nearer the truth; declared nothing is selected.
+fn found_undeclared_and_left_alone_declared(cases: Vec<(&str, String, String)>) {
     let dir = tempfile::tempdir().unwrap();
-    let base = run_ok("mems-sim", &["print-model", "--preset", "calibrated"]);
-    let id = identity();
-    let cases = [
-        (
-            "accel_bias",
-            set(&base, "accel", "bias", "[0.006, -0.005, 0.0]"),
-            id.replace("bias_g = [0.0, 0.0, 0.0]", "bias_g = [0.006, -0.005, 0.0]"),
-        ),
-        (
-            "accel_scale",
-            set(&base, "accel", "scale", "[0.012, -0.01, 0.001]"),
-            id.replace(
-                "scale = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]",
-                "scale = [[1.012, 0.0, 0.0], [0.0, 0.99, 0.0], [0.0, 0.0, 1.001]]",
-            ),
-        ),
-        (
-            "gyro_scale",
-            set(&base, "gyro", "scale", "[0.08, -0.07, 0.01]"),
-            format!(
-                "{id}\n[gyro]\ncorrection = [[{}, 0.0, 0.0], [0.0, {}, 0.0], [0.0, 0.0, {}]]\n",
-                1.0 / 1.08,
-                1.0 / 0.93,
-                1.0 / 1.01
-            ),
-        ),
-        (
-            "accel_temp_bias",
-            set(
-                &set(
-                    &set(&base, "accel", "bias_temp_coeff", "[0.002, -0.0015, 0.0]"),
-                    "thermal",
-                    "ambient_drift_c_per_s",
-                    "0.15",
-                ),
-                "thermal",
-                "self_heating_c",
-                "0.0",
-            ),
-            format!(
-                "{id}\n[temperature]\nreference_c = 25.0\nbias_g_per_c = [0.002, -0.0015, 0.0]\n"
-            ),
-        ),
-    ];
     for (effect, model, declared) in cases {
         let found = diagnose(dir.path(), effect, &model, None);
         assert_eq!(selected(&found), [effect], "undeclared {effect}: {found:#}");
@@ -184,6 +163,81 @@ fn each_effect_is_found_undeclared_and_left_alone_declared() {
 }
 
 #[test]
+fn accelerometer_effects_are_found_undeclared_and_left_alone_declared() {
+    let base = run_ok("mems-sim", &["print-model", "--preset", "calibrated"]);
+    let id = identity();
+    found_undeclared_and_left_alone_declared(vec![
+        (
+            "accel_bias",
+            set(&base, "accel", "bias", "[0.006, -0.005, 0.0]"),
+            id.replace("bias_g = [0.0, 0.0, 0.0]", "bias_g = [0.006, -0.005, 0.0]"),
+        ),
+        (
+            "accel_scale",
+            set(&base, "accel", "scale", "[0.012, -0.01, 0.001]"),
+            id.replace(
+                "scale = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]",
+                "scale = [[1.012, 0.0, 0.0], [0.0, 0.99, 0.0], [0.0, 0.0, 1.001]]",
+            ),
+        ),
+        (
+            "accel_temp_bias",
+            set(
+                &set(
+                    &set(&base, "accel", "bias_temp_coeff", "[0.002, -0.0015, 0.0]"),
+                    "thermal",
+                    "ambient_drift_c_per_s",
+                    "0.15",
+                ),
+                "thermal",
+                "self_heating_c",
+                "0.0",
+            ),
+            format!(
+                "{id}\n[temperature]\nreference_c = 25.0\nbias_g_per_c = [0.002, -0.0015, 0.0]\n"
+            ),
+        ),
+    ]);
+}
+
+#[test]
+fn gyro_effects_are_found_undeclared_and_left_alone_declared() {
+    use nalgebra::Matrix3;
+    let base = run_ok("mems-sim", &["print-model", "--preset", "calibrated"]);
+    let cross = Matrix3::new(0.0, 0.08, 0.0, 0.08, 0.0, 0.0, 0.0, 0.0, 0.0);
+    // The gyro's axes turned by 0.05 rad about x against the accelerometer's: M = [phi]x.
+    let rotation = Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, -0.05, 0.0, 0.05, 0.0);
+    let misalignment = |m: &Matrix3<f64>| {
+        let row = |r: usize| format!("[{:?}, {:?}, {:?}]", m[(r, 0)], m[(r, 1)], m[(r, 2)]);
+        set(
+            &base,
+            "gyro",
+            "misalignment",
+            &format!("[{}, {}, {}]", row(0), row(1), row(2)),
+        )
+    };
+    found_undeclared_and_left_alone_declared(vec![
+        (
+            "gyro_scale",
+            set(&base, "gyro", "scale", "[0.08, -0.07, 0.01]"),
+            gyro_declared(Matrix3::from_diagonal(&nalgebra::Vector3::new(
+                0.08, -0.07, 0.01,
+            ))),
+        ),
+        (
+            "gyro_cross_axis",
+            misalignment(&cross),
+            gyro_declared(cross),
+        ),
+        (
+            "gyro_rotation",
+            misalignment(&rotation),
+            gyro_declared(rotation),
+        ),
+    ]);
+}
+
+#[test]
 fn a_clean_run_selects_nothing_and_an_uncovered_effect_is_unexplained() {
     let dir = tempfile::tempdir().unwrap();
     let base = run_ok("mems-sim", &["print-model", "--preset", "calibrated"]);
@@ -194,15 +248,102 @@ fn a_clean_run_selects_nothing_and_an_uncovered_effect_is_unexplained() {
         clean["diagnosis"]["rests"].as_u64().unwrap() >= 20,
         "{clean:#}"
     );
-    let cross = set(
-        &base,
+    // A part whose gyro is calibrated (its scale and misalignment zero, the calibration file
+    // says so to 0.1 %) but reads `u + k u^2` (deg/s): a nonlinearity, even in the rate, which
+    // no candidate has. The same part without it is explained.
+    let calibrated = set(
+        &set(&base, "gyro", "scale", "[0.0, 0.0, 0.0]"),
         "gyro",
         "misalignment",
-        "[[0.0, 0.08, 0.0], [0.08, 0.0, 0.0], [0.0, 0.0, 0.0]]",
+        "[[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]",
     );
-    let unknown = diagnose(dir.path(), "cross-axis", &cross, None);
+    let tight = format!(
+        "{}\n[gyro]\ncorrection = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\n\
+         correction_sigma = [[0.001, 0.001, 0.001], [0.001, 0.001, 0.001], [0.001, 0.001, 0.001]]\n",
+        identity()
+    );
+    let control = diagnose(dir.path(), "calibrated", &calibrated, Some(tight.clone()));
+    assert!(selected(&control).is_empty(), "{control:#}");
+    assert_eq!(control["unexplained"], false, "{control:#}");
+    let nonlinear = set(
+        &calibrated,
+        "gyro",
+        "nonlinearity",
+        "[0.0001, -0.0001, 0.0001]",
+    );
+    let unknown = diagnose(dir.path(), "nonlinear", &nonlinear, Some(tight));
     assert_eq!(unknown["unexplained"], true, "{unknown:#}");
     assert!(selected(&unknown).is_empty(), "{unknown:#}");
+}
+
+/// The rate the gyro's clips hid in the canonical CSV `csv` (its truth columns), deg/s per
+/// axis: the mean of |true rate| - |reading| over the samples at the end of the +-250 deg/s
+/// range (`None` on an axis that never clipped).
+fn hidden_rate_truth(csv: &Path) -> [Option<f64>; 3] {
+    let text = std::fs::read_to_string(csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let axes =
+        ["x", "y", "z"].map(|a| (col(&format!("g{a}_dps")), col(&format!("truth_w{a}_rps"))));
+    let mut sums = [(0.0, 0usize); 3];
+    for line in lines {
+        let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
+        for (i, &(reading, truth)) in axes.iter().enumerate() {
+            if v[reading].abs() >= 250.0 * (1.0 - 1.0 / 4096.0) {
+                sums[i].0 += v[truth].to_degrees().abs() - v[reading].abs();
+                sums[i].1 += 1;
+            }
+        }
+    }
+    sums.map(|(sum, n)| (n > 0).then(|| sum / n as f64))
+}
+
+/// Saturation: a 60-move run of the calibrated part clips its gyro at +-250 deg/s in a few
+/// motions; the saturation candidate finds the rate the clips hid (within 2x of the truth of
+/// the same run written as CSV, on the axes that clipped) and explains most of the tilt after
+/// them, while nothing correctable is selected. With a +-500 deg/s range nothing clips and
+/// saturation is not tested.
+#[test]
+fn gyro_saturation_is_found_where_the_gyro_clipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = run_ok("mems-sim", &["print-model", "--preset", "calibrated"]);
+    let run = simulate(dir.path(), "clipped", &base, "60", &[], "mcap");
+    let csv = simulate(dir.path(), "clipped", &base, "60", &[], "csv");
+    let clipped = diagnose_file(dir.path(), "clipped", &run, None);
+    let sat = &clipped["diagnosis"]["saturation"];
+    assert_eq!(sat["found"], true, "{sat:#}");
+    assert!(selected(&clipped).is_empty(), "{clipped:#}");
+    let (before, after) = (
+        sat["rms_before"].as_f64().unwrap(),
+        sat["rms_after"].as_f64().unwrap(),
+    );
+    assert!(after < 0.5 * before, "clipped tilt rms {before} -> {after}");
+    let truth = hidden_rate_truth(&csv);
+    assert!(truth.iter().any(Option::is_some), "nothing clipped");
+    for (i, t) in truth.iter().enumerate() {
+        let fitted = sat["hidden_rps"][i].as_f64().unwrap().to_degrees();
+        match t {
+            Some(t) => assert!(
+                (0.5 * t..=2.0 * t).contains(&fitted),
+                "axis {i}: {fitted} deg/s fitted, {t} true"
+            ),
+            None => assert!(fitted.abs() < 1e-6, "axis {i} never clipped: {fitted}"),
+        }
+    }
+    let wide = simulate(
+        dir.path(),
+        "wide",
+        &base,
+        "60",
+        &["--gyro-range", "500"],
+        "mcap",
+    );
+    let wide = diagnose_file(dir.path(), "wide", &wide, None);
+    let sat = &wide["diagnosis"]["saturation"];
+    assert_eq!(sat["motions"], 0, "{sat:#}");
+    assert_eq!(sat["found"], false, "{sat:#}");
+    assert!(sat["untestable"].is_string(), "{sat:#}");
 }
 
 #[test]

@@ -1,13 +1,14 @@
 //! The selected effects written into a calibration file, so that a rerun of the odometry
 //! (`mems-odometry offline --calib`) models them: the accelerometer's through its reading model
-//! `a' = S a + b + c_b (T - T_ref)` (g, `calibrate::calibfile`), the gyro's through its
-//! correction `omega = C w` (`[gyro] correction`).
+//! `a' = S a + b + c_b (T - T_ref)` (g, `calibrate::calibfile`), the gyro's (scale,
+//! cross-axis, rotation) through its correction `omega = C w` (`[gyro] correction`).
 //!
 //! The diagnosis measures the effects in the calibrated output `a_c` (what the file's current
 //! correction gives, in g after dividing by its gravity): `a_c = (I + diag(s)) a + beta +
 //! c (T - T_ref)`. Put into `a' = S a_c + b`, that is `S' = S (I + diag(s))`, `b' = b + S beta`
-//! and a temperature bias `S c`. For the gyro, `omega_true = (I + diag(k)) C w` gives
-//! `C' = (I + diag(k)) C`. A file whose temperature terms also change the scale keeps them as
+//! and a temperature bias `S c`. For the gyro, `omega_true = (I + N) C w` gives
+//! `C' = (I + N) C`, each selected gyro candidate's `N` in turn
+//! (`Candidate::gyro_perturbation`). A file whose temperature terms also change the scale keeps them as
 //! they are (their product with the new scale's small change is neglected).
 
 use calibrate::calibfile::CalibrationFile;
@@ -49,14 +50,16 @@ pub fn apply(
                 out.temperature.reference_c = Some(reference);
                 out.temperature.bias_g_per_c = Some((old + per_c).into());
             }
-            Candidate::GyroScale => {
-                let c = file
+            Candidate::GyroScale | Candidate::GyroCrossAxis | Candidate::GyroRotation => {
+                let c = out
                     .gyro
                     .correction
                     .map_or(Matrix3::identity(), |c| matrix(&c));
-                let k = Matrix3::from_diagonal(&(Vector3::repeat(1.0) + p));
-                out.gyro.correction = Some(rows(&(k * c)));
+                let n = Matrix3::identity() + candidate.gyro_perturbation(&p);
+                out.gyro.correction = Some(rows(&(n * c)));
             }
+            // No calibration term restores what a clip hid.
+            Candidate::GyroSaturation => {}
         }
     }
     out.bias_g = bias.into();
@@ -111,6 +114,35 @@ mod tests {
             expected,
             epsilon = 1e-12
         );
+    }
+
+    #[test]
+    fn gyro_cross_axis_and_rotation_compose_with_the_scale() {
+        let file = CalibrationFile::identity(9.8);
+        let (k, m, phi) = (
+            Vector3::new(0.02, 0.0, 0.0),
+            Vector3::new(0.0, 0.0, 0.03),
+            Vector3::new(0.0, 0.0, 0.01),
+        );
+        let fixed = apply(
+            &file,
+            &[
+                (Candidate::GyroScale, k),
+                (Candidate::GyroCrossAxis, m),
+                (Candidate::GyroRotation, phi),
+            ],
+            f64::NAN,
+        );
+        let expected = (Matrix3::identity() + phi.cross_matrix())
+            * Matrix3::new(1.0, 0.03, 0.0, 0.03, 1.0, 0.0, 0.0, 0.0, 1.0)
+            * Matrix3::from_diagonal(&Vector3::new(1.02, 1.0, 1.0));
+        assert_relative_eq!(
+            matrix(&fixed.gyro.correction.unwrap()),
+            expected,
+            epsilon = 1e-12
+        );
+        // phi x w: a rate about x gains a part about y for a rotation about z.
+        assert_relative_eq!(expected[(1, 0)], (0.03 + 0.01) * 1.02, epsilon = 1e-12);
     }
 
     #[test]

@@ -187,17 +187,36 @@ impl Evidence {
         }
     }
 
-    /// The rotation the gyro carried over `interval` with its rate scaled by `I + diag(k)`
-    /// and the bias ([`Evidence::gyro_bias_rps`]) removed: sensor frame at the end to sensor
-    /// frame at the start.
-    pub fn carried(&self, interval: &Interval, k: &Vector3<f64>) -> UnitQuaternion<f64> {
+    /// The rotation the gyro carried over `interval` with its rate corrected by `I + n` and
+    /// the bias ([`Evidence::gyro_bias_rps`]) removed, and `hidden` (rad/s per axis) added to
+    /// each clipped axis of a sample with that axis's sign (the rate a clip hid beyond the
+    /// range; the raw axis's flag marks the corrected axis of the same index, which `C`
+    /// turns by no more than its cross-axis terms): sensor frame at the end to sensor frame
+    /// at the start.
+    pub fn carried(
+        &self,
+        interval: &Interval,
+        n: &Matrix3<f64>,
+        hidden: &Vector3<f64>,
+    ) -> UnitQuaternion<f64> {
         let bias = self.gyro_bias_rps;
-        let scale = Matrix3::from_diagonal(&(Vector3::repeat(1.0) + k));
+        let scale = Matrix3::identity() + n;
         let mut q = UnitQuaternion::identity();
         let s = &self.samples;
+        let rate = |x: &Sample| {
+            Vector3::from_fn(|i, _| {
+                let clipped = x.raw_flags & raw_flags::saturated_axis(3 + i) != 0;
+                let w = x.gyro_rps[i];
+                if clipped {
+                    w + w.signum() * hidden[i]
+                } else {
+                    w
+                }
+            })
+        };
         for i in interval.samples.start.max(1)..interval.samples.end {
             let dt = s[i].t_s - s[i - 1].t_s;
-            let w = scale * ((s[i].gyro_rps + s[i - 1].gyro_rps) / 2.0 - bias);
+            let w = scale * ((rate(&s[i]) + rate(&s[i - 1])) / 2.0 - bias);
             q *= UnitQuaternion::from_scaled_axis(w * dt);
         }
         q

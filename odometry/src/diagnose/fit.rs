@@ -117,12 +117,11 @@ mod tests {
                     r: u.dot(&b) + sign * noise,
                     sigma: noise.max(1e-6),
                     floor: 0.0,
-                    design: [
-                        u,
-                        u.component_mul(&u) * 9.8,
-                        Vector3::zeros(),
-                        Vector3::zeros(),
-                    ],
+                    design: std::array::from_fn(|c| match c {
+                        0 => u,
+                        1 => u.component_mul(&u) * 9.8,
+                        _ => Vector3::zeros(),
+                    }),
                 }
             })
             .collect()

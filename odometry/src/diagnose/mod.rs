@@ -2,9 +2,13 @@
 //! ([`evidence`]) it forms residuals the model should leave at its noise ([`rows`]: each
 //! rest's specific-force magnitude against gravity, each motion's tilt from one rest to the
 //! next against what the gyro carried), tests candidate effects the model lacks on them
-//! ([`fit`]: held-out chi-square gain), selects what the data support, and says when what
+//! ([`fit`]: held-out chi-square gain; [`rows::Candidate`]: the accelerometer's bias, scale
+//! and bias with temperature, the gyro's scale, cross-axis sensitivity and rotation against
+//! the accelerometer), selects what the data support, and says when what
 //! remains still exceeds the noise and what the model carries ("unexplained"). The selection
-//! is written into a calibration file ([`correct`]) for a rerun.
+//! is written into a calibration file ([`correct`]) for a rerun. Saturation, which no
+//! calibration term models, is tested apart on the motions during which the gyro clipped
+//! ([`saturation`]).
 //!
 //! Selection, as `mems-calibrate diagnose` selects (docs/diagnosis.md): forward, one candidate
 //! at a time, the one with the largest held-out gain over the current set, if that gain is
@@ -21,6 +25,7 @@ pub mod correct;
 pub mod evidence;
 pub mod fit;
 pub mod rows;
+pub mod saturation;
 
 use nalgebra::Vector3;
 use serde::Serialize;
@@ -95,9 +100,9 @@ pub struct Residuals {
 pub struct Diagnosis {
     /// Rests used.
     pub rests: usize,
-    /// Motions between them, and those left out because the gyro clipped in them.
+    /// Motions between them.
     pub motions: usize,
-    /// Motions with clipped gyro samples (left out of the tilt rows).
+    /// Motions with clipped gyro samples (left out of the tilt rows, tested for saturation).
     pub motions_gyro_clipped: usize,
     /// Samples with any axis clipped.
     pub clipped_samples: usize,
@@ -120,6 +125,8 @@ pub struct Diagnosis {
     pub p: f64,
     /// What remains exceeds noise and the model: no candidate explains it.
     pub unexplained: bool,
+    /// The saturation candidate on the motions during which the gyro clipped.
+    pub saturation: saturation::Saturation,
 }
 
 impl Diagnosis {
@@ -147,12 +154,12 @@ fn testable(c: Candidate, rows: &[Row], ev: &Evidence, s: &Settings) -> Option<S
     let needed = |per_group: usize| (3 * s.min_rows_per_param).div_ceil(per_group) + 1;
     let span = temp_span(ev);
     match c {
-        Candidate::GyroScale if groups(Kind::Tilt) < needed(2) => Some(format!(
+        _ if c.is_gyro() && groups(Kind::Tilt) < needed(2) => Some(format!(
             "{} motions between rests with the gyro unclipped (needs {})",
             groups(Kind::Tilt),
             needed(2)
         )),
-        Candidate::GyroScale => None,
+        _ if c.is_gyro() => None,
         _ if groups(Kind::Magnitude) < needed(1) => Some(format!(
             "{} rests (needs {})",
             groups(Kind::Magnitude),
@@ -173,7 +180,9 @@ fn temp_span(ev: &Evidence) -> f64 {
     temps.clone().fold(f64::NEG_INFINITY, f64::max) - temps.fold(f64::INFINITY, f64::min)
 }
 
-/// The model's carried 1-sigma for each parameter of `c` (zero: the model has no such term).
+/// The model's carried 1-sigma for each parameter of `c` (zero: the model has no such term):
+/// for the gyro's, the configuration's `gyro_correction_sigma` (diagonal for the scale, the
+/// larger of a pair's two off-diagonal entries for the cross-axis and rotation).
 fn carried(c: Candidate, config: &OdometryConfig) -> [f64; 3] {
     match c {
         // The residual scale and misalignment read as a bias of g times it under gravity.
@@ -181,8 +190,15 @@ fn carried(c: Candidate, config: &OdometryConfig) -> [f64; 3] {
             .accel_bias_sigma_mps2
             .map(|b| b.hypot(config.gravity_mps2 * config.accel_residual_scale)),
         Candidate::AccelScale => [config.accel_residual_scale; 3],
-        Candidate::AccelTempBias => [0.0; 3],
+        // The model has no such term; saturation is tested apart (`saturation`).
+        Candidate::AccelTempBias | Candidate::GyroSaturation => [0.0; 3],
         Candidate::GyroScale => std::array::from_fn(|i| config.gyro_correction_sigma[(i, i)]),
+        // Parameter i acts on the pair of axes other than i (both entries of the pair).
+        Candidate::GyroCrossAxis | Candidate::GyroRotation => std::array::from_fn(|i| {
+            let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+            let s = &config.gyro_correction_sigma;
+            s[(j, k)].max(s[(k, j)])
+        }),
     }
 }
 
@@ -195,6 +211,9 @@ fn plausible(f: &fit::Fit, slot: usize, config: &OdometryConfig, span_c: f64) ->
         Candidate::AccelBias => bias,
         Candidate::AccelScale | Candidate::GyroScale => bounds.scale_error,
         Candidate::AccelTempBias => bias / span_c.max(1.0),
+        // A rotation between the triads of one part is as small as its axes' misalignment.
+        Candidate::GyroCrossAxis | Candidate::GyroRotation => bounds.cross_axis,
+        Candidate::GyroSaturation => f64::INFINITY,
     };
     (0..3).all(|i| f.theta[3 * slot + i].abs() <= limit)
 }
@@ -239,18 +258,18 @@ pub fn diagnose(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64, s: &Settin
     } else {
         ev.rests.first().map_or(f64::NAN, |r| r.temp_c)
     };
-    let rows: Vec<Row> = rows::rows(ev, config, t_ref_c)
+    let (clipped, rows): (Vec<Row>, Vec<Row>) = rows::rows(ev, config, t_ref_c)
         .into_iter()
         .filter(|r| r.sigma > 0.0 && r.r.is_finite())
-        .collect();
+        .partition(|r| r.kind == Kind::ClippedTilt);
     let span = temp_span(ev);
-    let open: Vec<Candidate> = Candidate::ALL
-        .into_iter()
+    let correctable = Candidate::ALL.into_iter().filter(|c| c.is_correctable());
+    let open: Vec<Candidate> = correctable
+        .clone()
         .filter(|&c| testable(c, &rows, ev, s).is_none())
         .collect();
-    let scores = Candidate::ALL
-        .iter()
-        .map(|&c| {
+    let scores = correctable
+        .map(|c| {
             let untestable = testable(c, &rows, ev, s);
             let f = untestable
                 .is_none()
@@ -304,6 +323,7 @@ pub fn diagnose(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64, s: &Settin
         dof,
         p,
         unexplained: p < s.unexplained_p,
+        saturation: saturation::test(&clipped, &chosen, fitted.as_ref(), s),
     }
 }
 

@@ -3,6 +3,7 @@
 use std::fmt::Write;
 use std::path::Path;
 
+use odometry::diagnose::saturation::Saturation;
 use odometry::diagnose::{Diagnosis, Score};
 use serde_json::Value;
 
@@ -36,12 +37,48 @@ fn candidate(c: &Score) -> String {
     )
 }
 
+/// The saturation candidate's line: its score, the hidden rate (deg/s) and the clipped
+/// motions' tilt before and after.
+fn saturation(sat: &Saturation) -> String {
+    let name = "gyro_saturation";
+    if let Some(why) = &sat.untestable {
+        return format!("{name:<16} not testable: {why}");
+    }
+    let hidden: Vec<String> = (0..3)
+        .filter(|&i| sat.clipped_axes[i])
+        .map(|i| {
+            format!(
+                "{} {:.1} +- {:.1}",
+                ["x", "y", "z"][i],
+                sat.hidden_rps[i].to_degrees(),
+                sat.sigma_rps[i].to_degrees()
+            )
+        })
+        .collect();
+    format!(
+        "{name:<16} score {:>10.1}  hidden rate {} deg/s beyond the range; {} clipped \
+         motions' tilt rms {:.3} mrad before, {:.3} after (noise {:.3}, p {:.2e}): {}",
+        sat.gain,
+        hidden.join(", "),
+        sat.motions,
+        sat.rms_before * 1e3,
+        sat.rms_after * 1e3,
+        sat.rms_noise * 1e3,
+        sat.p_after,
+        if sat.found {
+            "found (remedy: a wider gyro range)"
+        } else {
+            "not found"
+        }
+    )
+}
+
 /// The report for `input`: the diagnosis `d` and the figures of `report` (the JSON form).
 pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{}: {} rests, {} motions between them ({} with the gyro clipped, left out of the tilt rows), {} clipped samples",
+        "{}: {} rests, {} motions between them ({} with the gyro clipped, tested apart for saturation), {} clipped samples",
         input.display(),
         d.rests,
         d.motions,
@@ -64,6 +101,7 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
     for c in &d.scores {
         let _ = writeln!(s, "    {}", candidate(c));
     }
+    let _ = writeln!(s, "    {}", saturation(&d.saturation));
     let names: Vec<&str> = d.selected.iter().map(|(c, _)| c.name()).collect();
     let _ = writeln!(
         s,
