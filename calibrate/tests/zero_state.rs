@@ -496,16 +496,92 @@ fn a_rest_after_a_tilt_is_rest_and_a_tilt_the_gyro_did_not_see_is_not() {
             }
         };
         feed_tilting(&mut det, &mut rng, &mut k, RATE_HZ, 1.0, tilt, rate);
-        let rest = feed_tilting(&mut det, &mut rng, &mut k, RATE_HZ, 3.0, tilt, rate);
+        let rest = feed_tilting(&mut det, &mut rng, &mut k, RATE_HZ, 1.9, tilt, rate);
         // The window needs half a second of the new rest.
         let f = rest_fraction(&rest[25..]);
         if seen {
             assert!(f > 0.9, "{what}: rest fraction {f}");
+            assert_eq!(det.gravity_reanchored(), 0, "{what}");
         } else {
-            // Gravity moved 20 degrees without a rotation: acceleration, not a rest.
+            // Gravity moved 20 degrees without a rotation: acceleration, not a rest, until
+            // it has been still by every other test for REANCHOR_S.
             assert_eq!(f, 0.0, "{what}");
+            assert_eq!(det.gravity_reanchored(), 0, "{what}");
+            let waited = until_reanchored(&mut det, &mut rng, &mut k, tilt, rate);
+            assert!(waited <= 2.0, "{what}: measured anew {waited} s later");
+            let later = feed_tilting(&mut det, &mut rng, &mut k, RATE_HZ, 1.0, tilt, rate);
+            let f = rest_fraction(&later);
+            assert!(
+                f > 0.9,
+                "{what}, after the reference was measured anew: {f}"
+            );
         }
     }
+}
+
+/// A gravity reference the gyroscope carried wrongly (here a 20 % scale error on a tilt of
+/// 22.5 deg: 4.5 deg the carrying does not see) is measured anew once the sensor has been
+/// still by every other test for `REANCHOR_S`; a steady horizontal acceleration with a
+/// vehicle's vibration never is.
+#[test]
+fn a_lost_gravity_reference_is_measured_anew_but_a_vibrating_acceleration_is_not_rest() {
+    use calibrate::zero_state::glrt::REANCHOR_S;
+    let (mut det, mut synth) = learned(DetectorKind::Glrt, 14);
+    // A steady 0.5 m/s^2 forward acceleration for 10 s, vibrating at three times the noise.
+    let v = synth.feed(&mut det, 10.0, [0.5, 0.0, 0.0], [0.0; 3], 3.0);
+    assert_eq!(rest_fraction(&v), 0.0);
+    assert_eq!(det.gravity_reanchored(), 0);
+
+    let mut det = ZeroStateDetector::new(DetectorConfig::new(DetectorKind::Glrt, G));
+    let mut rng = ChaCha8Rng::seed_from_u64(15);
+    let mut k = 0;
+    let level = |_t: f64| 0.0;
+    feed_tilting(&mut det, &mut rng, &mut k, RATE_HZ, 5.0, level, level);
+    assert!(det.is_ready());
+    // From t = 5 s: a tilt of 22.5 deg about x over 1 s that the gyroscope reads 20 % low, so
+    // the carried reference misses 4.5 deg of it; then rest there.
+    let end = 22.5f64.to_radians();
+    let tilt = move |t: f64| end * (t - 5.0).clamp(0.0, 1.0);
+    let rate = move |t: f64| {
+        if (5.0..6.0).contains(&t) {
+            0.8 * end
+        } else {
+            0.0
+        }
+    };
+    feed_tilting(&mut det, &mut rng, &mut k, RATE_HZ, 1.0, tilt, rate);
+    let before = feed_tilting(&mut det, &mut rng, &mut k, RATE_HZ, REANCHOR_S, tilt, rate);
+    assert_eq!(
+        rest_fraction(&before),
+        0.0,
+        "4.5 deg off the carried reference"
+    );
+    let waited = until_reanchored(&mut det, &mut rng, &mut k, tilt, rate);
+    assert!(waited <= 2.0, "measured anew {waited} s later");
+    let after = feed_tilting(&mut det, &mut rng, &mut k, RATE_HZ, 1.0, tilt, rate);
+    assert!(rest_fraction(&after) > 0.9, "{}", rest_fraction(&after));
+}
+
+/// Feeds `tilt` and `rate` in steps of 0.1 s until `det` has measured its gravity reference
+/// anew once (at most 3 s); returns the time that took, s.
+fn until_reanchored(
+    det: &mut ZeroStateDetector,
+    rng: &mut ChaCha8Rng,
+    k: &mut u64,
+    tilt: impl Fn(f64) -> f64 + Copy,
+    rate: impl Fn(f64) -> f64 + Copy,
+) -> f64 {
+    let mut waited = 0.0;
+    while det.gravity_reanchored() == 0 && waited < 3.0 {
+        feed_tilting(det, rng, k, RATE_HZ, 0.1, tilt, rate);
+        waited += 0.1;
+    }
+    assert_eq!(
+        det.gravity_reanchored(),
+        1,
+        "not measured anew within {waited} s"
+    );
+    waited
 }
 
 #[test]

@@ -389,6 +389,15 @@ impl ZeroStateDetector {
         })
     }
 
+    /// How often the GLRT took its gravity reference as lost and measured it anew at a rest
+    /// (`glrt`'s "A reference that was lost"); 0 for the other rules.
+    pub fn gravity_reanchored(&self) -> u64 {
+        match &self.rule {
+            Some(Rule::Glrt(r)) => r.reanchored(),
+            _ => 0,
+        }
+    }
+
     /// Rest time the references have been kept current over, s (the learning included).
     pub fn rest_seen_s(&self) -> f64 {
         self.rest_s

@@ -17,14 +17,16 @@ pub fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
     let (accel, gyro, refined) = stage.refinement();
     tracing::info!(
         "accepted {}, published {}, at rest {}, refused {refused}, gaps {}, \
-         stream restarts {}, learning restarts {learn_restarts}, detector ready {}, refined {refined} \
-         (accel {:.4?} m/s^2, gyro {:.5?} rad/s)",
+         stream restarts {}, learning restarts {learn_restarts}, detector ready {}, gravity \
+         reference lost and measured anew {}, refined {refined} (accel {:.4?} m/s^2, gyro \
+         {:.5?} rad/s)",
         s.accepted,
         s.released,
         s.rest,
         s.gaps,
         s.restarts,
         stage.detector().is_ready(),
+        stage.detector().gravity_reanchored(),
         accel,
         gyro
     );

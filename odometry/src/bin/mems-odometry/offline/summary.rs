@@ -186,6 +186,15 @@ impl Summary {
                 describe_axes(&axes, read.first_ns.unwrap_or(0))
             );
         }
+        let reanchored = chain.first.detector().gravity_reanchored();
+        if reanchored > 0 {
+            tracing::warn!(
+                "{input}: the rest detector lost its gravity reference (carried by the \
+                 gyroscope through the motion) {reanchored} times and measured it anew at a \
+                 rest of {} s still by every other test",
+                calibrate::zero_state::glrt::REANCHOR_S
+            );
+        }
         let truth_error = self.truth_error(&end, truth);
         if json {
             let mut result = self.json(&end, truth_error, aligned_at_s, read, chain);
@@ -193,6 +202,7 @@ impl Summary {
             result["wheeled"] = self.wheeled_json(&chain.second);
             result["aligned_in_motion"] = json!(in_motion.map(|s| json!({ "speed_mps": s })));
             result["accel_error"] = json!(accel);
+            result["gravity_reanchored"] = json!(reanchored);
             println!("{result}");
         } else {
             self.print(&end, truth_error);
