@@ -229,9 +229,14 @@ pub fn cruise_start(
 /// intervals are gathered and the direction's 1-sigma from the fit's residuals is at most
 /// [`FORWARD_MAX_SIGMA_RAD`]; the speed hints then take a lateral 1-sigma that covers it
 /// (`s` times that angle, with the non-holonomic one). Body z is the gravity-up direction
-/// (a level floor).
+/// (a level floor), taken once, from the filter's attitude at the first sample after alignment
+/// (the alignment's measured gravity): the attitude drifts while the speed hints wait for this
+/// estimate, and a later up direction would tilt the mounting by that drift (on the F1TENTH
+/// car of docs/real-data.md, 5-16 degrees after 30 s of driving on the IMU alone).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ForwardAxis {
+    /// Body up in the sensor frame (unit), fixed at the first sample.
+    up: Option<Vector3<f64>>,
     /// Time (ns) and speed (m/s) of the hint that opened the current interval.
     anchor: Option<(u64, f64)>,
     /// The current interval's sums: horizontal specific force (sensor frame, m/s^2), rate
@@ -250,24 +255,28 @@ pub struct ForwardAxis {
 
 impl ForwardAxis {
     /// Adds a sample's (bias-corrected) specific force `f_s` (m/s^2) and rate `w_s` (rad/s),
-    /// sensor frame, with the up direction `up_s` (unit, sensor frame).
+    /// sensor frame, with the filter's up direction `up_s` (unit, sensor frame; only the first
+    /// one given is used).
     pub fn sample(&mut self, f_s: &Vector3<f64>, w_s: &Vector3<f64>, up_s: &Vector3<f64>) {
+        let up_s = *self.up.get_or_insert(*up_s);
         if self.anchor.is_none() {
             return;
         }
         self.f_sum += f_s - up_s * up_s.dot(f_s);
-        self.w_up_sum += w_s.dot(up_s);
+        self.w_up_sum += w_s.dot(&up_s);
         self.n += 1;
     }
 
-    /// Takes a speed hint of `speed` m/s at `t_ns` with the up direction `up_s`; returns the
-    /// mounting (sensor to body) and its yaw 1-sigma (rad) once known.
+    /// Takes a speed hint of `speed` m/s at `t_ns` with the filter's up direction `up_s` (only
+    /// the first one given is used, as in [`Self::sample`]); returns the mounting (sensor to
+    /// body) and its yaw 1-sigma (rad) once known.
     pub fn hint(
         &mut self,
         t_ns: u64,
         speed: f64,
         up_s: &Vector3<f64>,
     ) -> Option<(UnitQuaternion<f64>, f64)> {
+        let up_s = *self.up.get_or_insert(*up_s);
         let Some((t0, s0)) = self.anchor else {
             self.anchor = Some((t_ns, speed));
             return None;
@@ -287,7 +296,7 @@ impl ForwardAxis {
         if !had {
             return None;
         }
-        let (e1, e2) = *self.basis.get_or_insert_with(|| horizontal_basis(up_s));
+        let (e1, e2) = *self.basis.get_or_insert_with(|| horizontal_basis(&up_s));
         let a = (f.dot(&e1), f.dot(&e2));
         let b = ((speed - s0) / dt, 0.5 * (speed + s0) * w_up);
         // A conj(B).
@@ -301,7 +310,7 @@ impl ForwardAxis {
             return None;
         }
         let forward = e1 * self.cross.0 + e2 * self.cross.1;
-        mounting_from(&forward, up_s).map(|q| (q, sigma))
+        mounting_from(&forward, &up_s).map(|q| (q, sigma))
     }
 }
 

@@ -184,6 +184,9 @@ pub struct Eskf {
     /// Position and velocity variances (m^2, (m/s)^2) of the covariance as last propagated or
     /// updated, the consider parameters' share included.
     var: (Vector3<f64>, Vector3<f64>),
+    /// Per-sample standard deviation of the specific force (m/s^2) and the rate (rad/s) the
+    /// stream shows ([`Self::set_sampled_noise`]).
+    sampled_sd: (f64, f64),
 }
 
 /// Skew-symmetric matrix: `skew(a) * b == a.cross(&b)`.
@@ -207,6 +210,7 @@ impl Eskf {
             inc: Increment::default(),
             interval_s: 0.0,
             var: (Vector3::zeros(), Vector3::zeros()),
+            sampled_sd: (0.0, 0.0),
         }
         .with_sigma()
     }
@@ -264,6 +268,14 @@ impl Eskf {
         self.with_sigma()
     }
 
+    /// The per-sample standard deviation of the specific force (`accel`, m/s^2) and of the
+    /// rate (`gyro`, rad/s) that the stream shows (`crate::sampled_noise`): each prediction's
+    /// velocity (attitude) noise is the larger of the noise model's density squared times
+    /// `dt` and the sample's own `(sd dt)^2`. Zero (the default) keeps the noise model alone.
+    pub fn set_sampled_noise(&mut self, accel: f64, gyro: f64) {
+        self.sampled_sd = (accel, gyro);
+    }
+
     /// Gravity in the navigation frame, m/s^2.
     pub fn gravity(&self) -> Vector3<f64> {
         self.g_n
@@ -297,6 +309,7 @@ impl Eskf {
         let f_mid = 0.5 * (f0 + f1);
         let n = &self.noise;
         let speed = x0.v.norm();
+        let (sd_a, sd_w) = self.sampled_sd;
         self.inc.push(&Step {
             dt,
             v_th: -r_mid * skew(&f_mid) * dt,
@@ -304,9 +317,11 @@ impl Eskf {
             th_th: (half * half).inverse().to_rotation_matrix().into_inner(),
             q_v: (n.accel_noise_density.powi(2)
                 + (n.vibration_accel_density_per_mps * speed).powi(2))
+            .max(sd_a * sd_a * dt)
                 * dt,
             q_th: (n.gyro_noise_density.powi(2)
                 + (n.vibration_gyro_density_per_mps * speed).powi(2))
+            .max(sd_w * sd_w * dt)
                 * dt,
             q_ba: n.accel_bias_random_walk.powi(2) * dt,
             q_bg: n.gyro_bias_random_walk.powi(2) * dt,
@@ -417,6 +432,21 @@ impl Eskf {
         }
         self.update_selected(BG, residual, sigma * sigma);
         true
+    }
+
+    /// Restarts the velocity at `v` (m/s, navigation frame) with covariance `cov_v`, uncorrelated
+    /// with the rest of the state: for a velocity the filter knows less about than a new
+    /// measurement gives, which an update linearized about it would take out on the attitude.
+    pub fn restart_velocity(&mut self, v: Vector3<f64>, cov_v: &Matrix3<f64>) {
+        self.propagate();
+        self.x.v = v;
+        for i in 0..N {
+            for j in V..V + 3 {
+                (self.cov[(i, j)], self.cov[(j, i)]) = (0.0, 0.0);
+            }
+        }
+        self.cov.fixed_view_mut::<3, 3>(V, V).copy_from(cov_v);
+        self.refresh_sigma();
     }
 
     /// The velocity in the robot's body frame, m/s: `R_bs q^-1 v`, with `r_bs` rotating

@@ -22,6 +22,7 @@ pub mod nonholonomic;
 pub mod platform;
 pub mod profile;
 pub mod rest_noise;
+pub mod sampled_noise;
 pub mod session;
 pub mod stage;
 pub mod uncalibrated;

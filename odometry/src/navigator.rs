@@ -13,6 +13,7 @@ use crate::hints::{
 };
 use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::rest_noise::RestNoise;
+use crate::sampled_noise::SampledNoise;
 use crate::uncalibrated::{AccelEstimate, AccelPrior};
 use crate::untrusted::{Untrusted, Verdict};
 use ipc_types::{
@@ -113,6 +114,8 @@ pub(crate) struct Navigator {
     accel_prior: Option<AccelPrior>,
     /// The rest samples by attitude (`crate::attitudes`).
     attitudes: RestAttitudes,
+    /// The stream's per-sample scatter, for the prediction's noise (`cfg.sampled_noise`).
+    sampled: SampledNoise,
 }
 
 impl Navigator {
@@ -163,6 +166,7 @@ impl Navigator {
             untrusted: Untrusted::default(),
             accel_prior: None,
             attitudes: RestAttitudes::default(),
+            sampled: SampledNoise::default(),
         }
     }
 
@@ -190,6 +194,7 @@ impl Navigator {
         self.standing_accel_sd = other.standing_accel_sd;
         self.untrusted = other.untrusted;
         self.accel_prior = other.accel_prior;
+        self.sampled = other.sampled;
     }
 
     /// Takes `cfg` from the next sample on (a profile recognized from the data): its rest
@@ -288,6 +293,7 @@ impl Navigator {
             },
         };
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
+        self.sampled.push(t_ns, &m.f, &m.w);
         let prev = self
             .last
             .replace((t_ns, s.seq, m))
@@ -395,6 +401,12 @@ impl Navigator {
     #[inline]
     fn predict(&mut self, m: Imu, dt: f64, gap: bool, hs: &mut HintSample) -> f64 {
         let kf = self.kf.as_mut().expect("aligned");
+        // Only with speed hints (see `OdometryConfig::sampled_noise`).
+        let (sd_a, sd_w) = match self.cfg.sampled_noise && self.hints.newest.is_some() {
+            true => self.sampled.sd(),
+            false => (0.0, 0.0),
+        };
+        kf.set_sampled_noise(sd_a, sd_w);
         let p_before = kf.x.p;
         // Across a gap the trapezoid of the readings on either side is the guess (on simulated
         // drives it ended closer than coasting with velocity and attitude held: NEES/2 at the
@@ -539,6 +551,7 @@ impl Navigator {
                 {
                     hints.r_bs = Some(q.to_rotation_matrix().into_inner());
                     hints.yaw_sigma_rad = sigma;
+                    hints.restart_velocity(kf, &h);
                     if let Some(nhc) = self.nhc.as_mut() {
                         nhc.adopt(q);
                     }

@@ -2,8 +2,8 @@
 //! speed hints still to apply and the body-velocity history they are applied against (see
 //! [`crate::stage`] for the behaviour, [`crate::hints`] for frames and times).
 
-use crate::cruise::ForwardAxis;
-use crate::eskf::Eskf;
+use crate::cruise::{ForwardAxis, initial_velocity};
+use crate::eskf::{Eskf, V};
 use crate::hints::{HintConfig, HintStats, MountingEstimator, Ring};
 use ipc_types::RobotHint;
 use nalgebra::{Matrix3, Vector3};
@@ -108,6 +108,32 @@ impl Hints {
             newer = Some(e);
         }
         None
+    }
+
+    /// With the mounting just estimated: when the filter's horizontal velocity is known worse
+    /// than the hint's speed (1-sigma per axis above it: the IMU alone integrated since a start
+    /// in motion), restarts the velocity from the hint along the body's forward axis, as a
+    /// cruise alignment with a known mounting does ([`crate::cruise::initial_velocity`]). An
+    /// update linearized about a velocity that far off turns the attitude instead (on the
+    /// F1TENTH car of docs/real-data.md, by 90 degrees after 30 s on the IMU alone).
+    pub(super) fn restart_velocity(&self, kf: &mut Eskf, h: &RobotHint) {
+        let Some(r_bs) = self.r_bs else {
+            return;
+        };
+        let speed = h.forward_speed_mps;
+        let horizontal_var = 0.5 * (kf.cov[(V, V)] + kf.cov[(V + 1, V + 1)]);
+        if horizontal_var.sqrt() <= speed.abs() {
+            return;
+        }
+        let forward_sigma = h
+            .forward_speed_sigma_mps
+            .hypot(speed * self.cfg.speed_scale_sigma);
+        let lateral = self
+            .cfg
+            .nonholonomic_sigma_mps
+            .hypot(speed * self.yaw_sigma_rad);
+        let (v, cov) = initial_velocity(&kf.x.q, Some(&r_bs), speed, forward_sigma, lateral, speed);
+        kf.restart_velocity(v, &cov);
     }
 
     /// Applies a speed hint as a body-velocity measurement at the hint's time; `false` when it

@@ -72,10 +72,10 @@ pub struct OfflineArgs {
 /// Runs the pipeline and prints the result. A part whose accelerometer the run found
 /// uncalibrated (`odometry::uncalibrated`) is run a second time with the bias the first run
 /// estimated removed from its samples (or, where its rests at several attitudes gave a
-/// per-axis fit, `odometry::attitudes`, with that fit's bias and scale applied), and only the second run's result is printed and
-/// written; should the second run move the bias further than an uncalibrated part's bias
-/// sigma, the first estimate was not one, and the recording is run once more as the first run
-/// was, that result standing.
+/// per-axis fit, `odometry::attitudes`, with that fit's bias and scale applied), and only the
+/// second run's result is printed and written; should the second run move the bias further than an uncalibrated part's bias
+/// sigma, or fail (never align, say), the first estimate was not one, and the recording is run
+/// once more as the first run was, that result standing.
 pub fn run(args: OfflineArgs) -> Result<()> {
     let is_mcap = recording::mcap::has_magic(&args.input)?;
     let choice = platform::choose(args.stage.profile, &args.input, is_mcap)?;
@@ -98,14 +98,20 @@ pub fn run(args: OfflineArgs) -> Result<()> {
             odometry::uncalibrated::remove_bias(&file, &first.bias_mps2)
         }
     };
-    let Some(second) = pass(&args, &choice, &removed, detector, Pass::Second(&first))? else {
-        return Ok(());
-    };
-    tracing::warn!(
-        "second pass: {second}: further than {:.2} m/s^2 from the first pass's, which is no \
-         estimate; the result is the first pass's",
-        odometry::config::UncalibratedAccel::default().bias_sigma_mps2
-    );
+    match pass(&args, &choice, &removed, detector, Pass::Second(&first)) {
+        Ok(None) => return Ok(()),
+        Ok(Some(second)) => tracing::warn!(
+            "second pass: {second}: further than {:.2} m/s^2 from the first pass's, which is no \
+             estimate; the result is the first pass's",
+            odometry::config::UncalibratedAccel::default().bias_sigma_mps2
+        ),
+        // The samples with that bias removed are no recording of this part (a first pass that
+        // diverged can estimate tens of m/s^2): the same evidence.
+        Err(e) => tracing::warn!(
+            "second pass with the first pass's estimate applied failed ({e:#}), so that estimate \
+             is no estimate; the result is the first pass's"
+        ),
+    }
     pass(&args, &choice, &file, detector, Pass::Only).map(|_| ())
 }
 
