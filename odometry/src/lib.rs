@@ -10,6 +10,7 @@
 
 pub mod arrival;
 pub mod axes;
+pub mod clip;
 pub mod config;
 pub mod cruise;
 pub mod diagnose;

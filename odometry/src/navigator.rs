@@ -4,6 +4,7 @@
 //! newest inputs and one on settled flags (and replays on final flags); this module holds what
 //! each of them does. The module documentation of [`crate::stage`] describes the behaviour.
 
+use crate::clip::{ClipRepair, ClipStats};
 use crate::config::OdometryConfig;
 use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
 use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
@@ -108,6 +109,9 @@ pub(crate) struct Navigator {
     standing_accel_sd: f64,
     /// Clipped and implausible stretches in progress.
     untrusted: Untrusted,
+    /// The clipped run being gathered for its reconstruction (boxed: a few kB, allocated in
+    /// [`Navigator::new`]).
+    clip: Box<ClipRepair>,
     /// The accelerometer prior the filter aligned with.
     accel_prior: Option<AccelPrior>,
 }
@@ -158,6 +162,7 @@ impl Navigator {
                 .then(|| ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)),
             standing_accel_sd: 0.0,
             untrusted: Untrusted::default(),
+            clip: Box::default(),
             accel_prior: None,
         }
     }
@@ -185,6 +190,7 @@ impl Navigator {
         self.nhc = other.nhc;
         self.standing_accel_sd = other.standing_accel_sd;
         self.untrusted = other.untrusted;
+        self.clip.copy_from(&other.clip);
         self.accel_prior = other.accel_prior;
     }
 
@@ -254,6 +260,11 @@ impl Navigator {
         self.imu_decided
     }
 
+    /// What the reconstruction of clipped runs did so far.
+    pub fn clip_stats(&self) -> ClipStats {
+        self.clip.stats()
+    }
+
     /// The filter, once aligned (for diagnostics and tests).
     pub fn filter(&self) -> Option<&Eskf> {
         self.kf.as_ref()
@@ -320,11 +331,22 @@ impl Navigator {
             // The rest ended at the previous sample: its last updates are made there.
             self.close_rest_window();
         }
+        let clipped = match self.cfg.reconstruct_clipped && !verdict.implausible {
+            true => verdict.clipped,
+            false => 0,
+        };
+        self.clip
+            .before_predict(self.kf.as_ref().expect("aligned"), clipped);
         let moved = self.predict(m, dt, gap, &mut d.sample);
         let kf = self.kf.as_mut().expect("aligned");
         if self.untrusted.widen(kf, &m, dt, verdict, &self.cfg) {
             d.sample.flags |= odometry_flags::UNTRUSTED_INPUT;
         }
+        if gap || verdict.implausible {
+            self.clip.spoil();
+        }
+        self.clip
+            .after_predict(kf, &m, dt, clipped, rest, &self.cfg);
         self.count_hint_use(&d);
         self.track_motion(t_ns, prev_ns, rest, emit);
         self.update(t_ns, dt, &m, rest, moved, &mut d.sample);
@@ -505,6 +527,10 @@ impl Navigator {
             self.hints.speed.clear();
         } else {
             self.distance_m += moved;
+            if self.nhc.is_some() || !self.hints.speed.is_empty() {
+                // An update the reconstruction's predictions would not redo.
+                self.clip.spoil();
+            }
             let kf = self.kf.as_mut().expect("aligned");
             let hints = &mut self.hints;
             if hints.r_bs.is_none() && hints.cfg.mounting_from_turns {
