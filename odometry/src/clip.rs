@@ -1,4 +1,4 @@
-//! Reconstruction of what clipped samples hid, once the next rest has measured it.
+//! Reconstruction of what a clipped gyroscope hid, once the next rest has measured it.
 //!
 //! A clipped axis read the end of its range while the truth was beyond it
 //! (`crate::untrusted` widens the 1-sigma for that while the clip lasts). On a foot the gyro
@@ -9,35 +9,44 @@
 //! measures what it missed: gravity gives the tilt, and the foot's velocity is zero. So the
 //! motion from the first clipped sample to that rest is redone:
 //!
-//! 1. At the first clipped sample the filter is copied as it was before it (fixed size: no
-//!    allocation); every sample from there goes into a ring of [`CAPACITY`] samples. The
-//!    states published meanwhile are the bridged ones (flagged
+//! 1. At the first sample with a gyroscope axis clipped the filter is copied as it was before
+//!    it (fixed size: no allocation); every sample from there goes into a ring of [`CAPACITY`]
+//!    samples. The states published meanwhile are the bridged ones (flagged
 //!    `odometry_flags::UNTRUSTED_INPUT`): a real-time reader is not told more than is known.
-//! 2. At the first rest sample each clipped stretch of each axis (a *run*) gets a prior
+//! 2. At the first rest sample each clipped stretch of each gyroscope axis (a *run*) gets a prior
 //!    reconstruction: a cubic Hermite curve through the unclipped neighbours on either side
 //!    (at each side a least-squares line through up to [`NEIGHBOURS`] readings gives value and
 //!    slope), never below the reading (the range's end, with the reading's sign) and never
 //!    beyond what the profile's manoeuvre reaches (`OdometryConfig::manoeuvre`, 1-sigma
 //!    figures: a curve through steep sides of a long clip overshoots). Units are the filter's
-//!    (m/s^2, rad/s), axes the sensor's, after the gyro correction.
-//! 3. Each run `j` then takes one unknown `d_j`, the integral of what the prior missed (rad for
-//!    a gyroscope axis, m/s for an accelerometer axis), spread over the run in the shape of the
-//!    prior's excess (uniform where the prior found none), with the prior 1-sigma
+//!    (rad/s, rad), axes the sensor's, after the gyro correction; time from the samples'
+//!    intervals.
+//! 3. Each run `j` then takes one unknown `d_j`, the integral of what the prior missed (rad,
+//!    about the run's sensor axis), spread over the run in the shape of the prior's excess
+//!    (uniform where the prior found none), with the prior 1-sigma
 //!    `|prior excess integral| + FLOOR_FRACTION |reading| T` (`T` the run's length). The rest
 //!    sample measures them: its specific force, rotated by the attitude the motion predicts,
 //!    must point up (1-sigma [`TILT_SIGMA_RAD`] each horizontal axis) and the velocity there must
 //!    be zero (1-sigma [`VELOCITY_SIGMA_MPS`] each axis). The `d_j` are the regularised
-//!    least-squares solution (two Gauss-Newton steps, the Jacobian by finite differences of
-//!    [`Eskf::coast`], the nominal state's prediction).
+//!    least-squares solution (up to [`GAUSS_NEWTON_STEPS`] Gauss-Newton steps, each halved
+//!    until the cost falls, the Jacobian by finite differences of [`Eskf::coast`], the nominal
+//!    state's prediction). The tilt residual is the horizontal part of the rest's specific
+//!    force, rotated into the navigation frame (z up) and normalised: zero when level.
 //! 4. The filter is restored from the copy and the motion predicted again with the readings
 //!    reconstructed, sample by sample (so the specific force of the clipped interval is rotated
-//!    by the corrected attitude); each run's posterior 1-sigma of `d_j` widens it, fully
-//!    correlated through the run (an attitude error about a gyroscope axis, a velocity error
-//!    along an accelerometer axis: `Eskf::clipped`). The rest's updates follow as usual.
+//!    by the corrected attitude); each run's posterior 1-sigma of `d_j` widens the attitude
+//!    about its axis, fully correlated through the run (`Eskf::clipped`); accelerometer clips
+//!    among the samples are bridged again (`crate::untrusted`). The rest's updates follow as
+//!    usual.
+//!
+//! Accelerometer clips are only bridged: reconstructed this way (a heel strike's spike,
+//! measured by the rest's zero velocity) the corpus's walks clipped at +-2 g ended no closer.
+//! The rest measures tilt and velocity, not heading: what the reconstruction gets wrong about
+//! the heading the unseen rotation turned stays (docs/input-checks.md measures both).
 //!
 //! A motion longer than the ring, with more than [`MAX_RUNS`] runs, or during which the filter
-//! took anything but predictions (a speed hint, a gap, an implausible sample) keeps the
-//! bridging.
+//! took anything but predictions (a speed hint, the wheeled constraint, a gap, an implausible
+//! sample) keeps the bridging.
 
 use ipc_types::raw_flags;
 use nalgebra::{SMatrix, SVector, Vector3};
@@ -62,8 +71,8 @@ pub const TILT_SIGMA_RAD: f64 = 0.0175;
 pub const VELOCITY_SIGMA_MPS: f64 = 0.05;
 
 const SEQ: usize = NEIGHBOURS + CAPACITY;
-/// Gauss-Newton steps of the solve.
-const GAUSS_NEWTON_STEPS: usize = 4;
+/// Most Gauss-Newton steps of the solve.
+pub const GAUSS_NEWTON_STEPS: usize = 4;
 /// Measurements: tilt (2), velocity (3).
 const MEAS: usize = 5;
 const NO_RUN: u8 = u8::MAX;
@@ -270,9 +279,10 @@ impl ClipRepair {
             self.seq[self.len] = e;
             self.len += 1;
         }
-        if !rest {
+        if !rest && !self.spoiled {
             return false;
         }
+        // A spoiled motion is given up at once: the next clip may start afresh.
         let start = self.start.take().expect("a clip is pending");
         if self.spoiled || !self.reconstruct(cfg.manoeuvre.rate) {
             self.stats.bridged += 1;

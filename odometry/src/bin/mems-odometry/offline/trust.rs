@@ -128,8 +128,8 @@ pub fn report(input: &Path, ranges: &Ranges, stats: &SessionStats, t0_ns: u64, t
             if trusted {
                 what
             } else {
-                "reconstructed once each run ended (runs too long: bridged), the rest counted in \
-                 the 1-sigma"
+                "bridged and counted in the 1-sigma; a clipped gyroscope's motion reconstructed at \
+                 the rest after it (unless --bridge-clipped; `clipped_runs` in --json)"
             }
         );
     }
