@@ -109,8 +109,8 @@ pub(crate) struct Navigator {
     standing_accel_sd: f64,
     /// Clipped and implausible stretches in progress.
     untrusted: Untrusted,
-    /// The clipped run being gathered for its reconstruction (boxed: a few kB, allocated in
-    /// [`Navigator::new`]).
+    /// The clipped motion being gathered for its reconstruction (boxed: about 170 kB,
+    /// allocated in [`Navigator::new`]).
     clip: Box<ClipRepair>,
     /// The accelerometer prior the filter aligned with.
     accel_prior: Option<AccelPrior>,
@@ -331,10 +331,8 @@ impl Navigator {
             // The rest ended at the previous sample: its last updates are made there.
             self.close_rest_window();
         }
-        let clipped = match self.cfg.reconstruct_clipped && !verdict.implausible {
-            true => verdict.clipped,
-            false => 0,
-        };
+        let reconstruct = self.cfg.reconstruct_clipped && !verdict.implausible;
+        let clipped = if reconstruct { verdict.clipped } else { 0 };
         self.clip
             .before_predict(self.kf.as_ref().expect("aligned"), clipped);
         let moved = self.predict(m, dt, gap, &mut d.sample);
