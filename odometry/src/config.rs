@@ -99,6 +99,9 @@ pub struct OdometryConfig {
     /// behaviour before they were recognised, for comparison, `mems-odometry offline
     /// --trust-clipped`); they are flagged and counted either way.
     pub trust_untrusted: bool,
+    /// Whether a clipped run is reconstructed and predicted again once it has ended
+    /// (`crate::clip`; `false`: bridged only, `mems-odometry offline --bridge-clipped`).
+    pub reconstruct_clipped: bool,
     /// Longest time between two propagations of the filter's covariance, s: the covariance is
     /// propagated from the transition and noise accumulated over the samples since the last
     /// one (`eskf::Eskf::with_propagation_interval`), and at rest the zero-velocity and
@@ -176,6 +179,7 @@ impl OdometryConfig {
             },
             plausible: DEFAULT_ENVELOPE,
             trust_untrusted: false,
+            reconstruct_clipped: true,
             propagation_interval_s: 0.01,
             rest_window_drift: 0.05,
             rest_updates: true,

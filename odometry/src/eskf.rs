@@ -134,6 +134,31 @@ fn envelope(t: f64, m: &Manoeuvre) -> [f64; 4] {
     ]
 }
 
+/// The nominal state `x0` advanced by `dt` seconds from the measurement `last` to `m` with the
+/// trapezoid rule, and half the interval's rotation (the attitude at its midpoint is
+/// `x0.q * half`, the geodesic between the two ends).
+fn advance(
+    x0: &Nominal,
+    last: &Imu,
+    m: &Imu,
+    dt: f64,
+    g_n: &Vector3<f64>,
+) -> (Nominal, UnitQuaternion<f64>) {
+    let w_mid = 0.5 * ((last.w - x0.b_g) + (m.w - x0.b_g));
+    let half = UnitQuaternion::from_scaled_axis(w_mid * (0.5 * dt));
+    let q1 = x0.q * half * half;
+    let a0 = x0.q * (last.f - x0.b_a) + g_n;
+    let a1 = q1 * (m.f - x0.b_a) + g_n;
+    let v1 = x0.v + 0.5 * (a0 + a1) * dt;
+    let x1 = Nominal {
+        p: x0.p + 0.5 * (x0.v + v1) * dt,
+        v: v1,
+        q: q1,
+        ..*x0
+    };
+    (x1, half)
+}
+
 /// The nominal (full) navigation state.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Nominal {
@@ -286,22 +311,12 @@ impl Eskf {
     /// propagating it when the interval is complete.
     pub fn predict(&mut self, m: Imu, dt: f64) {
         let x0 = self.x;
-        let w0 = self.last.w - x0.b_g;
-        let w1 = m.w - x0.b_g;
-        let w_mid = 0.5 * (w0 + w1);
-        // Half the sample's rotation: the attitude at the interval's midpoint (the geodesic
-        // between the two ends) and, squared, the whole.
-        let half = UnitQuaternion::from_scaled_axis(w_mid * (0.5 * dt));
+        let (x1, half) = advance(&x0, &self.last, &m, dt, &self.g_n);
+        self.x = x1;
         let q_mid = x0.q * half;
-        let q1 = q_mid * half;
+        let w_mid = 0.5 * ((self.last.w - x0.b_g) + (m.w - x0.b_g));
         let f0 = self.last.f - x0.b_a;
         let f1 = m.f - x0.b_a;
-        let a0 = x0.q * f0 + self.g_n;
-        let a1 = q1 * f1 + self.g_n;
-        let v1 = x0.v + 0.5 * (a0 + a1) * dt;
-        self.x.p = x0.p + 0.5 * (x0.v + v1) * dt;
-        self.x.v = v1;
-        self.x.q = q1;
 
         // Error-state transition at the interval's midpoint, first order in dt: the identity
         // but for the blocks of `Step` (Sola 2017, eq. 269).
@@ -333,6 +348,17 @@ impl Eskf {
         if self.inc.interval_s() + 0.5 * dt >= self.interval_s {
             self.propagate();
         }
+    }
+
+    /// The nominal state after `readings` (each a measurement and its interval, s), predicted
+    /// as [`Self::predict`] predicts it, without touching the filter or its covariance.
+    pub fn coast(&self, readings: impl Iterator<Item = (Imu, f64)>) -> Nominal {
+        let (mut x, mut last) = (self.x, self.last);
+        for (m, dt) in readings {
+            x = advance(&x, &last, &m, dt, &self.g_n).0;
+            last = m;
+        }
+        x
     }
 
     /// Widens the covariance for `t` seconds whose measurements are missing (a gap in the

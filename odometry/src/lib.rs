@@ -11,6 +11,7 @@
 pub mod arrival;
 pub mod attitudes;
 pub mod axes;
+pub mod clip;
 pub mod config;
 pub mod cruise;
 pub mod diagnose;

@@ -5,6 +5,7 @@
 //! each of them does. The module documentation of [`crate::stage`] describes the behaviour.
 
 use crate::attitudes::RestAttitudes;
+use crate::clip::{ClipRepair, ClipStats};
 use crate::config::OdometryConfig;
 use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
 use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
@@ -110,6 +111,9 @@ pub(crate) struct Navigator {
     standing_accel_sd: f64,
     /// Clipped and implausible stretches in progress.
     untrusted: Untrusted,
+    /// The clipped motion being gathered for its reconstruction (boxed: about 170 kB,
+    /// allocated in [`Navigator::new`]).
+    clip: Box<ClipRepair>,
     /// The accelerometer prior the filter aligned with.
     accel_prior: Option<AccelPrior>,
     /// The rest samples by attitude (`crate::attitudes`).
@@ -164,6 +168,7 @@ impl Navigator {
                 .then(|| ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)),
             standing_accel_sd: 0.0,
             untrusted: Untrusted::default(),
+            clip: Box::default(),
             accel_prior: None,
             attitudes: RestAttitudes::default(),
             sampled: SampledNoise::default(),
@@ -193,6 +198,7 @@ impl Navigator {
         self.nhc = other.nhc;
         self.standing_accel_sd = other.standing_accel_sd;
         self.untrusted = other.untrusted;
+        self.clip.copy_from(&other.clip);
         self.accel_prior = other.accel_prior;
         self.sampled = other.sampled;
     }
@@ -261,6 +267,11 @@ impl Navigator {
     /// with a rest source decided it).
     pub fn imu_decided(&self) -> bool {
         self.imu_decided
+    }
+
+    /// What the reconstruction of clipped runs did so far.
+    pub fn clip_stats(&self) -> ClipStats {
+        self.clip.stats()
     }
 
     /// The filter, once aligned (for diagnostics and tests).
@@ -333,11 +344,20 @@ impl Navigator {
             // The rest ended at the previous sample: its last updates are made there.
             self.close_rest_window();
         }
+        let reconstruct = self.cfg.reconstruct_clipped && !verdict.implausible;
+        let clipped = if reconstruct { verdict.clipped } else { 0 };
+        self.clip
+            .before_predict(self.kf.as_ref().expect("aligned"), clipped);
         let moved = self.predict(m, dt, gap, &mut d.sample);
         let kf = self.kf.as_mut().expect("aligned");
         if self.untrusted.widen(kf, &m, dt, verdict, &self.cfg) {
             d.sample.flags |= odometry_flags::UNTRUSTED_INPUT;
         }
+        if gap || verdict.implausible {
+            self.clip.spoil();
+        }
+        self.clip
+            .after_predict(kf, &m, dt, clipped, rest, &self.cfg);
         self.count_hint_use(&d);
         self.track_motion(t_ns, prev_ns, rest, emit);
         self.update(t_ns, dt, &m, rest, moved, &mut d.sample);
@@ -532,6 +552,10 @@ impl Navigator {
             self.hints.speed.clear();
         } else {
             self.distance_m += moved;
+            if self.nhc.is_some() || !self.hints.speed.is_empty() {
+                // An update the reconstruction's predictions would not redo.
+                self.clip.spoil();
+            }
             let kf = self.kf.as_mut().expect("aligned");
             let hints = &mut self.hints;
             if hints.r_bs.is_none() && hints.cfg.mounting_from_turns {

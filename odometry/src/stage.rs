@@ -279,6 +279,12 @@ impl OdometryStage {
         self.ahead.hint_stats()
     }
 
+    /// Clipped runs reconstructed and left bridged so far (`crate::clip`), by the navigator
+    /// on the newest inputs.
+    pub fn clip_stats(&self) -> crate::clip::ClipStats {
+        self.ahead.clip_stats()
+    }
+
     /// The IMU-to-body mounting (sensor to body), configured or estimated; `None` while it is
     /// being estimated.
     pub fn mounting(&self) -> Option<UnitQuaternion<f64>> {

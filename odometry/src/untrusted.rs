@@ -14,8 +14,8 @@
 //!   that of a fully correlated error: after `n` clipped samples the unseen velocity (or
 //!   rotation) has the 1-sigma `n excess dt`. A gyroscope clip on a foot turns it about a
 //!   horizontal axis: a tilt error that the next rest's gravity shows, and the rest's updates
-//!   take back through the widened covariance. The clipped interval is not reconstructed
-//!   (docs/input-checks.md says what a reconstruction did on a simulated walk).
+//!   take back through the widened covariance. A gyroscope clip is also reconstructed once
+//!   the rest after it has measured it ([`crate::clip`]).
 //!
 //! The state of every sample where either happened carries `odometry_flags::UNTRUSTED_INPUT`.
 //! `OdometryConfig::trust_untrusted` integrates both as measured (for comparison).

@@ -1,13 +1,14 @@
 //! The stage allocates nothing per sample: a counting global allocator sees zero allocations
 //! on this thread while it aligns, navigates, applies zero-velocity updates and republishes
 //! revised motion histories over a simulated drive with turns, and while it takes robot hints
-//! (stationary and speed updates, losses and a stale spell) and estimates the mounting.
+//! (stationary and speed updates, losses and a stale spell) and estimates the mounting, and
+//! while it reconstructs clipped gyroscope motions at their rests.
 
 mod common;
 
 use alloc_count::allocations;
 use common::{Case, Simulation};
-use ipc_types::{RobotHint, odometry_flags};
+use ipc_types::{CorrectedImuSample, RobotHint, corrected_flags, odometry_flags, raw_flags};
 use mems_sim::hints::{HintParams, RestSource};
 use mems_sim::model::G_MPS2;
 use mems_stage::Stage;
@@ -57,6 +58,56 @@ fn processing_samples_allocates_nothing() {
     assert_eq!(live, samples.len() as u64);
     assert!(stage.aligned() && revised > 100, "{revised} revised states");
     assert!(stage.withdrawn_rest_samples() > 0);
+}
+
+#[test]
+fn reconstructing_clipped_motions_allocates_nothing() {
+    let c = Case {
+        duration_s: 60.0,
+        rate_hz: 20.0,
+        turns: true,
+        ..Case::straight()
+    };
+    let mut sim = Simulation::new(&c, 2);
+    sim.session();
+    // At 20 Hz a motion fits the clip ring (1024 samples). The turns' yaw rate clipped at 0.8
+    // of its peak in motion, as a part with that range would read it (the rests stay
+    // unclipped; a lower range makes the noise cross it more often than a motion's runs hold).
+    let samples = sim.drive_samples();
+    let moving = |s: &CorrectedImuSample| s.flags & corrected_flags::ZERO_STATE == 0;
+    let peak = samples
+        .iter()
+        .filter(|s| moving(s))
+        .fold(0.0f64, |a, s| a.max(s.gyro_rps[2].abs()));
+    let limit = 0.8 * peak;
+    let samples: Vec<_> = samples
+        .into_iter()
+        .map(|mut s| {
+            if moving(&s) && s.gyro_rps[2].abs() > limit {
+                s.gyro_rps[2] = s.gyro_rps[2].clamp(-limit, limit);
+                s.flags |= corrected_flags::CLIPPED;
+                s.raw_flags |= raw_flags::SATURATED | raw_flags::saturated_axis(5);
+            }
+            s
+        })
+        .collect();
+    let mut stage = OdometryStage::new(OdometryConfig::mpu9250(G_MPS2));
+    let before = allocations();
+    for s in &samples {
+        stage.process(s, &mut |_| {}).unwrap();
+    }
+    let during = allocations() - before;
+    assert_eq!(during, 0, "{during} allocations");
+    let clip = stage.clip_stats();
+    let clipped = samples
+        .iter()
+        .filter(|s| s.flags & corrected_flags::CLIPPED != 0)
+        .count();
+    assert!(
+        clip.reconstructed > 0,
+        "{clip:?} ({clipped} samples clipped at {limit} rad/s, aligned {})",
+        stage.aligned()
+    );
 }
 
 #[test]

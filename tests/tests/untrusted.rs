@@ -2,7 +2,9 @@
 //! runs it (docs/input-checks.md):
 //! - a simulated walk whose gyroscope clips at +-250 deg/s (`mems-sim walk --gyro-range 250`):
 //!   the clipped samples are flagged per axis and counted (stderr, JSON, and `mems-info` on
-//!   the run's `--out` recording), and the filter widens its 1-sigma for what they hid;
+//!   the run's `--out` recording); each clipped swing is reconstructed at the rest after it
+//!   (odometry/src/clip.rs) and the walk ends within 2x of the same walk's unclipped error,
+//!   covered by its 1-sigma, where bridging the clips only ends metres off;
 //! - the same walk written as a logger without flags or counts would (values only, clipped
 //!   at +-250 deg/s by hand): the range is inferred from the readings stuck at the extreme,
 //!   and the unclipped file trips nothing;
@@ -64,7 +66,7 @@ fn rewrite(src: &Path, dst: &Path, edit: impl Fn(&[&str], &mut Vec<String>)) {
 }
 
 #[test]
-fn a_walk_clipped_at_250_dps_is_flagged_counted_and_widened() {
+fn a_walk_clipped_at_250_dps_is_flagged_counted_and_reconstructed() {
     let dir = std::env::temp_dir().join(unique_namespace("clipped-walk"));
     std::fs::create_dir_all(&dir).unwrap();
     let walk = |name, range| {
@@ -117,22 +119,46 @@ fn a_walk_clipped_at_250_dps_is_flagged_counted_and_widened() {
             > 0,
         "{info}"
     );
-    // Integrated as measured, the 1-sigma knows nothing of the clips; bridged, it holds
-    // their loss (docs/input-checks.md: on this walk, as on the corpus's, it does not yet
-    // cover the error of a gyroscope clipped at every step).
+    // Integrated as measured, the 1-sigma knows nothing of the clips; bridged only, it holds
+    // their loss (but does not cover the error of a gyroscope clipped at every step).
     let (trusted, _) = offline(&clipped, &["--profile", "pedestrian", "--trust-clipped"]);
     assert_eq!(trusted["clipped_samples"], flagged);
-    let (s, ts) = (vec3(&v["sigma_m"]), vec3(&trusted["sigma_m"]));
+    let (bridged, _) = offline(&clipped, &["--profile", "pedestrian", "--bridge-clipped"]);
+    let (bs, ts) = (vec3(&bridged["sigma_m"]), vec3(&trusted["sigma_m"]));
     assert!(
-        horizontal(s) > 2.0 * horizontal(ts),
-        "sigma {s:?} against {ts:?}"
+        horizontal(bs) > 2.0 * horizontal(ts),
+        "sigma {bs:?} against {ts:?}"
+    );
+    assert_eq!(bridged["clipped_runs"]["reconstructed"], 0, "{bridged}");
+
+    // Reconstructed at the rests: within 2x of the unclipped walk's error, and covered (the
+    // 68 % radius of the horizontal 1-sigma, as tools/real-data/bench.py's).
+    let runs = v["clipped_runs"]["reconstructed"].as_u64().unwrap();
+    assert!(runs > 20, "{v}");
+    let clean = walk("walk-2000.csv", "2000");
+    let (u, _) = offline(&clean, &["--profile", "pedestrian"]);
+    let error = horizontal(vec3(&v["truth_error_m"]));
+    let clean_error = horizontal(vec3(&u["truth_error_m"]));
+    let s = vec3(&v["sigma_m"]);
+    let r68 = 1.515 * ((s[0] * s[0] + s[1] * s[1]) / 2.0).sqrt();
+    assert!(
+        error <= 2.0 * clean_error,
+        "reconstructed {error} m against unclipped {clean_error} m"
+    );
+    assert!(
+        error <= r68,
+        "error {error} m outside the 68 % radius {r68} m"
+    );
+    let bridged_error = horizontal(vec3(&bridged["truth_error_m"]));
+    assert!(
+        bridged_error > 2.0 * clean_error,
+        "bridged only {bridged_error} m: the test no longer tells reconstruction apart"
     );
 
     // The unclipped walk trips nothing.
-    let clean = walk("walk-2000.csv", "2000");
-    let (v, _) = offline(&clean, &["--profile", "pedestrian"]);
-    assert_eq!(v["clipped_samples"], 0, "{v}");
-    assert_eq!(v["implausible_samples"], 0, "{v}");
+    assert_eq!(u["clipped_samples"], 0, "{u}");
+    assert_eq!(u["implausible_samples"], 0, "{u}");
+    assert_eq!(u["clipped_runs"]["reconstructed"], 0, "{u}");
 }
 
 #[test]

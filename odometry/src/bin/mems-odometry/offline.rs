@@ -169,6 +169,7 @@ fn pass(
     }
     base.rest_updates = !args.no_zupt;
     base.trust_untrusted = args.ranges.trust_clipped;
+    base.reconstruct_clipped = !args.ranges.bridge_clipped;
     let hints = args.hints.config()?;
     let (config, session) = match choice.profile {
         Profile::Auto => (
@@ -215,7 +216,7 @@ fn pass(
     let t0 = read.first_ns.unwrap_or(0);
     let stats = chain.second.stats();
     trust::report(&args.input, &ranges, &stats, t0, args.ranges.trust_clipped);
-    read.trust = trust::json(&ranges, &stats, t0);
+    read.trust = trust::json(&ranges, &stats, t0, chain.second.stage().clip_stats());
     summary.finish(ran, &read, &chain, &mut feed.truth, args.json)?;
     // Only a run that succeeded leaves its --out file (a failed one drops it unwritten).
     match feed.out {

@@ -7,6 +7,7 @@ use std::path::Path;
 
 use ipc_types::RawImuSample;
 use ipc_types::stream::range::{self, AXES, Range, RangeSource, Ranges};
+use odometry::clip::ClipStats;
 use odometry::session::SessionStats;
 use serde_json::json;
 
@@ -25,6 +26,10 @@ pub struct RangeArgs {
     /// counted): the behaviour without the checks, for comparison.
     #[arg(long)]
     pub trust_clipped: bool,
+    /// Bridge clipped runs only (widen the 1-sigma for what they hid) instead of
+    /// reconstructing them once they have ended and predicting them again: for comparison.
+    #[arg(long)]
+    pub bridge_clipped: bool,
 }
 
 impl RangeArgs {
@@ -69,9 +74,15 @@ pub fn mark(raw: &mut RawImuSample, ranges: &Ranges) {
     range::mark_clipped(raw, ranges.clipped_axes(raw));
 }
 
-/// The JSON fields: `ranges`, `clipped_samples`, `clipped_per_axis`, `implausible_samples`
-/// and `first_implausible` (seq, time from the first sample, s).
-pub fn json(ranges: &Ranges, stats: &SessionStats, t0_ns: u64) -> serde_json::Value {
+/// The JSON fields: `ranges`, `clipped_samples`, `clipped_per_axis`, `clipped_runs`
+/// (`reconstructed` and `bridged`, `odometry::clip`), `implausible_samples` and
+/// `first_implausible` (seq, time from the first sample, s).
+pub fn json(
+    ranges: &Ranges,
+    stats: &SessionStats,
+    t0_ns: u64,
+    clip: ClipStats,
+) -> serde_json::Value {
     let per_axis: serde_json::Map<String, serde_json::Value> = AXES
         .iter()
         .zip(stats.clipped.per_axis)
@@ -81,6 +92,7 @@ pub fn json(ranges: &Ranges, stats: &SessionStats, t0_ns: u64) -> serde_json::Va
         "ranges": ranges,
         "clipped_samples": stats.clipped.samples,
         "clipped_per_axis": per_axis,
+        "clipped_runs": json!({"reconstructed": clip.reconstructed, "bridged": clip.bridged}),
         "implausible_samples": stats.implausible,
         "first_implausible": stats.first_implausible.map(|(seq, t)| json!({
             "seq": seq,
@@ -110,9 +122,15 @@ pub fn report(input: &Path, ranges: &Ranges, stats: &SessionStats, t0_ns: u64, t
     };
     if stats.clipped.samples > 0 {
         tracing::warn!(
-            "{input}: {} samples clipped at the end of their range ({}); {what}",
+            "{input}: {} samples clipped at the end of their range ({}); {}",
             stats.clipped.samples,
-            stats.clipped.per_axis_text()
+            stats.clipped.per_axis_text(),
+            if trusted {
+                what
+            } else {
+                "bridged and counted in the 1-sigma; a clipped gyroscope's motion reconstructed at \
+                 the rest after it (unless --bridge-clipped; `clipped_runs` in --json)"
+            }
         );
     }
     if let Some((seq, t)) = stats.first_implausible {

@@ -120,10 +120,12 @@ impl Watch {
         }
         if stats.clipped.samples > 0 || stats.implausible > 0 {
             tracing::warn!(
-                "clipped {} samples ({}), implausible {}: bridged as unobserved and counted in the 1-sigma (states flagged UNTRUSTED_INPUT)",
+                "clipped {} samples ({}), implausible {}: bridged as unobserved and counted in the 1-sigma (states flagged UNTRUSTED_INPUT); clipped gyroscope motions reconstructed at their rest {}, left bridged {}",
                 stats.clipped.samples,
                 stats.clipped.per_axis_text(),
-                stats.implausible
+                stats.implausible,
+                session.stage().clip_stats().reconstructed,
+                session.stage().clip_stats().bridged
             );
         }
         tracing::info!("{}; {}", self.steady.summary(), crate::ALLOCATOR.summary());
