@@ -115,4 +115,16 @@ def short_rests(ctx):
     return {"detectors-short-rests": table(HEADER, rows)}
 
 
-SECTIONS = [Section("short-rests", "detectors.md", ["detectors-short-rests"], "2 min", short_rests)]
+def wheeled_vibration(ctx):
+    """The corpus's wheeled robots' vibration standing, creeping and driving (the simulator's
+    vibration floor stands on it)."""
+    out, _ = ctx.run(["python3", "tools/real-data/vibration.py"])
+    if ctx.dry:
+        return {}
+    return {"detectors-wheeled-vibration": out.strip()}
+
+
+SECTIONS = [
+    Section("short-rests", "detectors.md", ["detectors-short-rests"], "2 min", short_rests),
+    Section("wheeled-vibration", "detectors.md", ["detectors-wheeled-vibration"], "10 s", wheeled_vibration),
+]
