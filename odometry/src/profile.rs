@@ -54,7 +54,8 @@ pub const OTHER_GLRT_WINDOW_S: f64 = 0.2;
 
 /// Rest a robot's or an arm's filter aligns on after its detector has learned, s: with the
 /// detector's half second of learning
-/// ([`calibrate::zero_state::ROBOT_LEARN_S`]) a rest of 1 s aligns. Half a second's mean holds
+/// ([`calibrate::zero_state::ROBOT_LEARN_S`]) a rest of 1 s aligns (with speed hints the
+/// navigator takes a second). Half a second's mean holds
 /// the noise of an MPU-9250 (datasheet densities 0.01 deg/s/sqrt(Hz), 300 ug/sqrt(Hz)) to
 /// 0.014 deg/s of gyroscope bias and 0.02 deg of tilt, below what its bias leaves
 /// (docs/detectors.md, "Short rests", measures it on simulated robots and arms).
