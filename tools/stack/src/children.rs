@@ -98,13 +98,20 @@ pub fn specs(
 /// `mems-calibrate serve`'s detector arguments for `cli` ([`crate::cli::detector`]; the
 /// GLRT's window is the default 0.5 s at any rate, and the other profile's
 /// [`odometry::profile::OTHER_GLRT_WINDOW_S`] with `--profile other`, whose odometry holds its
-/// rest flags in hindsight for that long).
+/// rest flags in hindsight for that long; the vehicle profile's learning,
+/// [`odometry::profile::VEHICLE_LEARN_S`], with `--profile vehicle`).
 fn detector_args(cli: &Cli) -> Vec<String> {
     let mut args = vec!["--detector".into(), crate::cli::detector(cli).name().into()];
     if cli.profile == odometry::profile::Profile::Other && cli.detector.is_none() {
         args.extend([
             "--glrt-window-s".into(),
             odometry::profile::OTHER_GLRT_WINDOW_S.to_string(),
+        ]);
+    }
+    if cli.profile == odometry::profile::Profile::Vehicle && cli.detector.is_none() {
+        args.extend([
+            "--learn-s".into(),
+            odometry::profile::VEHICLE_LEARN_S.to_string(),
         ]);
     }
     args
@@ -191,6 +198,11 @@ mod tests {
         assert_eq!(
             other,
             ["--detector", "glrt", "--glrt-window-s", "0.2"].map(String::from)
+        );
+        let vehicle = detector(&["--profile", "vehicle"]);
+        assert_eq!(
+            vehicle,
+            ["--detector", "glrt", "--learn-s", "1"].map(String::from)
         );
     }
 }
