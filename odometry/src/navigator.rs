@@ -49,6 +49,13 @@ struct AlignSums {
     gyro: RestNoise,
 }
 
+/// Rest a filter with speed hints aligns on at least, s: a robot that creeps off from its
+/// first sample is as still to the IMU as a rest for a second (its encoders do not tick
+/// yet), and its hints' cruise alignment ([`crate::cruise`]) is what should start it. A
+/// simulated drive that starts moving at once (odometry/tests/start_in_motion.rs), aligned on
+/// half a second of that, ended outside its 1-sigma.
+const HINT_ALIGN_S: f64 = 1.0;
+
 /// What happens to the motion history after a motion interval has ended.
 #[derive(Debug, Clone, Copy)]
 struct PendingRevision {
@@ -691,7 +698,13 @@ impl Navigator {
         a.accel.push(m.f);
         a.gyro.push(m.w);
         a.gravity_off |= gravity_off;
-        if (t_ns - a.t0_ns) as f64 * 1e-9 < self.cfg.align_s || a.accel.len() < 2 {
+        // With speed hints a rest is aligned on for at least `HINT_ALIGN_S`.
+        let align_s = if self.hints.newest.is_some() {
+            self.cfg.align_s.max(HINT_ALIGN_S)
+        } else {
+            self.cfg.align_s
+        };
+        if (t_ns - a.t0_ns) as f64 * 1e-9 < align_s || a.accel.len() < 2 {
             return;
         }
         let f_mean = a.accel.mean();

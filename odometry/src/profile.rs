@@ -28,8 +28,9 @@ pub enum Profile {
     /// stance flag taken as it comes, a zero-velocity update of 0.01 m/s, alignment on half a
     /// second of standing.
     Pedestrian,
-    /// Anything else (an arm, a hand-held box): the vehicle's detector and rest handling,
-    /// without the non-holonomic constraint.
+    /// Anything else (an arm, a hand-held box): the vehicle's detector with a window of 0.2 s
+    /// (an arm's pauses are that short) and rest handling, without the non-holonomic
+    /// constraint.
     Other,
 }
 
@@ -41,6 +42,30 @@ pub const WHEELED_NONHOLONOMIC_SIGMA_MPS: f64 = 0.1;
 /// standard deviation is refused on a wheeled platform: a robot standing vibrates by 5-10 mg,
 /// driving at walking pace on a smooth floor by 50-90 mg (an LSM9DS1 on a home-robot base).
 pub const WHEELED_REST_VIBRATION_FACTOR: f64 = 3.0;
+
+/// The GLRT's window for anything else than a foot or a wheeled platform, s: an arm pauses
+/// for 0.1-0.65 s between moves (the MPU-family arm recordings), shorter than the
+/// robot's 0.5 s window, which never finds them. Nothing vibrates there while it moves, so the
+/// window need not be long enough to see vibration below the part's noise; on a simulated
+/// stop-and-go robot a 0.2 s window and hindsight took cruising for rest (15-34 % of the
+/// distance off on three seeds against 0.7-6.5 % with 0.5 s), while the simulated arm of
+/// docs/detectors.md, "Short rests", finds every pause with them.
+pub const OTHER_GLRT_WINDOW_S: f64 = 0.2;
+
+/// Start-up learning of the vehicle profile's detector, s, when it is asked for by name: its
+/// stops are seconds long, and on the simulated drives of docs/odometry.md ("wheeled-sim")
+/// the robot's half second (`calibrate::zero_state::ROBOT_LEARN_S`, which `auto` starts with)
+/// took one seed of five from 0.61 % to 3.0 % of its distance.
+pub const VEHICLE_LEARN_S: f64 = 1.0;
+
+/// Rest a robot's or an arm's filter aligns on after its detector has learned, s: with the
+/// detector's half second of learning
+/// ([`calibrate::zero_state::ROBOT_LEARN_S`]) a rest of 1 s aligns (with speed hints the
+/// navigator takes a second). Half a second's mean holds
+/// the noise of an MPU-9250 (datasheet densities 0.01 deg/s/sqrt(Hz), 300 ug/sqrt(Hz)) to
+/// 0.014 deg/s of gyroscope bias and 0.02 deg of tilt, below what its bias leaves
+/// (docs/detectors.md, "Short rests", measures it on simulated robots and arms).
+pub const ROBOT_ALIGN_S: f64 = 0.5;
 
 impl Profile {
     /// The profile for a recognized platform.
@@ -69,12 +94,31 @@ impl Profile {
             Self::Pedestrian => DetectorConfig::new(DetectorKind::Shoe, gravity_mps2),
             // The live calibration stage's default too (`mems-calibrate serve`), so that live
             // and offline agree under any of these.
-            Self::Auto | Self::Vehicle | Self::Other => DetectorConfig::robot(gravity_mps2),
+            Self::Auto => DetectorConfig::robot(gravity_mps2),
+            Self::Vehicle => {
+                let mut config = DetectorConfig::robot(gravity_mps2);
+                config.learn.duration_s = VEHICLE_LEARN_S;
+                config
+            }
+            Self::Other => {
+                let mut config = DetectorConfig::robot(gravity_mps2);
+                config.glrt.window_s = OTHER_GLRT_WINDOW_S;
+                config
+            }
         }
     }
 
     /// `config` with this profile's rest handling.
     pub fn odometry(self, mut config: OdometryConfig) -> OdometryConfig {
+        if matches!(self, Self::Auto | Self::Other) {
+            // The vehicle profile keeps its second, as its learning ([`VEHICLE_LEARN_S`]).
+            config.align_s = ROBOT_ALIGN_S;
+        }
+        if self == Self::Other {
+            // The detector's window is shorter (`OTHER_GLRT_WINDOW_S`), and so is the time a
+            // window still holds the rest before a motion.
+            config.rest_hindsight_s = OTHER_GLRT_WINDOW_S;
+        }
         if self == Self::Vehicle {
             config.imu_nonholonomic_sigma_mps = WHEELED_NONHOLONOMIC_SIGMA_MPS;
             config.rest_vibration_factor = WHEELED_REST_VIBRATION_FACTOR;

@@ -181,7 +181,7 @@ impl OdometrySession {
         hint_config: HintConfig,
         no_gyro: NoGyro,
     ) -> Result<Self, HintConfigError> {
-        let mut session = Self::new(Profile::Other.odometry(base), hint_config, no_gyro)?;
+        let mut session = Self::new(Profile::Auto.odometry(base), hint_config, no_gyro)?;
         session.auto = Some(Auto {
             classifier: Classifier::default(),
             base,
@@ -229,7 +229,12 @@ impl OdometrySession {
             features.principal_axis_deg,
             features.impacts_per_min
         );
-        self.config = profile.odometry(auto.base);
+        // The detector is the one the session started with (the calibration stage's, chosen
+        // before the platform was known): the hindsight that suits its window stays.
+        self.config = OdometryConfig {
+            rest_hindsight_s: self.config.rest_hindsight_s,
+            ..profile.odometry(auto.base)
+        };
         self.stage.reconfigure(self.config);
         self.plausibility = Plausibility::new(self.config.plausible, self.config.gravity_mps2);
     }

@@ -148,7 +148,7 @@ fn a_recording_that_starts_in_motion_aligns_at_its_first_rest() {
         e[0].hypot(e[1]) < 0.02 * distance,
         "end error {e:?} over {distance} m"
     );
-    // Without the measured noise, the vehicle profile's second of learning, taken with the
+    // Without the measured noise, the vehicle profile's half second of learning, taken with the
     // confidence of 5 s of rest, is not fooled by the first steady cruise either (5 s of
     // learning without the noise learned there, 8.3 s in, and ended 35 m off): it aligns at
     // the same rest.

@@ -440,7 +440,9 @@ def loso(corpus, runner, only):
         classes.setdefault(rec["platform"], []).append(rec)
     report = []
     for platform, group in classes.items():
-        params = [p for p in tuning if platform in p["classes"]]
+        # Each flag's default for this class: its profile's own where it differs.
+        params = [dict(p, default=p.get("class_defaults", {}).get(platform, p["default"]))
+                  for p in tuning if platform in p["classes"]]
 
         def args_for(rec, combo):
             return list(rec.get("extra_args", [])) + tuning_args(params, combo)

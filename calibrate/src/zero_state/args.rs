@@ -18,8 +18,9 @@ pub struct DetectorArgs {
     #[arg(long, value_name = "SECONDS")]
     pub glrt_window_s: Option<f64>,
     /// Length of the start-up rest the detector learns its thresholds from, s (default: the
-    /// process's, 1 for `mems-calibrate serve` and `mems-odometry`'s vehicle profile; the
-    /// first rest of this length anywhere in the data, at least two batches of 20 samples).
+    /// process's, 0.5 for `mems-calibrate serve` and `mems-odometry`'s auto and other profiles,
+    /// 1 for its vehicle profile; the first rest of this length anywhere in the data, at least
+    /// two batches of 20 samples).
     #[arg(long)]
     pub learn_s: Option<f64>,
     /// SHOE detector: the fixed threshold (default OpenShoe's 3e4).

@@ -56,6 +56,9 @@
 //! - [`GlrtStatistic::Split`] (default): rest iff each is below its `1 - a/2` chi-squared
 //!   quantile. The mean part (6 degrees of freedom) is what catches steady acceleration, turns
 //!   and the low-frequency (wheel) part of vibration; the scatter part catches vibration.
+//!   A window whose mean test passes and whose scatter test does not is steady but vibrating
+//!   ([`super::Verdict::vibrating`]): motion that only vibration tells from rest (a slow cruise
+//!   on a smooth floor), counted as such and never taken for rest.
 //! - [`GlrtStatistic::Combined`]: SHOE's single sum `T_mean + T_scatter ~ chi2(6 N)` against
 //!   its `1 - a` quantile, which dilutes the 6 mean degrees of freedom among `6 N`.
 //!
@@ -486,13 +489,12 @@ impl GlrtRule {
             t_scatter +=
                 (within[c] * self.dof_factor[c] + between[c] * self.inv_rho[c]) * self.inv_var[c];
         }
+        let full = self.filled == self.ring.len();
+        let steady = t_mean <= self.mean_quantile;
         let quiet = match self.statistic {
-            GlrtStatistic::Split => {
-                t_mean <= self.mean_quantile && t_scatter <= self.scatter_quantile
-            }
+            GlrtStatistic::Split => steady && t_scatter <= self.scatter_quantile,
             GlrtStatistic::Combined => t_mean + t_scatter <= self.combined_quantile,
         };
-        let full = self.filled == self.ring.len();
         let still_but_direction = self.channels == 6
             && full
             && !quiet
@@ -502,6 +504,7 @@ impl GlrtRule {
         self.rest_run = if rest { self.rest_run + 1 } else { 0 };
         Decision {
             rest,
+            vibrating: full && steady && !quiet,
             mean_mps2: [mean[0], mean[1], mean[2]],
             std_mps2: std::array::from_fn(|i| ((within[i] + between[i]) / (n - 1.0)).sqrt()),
         }

@@ -222,11 +222,15 @@ impl DetectorConfig {
     }
 }
 
-/// Start-up learning of a robot's detector, s: its first rest of a second (the odometry
-/// aligns on the second of rest after it).
-pub const ROBOT_LEARN_S: f64 = 1.0;
+/// Start-up learning of a robot's detector, s: the first half second of rest gives the
+/// references (gravity in the sensor frame, the gyroscope bias), while the noise the test
+/// holds them against is the part's own ([`ROBOT_NOISE_PRIOR_S`]), so the odometry aligns on
+/// the half second of rest after it: a rest of 1 s aligns (`odometry::profile::ROBOT_ALIGN_S`).
+/// At a rate where half a second is less than two batches (below 80 Hz) the learning takes
+/// two batches (1 s at 40 Hz).
+pub const ROBOT_LEARN_S: f64 = 0.5;
 
-/// Rest the part's noise counts for in a robot's detector beyond its second of learning, s
+/// Rest the part's noise counts for in a robot's detector beyond its half second of learning, s
 /// ([`DetectorConfig::noise_prior_s`]): the 5 s of learning it replaces. Without it, the F
 /// quantile of one second's 9 batches at 200 Hz let a robot's motions through as rest: a
 /// simulated stop-and-go robot (`mems-sim drive --duration 120 --initial-rest 7 --rests 1,2
@@ -258,6 +262,12 @@ pub struct Verdict {
     pub ready: bool,
     /// Whether the batch is at rest (never before `ready`).
     pub rest: bool,
+    /// Whether the detector found the window steady but vibrating: the GLRT's mean test saw
+    /// no acceleration or turn beyond the noise while its scatter test saw vibration above the
+    /// rest's noise (a slow cruise on a smooth floor, a running motor). Such a window is
+    /// motion (`rest` is false); it is counted ([`ZeroStateDetector::vibrating_s`]) so that a
+    /// run says how much of it only vibration told from rest.
+    pub vibrating: bool,
     /// Mean specific force over the window that decided (the batch for Yu, the sliding
     /// window for the GLRT), m/s^2.
     pub decided_mean_mps2: [f64; 3],
@@ -289,6 +299,8 @@ pub struct ZeroStateDetector {
     /// What the rule was built from (learned, or resumed).
     learned: Option<StaticReference>,
     rest_s: f64,
+    /// Batches found steady but vibrating, s.
+    vibrating_s: f64,
     /// Storage for the GLRT's window, allocated once and handed to the rule when it is learned.
     ring: Vec<glrt::BatchSums>,
 }
@@ -349,6 +361,7 @@ impl ZeroStateDetector {
                 .then(|| Rule::Shoe(shoe::ShoeRule::new(config.shoe, config.learn.gravity_mps2))),
             learned: None,
             rest_s: 0.0,
+            vibrating_s: 0.0,
             ring: Vec::with_capacity(config.glrt.max_window_batches()),
         }
     }
@@ -396,6 +409,12 @@ impl ZeroStateDetector {
             Some(Rule::Glrt(r)) => r.reanchored(),
             _ => 0,
         }
+    }
+
+    /// Time the detector found steady but vibrating, s ([`Verdict::vibrating`]): motion that
+    /// only vibration told from rest.
+    pub fn vibrating_s(&self) -> f64 {
+        self.vibrating_s
     }
 
     /// Rest time the references have been kept current over, s (the learning included).
@@ -484,6 +503,10 @@ impl ZeroStateDetector {
             Rule::Shoe(r) => r.decide(&accel, &gyro),
         };
         verdict.rest = decision.rest;
+        verdict.vibrating = decision.vibrating;
+        if decision.vibrating {
+            self.vibrating_s += batch_duration_s(&accel);
+        }
         verdict.decided_mean_mps2 = decision.mean_mps2;
         verdict.decided_std_mps2 = decision.std_mps2;
         if decision.rest {
@@ -520,6 +543,7 @@ impl ZeroStateDetector {
         self.learner.clear();
         self.learned = None;
         self.rest_s = 0.0;
+        self.vibrating_s = 0.0;
         match self.rule.take() {
             Some(Rule::Glrt(rule)) => self.ring = rule.into_ring(),
             Some(Rule::Shoe(mut rule)) => {
@@ -535,6 +559,9 @@ impl ZeroStateDetector {
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Decision {
     pub rest: bool,
+    /// Steady but vibrating: the GLRT's mean test passed (no acceleration or turn beyond the
+    /// noise) and its scatter test did not (see [`Verdict::vibrating`]).
+    pub vibrating: bool,
     pub mean_mps2: [f64; 3],
     pub std_mps2: [f64; 3],
 }

@@ -122,6 +122,7 @@ impl ShoeRule {
             .max(self.config.adaptive_factor * recent_min);
         Decision {
             rest: t <= threshold,
+            vibrating: false,
             mean_mps2: accel.mean,
             std_mps2: accel.std,
         }

@@ -73,6 +73,7 @@ impl YuRule {
         let std_ok = (0..3).all(|i| accel.std[i] <= self.std_factor * self.variance[i].sqrt());
         Decision {
             rest: mean_ok && std_ok,
+            vibrating: mean_ok && !std_ok,
             mean_mps2: accel.mean,
             std_mps2: accel.std,
         }

@@ -71,6 +71,10 @@ enum Command {
         /// 1 m/s (0 turns it off).
         #[arg(long, default_value_t = 1.0)]
         vibration: f64,
+        /// Vibration while the wheels turn at any speed, RMS per axis: accelerometer m/s^2,
+        /// gyroscope deg/s (motors and gears; tools/sim/src/vibration.rs gives measured levels).
+        #[arg(long, value_name = "MPS2,DPS", value_parser = parse_pair, default_value = "0,0")]
+        vibration_floor: [f64; 2],
         /// Turns between the legs of a motion.
         #[arg(long, value_enum, default_value_t = OnOff::Off)]
         turns: OnOff,
@@ -814,6 +818,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Drive {
             duration,
             vibration,
+            vibration_floor,
             turns,
             in_place_turns,
             initial_rest,
@@ -835,12 +840,12 @@ fn run(cli: Cli) -> Result<()> {
             }
             let drive = Drive::new(&params, common.seed)?;
             let hint_list = hints.received(&drive, common.seed)?;
-            simulate(
-                drive,
-                &VibrationModel::moderate(vibration),
-                &common,
-                &hint_list,
-            )
+            let [floor_accel, floor_gyro] = vibration_floor;
+            let model = VibrationModel::moderate(vibration).with_floor(floor_accel, floor_gyro);
+            model
+                .validate()
+                .map_err(|e| anyhow::anyhow!("--vibration-floor: {e}"))?;
+            simulate(drive, &model, &common, &hint_list)
         }
         Command::Walk {
             laps,

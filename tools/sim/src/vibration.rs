@@ -10,6 +10,20 @@
 //! band-pass resonator). The level is isotropic (the same RMS on every axis), so the mounting
 //! of the sensor does not change it.
 //!
+//! **A floor while the wheels turn** (`floor_accel_rms_mps2`, `floor_gyro_rms_dps`; 0 by
+//! default, which leaves the speed-scaled model as it was): motors, gearboxes and a chassis
+//! on its wheels do not go quiet at low speed. The floor adds that RMS per axis to the chassis
+//! resonance whenever the wheels turn, whatever the speed (at rest there is none). Measured on
+//! the corpus's wheeled robots by their own wheel speeds (`python3 tools/real-data/vibration.py`:
+//! 1 s windows, standard deviation of the three axes together, 10-90 %; docs/detectors.md,
+//! "Short rests"): a Clearpath Husky's MicroStrain 3DM-GX2 shows 54-134 mg and 1.5-5.1 deg/s
+//! driving above 0.3 m/s and 96-346 mg and 2-13 deg/s at 0.03-0.3 m/s; the VESC IMU of 1:10
+//! F1TENTH cars 6-15 mg and 0.2-0.4 deg/s standing, 95 mg and 2.4 deg/s at 0.03-0.3 m/s; an
+//! LSM9DS1 on a home-robot base (a recording outside the corpus) 50-90 mg and 2-4 deg/s at
+//! 78 mm/s against 5-10 mg and 0.2 deg/s standing. `mems-sim drive --vibration-floor 0.3,1`
+//! (0.3 m/s^2 and 1 deg/s per axis, 53 mg and 1.7 deg/s over three axes) is the low end of
+//! those.
+//!
 //! No power at zero frequency, by design: a vibration moves the sensor about its pose, so its
 //! time integral (a velocity for the accelerometer, an angle for the gyroscope) must stay
 //! bounded instead of drifting like a random walk.
@@ -58,6 +72,13 @@ pub struct VibrationModel {
     pub chassis_hz: f64,
     /// Damping ratio of the chassis resonance (0 < damping < 1).
     pub chassis_damping: f64,
+    /// Accelerometer disturbance added to the chassis resonance while the wheels turn at any
+    /// speed, RMS per axis, m/s^2 (see the module documentation; 0: none).
+    #[serde(default)]
+    pub floor_accel_rms_mps2: f64,
+    /// The same for the gyroscope, deg/s.
+    #[serde(default)]
+    pub floor_gyro_rms_dps: f64,
 }
 
 impl VibrationModel {
@@ -71,6 +92,18 @@ impl VibrationModel {
             gear_ratio: 30.0,
             chassis_hz: 25.0,
             chassis_damping: 0.1,
+            floor_accel_rms_mps2: 0.0,
+            floor_gyro_rms_dps: 0.0,
+        }
+    }
+
+    /// `self` with a floor of `accel_rms_mps2` (m/s^2) and `gyro_rms_dps` (deg/s) RMS per axis
+    /// while the wheels turn.
+    pub fn with_floor(self, accel_rms_mps2: f64, gyro_rms_dps: f64) -> Self {
+        Self {
+            floor_accel_rms_mps2: accel_rms_mps2,
+            floor_gyro_rms_dps: gyro_rms_dps,
+            ..self
         }
     }
 
@@ -85,6 +118,8 @@ impl VibrationModel {
         for (field, x) in [
             ("accel_rms_mps2", self.accel_rms_mps2),
             ("gyro_rms_dps", self.gyro_rms_dps),
+            ("floor_accel_rms_mps2", self.floor_accel_rms_mps2),
+            ("floor_gyro_rms_dps", self.floor_gyro_rms_dps),
         ] {
             if !(x.is_finite() && x >= 0.0) {
                 return err(field, format!("must be finite and >= 0, got {x}"));
@@ -189,7 +224,14 @@ impl Vibration {
     /// the wheels run at `wheel_speed_mps`: accelerometer in m/s^2 and gyroscope in deg/s,
     /// sensor frame.
     pub fn step(&mut self, t_s: f64, rate_hz: f64, wheel_speed_mps: f64) -> ([f64; 3], [f64; 3]) {
-        if self.model.accel_rms_mps2 == 0.0 && self.model.gyro_rms_dps == 0.0 {
+        let m = &self.model;
+        if [
+            m.accel_rms_mps2,
+            m.gyro_rms_dps,
+            m.floor_accel_rms_mps2,
+            m.floor_gyro_rms_dps,
+        ] == [0.0; 4]
+        {
             return ([0.0; 3], [0.0; 3]);
         }
         let dt = (t_s - self.last_t_s).max(0.0);
@@ -205,12 +247,15 @@ impl Vibration {
             _ => *self.resonator.insert(Resonator::new(&self.model, rate_hz)),
         };
         let mut unit = [0.0; 6];
+        // The chassis resonance's own state per channel, for the floor.
+        let mut chassis = [0.0; 6];
         for (ch, out) in unit.iter_mut().enumerate() {
             let [x1, x2] = self.chassis[ch];
             let w: f64 = self.rng.sample(StandardNormal);
             let x = res.a1 * x1 + res.a2 * x2 + res.e_std * (w - self.last_drive[ch]);
             self.last_drive[ch] = w;
             self.chassis[ch] = [x, x1];
+            chassis[ch] = x;
             let [pw, pm] = self.phases[ch];
             let wheel = (self.wheel_angle_rad + pw).sin();
             let motor = (self.model.gear_ratio * self.wheel_angle_rad + pm).sin();
@@ -220,9 +265,16 @@ impl Vibration {
         }
         let a = self.model.accel_rms_mps2 * wheel_speed_mps;
         let g = self.model.gyro_rms_dps * wheel_speed_mps;
-        (
-            [a * unit[0], a * unit[1], a * unit[2]],
-            [g * unit[3], g * unit[4], g * unit[5]],
-        )
+        let mut accel = [a * unit[0], a * unit[1], a * unit[2]];
+        let mut gyro = [g * unit[3], g * unit[4], g * unit[5]];
+        if wheel_speed_mps != 0.0 {
+            for (out, x) in accel.iter_mut().zip(&chassis[..3]) {
+                *out += self.model.floor_accel_rms_mps2 * x;
+            }
+            for (out, x) in gyro.iter_mut().zip(&chassis[3..]) {
+                *out += self.model.floor_gyro_rms_dps * x;
+            }
+        }
+        (accel, gyro)
     }
 }

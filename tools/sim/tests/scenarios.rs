@@ -394,6 +394,46 @@ fn vibration_is_zero_at_rest_and_scales_with_wheel_speed() {
 }
 
 #[test]
+fn the_vibration_floor_holds_at_any_wheel_speed_and_not_at_rest() {
+    // Only the floor: 0.3 m/s^2 and 1 deg/s RMS per axis whenever the wheels turn.
+    let drive = Drive::new(&drive_params(240.0), 12).unwrap();
+    let level = VibrationModel::moderate(0.0).with_floor(0.3, 1.0);
+    let mut sim = SimSensor::new(drive.clone(), &SensorModel::ideal(), &level, 12).unwrap();
+    let rate = 200.0;
+    let (mut acc_sq, mut gyr_sq, mut turning, mut slow) = (0.0, 0.0, 0usize, 0usize);
+    for k in 0..(240.0 * rate) as usize {
+        let t_s = k as f64 / rate;
+        let (a, truth) = sim.sample_with_truth(t_s, rate);
+        let speed = drive.wheel_speed_mps(t_s);
+        for i in 0..3 {
+            let va = a.accel_g[i] * G_MPS2 - truth.specific_force_mps2[i];
+            let vg = a.gyro_dps[i] - truth.angular_rate_rps[i].to_degrees();
+            if speed == 0.0 {
+                assert!(
+                    va.abs() < 1e-12 && vg.abs() < 1e-12,
+                    "vibration with the wheels still at {t_s} s"
+                );
+            } else {
+                acc_sq += va * va;
+                gyr_sq += vg * vg;
+            }
+        }
+        turning += usize::from(speed != 0.0);
+        slow += usize::from(speed != 0.0 && speed < 0.1);
+    }
+    assert!(slow > 0, "the drive never turns its wheels slowly");
+    // The chassis resonance alone: about 800 independent values per axis over 100 s of
+    // motion (see above), 3% relative std of the mean square over three axes; 10% is 3 sigma.
+    let n = 3.0 * turning as f64;
+    for (name, got, want) in [("accel", acc_sq / n, 0.09), ("gyro", gyr_sq / n, 1.0)] {
+        assert!(
+            (got / want - 1.0).abs() < 0.1,
+            "{name}: mean square {got} while the wheels turn, floor^2 {want}"
+        );
+    }
+}
+
+#[test]
 fn scenarios_are_deterministic_in_the_seed() {
     let a = Drive::new(&drive_params(120.0), 77).unwrap();
     let b = Drive::new(&drive_params(120.0), 77).unwrap();

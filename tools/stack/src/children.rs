@@ -96,9 +96,25 @@ pub fn specs(
 }
 
 /// `mems-calibrate serve`'s detector arguments for `cli` ([`crate::cli::detector`]; the
-/// accelerometer-only GLRT's window is the default 0.5 s at any rate).
+/// GLRT's window is the default 0.5 s at any rate, and the other profile's
+/// [`odometry::profile::OTHER_GLRT_WINDOW_S`] with `--profile other`, whose odometry holds its
+/// rest flags in hindsight for that long; the vehicle profile's learning,
+/// [`odometry::profile::VEHICLE_LEARN_S`], with `--profile vehicle`).
 fn detector_args(cli: &Cli) -> Vec<String> {
-    vec!["--detector".into(), crate::cli::detector(cli).name().into()]
+    let mut args = vec!["--detector".into(), crate::cli::detector(cli).name().into()];
+    if cli.profile == odometry::profile::Profile::Other && cli.detector.is_none() {
+        args.extend([
+            "--glrt-window-s".into(),
+            odometry::profile::OTHER_GLRT_WINDOW_S.to_string(),
+        ]);
+    }
+    if cli.profile == odometry::profile::Profile::Vehicle && cli.detector.is_none() {
+        args.extend([
+            "--learn-s".into(),
+            odometry::profile::VEHICLE_LEARN_S.to_string(),
+        ]);
+    }
+    args
 }
 
 /// `mems-acquire`'s arguments for `cli` (the namespace is added by the caller): the source,
@@ -177,5 +193,16 @@ mod tests {
         assert_eq!(at_1k, vec!["--detector".to_string(), "glrt".to_string()]);
         let asked = detector(&["--rate", "4000", "--detector", "yu"]);
         assert_eq!(asked, vec!["--detector".to_string(), "yu".to_string()]);
+        // The other profile's shorter window, which its odometry's hindsight matches.
+        let other = detector(&["--profile", "other"]);
+        assert_eq!(
+            other,
+            ["--detector", "glrt", "--glrt-window-s", "0.2"].map(String::from)
+        );
+        let vehicle = detector(&["--profile", "vehicle"]);
+        assert_eq!(
+            vehicle,
+            ["--detector", "glrt", "--learn-s", "1"].map(String::from)
+        );
     }
 }

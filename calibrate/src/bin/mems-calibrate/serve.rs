@@ -45,7 +45,7 @@ pub struct ServeArgs {
     /// `calibrate::zero_state::learn::UNCALIBRATED_GRAVITY_ERROR`).
     #[arg(long)]
     calib: Option<PathBuf>,
-    /// The zero-state detector (default: glrt, learning from the first second of rest with
+    /// The zero-state detector (default: glrt, learning from the first half second of rest with
     /// the confidence of 5 s, as `mems-odometry`'s vehicle profile).
     #[command(flatten)]
     detector: DetectorArgs,

@@ -173,7 +173,7 @@ fn pass(
     let hints = args.hints.config()?;
     let (config, session) = match choice.profile {
         Profile::Auto => (
-            Profile::Other.odometry(base),
+            Profile::Auto.odometry(base),
             OdometrySession::auto(base, hints, NoGyro::HoldAttitude)?,
         ),
         p => {

@@ -1,9 +1,11 @@
 //! `--profile auto` offline: the platform recognized from the whole recording
 //! (`odometry::platform`; up to its first 120 s of motion) before the stages run. A foot runs the pedestrian profile from the
 //! start (its SHOE detector is the calibration stage's, which a live stack cannot change once
-//! running); any other recording runs as `mems-odometry serve --profile auto` does (the GLRT,
-//! the session deciding after 10 s of motion, `odometry::session`), so that offline and live
-//! give the same states.
+//! running), and so does a recording that looks like neither a foot nor a wheeled platform over
+//! at least 10 s of motion (an arm, a hand-held box) with the other profile (its GLRT's
+//! window is shorter, `odometry::profile::OTHER_GLRT_WINDOW_S`); any other recording runs as
+//! `mems-odometry serve --profile auto` does (the GLRT, the session deciding after 10 s of
+//! motion, `odometry::session`), so that offline and live give the same states.
 
 use std::path::Path;
 
@@ -11,7 +13,7 @@ use anyhow::Result;
 use ipc_types::{RawImuSample, raw_flags};
 use odometry::platform::{Classifier, Features, Platform};
 use odometry::profile::Profile;
-use odometry::session::AutoChoice;
+use odometry::session::{AUTO_DECIDE_MOVING_S, AutoChoice};
 use recording::mcap::run::{Item, RawRun};
 
 /// Motion after which the look at the recording stops, s.
@@ -82,19 +84,22 @@ pub fn choose(asked: Profile, input: &Path, mcap: bool) -> Result<Choice> {
     }
     c.finish();
     let f = c.features();
-    // Only a foot needs a detector of its own; the rest decide as live.
+    // A foot and an arm or hand-held box (after as much motion as the live rule decides on)
+    // need detectors of their own (SHOE; the other profile's shorter window, which finds an
+    // arm's pauses); the rest decide as live.
     let profile = match f.platform {
         Platform::Foot => Profile::Pedestrian,
+        Platform::Other if f.moving_s >= AUTO_DECIDE_MOVING_S => Profile::Other,
         Platform::Wheeled | Platform::Other => Profile::Auto,
     };
     tracing::info!(
         "--profile auto: the whole recording looks {} ({}) (over {:.0} s of motion: tilt rate {:.1} deg/s, \
          principal-axis share {:.2} at {:.0} deg from gravity, {:.1} impacts/min)",
         f.platform.name(),
-        if profile == Profile::Auto {
-            "not a foot: the odometry decides as live, after 10 s of motion"
-        } else {
-            "profile pedestrian"
+        match profile {
+            Profile::Auto => "the odometry decides as live, after 10 s of motion",
+            Profile::Other => "profile other",
+            _ => "profile pedestrian",
         },
         f.moving_s,
         f.tilt_rate_dps,

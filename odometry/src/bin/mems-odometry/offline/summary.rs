@@ -179,6 +179,13 @@ impl Summary {
         if let Some(a) = &accel {
             tracing::info!("{a}");
         }
+        let vibrating_s = chain.first.detector().vibrating_s();
+        if vibrating_s > 0.0 {
+            tracing::info!(
+                "the detector found {vibrating_s:.1} s steady but vibrating above its rest's noise \
+                 (no acceleration or turn it could see): taken for motion, not rest"
+            );
+        }
         let axes = chain.second.stage().axes();
         if axes.disagree() {
             tracing::warn!(
@@ -203,6 +210,7 @@ impl Summary {
             result["aligned_in_motion"] = json!(in_motion.map(|s| json!({ "speed_mps": s })));
             result["accel_error"] = json!(accel);
             result["gravity_reanchored"] = json!(reanchored);
+            result["steady_vibrating_s"] = json!(vibrating_s);
             println!("{result}");
         } else {
             self.print(&end, truth_error);
