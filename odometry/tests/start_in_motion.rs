@@ -13,10 +13,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{Case, drive_with_encoder_hints};
-use ipc_types::{RawImuSample, RobotHint};
-use recording::Truth;
-use recording::mcap::Writer;
+use common::{Case, write_drive_with_encoder_hints};
 
 /// A scratch directory for this test binary.
 fn scratch() -> PathBuf {
@@ -36,20 +33,7 @@ fn write_drive(path: &Path) {
         initial_rest_s: 0.0,
         ..Case::straight()
     };
-    let (raw, hints) = drive_with_encoder_hints(&case, 5);
-    let mut w = Writer::create(path).unwrap();
-    let raw_ch = w.add_channel::<RawImuSample>().unwrap();
-    let truth_ch = w.add_channel::<Truth>().unwrap();
-    let hint_ch = w.add_channel::<RobotHint>().unwrap();
-    let mut hints = hints.into_iter().peekable();
-    for (r, t) in &raw {
-        while let Some(h) = hints.next_if(|h| h.stamps.acquired_ns <= r.stamps.sample_ns) {
-            w.write(hint_ch, &h, h.stamps.acquired_ns).unwrap();
-        }
-        w.write(raw_ch, r, r.stamps.sample_ns).unwrap();
-        w.write(truth_ch, t, r.stamps.sample_ns).unwrap();
-    }
-    w.finish().unwrap();
+    write_drive_with_encoder_hints(path, &case, 5);
 }
 
 /// `mems-odometry offline --json --input PATH ARGS`: its JSON result and stderr.

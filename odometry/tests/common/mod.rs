@@ -521,3 +521,23 @@ pub fn drive_with_encoder_hints(
         .collect();
     (raw, hints)
 }
+
+/// Writes the drive of `case` (power-on `seed`) and its encoder hints to the MCAP file `path`,
+/// as the recorder logs them: raw samples and the truth at each sample's time, each hint at its
+/// acquisition, before the first sample after it.
+pub fn write_drive_with_encoder_hints(path: &std::path::Path, case: &Case, seed: u64) {
+    let (raw, hints) = drive_with_encoder_hints(case, seed);
+    let mut w = recording::mcap::Writer::create(path).unwrap();
+    let raw_ch = w.add_channel::<RawImuSample>().unwrap();
+    let truth_ch = w.add_channel::<Truth>().unwrap();
+    let hint_ch = w.add_channel::<RobotHint>().unwrap();
+    let mut hints = hints.into_iter().peekable();
+    for (r, t) in &raw {
+        while let Some(h) = hints.next_if(|h| h.stamps.acquired_ns <= r.stamps.sample_ns) {
+            w.write(hint_ch, &h, h.stamps.acquired_ns).unwrap();
+        }
+        w.write(raw_ch, r, r.stamps.sample_ns).unwrap();
+        w.write(truth_ch, t, r.stamps.sample_ns).unwrap();
+    }
+    w.finish().unwrap();
+}
