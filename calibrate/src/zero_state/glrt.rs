@@ -522,17 +522,18 @@ impl GlrtRule {
         mean: &[f64; 6],
         var: &[f64; 6],
     ) -> bool {
+        if !still_but_direction {
+            self.lost_s = 0.0;
+            return false;
+        }
         let m = Vector3::new(mean[0], mean[1], mean[2]);
         // Two window means' difference: twice one mean's variance.
         let moved = (0..3)
             .map(|i| (m[i] - self.lost_from[i]).powi(2) / (2.0 * var[i]))
             .sum::<f64>();
-        if !still_but_direction || self.lost_s == 0.0 || moved > self.steady_quantile {
+        if self.lost_s == 0.0 || moved > self.steady_quantile {
             self.lost_from = m;
             self.lost_s = 0.0;
-        }
-        if !still_but_direction {
-            return false;
         }
         self.lost_s += super::batch_duration_s(accel);
         if self.lost_s < REANCHOR_S {
