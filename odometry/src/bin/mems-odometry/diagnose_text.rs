@@ -98,6 +98,11 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
         d.tilt.rms_after * 1e3,
         d.tilt.rms_noise * 1e3
     );
+    let _ = writeln!(
+        s,
+        "  velocity rows  {:>4}: rms {:.4} m/s before, {:.4} after the fit; noise and the model's 1-sigma predict {:.4}",
+        d.velocity.rows, d.velocity.rms_before, d.velocity.rms_after, d.velocity.rms_noise
+    );
     for c in &d.scores {
         let _ = writeln!(s, "    {}", candidate(c));
     }
