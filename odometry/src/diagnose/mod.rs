@@ -19,9 +19,10 @@
 //! carries for it ([`Settings::beyond_model`] times the configuration's 1-sigma on some axis,
 //! and as many of its own 1-sigma) and is plausible for a real part (within the bounds
 //! `calibrate::calibfile::plausibility::PLAUSIBLE` puts on a calibration file: a fit beyond
-//! them, such as a gyro scale of -100 %, is a candidate explaining something else). "Unexplained": the rows' chi-square after the selection,
-//! with each row's noise and the model's carried 1-sigma added in quadrature, has a p-value
-//! below [`Settings::unexplained_p`].
+//! them, such as a gyro scale of -100 %, is a candidate explaining something else).
+//! "Unexplained": the magnitude and tilt rows' chi-square after the selection, with each row's
+//! noise and the model's carried 1-sigma added in quadrature, has a p-value below
+//! [`Settings::unexplained_p`] (the velocity rows' own p-value is reported beside it).
 
 pub mod correct;
 pub mod evidence;

@@ -22,12 +22,14 @@
 //! derivative of `dv` in the candidate's parameters, as for the tilt rows.
 //!
 //! **Noise** per axis: the accelerometer's white noise integrated over the motion
-//! (`N_a^2 T`), the gyro's angle random walk leaking gravity (`g^2 N_g^2 T^3 / 3`), the noise
-//! of `f_a` (`var(f_a) T^2`) and of the gyro bias (`g^2 var(b_g) T^4 / 4`). What the odometry
-//! carries, the gyro correction's 1-sigma over the angle turned and the accelerometer bias
-//! turned with it (`g s theta T / 2`, `b theta T`), is added to the noise for these rows
-//! (and their `floor` left zero): an uncalibrated gyro's 1 % scale leaks as much gravity as a
-//! lag of some milliseconds, and the fit must not take one for the other.
+//! (`N_a^2 T`), the gyro's angle random walk leaking gravity, tied at both ends (`g^2 N_g^2
+//! T^3 / 12`), the noise of `f_a` (`var(f_a) T^2`) and of the tie (both rests' gravity
+//! directions, `(var(f_a) + var(f_b)) T^2 / 4`). What the odometry carries is added to it
+//! (and the rows' `floor` left zero): the accelerometer bias turned with the motion (`b theta
+//! T`) and what the tie leaves of a carried gyro error, `CARRIED_SHARE` of the gyro
+//! correction's 1-sigma times the angle turned (`g k s theta T`). An uncalibrated gyro's 1 %
+//! scale leaks as much gravity as a lag of some milliseconds would without the tie, and the
+//! fit must not take one for the other.
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
@@ -41,8 +43,10 @@ const BIAS_STEP_MPS2: f64 = 1e-2;
 const SCALE_STEP: f64 = 1e-3;
 const TEMP_STEP: f64 = 1e-3;
 const LAG_STEP_S: f64 = 1e-3;
-/// What the tie to the second rest leaves of a carried gyro error's tilt, as a share of the
-/// angle turned, on average over the motion.
+/// What the tie to the second rest leaves of a carried gyro error's tilt, as a share of its
+/// 1-sigma times the angle turned, on average over the motion: on the simulated clean arm run
+/// (docs/diagnosis.md) the uncalibrated gyro's 1 % scale leaves the rows at about a third of
+/// the 1-sigma this gives.
 const CARRIED_SHARE: f64 = 0.05;
 
 /// A correction of the samples: the gyro's `I + n` and the accelerometer's candidate.
