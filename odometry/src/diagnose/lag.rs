@@ -111,11 +111,13 @@ mod tests {
     fn ramp(n: u64) -> Vec<RawImuSample> {
         (0..n)
             .map(|k| {
-                let mut s = RawImuSample::default();
-                s.seq = k;
+                let mut s = RawImuSample {
+                    seq: k,
+                    accel_g: [k as f64 * 0.005, 0.0, 1.0],
+                    gyro_dps: [k as f64, 0.0, 0.0],
+                    ..RawImuSample::default()
+                };
                 s.stamps.sample_ns = 1_000_000_000 + k * 5_000_000;
-                s.accel_g = [k as f64 * 0.005, 0.0, 1.0];
-                s.gyro_dps = [k as f64, 0.0, 0.0];
                 s
             })
             .collect()

@@ -77,12 +77,11 @@ fn an_accelerometer_lag_reads_the_earlier_force_and_the_same_rate() {
         let (b, _) = late.sample_with_truth(t, RATE_HZ);
         assert_eq!(a.gyro_dps, b.gyro_dps, "t {t}");
         let earlier = plain.scenario().truth(t - lag).specific_force_mps2;
-        for i in 0..3 {
+        for (i, (read, want)) in b.accel_g.iter().zip(earlier).enumerate() {
             assert!(
-                (b.accel_g[i] * G_MPS2 - earlier[i]).abs() < 1e-9,
-                "t {t} axis {i}: {} against {}",
-                b.accel_g[i] * G_MPS2,
-                earlier[i]
+                (read * G_MPS2 - want).abs() < 1e-9,
+                "t {t} axis {i}: {} against {want}",
+                read * G_MPS2
             );
         }
     }
