@@ -208,3 +208,104 @@ fn noise(ev: &Evidence, config: &OdometryConfig, interval: &Interval) -> f64 {
         + (bias * angle * t).powi(2);
     var.sqrt()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::evidence::{Rest, Sample};
+
+    const RATE_HZ: f64 = 200.0;
+    const G: f64 = 9.80665;
+
+    /// A sensor turning about its x axis through 1.2 rad (a raised cosine over 1 s) between
+    /// two 1 s rests, at the rotation centre (no linear acceleration), its accelerometer
+    /// `lag_s` behind its gyro: the evidence and its one motion.
+    fn turn(lag_s: f64) -> Evidence {
+        let angle = |t: f64| {
+            let x = ((t - 1.0) / 1.0).clamp(0.0, 1.0);
+            1.2 * (1.0 - (std::f64::consts::PI * x).cos()) / 2.0
+        };
+        let rate = |t: f64| {
+            let x = (t - 1.0) / 1.0;
+            if (0.0..=1.0).contains(&x) {
+                1.2 * std::f64::consts::PI / 2.0 * (std::f64::consts::PI * x).sin()
+            } else {
+                0.0
+            }
+        };
+        // Gravity's reading in the sensor frame after turning by `a` about x.
+        let force = |a: f64| Vector3::new(0.0, G * a.sin(), G * a.cos());
+        let samples: Vec<Sample> = (0..(3.0 * RATE_HZ) as usize + 1)
+            .map(|k| {
+                let t = k as f64 / RATE_HZ;
+                Sample {
+                    t_s: t,
+                    accel_mps2: force(angle(t - lag_s)),
+                    gyro_rps: Vector3::new(rate(t), 0.0, 0.0),
+                    temp_c: f64::NAN,
+                    raw_flags: 0,
+                }
+            })
+            .collect();
+        let rest = |range: std::ops::Range<usize>| Rest {
+            t_s: 0.0,
+            accel_mps2: range
+                .clone()
+                .map(|i| samples[i].accel_mps2)
+                .sum::<Vector3<f64>>()
+                / range.len() as f64,
+            accel_mean_var: Vector3::repeat(1e-8),
+            gyro_rps: Vector3::zeros(),
+            gyro_mean_var: Vector3::repeat(1e-12),
+            temp_c: f64::NAN,
+            samples: range,
+        };
+        let rests = vec![rest(20..180), rest(420..580)];
+        Evidence {
+            intervals: vec![Interval {
+                from: 0,
+                samples: 100..500,
+                gyro_clipped: 0,
+                accel_clipped: 0,
+            }],
+            samples,
+            rests,
+            innovations_mps: Vec::new(),
+            gyro_bias_rps: Vector3::zeros(),
+            gyro_bias_var: Vector3::repeat(1e-12),
+        }
+    }
+
+    fn lag_slot() -> usize {
+        Candidate::ALL
+            .iter()
+            .position(|c| *c == Candidate::AccelLag)
+            .unwrap()
+    }
+
+    #[test]
+    fn a_lag_leaves_what_its_design_predicts_and_none_without_it() {
+        let config = OdometryConfig::mpu9250(G);
+        let clean = turn(0.0);
+        let rows = super::rows(&clean, &config, &clean.intervals[0], 0, f64::NAN);
+        for r in &rows {
+            assert!(r.r.abs() < 2e-3, "clean velocity row {}", r.r);
+            assert!(r.kind == Kind::Velocity && r.floor == 0.0);
+        }
+        let lag = 0.02;
+        let late = turn(lag);
+        let rows = super::rows(&late, &config, &late.intervals[0], 0, f64::NAN);
+        // About g lag per radian turned, across the turn's axis (y and z, not x).
+        let r = Vector3::from_fn(|i, _| rows[i].r);
+        assert!(r.x.abs() < 2e-3, "{r}");
+        assert!(r.norm() > 0.5 * G * lag, "{r}");
+        for row in &rows {
+            let predicted = row.design[lag_slot()].x * lag;
+            assert!(
+                (row.r - predicted).abs() < 0.1 * r.norm(),
+                "{} against {predicted}",
+                row.r
+            );
+        }
+    }
+}
