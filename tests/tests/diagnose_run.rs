@@ -323,6 +323,17 @@ fn an_accelerometer_lag_is_found_undeclared_and_left_alone_declared() {
         let (before, after) = (figure(&found, "before", key), figure(&found, "after", key));
         assert!(after < ratio * before, "{key} {before} -> {after}");
     }
+    // A lag no real part has is refused, naming the option and the value.
+    let out = std::process::Command::new(integration_tests::bin("mems-odometry"))
+        .args(["offline", "--input", path_arg(&run), "--accel-lag-s", "0.5"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("--accel-lag-s") && stderr.contains("0.5"),
+        "{stderr}"
+    );
     let told = diagnose_file(dir.path(), "lag-declared", &run, None, &lagged);
     assert!(selected(&told).is_empty(), "{told:#}");
     let rms = |v: &Value| v["diagnosis"]["velocity"]["rms_before"].as_f64().unwrap();

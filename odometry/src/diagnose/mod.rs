@@ -269,12 +269,15 @@ pub fn diagnose(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64, s: &Settin
     } else {
         ev.rests.first().map_or(f64::NAN, |r| r.temp_c)
     };
+    let usable = |r: &Row| r.sigma > 0.0 && r.r.is_finite();
     let (clipped, rows): (Vec<Row>, Vec<Row>) = rows::rows(ev, config, t_ref_c)
         .into_iter()
-        .filter(|r| r.sigma > 0.0 && r.r.is_finite())
+        .filter(usable)
         .partition(|r| r.kind == Kind::ClippedTilt);
-    let (velocity, rows): (Vec<Row>, Vec<Row>) =
-        rows.into_iter().partition(|r| r.kind == Kind::Velocity);
+    let velocity: Vec<Row> = velocity::all(ev, config, t_ref_c)
+        .into_iter()
+        .filter(usable)
+        .collect();
     let span = temp_span(ev);
     // The lag is tested apart, on the velocity rows (`lag_test`).
     let correctable = Candidate::ALL

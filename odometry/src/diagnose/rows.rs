@@ -20,9 +20,8 @@
 //!   saturation candidate adds to each clipped sample, on its clipped axis and with its sign,
 //!   a rate `h` (rad/s per axis) the clip hid (`Evidence::carried`).
 //!
-//! - Velocity rows, three per motion without a clip: the velocity change from the middle of
-//!   one rest to the middle of the next (m/s, [`super::velocity`]), where the accelerometer
-//!   lag shows.
+//! - Velocity rows ([`Kind::Velocity`]) are formed apart (`super::velocity::all`), with the
+//!   same design per candidate.
 //!
 //! Each row's `sigma` is what the samples' own noise predicts (white and low-pass
 //! correlated, `evidence::mean_variance`; for tilt also the gyro's angle random walk and the
@@ -207,17 +206,9 @@ pub fn rows(evidence: &Evidence, config: &OdometryConfig, t_ref_c: f64) -> Vec<R
         });
     }
     let groups = evidence.rests.len();
-    let motions = evidence.intervals.len();
     for (j, interval) in evidence.intervals.iter().enumerate() {
         if interval.samples.len() >= 2 {
             out.extend(tilt_rows(evidence, config, interval, groups + j));
-        }
-        // A clip hid part of the motion from both triads' integration.
-        if interval.samples.len() >= 3 && interval.gyro_clipped + interval.accel_clipped == 0 {
-            let group = groups + motions + j;
-            out.extend(super::velocity::rows(
-                evidence, config, interval, group, t_ref_c,
-            ));
         }
     }
     out

@@ -143,9 +143,22 @@ fn with(
     velocity_change(ev, interval, &Correction { n, accel: &*accel })
 }
 
+/// The velocity rows of `ev`, three per motion without a clip (a clip hid part of the
+/// motion from the integration), grouped by motion after the rests' and tilts' groups;
+/// `t_ref_c` is the temperature candidate's reference.
+pub fn all(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64) -> Vec<Row> {
+    let first = ev.rests.len() + ev.intervals.len();
+    ev.intervals
+        .iter()
+        .enumerate()
+        .filter(|(_, i)| i.samples.len() >= 3 && i.gyro_clipped + i.accel_clipped == 0)
+        .flat_map(|(j, i)| rows(ev, config, i, first + j, t_ref_c))
+        .collect()
+}
+
 /// The three velocity rows of `interval` (group `group`); `t_ref_c` is the temperature
 /// candidate's reference.
-pub fn rows(
+fn rows(
     ev: &Evidence,
     config: &OdometryConfig,
     interval: &Interval,

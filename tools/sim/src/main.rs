@@ -482,6 +482,18 @@ fn rotation_deg([r, p, y]: [f64; 3]) -> UnitQuaternion<f64> {
 }
 
 impl Common {
+    /// The mounting effects of `--accel-lag-s` and `--lever-arm-m`, checked.
+    fn mounting(&self) -> Result<Mounting> {
+        let mounting = Mounting {
+            accel_lag_s: self.accel_lag_s,
+            lever_arm_m: self.lever_arm_m,
+        };
+        mounting
+            .validate()
+            .map_err(|e| anyhow::anyhow!("--accel-lag-s / --lever-arm-m: {e}"))?;
+        Ok(mounting)
+    }
+
     /// The error model: the preset or the TOML file, with the noise overrides applied.
     fn sensor_model(&self) -> Result<SensorModel> {
         let mut model = match &self.model {
@@ -733,13 +745,7 @@ fn simulate(
         .any()
         .then(|| Logger::new(&defects, rate, common.seed))
         .transpose()?;
-    let mounting = Mounting {
-        accel_lag_s: common.accel_lag_s,
-        lever_arm_m: common.lever_arm_m,
-    };
-    mounting
-        .validate()
-        .map_err(|e| anyhow::anyhow!("--accel-lag-s / --lever-arm-m: {e}"))?;
+    let mounting = common.mounting()?;
     let mut sim = SimSensor::new(scenario, &model, vibration, common.seed)?;
     sim.set_dlpf(dlpf.map(DlpfGrid::from_power_on));
     sim.set_mounting(mounting);
