@@ -17,7 +17,15 @@ fn candidate(c: &Score) -> String {
     if let Some(why) = &c.untestable {
         return format!("{name:<16} not testable: {why}");
     }
-    let p = |v: &[f64; 3], prec: usize| v.map(|x| format!("{x:.prec$e}")).join(", ");
+    // The lag uses one of the three slots.
+    let used = c.candidate.params();
+    let p = |v: &[f64; 3], prec: usize| {
+        v[..used]
+            .iter()
+            .map(|x| format!("{x:.prec$e}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     format!(
         "{name:<16} score {:>10.1}  params [{}] +- [{}] {}  {} model's 1-sigma{}",
         c.gain,
