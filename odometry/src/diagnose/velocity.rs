@@ -5,7 +5,11 @@
 //! the specific force rotated into the sensor frame at the start by the gyro's carried
 //! attitude `R(t)`, minus gravity as rest `a` measured it (`f_a`), integrates to the velocity
 //! change, which is zero from rest to rest: `dv = int (R f - f_a) dt` (m/s, sensor frame at
-//! the start; trapezoidal in the samples).
+//! the start; trapezoidal in the samples). `R` is tied to the second rest: the rotation that
+//! takes the carried gravity direction at the end onto rest `b`'s measured one (the tilt the
+//! tilt rows measure) is applied in proportion to the angle turned so far (to time where the
+//! motion barely turns), as a gyro scale error's tilt grows; what the gyro's errors leak into
+//! the rows is then small and no stand-in for a lag.
 //!
 //! **Accelerometer lag** `d` (s; the sample stamped `t` holds the specific force at `t - d`):
 //! corrected, `f(t + d) ~ f + d f'` (`f'` the central difference of the samples), which adds
