@@ -78,12 +78,18 @@ def before_after(report, key, digits=3):
 
 
 def selected(report):
-    names = [s[0] for s in report["diagnosis"]["selected"]]
+    """The selected candidates; the lag with its value and 1-sigma (ms)."""
+    names = []
+    for name, params in report["diagnosis"]["selected"]:
+        if name == "accel_lag":
+            sd = next(c["sigma"][0] for c in report["diagnosis"]["scores"] if c["candidate"] == name)
+            name = f"accel_lag {1e3 * params[0]:.1f} +- {1e3 * sd:.1f}"
+        names.append(name)
     return ", ".join(names) if names else "none"
 
 
-def diagnose(ctx, run, calib, extra=(), closed=True):
-    argv = [B, "diagnose", run, "--calib", calib, "--json"] + (["--closed-loop"] if closed else [])
+def diagnose(ctx, run, calib, extra=(), closed=True, flags=()):
+    argv = [B, "diagnose", run, "--calib", calib, "--json"] + (["--closed-loop"] if closed else []) + list(flags)
     argv += ["--", *extra] if extra else []
     out, _ = ctx.run(argv, timeout=600)
     if ctx.dry:
@@ -114,10 +120,16 @@ def saturation(report):
             f"{1e3 * s['rms_after']:.1f} mrad")
 
 
+def velocity(report):
+    """The velocity rows' rms before -> after the lag, and their stated 1-sigma (m/s)."""
+    v = report["diagnosis"]["velocity"]
+    return f"{v['rms_before']:.3f} -> {v['rms_after']:.3f} / {v['rms_noise']:.3f}"
+
+
 def sim_row(label, effect, calib_label, r):
     return [label, effect, calib_label, selected(r), unexplained(r),
             before_after(r, "rest_innovation_rms_mps"), before_after(r, "end_error_m"), before_after(r, "truth_error_m"),
-            saturation(r)]
+            velocity(r), saturation(r)]
 
 
 def simulated(ctx, identity_path, identity):
@@ -125,13 +137,13 @@ def simulated(ctx, identity_path, identity):
     model, _ = ctx.run([SIM, "print-model", "--preset", "calibrated"])
     rows = []
 
-    def case(name, changes, calib_text, label, effect, calib_label, arm=ARM):
+    def case(name, changes, calib_text, label, effect, calib_label, arm=ARM, declare=()):
         mpath, run, cpath = f"{DIR}/{name}.model.toml", f"{DIR}/{name}.mcap", f"{DIR}/{name}.calib.toml"
         if not ctx.dry:
             Path(mpath).write_text(set_key(model, changes))
             Path(cpath).write_text(calib_text)
         ctx.run([SIM, *arm, "--model", mpath, "--out", run, "--force"])
-        r = diagnose(ctx, run, cpath)
+        r = diagnose(ctx, run, cpath, flags=declare)
         if r is not None:
             rows.append(sim_row(label, effect, calib_label, r))
 
@@ -140,6 +152,13 @@ def simulated(ctx, identity_path, identity):
         effect = "; ".join(f"{t}.{k} = {v}" for t, k, v in changes)
         case(name, changes, identity, f"{name}, undeclared", effect, "identity")
         case(name + "-declared", changes, declare(identity, declared), f"{name}, declared", effect, "the effect")
+    lag = [*ARM, "--accel-lag-s", "0.02"]
+    case("accel_lag", [], identity, "accel_lag, undeclared", "accelerometer 20 ms behind the gyro (--accel-lag-s 0.02)",
+         "identity", arm=lag)
+    case("accel_lag-declared", [], identity, "accel_lag, declared", "the same", "identity; diagnose --accel-lag-s 0.02",
+         arm=lag, declare=["--accel-lag-s", "0.02"])
+    case("lever_arm", [], identity, "lever arm", "sensor 0.3, -0.2, 0.1 m from the tool point (--lever-arm-m)", "identity",
+         arm=[*ARM, "--lever-arm-m", "0.3,-0.2,0.1"])
     gyro_label = "gyro calibrated to 0.1 %"
     case("calibrated-gyro", CALIBRATED_GYRO, identity + GYRO_DECLARED, "calibrated gyro", "gyro.scale and misalignment zero", gyro_label)
     case("uncovered", CALIBRATED_GYRO + UNCOVERED, identity + GYRO_DECLARED, "uncovered",
@@ -147,9 +166,9 @@ def simulated(ctx, identity_path, identity):
     case("saturation", [], identity, "60 moves, +-250 deg/s", "the gyro clips", "identity", arm=LONG_ARM)
     case("saturation-wide", [], identity, "60 moves, +-500 deg/s", "nothing clips", "identity",
          arm=[*LONG_ARM, "--gyro-range", "500"])
-    header = ["run", "effect in the simulated part", "calibration", "selected", "unexplained",
+    header = ["run", "effect in the simulated part", "calibration", "selected (accel_lag in ms)", "unexplained",
               "rest innovation rms (m/s) before -> after", "closed-loop end error (m)", "truth end error (m)",
-              "gyro saturation"]
+              "velocity rows rms (m/s) before -> after / 1-sigma", "gyro saturation"]
     return table(header, rows)
 
 

@@ -91,6 +91,9 @@ def run_diagnose():
     expect(run_diagnosis.before_after(report, "end_error_m", 2) == "2.00 -> 0.50", "before_after")
     expect(run_diagnosis.before_after(report, "truth_error_m") == "- -> -", "before_after without figures")
     expect(run_diagnosis.selected(report) == "accel_bias", "selected")
+    lag = {"diagnosis": {"selected": [["accel_lag", [0.0183, 0.0, 0.0]]],
+                         "scores": [{"candidate": "accel_lag", "sigma": [0.0008, 0.0, 0.0]}]}}
+    expect(run_diagnosis.selected(lag) == "accel_lag 18.3 +- 0.8", f"selected lag: {run_diagnosis.selected(lag)}")
     expect(run_diagnosis.unexplained(report).startswith("yes (the rerun refutes"), "refuted")
     expect(run_diagnosis.declare("a = 1\n", ("a = 1", "a = 2")) == "a = 2\n", "declare by replacement")
 

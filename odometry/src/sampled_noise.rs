@@ -81,18 +81,18 @@ impl SampledNoise {
 mod tests {
     use super::*;
 
-    /// Deterministic pseudo-random numbers, uniform in [-1, 1) (a 64-bit LCG, Knuth MMIX).
-    fn uniform(state: &mut u64) -> f64 {
-        *state = state
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (*state >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// Uniform in [-1, 1), from a seeded generator (deterministic).
+    fn uniform(rng: &mut ChaCha8Rng) -> f64 {
+        rng.random_range(-1.0..1.0)
     }
 
     #[test]
     fn a_smooth_motion_at_irregular_steps_leaves_no_scatter() {
         let mut n = SampledNoise::default();
-        let mut state = 7;
+        let mut state = ChaCha8Rng::seed_from_u64(7);
         let mut t = 0.0;
         for _ in 0..200 {
             // 18-30 Hz steps; specific force and rate changing linearly with time.
@@ -108,14 +108,15 @@ mod tests {
     #[test]
     fn independent_errors_give_their_standard_deviation_at_irregular_steps() {
         let mut n = SampledNoise::default();
-        let mut state = 11;
+        let mut state = ChaCha8Rng::seed_from_u64(11);
         let mut t = 0.0;
         // Uniform errors of half-width h: standard deviation h / sqrt(3).
         let (h_a, h_w) = (2.0, 0.1);
         let (mut sum_a, mut sum_w, mut k) = (0.0, 0.0, 0.0);
         for i in 0..20_000 {
             t += 0.04 + 0.015 * uniform(&mut state);
-            let e = |h: f64, s: &mut u64| Vector3::new(uniform(s), uniform(s), uniform(s)) * h;
+            let e =
+                |h: f64, s: &mut ChaCha8Rng| Vector3::new(uniform(s), uniform(s), uniform(s)) * h;
             let f = Vector3::new(0.0, 0.0, 9.8) + e(h_a, &mut state);
             let w = Vector3::new(0.0, 0.0, 1.0) + e(h_w, &mut state);
             n.push((t * 1e9) as u64, &f, &w);

@@ -58,8 +58,9 @@ pub fn apply(
                 let n = Matrix3::identity() + candidate.gyro_perturbation(&p);
                 out.gyro.correction = Some(rows(&(n * c)));
             }
-            // No calibration term restores what a clip hid.
-            Candidate::GyroSaturation => {}
+            // No calibration term restores what a clip hid; the lag is removed from the
+            // rerun's samples (`offline --accel-lag-s`), not by the file.
+            Candidate::GyroSaturation | Candidate::AccelLag => {}
         }
     }
     out.bias_g = bias.into();

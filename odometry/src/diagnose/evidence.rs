@@ -116,42 +116,73 @@ fn axis_stats(
     (mean, var)
 }
 
+/// The evidence gathered as a run is read, message by message (corrected samples and
+/// odometry states in the order the run wrote them: each corrected sample before its state),
+/// so that what is held is one [`Sample`] per state, not the run's messages.
+#[derive(Debug)]
+pub struct Gatherer {
+    gyro_correction: Matrix3<f64>,
+    /// Corrected samples whose state has not come yet, by sequence number.
+    pending: std::collections::BTreeMap<u64, CorrectedImuSample>,
+    t0: Option<u64>,
+    samples: Vec<Sample>,
+    at_rest: Vec<bool>,
+    velocity: Vec<Vector3<f64>>,
+}
+
+impl Gatherer {
+    /// A gatherer for a run whose odometry corrected the gyro by `gyro_correction` (`C`).
+    pub fn new(gyro_correction: &Matrix3<f64>) -> Self {
+        Self {
+            gyro_correction: *gyro_correction,
+            pending: std::collections::BTreeMap::new(),
+            t0: None,
+            samples: Vec::new(),
+            at_rest: Vec::new(),
+            velocity: Vec::new(),
+        }
+    }
+
+    /// Takes a corrected sample.
+    pub fn corrected(&mut self, c: CorrectedImuSample) {
+        self.pending.insert(c.seq, c);
+    }
+
+    /// Takes an odometry state (revisions are skipped): joined to its corrected sample by
+    /// sequence number; corrected samples before it that never got a state are dropped.
+    pub fn state(&mut self, s: &OdometryState) {
+        let t0 = *self.t0.get_or_insert(s.stamps.sample_ns);
+        if s.flags & odometry_flags::REVISION != 0 {
+            return;
+        }
+        let Some(c) = self.pending.remove(&s.seq) else {
+            return;
+        };
+        self.pending = self.pending.split_off(&s.seq);
+        let temp_valid = c.raw_flags & raw_flags::TEMP_VALID != 0;
+        self.samples.push(Sample {
+            t_s: (s.stamps.sample_ns as i64 - t0 as i64) as f64 * 1e-9,
+            accel_mps2: Vector3::from(c.accel_mps2),
+            gyro_rps: self.gyro_correction * Vector3::from(c.gyro_rps),
+            temp_c: if temp_valid { c.temp_c } else { f64::NAN },
+            raw_flags: c.raw_flags | (c.flags & corrected_flags::CLIPPED),
+        });
+        let aligned = s.flags & odometry_flags::ALIGNED != 0;
+        self.at_rest
+            .push(aligned && s.flags & odometry_flags::ZERO_VELOCITY != 0);
+        self.velocity.push(Vector3::from(s.velocity_mps));
+    }
+
+    /// The evidence of the run read.
+    pub fn finish(self) -> Evidence {
+        Evidence::from_samples(self.samples, &self.at_rest, &self.velocity)
+    }
+}
+
 impl Evidence {
-    /// Gathers the evidence from the run's corrected samples and its (non-revision) states,
-    /// matched by sequence number; `gyro_correction` is the odometry's `C`.
-    pub fn gather(
-        corrected: &[CorrectedImuSample],
-        states: &[OdometryState],
-        gyro_correction: &Matrix3<f64>,
-    ) -> Self {
-        let mut by_seq = std::collections::HashMap::with_capacity(corrected.len());
-        for c in corrected {
-            by_seq.insert(c.seq, c);
-        }
-        let t0 = states.first().map_or(0, |s| s.stamps.sample_ns);
-        let mut samples = Vec::with_capacity(states.len());
-        let mut at_rest = Vec::with_capacity(states.len());
-        let mut velocity = Vec::with_capacity(states.len());
-        for s in states
-            .iter()
-            .filter(|s| s.flags & odometry_flags::REVISION == 0)
-        {
-            let Some(c) = by_seq.get(&s.seq) else {
-                continue;
-            };
-            let temp_valid = c.raw_flags & raw_flags::TEMP_VALID != 0;
-            samples.push(Sample {
-                t_s: (s.stamps.sample_ns - t0) as f64 * 1e-9,
-                accel_mps2: Vector3::from(c.accel_mps2),
-                gyro_rps: gyro_correction * Vector3::from(c.gyro_rps),
-                temp_c: if temp_valid { c.temp_c } else { f64::NAN },
-                raw_flags: c.raw_flags | (c.flags & corrected_flags::CLIPPED),
-            });
-            let aligned = s.flags & odometry_flags::ALIGNED != 0;
-            at_rest.push(aligned && s.flags & odometry_flags::ZERO_VELOCITY != 0);
-            velocity.push(Vector3::from(s.velocity_mps));
-        }
-        let (rests, innovations_mps) = find_rests(&samples, &at_rest, &velocity);
+    /// The evidence of `samples` (one per state) with each state's rest flag and velocity.
+    fn from_samples(samples: Vec<Sample>, at_rest: &[bool], velocity: &[Vector3<f64>]) -> Self {
+        let (rests, innovations_mps) = find_rests(&samples, at_rest, velocity);
         let intervals = rests
             .windows(2)
             .enumerate()

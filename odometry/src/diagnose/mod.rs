@@ -8,7 +8,9 @@
 //! remains still exceeds the noise and what the model carries ("unexplained"). The selection
 //! is written into a calibration file ([`correct`]) for a rerun. Saturation, which no
 //! calibration term models, is tested apart on the motions during which the gyro clipped
-//! ([`saturation`]).
+//! ([`saturation`]). An accelerometer lag behind the gyro shows in neither a rest nor a tilt:
+//! it is tested on each motion's velocity change from rest to rest ([`velocity`]), and the
+//! rerun applies it to the samples (`mems-odometry offline --accel-lag-s`, [`lag`]).
 //!
 //! Selection, as `mems-calibrate diagnose` selects (docs/diagnosis.md): forward, one candidate
 //! at a time, the one with the largest held-out gain over the current set, if that gain is
@@ -17,15 +19,18 @@
 //! carries for it ([`Settings::beyond_model`] times the configuration's 1-sigma on some axis,
 //! and as many of its own 1-sigma) and is plausible for a real part (within the bounds
 //! `calibrate::calibfile::plausibility::PLAUSIBLE` puts on a calibration file: a fit beyond
-//! them, such as a gyro scale of -100 %, is a candidate explaining something else). "Unexplained": the rows' chi-square after the selection,
-//! with each row's noise and the model's carried 1-sigma added in quadrature, has a p-value
-//! below [`Settings::unexplained_p`].
+//! them, such as a gyro scale of -100 %, is a candidate explaining something else).
+//! "Unexplained": the magnitude and tilt rows' chi-square after the selection, with each row's
+//! noise and the model's carried 1-sigma added in quadrature, has a p-value below
+//! [`Settings::unexplained_p`] (the velocity rows' own p-value is reported beside it).
 
 pub mod correct;
 pub mod evidence;
 pub mod fit;
+pub mod lag;
 pub mod rows;
 pub mod saturation;
+pub mod velocity;
 
 use nalgebra::Vector3;
 use serde::Serialize;
@@ -116,6 +121,11 @@ pub struct Diagnosis {
     pub magnitude: Residuals,
     /// Tilt rows (rad).
     pub tilt: Residuals,
+    /// Velocity rows (m/s; their noise includes what the model carries), with the main
+    /// selection's effects taken out before (and the lag, when found, after).
+    pub velocity: Residuals,
+    /// p-value of what remains on the velocity rows.
+    pub velocity_p: f64,
     /// Chi-square of what remains (noise and carried 1-sigma), its degrees of freedom and
     /// p-value.
     pub chi2: f64,
@@ -191,7 +201,7 @@ fn carried(c: Candidate, config: &OdometryConfig) -> [f64; 3] {
             .map(|b| b.hypot(config.gravity_mps2 * config.accel_residual_scale)),
         Candidate::AccelScale => [config.accel_residual_scale; 3],
         // The model has no such term; saturation is tested apart (`saturation`).
-        Candidate::AccelTempBias | Candidate::GyroSaturation => [0.0; 3],
+        Candidate::AccelTempBias | Candidate::GyroSaturation | Candidate::AccelLag => [0.0; 3],
         Candidate::GyroScale => std::array::from_fn(|i| config.gyro_correction_sigma[(i, i)]),
         // Parameter i acts on the pair of axes other than i (both entries of the pair).
         Candidate::GyroCrossAxis | Candidate::GyroRotation => std::array::from_fn(|i| {
@@ -214,6 +224,7 @@ fn plausible(f: &fit::Fit, slot: usize, config: &OdometryConfig, span_c: f64) ->
         // A rotation between the triads of one part is as small as its axes' misalignment.
         Candidate::GyroCrossAxis | Candidate::GyroRotation => bounds.cross_axis,
         Candidate::GyroSaturation => f64::INFINITY,
+        Candidate::AccelLag => lag::MAX_LAG_S,
     };
     (0..3).all(|i| f.theta[3 * slot + i].abs() <= limit)
 }
@@ -258,36 +269,30 @@ pub fn diagnose(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64, s: &Settin
     } else {
         ev.rests.first().map_or(f64::NAN, |r| r.temp_c)
     };
+    let usable = |r: &Row| r.sigma > 0.0 && r.r.is_finite();
     let (clipped, rows): (Vec<Row>, Vec<Row>) = rows::rows(ev, config, t_ref_c)
         .into_iter()
-        .filter(|r| r.sigma > 0.0 && r.r.is_finite())
+        .filter(usable)
         .partition(|r| r.kind == Kind::ClippedTilt);
+    let velocity: Vec<Row> = velocity::all(ev, config, t_ref_c)
+        .into_iter()
+        .filter(usable)
+        .collect();
     let span = temp_span(ev);
-    let correctable = Candidate::ALL.into_iter().filter(|c| c.is_correctable());
+    // The lag is tested apart, on the velocity rows (`lag_test`).
+    let correctable = Candidate::ALL
+        .into_iter()
+        .filter(|&c| c.is_correctable() && c != Candidate::AccelLag);
     let open: Vec<Candidate> = correctable
         .clone()
         .filter(|&c| testable(c, &rows, ev, s).is_none())
         .collect();
-    let scores = correctable
-        .map(|c| {
-            let untestable = testable(c, &rows, ev, s);
-            let f = untestable
-                .is_none()
-                .then(|| fit::fit(&rows, &[c]))
-                .flatten();
-            let (params, sigma) = f.as_ref().map_or(([0.0; 3], [0.0; 3]), |f| params(f, 0));
-            Score {
-                candidate: c,
-                untestable,
-                gain: f.as_ref().map_or(0.0, |f| f.gain),
-                params,
-                sigma,
-                beyond_model: f.as_ref().is_some_and(|f| beyond(f, 0, config, s)),
-                plausible: f.as_ref().is_some_and(|f| plausible(f, 0, config, span)),
-            }
-        })
+    let mut scores: Vec<Score> = correctable
+        .map(|c| score(c, &rows, testable(c, &rows, ev, s), config, s, span).0)
         .collect();
     let (chosen, fitted) = select(&rows, &open, config, s, span);
+    let lag = lag_test(&velocity, &chosen, fitted.as_ref(), config, s);
+    scores.push(lag.score.clone());
     let after = fitted.as_ref().map_or_else(
         || rows.iter().map(|r| r.r).collect(),
         |f| f.residuals.clone(),
@@ -299,12 +304,15 @@ pub fn diagnose(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64, s: &Settin
         .sum();
     let dof = rows.len().saturating_sub(3 * chosen.len()).max(1);
     let p = ChiSquared::new(dof as f64).map_or(1.0, |d| d.sf(chi2));
-    let selected = match &fitted {
+    let mut selected: Vec<(Candidate, [f64; 3])> = match &fitted {
         Some(f) => (0..chosen.len())
             .map(|k| (chosen[k], params(f, k).0))
             .collect(),
         None => Vec::new(),
     };
+    if lag.found {
+        selected.push((Candidate::AccelLag, lag.score.params));
+    }
     Diagnosis {
         rests: ev.rests.len(),
         motions: ev.intervals.len(),
@@ -319,11 +327,107 @@ pub fn diagnose(ev: &Evidence, config: &OdometryConfig, t_ref_c: f64, s: &Settin
         selected,
         magnitude: residuals(&rows, &after, Kind::Magnitude),
         tilt: residuals(&rows, &after, Kind::Tilt),
+        velocity: lag.residuals,
+        velocity_p: lag.p,
         chi2,
         dof,
         p,
         unexplained: p < s.unexplained_p,
         saturation: saturation::test(&clipped, &chosen, fitted.as_ref(), s),
+    }
+}
+
+/// Candidate `c` alone on `rows` (`untestable`: why it cannot be), and its fit.
+fn score(
+    c: Candidate,
+    rows: &[Row],
+    untestable: Option<String>,
+    config: &OdometryConfig,
+    s: &Settings,
+    span_c: f64,
+) -> (Score, Option<fit::Fit>) {
+    let f = untestable.is_none().then(|| fit::fit(rows, &[c])).flatten();
+    let (params, sigma) = f.as_ref().map_or(([0.0; 3], [0.0; 3]), |f| params(f, 0));
+    let score = Score {
+        candidate: c,
+        untestable,
+        gain: f.as_ref().map_or(0.0, |f| f.gain),
+        params,
+        sigma,
+        beyond_model: f.as_ref().is_some_and(|f| beyond(f, 0, config, s)),
+        plausible: f.as_ref().is_some_and(|f| plausible(f, 0, config, span_c)),
+    };
+    (score, f)
+}
+
+/// `all`'s rows with the effect of `chosen`, fitted as `fitted`, taken out of each residual.
+pub(crate) fn without(all: &[Row], chosen: &[Candidate], fitted: Option<&fit::Fit>) -> Vec<Row> {
+    let slot = |c: &Candidate| Candidate::ALL.iter().position(|a| a == c).unwrap_or(0);
+    all.iter()
+        .map(|r| {
+            let mut r = r.clone();
+            if let Some(f) = fitted {
+                for (k, c) in chosen.iter().enumerate() {
+                    let d = r.design[slot(c)];
+                    r.r -= (0..3).map(|i| d[i] * f.theta[3 * k + i]).sum::<f64>();
+                }
+            }
+            r
+        })
+        .collect()
+}
+
+/// What the lag test found.
+struct LagTest {
+    score: Score,
+    found: bool,
+    residuals: Residuals,
+    p: f64,
+}
+
+/// The accelerometer lag on the velocity rows `all`, with the main selection's effects
+/// (`chosen`, fitted as `fitted`) taken out: found when its held-out gain passes the
+/// threshold, it is beyond [`Settings::beyond_model`] of its own 1-sigma (the model carries
+/// no lag) and plausible (within `lag::MAX_LAG_S`). Tested apart so that the velocity rows,
+/// which every candidate acts on, leave the main selection as the rests and tilts make it.
+fn lag_test(
+    all: &[Row],
+    chosen: &[Candidate],
+    fitted: Option<&fit::Fit>,
+    config: &OdometryConfig,
+    s: &Settings,
+) -> LagTest {
+    let rows = without(all, chosen, fitted);
+    let mut groups: Vec<usize> = rows.iter().map(|r| r.group).collect();
+    groups.dedup();
+    // Two rows per parameter once a motion is held out, three rows a motion.
+    let needed = (3 * s.min_rows_per_param).div_ceil(3) + 1;
+    let untestable = (groups.len() < needed).then(|| {
+        format!(
+            "{} motions between rests without a clip (needs {needed})",
+            groups.len()
+        )
+    });
+    let c = Candidate::AccelLag;
+    let (score, f) = score(c, &rows, untestable, config, s, f64::NAN);
+    let found = f.as_ref().is_some_and(|f| {
+        f.gain > s.threshold && beyond(f, 0, config, s) && plausible(f, 0, config, f64::NAN)
+    });
+    let after: Vec<f64> = match (&f, found) {
+        (Some(f), true) => f.residuals.clone(),
+        _ => rows.iter().map(|r| r.r).collect(),
+    };
+    let chi2: f64 = rows
+        .iter()
+        .zip(&after)
+        .map(|(r, e)| e * e / (r.sigma.powi(2) + r.floor.powi(2)))
+        .sum();
+    let dof = rows.len().saturating_sub(usize::from(found)).max(1);
+    LagTest {
+        score,
+        found,
+        residuals: residuals(&rows, &after, Kind::Velocity),
+        p: ChiSquared::new(dof as f64).map_or(1.0, |d| d.sf(chi2)),
     }
 }
 

@@ -20,6 +20,9 @@
 //!   saturation candidate adds to each clipped sample, on its clipped axis and with its sign,
 //!   a rate `h` (rad/s per axis) the clip hid (`Evidence::carried`).
 //!
+//! - Velocity rows ([`Kind::Velocity`]) are formed apart (`super::velocity::all`), with the
+//!   same design per candidate.
+//!
 //! Each row's `sigma` is what the samples' own noise predicts (white and low-pass
 //! correlated, `evidence::mean_variance`; for tilt also the gyro's angle random walk and the
 //! uncertainty of its bias, taken from the longest rest, over the motion); `floor` what the odometry's model already carries for
@@ -50,11 +53,14 @@ pub enum Candidate {
     /// Gyro saturation: the rate each clipped sample hid beyond the range, rad/s per sensor
     /// axis (on the clipped rows only; no calibration term restores it).
     GyroSaturation,
+    /// The accelerometer's lag behind the gyro, s (one parameter, the first; the sample
+    /// stamped `t` holds the specific force at `t - lag`): seen in the velocity rows.
+    AccelLag,
 }
 
 impl Candidate {
     /// Every candidate, in report order.
-    pub const ALL: [Candidate; 7] = [
+    pub const ALL: [Candidate; 8] = [
         Candidate::AccelBias,
         Candidate::AccelScale,
         Candidate::AccelTempBias,
@@ -62,6 +68,7 @@ impl Candidate {
         Candidate::GyroCrossAxis,
         Candidate::GyroRotation,
         Candidate::GyroSaturation,
+        Candidate::AccelLag,
     ];
 
     /// The candidate's name in reports.
@@ -74,10 +81,17 @@ impl Candidate {
             Self::GyroCrossAxis => "gyro_cross_axis",
             Self::GyroRotation => "gyro_rotation",
             Self::GyroSaturation => "gyro_saturation",
+            Self::AccelLag => "accel_lag",
         }
     }
 
-    /// Whether a calibration file can model it (every candidate but saturation).
+    /// How many of its three parameter slots it uses (the lag one, the others three).
+    pub fn params(self) -> usize {
+        if self == Self::AccelLag { 1 } else { 3 }
+    }
+
+    /// Whether a rerun can model it (every candidate but saturation: the lag through the
+    /// rerun's samples, `offline --accel-lag-s`, the others through the calibration file).
     pub fn is_correctable(self) -> bool {
         self != Self::GyroSaturation
     }
@@ -113,6 +127,7 @@ impl Candidate {
             Self::AccelTempBias => "m/s^2/degC",
             Self::GyroRotation => "rad",
             Self::GyroSaturation => "rad/s",
+            Self::AccelLag => "s",
         }
     }
 }
@@ -126,6 +141,8 @@ pub enum Kind {
     Tilt,
     /// The tilt of a motion during which the gyro clipped.
     ClippedTilt,
+    /// A motion's velocity change from rest to rest ([`super::velocity`]).
+    Velocity,
 }
 
 /// One residual.
@@ -133,7 +150,7 @@ pub enum Kind {
 pub struct Row {
     /// What it measures.
     pub kind: Kind,
-    /// Rows that are left out together (one rest, one motion).
+    /// Rows that are left out together (one rest, one motion's tilt, one motion's velocity).
     pub group: usize,
     /// The residual (m/s^2 or rad).
     pub r: f64,
@@ -147,7 +164,7 @@ pub struct Row {
 }
 
 /// Step of the numerical derivative of a tilt row in a gyro parameter.
-const GYRO_STEP: f64 = 1e-3;
+pub(super) const GYRO_STEP: f64 = 1e-3;
 /// Step of the numerical derivative of a tilt row in a hidden rate, rad/s.
 const HIDDEN_STEP_RPS: f64 = 1e-2;
 
@@ -180,6 +197,7 @@ pub fn rows(evidence: &Evidence, config: &OdometryConfig, t_ref_c: f64) -> Vec<R
                 u,
                 u.component_mul(&u) * g,
                 u * dt,
+                Vector3::zeros(),
                 Vector3::zeros(),
                 Vector3::zeros(),
                 Vector3::zeros(),

@@ -56,20 +56,12 @@ fn rms(x: impl ExactSizeIterator<Item = f64>) -> f64 {
 /// (`chosen`, fitted as `fitted`) is first taken out.
 pub fn test(all: &[Row], chosen: &[Candidate], fitted: Option<&Fit>, s: &Settings) -> Saturation {
     let slot = |c: &Candidate| Candidate::ALL.iter().position(|a| a == c).unwrap_or(0);
-    let rows: Vec<Row> = all
+    let clipped: Vec<Row> = all
         .iter()
         .filter(|r| r.kind == Kind::ClippedTilt)
-        .map(|r| {
-            let mut r = r.clone();
-            if let Some(f) = fitted {
-                for (k, c) in chosen.iter().enumerate() {
-                    let d = r.design[slot(c)];
-                    r.r -= (0..3).map(|i| d[i] * f.theta[3 * k + i]).sum::<f64>();
-                }
-            }
-            r
-        })
+        .cloned()
         .collect();
+    let rows = super::without(&clipped, chosen, fitted);
     let mut groups: Vec<usize> = rows.iter().map(|r| r.group).collect();
     groups.dedup();
     // Axes that clipped: the parameters the rows determine.

@@ -7,6 +7,8 @@
 //!   the part's internal rate ([`SimSensor::set_dlpf`] applies them).
 //! - [`model`]: the error model (bias, scale, misalignment, nonlinearity, noise, temperature,
 //!   warm-up, turn-on repeatability, random walk, bias instability) and its presets.
+//! - [`mounting`]: an accelerometer lag behind the gyro and a lever arm from the scenario's
+//!   reference point ([`SimSensor::set_mounting`]).
 //! - [`scenario`]: six-position, N-orientation, static, ground-robot drive and foot-mounted
 //!   walk scenarios with exact truth.
 //! - [`vibration`]: the speed-dependent vibration of a driven robot.
@@ -23,6 +25,7 @@ pub mod defects;
 pub mod dlpf;
 pub mod hints;
 pub mod model;
+pub mod mounting;
 pub mod scenario;
 pub mod vibration;
 
@@ -31,6 +34,7 @@ use rand_chacha::ChaCha8Rng;
 use recording::Truth;
 
 use model::{G_MPS2, ModelError, Sensor, SensorModel};
+use mounting::Mounting;
 use scenario::Scenario;
 use vibration::{Vibration, VibrationModel};
 
@@ -131,6 +135,7 @@ pub struct SimSensor<S> {
     sensor: Sensor,
     vibration: Vibration,
     dlpf: Option<FilterRun>,
+    mounting: Mounting,
 }
 
 /// The running DLPF of a [`SimSensor`]: both triads' filters on their internal grids.
@@ -164,7 +169,14 @@ impl<S: Scenario> SimSensor<S> {
             sensor: Sensor::power_on(model, seed)?,
             vibration: Vibration::new(vibration, seed)?,
             dlpf: None,
+            mounting: Mounting::default(),
         })
+    }
+
+    /// Measures with `mounting`'s accelerometer lag and lever arm from now on (the state after
+    /// [`Self::new`]: none). The truth stays the scenario's reference point's.
+    pub fn set_mounting(&mut self, mounting: Mounting) {
+        self.mounting = mounting;
     }
 
     /// Applies a DLPF from now on (`None`, the state after [`Self::new`]: no filter).
@@ -220,9 +232,8 @@ impl<S: Scenario> SimSensor<S> {
             self.vibration
                 .step(t_s, rate_hz, self.scenario.wheel_speed_mps(t_s));
         let (dist_accel, dist_gyro) = self.scenario.disturbance(t_s);
-        let accel_g = std::array::from_fn(|i| {
-            (truth.specific_force_mps2[i] + vib_accel[i] + dist_accel[i]) / G_MPS2
-        });
+        let force = self.mounting.specific_force(&self.scenario, truth, t_s);
+        let accel_g = std::array::from_fn(|i| (force[i] + vib_accel[i] + dist_accel[i]) / G_MPS2);
         let gyro_dps = std::array::from_fn(|i| {
             truth.angular_rate_rps[i].to_degrees() + vib_gyro[i] + dist_gyro[i]
         });

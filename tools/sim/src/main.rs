@@ -13,6 +13,7 @@ use mems_sim::defects::{LogDefects, Logger, peak_speed_time};
 use mems_sim::dlpf::DlpfConfig;
 use mems_sim::hints::{HintParams, RestSource, drive_hints};
 use mems_sim::model::{Preset, SensorModel};
+use mems_sim::mounting::Mounting;
 use mems_sim::scenario::{
     Arm, ArmParams, Drive, DriveParams, PoseParams, PoseSession, Scenario, Walk, WalkParams,
     ns_from_s,
@@ -256,6 +257,15 @@ struct Common {
     /// speed of the first motion: a start in motion, no rest before it).
     #[arg(long, default_value = "0")]
     start_at: StartAt,
+    /// The accelerometer's samples lag the gyro's by this, s: each holds the specific force
+    /// this long before its time (`mems_sim::mounting`).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    accel_lag_s: f64,
+    /// The sensor sits this far from the point the scenario moves (the arm's tool point, the
+    /// robot's rear axle), sensor frame, m; the truth stays that point's (`mems_sim::mounting`).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_triple, default_value = "0,0,0",
+          allow_hyphen_values = true)]
+    lever_arm_m: [f64; 3],
     #[command(flatten)]
     log: LogArgs,
 }
@@ -472,6 +482,18 @@ fn rotation_deg([r, p, y]: [f64; 3]) -> UnitQuaternion<f64> {
 }
 
 impl Common {
+    /// The mounting effects of `--accel-lag-s` and `--lever-arm-m`, checked.
+    fn mounting(&self) -> Result<Mounting> {
+        let mounting = Mounting {
+            accel_lag_s: self.accel_lag_s,
+            lever_arm_m: self.lever_arm_m,
+        };
+        mounting
+            .validate()
+            .map_err(|e| anyhow::anyhow!("--accel-lag-s / --lever-arm-m: {e}"))?;
+        Ok(mounting)
+    }
+
     /// The error model: the preset or the TOML file, with the noise overrides applied.
     fn sensor_model(&self) -> Result<SensorModel> {
         let mut model = match &self.model {
@@ -723,8 +745,10 @@ fn simulate(
         .any()
         .then(|| Logger::new(&defects, rate, common.seed))
         .transpose()?;
+    let mounting = common.mounting()?;
     let mut sim = SimSensor::new(scenario, &model, vibration, common.seed)?;
     sim.set_dlpf(dlpf.map(DlpfGrid::from_power_on));
+    sim.set_mounting(mounting);
     if !common.force {
         mems_files::refuse_existing(&common.out, Some("--out"))?;
     }

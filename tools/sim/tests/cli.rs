@@ -351,6 +351,10 @@ fn bad_input_gets_a_clear_error() {
     assert!(e.contains("initial_rest_s"), "{e}");
     let e = fails(&["static", "--duration", "1", "--rate", "0", "--out", o]);
     assert!(e.contains("--rate"), "{e}");
+    let e = fails(&["arm", "--accel-lag-s", "0.7", "--out", o]);
+    assert!(e.contains("--accel-lag-s") && e.contains("0.7"), "{e}");
+    let e = fails(&["arm", "--lever-arm-m", "-20,0,0", "--out", o]);
+    assert!(e.contains("--lever-arm-m") && e.contains("-20"), "{e}");
     let e = fails(&[
         "static",
         "--duration",

@@ -15,8 +15,10 @@ use std::process::Command;
 
 use anyhow::{Context, Result, anyhow, bail};
 use calibrate::calibfile::CalibrationFile;
+use ipc_types::{CorrectedImuSample, OdometryState};
 use nalgebra::Vector3;
-use odometry::diagnose::{self, Settings, evidence::Evidence};
+use odometry::diagnose::{self, Settings, evidence::Evidence, evidence::Gatherer, rows::Candidate};
+use recording::mcap::run::RunReader;
 use serde_json::{Value, json};
 
 use crate::load::odometry_config;
@@ -38,6 +40,10 @@ pub struct DiagnoseArgs {
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
+    /// The accelerometer lag behind the gyro the run is known to have, s (declared: removed
+    /// from the samples of both runs, `offline --accel-lag-s`; a fitted `accel_lag` adds to it).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    accel_lag_s: f64,
     /// Further `mems-odometry offline` options for both runs (after `--`: `--profile arm`).
     #[arg(last = true)]
     offline: Vec<OsString>,
@@ -95,11 +101,11 @@ impl Run {
     }
 }
 
-/// Runs `mems-odometry offline` on `args.run` with `calib` (none: the identity), reading its
-/// `--out` recording back.
+/// Runs `mems-odometry offline` on `args.run` with `calib` (none: the identity) and the
+/// accelerometer lag `lag_s` removed, reading its `--out` recording back.
 fn offline(
     args: &DiagnoseArgs,
-    calib: Option<&Path>,
+    (calib, lag_s): (Option<&Path>, f64),
     dir: &Path,
     name: &str,
     config: &odometry::config::OdometryConfig,
@@ -114,6 +120,9 @@ fn offline(
         .arg(&out);
     if let Some(c) = calib {
         cmd.arg("--calib").arg(c);
+    }
+    if lag_s != 0.0 {
+        cmd.arg(format!("--accel-lag-s={lag_s}"));
     }
     cmd.args(&args.offline);
     let output = cmd.output().context("cannot run mems-odometry offline")?;
@@ -134,13 +143,32 @@ fn offline(
     }
     let json: Value = serde_json::from_slice(&output.stdout)
         .with_context(|| format!("{name} run: offline printed no JSON"))?;
-    let contents = recording::mcap::read_all(&out)?;
-    let evidence = Evidence::gather(
-        &contents.corrected,
-        &contents.odometry,
-        &config.gyro_correction,
-    );
+    let evidence = read_evidence(&out, &config.gyro_correction)?;
     Ok(Run { json, evidence })
+}
+
+/// The evidence of the run recorded at `path`, read message by message: what is held is one
+/// chunk of the file and one sample per state, however long the run.
+fn read_evidence(path: &Path, gyro_correction: &nalgebra::Matrix3<f64>) -> Result<Evidence> {
+    let mut reader = RunReader::one(path)?;
+    let mut gatherer = Gatherer::new(gyro_correction);
+    while let Some(message) = reader.next() {
+        let message = message?;
+        if let Some(c) = message.decode::<CorrectedImuSample>() {
+            gatherer.corrected(c?);
+        } else if let Some(s) = message.decode::<OdometryState>() {
+            gatherer.state(&s?);
+        }
+    }
+    Ok(gatherer.finish())
+}
+
+/// The accelerometer lag the diagnosis selected, s (0 if none).
+fn fitted_lag(d: &diagnose::Diagnosis) -> f64 {
+    d.selected
+        .iter()
+        .find(|(c, _)| *c == Candidate::AccelLag)
+        .map_or(0.0, |(_, p)| p[0])
 }
 
 /// Runs the diagnosis and prints it.
@@ -156,7 +184,8 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
     };
     let dir = mems_files::private_dir("mems-diagnose")?;
     let config = odometry_config(&file);
-    let before = offline(&args, args.calib.as_deref(), dir.path(), "before", &config)?;
+    let declared = (args.calib.as_deref(), args.accel_lag_s);
+    let before = offline(&args, declared, dir.path(), "before", &config)?;
     let t_ref = file.temperature.reference_c.unwrap_or(f64::NAN);
     let d = diagnose::diagnose(&before.evidence, &config, t_ref, &Settings::default());
     let after = if d.selected.is_empty() {
@@ -168,7 +197,8 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
             .save(&path)
             .map_err(|e| anyhow!("cannot write the corrected calibration: {e}"))?;
         let config = odometry_config(&corrected);
-        let run = offline(&args, Some(&path), dir.path(), "after", &config)?;
+        let lag = args.accel_lag_s + fitted_lag(&d);
+        let run = offline(&args, (Some(&path), lag), dir.path(), "after", &config)?;
         let again = diagnose::diagnose(&run.evidence, &config, d.t_ref_c, &Settings::default());
         Some((run, again))
     };

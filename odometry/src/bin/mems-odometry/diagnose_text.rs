@@ -17,7 +17,15 @@ fn candidate(c: &Score) -> String {
     if let Some(why) = &c.untestable {
         return format!("{name:<16} not testable: {why}");
     }
-    let p = |v: &[f64; 3], prec: usize| v.map(|x| format!("{x:.prec$e}")).join(", ");
+    // The lag uses one of the three slots.
+    let used = c.candidate.params();
+    let p = |v: &[f64; 3], prec: usize| {
+        v[..used]
+            .iter()
+            .map(|x| format!("{x:.prec$e}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     format!(
         "{name:<16} score {:>10.1}  params [{}] +- [{}] {}  {} model's 1-sigma{}",
         c.gain,
@@ -97,6 +105,11 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
         d.tilt.rms_before * 1e3,
         d.tilt.rms_after * 1e3,
         d.tilt.rms_noise * 1e3
+    );
+    let _ = writeln!(
+        s,
+        "  velocity rows  {:>4}: rms {:.4} m/s before, {:.4} after the fit; noise and the model's 1-sigma predict {:.4}",
+        d.velocity.rows, d.velocity.rms_before, d.velocity.rms_after, d.velocity.rms_noise
     );
     for c in &d.scores {
         let _ = writeln!(s, "    {}", candidate(c));

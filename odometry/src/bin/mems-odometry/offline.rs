@@ -19,6 +19,7 @@ use anyhow::{Result, anyhow};
 use calibrate::stage::{CalibrationStage, RefineConfig};
 use ipc_types::odometry_flags;
 use mems_stage::{Chain, Either};
+use odometry::diagnose::lag::LagShift;
 use odometry::profile::Profile;
 use odometry::session::{NoGyro, OdometrySession};
 use odometry::uncalibrated::AccelEstimate;
@@ -67,6 +68,11 @@ pub struct OfflineArgs {
     /// Overwrite the recording at `--out`.
     #[arg(long, requires = "out")]
     force: bool,
+    /// The accelerometer's samples lag the gyro's by this, s (what `mems-odometry diagnose`
+    /// finds as `accel_lag`): each sample's specific force is read this much later, between
+    /// samples (`odometry::diagnose::lag`), before the calibration stage.
+    #[arg(long, allow_negative_numbers = true)]
+    accel_lag_s: Option<f64>,
 }
 
 /// Runs the pipeline and prints the result. A part whose accelerometer the run found
@@ -80,7 +86,10 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     let is_mcap = recording::mcap::has_magic(&args.input)?;
     let choice = platform::choose(args.stage.profile, &args.input, is_mcap)?;
     let (file, detector) = args.stage.load(choice.profile)?;
-    let Some(first) = pass(&args, &choice, &file, detector, Pass::First)? else {
+    let Some(Early {
+        estimate: first, ..
+    }) = pass(&args, &choice, &file, detector, Pass::First)?
+    else {
         return Ok(());
     };
     let removed = match &first.per_axis {
@@ -101,9 +110,10 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     match pass(&args, &choice, &removed, detector, Pass::Second(&first)) {
         Ok(None) => return Ok(()),
         Ok(Some(second)) => tracing::warn!(
-            "second pass: {second}: further than {:.2} m/s^2 from the first pass's, which is no \
+            "second pass: {}: further than {:.2} m/s^2 from the first pass's, which is no \
              estimate; the result is the first pass's",
-            odometry::config::UncalibratedAccel::default().bias_sigma_mps2
+            second.estimate,
+            second.limit_mps2
         ),
         // The samples with that bias removed are no recording of this part (a first pass that
         // diverged can estimate tens of m/s^2): the same evidence.
@@ -113,6 +123,13 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         ),
     }
     pass(&args, &choice, &file, detector, Pass::Only).map(|_| ())
+}
+
+/// A run that ended early: what the filter estimated of the accelerometer, and how far the
+/// bias may move between passes (the run's configured `uncalibrated.bias_sigma_mps2`, m/s^2).
+struct Early {
+    estimate: AccelEstimate,
+    limit_mps2: f64,
 }
 
 /// Which run of the recording [`pass`] makes.
@@ -156,7 +173,7 @@ fn pass(
     file: &calibrate::calibfile::CalibrationFile,
     detector: calibrate::zero_state::DetectorConfig,
     which: Pass<'_>,
-) -> Result<Option<AccelEstimate>> {
+) -> Result<Option<Early>> {
     let (source, repairs, ranges) = Source::open(args)?;
     let calibration = CalibrationStage::new(file, detector, RefineConfig::default())
         .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
@@ -189,7 +206,12 @@ fn pass(
         second: session,
     };
     let out = Out::for_input(args.out.as_deref(), &args.input, args.force)?;
-    let mut feed = Feed::new(source, out, ranges);
+    let shift = args
+        .accel_lag_s
+        .map(LagShift::new)
+        .transpose()
+        .map_err(|e| anyhow!("--accel-lag-s: {e}"))?;
+    let mut feed = Feed::new(source, out, ranges, shift);
     let mut summary = Summary::default();
     let progress = mems_log::progress::bar(None, "mems-odometry offline", "states");
     let ran =
@@ -205,7 +227,10 @@ fn pass(
     progress.finish_and_clear();
     let estimate = chain.second.stage().accel_estimate();
     if let Some(e) = estimate.filter(|e| ran.is_ok() && which.ends_early(e, &config)) {
-        return Ok(Some(e));
+        return Ok(Some(Early {
+            estimate: e,
+            limit_mps2: config.uncalibrated.bias_sigma_mps2,
+        }));
     }
     let mut read = Read::new(&args.input, &feed, repairs, config.align_s, *choice);
     if read.holes.count == 0 {

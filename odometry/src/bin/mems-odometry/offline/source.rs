@@ -3,6 +3,7 @@
 //! received them (`odometry::arrival`), with the truth and the `--out` recording they feed
 //! ([`Feed`]).
 
+use odometry::diagnose::lag::LagShift;
 use std::path::Path;
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
@@ -183,11 +184,14 @@ pub struct Feed {
     ended: bool,
     /// The ranges raw samples are marked clipped at as they leave.
     ranges: Ranges,
+    /// The accelerometer lag removed from the raw samples as they are read (`--accel-lag-s`).
+    shift: Option<LagShift>,
 }
 
 impl Feed {
-    /// Reads `source`, writing to `out`, marking raw samples clipped at `ranges`.
-    pub fn new(source: Source, out: Option<Out>, ranges: Ranges) -> Self {
+    /// Reads `source`, writing to `out`, marking raw samples clipped at `ranges`, removing the
+    /// accelerometer lag `shift` from them.
+    pub fn new(source: Source, out: Option<Out>, ranges: Ranges, shift: Option<LagShift>) -> Self {
         Self {
             source,
             arrival: Arrival::new(),
@@ -196,6 +200,7 @@ impl Feed {
             first_ns: None,
             ended: false,
             ranges,
+            shift,
         }
     }
 
@@ -215,12 +220,26 @@ impl Feed {
             match self.source.next() {
                 None => {
                     self.ended = true;
+                    for raw in self
+                        .shift
+                        .as_mut()
+                        .map(LagShift::finish)
+                        .unwrap_or_default()
+                    {
+                        self.arrival.raw(raw);
+                    }
                     self.arrival.end();
                 }
                 Some(Err(e)) => return Some(Err(e.into())),
                 Some(Ok(Item::Raw(raw))) => {
                     self.first_ns.get_or_insert(raw.stamps.sample_ns);
-                    self.arrival.raw(raw);
+                    match self.shift.as_mut() {
+                        Some(shift) => shift
+                            .push(raw)
+                            .into_iter()
+                            .for_each(|r| self.arrival.raw(r)),
+                        None => self.arrival.raw(raw),
+                    }
                 }
                 Some(Ok(Item::Hint(h))) => {
                     if let Some(out) = self.out.as_mut() {
