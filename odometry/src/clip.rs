@@ -39,17 +39,31 @@
 //!    among the samples are bridged again (`crate::untrusted`). The rest's updates follow as
 //!    usual.
 //!
+//! 5. The rest measures tilt and velocity, not heading. The velocity sees the heading only
+//!    through the swing's horizontal accelerations, which the clip's unknown shape corrupts: on
+//!    the corpus's walks clipped at +-250 deg/s, compared with the same walks unclipped, the
+//!    reconstructed steps are as long as the true ones (within about 1 cm on average) and the
+//!    end error is the heading the motions with a clipped yaw-ish axis turned wrongly
+//!    (docs/input-checks.md). So the heading each motion's unknowns turn (finite differences
+//!    of the same prediction: the rotation about the vertical, navigation frame, rad per
+//!    unknown) is given the variance those unknowns keep when known from their prior and the
+//!    rest's tilt alone, `h^T (I + J_t^T J_t)^-1 h` (whitened: `J_t` the tilt rows of the
+//!    Jacobian, `h` the heading per unknown). That heading error turns the path after the rest
+//!    about the rest's position: the reported position 1-sigma carries it
+//!    (`ClipRepair::unseen_heading_variance`, the variance `s psi^2 |p - p_rest|^2` across the
+//!    path, summed over the motions as independent), as a consider parameter: the filter
+//!    does not estimate it (given to the filter's heading instead, the rests' zero-velocity
+//!    updates took it for a heading they measure and the corpus's walks ended further off).
+//!
 //! Accelerometer clips are only bridged: reconstructed this way (a heel strike's spike,
 //! measured by the rest's zero velocity) the corpus's walks clipped at +-2 g ended no closer.
-//! The rest measures tilt and velocity, not heading: what the reconstruction gets wrong about
-//! the heading the unseen rotation turned stays (docs/input-checks.md measures both).
 //!
 //! A motion longer than the ring, with more than [`MAX_RUNS`] runs, or during which the filter
 //! took anything but predictions (a speed hint, the wheeled constraint, a gap, an implausible
 //! sample) keeps the bridging.
 
 use ipc_types::raw_flags;
-use nalgebra::{SMatrix, SVector, Vector3};
+use nalgebra::{SMatrix, SVector, UnitQuaternion, Vector3};
 
 use crate::config::OdometryConfig;
 use crate::eskf::{Eskf, Imu, Nominal};
@@ -183,6 +197,10 @@ pub(crate) struct ClipRepair {
     runs: [Run; MAX_RUNS],
     n_runs: usize,
     stats: ClipStats,
+    /// The heading the reconstructed motions may have got wrong (module documentation, item 5).
+    unseen: UnseenHeading,
+    /// The heading variance the last solve left, rad^2.
+    heading_var: f64,
 }
 
 impl Default for ClipRepair {
@@ -198,6 +216,8 @@ impl Default for ClipRepair {
             runs: [Run::default(); MAX_RUNS],
             n_runs: 0,
             stats: ClipStats::default(),
+            unseen: UnseenHeading::default(),
+            heading_var: 0.0,
         }
     }
 }
@@ -215,6 +235,14 @@ impl ClipRepair {
         self.runs = other.runs;
         self.n_runs = other.n_runs;
         self.stats = other.stats;
+        self.unseen = other.unseen;
+        self.heading_var = other.heading_var;
+    }
+
+    /// The variance (m^2, navigation frame x, y) that the heading errors of the reconstructed
+    /// motions so far add to the position `p` (module documentation, item 5).
+    pub fn unseen_heading_variance(&self, p: &Vector3<f64>) -> [f64; 2] {
+        self.unseen.position_variance(p)
     }
 
     /// What it did so far.
@@ -392,23 +420,30 @@ impl ClipRepair {
     }
 
     /// The whitened residuals at the rest of the motion from `start` with the runs' unknowns
-    /// `d`: tilt (the rest sample's specific force, rotated, must point up) and velocity.
-    fn residuals(&self, start: &Eskf, d: &[f64; MAX_RUNS]) -> SVector<f64, MEAS> {
+    /// `d`: tilt (the rest sample's specific force, rotated, must point up) and velocity; and
+    /// the attitude there.
+    fn residuals(
+        &self,
+        start: &Eskf,
+        d: &[f64; MAX_RUNS],
+    ) -> (SVector<f64, MEAS>, UnitQuaternion<f64>) {
         let entries = &self.seq[NEIGHBOURS..self.len];
         let x: Nominal = start.coast(entries.iter().map(|e| (e.with(d), e.dt)));
         let rest = entries.last().expect("the rest sample is recorded");
         let up = (x.q * (rest.m.f - x.b_a)).normalize();
-        SVector::from([
+        let r = SVector::from([
             up.x / TILT_SIGMA_RAD,
             up.y / TILT_SIGMA_RAD,
             x.v.x / VELOCITY_SIGMA_MPS,
             x.v.y / VELOCITY_SIGMA_MPS,
             x.v.z / VELOCITY_SIGMA_MPS,
-        ])
+        ]);
+        (r, x.q)
     }
 
     /// Solves for the runs' unknowns (module documentation, item 3), adds them to the
-    /// reconstruction and keeps their posterior 1-sigma.
+    /// reconstruction and keeps their posterior 1-sigma and the heading variance the rest's tilt
+    /// leaves (item 5).
     fn solve(&mut self, start: &Eskf) {
         let n = self.n_runs;
         let sigma: [f64; MAX_RUNS] =
@@ -422,15 +457,20 @@ impl ClipRepair {
         let cost = |r: &SVector<f64, MEAS>, z: &SVector<f64, MAX_RUNS>| {
             r.norm_squared() + z.norm_squared()
         };
-        let mut r0 = self.residuals(start, &d_of(&z));
+        let (mut r0, mut q0) = self.residuals(start, &d_of(&z));
+        self.heading_var = 0.0;
         for _ in 0..GAUSS_NEWTON_STEPS {
             let mut jac = SMatrix::<f64, MEAS, MAX_RUNS>::zeros();
+            // Heading per unit of z_j: the rotation about the vertical (navigation frame).
+            let mut heading = SVector::<f64, MAX_RUNS>::zeros();
             for j in 0..n {
                 let mut zj = z;
                 zj[j] += 1e-3;
-                let rj = self.residuals(start, &d_of(&zj));
+                let (rj, qj) = self.residuals(start, &d_of(&zj));
                 jac.set_column(j, &((rj - r0) / 1e-3));
+                heading[j] = (qj * q0.inverse()).scaled_axis().z / 1e-3;
             }
+            self.heading_var = tilt_only_variance(&jac, &heading);
             let a = jac.transpose() * jac + SMatrix::<f64, MAX_RUNS, MAX_RUNS>::identity();
             let Some(a_inv) = a.try_inverse() else {
                 return;
@@ -442,19 +482,19 @@ impl ClipRepair {
             let before = cost(&r0, &z);
             let accepted = loop {
                 let zn = z + step * scale;
-                let rn = self.residuals(start, &d_of(&zn));
+                let (rn, qn) = self.residuals(start, &d_of(&zn));
                 if cost(&rn, &zn) < before {
-                    break Some((zn, rn));
+                    break Some((zn, rn, qn));
                 }
                 scale /= 2.0;
                 if scale < 1.0 / 16.0 {
                     break None;
                 }
             };
-            let Some((zn, rn)) = accepted else {
+            let Some((zn, rn, qn)) = accepted else {
                 break;
             };
-            (z, r0) = (zn, rn);
+            (z, r0, q0) = (zn, rn, qn);
         }
         let d = d_of(&z);
         for e in &mut self.seq[NEIGHBOURS..self.len] {
@@ -466,9 +506,9 @@ impl ClipRepair {
     }
 
     /// Predicts the motion again on `kf` (restored to its start) with the reconstructed
-    /// readings, widening for what they may still miss (module documentation, item 4); an
-    /// accelerometer clip among them is bridged again (`crate::untrusted`).
-    fn repredict(&self, kf: &mut Eskf, cfg: &OdometryConfig) {
+    /// readings, widening for what they may still miss (module documentation, items 4 and 5);
+    /// an accelerometer clip among them is bridged again (`crate::untrusted`).
+    fn repredict(&mut self, kf: &mut Eskf, cfg: &OdometryConfig) {
         let mut sum = [0.0f64; MAX_RUNS];
         let mut accel = Untrusted::default();
         for e in &self.seq[NEIGHBOURS..self.len] {
@@ -480,18 +520,63 @@ impl ClipRepair {
             accel.widen(kf, &e.m, e.dt, verdict, cfg);
             let mut var = [0.0; 6];
             for (axis, var) in var.iter_mut().enumerate() {
-                let Some(run) = self.runs[..self.n_runs].get(usize::from(e.run[axis])) else {
+                let j = usize::from(e.run[axis]);
+                let Some(run) = self.runs[..self.n_runs].get(j) else {
                     continue;
                 };
-                let j = usize::from(e.run[axis]);
+                let share = e.shape[axis].abs() * e.dt;
                 let before = sum[j];
-                sum[j] += run.sigma * e.shape[axis].abs() * e.dt;
+                sum[j] += run.sigma * share;
                 *var = sum[j].powi(2) - before.powi(2);
             }
             if var.iter().any(|v| *v > 0.0) {
                 kf.clipped(&var);
             }
         }
+        self.unseen.add(self.heading_var, &kf.x.p);
+    }
+}
+
+/// The variance (rad^2) of the heading `heading^T z` (`heading` per whitened unknown) with
+/// the unknowns `z` known from their prior (identity) and the rest's tilt alone (the first two
+/// rows of the whitened Jacobian `jac`): `heading^T (I + J_t^T J_t)^-1 heading`; the prior's
+/// `heading^T heading` where that is singular.
+fn tilt_only_variance(jac: &SMatrix<f64, MEAS, MAX_RUNS>, heading: &SVector<f64, MAX_RUNS>) -> f64 {
+    let tilt = jac.fixed_rows::<2>(0);
+    let info = tilt.transpose() * tilt + SMatrix::<f64, MAX_RUNS, MAX_RUNS>::identity();
+    info.try_inverse().map_or(heading.norm_squared(), |c| {
+        (heading.transpose() * c * heading)[0]
+    })
+}
+
+/// Heading errors left by reconstructed motions, independent from motion to motion, each
+/// turning the path after it about the position where it was made: motion `k` with heading
+/// variance `s_k` (rad^2) at horizontal position `p_k` moves a later position `p` by
+/// `d psi_k z x (p - p_k)`. Kept as the sums `sum s_k`, `sum s_k p_k` and `sum s_k p_k^2` (per
+/// axis), so the variance at any `p` is a few products (no allocation).
+#[derive(Debug, Clone, Copy, Default)]
+struct UnseenHeading {
+    s0: f64,
+    s1: [f64; 2],
+    s2: [f64; 2],
+}
+
+impl UnseenHeading {
+    /// Adds a motion's heading variance `var` (rad^2), made at position `p` (m).
+    fn add(&mut self, var: f64, p: &Vector3<f64>) {
+        self.s0 += var;
+        for i in 0..2 {
+            self.s1[i] += var * p[i];
+            self.s2[i] += var * p[i] * p[i];
+        }
+    }
+
+    /// The variance (m^2) it adds to the x and y of position `p`: `sum s_k (p_y - p_k,y)^2` to
+    /// x, `sum s_k (p_x - p_k,x)^2` to y.
+    fn position_variance(&self, p: &Vector3<f64>) -> [f64; 2] {
+        let along =
+            |i: usize| (self.s0 * p[i] * p[i] - 2.0 * p[i] * self.s1[i] + self.s2[i]).max(0.0);
+        [along(1), along(0)]
     }
 }
 
@@ -545,12 +630,12 @@ mod tests {
         assert!(line(&[(0.0, 1.0)], 0.0).is_none());
     }
 
-    /// A sensor held in place is pitched up by a rate pulse that peaks at 8 rad/s, clipped at
-    /// 250 deg/s (4.36 rad/s), then turned back level slowly (unclipped) and left at rest. The
-    /// clipped reading hides about 0.44 rad of the pulse; after the rest sample the repaired filter
-    /// is level (as the truth), the one that integrated the readings as measured is not.
-    #[test]
-    fn the_rest_after_a_clipped_pulse_gives_back_what_it_hid() {
+    /// A sensor held level in place is turned about its axis `axis` (0 x, 2 z) by a rate pulse
+    /// that peaks at 8 rad/s, clipped at 250 deg/s (4.36 rad/s), then turned back slowly
+    /// (unclipped) and left at rest; the first rest sample ends the motion. Returns the
+    /// repair, the filter repaired, the filter that integrated the readings as measured and
+    /// the true angle at the end (rad, a few mrad from 0: the pulse's trapezoid sums).
+    fn clipped_pulse(axis: usize) -> (ClipRepair, Eskf, Eskf, f64) {
         let cfg = Profile::Pedestrian.odometry(OdometryConfig::mpu9250(G));
         let noise = NoiseModel {
             accel_noise_density: 1e-3,
@@ -585,7 +670,8 @@ mod tests {
                 0.0
             }
         };
-        let mut pitch = 0.0;
+        let about = Vector3::ith(axis, 1.0);
+        let mut angle = 0.0;
         let mut repaired = Eskf::new(x, cov, G, noise, level);
         let mut measured = repaired.clone();
         let mut clip = ClipRepair::default();
@@ -596,16 +682,16 @@ mod tests {
         for k in 1..=steps {
             let t = k as f64 * dt;
             let w_true = rate(t);
-            pitch += 0.5 * (rate(t - dt) + w_true) * dt;
-            let f = UnitQuaternion::from_scaled_axis(Vector3::x() * pitch).inverse() * up;
+            angle += 0.5 * (rate(t - dt) + w_true) * dt;
+            let f = UnitQuaternion::from_scaled_axis(about * angle).inverse() * up;
             let clipped = if w_true.abs() > limit {
-                raw_flags::saturated_axis(3)
+                raw_flags::saturated_axis(3 + axis)
             } else {
                 0
             };
             let m = Imu {
                 f,
-                w: Vector3::new(w_true.clamp(-limit, limit), 0.0, 0.0),
+                w: about * w_true.clamp(-limit, limit),
             };
             let rest = k == steps;
             clip.before_predict(&repaired, clipped);
@@ -613,15 +699,63 @@ mod tests {
             measured.predict(m, dt);
             clip.after_predict(&mut repaired, &m, dt, clipped, rest, &cfg);
         }
-        // The truth ends within a few mrad of level (the pulse's trapezoid sums).
-        assert!(pitch.abs() < 0.005, "{pitch}");
-        let tilt = |kf: &Eskf| (kf.x.q * Vector3::z()).xy().norm();
+        assert!(angle.abs() < 0.005, "{angle}");
         assert_eq!(clip.stats().reconstructed, 1);
+        (clip, repaired, measured, angle)
+    }
+
+    /// Pitched about x (horizontal when level): the clipped reading hides about 0.44 rad of
+    /// the pulse; after the rest sample the repaired filter is level (as the truth), the one
+    /// that integrated the readings as measured is not. The tilt measured the rotation, so the
+    /// heading keeps almost none of its prior.
+    #[test]
+    fn the_rest_after_a_clipped_pulse_gives_back_what_it_hid() {
+        let (clip, repaired, measured, pitch) = clipped_pulse(0);
+        let tilt = |kf: &Eskf| (kf.x.q * Vector3::z()).xy().norm();
         assert!(tilt(&measured) > 0.3, "as measured: {}", tilt(&measured));
         assert!(
             (tilt(&repaired) - pitch.abs()).abs() < 0.02,
             "repaired: {} against {pitch}",
             tilt(&repaired)
         );
+        let prior = clip.runs[0].prior_sigma;
+        assert!(
+            clip.unseen.s0 < 0.01 * prior * prior,
+            "heading variance {} against the prior's {}",
+            clip.unseen.s0,
+            prior * prior
+        );
+    }
+
+    /// Turned about z (vertical when level): the rest's tilt and zero velocity cannot see the
+    /// unknown, so the heading keeps its prior, and the position 1-sigma grows with the
+    /// distance from the rest where it was made, across the path.
+    #[test]
+    fn a_clipped_turn_about_the_vertical_keeps_its_prior_in_the_heading() {
+        let (clip, repaired, measured, _) = clipped_pulse(2);
+        let yaw = |kf: &Eskf| (kf.x.q * Vector3::x()).y.atan2((kf.x.q * Vector3::x()).x);
+        // The prior puts back some of what the clip hid (the curve through its sides).
+        assert!(yaw(&measured) < -0.3, "as measured: {}", yaw(&measured));
+        assert!(
+            yaw(&repaired) > yaw(&measured),
+            "repaired: {}",
+            yaw(&repaired)
+        );
+        let prior = clip.runs[0].prior_sigma;
+        let var = clip.unseen.s0;
+        assert!(
+            (var / (prior * prior) - 1.0).abs() < 0.1,
+            "heading variance {var} against the prior's {}",
+            prior * prior
+        );
+        let at = |x: f64, y: f64| clip.unseen_heading_variance(&Vector3::new(x, y, 0.0));
+        let here = repaired.x.p;
+        let [sx, sy] = at(here.x + 10.0, here.y);
+        assert!(
+            sx < 1e-9 && (sy / (100.0 * var) - 1.0).abs() < 1e-6,
+            "{sx} {sy}"
+        );
+        let [sx, _] = at(here.x, here.y - 5.0);
+        assert!((sx / (25.0 * var) - 1.0).abs() < 1e-6, "{sx}");
     }
 }

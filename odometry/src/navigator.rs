@@ -826,6 +826,14 @@ impl Navigator {
         }
     }
 
+    /// The filter's position 1-sigma with the heading the clip reconstruction could not
+    /// measure (`ClipRepair::unseen_heading_variance`) added, m.
+    fn position_sigma(&self, kf: &Eskf) -> Vector3<f64> {
+        let [x, y] = self.clip.unseen_heading_variance(&kf.x.p);
+        let s = kf.position_sigma();
+        Vector3::new((s.x * s.x + x).sqrt(), (s.y * s.y + y).sqrt(), s.z)
+    }
+
     fn state(&self, s: &CorrectedImuSample, rest: bool, hs: HintSample) -> OdometryState {
         let kf = self.kf.as_ref().expect("state() is called once aligned");
         let q = kf.x.q;
@@ -838,7 +846,7 @@ impl Navigator {
             stamps: s.stamps,
             seq: s.seq,
             position_m: kf.x.p.into(),
-            position_sigma_m: kf.position_sigma().into(),
+            position_sigma_m: self.position_sigma(kf).into(),
             velocity_mps: kf.x.v.into(),
             velocity_sigma_mps: kf.velocity_sigma().into(),
             gravity_sensor_mps2: g_s.into(),

@@ -123,7 +123,14 @@ fn a_walk_clipped_at_250_dps_is_flagged_counted_and_reconstructed() {
     // their loss (but does not cover the error of a gyroscope clipped at every step).
     let (trusted, _) = offline(&clipped, &["--profile", "pedestrian", "--trust-clipped"]);
     assert_eq!(trusted["clipped_samples"], flagged);
-    let (bridged, _) = offline(&clipped, &["--profile", "pedestrian", "--bridge-clipped"]);
+    let (bridged, bridged_stderr) =
+        offline(&clipped, &["--profile", "pedestrian", "--bridge-clipped"]);
+    assert!(
+        bridged_stderr.contains("not reconstructed (--bridge-clipped)")
+            && !bridged_stderr.contains("reconstructed at the rest"),
+        "{bridged_stderr}"
+    );
+    assert!(stderr.contains("reconstructed at the rest"), "{stderr}");
     let (bs, ts) = (vec3(&bridged["sigma_m"]), vec3(&trusted["sigma_m"]));
     assert!(
         horizontal(bs) > 2.0 * horizontal(ts),

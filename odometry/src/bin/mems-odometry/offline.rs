@@ -240,7 +240,13 @@ fn pass(
     read.segments = summary::report_input(&read, &mut feed.source, no_gyro);
     let t0 = read.first_ns.unwrap_or(0);
     let stats = chain.second.stats();
-    trust::report(&args.input, &ranges, &stats, t0, args.ranges.trust_clipped);
+    trust::report(
+        &args.input,
+        &ranges,
+        &stats,
+        t0,
+        trust::Treatment::of(&args.ranges),
+    );
     read.trust = trust::json(&ranges, &stats, t0, chain.second.stage().clip_stats());
     summary.finish(ran, &read, &chain, &mut feed.truth, args.json)?;
     // Only a run that succeeded leaves its --out file (a failed one drops it unwritten).

@@ -101,8 +101,33 @@ pub fn json(
     })
 }
 
+/// What the run did with clipped and implausible samples (`--trust-clipped`,
+/// `--bridge-clipped` or neither).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Treatment {
+    /// Integrated as measured.
+    Trusted,
+    /// Bridged only: the 1-sigma widened for what they hid.
+    Bridged,
+    /// Bridged, and a clipped gyroscope's motion reconstructed at the rest after it.
+    Reconstructed,
+}
+
+impl Treatment {
+    /// The treatment `args` ask for.
+    pub fn of(args: &RangeArgs) -> Self {
+        if args.trust_clipped {
+            Self::Trusted
+        } else if args.bridge_clipped {
+            Self::Bridged
+        } else {
+            Self::Reconstructed
+        }
+    }
+}
+
 /// Says on stderr which ranges the run used and what it did not take at its word.
-pub fn report(input: &Path, ranges: &Ranges, stats: &SessionStats, t0_ns: u64, trusted: bool) {
+pub fn report(input: &Path, ranges: &Ranges, stats: &SessionStats, t0_ns: u64, how: Treatment) {
     let input = input.display();
     for (name, unit, r) in [
         ("accelerometer", "g", ranges.accel_g),
@@ -115,7 +140,7 @@ pub fn report(input: &Path, ranges: &Ranges, stats: &SessionStats, t0_ns: u64, t
             );
         }
     }
-    let what = if trusted {
+    let what = if how == Treatment::Trusted {
         "integrated as measured (--trust-clipped)"
     } else {
         "bridged as unobserved and counted in the 1-sigma"
@@ -125,11 +150,16 @@ pub fn report(input: &Path, ranges: &Ranges, stats: &SessionStats, t0_ns: u64, t
             "{input}: {} samples clipped at the end of their range ({}); {}",
             stats.clipped.samples,
             stats.clipped.per_axis_text(),
-            if trusted {
-                what
-            } else {
-                "bridged and counted in the 1-sigma; a clipped gyroscope's motion reconstructed at \
-                 the rest after it (unless --bridge-clipped; `clipped_runs` in --json)"
+            match how {
+                Treatment::Trusted => what,
+                Treatment::Bridged => {
+                    "bridged and counted in the 1-sigma, not reconstructed (--bridge-clipped)"
+                }
+                Treatment::Reconstructed => {
+                    "bridged and counted in the 1-sigma; a clipped gyroscope's motion \
+                     reconstructed at the rest after it (unless --bridge-clipped; \
+                     `clipped_runs` in --json)"
+                }
             }
         );
     }

@@ -1,0 +1,98 @@
+#!/usr/bin/env python3
+"""Where a clipped walk's end error comes from: each foot walk of the corpus run as converted and
+with every gyroscope column capped at +-DPS deg/s (perturb.py's clipping, the reconstruction at
+the rests on), and the two runs' rests (`mems-odometry offline --json`'s `rests`, matched by
+time) compared step by step: a step is the horizontal move from one rest to the next, kept where
+the unclipped step is at least 0.3 m. Printed per walk: steps matched, the clipped steps' length
+error (mean and mean absolute, cm), the heading error of the clipped path (the direction of the
+clipped step less the unclipped one's, deg: median over the first and the last quarter of the
+steps) and the end error / 1-sigma of the clipped run (m, bench.py's).
+
+The unclipped run is the truth of the clipped one here: what the clips cost, not what either
+gets wrong.
+
+Usage: clip_heading.py [--gyro-dps DPS] [--bin PATH] [--data DIR] [--only ID ...]
+"""
+
+import argparse
+import json
+import math
+import os
+import statistics
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench  # noqa: E402
+import perturb  # noqa: E402
+
+MIN_STEP_M = 0.3
+
+
+def steps(clean, clipped):
+    """(heading error deg, length error m) of each matched step."""
+    by_t = {round(r["t_s"], 2): r for r in clean}
+    out, prev = [], None
+    for r in clipped:
+        c = by_t.get(round(r["t_s"], 2))
+        if c is None:
+            continue
+        if prev is not None:
+            (pk, pc) = prev
+            sk = [a - b for a, b in zip(r["position_m"][:2], pk["position_m"][:2])]
+            sc = [a - b for a, b in zip(c["position_m"][:2], pc["position_m"][:2])]
+            if math.hypot(*sc) >= MIN_STEP_M:
+                turn = math.degrees(math.atan2(sk[1], sk[0]) - math.atan2(sc[1], sc[0]))
+                out.append(((turn + 180) % 360 - 180, math.hypot(*sk) - math.hypot(*sc)))
+        prev = (r, c)
+    return out
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--gyro-dps", type=float, default=250.0)
+    p.add_argument("--bin", default=str(bench.REPO / "target" / "release" / "mems-odometry"))
+    p.add_argument("--data", default=os.environ.get("MEMS_REAL_DATA", "/work/real-data"))
+    p.add_argument("--only", nargs="*")
+    args = p.parse_args()
+    clip = perturb.Perturbation(argparse.Namespace(accel_scale=None, accel_bias_g=None, accel_g=None,
+                                                   gyro_dps=args.gyro_dps))
+    corpus = json.loads((Path(__file__).resolve().parent / "corpus.json").read_text())
+    recs = [r for r in corpus["recordings"] if r.get("platform") == "foot" and (not args.only or r["id"] in args.only)]
+    print(f"Foot walks with the gyroscope clipped at +-{args.gyro_dps:g} deg/s against the same walks unclipped, step by step")
+    print()
+    print("| walk | steps | length error, mean / mean abs, cm | heading error, first / last quarter, deg | end error / 1-sigma, m |")
+    print("| --- | --- | --- | --- | --- |")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        calib = tmp / "identity.toml"
+        calib.write_text(bench.identity_calibration())
+        (tmp / "clipped").mkdir()
+        plain = bench.Runner(Path(args.bin), calib, Path(args.data), 900.0, quiet=True)
+        clipped = bench.Runner(Path(args.bin), calib, tmp / "clipped", 900.0, quiet=True)
+        for rec in recs:
+            side = json.loads((Path(args.data) / f"{rec['id']}.json").read_text())
+            name = side.get("input", side["csv"])
+            (tmp / "clipped" / f"{rec['id']}.json").write_text(json.dumps(side))
+            write = perturb.perturb_mcap if name.endswith(".mcap") else perturb.perturb_csv
+            write(Path(args.data) / name, tmp / "clipped" / name, clip)
+            extra = list(rec.get("extra_args", []))
+            a, b = plain.row(rec, extra), clipped.row(rec, extra)
+            if "error" in a or "error" in b:
+                print(f"| {rec['id']} | failed: {a.get('error') or b.get('error')} | | | |")
+                continue
+            st = steps(a["odometry"]["rests"], b["odometry"]["rests"])
+            q = max(1, len(st) // 4)
+            head = [h for h, _ in st]
+            lengths = [dl for _, dl in st]
+            r = b["result"]
+            print(f"| {rec['id']} | {len(st)} | {100 * statistics.mean(lengths):+.1f} / "
+                  f"{100 * statistics.mean(abs(x) for x in lengths):.1f} | "
+                  f"{statistics.median(head[:q]):+.1f} / {statistics.median(head[-q:]):+.1f} | "
+                  f"{r['error_m'][1]:.2f} / {r['sigma_h_m']:.2f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
