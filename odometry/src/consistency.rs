@@ -28,11 +28,14 @@
 //! beyond the chi-square quantile of [`ConsistencyConfig::false_rest_significance`] (3 dof)
 //! says the body was not at rest: it is not fed to the factor, and the rest is counted once
 //! in `rests_inconsistent`. The update is still made (the estimate is what it would be
-//! without this module); what it hides goes into the published 1-sigma: over such a rest the
-//! body may have kept moving at the horizontal speed the inconsistent windows removed (their
-//! largest, `s`, m/s), so for the time `T` its inconsistent windows span it may have gone
-//! `s T` in an unknown direction: position variance `(s T)^2 / 2` and velocity variance
-//! `s^2 / 2` per horizontal axis are added (once per rest, growing with `T`).
+//! without this module); what it hides goes into the published 1-sigma. The two readings of
+//! such a window, rest or motion as the IMU integrates it, differ by the velocity the update
+//! removed; summed over the rest's inconsistent windows that is the velocity `u` (horizontal,
+//! navigation frame, m/s) free integration would have had, and `d = sum u T_w` over their
+//! spans `T_w` the displacement it would have added. The published variance of each
+//! horizontal axis gets `d_i^2` (position) and `u_i^2` (velocity) for the rest (added as they
+//! grow): the 1-sigma spans both readings. Windows consistent with rest add nothing (a stop
+//! detected late keeps what the late windows removed, not a drift at that speed).
 //!
 //! Fixed-size state, no allocation: the stage's hot path runs it.
 
@@ -183,17 +186,31 @@ pub struct KindReport {
     pub lambda: f64,
 }
 
-/// The current rest's false-rest evidence.
+/// The current rest's false-rest evidence (horizontal, navigation frame).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct FalseRest {
     /// Whether the rest has been counted.
     counted: bool,
-    /// Time its inconsistent windows span, s.
-    span_s: f64,
-    /// Largest horizontal speed they removed, m/s.
-    speed_mps: f64,
-    /// Position and velocity variance added for it so far (per horizontal axis).
-    added: (f64, f64),
+    /// Sum of the velocities its inconsistent windows removed, m/s.
+    u: [f64; 2],
+    /// Displacement free integration would have added over them, m.
+    d: [f64; 2],
+    /// Position and velocity variance added for it so far, m^2 and (m/s)^2 per axis.
+    added_p: [f64; 2],
+    added_v: [f64; 2],
+}
+
+/// Variance to add to the published 1-sigma, m^2 (position) and (m/s)^2 (velocity) per
+/// horizontal axis.
+pub type Widening = ([f64; 2], [f64; 2]);
+
+/// The increase from `added` to `target` (none when it shrinks), and `added` raised to it.
+fn raise(added: &mut [f64; 2], target: [f64; 2]) -> [f64; 2] {
+    std::array::from_fn(|i| {
+        let add = (target[i] - added[i]).max(0.0);
+        added[i] += add;
+        add
+    })
 }
 
 /// The tracker (fixed size, `Copy`).
@@ -253,18 +270,19 @@ impl Consistency {
     }
 
     /// Takes a zero-velocity window of `span_s` seconds at `t_ns` whose update had NIS `nis`
-    /// and removed the horizontal speed `speed_mps`. Returns the position and velocity
-    /// variance (per horizontal axis, m^2 and (m/s)^2) to add to the published 1-sigma for a
-    /// false rest (zeros for a consistent window), and the factor in force.
+    /// and removed the horizontal velocity `removed` (m/s, navigation frame). Returns the
+    /// variance to add to the published 1-sigma for a false rest (zeros for a consistent
+    /// window) and the factor in force.
     pub fn zero_velocity(
         &mut self,
         t_ns: u64,
         nis: f64,
         span_s: f64,
-        speed_mps: f64,
-    ) -> ((f64, f64), f64) {
+        removed: [f64; 2],
+    ) -> (Widening, f64) {
         if nis <= self.lambda() * self.false_rest_nis {
-            return ((0.0, 0.0), self.push(Kind::ZeroVelocity, t_ns, nis, 3.0));
+            let lambda = self.push(Kind::ZeroVelocity, t_ns, nis, 3.0);
+            return (([0.0; 2], [0.0; 2]), lambda);
         }
         self.windows_inconsistent += 1;
         let r = &mut self.rest;
@@ -272,15 +290,13 @@ impl Consistency {
             r.counted = true;
             self.rests_inconsistent += 1;
         }
-        r.span_s += span_s;
-        r.speed_mps = r.speed_mps.max(speed_mps);
-        let target = (
-            (r.speed_mps * r.span_s).powi(2) / 2.0,
-            r.speed_mps.powi(2) / 2.0,
-        );
-        let add = (target.0 - r.added.0, target.1 - r.added.1);
-        r.added = target;
-        (add, self.lambda())
+        for i in 0..2 {
+            r.u[i] += removed[i];
+            r.d[i] += r.u[i] * span_s;
+        }
+        let p = raise(&mut r.added_p, r.d.map(|d| d * d));
+        let v = raise(&mut r.added_v, r.u.map(|u| u * u));
+        ((p, v), self.lambda())
     }
 
     /// Takes the NIS of an update `kf` made (`None`: it made none) and sets the factor in
@@ -288,7 +304,7 @@ impl Consistency {
     pub fn update(&mut self, kf: &mut Eskf, kind: Kind, t_ns: u64, nis: Option<f64>, dof: f64) {
         if let Some(nis) = nis {
             let lambda = self.push(kind, t_ns, nis, dof);
-            self.apply(kf, lambda, (0.0, 0.0));
+            self.apply(kf, lambda, ([0.0; 2], [0.0; 2]));
         }
     }
 
@@ -301,15 +317,15 @@ impl Consistency {
         t_ns: u64,
         nis: Option<f64>,
         span_s: f64,
-        speed_mps: f64,
+        removed: [f64; 2],
     ) {
         if let Some(nis) = nis {
-            let (widen, lambda) = self.zero_velocity(t_ns, nis, span_s, speed_mps);
+            let (widen, lambda) = self.zero_velocity(t_ns, nis, span_s, removed);
             self.apply(kf, lambda, widen);
         }
     }
 
-    fn apply(&self, kf: &mut Eskf, lambda: f64, widen: (f64, f64)) {
+    fn apply(&self, kf: &mut Eskf, lambda: f64, widen: Widening) {
         if self.cfg.scaling == Scaling::Off {
             return;
         }
@@ -376,22 +392,30 @@ mod tests {
         assert!((r.lambda / 100.0 - 1.0).abs() < 0.1, "{r:?}");
     }
 
+    /// A walk at 1.4 m/s along x taken for rest: the first window removes the walk's
+    /// velocity, the next ones what each window's acceleration added (here none); the
+    /// widening is the displacement free integration would have made.
     #[test]
     fn a_false_rest_is_counted_once_and_widens_with_its_span() {
         let mut c = Consistency::new(ConsistencyConfig::default());
         c.rest_started();
-        let ((p1, v1), _) = c.zero_velocity(0, 1e4, 0.01, 1.4);
-        let ((p2, _), _) = c.zero_velocity(10_000_000, 1e4, 0.01, 0.1);
+        let ((p1, v1), _) = c.zero_velocity(0, 1e4, 0.01, [1.4, 0.0]);
+        assert!((v1[0] - 1.4f64.powi(2)).abs() < 1e-12 && v1[1] == 0.0);
+        let mut p = p1[0];
+        for k in 1..100 {
+            let ((pk, _), _) = c.zero_velocity(k * 10_000_000, 1e4, 0.01, [0.0, 0.0]);
+            p += pk[0];
+        }
         assert_eq!(c.report().rests_inconsistent, 1);
-        assert_eq!(c.report().windows_inconsistent, 2);
-        assert!((v1 - 1.4f64.powi(2) / 2.0).abs() < 1e-12);
-        // After both windows: (1.4 m/s * 0.02 s)^2 / 2 in all.
-        assert!((p1 + p2 - (1.4f64 * 0.02).powi(2) / 2.0).abs() < 1e-12);
+        assert_eq!(c.report().windows_inconsistent, 100);
+        // One second of walking: 1.4 m.
+        assert!((p - 1.4f64.powi(2)).abs() < 1e-9, "{p}");
         // A consistent window adds nothing and feeds the factor.
-        assert_eq!(c.zero_velocity(20_000_000, 2.0, 0.01, 0.0).0, (0.0, 0.0));
+        let (w, _) = c.zero_velocity(2_000_000_000, 2.0, 0.01, [1e-3, 0.0]);
+        assert_eq!(w, ([0.0; 2], [0.0; 2]));
         assert_eq!(c.report().zero_velocity.count, 1);
         c.rest_started();
-        c.zero_velocity(30_000_000, 1e4, 0.01, 1.0);
+        c.zero_velocity(3_000_000_000, 1e4, 0.01, [1.0, 0.0]);
         assert_eq!(c.report().rests_inconsistent, 2);
     }
 }

@@ -41,7 +41,7 @@ mod reported;
 
 use increment::{Increment, Sensitivity, Step};
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
-use reported::{Diagonal, Reported};
+use reported::Reported;
 
 /// Error-state dimension.
 pub const N: usize = 16;
@@ -267,22 +267,22 @@ impl Eskf {
         if self.propagated() {
             return;
         }
-        let before = self.diagonal();
+        let before = self.var;
         self.inc.apply(&mut self.cov, &mut self.sens);
         self.refresh_sigma();
-        self.reported.propagated(&before, &self.diagonal());
+        self.reported.propagated(&before, &self.var);
     }
 
-    /// The covariance's position and velocity variances.
-    fn diagonal(&self) -> Diagonal {
-        let d = |i: usize| {
-            Vector3::new(
-                self.cov[(i, i)],
-                self.cov[(i + 1, i + 1)],
-                self.cov[(i + 2, i + 2)],
-            )
-        };
-        (d(P), d(V))
+    /// The normalized innovation squared of `residual` with the filter's innovation
+    /// covariance `s` and the consider parameters' share, `g` being the sensitivity of the
+    /// measurement to them (`M^T H^T`): `r^T (S + G^T Sigma G)^-1 r`, the innovation's whole
+    /// predicted covariance, as the published 1-sigma holds both (`crate::consistency`).
+    fn nis(&self, residual: &Vector3<f64>, s: &Matrix3<f64>, g: &SMatrix<f64, NC, 3>) -> f64 {
+        let weighted = SMatrix::<f64, NC, 3>::from_fn(|q, a| g[(q, a)] * self.consider_var[q]);
+        let share = g.transpose() * weighted;
+        (s + share)
+            .try_inverse()
+            .map_or(f64::NAN, |inv| residual.dot(&(inv * residual)))
     }
 
     /// The innovation consistency's factor `lambda` (>= 1, `crate::consistency`) from now on:
@@ -298,9 +298,10 @@ impl Eskf {
         };
     }
 
-    /// Adds `p` (m^2) and `v` ((m/s)^2) to the published horizontal position and velocity
-    /// variances (each axis): motion the filter could not see, which its estimates keep out.
-    pub fn widen_reported(&mut self, p: f64, v: f64) {
+    /// Adds `p` (m^2) and `v` ((m/s)^2) to the published position and velocity variances of
+    /// the horizontal axes (x, y): motion the filter could not see, which its estimates keep
+    /// out.
+    pub fn widen_reported(&mut self, p: [f64; 2], v: [f64; 2]) {
         self.reported.widen_horizontal(p, v);
     }
 
@@ -570,10 +571,12 @@ impl Eskf {
     /// every rest window. Returns the normalized innovation squared `r^T S^-1 r`.
     fn update_selected(&mut self, c: usize, residual: Vector3<f64>, var: f64) -> Option<f64> {
         self.propagate();
-        let diagonal = self.diagonal();
+        let before = self.var;
         let l = SMatrix::<f64, N, 3>::from_fn(|i, j| self.cov[(i, c + j)]);
         let s = l.fixed_rows::<3>(c) + Matrix3::identity() * var;
         let s_inv = s.try_inverse()?;
+        let m_c = SMatrix::<f64, NC, 3>::from_fn(|q, a| self.sens[(q, c + a)]);
+        let nis = self.nis(&residual, &s, &m_c);
         let k = l * s_inv;
         let d = l - k * s;
         let dx: VecN = k * residual;
@@ -595,7 +598,6 @@ impl Eskf {
             }
         }
         // `M <- M - K M_c:`, on `M^T`'s columns: `M^T[:, i] -= sum_a K[i, a] M^T[:, c + a]`.
-        let m_c = SMatrix::<f64, NC, 3>::from_fn(|q, a| self.sens[(q, c + a)]);
         let m = self.sens.as_mut_slice();
         for i in 0..N {
             let col = &mut m[i * NC..(i + 1) * NC];
@@ -607,8 +609,8 @@ impl Eskf {
             }
         }
         self.inject(&dx);
-        self.reported.updated(&diagonal, &self.diagonal());
-        Some(residual.dot(&(s_inv * residual)))
+        self.reported.updated(&before, &self.var);
+        Some(nis)
     }
 
     /// A linear measurement `z = H dx + noise` with noise covariance `r`, in Joseph form,
@@ -620,18 +622,20 @@ impl Eskf {
         r: &Matrix3<f64>,
     ) -> Option<f64> {
         self.propagate();
-        let diagonal = self.diagonal();
+        let before = self.var;
         let s = h * self.cov * h.transpose() + r;
         let s_inv = s.try_inverse()?;
+        let g = self.sens * h.transpose();
+        let nis = self.nis(&residual, &s, &g);
         let k = self.cov * h.transpose() * s_inv;
         let dx: VecN = k * residual;
         let i_kh = Cov::identity() - k * h;
         self.cov = i_kh * self.cov * i_kh.transpose() + k * r * k.transpose();
         self.cov = 0.5 * (self.cov + self.cov.transpose());
-        self.sens -= (self.sens * h.transpose()) * k.transpose();
+        self.sens -= g * k.transpose();
         self.inject(&dx);
-        self.reported.updated(&diagonal, &self.diagonal());
-        Some(residual.dot(&(s_inv * residual)))
+        self.reported.updated(&before, &self.var);
+        Some(nis)
     }
 
     fn inject(&mut self, dx: &VecN) {
@@ -665,7 +669,7 @@ impl Eskf {
     /// times its factor. This is the 1-sigma the stage publishes.
     pub fn position_sigma(&self) -> Vector3<f64> {
         let r = &self.reported;
-        (self.var.0 + r.p + self.inc.noise_variance().0 * r.lambda).map(f64::sqrt)
+        (self.var.0 + r.position() + self.inc.noise_variance().0 * r.lambda).map(f64::sqrt)
     }
 
     /// 1-sigma of the accelerometer bias, m/s^2, sensor frame, as of the last propagation or

@@ -678,8 +678,9 @@ impl Navigator {
         let (p0, v0) = (kf.x.p, kf.x.v);
         let n = f64::from(w.n);
         let nis = kf.zero_velocity(self.zupt_sigma_mps / n.sqrt());
-        let speed = v0.xy().norm();
-        self.consistency.rest_window(kf, w.t_ns, nis, w.t_s, speed);
+        let removed = [v0.x - kf.x.v.x, v0.y - kf.x.v.y];
+        self.consistency
+            .rest_window(kf, w.t_ns, nis, w.t_s, removed);
         let gyro_sigma = self.cfg.noise.gyro_noise_density / w.t_s.sqrt();
         kf.zero_rate(w.w_sum / n, gyro_sigma, self.cfg.zaru_gate_sigma);
         if let Some(pending) = self.pending.as_mut() {

@@ -10,8 +10,12 @@
 //! adds is multiplied by the factor in force while it was added (position variance
 //! accumulates: a factor on the whole `P` would rescale the past), and an update shrinks the
 //! extra in the proportion it shrinks the filter's own variance (as it shrinks `lambda P`).
-//! Kept per navigation axis (the diagonal): exact for a constant factor, the diagonal's
-//! share of the scaled covariance otherwise. Estimates and gains are untouched.
+//! The consider parameters' share (`crate::eskf`'s module documentation) is scaled with the
+//! rest: a filter whose consider variances were also `lambda` times larger has the same
+//! estimates too, and the innovations cannot tell a noise from a systematic error (their
+//! NIS is taken against the innovation's whole predicted covariance, the consider share
+//! included). Kept per navigation axis (the diagonal): exact for a constant factor, the
+//! diagonal's share of the scaled covariance otherwise. Estimates and gains are untouched.
 //!
 //! Units: position m^2, velocity (m/s)^2, navigation frame (z up).
 
@@ -26,6 +30,9 @@ pub struct Reported {
     pub p: Vector3<f64>,
     /// Extra velocity variance, (m/s)^2 per axis.
     pub v: Vector3<f64>,
+    /// Position variance of motion the filter took for rest, m^2 per axis: uncorrelated with
+    /// the state, so no update (none measures position) shrinks it.
+    pub hidden: Vector3<f64>,
 }
 
 impl Default for Reported {
@@ -34,11 +41,13 @@ impl Default for Reported {
             lambda: 1.0,
             p: Vector3::zeros(),
             v: Vector3::zeros(),
+            hidden: Vector3::zeros(),
         }
     }
 }
 
-/// Position and velocity variances (the covariance's diagonal), m^2 and (m/s)^2.
+/// Position and velocity variances (the covariance's diagonal with the consider share), m^2
+/// and (m/s)^2.
 pub type Diagonal = (Vector3<f64>, Vector3<f64>);
 
 impl Reported {
@@ -73,13 +82,18 @@ impl Reported {
             });
     }
 
-    /// Adds `p` (m^2) and `v` ((m/s)^2) to each horizontal axis: motion the filter took for
-    /// rest ([`crate::consistency`]).
-    pub fn widen_horizontal(&mut self, p: f64, v: f64) {
+    /// Adds `p` (m^2, to [`Self::hidden`]) and `v` ((m/s)^2) to the horizontal axes (x, y):
+    /// motion the filter took for rest ([`crate::consistency`]).
+    pub fn widen_horizontal(&mut self, p: [f64; 2], v: [f64; 2]) {
         for i in 0..2 {
-            self.p[i] += p.max(0.0);
-            self.v[i] += v.max(0.0);
+            self.hidden[i] += p[i].max(0.0);
+            self.v[i] += v[i].max(0.0);
         }
+    }
+
+    /// The extra position variance, m^2 per axis.
+    pub fn position(&self) -> Vector3<f64> {
+        self.p + self.hidden
     }
 }
 
