@@ -290,9 +290,9 @@ impl Consistency {
             r.counted = true;
             self.rests_inconsistent += 1;
         }
-        for i in 0..2 {
-            r.u[i] += removed[i];
-            r.d[i] += r.u[i] * span_s;
+        for ((u, d), removed) in r.u.iter_mut().zip(r.d.iter_mut()).zip(removed) {
+            *u += removed;
+            *d += *u * span_s;
         }
         let p = raise(&mut r.added_p, r.d.map(|d| d * d));
         let v = raise(&mut r.added_v, r.u.map(|u| u * u));

@@ -53,7 +53,10 @@ fn walk(dir: &Path, name: &str, extra: &[&str]) -> (serde_json::Value, serde_jso
     args.extend_from_slice(&["--out", path_arg(&path)]);
     run_ok("mems-sim", &args);
     let (off, on) = (offline(&path, "off"), offline(&path, "report"));
-    assert_eq!(off["end_displacement_m"], on["end_displacement_m"], "{name}");
+    assert_eq!(
+        off["end_displacement_m"], on["end_displacement_m"],
+        "{name}"
+    );
     let ((s_off, e), (s_on, _)) = (sigma_and_error(&off), sigma_and_error(&on));
     eprintln!(
         "{name}: error {e:.3} m, 1-sigma {s_off:.3} m (off) -> {s_on:.3} m (report); {}",
@@ -71,10 +74,16 @@ fn a_consistent_walk_keeps_its_sigma_and_a_ten_times_noisier_one_widens_it() {
     let c = &on["consistency"];
     assert_eq!(c["lambda_max"].as_f64().unwrap(), 1.0, "{c}");
     assert!(c["zero_velocity"]["count"].as_u64().unwrap() > 1000, "{c}");
-    assert!(c["zero_velocity"]["nis_per_dof"].as_f64().unwrap() < 1.0, "{c}");
+    assert!(
+        c["zero_velocity"]["nis_per_dof"].as_f64().unwrap() < 1.0,
+        "{c}"
+    );
     assert_eq!(off["sigma_m"], on["sigma_m"]);
     let (sigma, error) = sigma_and_error(&on);
-    assert!(error <= 1.515 * sigma, "nominal walk: {error} m outside 1.515 x {sigma} m");
+    assert!(
+        error <= 1.515 * sigma,
+        "nominal walk: {error} m outside 1.515 x {sigma} m"
+    );
 
     let (off, on) = walk(
         &dir,
@@ -83,7 +92,10 @@ fn a_consistent_walk_keeps_its_sigma_and_a_ten_times_noisier_one_widens_it() {
     );
     let c = &on["consistency"];
     assert!(c["lambda_max"].as_f64().unwrap() > 2.0, "{c}");
-    assert!(c["zero_velocity"]["nis_per_dof"].as_f64().unwrap() > 1.5, "{c}");
+    assert!(
+        c["zero_velocity"]["nis_per_dof"].as_f64().unwrap() > 1.5,
+        "{c}"
+    );
     let (s_off, _) = sigma_and_error(&off);
     let (s_on, _) = sigma_and_error(&on);
     assert!(s_on > 1.5 * s_off, "1-sigma {s_off} m -> {s_on} m");
