@@ -24,6 +24,7 @@ use ipc_types::stream::plausible::Envelope;
 use ipc_types::units::STANDARD_GRAVITY_MPS2;
 use nalgebra::Matrix3;
 
+use crate::consistency::ConsistencyConfig;
 use crate::eskf::{Manoeuvre, NoiseModel};
 
 /// Configuration of the stage. Noise figures come from the calibration file's noise parameters.
@@ -139,6 +140,9 @@ pub struct OdometryConfig {
     /// Not without hints: on the IMU-only car runs of docs/real-data.md the wider noise moved
     /// the estimates further off (the gain changed, not only the 1-sigma).
     pub sampled_noise: bool,
+    /// What the run's innovations say of the covariance, and how it enters the published
+    /// 1-sigma ([`crate::consistency`]).
+    pub consistency: ConsistencyConfig,
 }
 
 impl OdometryConfig {
@@ -186,6 +190,7 @@ impl OdometryConfig {
             imu_nonholonomic_sigma_mps: 0.0,
             rest_vibration_factor: 0.0,
             sampled_noise: true,
+            consistency: ConsistencyConfig::default(),
         }
     }
 

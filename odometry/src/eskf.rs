@@ -37,9 +37,11 @@
 //! ZUPT for a strapdown IMU; nalgebra does the linear algebra.
 
 mod increment;
+mod reported;
 
 use increment::{Increment, Sensitivity, Step};
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
+use reported::Reported;
 
 /// Error-state dimension.
 pub const N: usize = 16;
@@ -212,6 +214,10 @@ pub struct Eskf {
     /// Per-sample standard deviation of the specific force (m/s^2) and the rate (rad/s) the
     /// stream shows ([`Self::set_sampled_noise`]).
     sampled_sd: (f64, f64),
+    /// What the published 1-sigma carries beyond the covariance ([`Self::set_consistency`]).
+    reported: Reported,
+    /// Factor on the process noise ([`Self::set_consistency`] with `process`), 1 by default.
+    q_scale: f64,
 }
 
 /// Skew-symmetric matrix: `skew(a) * b == a.cross(&b)`.
@@ -236,6 +242,8 @@ impl Eskf {
             interval_s: 0.0,
             var: (Vector3::zeros(), Vector3::zeros()),
             sampled_sd: (0.0, 0.0),
+            reported: Reported::default(),
+            q_scale: 1.0,
         }
         .with_sigma()
     }
@@ -259,8 +267,42 @@ impl Eskf {
         if self.propagated() {
             return;
         }
+        let before = self.var;
         self.inc.apply(&mut self.cov, &mut self.sens);
         self.refresh_sigma();
+        self.reported.propagated(&before, &self.var);
+    }
+
+    /// The normalized innovation squared of `residual` with the filter's innovation
+    /// covariance `s` and the consider parameters' share, `g` being the sensitivity of the
+    /// measurement to them (`M^T H^T`): `r^T (S + G^T Sigma G)^-1 r`, the innovation's whole
+    /// predicted covariance, as the published 1-sigma holds both (`crate::consistency`).
+    fn nis(&self, residual: &Vector3<f64>, s: &Matrix3<f64>, g: &SMatrix<f64, NC, 3>) -> f64 {
+        let weighted = SMatrix::<f64, NC, 3>::from_fn(|q, a| g[(q, a)] * self.consider_var[q]);
+        let share = g.transpose() * weighted;
+        (s + share)
+            .try_inverse()
+            .map_or(f64::NAN, |inv| residual.dot(&(inv * residual)))
+    }
+
+    /// The innovation consistency's factor `lambda` (>= 1, `crate::consistency`) from now on:
+    /// with `process` false it multiplies the variance each propagation adds, in the
+    /// published 1-sigma only (module `reported`: estimates unchanged); with `process` true it
+    /// multiplies the process noise instead (adaptive process noise: the estimates change).
+    pub fn set_consistency(&mut self, lambda: f64, process: bool) {
+        let lambda = lambda.max(1.0);
+        (self.reported.lambda, self.q_scale) = if process {
+            (1.0, lambda)
+        } else {
+            (lambda, 1.0)
+        };
+    }
+
+    /// Adds `p` (m^2) and `v` ((m/s)^2) to the published position and velocity variances of
+    /// the horizontal axes (x, y): motion the filter could not see, which its estimates keep
+    /// out.
+    pub fn widen_reported(&mut self, p: [f64; 2], v: [f64; 2]) {
+        self.reported.widen_horizontal(p, v);
     }
 
     fn with_sigma(mut self) -> Self {
@@ -330,16 +372,18 @@ impl Eskf {
             v_th: -r_mid * skew(&f_mid) * dt,
             v_ba: -r_mid * dt,
             th_th: (half * half).inverse().to_rotation_matrix().into_inner(),
-            q_v: (n.accel_noise_density.powi(2)
-                + (n.vibration_accel_density_per_mps * speed).powi(2))
-            .max(sd_a * sd_a * dt)
+            q_v: self.q_scale
+                * (n.accel_noise_density.powi(2)
+                    + (n.vibration_accel_density_per_mps * speed).powi(2))
+                .max(sd_a * sd_a * dt)
                 * dt,
-            q_th: (n.gyro_noise_density.powi(2)
-                + (n.vibration_gyro_density_per_mps * speed).powi(2))
-            .max(sd_w * sd_w * dt)
+            q_th: self.q_scale
+                * (n.gyro_noise_density.powi(2)
+                    + (n.vibration_gyro_density_per_mps * speed).powi(2))
+                .max(sd_w * sd_w * dt)
                 * dt,
-            q_ba: n.accel_bias_random_walk.powi(2) * dt,
-            q_bg: n.gyro_bias_random_walk.powi(2) * dt,
+            q_ba: self.q_scale * n.accel_bias_random_walk.powi(2) * dt,
+            q_bg: self.q_scale * n.gyro_bias_random_walk.powi(2) * dt,
             w: w_mid,
             df: f_mid - self.f_align,
             r: r_mid,
@@ -420,9 +464,11 @@ impl Eskf {
 
     /// Zero-velocity update: the true velocity is zero, measured with 1-sigma `sigma` (m/s).
     /// The covariance is propagated to the newest sample first (as for every update).
-    pub fn zero_velocity(&mut self, sigma: f64) {
+    /// Returns the normalized innovation squared (3 degrees of freedom), `None` when its
+    /// covariance was singular and nothing was updated.
+    pub fn zero_velocity(&mut self, sigma: f64) -> Option<f64> {
         let residual = -self.x.v;
-        self.update_selected(V, residual, sigma * sigma);
+        self.update_selected(V, residual, sigma * sigma)
     }
 
     /// Whether the velocity is consistent with rest: every component within `gate` standard
@@ -472,6 +518,7 @@ impl Eskf {
             }
         }
         self.cov.fixed_view_mut::<3, 3>(V, V).copy_from(cov_v);
+        self.reported.v = Vector3::zeros();
         self.refresh_sigma();
     }
 
@@ -486,14 +533,15 @@ impl Eskf {
     /// `sigma` per component (m/s). `residual` is `z` minus its prediction, computed by the
     /// caller (who may take the prediction at the measurement's own time). The Jacobian is
     /// evaluated at the current state: `dv_b = R_bs R^T dv + R_bs [R^T v]x dtheta` and the
-    /// forward row also has `v_b.x` for `dk`. Returns the change of [`Self::body_velocity`]
-    /// (before scale) the update made, m/s.
+    /// forward row also has `v_b.x` for `dk`. Returns the normalized innovation squared
+    /// (`None`: singular, nothing updated); a component given a 1-sigma far beyond the
+    /// velocity's adds about nothing to it (one degree of freedom fewer).
     pub fn body_velocity_update(
         &mut self,
         r_bs: &Matrix3<f64>,
         residual: Vector3<f64>,
         sigma: Vector3<f64>,
-    ) -> Vector3<f64> {
+    ) -> Option<f64> {
         self.propagate();
         let before = self.body_velocity(r_bs);
         let r_t = self.x.q.to_rotation_matrix().into_inner().transpose();
@@ -509,8 +557,7 @@ impl Eskf {
         }
         h[(0, KS)] = before.x;
         let var = Matrix3::from_diagonal(&sigma.component_mul(&sigma));
-        self.update(&h, residual, &var);
-        self.body_velocity(r_bs) - before
+        self.update(&h, residual, &var)
     }
 
     /// The measurement of [`Self::update`] with `H` selecting the three error-state components
@@ -521,14 +568,15 @@ impl Eskf {
     /// kept, it is what the Joseph form keeps), on the upper triangle and mirrored, with plain
     /// loops over the covariance's contiguous columns (nalgebra's products on its row blocks
     /// copied them out element by element). The zero-velocity and zero-rate updates run at
-    /// every rest window.
-    fn update_selected(&mut self, c: usize, residual: Vector3<f64>, var: f64) {
+    /// every rest window. Returns the normalized innovation squared `r^T S^-1 r`.
+    fn update_selected(&mut self, c: usize, residual: Vector3<f64>, var: f64) -> Option<f64> {
         self.propagate();
+        let before = self.var;
         let l = SMatrix::<f64, N, 3>::from_fn(|i, j| self.cov[(i, c + j)]);
         let s = l.fixed_rows::<3>(c) + Matrix3::identity() * var;
-        let Some(s_inv) = s.try_inverse() else {
-            return;
-        };
+        let s_inv = s.try_inverse()?;
+        let m_c = SMatrix::<f64, NC, 3>::from_fn(|q, a| self.sens[(q, c + a)]);
+        let nis = self.nis(&residual, &s, &m_c);
         let k = l * s_inv;
         let d = l - k * s;
         let dx: VecN = k * residual;
@@ -550,7 +598,6 @@ impl Eskf {
             }
         }
         // `M <- M - K M_c:`, on `M^T`'s columns: `M^T[:, i] -= sum_a K[i, a] M^T[:, c + a]`.
-        let m_c = SMatrix::<f64, NC, 3>::from_fn(|q, a| self.sens[(q, c + a)]);
         let m = self.sens.as_mut_slice();
         for i in 0..N {
             let col = &mut m[i * NC..(i + 1) * NC];
@@ -562,23 +609,33 @@ impl Eskf {
             }
         }
         self.inject(&dx);
+        self.reported.updated(&before, &self.var);
+        Some(nis)
     }
 
     /// A linear measurement `z = H dx + noise` with noise covariance `r`, in Joseph form,
-    /// injected into the nominal state.
-    fn update(&mut self, h: &SMatrix<f64, 3, N>, residual: Vector3<f64>, r: &Matrix3<f64>) {
+    /// injected into the nominal state. Returns the normalized innovation squared.
+    fn update(
+        &mut self,
+        h: &SMatrix<f64, 3, N>,
+        residual: Vector3<f64>,
+        r: &Matrix3<f64>,
+    ) -> Option<f64> {
         self.propagate();
+        let before = self.var;
         let s = h * self.cov * h.transpose() + r;
-        let Some(s_inv) = s.try_inverse() else {
-            return;
-        };
+        let s_inv = s.try_inverse()?;
+        let g = self.sens * h.transpose();
+        let nis = self.nis(&residual, &s, &g);
         let k = self.cov * h.transpose() * s_inv;
         let dx: VecN = k * residual;
         let i_kh = Cov::identity() - k * h;
         self.cov = i_kh * self.cov * i_kh.transpose() + k * r * k.transpose();
         self.cov = 0.5 * (self.cov + self.cov.transpose());
-        self.sens -= (self.sens * h.transpose()) * k.transpose();
+        self.sens -= g * k.transpose();
         self.inject(&dx);
+        self.reported.updated(&before, &self.var);
+        Some(nis)
     }
 
     fn inject(&mut self, dx: &VecN) {
@@ -607,9 +664,12 @@ impl Eskf {
     /// left out: computed at every sample it would cost the propagation it saves. The noise is
     /// kept so that at rest, where each propagation comes with the window's updates, the
     /// reported 1-sigma runs between the updated and the predicted one, as a filter updated
-    /// at every sample reports, rather than staying at the lower.
+    /// at every sample reports, rather than staying at the lower. With the innovation
+    /// consistency's share (module `reported`): its extra variance, and the noise since
+    /// times its factor. This is the 1-sigma the stage publishes.
     pub fn position_sigma(&self) -> Vector3<f64> {
-        (self.var.0 + self.inc.noise_variance().0).map(f64::sqrt)
+        let r = &self.reported;
+        (self.var.0 + r.position() + self.inc.noise_variance().0 * r.lambda).map(f64::sqrt)
     }
 
     /// 1-sigma of the accelerometer bias, m/s^2, sensor frame, as of the last propagation or
@@ -620,6 +680,14 @@ impl Eskf {
 
     /// 1-sigma of velocity, m/s, navigation frame, as [`Self::position_sigma`].
     pub fn velocity_sigma(&self) -> Vector3<f64> {
+        let r = &self.reported;
+        (self.var.1 + r.v + self.inc.noise_variance().1 * r.lambda).map(f64::sqrt)
+    }
+
+    /// 1-sigma of velocity, m/s, navigation frame, from the filter's covariance alone (the
+    /// consider parameters' share included, the innovation consistency's not): what its
+    /// gates compare against, so that the published 1-sigma changes no estimate.
+    pub fn filter_velocity_sigma(&self) -> Vector3<f64> {
         (self.var.1 + self.inc.noise_variance().1).map(f64::sqrt)
     }
 }
@@ -686,305 +754,4 @@ pub fn align(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use approx::assert_relative_eq;
-
-    const G: f64 = 9.81;
-
-    fn noise() -> NoiseModel {
-        NoiseModel {
-            accel_noise_density: 300e-6 * G,
-            gyro_noise_density: 0.01_f64.to_radians(),
-            accel_bias_random_walk: 1e-5,
-            gyro_bias_random_walk: 1e-6,
-            vibration_accel_density_per_mps: 0.0,
-            vibration_gyro_density_per_mps: 0.0,
-        }
-    }
-
-    /// A dense, well-conditioned covariance with every entry non-zero.
-    fn full_cov() -> Cov {
-        let a = Cov::from_fn(|i, j| ((7 * i + 3 * j) as f64).sin());
-        a * a.transpose() * 1e-3 + Cov::identity() * 1e-4
-    }
-
-    #[test]
-    fn selected_update_is_the_general_update() {
-        let x = Nominal {
-            p: Vector3::new(1.0, 2.0, 3.0),
-            v: Vector3::new(0.1, -0.2, 0.05),
-            q: UnitQuaternion::from_scaled_axis(Vector3::new(0.1, 0.2, 0.3)),
-            b_a: Vector3::new(0.01, 0.02, -0.01),
-            b_g: Vector3::new(1e-3, -2e-3, 3e-3),
-            k: 0.01,
-        };
-        let first = Imu {
-            f: Vector3::new(0.1, 0.2, 9.8),
-            w: Vector3::new(0.01, 0.02, -0.03),
-        };
-        let mut a = Eskf::new(x, full_cov(), G, noise(), first);
-        a.sens = Sensitivity::from_fn(|j, i| ((i * 5 + j) as f64).cos());
-        let mut b = a.clone();
-        for c in [V, BG] {
-            let residual = Vector3::new(0.03, -0.01, 0.02);
-            let mut h = SMatrix::<f64, 3, N>::zeros();
-            h.fixed_view_mut::<3, 3>(0, c)
-                .copy_from(&Matrix3::identity());
-            a.update(&h, residual, &(Matrix3::identity() * 4e-6));
-            b.update_selected(c, residual, 4e-6);
-        }
-        assert_relative_eq!(a.cov, b.cov, epsilon = 1e-15);
-        assert_relative_eq!(a.sens, b.sens, epsilon = 1e-12);
-        assert_relative_eq!(a.x.p, b.x.p, epsilon = 1e-12);
-        assert_relative_eq!(a.x.q, b.x.q, epsilon = 1e-12);
-        assert_relative_eq!(a.x.b_g, b.x.b_g, epsilon = 1e-15);
-    }
-
-    #[test]
-    fn alignment_levels_a_tilted_sensor() {
-        // Sensor tilted 10 deg about x: gravity reaction seen in the sensor frame.
-        let tilt = UnitQuaternion::from_scaled_axis(Vector3::x() * 10f64.to_radians());
-        let f_s = tilt.inverse() * Vector3::new(0.0, 0.0, G + 0.05);
-        let (x, cov) = align(
-            f_s,
-            Vector3::new(0.01, 0.0, 0.0),
-            G,
-            Vector3::repeat(0.005),
-            Vector3::repeat(1e-4),
-        );
-        let up = x.q * f_s;
-        assert_relative_eq!(up.normalize(), Vector3::z(), epsilon = 1e-12);
-        // The 0.05 m/s^2 excess is vertical bias, in the sensor frame along the measured up.
-        assert_relative_eq!(x.q * x.b_a, Vector3::new(0.0, 0.0, 0.05), epsilon = 1e-12);
-        assert_eq!(x.b_g, Vector3::new(0.01, 0.0, 0.0));
-        // Tilt variance is bias variance / g^2 (5 mm/s^2 -> 0.51 mrad).
-        assert_relative_eq!(cov[(TH, TH)].sqrt(), 0.005 / G, max_relative = 0.05);
-    }
-
-    #[test]
-    fn static_integration_with_a_bias_grows_quadratically() {
-        // Level sensor with an (unknown to the filter) 0.01 m/s^2 x bias: after t seconds of
-        // pure prediction the x position error is b t^2 / 2, as the thesis's error model says.
-        let g_s = Vector3::new(0.0, 0.0, G);
-        let bias = Vector3::new(0.01, 0.0, 0.0);
-        let m = Imu {
-            f: g_s + bias,
-            w: Vector3::zeros(),
-        };
-        let (x, cov) = align(
-            g_s,
-            Vector3::zeros(),
-            G,
-            Vector3::repeat(0.005),
-            Vector3::repeat(1e-4),
-        );
-        let mut kf = Eskf::new(x, cov, G, noise(), m);
-        let dt = 0.001;
-        for _ in 0..10_000 {
-            kf.predict(m, dt);
-        }
-        assert_relative_eq!(kf.x.p.x, 0.5 * 0.01 * 100.0, max_relative = 1e-9);
-        assert_relative_eq!(kf.x.v.x, 0.01 * 10.0, max_relative = 1e-9);
-        // The covariance knows about it: the bias-induced 1-sigma at 10 s is about
-        // sigma_b * t^2 / 2 = 0.25 m; tilt-bias correlation cancels part of it.
-        assert!(kf.position_sigma().x > 0.0);
-    }
-
-    #[test]
-    fn zupt_removes_the_velocity_error() {
-        let g_s = Vector3::new(0.0, 0.0, G);
-        let m = Imu {
-            f: g_s + Vector3::new(0.02, -0.01, 0.0),
-            w: Vector3::zeros(),
-        };
-        let (x, cov) = align(
-            g_s,
-            Vector3::zeros(),
-            G,
-            Vector3::repeat(0.005),
-            Vector3::repeat(1e-4),
-        );
-        let mut kf = Eskf::new(x, cov, G, noise(), m);
-        for _ in 0..1000 {
-            kf.predict(m, 0.001);
-        }
-        assert!(kf.x.v.norm() > 0.01);
-        for _ in 0..200 {
-            kf.predict(m, 0.001);
-            kf.zero_velocity(1e-3);
-        }
-        assert!(kf.x.v.norm() < 1e-3, "v = {}", kf.x.v);
-    }
-
-    #[test]
-    fn gyro_integration_follows_a_constant_rate() {
-        let g_s = Vector3::new(0.0, 0.0, G);
-        let rate = Vector3::new(0.0, 0.0, 0.5);
-        let m = Imu { f: g_s, w: rate };
-        let (x, cov) = align(
-            g_s,
-            Vector3::zeros(),
-            G,
-            Vector3::repeat(0.005),
-            Vector3::repeat(1e-4),
-        );
-        let mut kf = Eskf::new(x, cov, G, noise(), m);
-        for _ in 0..2000 {
-            kf.predict(m, 0.001);
-        }
-        let expected = UnitQuaternion::from_scaled_axis(rate * 2.0);
-        assert_relative_eq!(kf.x.q.angle_to(&expected), 0.0, epsilon = 1e-9);
-        // Rotating about the vertical does not move a level sensor.
-        assert!(kf.x.p.norm() < 1e-9);
-    }
-
-    #[test]
-    fn vibration_noise_grows_with_speed() {
-        // The transition does not depend on the velocity, so two filters that differ only in
-        // speed differ after one step by exactly the speed-dependent process noise.
-        let g_s = Vector3::new(0.0, 0.0, G);
-        let m = Imu {
-            f: g_s,
-            w: Vector3::zeros(),
-        };
-        let (x, cov) = align(
-            g_s,
-            Vector3::zeros(),
-            G,
-            Vector3::repeat(0.005),
-            Vector3::repeat(1e-4),
-        );
-        let (k_a, k_g) = (4e-3, 4e-4);
-        let n = NoiseModel {
-            vibration_accel_density_per_mps: k_a,
-            vibration_gyro_density_per_mps: k_g,
-            ..noise()
-        };
-        let dt = 0.01;
-        let step = |speed: f64| {
-            let moving = Nominal {
-                v: Vector3::new(speed, 0.0, 0.0),
-                ..x
-            };
-            let mut kf = Eskf::new(moving, cov, G, n, m);
-            kf.predict(m, dt);
-            kf.cov
-        };
-        let (slow, fast) = (step(0.0), step(2.0));
-        for i in 0..3 {
-            let dv = fast[(V + i, V + i)] - slow[(V + i, V + i)];
-            let dth = fast[(TH + i, TH + i)] - slow[(TH + i, TH + i)];
-            assert_relative_eq!(dv, (k_a * 2.0).powi(2) * dt, max_relative = 1e-9);
-            assert_relative_eq!(dth, (k_g * 2.0).powi(2) * dt, max_relative = 1e-9);
-        }
-    }
-
-    /// The consider sensitivity against an independent computation: the same trajectory
-    /// integrated twice by the nonlinear filter, once from exact readings and once with one
-    /// reading scaled by `1 + eps`. Their position difference is the error that entry causes,
-    /// and the first-order sensitivity must predict it (dx = true - nominal = M e).
-    #[test]
-    fn consider_sensitivity_predicts_a_scale_errors_effect() {
-        let g_s = Vector3::new(0.0, 0.0, G);
-        let eps = 1e-3;
-        let dt = 0.005;
-        // 2 s of yawing at 0.8 rad/s while the specific force pushes 1 m/s^2 along sensor x.
-        let reading = |k: usize| Imu {
-            f: g_s + Vector3::new(if k < 400 { 1.0 } else { 0.0 }, 0.0, 0.0),
-            w: Vector3::new(0.0, 0.0, if k < 400 { 0.8 } else { 0.0 }),
-        };
-        let run = |scale: &dyn Fn(Imu) -> Imu| {
-            let (x, cov) = align(
-                g_s,
-                Vector3::zeros(),
-                G,
-                Vector3::repeat(0.005),
-                Vector3::repeat(1e-4),
-            );
-            let model = ConsiderModel {
-                gyro: Matrix3::repeat(0.01),
-                accel: Matrix3::repeat(0.01),
-            };
-            let mut kf = Eskf::new(x, cov, G, noise(), scale(reading(0))).with_consider(model, g_s);
-            for k in 1..600 {
-                kf.predict(scale(reading(k)), dt);
-            }
-            kf
-        };
-        let exact = run(&|m| m);
-        // Gyro z scale (entry (2, 2), consider index 8).
-        let gyro = run(&|m: Imu| Imu {
-            w: m.w * (1.0 + eps),
-            ..m
-        });
-        let predicted = exact.sens.fixed_view::<1, 3>(8, P).transpose() * eps;
-        assert_relative_eq!(exact.x.p - gyro.x.p, predicted, max_relative = 0.02);
-        assert!(predicted.norm() > 1e-3, "{predicted}");
-        // Accelerometer x scale (entry (0, 0), consider index 9): only the change of specific
-        // force since alignment counts, and gravity lies along z.
-        let accel = run(&|m: Imu| Imu {
-            f: Vector3::new(m.f.x * (1.0 + eps), m.f.y, m.f.z),
-            ..m
-        });
-        let predicted = exact.sens.fixed_view::<1, 3>(9, P).transpose() * eps;
-        assert_relative_eq!(exact.x.p - accel.x.p, predicted, max_relative = 0.02);
-        assert!(predicted.norm() > 1e-3, "{predicted}");
-        // The reported sigma holds the consider share: at 1 % per entry, well above eps's.
-        assert!(exact.position_sigma().x > 10.0 * predicted.x.abs());
-    }
-
-    /// The alignment's tilt/bias correlation is what makes a horizontal bias observable after a
-    /// heading change: a level sensor with an unknown bias, aligned, spun 180 deg in place and
-    /// held at rest, must end with the bias estimated (which it cannot be without the turn).
-    #[test]
-    fn heading_change_reveals_the_horizontal_bias() {
-        let bias = Vector3::new(0.03, -0.02, 0.0);
-        let up_s = Vector3::new(0.0, 0.0, G);
-        let dt = 0.002;
-        let run = |turn: bool| {
-            let (x, cov) = align(
-                up_s + bias,
-                Vector3::zeros(),
-                G,
-                Vector3::repeat(0.05),
-                Vector3::repeat(1e-4),
-            );
-            let first = Imu {
-                f: up_s + bias,
-                w: Vector3::zeros(),
-            };
-            let mut kf = Eskf::new(x, cov, G, noise(), first);
-            let rate = if turn {
-                std::f64::consts::PI / 2.0
-            } else {
-                0.0
-            };
-            let mut heading = 0.0;
-            for k in 0..3000 {
-                // 2 s of spinning (when turning), then rest; always zero velocity.
-                let w = if k < 1000 { rate } else { 0.0 };
-                heading += w * dt;
-                let r = UnitQuaternion::from_scaled_axis(Vector3::z() * heading);
-                let m = Imu {
-                    f: r.inverse() * up_s + bias,
-                    w: Vector3::new(0.0, 0.0, w),
-                };
-                kf.predict(m, dt);
-                kf.zero_velocity(1e-3);
-            }
-            kf
-        };
-        let turned = run(true);
-        assert!(
-            (turned.x.b_a - bias).norm() < 2e-3,
-            "estimated {} vs {bias}",
-            turned.x.b_a
-        );
-        let still = run(false);
-        assert!(
-            (still.x.b_a - bias).norm() > 0.02,
-            "without a turn the bias stays hidden"
-        );
-    }
-}
+mod tests;

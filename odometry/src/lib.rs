@@ -13,6 +13,7 @@ pub mod attitudes;
 pub mod axes;
 pub mod clip;
 pub mod config;
+pub mod consistency;
 pub mod cruise;
 pub mod diagnose;
 pub mod eskf;

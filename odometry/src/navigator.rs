@@ -7,6 +7,7 @@
 use crate::attitudes::RestAttitudes;
 use crate::clip::{ClipRepair, ClipStats};
 use crate::config::OdometryConfig;
+use crate::consistency::{Consistency, ConsistencyReport, Kind};
 use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
 use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
 use crate::hints::{
@@ -78,6 +79,8 @@ struct RestWindow {
     t_s: f64,
     /// Sum of their (corrected) gyro readings, rad/s, sensor frame.
     w_sum: Vector3<f64>,
+    /// Time of the newest, ns.
+    t_ns: u64,
 }
 
 /// The odometry state machine for one stream of inputs. Its storage is allocated once, in
@@ -127,6 +130,8 @@ pub(crate) struct Navigator {
     attitudes: RestAttitudes,
     /// The stream's per-sample scatter, for the prediction's noise (`cfg.sampled_noise`).
     sampled: SampledNoise,
+    /// What the updates' innovations say of the covariance (`crate::consistency`).
+    consistency: Consistency,
 }
 
 impl Navigator {
@@ -179,6 +184,7 @@ impl Navigator {
             accel_prior: None,
             attitudes: RestAttitudes::default(),
             sampled: SampledNoise::default(),
+            consistency: Consistency::new(cfg.consistency),
         }
     }
 
@@ -208,6 +214,7 @@ impl Navigator {
         self.clip.copy_from(&other.clip);
         self.accel_prior = other.accel_prior;
         self.sampled = other.sampled;
+        self.consistency = other.consistency;
     }
 
     /// Takes `cfg` from the next sample on (a profile recognized from the data): its rest
@@ -274,6 +281,11 @@ impl Navigator {
     /// with a rest source decided it).
     pub fn imu_decided(&self) -> bool {
         self.imu_decided
+    }
+
+    /// What the updates' innovations said so far (`crate::consistency`).
+    pub fn consistency(&self) -> ConsistencyReport {
+        self.consistency.report()
     }
 
     /// What the reconstruction of clipped runs did so far.
@@ -509,6 +521,9 @@ impl Navigator {
         rest: bool,
         emit: &mut impl FnMut(&OdometryState),
     ) {
+        if rest && !self.at_rest {
+            self.consistency.rest_started();
+        }
         if rest && !self.at_rest && self.motion_start_ns.is_some() && self.pending.is_none() {
             self.rest_count += 1;
             self.pending = Some(PendingRevision {
@@ -549,6 +564,7 @@ impl Navigator {
             w.n += 1;
             w.t_s += dt;
             w.w_sum += m.w;
+            w.t_ns = t_ns;
             let accel_var = self.cfg.noise.accel_noise_density.powi(2) * w.t_s;
             let quasi_static = accel_var * f64::from(w.n)
                 < self.cfg.rest_window_drift * self.zupt_sigma_mps.powi(2);
@@ -587,7 +603,9 @@ impl Navigator {
                         nhc.adopt(q);
                     }
                 }
-                if hints.apply_speed(kf, &h, t_ns) {
+                if let Some(nis) = hints.apply_speed(kf, &h, t_ns) {
+                    let nis = Some(nis).filter(|x| x.is_finite());
+                    self.consistency.update(kf, Kind::Speed, t_ns, nis, 3.0);
                     hs.flags |= odometry_flags::HINT_SPEED;
                     hints.applied += 1;
                     hints.stats.speed_updates += 1;
@@ -601,8 +619,14 @@ impl Navigator {
                 .filter(|_| hs.flags & odometry_flags::HINT_SPEED == 0)
             {
                 let interval = self.cfg.propagation_interval_s.max(dt);
-                if nhc.apply(kf, dt, interval) == Some(Outcome::Rejected) {
-                    hs.flags |= odometry_flags::NONHOLONOMIC_REJECTED;
+                match nhc.apply(kf, dt, interval) {
+                    Some(Outcome::Rejected) => hs.flags |= odometry_flags::NONHOLONOMIC_REJECTED,
+                    Some(Outcome::Applied { nis, dof }) => {
+                        let nis = Some(nis).filter(|x| x.is_finite());
+                        self.consistency
+                            .update(kf, Kind::Nonholonomic, t_ns, nis, dof);
+                    }
+                    None => {}
                 }
             }
         }
@@ -653,7 +677,10 @@ impl Navigator {
         let kf = self.kf.as_mut().expect("aligned");
         let (p0, v0) = (kf.x.p, kf.x.v);
         let n = f64::from(w.n);
-        kf.zero_velocity(self.zupt_sigma_mps / n.sqrt());
+        let nis = kf.zero_velocity(self.zupt_sigma_mps / n.sqrt());
+        let removed = [v0.x - kf.x.v.x, v0.y - kf.x.v.y];
+        self.consistency
+            .rest_window(kf, w.t_ns, nis, w.t_s, removed);
         let gyro_sigma = self.cfg.noise.gyro_noise_density / w.t_s.sqrt();
         kf.zero_rate(w.w_sum / n, gyro_sigma, self.cfg.zaru_gate_sigma);
         if let Some(pending) = self.pending.as_mut() {

@@ -42,10 +42,17 @@ pub struct ImuConstraint {
 }
 
 /// What one call did.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Outcome {
-    /// The constraint was applied.
-    Applied,
+    /// The constraint was applied: its normalized innovation squared and degrees of freedom
+    /// (2, or 1 while only the vertical velocity is constrained); NaN NIS when its covariance
+    /// was singular.
+    Applied {
+        /// Normalized innovation squared.
+        nis: f64,
+        /// Degrees of freedom.
+        dof: f64,
+    },
     /// The gate rejected it.
     Rejected,
 }
@@ -101,16 +108,20 @@ impl ImuConstraint {
             None => (up_only(&up_s)?, FREE_MPS),
         };
         let v_b = kf.body_velocity(&r_bs);
-        let sigma_v = kf.velocity_sigma().norm();
+        let sigma_v = kf.filter_velocity_sigma().norm();
         let gate = |s: f64| GATE_SIGMA * s.hypot(sigma_v);
         if v_b.z.abs() > gate(sigma) || (lateral < FREE_MPS && v_b.y.abs() > gate(lateral)) {
             self.rejected += 1;
             return Some(Outcome::Rejected);
         }
         let residual = Vector3::new(0.0, -v_b.y, -v_b.z);
-        kf.body_velocity_update(&r_bs, residual, Vector3::new(FREE_MPS, lateral, sigma));
+        let nis = kf.body_velocity_update(&r_bs, residual, Vector3::new(FREE_MPS, lateral, sigma));
         self.applied += 1;
-        Some(Outcome::Applied)
+        let dof = if lateral < FREE_MPS { 2.0 } else { 1.0 };
+        Some(Outcome::Applied {
+            nis: nis.unwrap_or(f64::NAN),
+            dof,
+        })
     }
 }
 

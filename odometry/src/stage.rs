@@ -365,6 +365,15 @@ impl OdometryStage {
         settled.flatten().or_else(|| self.ahead.accel_estimate())
     }
 
+    /// What the filter's innovations said of its covariance so far
+    /// ([`crate::consistency`]), by the settled navigator (the live one while in step).
+    pub fn consistency(&self) -> crate::consistency::ConsistencyReport {
+        match self.in_step {
+            true => self.ahead.consistency(),
+            false => self.settled.live.consistency(),
+        }
+    }
+
     /// The filter, once aligned (for diagnostics and tests).
     pub fn filter(&self) -> Option<&Eskf> {
         self.ahead.filter()

@@ -136,19 +136,16 @@ impl Hints {
         kf.restart_velocity(v, &cov);
     }
 
-    /// Applies a speed hint as a body-velocity measurement at the hint's time; `false` when it
-    /// cannot be (mounting unknown, or the hint stale at `t_ns` or older than the velocity
-    /// history).
-    pub(super) fn apply_speed(&mut self, kf: &mut Eskf, h: &RobotHint, t_ns: u64) -> bool {
-        let Some(r_bs) = self.r_bs else {
-            return false;
-        };
+    /// Applies a speed hint as a body-velocity measurement at the hint's time; returns its
+    /// normalized innovation squared (3 dof; NaN when its covariance was singular), `None`
+    /// when it cannot be applied (mounting unknown, or the hint stale at `t_ns` or older than
+    /// the velocity history).
+    pub(super) fn apply_speed(&mut self, kf: &mut Eskf, h: &RobotHint, t_ns: u64) -> Option<f64> {
+        let r_bs = self.r_bs?;
         if t_ns.saturating_sub(h.stamps.sample_ns) > self.max_age_ns {
-            return false;
+            return None;
         }
-        let Some(then) = self.uncorrected_at(h.stamps.sample_ns) else {
-            return false;
-        };
+        let then = self.uncorrected_at(h.stamps.sample_ns)?;
         // The body velocity the filter now believes it had at the hint's time.
         let predicted = then + self.corrections;
         let residual = Vector3::new(
@@ -159,11 +156,11 @@ impl Hints {
         let nh = self.cfg.nonholonomic_sigma_mps;
         // A mounting yaw known to `yaw_sigma_rad` puts that much of the speed sideways.
         let lateral = nh.hypot(h.forward_speed_mps * self.yaw_sigma_rad);
-        kf.body_velocity_update(
+        let nis = kf.body_velocity_update(
             &r_bs,
             residual,
             Vector3::new(h.forward_speed_sigma_mps, lateral, nh),
         );
-        true
+        Some(nis.unwrap_or(f64::NAN))
     }
 }

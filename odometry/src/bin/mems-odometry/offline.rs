@@ -19,6 +19,7 @@ use anyhow::{Result, anyhow};
 use calibrate::stage::{CalibrationStage, RefineConfig};
 use ipc_types::odometry_flags;
 use mems_stage::{Chain, Either};
+use odometry::consistency::Scaling;
 use odometry::diagnose::lag::LagShift;
 use odometry::profile::Profile;
 use odometry::session::{NoGyro, OdometrySession};
@@ -43,6 +44,11 @@ pub struct OfflineArgs {
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
+    /// How the innovations' consistency enters (`odometry::consistency`): `report` (the
+    /// published 1-sigma only), `process` (a factor on the process noise: the estimates
+    /// change), `off` (the filter's covariance as is; still reported in the JSON).
+    #[arg(long, value_enum, default_value_t = Scaling::Report)]
+    innovation_scaling: Scaling,
     /// Ignore the recording's robot hints (IMU only).
     #[arg(long)]
     no_hints: bool,
@@ -185,6 +191,7 @@ fn pass(
         }
     }
     base.rest_updates = !args.no_zupt;
+    base.consistency.scaling = args.innovation_scaling;
     base.trust_untrusted = args.ranges.trust_clipped;
     base.reconstruct_clipped = !args.ranges.bridge_clipped;
     let hints = args.hints.config()?;

@@ -202,6 +202,8 @@ impl Summary {
                 calibrate::zero_state::glrt::REANCHOR_S
             );
         }
+        let consistency = chain.second.stage().consistency();
+        tracing::info!("{consistency}");
         let truth_error = self.truth_error(&end, truth);
         if json {
             let mut result = self.json(&end, truth_error, aligned_at_s, read, chain);
@@ -211,6 +213,7 @@ impl Summary {
             result["accel_error"] = json!(accel);
             result["gravity_reanchored"] = json!(reanchored);
             result["steady_vibrating_s"] = json!(vibrating_s);
+            result["consistency"] = json!(consistency);
             println!("{result}");
         } else {
             self.print(&end, truth_error);

@@ -100,6 +100,7 @@ impl Watch {
         if let Some(a) = session.stage().accel_estimate() {
             tracing::info!("{a}");
         }
+        tracing::info!("{}", session.stage().consistency());
         if axes.disagree() {
             tracing::warn!(
                 "the accelerometer's and the gyroscope's axes disagree (odometry::axes): {axes:?}"
