@@ -34,6 +34,8 @@ pub struct ImuConstraint {
     sigma_mps: f64,
     /// `R_bs`, given or estimated; `None` while estimating.
     r_bs: Option<Matrix3<f64>>,
+    /// Whether `r_bs` was given.
+    given: bool,
     estimator: MountingEstimator,
     /// Updates applied and rejected.
     pub applied: u64,
@@ -57,6 +59,7 @@ impl ImuConstraint {
         Self {
             sigma_mps,
             r_bs: mounting.map(|q| q.to_rotation_matrix().into_inner()),
+            given: mounting.is_some(),
             estimator: MountingEstimator::default(),
             applied: 0,
             rejected: 0,
@@ -70,10 +73,10 @@ impl ImuConstraint {
         })
     }
 
-    /// Takes `mounting` (sensor to body) when none is given or estimated yet (the speed
-    /// hints' forward axis, [`crate::cruise::ForwardFromSpeedChanges`]).
-    pub fn adopt(&mut self, mounting: UnitQuaternion<f64>) {
-        if self.r_bs.is_none() {
+    /// Takes `mounting` (sensor to body), the speed hints' forward axis
+    /// ([`crate::cruise::ForwardAxis`]) as it is refined, unless a mounting was given.
+    pub fn follow(&mut self, mounting: UnitQuaternion<f64>) {
+        if !self.given {
             self.r_bs = Some(mounting.to_rotation_matrix().into_inner());
         }
     }
