@@ -597,7 +597,7 @@ impl Navigator {
                         Some(turn) => body_turn = turn * body_turn,
                     }
                     if let Some(nhc) = self.nhc.as_mut() {
-                        nhc.follow(fit.mounting);
+                        nhc.follow(fit.mounting, fit.sigma_rad);
                     }
                 }
                 if hints.apply_speed(kf, &h, t_ns) {

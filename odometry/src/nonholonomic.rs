@@ -36,6 +36,9 @@ pub struct ImuConstraint {
     r_bs: Option<Matrix3<f64>>,
     /// Whether `r_bs` was given.
     given: bool,
+    /// 1-sigma of `r_bs`'s yaw when it follows the speed hints' forward axis, rad (0
+    /// otherwise): a yaw off by that much puts that fraction of the forward speed sideways.
+    yaw_sigma_rad: f64,
     estimator: MountingEstimator,
     /// Updates applied and rejected.
     pub applied: u64,
@@ -60,6 +63,7 @@ impl ImuConstraint {
             sigma_mps,
             r_bs: mounting.map(|q| q.to_rotation_matrix().into_inner()),
             given: mounting.is_some(),
+            yaw_sigma_rad: 0.0,
             estimator: MountingEstimator::default(),
             applied: 0,
             rejected: 0,
@@ -74,10 +78,13 @@ impl ImuConstraint {
     }
 
     /// Takes `mounting` (sensor to body), the speed hints' forward axis
-    /// ([`crate::cruise::ForwardAxis`]) as it is refined, unless a mounting was given.
-    pub fn follow(&mut self, mounting: UnitQuaternion<f64>) {
+    /// ([`crate::cruise::ForwardAxis`]) as it is refined, with its yaw 1-sigma `yaw_sigma_rad`,
+    /// unless a mounting was given. The lateral constraint's 1-sigma then takes the forward
+    /// speed times that angle, in quadrature.
+    pub fn follow(&mut self, mounting: UnitQuaternion<f64>, yaw_sigma_rad: f64) {
         if !self.given {
             self.r_bs = Some(mounting.to_rotation_matrix().into_inner());
+            self.yaw_sigma_rad = yaw_sigma_rad;
         }
     }
 
@@ -104,6 +111,7 @@ impl ImuConstraint {
             None => (up_only(&up_s)?, FREE_MPS),
         };
         let v_b = kf.body_velocity(&r_bs);
+        let lateral = lateral.hypot(v_b.x * self.yaw_sigma_rad);
         let sigma_v = kf.velocity_sigma().norm();
         let gate = |s: f64| GATE_SIGMA * s.hypot(sigma_v);
         if v_b.z.abs() > gate(sigma) || (lateral < FREE_MPS && v_b.y.abs() > gate(lateral)) {
