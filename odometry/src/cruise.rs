@@ -33,6 +33,7 @@ use crate::eskf::{Cov, KS, Nominal, V, align};
 use crate::hints::{HintConfig, mounting_from};
 use crate::rest_noise::RestNoise;
 use crate::uncalibrated::AccelPrior;
+use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 /// Slowest hint speed a cruise window takes, m/s (below it, a hint's noise is the speed).
 pub const MIN_SPEED_MPS: f64 = 0.1;
@@ -41,14 +42,17 @@ pub const STEADY_MPS: f64 = 0.15;
 /// Largest least-squares slope of the hint speeds over a cruise window, m/s^2 (an
 /// acceleration hidden in the mean specific force tilts the alignment by `a / g`: 0.9 deg).
 pub const MAX_ACCEL_MPS2: f64 = 0.15;
-/// Intervals the forward-axis estimate gathers before use (30 s at one per half second: its
-/// 1-sigma from fewer came out optimistic on the Husky recording of the corpus).
-pub const FORWARD_MIN_INTERVALS: u32 = 60;
+/// Intervals the forward-axis estimate gathers before use, the least excitation it takes (3 s
+/// at one per half second; the 1-sigma's upper confidence bound, [`ForwardAxis`], covers what
+/// few intervals leave unknown).
+pub const FORWARD_MIN_INTERVALS: u32 = 6;
 /// Largest 1-sigma of the forward-axis fit's direction for use, rad (10 degrees); the speed
 /// hints' lateral 1-sigma then covers it ([`ForwardAxis`]).
 pub const FORWARD_MAX_SIGMA_RAD: f64 = 0.175;
 /// Shortest interval between two speed hints the forward-axis estimate compares, s.
 pub const FORWARD_INTERVAL_S: f64 = 0.5;
+/// Confidence of the upper bound on the forward-axis fit's residual variance.
+const CONFIDENCE: f64 = 0.95;
 
 /// The cruise window being gathered.
 #[derive(Debug, Clone, Copy, Default)]
@@ -224,19 +228,30 @@ pub fn cruise_start(
 /// horizontal specific force over an interval is `A = F (ds/dt + i s w_z)` with `F` the forward
 /// axis. The least-squares `F = sum(A conj(B)) / sum(|B|^2)`, `B = ds/dt + i s w_z`, keeps the
 /// sign (a displacement cannot tell forward from reverse) and does not depend on the filter's
-/// velocity, which a start in motion leaves unknown. Intervals run between speed hints at
-/// least [`FORWARD_INTERVAL_S`] apart; the estimate is used once [`FORWARD_MIN_INTERVALS`]
-/// intervals are gathered and the direction's 1-sigma from the fit's residuals is at most
-/// [`FORWARD_MAX_SIGMA_RAD`]; the speed hints then take a lateral 1-sigma that covers it
-/// (`s` times that angle, with the non-holonomic one). Body z is the gravity-up direction
+/// velocity, which a start in motion leaves unknown. The fit has no intercept: a robot turning
+/// steadily has a constant `B`, which an intercept (a constant horizontal bias) would take
+/// away (with one, the Husky recording of the corpus, turning about a parking lot, was not
+/// trusted for 250 s). Intervals run between speed hints at least [`FORWARD_INTERVAL_S`]
+/// apart.
+///
+/// The direction's 1-sigma is the fit's: the residuals' variance per component (their sum of
+/// squares over `2k - 2` degrees of freedom, `k` intervals and one complex unknown) over the
+/// excitation `sum|B|^2`, relative to `|F|`. From a few intervals that variance is itself
+/// uncertain (the plain estimate from fewer than 60 intervals came out optimistic on the Husky
+/// recording), so the 1-sigma used is the one from its one-sided 95 % upper confidence bound
+/// (chi-square with `2k - 2` degrees of freedom: the residual sum of squares over the 5 %
+/// quantile). The estimate is trusted once it has at least [`FORWARD_MIN_INTERVALS`] intervals
+/// and that 1-sigma is at most [`FORWARD_MAX_SIGMA_RAD`]: the excitation it takes is what the
+/// residuals say is enough; it is refined at every interval after. The speed hints take a
+/// lateral 1-sigma that covers it (`s` times that angle, with the non-holonomic one). Body z is the gravity-up direction
 /// (a level floor), taken once, from the filter's attitude at the first sample after alignment
 /// (the alignment's measured gravity): the attitude drifts while the speed hints wait for this
 /// estimate, and a later up direction would tilt the mounting by that drift (on the F1TENTH
 /// car of docs/real-data.md, 5-16 degrees after 30 s of driving on the IMU alone).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ForwardAxis {
-    /// Body up in the sensor frame (unit), fixed at the first sample.
-    up: Option<Vector3<f64>>,
+    /// The filter's up direction and biases, fixed at the first sample.
+    reference: Option<Reference>,
     /// Time (ns) and speed (m/s) of the hint that opened the current interval.
     anchor: Option<(u64, f64)>,
     /// The current interval's sums: horizontal specific force (sensor frame, m/s^2), rate
@@ -253,30 +268,48 @@ pub struct ForwardAxis {
     intervals: u32,
 }
 
+/// A trusted forward-axis fit ([`ForwardAxis`]): the mounting it gives and its yaw 1-sigma.
+#[derive(Debug, Clone, Copy)]
+pub struct ForwardFit {
+    /// The mounting (sensor to body).
+    pub mounting: UnitQuaternion<f64>,
+    /// 1-sigma of its yaw, rad (from the residual variance's upper confidence bound).
+    pub sigma_rad: f64,
+}
+
+/// What [`ForwardAxis`] takes from the filter, once, at the first sample after alignment:
+/// later values would bring in the attitude's drift on the IMU alone and, once the speed hints
+/// apply along the estimated axis, that axis's own error (through the updates' corrections of
+/// the biases).
+#[derive(Debug, Clone, Copy)]
+pub struct Reference {
+    /// Body up in the sensor frame (unit).
+    pub up: Vector3<f64>,
+    /// Accelerometer bias, sensor frame, m/s^2.
+    pub accel_bias: Vector3<f64>,
+    /// Gyro bias, sensor frame, rad/s.
+    pub gyro_bias: Vector3<f64>,
+}
+
 impl ForwardAxis {
-    /// Adds a sample's (bias-corrected) specific force `f_s` (m/s^2) and rate `w_s` (rad/s),
-    /// sensor frame, with the filter's up direction `up_s` (unit, sensor frame; only the first
-    /// one given is used).
-    pub fn sample(&mut self, f_s: &Vector3<f64>, w_s: &Vector3<f64>, up_s: &Vector3<f64>) {
-        let up_s = *self.up.get_or_insert(*up_s);
+    /// Adds a sample's specific force `f_s` (m/s^2) and rate `w_s` (rad/s), sensor frame, with
+    /// the filter's reference `r` (only the first one given is used).
+    pub fn sample(&mut self, f_s: &Vector3<f64>, w_s: &Vector3<f64>, r: &Reference) {
+        let r = *self.reference.get_or_insert(*r);
         if self.anchor.is_none() {
             return;
         }
-        self.f_sum += f_s - up_s * up_s.dot(f_s);
-        self.w_up_sum += w_s.dot(&up_s);
+        let f_s = f_s - r.accel_bias;
+        self.f_sum += f_s - r.up * r.up.dot(&f_s);
+        self.w_up_sum += (w_s - r.gyro_bias).dot(&r.up);
         self.n += 1;
     }
 
-    /// Takes a speed hint of `speed` m/s at `t_ns` with the filter's up direction `up_s` (only
-    /// the first one given is used, as in [`Self::sample`]); returns the mounting (sensor to
-    /// body) and its yaw 1-sigma (rad) once known.
-    pub fn hint(
-        &mut self,
-        t_ns: u64,
-        speed: f64,
-        up_s: &Vector3<f64>,
-    ) -> Option<(UnitQuaternion<f64>, f64)> {
-        let up_s = *self.up.get_or_insert(*up_s);
+    /// Takes a speed hint of `speed` m/s at `t_ns` with the filter's reference `r` (only the
+    /// first one given is used, as in [`Self::sample`]); returns the fit when this hint closed
+    /// an interval and the fit is trusted (see the type's documentation).
+    pub fn hint(&mut self, t_ns: u64, speed: f64, r: &Reference) -> Option<ForwardFit> {
+        let up_s = self.reference.get_or_insert(*r).up;
         let Some((t0, s0)) = self.anchor else {
             self.anchor = Some((t_ns, speed));
             return None;
@@ -310,24 +343,31 @@ impl ForwardAxis {
             return None;
         }
         let forward = e1 * self.cross.0 + e2 * self.cross.1;
-        mounting_from(&forward, &up_s).map(|q| (q, sigma))
+        mounting_from(&forward, &up_s).map(|mounting| ForwardFit {
+            mounting,
+            sigma_rad: sigma,
+        })
     }
 }
 
 impl ForwardAxis {
-    /// 1-sigma of the fit's direction, rad: the residuals' variance per interval
-    /// (`(sum|A|^2 - |sum A conj B|^2 / sum|B|^2) / (k - 1)` over `k` intervals) over
-    /// `sum|B|^2`, square-rooted, relative to `|F|`; infinite before two intervals.
+    /// 1-sigma of the fit's direction, rad (see the type's documentation): the residual sum of
+    /// squares `sum|A|^2 - |sum A conj B|^2 / sum|B|^2` over its chi-square 5 % quantile
+    /// (`2k - 2` degrees of freedom), per component, over `sum|B|^2`, square-rooted, relative
+    /// to `|F|`; infinite before two intervals.
     fn angle_sigma_rad(&self) -> f64 {
         let k = f64::from(self.intervals);
         let cross2 = self.cross.0 * self.cross.0 + self.cross.1 * self.cross.1;
-        if k < 2.0 || self.bb <= 0.0 || cross2 <= 0.0 {
+        let dof = 2.0 * k - 2.0;
+        let Some(chi2) = ChiSquared::new(dof)
+            .ok()
+            .filter(|_| self.bb > 0.0 && cross2 > 0.0)
+        else {
             return f64::INFINITY;
-        }
-        let residual = (self.aa - cross2 / self.bb).max(0.0) / (k - 1.0);
+        };
+        let residual = (self.aa - cross2 / self.bb).max(0.0) / chi2.inverse_cdf(1.0 - CONFIDENCE);
         let f_norm = cross2.sqrt() / self.bb;
-        // Per component of the complex fit: half the residual variance.
-        (0.5 * residual / self.bb).sqrt() / f_norm
+        (residual / self.bb).sqrt() / f_norm
     }
 }
 
@@ -350,6 +390,11 @@ mod tests {
         let left_s = up_s.cross(&fwd_s);
         let truth = mounting_from(&fwd_s, &up_s).unwrap();
         let mut est = ForwardAxis::default();
+        let r = Reference {
+            up: up_s,
+            accel_bias: Vector3::zeros(),
+            gyro_bias: Vector3::zeros(),
+        };
         let mut got = None;
         // Slowing down and turning both ways, 0.5 s between hints, 10 samples each.
         for k in 0..80 {
@@ -358,12 +403,15 @@ mod tests {
             // Over the interval that this hint opens: the mean speed is the mid-interval one.
             let mid = speed - 0.02 * 0.25;
             let f = fwd_s * accel + left_s * mid * yaw_rate + up_s * 9.81;
-            got = est.hint((t * 1e9) as u64, speed, &up_s).or(got);
+            got = est.hint((t * 1e9) as u64, speed, &r).or(got);
             for _ in 0..10 {
-                est.sample(&f, &(up_s * yaw_rate), &up_s);
+                est.sample(&f, &(up_s * yaw_rate), &r);
             }
         }
-        let (q, sigma) = got.unwrap();
+        let ForwardFit {
+            mounting: q,
+            sigma_rad: sigma,
+        } = got.unwrap();
         assert!(q.angle_to(&truth) < 0.01 && sigma < 0.01, "{q:?} {sigma}");
     }
 

@@ -509,8 +509,21 @@ impl Eskf {
     /// Restarts the velocity at `v` (m/s, navigation frame) with covariance `cov_v`, uncorrelated
     /// with the rest of the state: for a velocity the filter knows less about than a new
     /// measurement gives, which an update linearized about it would take out on the attitude.
+    /// The position takes what its covariance with the velocity says of the velocity's change
+    /// (the Gaussian conditional on the new velocity taken as exact: `p += P_pv P_vv^-1
+    /// (v - v_old)`, and the whole covariance `P -= P_xv P_vv^-1 P_vx`, which stays positive
+    /// semi-definite): the distance a velocity started at zero for want of a direction left
+    /// out (a start in motion, [`crate::cruise`]). The other states keep their means.
     pub fn restart_velocity(&mut self, v: Vector3<f64>, cov_v: &Matrix3<f64>) {
         self.propagate();
+        let p_vv = self.cov.fixed_view::<3, 3>(V, V).into_owned();
+        if let Some(inv) = p_vv.try_inverse() {
+            let p_xv = self.cov.fixed_view::<N, 3>(0, V).into_owned();
+            let gain = p_xv * inv;
+            self.x.p += gain.fixed_view::<3, 3>(P, 0) * (v - self.x.v);
+            self.cov -= gain * p_xv.transpose();
+            self.cov = (self.cov + self.cov.transpose()) * 0.5;
+        }
         self.x.v = v;
         for i in 0..N {
             for j in V..V + 3 {

@@ -8,7 +8,7 @@ use crate::attitudes::RestAttitudes;
 use crate::clip::{ClipRepair, ClipStats};
 use crate::config::OdometryConfig;
 use crate::consistency::{Consistency, ConsistencyReport, Kind};
-use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
+use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, Reference, cruise_start};
 use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
 use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
@@ -22,7 +22,7 @@ use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
     odometry_flags, raw_flags,
 };
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 mod hint_state;
 use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE};
@@ -155,6 +155,7 @@ impl Navigator {
                 yaw_sigma_rad: 0.0,
                 estimator: MountingEstimator::default(),
                 forward: ForwardAxis::default(),
+                mounting_at_ns: None,
                 history: Ring::new(velocity_capacity),
                 corrections: Vector3::zeros(),
                 applied: 0,
@@ -264,6 +265,15 @@ impl Navigator {
         self.hints.r_bs.map(|r| {
             UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r))
         })
+    }
+
+    /// The time (ns, sample clock) and yaw 1-sigma (rad) of the forward axis estimated from the
+    /// speed hints ([`crate::cruise::ForwardAxis`]): when it was first trusted, and its
+    /// latest 1-sigma.
+    pub fn forward_axis(&self) -> Option<(u64, f64)> {
+        self.hints
+            .mounting_at_ns
+            .map(|t| (t, self.hints.yaw_sigma_rad))
     }
 
     /// Whether alignment is done.
@@ -551,7 +561,7 @@ impl Navigator {
     /// The body velocity's corrections are tracked for the mounting estimate.
     #[inline]
     fn update(&mut self, t_ns: u64, dt: f64, m: &Imu, rest: bool, moved: f64, hs: &mut HintSample) {
-        let body_before = self.body_velocity();
+        let mut body_before = self.body_velocity();
         if let Some(v_b) = body_before {
             let hints = &mut self.hints;
             hints.history.push(BodyVelocity {
@@ -581,26 +591,29 @@ impl Navigator {
             }
             let kf = self.kf.as_mut().expect("aligned");
             let hints = &mut self.hints;
-            if hints.r_bs.is_none() && hints.cfg.mounting_from_turns {
-                let up_s = kf.x.q.inverse_transform_vector(&Vector3::z());
-                hints
-                    .forward
-                    .sample(&(m.f - kf.x.b_a), &(m.w - kf.x.b_g), &up_s);
+            // Turns a refined mounting made ([`Hints::remount`]), for `body_before`.
+            let mut body_turn = Matrix3::identity();
+            let reference = Reference {
+                up: kf.x.q.inverse_transform_vector(&Vector3::z()),
+                accel_bias: kf.x.b_a,
+                gyro_bias: kf.x.b_g,
+            };
+            if hints.cfg.mounting_from_turns {
+                hints.forward.sample(&m.f, &m.w, &reference);
             }
             while let Some(h) = hints.speed.pop() {
-                let up_s = kf.x.q.inverse_transform_vector(&Vector3::z());
-                if hints.r_bs.is_none()
-                    && hints.cfg.mounting_from_turns
-                    && let Some((q, sigma)) =
+                if hints.cfg.mounting_from_turns
+                    && let Some(fit) =
                         hints
                             .forward
-                            .hint(h.stamps.sample_ns, h.forward_speed_mps, &up_s)
+                            .hint(h.stamps.sample_ns, h.forward_speed_mps, &reference)
                 {
-                    hints.r_bs = Some(q.to_rotation_matrix().into_inner());
-                    hints.yaw_sigma_rad = sigma;
-                    hints.restart_velocity(kf, &h);
+                    match hints.remount(&fit, t_ns) {
+                        None => hints.restart_velocity(kf, &h),
+                        Some(turn) => body_turn = turn * body_turn,
+                    }
                     if let Some(nhc) = self.nhc.as_mut() {
-                        nhc.adopt(q);
+                        nhc.follow(fit.mounting, fit.sigma_rad);
                     }
                 }
                 if let Some(nis) = hints.apply_speed(kf, &h, t_ns) {
@@ -629,6 +642,7 @@ impl Navigator {
                     None => {}
                 }
             }
+            body_before = body_before.map(|v| body_turn * v);
         }
         self.track_corrections(body_before);
     }

@@ -34,6 +34,11 @@ pub struct ImuConstraint {
     sigma_mps: f64,
     /// `R_bs`, given or estimated; `None` while estimating.
     r_bs: Option<Matrix3<f64>>,
+    /// Whether `r_bs` was given.
+    given: bool,
+    /// 1-sigma of `r_bs`'s yaw when it follows the speed hints' forward axis, rad (0
+    /// otherwise): a yaw off by that much puts that fraction of the forward speed sideways.
+    yaw_sigma_rad: f64,
     estimator: MountingEstimator,
     /// Updates applied and rejected.
     pub applied: u64,
@@ -64,6 +69,8 @@ impl ImuConstraint {
         Self {
             sigma_mps,
             r_bs: mounting.map(|q| q.to_rotation_matrix().into_inner()),
+            given: mounting.is_some(),
+            yaw_sigma_rad: 0.0,
             estimator: MountingEstimator::default(),
             applied: 0,
             rejected: 0,
@@ -77,11 +84,14 @@ impl ImuConstraint {
         })
     }
 
-    /// Takes `mounting` (sensor to body) when none is given or estimated yet (the speed
-    /// hints' forward axis, [`crate::cruise::ForwardFromSpeedChanges`]).
-    pub fn adopt(&mut self, mounting: UnitQuaternion<f64>) {
-        if self.r_bs.is_none() {
+    /// Takes `mounting` (sensor to body), the speed hints' forward axis
+    /// ([`crate::cruise::ForwardAxis`]) as it is refined, with its yaw 1-sigma `yaw_sigma_rad`,
+    /// unless a mounting was given. The lateral constraint's 1-sigma then takes the forward
+    /// speed times that angle, in quadrature.
+    pub fn follow(&mut self, mounting: UnitQuaternion<f64>, yaw_sigma_rad: f64) {
+        if !self.given {
             self.r_bs = Some(mounting.to_rotation_matrix().into_inner());
+            self.yaw_sigma_rad = yaw_sigma_rad;
         }
     }
 
@@ -108,6 +118,7 @@ impl ImuConstraint {
             None => (up_only(&up_s)?, FREE_MPS),
         };
         let v_b = kf.body_velocity(&r_bs);
+        let lateral = lateral.hypot(v_b.x * self.yaw_sigma_rad);
         let sigma_v = kf.filter_velocity_sigma().norm();
         let gate = |s: f64| GATE_SIGMA * s.hypot(sigma_v);
         if v_b.z.abs() > gate(sigma) || (lateral < FREE_MPS && v_b.y.abs() > gate(lateral)) {

@@ -291,6 +291,13 @@ impl OdometryStage {
         self.ahead.mounting()
     }
 
+    /// The time (ns, sample clock) the forward axis estimated from the speed hints was first
+    /// trusted and its latest yaw 1-sigma (rad), by the navigator on the newest inputs
+    /// ([`crate::cruise::ForwardAxis`]).
+    pub fn forward_axis(&self) -> Option<(u64, f64)> {
+        self.ahead.forward_axis()
+    }
+
     /// Takes `cfg` from the next sample on: every navigator's rest handling, manoeuvre and
     /// wheeled constraint (a profile recognized from the data). The hindsight's lag and
     /// confirmation, the history sizes and the bridge limit stay those the stage was built

@@ -2,8 +2,9 @@
 //! docs/real-data.md) and which starts in motion, through the real `mems-odometry offline`
 //! binary with no `--mount`: the speed hints wait for the forward axis estimated from the
 //! horizontal specific force against their changes and turns (`odometry::cruise::ForwardAxis`),
-//! while the IMU alone integrates. The estimate's up direction is the one at alignment (the
-//! attitude drifts meanwhile, and a later one tilted the mounting).
+//! while the IMU alone integrates, and apply within seconds of the alignment (they waited 30 s
+//! when the estimate took a fixed 60 intervals). The estimate's up direction is the one at
+//! alignment (the attitude drifts meanwhile, and a later one tilted the mounting).
 
 mod common;
 
@@ -52,6 +53,19 @@ fn an_estimated_mounting_after_a_start_in_motion_is_level() {
     let rpy = |i: usize| v["hints"]["mounting_rpy_deg"][i].as_f64().unwrap();
     eprintln!("mounting {:.2} {:.2} {:.2} deg", rpy(0), rpy(1), rpy(2));
     assert!((rpy(2) - 90.0).abs() < 2.0, "{v}");
+    // The hints apply within seconds of the alignment: the forward axis is trusted once its
+    // 1-sigma's upper confidence bound is below 10 degrees (at least 6 intervals of 0.5 s).
+    let forward = &v["hints"]["forward_axis"];
+    let wait_s = forward["trusted_at_s"].as_f64().unwrap() - v["aligned_at_s"].as_f64().unwrap();
+    eprintln!(
+        "forward axis trusted {wait_s:.1} s after the alignment, yaw 1-sigma {:.2} deg",
+        forward["yaw_sigma_deg"].as_f64().unwrap()
+    );
+    assert!((0.0..10.0).contains(&wait_s), "{v}");
+    assert!(v["hints"]["speed_updates"].as_u64().unwrap() > 0, "{v}");
+    // The yaw's 1-sigma covers its error.
+    let sigma = forward["yaw_sigma_deg"].as_f64().unwrap();
+    assert!((rpy(2) - 90.0).abs() < 3.0 * sigma.max(0.1), "{v}");
     // The simulated IMU sits level on the robot: so does the estimate (an up direction taken
     // when the estimate was ready, after 30 s on the IMU alone, tilted it by 0.5-0.7 degrees
     // here and by 5-16 degrees on the F1TENTH car).

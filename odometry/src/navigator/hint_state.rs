@@ -2,7 +2,7 @@
 //! speed hints still to apply and the body-velocity history they are applied against (see
 //! [`crate::stage`] for the behaviour, [`crate::hints`] for frames and times).
 
-use crate::cruise::{ForwardAxis, initial_velocity};
+use crate::cruise::{ForwardAxis, ForwardFit, initial_velocity};
 use crate::eskf::{Eskf, V};
 use crate::hints::{HintConfig, HintStats, MountingEstimator, Ring};
 use ipc_types::RobotHint;
@@ -58,6 +58,8 @@ pub(super) struct Hints {
     pub(super) estimator: MountingEstimator,
     /// The forward axis from the speed hints' changes (mounting not given).
     pub(super) forward: ForwardAxis,
+    /// Time the forward axis was first trusted, ns (sample clock).
+    pub(super) mounting_at_ns: Option<u64>,
     /// Body velocity minus corrections, one per sample since the mounting is known.
     pub(super) history: Ring<BodyVelocity>,
     /// Sum of the body-velocity changes every update has made since the mounting is known,
@@ -82,6 +84,7 @@ impl Hints {
         self.yaw_sigma_rad = other.yaw_sigma_rad;
         self.estimator = other.estimator;
         self.forward = other.forward;
+        self.mounting_at_ns = other.mounting_at_ns;
         self.history.clone_from(&other.history);
         self.corrections = other.corrections;
         self.applied = other.applied;
@@ -108,6 +111,27 @@ impl Hints {
             newer = Some(e);
         }
         None
+    }
+
+    /// Takes the forward-axis fit `fit` at `t_ns` as the mounting; returns `None` for the first
+    /// one, else the turn `R_new R_old^T` of the refined mounting. The stored body velocities
+    /// and their corrections are turned with it, so that the speed hints still compare like
+    /// with like.
+    pub(super) fn remount(&mut self, fit: &ForwardFit, t_ns: u64) -> Option<Matrix3<f64>> {
+        let r_new = fit.mounting.to_rotation_matrix().into_inner();
+        self.yaw_sigma_rad = fit.sigma_rad;
+        let Some(r_old) = self.r_bs.replace(r_new) else {
+            self.mounting_at_ns = Some(t_ns);
+            return None;
+        };
+        let turn = r_new * r_old.transpose();
+        for i in 0..self.history.len() {
+            if let Some(e) = self.history.oldest_mut(i) {
+                e.uncorrected = turn * e.uncorrected;
+            }
+        }
+        self.corrections = turn * self.corrections;
+        Some(turn)
     }
 
     /// With the mounting just estimated: when the filter's horizontal velocity is known worse

@@ -257,6 +257,7 @@ impl Summary {
                 "disagreements": end.hint_disagreements,
                 "speed_updates": speed_updates,
                 "mounting_rpy_deg": hint_mounting(chain),
+                "forward_axis": forward_axis_json(chain, read.first_ns.unwrap_or(0)),
             },
         });
         if let (Some(r), Some(t)) = (result.as_object_mut(), read.trust.as_object()) {
@@ -478,6 +479,21 @@ fn hint_mounting(chain: &OfflineChain) -> Option<[f64; 3]> {
         let (r, p, y) = q.euler_angles();
         [r.to_degrees(), p.to_degrees(), y.to_degrees()]
     })
+}
+
+/// When the forward axis estimated from the speed hints was first trusted (s from the first
+/// sample) and its latest yaw 1-sigma (deg); `null` when it was given or never estimated.
+fn forward_axis_json(chain: &OfflineChain, first_ns: u64) -> serde_json::Value {
+    chain
+        .second
+        .stage()
+        .forward_axis()
+        .map_or(serde_json::Value::Null, |(t_ns, sigma)| {
+            json!({
+                "trusted_at_s": t_ns.saturating_sub(first_ns) as f64 * 1e-9,
+                "yaw_sigma_deg": sigma.to_degrees(),
+            })
+        })
 }
 
 /// Why the odometry never aligned: the detector never learned (with the learner's last
