@@ -14,41 +14,19 @@ use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
 use crate::nonholonomic::{ImuConstraint, Outcome};
-use crate::rest_noise::RestNoise;
 use crate::sampled_noise::SampledNoise;
 use crate::uncalibrated::{AccelEstimate, AccelPrior};
 use crate::untrusted::{Untrusted, Verdict};
 use ipc_types::{
-    CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
-    odometry_flags, raw_flags,
+    CorrectedImuSample, OdometryState, RobotHint, corrected_flags, hint_flags, odometry_flags,
+    raw_flags,
 };
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 mod hint_state;
+mod records;
 use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE};
-
-#[derive(Debug, Clone, Copy)]
-struct HistoryEntry {
-    t_ns: u64,
-    stamps: Stamps,
-    seq: u64,
-    p: Vector3<f64>,
-    v: Vector3<f64>,
-    sigma_p: Vector3<f64>,
-    sigma_v: Vector3<f64>,
-    q: UnitQuaternion<f64>,
-    distance_m: f64,
-}
-
-#[derive(Debug, Clone, Copy, Default)]
-struct AlignSums {
-    t0_ns: u64,
-    /// A sample of the rest was flagged `GRAVITY_OFF` (the calibration stage's learned rest
-    /// read gravity off before its refinement removed that from the samples).
-    gravity_off: bool,
-    accel: RestNoise,
-    gyro: RestNoise,
-}
+use records::{AlignSums, HistoryEntry, PendingRevision, RestWindow};
 
 /// Rest a filter with speed hints aligns on at least, s: a robot that creeps off from its
 /// first sample is as still to the IMU as a rest for a second (its encoders do not tick
@@ -56,32 +34,6 @@ struct AlignSums {
 /// simulated drive that starts moving at once (odometry/tests/start_in_motion.rs), aligned on
 /// half a second of that, ended outside its 1-sigma.
 const HINT_ALIGN_S: f64 = 1.0;
-
-/// What happens to the motion history after a motion interval has ended.
-#[derive(Debug, Clone, Copy)]
-struct PendingRevision {
-    /// Time the motion interval ended (first rest sample), ns.
-    end_ns: u64,
-    /// Sum of the corrections the updates injected since, position and velocity.
-    dp: Vector3<f64>,
-    dv: Vector3<f64>,
-}
-
-/// The rest samples whose zero-velocity and zero-rate updates are still to be made: at rest
-/// the updates are made once per covariance propagation (`OdometryConfig::
-/// propagation_interval_s`) or sooner, for all the rest samples since the last ones, with
-/// their information (see [`Navigator::rest_updates`]).
-#[derive(Debug, Clone, Copy, Default)]
-struct RestWindow {
-    /// Samples.
-    n: u32,
-    /// Their intervals' sum, s.
-    t_s: f64,
-    /// Sum of their (corrected) gyro readings, rad/s, sensor frame.
-    w_sum: Vector3<f64>,
-    /// Time of the newest, ns.
-    t_ns: u64,
-}
 
 /// The odometry state machine for one stream of inputs. Its storage is allocated once, in
 /// [`Navigator::new`]; [`Navigator::copy_from`] copies another navigator into it without

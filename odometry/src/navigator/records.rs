@@ -1,0 +1,57 @@
+//! The navigator's bookkeeping records: the motion history's entries, the alignment's sums,
+//! a pending revision and the rest window still to be updated.
+
+use crate::rest_noise::RestNoise;
+use ipc_types::Stamps;
+use nalgebra::{UnitQuaternion, Vector3};
+
+/// One decimated state of the motion history, kept for the revision at the next rest.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct HistoryEntry {
+    pub(super) t_ns: u64,
+    pub(super) stamps: Stamps,
+    pub(super) seq: u64,
+    pub(super) p: Vector3<f64>,
+    pub(super) v: Vector3<f64>,
+    pub(super) sigma_p: Vector3<f64>,
+    pub(super) sigma_v: Vector3<f64>,
+    pub(super) q: UnitQuaternion<f64>,
+    pub(super) distance_m: f64,
+}
+
+/// What the alignment rest has gathered so far.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct AlignSums {
+    pub(super) t0_ns: u64,
+    /// A sample of the rest was flagged `GRAVITY_OFF` (the calibration stage's learned rest
+    /// read gravity off before its refinement removed that from the samples).
+    pub(super) gravity_off: bool,
+    pub(super) accel: RestNoise,
+    pub(super) gyro: RestNoise,
+}
+
+/// What happens to the motion history after a motion interval has ended.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct PendingRevision {
+    /// Time the motion interval ended (first rest sample), ns.
+    pub(super) end_ns: u64,
+    /// Sum of the corrections the updates injected since, position and velocity.
+    pub(super) dp: Vector3<f64>,
+    pub(super) dv: Vector3<f64>,
+}
+
+/// The rest samples whose zero-velocity and zero-rate updates are still to be made: at rest
+/// the updates are made once per covariance propagation (`OdometryConfig::
+/// propagation_interval_s`) or sooner, for all the rest samples since the last ones, with
+/// their information (see [`super::Navigator::rest_updates`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct RestWindow {
+    /// Samples.
+    pub(super) n: u32,
+    /// Their intervals' sum, s.
+    pub(super) t_s: f64,
+    /// Sum of their (corrected) gyro readings, rad/s, sensor frame.
+    pub(super) w_sum: Vector3<f64>,
+    /// Time of the newest, ns.
+    pub(super) t_ns: u64,
+}
