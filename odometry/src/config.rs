@@ -139,6 +139,9 @@ pub struct OdometryConfig {
     /// Not without hints: on the IMU-only car runs of docs/real-data.md the wider noise moved
     /// the estimates further off (the gain changed, not only the 1-sigma).
     pub sampled_noise: bool,
+    /// Hand-held walking: pedestrian dead reckoning at each step instead of zero-velocity
+    /// updates while walking (`crate::walking`); `None` on other platforms.
+    pub walking: Option<crate::walking::WalkingConfig>,
 }
 
 impl OdometryConfig {
@@ -186,6 +189,7 @@ impl OdometryConfig {
             imu_nonholonomic_sigma_mps: 0.0,
             rest_vibration_factor: 0.0,
             sampled_noise: true,
+            walking: None,
         }
     }
 

@@ -8,15 +8,17 @@ use crate::attitudes::RestAttitudes;
 use crate::clip::{ClipRepair, ClipStats};
 use crate::config::OdometryConfig;
 use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
-use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
+use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, V, align};
 use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
 use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::rest_noise::RestNoise;
 use crate::sampled_noise::SampledNoise;
+use crate::steps::Step;
 use crate::uncalibrated::{AccelEstimate, AccelPrior};
 use crate::untrusted::{Untrusted, Verdict};
+use crate::walking::{Walk, WalkingStats};
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
     odometry_flags, raw_flags,
@@ -127,6 +129,8 @@ pub(crate) struct Navigator {
     attitudes: RestAttitudes,
     /// The stream's per-sample scatter, for the prediction's noise (`cfg.sampled_noise`).
     sampled: SampledNoise,
+    /// Hand-held walking's steps and updates (`cfg.walking`).
+    walk: Option<Walk>,
 }
 
 impl Navigator {
@@ -179,6 +183,7 @@ impl Navigator {
             accel_prior: None,
             attitudes: RestAttitudes::default(),
             sampled: SampledNoise::default(),
+            walk: cfg.walking.map(Walk::new),
         }
     }
 
@@ -208,6 +213,7 @@ impl Navigator {
         self.clip.copy_from(&other.clip);
         self.accel_prior = other.accel_prior;
         self.sampled = other.sampled;
+        self.walk = other.walk;
     }
 
     /// Takes `cfg` from the next sample on (a profile recognized from the data): its rest
@@ -224,7 +230,17 @@ impl Navigator {
                 self.hints.cfg.imu_mounting,
             )),
         };
+        self.walk = match (cfg.walking, self.walk) {
+            (None, _) => None,
+            (Some(_), Some(walk)) => Some(walk),
+            (Some(c), None) => Some(Walk::new(c)),
+        };
         self.cfg = cfg;
+    }
+
+    /// What hand-held walking did, in that mode.
+    pub fn walking_stats(&self) -> Option<WalkingStats> {
+        self.walk.as_ref().map(Walk::stats)
     }
 
     /// The IMU-only non-holonomic constraint, on a wheeled platform.
@@ -322,6 +338,13 @@ impl Navigator {
         let prev_ns = prev.map(|((t, _), _)| t);
         let detector_ready = s.flags & corrected_flags::DETECTOR_READY != 0;
         let mut d = self.hint_decision(t_ns, imu_rest, detector_ready);
+        // Hand-held walking: the quiet instants between steps are no rests.
+        let (step, walking) = match self.walk.as_mut() {
+            Some(w) if !verdict.implausible => (w.push(t_ns, &m.f), w.walking(t_ns)),
+            Some(w) => (None, w.walking(t_ns)),
+            None => (None, false),
+        };
+        let imu_rest = imu_rest && !walking;
 
         if self.kf.is_none() {
             let rest = d.rest.unwrap_or(imu_rest);
@@ -339,6 +362,7 @@ impl Navigator {
                 self.accumulate_alignment(t_ns, &m, rest, gravity_off);
                 let still = imu_rest && detector_ready && verdict.clipped == 0;
                 self.accumulate_cruise(t_ns, &m, d.fresh.filter(|_| still), gravity_off);
+                self.align_on_steps(&m, step.as_ref());
             }
             emit(&self.unaligned_state(s, rest, d.sample));
             return;
@@ -368,6 +392,18 @@ impl Navigator {
         self.count_hint_use(&d);
         self.track_motion(t_ns, prev_ns, rest, emit);
         self.update(t_ns, dt, &m, rest, moved, &mut d.sample);
+        if let Some(walk) = self.walk.as_mut() {
+            if step.is_some() {
+                // An update the reconstruction's predictions would not redo.
+                self.clip.spoil();
+            }
+            walk.update(
+                self.kf.as_mut().expect("aligned"),
+                t_ns,
+                step.as_ref(),
+                rest,
+            );
+        }
 
         let state = self.state(s, rest, d.sample);
         if !rest && self.motion_start_ns.is_some() {
@@ -656,7 +692,8 @@ impl Navigator {
         kf.zero_velocity(self.zupt_sigma_mps / n.sqrt());
         let gyro_sigma = self.cfg.noise.gyro_noise_density / w.t_s.sqrt();
         kf.zero_rate(w.w_sum / n, gyro_sigma, self.cfg.zaru_gate_sigma);
-        if let Some(pending) = self.pending.as_mut() {
+        // (Hand-held walking's position is the walk's, not the filter's: nothing to revise.)
+        if let Some(pending) = self.pending.as_mut().filter(|_| self.walk.is_none()) {
             pending.dp += kf.x.p - p0;
             pending.dv += kf.x.v - v0;
         }
@@ -724,9 +761,44 @@ impl Navigator {
         let g = self.cfg.gravity_mps2;
         let prior = AccelPrior::at_rest(&self.cfg, &f_mean, a.gravity_off);
         let (x, mut cov) = align(f_mean, w_mean, g, prior.bias_sigma_mps2, w_sigma);
-        cov[(KS, KS)] = self.hints.cfg.speed_scale_sigma.powi(2);
+        // Hand-held walking holds its step-length uncertainty outside the filter
+        // (`crate::walking`): the scale state stays at zero.
+        cov[(KS, KS)] = match &self.walk {
+            Some(_) => 0.0,
+            None => self.hints.cfg.speed_scale_sigma.powi(2),
+        };
         self.start_filter(x, cov, prior, f_mean, m);
         self.at_rest = true;
+    }
+
+    /// Hand-held walking without a rest: aligns on the mean specific force over whole steps
+    /// (`crate::walking`), the gyro bias unknown.
+    fn align_on_steps(&mut self, m: &Imu, step: Option<&Step>) {
+        if self.kf.is_some() {
+            return;
+        }
+        let Some(walk) = self.walk.as_mut() else {
+            return;
+        };
+        let Some(f_mean) = walk.stride_mean(&m.f, step) else {
+            return;
+        };
+        let g = self.cfg.gravity_mps2;
+        let prior = AccelPrior::at_rest(&self.cfg, &f_mean, false);
+        let (x, mut cov) = align(
+            f_mean,
+            Vector3::zeros(),
+            g,
+            prior.bias_sigma_mps2,
+            Walk::gyro_bias_sigma(),
+        );
+        cov[(KS, KS)] = 0.0;
+        for i in 0..3 {
+            cov[(V + i, V + i)] = crate::walking::ALIGN_VELOCITY_SIGMA_MPS.powi(2);
+        }
+        self.start_filter(x, cov, prior, f_mean, m);
+        self.zupt_sigma_mps = self.cfg.zupt_sigma_mps;
+        self.at_rest = false;
     }
 
     /// Starts the filter at `x`, `cov` (an alignment at rest or in motion) with the
@@ -834,16 +906,25 @@ impl Navigator {
         if rest {
             flags |= odometry_flags::ZERO_VELOCITY;
         }
+        // Hand-held walking: the position is the walk's (the sum of the steps).
+        let (position, position_sigma, distance_m) = match &self.walk {
+            Some(walk) => (
+                walk.position(kf.x.p.z),
+                walk.position_sigma(kf.position_sigma().z),
+                walk.distance_m(),
+            ),
+            None => (kf.x.p, kf.position_sigma(), self.distance_m),
+        };
         OdometryState {
             stamps: s.stamps,
             seq: s.seq,
-            position_m: kf.x.p.into(),
-            position_sigma_m: kf.position_sigma().into(),
+            position_m: position.into(),
+            position_sigma_m: position_sigma.into(),
             velocity_mps: kf.x.v.into(),
             velocity_sigma_mps: kf.velocity_sigma().into(),
             gravity_sensor_mps2: g_s.into(),
             attitude_wxyz: [q.w, q.i, q.j, q.k],
-            distance_m: self.distance_m,
+            distance_m,
             flags,
             reserved16: 0,
             rest_count: self.rest_count,

@@ -202,11 +202,23 @@ impl Summary {
                 calibrate::zero_state::glrt::REANCHOR_S
             );
         }
+        let walking = chain.second.walking_stats();
+        if let Some(w) = walking {
+            tracing::info!("{w}");
+        }
         let truth_error = self.truth_error(&end, truth);
         if json {
             let mut result = self.json(&end, truth_error, aligned_at_s, read, chain);
             result["profile"] = read.choice.json(chain.second.auto_choice());
             result["wheeled"] = self.wheeled_json(&chain.second);
+            result["walking"] = json!(walking.map(|w| json!({
+                "mode": "pedestrian dead reckoning",
+                "steps": w.steps,
+                "step_updates": w.step_updates,
+                "mean_step_m": w.mean_step_m(),
+                "weinberg_k": w.weinberg_k,
+                "aligned_on_steps": w.aligned_on_steps,
+            })));
             result["aligned_in_motion"] = json!(in_motion.map(|s| json!({ "speed_mps": s })));
             result["accel_error"] = json!(accel);
             result["gravity_reanchored"] = json!(reanchored);

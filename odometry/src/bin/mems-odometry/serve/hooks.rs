@@ -100,6 +100,9 @@ impl Watch {
         if let Some(a) = session.stage().accel_estimate() {
             tracing::info!("{a}");
         }
+        if let Some(w) = session.walking_stats() {
+            tracing::info!("{w}");
+        }
         if axes.disagree() {
             tracing::warn!(
                 "the accelerometer's and the gyroscope's axes disagree (odometry::axes): {axes:?}"
