@@ -14,8 +14,8 @@ use mems_sim::dlpf::DlpfConfig;
 use mems_sim::hints::{HintParams, RestSource, drive_hints};
 use mems_sim::model::{Preset, SensorModel};
 use mems_sim::scenario::{
-    Arm, ArmParams, Drive, DriveParams, PoseParams, PoseSession, Scenario, Walk, WalkParams,
-    ns_from_s,
+    Arm, ArmParams, Drive, DriveParams, Handheld, HandheldParams, PoseParams, PoseSession,
+    Scenario, Walk, WalkParams, ns_from_s,
 };
 use mems_sim::vibration::VibrationModel;
 use mems_sim::{DlpfGrid, SimSensor};
@@ -118,6 +118,28 @@ enum Command {
         /// Tremor level in stance (1: about 0.05 m/s^2 and 0.3 deg/s RMS; 0: none).
         #[arg(long, default_value_t = 1.0)]
         tremor: f64,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// A walker with the sensor in the hand, held in front like a phone for texting, walking
+    /// laps of a circle between two rests: the hand bounces and surges once per step and sways
+    /// once per stride.
+    Handheld {
+        /// Laps of the circle (fractions allowed).
+        #[arg(long, default_value_t = 2.0)]
+        laps: f64,
+        /// Radius of the circle, m.
+        #[arg(long, default_value_t = 4.0)]
+        radius: f64,
+        /// Walking speed, m/s.
+        #[arg(long, default_value_t = 0.8)]
+        speed: f64,
+        /// Steps per second.
+        #[arg(long, default_value_t = 1.7)]
+        step_hz: f64,
+        /// Standing still at the start and at the end, s.
+        #[arg(long, default_value_t = 2.0)]
+        rest: f64,
         #[command(flatten)]
         common: Common,
     },
@@ -868,6 +890,24 @@ fn run(cli: Cli) -> Result<()> {
                 ..WalkParams::new(laps)
             };
             simulate(Walk::new(&params, common.seed)?, &still, &common, &[])
+        }
+        Command::Handheld {
+            laps,
+            radius,
+            speed,
+            step_hz,
+            rest,
+            common,
+        } => {
+            let params = HandheldParams {
+                radius_m: radius,
+                speed_mps: speed,
+                step_hz,
+                rest_s: rest,
+                gravity_mps2: common.gravity,
+                ..HandheldParams::new(laps)
+            };
+            simulate(Handheld::new(&params)?, &still, &common, &[])
         }
         Command::Arm { arm, common } => {
             let params = arm.params(common.gravity);
