@@ -909,7 +909,7 @@ impl Navigator {
         // Hand-held walking: the position is the walk's (the sum of the steps).
         let (position, position_sigma, distance_m) = match &self.walk {
             Some(walk) => (
-                walk.position(kf.x.p.z),
+                walk.position(),
                 walk.position_sigma(kf.position_sigma().z),
                 walk.distance_m(),
             ),

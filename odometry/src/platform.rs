@@ -32,8 +32,8 @@
 //!   their mean amplitude (m/s^2), and the *still share*, the share of the windows that are not
 //!   moving;
 //! - walking (a sensor in a walker's hand): not a foot, gait steps/min >=
-//!   [`WALK_MIN_STEPS_PER_MIN`], mean step amplitude <= [`WALK_MAX_STEP_MPS2`] (no heel
-//!   strike, no shaking), principal-axis share < [`WALK_MAX_SHARE`], still share <= [`WALK_MAX_STILL_SHARE`] (the hand is never still
+//!   [`WALK_MIN_STEPS_PER_MIN`], mean step amplitude <= [`WALK_MAX_STEP_MPS2`] and impacts/min
+//!   <= [`WALK_MAX_IMPACTS_PER_MIN`] (no heel strike, no shaking), principal-axis share < [`WALK_MAX_SHARE`], still share <= [`WALK_MAX_STILL_SHARE`] (the hand is never still
 //!   while its carrier walks) and tilt rate > [`WHEELED_MAX_TILT_DPS`] (a hand turns the
 //!   sensor). (A walker who stands for more than a tenth of the recording is not recognized:
 //!   BROAD's box moved slowly by hand without breaks, broad-11-slow, shows the steps and
@@ -82,8 +82,12 @@ pub const WHEELED_MAX_AXIS_DEG: f64 = 30.0;
 
 /// Gait steps per moving minute a hand-held walk reaches.
 pub const WALK_MIN_STEPS_PER_MIN: f64 = 6.0;
-/// Mean step amplitude a hand-held walk stays under, m/s^2.
-pub const WALK_MAX_STEP_MPS2: f64 = 5.0;
+/// Mean step amplitude a hand-held walk stays under, m/s^2 (the Tyrex phones: 0.4-1.8).
+pub const WALK_MAX_STEP_MPS2: f64 = 2.5;
+/// Impacts per moving minute a hand-held walk stays under (the hand holds the sensor off the
+/// ground: the Tyrex walks show at most 0.5; the F1TENTH car strikes 42 times a minute in its
+/// first 10 s of motion, where its rotation is not yet about gravity alone).
+pub const WALK_MAX_IMPACTS_PER_MIN: f64 = 5.0;
 /// Principal-axis share a hand-held walk stays under: the hand pitches and rolls the sensor at
 /// every step, where a car turning about gravity (the F1TENTH car's bumps count as steps at
 /// 18-30 Hz) holds 0.92-0.96.
@@ -311,6 +315,7 @@ fn classify(f: &Features) -> Platform {
     }
     if f.gait_steps_per_min >= WALK_MIN_STEPS_PER_MIN
         && f.step_amplitude_mps2 <= WALK_MAX_STEP_MPS2
+        && f.impacts_per_min <= WALK_MAX_IMPACTS_PER_MIN
         && f.principal_share < WALK_MAX_SHARE
         && f.still_share <= WALK_MAX_STILL_SHARE
         && f.tilt_rate_dps > WHEELED_MAX_TILT_DPS

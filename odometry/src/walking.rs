@@ -233,9 +233,11 @@ impl Walk {
         Vector3::repeat(GYRO_BIAS_SIGMA_DPS.to_radians())
     }
 
-    /// The walk's position, m, navigation frame (x, y; z is the filter's `z_m`).
-    pub fn position(&self, z_m: f64) -> Vector3<f64> {
-        Vector3::new(self.position.x, self.position.y, z_m)
+    /// The walk's position, m, navigation frame: the steps' sum horizontally, and 0 vertically
+    /// (a walk on one floor: steps measure no height, and the filter's height between steps
+    /// drifts with its tilt).
+    pub fn position(&self) -> Vector3<f64> {
+        Vector3::new(self.position.x, self.position.y, 0.0)
     }
 
     /// Distance walked, m (the steps' lengths summed).

@@ -162,7 +162,15 @@ impl Summary {
             .aligned_ns
             .map_or(0.0, |t| (t - read.first_ns.unwrap_or(0)) as f64 * 1e-9);
         let in_motion = chain.second.stage().aligned_in_motion();
+        let on_steps = chain
+            .second
+            .walking_stats()
+            .is_some_and(|w| w.aligned_on_steps);
         match in_motion {
+            None if on_steps => tracing::info!(
+                "aligned {aligned_at_s:.2} s into the recording on whole steps of a walk (no \
+                 rest); the position counts from there"
+            ),
             None => tracing::info!(
                 "aligned {aligned_at_s:.2} s into the recording (at its first rest of {} s); the \
                  position counts from there",
