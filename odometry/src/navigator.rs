@@ -8,17 +8,16 @@ use crate::attitudes::RestAttitudes;
 use crate::clip::{ClipRepair, ClipStats};
 use crate::config::OdometryConfig;
 use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
-use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, V, align};
+use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
 use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
 use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::rest_noise::RestNoise;
 use crate::sampled_noise::SampledNoise;
-use crate::steps::Step;
 use crate::uncalibrated::{AccelEstimate, AccelPrior};
 use crate::untrusted::{Untrusted, Verdict};
-use crate::walking::{Walk, WalkingStats};
+use crate::walking::Walk;
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, Stamps, corrected_flags, hint_flags,
     odometry_flags, raw_flags,
@@ -26,6 +25,7 @@ use ipc_types::{
 use nalgebra::{UnitQuaternion, Vector3};
 
 mod hint_state;
+mod walk_hooks;
 use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE};
 
 #[derive(Debug, Clone, Copy)]
@@ -238,11 +238,6 @@ impl Navigator {
         self.cfg = cfg;
     }
 
-    /// What hand-held walking did, in that mode.
-    pub fn walking_stats(&self) -> Option<WalkingStats> {
-        self.walk.as_ref().map(Walk::stats)
-    }
-
     /// The IMU-only non-holonomic constraint, on a wheeled platform.
     pub fn imu_constraint(&self) -> Option<&ImuConstraint> {
         self.nhc.as_ref()
@@ -339,11 +334,7 @@ impl Navigator {
         let detector_ready = s.flags & corrected_flags::DETECTOR_READY != 0;
         let mut d = self.hint_decision(t_ns, imu_rest, detector_ready);
         // Hand-held walking: the quiet instants between steps are no rests.
-        let (step, walking) = match self.walk.as_mut() {
-            Some(w) if !verdict.implausible => (w.push(t_ns, &m.f), w.walking(t_ns)),
-            Some(w) => (None, w.walking(t_ns)),
-            None => (None, false),
-        };
+        let (step, walking) = self.walk_step(t_ns, &m, verdict.implausible);
         let imu_rest = imu_rest && !walking;
 
         if self.kf.is_none() {
@@ -392,18 +383,7 @@ impl Navigator {
         self.count_hint_use(&d);
         self.track_motion(t_ns, prev_ns, rest, emit);
         self.update(t_ns, dt, &m, rest, moved, &mut d.sample);
-        if let Some(walk) = self.walk.as_mut() {
-            if step.is_some() {
-                // An update the reconstruction's predictions would not redo.
-                self.clip.spoil();
-            }
-            walk.update(
-                self.kf.as_mut().expect("aligned"),
-                t_ns,
-                step.as_ref(),
-                rest,
-            );
-        }
+        self.walk_update(t_ns, step.as_ref(), rest);
 
         let state = self.state(s, rest, d.sample);
         if !rest && self.motion_start_ns.is_some() {
@@ -769,36 +749,6 @@ impl Navigator {
         };
         self.start_filter(x, cov, prior, f_mean, m);
         self.at_rest = true;
-    }
-
-    /// Hand-held walking without a rest: aligns on the mean specific force over whole steps
-    /// (`crate::walking`), the gyro bias unknown.
-    fn align_on_steps(&mut self, m: &Imu, step: Option<&Step>) {
-        if self.kf.is_some() {
-            return;
-        }
-        let Some(walk) = self.walk.as_mut() else {
-            return;
-        };
-        let Some(f_mean) = walk.stride_mean(&m.f, step) else {
-            return;
-        };
-        let g = self.cfg.gravity_mps2;
-        let prior = AccelPrior::at_rest(&self.cfg, &f_mean, false);
-        let (x, mut cov) = align(
-            f_mean,
-            Vector3::zeros(),
-            g,
-            prior.bias_sigma_mps2,
-            Walk::gyro_bias_sigma(),
-        );
-        cov[(KS, KS)] = 0.0;
-        for i in 0..3 {
-            cov[(V + i, V + i)] = crate::walking::ALIGN_VELOCITY_SIGMA_MPS.powi(2);
-        }
-        self.start_filter(x, cov, prior, f_mean, m);
-        self.zupt_sigma_mps = self.cfg.zupt_sigma_mps;
-        self.at_rest = false;
     }
 
     /// Starts the filter at `x`, `cov` (an alignment at rest or in motion) with the

@@ -125,21 +125,8 @@ enum Command {
     /// laps of a circle between two rests: the hand bounces and surges once per step and sways
     /// once per stride.
     Handheld {
-        /// Laps of the circle (fractions allowed).
-        #[arg(long, default_value_t = 2.0)]
-        laps: f64,
-        /// Radius of the circle, m.
-        #[arg(long, default_value_t = 4.0)]
-        radius: f64,
-        /// Walking speed, m/s.
-        #[arg(long, default_value_t = 0.8)]
-        speed: f64,
-        /// Steps per second.
-        #[arg(long, default_value_t = 1.7)]
-        step_hz: f64,
-        /// Standing still at the start and at the end, s.
-        #[arg(long, default_value_t = 2.0)]
-        rest: f64,
+        #[command(flatten)]
+        walk: HandheldArgs,
         #[command(flatten)]
         common: Common,
     },
@@ -181,6 +168,39 @@ struct PlanArgs {
 }
 
 /// An arm's path.
+/// The hand-held walk's options.
+#[derive(Args)]
+struct HandheldArgs {
+    /// Laps of the circle (fractions allowed).
+    #[arg(long, default_value_t = 2.0)]
+    laps: f64,
+    /// Radius of the circle, m.
+    #[arg(long, default_value_t = 4.0)]
+    radius: f64,
+    /// Walking speed, m/s.
+    #[arg(long, default_value_t = 0.8)]
+    speed: f64,
+    /// Steps per second.
+    #[arg(long, default_value_t = 1.7)]
+    step_hz: f64,
+    /// Standing still at the start and at the end, s.
+    #[arg(long, default_value_t = 2.0)]
+    rest: f64,
+}
+
+impl HandheldArgs {
+    fn params(&self, gravity_mps2: f64) -> HandheldParams {
+        HandheldParams {
+            radius_m: self.radius,
+            speed_mps: self.speed,
+            step_hz: self.step_hz,
+            rest_s: self.rest,
+            gravity_mps2,
+            ..HandheldParams::new(self.laps)
+        }
+    }
+}
+
 #[derive(Args)]
 struct ArmArgs {
     /// Moves (the last one returns to the start).
@@ -891,22 +911,8 @@ fn run(cli: Cli) -> Result<()> {
             };
             simulate(Walk::new(&params, common.seed)?, &still, &common, &[])
         }
-        Command::Handheld {
-            laps,
-            radius,
-            speed,
-            step_hz,
-            rest,
-            common,
-        } => {
-            let params = HandheldParams {
-                radius_m: radius,
-                speed_mps: speed,
-                step_hz,
-                rest_s: rest,
-                gravity_mps2: common.gravity,
-                ..HandheldParams::new(laps)
-            };
+        Command::Handheld { walk, common } => {
+            let params = walk.params(common.gravity);
             simulate(Handheld::new(&params)?, &still, &common, &[])
         }
         Command::Arm { arm, common } => {
