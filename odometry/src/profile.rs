@@ -14,7 +14,8 @@ use crate::platform::Platform;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Profile {
     /// Recognize the platform from the data ([`crate::platform`]) and take its profile:
-    /// `pedestrian` for a foot, `vehicle` for wheeled motion, `other` for anything else.
+    /// `pedestrian` for a foot, `vehicle` for wheeled motion, `walking` for a walker's hand,
+    /// `other` for anything else.
     #[default]
     Auto,
     /// Wheeled robot or vehicle: the GLRT against the references learned from the first
