@@ -41,13 +41,18 @@ def features_row(name, truth, r):
         f"{f.get('principal_share', 0):.2f}",
         f"{f.get('principal_axis_deg', 0):.0f}",
         f"{f.get('impacts_per_min', 0):.1f}",
+        f"{f.get('gait_steps_per_min', 0):.0f}",
+        f"{f.get('still_share', 0):.2f}",
         p["profile"],
         how,
     ]
 
 
-HEADER = ["recording", "class", "whole recording", "moving s", "tilt rate deg/s", "principal share", "axis from gravity deg", "impacts/min", "profile used", "chosen"]
-PROFILE_OF_CLASS = {"foot": "pedestrian", "wheeled": "vehicle", "vehicle": "vehicle", "handheld": "other", "arm": "other", "other": "other"}
+HEADER = ["recording", "class", "whole recording", "moving s", "tilt rate deg/s", "principal share", "axis from gravity deg", "impacts/min", "gait steps/min", "still share", "profile used", "chosen"]
+# The profiles a class's recordings should get: a hand-held sensor is walked by a pedestrian
+# (walking) or moved by hand (other), which the corpus's class does not tell apart.
+PROFILES_OF_CLASS = {"foot": {"pedestrian"}, "wheeled": {"vehicle"}, "vehicle": {"vehicle"}, "handheld": {"other", "walking"}, "arm": {"other"}, "other": {"other"}, "walking": {"walking"}}
+PROFILE_OF_PLATFORM = {"foot": "pedestrian", "wheeled": "vehicle", "other": "other", "walking": "walking", "-": "-"}
 
 
 def auto(ctx):
@@ -62,11 +67,12 @@ def auto(ctx):
         "walk": (["walk", "--laps", "1"], "foot"),
         "drive": (["drive", "--duration", "300", "--turns", "on"], "wheeled"),
         "arm": (["orientations", "--n", "12", "--hold", "6"], "other"),
+        "hand-held walk": (["handheld", "--laps", "2"], "walking"),
     }
     outs = []
     for seed in seeds:
         for name, (args, truth) in sims.items():
-            path = f"{TMP}/{name}-{seed}.mcap"
+            path = f"{TMP}/{name.replace(' ', '-')}-{seed}.mcap"
             ctx.run([BIN + "mems-sim", *args, "--rate", "200", "--seed", str(seed), "--out", path])
             out, _ = ctx.run([BIN + "mems-odometry", "offline", "--input", path, "--json"])
             outs.append((f"simulated {name}, seed {seed}", truth, out))
@@ -81,8 +87,8 @@ def auto(ctx):
             continue
         rows.append(features_row(r["id"], r["sidecar"]["platform"], r["odometry"]))
     rows += [features_row(name, truth, result(out, name)) for name, truth, out in outs]
-    whole = sum(1 for r in rows if PROFILE_OF_CLASS[r[1]] == PROFILE_OF_CLASS[r[2]])
-    used = sum(1 for r in rows if PROFILE_OF_CLASS[r[1]] == r[8])
+    whole = sum(1 for r in rows if PROFILE_OF_PLATFORM[r[2]] in PROFILES_OF_CLASS[r[1]])
+    used = sum(1 for r in rows if r[10] in PROFILES_OF_CLASS[r[1]])
     counts = f"The whole recording recognized as its class: {whole} of {len(rows)}; the profile used is its class's: {used} of {len(rows)}."
     if failed:
         counts += f" No position, so not counted (the bench's table gives why): {', '.join(failed)}."

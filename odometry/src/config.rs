@@ -143,6 +143,9 @@ pub struct OdometryConfig {
     /// What the run's innovations say of the covariance, and how it enters the published
     /// 1-sigma ([`crate::consistency`]).
     pub consistency: ConsistencyConfig,
+    /// Hand-held walking: pedestrian dead reckoning at each step instead of zero-velocity
+    /// updates while walking (`crate::walking`); `None` on other platforms.
+    pub walking: Option<crate::walking::WalkingConfig>,
 }
 
 impl OdometryConfig {
@@ -191,6 +194,7 @@ impl OdometryConfig {
             rest_vibration_factor: 0.0,
             sampled_noise: true,
             consistency: ConsistencyConfig::default(),
+            walking: None,
         }
     }
 

@@ -55,7 +55,8 @@ pub const NC: usize = 18;
 const P: usize = 0;
 /// Index of the (navigation-frame) velocity error in the error state.
 pub const V: usize = 3;
-const TH: usize = 6;
+/// Index of the attitude error (navigation frame: its z is the heading's) in the error state.
+pub const TH: usize = 6;
 const BA: usize = 9;
 const BG: usize = 12;
 /// Index of the wheel-speed scale error in the error state.

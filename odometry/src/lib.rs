@@ -27,5 +27,7 @@ pub mod rest_noise;
 pub mod sampled_noise;
 pub mod session;
 pub mod stage;
+pub mod steps;
 pub mod uncalibrated;
 mod untrusted;
+pub mod walking;

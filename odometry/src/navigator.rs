@@ -17,6 +17,7 @@ use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::sampled_noise::SampledNoise;
 use crate::uncalibrated::{AccelEstimate, AccelPrior};
 use crate::untrusted::{Untrusted, Verdict};
+use crate::walking::Walk;
 use ipc_types::{
     CorrectedImuSample, OdometryState, RobotHint, corrected_flags, hint_flags, odometry_flags,
     raw_flags,
@@ -25,6 +26,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 mod hint_state;
 mod records;
+mod walk_hooks;
 use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE};
 use records::{AlignSums, HistoryEntry, PendingRevision, RestWindow};
 
@@ -84,6 +86,8 @@ pub(crate) struct Navigator {
     sampled: SampledNoise,
     /// What the updates' innovations say of the covariance (`crate::consistency`).
     consistency: Consistency,
+    /// Hand-held walking's steps and updates (`cfg.walking`).
+    walk: Option<Walk>,
 }
 
 impl Navigator {
@@ -138,6 +142,7 @@ impl Navigator {
             attitudes: RestAttitudes::default(),
             sampled: SampledNoise::default(),
             consistency: Consistency::new(cfg.consistency),
+            walk: cfg.walking.map(Walk::new),
         }
     }
 
@@ -168,6 +173,7 @@ impl Navigator {
         self.accel_prior = other.accel_prior;
         self.sampled = other.sampled;
         self.consistency = other.consistency;
+        self.walk = other.walk;
     }
 
     /// Takes `cfg` from the next sample on (a profile recognized from the data): its rest
@@ -183,6 +189,11 @@ impl Navigator {
                 cfg.imu_nonholonomic_sigma_mps,
                 self.hints.cfg.imu_mounting,
             )),
+        };
+        self.walk = match (cfg.walking, self.walk) {
+            (None, _) => None,
+            (Some(_), Some(walk)) => Some(walk),
+            (Some(c), None) => Some(Walk::new(c)),
         };
         self.cfg = cfg;
     }
@@ -296,6 +307,9 @@ impl Navigator {
         let prev_ns = prev.map(|((t, _), _)| t);
         let detector_ready = s.flags & corrected_flags::DETECTOR_READY != 0;
         let mut d = self.hint_decision(t_ns, imu_rest, detector_ready);
+        // Hand-held walking: the quiet instants between steps are no rests.
+        let (step, walking) = self.walk_step(t_ns, &m, verdict.implausible);
+        let imu_rest = imu_rest && !walking;
 
         if self.kf.is_none() {
             let rest = d.rest.unwrap_or(imu_rest);
@@ -313,6 +327,7 @@ impl Navigator {
                 self.accumulate_alignment(t_ns, &m, rest, gravity_off);
                 let still = imu_rest && detector_ready && verdict.clipped == 0;
                 self.accumulate_cruise(t_ns, &m, d.fresh.filter(|_| still), gravity_off);
+                self.align_on_steps(&m, step.as_ref());
             }
             emit(&self.unaligned_state(s, rest, d.sample));
             return;
@@ -342,6 +357,7 @@ impl Navigator {
         self.count_hint_use(&d);
         self.track_motion(t_ns, prev_ns, rest, emit);
         self.update(t_ns, dt, &m, rest, moved, &mut d.sample);
+        self.walk_update(t_ns, step.as_ref(), rest);
 
         let state = self.state(s, rest, d.sample);
         if !rest && self.motion_start_ns.is_some() {
@@ -649,7 +665,8 @@ impl Navigator {
             .rest_window(kf, w.t_ns, nis, w.t_s, removed);
         let gyro_sigma = self.cfg.noise.gyro_noise_density / w.t_s.sqrt();
         kf.zero_rate(w.w_sum / n, gyro_sigma, self.cfg.zaru_gate_sigma);
-        if let Some(pending) = self.pending.as_mut() {
+        // (Hand-held walking's position is the walk's, not the filter's: nothing to revise.)
+        if let Some(pending) = self.pending.as_mut().filter(|_| self.walk.is_none()) {
             pending.dp += kf.x.p - p0;
             pending.dv += kf.x.v - v0;
         }
@@ -717,7 +734,12 @@ impl Navigator {
         let g = self.cfg.gravity_mps2;
         let prior = AccelPrior::at_rest(&self.cfg, &f_mean, a.gravity_off);
         let (x, mut cov) = align(f_mean, w_mean, g, prior.bias_sigma_mps2, w_sigma);
-        cov[(KS, KS)] = self.hints.cfg.speed_scale_sigma.powi(2);
+        // Hand-held walking holds its step-length uncertainty outside the filter
+        // (`crate::walking`): the scale state stays at zero.
+        cov[(KS, KS)] = match &self.walk {
+            Some(_) => 0.0,
+            None => self.hints.cfg.speed_scale_sigma.powi(2),
+        };
         self.start_filter(x, cov, prior, f_mean, m);
         self.at_rest = true;
     }
@@ -835,16 +857,25 @@ impl Navigator {
         if rest {
             flags |= odometry_flags::ZERO_VELOCITY;
         }
+        // Hand-held walking: the position is the walk's (the sum of the steps).
+        let (position, position_sigma, distance_m) = match &self.walk {
+            Some(walk) => (
+                walk.position(),
+                walk.position_sigma(kf.position_sigma().z),
+                walk.distance_m(),
+            ),
+            None => (kf.x.p, self.position_sigma(kf), self.distance_m),
+        };
         OdometryState {
             stamps: s.stamps,
             seq: s.seq,
-            position_m: kf.x.p.into(),
-            position_sigma_m: self.position_sigma(kf).into(),
+            position_m: position.into(),
+            position_sigma_m: position_sigma.into(),
             velocity_mps: kf.x.v.into(),
             velocity_sigma_mps: kf.velocity_sigma().into(),
             gravity_sensor_mps2: g_s.into(),
             attitude_wxyz: [q.w, q.i, q.j, q.k],
-            distance_m: self.distance_m,
+            distance_m,
             flags,
             reserved16: 0,
             rest_count: self.rest_count,

@@ -28,9 +28,26 @@
 //! - wheeled: tilt rate <= [`WHEELED_MAX_TILT_DPS`] without impacts, or share >=
 //!   [`WHEELED_MIN_SHARE`] about an axis within [`WHEELED_MAX_AXIS_DEG`] of `g` (turning about
 //!   gravity);
+//! - *gait steps per minute*: steps of [`crate::steps`] in a walking cadence per moving minute,
+//!   their mean amplitude (m/s^2), and the *still share*, the share of the windows that are not
+//!   moving;
+//! - walking (a sensor in a walker's hand): not a foot, gait steps/min >=
+//!   [`WALK_MIN_STEPS_PER_MIN`], mean step amplitude <= [`WALK_MAX_STEP_MPS2`] and impacts/min
+//!   <= [`WALK_MAX_IMPACTS_PER_MIN`] (no heel strike, no shaking), principal-axis share < [`WALK_MAX_SHARE`], still share <= [`WALK_MAX_STILL_SHARE`] (the hand is never still
+//!   while its carrier walks) and tilt rate > [`WHEELED_MAX_TILT_DPS`] (a hand turns the
+//!   sensor). (A walker who stands for more than a tenth of the recording is not recognized:
+//!   BROAD's box moved slowly by hand without breaks, broad-11-slow, shows the steps and
+//!   amplitudes of a phone held up while walking, and only its 21 % of rest tells it apart.)
+//!   On the corpus the Tyrex phone walks reach 11-90 gait steps/min of 0.4-1.8 m/s^2,
+//!   a share of 0.51-0.87, at most 1 % still windows, 11-40 deg/s; BROAD's hand-moved box
+//!   rests on a table for 36-51 % of its windows; the cars tilt by 2 deg/s; the F1TENTH car's
+//!   bumps count as 58-67 steps/min but it turns about gravity (share 0.92-0.96);
 //! - other: anything else, or fewer than [`MIN_MOVING_S`] seconds of motion.
 
+use ipc_types::units::STANDARD_GRAVITY_MPS2;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+use crate::steps::StepDetector;
 
 /// Window length, s.
 pub const WINDOW_S: f64 = 1.0;
@@ -63,6 +80,21 @@ pub const WHEELED_MIN_SHARE: f64 = 0.85;
 /// Angle from gravity of a wheeled platform's principal rotation axis, at most, degrees.
 pub const WHEELED_MAX_AXIS_DEG: f64 = 30.0;
 
+/// Gait steps per moving minute a hand-held walk reaches.
+pub const WALK_MIN_STEPS_PER_MIN: f64 = 6.0;
+/// Mean step amplitude a hand-held walk stays under, m/s^2 (the Tyrex phones: 0.4-1.8).
+pub const WALK_MAX_STEP_MPS2: f64 = 2.5;
+/// Impacts per moving minute a hand-held walk stays under (the hand holds the sensor off the
+/// ground: the Tyrex walks show at most 0.5; the F1TENTH car strikes 42 times a minute in its
+/// first 10 s of motion, where its rotation is not yet about gravity alone).
+pub const WALK_MAX_IMPACTS_PER_MIN: f64 = 5.0;
+/// Principal-axis share a hand-held walk stays under: the hand pitches and rolls the sensor at
+/// every step, where a car turning about gravity (the F1TENTH car's bumps count as steps at
+/// 18-30 Hz) holds 0.92-0.96.
+pub const WALK_MAX_SHARE: f64 = 0.9;
+/// Share of still windows a hand-held walk stays under.
+pub const WALK_MAX_STILL_SHARE: f64 = 0.1;
+
 /// A platform class.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -73,6 +105,8 @@ pub enum Platform {
     Wheeled,
     /// Anything else: an arm, a hand-held box, or too little motion to tell.
     Other,
+    /// A sensor in the hand of a walker.
+    Walking,
 }
 
 impl Platform {
@@ -82,6 +116,7 @@ impl Platform {
             Self::Foot => "foot",
             Self::Wheeled => "wheeled",
             Self::Other => "other",
+            Self::Walking => "walking",
         }
     }
 }
@@ -99,6 +134,12 @@ pub struct Features {
     pub principal_axis_deg: f64,
     /// Impacts per moving minute.
     pub impacts_per_min: f64,
+    /// Steps in a walking cadence per moving minute ([`crate::steps`]).
+    pub gait_steps_per_min: f64,
+    /// Their mean amplitude, m/s^2.
+    pub step_amplitude_mps2: f64,
+    /// Share of the windows that are not moving.
+    pub still_share: f64,
     /// The class the rule gives.
     pub platform: Platform,
 }
@@ -115,6 +156,8 @@ struct Window {
     w_sum_sq: f64,
     ww: Matrix3<f64>,
     impacts: u32,
+    gait_steps: u32,
+    gait_amplitude_sum: f64,
 }
 
 /// The classifier: feed it samples in time order ([`Classifier::push`]), read
@@ -131,6 +174,12 @@ pub struct Classifier {
     quietest: Option<(f64, f64)>,
     ww: Matrix3<f64>,
     impacts: u64,
+    /// Windows closed, moving or not.
+    windows: u32,
+    steps: StepDetector,
+    /// Steps in cadence in the moving windows, and the sum of their amplitudes, m/s^2.
+    gait_steps: u64,
+    gait_amplitude_sum: f64,
 }
 
 impl Classifier {
@@ -156,6 +205,14 @@ impl Classifier {
         w.w_sum += r;
         w.w_sum_sq += r.norm_squared();
         w.ww += r * r.transpose();
+        if let Some(step) = self
+            .steps
+            .push(t_ns, norm * STANDARD_GRAVITY_MPS2)
+            .filter(|s| s.in_cadence())
+        {
+            w.gait_steps += 1;
+            w.gait_amplitude_sum += step.amplitude_mps2;
+        }
         if norm > IMPACT_G {
             let gap_ns = (IMPACT_GAP_S * 1e9) as u64;
             if self
@@ -187,12 +244,16 @@ impl Classifier {
         let quietest = self.quietest.get_or_insert(spread);
         *quietest = (quietest.0.min(spread.0), quietest.1.min(spread.1));
         if gyro_rms <= MOVING_GYRO_DPS && norm_sd <= MOVING_ACCEL_G && !louder {
+            self.windows += 1;
             return;
         }
+        self.windows += 1;
         self.ww += w.ww;
         self.moving_windows += 1;
         self.moving_samples += u64::from(w.n);
         self.impacts += u64::from(w.impacts);
+        self.gait_steps += u64::from(w.gait_steps);
+        self.gait_amplitude_sum += w.gait_amplitude_sum;
     }
 
     /// Moving time seen so far, s (closed windows only).
@@ -223,6 +284,9 @@ impl Classifier {
             principal_share,
             principal_axis_deg,
             impacts_per_min: self.impacts as f64 / moving_s.max(WINDOW_S) * 60.0,
+            gait_steps_per_min: self.gait_steps as f64 / moving_s.max(WINDOW_S) * 60.0,
+            step_amplitude_mps2: self.gait_amplitude_sum / (self.gait_steps.max(1) as f64),
+            still_share: 1.0 - f64::from(self.moving_windows) / f64::from(self.windows.max(1)),
             platform: Platform::Other,
         };
         f.platform = classify(&f);
@@ -248,6 +312,15 @@ fn classify(f: &Features) -> Platform {
         && f.impacts_per_min >= FOOT_MIN_IMPACTS_PER_MIN
     {
         return Platform::Foot;
+    }
+    if f.gait_steps_per_min >= WALK_MIN_STEPS_PER_MIN
+        && f.step_amplitude_mps2 <= WALK_MAX_STEP_MPS2
+        && f.impacts_per_min <= WALK_MAX_IMPACTS_PER_MIN
+        && f.principal_share < WALK_MAX_SHARE
+        && f.still_share <= WALK_MAX_STILL_SHARE
+        && f.tilt_rate_dps > WHEELED_MAX_TILT_DPS
+    {
+        return Platform::Walking;
     }
     let level = f.tilt_rate_dps <= WHEELED_MAX_TILT_DPS && f.impacts_per_min == 0.0;
     let turning =
@@ -302,5 +375,38 @@ mod tests {
             ([0.0, 0.0, 1.0 + strike], [5.0, swing, 2.0])
         });
         assert_eq!(c.features().platform, Platform::Foot, "{:?}", c.features());
+    }
+
+    /// A hand's bounce at `hz` steps/s (|f| 1 m/s^2 peak to peak) and pitching (30 deg/s
+    /// amplitude, about a horizontal axis), with the yaw of a slow turn.
+    fn hand(t: f64, hz: f64) -> ([f64; 3], [f64; 3]) {
+        let w = 2.0 * std::f64::consts::PI * hz;
+        let bounce = 0.5 / STANDARD_GRAVITY_MPS2 * (w * t).sin();
+        ([0.0, 0.0, 1.0 + bounce], [30.0 * (w * t).cos(), 0.0, 8.0])
+    }
+
+    #[test]
+    fn a_hand_bouncing_at_a_walking_cadence_is_a_walk_unless_it_rests_long() {
+        let mut c = Classifier::default();
+        feed(&mut c, 60.0, |t| hand(t, 1.7));
+        let f = c.features();
+        assert_eq!(f.platform, Platform::Walking, "{f:?}");
+        assert!((90.0..=104.0).contains(&f.gait_steps_per_min), "{f:?}");
+        // The same hand resting on a table for a third of the time: a box moved by hand.
+        let mut c = Classifier::default();
+        feed(&mut c, 60.0, |t| {
+            if t % 30.0 < 10.0 {
+                ([0.0, 0.0, 1.0], [0.05, -0.05, 0.0])
+            } else {
+                hand(t, 1.7)
+            }
+        });
+        let f = c.features();
+        assert!(f.still_share > 0.3, "{f:?}");
+        assert_eq!(f.platform, Platform::Other, "{f:?}");
+        // A bounce at 0.5 Hz is no cadence.
+        let mut c = Classifier::default();
+        feed(&mut c, 60.0, |t| hand(t, 0.5));
+        assert_eq!(c.features().platform, Platform::Other, "{:?}", c.features());
     }
 }

@@ -14,7 +14,8 @@ use crate::platform::Platform;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Profile {
     /// Recognize the platform from the data ([`crate::platform`]) and take its profile:
-    /// `pedestrian` for a foot, `vehicle` for wheeled motion, `other` for anything else.
+    /// `pedestrian` for a foot, `vehicle` for wheeled motion, `walking` for a walker's hand,
+    /// `other` for anything else.
     #[default]
     Auto,
     /// Wheeled robot or vehicle: the GLRT against the references learned from the first
@@ -32,6 +33,13 @@ pub enum Profile {
     /// (an arm's pauses are that short) and rest handling, without the non-holonomic
     /// constraint.
     Other,
+    /// A sensor in the hand of a walker (a phone held in front or up): pedestrian dead
+    /// reckoning ([`crate::walking`]: a velocity update at each step, no zero-velocity update
+    /// while walking, an alignment on whole steps when the walker never stands still), the
+    /// robot's GLRT (0.5 s windows: a standing walker's rests, not the quiet instants between
+    /// steps).
+    #[value(alias = "hand-held", alias = "handheld")]
+    Walking,
 }
 
 /// 1-sigma of the IMU-only non-holonomic constraint over a second of driving, m/s: skid and the
@@ -74,6 +82,7 @@ impl Profile {
             Platform::Foot => Self::Pedestrian,
             Platform::Wheeled => Self::Vehicle,
             Platform::Other => Self::Other,
+            Platform::Walking => Self::Walking,
         }
     }
 
@@ -84,6 +93,7 @@ impl Profile {
             Self::Vehicle => "vehicle",
             Self::Pedestrian => "pedestrian",
             Self::Other => "other",
+            Self::Walking => "walking",
         }
     }
 
@@ -94,7 +104,7 @@ impl Profile {
             Self::Pedestrian => DetectorConfig::new(DetectorKind::Shoe, gravity_mps2),
             // The live calibration stage's default too (`mems-calibrate serve`), so that live
             // and offline agree under any of these.
-            Self::Auto => DetectorConfig::robot(gravity_mps2),
+            Self::Auto | Self::Walking => DetectorConfig::robot(gravity_mps2),
             Self::Vehicle => {
                 let mut config = DetectorConfig::robot(gravity_mps2);
                 config.learn.duration_s = VEHICLE_LEARN_S;
@@ -110,7 +120,7 @@ impl Profile {
 
     /// `config` with this profile's rest handling.
     pub fn odometry(self, mut config: OdometryConfig) -> OdometryConfig {
-        if matches!(self, Self::Auto | Self::Other) {
+        if matches!(self, Self::Auto | Self::Other | Self::Walking) {
             // The vehicle profile keeps its second, as its learning ([`VEHICLE_LEARN_S`]).
             config.align_s = ROBOT_ALIGN_S;
         }
@@ -119,6 +129,12 @@ impl Profile {
             // window still holds the rest before a motion.
             config.rest_hindsight_s = OTHER_GLRT_WINDOW_S;
         }
+        // The walking mode's settings: `config`'s when given (`--weinberg-k`), for the walking
+        // profile only.
+        config.walking = match self {
+            Self::Walking => Some(config.walking.unwrap_or_default()),
+            _ => None,
+        };
         if self == Self::Vehicle {
             config.imu_nonholonomic_sigma_mps = WHEELED_NONHOLONOMIC_SIGMA_MPS;
             config.rest_vibration_factor = WHEELED_REST_VIBRATION_FACTOR;

@@ -254,6 +254,11 @@ impl OdometrySession {
         self.stage.imu_constraint()
     }
 
+    /// The current sensor session's hand-held walking counters (the walking profile).
+    pub fn walking_stats(&self) -> Option<crate::walking::WalkingStats> {
+        self.stage.walking_stats()
+    }
+
     /// The session's counters.
     pub fn stats(&self) -> SessionStats {
         self.stats

@@ -315,6 +315,11 @@ impl OdometryStage {
         self.ahead.imu_constraint().copied()
     }
 
+    /// What hand-held walking did (`crate::walking`), in that mode.
+    pub fn walking_stats(&self) -> Option<crate::walking::WalkingStats> {
+        self.ahead.walking_stats()
+    }
+
     /// Whether alignment is done.
     pub fn aligned(&self) -> bool {
         self.ahead.aligned()

@@ -1,8 +1,9 @@
 //! The stage allocates nothing per sample: a counting global allocator sees zero allocations
 //! on this thread while it aligns, navigates, applies zero-velocity updates and republishes
 //! revised motion histories over a simulated drive with turns, and while it takes robot hints
-//! (stationary and speed updates, losses and a stale spell) and estimates the mounting, and
-//! while it reconstructs clipped gyroscope motions at their rests.
+//! (stationary and speed updates, losses and a stale spell) and estimates the mounting,
+//! while it reconstructs clipped gyroscope motions at their rests, and while the walking
+//! profile counts steps and makes their updates.
 
 mod common;
 
@@ -58,6 +59,34 @@ fn processing_samples_allocates_nothing() {
     assert_eq!(live, samples.len() as u64);
     assert!(stage.aligned() && revised > 100, "{revised} revised states");
     assert!(stage.withdrawn_rest_samples() > 0);
+}
+
+#[test]
+fn dead_reckoning_steps_allocates_nothing() {
+    let c = Case {
+        duration_s: 60.0,
+        rate_hz: 100.0,
+        turns: true,
+        ..Case::straight()
+    };
+    let mut sim = Simulation::new(&c, 3);
+    sim.session();
+    let mut samples = sim.drive_samples();
+    // A walker's bounce on the drive's samples: 1 m/s^2 peak to peak at 1.7 steps/s.
+    for s in &mut samples {
+        let t = s.stamps.sample_ns as f64 * 1e-9;
+        s.accel_mps2[2] += 0.5 * (std::f64::consts::TAU * 1.7 * t).sin();
+    }
+    let config = odometry::profile::Profile::Walking.odometry(OdometryConfig::mpu9250(G_MPS2));
+    let mut stage = OdometryStage::new(config);
+    let before = allocations();
+    for s in &samples {
+        stage.process(s, &mut |_| {}).unwrap();
+    }
+    let during = allocations() - before;
+    assert_eq!(during, 0, "{during} allocations");
+    let w = stage.walking_stats().expect("the walking profile");
+    assert!(w.steps > 50 && w.step_updates > 50, "{w:?}");
 }
 
 #[test]

@@ -15,8 +15,8 @@ use mems_sim::hints::{HintParams, RestSource, drive_hints};
 use mems_sim::model::{Preset, SensorModel};
 use mems_sim::mounting::Mounting;
 use mems_sim::scenario::{
-    Arm, ArmParams, Drive, DriveParams, PoseParams, PoseSession, Scenario, Walk, WalkParams,
-    ns_from_s,
+    Arm, ArmParams, Drive, DriveParams, Handheld, HandheldParams, PoseParams, PoseSession,
+    Scenario, Walk, WalkParams, ns_from_s,
 };
 use mems_sim::vibration::VibrationModel;
 use mems_sim::{DlpfGrid, SimSensor};
@@ -122,6 +122,15 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// A walker with the sensor in the hand, held in front like a phone for texting, walking
+    /// laps of a circle between two rests: the hand bounces and surges once per step and sways
+    /// once per stride.
+    Handheld {
+        #[command(flatten)]
+        walk: HandheldArgs,
+        #[command(flatten)]
+        common: Common,
+    },
     /// An industrial arm: a rest, then moves between random waypoints of its workspace with
     /// short pauses, back to the start.
     Arm {
@@ -160,6 +169,39 @@ struct PlanArgs {
 }
 
 /// An arm's path.
+/// The hand-held walk's options.
+#[derive(Args)]
+struct HandheldArgs {
+    /// Laps of the circle (fractions allowed).
+    #[arg(long, default_value_t = 2.0)]
+    laps: f64,
+    /// Radius of the circle, m.
+    #[arg(long, default_value_t = 4.0)]
+    radius: f64,
+    /// Walking speed, m/s.
+    #[arg(long, default_value_t = 0.8)]
+    speed: f64,
+    /// Steps per second.
+    #[arg(long, default_value_t = 1.7)]
+    step_hz: f64,
+    /// Standing still at the start and at the end, s.
+    #[arg(long, default_value_t = 2.0)]
+    rest: f64,
+}
+
+impl HandheldArgs {
+    fn params(&self, gravity_mps2: f64) -> HandheldParams {
+        HandheldParams {
+            radius_m: self.radius,
+            speed_mps: self.speed,
+            step_hz: self.step_hz,
+            rest_s: self.rest,
+            gravity_mps2,
+            ..HandheldParams::new(self.laps)
+        }
+    }
+}
+
 #[derive(Args)]
 struct ArmArgs {
     /// Moves (the last one returns to the start).
@@ -892,6 +934,10 @@ fn run(cli: Cli) -> Result<()> {
                 ..WalkParams::new(laps)
             };
             simulate(Walk::new(&params, common.seed)?, &still, &common, &[])
+        }
+        Command::Handheld { walk, common } => {
+            let params = walk.params(common.gravity);
+            simulate(Handheld::new(&params)?, &still, &common, &[])
         }
         Command::Arm { arm, common } => {
             let params = arm.params(common.gravity);

@@ -112,7 +112,9 @@ pub fn detector(cli: &Cli) -> DetectorKind {
         (Some(d), _) => d,
         (None, Profile::Pedestrian) => DetectorKind::Shoe,
         (None, _) if cli.rate > 1000 => DetectorKind::GlrtAccel,
-        (None, Profile::Auto | Profile::Vehicle | Profile::Other) => DetectorKind::Glrt,
+        (None, Profile::Auto | Profile::Vehicle | Profile::Other | Profile::Walking) => {
+            DetectorKind::Glrt
+        }
     }
 }
 

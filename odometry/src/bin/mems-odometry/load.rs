@@ -40,7 +40,8 @@ pub struct StageArgs {
     #[command(flatten)]
     pub detector: DetectorArgs,
     /// Motion profile: the detector and rest handling for the platform; `auto` recognizes the
-    /// platform from the recording (foot, wheeled or other, `odometry::platform`).
+    /// platform from the recording (foot, wheeled, a walker's hand or other,
+    /// `odometry::platform`).
     #[arg(long, value_enum, default_value_t = Profile::Auto)]
     pub profile: Profile,
 }

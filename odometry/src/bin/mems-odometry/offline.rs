@@ -62,6 +62,10 @@ pub struct OfflineArgs {
     /// only without it.
     #[arg(long)]
     repair_torn_reads: bool,
+    /// Weinberg's step-length constant of hand-held walking (the walking profile,
+    /// `odometry::walking`), m/(m/s^2)^(1/4). Default: `odometry::walking::WEINBERG_K`.
+    #[arg(long)]
+    weinberg_k: Option<f64>,
     #[command(flatten)]
     hints: crate::hint_args::HintArgs,
     #[command(flatten)]
@@ -192,6 +196,17 @@ fn pass(
     }
     base.rest_updates = !args.no_zupt;
     base.consistency.scaling = args.innovation_scaling;
+    if let Some(k) = args.weinberg_k {
+        if !(k.is_finite() && k > 0.0) {
+            return Err(anyhow!(
+                "--weinberg-k {k}: expected a positive step-length constant"
+            ));
+        }
+        base.walking = Some(odometry::walking::WalkingConfig {
+            weinberg_k: k,
+            ..Default::default()
+        });
+    }
     base.trust_untrusted = args.ranges.trust_clipped;
     base.reconstruct_clipped = !args.ranges.bridge_clipped;
     let hints = args.hints.config()?;

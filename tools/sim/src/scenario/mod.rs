@@ -10,11 +10,13 @@
 
 mod arm;
 mod drive;
+mod handheld;
 mod pose;
 mod walk;
 
 pub use arm::{Arm, ArmParams};
 pub use drive::{Drive, DriveParams, DriveSegment};
+pub use handheld::{Handheld, HandheldParams};
 pub use pose::{PoseParams, PoseSession};
 pub use walk::{Walk, WalkParams};
 

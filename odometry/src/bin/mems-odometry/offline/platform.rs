@@ -1,6 +1,7 @@
 //! `--profile auto` offline: the platform recognized from the whole recording
 //! (`odometry::platform`; up to its first 120 s of motion) before the stages run. A foot runs the pedestrian profile from the
-//! start (its SHOE detector is the calibration stage's, which a live stack cannot change once
+//! start, a walker's hand the walking profile (its alignment on whole steps must see the
+//! walk from its start) (its SHOE detector is the calibration stage's, which a live stack cannot change once
 //! running), and so does a recording that looks like neither a foot nor a wheeled platform over
 //! at least 10 s of motion (an arm, a hand-held box) with the other profile (its GLRT's
 //! window is shorter, `odometry::profile::OTHER_GLRT_WINDOW_S`); any other recording runs as
@@ -89,6 +90,7 @@ pub fn choose(asked: Profile, input: &Path, mcap: bool) -> Result<Choice> {
     // arm's pauses); the rest decide as live.
     let profile = match f.platform {
         Platform::Foot => Profile::Pedestrian,
+        Platform::Walking => Profile::Walking,
         Platform::Other if f.moving_s >= AUTO_DECIDE_MOVING_S => Profile::Other,
         Platform::Wheeled | Platform::Other => Profile::Auto,
     };
@@ -99,6 +101,7 @@ pub fn choose(asked: Profile, input: &Path, mcap: bool) -> Result<Choice> {
         match profile {
             Profile::Auto => "the odometry decides as live, after 10 s of motion",
             Profile::Other => "profile other",
+            Profile::Walking => "profile walking",
             _ => "profile pedestrian",
         },
         f.moving_s,

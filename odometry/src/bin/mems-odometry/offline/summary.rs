@@ -162,19 +162,7 @@ impl Summary {
             .aligned_ns
             .map_or(0.0, |t| (t - read.first_ns.unwrap_or(0)) as f64 * 1e-9);
         let in_motion = chain.second.stage().aligned_in_motion();
-        match in_motion {
-            None => tracing::info!(
-                "aligned {aligned_at_s:.2} s into the recording (at its first rest of {} s); the \
-                 position counts from there",
-                read.align_s
-            ),
-            Some(speed) => tracing::info!(
-                "aligned {aligned_at_s:.2} s into the recording in motion (a steady cruise of \
-                 {} s at {speed:.2} m/s by the speed hints, the IMU still); the position counts \
-                 from there",
-                read.align_s
-            ),
-        }
+        say_aligned(aligned_at_s, read.align_s, in_motion, chain);
         let accel = chain.second.stage().accel_estimate();
         if let Some(a) = &accel {
             tracing::info!("{a}");
@@ -204,11 +192,23 @@ impl Summary {
         }
         let consistency = chain.second.stage().consistency();
         tracing::info!("{consistency}");
+        let walking = chain.second.walking_stats();
+        if let Some(w) = walking {
+            tracing::info!("{w}");
+        }
         let truth_error = self.truth_error(&end, truth);
         if json {
             let mut result = self.json(&end, truth_error, aligned_at_s, read, chain);
             result["profile"] = read.choice.json(chain.second.auto_choice());
             result["wheeled"] = self.wheeled_json(&chain.second);
+            result["walking"] = json!(walking.map(|w| json!({
+                "mode": "pedestrian dead reckoning",
+                "steps": w.steps,
+                "step_updates": w.step_updates,
+                "mean_step_m": w.mean_step_m(),
+                "weinberg_k": w.weinberg_k,
+                "aligned_on_steps": w.aligned_on_steps,
+            })));
             result["aligned_in_motion"] = json!(in_motion.map(|s| json!({ "speed_mps": s })));
             result["accel_error"] = json!(accel);
             result["gravity_reanchored"] = json!(reanchored);
@@ -518,6 +518,32 @@ fn why_never_aligned(calibration: &CalibrationStage) -> String {
             "the {kind} detector refused all {n} windows of {learn_s} s it could learn its rest \
              from; the last because {}",
             why.map_or_else(|| "of a gap".into(), |w| w.to_string())
+        ),
+    }
+}
+
+/// Says on stderr when and on what the odometry aligned: a rest of `align_s` seconds, whole
+/// steps of a walk, or a cruise at the hints' speed `in_motion` (m/s).
+fn say_aligned(aligned_at_s: f64, align_s: f64, in_motion: Option<f64>, chain: &OfflineChain) {
+    let on_steps = chain
+        .second
+        .walking_stats()
+        .is_some_and(|w| w.aligned_on_steps);
+    match in_motion {
+        None if on_steps => tracing::info!(
+            "aligned {aligned_at_s:.2} s into the recording on whole steps of a walk (no \
+             rest); the position counts from there"
+        ),
+        None => tracing::info!(
+            "aligned {aligned_at_s:.2} s into the recording (at its first rest of {} s); the \
+             position counts from there",
+            align_s
+        ),
+        Some(speed) => tracing::info!(
+            "aligned {aligned_at_s:.2} s into the recording in motion (a steady cruise of \
+             {} s at {speed:.2} m/s by the speed hints, the IMU still); the position counts \
+             from there",
+            align_s
         ),
     }
 }

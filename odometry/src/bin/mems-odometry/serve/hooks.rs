@@ -101,6 +101,9 @@ impl Watch {
             tracing::info!("{a}");
         }
         tracing::info!("{}", session.stage().consistency());
+        if let Some(w) = session.walking_stats() {
+            tracing::info!("{w}");
+        }
         if axes.disagree() {
             tracing::warn!(
                 "the accelerometer's and the gyroscope's axes disagree (odometry::axes): {axes:?}"

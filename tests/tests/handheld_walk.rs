@@ -1,0 +1,68 @@
+//! Hand-held walking through the real binaries: `mems-sim handheld` writes a walker carrying
+//! the sensor in the hand (two laps of a 4 m circle at 0.8 m/s and 1.7 steps/s, 2 s of rest at
+//! both ends), and `mems-odometry offline` with no flags recognizes the walk (`--profile auto`:
+//! platform and profile `walking`), counts its steps, dead-reckons them and ends where the
+//! walker ended within the reported 1-sigma; `--profile other` still overrides.
+
+use integration_tests::{path_arg, run_ok, simulate, unique_namespace};
+use serde_json::Value;
+
+/// `mems-odometry offline --json ARGS` on `input`.
+fn offline(input: &std::path::Path, args: &[&str]) -> Value {
+    let json = run_ok(
+        "mems-odometry",
+        &[&["offline", "--input", path_arg(input), "--json"][..], args].concat(),
+    );
+    serde_json::from_str(json.trim()).unwrap()
+}
+
+/// Horizontal norm of a JSON triple.
+fn horizontal(v: &Value) -> f64 {
+    v[0].as_f64().unwrap().hypot(v[1].as_f64().unwrap())
+}
+
+#[test]
+fn a_hand_held_walk_is_recognized_and_its_steps_dead_reckoned() {
+    let dir = std::env::temp_dir().join(unique_namespace("handheld"));
+    std::fs::create_dir_all(&dir).unwrap();
+    for seed in ["1", "2"] {
+        let walk = simulate(
+            &dir,
+            &format!("walk-{seed}.mcap"),
+            &["handheld", "--laps", "2", "--rate", "100", "--seed", seed],
+        );
+        let v = offline(&walk, &[]);
+        assert_eq!(v["profile"]["profile"], "walking", "{}", v["profile"]);
+        assert_eq!(v["profile"]["platform"]["platform"], "walking");
+        // 2 laps of 8 pi m at 0.8 m/s with a second of ramps: 63.8 s of walking at 1.7
+        // steps/s, the ramps' slower steps included.
+        let w = &v["walking"];
+        let steps = w["steps"].as_u64().unwrap();
+        assert!((102..=112).contains(&steps), "{w}");
+        assert!(w["step_updates"].as_u64().unwrap() >= steps - 5, "{w}");
+        assert_eq!(w["aligned_on_steps"], false, "{w}");
+        // The walk closes: the end error is the dead reckoning's, within its 1-sigma's
+        // 68 % radius and under 2 % of the distance walked.
+        let error = horizontal(&v["truth_error_m"]);
+        let sigma = horizontal(&v["sigma_m"]) / 2f64.sqrt();
+        let distance = v["truth_distance_m"].as_f64().unwrap();
+        assert!(error <= 1.515 * sigma, "error {error} m, 1-sigma {sigma} m");
+        assert!(error <= 0.02 * distance, "error {error} m of {distance} m");
+        // The steps' sum is the distance reported.
+        let mean = w["mean_step_m"].as_f64().unwrap();
+        let walked = v["distance_m"].as_f64().unwrap();
+        assert!(
+            (walked / mean - steps as f64).abs() <= 10.0,
+            "{walked} m, {w}"
+        );
+    }
+    // `--profile NAME` overrides: the other profile runs no dead reckoning.
+    let walk = dir.join("walk-1.mcap");
+    let v = offline(&walk, &["--profile", "other"]);
+    assert_eq!(v["profile"]["profile"], "other");
+    assert!(v["walking"].is_null(), "{}", v["walking"]);
+    // And `--profile walking` on it runs it, with a given step-length constant.
+    let v = offline(&walk, &["--profile", "walking", "--weinberg-k", "0.4"]);
+    assert_eq!(v["walking"]["weinberg_k"], 0.4);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
