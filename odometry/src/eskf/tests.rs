@@ -16,6 +16,18 @@ fn noise() -> NoiseModel {
     }
 }
 
+/// The filter aligned on a rest whose mean specific force is `g_s` (no gyro bias measured),
+/// with 5 mm/s^2 of accelerometer and 1e-4 rad/s of gyro bias 1-sigma.
+fn level_alignment(g_s: Vector3<f64>) -> (Nominal, Cov) {
+    align(
+        g_s,
+        Vector3::zeros(),
+        G,
+        Vector3::repeat(0.005),
+        Vector3::repeat(1e-4),
+    )
+}
+
 /// A dense, well-conditioned covariance with every entry non-zero.
 fn full_cov() -> Cov {
     let a = Cov::from_fn(|i, j| ((7 * i + 3 * j) as f64).sin());
@@ -85,13 +97,7 @@ fn static_integration_with_a_bias_grows_quadratically() {
         f: g_s + bias,
         w: Vector3::zeros(),
     };
-    let (x, cov) = align(
-        g_s,
-        Vector3::zeros(),
-        G,
-        Vector3::repeat(0.005),
-        Vector3::repeat(1e-4),
-    );
+    let (x, cov) = level_alignment(g_s);
     let mut kf = Eskf::new(x, cov, G, noise(), m);
     let dt = 0.001;
     for _ in 0..10_000 {
@@ -111,13 +117,7 @@ fn zupt_removes_the_velocity_error() {
         f: g_s + Vector3::new(0.02, -0.01, 0.0),
         w: Vector3::zeros(),
     };
-    let (x, cov) = align(
-        g_s,
-        Vector3::zeros(),
-        G,
-        Vector3::repeat(0.005),
-        Vector3::repeat(1e-4),
-    );
+    let (x, cov) = level_alignment(g_s);
     let mut kf = Eskf::new(x, cov, G, noise(), m);
     for _ in 0..1000 {
         kf.predict(m, 0.001);
@@ -135,13 +135,7 @@ fn gyro_integration_follows_a_constant_rate() {
     let g_s = Vector3::new(0.0, 0.0, G);
     let rate = Vector3::new(0.0, 0.0, 0.5);
     let m = Imu { f: g_s, w: rate };
-    let (x, cov) = align(
-        g_s,
-        Vector3::zeros(),
-        G,
-        Vector3::repeat(0.005),
-        Vector3::repeat(1e-4),
-    );
+    let (x, cov) = level_alignment(g_s);
     let mut kf = Eskf::new(x, cov, G, noise(), m);
     for _ in 0..2000 {
         kf.predict(m, 0.001);
@@ -161,13 +155,7 @@ fn vibration_noise_grows_with_speed() {
         f: g_s,
         w: Vector3::zeros(),
     };
-    let (x, cov) = align(
-        g_s,
-        Vector3::zeros(),
-        G,
-        Vector3::repeat(0.005),
-        Vector3::repeat(1e-4),
-    );
+    let (x, cov) = level_alignment(g_s);
     let (k_a, k_g) = (4e-3, 4e-4);
     let n = NoiseModel {
         vibration_accel_density_per_mps: k_a,
@@ -208,13 +196,7 @@ fn consider_sensitivity_predicts_a_scale_errors_effect() {
         w: Vector3::new(0.0, 0.0, if k < 400 { 0.8 } else { 0.0 }),
     };
     let run = |scale: &dyn Fn(Imu) -> Imu| {
-        let (x, cov) = align(
-            g_s,
-            Vector3::zeros(),
-            G,
-            Vector3::repeat(0.005),
-            Vector3::repeat(1e-4),
-        );
+        let (x, cov) = level_alignment(g_s);
         let model = ConsiderModel {
             gyro: Matrix3::repeat(0.01),
             accel: Matrix3::repeat(0.01),
