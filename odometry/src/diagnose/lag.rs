@@ -43,28 +43,25 @@ impl LagShift {
         })
     }
 
-    /// Takes the next sample read; returns the samples now ready, in order.
-    pub fn push(&mut self, raw: RawImuSample) -> Vec<RawImuSample> {
+    /// Takes the next sample read; hands the samples now ready to `ready`, in order (no
+    /// allocation once the buffer has grown to the lag's span).
+    pub fn push(&mut self, raw: RawImuSample, mut ready: impl FnMut(RawImuSample)) {
         self.buffer.push_back(raw);
         let newest = raw.stamps.sample_ns as i64;
-        let mut out = Vec::new();
         while self.next < self.buffer.len() {
             let t = self.buffer[self.next].stamps.sample_ns as i64;
             if newest < t + self.lag_ns {
                 break;
             }
-            out.push(self.release());
+            ready(self.release());
         }
-        out
     }
 
-    /// The samples still held, at the end of the stream.
-    pub fn finish(&mut self) -> Vec<RawImuSample> {
-        let mut out = Vec::new();
+    /// Hands the samples still held to `ready`, at the end of the stream.
+    pub fn finish(&mut self, mut ready: impl FnMut(RawImuSample)) {
         while self.next < self.buffer.len() {
-            out.push(self.release());
+            ready(self.release());
         }
-        out
     }
 
     /// Releases the sample at `next` with its accelerometer reading moved by the lag, and
@@ -125,8 +122,11 @@ mod tests {
 
     fn shifted(lag_s: f64, input: &[RawImuSample]) -> Vec<RawImuSample> {
         let mut shift = LagShift::new(lag_s).unwrap();
-        let mut out: Vec<RawImuSample> = input.iter().flat_map(|s| shift.push(*s)).collect();
-        out.extend(shift.finish());
+        let mut out = Vec::new();
+        for s in input {
+            shift.push(*s, |r| out.push(r));
+        }
+        shift.finish(|r| out.push(r));
         out
     }
 
@@ -155,10 +155,19 @@ mod tests {
     fn a_positive_lag_holds_samples_back_only_as_long_as_it_needs() {
         let mut shift = LagShift::new(0.012).unwrap();
         let input = ramp(10);
-        let ready: Vec<usize> = input.iter().map(|s| shift.push(*s).len()).collect();
+        let ready: Vec<usize> = input
+            .iter()
+            .map(|s| {
+                let mut n = 0;
+                shift.push(*s, |_| n += 1);
+                n
+            })
+            .collect();
         // 12 ms is 2.4 samples: the first is released with the fourth sample.
         assert_eq!(ready, [0, 0, 0, 1, 1, 1, 1, 1, 1, 1]);
-        assert_eq!(shift.finish().len(), 3);
+        let mut held = 0;
+        shift.finish(|_| held += 1);
+        assert_eq!(held, 3);
     }
 
     #[test]

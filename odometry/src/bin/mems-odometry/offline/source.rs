@@ -220,13 +220,8 @@ impl Feed {
             match self.source.next() {
                 None => {
                     self.ended = true;
-                    for raw in self
-                        .shift
-                        .as_mut()
-                        .map(LagShift::finish)
-                        .unwrap_or_default()
-                    {
-                        self.arrival.raw(raw);
+                    if let Some(shift) = self.shift.as_mut() {
+                        shift.finish(|raw| self.arrival.raw(raw));
                     }
                     self.arrival.end();
                 }
@@ -234,10 +229,7 @@ impl Feed {
                 Some(Ok(Item::Raw(raw))) => {
                     self.first_ns.get_or_insert(raw.stamps.sample_ns);
                     match self.shift.as_mut() {
-                        Some(shift) => shift
-                            .push(raw)
-                            .into_iter()
-                            .for_each(|r| self.arrival.raw(r)),
+                        Some(shift) => shift.push(raw, |r| self.arrival.raw(r)),
                         None => self.arrival.raw(raw),
                     }
                 }
