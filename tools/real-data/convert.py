@@ -901,7 +901,7 @@ def self_test():
     _test_vesc_and_mcap()
     _test_ros_bag()
     _test_rtk_npy()
-    checked = [comma2k19.self_test(), tyrex_attitude.self_test(), navego.self_test(), *containers.self_test()]
+    checked = [comma2k19.self_test(), tyrex_attitude.self_test(), navego.self_test(local_east_north), *containers.self_test()]
     print("convert.py self-test: ok (xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv, broad_mat, vesc_f1tenth_csv, "
           "ros1_bag_robot, xsens_dot_rtk_npy, MAT v5 GCP, GNSS, MCAP with hints, " + ", ".join(checked) + ")")
     return 0

@@ -186,11 +186,11 @@ def _mat_struct_arrays(name, columns):
     return out
 
 
-def self_test():
+def self_test(local_east_north):
     """A rover weaving at 0.5 m/s with its IMU z down, the reference log starting 3 s after
-    the IMU's: units, the offset, the truth; malformed input names the field."""
+    the IMU's: units, the offset, the truth; malformed input names the field. The caller
+    passes its projection of (latitude, longitude) degrees to local (east, north) metres."""
     from containers import mat_bytes, read_mat
-    from convert import local_east_north
 
     def heading(t):
         return 0.6 * math.sin(0.15 * t) + 0.3 * math.sin(0.4 * t)
