@@ -616,7 +616,8 @@ def _load_navego(rec, source, f):
     track = [(t, e, n) for (t, _, _), (e, n) in zip(fixes, local_east_north([q[1:] for q in fixes]))]
     offset, r = navego.clock_offset(samples, track, f.where(1))
     notes.append(f"reference clock offset {offset:+.1f} s (yaw-rate correlation r = {r:.2f}, navego.clock_offset)")
-    return (samples, notes, *navego.track_truth(track, offset, r), None)
+    distance = _path_length([q[1:] for q in track], navego.TRACK_MIN_STEP_M)
+    return samples, notes, navego.track_truth(track, offset, r), distance, None
 
 
 LOADERS = {
