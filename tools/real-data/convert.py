@@ -34,6 +34,7 @@ from pathlib import Path
 
 import comma2k19
 import containers
+import navego
 import tyrex_attitude
 from containers import (HINT_TOPIC, MCAP_T0_NS, RAW_TOPIC, ConvertError, bag_bytes, bag_messages, decode_imu,
                         decode_navsatfix, decode_odometry, imu_message, mat_bytes, mat_matrix, mcap_bytes,
@@ -609,11 +610,21 @@ def _load_tyrex(rec, source, f):
     return samples, notes, truth, distance, None
 
 
+def _load_navego(rec, source, f):
+    samples, notes = navego.samples(read_mat(f.raw(0), f.where(0)), f.where(0))
+    fixes = navego.reference_fixes(read_mat(f.raw(1), f.where(1)), f.where(1))
+    track = [(t, e, n) for (t, _, _), (e, n) in zip(fixes, local_east_north([q[1:] for q in fixes]))]
+    offset, r = navego.clock_offset(samples, track, f.where(1))
+    notes.append(f"reference clock offset {offset:+.1f} s (yaw-rate correlation r = {r:.2f}, navego.clock_offset)")
+    distance = _path_length([q[1:] for q in track], navego.TRACK_MIN_STEP_M)
+    return samples, notes, navego.track_truth(track, offset, r), distance, None
+
+
 LOADERS = {
     "xio_csv": _load_xio, "openshoe_txt": _load_openshoe, "sensorconnect_csv": _load_sensorconnect,
     "xsens_dot_csv": _load_xsens_dot, "xsens_dot_rtk_npy": _load_xsens_dot_rtk, "broad_mat": _load_broad,
     "vesc_f1tenth_csv": _load_vesc, "ros1_bag_robot": _load_ros_bag, "comma2k19_npy": _load_comma2k19,
-    "tyrex_android_qtm": _load_tyrex, "tyrex_ios_qtm": _load_tyrex,
+    "tyrex_android_qtm": _load_tyrex, "tyrex_ios_qtm": _load_tyrex, "navego_planetary_mat": _load_navego,
 }
 
 
@@ -891,7 +902,7 @@ def self_test():
     _test_vesc_and_mcap()
     _test_ros_bag()
     _test_rtk_npy()
-    checked = [comma2k19.self_test(), tyrex_attitude.self_test(), *containers.self_test()]
+    checked = [comma2k19.self_test(), tyrex_attitude.self_test(), navego.self_test(local_east_north), *containers.self_test()]
     print("convert.py self-test: ok (xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv, broad_mat, vesc_f1tenth_csv, "
           "ros1_bag_robot, xsens_dot_rtk_npy, MAT v5 GCP, GNSS, MCAP with hints, " + ", ".join(checked) + ")")
     return 0
