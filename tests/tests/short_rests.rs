@@ -12,6 +12,9 @@
 //!   reach and a small part of the path.
 //! - A robot cruising at 0.08 m/s on a smooth floor, with the vibration its motors make at any
 //!   speed (`--vibration-floor`), is not taken for rest.
+//! - An alignment on a first rest that the hindsight then withdraws (a start right after it)
+//!   is not the one the position counts from: the summary says so, and its truth frame and
+//!   distance start at the alignment the end state stands on.
 //! - A car whose stops are on slopes of up to 5 degrees (it pitches while it brakes) has a rest
 //!   flagged at every stop: the rest test does not compare with the start's gravity direction.
 
@@ -267,4 +270,68 @@ fn a_slow_cruise_on_a_smooth_floor_is_not_rest() {
         "end error {error:.3} m after {distance:.1} m of slow cruise"
     );
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A drive whose first rest (0.8 s) ends as the filter aligns on it: the settled flags take
+/// the rest away, the filter waits for the next one, and the summary measures from there
+/// (before, it kept the first alignment's truth frame: every rest 1.8-2.0 m off on this seed).
+#[test]
+fn a_withdrawn_alignment_is_reported_and_not_counted_from() {
+    let dir = std::env::temp_dir().join(unique_namespace("short-rests-withdrawn"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (truth, v) = drive_and_run(
+        &dir,
+        "withdrawn",
+        &[
+            "--duration",
+            "30",
+            "--initial-rest",
+            "0.8",
+            "--rests",
+            "1,2",
+            "--legs",
+            "2,4",
+            "--max-motion",
+            "10",
+            "--cruise",
+            "0.2,0.5",
+            "--rate",
+            "200",
+            "--seed",
+            "1",
+        ],
+    );
+    let withdrawn = v["alignments_withdrawn"].as_array().unwrap();
+    assert!(!withdrawn.is_empty(), "no withdrawal on this seed: {v}");
+    let aligned = v["aligned_at_s"].as_f64().unwrap();
+    for w in withdrawn {
+        let (a, at) = (
+            w["aligned_at_s"].as_f64().unwrap(),
+            w["withdrawn_at_s"].as_f64().unwrap(),
+        );
+        assert!(
+            a < at && at < aligned,
+            "{w} against the alignment at {aligned} s"
+        );
+    }
+    // The alignment that holds is on a rest of the truth.
+    assert!(
+        truth.iter().any(|(a, b)| (*a..=b + 0.2).contains(&aligned)),
+        "aligned at {aligned} s, truth rests {truth:?}"
+    );
+    // Every rest counted after it is within 0.3 m of the truth in the frame of that alignment
+    // (the legs before the second rest cover about 2 m).
+    let rests = v["rest_intervals"].as_array().unwrap();
+    assert!(!rests.is_empty());
+    let first = &rests[0];
+    let e = &first["error_m"];
+    let horizontal = e[0].as_f64().unwrap().hypot(e[1].as_f64().unwrap());
+    assert!(
+        horizontal < 0.3,
+        "first rest after the alignment {horizontal} m off: {first}"
+    );
+    assert!(rests.iter().all(|r| r["t_s"].as_f64().unwrap() > aligned));
+    // The truth's distance counts from the alignment: below the truth's whole path.
+    let (_, _, distance) = end_error(&v);
+    assert!(distance > 0.0 && distance < 10.0, "distance {distance} m");
 }

@@ -63,8 +63,13 @@ impl TruthFrame {
 pub struct Summary {
     /// The last state.
     pub last: Option<OdometryState>,
-    /// The first aligned state's time, ns.
+    /// The time, ns, of the alignment the latest state stands on (the first aligned state
+    /// since the last unaligned one).
     pub aligned_ns: Option<u64>,
+    /// Alignments the filter gave up (aligned, withdrawn), ns: the detector's settled verdict
+    /// took away the rest the filter had aligned on (the hindsight navigates again without
+    /// it), or a new sensor session started; it waits for another rest.
+    withdrawn: Vec<(u64, u64)>,
     rests: Vec<serde_json::Value>,
     frame: Option<TruthFrame>,
     rest_errors: Vec<serde_json::Value>,
@@ -78,7 +83,9 @@ pub struct Summary {
 impl Summary {
     /// Takes the (non-revision) state of one sample, with the truth read so far.
     pub fn state(&mut self, state: OdometryState, truth: &mut TruthQueue) {
-        if self.aligned_ns.is_none() && state.flags & odometry_flags::ALIGNED != 0 {
+        if state.flags & odometry_flags::ALIGNED == 0 {
+            self.withdraw(state.stamps.sample_ns);
+        } else if self.aligned_ns.is_none() {
             self.aligned_ns = Some(state.stamps.sample_ns);
         }
         self.rest_vibrating += u64::from(state.flags & odometry_flags::REST_VIBRATING != 0);
@@ -93,14 +100,15 @@ impl Summary {
             }));
         }
         if let Some(t) = truth.at(state.stamps.sample_ns) {
-            let p = Vector3::from(t.position_m);
-            if let Some(q) = self.prev_truth {
-                self.truth_distance += (p - q).xy().norm();
-            }
-            self.prev_truth = Some(p);
             if self.frame.is_none() && state.flags & odometry_flags::ALIGNED != 0 {
                 self.frame = Some(TruthFrame::new(&state, t));
             }
+            // The truth's distance counts from the alignment, as the position does.
+            let p = Vector3::from(t.position_m);
+            if let (Some(q), Some(_)) = (self.prev_truth, &self.frame) {
+                self.truth_distance += (p - q).xy().norm();
+            }
+            self.prev_truth = Some(p);
             if let (Some(f), true) = (&self.frame, new_rest) {
                 let e = Vector3::from(state.position_m) - f.position(t);
                 self.rest_errors.push(json!({
@@ -111,6 +119,18 @@ impl Summary {
             }
         }
         self.last = Some(state);
+    }
+
+    /// An unaligned state at `t_ns`: an alignment before it was withdrawn, and what was
+    /// measured from it (the truth's frame, the rests' positions) goes with it.
+    fn withdraw(&mut self, t_ns: u64) {
+        if let Some(aligned) = self.aligned_ns.take() {
+            self.withdrawn.push((aligned, t_ns));
+            self.frame = None;
+            self.truth_distance = 0.0;
+            self.rests.clear();
+            self.rest_errors.clear();
+        }
     }
 
     /// The end state's error against the truth, m, in our frame (a recording with truth).
@@ -163,6 +183,24 @@ impl Summary {
             .map_or(0.0, |t| (t - read.first_ns.unwrap_or(0)) as f64 * 1e-9);
         let in_motion = chain.second.stage().aligned_in_motion();
         say_aligned(aligned_at_s, read.align_s, in_motion, chain);
+        let t0 = read.first_ns.unwrap_or(0);
+        let withdrawn: Vec<_> = self
+            .withdrawn
+            .iter()
+            .map(|&(a, w)| {
+                (
+                    a.saturating_sub(t0) as f64 * 1e-9,
+                    w.saturating_sub(t0) as f64 * 1e-9,
+                )
+            })
+            .collect();
+        for (a, w) in &withdrawn {
+            tracing::warn!(
+                "{input}: the alignment at {a:.2} s was withdrawn at {w:.2} s (the detector's \
+                 settled verdict took away the rest it stood on, or a new sensor session \
+                 started); the position counts from the alignment at {aligned_at_s:.2} s"
+            );
+        }
         let accel = chain.second.stage().accel_estimate();
         if let Some(a) = &accel {
             tracing::info!("{a}");
@@ -210,6 +248,12 @@ impl Summary {
                 "aligned_on_steps": w.aligned_on_steps,
             })));
             result["aligned_in_motion"] = json!(in_motion.map(|s| json!({ "speed_mps": s })));
+            result["alignments_withdrawn"] = json!(
+                withdrawn
+                    .iter()
+                    .map(|(a, w)| json!({ "aligned_at_s": a, "withdrawn_at_s": w }))
+                    .collect::<Vec<_>>()
+            );
             result["accel_error"] = json!(accel);
             result["gravity_reanchored"] = json!(reanchored);
             result["steady_vibrating_s"] = json!(vibrating_s);
