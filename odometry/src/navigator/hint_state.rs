@@ -204,17 +204,18 @@ impl Hints {
     }
 
     /// What the forward-axis fit takes from the filter at this sample ([`Reference`]); the
-    /// horizontal bias 1-sigma only until the fit has its reference (it keeps the first), `g`
-    /// gravity, m/s^2.
+    /// horizontal bias 1-sigma only while the fit runs and has no reference yet (it keeps the
+    /// first), `g` gravity, m/s^2.
     pub(super) fn reference(&self, kf: &Eskf, g: f64) -> Reference {
         Reference {
             up: kf.x.q.inverse_transform_vector(&Vector3::z()),
             accel_bias: kf.x.b_a,
             gyro_bias: kf.x.b_g,
-            horizontal_sigma_mps2: if self.forward.has_reference() {
-                0.0
-            } else {
+            horizontal_sigma_mps2: if self.cfg.mounting_from_turns && !self.forward.has_reference()
+            {
                 horizontal_bias_sigma(&kf.cov, &kf.x.q, g)
+            } else {
+                0.0
             },
         }
     }
