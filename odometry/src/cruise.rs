@@ -243,7 +243,9 @@ pub fn cruise_start(
 /// quantile). The estimate is trusted once it has at least [`FORWARD_MIN_INTERVALS`] intervals
 /// and that 1-sigma is at most [`FORWARD_MAX_SIGMA_RAD`]: the excitation it takes is what the
 /// residuals say is enough; it is refined at every interval after. The speed hints take a
-/// lateral 1-sigma that covers it (`s` times that angle, with the non-holonomic one). Body z is the gravity-up direction
+/// lateral 1-sigma that covers it (`s` times that angle, with the non-holonomic one). `|F|`
+/// gives the hints' speed scale, and a bias the residuals cannot show adds a share to both
+/// 1-sigmas ([`ForwardFit`]). Body z is the gravity-up direction
 /// (a level floor), taken once, from the filter's attitude at the first sample after alignment
 /// (the alignment's measured gravity): the attitude drifts while the speed hints wait for this
 /// estimate, and a later up direction would tilt the mounting by that drift (on the F1TENTH
