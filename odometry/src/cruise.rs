@@ -29,7 +29,7 @@
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::config::OdometryConfig;
-use crate::eskf::{Cov, KS, Nominal, V, align};
+use crate::eskf::{BA, Cov, KS, Nominal, TH, V, align};
 use crate::hints::{HintConfig, mounting_from};
 use crate::rest_noise::RestNoise;
 use crate::uncalibrated::AccelPrior;
@@ -243,7 +243,9 @@ pub fn cruise_start(
 /// quantile). The estimate is trusted once it has at least [`FORWARD_MIN_INTERVALS`] intervals
 /// and that 1-sigma is at most [`FORWARD_MAX_SIGMA_RAD`]: the excitation it takes is what the
 /// residuals say is enough; it is refined at every interval after. The speed hints take a
-/// lateral 1-sigma that covers it (`s` times that angle, with the non-holonomic one). Body z is the gravity-up direction
+/// lateral 1-sigma that covers it (`s` times that angle, with the non-holonomic one). `|F|`
+/// gives the hints' speed scale, and a bias the residuals cannot show adds a share to both
+/// 1-sigmas ([`ForwardFit`]). Body z is the gravity-up direction
 /// (a level floor), taken once, from the filter's attitude at the first sample after alignment
 /// (the alignment's measured gravity): the attitude drifts while the speed hints wait for this
 /// estimate, and a later up direction would tilt the mounting by that drift (on the F1TENTH
@@ -252,8 +254,9 @@ pub fn cruise_start(
 pub struct ForwardAxis {
     /// The filter's up direction and biases, fixed at the first sample.
     reference: Option<Reference>,
-    /// Time (ns) and speed (m/s) of the hint that opened the current interval.
-    anchor: Option<(u64, f64)>,
+    /// Time (ns), speed (m/s) and speed 1-sigma (m/s) of the hint that opened the current
+    /// interval.
+    anchor: Option<(u64, f64, f64)>,
     /// The current interval's sums: horizontal specific force (sensor frame, m/s^2), rate
     /// about up (rad/s), samples.
     f_sum: Vector3<f64>,
@@ -266,15 +269,38 @@ pub struct ForwardAxis {
     aa: f64,
     bb: f64,
     intervals: u32,
+    /// `sum B` as (re, im): what a horizontal bias left in `A` aliases into the fit.
+    b_sum: (f64, f64),
+    /// The hints' own noise's share of `sum |B|^2` (their speed 1-sigmas through `ds/dt`).
+    bb_noise: f64,
 }
 
-/// A trusted forward-axis fit ([`ForwardAxis`]): the mounting it gives and its yaw 1-sigma.
+/// A trusted forward-axis fit ([`ForwardAxis`]): the mounting it gives, its yaw 1-sigma, and
+/// the speed hints' scale error it shows.
 #[derive(Debug, Clone, Copy)]
 pub struct ForwardFit {
     /// The mounting (sensor to body).
     pub mounting: UnitQuaternion<f64>,
-    /// 1-sigma of its yaw, rad (from the residual variance's upper confidence bound).
+    /// 1-sigma of its yaw, rad (from the residual variance's upper confidence bound): the
+    /// fit's noise.
     pub sigma_rad: f64,
+    /// 1-sigma of its yaw that a horizontal specific-force bias left by the reference (its
+    /// tilt, accelerometer bias and the floor's slope) may have aliased into the fit, rad: a
+    /// systematic error, common to every later speed hint.
+    pub bias_sigma_rad: f64,
+    /// The speed hints' scale error `k` (they read `1 + k` times the speed the specific force
+    /// shows: `1 / |F| - 1`), fraction; `None` while the hints' own noise is half the
+    /// excitation or more.
+    pub scale: Option<f64>,
+    /// 1-sigma of `scale`, fraction: the fit's noise and the bias's share, in quadrature.
+    pub scale_sigma: f64,
+}
+
+impl ForwardFit {
+    /// The yaw's whole 1-sigma, rad: the fit's noise and the bias's share, in quadrature.
+    pub fn systematic_sigma_rad(&self) -> f64 {
+        self.sigma_rad.hypot(self.bias_sigma_rad)
+    }
 }
 
 /// What [`ForwardAxis`] takes from the filter, once, at the first sample after alignment:
@@ -289,9 +315,47 @@ pub struct Reference {
     pub accel_bias: Vector3<f64>,
     /// Gyro bias, sensor frame, rad/s.
     pub gyro_bias: Vector3<f64>,
+    /// 1-sigma per horizontal axis of the specific force that the reference leaves after
+    /// taking away gravity and the bias, m/s^2: the filter's tilt and accelerometer bias
+    /// uncertainty ([`horizontal_bias_sigma`]) with a floor slope of [`FLOOR_SLOPE_RAD`].
+    pub horizontal_sigma_mps2: f64,
+}
+
+/// 1-sigma of the floor's slope under a wheeled robot, rad: 1:48 (1.2 deg), the steepest a
+/// parking space or a wheelchair turning space may be (2010 ADA Standards for
+/// Accessible Design, 502.4 and 304.2); a robot that turns on a slope sees `g` times it in
+/// its horizontal specific force, which the forward-axis fit cannot tell from a bias.
+pub const FLOOR_SLOPE_RAD: f64 = 1.0 / 48.0;
+
+/// The [`Reference::horizontal_sigma_mps2`] of a filter with covariance `cov` (error state:
+/// attitude at [`TH`] in the navigation frame, accelerometer bias at [`BA`] in the sensor
+/// frame), attitude `q` (sensor to navigation) and gravity `g` (m/s^2). A navigation-frame
+/// tilt error `d` leaves `g (z x d) = g (-d_y, d_x)` of gravity in the horizontal specific
+/// force, the bias error `R db` its horizontal part; their variance (cross terms included:
+/// an alignment makes them cancel), per axis, with the floor's slope in quadrature.
+pub fn horizontal_bias_sigma(cov: &Cov, q: &UnitQuaternion<f64>, g: f64) -> f64 {
+    let r = q.to_rotation_matrix().into_inner();
+    let mut j = nalgebra::SMatrix::<f64, 2, 6>::zeros();
+    (j[(0, 1)], j[(1, 0)]) = (-g, g);
+    j.fixed_view_mut::<2, 3>(0, 3)
+        .copy_from(&r.fixed_view::<2, 3>(0, 0));
+    let mut p = nalgebra::SMatrix::<f64, 6, 6>::zeros();
+    for (a, ia) in [(0, TH), (3, BA)] {
+        for (b, ib) in [(0, TH), (3, BA)] {
+            p.fixed_view_mut::<3, 3>(a, b)
+                .copy_from(&cov.fixed_view::<3, 3>(ia, ib));
+        }
+    }
+    let var = (j * p * j.transpose()).trace() / 2.0;
+    var.max(0.0).sqrt().hypot(g * FLOOR_SLOPE_RAD)
 }
 
 impl ForwardAxis {
+    /// Whether the reference was taken (the first sample or hint after alignment).
+    pub fn has_reference(&self) -> bool {
+        self.reference.is_some()
+    }
+
     /// Adds a sample's specific force `f_s` (m/s^2) and rate `w_s` (rad/s), sensor frame, with
     /// the filter's reference `r` (only the first one given is used).
     pub fn sample(&mut self, f_s: &Vector3<f64>, w_s: &Vector3<f64>, r: &Reference) {
@@ -305,13 +369,15 @@ impl ForwardAxis {
         self.n += 1;
     }
 
-    /// Takes a speed hint of `speed` m/s at `t_ns` with the filter's reference `r` (only the
-    /// first one given is used, as in [`Self::sample`]); returns the fit when this hint closed
-    /// an interval and the fit is trusted (see the type's documentation).
-    pub fn hint(&mut self, t_ns: u64, speed: f64, r: &Reference) -> Option<ForwardFit> {
-        let up_s = self.reference.get_or_insert(*r).up;
-        let Some((t0, s0)) = self.anchor else {
-            self.anchor = Some((t_ns, speed));
+    /// Takes a speed hint of `speed` m/s (1-sigma `sigma`) at `t_ns` with the filter's
+    /// reference `r` (only the first one given is used, as in [`Self::sample`]); returns the
+    /// fit when this hint closed an interval and the fit is trusted (see the type's
+    /// documentation).
+    pub fn hint(&mut self, t_ns: u64, speed: f64, sigma: f64, r: &Reference) -> Option<ForwardFit> {
+        let reference = *self.reference.get_or_insert(*r);
+        let up_s = reference.up;
+        let Some((t0, s0, sigma0)) = self.anchor else {
+            self.anchor = Some((t_ns, speed, sigma));
             return None;
         };
         let dt = t_ns.saturating_sub(t0) as f64 * 1e-9;
@@ -322,7 +388,7 @@ impl ForwardAxis {
         let (f, w_up) = (self.f_sum / n, self.w_up_sum / n);
         let had = self.n > 0;
         *self = Self {
-            anchor: Some((t_ns, speed)),
+            anchor: Some((t_ns, speed, sigma)),
             ..*self
         };
         (self.f_sum, self.w_up_sum, self.n) = (Vector3::zeros(), 0.0, 0);
@@ -337,16 +403,44 @@ impl ForwardAxis {
         self.cross.1 += a.1 * b.0 - a.0 * b.1;
         self.aa += a.0 * a.0 + a.1 * a.1;
         self.bb += b.0 * b.0 + b.1 * b.1;
+        self.b_sum = (self.b_sum.0 + b.0, self.b_sum.1 + b.1);
+        self.bb_noise += (sigma * sigma + sigma0 * sigma0) / (dt * dt);
         self.intervals += 1;
         let sigma = self.angle_sigma_rad();
         if self.intervals < FORWARD_MIN_INTERVALS || sigma > FORWARD_MAX_SIGMA_RAD {
             return None;
         }
         let forward = e1 * self.cross.0 + e2 * self.cross.1;
-        mounting_from(&forward, &up_s).map(|mounting| ForwardFit {
+        let mounting = mounting_from(&forward, &up_s)?;
+        Some(self.fit(mounting, sigma, reference.horizontal_sigma_mps2))
+    }
+
+    /// The trusted fit's scale and bias share (see [`ForwardFit`]), with the fit's direction
+    /// 1-sigma `sigma` (rad) and the reference's horizontal bias 1-sigma `bias` (m/s^2).
+    ///
+    /// A bias `b` in every `A` moves the estimate by `b sum(conj B) / sum|B|^2`: relative to
+    /// `|F|`, `bias |sum B| / (sum|B|^2 |F|)` per component. The scale comes from `|F|`, whose
+    /// relative 1-sigma per component is the direction's (`sigma`, the bias share in
+    /// quadrature), and `k = 1 / |F| - 1` has 1-sigma `(1 + k)` times that. Noise in the
+    /// regressor `B` (the hints' speed 1-sigmas through `ds/dt`) would shrink `|F|` by the
+    /// share of `sum|B|^2` it makes (regression dilution; W. A. Fuller, "Measurement Error
+    /// Models", Wiley 1987, sec. 1.1): it is taken away from `sum|B|^2`, and with half or
+    /// more of it noise no scale is given.
+    fn fit(&self, mounting: UnitQuaternion<f64>, sigma: f64, bias: f64) -> ForwardFit {
+        let cross = self.cross.0.hypot(self.cross.1);
+        let f_norm = cross / self.bb;
+        let b_sum = self.b_sum.0.hypot(self.b_sum.1);
+        let bias_sigma_rad = bias * b_sum / (self.bb * f_norm);
+        let signal = self.bb - self.bb_noise;
+        let scale = (signal > 0.5 * self.bb).then(|| signal / cross - 1.0);
+        let relative = sigma.hypot(bias_sigma_rad);
+        ForwardFit {
             mounting,
             sigma_rad: sigma,
-        })
+            bias_sigma_rad,
+            scale,
+            scale_sigma: (1.0 + scale.unwrap_or(0.0)) * relative,
+        }
     }
 }
 
@@ -383,9 +477,10 @@ fn horizontal_basis(up: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
 mod tests {
     use super::*;
 
-    #[test]
-    fn forward_axis_from_speed_changes_and_turns_keeps_its_sign() {
-        // IMU mounted +y up, -z forward, -x left (the Husky's).
+    /// The fit on a robot (IMU mounted +y up, -z forward, -x left: the Husky's) slowing down
+    /// and turning both ways, 0.5 s between hints, 10 samples each, whose hints read `gain`
+    /// times its speed; a horizontal bias `bias` (sensor frame, m/s^2) on every sample.
+    fn fit_on_a_drive(gain: f64, bias: Vector3<f64>) -> (ForwardFit, UnitQuaternion<f64>) {
         let (fwd_s, up_s) = (Vector3::new(0.0, 0.0, -1.0), Vector3::new(0.0, 1.0, 0.0));
         let left_s = up_s.cross(&fwd_s);
         let truth = mounting_from(&fwd_s, &up_s).unwrap();
@@ -394,25 +489,49 @@ mod tests {
             up: up_s,
             accel_bias: Vector3::zeros(),
             gyro_bias: Vector3::zeros(),
+            horizontal_sigma_mps2: bias.norm(),
         };
         let mut got = None;
-        // Slowing down and turning both ways, 0.5 s between hints, 10 samples each.
         for k in 0..80 {
             let t = f64::from(k) * 0.5;
             let (speed, accel, yaw_rate) = (1.5 - 0.02 * t, -0.02, 0.3 * (0.4 * t).sin());
             // Over the interval that this hint opens: the mean speed is the mid-interval one.
             let mid = speed - 0.02 * 0.25;
-            let f = fwd_s * accel + left_s * mid * yaw_rate + up_s * 9.81;
-            got = est.hint((t * 1e9) as u64, speed, &r).or(got);
+            let f = fwd_s * accel + left_s * mid * yaw_rate + up_s * 9.81 + bias;
+            got = est.hint((t * 1e9) as u64, gain * speed, 0.0, &r).or(got);
             for _ in 0..10 {
                 est.sample(&f, &(up_s * yaw_rate), &r);
             }
         }
-        let ForwardFit {
-            mounting: q,
-            sigma_rad: sigma,
-        } = got.unwrap();
+        (got.unwrap(), truth)
+    }
+
+    #[test]
+    fn forward_axis_from_speed_changes_and_turns_keeps_its_sign() {
+        let (fit, truth) = fit_on_a_drive(1.0, Vector3::zeros());
+        let (q, sigma) = (fit.mounting, fit.sigma_rad);
         assert!(q.angle_to(&truth) < 0.01 && sigma < 0.01, "{q:?} {sigma}");
+        assert!(fit.scale.unwrap().abs() < 0.01, "{fit:?}");
+    }
+
+    #[test]
+    fn hints_reading_high_show_their_scale() {
+        let (fit, _) = fit_on_a_drive(1.3, Vector3::zeros());
+        let k = fit.scale.unwrap();
+        assert!((k - 0.3).abs() < 0.01 && fit.scale_sigma < 0.02, "{fit:?}");
+    }
+
+    #[test]
+    fn a_horizontal_bias_is_carried_in_the_systematic_sigma() {
+        // 0.05 m/s^2 along the left axis, which the steady part of the turns aliases.
+        let bias = Vector3::new(-0.05, 0.0, 0.0);
+        let (fit, truth) = fit_on_a_drive(1.0, bias);
+        let (clean, _) = fit_on_a_drive(1.0, Vector3::zeros());
+        let error = fit.mounting.angle_to(&truth);
+        assert!(fit.bias_sigma_rad > clean.bias_sigma_rad, "{fit:?}");
+        assert!(error <= 2.0 * fit.systematic_sigma_rad(), "{error} {fit:?}");
+        let k_error = fit.scale.unwrap().abs();
+        assert!(k_error <= 2.0 * fit.scale_sigma, "{k_error} {fit:?}");
     }
 
     #[test]

@@ -57,7 +57,8 @@ const P: usize = 0;
 pub const V: usize = 3;
 /// Index of the attitude error (navigation frame: its z is the heading's) in the error state.
 pub const TH: usize = 6;
-const BA: usize = 9;
+/// Index of the accelerometer bias error (sensor frame) in the error state.
+pub const BA: usize = 9;
 const BG: usize = 12;
 /// Index of the wheel-speed scale error in the error state.
 pub const KS: usize = 15;
@@ -304,6 +305,54 @@ impl Eskf {
     /// out.
     pub fn widen_reported(&mut self, p: [f64; 2], v: [f64; 2]) {
         self.reported.widen_horizontal(p, v);
+    }
+
+    /// Sets the published position variance of a systematic error the filter holds no state
+    /// for, m^2 per horizontal axis (x, y) (module `reported`): replaced, not added to.
+    pub fn set_systematic(&mut self, p: [f64; 2]) {
+        self.reported.systematic[0] = p[0].max(0.0);
+        self.reported.systematic[1] = p[1].max(0.0);
+    }
+
+    /// Widens the wheel-speed scale error's variance to `var` when it is smaller, its
+    /// covariances with the other states in proportion (`D P D` with `D` diagonal: the
+    /// covariance stays positive semi-definite): a prior the data refuted.
+    pub fn widen_scale(&mut self, var: f64) {
+        let now = self.cov[(KS, KS)];
+        if !(var > now && now > 0.0) {
+            self.cov[(KS, KS)] = self.cov[(KS, KS)].max(var);
+            return;
+        }
+        let f = (var / now).sqrt();
+        for i in 0..N {
+            self.cov[(i, KS)] *= f;
+            self.cov[(KS, i)] *= f;
+        }
+    }
+
+    /// The wheel-speed scale error and its 1-sigma, fraction.
+    pub fn scale(&self) -> (f64, f64) {
+        (self.x.k, self.cov[(KS, KS)].max(0.0).sqrt())
+    }
+
+    /// A direct measurement of the wheel-speed scale error: `k_meas` with variance `var`
+    /// (a scalar Kalman update; every state moves by its covariance with the scale).
+    pub fn measure_scale(&mut self, k_meas: f64, var: f64) {
+        self.propagate();
+        let s = self.cov[(KS, KS)] + var;
+        if s <= 0.0 {
+            return;
+        }
+        let before = self.var;
+        let l: VecN = self.cov.column(KS).into_owned();
+        let gain = l / s;
+        let dx = gain * (k_meas - self.x.k);
+        self.cov -= gain * l.transpose();
+        let g = self.sens.column(KS).into_owned();
+        self.sens -= g * gain.transpose();
+        self.cov = 0.5 * (self.cov + self.cov.transpose());
+        self.inject(&dx);
+        self.reported.updated(&before, &self.var);
     }
 
     fn with_sigma(mut self) -> Self {

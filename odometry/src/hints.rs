@@ -80,6 +80,47 @@ impl Default for HintConfig {
     }
 }
 
+/// How many standard deviations (of the prior and the fit, in quadrature) the forward-axis
+/// fit's speed scale may lie from the scale state's prior before the prior is taken as refuted
+/// for this robot (a prior-data conflict check: M. Evans and H. Moshonov, "Checking for
+/// prior-data conflict", Bayesian Analysis 1(4), 2006): 3, a 0.3 % two-sided tail.
+pub const SCALE_CONFLICT_SIGMAS: f64 = 3.0;
+
+/// The filter's speed scale checked against the forward-axis fit's once the fit's is
+/// observable (its 1-sigma below [`HintConfig::speed_scale_sigma`]; `odometry::cruise::
+/// ForwardFit`; fractions: the hints read `1 + k` times the speed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScaleTaken {
+    /// When, ns (sample clock).
+    pub at_ns: u64,
+    /// The fit's scale error and its 1-sigma.
+    pub fit: (f64, f64),
+    /// The filter's 1-sigma then.
+    pub prior_sigma: f64,
+    /// Whether the fit lay beyond [`SCALE_CONFLICT_SIGMAS`] of the filter's: its variance was
+    /// then widened to cover the fit, which it took as a measurement; else nothing changed.
+    pub prior_refuted: bool,
+    /// The filter's scale error and 1-sigma after the check.
+    pub taken: (f64, f64),
+}
+
+/// What the forward axis estimated from the speed hints gave (`odometry::cruise::
+/// ForwardAxis`), for reports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForwardAxisReport {
+    /// When it was first trusted, ns (sample clock).
+    pub trusted_at_ns: u64,
+    /// The latest fit's yaw 1-sigma from its residuals (the fit's noise), rad.
+    pub yaw_sigma_rad: f64,
+    /// The latest fit's whole yaw 1-sigma, the reference's horizontal bias included, rad: what
+    /// the published position 1-sigma carries as a systematic error.
+    pub yaw_systematic_sigma_rad: f64,
+    /// The latest fit's speed scale error and its 1-sigma (`None`: hints too noisy for it).
+    pub scale_fit: Option<(f64, f64)>,
+    /// What the filter took from the fit's scale once observable (`None`: not yet).
+    pub scale_taken: Option<ScaleTaken>,
+}
+
 /// A configuration the stage cannot run with; the message names the field.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("hint configuration `{field}`: {reason}")]

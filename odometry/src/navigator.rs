@@ -8,10 +8,11 @@ use crate::attitudes::RestAttitudes;
 use crate::clip::{ClipRepair, ClipStats};
 use crate::config::OdometryConfig;
 use crate::consistency::{Consistency, ConsistencyReport, Kind};
-use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, Reference, cruise_start};
+use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
 use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
 use crate::hints::{
-    HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
+    ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring, has_rest_source,
+    usable_from_ns,
 };
 use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::sampled_noise::SampledNoise;
@@ -112,6 +113,9 @@ impl Navigator {
                 estimator: MountingEstimator::default(),
                 forward: ForwardAxis::default(),
                 mounting_at_ns: None,
+                latest_fit: None,
+                scale_taken: None,
+                systematic: [0.0; 2],
                 history: Ring::new(velocity_capacity),
                 corrections: Vector3::zeros(),
                 applied: 0,
@@ -230,13 +234,16 @@ impl Navigator {
         })
     }
 
-    /// The time (ns, sample clock) and yaw 1-sigma (rad) of the forward axis estimated from the
-    /// speed hints ([`crate::cruise::ForwardAxis`]): when it was first trusted, and its
-    /// latest 1-sigma.
-    pub fn forward_axis(&self) -> Option<(u64, f64)> {
-        self.hints
-            .mounting_at_ns
-            .map(|t| (t, self.hints.yaw_sigma_rad))
+    /// The forward axis estimated from the speed hints ([`crate::cruise::ForwardAxis`]): when
+    /// it was first trusted, its latest 1-sigmas and speed scale, and what the filter took.
+    pub fn forward_axis(&self) -> Option<ForwardAxisReport> {
+        self.hints.forward_report()
+    }
+
+    /// The filter's wheel-speed scale error and its 1-sigma (fractions: the speed hints read
+    /// `1 + k` times the speed); `None` before alignment.
+    pub fn speed_scale(&self) -> Option<(f64, f64)> {
+        self.kf.as_ref().map(Eskf::scale)
     }
 
     /// Whether alignment is done.
@@ -561,25 +568,24 @@ impl Navigator {
             let hints = &mut self.hints;
             // Turns a refined mounting made ([`Hints::remount`]), for `body_before`.
             let mut body_turn = Matrix3::identity();
-            let reference = Reference {
-                up: kf.x.q.inverse_transform_vector(&Vector3::z()),
-                accel_bias: kf.x.b_a,
-                gyro_bias: kf.x.b_g,
-            };
+            let reference = hints.reference(kf, self.cfg.gravity_mps2);
             if hints.cfg.mounting_from_turns {
                 hints.forward.sample(&m.f, &m.w, &reference);
             }
             while let Some(h) = hints.speed.pop() {
                 if hints.cfg.mounting_from_turns
-                    && let Some(fit) =
-                        hints
-                            .forward
-                            .hint(h.stamps.sample_ns, h.forward_speed_mps, &reference)
+                    && let Some(fit) = hints.forward.hint(
+                        h.stamps.sample_ns,
+                        h.forward_speed_mps,
+                        h.forward_speed_sigma_mps,
+                        &reference,
+                    )
                 {
                     match hints.remount(&fit, t_ns) {
                         None => hints.restart_velocity(kf, &h),
                         Some(turn) => body_turn = turn * body_turn,
                     }
+                    hints.scale_from_fit(kf, &fit, t_ns);
                     if let Some(nhc) = self.nhc.as_mut() {
                         nhc.follow(fit.mounting, fit.sigma_rad);
                     }
@@ -610,6 +616,7 @@ impl Navigator {
                     None => {}
                 }
             }
+            hints.carry_systematic(kf, dt);
             body_before = body_before.map(|v| body_turn * v);
         }
         self.track_corrections(body_before);

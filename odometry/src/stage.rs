@@ -291,11 +291,18 @@ impl OdometryStage {
         self.ahead.mounting()
     }
 
-    /// The time (ns, sample clock) the forward axis estimated from the speed hints was first
-    /// trusted and its latest yaw 1-sigma (rad), by the navigator on the newest inputs
-    /// ([`crate::cruise::ForwardAxis`]).
-    pub fn forward_axis(&self) -> Option<(u64, f64)> {
+    /// The forward axis estimated from the speed hints, by the navigator on the newest inputs
+    /// ([`crate::cruise::ForwardAxis`]): when it was first trusted, its latest 1-sigmas and
+    /// speed scale, and what the filter took of that scale.
+    pub fn forward_axis(&self) -> Option<crate::hints::ForwardAxisReport> {
         self.ahead.forward_axis()
+    }
+
+    /// The filter's wheel-speed scale error and its 1-sigma, fractions (the speed hints read
+    /// `1 + k` times the speed), by the navigator on the newest inputs; `None` before
+    /// alignment.
+    pub fn speed_scale(&self) -> Option<(f64, f64)> {
+        self.ahead.speed_scale()
     }
 
     /// Takes `cfg` from the next sample on: every navigator's rest handling, manoeuvre and

@@ -33,6 +33,10 @@ pub struct Reported {
     /// Position variance of motion the filter took for rest, m^2 per axis: uncorrelated with
     /// the state, so no update (none measures position) shrinks it.
     pub hidden: Vector3<f64>,
+    /// Position variance of a systematic error the filter does not hold as a state (an
+    /// estimated mounting's yaw, [`crate::cruise::ForwardFit`]), m^2 per axis: set whole by
+    /// its owner, never grown or shrunk here.
+    pub systematic: Vector3<f64>,
 }
 
 impl Default for Reported {
@@ -42,6 +46,7 @@ impl Default for Reported {
             p: Vector3::zeros(),
             v: Vector3::zeros(),
             hidden: Vector3::zeros(),
+            systematic: Vector3::zeros(),
         }
     }
 }
@@ -93,7 +98,7 @@ impl Reported {
 
     /// The extra position variance, m^2 per axis.
     pub fn position(&self) -> Vector3<f64> {
-        self.p + self.hidden
+        self.p + self.hidden + self.systematic
     }
 }
 

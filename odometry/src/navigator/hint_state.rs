@@ -2,9 +2,12 @@
 //! speed hints still to apply and the body-velocity history they are applied against (see
 //! [`crate::stage`] for the behaviour, [`crate::hints`] for frames and times).
 
-use crate::cruise::{ForwardAxis, ForwardFit, initial_velocity};
+use crate::cruise::{ForwardAxis, ForwardFit, Reference, horizontal_bias_sigma, initial_velocity};
 use crate::eskf::{Eskf, V};
-use crate::hints::{HintConfig, HintStats, MountingEstimator, Ring};
+use crate::hints::{
+    ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring, SCALE_CONFLICT_SIGMAS,
+    ScaleTaken,
+};
 use ipc_types::RobotHint;
 use nalgebra::{Matrix3, Vector3};
 
@@ -60,6 +63,14 @@ pub(super) struct Hints {
     pub(super) forward: ForwardAxis,
     /// Time the forward axis was first trusted, ns (sample clock).
     pub(super) mounting_at_ns: Option<u64>,
+    /// The latest trusted forward-axis fit.
+    pub(super) latest_fit: Option<ForwardFit>,
+    /// What the filter took from the first trusted fit's speed scale.
+    pub(super) scale_taken: Option<ScaleTaken>,
+    /// The estimated mounting's yaw error carried as a systematic position error: `sum
+    /// sigma_j (-dp_y, dp_x)` over the horizontal steps `dp` since the fit was trusted, with
+    /// `sigma_j` the fit's whole yaw 1-sigma then, m (navigation frame x, y).
+    pub(super) systematic: [f64; 2],
     /// Body velocity minus corrections, one per sample since the mounting is known.
     pub(super) history: Ring<BodyVelocity>,
     /// Sum of the body-velocity changes every update has made since the mounting is known,
@@ -85,6 +96,9 @@ impl Hints {
         self.estimator = other.estimator;
         self.forward = other.forward;
         self.mounting_at_ns = other.mounting_at_ns;
+        self.latest_fit = other.latest_fit;
+        self.scale_taken = other.scale_taken;
+        self.systematic = other.systematic;
         self.history.clone_from(&other.history);
         self.corrections = other.corrections;
         self.applied = other.applied;
@@ -120,6 +134,7 @@ impl Hints {
     pub(super) fn remount(&mut self, fit: &ForwardFit, t_ns: u64) -> Option<Matrix3<f64>> {
         let r_new = fit.mounting.to_rotation_matrix().into_inner();
         self.yaw_sigma_rad = fit.sigma_rad;
+        self.latest_fit = Some(*fit);
         let Some(r_old) = self.r_bs.replace(r_new) else {
             self.mounting_at_ns = Some(t_ns);
             return None;
@@ -186,5 +201,81 @@ impl Hints {
             Vector3::new(h.forward_speed_sigma_mps, lateral, nh),
         );
         Some(nis.unwrap_or(f64::NAN))
+    }
+
+    /// What the forward-axis fit takes from the filter at this sample ([`Reference`]); the
+    /// horizontal bias 1-sigma only while the fit runs and has no reference yet (it keeps the
+    /// first), `g` gravity, m/s^2.
+    pub(super) fn reference(&self, kf: &Eskf, g: f64) -> Reference {
+        Reference {
+            up: kf.x.q.inverse_transform_vector(&Vector3::z()),
+            accel_bias: kf.x.b_a,
+            gyro_bias: kf.x.b_g,
+            horizontal_sigma_mps2: if self.cfg.mounting_from_turns && !self.forward.has_reference()
+            {
+                horizontal_bias_sigma(&kf.cov, &kf.x.q, g)
+            } else {
+                0.0
+            },
+        }
+    }
+
+    /// Checks the filter's speed scale against a trusted forward-axis fit's at `t_ns`, once,
+    /// when the fit's is first observable (its 1-sigma below the scale state's prior,
+    /// [`HintConfig::speed_scale_sigma`]; see [`ScaleTaken`]). When the two lie more than
+    /// [`SCALE_CONFLICT_SIGMAS`] apart (their 1-sigmas in quadrature) the scale state's
+    /// prior was wrong for this robot (a misconfigured wheel-speed gain, a tyre of another
+    /// size), which a state learning slowly from its speed updates does not recover from: its
+    /// variance is widened to cover the difference and the fit enters as a measurement of it.
+    /// When they agree nothing changes: the filter learns the scale from the same
+    /// accelerations the fit uses, and taking the fit as well would count them twice.
+    pub(super) fn scale_from_fit(&mut self, kf: &mut Eskf, fit: &ForwardFit, t_ns: u64) {
+        let observable = fit.scale_sigma < self.cfg.speed_scale_sigma;
+        let (Some(k_fit), None, true) = (fit.scale, self.scale_taken, observable) else {
+            return;
+        };
+        let (k0, sigma0) = kf.scale();
+        let conflict = SCALE_CONFLICT_SIGMAS * sigma0.hypot(fit.scale_sigma);
+        let prior_refuted = (k_fit - k0).abs() > conflict;
+        if prior_refuted {
+            kf.widen_scale((k_fit - k0).powi(2));
+            kf.measure_scale(k_fit, fit.scale_sigma * fit.scale_sigma);
+        }
+        self.scale_taken = Some(ScaleTaken {
+            at_ns: t_ns,
+            fit: (k_fit, fit.scale_sigma),
+            prior_sigma: sigma0,
+            prior_refuted,
+            taken: kf.scale(),
+        });
+    }
+
+    /// Carries the estimated mounting's yaw error into the published position 1-sigma as a
+    /// systematic error (see [`Self::systematic`]) for a step of `dt_s` seconds at the
+    /// filter's velocity. A yaw error `d` of the mounting turns every velocity the speed
+    /// hints give by `d`, so the position error is `d` times the displacement since, turned
+    /// by 90 degrees: the speed updates' lateral 1-sigma (per hint, white) averages it away.
+    /// Taken as one error scaled by each fit's 1-sigma (a refined fit's error is the earlier
+    /// one's, shrunk), the variance per axis is the sum's square.
+    pub(super) fn carry_systematic(&mut self, kf: &mut Eskf, dt_s: f64) {
+        let Some(fit) = self.latest_fit.filter(|_| self.mounting_at_ns.is_some()) else {
+            return;
+        };
+        let sigma = fit.systematic_sigma_rad();
+        self.systematic[0] -= sigma * kf.x.v.y * dt_s;
+        self.systematic[1] += sigma * kf.x.v.x * dt_s;
+        kf.set_systematic(self.systematic.map(|s| s * s));
+    }
+
+    /// The forward axis's report once trusted.
+    pub(super) fn forward_report(&self) -> Option<ForwardAxisReport> {
+        let (t, fit) = (self.mounting_at_ns?, self.latest_fit?);
+        Some(ForwardAxisReport {
+            trusted_at_ns: t,
+            yaw_sigma_rad: fit.sigma_rad,
+            yaw_systematic_sigma_rad: fit.systematic_sigma_rad(),
+            scale_fit: fit.scale.map(|k| (k, fit.scale_sigma)),
+            scale_taken: self.scale_taken,
+        })
     }
 }

@@ -527,12 +527,22 @@ pub fn drive_with_encoder_hints(
 /// acquisition, before the first sample after it.
 pub fn write_drive_with_encoder_hints(path: &std::path::Path, case: &Case, seed: u64) {
     let (raw, hints) = drive_with_encoder_hints(case, seed);
+    write_drive_with_hints(path, &raw, hints);
+}
+
+/// Writes raw samples with their truth and the hints `hints` to the MCAP file `path`, as
+/// [`write_drive_with_encoder_hints`] does (for hints changed after they were made).
+pub fn write_drive_with_hints(
+    path: &std::path::Path,
+    raw: &[(RawImuSample, Truth)],
+    hints: Vec<RobotHint>,
+) {
     let mut w = recording::mcap::Writer::create(path).unwrap();
     let raw_ch = w.add_channel::<RawImuSample>().unwrap();
     let truth_ch = w.add_channel::<Truth>().unwrap();
     let hint_ch = w.add_channel::<RobotHint>().unwrap();
     let mut hints = hints.into_iter().peekable();
-    for (r, t) in &raw {
+    for (r, t) in raw {
         while let Some(h) = hints.next_if(|h| h.stamps.acquired_ns <= r.stamps.sample_ns) {
             w.write(hint_ch, &h, h.stamps.acquired_ns).unwrap();
         }

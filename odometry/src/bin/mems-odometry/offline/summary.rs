@@ -302,6 +302,7 @@ impl Summary {
                 "speed_updates": speed_updates,
                 "mounting_rpy_deg": hint_mounting(chain),
                 "forward_axis": forward_axis_json(chain, read.first_ns.unwrap_or(0)),
+                "speed_scale": speed_scale_json(chain),
             },
         });
         if let (Some(r), Some(t)) = (result.as_object_mut(), read.trust.as_object()) {
@@ -526,18 +527,41 @@ fn hint_mounting(chain: &OfflineChain) -> Option<[f64; 3]> {
 }
 
 /// When the forward axis estimated from the speed hints was first trusted (s from the first
-/// sample) and its latest yaw 1-sigma (deg); `null` when it was given or never estimated.
+/// sample), its latest yaw 1-sigma (deg: the fit's noise, and with the reference's bias, the
+/// systematic one the position 1-sigma carries), its speed scale and what the filter took of
+/// it once observable (fractions: the hints read `1 + k` times the speed); `null` when it was
+/// given or never estimated.
 fn forward_axis_json(chain: &OfflineChain, first_ns: u64) -> serde_json::Value {
-    chain
-        .second
-        .stage()
-        .forward_axis()
-        .map_or(serde_json::Value::Null, |(t_ns, sigma)| {
-            json!({
-                "trusted_at_s": t_ns.saturating_sub(first_ns) as f64 * 1e-9,
-                "yaw_sigma_deg": sigma.to_degrees(),
-            })
+    let Some(f) = chain.second.stage().forward_axis() else {
+        return serde_json::Value::Null;
+    };
+    let taken = f.scale_taken.map(|t| {
+        json!({
+            "at_s": t.at_ns.saturating_sub(first_ns) as f64 * 1e-9,
+            "fit": t.fit.0,
+            "fit_sigma": t.fit.1,
+            "prior_sigma": t.prior_sigma,
+            "prior_refuted": t.prior_refuted,
+            "taken": t.taken.0,
+            "taken_sigma": t.taken.1,
         })
+    });
+    json!({
+        "trusted_at_s": f.trusted_at_ns.saturating_sub(first_ns) as f64 * 1e-9,
+        "yaw_sigma_deg": f.yaw_sigma_rad.to_degrees(),
+        "yaw_systematic_sigma_deg": f.yaw_systematic_sigma_rad.to_degrees(),
+        "scale_fit": f.scale_fit.map(|(k, s)| json!({"k": k, "sigma": s})),
+        "scale_taken": taken,
+    })
+}
+
+/// The filter's wheel-speed scale error at the end and its 1-sigma (fractions: the speed
+/// hints read `1 + k` times the speed); `null` before alignment.
+fn speed_scale_json(chain: &OfflineChain) -> serde_json::Value {
+    chain.second.stage().speed_scale().map_or(
+        serde_json::Value::Null,
+        |(k, s)| json!({"k": k, "sigma": s}),
+    )
 }
 
 /// Why the odometry never aligned: the detector never learned (with the learner's last
