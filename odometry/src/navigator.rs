@@ -10,6 +10,7 @@ use crate::config::OdometryConfig;
 use crate::consistency::{Consistency, ConsistencyReport, Kind};
 use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, Reference, cruise_start};
 use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
+use crate::hand_bound::HandBound;
 use crate::hints::{
     HintConfig, HintStats, MountingEstimator, Ring, has_rest_source, usable_from_ns,
 };
@@ -88,6 +89,8 @@ pub(crate) struct Navigator {
     consistency: Consistency,
     /// Hand-held walking's steps and updates (`cfg.walking`).
     walk: Option<Walk>,
+    /// The hand's velocity bound (`crate::hand_bound`).
+    hand: HandBound,
 }
 
 impl Navigator {
@@ -143,6 +146,7 @@ impl Navigator {
             sampled: SampledNoise::default(),
             consistency: Consistency::new(cfg.consistency),
             walk: cfg.walking.map(Walk::new),
+            hand: HandBound::default(),
         }
     }
 
@@ -174,6 +178,7 @@ impl Navigator {
         self.sampled = other.sampled;
         self.consistency = other.consistency;
         self.walk = other.walk;
+        self.hand = other.hand;
     }
 
     /// Takes `cfg` from the next sample on (a profile recognized from the data): its rest
@@ -358,6 +363,7 @@ impl Navigator {
         self.track_motion(t_ns, prev_ns, rest, emit);
         self.update(t_ns, dt, &m, rest, moved, &mut d.sample);
         self.walk_update(t_ns, step.as_ref(), rest);
+        self.hand_update(t_ns, rest);
 
         let state = self.state(s, rest, d.sample);
         if !rest && self.motion_start_ns.is_some() {
