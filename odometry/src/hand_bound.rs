@@ -5,7 +5,7 @@
 //! 560 m off after 150 s (`b t^2 / 2`); BROAD's box moved by hand for 150 s without a break
 //! ended 143 and 151 m off (docs/real-data.md).
 //!
-//! Method: while the sample is not taken as rest, every [`HAND_BOUND_INTERVAL_S`] the filter's
+//! Method: while the sample is not taken as rest and no robot hint reports the motion, every [`HAND_BOUND_INTERVAL_S`] the filter's
 //! velocity (m/s, navigation frame, z up) is measured as zero with 1-sigma
 //! [`HAND_SPEED_SIGMA_MPS`] per axis: a pseudo-measurement of the hand's speed scale, not of
 //! its rest. Reaching movements peak at 0.5-1.5 m/s and reverse within about a second (T. Flash
@@ -33,13 +33,14 @@ pub struct HandBound {
 impl HandBound {
     /// After the aligned filter's updates at `t_ns`: bounds its velocity with 1-sigma
     /// `sigma_mps` (0: off) when [`HAND_BOUND_INTERVAL_S`] has passed in motion since the last
-    /// bound or rest (`rest`: the sample is taken as rest). Returns whether it updated.
-    pub fn update(&mut self, kf: &mut Eskf, t_ns: u64, rest: bool, sigma_mps: f64) -> bool {
+    /// bound or held sample (`held`: the sample is taken as rest, or robot hints report the
+    /// motion). Returns whether it updated.
+    pub fn update(&mut self, kf: &mut Eskf, t_ns: u64, held: bool, sigma_mps: f64) -> bool {
         if sigma_mps <= 0.0 {
             return false;
         }
         let last = *self.last_ns.get_or_insert(t_ns);
-        if rest {
+        if held {
             self.last_ns = Some(t_ns);
             return false;
         }

@@ -363,7 +363,7 @@ impl Navigator {
         self.track_motion(t_ns, prev_ns, rest, emit);
         self.update(t_ns, dt, &m, rest, moved, &mut d.sample);
         self.walk_update(t_ns, step.as_ref(), rest);
-        self.hand_update(t_ns, rest);
+        self.hand_update(t_ns, rest, d.fresh.is_some() || d.stale);
 
         let state = self.state(s, rest, d.sample);
         if !rest && self.motion_start_ns.is_some() {

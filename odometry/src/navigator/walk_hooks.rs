@@ -44,12 +44,13 @@ impl Navigator {
     }
 
     /// After the aligned filter's updates: the velocity bound of a sensor moved by hand
-    /// (`crate::hand_bound`), when the profile asks for it.
-    pub(super) fn hand_update(&mut self, t_ns: u64, rest: bool) {
+    /// (`crate::hand_bound`), when the profile asks for it and no robot hint reports the
+    /// motion (`hinted`: a robot that sends hints is no hand, and its speed is measured).
+    pub(super) fn hand_update(&mut self, t_ns: u64, rest: bool, hinted: bool) {
         let kf = self.kf.as_mut().expect("aligned");
         if self
             .hand
-            .update(kf, t_ns, rest, self.cfg.hand_speed_sigma_mps)
+            .update(kf, t_ns, rest || hinted, self.cfg.hand_speed_sigma_mps)
         {
             // An update the reconstruction's predictions would not redo.
             self.clip.spoil();
