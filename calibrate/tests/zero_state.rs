@@ -641,12 +641,8 @@ fn a_walkers_steady_turn_is_no_rest_under_the_rest_noise_ceiling() {
     let (t_s, r) = learned.expect("learned on the rest");
     assert!(t_s > 2.0, "learned at {t_s} s");
     assert!(refused > 10, "{refused}");
-    for i in 0..3 {
-        assert!(
-            (r.gyro_mean_rps[i] - GYRO_BIAS[i]).abs() < 0.002,
-            "{:?}",
-            r.gyro_mean_rps
-        );
+    for (learned, bias) in r.gyro_mean_rps.iter().zip(GYRO_BIAS) {
+        assert!((learned - bias).abs() < 0.002, "{:?}", r.gyro_mean_rps);
     }
 }
 

@@ -51,3 +51,80 @@ impl HandBound {
         kf.zero_velocity(sigma_mps).is_some()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector3;
+
+    use super::*;
+    use crate::eskf::{Imu, NoiseModel, align};
+
+    const G: f64 = 9.81;
+
+    /// A level filter (the MPU-9250's densities, 0.05 m/s^2 of accelerometer bias 1-sigma) and
+    /// the still sensor's sample whose accelerometer reads `bias_x` m/s^2 along x.
+    fn filter(bias_x: f64) -> (Eskf, Imu) {
+        let noise = NoiseModel {
+            accel_noise_density: 300e-6 * G,
+            gyro_noise_density: 0.01_f64.to_radians(),
+            accel_bias_random_walk: 1e-5,
+            gyro_bias_random_walk: 1e-6,
+            vibration_accel_density_per_mps: 0.0,
+            vibration_gyro_density_per_mps: 0.0,
+        };
+        let up = Vector3::new(0.0, 0.0, G);
+        let (x, cov) = align(
+            up,
+            Vector3::zeros(),
+            G,
+            Vector3::repeat(0.05),
+            Vector3::repeat(1e-4),
+        );
+        let m = Imu {
+            f: up + Vector3::new(bias_x, 0.0, 0.0),
+            w: Vector3::zeros(),
+        };
+        (Eskf::new(x, cov, G, noise, m), m)
+    }
+
+    /// 150 s at 100 Hz of a still sensor whose accelerometer reads a bias of 0.05 m/s^2 along
+    /// x that the alignment did not see (a hand that never rests: no zero-velocity update),
+    /// with the bound at `sigma_mps` (0: off). Returns the end's horizontal distance from the
+    /// start and the reported position 1-sigma along x, m.
+    fn drift(sigma_mps: f64) -> (f64, f64) {
+        let (mut kf, m) = filter(0.05);
+        let mut bound = HandBound::default();
+        for i in 1..=15_000u64 {
+            kf.predict(m, 0.01);
+            bound.update(&mut kf, i * 10_000_000, false, sigma_mps);
+        }
+        kf.propagate();
+        (kf.x.p.xy().norm(), kf.position_sigma().x)
+    }
+
+    #[test]
+    fn a_hand_that_never_rests_drifts_as_a_random_walk_not_with_the_square_of_time() {
+        // Free integration: b t^2 / 2 = 562 m.
+        let (free, _) = drift(0.0);
+        assert!((free - 562.5).abs() < 5.0, "{free}");
+        // Bounded: the velocity is held to the hand's scale and the bias is learned from it.
+        let (bounded, sigma) = drift(HAND_SPEED_SIGMA_MPS);
+        assert!(bounded < 0.1 * free, "{bounded} m");
+        assert!(bounded <= 3.0 * sigma, "{bounded} m, 1-sigma {sigma} m");
+    }
+
+    #[test]
+    fn a_rest_or_a_hint_restarts_the_interval_and_no_sigma_is_off() {
+        let (mut kf, _) = filter(0.0);
+        let mut bound = HandBound::default();
+        let s = 1_000_000_000;
+        assert!(!bound.update(&mut kf, 0, false, 1.0));
+        assert!(!bound.update(&mut kf, s / 2, true, 1.0));
+        assert!(
+            !bound.update(&mut kf, s, false, 1.0),
+            "0.5 s after the rest"
+        );
+        assert!(bound.update(&mut kf, 3 * s / 2, false, 1.0));
+        assert!(!bound.update(&mut kf, 4 * s, false, 0.0), "off");
+    }
+}
