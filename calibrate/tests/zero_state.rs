@@ -599,3 +599,68 @@ fn windows_are_seconds_at_any_rate() {
     let v = feed_tilting(&mut det, &mut rng, &mut k, 40.0, 2.0, level, level);
     assert!(v.iter().all(|v| v.rest), "{v:?}");
 }
+
+/// A walker turning steadily with the sensor in hand: 0.2 rad/s about z (a 4 m circle at 0.8
+/// m/s) and a bounce of 0.7 m/s^2 at 1.7 steps/s along z. Its batch means are steady enough
+/// for the white-noise tests, whose scatter the bounce widens, so without a ceiling on the
+/// accelerometer's noise the turn is learned as the gyro's bias; with
+/// [`REST_ACCEL_SIGMA_MPS2`] it is refused as shaking, and the rest after it is learned.
+#[test]
+fn a_walkers_steady_turn_is_no_rest_under_the_rest_noise_ceiling() {
+    use calibrate::zero_state::learn::REST_ACCEL_SIGMA_MPS2;
+    let walk_then_rest = |ceiling: Option<f64>| {
+        let mut config = DetectorConfig::robot(G);
+        config.learn.max_accel_sigma_mps2 = ceiling;
+        let mut det = ZeroStateDetector::new(config);
+        let mut synth = Synth::new(21);
+        let mut learned = None;
+        for k in 0..(3.0 * RATE_HZ) as usize {
+            let t_s = k as f64 / RATE_HZ;
+            let walking = t_s < 2.0;
+            let bounce = 0.7 * (2.0 * std::f64::consts::PI * 1.7 * t_s).sin();
+            let (t, a, w) = if walking {
+                synth.sample([0.0, 0.0, bounce], [0.0, 0.0, 0.2], 1.0)
+            } else {
+                synth.sample([0.0; 3], [0.0; 3], 1.0)
+            };
+            if let Some(v) = det.push(t, a, w) {
+                learned = learned.or(v.learned.map(|r| (t_s, r)));
+            }
+        }
+        (learned, det.learn_rejections())
+    };
+    let (learned, _) = walk_then_rest(None);
+    let (t_s, r) = learned.expect("learned without the ceiling");
+    assert!(t_s < 2.0, "learned at {t_s} s");
+    assert!(
+        (r.gyro_mean_rps[2] - 0.2).abs() < 0.01,
+        "{:?}",
+        r.gyro_mean_rps
+    );
+    let (learned, (refused, _)) = walk_then_rest(Some(REST_ACCEL_SIGMA_MPS2));
+    let (t_s, r) = learned.expect("learned on the rest");
+    assert!(t_s > 2.0, "learned at {t_s} s");
+    assert!(refused > 10, "{refused}");
+    for (learned, bias) in r.gyro_mean_rps.iter().zip(GYRO_BIAS) {
+        assert!((learned - bias).abs() < 0.002, "{:?}", r.gyro_mean_rps);
+    }
+}
+
+/// The ceiling's refusal names the axis and its noise.
+#[test]
+fn a_shaking_window_is_refused_by_name() {
+    let mut config = DetectorConfig::robot(G);
+    config.learn.max_accel_sigma_mps2 = Some(0.15);
+    let mut det = ZeroStateDetector::new(config);
+    let mut synth = Synth::new(22);
+    // Four times the MPU-9250's noise at 1 kHz: 0.37 m/s^2 per sample.
+    synth.feed(&mut det, 2.0, [0.0; 3], [0.0; 3], 4.0);
+    assert!(!det.is_ready());
+    match det.learn_rejections().1 {
+        Some(why @ LearnRejection::Shaking { sigma_mps2, .. }) => {
+            assert!((sigma_mps2 - 4.0 * ACCEL_SIGMA).abs() < 0.05, "{why}");
+            assert!(why.to_string().contains("about its mean"), "{why}");
+        }
+        other => panic!("{other:?}"),
+    }
+}

@@ -146,6 +146,9 @@ pub struct OdometryConfig {
     /// Hand-held walking: pedestrian dead reckoning at each step instead of zero-velocity
     /// updates while walking (`crate::walking`); `None` on other platforms.
     pub walking: Option<crate::walking::WalkingConfig>,
+    /// A sensor moved by a hand or an arm: 1-sigma of the velocity bound made while it moves
+    /// (`crate::hand_bound`), m/s per axis. 0: off.
+    pub hand_speed_sigma_mps: f64,
 }
 
 impl OdometryConfig {
@@ -195,6 +198,7 @@ impl OdometryConfig {
             sampled_noise: true,
             consistency: ConsistencyConfig::default(),
             walking: None,
+            hand_speed_sigma_mps: 0.0,
         }
     }
 

@@ -17,6 +17,7 @@ pub mod consistency;
 pub mod cruise;
 pub mod diagnose;
 pub mod eskf;
+pub mod hand_bound;
 mod hindsight;
 pub mod hints;
 mod navigator;

@@ -10,6 +10,7 @@ use crate::config::OdometryConfig;
 use crate::consistency::{Consistency, ConsistencyReport, Kind};
 use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
 use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
+use crate::hand_bound::HandBound;
 use crate::hints::{
     ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring, has_rest_source,
     usable_from_ns,
@@ -89,6 +90,8 @@ pub(crate) struct Navigator {
     consistency: Consistency,
     /// Hand-held walking's steps and updates (`cfg.walking`).
     walk: Option<Walk>,
+    /// The hand's velocity bound (`crate::hand_bound`).
+    hand: HandBound,
 }
 
 impl Navigator {
@@ -147,6 +150,7 @@ impl Navigator {
             sampled: SampledNoise::default(),
             consistency: Consistency::new(cfg.consistency),
             walk: cfg.walking.map(Walk::new),
+            hand: HandBound::default(),
         }
     }
 
@@ -178,6 +182,7 @@ impl Navigator {
         self.sampled = other.sampled;
         self.consistency = other.consistency;
         self.walk = other.walk;
+        self.hand = other.hand;
     }
 
     /// Takes `cfg` from the next sample on (a profile recognized from the data): its rest
@@ -365,6 +370,7 @@ impl Navigator {
         self.track_motion(t_ns, prev_ns, rest, emit);
         self.update(t_ns, dt, &m, rest, moved, &mut d.sample);
         self.walk_update(t_ns, step.as_ref(), rest);
+        self.hand_update(t_ns, rest, d.fresh.is_some() || d.stale);
 
         let state = self.state(s, rest, d.sample);
         if !rest && self.motion_start_ns.is_some() {
@@ -459,41 +465,6 @@ impl Navigator {
             hs.flags |= odometry_flags::REST_VIBRATING;
         }
         vibrating
-    }
-
-    /// Whether the aligned filter takes this sample as rest (decided before its prediction).
-    #[inline]
-    fn rest_decision(&self, d: &HintDecision, imu_rest: bool) -> bool {
-        // The IMU's rest flag decides without a fresh hint; after hints went stale, only when
-        // the velocity (at the previous sample) is consistent with rest (a detector that takes
-        // cruising for rest must not stop a robot the hints have just seen moving).
-        match d.rest {
-            Some(r) => r,
-            None if d.stale && imu_rest => self
-                .kf
-                .as_ref()
-                .expect("aligned")
-                .velocity_consistent_with_zero(
-                    self.cfg.zupt_sigma_mps,
-                    self.hints.cfg.fallback_zupt_gate_sigma,
-                ),
-            None => imu_rest,
-        }
-    }
-
-    /// Counts the hint's disagreement with the detector and its first use.
-    #[inline]
-    fn count_hint_use(&mut self, d: &HintDecision) {
-        if d.sample.flags & odometry_flags::HINT_DISAGREE != 0 {
-            self.hints.disagreements += 1;
-        }
-        if d.rest.is_some()
-            && d.fresh
-                .is_some_and(|h| self.hints.newest_used != Some(h.seq))
-        {
-            self.hints.newest_used = d.fresh.map(|h| h.seq);
-            self.hints.applied += 1;
-        }
     }
 
     /// Motion interval bookkeeping: a rest after motion opens a pending revision; motion that

@@ -2,12 +2,14 @@
 //! robot or vehicle rests for seconds between motions, vibrates while it moves and starts
 //! gently; a foot rests for 0.2-0.5 s at every step and is not quite still while it does.
 
+use calibrate::zero_state::learn::REST_ACCEL_SIGMA_MPS2;
 use calibrate::zero_state::{DetectorConfig, DetectorKind};
 use ipc_types::stream::plausible::Envelope;
 use ipc_types::units::STANDARD_GRAVITY_MPS2;
 
 use crate::config::OdometryConfig;
 use crate::eskf::Manoeuvre;
+use crate::hand_bound::HAND_SPEED_SIGMA_MPS;
 use crate::platform::Platform;
 
 /// A platform's motion profile.
@@ -31,7 +33,8 @@ pub enum Profile {
     Pedestrian,
     /// Anything else (an arm, a hand-held box): the vehicle's detector with a window of 0.2 s
     /// (an arm's pauses are that short) and rest handling, without the non-holonomic
-    /// constraint.
+    /// constraint, and the velocity held to a hand's speed scale while it moves
+    /// ([`crate::hand_bound`]).
     Other,
     /// A sensor in the hand of a walker (a phone held in front or up): pedestrian dead
     /// reckoning ([`crate::walking`]: a velocity update at each step, no zero-velocity update
@@ -104,7 +107,14 @@ impl Profile {
             Self::Pedestrian => DetectorConfig::new(DetectorKind::Shoe, gravity_mps2),
             // The live calibration stage's default too (`mems-calibrate serve`), so that live
             // and offline agree under any of these.
-            Self::Auto | Self::Walking => DetectorConfig::robot(gravity_mps2),
+            Self::Auto => DetectorConfig::robot(gravity_mps2),
+            Self::Walking => {
+                // A walker's hand is never still while they walk: a window that shakes more
+                // than any part's noise is no rest, however steady its means (a steady turn).
+                let mut config = DetectorConfig::robot(gravity_mps2);
+                config.learn.max_accel_sigma_mps2 = Some(REST_ACCEL_SIGMA_MPS2);
+                config
+            }
             Self::Vehicle => {
                 let mut config = DetectorConfig::robot(gravity_mps2);
                 config.learn.duration_s = VEHICLE_LEARN_S;
@@ -128,6 +138,8 @@ impl Profile {
             // The detector's window is shorter (`OTHER_GLRT_WINDOW_S`), and so is the time a
             // window still holds the rest before a motion.
             config.rest_hindsight_s = OTHER_GLRT_WINDOW_S;
+            // A hand or an arm moves within reach: its velocity is bounded.
+            config.hand_speed_sigma_mps = HAND_SPEED_SIGMA_MPS;
         }
         // The walking mode's settings: `config`'s when given (`--weinberg-k`), for the walking
         // profile only.

@@ -75,6 +75,8 @@ pub const STANDING_SIGMA_MPS: f64 = 0.3;
 pub const STANDING_UPDATE_S: f64 = 0.5;
 /// Whole steps the alignment in motion spans at least, s.
 pub const STRIDE_ALIGN_S: f64 = 3.0;
+/// Step updates the innovations' widening waits for (module documentation, "Position").
+pub const STEP_NIS_MIN_UPDATES: u64 = 10;
 /// 1-sigma of the gyro bias when aligned in motion, deg/s: a phone's gyroscope after its
 /// system's bias calibration (the MPU-6500 family's datasheet zero-rate offset is +-5 deg/s
 /// before it).
@@ -113,6 +115,9 @@ pub struct WalkingStats {
     pub weinberg_k: f64,
     /// Whether the filter aligned on whole steps (no rest).
     pub aligned_on_steps: bool,
+    /// The step updates' normalized innovation squared per degree of freedom, mean (1 when
+    /// their 1-sigma is honest).
+    pub step_nis_per_dof: f64,
 }
 
 impl WalkingStats {
@@ -246,16 +251,33 @@ impl Walk {
     }
 
     /// The position's 1-sigma, m, navigation frame (z: the filter's `z_sigma_m`; module
-    /// documentation, "Position").
+    /// documentation, "Position"), widened by the step updates' innovations
+    /// ([`Self::innovation_factor`]).
     pub fn position_sigma(&self, z_sigma_m: f64) -> Vector3<f64> {
         let s = self.cfg.step_scale_sigma;
         let common = self.length_var + self.heading_sd_sum.powi(2);
         let p = &self.position;
+        let lambda = self.innovation_factor();
         Vector3::new(
-            (common + (s * p.x).powi(2)).sqrt(),
-            (common + (s * p.y).powi(2)).sqrt(),
+            (lambda * (common + (s * p.x).powi(2))).sqrt(),
+            (lambda * (common + (s * p.y).powi(2))).sqrt(),
             z_sigma_m,
         )
+    }
+
+    /// The factor on the position's variance from the step updates' innovations: their mean
+    /// normalized innovation squared per degree of freedom `m` once [`STEP_NIS_MIN_UPDATES`]
+    /// were made and `m` exceeds 1 by more than three standard deviations of such a mean
+    /// (`sqrt(2 / (3 n))` for `n` updates of 3 degrees of freedom), else 1.
+    pub fn innovation_factor(&self) -> f64 {
+        let n = self.stats.step_updates;
+        let m = self.stats.step_nis_per_dof;
+        let significant = m > 1.0 + 3.0 * (2.0 / (3.0 * n as f64)).sqrt();
+        if n >= STEP_NIS_MIN_UPDATES && significant {
+            m
+        } else {
+            1.0
+        }
     }
 
     /// After the prediction of an aligned filter: a step's velocity update, or a standing
@@ -304,7 +326,10 @@ impl Walk {
             LATERAL_SIGMA_MPS + LATERAL_SIGMA_PER_MPS * speed,
             VERTICAL_SIGMA_MPS,
         );
-        kf.body_velocity_update(&r_ws, residual, sigma);
+        if let Some(nis) = kf.body_velocity_update(&r_ws, residual, sigma) {
+            let n = self.stats.step_updates as f64;
+            self.stats.step_nis_per_dof = (self.stats.step_nis_per_dof * n + nis / 3.0) / (n + 1.0);
+        }
         self.stats.step_updates += 1;
     }
 }

@@ -34,8 +34,9 @@ In-sample: the candidate with the smallest median % of distance over all of the 
 recordings, and that median. Leave one source out: for each source S of the class, the
 candidate with the smallest median over the class's recordings from the other sources, then
 S's recordings run with it; the median of those runs over the class. A source here is a
-repository: corpus.json sources from one repository (the same sessions logged by two phones)
-are held out together. A class with a single source has no other source to choose on: its
+repository: corpus.json sources from one repository are held out together, unless a source
+names its own `holdout` group (the Tyrex phones: separate sessions on two phones with
+different IMU makes, held out by phone). A class with a single source has no other source to choose on: its
 recordings are run with the defaults (the values the binary uses without flags), and the
 table says so. A failed run counts as an
 infinite error, as does a run with no distance after its alignment. Runs are cached by
@@ -421,12 +422,14 @@ def candidates(params, score):
 
 
 def held_out_groups(group, corpus):
-    """The class's recordings by repository, each group labelled by its corpus.json sources
-    joined with '+': sources from one repository (two phones in the same sessions) come from
-    one data set and are held out together."""
+    """The class's recordings by held-out group, each labelled by its corpus.json sources
+    joined with '+'. A source's group is its `holdout` key where it has one, else its
+    repository: sources from one repository come from one data set and are held out together,
+    unless corpus.json says why they are independent enough to be held out apart."""
     groups = {}
     for rec in group:
-        groups.setdefault(corpus["sources"][rec["source"]]["repo"], []).append(rec)
+        src = corpus["sources"][rec["source"]]
+        groups.setdefault(src.get("holdout", src["repo"]), []).append(rec)
     return [("+".join(dict.fromkeys(r["source"] for r in recs)), recs) for recs in groups.values()]
 
 

@@ -34,6 +34,12 @@ pub struct DetectorArgs {
     /// `zero_state::learn::UNCALIBRATED_GRAVITY_ERROR`).
     #[arg(long, value_name = "FRACTION")]
     pub max_gravity_error: Option<f64>,
+    /// Largest spread of the accelerometer's samples about the learning window's mean, any
+    /// axis, m/s^2, that a rest may show whatever the part (default: none; `mems-odometry`'s
+    /// walking profile 0.15, `zero_state::learn::REST_ACCEL_SIGMA_MPS2`: a walker's hand is
+    /// never that still).
+    #[arg(long, value_name = "MPS2")]
+    pub max_rest_accel_sigma: Option<f64>,
 }
 
 impl DetectorArgs {
@@ -66,6 +72,9 @@ impl DetectorArgs {
         if let Some(e) = self.max_gravity_error {
             config.learn.max_gravity_error = positive("max-gravity-error", e)?;
         }
+        if let Some(s) = self.max_rest_accel_sigma {
+            config.learn.max_accel_sigma_mps2 = Some(positive("max-rest-accel-sigma", s)?);
+        }
         Ok(config)
     }
 }
@@ -82,12 +91,14 @@ mod tests {
             detector: Some(DetectorKind::GlrtAccel),
             glrt_window_s: Some(0.25),
             learn_s: Some(2.5),
+            max_rest_accel_sigma: Some(0.15),
             ..DetectorArgs::default()
         };
         let c = args.apply(default).unwrap();
         assert_eq!(c.kind, DetectorKind::GlrtAccel);
         assert_eq!(c.glrt.window_s, 0.25);
         assert_eq!(c.learn.duration_s, 2.5);
+        assert_eq!(c.learn.max_accel_sigma_mps2, Some(0.15));
         for (args, name) in [
             (
                 DetectorArgs {
@@ -109,6 +120,13 @@ mod tests {
                     ..Default::default()
                 },
                 "--shoe-factor",
+            ),
+            (
+                DetectorArgs {
+                    max_rest_accel_sigma: Some(-0.1),
+                    ..Default::default()
+                },
+                "--max-rest-accel-sigma",
             ),
         ] {
             assert!(args.apply(default).unwrap_err().starts_with(name));

@@ -91,7 +91,24 @@ pub struct LearnConfig {
     /// noise (the calibration file's `[noise]` table, when it has one for this rate): a window
     /// that noisy is a vehicle cruising with its vibration, not a rest.
     pub max_noise_ratio: f64,
+    /// Largest standard deviation of the accelerometer's samples (any axis, over the whole
+    /// learning window about its mean) a rest shows, m/s^2, whatever the sensor: `None` for no
+    /// such ceiling (see [`REST_ACCEL_SIGMA_MPS2`]).
+    pub max_accel_sigma_mps2: Option<f64>,
 }
+
+/// A ceiling on the per-sample accelerometer noise of a rest whatever the part, m/s^2 (15 mg):
+/// above the white noise of the project's and the corpus's parts at any rate they run at (a
+/// datasheet density times the root of the sample rate, the most a sampled white noise can
+/// carry: the MPU-9250's and MPU-6500's 300 ug/sqrt(Hz) at 1 kHz, 9.5 mg; the MPU-6050's
+/// 400 ug/sqrt(Hz) at 1 kHz, 12.6 mg; the LIS331DLH's 218 ug/sqrt(Hz) at 1 kHz, 6.9 mg), and
+/// below a walker's hand, whose bounce scatters 0.2-0.65 m/s^2 per sample within 0.2 s (10th
+/// to 90th percentile on the simulated hand-held walk; the Tyrex phones' walks the same or
+/// more) and more over the half second a robot's detector learns from. A window that shakes more is no rest, however steady its batch means
+/// look: a steady turn on a walk has steady gyro means, and its bounce makes the white-noise
+/// scatter test too wide to see the turn. A vehicle idling vibrates by 50-90 mg: the ceiling
+/// is for a hand's profile only (`odometry::profile`), not a vehicle's.
+pub const REST_ACCEL_SIGMA_MPS2: f64 = 0.15;
 
 impl LearnConfig {
     /// Defaults: 5 s (at least two batches at any rate), 5% of gravity (a calibrated sensor is
@@ -105,6 +122,7 @@ impl LearnConfig {
             max_correlation: 3.0,
             max_batch_correlation: 0.35,
             max_noise_ratio: 1.5,
+            max_accel_sigma_mps2: None,
         }
     }
 }
@@ -189,6 +207,16 @@ pub enum LearnRejection {
         /// The largest ratio allowed.
         limit: f64,
     },
+    /// The accelerometer's axis `channel` shakes more than a rest does
+    /// ([`LearnConfig::max_accel_sigma_mps2`]).
+    Shaking {
+        /// The axis (0-2: x, y, z).
+        channel: usize,
+        /// Its samples' standard deviation over the window, m/s^2.
+        sigma_mps2: f64,
+        /// The largest allowed, m/s^2.
+        limit_mps2: f64,
+    },
     /// A gap in the data interrupted learning.
     Interrupted,
 }
@@ -237,6 +265,16 @@ impl std::fmt::Display for LearnRejection {
                 f,
                 "{} is {ratio:.2}x as noisy as the sensor's measured noise (a rest is at most \
                  {limit}x): vibration of a moving vehicle",
+                CHANNELS[*channel]
+            ),
+            Self::Shaking {
+                channel,
+                sigma_mps2,
+                limit_mps2,
+            } => write!(
+                f,
+                "{} scatters {sigma_mps2:.3} m/s^2 about its mean (a rest at most {limit_mps2} \
+                 m/s^2): the sensor is carried, not at rest",
                 CHANNELS[*channel]
             ),
             Self::Interrupted => write!(f, "a gap in the data interrupted learning"),
@@ -441,9 +479,22 @@ impl StaticLearner {
         })
     }
 
-    /// Refuses learned noise `sigma` above the ceiling, when the measured noise is known for a
-    /// stream at `rate_hz` (within 10%, as [`super::NoiseFloor::apply`]).
+    /// Refuses an accelerometer whose samples spread over the window more than
+    /// [`LearnConfig::max_accel_sigma_mps2`], and learned noise `sigma` above the measured
+    /// noise's ceiling when that is known for a stream at `rate_hz` (within 10%, as
+    /// [`super::NoiseFloor::apply`]).
     fn check_noise(&self, sigma: &[f64; 6], rate_hz: f64) -> Result<(), LearnRejection> {
+        if let Some(limit_mps2) = self.config.max_accel_sigma_mps2
+            && let Some((channel, sigma_mps2)) = (0..3)
+                .map(|c| (c, self.spread(c)))
+                .find(|(_, s)| *s > limit_mps2)
+        {
+            return Err(LearnRejection::Shaking {
+                channel,
+                sigma_mps2,
+                limit_mps2,
+            });
+        }
         let Some(noise) = &self.noise else {
             return Ok(());
         };
@@ -464,6 +515,21 @@ impl StaticLearner {
             }
         }
         Ok(())
+    }
+
+    /// Channel `c`'s standard deviation over the whole window, about the window's mean (the
+    /// within-batch sums of squares and the batch means' spread together): a rate's batches
+    /// may be too short to hold a slow motion, the window is not.
+    fn spread(&self, c: usize) -> f64 {
+        let batches = (0..self.len).map(|i| self.batch(i));
+        let (n, sum) = batches.clone().fold((0.0, 0.0), |(n, s), b| {
+            (n + b.n as f64, s + b.n as f64 * b.mean[c])
+        });
+        let mean = sum / n;
+        let ss = batches.fold(0.0, |s, b| {
+            s + b.ss[c] + b.n as f64 * (b.mean[c] - mean).powi(2)
+        });
+        (ss / (n - 1.0).max(1.0)).sqrt()
     }
 
     /// Channel `c`'s per-sample noise: the pooled within-batch standard deviation, at least

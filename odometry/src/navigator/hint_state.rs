@@ -8,7 +8,7 @@ use crate::hints::{
     ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring, SCALE_CONFLICT_SIGMAS,
     ScaleTaken,
 };
-use ipc_types::RobotHint;
+use ipc_types::{RobotHint, odometry_flags};
 use nalgebra::{Matrix3, Vector3};
 
 /// Speed hints that can wait for the next sample's update (more arrive at once only at sample
@@ -277,5 +277,42 @@ impl Hints {
             scale_fit: fit.scale.map(|k| (k, fit.scale_sigma)),
             scale_taken: self.scale_taken,
         })
+    }
+}
+
+impl super::Navigator {
+    /// Whether the aligned filter takes this sample as rest (decided before its prediction).
+    #[inline]
+    pub(super) fn rest_decision(&self, d: &HintDecision, imu_rest: bool) -> bool {
+        // The IMU's rest flag decides without a fresh hint; after hints went stale, only when
+        // the velocity (at the previous sample) is consistent with rest (a detector that takes
+        // cruising for rest must not stop a robot the hints have just seen moving).
+        match d.rest {
+            Some(r) => r,
+            None if d.stale && imu_rest => self
+                .kf
+                .as_ref()
+                .expect("aligned")
+                .velocity_consistent_with_zero(
+                    self.cfg.zupt_sigma_mps,
+                    self.hints.cfg.fallback_zupt_gate_sigma,
+                ),
+            None => imu_rest,
+        }
+    }
+
+    /// Counts the hint's disagreement with the detector and its first use.
+    #[inline]
+    pub(super) fn count_hint_use(&mut self, d: &HintDecision) {
+        if d.sample.flags & odometry_flags::HINT_DISAGREE != 0 {
+            self.hints.disagreements += 1;
+        }
+        if d.rest.is_some()
+            && d.fresh
+                .is_some_and(|h| self.hints.newest_used != Some(h.seq))
+        {
+            self.hints.newest_used = d.fresh.map(|h| h.seq);
+            self.hints.applied += 1;
+        }
     }
 }

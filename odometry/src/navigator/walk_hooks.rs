@@ -1,5 +1,5 @@
 //! The navigator's hooks of hand-held walking (`crate::walking`): its steps, its updates and
-//! its alignment on whole steps.
+//! its alignment on whole steps; and the velocity bound of a sensor moved by hand.
 
 use nalgebra::Vector3;
 
@@ -41,6 +41,20 @@ impl Navigator {
             self.clip.spoil();
         }
         walk.update(self.kf.as_mut().expect("aligned"), t_ns, step, rest);
+    }
+
+    /// After the aligned filter's updates: the velocity bound of a sensor moved by hand
+    /// (`crate::hand_bound`), when the profile asks for it and no robot hint reports the
+    /// motion (`hinted`: a robot that sends hints is no hand, and its speed is measured).
+    pub(super) fn hand_update(&mut self, t_ns: u64, rest: bool, hinted: bool) {
+        let kf = self.kf.as_mut().expect("aligned");
+        if self
+            .hand
+            .update(kf, t_ns, rest || hinted, self.cfg.hand_speed_sigma_mps)
+        {
+            // An update the reconstruction's predictions would not redo.
+            self.clip.spoil();
+        }
     }
 
     /// Hand-held walking without a rest: aligns on the mean specific force over whole steps

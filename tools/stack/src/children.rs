@@ -99,7 +99,9 @@ pub fn specs(
 /// GLRT's window is the default 0.5 s at any rate, and the other profile's
 /// [`odometry::profile::OTHER_GLRT_WINDOW_S`] with `--profile other`, whose odometry holds its
 /// rest flags in hindsight for that long; the vehicle profile's learning,
-/// [`odometry::profile::VEHICLE_LEARN_S`], with `--profile vehicle`).
+/// [`odometry::profile::VEHICLE_LEARN_S`], with `--profile vehicle`; the walking profile's
+/// ceiling on a rest's accelerometer spread,
+/// [`calibrate::zero_state::learn::REST_ACCEL_SIGMA_MPS2`], with `--profile walking`).
 fn detector_args(cli: &Cli) -> Vec<String> {
     let mut args = vec!["--detector".into(), crate::cli::detector(cli).name().into()];
     if cli.profile == odometry::profile::Profile::Other && cli.detector.is_none() {
@@ -112,6 +114,12 @@ fn detector_args(cli: &Cli) -> Vec<String> {
         args.extend([
             "--learn-s".into(),
             odometry::profile::VEHICLE_LEARN_S.to_string(),
+        ]);
+    }
+    if cli.profile == odometry::profile::Profile::Walking && cli.detector.is_none() {
+        args.extend([
+            "--max-rest-accel-sigma".into(),
+            calibrate::zero_state::learn::REST_ACCEL_SIGMA_MPS2.to_string(),
         ]);
     }
     args
@@ -203,6 +211,12 @@ mod tests {
         assert_eq!(
             vehicle,
             ["--detector", "glrt", "--learn-s", "1"].map(String::from)
+        );
+        // A walker's hand: no window that shakes is learned as rest (a steady turn).
+        let walking = detector(&["--profile", "walking"]);
+        assert_eq!(
+            walking,
+            ["--detector", "glrt", "--max-rest-accel-sigma", "0.15"].map(String::from)
         );
     }
 }

@@ -246,6 +246,7 @@ impl Summary {
                 "mean_step_m": w.mean_step_m(),
                 "weinberg_k": w.weinberg_k,
                 "aligned_on_steps": w.aligned_on_steps,
+                "step_nis_per_dof": w.step_nis_per_dof,
             })));
             result["aligned_in_motion"] = json!(in_motion.map(|s| json!({ "speed_mps": s })));
             result["alignments_withdrawn"] = json!(

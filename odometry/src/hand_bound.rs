@@ -1,0 +1,130 @@
+//! A bound on the velocity of a sensor moved by a hand or an arm (the `other` profile): such a
+//! motion goes back and forth within a person's reach or a workcell, so its velocity, whatever
+//! the integration says, is near zero on the scale of a hand's speed. Without it, a hand-moved
+//! sensor that never rests integrates freely, and an accelerometer bias of 0.05 m/s^2 puts it
+//! 560 m off after 150 s (`b t^2 / 2`); BROAD's box moved by hand for 150 s without a break
+//! ended 143 and 151 m off (docs/real-data.md).
+//!
+//! Method: while the sample is not taken as rest and no robot hint reports the motion, every [`HAND_BOUND_INTERVAL_S`] the filter's
+//! velocity (m/s, navigation frame, z up) is measured as zero with 1-sigma
+//! [`HAND_SPEED_SIGMA_MPS`] per axis: a pseudo-measurement of the hand's speed scale, not of
+//! its rest. Reaching movements peak at 0.5-1.5 m/s and reverse within about a second (T. Flash
+//! and N. Hogan, "The coordination of arm movements: an experimentally confirmed mathematical
+//! model", J. Neuroscience 5(7), 1985: minimum-jerk reaches of 0.2-0.4 m in 0.5-1 s), so one
+//! measurement a second counts each such excursion once. A filter whose velocity is known
+//! better than that (after a rest, or with an arm's pauses every few seconds) is barely moved
+//! by it (its gain is `P / (P + sigma^2)`); a filter integrating freely has its velocity, and
+//! with it the accelerometer bias, held to the hand's scale, and its position then grows as a
+//! random walk of about `sigma sqrt(interval t)` instead of `b t^2 / 2`.
+
+use crate::eskf::Eskf;
+
+/// 1-sigma per axis of a hand's or an arm's velocity about zero, m/s (module documentation).
+pub const HAND_SPEED_SIGMA_MPS: f64 = 1.0;
+/// Interval between the velocity bounds while the sensor moves, s.
+pub const HAND_BOUND_INTERVAL_S: f64 = 1.0;
+
+/// The bound's state in a navigator: the time of the last bound or rest.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct HandBound {
+    last_ns: Option<u64>,
+}
+
+impl HandBound {
+    /// After the aligned filter's updates at `t_ns`: bounds its velocity with 1-sigma
+    /// `sigma_mps` (0: off) when [`HAND_BOUND_INTERVAL_S`] has passed in motion since the last
+    /// bound or held sample (`held`: the sample is taken as rest, or robot hints report the
+    /// motion). Returns whether it updated.
+    pub fn update(&mut self, kf: &mut Eskf, t_ns: u64, held: bool, sigma_mps: f64) -> bool {
+        if sigma_mps <= 0.0 {
+            return false;
+        }
+        let last = *self.last_ns.get_or_insert(t_ns);
+        if held {
+            self.last_ns = Some(t_ns);
+            return false;
+        }
+        if (t_ns.saturating_sub(last) as f64) * 1e-9 < HAND_BOUND_INTERVAL_S {
+            return false;
+        }
+        self.last_ns = Some(t_ns);
+        kf.zero_velocity(sigma_mps).is_some()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector3;
+
+    use super::*;
+    use crate::eskf::{Imu, NoiseModel, align};
+
+    const G: f64 = 9.81;
+
+    /// A level filter (the MPU-9250's densities, 0.05 m/s^2 of accelerometer bias 1-sigma) and
+    /// the still sensor's sample whose accelerometer reads `bias_x` m/s^2 along x.
+    fn filter(bias_x: f64) -> (Eskf, Imu) {
+        let noise = NoiseModel {
+            accel_noise_density: 300e-6 * G,
+            gyro_noise_density: 0.01_f64.to_radians(),
+            accel_bias_random_walk: 1e-5,
+            gyro_bias_random_walk: 1e-6,
+            vibration_accel_density_per_mps: 0.0,
+            vibration_gyro_density_per_mps: 0.0,
+        };
+        let up = Vector3::new(0.0, 0.0, G);
+        let (x, cov) = align(
+            up,
+            Vector3::zeros(),
+            G,
+            Vector3::repeat(0.05),
+            Vector3::repeat(1e-4),
+        );
+        let m = Imu {
+            f: up + Vector3::new(bias_x, 0.0, 0.0),
+            w: Vector3::zeros(),
+        };
+        (Eskf::new(x, cov, G, noise, m), m)
+    }
+
+    /// 150 s at 100 Hz of a still sensor whose accelerometer reads a bias of 0.05 m/s^2 along
+    /// x that the alignment did not see (a hand that never rests: no zero-velocity update),
+    /// with the bound at `sigma_mps` (0: off). Returns the end's horizontal distance from the
+    /// start and the reported position 1-sigma along x, m.
+    fn drift(sigma_mps: f64) -> (f64, f64) {
+        let (mut kf, m) = filter(0.05);
+        let mut bound = HandBound::default();
+        for i in 1..=15_000u64 {
+            kf.predict(m, 0.01);
+            bound.update(&mut kf, i * 10_000_000, false, sigma_mps);
+        }
+        kf.propagate();
+        (kf.x.p.xy().norm(), kf.position_sigma().x)
+    }
+
+    #[test]
+    fn a_hand_that_never_rests_drifts_as_a_random_walk_not_with_the_square_of_time() {
+        // Free integration: b t^2 / 2 = 562 m.
+        let (free, _) = drift(0.0);
+        assert!((free - 562.5).abs() < 5.0, "{free}");
+        // Bounded: the velocity is held to the hand's scale and the bias is learned from it.
+        let (bounded, sigma) = drift(HAND_SPEED_SIGMA_MPS);
+        assert!(bounded < 0.1 * free, "{bounded} m");
+        assert!(bounded <= 3.0 * sigma, "{bounded} m, 1-sigma {sigma} m");
+    }
+
+    #[test]
+    fn a_rest_or_a_hint_restarts_the_interval_and_no_sigma_is_off() {
+        let (mut kf, _) = filter(0.0);
+        let mut bound = HandBound::default();
+        let s = 1_000_000_000;
+        assert!(!bound.update(&mut kf, 0, false, 1.0));
+        assert!(!bound.update(&mut kf, s / 2, true, 1.0));
+        assert!(
+            !bound.update(&mut kf, s, false, 1.0),
+            "0.5 s after the rest"
+        );
+        assert!(bound.update(&mut kf, 3 * s / 2, false, 1.0));
+        assert!(!bound.update(&mut kf, 4 * s, false, 0.0), "off");
+    }
+}
