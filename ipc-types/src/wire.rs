@@ -209,6 +209,10 @@ pub mod odometry_flags {
     /// velocity) disagreed with the filter's velocity by more than its gate at this sample
     /// (a skid, a wrong mounting, or a drifting velocity): it was not applied.
     pub const NONHOLONOMIC_REJECTED: u16 = 1 << 12;
+    /// Wheeled platform without speed hints: the zero-state detector flagged rest, but the
+    /// filter's velocity was further from zero than its 1-sigma allows (a car cruising as
+    /// smoothly as it stood): the sample is taken as motion, never silently as rest.
+    pub const REST_MOVING: u16 = 1 << 13;
 }
 
 /// The odometry estimate at one sample time.

@@ -29,6 +29,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 mod hint_state;
 mod records;
 mod walk_hooks;
+mod wheeled;
 use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE};
 use records::{AlignSums, HistoryEntry, PendingRevision, RestWindow};
 
@@ -346,6 +347,8 @@ impl Navigator {
         }
         let dt = (t_ns - prev_ns.unwrap_or(t_ns)) as f64 * 1e-9;
         let imu_rest = imu_rest && !self.vibrating(s, &mut d.sample);
+        let unaided = self.unaided_wheeled(&d);
+        let imu_rest = imu_rest && !self.moving_rest(unaided, &mut d.sample);
         let rest = self.rest_decision(&d, imu_rest);
         self.gather_attitude(&m, rest && !verdict.implausible && verdict.clipped == 0);
         if !rest {
@@ -369,6 +372,7 @@ impl Navigator {
         self.count_hint_use(&d);
         self.track_motion(t_ns, prev_ns, rest, emit);
         self.update(t_ns, dt, &m, rest, moved, &mut d.sample);
+        self.along_track(unaided, dt, rest);
         self.walk_update(t_ns, step.as_ref(), rest);
         self.hand_update(t_ns, rest, d.fresh.is_some() || d.stale);
 

@@ -14,6 +14,24 @@
 //! Each update is gated: a residual beyond [`GATE_SIGMA`] standard deviations of its
 //! prediction (the filter's velocity 1-sigma and the constraint's, in quadrature) is not
 //! applied and the sample is flagged `NONHOLONOMIC_REJECTED`.
+//!
+//! **What it bounds and what it does not.** The constraint observes the velocity across the
+//! forward axis: the lateral and vertical drift, and through them the tilt (a tilt error
+//! `delta` shows as a vertical body velocity `v delta`) and the heading's coupling to the
+//! accelerometer bias. It says nothing about the speed along the forward axis: between two
+//! rests that is the double integral of the specific force along it, whose error grows with
+//! the forward axis's pitch error (`g delta_p`: 1 deg is 0.17 m/s^2) and the accelerometer's
+//! residual bias along it, neither of which the constraint can tell from an acceleration.
+//! The filter's own covariance does not hold that error (its mounting is taken as exact, and
+//! the constraint's updates shrink the tilt that would carry it), so [`AlongTrack`] adds it
+//! to the published 1-sigma: an along-track acceleration error of 1-sigma
+//! [`ALONG_TRACK_ACCEL_SIGMA_MPS2`], constant over each motion between rests (a systematic
+//! error, not a noise: the velocity error grows as `a t`, the position error as `a t^2 / 2`),
+//! independent from one motion to the next. A rest's zero-velocity update takes the velocity
+//! share away; the position share stays (a stop's update does not reveal it: on the simulated
+//! car of docs/odometry.md the stop's position correction, through the covariance's
+//! position-velocity correlation, moved the track the wrong way by tens of metres). Estimates
+//! are unchanged.
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
@@ -26,6 +44,12 @@ pub const MOUNTING_PATH_M: f64 = 2.0;
 pub const GATE_SIGMA: f64 = 5.0;
 /// 1-sigma given to the unconstrained forward component, m/s (no information).
 const FREE_MPS: f64 = 1e3;
+/// 1-sigma of the along-track acceleration error between rests, m/s^2 ([`AlongTrack`]): a
+/// 0.1 deg pitch of the estimated forward axis (`g` times 1.7 mrad, 0.017 m/s^2) and a
+/// calibrated accelerometer's residual bias along it of 1 mg (the MPU-9250's zero-g offset
+/// changes by +-1.5 mg/degC over temperature, datasheet PS-MPU-9250A-01 table 2; 0.01 m/s^2),
+/// in quadrature.
+pub const ALONG_TRACK_ACCEL_SIGMA_MPS2: f64 = 0.03;
 
 /// The IMU-only constraint's state.
 #[derive(Debug, Clone, Copy)]
@@ -40,6 +64,8 @@ pub struct ImuConstraint {
     /// otherwise): a yaw off by that much puts that fraction of the forward speed sideways.
     yaw_sigma_rad: f64,
     estimator: MountingEstimator,
+    /// The along-track drift's share of the published 1-sigma.
+    along: AlongTrack,
     /// Updates applied and rejected.
     pub applied: u64,
     /// Updates rejected by the gate.
@@ -72,6 +98,7 @@ impl ImuConstraint {
             given: mounting.is_some(),
             yaw_sigma_rad: 0.0,
             estimator: MountingEstimator::default(),
+            along: AlongTrack::default(),
             applied: 0,
             rejected: 0,
         }
@@ -136,6 +163,55 @@ impl ImuConstraint {
     }
 }
 
+impl ImuConstraint {
+    /// Adds `dt_s` of motion without speed to the along-track drift ([`AlongTrack`]) and
+    /// widens `kf`'s published 1-sigma by what it grew.
+    pub fn drift_along_track(&mut self, kf: &mut Eskf, dt_s: f64) {
+        let v = kf.x.v.xy();
+        let speed = v.norm();
+        // The direction of travel; at a standstill, any.
+        let h = if speed > 0.0 {
+            v / speed
+        } else {
+            nalgebra::Vector2::repeat(std::f64::consts::FRAC_1_SQRT_2)
+        };
+        let (dp, dv) = self.along.grow(dt_s, ALONG_TRACK_ACCEL_SIGMA_MPS2);
+        let split = |d: f64| [d * h.x * h.x, d * h.y * h.y];
+        kf.widen_reported(split(dp), split(dv));
+    }
+
+    /// A rest (or a speed measurement) ended the motion: the along-track drift starts anew.
+    pub fn stopped(&mut self) {
+        self.along = AlongTrack::default();
+    }
+}
+
+/// The along-track error of one motion between rests (see the module documentation): an
+/// acceleration error of 1-sigma `a`, constant over the motion, grows the velocity's 1-sigma
+/// as `u = a t` and the position's as `d = a t^2 / 2` (accumulated as `u dt`, so a motion
+/// that stops and starts again without a rest keeps its time).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct AlongTrack {
+    /// Time since the motion began, s.
+    t_s: f64,
+    /// The velocity and position 1-sigma so far, m/s and m.
+    u: f64,
+    d: f64,
+}
+
+impl AlongTrack {
+    /// Adds `dt_s` seconds at the acceleration 1-sigma `a` (m/s^2); returns how much the
+    /// position variance (m^2) and the velocity variance ((m/s)^2) grew.
+    pub fn grow(&mut self, dt_s: f64, a: f64) -> (f64, f64) {
+        self.t_s += dt_s;
+        let u = a * self.t_s;
+        let d = self.d + 0.5 * (self.u + u) * dt_s;
+        let grown = (d * d - self.d * self.d, u * u - self.u * self.u);
+        (self.u, self.d) = (u, d);
+        grown
+    }
+}
+
 /// A mounting whose body z is `up_s` and whose x is any perpendicular axis (for the vertical
 /// constraint alone).
 fn up_only(up_s: &Vector3<f64>) -> Option<Matrix3<f64>> {
@@ -147,6 +223,19 @@ fn up_only(up_s: &Vector3<f64>) -> Option<Matrix3<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn along_track_drift_grows_as_a_constant_acceleration_error() {
+        let mut along = AlongTrack::default();
+        let (mut p, mut v) = (0.0, 0.0);
+        for _ in 0..6000 {
+            let (dp, dv) = along.grow(0.01, 0.02);
+            (p, v) = (p + dp, v + dv);
+        }
+        // After 60 s: 1.2 m/s and 36 m.
+        assert!((v.sqrt() - 1.2).abs() < 1e-9, "{}", v.sqrt());
+        assert!((p.sqrt() - 36.0).abs() < 1e-3, "{}", p.sqrt());
+    }
 
     #[test]
     fn up_only_keeps_body_z_on_up() {

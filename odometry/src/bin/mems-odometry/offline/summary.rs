@@ -75,8 +75,9 @@ pub struct Summary {
     rest_errors: Vec<serde_json::Value>,
     truth_distance: f64,
     prev_truth: Option<Vector3<f64>>,
-    /// States flagged `REST_VIBRATING` and `NONHOLONOMIC_REJECTED`.
+    /// States flagged `REST_VIBRATING`, `REST_MOVING` and `NONHOLONOMIC_REJECTED`.
     rest_vibrating: u64,
+    rest_moving: u64,
     nonholonomic_rejected: u64,
 }
 
@@ -89,6 +90,7 @@ impl Summary {
             self.aligned_ns = Some(state.stamps.sample_ns);
         }
         self.rest_vibrating += u64::from(state.flags & odometry_flags::REST_VIBRATING != 0);
+        self.rest_moving += u64::from(state.flags & odometry_flags::REST_MOVING != 0);
         self.nonholonomic_rejected +=
             u64::from(state.flags & odometry_flags::NONHOLONOMIC_REJECTED != 0);
         let new_rest = self.last.is_some_and(|l| state.rest_count > l.rest_count);
@@ -327,6 +329,7 @@ impl Summary {
             "nonholonomic_rejected": nhc.rejected,
             "mounting_rpy_deg": mounting,
             "rest_vibrating_states": self.rest_vibrating,
+            "rest_moving_states": self.rest_moving,
             "nonholonomic_rejected_states": self.nonholonomic_rejected,
         })
     }
