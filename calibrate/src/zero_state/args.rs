@@ -34,6 +34,12 @@ pub struct DetectorArgs {
     /// `zero_state::learn::UNCALIBRATED_GRAVITY_ERROR`).
     #[arg(long, value_name = "FRACTION")]
     pub max_gravity_error: Option<f64>,
+    /// The GLRT's allowance for the zero-g offset of a part whose learned rest reads gravity
+    /// more than 2 % off, 1-sigma per axis, m/s^2, turned with the gravity reference through
+    /// turns and tilts (default 0.1 g; `mems-odometry`'s walking profile keeps a calibrated
+    /// part's 0.0061: `zero_state::glrt::GlrtConfig::uncalibrated_accel_bias_sigma_mps2`).
+    #[arg(long, value_name = "MPS2")]
+    pub glrt_uncalibrated_offset_mps2: Option<f64>,
 }
 
 impl DetectorArgs {
@@ -65,6 +71,10 @@ impl DetectorArgs {
         }
         if let Some(e) = self.max_gravity_error {
             config.learn.max_gravity_error = positive("max-gravity-error", e)?;
+        }
+        if let Some(s) = self.glrt_uncalibrated_offset_mps2 {
+            config.glrt.uncalibrated_accel_bias_sigma_mps2 =
+                positive("glrt-uncalibrated-offset-mps2", s)?;
         }
         Ok(config)
     }

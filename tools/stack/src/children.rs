@@ -99,7 +99,8 @@ pub fn specs(
 /// GLRT's window is the default 0.5 s at any rate, and the other profile's
 /// [`odometry::profile::OTHER_GLRT_WINDOW_S`] with `--profile other`, whose odometry holds its
 /// rest flags in hindsight for that long; the vehicle profile's learning,
-/// [`odometry::profile::VEHICLE_LEARN_S`], with `--profile vehicle`).
+/// [`odometry::profile::VEHICLE_LEARN_S`], with `--profile vehicle`; the walking profile's
+/// calibrated allowance for an uncalibrated part's offset, with `--profile walking`).
 fn detector_args(cli: &Cli) -> Vec<String> {
     let mut args = vec!["--detector".into(), crate::cli::detector(cli).name().into()];
     if cli.profile == odometry::profile::Profile::Other && cli.detector.is_none() {
@@ -112,6 +113,13 @@ fn detector_args(cli: &Cli) -> Vec<String> {
         args.extend([
             "--learn-s".into(),
             odometry::profile::VEHICLE_LEARN_S.to_string(),
+        ]);
+    }
+    if cli.profile == odometry::profile::Profile::Walking && cli.detector.is_none() {
+        let walking = odometry::profile::Profile::Walking.detector(1.0).glrt;
+        args.extend([
+            "--glrt-uncalibrated-offset-mps2".into(),
+            walking.uncalibrated_accel_bias_sigma_mps2.to_string(),
         ]);
     }
     args
@@ -203,6 +211,18 @@ mod tests {
         assert_eq!(
             vehicle,
             ["--detector", "glrt", "--learn-s", "1"].map(String::from)
+        );
+        // The walking profile's allowance for an uncalibrated part's offset, as offline.
+        let walking = detector(&["--profile", "walking"]);
+        assert_eq!(
+            walking,
+            [
+                "--detector",
+                "glrt",
+                "--glrt-uncalibrated-offset-mps2",
+                "0.0061"
+            ]
+            .map(String::from)
         );
     }
 }
