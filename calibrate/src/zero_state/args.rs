@@ -92,12 +92,14 @@ mod tests {
             detector: Some(DetectorKind::GlrtAccel),
             glrt_window_s: Some(0.25),
             learn_s: Some(2.5),
+            glrt_uncalibrated_offset_mps2: Some(0.0061),
             ..DetectorArgs::default()
         };
         let c = args.apply(default).unwrap();
         assert_eq!(c.kind, DetectorKind::GlrtAccel);
         assert_eq!(c.glrt.window_s, 0.25);
         assert_eq!(c.learn.duration_s, 2.5);
+        assert_eq!(c.glrt.uncalibrated_accel_bias_sigma_mps2, 0.0061);
         for (args, name) in [
             (
                 DetectorArgs {
@@ -119,6 +121,13 @@ mod tests {
                     ..Default::default()
                 },
                 "--shoe-factor",
+            ),
+            (
+                DetectorArgs {
+                    glrt_uncalibrated_offset_mps2: Some(-0.1),
+                    ..Default::default()
+                },
+                "--glrt-uncalibrated-offset-mps2",
             ),
         ] {
             assert!(args.apply(default).unwrap_err().starts_with(name));
