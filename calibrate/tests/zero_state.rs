@@ -664,3 +664,69 @@ fn a_shaking_window_is_refused_by_name() {
         other => panic!("{other:?}"),
     }
 }
+
+/// An uncalibrated part (4 % scale error and a 0.15 g offset on every axis, so its rest reads
+/// gravity 19 % off) turned 30 deg about gravity, or pitched by 5 deg, its gyro seeing the
+/// turn, rests again. Carrying the reference turns its offset with it: about gravity by
+/// `2 sin(15 deg) 0.21 g` = 0.53 m/s^2 across gravity; a pitch moves the offset's share of the
+/// magnitude by `sin(5 deg) 0.15 g` = 0.13 m/s^2. The reference's uncertainty must allow both.
+/// The same turn without the offset (a calibrated part) keeps the calibrated allowance: a
+/// horizontal acceleration of 0.3 m/s^2 after it (five times the gyro's turn error there) is
+/// still motion.
+#[test]
+fn an_uncalibrated_part_rests_again_after_a_turn() {
+    let na = Normal::new(0.0, ACCEL_SIGMA).unwrap();
+    let ng = Normal::new(0.0, GYRO_SIGMA).unwrap();
+    // (offset, g; turn axis; angle, deg; acceleration after it, m/s^2 along x; a rest?)
+    let cases = [
+        (0.15, 2, 30.0, 0.0, true),
+        (0.15, 1, 5.0, 0.0, true),
+        (0.0, 2, 30.0, 0.0, true),
+        (0.0, 2, 30.0, 0.3, false),
+    ];
+    for (offset_g, axis, angle_deg, extra, want_rest) in cases {
+        let mut c = DetectorConfig::new(DetectorKind::Glrt, G);
+        c.learn.max_gravity_error = calibrate::zero_state::learn::UNCALIBRATED_GRAVITY_ERROR;
+        let mut det = ZeroStateDetector::new(c);
+        let mut rng = ChaCha8Rng::seed_from_u64(15);
+        let scale = if offset_g > 0.0 { 1.04 } else { 1.0 };
+        let angle = f64::to_radians(angle_deg);
+        // The turn takes 1 s from t = 5 s, at `angle` rad/s about `axis`.
+        let turned = |t: f64| angle * (t - 5.0).clamp(0.0, 1.0);
+        let mut feed = |det: &mut ZeroStateDetector, from_s: f64, seconds: f64, extra: f64| {
+            let n = (seconds * RATE_HZ).round() as usize;
+            let k0 = (from_s * RATE_HZ).round() as usize;
+            let mut out = Vec::new();
+            for k in k0..k0 + n {
+                let t = k as f64 / RATE_HZ;
+                // Gravity's reaction in the sensor frame: unmoved by a turn about z (gravity),
+                // turned to (-g sin phi, 0, g cos phi) by a pitch of phi about y.
+                let phi = if axis == 1 { turned(t) } else { 0.0 };
+                let truth = [extra - G * phi.sin(), 0.0, G * phi.cos()];
+                let a =
+                    std::array::from_fn(|i| scale * truth[i] + offset_g * G + na.sample(&mut rng));
+                let rate = if (5.0..6.0).contains(&t) { angle } else { 0.0 };
+                let w = std::array::from_fn(|i| {
+                    GYRO_BIAS[i] + if i == axis { rate } else { 0.0 } + ng.sample(&mut rng)
+                });
+                out.extend(det.push(ns_from_s(t), a, w));
+            }
+            out
+        };
+        feed(&mut det, 0.0, 5.0, 0.0);
+        assert!(det.is_ready(), "{:?}", det.learn_rejections());
+        feed(&mut det, 5.0, 1.0, 0.0);
+        let after = feed(&mut det, 6.0, 1.9, extra);
+        // The window needs half a second of the new rest.
+        let f = rest_fraction(&after[25..]);
+        let what = format!(
+            "offset {offset_g} g, {angle_deg} deg about axis {axis}, {extra} m/s^2 after it"
+        );
+        if want_rest {
+            assert!(f > 0.9, "{what}: rest fraction {f}");
+        } else {
+            assert_eq!(f, 0.0, "{what}");
+        }
+        assert_eq!(det.gravity_reanchored(), 0, "{what}");
+    }
+}

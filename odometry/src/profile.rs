@@ -113,6 +113,13 @@ impl Profile {
                 // than any part's noise is no rest, however steady its means (a steady turn).
                 let mut config = DetectorConfig::robot(gravity_mps2);
                 config.learn.max_accel_sigma_mps2 = Some(REST_ACCEL_SIGMA_MPS2);
+                // A hand turns its uncalibrated part's offset with the gravity reference as a
+                // vehicle does, but the allowance for that (a tenth of g per axis) also takes a
+                // hand's slow motion after a tilt for rest: on the perturbed Tyrex walks
+                // (docs/real-data.md) tyrex-nexus5-jakob-ar then took 304 such rests, its
+                // zero-velocity NIS 411 per degree of freedom, and ended 7.7 m off instead of
+                // 3.7. A hand-held part keeps the calibrated allowance.
+                config.glrt.uncalibrated_accel_bias_sigma_mps2 = config.glrt.accel_bias_sigma_mps2;
                 config
             }
             Self::Vehicle => {

@@ -40,6 +40,12 @@ pub struct DetectorArgs {
     /// never that still).
     #[arg(long, value_name = "MPS2")]
     pub max_rest_accel_sigma: Option<f64>,
+    /// The GLRT's allowance for the zero-g offset of a part whose learned rest reads gravity
+    /// more than 2 % off, 1-sigma per axis, m/s^2, turned with the gravity reference through
+    /// turns and tilts (default 0.1 g; `mems-odometry`'s walking profile keeps a calibrated
+    /// part's 0.0061: `zero_state::glrt::GlrtConfig::uncalibrated_accel_bias_sigma_mps2`).
+    #[arg(long, value_name = "MPS2")]
+    pub glrt_uncalibrated_offset_mps2: Option<f64>,
 }
 
 impl DetectorArgs {
@@ -75,6 +81,10 @@ impl DetectorArgs {
         if let Some(s) = self.max_rest_accel_sigma {
             config.learn.max_accel_sigma_mps2 = Some(positive("max-rest-accel-sigma", s)?);
         }
+        if let Some(s) = self.glrt_uncalibrated_offset_mps2 {
+            config.glrt.uncalibrated_accel_bias_sigma_mps2 =
+                positive("glrt-uncalibrated-offset-mps2", s)?;
+        }
         Ok(config)
     }
 }
@@ -92,6 +102,7 @@ mod tests {
             glrt_window_s: Some(0.25),
             learn_s: Some(2.5),
             max_rest_accel_sigma: Some(0.15),
+            glrt_uncalibrated_offset_mps2: Some(0.0061),
             ..DetectorArgs::default()
         };
         let c = args.apply(default).unwrap();
@@ -99,6 +110,7 @@ mod tests {
         assert_eq!(c.glrt.window_s, 0.25);
         assert_eq!(c.learn.duration_s, 2.5);
         assert_eq!(c.learn.max_accel_sigma_mps2, Some(0.15));
+        assert_eq!(c.glrt.uncalibrated_accel_bias_sigma_mps2, 0.0061);
         for (args, name) in [
             (
                 DetectorArgs {
@@ -127,6 +139,13 @@ mod tests {
                     ..Default::default()
                 },
                 "--max-rest-accel-sigma",
+            ),
+            (
+                DetectorArgs {
+                    glrt_uncalibrated_offset_mps2: Some(-0.1),
+                    ..Default::default()
+                },
+                "--glrt-uncalibrated-offset-mps2",
             ),
         ] {
             assert!(args.apply(default).unwrap_err().starts_with(name));

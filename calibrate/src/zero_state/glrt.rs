@@ -123,6 +123,12 @@ pub struct GlrtConfig {
     /// body: after a turn by `theta` the reference is off by `(R(theta) - I) b`, up to
     /// `2 sin(theta / 2) |b|` across gravity, which a rest after a turn must be allowed.
     pub accel_bias_sigma_mps2: f64,
+    /// The same for a part whose learned rest reads gravity more than
+    /// [`super::learn::CALIBRATED_GRAVITY_ERROR`] off (an uncalibrated part, whatever its file
+    /// says), m/s^2: its zero-g offset is unknown across gravity too, and a 0.15 g offset turned
+    /// by a car's 10 degree bend moves the reference by 0.25 m/s^2, which held to a calibrated
+    /// part's 6 mm/s^2 calls every later cruise and rest motion.
+    pub uncalibrated_accel_bias_sigma_mps2: f64,
 }
 
 impl GlrtConfig {
@@ -143,7 +149,10 @@ impl Default for GlrtConfig {
     /// best trade-off measured on simulated drives (docs/detectors.md); reference tolerances of
     /// 0 for the accelerometer and 0.02 deg/s for the gyroscope; 1.2 % per radian turned; an
     /// accelerometer bias of 6.1 mm/s^2 (the thesis's turn-on repeatability of a calibrated
-    /// MPU-9250, its largest axis; `odometry::config::OdometryConfig::mpu9250`).
+    /// MPU-9250, its largest axis; `odometry::config::OdometryConfig::mpu9250`), 0.1 g for an
+    /// uncalibrated part (the MPU-6050 datasheet's zero-g offset, +-50 mg on x and y, +-80 mg on
+    /// z; the thesis's uncalibrated MPU-9250 read 0.1-0.2 g off; the same prior as
+    /// `odometry::config::UncalibratedAccel::bias_sigma_mps2`).
     fn default() -> Self {
         Self {
             false_alarm: 1e-2,
@@ -153,6 +162,7 @@ impl Default for GlrtConfig {
             gyro_tolerance_rps: 0.02_f64.to_radians(),
             turn_error: 0.012,
             accel_bias_sigma_mps2: 6.1e-3,
+            uncalibrated_accel_bias_sigma_mps2: 0.1 * ipc_types::units::STANDARD_GRAVITY_MPS2,
         }
     }
 }
@@ -219,6 +229,12 @@ pub(crate) struct GlrtRule {
     /// by a fraction of it (linear in the integral, so a turn and back cancels, and so does
     /// noise, as a random walk).
     turned_rad: Vector3<f64>,
+    /// The gravity reference's direction at the last rest (unit vector, sensor frame): how far
+    /// gravity has turned in the sensor frame since, which moves the accelerometer bias's
+    /// share of the reference's magnitude ([`Self::along_var_now`]).
+    rest_dir: Vector3<f64>,
+    /// Variance of the gravity reference's magnitude that the last rests left, (m/s^2)^2.
+    along_var: f64,
     /// 1-sigma of the gyroscope bias reference, rad/s (the learned mean's noise, largest axis).
     bias_sigma_rps: f64,
     turn_error: f64,
@@ -293,6 +309,10 @@ impl GlrtRule {
             across_var: 0.0,
             moving_s: 0.0,
             turned_rad: Vector3::zeros(),
+            rest_dir: Vector3::from_column_slice(&r.accel_mean_mps2)
+                .try_normalize(1e-9)
+                .unwrap_or_else(Vector3::z),
+            along_var: 0.0,
             bias_sigma_rps: 0.0,
             turn_error: config.turn_error,
             accel_bias_sigma_mps2: config.accel_bias_sigma_mps2,
@@ -454,6 +474,21 @@ impl GlrtRule {
         self.across_var + drift * drift + bias * bias
     }
 
+    /// Variance of the gravity reference's magnitude now, (m/s^2)^2: what the last rests left,
+    /// and what a tilt since moved. The reference holds the accelerometer bias `b` with
+    /// gravity, `|g_s + b|`, and a tilt that turns gravity in the sensor frame by `phi` changes
+    /// the reading's magnitude by `(g_s' - g_s) . b / g`, up to `2 sin(phi / 2)` of the bias (a
+    /// pitch of 2 deg with a 0.15 g offset along the forward axis: 0.05 m/s^2). `phi` is taken
+    /// as the angle the reference turned since the last rest, which counts a turn about gravity
+    /// by the reference's tilt from it (the bias across gravity over g) too: on the safe side.
+    fn along_var_now(&self) -> f64 {
+        let phi = self
+            .gravity()
+            .try_normalize(1e-9)
+            .map_or(0.0, |u| u.angle(&self.rest_dir));
+        self.along_var + (self.accel_bias_sigma_mps2 * 2.0 * (0.5 * phi).sin()).powi(2)
+    }
+
     /// Adds the batch to the window and decides; not at rest until the window is full.
     pub fn decide(&mut self, accel: &WindowStats, gyro: &WindowStats) -> Decision {
         self.carry_gravity(gyro);
@@ -547,6 +582,7 @@ impl GlrtRule {
         let g = m.normalize() * self.gravity().norm();
         self.reference[..3].copy_from_slice(g.as_slice());
         self.across_var = (var[0] + var[1] + var[2]) / 3.0;
+        self.rest_dir = m.normalize();
         true
     }
 
@@ -561,7 +597,8 @@ impl GlrtRule {
     /// reference's own uncertainty across gravity.
     /// Along is the difference of the magnitudes: a turn keeps a vector's magnitude, so the
     /// accelerometer bias that carrying turned with gravity (it tilts the reference by
-    /// `|b| / g`) does not leak into the magnitude test.
+    /// `|b| / g`) does not leak into the magnitude test; what a tilt changes of the bias's share
+    /// of the magnitude is allowed for ([`Self::along_var_now`]).
     fn accel_mean_statistic(&self, mean: &[f64; 6], var: &[f64; 6]) -> (f64, f64) {
         let reference = self.gravity();
         let u = reference.normalize();
@@ -569,7 +606,8 @@ impl GlrtRule {
         let d = m - reference;
         let along = m.norm() - reference.norm();
         let across = (d.norm_squared() - along * along).max(0.0);
-        let var_along: f64 = (0..3).map(|i| u[i] * u[i] * var[i]).sum();
+        let var_along: f64 =
+            (0..3).map(|i| u[i] * u[i] * var[i]).sum::<f64>() + self.along_var_now();
         let var_across = (var[0] + var[1] + var[2] - var_along) / 2.0 + self.across_var_now();
         (along * along / var_along, across / var_across)
     }
@@ -592,13 +630,19 @@ impl GlrtRule {
         // Direction and magnitude apart: a step across gravity alone would lengthen the
         // reference by `|step|^2 / 2 g` (a rest after a turn that carried a 20 mg bias with
         // gravity: 0.4 m/s^2 across, 0.01 m/s^2 longer), which the magnitude test then holds
-        // against every later rest.
-        let magnitude = reference.norm() + gain * (m_norm(&accel.mean) - reference.norm());
+        // against every later rest. The magnitude is a running mean, but what a tilt since
+        // the last rest moved of the bias's share of it ([`Self::along_var_now`]) is
+        // uncertain as the direction is: it takes the same Kalman gain.
+        let prior_along = self.along_var_now();
+        let k_along = (prior_along / (prior_along + batch_var)).max(gain);
+        let magnitude = reference.norm() + k_along * (m_norm(&accel.mean) - reference.norm());
+        self.along_var = (1.0 - k_along) * prior_along;
         let g = (reference + (d - along) * k).normalize() * magnitude;
         self.reference[..3].copy_from_slice(g.as_slice());
         self.across_var = (1.0 - k) * prior;
         self.moving_s = 0.0;
         self.turned_rad = Vector3::zeros();
+        self.rest_dir = g.normalize();
         for i in 3..6 {
             self.reference[i] += gain * (gyro.mean[i - 3] - self.reference[i]);
         }

@@ -451,10 +451,18 @@ impl ZeroStateDetector {
         self.rule = Some(match self.config.kind {
             DetectorKind::Yu => Rule::Yu(yu::YuRule::new(&reference, &self.config.yu)),
             kind @ (DetectorKind::Glrt | DetectorKind::GlrtAccel) => {
+                let mut config = self.config.glrt;
+                let g = self.config.learn.gravity_mps2;
+                if (reference.magnitude_mps2 / g - 1.0).abs() > learn::CALIBRATED_GRAVITY_ERROR {
+                    // An uncalibrated part: its offset across gravity is unknown as well.
+                    config.accel_bias_sigma_mps2 = config
+                        .accel_bias_sigma_mps2
+                        .max(config.uncalibrated_accel_bias_sigma_mps2);
+                }
                 let mut rule = glrt::GlrtRule::new(
                     &reference,
                     &learned,
-                    &self.config.glrt,
+                    &config,
                     ring,
                     kind == DetectorKind::GlrtAccel,
                     self.prior_batches(&learned),

@@ -101,7 +101,8 @@ pub fn specs(
 /// rest flags in hindsight for that long; the vehicle profile's learning,
 /// [`odometry::profile::VEHICLE_LEARN_S`], with `--profile vehicle`; the walking profile's
 /// ceiling on a rest's accelerometer spread,
-/// [`calibrate::zero_state::learn::REST_ACCEL_SIGMA_MPS2`], with `--profile walking`).
+/// [`calibrate::zero_state::learn::REST_ACCEL_SIGMA_MPS2`], and its calibrated allowance for
+/// an uncalibrated part's offset, with `--profile walking`).
 fn detector_args(cli: &Cli) -> Vec<String> {
     let mut args = vec!["--detector".into(), crate::cli::detector(cli).name().into()];
     if cli.profile == odometry::profile::Profile::Other && cli.detector.is_none() {
@@ -117,9 +118,12 @@ fn detector_args(cli: &Cli) -> Vec<String> {
         ]);
     }
     if cli.profile == odometry::profile::Profile::Walking && cli.detector.is_none() {
+        let walking = odometry::profile::Profile::Walking.detector(1.0);
         args.extend([
             "--max-rest-accel-sigma".into(),
             calibrate::zero_state::learn::REST_ACCEL_SIGMA_MPS2.to_string(),
+            "--glrt-uncalibrated-offset-mps2".into(),
+            walking.glrt.uncalibrated_accel_bias_sigma_mps2.to_string(),
         ]);
     }
     args
@@ -212,11 +216,20 @@ mod tests {
             vehicle,
             ["--detector", "glrt", "--learn-s", "1"].map(String::from)
         );
-        // A walker's hand: no window that shakes is learned as rest (a steady turn).
+        // A walker's hand: no window that shakes is learned as rest (a steady turn), and the
+        // calibrated allowance for an uncalibrated part's offset, as offline.
         let walking = detector(&["--profile", "walking"]);
         assert_eq!(
             walking,
-            ["--detector", "glrt", "--max-rest-accel-sigma", "0.15"].map(String::from)
+            [
+                "--detector",
+                "glrt",
+                "--max-rest-accel-sigma",
+                "0.15",
+                "--glrt-uncalibrated-offset-mps2",
+                "0.0061"
+            ]
+            .map(String::from)
         );
     }
 }
