@@ -37,7 +37,7 @@ enum Command {
     /// Subscribe to corrected samples and publish odometry states.
     Serve(serve::ServeArgs),
     /// Run calibration and odometry over a raw recording (CSV or MCAP).
-    Offline(offline::OfflineArgs),
+    Offline(Box<offline::OfflineArgs>),
     /// Diagnose a run: test effects the model lacks on its rests, rerun with what the data
     /// support, print the error before and after (`odometry::diagnose`).
     Diagnose(diagnose::DiagnoseArgs),
@@ -56,7 +56,7 @@ fn main() -> ExitCode {
     mems_log::init("mems-odometry");
     mems_log::exit(match Cli::parse().command {
         Command::Serve(args) => serve::run(args),
-        Command::Offline(args) => offline::run(args),
+        Command::Offline(args) => offline::run(*args),
         Command::Diagnose(args) => diagnose::run(args),
         Command::Gyrocal { args } => Err(calibrate::offline::exec_offline(
             std::iter::once("gyrocal".as_ref()).chain(args.iter().map(|a| a.as_os_str())),
