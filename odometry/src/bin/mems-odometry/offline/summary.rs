@@ -154,23 +154,7 @@ impl Summary {
         json: bool,
     ) -> Result<()> {
         let input = read.input.display();
-        match ran {
-            Err(Stop::Refused { refusal, .. }) => {
-                // A hole the odometry does not bridge: name its line and time too.
-                let refusal = refusal.to_string();
-                let t0 = read.first_ns.unwrap_or(0);
-                if let Some(h) = read.holes.longest
-                    && refusal.starts_with(&format!("sample seq {}:", h.seq))
-                {
-                    let line = h.line.map_or(String::new(), |l| format!(":{l}"));
-                    let t_s = h.t_ns.saturating_sub(t0) as f64 * 1e-9;
-                    bail!("{input}{line}: at t {t_s:.3} s: {refusal}");
-                }
-                bail!("{input}: {refusal}")
-            }
-            Err(Stop::Input(e)) => return Err(e),
-            Ok(_) => {}
-        }
+        stopped(ran, read)?;
         let Some(end) = self.last else {
             bail!("{input}: no samples");
         };
@@ -185,24 +169,7 @@ impl Summary {
             .map_or(0.0, |t| (t - read.first_ns.unwrap_or(0)) as f64 * 1e-9);
         let in_motion = chain.second.stage().aligned_in_motion();
         say_aligned(aligned_at_s, read.align_s, in_motion, chain);
-        let t0 = read.first_ns.unwrap_or(0);
-        let withdrawn: Vec<_> = self
-            .withdrawn
-            .iter()
-            .map(|&(a, w)| {
-                (
-                    a.saturating_sub(t0) as f64 * 1e-9,
-                    w.saturating_sub(t0) as f64 * 1e-9,
-                )
-            })
-            .collect();
-        for (a, w) in &withdrawn {
-            tracing::warn!(
-                "{input}: the alignment at {a:.2} s was withdrawn at {w:.2} s (the detector's \
-                 settled verdict took away the rest it stood on, or a new sensor session \
-                 started); the position counts from the alignment at {aligned_at_s:.2} s"
-            );
-        }
+        let withdrawn = self.say_withdrawn(read, aligned_at_s);
         let accel = chain.second.stage().accel_estimate();
         if let Some(a) = &accel {
             tracing::info!("{a}");
@@ -266,6 +233,23 @@ impl Summary {
             self.print(&end, truth_error);
         }
         Ok(())
+    }
+
+    /// The alignments withdrawn, (aligned, withdrawn) in s from the first sample, each said on
+    /// stderr against the alignment `aligned_at_s` the position counts from.
+    fn say_withdrawn(&self, read: &Read, aligned_at_s: f64) -> Vec<(f64, f64)> {
+        let t0 = read.first_ns.unwrap_or(0);
+        let s = |t: u64| t.saturating_sub(t0) as f64 * 1e-9;
+        let withdrawn: Vec<_> = self.withdrawn.iter().map(|&(a, w)| (s(a), s(w))).collect();
+        for (a, w) in &withdrawn {
+            tracing::warn!(
+                "{}: the alignment at {a:.2} s was withdrawn at {w:.2} s (the detector's \
+                 settled verdict took away the rest it stood on, or a new sensor session \
+                 started); the position counts from the alignment at {aligned_at_s:.2} s",
+                read.input.display()
+            );
+        }
+        withdrawn
     }
 
     /// The JSON result from the end state `end` (with `truth_error`), when it aligned, what
@@ -591,6 +575,31 @@ fn why_never_aligned(calibration: &CalibrationStage) -> String {
              from; the last because {}",
             why.map_or_else(|| "of a gap".into(), |w| w.to_string())
         ),
+    }
+}
+
+/// The error for a run that was stopped (`ran`): a refusal (a hole the odometry does not
+/// bridge named with its line and time) or the input's own error.
+fn stopped<R: std::fmt::Display>(
+    ran: Result<u64, Stop<R, anyhow::Error>>,
+    read: &Read,
+) -> Result<()> {
+    let input = read.input.display();
+    match ran {
+        Err(Stop::Refused { refusal, .. }) => {
+            let refusal = refusal.to_string();
+            let t0 = read.first_ns.unwrap_or(0);
+            if let Some(h) = read.holes.longest
+                && refusal.starts_with(&format!("sample seq {}:", h.seq))
+            {
+                let line = h.line.map_or(String::new(), |l| format!(":{l}"));
+                let t_s = h.t_ns.saturating_sub(t0) as f64 * 1e-9;
+                bail!("{input}{line}: at t {t_s:.3} s: {refusal}");
+            }
+            bail!("{input}: {refusal}")
+        }
+        Err(Stop::Input(e)) => Err(e),
+        Ok(_) => Ok(()),
     }
 }
 
