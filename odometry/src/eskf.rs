@@ -817,4 +817,4 @@ pub fn align(
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

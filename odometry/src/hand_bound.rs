@@ -57,21 +57,13 @@ mod tests {
     use nalgebra::Vector3;
 
     use super::*;
-    use crate::eskf::{Imu, NoiseModel, align};
+    use crate::eskf::{Imu, align};
 
     const G: f64 = 9.81;
 
     /// A level filter (the MPU-9250's densities, 0.05 m/s^2 of accelerometer bias 1-sigma) and
     /// the still sensor's sample whose accelerometer reads `bias_x` m/s^2 along x.
     fn filter(bias_x: f64) -> (Eskf, Imu) {
-        let noise = NoiseModel {
-            accel_noise_density: 300e-6 * G,
-            gyro_noise_density: 0.01_f64.to_radians(),
-            accel_bias_random_walk: 1e-5,
-            gyro_bias_random_walk: 1e-6,
-            vibration_accel_density_per_mps: 0.0,
-            vibration_gyro_density_per_mps: 0.0,
-        };
         let up = Vector3::new(0.0, 0.0, G);
         let (x, cov) = align(
             up,
@@ -84,7 +76,7 @@ mod tests {
             f: up + Vector3::new(bias_x, 0.0, 0.0),
             w: Vector3::zeros(),
         };
-        (Eskf::new(x, cov, G, noise, m), m)
+        (Eskf::new(x, cov, G, crate::eskf::tests::noise(), m), m)
     }
 
     /// 150 s at 100 Hz of a still sensor whose accelerometer reads a bias of 0.05 m/s^2 along

@@ -5,7 +5,8 @@ use approx::assert_relative_eq;
 
 const G: f64 = 9.81;
 
-fn noise() -> NoiseModel {
+/// The MPU-9250's noise densities (no vibration), for the filter's tests and its users'.
+pub(crate) fn noise() -> NoiseModel {
     NoiseModel {
         accel_noise_density: 300e-6 * G,
         gyro_noise_density: 0.01_f64.to_radians(),
