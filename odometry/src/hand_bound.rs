@@ -5,7 +5,10 @@
 //! 560 m off after 150 s (`b t^2 / 2`); BROAD's box moved by hand for 150 s without a break
 //! ended 143 and 151 m off (docs/real-data.md).
 //!
-//! Method: while the sample is not taken as rest and no robot hint reports the motion, every [`HAND_BOUND_INTERVAL_S`] the filter's
+//! Method: once the sensor has moved [`HAND_BOUND_AFTER_S`] without a rest (an arm's move
+//! between pauses, or a single reach, never lasts that long: it needs no bound, and on the
+//! simulated arm runs of docs/diagnosis.md a bound in every move of 1-2 s moved the end by
+//! tenths of a metre either way), while the sample is not taken as rest and no robot hint reports the motion, every [`HAND_BOUND_INTERVAL_S`] the filter's
 //! velocity (m/s, navigation frame, z up) is measured as zero with 1-sigma
 //! [`HAND_SPEED_SIGMA_MPS`] per axis: a pseudo-measurement of the hand's speed scale, not of
 //! its rest. Reaching movements peak at 0.5-1.5 m/s and reverse within about a second (T. Flash
@@ -23,28 +26,34 @@ use crate::eskf::Eskf;
 pub const HAND_SPEED_SIGMA_MPS: f64 = 1.0;
 /// Interval between the velocity bounds while the sensor moves, s.
 pub const HAND_BOUND_INTERVAL_S: f64 = 1.0;
+/// Motion without a rest before the first bound, s: longer than a reach (module documentation).
+pub const HAND_BOUND_AFTER_S: f64 = 5.0;
 
-/// The bound's state in a navigator: the time of the last bound or rest.
+/// The bound's state in a navigator: the times of the last bound or rest and of the last rest.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct HandBound {
     last_ns: Option<u64>,
+    held_ns: Option<u64>,
 }
 
 impl HandBound {
     /// After the aligned filter's updates at `t_ns`: bounds its velocity with 1-sigma
-    /// `sigma_mps` (0: off) when [`HAND_BOUND_INTERVAL_S`] has passed in motion since the last
-    /// bound or held sample (`held`: the sample is taken as rest, or robot hints report the
+    /// `sigma_mps` (0: off) when [`HAND_BOUND_AFTER_S`] has passed in motion since the last held
+    /// sample and [`HAND_BOUND_INTERVAL_S`] since the last bound or held sample (`held`: the sample is taken as rest, or robot hints report the
     /// motion). Returns whether it updated.
     pub fn update(&mut self, kf: &mut Eskf, t_ns: u64, held: bool, sigma_mps: f64) -> bool {
         if sigma_mps <= 0.0 {
             return false;
         }
         let last = *self.last_ns.get_or_insert(t_ns);
+        let held_at = *self.held_ns.get_or_insert(t_ns);
         if held {
             self.last_ns = Some(t_ns);
+            self.held_ns = Some(t_ns);
             return false;
         }
-        if (t_ns.saturating_sub(last) as f64) * 1e-9 < HAND_BOUND_INTERVAL_S {
+        let since = |t: u64| (t_ns.saturating_sub(t) as f64) * 1e-9;
+        if since(held_at) < HAND_BOUND_AFTER_S || since(last) < HAND_BOUND_INTERVAL_S {
             return false;
         }
         self.last_ns = Some(t_ns);
@@ -112,11 +121,22 @@ mod tests {
         let s = 1_000_000_000;
         assert!(!bound.update(&mut kf, 0, false, 1.0));
         assert!(!bound.update(&mut kf, s / 2, true, 1.0));
+        // A reach: a few seconds after the rest, no bound yet.
+        for t in [s, 3 * s, 5 * s] {
+            assert!(!bound.update(&mut kf, t, false, 1.0), "{t} ns");
+        }
         assert!(
-            !bound.update(&mut kf, s, false, 1.0),
-            "0.5 s after the rest"
+            bound.update(&mut kf, 11 * s / 2, false, 1.0),
+            "5 s after the rest"
         );
-        assert!(bound.update(&mut kf, 3 * s / 2, false, 1.0));
-        assert!(!bound.update(&mut kf, 4 * s, false, 0.0), "off");
+        assert!(
+            !bound.update(&mut kf, 6 * s, false, 1.0),
+            "0.5 s after the bound"
+        );
+        assert!(
+            bound.update(&mut kf, 13 * s / 2, false, 1.0),
+            "1 s after the bound"
+        );
+        assert!(!bound.update(&mut kf, 8 * s, false, 0.0), "off");
     }
 }

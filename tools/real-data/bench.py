@@ -244,18 +244,21 @@ def evaluate(side, out):
         t = truth["end_distance_m"]
         ours = math.hypot(p[0], p[1])
         lo, hi = abs(ours - t), ours + t
-    if hi <= r68:
-        covered = "yes"
-    elif lo > r68:
-        covered = "no"
-    else:
-        covered = "?"
     distance = side.get("distance_m")
     if truth.get("track") and out.get("aligned_at_s") is not None:
         distance = track_length(truth["track"], out["aligned_at_s"], truth.get("track_min_step_m", TRACK_MIN_STEP_M))
     ours_distance = distance is None
     if ours_distance:
         distance = out.get("distance_m")
+    if not distance:
+        # Nothing navigated (aligned only at the end): no position worth the name to cover.
+        covered = "no"
+    elif hi <= r68:
+        covered = "yes"
+    elif lo > r68:
+        covered = "no"
+    else:
+        covered = "?"
     pct = (lambda e: 100.0 * e / distance if distance else None)
     return {
         "end_displacement_m": p,
@@ -318,14 +321,20 @@ def fmt_pct(value):
     return "inf" if value == math.inf else f"{value:.2f} %"
 
 
+def navigated(row):
+    """Whether the run gave a position over some distance (not failed, not aligned only at its
+    very end)."""
+    return not row.get("error") and bool(row["result"]["distance_m"])
+
+
 def summary(rows):
-    done = [r for r in rows if not r.get("error")]
+    done = [r for r in rows if navigated(r)]
     covered = sum(1 for r in done if r["result"]["covered"] == "yes")
     undecided = sum(1 for r in done if r["result"]["covered"] == "?")
     loops = [r["result"]["pct_of_distance"][1] for r in done
              if r["sidecar"]["platform"] == "foot" and r["sidecar"]["truth"]["kind"] == "closed_loop"]
     lines = [
-        f"positions produced: {len(done)} of {len(rows)}",
+        f"positions produced (over some distance): {len(done)} of {len(rows)}",
         f"1-sigma covers the error (r68): {covered} of {len(rows)} ({undecided} undecided: truth known as a distance only)",
     ]
     if loops:
@@ -335,7 +344,7 @@ def summary(rows):
         platform = (r.get("sidecar") or {}).get("platform", "-")
         classes.setdefault(platform, []).append(r)
     for platform, group in classes.items():
-        ok = [r for r in group if not r.get("error")]
+        ok = [r for r in group if navigated(r)]
         cov = sum(1 for r in ok if r["result"]["covered"] == "yes")
         sources = sorted({r["sidecar"]["source"]["repo"] for r in group if r.get("sidecar")})
         med = statistics.median(pct_upper(r) for r in group)
