@@ -15,10 +15,14 @@
 //!
 //! Frames: the navigation frame is the filter's (z up, heading fixed at alignment); the walking
 //! frame has x forward and z up, y = z x x (left). Forward is the horizontal part, at the
-//! filter's attitude, of the sensor's `+y - z` axis: a phone held in front with its screen
-//! toward its carrier's face and its top away from them points `+y` forward when held flat
-//! (texting) and `-z` (its back camera) forward when held upright (augmented reality), and the
-//! horizontal parts of both point forward at any tilt between (`cos` and `sin` of the tilt).
+//! filter's attitude, of the sensor's `+y (1 - u_x^2) - z` axis, `u` the up direction in the
+//! sensor frame: a phone held in front with its screen toward its carrier's face and its top
+//! away from them points `+y` forward when held flat (texting) and `-z` (its back camera)
+//! forward when held upright (augmented reality), and the horizontal parts of both point
+//! forward at any tilt between (`cos` and `sin` of the tilt). A phone held in landscape (its x
+//! along the vertical: four of the six Tyrex augmented-reality walks, `|u_x|` 0.8-1.0) has its
+//! top sideways, so `+y` is dropped as `u_x^2` nears 1: with `+y - z` its steps ran 45 degrees
+//! off the walking direction.
 //! The heading is the filter's, integrated from the gyro. (The horizontal acceleration's
 //! principal axis, the other common estimate, lies along the phone's x, the walker's lateral
 //! sway, on 2 of the 6 Tyrex texting walks: it was not used.)
@@ -27,6 +31,15 @@
 //! swings about the step's mean within a step), vertical [`VERTICAL_SIGMA_MPS`], lateral
 //! [`LATERAL_SIGMA_MPS`] plus [`LATERAL_SIGMA_PER_MPS`] times the speed (the phone points
 //! 15 degrees off the walking direction, 1-sigma: `tan 15 deg = 0.27`).
+//!
+//! Tilt. The filter's roll and pitch drift with the gyro's errors under the hand's turns (a
+//! phone's gyro, its scale and axes uncalibrated, looking around at tens of deg/s), far beyond
+//! what its noise model holds: at each step their variance is widened by a random walk of
+//! [`HAND_TILT_WALK_DPS`], so that the step's velocity measures the tilt. Without it the
+//! filter took its tilt as known to a hundredth of a degree, the gravity its drifting tilt
+//! leaked into the velocity (10-40 m/s between steps on the Tyrex augmented-reality walks) was
+//! learned as accelerometer bias at each step and rest (1-5 m/s^2 where a phone's is a few
+//! 0.01), and the steps' innovations ran at 138-432 per degree of freedom.
 //!
 //! A walker standing with the sensor in hand (no step for [`WALKING_HOLD_S`], the detector
 //! flagging no rest) moves it slowly: a zero-velocity update of [`STANDING_SIGMA_MPS`] every
@@ -53,6 +66,9 @@ pub const STEP_SCALE_SIGMA: f64 = 0.33;
 /// Random walk of the hand's velocity about the walk's, m/s per square root of s: the
 /// filter's velocity is widened by it at each step (module documentation).
 pub const HAND_VELOCITY_WALK_MPS: f64 = 0.3;
+/// Random walk of the filter's tilt (roll and pitch) while walking, deg per square root of s:
+/// its attitude error is widened by it at each step (module documentation, "Tilt").
+pub const HAND_TILT_WALK_DPS: f64 = 2.0;
 /// 1-sigma of the velocity at an alignment on whole steps, m/s per axis (a walk's speed).
 pub const ALIGN_VELOCITY_SIGMA_MPS: f64 = 1.0;
 /// A walker whose last step was this long ago is walking, s.
@@ -317,6 +333,11 @@ impl Walk {
         for i in 0..3 {
             kf.cov[(V + i, V + i)] += HAND_VELOCITY_WALK_MPS.powi(2) * interval_s;
         }
+        // The tilt drifts with the gyro's errors under the hand's turns (module
+        // documentation, "Tilt"): widened so that the step measures it, not the bias.
+        for i in 0..2 {
+            kf.cov[(TH + i, TH + i)] += HAND_TILT_WALK_DPS.to_radians().powi(2) * interval_s;
+        }
         let speed = length_m / interval_s.clamp(CADENCE_S.0, MAX_STEP_S);
         let v_w = kf.body_velocity(&r_ws);
         // The scale state stays at zero (its variance is zero from the alignment on).
@@ -335,10 +356,13 @@ impl Walk {
 }
 
 /// The rotation from the sensor frame to the walking frame at the filter's attitude (rows: the
-/// walking frame's axes in the sensor frame); `None` when the phone's `+y - z` is vertical.
+/// walking frame's axes in the sensor frame); `None` when the phone's pointing axis (module
+/// documentation) is vertical.
 fn walking_frame(kf: &Eskf) -> Option<Matrix3<f64>> {
     let up = kf.x.q.inverse_transform_vector(&Vector3::z());
-    let pointing = Vector3::new(0.0, 1.0, -1.0);
+    // `+y (1 - up_x^2) - z`: a phone held in landscape (its x along the vertical) has its top
+    // sideways, and its back camera alone points forward.
+    let pointing = Vector3::new(0.0, 1.0 - up.x * up.x, -1.0);
     let forward = (pointing - up * up.dot(&pointing)).try_normalize(1e-3)?;
     let left = up.cross(&forward);
     Some(Matrix3::from_rows(&[
