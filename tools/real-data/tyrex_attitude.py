@@ -28,6 +28,12 @@ from containers import ConvertError
 G0 = 9.80665  # m/s^2 per g
 DEG = 180.0 / math.pi
 MOCAP_TRACK_MIN_STEP_M = 0.1
+# Longest interval between two gyro events the samples are interpolated across, s: the phones
+# log their gyros at 100-200 Hz, so a longer one is events lost, not a slow sensor. The Nexus
+# 5's Guillaume_Nexus5_NoDist_AR gyroscope.txt stops for 23.7 s (67.1-90.8 s) and 11.9 s;
+# interpolated across, the phone's turns in them vanished from the gyro while its gravity
+# turned by 90 degrees.
+MAX_GYRO_GAP_S = 0.5
 
 
 def _rows(text, where, width):
@@ -80,13 +86,18 @@ def samples_from_logs(acc_text, gyro_text, wheres, os_name, time_zero=0.0):
     to_g = ACCEL_TO_G[os_name]
     acc = [[r[0] - time_zero, *r[1:]] for r in _rows(acc_text, wheres[0], 4)]
     gyr = [[r[0] - time_zero, *r[1:]] for r in _rows(gyro_text, wheres[1], 4)]
-    kept, j = [], 0
+    kept, j, gap, outside = [], 0, None, 0
     for t, ax, ay, az in acc:
         if t < gyr[0][0] or t > gyr[-1][0]:
+            outside += 1
             continue
         while gyr[j + 1][0] < t:
             j += 1
         (t0, *w0), (t1, *w1) = gyr[j], gyr[j + 1]
+        if t1 - t0 > MAX_GYRO_GAP_S:
+            # The samples end at the gyro log's first gap: the turns in it are unknown.
+            gap = (t0, t1)
+            break
         f = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
         w = [(a + f * (b - a)) * DEG for a, b in zip(w0, w1)]
         kept.append((t, ax * to_g, ay * to_g, az * to_g, *w))
@@ -95,8 +106,12 @@ def samples_from_logs(acc_text, gyro_text, wheres, os_name, time_zero=0.0):
     start = kept[0][0]
     unit = "m/s^2 -> g (/9.80665)" if os_name == "android" else "g of acceleration -> g of specific force (negated)"
     notes = [f"accelerometer {unit}, gyroscope (first three values) rad/s -> deg/s; one sample per accelerometer event, "
-             f"the gyro interpolated linearly to it ({len(acc) - len(kept)} accelerometer events outside the gyro's span dropped); "
+             f"the gyro interpolated linearly to it ({outside} accelerometer events outside the gyro's span dropped); "
              f"t_s = phone time (log time minus {time_zero} s) minus the first kept event's"]
+    if gap is not None:
+        notes.append(f"{wheres[1]}: no gyro event for {gap[1] - gap[0]:.1f} s from phone time {gap[0]:.1f} s "
+                     f"(longer than {MAX_GYRO_GAP_S} s: events lost); the samples end there, at "
+                     f"{gap[0] - start:.1f} s, and the truth with them")
     return [(t - start, *rest) for t, *rest in kept], start, notes
 
 
@@ -199,6 +214,9 @@ def self_test():
     samples, start, _ = samples_from_logs(acc, gyr, ["a.txt", "g.txt"], "android")
     assert start == 0.1 and len(samples) == 2 and samples[0][:4] == (0.0, 0.0, 0.0, 1.0), samples
     assert abs(samples[0][6] - 0.1 * DEG) < 1e-9 and abs(samples[1][6] - 0.3 * DEG) < 1e-9 and abs(samples[1][2] - 0.5) < 1e-12, samples
+    # A gyro log that stops for 1 s: the samples end at its start, and a note names it.
+    gapped, _, gap_notes = samples_from_logs(acc + "1.2 0 0 1\n", gyr + "1.25 0 0 0 9 9 9\n", ["a.txt", "g.txt"], "android")
+    assert len(gapped) == 2 and "g.txt: no gyro event for 1.0 s" in gap_notes[-1], (gapped, gap_notes)
     try:
         samples_from_logs(acc, gyr.replace("0.15", "0.01"), ["a.txt", "g.txt"], "android")
         raise AssertionError("a gyro time running backwards was taken")
