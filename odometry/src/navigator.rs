@@ -27,10 +27,12 @@ use ipc_types::{
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 mod hint_state;
+mod learning;
 mod records;
 mod walk_hooks;
 mod wheeled;
 use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE};
+use learning::LearningWindow;
 use records::{AlignSums, HistoryEntry, PendingRevision, RestWindow};
 
 /// Rest a filter with speed hints aligns on at least, s: a robot that creeps off from its
@@ -47,6 +49,8 @@ pub(crate) struct Navigator {
     cfg: OdometryConfig,
     hints: Hints,
     align: AlignSums,
+    /// The samples before the detector's learned verdict, for the alignment.
+    learning: LearningWindow,
     /// The cruise window gathered while unaligned ([`crate::cruise`]).
     cruise: CruiseWindow,
     /// The mean hint speed of the cruise window the filter aligned on, m/s; `None` when it
@@ -127,6 +131,7 @@ impl Navigator {
                 stats: HintStats::default(),
             },
             align: AlignSums::default(),
+            learning: LearningWindow::new(cfg.learned_rest_s, cfg.max_rate_hz),
             cruise: CruiseWindow::default(),
             aligned_in_motion: None,
             zupt_sigma_mps: cfg.zupt_sigma_mps,
@@ -161,6 +166,7 @@ impl Navigator {
         self.cfg = other.cfg;
         self.hints.copy_from(&other.hints);
         self.align = other.align;
+        self.learning.copy_from(&other.learning);
         self.cruise = other.cruise;
         self.aligned_in_motion = other.aligned_in_motion;
         self.zupt_sigma_mps = other.zupt_sigma_mps;
@@ -337,7 +343,9 @@ impl Navigator {
                 let gravity_off = s.flags & corrected_flags::GRAVITY_OFF != 0;
                 let rest = rest && ready && verdict.clipped == 0;
                 self.gather_attitude(&m, rest);
-                self.accumulate_alignment(t_ns, &m, rest, gravity_off);
+                if !self.seed_alignment(s, &m, verdict.clipped == 0, gravity_off) {
+                    self.accumulate_alignment(t_ns, &m, rest, gravity_off);
+                }
                 let still = imu_rest && detector_ready && verdict.clipped == 0;
                 self.accumulate_cruise(t_ns, &m, d.fresh.filter(|_| still), gravity_off);
                 self.align_on_steps(&m, step.as_ref());
@@ -678,6 +686,34 @@ impl Navigator {
         }
     }
 
+    /// Starts the alignment sums with the calibration stage's learning window at its learned
+    /// verdict's sample `s` (`navigator::learning`; not with speed hints) and aligns when they
+    /// are long enough; whether it did start them.
+    fn seed_alignment(
+        &mut self,
+        s: &CorrectedImuSample,
+        m: &Imu,
+        usable: bool,
+        gravity_off: bool,
+    ) -> bool {
+        let ready = s.flags & corrected_flags::DETECTOR_READY != 0;
+        let refined = s.flags & corrected_flags::BIAS_REFINED != 0;
+        let learned_rest_s = match self.hints.newest {
+            Some(_) => 0.0,
+            None => self.cfg.learned_rest_s,
+        };
+        let zs_mean = Vector3::from(s.zs_mean_mps2);
+        let t_ns = s.stamps.sample_ns;
+        let flags = (usable, ready, refined);
+        let Some(sums) = self.learning.take(t_ns, m, flags, zs_mean, learned_rest_s) else {
+            return false;
+        };
+        self.align = sums;
+        self.align.gravity_off = gravity_off;
+        self.try_align(t_ns, m);
+        true
+    }
+
     fn accumulate_alignment(&mut self, t_ns: u64, m: &Imu, rest: bool, gravity_off: bool) {
         if !rest {
             self.align = AlignSums::default();
@@ -690,6 +726,12 @@ impl Navigator {
         a.accel.push(m.f);
         a.gyro.push(m.w);
         a.gravity_off |= gravity_off;
+        self.try_align(t_ns, m);
+    }
+
+    /// Aligns on the alignment sums when they span the rest the alignment needs.
+    fn try_align(&mut self, t_ns: u64, m: &Imu) {
+        let a = &self.align;
         // With speed hints a rest is aligned on for at least `HINT_ALIGN_S`.
         let align_s = if self.hints.newest.is_some() {
             self.cfg.align_s.max(HINT_ALIGN_S)

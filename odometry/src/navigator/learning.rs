@@ -1,0 +1,143 @@
+//! The calibration stage's learning window as the alignment's rest.
+//!
+//! A robot's detector learns its references from the first half second of rest
+//! (`calibrate::zero_state::ROBOT_LEARN_S`) and flags rest only after it; the odometry aligns
+//! on `OdometryConfig::align_s` of flagged rest, and the rest hindsight withdraws the flags of
+//! the `rest_hindsight_s` before a motion. On a rest of 1 s that leaves nothing: the learning
+//! took the first half, the hindsight the second. But the learner already judged its window
+//! still, batch by batch (`calibrate::zero_state::learn`: gravity's magnitude, no outlying
+//! batch mean, no trend), so the alignment may stand on those samples: the odometry keeps
+//! the samples before the learned verdict and, when it comes, starts its alignment sums with
+//! the last `OdometryConfig::learned_rest_s` of them (no more than the learner's window).
+//!
+//! Those samples left the calibration stage before its first refinement, which the verdict
+//! makes (`calibrate::stage`, "Bias refinement at rest"), so they are put in the terms of the
+//! samples after it:
+//! - gyroscope (rad/s, sensor frame, after `OdometryConfig::gyro_correction`): the first
+//!   refinement subtracts the learned window's mean rate, so the window's own mean is
+//!   subtracted; the alignment's gyro bias is then zero with the variance of that mean, which
+//!   is what is left of the bias after the refinement;
+//! - accelerometer (m/s^2, sensor frame): the refinement moves the offset along gravity; the
+//!   verdict's sample carries its batch's mean after the refinement (`zs_mean_mps2`), so the
+//!   offset it moved is that batch's mean as emitted minus that, subtracted from every sample.
+//!
+//! The verdict's sample is the first with `BIAS_REFINED` (the samples of its batch before it
+//! are flagged `DETECTOR_READY` once settled, but not refined). A stream that starts ready
+//! (SHOE, which learns nothing; a resumed calibration state) keeps nothing here, nor does a
+//! filter with speed hints (its rest alignment takes a second, `navigator::HINT_ALIGN_S`).
+
+use super::records::AlignSums;
+use crate::eskf::Imu;
+use crate::hints::Ring;
+use calibrate::zero_state::BATCH_LEN;
+use nalgebra::Vector3;
+
+/// One sample kept before the learned verdict.
+#[derive(Debug, Clone, Copy, Default)]
+struct Kept {
+    t_ns: u64,
+    f: Vector3<f64>,
+    w: Vector3<f64>,
+}
+
+/// The samples before the learned verdict (see the module documentation).
+#[derive(Debug, Clone)]
+pub(super) struct LearningWindow {
+    kept: Ring<Kept>,
+    /// Samples kept that were flagged `DETECTOR_READY` (the verdict's batch, once settled).
+    ready_kept: usize,
+}
+
+impl LearningWindow {
+    /// Storage for `learned_rest_s` at `max_rate_hz`, allocated here.
+    pub(super) fn new(learned_rest_s: f64, max_rate_hz: f64) -> Self {
+        let capacity = (learned_rest_s.max(0.0) * max_rate_hz).ceil() as usize + 1;
+        Self {
+            kept: Ring::new(capacity),
+            ready_kept: 0,
+        }
+    }
+
+    /// Makes this a copy of `other` (same capacity): nothing is allocated.
+    pub(super) fn copy_from(&mut self, other: &Self) {
+        self.kept.clone_from(&other.kept);
+        self.ready_kept = other.ready_kept;
+    }
+
+    /// Takes the unaligned filter's sample `m` at `t_ns` (`usable`: neither clipped nor
+    /// implausible; `ready`, `refined`: its `DETECTOR_READY` and `BIAS_REFINED` flags;
+    /// `zs_mean`: its detector window's mean, m/s^2). Returns the alignment sums of the
+    /// learned window, in the refined terms, at the learned verdict's sample; `None` before
+    /// and after it. `learned_rest_s` 0 keeps nothing.
+    pub(super) fn take(
+        &mut self,
+        t_ns: u64,
+        m: &Imu,
+        flags: (bool, bool, bool),
+        zs_mean: Vector3<f64>,
+        learned_rest_s: f64,
+    ) -> Option<AlignSums> {
+        let (usable, ready, refined) = flags;
+        let learning = !ready || (!refined && !self.kept.is_empty() && self.ready_kept < BATCH_LEN);
+        if learned_rest_s <= 0.0 || !(learning || refined && !self.kept.is_empty()) {
+            self.clear();
+            return None;
+        }
+        if !usable {
+            // A clipped or implausible reading is no part of a rest.
+            self.clear();
+            return None;
+        }
+        self.kept.push(Kept {
+            t_ns,
+            f: m.f,
+            w: m.w,
+        });
+        if learning {
+            self.ready_kept += usize::from(ready);
+            return None;
+        }
+        let sums = self.sums(learned_rest_s, zs_mean);
+        self.clear();
+        sums
+    }
+
+    /// The alignment sums of the kept samples of the last `learned_rest_s` (the newest the
+    /// verdict's), refined (module documentation).
+    fn sums(&self, learned_rest_s: f64, zs_mean: Vector3<f64>) -> Option<AlignSums> {
+        let last = *self.kept.newest(0)?;
+        let dt_ns = last.t_ns - self.kept.newest(1)?.t_ns;
+        // The learner's window of `n` samples spans `n - 1` intervals.
+        let from_ns = (last.t_ns + dt_ns / 2).saturating_sub((learned_rest_s * 1e9) as u64);
+        let n = (0..self.kept.len())
+            .take_while(|&i| self.kept.newest(i).is_some_and(|k| k.t_ns >= from_ns))
+            .count();
+        if n < 2 {
+            return None;
+        }
+        let window = || (0..n).rev().filter_map(|i| self.kept.newest(i));
+        let batch = n.min(BATCH_LEN);
+        let batch_mean = (0..batch)
+            .filter_map(|i| self.kept.newest(i))
+            .fold(Vector3::zeros(), |acc, k| acc + k.f)
+            / batch as f64;
+        let accel_shift = batch_mean - zs_mean;
+        let gyro_mean = window().fold(Vector3::zeros(), |acc, k| acc + k.w) / n as f64;
+        let mut sums = AlignSums::default();
+        for (i, k) in window().enumerate() {
+            if i == 0 {
+                // The span counts the first sample's interval too (`n` samples, `n`
+                // intervals), and a quarter of one for the jitter of the times.
+                sums.t0_ns = k.t_ns.saturating_sub(dt_ns + dt_ns / 4);
+            }
+            sums.accel.push(k.f - accel_shift);
+            sums.gyro.push(k.w - gyro_mean);
+        }
+        Some(sums)
+    }
+
+    fn clear(&mut self) {
+        self.kept.clear();
+        self.ready_kept = 0;
+    }
+}
