@@ -686,34 +686,6 @@ impl Navigator {
         }
     }
 
-    /// Starts the alignment sums with the calibration stage's learning window at its learned
-    /// verdict's sample `s` (`navigator::learning`; not with speed hints) and aligns when they
-    /// are long enough; whether it did start them.
-    fn seed_alignment(
-        &mut self,
-        s: &CorrectedImuSample,
-        m: &Imu,
-        usable: bool,
-        gravity_off: bool,
-    ) -> bool {
-        let ready = s.flags & corrected_flags::DETECTOR_READY != 0;
-        let refined = s.flags & corrected_flags::BIAS_REFINED != 0;
-        let learned_rest_s = match self.hints.newest {
-            Some(_) => 0.0,
-            None => self.cfg.learned_rest_s,
-        };
-        let zs_mean = Vector3::from(s.zs_mean_mps2);
-        let t_ns = s.stamps.sample_ns;
-        let flags = (usable, ready, refined);
-        let Some(sums) = self.learning.take(t_ns, m, flags, zs_mean, learned_rest_s) else {
-            return false;
-        };
-        self.align = sums;
-        self.align.gravity_off = gravity_off;
-        self.try_align(t_ns, m);
-        true
-    }
-
     fn accumulate_alignment(&mut self, t_ns: u64, m: &Imu, rest: bool, gravity_off: bool) {
         if !rest {
             self.align = AlignSums::default();

@@ -26,10 +26,12 @@
 //! (SHOE, which learns nothing; a resumed calibration state) keeps nothing here, nor does a
 //! filter with speed hints (its rest alignment takes a second, `navigator::HINT_ALIGN_S`).
 
+use super::Navigator;
 use super::records::AlignSums;
 use crate::eskf::Imu;
 use crate::hints::Ring;
 use calibrate::zero_state::BATCH_LEN;
+use ipc_types::{CorrectedImuSample, corrected_flags};
 use nalgebra::Vector3;
 
 /// One sample kept before the learned verdict.
@@ -139,5 +141,35 @@ impl LearningWindow {
     fn clear(&mut self) {
         self.kept.clear();
         self.ready_kept = 0;
+    }
+}
+
+impl Navigator {
+    /// Starts the alignment sums with the calibration stage's learning window at its learned
+    /// verdict's sample `s` (`navigator::learning`; not with speed hints) and aligns when they
+    /// are long enough; whether it did start them.
+    pub(super) fn seed_alignment(
+        &mut self,
+        s: &CorrectedImuSample,
+        m: &Imu,
+        usable: bool,
+        gravity_off: bool,
+    ) -> bool {
+        let ready = s.flags & corrected_flags::DETECTOR_READY != 0;
+        let refined = s.flags & corrected_flags::BIAS_REFINED != 0;
+        let learned_rest_s = match self.hints.newest {
+            Some(_) => 0.0,
+            None => self.cfg.learned_rest_s,
+        };
+        let zs_mean = Vector3::from(s.zs_mean_mps2);
+        let t_ns = s.stamps.sample_ns;
+        let flags = (usable, ready, refined);
+        let Some(sums) = self.learning.take(t_ns, m, flags, zs_mean, learned_rest_s) else {
+            return false;
+        };
+        self.align = sums;
+        self.align.gravity_off = gravity_off;
+        self.try_align(t_ns, m);
+        true
     }
 }
