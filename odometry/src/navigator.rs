@@ -32,7 +32,7 @@ mod records;
 mod walk_hooks;
 mod wheeled;
 use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE};
-use learning::LearningWindow;
+use learning::{Learned, LearningWindow};
 use records::{AlignSums, HistoryEntry, PendingRevision, RestWindow};
 
 /// Rest a filter with speed hints aligns on at least, s: a robot that creeps off from its
@@ -51,6 +51,9 @@ pub(crate) struct Navigator {
     align: AlignSums,
     /// The samples before the detector's learned verdict, for the alignment.
     learning: LearningWindow,
+    /// The learning window's alignment sums and the rest flagged after it, while the flagged
+    /// rest is too short to align on by itself (`navigator::learning`).
+    learned: Option<Learned>,
     /// The cruise window gathered while unaligned ([`crate::cruise`]).
     cruise: CruiseWindow,
     /// The mean hint speed of the cruise window the filter aligned on, m/s; `None` when it
@@ -132,6 +135,7 @@ impl Navigator {
             },
             align: AlignSums::default(),
             learning: LearningWindow::new(cfg.learned_rest_s, cfg.max_rate_hz),
+            learned: None,
             cruise: CruiseWindow::default(),
             aligned_in_motion: None,
             zupt_sigma_mps: cfg.zupt_sigma_mps,
@@ -167,6 +171,7 @@ impl Navigator {
         self.hints.copy_from(&other.hints);
         self.align = other.align;
         self.learning.copy_from(&other.learning);
+        self.learned = other.learned;
         self.cruise = other.cruise;
         self.aligned_in_motion = other.aligned_in_motion;
         self.zupt_sigma_mps = other.zupt_sigma_mps;
@@ -689,16 +694,29 @@ impl Navigator {
     fn accumulate_alignment(&mut self, t_ns: u64, m: &Imu, rest: bool, gravity_off: bool) {
         if !rest {
             self.align = AlignSums::default();
+            self.align_on_learned(m);
             return;
         }
-        let a = &mut self.align;
-        if a.accel.is_empty() {
-            a.t0_ns = t_ns;
+        if self.learned.is_some_and(|l| l.motion > 0) {
+            // A motion came between: the learning window is not this rest's.
+            self.learned = None;
         }
-        a.accel.push(m.f);
-        a.gyro.push(m.w);
-        a.gravity_off |= gravity_off;
+        let learned = self.learned.as_mut().map(|l| {
+            l.end_ns = t_ns;
+            &mut l.sums
+        });
+        for a in std::iter::once(&mut self.align).chain(learned) {
+            if a.accel.is_empty() {
+                a.t0_ns = t_ns;
+            }
+            a.accel.push(m.f);
+            a.gyro.push(m.w);
+            a.gravity_off |= gravity_off;
+        }
         self.try_align(t_ns, m);
+        if self.kf.is_some() {
+            self.learned = None;
+        }
     }
 
     /// Aligns on the alignment sums when they span the rest the alignment needs.
