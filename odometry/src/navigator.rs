@@ -691,34 +691,6 @@ impl Navigator {
         }
     }
 
-    fn accumulate_alignment(&mut self, t_ns: u64, m: &Imu, rest: bool, gravity_off: bool) {
-        if !rest {
-            self.align = AlignSums::default();
-            self.align_on_learned(m);
-            return;
-        }
-        if self.learned.is_some_and(|l| l.motion > 0) {
-            // A motion came between: the learning window is not this rest's.
-            self.learned = None;
-        }
-        let learned = self.learned.as_mut().map(|l| {
-            l.end_ns = t_ns;
-            &mut l.sums
-        });
-        for a in std::iter::once(&mut self.align).chain(learned) {
-            if a.accel.is_empty() {
-                a.t0_ns = t_ns;
-            }
-            a.accel.push(m.f);
-            a.gyro.push(m.w);
-            a.gravity_off |= gravity_off;
-        }
-        self.try_align(t_ns, m);
-        if self.kf.is_some() {
-            self.learned = None;
-        }
-    }
-
     /// Aligns on the alignment sums when they span the rest the alignment needs.
     fn try_align(&mut self, t_ns: u64, m: &Imu) {
         let a = &self.align;

@@ -217,4 +217,41 @@ impl Navigator {
         self.try_align(end_ns, m);
         self.align = AlignSums::default();
     }
+
+    /// Adds the unaligned filter's sample `m` at `t_ns` to the alignment's rest (`rest`: it
+    /// is flagged rest; `gravity_off`: `GRAVITY_OFF`), or ends that rest, and aligns when the
+    /// rest spans the alignment's.
+    pub(super) fn accumulate_alignment(
+        &mut self,
+        t_ns: u64,
+        m: &Imu,
+        rest: bool,
+        gravity_off: bool,
+    ) {
+        if !rest {
+            self.align = AlignSums::default();
+            self.align_on_learned(m);
+            return;
+        }
+        if self.learned.is_some_and(|l| l.motion > 0) {
+            // A motion came between: the learning window is not this rest's.
+            self.learned = None;
+        }
+        let learned = self.learned.as_mut().map(|l| {
+            l.end_ns = t_ns;
+            &mut l.sums
+        });
+        for a in std::iter::once(&mut self.align).chain(learned) {
+            if a.accel.is_empty() {
+                a.t0_ns = t_ns;
+            }
+            a.accel.push(m.f);
+            a.gyro.push(m.w);
+            a.gravity_off |= gravity_off;
+        }
+        self.try_align(t_ns, m);
+        if self.kf.is_some() {
+            self.learned = None;
+        }
+    }
 }
