@@ -12,8 +12,8 @@
 //! flagged after the verdict still comes first: when it spans the alignment's rest, the
 //! filter aligns on it alone, as without this module. When it ends sooner (the hindsight
 //! withdrew its end, or all of it), the filter aligns on the learning window and what
-//! remains of that rest, if together they span the alignment's rest, at the sample that ended
-//! it. (The learner's tests are weaker than the detector's on a short window: at 120 Hz half
+//! remains of that rest, if together they span the alignment's rest, a batch of samples
+//! after it ended ([`Navigator::align_on_learned`] says why). (The learner's tests are weaker than the detector's on a short window: at 120 Hz half
 //! a second is three batches; aligning on the learning window whenever it came took a real
 //! car of docs/real-data.md, wid-car-06, from 55-106 % to 244-406 % of its distance.)
 //!
