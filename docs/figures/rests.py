@@ -16,6 +16,15 @@ SCENARIOS = [
         "stop-and-go robot: rests 1-2 s, first rest 1 s, 0.2-0.5 m/s, 200 Hz",
         ["--duration", "120", "--initial-rest", "1", "--rests", "1,2", "--legs", "2,4", "--max-motion", "10", "--cruise", "0.2,0.5", "--rate", "200"],
     ),
+] + [
+    (
+        f"the same robot vibrating while its wheels turn (`--vibration-floor 0.3,1`), {rate} Hz",
+        ["--duration", "120", "--initial-rest", "1", "--rests", "1,2", "--legs", "2,4", "--max-motion", "10", "--cruise", "0.2,0.5", "--vibration-floor", "0.3,1", "--rate", rate],
+    )
+    # 62.5 Hz: the simulated part samples at 1 kHz behind its low-pass filter and outputs
+    # 1000/n Hz, the nearest to a 64 Hz part.
+    for rate in ("200", "100", "62.5", "40")
+] + [
     (
         "car, stops of 3-6 s on slopes up to 5 deg, turns, 1-3 m/s, 100 Hz",
         ["--duration", "240", "--initial-rest", "2", "--rests", "3,6", "--legs", "5,10", "--max-motion", "45", "--cruise", "1,3", "--max-slope-deg", "5", "--turns", "on", "--rate", "100"],

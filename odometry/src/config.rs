@@ -73,6 +73,10 @@ pub struct OdometryConfig {
     pub effective_samples: bool,
     /// Rest needed before alignment, s.
     pub align_s: f64,
+    /// The end of the calibration stage's learning window its alignment may stand on, s (at
+    /// most the detector's `learn.duration_s`; 0: none, the alignment waits for flagged rest):
+    /// the learner judged those samples still (`navigator::learning`).
+    pub learned_rest_s: f64,
     /// Time after the end of a motion interval over which corrections are gathered before the
     /// interval is republished, s.
     pub revision_delay_s: f64,
@@ -174,6 +178,7 @@ impl OdometryConfig {
             zupt_sigma_mps: 2e-3,
             effective_samples: true,
             align_s: 1.0,
+            learned_rest_s: 0.0,
             revision_delay_s: 0.2,
             max_motion_s: 120.0,
             max_rate_hz: 4000.0,

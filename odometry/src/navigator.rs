@@ -27,10 +27,12 @@ use ipc_types::{
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 mod hint_state;
+mod learning;
 mod records;
 mod walk_hooks;
 mod wheeled;
 use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE};
+use learning::{Learned, LearningWindow};
 use records::{AlignSums, HistoryEntry, PendingRevision, RestWindow};
 
 /// Rest a filter with speed hints aligns on at least, s: a robot that creeps off from its
@@ -47,6 +49,11 @@ pub(crate) struct Navigator {
     cfg: OdometryConfig,
     hints: Hints,
     align: AlignSums,
+    /// The samples before the detector's learned verdict, for the alignment.
+    learning: LearningWindow,
+    /// The learning window's alignment sums and the rest flagged after it, while the flagged
+    /// rest is too short to align on by itself (`navigator::learning`).
+    learned: Option<Learned>,
     /// The cruise window gathered while unaligned ([`crate::cruise`]).
     cruise: CruiseWindow,
     /// The mean hint speed of the cruise window the filter aligned on, m/s; `None` when it
@@ -127,6 +134,8 @@ impl Navigator {
                 stats: HintStats::default(),
             },
             align: AlignSums::default(),
+            learning: LearningWindow::new(cfg.learned_rest_s, cfg.max_rate_hz),
+            learned: None,
             cruise: CruiseWindow::default(),
             aligned_in_motion: None,
             zupt_sigma_mps: cfg.zupt_sigma_mps,
@@ -161,6 +170,8 @@ impl Navigator {
         self.cfg = other.cfg;
         self.hints.copy_from(&other.hints);
         self.align = other.align;
+        self.learning.copy_from(&other.learning);
+        self.learned = other.learned;
         self.cruise = other.cruise;
         self.aligned_in_motion = other.aligned_in_motion;
         self.zupt_sigma_mps = other.zupt_sigma_mps;
@@ -337,7 +348,9 @@ impl Navigator {
                 let gravity_off = s.flags & corrected_flags::GRAVITY_OFF != 0;
                 let rest = rest && ready && verdict.clipped == 0;
                 self.gather_attitude(&m, rest);
-                self.accumulate_alignment(t_ns, &m, rest, gravity_off);
+                if !self.seed_alignment(s, &m, verdict.clipped == 0, gravity_off) {
+                    self.accumulate_alignment(t_ns, &m, rest, gravity_off);
+                }
                 let still = imu_rest && detector_ready && verdict.clipped == 0;
                 self.accumulate_cruise(t_ns, &m, d.fresh.filter(|_| still), gravity_off);
                 self.align_on_steps(&m, step.as_ref());
@@ -678,18 +691,9 @@ impl Navigator {
         }
     }
 
-    fn accumulate_alignment(&mut self, t_ns: u64, m: &Imu, rest: bool, gravity_off: bool) {
-        if !rest {
-            self.align = AlignSums::default();
-            return;
-        }
-        let a = &mut self.align;
-        if a.accel.is_empty() {
-            a.t0_ns = t_ns;
-        }
-        a.accel.push(m.f);
-        a.gyro.push(m.w);
-        a.gravity_off |= gravity_off;
+    /// Aligns on the alignment sums when they span the rest the alignment needs.
+    fn try_align(&mut self, t_ns: u64, m: &Imu) {
+        let a = &self.align;
         // With speed hints a rest is aligned on for at least `HINT_ALIGN_S`.
         let align_s = if self.hints.newest.is_some() {
             self.cfg.align_s.max(HINT_ALIGN_S)

@@ -3,7 +3,7 @@
 //! gently; a foot rests for 0.2-0.5 s at every step and is not quite still while it does.
 
 use calibrate::zero_state::learn::REST_ACCEL_SIGMA_MPS2;
-use calibrate::zero_state::{DetectorConfig, DetectorKind};
+use calibrate::zero_state::{DetectorConfig, DetectorKind, ROBOT_LEARN_S};
 use ipc_types::stream::plausible::Envelope;
 use ipc_types::units::STANDARD_GRAVITY_MPS2;
 
@@ -141,6 +141,15 @@ impl Profile {
             // The vehicle profile keeps its second, as its learning ([`VEHICLE_LEARN_S`]).
             config.align_s = ROBOT_ALIGN_S;
         }
+        // The end of the learning window (`navigator::learning`), unless `config` has its
+        // own: the robot's half second is within every learned detector's window these
+        // profiles run (the vehicle profile's second, live `mems-calibrate serve`'s half
+        // second). SHOE learns nothing.
+        config.learned_rest_s = match self {
+            Self::Pedestrian => 0.0,
+            _ if config.learned_rest_s > 0.0 => config.learned_rest_s,
+            _ => ROBOT_LEARN_S,
+        };
         if self == Self::Other {
             // The detector's window is shorter (`OTHER_GLRT_WINDOW_S`), and so is the time a
             // window still holds the rest before a motion.

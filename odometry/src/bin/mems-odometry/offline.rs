@@ -195,6 +195,8 @@ fn pass(
         }
     }
     base.rest_updates = !args.no_zupt;
+    // The alignment's share of the learning window lies within it (`--learn-s`).
+    base.learned_rest_s = calibrate::zero_state::ROBOT_LEARN_S.min(detector.learn.duration_s);
     base.consistency.scaling = args.innovation_scaling;
     if let Some(k) = args.weinberg_k {
         if !(k.is_finite() && k > 0.0) {

@@ -1,0 +1,257 @@
+//! The calibration stage's learning window as the alignment's rest.
+//!
+//! A robot's detector learns its references from the first half second of rest
+//! (`calibrate::zero_state::ROBOT_LEARN_S`) and flags rest only after it; the odometry aligns
+//! on `OdometryConfig::align_s` of flagged rest, and the rest hindsight withdraws the flags of
+//! the `rest_hindsight_s` before a motion. On a rest of 1 s that leaves nothing: the learning
+//! took the first half, the hindsight the second. But the learner already judged its window
+//! still, batch by batch (`calibrate::zero_state::learn`: gravity's magnitude, no outlying
+//! batch mean, no trend), so the alignment may stand on those samples: the odometry keeps
+//! the samples before the learned verdict and, when it comes, the alignment sums of the last
+//! `OdometryConfig::learned_rest_s` of them (no more than the learner's window). The rest
+//! flagged after the verdict still comes first: when it spans the alignment's rest, the
+//! filter aligns on it alone, as without this module. When it ends sooner (the hindsight
+//! withdrew its end, or all of it), the filter aligns on the learning window and what
+//! remains of that rest, if together they span the alignment's rest, a batch of samples
+//! after it ended ([`Navigator::align_on_learned`] says why). (The learner's tests are weaker than the detector's on a short window: at 120 Hz half
+//! a second is three batches; aligning on the learning window whenever it came took a real
+//! car of docs/real-data.md, wid-car-06, from 55-106 % to 244-406 % of its distance.)
+//!
+//! Those samples left the calibration stage before its first refinement, which the verdict
+//! makes (`calibrate::stage`, "Bias refinement at rest"), so they are put in the terms of the
+//! samples after it:
+//! - gyroscope (rad/s, sensor frame, after `OdometryConfig::gyro_correction`): the first
+//!   refinement subtracts the learned window's mean rate, so the window's own mean is
+//!   subtracted; the alignment's gyro bias is then zero with the variance of that mean, which
+//!   is what is left of the bias after the refinement;
+//! - accelerometer (m/s^2, sensor frame): the refinement moves the offset along gravity; the
+//!   verdict's sample carries its batch's mean after the refinement (`zs_mean_mps2`), so the
+//!   offset it moved is that batch's mean as emitted minus that, subtracted from every sample.
+//!
+//! The verdict's sample is the first with `BIAS_REFINED` (the samples of its batch before it
+//! are flagged `DETECTOR_READY` once settled, but not refined). A stream that starts ready
+//! (SHOE, which learns nothing; a resumed calibration state) keeps nothing here, nor does a
+//! filter with speed hints (its rest alignment takes a second, `navigator::HINT_ALIGN_S`).
+
+use super::Navigator;
+use super::records::AlignSums;
+use crate::eskf::Imu;
+use crate::hints::Ring;
+use calibrate::zero_state::BATCH_LEN;
+use ipc_types::{CorrectedImuSample, corrected_flags};
+use nalgebra::Vector3;
+
+/// The learning window's alignment sums, with the rest flagged after it, and the samples
+/// since that rest ended.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Learned {
+    pub(super) sums: AlignSums,
+    /// Time of the rest's last sample, ns.
+    pub(super) end_ns: u64,
+    pub(super) motion: usize,
+}
+
+/// One sample kept before the learned verdict.
+#[derive(Debug, Clone, Copy, Default)]
+struct Kept {
+    t_ns: u64,
+    f: Vector3<f64>,
+    w: Vector3<f64>,
+}
+
+/// The samples before the learned verdict (see the module documentation).
+#[derive(Debug, Clone)]
+pub(super) struct LearningWindow {
+    kept: Ring<Kept>,
+    /// Samples kept that were flagged `DETECTOR_READY` (the verdict's batch, once settled).
+    ready_kept: usize,
+}
+
+impl LearningWindow {
+    /// Storage for `learned_rest_s` at `max_rate_hz`, allocated here.
+    pub(super) fn new(learned_rest_s: f64, max_rate_hz: f64) -> Self {
+        let capacity = (learned_rest_s.max(0.0) * max_rate_hz).ceil() as usize + 1;
+        Self {
+            kept: Ring::new(capacity),
+            ready_kept: 0,
+        }
+    }
+
+    /// Makes this a copy of `other` (same capacity): nothing is allocated.
+    pub(super) fn copy_from(&mut self, other: &Self) {
+        self.kept.clone_from(&other.kept);
+        self.ready_kept = other.ready_kept;
+    }
+
+    /// Takes the unaligned filter's sample `m` at `t_ns` (`usable`: neither clipped nor
+    /// implausible; `ready`, `refined`: its `DETECTOR_READY` and `BIAS_REFINED` flags;
+    /// `zs_mean`: its detector window's mean, m/s^2). Returns the alignment sums of the
+    /// learned window, in the refined terms, at the learned verdict's sample; `None` before
+    /// and after it. `learned_rest_s` 0 keeps nothing.
+    pub(super) fn take(
+        &mut self,
+        t_ns: u64,
+        m: &Imu,
+        flags: (bool, bool, bool),
+        zs_mean: Vector3<f64>,
+        learned_rest_s: f64,
+    ) -> Option<AlignSums> {
+        let (usable, ready, refined) = flags;
+        let learning = !ready || (!refined && !self.kept.is_empty() && self.ready_kept < BATCH_LEN);
+        if learned_rest_s <= 0.0 || !(learning || refined && !self.kept.is_empty()) {
+            self.clear();
+            return None;
+        }
+        if !usable {
+            // A clipped or implausible reading is no part of a rest.
+            self.clear();
+            return None;
+        }
+        self.kept.push(Kept {
+            t_ns,
+            f: m.f,
+            w: m.w,
+        });
+        if learning {
+            self.ready_kept += usize::from(ready);
+            return None;
+        }
+        let sums = self.sums(learned_rest_s, zs_mean);
+        self.clear();
+        sums
+    }
+
+    /// The alignment sums of the kept samples of the last `learned_rest_s` (the newest the
+    /// verdict's), refined (module documentation).
+    fn sums(&self, learned_rest_s: f64, zs_mean: Vector3<f64>) -> Option<AlignSums> {
+        let last = *self.kept.newest(0)?;
+        let dt_ns = last.t_ns - self.kept.newest(1)?.t_ns;
+        // The learner's window of `n` samples spans `n - 1` intervals.
+        let from_ns = (last.t_ns + dt_ns / 2).saturating_sub((learned_rest_s * 1e9) as u64);
+        let n = (0..self.kept.len())
+            .take_while(|&i| self.kept.newest(i).is_some_and(|k| k.t_ns >= from_ns))
+            .count();
+        if n < 2 {
+            return None;
+        }
+        let window = || (0..n).rev().filter_map(|i| self.kept.newest(i));
+        let batch = n.min(BATCH_LEN);
+        let batch_mean = (0..batch)
+            .filter_map(|i| self.kept.newest(i))
+            .fold(Vector3::zeros(), |acc, k| acc + k.f)
+            / batch as f64;
+        let accel_shift = batch_mean - zs_mean;
+        let gyro_mean = window().fold(Vector3::zeros(), |acc, k| acc + k.w) / n as f64;
+        let mut sums = AlignSums::default();
+        for (i, k) in window().enumerate() {
+            if i == 0 {
+                // The span counts the first sample's interval too (`n` samples, `n`
+                // intervals), and a quarter of one for the jitter of the times.
+                sums.t0_ns = k.t_ns.saturating_sub(dt_ns + dt_ns / 4);
+            }
+            sums.accel.push(k.f - accel_shift);
+            sums.gyro.push(k.w - gyro_mean);
+        }
+        Some(sums)
+    }
+
+    fn clear(&mut self) {
+        self.kept.clear();
+        self.ready_kept = 0;
+    }
+}
+
+impl Navigator {
+    /// Keeps the alignment sums of the calibration stage's learning window at its learned
+    /// verdict's sample `s` (`navigator::learning`; not with speed hints), for the rest
+    /// flagged after it to add to; whether this was that sample.
+    pub(super) fn seed_alignment(
+        &mut self,
+        s: &CorrectedImuSample,
+        m: &Imu,
+        usable: bool,
+        gravity_off: bool,
+    ) -> bool {
+        let ready = s.flags & corrected_flags::DETECTOR_READY != 0;
+        let refined = s.flags & corrected_flags::BIAS_REFINED != 0;
+        let learned_rest_s = match self.hints.newest {
+            Some(_) => 0.0,
+            None => self.cfg.learned_rest_s,
+        };
+        let zs_mean = Vector3::from(s.zs_mean_mps2);
+        let t_ns = s.stamps.sample_ns;
+        let flags = (usable, ready, refined);
+        let Some(sums) = self.learning.take(t_ns, m, flags, zs_mean, learned_rest_s) else {
+            return false;
+        };
+        let sums = AlignSums {
+            gravity_off,
+            ..sums
+        };
+        self.learned = Some(Learned {
+            sums,
+            end_ns: t_ns,
+            motion: 0,
+        });
+        true
+    }
+
+    /// A motion sample `m` while the rest flagged after the learning window was
+    /// too short to align on by itself: a batch of them ([`BATCH_LEN`]) after that rest, the
+    /// filter aligns on the learning window and that rest together when they span the
+    /// alignment's rest. (Not at the first: the samples of the batch after the learned
+    /// verdict leave the calibration stage with its verdict, not rest, until their own
+    /// settles them; a filter aligned there would be unaligned again when they turn out rest.)
+    pub(super) fn align_on_learned(&mut self, m: &Imu) {
+        let Some(learned) = self.learned.as_mut() else {
+            return;
+        };
+        learned.motion += 1;
+        if learned.motion < BATCH_LEN {
+            return;
+        }
+        self.align = learned.sums;
+        let end_ns = learned.end_ns;
+        self.learned = None;
+        // The rest's span ends at its last sample.
+        self.try_align(end_ns, m);
+        self.align = AlignSums::default();
+    }
+
+    /// Adds the unaligned filter's sample `m` at `t_ns` to the alignment's rest (`rest`: it
+    /// is flagged rest; `gravity_off`: `GRAVITY_OFF`), or ends that rest, and aligns when the
+    /// rest spans the alignment's.
+    pub(super) fn accumulate_alignment(
+        &mut self,
+        t_ns: u64,
+        m: &Imu,
+        rest: bool,
+        gravity_off: bool,
+    ) {
+        if !rest {
+            self.align = AlignSums::default();
+            self.align_on_learned(m);
+            return;
+        }
+        if self.learned.is_some_and(|l| l.motion > 0) {
+            // A motion came between: the learning window is not this rest's.
+            self.learned = None;
+        }
+        let learned = self.learned.as_mut().map(|l| {
+            l.end_ns = t_ns;
+            &mut l.sums
+        });
+        for a in std::iter::once(&mut self.align).chain(learned) {
+            if a.accel.is_empty() {
+                a.t0_ns = t_ns;
+            }
+            a.accel.push(m.f);
+            a.gyro.push(m.w);
+            a.gravity_off |= gravity_off;
+        }
+        self.try_align(t_ns, m);
+        if self.kf.is_some() {
+            self.learned = None;
+        }
+    }
+}
