@@ -34,8 +34,14 @@
 //! navigation frame, m/s) free integration would have had, and `d = sum u T_w` over their
 //! spans `T_w` the displacement it would have added. The published variance of each
 //! horizontal axis gets `d_i^2` (position) and `u_i^2` (velocity) for the rest (added as they
-//! grow): the 1-sigma spans both readings. Windows consistent with rest add nothing (a stop
-//! detected late keeps what the late windows removed, not a drift at that speed).
+//! grow): the 1-sigma spans both readings. On a platform that cannot glide (a foot, a walker's
+//! hand) the windows consistent with rest that follow add nothing: a stop detected late keeps
+//! what the late windows removed, not a drift at that speed. On one that can
+//! ([`ConsistencyConfig::false_rest_glides`]: a wheeled robot, a cart, an arm), the rest's
+//! later windows are also what a cruise too smooth for the detector looks like once its
+//! velocity has been removed: they carry the false rest's `u` on, `d += u T_w`, for the rest
+//! of the rest (a robot at 0.3 m/s taken for rest over 2 s: 0.6 m, where the first window
+//! alone gave 0.3 m/s times its span).
 //!
 //! Fixed-size state, no allocation: the stage's hot path runs it.
 
@@ -65,17 +71,23 @@ pub struct ConsistencyConfig {
     pub significance: f64,
     /// Significance of one zero-velocity window's chi-square test that calls a rest false.
     pub false_rest_significance: f64,
+    /// Whether the platform can glide through a rest the detector cannot tell from a smooth
+    /// cruise (wheels), so that a false rest's velocity is carried through the rest's later
+    /// windows; not for a foot or a walker's hand, which cannot.
+    pub false_rest_glides: bool,
 }
 
 impl Default for ConsistencyConfig {
     /// Report-only, 30 s of memory (several rests of a walk or a robot's stop-and-go, short
-    /// against a recording), 1 % and 0.1 %.
+    /// against a recording), 1 % and 0.1 %, no glide (the profiles turn it on,
+    /// `Profile::odometry`).
     fn default() -> Self {
         Self {
             scaling: Scaling::Report,
             memory_s: 30.0,
             significance: 0.01,
             false_rest_significance: 1e-3,
+            false_rest_glides: false,
         }
     }
 }
@@ -204,6 +216,20 @@ struct FalseRest {
 /// horizontal axis.
 pub type Widening = ([f64; 2], [f64; 2]);
 
+impl FalseRest {
+    /// Takes a window of `span_s` seconds that removed `removed` (m/s) into the motion the
+    /// rest may hide; returns the variance to add.
+    fn carry(&mut self, span_s: f64, removed: [f64; 2]) -> Widening {
+        for ((u, d), removed) in self.u.iter_mut().zip(self.d.iter_mut()).zip(removed) {
+            *u += removed;
+            *d += *u * span_s;
+        }
+        let p = raise(&mut self.added_p, self.d.map(|d| d * d));
+        let v = raise(&mut self.added_v, self.u.map(|u| u * u));
+        (p, v)
+    }
+}
+
 /// The increase from `added` to `target` (none when it shrinks), and `added` raised to it.
 fn raise(added: &mut [f64; 2], target: [f64; 2]) -> [f64; 2] {
     std::array::from_fn(|i| {
@@ -282,21 +308,20 @@ impl Consistency {
     ) -> (Widening, f64) {
         if nis <= self.lambda() * self.false_rest_nis {
             let lambda = self.push(Kind::ZeroVelocity, t_ns, nis, 3.0);
-            return (([0.0; 2], [0.0; 2]), lambda);
+            let glides = self.cfg.false_rest_glides && self.rest.counted;
+            let widen = if glides {
+                self.rest.carry(span_s, removed)
+            } else {
+                ([0.0; 2], [0.0; 2])
+            };
+            return (widen, lambda);
         }
         self.windows_inconsistent += 1;
-        let r = &mut self.rest;
-        if !r.counted {
-            r.counted = true;
+        if !self.rest.counted {
+            self.rest.counted = true;
             self.rests_inconsistent += 1;
         }
-        for ((u, d), removed) in r.u.iter_mut().zip(r.d.iter_mut()).zip(removed) {
-            *u += removed;
-            *d += *u * span_s;
-        }
-        let p = raise(&mut r.added_p, r.d.map(|d| d * d));
-        let v = raise(&mut r.added_v, r.u.map(|u| u * u));
-        ((p, v), self.lambda())
+        (self.rest.carry(span_s, removed), self.lambda())
     }
 
     /// Takes the NIS of an update `kf` made (`None`: it made none) and sets the factor in
@@ -417,5 +442,40 @@ mod tests {
         c.rest_started();
         c.zero_velocity(3_000_000_000, 1e4, 0.01, [1.0, 0.0]);
         assert_eq!(c.report().rests_inconsistent, 2);
+    }
+
+    /// A robot cruising at 0.3 m/s taken for a 2 s rest: one inconsistent window removes its
+    /// velocity, the 199 after it see none. A platform that glides carries the 0.3 m/s
+    /// through them (0.6 m); a foot's rest does not (0.003 m, the first window's span).
+    #[test]
+    fn a_false_rest_of_a_gliding_platform_carries_its_velocity_through_the_rest() {
+        let position_sigma = |glides: bool| {
+            let cfg = ConsistencyConfig {
+                false_rest_glides: glides,
+                ..ConsistencyConfig::default()
+            };
+            let mut c = Consistency::new(cfg);
+            c.rest_started();
+            let mut p = 0.0;
+            for k in 0..200 {
+                let (nis, removed) = if k == 0 { (1e4, 0.3) } else { (1.0, 0.0) };
+                let ((pk, _), _) = c.zero_velocity(k * 10_000_000, nis, 0.01, [removed, 0.0]);
+                p += pk[0];
+            }
+            assert_eq!(c.report().windows_inconsistent, 1);
+            // The consistent windows still feed the factor.
+            assert_eq!(c.report().zero_velocity.count, 199);
+            p.sqrt()
+        };
+        assert!((position_sigma(true) - 0.6).abs() < 1e-9);
+        assert!((position_sigma(false) - 0.003).abs() < 1e-9);
+        // A consistent rest adds nothing either way.
+        let mut c = Consistency::new(ConsistencyConfig {
+            false_rest_glides: true,
+            ..ConsistencyConfig::default()
+        });
+        c.rest_started();
+        let (w, _) = c.zero_velocity(0, 1.0, 0.01, [0.01, 0.0]);
+        assert_eq!(w, ([0.0; 2], [0.0; 2]));
     }
 }

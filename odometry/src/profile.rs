@@ -163,6 +163,9 @@ impl Profile {
             Self::Walking => Some(config.walking.unwrap_or_default()),
             _ => None,
         };
+        // A wheel glides through what a detector may take for rest; a foot and a walker's
+        // hand cannot (`consistency`'s false rests).
+        config.consistency.false_rest_glides = !matches!(self, Self::Pedestrian | Self::Walking);
         if self == Self::Vehicle {
             config.imu_nonholonomic_sigma_mps = WHEELED_NONHOLONOMIC_SIGMA_MPS;
             config.rest_vibration_factor = WHEELED_REST_VIBRATION_FACTOR;
