@@ -302,10 +302,10 @@ pub struct UncalibratedAccel {
     pub fitted: Option<crate::attitudes::AttitudeFit>,
 }
 
-/// Tilt change between two rests the refined bias's random walk allows for, degrees
+/// Tilt change between two rests the refined bias's random walk is sized by, degrees
 /// ([`UncalibratedAccel::refined_bias_walk_mps3`]): a car stopping on grades of up to 5 deg
-/// either way (`mems-sim drive --max-slope-deg 5`), a foot's stances at slightly different
-/// tilts.
+/// either way (`mems-sim drive --max-slope-deg 5`). The walk is a chosen figure of that order
+/// (0.01 and 0.03 covered the simulated sloped drive, 0.003 did not), not a measured one.
 pub const REST_TILT_CHANGE_DEG: f64 = 5.0;
 
 impl Default for UncalibratedAccel {

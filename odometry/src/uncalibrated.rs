@@ -111,16 +111,19 @@ impl AccelPrior {
 impl AccelPrior {
     /// The filter's noise model under `cfg` for this prior: `cfg.noise`, with the bias's random
     /// walk at least [`UncalibratedAccel::refined_bias_walk_mps3`] for a part the calibration
-    /// stage flagged `GRAVITY_OFF`. That stage refines such a part's bias at every rest along
-    /// gravity there, with no prior and a running mean over its last minute of rest
-    /// (`calibrate::stage`), so the bias the filter sees moves at a rest at another tilt: by
-    /// the share of the offset across the old gravity that the tilt turns along the new one.
-    /// A calibrated part's random walk (1e-4) holds nothing of that: on a simulated drive
-    /// stopping on grades of up to 5 deg (`mems-sim drive --duration 120 --turns on --rate 200
-    /// --seed 1 --max-slope-deg 5`, the part of tests/uncalibrated.rs) the filter's bias sigma
-    /// across gravity fell to 0.01-0.02 m/s^2 with its estimate 1.4 m/s^2 off, and the
-    /// position's 1-sigma, 0.38 m, did not hold its error, 0.66 m; with this walk the error
-    /// is 0.42 m, its 1-sigma 0.55 m.
+    /// stage flagged `GRAVITY_OFF`. What the filter calls such a part's bias holds what its
+    /// model lacks: the 3 % scale and 2 % cross-axis errors times the changes of specific force
+    /// (a stop on a grade tilts gravity in the sensor frame), and the stage's refinement at
+    /// every rest along gravity there (no prior, a running mean over its last minute of rest),
+    /// which moves it at a rest at another tilt by the share of the offset across the old
+    /// gravity that the tilt turns along the new one. A calibrated part's random walk (1e-4)
+    /// holds nothing of that: on a simulated drive stopping on grades of up to 5 deg
+    /// (`mems-sim drive --duration 120 --turns on --rate 200 --seed 1 --max-slope-deg 5`, the
+    /// part of tests/uncalibrated.rs) the filter's bias sigma across gravity fell to
+    /// 0.01-0.02 m/s^2 with its estimate 1.4 m/s^2 off, and the position's 1-sigma, 0.38 m,
+    /// did not hold its error, 0.66 m; with this walk the error is 0.39 m, its 1-sigma 0.58 m.
+    /// Tried and not kept (docs/odometry.md): the bias across gravity held out of the updates,
+    /// the walk at rests only, the refinement's share of a tilt added at each rest.
     pub fn noise(&self, cfg: &OdometryConfig) -> NoiseModel {
         let mut noise = cfg.noise;
         if self.flagged {
