@@ -498,6 +498,52 @@ mod tests {
     }
 
     #[test]
+    fn a_refused_fit_names_the_check_and_what_it_measured() {
+        let cfg = UncalibratedAccel::default();
+        let fit = AttitudeFit {
+            bias_mps2: [0.5, -0.3, 0.2],
+            bias_sigma_mps2: [0.01; 3],
+            scale: [0.02, -0.01, 0.0],
+            scale_sigma: [0.002; 3],
+            poses: 12,
+            condition: 3.0,
+        };
+        assert_eq!(FitRefusal::of_fit(&fit, &cfg), None);
+        let wide = AttitudeFit {
+            scale_sigma: [0.002, 0.05, 0.002],
+            ..fit
+        };
+        let refused = FitRefusal::of_fit(&wide, &cfg).unwrap();
+        assert_eq!(
+            refused,
+            FitRefusal::ScaleSigma {
+                axis: 1,
+                sigma: 0.05
+            }
+        );
+        assert!(
+            refused.to_string().contains("y scale 1-sigma 5.0 %"),
+            "{refused}"
+        );
+        let far = AttitudeFit {
+            bias_mps2: [0.5, -0.3, 4.0],
+            ..fit
+        };
+        assert!(matches!(
+            FitRefusal::of_fit(&far, &cfg),
+            Some(FitRefusal::Bias { axis: 2, .. })
+        ));
+        let few = FitRefusal::of_error(&LabelFreeError::TooFewPoses {
+            poses: 3,
+            distinct: 2,
+        });
+        assert_eq!(
+            few.to_string(),
+            "2 distinct attitudes among 3 rest poses, the fit needs 9"
+        );
+    }
+
+    #[test]
     fn only_a_rest_beyond_the_trigger_or_flagged_gets_the_uncalibrated_prior() {
         let cfg = OdometryConfig::mpu9250(9.8);
         let calibrated = AccelPrior::at_rest(&cfg, &Vector3::new(0.0, 0.0, 9.8 * 1.015), false);

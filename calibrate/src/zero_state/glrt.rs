@@ -125,7 +125,7 @@ pub struct GlrtConfig {
     pub accel_bias_sigma_mps2: f64,
     /// The same for a part whose learned rest reads gravity more than
     /// [`super::learn::CALIBRATED_GRAVITY_ERROR`] off (an uncalibrated part, whatever its file
-    /// says), m/s^2: its zero-g offset is unknown across gravity too, and a 0.15 g offset turned
+    /// says) or declared uncalibrated ([`super::DetectorConfig::uncalibrated`]), m/s^2: its zero-g offset is unknown across gravity too, and a 0.15 g offset turned
     /// by a car's 10 degree bend moves the reference by 0.25 m/s^2, which held to a calibrated
     /// part's 6 mm/s^2 calls every later cruise and rest motion.
     pub uncalibrated_accel_bias_sigma_mps2: f64,

@@ -199,19 +199,13 @@ impl Pass<'_> {
     }
 }
 
-/// One run of the pipeline over the recording with the calibration `file` (see [`Pass`]).
-/// Returns what the filter estimated of the accelerometer, without printing or writing
-/// anything, when the run ends early; else prints the result and writes `--out`.
-fn pass(
+/// The odometry's configuration for the calibration `file` and the options `args`, before
+/// the profile's, with what an earlier pass estimated for `which`.
+fn base_config(
     args: &OfflineArgs,
-    choice: &platform::Choice,
     file: &calibrate::calibfile::CalibrationFile,
-    detector: calibrate::zero_state::DetectorConfig,
     which: Pass<'_>,
-) -> Result<Option<Early>> {
-    let (source, repairs, ranges) = Source::open(args)?;
-    let calibration = CalibrationStage::new(file, detector, RefineConfig::default())
-        .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
+) -> Result<odometry::config::OdometryConfig> {
     let mut base = odometry_config(file);
     if let Pass::Second(first) = which {
         match first.per_axis {
@@ -234,6 +228,23 @@ fn pass(
     }
     base.trust_untrusted = args.ranges.trust_clipped;
     base.reconstruct_clipped = !args.ranges.bridge_clipped;
+    Ok(base)
+}
+
+/// One run of the pipeline over the recording with the calibration `file` (see [`Pass`]).
+/// Returns what the filter estimated of the accelerometer, without printing or writing
+/// anything, when the run ends early; else prints the result and writes `--out`.
+fn pass(
+    args: &OfflineArgs,
+    choice: &platform::Choice,
+    file: &calibrate::calibfile::CalibrationFile,
+    detector: calibrate::zero_state::DetectorConfig,
+    which: Pass<'_>,
+) -> Result<Option<Early>> {
+    let (source, repairs, ranges) = Source::open(args)?;
+    let calibration = CalibrationStage::new(file, detector, RefineConfig::default())
+        .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
+    let base = base_config(args, file, which)?;
     let hints = args.hints.config()?;
     let (config, session) = match choice.profile {
         Profile::Auto => (
