@@ -39,8 +39,10 @@
 //!   mean `m`, `d += k (|m - d| - g) (m - d) / |m - d|`. At one attitude this is the running
 //!   mean of `|m| - g` along `u`; rests at other attitudes correct other components and leave
 //!   the rest of `d` as it was. A learned rest that reads gravity more than
-//!   [`crate::zero_state::learn::CALIBRATED_GRAVITY_ERROR`] off (an uncalibrated part) is taken
-//!   with no prior, and every sample after it is flagged `GRAVITY_OFF`.
+//!   [`crate::zero_state::learn::CALIBRATED_GRAVITY_ERROR`] off (an uncalibrated part), or any
+//!   learned rest of a part declared uncalibrated
+//!   ([`crate::zero_state::DetectorConfig::uncalibrated`]), is taken with no prior, and every
+//!   sample after it is flagged `GRAVITY_OFF`.
 //!
 //! Only a detector whose rest means still refines ([`crate::zero_state::DetectorKind::rest_is_still`]:
 //! not SHOE, whose stances roll). Both are running means over rest time (the learning interval
@@ -61,7 +63,7 @@ use crate::model::AccelModel;
 use crate::terms::ReadingTerms;
 use crate::zero_state::{
     BATCH_LEN, DetectorConfig, NoiseFloor, StaticReference, Verdict, ZeroStateDetector,
-    batch_duration_s, learn, rest_gain,
+    batch_duration_s, rest_gain,
 };
 
 /// Settings of the bias refinement.
@@ -564,9 +566,7 @@ impl CalibrationStage {
             // The start-up interval was at rest by assumption: the first refinement. A part
             // that reads gravity further off than a calibrated one is not what the file says:
             // its bias is worth nothing against the rest, which is taken whole.
-            if (learned.magnitude_mps2 / self.gravity_mps2 - 1.0).abs()
-                > learn::CALIBRATED_GRAVITY_ERROR
-            {
+            if self.detector.config().uncalibrated(learned) {
                 self.refine.accel_seen_s = 0.0;
             }
             let gyro = self.batch_gyro.then_some(learned.gyro_mean_rps);
@@ -584,12 +584,13 @@ impl CalibrationStage {
                 self.gravity_mps2,
             );
         }
-        let g = self.gravity_mps2;
+        let config = self.detector.config();
         self.carried = Carried {
             ready: v.ready,
-            gravity_off: self.detector.reference().is_some_and(|r| {
-                (r.magnitude_mps2 / g - 1.0).abs() > learn::CALIBRATED_GRAVITY_ERROR
-            }),
+            gravity_off: self
+                .detector
+                .reference()
+                .is_some_and(|r| config.uncalibrated(&r)),
             rest: v.rest,
             zs_mean_mps2: std::array::from_fn(|i| {
                 v.decided_mean_mps2[i] - self.refine.accel_mps2[i]

@@ -289,6 +289,10 @@ pub struct UncalibratedAccel {
     pub scale_sigma: f64,
     /// 1-sigma of the cross-axis sensitivity, fraction: 2 % (the same datasheets, +-2 %).
     pub cross_axis_sigma: f64,
+    /// Smallest random walk of the accelerometer bias for a part the calibration stage flagged
+    /// `GRAVITY_OFF`, m/s^3/sqrt(Hz) (see [`crate::uncalibrated::AccelPrior::noise`]):
+    /// `bias_sigma_mps2 sin(REST_TILT_CHANGE_DEG) / sqrt(memory_s)`, 0.011 by default.
+    pub refined_bias_walk_mps3: f64,
     /// The bias an earlier pass over the same recording estimated and removed from the
     /// samples, m/s^2, sensor frame (`mems-odometry offline`,
     /// [`crate::uncalibrated::remove_bias`]): the filter then starts from it with the
@@ -303,13 +307,23 @@ pub struct UncalibratedAccel {
     pub fitted: Option<crate::attitudes::AttitudeFit>,
 }
 
+/// Tilt change between two rests the refined bias's random walk is sized by, degrees
+/// ([`UncalibratedAccel::refined_bias_walk_mps3`]): a car stopping on grades of up to 5 deg
+/// either way (`mems-sim drive --max-slope-deg 5`). The walk is a chosen figure of that order
+/// (0.01 and 0.03 covered the simulated sloped drive, 0.003 did not), not a measured one.
+pub const REST_TILT_CHANGE_DEG: f64 = 5.0;
+
 impl Default for UncalibratedAccel {
     fn default() -> Self {
+        let bias_sigma_mps2 = 0.1 * ipc_types::units::STANDARD_GRAVITY_MPS2;
+        let memory_s = calibrate::stage::RefineConfig::default().memory_s;
         Self {
             trigger: calibrate::zero_state::learn::CALIBRATED_GRAVITY_ERROR,
-            bias_sigma_mps2: 0.1 * ipc_types::units::STANDARD_GRAVITY_MPS2,
+            bias_sigma_mps2,
             scale_sigma: 0.03,
             cross_axis_sigma: 0.02,
+            refined_bias_walk_mps3: bias_sigma_mps2 * REST_TILT_CHANGE_DEG.to_radians().sin()
+                / memory_s.sqrt(),
             removed_bias_mps2: None,
             fitted: None,
         }

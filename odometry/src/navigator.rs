@@ -745,7 +745,7 @@ impl Navigator {
             accel: prior.consider,
         };
         self.kf = Some(
-            Eskf::new(x, cov, self.cfg.gravity_mps2, self.cfg.noise, *m)
+            Eskf::new(x, cov, self.cfg.gravity_mps2, prior.noise(&self.cfg), *m)
                 .with_consider(consider, f_mean)
                 .with_propagation_interval(self.cfg.propagation_interval_s),
         );

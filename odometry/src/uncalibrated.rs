@@ -39,9 +39,11 @@
 use calibrate::calibfile::CalibrationFile;
 use nalgebra::{Matrix3, Vector3};
 
+use calibrate_fit::labelfree::LabelFreeError;
+
 use crate::attitudes::{AttitudeFit, RestAttitudes};
 use crate::config::{OdometryConfig, UncalibratedAccel};
-use crate::eskf::Eskf;
+use crate::eskf::{Eskf, NoiseModel};
 
 /// The accelerometer prior the filter aligns with.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -106,6 +108,33 @@ impl AccelPrior {
     }
 }
 
+impl AccelPrior {
+    /// The filter's noise model under `cfg` for this prior: `cfg.noise`, with the bias's random
+    /// walk at least [`UncalibratedAccel::refined_bias_walk_mps3`] for a part the calibration
+    /// stage flagged `GRAVITY_OFF`. What the filter calls such a part's bias holds what its
+    /// model lacks: the 3 % scale and 2 % cross-axis errors times the changes of specific force
+    /// (a stop on a grade tilts gravity in the sensor frame), and the stage's refinement at
+    /// every rest along gravity there (no prior, a running mean over its last minute of rest),
+    /// which moves it at a rest at another tilt by the share of the offset across the old
+    /// gravity that the tilt turns along the new one. A calibrated part's random walk (1e-4)
+    /// holds nothing of that: on a simulated drive stopping on grades of up to 5 deg
+    /// (`mems-sim drive --duration 120 --turns on --rate 200 --seed 1 --max-slope-deg 5`, the
+    /// part of tests/uncalibrated.rs) the filter's bias sigma across gravity fell to
+    /// 0.01-0.02 m/s^2 with its estimate 1.4 m/s^2 off, and the position's 1-sigma, 0.38 m,
+    /// did not hold its error, 0.66 m; with this walk the error is 0.39 m, its 1-sigma 0.58 m.
+    /// Tried and not kept (docs/odometry.md): the bias across gravity held out of the updates,
+    /// the walk at rests only, the refinement's share of a tilt added at each rest.
+    pub fn noise(&self, cfg: &OdometryConfig) -> NoiseModel {
+        let mut noise = cfg.noise;
+        if self.flagged {
+            noise.accel_bias_random_walk = noise
+                .accel_bias_random_walk
+                .max(cfg.uncalibrated.refined_bias_walk_mps3);
+        }
+        noise
+    }
+}
+
 /// What the filter holds of the accelerometer's error.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct AccelEstimate {
@@ -140,6 +169,124 @@ pub struct AccelEstimate {
     pub per_axis: Option<AttitudeFit>,
     /// Whether `per_axis` corrected this pass's samples (an earlier pass fitted it).
     pub per_axis_applied: bool,
+    /// Why there is no `per_axis` fit: the check that refused it and what it measured.
+    pub per_axis_refused: Option<FitRefusal>,
+}
+
+/// The check that refused a per-axis fit of the rest attitudes, with what it measured.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[serde(tag = "check", rename_all = "snake_case")]
+pub enum FitRefusal {
+    /// Fewer distinct attitudes than the fit's 9 parameters need
+    /// (`calibrate_fit::labelfree::MIN_POSES`).
+    TooFewPoses {
+        /// Poses gathered.
+        poses: usize,
+        /// Distinct attitudes among them.
+        distinct: usize,
+    },
+    /// The attitudes leave a combination of the parameters undetermined (the Jacobian's
+    /// condition number above `calibrate_fit::labelfree::MAX_CONDITION`).
+    IllConditioned {
+        /// The condition number.
+        condition: f64,
+    },
+    /// The fit itself failed (no ellipsoid, no convergence, no usable model).
+    Failed,
+    /// An axis's scale sigma is not below the prior's ([`UncalibratedAccel::scale_sigma`]).
+    ScaleSigma {
+        /// The axis, 0-2.
+        axis: usize,
+        /// Its scale's 1-sigma, fraction.
+        sigma: f64,
+    },
+    /// An axis's scale is beyond [`PLAUSIBLE_SCALE`].
+    Scale {
+        /// The axis, 0-2.
+        axis: usize,
+        /// Its scale error, fraction.
+        scale: f64,
+    },
+    /// An axis's bias is beyond three prior sigmas ([`UncalibratedAccel::bias_sigma_mps2`]).
+    Bias {
+        /// The axis, 0-2.
+        axis: usize,
+        /// Its bias, m/s^2.
+        bias_mps2: f64,
+    },
+}
+
+impl FitRefusal {
+    /// Why `fit` is refused under `cfg`, `None` when it is usable: every scale sigma below
+    /// the prior's, every scale within [`PLAUSIBLE_SCALE`] and every bias within three prior
+    /// sigmas (beyond, the rests were no rests).
+    pub fn of_fit(fit: &AttitudeFit, cfg: &UncalibratedAccel) -> Option<Self> {
+        (0..3).find_map(|axis| {
+            let (k, dk, b) = (fit.scale[axis], fit.scale_sigma[axis], fit.bias_mps2[axis]);
+            if dk >= cfg.scale_sigma {
+                Some(Self::ScaleSigma { axis, sigma: dk })
+            } else if k.abs() > PLAUSIBLE_SCALE {
+                Some(Self::Scale { axis, scale: k })
+            } else if b.abs() > 3.0 * cfg.bias_sigma_mps2 {
+                Some(Self::Bias { axis, bias_mps2: b })
+            } else {
+                None
+            }
+        })
+    }
+
+    /// The refusal of the label-free fit's error `e`.
+    pub fn of_error(e: &LabelFreeError) -> Self {
+        match e {
+            LabelFreeError::TooFewPoses { poses, distinct } => Self::TooFewPoses {
+                poses: *poses,
+                distinct: *distinct,
+            },
+            LabelFreeError::IllConditioned { condition, .. } => Self::IllConditioned {
+                condition: *condition,
+            },
+            _ => Self::Failed,
+        }
+    }
+}
+
+impl std::fmt::Display for FitRefusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let axis = |i: &usize| ["x", "y", "z"][*i];
+        match self {
+            Self::TooFewPoses { poses, distinct } => write!(
+                f,
+                "{distinct} distinct attitudes among {poses} rest poses, the fit needs {}",
+                calibrate_fit::labelfree::MIN_POSES
+            ),
+            Self::IllConditioned { condition } => write!(
+                f,
+                "the attitudes leave a combination of bias and scale undetermined (condition \
+                 number {condition:.0} above {:.0}): rests tilted out of their plane would",
+                calibrate_fit::labelfree::MAX_CONDITION
+            ),
+            Self::Failed => write!(f, "the fit to the rest attitudes failed"),
+            Self::ScaleSigma { axis: i, sigma } => write!(
+                f,
+                "the fit's {} scale 1-sigma {:.1} % is not below the prior's",
+                axis(i),
+                100.0 * sigma
+            ),
+            Self::Scale { axis: i, scale } => write!(
+                f,
+                "the fit's {} scale {:+.1} % is beyond a plausible part's {:.0} %",
+                axis(i),
+                100.0 * scale,
+                100.0 * PLAUSIBLE_SCALE
+            ),
+            Self::Bias { axis: i, bias_mps2 } => write!(
+                f,
+                "the fit's {} bias {bias_mps2:+.2} m/s^2 is beyond three prior sigmas (its rests \
+                 were no rests)",
+                axis(i)
+            ),
+        }
+    }
 }
 
 impl AccelEstimate {
@@ -184,7 +331,16 @@ impl AccelEstimate {
             }
         };
         let sigma = filter.zip_map(&extra.diagonal(), |f, e| (f * f + e).sqrt());
-        let per_axis = applied.or_else(|| attitudes.fit(g).ok().filter(|f| usable(f, cfg)));
+        let (per_axis, per_axis_refused) = match applied {
+            Some(fit) => (Some(fit), None),
+            None => match attitudes.fit(g) {
+                Ok(fit) => match FitRefusal::of_fit(&fit, cfg) {
+                    None => (Some(fit), None),
+                    refused => (None, refused),
+                },
+                Err(e) => (None, Some(FitRefusal::of_error(&e))),
+            },
+        };
         Self {
             uncalibrated: prior.uncalibrated,
             flagged: prior.flagged,
@@ -199,19 +355,9 @@ impl AccelEstimate {
             attitude_samples_missed: attitudes.missed(),
             per_axis,
             per_axis_applied: applied.is_some(),
+            per_axis_refused,
         }
     }
-}
-
-/// Whether `fit` says more than the prior `cfg` and is a plausible part's: every scale sigma
-/// below the prior's, every scale within [`PLAUSIBLE_SCALE`] and every bias within three
-/// prior sigmas (beyond, the rests were no rests).
-pub fn usable(fit: &AttitudeFit, cfg: &UncalibratedAccel) -> bool {
-    (0..3).all(|i| {
-        fit.scale_sigma[i] < cfg.scale_sigma
-            && fit.scale[i].abs() <= PLAUSIBLE_SCALE
-            && fit.bias_mps2[i].abs() <= 3.0 * cfg.bias_sigma_mps2
-    })
 }
 
 /// Largest scale error per axis taken from a fit, fraction (the datasheets' +-3 % initial
@@ -243,7 +389,7 @@ impl std::fmt::Display for AccelEstimate {
             write!(
                 f,
                 " after the calibration stage's refinement (its learned rest read gravity more \
-                 than {:.0} % off)",
+                 than {:.0} % off, or the part was declared --uncalibrated)",
                 100.0 * calibrate::zero_state::learn::CALIBRATED_GRAVITY_ERROR
             )?;
         }
@@ -274,11 +420,10 @@ impl AccelEstimate {
             )?,
         }
         let Some(fit) = &self.per_axis else {
-            return write!(
-                f,
-                " (no per-axis scale: it needs {} well-spread ones)",
-                calibrate_fit::labelfree::MIN_POSES
-            );
+            return match &self.per_axis_refused {
+                Some(why) => write!(f, " (no per-axis scale: {why})"),
+                None => write!(f, " (no per-axis scale)"),
+            };
         };
         let (k, e) = (&fit.scale, &fit.scale_sigma);
         write!(
@@ -350,6 +495,52 @@ mod tests {
             assert!((b - w).abs() < 1e-12, "{:?}", out.bias_g);
         }
         assert_eq!(out.scale, file.scale);
+    }
+
+    #[test]
+    fn a_refused_fit_names_the_check_and_what_it_measured() {
+        let cfg = UncalibratedAccel::default();
+        let fit = AttitudeFit {
+            bias_mps2: [0.5, -0.3, 0.2],
+            bias_sigma_mps2: [0.01; 3],
+            scale: [0.02, -0.01, 0.0],
+            scale_sigma: [0.002; 3],
+            poses: 12,
+            condition: 3.0,
+        };
+        assert_eq!(FitRefusal::of_fit(&fit, &cfg), None);
+        let wide = AttitudeFit {
+            scale_sigma: [0.002, 0.05, 0.002],
+            ..fit
+        };
+        let refused = FitRefusal::of_fit(&wide, &cfg).unwrap();
+        assert_eq!(
+            refused,
+            FitRefusal::ScaleSigma {
+                axis: 1,
+                sigma: 0.05
+            }
+        );
+        assert!(
+            refused.to_string().contains("y scale 1-sigma 5.0 %"),
+            "{refused}"
+        );
+        let far = AttitudeFit {
+            bias_mps2: [0.5, -0.3, 4.0],
+            ..fit
+        };
+        assert!(matches!(
+            FitRefusal::of_fit(&far, &cfg),
+            Some(FitRefusal::Bias { axis: 2, .. })
+        ));
+        let few = FitRefusal::of_error(&LabelFreeError::TooFewPoses {
+            poses: 3,
+            distinct: 2,
+        });
+        assert_eq!(
+            few.to_string(),
+            "2 distinct attitudes among 3 rest poses, the fit needs 9"
+        );
     }
 
     #[test]

@@ -46,6 +46,13 @@ pub struct DetectorArgs {
     /// part's 0.0061: `zero_state::glrt::GlrtConfig::uncalibrated_accel_bias_sigma_mps2`).
     #[arg(long, value_name = "MPS2")]
     pub glrt_uncalibrated_offset_mps2: Option<f64>,
+    /// Take the accelerometer as uncalibrated whatever its learned rest reads: its offset
+    /// across gravity unknown (0.1 g per axis in the GLRT's allowance), its samples flagged
+    /// GRAVITY_OFF (the odometry's uncalibrated prior). For a part with no calibration of its
+    /// own whose rest happens to read gravity within 2 % (an offset across gravity barely
+    /// moves the magnitude).
+    #[arg(long)]
+    pub uncalibrated: bool,
 }
 
 impl DetectorArgs {
@@ -85,6 +92,7 @@ impl DetectorArgs {
             config.glrt.uncalibrated_accel_bias_sigma_mps2 =
                 positive("glrt-uncalibrated-offset-mps2", s)?;
         }
+        config.offset_unknown |= self.uncalibrated;
         Ok(config)
     }
 }
@@ -103,6 +111,7 @@ mod tests {
             learn_s: Some(2.5),
             max_rest_accel_sigma: Some(0.15),
             glrt_uncalibrated_offset_mps2: Some(0.0061),
+            uncalibrated: true,
             ..DetectorArgs::default()
         };
         let c = args.apply(default).unwrap();
@@ -111,6 +120,7 @@ mod tests {
         assert_eq!(c.learn.duration_s, 2.5);
         assert_eq!(c.learn.max_accel_sigma_mps2, Some(0.15));
         assert_eq!(c.glrt.uncalibrated_accel_bias_sigma_mps2, 0.0061);
+        assert!(c.offset_unknown && !default.offset_unknown);
         for (args, name) in [
             (
                 DetectorArgs {

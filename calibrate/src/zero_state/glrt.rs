@@ -125,7 +125,7 @@ pub struct GlrtConfig {
     pub accel_bias_sigma_mps2: f64,
     /// The same for a part whose learned rest reads gravity more than
     /// [`super::learn::CALIBRATED_GRAVITY_ERROR`] off (an uncalibrated part, whatever its file
-    /// says), m/s^2: its zero-g offset is unknown across gravity too, and a 0.15 g offset turned
+    /// says) or declared uncalibrated ([`super::DetectorConfig::uncalibrated`]), m/s^2: its zero-g offset is unknown across gravity too, and a 0.15 g offset turned
     /// by a car's 10 degree bend moves the reference by 0.25 m/s^2, which held to a calibrated
     /// part's 6 mm/s^2 calls every later cruise and rest motion.
     pub uncalibrated_accel_bias_sigma_mps2: f64,
@@ -236,8 +236,8 @@ pub(crate) struct GlrtRule {
     /// Variance of the gravity reference's magnitude that the last rests left, (m/s^2)^2.
     along_var: f64,
     /// The accelerometer bias 1-sigma whose share of the magnitude a tilt moves, m/s^2: an
-    /// uncalibrated part's ([`GlrtConfig::uncalibrated_accel_bias_sigma_mps2`]); 0 for a
-    /// calibrated one, whose 6 mm/s^2 would loosen the magnitude test after every tilt by
+    /// uncalibrated part's (the configuration's bias sigma, which the caller widened to
+    /// [`GlrtConfig::uncalibrated_accel_bias_sigma_mps2`]); 0 for a calibrated one, whose 6 mm/s^2 would loosen the magnitude test after every tilt by
     /// about the window mean's own noise (on the simulated arm runs of docs/diagnosis.md,
     /// slow moves then passed for rests: 19 rests counted of 25, the end 0.52 -> 1.30 m off).
     along_bias_sigma_mps2: f64,
@@ -275,6 +275,10 @@ impl GlrtRule {
     /// nothing. `accel_only` leaves the gyroscope out. `prior_batches`: the batches of rest
     /// the part's known noise (the calibration file's `[noise]` table or the datasheet's, at
     /// this rate) stands for in the mean test's quantile, 0 when it is not known.
+    /// `uncalibrated`: the learned rest read gravity more than
+    /// [`super::learn::CALIBRATED_GRAVITY_ERROR`] off (the caller's decision, which also set
+    /// `config.accel_bias_sigma_mps2`): only then does a tilt move the bias's share of the
+    /// gravity magnitude by more than the window mean's noise ([`Self::along_var_now`]).
     pub fn new(
         r: &StaticReference,
         learned: &StaticReference,
@@ -282,6 +286,7 @@ impl GlrtRule {
         mut ring: Vec<BatchSums>,
         accel_only: bool,
         prior_batches: f64,
+        uncalibrated: bool,
     ) -> Self {
         let channels = if accel_only { 3 } else { 6 };
         let k = config.window_batches(r.rate_hz());
@@ -319,9 +324,7 @@ impl GlrtRule {
                 .try_normalize(1e-9)
                 .unwrap_or_else(Vector3::z),
             along_var: 0.0,
-            along_bias_sigma_mps2: if config.accel_bias_sigma_mps2
-                >= config.uncalibrated_accel_bias_sigma_mps2
-            {
+            along_bias_sigma_mps2: if uncalibrated {
                 config.accel_bias_sigma_mps2
             } else {
                 0.0

@@ -181,6 +181,12 @@ pub struct DetectorConfig {
     /// noise is the calibration file's `[noise]` table or the datasheet's, and what the first
     /// second of rest shows is taken at that confidence until pooled rests exceed it.
     pub noise_prior_s: f64,
+    /// The accelerometer is uncalibrated whatever its learned rest reads (`--uncalibrated`):
+    /// an offset across gravity barely moves the magnitude (0.15 g across reads gravity 1.1 %
+    /// off, within a calibrated part's [`learn::CALIBRATED_GRAVITY_ERROR`]), so a part with no
+    /// calibration of its own can read gravity right and still carry 0.1 g that only a turn or
+    /// a tilt shows ([`Self::uncalibrated`]).
+    pub offset_unknown: bool,
 }
 
 impl DetectorConfig {
@@ -203,7 +209,19 @@ impl DetectorConfig {
             shoe: ShoeConfig::default(),
             noise: None,
             noise_prior_s: 0.0,
+            offset_unknown: false,
         }
+    }
+
+    /// Whether the part whose learned rest is `learned` is taken as uncalibrated: declared so
+    /// ([`Self::offset_unknown`]), or its rest read gravity more than
+    /// [`learn::CALIBRATED_GRAVITY_ERROR`] off. Then the GLRT allows its offset across gravity
+    /// (`glrt::GlrtConfig::uncalibrated_accel_bias_sigma_mps2`), the calibration stage takes
+    /// the rest whole and flags its samples `GRAVITY_OFF`.
+    pub fn uncalibrated(&self, learned: &StaticReference) -> bool {
+        self.offset_unknown
+            || (learned.magnitude_mps2 / self.learn.gravity_mps2 - 1.0).abs()
+                > learn::CALIBRATED_GRAVITY_ERROR
     }
 }
 
@@ -452,8 +470,8 @@ impl ZeroStateDetector {
             DetectorKind::Yu => Rule::Yu(yu::YuRule::new(&reference, &self.config.yu)),
             kind @ (DetectorKind::Glrt | DetectorKind::GlrtAccel) => {
                 let mut config = self.config.glrt;
-                let g = self.config.learn.gravity_mps2;
-                if (reference.magnitude_mps2 / g - 1.0).abs() > learn::CALIBRATED_GRAVITY_ERROR {
+                let uncalibrated = self.config.uncalibrated(&reference);
+                if uncalibrated {
                     // An uncalibrated part: its offset across gravity is unknown as well.
                     config.accel_bias_sigma_mps2 = config
                         .accel_bias_sigma_mps2
@@ -466,6 +484,7 @@ impl ZeroStateDetector {
                     ring,
                     kind == DetectorKind::GlrtAccel,
                     self.prior_batches(&learned),
+                    uncalibrated,
                 );
                 // The batches just learned from (none when resumed) are a rest already.
                 rule.seed(

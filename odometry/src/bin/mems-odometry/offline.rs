@@ -92,13 +92,31 @@ pub struct OfflineArgs {
 /// second run's result is printed and written; should the second run move the bias further than an uncalibrated part's bias
 /// sigma, or fail (never align, say), the first estimate was not one, and the recording is run
 /// once more as the first run was, that result standing.
+///
+/// A first run that never aligned although its GLRT was ready, with a calibration file that
+/// has no fit of the part's accelerometer and a learned rest that read gravity like a
+/// calibrated part's, is made again with the part declared uncalibrated (`--uncalibrated`):
+/// an offset across gravity barely moves the magnitude, and turned with the gravity reference
+/// it calls every later window motion (the comma2k19 drive with 0.15 g on x alone never
+/// aligned).
 pub fn run(args: OfflineArgs) -> Result<()> {
     let is_mcap = recording::mcap::has_magic(&args.input)?;
     let choice = platform::choose(args.stage.profile, &args.input, is_mcap)?;
-    let (file, detector) = args.stage.load(choice.profile)?;
+    let (file, mut detector) = args.stage.load(choice.profile)?;
+    let early = match pass(&args, &choice, &file, detector, Pass::First) {
+        Err(e) if e.is::<NotAligned>() => {
+            tracing::warn!(
+                "{e:#}; the calibration file has no fit of this part's accelerometer: running \
+                 it again as an uncalibrated part (as --uncalibrated)"
+            );
+            detector.offset_unknown = true;
+            pass(&args, &choice, &file, detector, Pass::First)?
+        }
+        other => other?,
+    };
     let Some(Early {
         estimate: first, ..
-    }) = pass(&args, &choice, &file, detector, Pass::First)?
+    }) = early
     else {
         return Ok(());
     };
@@ -142,6 +160,13 @@ struct Early {
     limit_mps2: f64,
 }
 
+/// A first run that never aligned while its part, with no fit in its calibration file, was
+/// taken for a calibrated one ([`summary::may_be_uncalibrated`]): [`run`] makes it again as
+/// an uncalibrated part's.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct NotAligned(String);
+
 /// Which run of the recording [`pass`] makes.
 #[derive(Clone, Copy)]
 enum Pass<'a> {
@@ -174,19 +199,13 @@ impl Pass<'_> {
     }
 }
 
-/// One run of the pipeline over the recording with the calibration `file` (see [`Pass`]).
-/// Returns what the filter estimated of the accelerometer, without printing or writing
-/// anything, when the run ends early; else prints the result and writes `--out`.
-fn pass(
+/// The odometry's configuration for the calibration `file` and the options `args`, before
+/// the profile's, with what an earlier pass estimated for `which`.
+fn base_config(
     args: &OfflineArgs,
-    choice: &platform::Choice,
     file: &calibrate::calibfile::CalibrationFile,
-    detector: calibrate::zero_state::DetectorConfig,
     which: Pass<'_>,
-) -> Result<Option<Early>> {
-    let (source, repairs, ranges) = Source::open(args)?;
-    let calibration = CalibrationStage::new(file, detector, RefineConfig::default())
-        .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
+) -> Result<odometry::config::OdometryConfig> {
     let mut base = odometry_config(file);
     if let Pass::Second(first) = which {
         match first.per_axis {
@@ -211,6 +230,23 @@ fn pass(
     }
     base.trust_untrusted = args.ranges.trust_clipped;
     base.reconstruct_clipped = !args.ranges.bridge_clipped;
+    Ok(base)
+}
+
+/// One run of the pipeline over the recording with the calibration `file` (see [`Pass`]).
+/// Returns what the filter estimated of the accelerometer, without printing or writing
+/// anything, when the run ends early; else prints the result and writes `--out`.
+fn pass(
+    args: &OfflineArgs,
+    choice: &platform::Choice,
+    file: &calibrate::calibfile::CalibrationFile,
+    detector: calibrate::zero_state::DetectorConfig,
+    which: Pass<'_>,
+) -> Result<Option<Early>> {
+    let (source, repairs, ranges) = Source::open(args)?;
+    let calibration = CalibrationStage::new(file, detector, RefineConfig::default())
+        .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
+    let base = base_config(args, file, which)?;
     let hints = args.hints.config()?;
     let (config, session) = match choice.profile {
         Profile::Auto => (
@@ -249,6 +285,19 @@ fn pass(
             }
         });
     progress.finish_and_clear();
+    if matches!(which, Pass::First)
+        && ran.is_ok()
+        && !file.accel_fitted()
+        && !summary.aligned()
+        && summary::may_be_uncalibrated(&chain.first)
+    {
+        return Err(NotAligned(format!(
+            "{}: never aligned: {}",
+            args.input.display(),
+            summary::why_never_aligned(&chain.first, config.align_s)
+        ))
+        .into());
+    }
     let estimate = chain.second.stage().accel_estimate();
     if let Some(e) = estimate.filter(|e| ran.is_ok() && which.ends_early(e, &config)) {
         return Ok(Some(Early {

@@ -12,6 +12,7 @@ use std::path::Path;
 
 use anyhow::{Result, bail};
 use calibrate::stage::CalibrationStage;
+use calibrate::zero_state::{DetectorKind, StaticReference};
 use ipc_types::stream::Holes;
 use ipc_types::{OdometryState, odometry_flags};
 use mems_stage::Chain;
@@ -82,6 +83,12 @@ pub struct Summary {
 }
 
 impl Summary {
+    /// Whether the last state was aligned.
+    pub fn aligned(&self) -> bool {
+        self.last
+            .is_some_and(|s| s.flags & odometry_flags::ALIGNED != 0)
+    }
+
     /// Takes the (non-revision) state of one sample, with the truth read so far.
     pub fn state(&mut self, state: OdometryState, truth: &mut TruthQueue) {
         if state.flags & odometry_flags::ALIGNED == 0 {
@@ -161,7 +168,7 @@ impl Summary {
         if end.flags & odometry_flags::ALIGNED == 0 {
             bail!(
                 "{input}: never aligned: {}",
-                why_never_aligned(&chain.first)
+                why_never_aligned(&chain.first, read.align_s)
             );
         }
         let aligned_at_s = self
@@ -552,17 +559,39 @@ fn speed_scale_json(chain: &OfflineChain) -> serde_json::Value {
     )
 }
 
-/// Why the odometry never aligned: the detector never learned (with the learner's last
-/// refusal), or it never flagged rest after it did.
-fn why_never_aligned(calibration: &CalibrationStage) -> String {
+/// Whether a run that never aligned may align with the part declared uncalibrated
+/// (`--uncalibrated`): its GLRT learned a rest that read gravity like a calibrated part's, so it
+/// allowed its gravity reference a calibrated part's offset only, which an offset across
+/// gravity (unseen in the magnitude) turned through the first bend or tilt calls motion.
+pub fn may_be_uncalibrated(calibration: &CalibrationStage) -> bool {
+    let detector = calibration.detector();
+    let config = detector.config();
+    is_glrt(config.kind)
+        && detector
+            .reference()
+            .is_some_and(|r| !config.uncalibrated(&r))
+}
+
+fn is_glrt(kind: DetectorKind) -> bool {
+    matches!(kind, DetectorKind::Glrt | DetectorKind::GlrtAccel)
+}
+
+/// Why the odometry never aligned, rests shorter than `align_s` seconds not counting: the
+/// detector never learned (with the learner's last refusal), or it never flagged rest after
+/// it did (with what its learned rest read of gravity and the offset its GLRT allowed).
+pub fn why_never_aligned(calibration: &CalibrationStage, align_s: f64) -> String {
     let detector = calibration.detector();
     let kind = detector.config().kind.name();
     let learn_s = detector.config().learn.duration_s;
     if detector.is_ready() {
+        let learned = detector
+            .reference()
+            .map_or_else(String::new, |r| learned_rest(calibration, &r));
         return format!(
-            "the {kind} detector flagged no rest long enough to align on after it was ready \
-             ({} samples flagged rest in all)",
-            calibration.stats().rest
+            "the {kind} detector flagged no rest of {align_s} s to align on after it was ready \
+             ({} samples flagged rest in all, its gravity reference measured anew {} times){learned}",
+            calibration.stats().rest,
+            detector.gravity_reanchored(),
         );
     }
     match detector.learn_rejections() {
@@ -576,6 +605,32 @@ fn why_never_aligned(calibration: &CalibrationStage) -> String {
             why.map_or_else(|| "of a gap".into(), |w| w.to_string())
         ),
     }
+}
+
+/// What the learned rest `r` of `calibration`'s detector read of gravity, and the offset its
+/// GLRT allowed for, with the flag that changes it (empty for the other detectors).
+fn learned_rest(calibration: &CalibrationStage, r: &StaticReference) -> String {
+    let config = calibration.detector().config();
+    if !is_glrt(config.kind) {
+        return String::new();
+    }
+    let off = 100.0 * (r.magnitude_mps2 / config.learn.gravity_mps2 - 1.0);
+    let limit = 100.0 * calibrate::zero_state::learn::CALIBRATED_GRAVITY_ERROR;
+    let wide = config.glrt.uncalibrated_accel_bias_sigma_mps2;
+    if config.uncalibrated(r) {
+        return format!(
+            "; its learned rest read gravity {off:+.1} % off, an uncalibrated part's: its \
+             gravity reference allowed {wide:.3} m/s^2 of accelerometer offset per axis through \
+             turns and tilts (--glrt-uncalibrated-offset-mps2)"
+        );
+    }
+    format!(
+        "; its learned rest read gravity {off:+.1} % off, within a calibrated part's {limit:.0} %: \
+         its gravity reference allowed {:.4} m/s^2 of accelerometer offset per axis through \
+         turns and tilts, and an offset across gravity barely moves the magnitude (0.15 g reads \
+         1.1 % off); --uncalibrated allows {wide:.3} m/s^2",
+        config.glrt.accel_bias_sigma_mps2
+    )
 }
 
 /// The error for a run that was stopped (`ran`): a refusal (a hole the odometry does not
