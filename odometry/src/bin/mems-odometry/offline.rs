@@ -199,11 +199,12 @@ impl Pass<'_> {
     }
 }
 
-/// The odometry's configuration for the calibration `file` and the options `args`, before
-/// the profile's, with what an earlier pass estimated for `which`.
+/// The odometry's configuration for the calibration `file`, the `detector` and the options
+/// `args`, before the profile's, with what an earlier pass estimated for `which`.
 fn base_config(
     args: &OfflineArgs,
     file: &calibrate::calibfile::CalibrationFile,
+    detector: &calibrate::zero_state::DetectorConfig,
     which: Pass<'_>,
 ) -> Result<odometry::config::OdometryConfig> {
     let mut base = odometry_config(file);
@@ -244,9 +245,9 @@ fn pass(
     which: Pass<'_>,
 ) -> Result<Option<Early>> {
     let (source, repairs, ranges) = Source::open(args)?;
+    let base = base_config(args, file, &detector, which)?;
     let calibration = CalibrationStage::new(file, detector, RefineConfig::default())
         .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
-    let base = base_config(args, file, which)?;
     let hints = args.hints.config()?;
     let (config, session) = match choice.profile {
         Profile::Auto => (
