@@ -30,7 +30,7 @@ mod hint_state;
 mod records;
 mod walk_hooks;
 mod wheeled;
-use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE};
+use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE, WheelsStill};
 use records::{AlignSums, HistoryEntry, PendingRevision, RestWindow};
 
 /// Rest a filter with speed hints aligns on at least, s: a robot that creeps off from its
@@ -121,6 +121,7 @@ impl Navigator {
                 scale_taken: None,
                 systematic: [0.0; 2],
                 history: Ring::new(velocity_capacity),
+                still: WheelsStill::default(),
                 corrections: Vector3::zeros(),
                 applied: 0,
                 disagreements: 0,
@@ -520,6 +521,14 @@ impl Navigator {
             });
         }
         if rest && self.cfg.rest_updates {
+            if hs.flags & odometry_flags::HINT_STATIONARY != 0 {
+                let kf = self.kf.as_mut().expect("aligned");
+                let density = self.cfg.noise.gyro_noise_density;
+                let gate = self.cfg.zaru_gate_sigma;
+                self.hints.wheels_still(kf, &m.w, dt, density, gate);
+            } else {
+                self.hints.still = WheelsStill::default();
+            }
             let w = &mut self.rest_window;
             w.n += 1;
             w.t_s += dt;
@@ -534,6 +543,7 @@ impl Navigator {
             // A stationary robot's speed hint says nothing the zero-velocity update did not.
             self.hints.speed.clear();
         } else {
+            self.hints.still = WheelsStill::default();
             self.distance_m += moved;
             if self.nhc.is_some() || !self.hints.speed.is_empty() {
                 // An update the reconstruction's predictions would not redo.
@@ -575,11 +585,7 @@ impl Navigator {
                     hints.stats.speed_skipped += 1;
                 }
             }
-            if let Some(nhc) = self
-                .nhc
-                .as_mut()
-                .filter(|_| hs.flags & odometry_flags::HINT_SPEED == 0)
-            {
+            if let Some(nhc) = self.nhc.as_mut().filter(|_| !hints.speed_in_use(t_ns)) {
                 let interval = self.cfg.propagation_interval_s.max(dt);
                 match nhc.apply(kf, dt, interval) {
                     Some(Outcome::Rejected) => hs.flags |= odometry_flags::NONHOLONOMIC_REJECTED,
