@@ -14,12 +14,7 @@
 //!   indistinguishable from a horizontal accelerometer bias: it is added to the bias sigma
 //!   the alignment turns into its tilt sigma;
 //! - a turn slower than the gyro mean's own 1-sigma is not seen: the gyro bias sigma is the
-//!   rest's times `sqrt(2)` (such a turn and the noise, in quadrature);
-//! - a steady turn is a steady cruise to the detector (a steady speed, no rate change), and
-//!   its rate about up is indistinguishable from a bias: the gyro bias about up stays the
-//!   calibration stage's (nothing is taken from the window's mean rate about up) with the
-//!   mean rate about up added to its 1-sigma. The Husky of docs/real-data.md turned at 8 deg/s
-//!   in its cruise window; taken as bias, its heading spun at 8 deg/s until its one stop.
+//!   rest's times `sqrt(2)` (such a turn and the noise, in quadrature).
 //!
 //! Frames and signs as in [`crate::hints`]: body x forward, y left, z up; `R_bs` sensor to
 //! body; navigation frame z up, heading fixed at alignment. The velocity starts from the hint's
@@ -34,7 +29,7 @@
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::config::OdometryConfig;
-use crate::eskf::{BA, BG, Cov, KS, Nominal, TH, V, align};
+use crate::eskf::{BA, Cov, KS, Nominal, TH, V, align};
 use crate::hints::{HintConfig, mounting_from};
 use crate::rest_noise::RestNoise;
 use crate::uncalibrated::AccelPrior;
@@ -201,7 +196,6 @@ pub fn cruise_start(
     let hidden = c.hidden_accel(&w_sigma);
     let bias_sigma = prior.bias_sigma_mps2.map(|s| s.hypot(hidden));
     let (mut x, mut cov) = align(c.accel.mean(), c.gyro.mean(), g, bias_sigma, w_sigma);
-    turn_not_bias(&mut x, &mut cov);
     cov[(KS, KS)] = hints.speed_scale_sigma.powi(2);
     let (speed, hint_sigma) = c.speed();
     let forward_sigma = hint_sigma
@@ -223,17 +217,6 @@ pub fn cruise_start(
         cov,
         standing_accel_sd: cfg.noise.accel_noise_density * (1.5 * rate_hz).sqrt(),
     }
-}
-
-/// Takes the part of the aligned gyro bias about up (sensor frame, rad/s) back out of `x`,
-/// and adds it to the bias's variance along up: over a cruise window it is as likely a
-/// steady turn as a bias (see the module documentation).
-fn turn_not_bias(x: &mut Nominal, cov: &mut Cov) {
-    let up = x.q.inverse_transform_vector(&Vector3::z());
-    let about_up = x.b_g.dot(&up);
-    x.b_g -= up * about_up;
-    let mut block = cov.fixed_view_mut::<3, 3>(BG, BG);
-    block += up * up.transpose() * about_up.powi(2);
 }
 
 /// The forward axis in the sensor frame from the horizontal specific force and the speed

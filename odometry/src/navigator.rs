@@ -120,6 +120,7 @@ impl Navigator {
                 latest_fit: None,
                 scale_taken: None,
                 systematic: [0.0; 2],
+                along: [0.0; 2],
                 history: Ring::new(velocity_capacity),
                 still: WheelsStill::default(),
                 corrections: Vector3::zeros(),
@@ -597,7 +598,7 @@ impl Navigator {
                     None => {}
                 }
             }
-            hints.carry_systematic(kf, dt);
+            hints.carry_systematic(kf, dt, t_ns);
             body_before = body_before.map(|v| body_turn * v);
         }
         self.track_corrections(body_before);

@@ -87,6 +87,11 @@ pub(super) struct Hints {
     /// sigma_j (-dp_y, dp_x)` over the horizontal steps `dp` since the fit was trusted, with
     /// `sigma_j` the fit's whole yaw 1-sigma then, m (navigation frame x, y).
     pub(super) systematic: [f64; 2],
+    /// The speed scale's error beyond the scale state's 1-sigma carried as a systematic
+    /// position error: `sum e_j dp_j` over the horizontal steps since the speed hints apply,
+    /// `e_j` the relative distance error then ([`Self::carry_systematic`]), m (navigation
+    /// frame x, y).
+    pub(super) along: [f64; 2],
     /// Body velocity minus corrections, one per sample since the mounting is known.
     pub(super) history: Ring<BodyVelocity>,
     /// The current rest's gyro readings while stationary hints decide it.
@@ -117,6 +122,7 @@ impl Hints {
         self.latest_fit = other.latest_fit;
         self.scale_taken = other.scale_taken;
         self.systematic = other.systematic;
+        self.along = other.along;
         self.history.clone_from(&other.history);
         self.still = other.still;
         self.corrections = other.corrections;
@@ -329,21 +335,43 @@ impl Hints {
         }
     }
 
-    /// Carries the estimated mounting's yaw error into the published position 1-sigma as a
-    /// systematic error (see [`Self::systematic`]) for a step of `dt_s` seconds at the
-    /// filter's velocity. A yaw error `d` of the mounting turns every velocity the speed
-    /// hints give by `d`, so the position error is `d` times the displacement since, turned
-    /// by 90 degrees: the speed updates' lateral 1-sigma (per hint, white) averages it away.
-    /// Taken as one error scaled by each fit's 1-sigma (a refined fit's error is the earlier
-    /// one's, shrunk), the variance per axis is the sum's square.
-    pub(super) fn carry_systematic(&mut self, kf: &mut Eskf, dt_s: f64) {
-        let Some(fit) = self.latest_fit.filter(|_| self.mounting_at_ns.is_some()) else {
+    /// Carries what the filter's covariance does not hold of the speed hints' two systematic
+    /// errors into the published position 1-sigma (estimates unchanged), for a step of `dt_s`
+    /// seconds at the filter's velocity, while speed hints are applied (`t_ns`):
+    /// - the estimated mounting's yaw error (see [`Self::systematic`]): a yaw error `d` turns
+    ///   every velocity the speed hints give by `d`, so the position error is `d` times the
+    ///   displacement since, turned by 90 degrees; the speed updates' lateral 1-sigma (per
+    ///   hint, white) averages it away. Taken as one error scaled by each fit's 1-sigma (a
+    ///   refined fit's error is the earlier one's, shrunk);
+    /// - the speed scale beyond the scale state's 1-sigma (see [`Self::along`]): the
+    ///   forward-axis fit's scale and the state's are two estimates of one scale from the same
+    ///   run, and where they lie further apart than the state's 1-sigma the state does not know
+    ///   the scale that well (on the F1TENTH car of docs/real-data.md the state ended tens of
+    ///   its 1-sigmas from the particle filter's ratio). The excess, `sqrt(d^2 - sigma_k^2)`
+    ///   over `1 + k`, is a relative error of the distance along the velocity.
+    ///
+    /// Each is one error for the whole run: the variance per axis is its sum's square, and
+    /// the two, independent, add.
+    pub(super) fn carry_systematic(&mut self, kf: &mut Eskf, dt_s: f64, t_ns: u64) {
+        if !self.speed_in_use(t_ns) {
             return;
-        };
-        let sigma = fit.systematic_sigma_rad();
-        self.systematic[0] -= sigma * kf.x.v.y * dt_s;
-        self.systematic[1] += sigma * kf.x.v.x * dt_s;
-        kf.set_systematic(self.systematic.map(|s| s * s));
+        }
+        let v = kf.x.v;
+        let fit = self.latest_fit.filter(|_| self.mounting_at_ns.is_some());
+        if let Some(fit) = fit {
+            let sigma = fit.systematic_sigma_rad();
+            self.systematic[0] -= sigma * v.y * dt_s;
+            self.systematic[1] += sigma * v.x * dt_s;
+        }
+        let (k, sigma_k) = kf.scale();
+        if let Some(k_fit) = fit.and_then(|f| f.scale) {
+            let excess = ((k - k_fit).powi(2) - sigma_k * sigma_k).max(0.0).sqrt();
+            let relative = excess / (1.0 + k).max(f64::EPSILON);
+            self.along[0] += relative * v.x * dt_s;
+            self.along[1] += relative * v.y * dt_s;
+        }
+        let var = |i: usize| self.systematic[i].powi(2) + self.along[i].powi(2);
+        kf.set_systematic([var(0), var(1)]);
     }
 
     /// The forward axis's report once trusted.
