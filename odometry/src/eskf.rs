@@ -59,9 +59,28 @@ pub const V: usize = 3;
 pub const TH: usize = 6;
 /// Index of the accelerometer bias error (sensor frame) in the error state.
 pub const BA: usize = 9;
-const BG: usize = 12;
+/// Index of the gyro bias error (sensor frame) in the error state.
+pub const BG: usize = 12;
 /// Index of the wheel-speed scale error in the error state.
 pub const KS: usize = 15;
+
+/// Whether a velocity update may turn the heading (and its rate, the gyro bias about up).
+///
+/// A rotation of the whole trajectory about gravity changes no body-frame velocity and no
+/// specific force: from body-frame velocities (wheel speeds, the non-holonomic constraint) the
+/// heading is unobservable, and only the gyro (its bias at rests) carries it. A linearized
+/// filter whose Jacobians are evaluated at changing estimates gains spurious information
+/// along such a direction (G. P. Huang, A. I. Mourikis and S. I. Roumeliotis, "Observability-
+/// based rules for designing consistent EKF SLAM estimators", IJRR 29(5), 2010), and with a
+/// velocity integrated from vibrating samples it takes the speed updates' disagreements out
+/// on the heading (docs/real-data.md, the F1TENTH car).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Heading {
+    /// The optimal gain: every state the update's Jacobian reaches, the heading included.
+    Corrected,
+    /// The heading's share of the gain removed (see [`Eskf::body_velocity_update`]).
+    Kept,
+}
 
 /// Noise model of the filter, SI units throughout.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -279,8 +298,13 @@ impl Eskf {
     /// covariance `s` and the consider parameters' share, `g` being the sensitivity of the
     /// measurement to them (`M^T H^T`): `r^T (S + G^T Sigma G)^-1 r`, the innovation's whole
     /// predicted covariance, as the published 1-sigma holds both (`crate::consistency`).
-    fn nis(&self, residual: &Vector3<f64>, s: &Matrix3<f64>, g: &SMatrix<f64, NC, 3>) -> f64 {
-        let weighted = SMatrix::<f64, NC, 3>::from_fn(|q, a| g[(q, a)] * self.consider_var[q]);
+    fn nis<const D: usize>(
+        &self,
+        residual: &SVector<f64, D>,
+        s: &SMatrix<f64, D, D>,
+        g: &SMatrix<f64, NC, D>,
+    ) -> f64 {
+        let weighted = SMatrix::<f64, NC, D>::from_fn(|q, a| g[(q, a)] * self.consider_var[q]);
         let share = g.transpose() * weighted;
         (s + share)
             .try_inverse()
@@ -315,18 +339,32 @@ impl Eskf {
     }
 
     /// Widens the wheel-speed scale error's variance to `var` when it is smaller, its
-    /// covariances with the other states in proportion (`D P D` with `D` diagonal: the
-    /// covariance stays positive semi-definite): a prior the data refuted.
+    /// covariances with the other states in proportion: a prior the data refuted.
     pub fn widen_scale(&mut self, var: f64) {
-        let now = self.cov[(KS, KS)];
+        self.widen(KS, var);
+    }
+
+    /// Widens the gyro bias's variances (sensor frame, (rad/s)^2 per axis) to `var` where
+    /// they are smaller, as [`Self::widen_scale`].
+    pub fn widen_gyro_bias(&mut self, var: Vector3<f64>) {
+        for (i, v) in var.iter().enumerate() {
+            self.widen(BG + i, *v);
+        }
+    }
+
+    /// Widens error-state component `i`'s variance to `var` when it is smaller, its
+    /// covariances with the other states in proportion (`D P D` with `D` diagonal: the
+    /// covariance stays positive semi-definite).
+    fn widen(&mut self, i: usize, var: f64) {
+        let now = self.cov[(i, i)];
         if !(var > now && now > 0.0) {
-            self.cov[(KS, KS)] = self.cov[(KS, KS)].max(var);
+            self.cov[(i, i)] = self.cov[(i, i)].max(var);
             return;
         }
         let f = (var / now).sqrt();
-        for i in 0..N {
-            self.cov[(i, KS)] *= f;
-            self.cov[(KS, i)] *= f;
+        for j in 0..N {
+            self.cov[(j, i)] *= f;
+            self.cov[(i, j)] *= f;
         }
     }
 
@@ -335,24 +373,19 @@ impl Eskf {
         (self.x.k, self.cov[(KS, KS)].max(0.0).sqrt())
     }
 
-    /// A direct measurement of the wheel-speed scale error: `k_meas` with variance `var`
-    /// (a scalar Kalman update; every state moves by its covariance with the scale).
+    /// A direct measurement of the wheel-speed scale error: `k_meas` with variance `var`,
+    /// through the filter's one update ([`Self::update`], Joseph form): every state moves by
+    /// its covariance with the scale.
     pub fn measure_scale(&mut self, k_meas: f64, var: f64) {
-        self.propagate();
-        let s = self.cov[(KS, KS)] + var;
-        if s <= 0.0 {
-            return;
-        }
-        let before = self.var;
-        let l: VecN = self.cov.column(KS).into_owned();
-        let gain = l / s;
-        let dx = gain * (k_meas - self.x.k);
-        self.cov -= gain * l.transpose();
-        let g = self.sens.column(KS).into_owned();
-        self.sens -= g * gain.transpose();
-        self.cov = 0.5 * (self.cov + self.cov.transpose());
-        self.inject(&dx);
-        self.reported.updated(&before, &self.var);
+        let mut h = SMatrix::<f64, 1, N>::zeros();
+        h[(0, KS)] = 1.0;
+        let r = SMatrix::<f64, 1, 1>::new(var);
+        self.update(
+            &h,
+            SVector::<f64, 1>::new(k_meas - self.x.k),
+            &r,
+            Heading::Corrected,
+        );
     }
 
     fn with_sigma(mut self) -> Self {
@@ -598,12 +631,26 @@ impl Eskf {
     /// evaluated at the current state: `dv_b = R_bs R^T dv + R_bs [R^T v]x dtheta` and the
     /// forward row also has `v_b.x` for `dk`. Returns the normalized innovation squared
     /// (`None`: singular, nothing updated); a component given a 1-sigma far beyond the
-    /// velocity's adds about nothing to it (one degree of freedom fewer).
+    /// velocity's adds about nothing to it (one degree of freedom fewer). The heading is
+    /// corrected with the rest ([`Heading::Corrected`]; [`Self::body_velocity_update_with`]
+    /// chooses).
     pub fn body_velocity_update(
         &mut self,
         r_bs: &Matrix3<f64>,
         residual: Vector3<f64>,
         sigma: Vector3<f64>,
+    ) -> Option<f64> {
+        self.body_velocity_update_with(r_bs, residual, sigma, Heading::Corrected)
+    }
+
+    /// [`Self::body_velocity_update`], with `heading` saying whether it may turn the heading
+    /// ([`Heading`]).
+    pub fn body_velocity_update_with(
+        &mut self,
+        r_bs: &Matrix3<f64>,
+        residual: Vector3<f64>,
+        sigma: Vector3<f64>,
+        heading: Heading,
     ) -> Option<f64> {
         self.propagate();
         let before = self.body_velocity(r_bs);
@@ -620,7 +667,7 @@ impl Eskf {
         }
         h[(0, KS)] = before.x;
         let var = Matrix3::from_diagonal(&sigma.component_mul(&sigma));
-        self.update(&h, residual, &var)
+        self.update(&h, residual, &var, heading)
     }
 
     /// The measurement of [`Self::update`] with `H` selecting the three error-state components
@@ -676,13 +723,21 @@ impl Eskf {
         Some(nis)
     }
 
-    /// A linear measurement `z = H dx + noise` with noise covariance `r`, in Joseph form,
-    /// injected into the nominal state. Returns the normalized innovation squared.
-    fn update(
+    /// A linear measurement `z = H dx + noise` of `D` components with noise covariance `r`,
+    /// in Joseph form, injected into the nominal state. With [`Heading::Kept`] the gain's
+    /// heading component (the attitude error's part about the navigation frame's up, `u =
+    /// R^T z` in the local attitude error) and the gyro bias's about the same axis (the
+    /// heading's rate) are taken out: the Joseph form
+    /// `(I - K H) P (I - K H)^T + K R K^T` is the covariance of any gain's estimate (Gelb
+    /// 1974, section 4.2), so the covariance stays that of what is done, and the heading
+    /// keeps its variance (a Schmidt, "consider", treatment of the heading). Returns the
+    /// normalized innovation squared.
+    fn update<const D: usize>(
         &mut self,
-        h: &SMatrix<f64, 3, N>,
-        residual: Vector3<f64>,
-        r: &Matrix3<f64>,
+        h: &SMatrix<f64, D, N>,
+        residual: SVector<f64, D>,
+        r: &SMatrix<f64, D, D>,
+        heading: Heading,
     ) -> Option<f64> {
         self.propagate();
         let before = self.var;
@@ -690,7 +745,15 @@ impl Eskf {
         let s_inv = s.try_inverse()?;
         let g = self.sens * h.transpose();
         let nis = self.nis(&residual, &s, &g);
-        let k = self.cov * h.transpose() * s_inv;
+        let mut k = self.cov * h.transpose() * s_inv;
+        if heading == Heading::Kept {
+            let u = self.x.q.inverse_transform_vector(&Vector3::z());
+            for block in [TH, BG] {
+                let mut rows = k.fixed_rows_mut::<3>(block);
+                let along_up = u.transpose() * &rows;
+                rows -= u * along_up;
+            }
+        }
         let dx: VecN = k * residual;
         let i_kh = Cov::identity() - k * h;
         self.cov = i_kh * self.cov * i_kh.transpose() + k * r * k.transpose();

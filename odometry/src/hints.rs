@@ -16,6 +16,7 @@
 //! as a hint reaches the odometry process within `delivery_s` of its publication (plus the
 //! calibration stage's own latency, by which every sample arrives late).
 
+use crate::eskf::Heading;
 use ipc_types::{RobotHint, hint_flags};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
@@ -53,6 +54,13 @@ pub struct HintConfig {
     /// After hints went stale, the IMU's rest flag gives a zero-velocity update only while
     /// the filter's velocity is within this many standard deviations of zero.
     pub fallback_zupt_gate_sigma: f64,
+    /// Whether a speed hint's update may turn the heading (`crate::eskf::Heading`): by default
+    /// it does not, since body-frame velocities do not observe it.
+    pub speed_heading: Heading,
+    /// Added to a speed hint's `sample_ns` before it is compared with the filter's velocity,
+    /// s: the speed source's lag behind the IMU (positive: the hint describes motion that much
+    /// later than its stamp says).
+    pub speed_time_offset_s: f64,
     /// Hints that can wait for their delivery time at once; when full, the oldest waiting hint
     /// is dropped (and counted in [`HintStats::overflowed`]).
     pub capacity: usize,
@@ -75,6 +83,8 @@ impl Default for HintConfig {
             nonholonomic_sigma_mps: 0.02,
             speed_scale_sigma: 0.02,
             fallback_zupt_gate_sigma: 5.0,
+            speed_heading: Heading::Kept,
+            speed_time_offset_s: 0.0,
             capacity: 256,
         }
     }
@@ -155,6 +165,17 @@ impl HintConfig {
         positive("nonholonomic_sigma_mps", self.nonholonomic_sigma_mps)?;
         positive("speed_scale_sigma", self.speed_scale_sigma)?;
         positive("fallback_zupt_gate_sigma", self.fallback_zupt_gate_sigma)?;
+        if !(self.speed_time_offset_s.is_finite()
+            && self.speed_time_offset_s.abs() < self.max_age_s)
+        {
+            return Err(HintConfigError {
+                field: "speed_time_offset_s",
+                reason: format!(
+                    "must be finite and within the maximum age ({} s), got {}",
+                    self.max_age_s, self.speed_time_offset_s
+                ),
+            });
+        }
         if self.capacity == 0 {
             return Err(HintConfigError {
                 field: "capacity",
@@ -269,6 +290,9 @@ pub struct HintStats {
     /// Speed hints not applied: stale or older than the velocity history when their sample
     /// came, the mounting not yet known, or more than eight delivered at one sample.
     pub speed_skipped: u64,
+    /// Rests the stationary hints decided whose gyro reading refuted the filter's gyro bias
+    /// (`Navigator`'s zero-rate conflict: the bias widened and the reading taken).
+    pub gyro_bias_refuted: u64,
 }
 
 impl std::fmt::Display for HintStats {
@@ -277,13 +301,14 @@ impl std::fmt::Display for HintStats {
         write!(
             f,
             "received {}, consumed {}, out of order {}, overflowed {}, speed updates {}, \
-             speed skipped {}",
+             speed skipped {}, gyro bias refuted {}",
             self.received,
             self.consumed,
             self.out_of_order,
             self.overflowed,
             self.speed_updates,
-            self.speed_skipped
+            self.speed_skipped,
+            self.gyro_bias_refuted
         )
     }
 }

@@ -31,7 +31,7 @@ mod learning;
 mod records;
 mod walk_hooks;
 mod wheeled;
-use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE};
+use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE, WheelsStill};
 use learning::{Learned, LearningWindow};
 use records::{AlignSums, HistoryEntry, PendingRevision, RestWindow};
 
@@ -127,7 +127,9 @@ impl Navigator {
                 latest_fit: None,
                 scale_taken: None,
                 systematic: [0.0; 2],
+                along: [0.0; 2],
                 history: Ring::new(velocity_capacity),
+                still: WheelsStill::default(),
                 corrections: Vector3::zeros(),
                 applied: 0,
                 disagreements: 0,
@@ -533,6 +535,14 @@ impl Navigator {
             });
         }
         if rest && self.cfg.rest_updates {
+            if hs.flags & odometry_flags::HINT_STATIONARY != 0 {
+                let kf = self.kf.as_mut().expect("aligned");
+                let density = self.cfg.noise.gyro_noise_density;
+                let gate = self.cfg.zaru_gate_sigma;
+                self.hints.wheels_still(kf, &m.w, dt, density, gate);
+            } else {
+                self.hints.still = WheelsStill::default();
+            }
             let w = &mut self.rest_window;
             w.n += 1;
             w.t_s += dt;
@@ -547,6 +557,7 @@ impl Navigator {
             // A stationary robot's speed hint says nothing the zero-velocity update did not.
             self.hints.speed.clear();
         } else {
+            self.hints.still = WheelsStill::default();
             self.distance_m += moved;
             if self.nhc.is_some() || !self.hints.speed.is_empty() {
                 // An update the reconstruction's predictions would not redo.
@@ -588,11 +599,7 @@ impl Navigator {
                     hints.stats.speed_skipped += 1;
                 }
             }
-            if let Some(nhc) = self
-                .nhc
-                .as_mut()
-                .filter(|_| hs.flags & odometry_flags::HINT_SPEED == 0)
-            {
+            if let Some(nhc) = self.nhc.as_mut().filter(|_| !hints.speed_in_use(t_ns)) {
                 let interval = self.cfg.propagation_interval_s.max(dt);
                 match nhc.apply(kf, dt, interval) {
                     Some(Outcome::Rejected) => hs.flags |= odometry_flags::NONHOLONOMIC_REJECTED,
@@ -604,7 +611,7 @@ impl Navigator {
                     None => {}
                 }
             }
-            hints.carry_systematic(kf, dt);
+            hints.carry_systematic(kf, dt, t_ns);
             body_before = body_before.map(|v| body_turn * v);
         }
         self.track_corrections(body_before);

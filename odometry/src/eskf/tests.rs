@@ -57,7 +57,12 @@ fn selected_update_is_the_general_update() {
         let mut h = SMatrix::<f64, 3, N>::zeros();
         h.fixed_view_mut::<3, 3>(0, c)
             .copy_from(&Matrix3::identity());
-        a.update(&h, residual, &(Matrix3::identity() * 4e-6));
+        a.update(
+            &h,
+            residual,
+            &(Matrix3::identity() * 4e-6),
+            Heading::Corrected,
+        );
         b.update_selected(c, residual, 4e-6);
     }
     assert_relative_eq!(a.cov, b.cov, epsilon = 1e-15);
@@ -65,6 +70,70 @@ fn selected_update_is_the_general_update() {
     assert_relative_eq!(a.x.p, b.x.p, epsilon = 1e-12);
     assert_relative_eq!(a.x.q, b.x.q, epsilon = 1e-12);
     assert_relative_eq!(a.x.b_g, b.x.b_g, epsilon = 1e-15);
+}
+
+/// The scale measurement through the one update is the scalar Kalman update it replaced
+/// (gain `P e / (P_kk + R)`), to rounding.
+#[test]
+fn scale_measurement_is_the_scalar_update() {
+    let x = Nominal {
+        p: Vector3::zeros(),
+        v: Vector3::new(1.0, 0.2, 0.0),
+        q: UnitQuaternion::identity(),
+        b_a: Vector3::zeros(),
+        b_g: Vector3::zeros(),
+        k: 0.05,
+    };
+    let first = Imu {
+        f: Vector3::new(0.0, 0.0, 9.8),
+        w: Vector3::zeros(),
+    };
+    let mut a = Eskf::new(x, full_cov(), G, noise(), first);
+    let p = a.cov;
+    let s = p[(KS, KS)] + 1e-4;
+    let gain: VecN = p.column(KS) / s;
+    a.measure_scale(0.3, 1e-4);
+    assert_relative_eq!(a.x.k, 0.05 + gain[KS] * 0.25, epsilon = 1e-12);
+    assert_relative_eq!(a.x.v, x.v + gain.fixed_rows::<3>(V) * 0.25, epsilon = 1e-12);
+    let expected = p - gain * p.column(KS).transpose();
+    assert_relative_eq!(a.cov, expected, epsilon = 1e-12);
+}
+
+/// A speed update with the heading kept moves neither the heading nor the gyro bias about up,
+/// moves the other states, and leaves a symmetric covariance whose heading variance is the
+/// prior's.
+#[test]
+fn a_kept_heading_stays_put() {
+    let tilt = UnitQuaternion::from_scaled_axis(Vector3::new(0.2, -0.1, 0.7));
+    let x = Nominal {
+        p: Vector3::zeros(),
+        v: Vector3::new(1.5, 0.4, 0.0),
+        q: tilt,
+        b_a: Vector3::zeros(),
+        b_g: Vector3::zeros(),
+        k: 0.0,
+    };
+    let first = Imu {
+        f: tilt.inverse() * Vector3::new(0.0, 0.0, 9.8),
+        w: Vector3::zeros(),
+    };
+    let mut a = Eskf::new(x, full_cov(), G, noise(), first);
+    let up = a.x.q.inverse_transform_vector(&Vector3::z());
+    let heading_var = |f: &Eskf| (up.transpose() * f.cov.fixed_view::<3, 3>(TH, TH) * up)[0];
+    let before = heading_var(&a);
+    let nis = a.body_velocity_update_with(
+        &Matrix3::identity(),
+        Vector3::new(0.3, -0.2, 0.05),
+        Vector3::repeat(0.05),
+        Heading::Kept,
+    );
+    assert!(nis.is_some());
+    let turn = tilt.inverse() * a.x.q;
+    assert!(turn.scaled_axis().dot(&up).abs() < 1e-12, "{turn:?}");
+    assert!(a.x.b_g.dot(&up).abs() < 1e-12, "{}", a.x.b_g);
+    assert!((a.x.v - x.v).norm() > 1e-3);
+    assert_relative_eq!(a.cov, a.cov.transpose(), epsilon = 1e-15);
+    assert_relative_eq!(heading_var(&a), before, max_relative = 1e-9);
 }
 
 #[test]

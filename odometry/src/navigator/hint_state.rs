@@ -3,12 +3,12 @@
 //! [`crate::stage`] for the behaviour, [`crate::hints`] for frames and times).
 
 use crate::cruise::{ForwardAxis, ForwardFit, Reference, horizontal_bias_sigma, initial_velocity};
-use crate::eskf::{Eskf, V};
+use crate::eskf::{BG, Eskf, V};
 use crate::hints::{
     ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring, SCALE_CONFLICT_SIGMAS,
     ScaleTaken,
 };
-use ipc_types::{RobotHint, odometry_flags};
+use ipc_types::{RobotHint, hint_flags, odometry_flags};
 use nalgebra::{Matrix3, Vector3};
 
 /// Speed hints that can wait for the next sample's update (more arrive at once only at sample
@@ -20,6 +20,22 @@ pub(super) const SPEED_QUEUE: usize = 8;
 pub(super) struct BodyVelocity {
     pub(super) t_ns: u64,
     pub(super) uncorrected: Vector3<f64>,
+}
+
+/// How long a rest the stationary hints decided is gathered before its mean gyro reading is
+/// checked against the filter's gyro bias ([`Hints::wheels_still`]), s.
+pub(super) const WHEELS_STILL_CHECK_S: f64 = 1.0;
+
+/// Corrected gyro readings of a rest the stationary hints decided, since it began or was last
+/// checked ([`Hints::wheels_still`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct WheelsStill {
+    n: u32,
+    /// Their intervals' sum, s.
+    t_s: f64,
+    /// Sums of the readings and of their squares, sensor frame, rad/s and (rad/s)^2.
+    sum: Vector3<f64>,
+    sum_sq: Vector3<f64>,
 }
 
 /// What the hints did at the current sample.
@@ -71,8 +87,15 @@ pub(super) struct Hints {
     /// sigma_j (-dp_y, dp_x)` over the horizontal steps `dp` since the fit was trusted, with
     /// `sigma_j` the fit's whole yaw 1-sigma then, m (navigation frame x, y).
     pub(super) systematic: [f64; 2],
+    /// The speed scale's error beyond the scale state's 1-sigma carried as a systematic
+    /// position error: `sum e_j dp_j` over the horizontal steps since the speed hints apply,
+    /// `e_j` the relative distance error then ([`Self::carry_systematic`]), m (navigation
+    /// frame x, y).
+    pub(super) along: [f64; 2],
     /// Body velocity minus corrections, one per sample since the mounting is known.
     pub(super) history: Ring<BodyVelocity>,
+    /// The current rest's gyro readings while stationary hints decide it.
+    pub(super) still: WheelsStill,
     /// Sum of the body-velocity changes every update has made since the mounting is known,
     /// m/s.
     pub(super) corrections: Vector3<f64>,
@@ -99,7 +122,9 @@ impl Hints {
         self.latest_fit = other.latest_fit;
         self.scale_taken = other.scale_taken;
         self.systematic = other.systematic;
+        self.along = other.along;
         self.history.clone_from(&other.history);
+        self.still = other.still;
         self.corrections = other.corrections;
         self.applied = other.applied;
         self.disagreements = other.disagreements;
@@ -125,6 +150,20 @@ impl Hints {
             newer = Some(e);
         }
         None
+    }
+
+    /// Whether speed hints are being applied at `t_ns`: the mounting is known and the newest
+    /// delivered hint carries a speed and is fresh. Their updates hold the non-holonomic
+    /// constraint (the lateral and vertical body velocity), so the IMU-only one
+    /// (`crate::nonholonomic`) waits: applied between them as well, at the IMU's rate, it took
+    /// the same lateral velocity error for new information several times per hint, and with
+    /// the heading kept ([`crate::eskf::Heading`]) turned the gyro bias about up instead.
+    pub(super) fn speed_in_use(&self, t_ns: u64) -> bool {
+        self.r_bs.is_some()
+            && self.newest.is_some_and(|h| {
+                h.flags & hint_flags::SPEED_VALID != 0
+                    && t_ns.saturating_sub(h.stamps.sample_ns) <= self.max_age_ns
+            })
     }
 
     /// Takes the forward-axis fit `fit` at `t_ns` as the mounting; returns `None` for the first
@@ -184,7 +223,8 @@ impl Hints {
         if t_ns.saturating_sub(h.stamps.sample_ns) > self.max_age_ns {
             return None;
         }
-        let then = self.uncorrected_at(h.stamps.sample_ns)?;
+        let lag_ns = (self.cfg.speed_time_offset_s * 1e9) as i64;
+        let then = self.uncorrected_at(h.stamps.sample_ns.saturating_add_signed(lag_ns))?;
         // The body velocity the filter now believes it had at the hint's time.
         let predicted = then + self.corrections;
         let residual = Vector3::new(
@@ -195,10 +235,11 @@ impl Hints {
         let nh = self.cfg.nonholonomic_sigma_mps;
         // A mounting yaw known to `yaw_sigma_rad` puts that much of the speed sideways.
         let lateral = nh.hypot(h.forward_speed_mps * self.yaw_sigma_rad);
-        let nis = kf.body_velocity_update(
+        let nis = kf.body_velocity_update_with(
             &r_bs,
             residual,
             Vector3::new(h.forward_speed_sigma_mps, lateral, nh),
+            self.cfg.speed_heading,
         );
         Some(nis.unwrap_or(f64::NAN))
     }
@@ -250,21 +291,87 @@ impl Hints {
         });
     }
 
-    /// Carries the estimated mounting's yaw error into the published position 1-sigma as a
-    /// systematic error (see [`Self::systematic`]) for a step of `dt_s` seconds at the
-    /// filter's velocity. A yaw error `d` of the mounting turns every velocity the speed
-    /// hints give by `d`, so the position error is `d` times the displacement since, turned
-    /// by 90 degrees: the speed updates' lateral 1-sigma (per hint, white) averages it away.
-    /// Taken as one error scaled by each fit's 1-sigma (a refined fit's error is the earlier
-    /// one's, shrunk), the variance per axis is the sum's square.
-    pub(super) fn carry_systematic(&mut self, kf: &mut Eskf, dt_s: f64) {
-        let Some(fit) = self.latest_fit.filter(|_| self.mounting_at_ns.is_some()) else {
+    /// A sample at a rest a fresh stationary hint decided (`w` its corrected rate, rad/s,
+    /// sensor frame; `dt` s): the wheels stand still, so the body does not turn. Once
+    /// [`WHEELS_STILL_CHECK_S`] of such samples are gathered, their mean is compared with the
+    /// filter's gyro bias, with the variance of the mean from their own scatter (a stop's
+    /// settling and the part's real noise, at least the noise density `density`,
+    /// rad/s/sqrt(Hz), over the root of the span) and the bias's: beyond `gate` 1-sigmas on
+    /// an axis, the reading says the bias is wrong, not that the robot spins. A bias learned
+    /// while the robot moved (a start in motion: the calibration stage's first steady window
+    /// was a steady turn) is that far off, and the zero-rate updates' gate, made for an
+    /// in-place spin flagged rest, then refuses every rest. As for the speed scale
+    /// ([`Self::scale_from_fit`], a prior-data conflict) the bias variance is widened to cover
+    /// the difference and the mean taken. Counted in [`HintStats::gyro_bias_refuted`].
+    pub(super) fn wheels_still(
+        &mut self,
+        kf: &mut Eskf,
+        w: &Vector3<f64>,
+        dt: f64,
+        density: f64,
+        gate: f64,
+    ) {
+        let still = &mut self.still;
+        still.n += 1;
+        still.t_s += dt;
+        still.sum += w;
+        still.sum_sq += w.component_mul(w);
+        if still.t_s < WHEELS_STILL_CHECK_S || still.n < 3 {
             return;
-        };
-        let sigma = fit.systematic_sigma_rad();
-        self.systematic[0] -= sigma * kf.x.v.y * dt_s;
-        self.systematic[1] += sigma * kf.x.v.x * dt_s;
-        kf.set_systematic(self.systematic.map(|s| s * s));
+        }
+        let n = f64::from(still.n);
+        let mean = still.sum / n;
+        let spread = (still.sum_sq / n - mean.component_mul(&mean)) * (n / (n - 1.0));
+        let floor = density * density / still.t_s;
+        let var_mean = spread.map(|v| (v / n).max(floor));
+        *still = WheelsStill::default();
+        let residual = mean - kf.x.b_g;
+        let p_bg = kf.cov.fixed_view::<3, 3>(BG, BG).diagonal();
+        let refuted = (0..3).any(|i| residual[i].abs() > gate * (p_bg[i] + var_mean[i]).sqrt());
+        if refuted {
+            kf.widen_gyro_bias(residual.map(|r| r * r));
+            kf.zero_rate(mean, var_mean.max().sqrt(), f64::INFINITY);
+            self.stats.gyro_bias_refuted += 1;
+        }
+    }
+
+    /// Carries what the filter's covariance does not hold of the speed hints' two systematic
+    /// errors into the published position 1-sigma (estimates unchanged), for a step of `dt_s`
+    /// seconds at the filter's velocity, while speed hints are applied (`t_ns`):
+    /// - the estimated mounting's yaw error (see [`Self::systematic`]): a yaw error `d` turns
+    ///   every velocity the speed hints give by `d`, so the position error is `d` times the
+    ///   displacement since, turned by 90 degrees; the speed updates' lateral 1-sigma (per
+    ///   hint, white) averages it away. Taken as one error scaled by each fit's 1-sigma (a
+    ///   refined fit's error is the earlier one's, shrunk);
+    /// - the speed scale beyond the scale state's 1-sigma (see [`Self::along`]): the
+    ///   forward-axis fit's scale and the state's are two estimates of one scale from the same
+    ///   run, and where they lie further apart than the state's 1-sigma the state does not know
+    ///   the scale that well (on the F1TENTH car of docs/real-data.md the state ended tens of
+    ///   its 1-sigmas from the particle filter's ratio). The excess, `sqrt(d^2 - sigma_k^2)`
+    ///   over `1 + k`, is a relative error of the distance along the velocity.
+    ///
+    /// Each is one error for the whole run: the variance per axis is its sum's square, and
+    /// the two, independent, add.
+    pub(super) fn carry_systematic(&mut self, kf: &mut Eskf, dt_s: f64, t_ns: u64) {
+        if !self.speed_in_use(t_ns) {
+            return;
+        }
+        let v = kf.x.v;
+        let fit = self.latest_fit.filter(|_| self.mounting_at_ns.is_some());
+        if let Some(fit) = fit {
+            let sigma = fit.systematic_sigma_rad();
+            self.systematic[0] -= sigma * v.y * dt_s;
+            self.systematic[1] += sigma * v.x * dt_s;
+        }
+        let (k, sigma_k) = kf.scale();
+        if let Some(k_fit) = fit.and_then(|f| f.scale) {
+            let excess = ((k - k_fit).powi(2) - sigma_k * sigma_k).max(0.0).sqrt();
+            let relative = excess / (1.0 + k).max(f64::EPSILON);
+            self.along[0] += relative * v.x * dt_s;
+            self.along[1] += relative * v.y * dt_s;
+        }
+        let var = |i: usize| self.systematic[i].powi(2) + self.along[i].powi(2);
+        kf.set_systematic([var(0), var(1)]);
     }
 
     /// The forward axis's report once trusted.

@@ -2,6 +2,7 @@
 
 use anyhow::{Result, bail};
 use nalgebra::UnitQuaternion;
+use odometry::eskf::Heading;
 use odometry::hints::HintConfig;
 
 /// How the odometry uses robot hints (`mems/robot/hint`).
@@ -28,6 +29,14 @@ pub struct HintArgs {
     /// 1-sigma of the wheel-speed scale error (prior of the filter's scale state), fraction.
     #[arg(long, default_value_t = 0.02)]
     pub speed_scale_sigma: f64,
+    /// Let the speed hints' updates turn the heading (the filter's optimal gain), which
+    /// body-frame velocities do not observe: for comparison (`odometry::eskf::Heading`).
+    #[arg(long)]
+    pub speed_hints_turn_heading: bool,
+    /// The speed source's lag behind the IMU, ms: added to each speed hint's time before it
+    /// is compared with the filter's velocity (`tools/real-data/hint_lag.py` measures it).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub hint_speed_lag_ms: f64,
 }
 
 impl HintArgs {
@@ -46,6 +55,12 @@ impl HintArgs {
             mounting_from_turns: given.is_none(),
             nonholonomic_sigma_mps: self.nonholonomic_sigma,
             speed_scale_sigma: self.speed_scale_sigma,
+            speed_heading: if self.speed_hints_turn_heading {
+                Heading::Corrected
+            } else {
+                Heading::Kept
+            },
+            speed_time_offset_s: self.hint_speed_lag_ms * 1e-3,
             ..HintConfig::default()
         };
         config.validate().map_err(|e| anyhow::anyhow!("{e}"))?;

@@ -269,7 +269,7 @@ impl Summary {
         read: &Read,
         chain: &OfflineChain,
     ) -> serde_json::Value {
-        let speed_updates = chain.second.hint_stats().speed_updates;
+        let stats = chain.second.hint_stats();
         let chain_axes = chain.second.stage().axes();
         let mut result = json!({
             "end_displacement_m": end.position_m,
@@ -293,7 +293,8 @@ impl Summary {
                 "late": read.hints_late,
                 "applied": end.hints_applied,
                 "disagreements": end.hint_disagreements,
-                "speed_updates": speed_updates,
+                "speed_updates": stats.speed_updates,
+                "gyro_bias_refuted": stats.gyro_bias_refuted,
                 "mounting_rpy_deg": hint_mounting(chain),
                 "forward_axis": forward_axis_json(chain, read.first_ns.unwrap_or(0)),
                 "speed_scale": speed_scale_json(chain),
