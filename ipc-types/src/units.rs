@@ -7,7 +7,7 @@ pub const STANDARD_GRAVITY_MPS2: f64 = 9.806_65;
 /// Local gravity the capstone thesis used for its recordings, m/s^2.
 pub const THESIS_GRAVITY_MPS2: f64 = 9.797;
 
-/// Accelerometer full-scale range, ACCEL_CONFIG bits [4:3] (`ACCEL_FS_SEL`).
+/// Accelerometer full-scale range, ACCEL_CONFIG bits `[4:3]` (`ACCEL_FS_SEL`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[repr(u8)]
 pub enum AccelRange {
@@ -39,7 +39,7 @@ impl AccelRange {
     }
 }
 
-/// Gyroscope full-scale range, GYRO_CONFIG bits [4:3] (`GYRO_FS_SEL`).
+/// Gyroscope full-scale range, GYRO_CONFIG bits `[4:3]` (`GYRO_FS_SEL`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[repr(u8)]
 pub enum GyroRange {

@@ -53,8 +53,8 @@ const MAX_INTERVAL_S: f64 = 30.0;
 /// What the check found so far.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct AxesReport {
-    /// Pairs of still windows at most [`MAX_INTERVAL_S`] apart between which the gyroscope
-    /// tilted the sensor by at least [`MIN_TURN_RAD`] against gravity.
+    /// Pairs of still windows at most `MAX_INTERVAL_S` apart between which the gyroscope
+    /// tilted the sensor by at least `MIN_TURN_RAD` against gravity.
     pub checked: u32,
     /// Of those, the pairs where gravity's direction disagreed with the gyroscope beyond the
     /// tolerance.

@@ -162,7 +162,7 @@ impl Entry {
     }
 }
 
-/// Counts of what [`ClipRepair`] did.
+/// Counts of what `ClipRepair` did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ClipStats {
     /// Motions with clipped samples reconstructed at their rest.

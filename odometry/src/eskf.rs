@@ -374,7 +374,7 @@ impl Eskf {
     }
 
     /// A direct measurement of the wheel-speed scale error: `k_meas` with variance `var`,
-    /// through the filter's one update ([`Self::update`], Joseph form): every state moves by
+    /// through the filter's one update (`update`, Joseph form): every state moves by
     /// its covariance with the scale.
     pub fn measure_scale(&mut self, k_meas: f64, var: f64) {
         let mut h = SMatrix::<f64, 1, N>::zeros();

@@ -4,7 +4,7 @@
 //!
 //! # Method
 //!
-//! **Data.** Each session is cut into observations ([`data`]): block means of `block_s`
+//! **Data.** Each session is cut into observations (module `data`): block means of `block_s`
 //! seconds inside static segments (raw recordings) or the poses of a six-position means file,
 //! each with the white-noise variance of its mean that the samples themselves predict, and its
 //! elapsed time (s) since a time origin: the session's first sample, or with

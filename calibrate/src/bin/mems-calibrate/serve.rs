@@ -10,7 +10,7 @@
 //!   and not published; the service goes on.
 //! - A restarted publisher (sequence numbers starting again) is a new sensor session: the stage
 //!   starts over (time check, detector learning, refinement).
-//! - `--state FILE`: the stage's [`WarmState`] (references, bias refinement, stream) is written
+//! - `--state FILE`: the stage's [`calibrate::stage::WarmState`] (references, bias refinement, stream) is written
 //!   to FILE when the detector has learned and then at most once a second while it changes
 //!   (atomically: a temporary file renamed over it), and read back at start-up when FILE
 //!   exists, so that a restarted process goes on where the killed one stopped instead of

@@ -42,7 +42,7 @@ enum Command {
     /// support, print the error before and after (`odometry::diagnose`).
     Diagnose(diagnose::DiagnoseArgs),
     /// Fit the gyro's scale and misalignment correction from a recorded pose session and
-    /// optionally store it in the calibration file's [gyro] table (`mems-calibrate gyrocal`:
+    /// optionally store it in the calibration file's `[gyro]` table (`mems-calibrate gyrocal`:
     /// see its --help).
     #[command(disable_help_flag = true)]
     Gyrocal {

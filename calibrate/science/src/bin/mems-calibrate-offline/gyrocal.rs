@@ -45,7 +45,7 @@ pub struct GyroCalArgs {
     /// more, with rotations about varied axes between them, starting at rest for `--learn-s`.
     #[arg(long)]
     input: PathBuf,
-    /// Store the correction and its 1-sigma in this calibration file's [gyro] table (the rest
+    /// Store the correction and its 1-sigma in this calibration file's `[gyro]` table (the rest
     /// of the file is kept). It must hold the same accelerometer calibration as --calib (the
     /// same file, usually).
     #[arg(long, value_name = "CALIB.toml")]

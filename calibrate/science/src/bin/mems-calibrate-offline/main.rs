@@ -98,7 +98,7 @@ enum Command {
     /// file's [noise] table, exported for Kalibr and plotted.
     Allan(AllanArgs),
     /// Fit the gyro's scale and misalignment correction from a recorded pose session and
-    /// optionally store it in the calibration file's [gyro] table.
+    /// optionally store it in the calibration file's `[gyro]` table.
     Gyrocal(gyrocal::GyroCalArgs),
 }
 
