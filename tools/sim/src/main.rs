@@ -76,6 +76,14 @@ enum Command {
         /// gyroscope deg/s (motors and gears; tools/sim/src/vibration.rs gives measured levels).
         #[arg(long, value_name = "MPS2,DPS", value_parser = parse_pair, default_value = "0,0")]
         vibration_floor: [f64; 2],
+        /// An engine idling at the stops after the first motion: accelerometer RMS per axis,
+        /// m/s^2, and firing frequency, Hz (tools/sim/src/vibration.rs gives measured levels).
+        #[arg(long, value_name = "MPS2,HZ", value_parser = parse_pair, default_value = "0,23")]
+        engine_idle: [f64; 2],
+        /// A road rocking a car's body while the wheels turn: accelerometer RMS per axis,
+        /// m/s^2, at 1.2 Hz (tools/sim/src/vibration.rs gives measured levels).
+        #[arg(long, default_value_t = 0.0)]
+        road: f64,
         /// Turns between the legs of a motion.
         #[arg(long, value_enum, default_value_t = OnOff::Off)]
         turns: OnOff,
@@ -885,6 +893,8 @@ fn run(cli: Cli) -> Result<()> {
             duration,
             vibration,
             vibration_floor,
+            engine_idle,
+            road,
             turns,
             in_place_turns,
             initial_rest,
@@ -907,10 +917,13 @@ fn run(cli: Cli) -> Result<()> {
             let drive = Drive::new(&params, common.seed)?;
             let hint_list = hints.received(&drive, common.seed)?;
             let [floor_accel, floor_gyro] = vibration_floor;
-            let model = VibrationModel::moderate(vibration).with_floor(floor_accel, floor_gyro);
+            let model = VibrationModel::moderate(vibration)
+                .with_floor(floor_accel, floor_gyro)
+                .with_engine_idle(engine_idle[0], engine_idle[1])
+                .with_road(road);
             model
                 .validate()
-                .map_err(|e| anyhow::anyhow!("--vibration-floor: {e}"))?;
+                .map_err(|e| anyhow::anyhow!("--vibration-floor, --engine-idle or --road: {e}"))?;
             simulate(drive, &model, &common, &hint_list)
         }
         Command::Walk {
