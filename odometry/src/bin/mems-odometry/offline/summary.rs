@@ -181,7 +181,9 @@ impl Summary {
         if vibrating_s > 0.0 {
             tracing::info!(
                 "the detector found {vibrating_s:.1} s steady but vibrating above its rest's noise \
-                 (no acceleration or turn it could see): taken for motion, not rest"
+                 (no acceleration or turn it could see): taken for motion, not rest, but for \
+                 {} samples the odometry took as stops (quiet below 2 Hz, flagged VIBRATING_STOP)",
+                self.vibrating_stop
             );
         }
         let axes = chain.second.stage().axes();
