@@ -328,11 +328,10 @@ impl Navigator {
         let dt = (t_ns - prev_ns.unwrap_or(t_ns)) as f64 * 1e-9;
         // The standing before the first motion (`crate::stops`): under a metre travelled.
         let learn = self.distance_m < 1.0 && imu_rest && detector_ready;
-        let moving = self.kf.is_some() && !self.at_rest;
         let flags = PushFlags {
             rest: imu_rest,
             learn,
-            moving,
+            moving: self.kf.is_some() && !self.at_rest,
         };
         self.stops.push(&m.f, &m.w, dt, flags);
 

@@ -30,9 +30,17 @@
 //! undulations always show, a smooth floor's or a simulator's perfectly smooth road need not,
 //! and there a cruise at constant speed is as quiet as a stop (the filter's velocity, whose
 //! along-track 1-sigma grows between stops, refuses it only at first). So the test takes
-//! windows for stops only while the platform's driving has been told from them: after
-//! [`MIN_DRIVING_S`] of windows in motion, of which at most [`QUIET_DRIVING_SHARE`] were quiet
-//! ([`StopTest::driving_told`]). The navigator
+//! windows for stops only where the platform's driving has been told from them: of its first
+//! [`MIN_DRIVING_S`] of windows in motion, at most [`QUIET_DRIVING_SHARE`] quiet, decided
+//! then once and for all ([`StopTest::driving_told`]; counted on, the windows it then takes
+//! for stops would no longer count as driving's, and a simulated robot's cruise, quiet below
+//! 2 Hz once its wheel's frequency is above it, was taken for stops). And only where an
+//! engine runs: the platform stood before its first motion shaking by more than [`FACTOR`]
+//! times the sensor's white noise at its rate (the profile's noise density; wid-car-06: 42-46
+//! mg against 4 mg for the MPU-9250's datasheet density at 120 Hz), or its stops are no
+//! different from its standing and the detector finds them (a simulated robot standing in
+//! its sensor's noise alone, docs/odometry.md's wheeled-sim drives, took cruising at 1-2 m/s
+//! for stops without this). The navigator
 //! (`navigator::wheeled`) takes a quiet window the detector calls motion as a stop when the
 //! filter's velocity does not contradict it (flagged `VIBRATING_STOP`), and refuses a rest the
 //! detector flags in a window that is not quiet (flagged `REST_VIBRATING`).
@@ -55,7 +63,7 @@ pub const FLOOR_ACCEL_MPS2: f64 = 1e-3 * 9.80665;
 /// Floor of the gyroscope reference's standard deviation, rad/s (0.05 deg/s).
 pub const FLOOR_GYRO_RPS: f64 = 0.05 * std::f64::consts::PI / 180.0;
 /// Windows in motion the test must have seen before it tells a stop, s of windows.
-pub const MIN_DRIVING_S: f64 = 10.0;
+pub const MIN_DRIVING_S: f64 = 30.0;
 /// The largest share of windows in motion that may be quiet for the test to tell a stop:
 /// wid-car-06 drives 43 s with 1 quiet window in 40 at most (the one at 40 s, 2.5 mg below
 /// 2 Hz).
@@ -227,7 +235,9 @@ impl StopTest {
             gyro_mean: Vector3::new(mean(3), mean(4), mean(5)),
         };
         self.window = Some(spread);
-        if self.ring.iter().all(|b| b.moving)
+        let undecided = f64::from(self.driving[0]) * BLOCK_S < MIN_DRIVING_S;
+        if undecided
+            && self.ring.iter().all(|b| b.moving)
             && let Some(quiet) = self.quiet()
         {
             self.driving[0] += 1;
@@ -257,9 +267,14 @@ impl StopTest {
         self.window
     }
 
+    /// The sample rate the low-pass runs at, Hz (`None` before two samples).
+    pub fn rate_hz(&self) -> Option<f64> {
+        (self.coef.dt_s > 0.0).then(|| 1.0 / self.coef.dt_s)
+    }
+
     /// Whether the platform's driving has been told from its stops (module documentation):
-    /// [`MIN_DRIVING_S`] of windows in motion seen, at most [`QUIET_DRIVING_SHARE`] of them
-    /// quiet.
+    /// of the first [`MIN_DRIVING_S`] of windows in motion, at most [`QUIET_DRIVING_SHARE`]
+    /// quiet (decided once: the windows later taken for stops are not driving's).
     pub fn driving_told(&self) -> bool {
         let [n, quiet] = self.driving.map(f64::from);
         n * BLOCK_S >= MIN_DRIVING_S && quiet <= QUIET_DRIVING_SHARE * n

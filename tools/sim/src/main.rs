@@ -80,6 +80,10 @@ enum Command {
         /// m/s^2, and firing frequency, Hz (tools/sim/src/vibration.rs gives measured levels).
         #[arg(long, value_name = "MPS2,HZ", value_parser = parse_pair, default_value = "0,23")]
         engine_idle: [f64; 2],
+        /// The same engine before the first motion, accelerometer RMS per axis, m/s^2 (0:
+        /// parked with the engine off).
+        #[arg(long, default_value_t = 0.0)]
+        engine_start: f64,
         /// A road rocking a car's body while the wheels turn: accelerometer RMS per axis,
         /// m/s^2, at 1.2 Hz (tools/sim/src/vibration.rs gives measured levels).
         #[arg(long, default_value_t = 0.0)]
@@ -894,6 +898,7 @@ fn run(cli: Cli) -> Result<()> {
             vibration,
             vibration_floor,
             engine_idle,
+            engine_start,
             road,
             turns,
             in_place_turns,
@@ -919,11 +924,11 @@ fn run(cli: Cli) -> Result<()> {
             let [floor_accel, floor_gyro] = vibration_floor;
             let model = VibrationModel::moderate(vibration)
                 .with_floor(floor_accel, floor_gyro)
-                .with_engine_idle(engine_idle[0], engine_idle[1])
+                .with_engine_idle(engine_idle[0], engine_idle[1], engine_start)
                 .with_road(road);
-            model
-                .validate()
-                .map_err(|e| anyhow::anyhow!("--vibration-floor, --engine-idle or --road: {e}"))?;
+            model.validate().map_err(|e| {
+                anyhow::anyhow!("--vibration-floor, --engine-idle, --engine-start or --road: {e}")
+            })?;
             simulate(drive, &model, &common, &hint_list)
         }
         Command::Walk {

@@ -35,9 +35,10 @@
 //! three axes (30-80 mg per axis), with nothing below 2 Hz and the gyroscope as quiet as
 //! standing. The model adds, on every accelerometer axis, 70 % of the RMS's power at
 //! `engine_idle_hz` and 30 % at twice that (the fourth order), with phases drawn per channel,
-//! whenever the wheels stand still after they first turned (the car was parked with its
-//! engine off before its first motion): `mems-sim drive --engine-idle 0.3,23`. The
-//! gyroscope gets none.
+//! whenever the wheels stand still after they first turned, and `engine_start_accel_rms_mps2`
+//! before the first motion (0 by default: parked with the engine off; wid-car-06 idles at
+//! 42-46 mg standing at its start and 52-55 mg at its stop after driving): `mems-sim drive
+//! --engine-idle 0.3,23 --engine-start 0.2`. The gyroscope gets none.
 //!
 //! **A road under a car's body** (`road_accel_rms_mps2`; 0 by default): a road's
 //! undulations rock a car's body on its suspension at its bounce and pitch modes, 1-1.5 Hz
@@ -109,6 +110,10 @@ pub struct VibrationModel {
     /// The engine's firing frequency at idle (its second order), Hz.
     #[serde(default = "default_engine_idle_hz")]
     pub engine_idle_hz: f64,
+    /// The same engine's vibration before the first motion, RMS per axis, m/s^2 (0: parked
+    /// with the engine off).
+    #[serde(default)]
+    pub engine_start_accel_rms_mps2: f64,
     /// Accelerometer disturbance of a road rocking a car's body while the wheels turn, RMS
     /// per axis, m/s^2 (see the module documentation; 0: none).
     #[serde(default)]
@@ -143,6 +148,7 @@ impl VibrationModel {
             floor_gyro_rms_dps: 0.0,
             engine_idle_accel_rms_mps2: 0.0,
             engine_idle_hz: default_engine_idle_hz(),
+            engine_start_accel_rms_mps2: 0.0,
             road_accel_rms_mps2: 0.0,
         }
     }
@@ -157,10 +163,11 @@ impl VibrationModel {
     }
 
     /// `self` with an engine idling at the stops at `accel_rms_mps2` (m/s^2 RMS per axis) and
-    /// `hz` (its firing frequency).
-    pub fn with_engine_idle(self, accel_rms_mps2: f64, hz: f64) -> Self {
+    /// `hz` (its firing frequency), and at `start_rms_mps2` before the first motion.
+    pub fn with_engine_idle(self, accel_rms_mps2: f64, hz: f64, start_rms_mps2: f64) -> Self {
         Self {
             engine_idle_accel_rms_mps2: accel_rms_mps2,
+            engine_start_accel_rms_mps2: start_rms_mps2,
             engine_idle_hz: hz,
             ..self
         }
@@ -192,6 +199,10 @@ impl VibrationModel {
             (
                 "engine_idle_accel_rms_mps2",
                 self.engine_idle_accel_rms_mps2,
+            ),
+            (
+                "engine_start_accel_rms_mps2",
+                self.engine_start_accel_rms_mps2,
             ),
             ("road_accel_rms_mps2", self.road_accel_rms_mps2),
         ] {
@@ -323,8 +334,9 @@ impl Vibration {
             m.floor_accel_rms_mps2,
             m.floor_gyro_rms_dps,
             m.engine_idle_accel_rms_mps2,
+            m.engine_start_accel_rms_mps2,
             m.road_accel_rms_mps2,
-        ] == [0.0; 6]
+        ] == [0.0; 7]
         {
             return ([0.0; 3], [0.0; 3]);
         }
@@ -366,8 +378,12 @@ impl Vibration {
         let mut accel = [a * unit[0], a * unit[1], a * unit[2]];
         let mut gyro = [g * unit[3], g * unit[4], g * unit[5]];
         self.moved |= wheel_speed_mps != 0.0;
-        if wheel_speed_mps == 0.0 && self.moved {
-            let idle = self.engine_idle(t_s);
+        if wheel_speed_mps == 0.0 {
+            let level = match self.moved {
+                true => self.model.engine_idle_accel_rms_mps2,
+                false => self.model.engine_start_accel_rms_mps2,
+            };
+            let idle = self.engine_idle(t_s, level);
             for (out, x) in accel.iter_mut().zip(idle) {
                 *out += x;
             }
@@ -406,12 +422,13 @@ impl Vibration {
         })
     }
 
-    /// The idling engine's specific force at `t_s`, m/s^2 per accelerometer axis.
-    fn engine_idle(&self, t_s: f64) -> [f64; 3] {
+    /// The idling engine's specific force at `t_s` with the RMS `level` per axis, m/s^2 per
+    /// accelerometer axis.
+    fn engine_idle(&self, t_s: f64, level: f64) -> [f64; 3] {
         let m = &self.model;
         let (a1, a2) = (
-            m.engine_idle_accel_rms_mps2 * (2.0 * ENGINE_FIRST_POWER).sqrt(),
-            m.engine_idle_accel_rms_mps2 * (2.0 * (1.0 - ENGINE_FIRST_POWER)).sqrt(),
+            level * (2.0 * ENGINE_FIRST_POWER).sqrt(),
+            level * (2.0 * (1.0 - ENGINE_FIRST_POWER)).sqrt(),
         );
         let w = TAU * m.engine_idle_hz * t_s;
         std::array::from_fn(|i| {
