@@ -336,14 +336,17 @@ mod tests {
         let body = |t: f64| 0.05 * (2.0 * std::f64::consts::PI * t).sin();
         let mut rough = StopTest::default();
         run(&mut rough, 3.0, true, |_| 0.0);
-        run(&mut rough, 5.0, false, body);
-        assert!(!rough.driving_told(), "5 s of driving is too little");
-        run(&mut rough, 6.0, false, body);
+        run(&mut rough, 20.0, false, body);
+        assert!(!rough.driving_told(), "20 s of driving is too little");
+        run(&mut rough, 12.0, false, body);
         assert!(rough.driving_told());
         // A smooth road: as quiet as standing.
         let mut smooth = StopTest::default();
         run(&mut smooth, 3.0, true, |_| 0.0);
-        run(&mut smooth, 20.0, false, |_| 0.0);
+        run(&mut smooth, 40.0, false, |_| 0.0);
+        assert!(!smooth.driving_told());
+        // Decided once: rough driving after that does not change it.
+        run(&mut smooth, 40.0, false, body);
         assert!(!smooth.driving_told());
     }
 
