@@ -17,7 +17,7 @@ use crate::hints::{
 };
 use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::sampled_noise::SampledNoise;
-use crate::stops::{PushFlags, StopTest};
+use crate::stops::StopTest;
 use crate::uncalibrated::{AccelEstimate, AccelPrior};
 use crate::untrusted::{Untrusted, Verdict};
 use crate::walking::Walk;
@@ -326,14 +326,7 @@ impl Navigator {
         let (step, walking) = self.walk_step(t_ns, &m, verdict.implausible);
         let imu_rest = imu_rest && !walking;
         let dt = (t_ns - prev_ns.unwrap_or(t_ns)) as f64 * 1e-9;
-        // The standing before the first motion (`crate::stops`): under a metre travelled.
-        let learn = self.distance_m < 1.0 && imu_rest && detector_ready;
-        let flags = PushFlags {
-            rest: imu_rest,
-            learn,
-            moving: self.kf.is_some() && !self.at_rest,
-        };
-        self.stops.push(&m.f, &m.w, dt, flags);
+        self.push_stops(&m, dt, imu_rest && detector_ready);
 
         if self.kf.is_none() {
             let rest = d.rest.unwrap_or(imu_rest);

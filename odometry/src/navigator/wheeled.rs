@@ -5,7 +5,9 @@
 use ipc_types::{hint_flags, odometry_flags};
 
 use crate::config::OdometryConfig;
+use crate::eskf::Imu;
 use crate::nonholonomic::ImuConstraint;
+use crate::stops::PushFlags;
 
 use super::Navigator;
 use super::hint_state::{HintDecision, HintSample};
@@ -92,6 +94,18 @@ impl Navigator {
             nhc.stop_seen(v);
         }
         true
+    }
+
+    /// Feeds the low-frequency test (`crate::stops`) the sample `m`, `dt_s` after the
+    /// previous one, with the detector's rest flag `rest` (once it is ready): the standing
+    /// before the first motion (under a metre travelled) is its reference.
+    pub(super) fn push_stops(&mut self, m: &Imu, dt_s: f64, rest: bool) {
+        let flags = PushFlags {
+            rest,
+            learn: self.distance_m < 1.0 && rest,
+            moving: self.kf.is_some() && !self.at_rest,
+        };
+        self.stops.push(&m.f, &m.w, dt_s, flags);
     }
 
     /// Whether the platform stood at its alignment with an engine running (`crate::stops`):

@@ -757,6 +757,14 @@ impl Sink {
     }
 }
 
+/// `model` if it is valid, else an error naming the options that set it.
+fn checked(model: VibrationModel) -> anyhow::Result<VibrationModel> {
+    model.validate().map_err(|e| {
+        anyhow::anyhow!("--vibration-floor, --engine-idle, --engine-start or --road: {e}")
+    })?;
+    Ok(model)
+}
+
 /// Samples `scenario` from 0 to its duration at the common rate, quantizes, and writes, with
 /// `hints` interleaved by publication time.
 fn simulate(
@@ -921,15 +929,11 @@ fn run(cli: Cli) -> Result<()> {
             }
             let drive = Drive::new(&params, common.seed)?;
             let hint_list = hints.received(&drive, common.seed)?;
-            let [floor_accel, floor_gyro] = vibration_floor;
             let model = VibrationModel::moderate(vibration)
-                .with_floor(floor_accel, floor_gyro)
+                .with_floor(vibration_floor[0], vibration_floor[1])
                 .with_engine_idle(engine_idle[0], engine_idle[1], engine_start)
                 .with_road(road);
-            model.validate().map_err(|e| {
-                anyhow::anyhow!("--vibration-floor, --engine-idle, --engine-start or --road: {e}")
-            })?;
-            simulate(drive, &model, &common, &hint_list)
+            simulate(drive, &checked(model)?, &common, &hint_list)
         }
         Command::Walk {
             laps,
