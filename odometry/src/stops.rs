@@ -7,13 +7,14 @@
 //! nothing below a few hertz, because the body stands on its tyres. Driving puts power where
 //! standing has none: the road's undulations through the suspension (body modes at 1-2 Hz),
 //! speed changes and steering. On the corpus's wid-car-06 (an Xsens DOT at 120 Hz; 1 s
-//! windows, standard deviation of the three axes together) the stop with the engine running
-//! shows 52-60 mg in all against 42-46 mg standing at the start, so the zero-state detector's
-//! scatter test calls it motion, but below 2 Hz it shows 0.4-1.9 mg, as at the start
-//! (0.5-1.5 mg), against 2.5-54 mg (mostly above 5) while it drives. wid-car-10 is the other
-//! way round: its engine shook it more standing (100-140 mg) than cruising (46-96 mg), so the
-//! detector took stretches of its cruise for rest, while below 2 Hz the cruise shows 5.6-36 mg
-//! against 0.7-2.7 mg standing. (The figures: `python3 tools/real-data/low_frequency.py`.)
+//! windows, standard deviation of the three axes together, 10-90 %) the stop with the engine
+//! running shows 52.1-55.4 mg in all against 41.9-45.6 mg standing at the start, so the
+//! zero-state detector's scatter test calls it motion, but below 2 Hz it shows 0.7-2.0 mg, as
+//! at the start (0.9-2.6 mg), against 10.3-42.3 mg while it drives. wid-car-10 is the other
+//! way round: its engine shook it more standing (101-125 mg) than cruising (53-95 mg), so the
+//! detector took stretches of its cruise for rest, while below 2 Hz the cruise shows
+//! 10.6-38.5 mg against 0.5-2.2 mg standing. (The figures: `python3
+//! tools/real-data/low_frequency.py`, with the spans of docs/odometry.md.)
 //!
 //! [`StopTest`] runs every channel through a second-order Butterworth low-pass at
 //! [`CUTOFF_HZ`] (bilinear transform; an engine's 20 Hz leaks through at 1 %, aliased or
