@@ -202,7 +202,8 @@ pub mod odometry_flags {
     pub const UNTRUSTED_INPUT: u16 = 1 << 9;
     /// Wheeled platform without hints: the zero-state detector flagged rest, but the window
     /// that decided it vibrated more than the platform did standing at alignment
-    /// (`OdometryConfig::rest_vibration_factor` times its standard deviation): the sample is
+    /// (`OdometryConfig::rest_vibration_factor` times its standard deviation), or shook below
+    /// 2 Hz more than it did standing (`odometry::stops`, without speed hints): the sample is
     /// taken as motion (no zero-velocity update), never silently as rest.
     pub const REST_VIBRATING: u16 = 1 << 11;
     /// Wheeled platform: the non-holonomic constraint (zero lateral and vertical body
@@ -213,6 +214,12 @@ pub mod odometry_flags {
     /// filter's velocity was further from zero than its 1-sigma allows (a car cruising as
     /// smoothly as it stood): the sample is taken as motion, never silently as rest.
     pub const REST_MOVING: u16 = 1 << 13;
+    /// Wheeled platform without speed hints: the zero-state detector found motion (its window
+    /// vibrated more than its rest), but below 2 Hz the specific force and the angular rate
+    /// were as quiet as standing at alignment, with no turn, and the filter's velocity did not
+    /// contradict a stop (`odometry::stops`: a car stopped with its engine running): the
+    /// sample is taken as rest, with a zero-velocity update.
+    pub const VIBRATING_STOP: u16 = 1 << 14;
 }
 
 /// The odometry estimate at one sample time.

@@ -29,6 +29,7 @@ pub mod sampled_noise;
 pub mod session;
 pub mod stage;
 pub mod steps;
+pub mod stops;
 pub mod uncalibrated;
 mod untrusted;
 pub mod walking;

@@ -17,6 +17,7 @@ use crate::hints::{
 };
 use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::sampled_noise::SampledNoise;
+use crate::stops::StopTest;
 use crate::uncalibrated::{AccelEstimate, AccelPrior};
 use crate::untrusted::{Untrusted, Verdict};
 use crate::walking::Walk;
@@ -83,6 +84,8 @@ pub(crate) struct Navigator {
     /// Standard deviation of the specific force's norm over the alignment rest (the root of
     /// the three axes' variances summed), m/s^2.
     standing_accel_sd: f64,
+    /// The low-frequency test of a wheeled platform's stops (`crate::stops`).
+    stops: StopTest,
     /// Clipped and implausible stretches in progress.
     untrusted: Untrusted,
     /// The clipped motion being gathered for its reconstruction (boxed: about 170 kB,
@@ -155,6 +158,7 @@ impl Navigator {
             nhc: (cfg.imu_nonholonomic_sigma_mps > 0.0)
                 .then(|| ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)),
             standing_accel_sd: 0.0,
+            stops: StopTest::default(),
             untrusted: Untrusted::default(),
             clip: Box::default(),
             accel_prior: None,
@@ -190,6 +194,7 @@ impl Navigator {
         self.imu_decided = other.imu_decided;
         self.nhc = other.nhc;
         self.standing_accel_sd = other.standing_accel_sd;
+        self.stops = other.stops;
         self.untrusted = other.untrusted;
         self.clip.copy_from(&other.clip);
         self.accel_prior = other.accel_prior;
@@ -208,10 +213,7 @@ impl Navigator {
         self.nhc = match (cfg.imu_nonholonomic_sigma_mps > 0.0, self.nhc) {
             (false, _) => None,
             (true, Some(nhc)) => Some(nhc),
-            (true, None) => Some(ImuConstraint::new(
-                cfg.imu_nonholonomic_sigma_mps,
-                self.hints.cfg.imu_mounting,
-            )),
+            (true, None) => Some(self.started_constraint(&cfg)),
         };
         self.walk = match (cfg.walking, self.walk) {
             (None, _) => None,
@@ -336,6 +338,8 @@ impl Navigator {
         // Hand-held walking: the quiet instants between steps are no rests.
         let (step, walking) = self.walk_step(t_ns, &m, verdict.implausible);
         let imu_rest = imu_rest && !walking;
+        let dt = (t_ns - prev_ns.unwrap_or(t_ns)) as f64 * 1e-9;
+        self.push_stops(&m, dt, imu_rest && detector_ready);
 
         if self.kf.is_none() {
             let rest = d.rest.unwrap_or(imu_rest);
@@ -360,10 +364,10 @@ impl Navigator {
             emit(&self.unaligned_state(s, rest, d.sample));
             return;
         }
-        let dt = (t_ns - prev_ns.unwrap_or(t_ns)) as f64 * 1e-9;
         let imu_rest = imu_rest && !self.vibrating(s, &mut d.sample);
         let unaided = self.unaided_wheeled(&d);
-        let imu_rest = imu_rest && !self.moving_rest(unaided, &mut d.sample);
+        let imu_rest =
+            self.wheeled_rest(imu_rest, !walking && detector_ready, unaided, &mut d.sample);
         let rest = self.rest_decision(&d, imu_rest);
         self.gather_attitude(&m, rest && !verdict.implausible && verdict.clipped == 0);
         if !rest {

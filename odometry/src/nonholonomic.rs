@@ -24,10 +24,18 @@
 //! residual bias along it, neither of which the constraint can tell from an acceleration.
 //! The filter's own covariance does not hold that error (its mounting is taken as exact, and
 //! the constraint's updates shrink the tilt that would carry it), so [`AlongTrack`] adds it
-//! to the published 1-sigma: an along-track acceleration error of 1-sigma
-//! [`ALONG_TRACK_ACCEL_SIGMA_MPS2`], constant over each motion between rests (a systematic
-//! error, not a noise: the velocity error grows as `a t`, the position error as `a t^2 / 2`),
-//! independent from one motion to the next. A rest's zero-velocity update takes the velocity
+//! to the published 1-sigma: an along-track acceleration error of 1-sigma `a`, constant over
+//! each motion between rests (a systematic error, not a noise: the velocity error grows as
+//! `a t`, the position error as `a t^2 / 2`), independent from one motion to the next.
+//!
+//! `a` is learned from the data: each stop's velocity correction is a measurement of it (the
+//! filter's speed when a rest after at least [`MIN_MOTION_S`] of motion begins, over that
+//! motion's time), pooled with the prior [`ALONG_TRACK_ACCEL_SIGMA_MPS2`] counted as one stop
+//! (`a^2` the mean of the squares). And the velocity share stays within [`SPEED_FACTOR`] times
+//! the speed the filter has shown over the motion (its root mean square): the error `e` is
+//! the filter's speed less the true one, within the shown speed plus the true speed for a
+//! platform that drives forward, so a 1-sigma of about the shown speed (a slow rover at
+//! 0.2 m/s does not gain a velocity error of 8 m/s in 260 s: the filter would show it). A rest's zero-velocity update takes the velocity
 //! share away; the position share stays (a stop's update does not reveal it: on the simulated
 //! car of docs/odometry.md the stop's position correction, through the covariance's
 //! position-velocity correlation, moved the track the wrong way by tens of metres). Estimates
@@ -50,6 +58,12 @@ const FREE_MPS: f64 = 1e3;
 /// changes by +-1.5 mg/degC over temperature, datasheet PS-MPU-9250A-01 table 2; 0.01 m/s^2),
 /// in quadrature.
 pub const ALONG_TRACK_ACCEL_SIGMA_MPS2: f64 = 0.03;
+/// Shortest motion whose stop measures the along-track acceleration error, s: below it the
+/// stop's residual speed is the detector's timing more than the drift.
+pub const MIN_MOTION_S: f64 = 5.0;
+/// The along-track velocity share stays within this many times the speed the filter has
+/// shown over the motion, root mean square (module documentation).
+pub const SPEED_FACTOR: f64 = 1.0;
 
 /// The IMU-only constraint's state.
 #[derive(Debug, Clone, Copy)]
@@ -66,6 +80,8 @@ pub struct ImuConstraint {
     estimator: MountingEstimator,
     /// The along-track drift's share of the published 1-sigma.
     along: AlongTrack,
+    /// The stops' along-track acceleration errors: sum of squares (m/s^2)^2 and count.
+    stops: [f64; 2],
     /// Updates applied and rejected.
     pub applied: u64,
     /// Updates rejected by the gate.
@@ -99,6 +115,7 @@ impl ImuConstraint {
             yaw_sigma_rad: 0.0,
             estimator: MountingEstimator::default(),
             along: AlongTrack::default(),
+            stops: [0.0; 2],
             applied: 0,
             rejected: 0,
         }
@@ -175,7 +192,7 @@ impl ImuConstraint {
         } else {
             nalgebra::Vector2::repeat(std::f64::consts::FRAC_1_SQRT_2)
         };
-        let (dp, dv) = self.along.grow(dt_s, ALONG_TRACK_ACCEL_SIGMA_MPS2);
+        let (dp, dv) = self.along.grow(dt_s, self.along_track_accel(), speed);
         let split = |d: f64| [d * h.x * h.x, d * h.y * h.y];
         kf.widen_reported(split(dp), split(dv));
     }
@@ -184,11 +201,37 @@ impl ImuConstraint {
     pub fn stopped(&mut self) {
         self.along = AlongTrack::default();
     }
+
+    /// A rest begins while the filter's horizontal speed is `speed_mps`: after a motion of
+    /// at least [`MIN_MOTION_S`] that speed over the motion's time measures the along-track
+    /// acceleration error (module documentation). Called at every rest sample; only the
+    /// first after a motion counts (it ends the motion, as [`Self::stopped`] does).
+    pub fn stop_seen(&mut self, speed_mps: f64) {
+        let t = self.along.t_s;
+        if t >= MIN_MOTION_S && speed_mps.is_finite() {
+            self.stops[0] += (speed_mps / t).powi(2);
+            self.stops[1] += 1.0;
+        }
+        self.stopped();
+    }
+
+    /// 1-sigma of the along-track acceleration error, m/s^2: the prior and the stops'
+    /// measurements pooled (module documentation).
+    pub fn along_track_accel(&self) -> f64 {
+        let [sum_sq, n] = self.stops;
+        ((ALONG_TRACK_ACCEL_SIGMA_MPS2.powi(2) + sum_sq) / (1.0 + n)).sqrt()
+    }
+
+    /// Stops that measured the along-track acceleration error.
+    pub fn stops_measured(&self) -> u64 {
+        self.stops[1] as u64
+    }
 }
 
 /// The along-track error of one motion between rests (see the module documentation): an
 /// acceleration error of 1-sigma `a`, constant over the motion, grows the velocity's 1-sigma
-/// as `u = a t` and the position's as `d = a t^2 / 2` (accumulated as `u dt`, so a motion
+/// as `u = a t`, within [`SPEED_FACTOR`] times the speed shown (rms), and the position's
+/// as the integral of `u` (`a t^2 / 2` below that bound; accumulated as `u dt`, so a motion
 /// that stops and starts again without a rest keeps its time).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct AlongTrack {
@@ -197,14 +240,19 @@ pub struct AlongTrack {
     /// The velocity and position 1-sigma so far, m/s and m.
     u: f64,
     d: f64,
+    /// The integral of the squared speed shown in the motion, m^2/s.
+    speed_sq_s: f64,
 }
 
 impl AlongTrack {
-    /// Adds `dt_s` seconds at the acceleration 1-sigma `a` (m/s^2); returns how much the
-    /// position variance (m^2) and the velocity variance ((m/s)^2) grew.
-    pub fn grow(&mut self, dt_s: f64, a: f64) -> (f64, f64) {
+    /// Adds `dt_s` seconds at the acceleration 1-sigma `a` (m/s^2) with the filter showing
+    /// the speed `speed_mps`; returns how much the position variance (m^2) and the velocity
+    /// variance ((m/s)^2) grew.
+    pub fn grow(&mut self, dt_s: f64, a: f64, speed_mps: f64) -> (f64, f64) {
         self.t_s += dt_s;
-        let u = a * self.t_s;
+        self.speed_sq_s += speed_mps * speed_mps * dt_s;
+        let rms = (self.speed_sq_s / self.t_s).sqrt();
+        let u = (a * self.t_s).min(SPEED_FACTOR * rms).max(self.u);
         let d = self.d + 0.5 * (self.u + u) * dt_s;
         let grown = (d * d - self.d * self.d, u * u - self.u * self.u);
         (self.u, self.d) = (u, d);
@@ -229,12 +277,46 @@ mod tests {
         let mut along = AlongTrack::default();
         let (mut p, mut v) = (0.0, 0.0);
         for _ in 0..6000 {
-            let (dp, dv) = along.grow(0.01, 0.02);
+            let (dp, dv) = along.grow(0.01, 0.02, 5.0);
             (p, v) = (p + dp, v + dv);
         }
         // After 60 s: 1.2 m/s and 36 m.
         assert!((v.sqrt() - 1.2).abs() < 1e-9, "{}", v.sqrt());
         assert!((p.sqrt() - 36.0).abs() < 1e-3, "{}", p.sqrt());
+    }
+
+    #[test]
+    fn a_slow_platform_s_velocity_share_stays_near_its_speed() {
+        let mut along = AlongTrack::default();
+        let (mut p, mut v) = (0.0, 0.0);
+        for _ in 0..26000 {
+            let (dp, dv) = along.grow(0.01, 0.03, 0.2);
+            (p, v) = (p + dp, v + dv);
+        }
+        // 0.2 m/s from 6.7 s on: 51.3 m after 260 s instead of 1014 m.
+        assert!((v.sqrt() - 0.2).abs() < 1e-9, "{}", v.sqrt());
+        let t1 = 0.2 / 0.03;
+        let expected = 0.03 * t1 * t1 / 2.0 + 0.2 * (260.0 - t1);
+        assert!((p.sqrt() - expected).abs() < 0.1, "{} {expected}", p.sqrt());
+    }
+
+    #[test]
+    fn stops_teach_the_along_track_acceleration() {
+        let mut nhc = ImuConstraint::new(0.1, None);
+        assert_eq!(nhc.along_track_accel(), ALONG_TRACK_ACCEL_SIGMA_MPS2);
+        for _ in 0..1000 {
+            nhc.along.grow(0.01, 0.03, 1.0);
+        }
+        // 10 s of motion, 0.05 m/s at the stop: 0.005 m/s^2, pooled with the prior; the
+        // stop's next sample is no new stop.
+        nhc.stop_seen(0.05);
+        nhc.stop_seen(0.05);
+        let expected = ((0.03f64.powi(2) + 0.005f64.powi(2)) / 2.0).sqrt();
+        assert!((nhc.along_track_accel() - expected).abs() < 1e-12);
+        // A short motion measures nothing.
+        nhc.along.grow(1.0, 0.03, 1.0);
+        nhc.stop_seen(3.0);
+        assert_eq!(nhc.stops_measured(), 1);
     }
 
     #[test]

@@ -4,6 +4,11 @@
 
 use ipc_types::{hint_flags, odometry_flags};
 
+use crate::config::OdometryConfig;
+use crate::eskf::Imu;
+use crate::nonholonomic::ImuConstraint;
+use crate::stops::PushFlags;
+
 use super::Navigator;
 use super::hint_state::{HintDecision, HintSample};
 
@@ -47,6 +52,87 @@ impl Navigator {
             hs.flags |= odometry_flags::REST_MOVING;
         }
         moving
+    }
+
+    /// The rest decision of a wheeled platform without speed hints (`unaided`, as in
+    /// [`Self::unaided_wheeled`]) from the detector's (`imu_rest`, after the vibration check)
+    /// and the low-frequency test (`crate::stops`): a rest whose window is not quiet is
+    /// refused (flagged `REST_VIBRATING`: it shakes below 2 Hz as the platform did not
+    /// standing); a quiet window the detector calls motion (`detector_ready`, and no step of a
+    /// walk) is a stop with its engine running (flagged `VIBRATING_STOP`). Either way the
+    /// filter's velocity may still refuse it ([`Self::moving_rest`]). A rest after a motion
+    /// gives the along-track drift its velocity correction
+    /// (`crate::nonholonomic::ImuConstraint::stop_seen`).
+    pub(super) fn wheeled_rest(
+        &mut self,
+        imu_rest: bool,
+        detector_ready: bool,
+        unaided: bool,
+        hs: &mut HintSample,
+    ) -> bool {
+        let Some(kf) = self.kf.as_ref().filter(|_| unaided) else {
+            return imu_rest;
+        };
+        let quiet = self.stops.quiet();
+        if imu_rest && quiet == Some(false) {
+            hs.flags |= odometry_flags::REST_VIBRATING;
+            return false;
+        }
+        let stop = !imu_rest
+            && detector_ready
+            && quiet == Some(true)
+            && self.stops.driving_told()
+            && self.engine_running();
+        if !(imu_rest || stop) || self.moving_rest(unaided, hs) {
+            return false;
+        }
+        if stop {
+            hs.flags |= odometry_flags::VIBRATING_STOP;
+        }
+        let v = kf.x.v.xy().norm();
+        if let Some(nhc) = self.nhc.as_mut() {
+            nhc.stop_seen(v);
+        }
+        true
+    }
+
+    /// Feeds the low-frequency test (`crate::stops`) the sample `m`, `dt_s` after the
+    /// previous one, with the detector's rest flag `rest` (once it is ready): the standing
+    /// before the first motion (under a metre travelled) is its reference.
+    pub(super) fn push_stops(&mut self, m: &Imu, dt_s: f64, rest: bool) {
+        let flags = PushFlags {
+            rest,
+            learn: self.distance_m < 1.0 && rest,
+            moving: self.kf.is_some() && !self.at_rest,
+        };
+        self.stops.push(&m.f, &m.w, dt_s, flags);
+    }
+
+    /// Whether the platform stood at its alignment with an engine running (`crate::stops`):
+    /// its specific force's standard deviation (three axes) more than `stops::FACTOR` times
+    /// what the profile's white-noise density makes at the sample rate.
+    fn engine_running(&self) -> bool {
+        let Some(rate_hz) = self.stops.rate_hz() else {
+            return false;
+        };
+        let noise = self.cfg.noise.accel_noise_density * (1.5 * rate_hz).sqrt();
+        self.standing_accel_sd > crate::stops::FACTOR * noise
+    }
+
+    /// The IMU-only constraint of `cfg`, taken in the middle of a motion (a platform
+    /// recognized as wheeled after seconds of driving): the along-track drift counts that
+    /// motion from its start.
+    pub(super) fn started_constraint(&mut self, cfg: &OdometryConfig) -> ImuConstraint {
+        let mut nhc =
+            ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, self.hints.cfg.imu_mounting);
+        let moving_s = match (self.motion_start_ns, self.last, self.at_rest) {
+            (Some(start), Some((t_ns, _, _)), false) => t_ns.saturating_sub(start) as f64 * 1e-9,
+            _ => 0.0,
+        };
+        if let Some(kf) = self.kf.as_mut().filter(|_| moving_s > 0.0) {
+            nhc.drift_along_track(kf, moving_s);
+        }
+        nhc
     }
 
     /// After the updates of an aligned sample: the along-track drift of a wheeled platform's

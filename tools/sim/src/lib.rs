@@ -119,6 +119,11 @@ pub(crate) mod streams {
     pub const DRIVE_SLOPES: u64 = 9;
     /// The waypoints, moves and pauses of an arm's path.
     pub const ARM_PLAN: u64 = 40;
+    /// The phases of an engine idling at the stops (its own stream, so that drives without an
+    /// engine draw as before).
+    pub const ENGINE_IDLE: u64 = 41;
+    /// A road's rocking of a car's body (its own stream likewise).
+    pub const ROAD: u64 = 42;
 }
 
 /// A ChaCha8 generator for stream `stream` of `seed` (see [`streams`] and the model's streams).

@@ -76,6 +76,18 @@ enum Command {
         /// gyroscope deg/s (motors and gears; tools/sim/src/vibration.rs gives measured levels).
         #[arg(long, value_name = "MPS2,DPS", value_parser = parse_pair, default_value = "0,0")]
         vibration_floor: [f64; 2],
+        /// An engine idling at the stops after the first motion: accelerometer RMS per axis,
+        /// m/s^2, and firing frequency, Hz (tools/sim/src/vibration.rs gives measured levels).
+        #[arg(long, value_name = "MPS2,HZ", value_parser = parse_pair, default_value = "0,23")]
+        engine_idle: [f64; 2],
+        /// The same engine before the first motion, accelerometer RMS per axis, m/s^2 (0:
+        /// parked with the engine off).
+        #[arg(long, default_value_t = 0.0)]
+        engine_start: f64,
+        /// A road rocking a car's body while the wheels turn: accelerometer RMS per axis,
+        /// m/s^2, at 1.2 Hz (tools/sim/src/vibration.rs gives measured levels).
+        #[arg(long, default_value_t = 0.0)]
+        road: f64,
         /// Turns between the legs of a motion.
         #[arg(long, value_enum, default_value_t = OnOff::Off)]
         turns: OnOff,
@@ -745,6 +757,14 @@ impl Sink {
     }
 }
 
+/// `model` if it is valid, else an error naming the options that set it.
+fn checked(model: VibrationModel) -> anyhow::Result<VibrationModel> {
+    model.validate().map_err(|e| {
+        anyhow::anyhow!("--vibration-floor, --engine-idle, --engine-start or --road: {e}")
+    })?;
+    Ok(model)
+}
+
 /// Samples `scenario` from 0 to its duration at the common rate, quantizes, and writes, with
 /// `hints` interleaved by publication time.
 fn simulate(
@@ -885,6 +905,9 @@ fn run(cli: Cli) -> Result<()> {
             duration,
             vibration,
             vibration_floor,
+            engine_idle,
+            engine_start,
+            road,
             turns,
             in_place_turns,
             initial_rest,
@@ -906,12 +929,11 @@ fn run(cli: Cli) -> Result<()> {
             }
             let drive = Drive::new(&params, common.seed)?;
             let hint_list = hints.received(&drive, common.seed)?;
-            let [floor_accel, floor_gyro] = vibration_floor;
-            let model = VibrationModel::moderate(vibration).with_floor(floor_accel, floor_gyro);
-            model
-                .validate()
-                .map_err(|e| anyhow::anyhow!("--vibration-floor: {e}"))?;
-            simulate(drive, &model, &common, &hint_list)
+            let model = VibrationModel::moderate(vibration)
+                .with_floor(vibration_floor[0], vibration_floor[1])
+                .with_engine_idle(engine_idle[0], engine_idle[1], engine_start)
+                .with_road(road);
+            simulate(drive, &checked(model)?, &common, &hint_list)
         }
         Command::Walk {
             laps,

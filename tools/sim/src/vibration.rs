@@ -24,6 +24,30 @@
 //! (0.3 m/s^2 and 1 deg/s per axis, 53 mg and 1.7 deg/s over three axes) is the low end of
 //! those.
 //!
+//! **An engine idling at the stops** (`engine_idle_accel_rms_mps2`, `engine_idle_hz`; 0 by
+//! default): a car stopped with its engine running vibrates without moving. An inline
+//! four-cylinder four-stroke engine fires twice per crankshaft revolution, so its strongest
+//! excitation is the second engine order, `2 rpm / 60` Hz: 20-30 Hz at an idle of 600-900 rpm
+//! (the second-order shaking force of the inline four: Heywood, "Internal Combustion Engine
+//! Fundamentals", 1988, section 2.2 and chapter 13, on the engine's balance). The corpus's
+//! wid-car recordings (an Xsens DOT on a car's body, `python3 tools/real-data/low_frequency.py`)
+//! peak at 22-23 Hz and 32-33 Hz, and their stops shake by 52-60 mg and 100-140 mg over the
+//! three axes (30-80 mg per axis), with nothing below 2 Hz and the gyroscope as quiet as
+//! standing. The model adds, on every accelerometer axis, 70 % of the RMS's power at
+//! `engine_idle_hz` and 30 % at twice that (the fourth order), with phases drawn per channel,
+//! whenever the wheels stand still after they first turned, and `engine_start_accel_rms_mps2`
+//! before the first motion (0 by default: parked with the engine off; wid-car-06 idles at
+//! 42-46 mg standing at its start and 52-55 mg at its stop after driving): `mems-sim drive
+//! --engine-idle 0.3,23 --engine-start 0.2`. The gyroscope gets none.
+//!
+//! **A road under a car's body** (`road_accel_rms_mps2`; 0 by default): a road's
+//! undulations rock a car's body on its suspension at its bounce and pitch modes, 1-1.5 Hz
+//! with a damping ratio of 0.2-0.4 (Gillespie, "Fundamentals of Vehicle Dynamics", SAE 1992,
+//! chapter 5, on ride). The wid-car recordings show 2.5-54 mg below 2 Hz while they drive
+//! (mostly above 5 mg) against 0.4-2.7 mg standing. The model adds, on every accelerometer
+//! axis while the wheels turn, a resonance at [`ROAD_HZ`] with damping [`ROAD_DAMPING`]
+//! (band-pass, as the chassis's) of that RMS: `mems-sim drive --road 0.1`.
+//!
 //! No power at zero frequency, by design: a vibration moves the sensor about its pose, so its
 //! time integral (a velocity for the accelerometer, an angle for the gyroscope) must stay
 //! bounded instead of drifting like a random walk.
@@ -79,7 +103,35 @@ pub struct VibrationModel {
     /// The same for the gyroscope, deg/s.
     #[serde(default)]
     pub floor_gyro_rms_dps: f64,
+    /// Accelerometer vibration of an engine idling at the stops after the first motion, RMS
+    /// per axis, m/s^2 (see the module documentation; 0: none).
+    #[serde(default)]
+    pub engine_idle_accel_rms_mps2: f64,
+    /// The engine's firing frequency at idle (its second order), Hz.
+    #[serde(default = "default_engine_idle_hz")]
+    pub engine_idle_hz: f64,
+    /// The same engine's vibration before the first motion, RMS per axis, m/s^2 (0: parked
+    /// with the engine off).
+    #[serde(default)]
+    pub engine_start_accel_rms_mps2: f64,
+    /// Accelerometer disturbance of a road rocking a car's body while the wheels turn, RMS
+    /// per axis, m/s^2 (see the module documentation; 0: none).
+    #[serde(default)]
+    pub road_accel_rms_mps2: f64,
 }
+
+/// A car body's bounce on its suspension, Hz (module documentation).
+pub const ROAD_HZ: f64 = 1.2;
+/// Its damping ratio.
+pub const ROAD_DAMPING: f64 = 0.3;
+
+/// An idle of 690 rpm's second order, Hz (wid-car-06's stop peaks at 22-23 Hz).
+fn default_engine_idle_hz() -> f64 {
+    23.0
+}
+
+/// Share of the engine's power at its firing frequency (the rest at twice that).
+const ENGINE_FIRST_POWER: f64 = 0.7;
 
 impl VibrationModel {
     /// Moderate vibration scaled by `level` (1: 0.1 m/s^2 and 0.5 deg/s RMS per axis at
@@ -94,6 +146,30 @@ impl VibrationModel {
             chassis_damping: 0.1,
             floor_accel_rms_mps2: 0.0,
             floor_gyro_rms_dps: 0.0,
+            engine_idle_accel_rms_mps2: 0.0,
+            engine_idle_hz: default_engine_idle_hz(),
+            engine_start_accel_rms_mps2: 0.0,
+            road_accel_rms_mps2: 0.0,
+        }
+    }
+
+    /// `self` with a road rocking the body at `accel_rms_mps2` (m/s^2 RMS per axis) while the
+    /// wheels turn.
+    pub fn with_road(self, accel_rms_mps2: f64) -> Self {
+        Self {
+            road_accel_rms_mps2: accel_rms_mps2,
+            ..self
+        }
+    }
+
+    /// `self` with an engine idling at the stops at `accel_rms_mps2` (m/s^2 RMS per axis) and
+    /// `hz` (its firing frequency), and at `start_rms_mps2` before the first motion.
+    pub fn with_engine_idle(self, accel_rms_mps2: f64, hz: f64, start_rms_mps2: f64) -> Self {
+        Self {
+            engine_idle_accel_rms_mps2: accel_rms_mps2,
+            engine_start_accel_rms_mps2: start_rms_mps2,
+            engine_idle_hz: hz,
+            ..self
         }
     }
 
@@ -120,6 +196,15 @@ impl VibrationModel {
             ("gyro_rms_dps", self.gyro_rms_dps),
             ("floor_accel_rms_mps2", self.floor_accel_rms_mps2),
             ("floor_gyro_rms_dps", self.floor_gyro_rms_dps),
+            (
+                "engine_idle_accel_rms_mps2",
+                self.engine_idle_accel_rms_mps2,
+            ),
+            (
+                "engine_start_accel_rms_mps2",
+                self.engine_start_accel_rms_mps2,
+            ),
+            ("road_accel_rms_mps2", self.road_accel_rms_mps2),
         ] {
             if !(x.is_finite() && x >= 0.0) {
                 return err(field, format!("must be finite and >= 0, got {x}"));
@@ -129,6 +214,7 @@ impl VibrationModel {
             ("wheel_radius_m", self.wheel_radius_m),
             ("gear_ratio", self.gear_ratio),
             ("chassis_hz", self.chassis_hz),
+            ("engine_idle_hz", self.engine_idle_hz),
         ] {
             if !(x.is_finite() && x > 0.0) {
                 return err(field, format!("must be finite and > 0, got {x}"));
@@ -160,10 +246,10 @@ impl Resonator {
     /// `2 (g0 - g1)` with the AR(2) autocovariances `g0 = e^2 (1 - a2) / ((1 + a2) ((1 - a2)^2 -
     /// a1^2))` and `g1 = a1 g0 / (1 - a2)`, which simplifies to `2 e^2 / ((1 + a2) (1 - a2 +
     /// a1))`.
-    fn new(model: &VibrationModel, rate_hz: f64) -> Self {
+    fn new(hz: f64, damping: f64, rate_hz: f64) -> Self {
         let dt = 1.0 / rate_hz;
-        let w0 = TAU * model.chassis_hz;
-        let z = model.chassis_damping;
+        let w0 = TAU * hz;
+        let z = damping;
         let r = (-z * w0 * dt).exp();
         let theta = w0 * (1.0 - z * z).sqrt() * dt;
         let (a1, a2) = (2.0 * r * theta.cos(), -r * r);
@@ -191,6 +277,15 @@ pub struct Vibration {
     /// Last resonator input (white-noise draw) per channel, for the resonator's zero at DC.
     last_drive: [f64; 6],
     resonator: Option<Resonator>,
+    /// Whether the wheels have turned yet (the engine idles at the stops after that).
+    moved: bool,
+    /// Phases of the engine's two orders per accelerometer axis, rad.
+    engine_phases: [[f64; 2]; 3],
+    /// The road's resonance per accelerometer axis: its last two outputs and last drive, its
+    /// coefficients, and its own random stream.
+    road: [[f64; 3]; 3],
+    road_resonator: Option<Resonator>,
+    road_rng: ChaCha8Rng,
     rng: ChaCha8Rng,
 }
 
@@ -208,6 +303,9 @@ impl Vibration {
                 }
             })
         });
+        let mut engine = stream_rng(seed, streams::ENGINE_IDLE);
+        let engine_phases =
+            std::array::from_fn(|_| std::array::from_fn(|_| engine.random_range(0.0..TAU)));
         Ok(Self {
             model: model.clone(),
             last_t_s: 0.0,
@@ -216,6 +314,11 @@ impl Vibration {
             chassis: [[0.0; 2]; 6],
             last_drive: [0.0; 6],
             resonator: None,
+            moved: false,
+            engine_phases,
+            road: [[0.0; 3]; 3],
+            road_resonator: None,
+            road_rng: stream_rng(seed, streams::ROAD),
             rng,
         })
     }
@@ -230,7 +333,10 @@ impl Vibration {
             m.gyro_rms_dps,
             m.floor_accel_rms_mps2,
             m.floor_gyro_rms_dps,
-        ] == [0.0; 4]
+            m.engine_idle_accel_rms_mps2,
+            m.engine_start_accel_rms_mps2,
+            m.road_accel_rms_mps2,
+        ] == [0.0; 7]
         {
             return ([0.0; 3], [0.0; 3]);
         }
@@ -244,7 +350,11 @@ impl Vibration {
         }
         let res = match self.resonator {
             Some(r) if r.rate_hz == rate_hz => r,
-            _ => *self.resonator.insert(Resonator::new(&self.model, rate_hz)),
+            _ => *self.resonator.insert(Resonator::new(
+                self.model.chassis_hz,
+                self.model.chassis_damping,
+                rate_hz,
+            )),
         };
         let mut unit = [0.0; 6];
         // The chassis resonance's own state per channel, for the floor.
@@ -267,6 +377,23 @@ impl Vibration {
         let g = self.model.gyro_rms_dps * wheel_speed_mps;
         let mut accel = [a * unit[0], a * unit[1], a * unit[2]];
         let mut gyro = [g * unit[3], g * unit[4], g * unit[5]];
+        self.moved |= wheel_speed_mps != 0.0;
+        if wheel_speed_mps == 0.0 {
+            let level = match self.moved {
+                true => self.model.engine_idle_accel_rms_mps2,
+                false => self.model.engine_start_accel_rms_mps2,
+            };
+            let idle = self.engine_idle(t_s, level);
+            for (out, x) in accel.iter_mut().zip(idle) {
+                *out += x;
+            }
+        }
+        if wheel_speed_mps != 0.0 && self.model.road_accel_rms_mps2 > 0.0 {
+            let road = self.road(rate_hz);
+            for (out, x) in accel.iter_mut().zip(road) {
+                *out += self.model.road_accel_rms_mps2 * x;
+            }
+        }
         if wheel_speed_mps != 0.0 {
             for (out, x) in accel.iter_mut().zip(&chassis[..3]) {
                 *out += self.model.floor_accel_rms_mps2 * x;
@@ -276,5 +403,37 @@ impl Vibration {
             }
         }
         (accel, gyro)
+    }
+
+    /// The road's unit resonance per accelerometer axis at `rate_hz` (one step).
+    fn road(&mut self, rate_hz: f64) -> [f64; 3] {
+        let res = match self.road_resonator {
+            Some(r) if r.rate_hz == rate_hz => r,
+            _ => *self
+                .road_resonator
+                .insert(Resonator::new(ROAD_HZ, ROAD_DAMPING, rate_hz)),
+        };
+        std::array::from_fn(|i| {
+            let [x1, x2, last] = self.road[i];
+            let w: f64 = self.road_rng.sample(StandardNormal);
+            let x = res.a1 * x1 + res.a2 * x2 + res.e_std * (w - last);
+            self.road[i] = [x, x1, w];
+            x
+        })
+    }
+
+    /// The idling engine's specific force at `t_s` with the RMS `level` per axis, m/s^2 per
+    /// accelerometer axis.
+    fn engine_idle(&self, t_s: f64, level: f64) -> [f64; 3] {
+        let m = &self.model;
+        let (a1, a2) = (
+            level * (2.0 * ENGINE_FIRST_POWER).sqrt(),
+            level * (2.0 * (1.0 - ENGINE_FIRST_POWER)).sqrt(),
+        );
+        let w = TAU * m.engine_idle_hz * t_s;
+        std::array::from_fn(|i| {
+            let [p1, p2] = self.engine_phases[i];
+            a1 * (w + p1).sin() + a2 * (2.0 * w + p2).sin()
+        })
     }
 }

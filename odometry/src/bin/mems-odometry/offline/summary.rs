@@ -76,9 +76,11 @@ pub struct Summary {
     rest_errors: Vec<serde_json::Value>,
     truth_distance: f64,
     prev_truth: Option<Vector3<f64>>,
-    /// States flagged `REST_VIBRATING`, `REST_MOVING` and `NONHOLONOMIC_REJECTED`.
+    /// States flagged `REST_VIBRATING`, `REST_MOVING`, `VIBRATING_STOP` and
+    /// `NONHOLONOMIC_REJECTED`.
     rest_vibrating: u64,
     rest_moving: u64,
+    vibrating_stop: u64,
     nonholonomic_rejected: u64,
 }
 
@@ -98,6 +100,7 @@ impl Summary {
         }
         self.rest_vibrating += u64::from(state.flags & odometry_flags::REST_VIBRATING != 0);
         self.rest_moving += u64::from(state.flags & odometry_flags::REST_MOVING != 0);
+        self.vibrating_stop += u64::from(state.flags & odometry_flags::VIBRATING_STOP != 0);
         self.nonholonomic_rejected +=
             u64::from(state.flags & odometry_flags::NONHOLONOMIC_REJECTED != 0);
         let new_rest = self.last.is_some_and(|l| state.rest_count > l.rest_count);
@@ -185,7 +188,9 @@ impl Summary {
         if vibrating_s > 0.0 {
             tracing::info!(
                 "the detector found {vibrating_s:.1} s steady but vibrating above its rest's noise \
-                 (no acceleration or turn it could see): taken for motion, not rest"
+                 (no acceleration or turn it could see): taken for motion, not rest, but for \
+                 {} samples the odometry took as stops (quiet below 2 Hz, flagged VIBRATING_STOP)",
+                self.vibrating_stop
             );
         }
         let axes = chain.second.stage().axes();
@@ -322,6 +327,7 @@ impl Summary {
             "mounting_rpy_deg": mounting,
             "rest_vibrating_states": self.rest_vibrating,
             "rest_moving_states": self.rest_moving,
+            "vibrating_stop_states": self.vibrating_stop,
             "nonholonomic_rejected_states": self.nonholonomic_rejected,
         })
     }
