@@ -68,6 +68,33 @@ pub fn simulate(dir: &std::path::Path, file: &str, args: &[&str]) -> PathBuf {
     out
 }
 
+/// Times (s) of the truth's rests in a `mems-sim` CSV: `(start, end)` of each run of rows with
+/// `truth_rest` set.
+pub fn truth_rests(csv: &std::path::Path) -> Vec<(f64, f64)> {
+    let text = std::fs::read_to_string(csv).unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (t_col, rest_col) = (column("t_s"), column("truth_rest"));
+    let (mut rests, mut start, mut last_t) = (Vec::new(), None, 0.0);
+    for line in lines {
+        let cells: Vec<&str> = line.split(',').collect();
+        let t: f64 = cells[t_col].parse().unwrap();
+        let rest = matches!(cells[rest_col], "1" | "true");
+        match (rest, start) {
+            (true, None) => start = Some(t),
+            (false, Some(s)) => {
+                rests.push((s, t));
+                start = None;
+            }
+            _ => {}
+        }
+        last_t = t;
+    }
+    rests.extend(start.map(|s| (s, last_t)));
+    rests
+}
+
 /// Calibrates the simulated datasheet-level MPU-9250 of power-on `seed` the way a user would,
 /// and as `mems-stack` does: the commands of [`mems_sim::calibration::recipe`] (a six-position
 /// session fitted with model 3, then the gyro's scale and misalignment from 16 orientations),

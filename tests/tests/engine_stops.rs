@@ -19,34 +19,7 @@
 //!   rotation below 2 Hz while it creeps off, its first 30 s of driving are not quiet, and its
 //!   cruise on a smooth road is then taken for stops: docs/odometry.md.)
 
-use integration_tests::{path_arg, run_ok, simulate, unique_namespace};
-
-/// Times (s) of the truth's rests in a `mems-sim` CSV: `(start, end)` of each run of rows with
-/// `truth_rest` set.
-fn truth_rests(csv: &std::path::Path) -> Vec<(f64, f64)> {
-    let text = std::fs::read_to_string(csv).unwrap();
-    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let (t_col, rest_col) = (column("t_s"), column("truth_rest"));
-    let (mut rests, mut start, mut last_t) = (Vec::new(), None, 0.0);
-    for line in lines {
-        let cells: Vec<&str> = line.split(',').collect();
-        let t: f64 = cells[t_col].parse().unwrap();
-        let rest = matches!(cells[rest_col], "1" | "true");
-        match (rest, start) {
-            (true, None) => start = Some(t),
-            (false, Some(s)) => {
-                rests.push((s, t));
-                start = None;
-            }
-            _ => {}
-        }
-        last_t = t;
-    }
-    rests.extend(start.map(|s| (s, last_t)));
-    rests
-}
+use integration_tests::{path_arg, run_ok, simulate, truth_rests, unique_namespace};
 
 /// The car of the module documentation with seed `seed` and `extra` arguments, run through
 /// `mems-odometry offline --json`: the truth's rests and the summary.

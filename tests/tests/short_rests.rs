@@ -21,34 +21,7 @@
 //! - A car whose stops are on slopes of up to 5 degrees (it pitches while it brakes) has a rest
 //!   flagged at every stop: the rest test does not compare with the start's gravity direction.
 
-use integration_tests::{path_arg, run_ok, simulate, unique_namespace};
-
-/// Times (s) of the truth's rests in a `mems-sim` CSV: `(start, end)` of each run of rows with
-/// `truth_rest` set.
-fn truth_rests(csv: &std::path::Path) -> Vec<(f64, f64)> {
-    let text = std::fs::read_to_string(csv).unwrap();
-    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let (t_col, rest_col) = (column("t_s"), column("truth_rest"));
-    let (mut rests, mut start, mut last_t) = (Vec::new(), None, 0.0);
-    for line in lines {
-        let cells: Vec<&str> = line.split(',').collect();
-        let t: f64 = cells[t_col].parse().unwrap();
-        let rest = matches!(cells[rest_col], "1" | "true");
-        match (rest, start) {
-            (true, None) => start = Some(t),
-            (false, Some(s)) => {
-                rests.push((s, t));
-                start = None;
-            }
-            _ => {}
-        }
-        last_t = t;
-    }
-    rests.extend(start.map(|s| (s, last_t)));
-    rests
-}
+use integration_tests::{path_arg, run_ok, simulate, truth_rests, unique_namespace};
 
 /// `mems-sim drive` with `args` into `dir/name.csv`, then `mems-odometry offline --json` on it:
 /// the truth's rests and the summary.
