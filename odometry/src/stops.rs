@@ -74,7 +74,12 @@ pub const QUIET_DRIVING_SHARE: f64 = 0.1;
 /// 5.7 deg/s), a gyroscope's bias moves by hundredths of a degree a second between rests.
 pub const TURN_RPS: f64 = 0.5 * std::f64::consts::PI / 180.0;
 
-/// One channel's second-order Butterworth low-pass (direct form II transposed).
+/// One channel's second-order Butterworth low-pass (direct form II transposed). Written here
+/// rather than taken from the `biquad` crate: the filter must start (and restart, when the
+/// sample interval changes) at the steady state of its input, which that crate's
+/// `DirectForm2Transposed` cannot be set to; started from zero, a 2 Hz low-pass rings through
+/// its first second with a gravity-sized step, and the standing reference would be learned
+/// from the ringing.
 #[derive(Debug, Clone, Copy, Default)]
 struct Biquad {
     s1: f64,
