@@ -8,18 +8,11 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-use common::{Case, write_drive_with_encoder_hints};
+use common::{Case, scratch, write_drive_with_encoder_hints};
 use nalgebra::{UnitQuaternion, Vector3};
-
-/// A scratch directory for this test binary.
-fn scratch() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("mounting-in-motion-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// Writes a drive with turns that starts by driving off, its IMU yawed 90 degrees (sensor
 /// -y forward), and its encoder hints to `path`.
@@ -37,7 +30,7 @@ fn write_drive(path: &Path) {
 
 #[test]
 fn an_estimated_mounting_after_a_start_in_motion_is_level() {
-    let dir = scratch();
+    let dir = scratch("mounting-in-motion");
     let path = dir.join("drive.mcap");
     write_drive(&path);
     let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))

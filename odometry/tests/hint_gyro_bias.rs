@@ -9,22 +9,14 @@
 
 mod common;
 
-use std::path::PathBuf;
 use std::process::Command;
 
-use common::{Case, drive_with_encoder_hints, write_drive_with_hints};
+use common::{Case, drive_with_encoder_hints, scratch, write_drive_with_hints};
 
 /// The bias shift about the sensor's z axis (up: the IMU lies level on the robot), deg/s.
 const SHIFT_DPS: f64 = 0.5;
 /// When it happens, s after the first sample.
 const SHIFT_AT_S: f64 = 100.0;
-
-/// A scratch directory for this test binary.
-fn scratch() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("hint-gyro-bias-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 #[test]
 fn a_stop_the_wheels_report_refutes_a_gyro_bias_that_moved() {
@@ -65,7 +57,7 @@ fn a_stop_the_wheels_report_refutes_a_gyro_bias_that_moved() {
         }
         f64::hypot(ex, ey)
     };
-    let dir = scratch();
+    let dir = scratch("hint-gyro-bias");
     let path = dir.join("drive.mcap");
     write_drive_with_hints(&path, &raw, hints);
     let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))

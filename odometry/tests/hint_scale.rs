@@ -8,22 +8,14 @@
 
 mod common;
 
-use std::path::PathBuf;
 use std::process::Command;
 
-use common::{Case, drive_with_encoder_hints, write_drive_with_hints};
+use common::{Case, drive_with_encoder_hints, scratch, write_drive_with_hints};
 use mems_sim::hints::{HintParams, RestSource};
 use nalgebra::{UnitQuaternion, Vector3};
 
 /// How much the hints read above the encoders' own (already scale-erred) speed.
 const GAIN: f64 = 1.3;
-
-/// A scratch directory for this test binary.
-fn scratch() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("hint-scale-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 #[test]
 fn hints_reading_a_third_high_get_their_scale_and_a_covering_sigma() {
@@ -49,7 +41,7 @@ fn hints_reading_a_third_high_get_their_scale_and_a_covering_sigma() {
         .hints(seed, &HintParams::new(RestSource::Encoders))
         .speed_scale;
     let k_true = GAIN * (1.0 + drawn) - 1.0;
-    let dir = scratch();
+    let dir = scratch("hint-scale");
     let path = dir.join("drive.mcap");
     write_drive_with_hints(&path, &raw, hints);
     let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))

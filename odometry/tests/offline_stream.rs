@@ -5,23 +5,16 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-use common::{Case, drive_with_encoder_hints};
+use common::{Case, drive_with_encoder_hints, scratch};
 use ipc_types::{OdometryState, RawImuSample, RobotHint};
 use recording::Truth;
 use recording::mcap::{EventKind, RecorderEvent, Writer, quantum};
 
 /// How long after its publication the recorder receives a hint, ns.
 const HINT_LATENCY_NS: u64 = 40_000_000;
-
-/// A scratch directory for this test binary.
-fn scratch() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("offline-stream-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// One message of the recording, in the order the recorder writes them.
 enum Message {
@@ -96,7 +89,7 @@ fn offline(input: &Path, extra: &[&str]) -> serde_json::Value {
 
 #[test]
 fn a_segmented_run_streams_to_the_single_files_result() {
-    let dir = scratch();
+    let dir = scratch("offline-stream");
     let messages = drive();
     let single = dir.join("single.mcap");
     write(&single, 0, &messages);
@@ -134,7 +127,7 @@ fn a_segmented_run_streams_to_the_single_files_result() {
 /// unless `--force`.
 #[test]
 fn offline_writes_its_run_as_a_recording() {
-    // Not under `scratch()`, which the other test removes when it ends.
+    // Not under `scratch("offline-stream")`, which the other test removes when it ends.
     let dir = std::env::temp_dir().join(format!("offline-out-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let messages = drive();

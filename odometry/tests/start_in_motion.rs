@@ -10,17 +10,10 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-use common::{Case, write_drive_with_encoder_hints};
-
-/// A scratch directory for this test binary.
-fn scratch() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("start-in-motion-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use common::{Case, scratch, write_drive_with_encoder_hints};
 
 /// Writes a drive with turns that starts by driving off, and its encoder hints (on the
 /// samples' clock, recorded at their publication), to `path`.
@@ -56,7 +49,7 @@ fn horizontal(v: &serde_json::Value, key: &str) -> (f64, f64) {
 
 #[test]
 fn a_robot_that_starts_in_motion_aligns_on_its_first_cruise_and_ends_within_its_sigma() {
-    let dir = scratch();
+    let dir = scratch("start-in-motion");
     let path = dir.join("drive.mcap");
     write_drive(&path);
     let (with_hints, stderr) = offline(&path, &["--mount", "0,0,0"]);

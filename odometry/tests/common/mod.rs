@@ -425,6 +425,13 @@ pub fn wait_until(timeout: std::time::Duration, what: &str, mut condition: impl 
     }
 }
 
+/// A scratch directory `TAG-PID` for one test binary, created.
+pub fn scratch(tag: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
 /// A service namespace unique to this test process and call (`test-{tag}-{pid}-{nanos}`),
 /// also used as the name of the test's temporary directory.
 pub fn unique_namespace(tag: &str) -> String {
