@@ -17,8 +17,10 @@
 //!
 //! **What it bounds and what it does not.** The constraint observes the velocity across the
 //! forward axis: the lateral and vertical drift, and through them the tilt (a tilt error
-//! `delta` shows as a vertical body velocity `v delta`) and the heading's coupling to the
-//! accelerometer bias. It says nothing about the speed along the forward axis: between two
+//! `delta` shows as a vertical body velocity `v delta`). It does not observe the heading: a
+//! rotation of the whole track about gravity changes no body-frame velocity, so its updates
+//! carry no gain on the heading or on the gyro bias about up (`Heading::Kept`, as the speed
+//! hints' updates: `crate::eskf::Heading`). It says nothing about the speed along the forward axis: between two
 //! rests that is the double integral of the specific force along it, whose error grows with
 //! the forward axis's pitch error (`g delta_p`: 1 deg is 0.17 m/s^2) and the accelerometer's
 //! residual bias along it, neither of which the constraint can tell from an acceleration.
@@ -43,7 +45,7 @@
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
-use crate::eskf::Eskf;
+use crate::eskf::{Eskf, Heading};
 use crate::hints::{MountingEstimator, mounting_from};
 
 /// Path of driving the mounting estimate gathers before the lateral constraint starts, m.
@@ -170,7 +172,12 @@ impl ImuConstraint {
             return Some(Outcome::Rejected);
         }
         let residual = Vector3::new(0.0, -v_b.y, -v_b.z);
-        let nis = kf.body_velocity_update(&r_bs, residual, Vector3::new(FREE_MPS, lateral, sigma));
+        let nis = kf.body_velocity_update_with(
+            &r_bs,
+            residual,
+            Vector3::new(FREE_MPS, lateral, sigma),
+            Heading::Kept,
+        );
         self.applied += 1;
         let dof = if lateral < FREE_MPS { 2.0 } else { 1.0 };
         Some(Outcome::Applied {
@@ -317,6 +324,44 @@ mod tests {
         nhc.along.grow(1.0, 0.03, 1.0);
         nhc.stop_seen(3.0);
         assert_eq!(nhc.stops_measured(), 1);
+    }
+
+    /// The constraint's update takes the lateral and vertical body velocity towards zero but
+    /// turns neither the heading nor the gyro bias about up (a body-frame velocity does not
+    /// observe them), whatever the covariance couples to them.
+    #[test]
+    fn the_constraint_keeps_the_heading_and_its_rate() {
+        use crate::eskf::{Cov, Imu, Nominal};
+        let q = UnitQuaternion::from_scaled_axis(Vector3::new(0.05, -0.03, 0.9));
+        let x = Nominal {
+            p: Vector3::zeros(),
+            v: q * Vector3::new(2.0, 0.3, -0.1),
+            q,
+            b_a: Vector3::zeros(),
+            b_g: Vector3::zeros(),
+            k: 0.0,
+        };
+        let a = Cov::from_fn(|i, j| ((5 * i + 2 * j) as f64).cos());
+        let cov = a * a.transpose() * 1e-3 + Cov::identity() * 1e-4;
+        let first = Imu {
+            f: q.inverse() * Vector3::new(0.0, 0.0, 9.81),
+            w: Vector3::zeros(),
+        };
+        let noise = crate::config::OdometryConfig::mpu9250(9.81).noise;
+        let mut kf = Eskf::new(x, cov, 9.81, noise, first);
+        let up = q.inverse_transform_vector(&Vector3::z());
+        let mut nhc = ImuConstraint::new(0.05, Some(UnitQuaternion::identity()));
+        let outcome = nhc.apply(&mut kf, 0.01, 1.0);
+        assert!(
+            matches!(outcome, Some(Outcome::Applied { .. })),
+            "{outcome:?}"
+        );
+        let turn = q.inverse() * kf.x.q;
+        assert!(turn.scaled_axis().dot(&up).abs() < 1e-12, "{turn:?}");
+        assert!(kf.x.b_g.dot(&up).abs() < 1e-12, "{}", kf.x.b_g);
+        // The body's lateral velocity (0.3 m/s before) moves towards zero.
+        let lateral = kf.x.q.inverse_transform_vector(&kf.x.v).y;
+        assert!(lateral > 0.0 && lateral < 0.25, "{lateral}");
     }
 
     #[test]
