@@ -28,6 +28,7 @@ pub mod correct;
 pub mod evidence;
 pub mod fit;
 pub mod lag;
+pub mod lever;
 pub mod rows;
 pub mod saturation;
 pub mod velocity;
