@@ -20,6 +20,8 @@ DIR = "/tmp/figures-rundiag"
 DATA = Path(os.environ.get("MEMS_REAL_DATA", "/work/real-data"))
 ARM = ["arm", "--moves", "24", "--pauses", "1,2", "--rate", "200", "--seed", "3"]
 LONG_ARM = ["arm", "--moves", "60", "--pauses", "1,2", "--rate", "200", "--seed", "3"]
+# A drive with turns for the lever-arm candidate (the IMU ahead of the rear axle), run as the vehicle profile.
+DRIVE = ["drive", "--duration", "120", "--turns", "on", "--seed", "4", "--rate", "200"]
 IDENTITY_SCALE = "scale = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]"
 
 # (case, model changes (table, key, value), what the calibration file declares).
@@ -72,9 +74,26 @@ def fmt(v, digits=3):
     return "-" if v is None else f"{v:.{digits}f}"
 
 
+def lever_found(report):
+    """The lever-arm candidate's report when found, else None."""
+    lever = report.get("lever_arm") or {}
+    return lever if (lever.get("candidate") or {}).get("found") else None
+
+
 def before_after(report, key, digits=3):
     after = (report.get("after") or {}).get("figures", {}).get(key)
+    lever = lever_found(report)
+    if after is None and lever is not None:
+        after = lever["after"].get(key)
     return f"{fmt(report['before'].get(key), digits)} -> {fmt(after, digits)}"
+
+
+def lever_score(report):
+    """The lever-arm candidate's score and forward offset (m), or None where it was not testable."""
+    c = (report.get("lever_arm") or {}).get("candidate") or {}
+    if not c or c.get("untestable"):
+        return None
+    return f"lever_arm {c['gain']:.0f} ({c['r_x_m']:.2f} +- {c['sigma_m']:.2f} m)"
 
 
 def selected(report):
@@ -85,6 +104,10 @@ def selected(report):
             sd = next(c["sigma"][0] for c in report["diagnosis"]["scores"] if c["candidate"] == name)
             name = f"accel_lag {1e3 * params[0]:.1f} +- {1e3 * sd:.1f}"
         names.append(name)
+    lever = lever_found(report)
+    if lever is not None:
+        c = lever["candidate"]
+        names.append(f"lever_arm {c['r_x_m']:.2f} +- {c['sigma_m']:.2f} m")
     return ", ".join(names) if names else "none"
 
 
@@ -163,6 +186,16 @@ def simulated(ctx, identity_path, identity):
     case("calibrated-gyro", CALIBRATED_GYRO, identity + GYRO_DECLARED, "calibrated gyro", "gyro.scale and misalignment zero", gyro_label)
     case("uncovered", CALIBRATED_GYRO + UNCOVERED, identity + GYRO_DECLARED, "uncovered",
          "the same; gyro.nonlinearity = [0.0001, -0.0001, 0.0001]", gyro_label)
+    for ahead, label, declared in [(0.0, "drive, IMU on the axle", ()),
+                                   (1.5, "drive, IMU 1.5 m ahead, undeclared", ()),
+                                   (1.5, "drive, IMU 1.5 m ahead, declared", ("--lever-arm", "-1.5,0,0"))]:
+        name = f"drive-{ahead}" + ("-declared" if declared else "")
+        run = f"{DIR}/{name}.mcap"
+        ctx.run([SIM, *DRIVE, "--lever-arm-m", f"{ahead},0,0", "--out", run, "--force"])
+        r = diagnose(ctx, run, identity_path, ["--profile", "vehicle"], closed=False, flags=declared)
+        if r is not None:
+            calib = "identity; diagnose " + " ".join(declared) if declared else "identity"
+            rows.append(sim_row(label, f"120 s drive with turns, --lever-arm-m {ahead},0,0", calib, r))
     case("saturation", [], identity, "60 moves, +-250 deg/s", "the gyro clips", "identity", arm=LONG_ARM)
     case("saturation-wide", [], identity, "60 moves, +-500 deg/s", "nothing clips", "identity",
          arm=[*LONG_ARM, "--gyro-range", "500"])
@@ -190,7 +223,8 @@ def corpus(ctx, identity_path):
             continue
         d = r["diagnosis"]
         m, t = d["magnitude"], d["tilt"]
-        scores = ", ".join(f"{c['candidate']} {c['gain']:.0f}" for c in d["scores"] if not c["untestable"]) or "none testable"
+        scores = [f"{c['candidate']} {c['gain']:.0f}" for c in d["scores"] if not c["untestable"]]
+        scores = ", ".join(scores + [x for x in [lever_score(r)] if x]) or "none testable"
         rows.append([s["id"], s["platform"], d["rests"], f"{d['motions']} ({d['motions_gyro_clipped']})",
                      f"{1e3 * m['rms_before']:.1f} / {1e3 * m['rms_noise']:.1f}", f"{1e3 * t['rms_before']:.1f} / {1e3 * t['rms_noise']:.1f}",
                      scores, selected(r), unexplained(r),

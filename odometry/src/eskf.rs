@@ -37,6 +37,7 @@
 //! ZUPT for a strapdown IMU; nalgebra does the linear algebra.
 
 mod increment;
+mod lever;
 mod reported;
 
 use increment::{Increment, Sensitivity, Step};
@@ -652,22 +653,7 @@ impl Eskf {
         sigma: Vector3<f64>,
         heading: Heading,
     ) -> Option<f64> {
-        self.propagate();
-        let before = self.body_velocity(r_bs);
-        let r_t = self.x.q.to_rotation_matrix().into_inner().transpose();
-        let a = r_bs * r_t;
-        let b = r_bs * skew(&(r_t * self.x.v));
-        let mut h = SMatrix::<f64, 3, N>::zeros();
-        h.fixed_view_mut::<3, 3>(0, V).copy_from(&a);
-        h.fixed_view_mut::<3, 3>(0, TH).copy_from(&b);
-        // The forward row reads (1 + k) v_b.x.
-        let scale = 1.0 + self.x.k;
-        for c in 0..N {
-            h[(0, c)] *= scale;
-        }
-        h[(0, KS)] = before.x;
-        let var = Matrix3::from_diagonal(&sigma.component_mul(&sigma));
-        self.update(&h, residual, &var, heading)
+        self.point_velocity_update(r_bs, &Vector3::zeros(), residual, sigma, heading)
     }
 
     /// The measurement of [`Self::update`] with `H` selecting the three error-state components

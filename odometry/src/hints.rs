@@ -4,9 +4,12 @@
 //!
 //! Frames: the robot body frame `b` is x forward, y left, z up (REP 103); the IMU's sensor
 //! frame `s` is the accelerometer's axes. The mounting `R_bs` rotates sensor-frame vectors
-//! into the body frame (`v_b = R_bs v_s`), and the IMU sits at the body origin (no lever arm:
-//! a lever arm `r` would add `omega x r` to the body velocity during turns, which the
-//! non-holonomic constraint's 1-sigma has to cover).
+//! into the body frame (`v_b = R_bs v_s`). The speed and the non-holonomic constraint describe
+//! the rear axle, at [`HintConfig::lever_arm_m`] from the IMU (body frame; zero: the IMU sits
+//! on the axle): the velocity compared with them is the axle's, `v_b + omega_b x r_b`
+//! (`crate::eskf`'s `lever` module), with the newest sample's rate (a hint is at most
+//! [`HintConfig::max_age_s`] old). A lever arm left undeclared adds `omega x r` to the
+//! body velocity during turns, which the non-holonomic constraint's 1-sigma has to cover.
 //!
 //! Times: a hint's `stamps.sample_ns` is the time it describes and `stamps.acquired_ns` when
 //! the controller published it, both ns `CLOCK_MONOTONIC` like the IMU samples. The stage uses
@@ -61,6 +64,10 @@ pub struct HintConfig {
     /// s: the speed source's lag behind the IMU (positive: the hint describes motion that much
     /// later than its stamp says).
     pub speed_time_offset_s: f64,
+    /// The lever arm from the IMU to the rear axle (the point the speed and the
+    /// non-holonomic constraints describe), body frame (x forward, y left, z up), m; also
+    /// used by the IMU-only constraint ([`crate::nonholonomic`]).
+    pub lever_arm_m: Vector3<f64>,
     /// Hints that can wait for their delivery time at once; when full, the oldest waiting hint
     /// is dropped (and counted in [`HintStats::overflowed`]).
     pub capacity: usize,
@@ -85,6 +92,7 @@ impl Default for HintConfig {
             fallback_zupt_gate_sigma: 5.0,
             speed_heading: Heading::Kept,
             speed_time_offset_s: 0.0,
+            lever_arm_m: Vector3::zeros(),
             capacity: 256,
         }
     }
@@ -165,6 +173,15 @@ impl HintConfig {
         positive("nonholonomic_sigma_mps", self.nonholonomic_sigma_mps)?;
         positive("speed_scale_sigma", self.speed_scale_sigma)?;
         positive("fallback_zupt_gate_sigma", self.fallback_zupt_gate_sigma)?;
+        if !(self.lever_arm_m.iter().all(|x| x.is_finite()) && self.lever_arm_m.norm() <= 10.0) {
+            return Err(HintConfigError {
+                field: "lever_arm_m",
+                reason: format!(
+                    "must be finite and within 10 m, got {:?}",
+                    self.lever_arm_m.as_slice()
+                ),
+            });
+        }
         if !(self.speed_time_offset_s.is_finite()
             && self.speed_time_offset_s.abs() < self.max_age_s)
         {

@@ -155,8 +155,10 @@ impl Navigator {
             rest_count: 0,
             distance_m: 0.0,
             imu_decided: true,
-            nhc: (cfg.imu_nonholonomic_sigma_mps > 0.0)
-                .then(|| ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)),
+            nhc: (cfg.imu_nonholonomic_sigma_mps > 0.0).then(|| {
+                ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)
+                    .with_lever_arm(hints.lever_arm_m)
+            }),
             standing_accel_sd: 0.0,
             stops: StopTest::default(),
             untrusted: Untrusted::default(),
@@ -245,6 +247,11 @@ impl Navigator {
     /// 1-sigma of one sample's zero-velocity update, m/s (see the field).
     pub fn zupt_sigma_mps(&self) -> f64 {
         self.zupt_sigma_mps
+    }
+
+    /// The lever arm from the IMU to the rear axle, body frame, m (`HintConfig::lever_arm_m`).
+    pub fn lever_arm_m(&self) -> Vector3<f64> {
+        self.hints.cfg.lever_arm_m
     }
 
     /// The IMU-to-body mounting (sensor to body), configured or estimated; `None` while it is

@@ -11,6 +11,11 @@
 //! vertical velocity is constrained. The constraint says nothing about the sign of the
 //! forward axis, so a drive that starts in reverse estimates the same mounting.
 //!
+//! The constraint holds at the rear axle, which the lever arm `r_b` (body frame, m, from the
+//! IMU to the axle; [`ImuConstraint::with_lever_arm`], zero by default) locates: the velocity
+//! constrained is the axle's, `v_b + omega_b x r_b` ([`Eskf::point_velocity`]). Until the
+//! mounting is known the lever arm is not used (its body frame is not).
+//!
 //! Each update is gated: a residual beyond [`GATE_SIGMA`] standard deviations of its
 //! prediction (the filter's velocity 1-sigma and the constraint's, in quadrature) is not
 //! applied and the sample is flagged `NONHOLONOMIC_REJECTED`.
@@ -84,6 +89,11 @@ pub struct ImuConstraint {
     along: AlongTrack,
     /// The stops' along-track acceleration errors: sum of squares (m/s^2)^2 and count.
     stops: [f64; 2],
+    /// The lever arm from the IMU to the constrained point, body frame, m.
+    lever_arm_m: Vector3<f64>,
+    /// Sum of the applied updates' normalized innovations squared and of their degrees of
+    /// freedom (for `mems-odometry diagnose`'s lever-arm candidate).
+    pub nis_sum: [f64; 2],
     /// Updates applied and rejected.
     pub applied: u64,
     /// Updates rejected by the gate.
@@ -118,9 +128,17 @@ impl ImuConstraint {
             estimator: MountingEstimator::default(),
             along: AlongTrack::default(),
             stops: [0.0; 2],
+            lever_arm_m: Vector3::zeros(),
+            nis_sum: [0.0; 2],
             applied: 0,
             rejected: 0,
         }
+    }
+
+    /// The constraint at the point `r_b` (body frame, m, from the IMU; module documentation).
+    pub fn with_lever_arm(mut self, r_b: Vector3<f64>) -> Self {
+        self.lever_arm_m = r_b;
+        self
     }
 
     /// The mounting in use (given or estimated), `None` while estimating.
@@ -159,11 +177,11 @@ impl ImuConstraint {
             return None;
         }
         let sigma = self.sigma_mps * (1.0 / interval_s).sqrt();
-        let (r_bs, lateral) = match self.r_bs {
-            Some(r) => (r, sigma),
-            None => (up_only(&up_s)?, FREE_MPS),
+        let (r_bs, lateral, r_b) = match self.r_bs {
+            Some(r) => (r, sigma, self.lever_arm_m),
+            None => (up_only(&up_s)?, FREE_MPS, Vector3::zeros()),
         };
-        let v_b = kf.body_velocity(&r_bs);
+        let v_b = kf.point_velocity(&r_bs, &r_b);
         let lateral = lateral.hypot(v_b.x * self.yaw_sigma_rad);
         let sigma_v = kf.filter_velocity_sigma().norm();
         let gate = |s: f64| GATE_SIGMA * s.hypot(sigma_v);
@@ -172,14 +190,14 @@ impl ImuConstraint {
             return Some(Outcome::Rejected);
         }
         let residual = Vector3::new(0.0, -v_b.y, -v_b.z);
-        let nis = kf.body_velocity_update_with(
-            &r_bs,
-            residual,
-            Vector3::new(FREE_MPS, lateral, sigma),
-            Heading::Kept,
-        );
+        let sigmas = Vector3::new(FREE_MPS, lateral, sigma);
+        let nis = kf.point_velocity_update(&r_bs, &r_b, residual, sigmas, Heading::Kept);
         self.applied += 1;
         let dof = if lateral < FREE_MPS { 2.0 } else { 1.0 };
+        if let Some(x) = nis.filter(|x| x.is_finite()) {
+            self.nis_sum[0] += x;
+            self.nis_sum[1] += dof;
+        }
         Some(Outcome::Applied {
             nis: nis.unwrap_or(f64::NAN),
             dof,

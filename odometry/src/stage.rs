@@ -291,6 +291,11 @@ impl OdometryStage {
         self.ahead.mounting()
     }
 
+    /// The lever arm from the IMU to the rear axle, body frame, m (`HintConfig::lever_arm_m`).
+    pub fn lever_arm_m(&self) -> nalgebra::Vector3<f64> {
+        self.ahead.lever_arm_m()
+    }
+
     /// The forward axis estimated from the speed hints, by the navigator on the newest inputs
     /// ([`crate::cruise::ForwardAxis`]): when it was first trusted, its latest 1-sigmas and
     /// speed scale, and what the filter took of that scale.

@@ -11,6 +11,9 @@
 //! ([`saturation`]). An accelerometer lag behind the gyro shows in neither a rest nor a tilt:
 //! it is tested on each motion's velocity change from rest to rest ([`velocity`]), and the
 //! rerun applies it to the samples (`mems-odometry offline --accel-lag-s`, [`lag`]).
+//! A lever arm between the IMU and the rear axle of a wheeled platform shows only in the
+//! non-holonomic constraint's innovations: [`lever`] judges the profile of their chi-square
+//! over the forward offset from reruns (`mems-odometry offline --lever-arm`).
 //!
 //! Selection, as `mems-calibrate diagnose` selects (docs/diagnosis.md): forward, one candidate
 //! at a time, the one with the largest held-out gain over the current set, if that gain is
@@ -28,6 +31,7 @@ pub mod correct;
 pub mod evidence;
 pub mod fit;
 pub mod lag;
+pub mod lever;
 pub mod rows;
 pub mod saturation;
 pub mod velocity;

@@ -225,8 +225,12 @@ impl Hints {
         }
         let lag_ns = (self.cfg.speed_time_offset_s * 1e9) as i64;
         let then = self.uncorrected_at(h.stamps.sample_ns.saturating_add_signed(lag_ns))?;
-        // The body velocity the filter now believes it had at the hint's time.
-        let predicted = then + self.corrections;
+        // The body velocity the filter now believes it had at the hint's time, at the axle.
+        let r_b = self.cfg.lever_arm_m;
+        let mut predicted = then + self.corrections;
+        if r_b != Vector3::zeros() {
+            predicted += (r_bs * kf.rate()).cross(&r_b);
+        }
         let residual = Vector3::new(
             h.forward_speed_mps - (1.0 + kf.x.k) * predicted.x,
             -predicted.y,
@@ -235,8 +239,9 @@ impl Hints {
         let nh = self.cfg.nonholonomic_sigma_mps;
         // A mounting yaw known to `yaw_sigma_rad` puts that much of the speed sideways.
         let lateral = nh.hypot(h.forward_speed_mps * self.yaw_sigma_rad);
-        let nis = kf.body_velocity_update_with(
+        let nis = kf.point_velocity_update(
             &r_bs,
+            &r_b,
             residual,
             Vector3::new(h.forward_speed_sigma_mps, lateral, nh),
             self.cfg.speed_heading,

@@ -123,8 +123,9 @@ impl Navigator {
     /// recognized as wheeled after seconds of driving): the along-track drift counts that
     /// motion from its start.
     pub(super) fn started_constraint(&mut self, cfg: &OdometryConfig) -> ImuConstraint {
-        let mut nhc =
-            ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, self.hints.cfg.imu_mounting);
+        let hints = &self.hints.cfg;
+        let mut nhc = ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)
+            .with_lever_arm(hints.lever_arm_m);
         let moving_s = match (self.motion_start_ns, self.last, self.at_rest) {
             (Some(start), Some((t_ns, _, _)), false) => t_ns.saturating_sub(start) as f64 * 1e-9,
             _ => 0.0,

@@ -44,6 +44,12 @@ pub struct DiagnoseArgs {
     /// from the samples of both runs, `offline --accel-lag-s`; a fitted `accel_lag` adds to it).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     accel_lag_s: f64,
+    /// The lever arm from the IMU to the rear axle the run is known to have, `X,Y,Z` in m,
+    /// body frame (declared: both runs use it, `offline --lever-arm`; the lever-arm
+    /// candidate tests the forward offset about it).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true,
+          value_parser = crate::hint_args::parse_lever_arm, default_value = "0,0,0")]
+    lever_arm: [f64; 3],
     /// Further `mems-odometry offline` options for both runs (after `--`: `--profile arm`).
     #[arg(last = true)]
     offline: Vec<OsString>,
@@ -62,8 +68,8 @@ fn parse_point(text: &str) -> Result<[f64; 3], String> {
 }
 
 /// What one offline run gave.
-struct Run {
-    json: Value,
+pub(crate) struct Run {
+    pub(crate) json: Value,
     evidence: Evidence,
 }
 
@@ -91,7 +97,7 @@ impl Run {
         )
     }
 
-    fn figures(&self, end: Option<Vector3<f64>>) -> Value {
+    pub(crate) fn figures(&self, end: Option<Vector3<f64>>) -> Value {
         json!({
             "rest_innovation_rms_mps": self.innovation_rms(),
             "end_error_m": self.end_error(end),
@@ -101,28 +107,55 @@ impl Run {
     }
 }
 
-/// Runs `mems-odometry offline` on `args.run` with `calib` (none: the identity) and the
-/// accelerometer lag `lag_s` removed, reading its `--out` recording back.
-fn offline(
+/// What a run declares: the calibration file (none: the identity), the accelerometer lag
+/// removed (s) and the lever arm (m, body frame).
+#[derive(Clone, Copy)]
+pub(crate) struct Declared<'a> {
+    pub(crate) calib: Option<&'a Path>,
+    pub(crate) lag_s: f64,
+    pub(crate) lever_arm_m: [f64; 3],
+}
+
+/// Runs `mems-odometry offline` on `args.run` as `declared` says, reading its `--out`
+/// recording back.
+pub(crate) fn offline(
     args: &DiagnoseArgs,
-    (calib, lag_s): (Option<&Path>, f64),
+    declared: Declared,
     dir: &Path,
     name: &str,
     config: &odometry::config::OdometryConfig,
 ) -> Result<Run> {
     let out = dir.join(format!("{name}.mcap"));
+    let json = offline_json(args, declared, name, Some(&out))?;
+    let evidence = read_evidence(&out, &config.gyro_correction)?;
+    Ok(Run { json, evidence })
+}
+
+/// Runs `mems-odometry offline` on `args.run` as `declared` says (recording it to `out` if
+/// given) and returns its JSON result.
+pub(crate) fn offline_json(
+    args: &DiagnoseArgs,
+    declared: Declared,
+    name: &str,
+    out: Option<&Path>,
+) -> Result<Value> {
     let mut cmd = Command::new(std::env::current_exe()?);
     cmd.arg("offline")
         .arg("--input")
         .arg(&args.run)
-        .arg("--json")
-        .arg("--out")
-        .arg(&out);
-    if let Some(c) = calib {
+        .arg("--json");
+    if let Some(out) = out {
+        cmd.arg("--out").arg(out);
+    }
+    if let Some(c) = declared.calib {
         cmd.arg("--calib").arg(c);
     }
-    if lag_s != 0.0 {
-        cmd.arg(format!("--accel-lag-s={lag_s}"));
+    if declared.lag_s != 0.0 {
+        cmd.arg(format!("--accel-lag-s={}", declared.lag_s));
+    }
+    if declared.lever_arm_m != [0.0; 3] {
+        let [x, y, z] = declared.lever_arm_m;
+        cmd.arg(format!("--lever-arm={x},{y},{z}"));
     }
     cmd.args(&args.offline);
     let output = cmd.output().context("cannot run mems-odometry offline")?;
@@ -141,10 +174,8 @@ fn offline(
             last.trim_start_matches("mems-odometry: error: ")
         );
     }
-    let json: Value = serde_json::from_slice(&output.stdout)
-        .with_context(|| format!("{name} run: offline printed no JSON"))?;
-    let evidence = read_evidence(&out, &config.gyro_correction)?;
-    Ok(Run { json, evidence })
+    serde_json::from_slice(&output.stdout)
+        .with_context(|| format!("{name} run: offline printed no JSON"))
 }
 
 /// The evidence of the run recorded at `path`, read message by message: what is held is one
@@ -184,7 +215,11 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
     };
     let dir = mems_files::private_dir("mems-diagnose")?;
     let config = odometry_config(&file);
-    let declared = (args.calib.as_deref(), args.accel_lag_s);
+    let declared = Declared {
+        calib: args.calib.as_deref(),
+        lag_s: args.accel_lag_s,
+        lever_arm_m: args.lever_arm,
+    };
     let before = offline(&args, declared, dir.path(), "before", &config)?;
     let t_ref = file.temperature.reference_c.unwrap_or(f64::NAN);
     let d = diagnose::diagnose(&before.evidence, &config, t_ref, &Settings::default());
@@ -198,7 +233,12 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
             .map_err(|e| anyhow!("cannot write the corrected calibration: {e}"))?;
         let config = odometry_config(&corrected);
         let lag = args.accel_lag_s + fitted_lag(&d);
-        let run = offline(&args, (Some(&path), lag), dir.path(), "after", &config)?;
+        let corrected = Declared {
+            calib: Some(&path),
+            lag_s: lag,
+            ..declared
+        };
+        let run = offline(&args, corrected, dir.path(), "after", &config)?;
         let again = diagnose::diagnose(&run.evidence, &config, d.t_ref_c, &Settings::default());
         Some((run, again))
     };
@@ -207,6 +247,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         let (b, a) = (before.innovation_rms(), r.innovation_rms());
         a.zip(b).is_none_or(|(a, b)| a <= b)
     });
+    let lever = crate::diagnose_lever::test(&args, declared, &before, dir.path(), &config, end)?;
     let report = json!({
         "input": args.run,
         "before": before.figures(end),
@@ -218,6 +259,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
             "magnitude_rms_mps2": again.magnitude.rms_before,
             "tilt_rms_rad": again.tilt.rms_before,
         })),
+        "lever_arm": lever,
     });
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

@@ -115,6 +115,11 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
         let _ = writeln!(s, "    {}", candidate(c));
     }
     let _ = writeln!(s, "    {}", saturation(&d.saturation));
+    let _ = writeln!(
+        s,
+        "    {}",
+        crate::diagnose_lever::text(&report["lever_arm"])
+    );
     let names: Vec<&str> = d.selected.iter().map(|(c, _)| c.name()).collect();
     let _ = writeln!(
         s,

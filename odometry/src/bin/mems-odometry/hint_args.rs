@@ -1,7 +1,7 @@
 //! Command-line options for robot hints, shared by `serve` and `offline`.
 
 use anyhow::{Result, bail};
-use nalgebra::UnitQuaternion;
+use nalgebra::{UnitQuaternion, Vector3};
 use odometry::eskf::Heading;
 use odometry::hints::HintConfig;
 
@@ -37,6 +37,29 @@ pub struct HintArgs {
     /// is compared with the filter's velocity (`tools/real-data/hint_lag.py` measures it).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub hint_speed_lag_ms: f64,
+    /// The lever arm from the IMU to the rear axle, the point the non-holonomic constraint
+    /// and the wheel speed describe: `X,Y,Z` in metres, body frame (x forward, y left, z up;
+    /// an IMU 1.2 m ahead of the axle is `-1.2,0,0`). Default: the IMU on the axle.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = parse_lever_arm)]
+    pub lever_arm: Option<[f64; 3]>,
+}
+
+/// Parses `X,Y,Z` (m).
+pub fn parse_lever_arm(text: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| {
+            x.trim()
+                .parse::<f64>()
+                .map_err(|e| format!("{text:?}: {x:?} is not a number: {e}"))
+        })
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!(
+            "{text:?}: three finite numbers X,Y,Z (m, body frame) expected"
+        )),
+    }
 }
 
 impl HintArgs {
@@ -61,6 +84,7 @@ impl HintArgs {
                 Heading::Kept
             },
             speed_time_offset_s: self.hint_speed_lag_ms * 1e-3,
+            lever_arm_m: self.lever_arm.map_or_else(Vector3::zeros, Vector3::from),
             ..HintConfig::default()
         };
         config.validate().map_err(|e| anyhow::anyhow!("{e}"))?;

@@ -8,6 +8,7 @@
 //! reruns with those the data support.
 
 mod diagnose;
+mod diagnose_lever;
 mod diagnose_text;
 mod hint_args;
 mod load;

@@ -7,6 +7,10 @@
 //! rotation between the two frames' headings is taken from the two attitudes (its yaw part
 //! only: a roll or pitch difference is our own tilt error and stays in the error), and the
 //! truth positions are expressed in our frame relative to the truth position there.
+//! A simulated drive's truth is its rear axle's (`mems-sim --lever-arm-m`): with a lever arm
+//! declared (`--lever-arm`, `r_b` from the IMU to the axle, body frame), the position compared
+//! is the axle's, `p + q R_bs^-1 r_b` at the end less the same at the first aligned state
+//! (the mounting `R_bs` as used at the end); without one, the IMU's.
 
 use std::path::Path;
 
@@ -40,6 +44,8 @@ fn quat(wxyz: [f64; 4]) -> UnitQuaternion<f64> {
 struct TruthFrame {
     origin: Vector3<f64>,
     to_ours: Rotation3<f64>,
+    /// Our attitude there (sensor to navigation).
+    attitude: UnitQuaternion<f64>,
 }
 
 impl TruthFrame {
@@ -51,6 +57,7 @@ impl TruthFrame {
         Self {
             origin: Vector3::from(truth.position_m),
             to_ours: Rotation3::from_axis_angle(&Vector3::z_axis(), yaw),
+            attitude: quat(ours.attitude_wxyz),
         }
     }
 
@@ -145,10 +152,22 @@ impl Summary {
         }
     }
 
-    /// The end state's error against the truth, m, in our frame (a recording with truth).
-    pub fn truth_error(&self, end: &OdometryState, truth: &mut TruthQueue) -> Option<[f64; 3]> {
+    /// The end state's error against the truth, m, in our frame (a recording with truth);
+    /// `lever` the mounting (sensor to body) and the declared lever arm to the axle (module
+    /// documentation).
+    pub fn truth_error(
+        &self,
+        end: &OdometryState,
+        truth: &mut TruthQueue,
+        lever: Option<(UnitQuaternion<f64>, Vector3<f64>)>,
+    ) -> Option<[f64; 3]> {
         let (f, t) = (self.frame.as_ref()?, truth.at(end.stamps.sample_ns)?);
-        let e = Vector3::from(end.position_m) - f.position(t);
+        let mut p = Vector3::from(end.position_m);
+        if let Some((r_bs, r_b)) = lever {
+            let axle = |q: UnitQuaternion<f64>| q * (r_bs.inverse() * r_b);
+            p += axle(quat(end.attitude_wxyz)) - axle(f.attitude);
+        }
+        let e = p - f.position(t);
         Some([e.x, e.y, e.z])
     }
 
@@ -215,7 +234,7 @@ impl Summary {
         if let Some(w) = walking {
             tracing::info!("{w}");
         }
-        let truth_error = self.truth_error(&end, truth);
+        let truth_error = self.truth_error(&end, truth, declared_lever(chain));
         if json {
             let mut result = self.json(&end, truth_error, aligned_at_s, read, chain);
             result["profile"] = read.choice.json(chain.second.auto_choice());
@@ -324,6 +343,8 @@ impl Summary {
         json!({
             "nonholonomic_updates": nhc.applied,
             "nonholonomic_rejected": nhc.rejected,
+            "nonholonomic_nis_sum": nhc.nis_sum[0],
+            "nonholonomic_dof_sum": nhc.nis_sum[1],
             "mounting_rpy_deg": mounting,
             "rest_vibrating_states": self.rest_vibrating,
             "rest_moving_states": self.rest_moving,
@@ -521,6 +542,20 @@ pub fn report_input(read: &Read, source: &mut Source, no_gyro: Option<u64>) -> V
 
 /// The mounting the speed hints use (sensor to body, roll, pitch, yaw in degrees), given or
 /// estimated; `None` while unknown.
+/// The mounting (the IMU-only constraint's, else the hints') and the declared lever arm to
+/// the axle, when one is declared and the mounting known.
+fn declared_lever(chain: &OfflineChain) -> Option<(UnitQuaternion<f64>, Vector3<f64>)> {
+    let stage = chain.second.stage();
+    let r_b = stage.lever_arm_m();
+    let mounting = stage
+        .imu_constraint()
+        .and_then(|n| n.mounting())
+        .or_else(|| stage.mounting());
+    mounting
+        .filter(|_| r_b != Vector3::zeros())
+        .map(|q| (q, r_b))
+}
+
 fn hint_mounting(chain: &OfflineChain) -> Option<[f64; 3]> {
     chain.second.stage().mounting().map(|q| {
         let (r, p, y) = q.euler_angles();

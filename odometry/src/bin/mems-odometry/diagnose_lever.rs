@@ -1,0 +1,134 @@
+//! The lever-arm candidate of `mems-odometry diagnose` (`odometry::diagnose::lever`): the
+//! run made again with the IMU-only non-holonomic constraint at the declared forward offset
+//! plus and minus `lever::PROBE_M`, the profile of its NIS sum fitted, and, when the data
+//! support an offset, the run made once more with it and its figures compared with the
+//! declared run's.
+
+use std::path::Path;
+
+use anyhow::Result;
+use nalgebra::Vector3;
+use odometry::config::OdometryConfig;
+use odometry::diagnose::Settings;
+use odometry::diagnose::lever::{LeverArm, PROBE_M, Point};
+use serde_json::{Value, json};
+
+use crate::diagnose::{Declared, DiagnoseArgs, Run, offline, offline_json};
+
+/// Fewest degrees of freedom of the constraint's updates the candidate needs (a second of
+/// driving at the propagation interval's rate is tens).
+const MIN_DOF: f64 = 100.0;
+
+/// The constraint's NIS sum and degrees of freedom in an offline run's JSON (`None`: no
+/// IMU-only constraint ran).
+fn point(json: &Value, r_x_m: f64) -> Option<Point> {
+    let w = &json["wheeled"];
+    Some(Point {
+        r_x_m,
+        chi2: w["nonholonomic_nis_sum"].as_f64()?,
+        dof: w["nonholonomic_dof_sum"].as_f64()?,
+    })
+}
+
+/// Tests the lever-arm candidate on the run `before`, made as `declared` says; `end` is the
+/// known end point, if any. Returns the candidate and, when found, the rerun's figures
+/// beside the declared run's, as JSON.
+pub fn test(
+    args: &DiagnoseArgs,
+    declared: Declared,
+    before: &Run,
+    dir: &Path,
+    config: &OdometryConfig,
+    end: Option<Vector3<f64>>,
+) -> Result<Value> {
+    let r0 = declared.lever_arm_m;
+    let Some(first) = point(&before.json, r0[0]) else {
+        let why =
+            "no IMU-only non-holonomic constraint ran (a wheeled profile without speed hints)";
+        return Ok(json!({ "candidate": LeverArm::untestable(why.into()) }));
+    };
+    if first.dof < MIN_DOF {
+        let why = format!(
+            "{:.0} degrees of freedom of the constraint's updates (needs {MIN_DOF})",
+            first.dof
+        );
+        return Ok(json!({ "candidate": LeverArm::untestable(why) }));
+    }
+    let mut points = vec![first];
+    for (k, dx) in [-PROBE_M, PROBE_M].into_iter().enumerate() {
+        let r = [r0[0] + dx, r0[1], r0[2]];
+        let probe = Declared {
+            lever_arm_m: r,
+            ..declared
+        };
+        let json = offline_json(args, probe, &format!("lever probe {k}"), None)?;
+        if let Some(p) = point(&json, r[0]) {
+            points.push(p);
+        }
+    }
+    let s = Settings::default();
+    let lever = LeverArm::from_profile(points, s.threshold, s.beyond_model);
+    if !lever.found {
+        return Ok(json!({ "candidate": lever }));
+    }
+    let fitted = Declared {
+        lever_arm_m: [lever.r_x_m, r0[1], r0[2]],
+        ..declared
+    };
+    let after = offline(args, fitted, dir, "lever", config)?;
+    let nis_after = point(&after.json, lever.r_x_m);
+    // The rerun confirms the offset when its constraint's NIS sum is no larger.
+    let confirmed = nis_after.map(|p| p.chi2 <= first.chi2);
+    Ok(json!({
+        "candidate": lever,
+        "lever_arm_m": fitted.lever_arm_m,
+        "nis_sum_after": nis_after.map(|p| p.chi2),
+        "confirmed": confirmed,
+        "before": before.figures(end),
+        "after": after.figures(end),
+    }))
+}
+
+/// The candidate's line of the text report, from its JSON (`test`'s result).
+pub fn text(lever: &Value) -> String {
+    let c = &lever["candidate"];
+    let name = "lever_arm";
+    if let Some(why) = c["untestable"].as_str() {
+        return format!("{name:<16} not testable: {why}");
+    }
+    let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+    let mut line = format!(
+        "{name:<16} score {:>10.1}  forward offset IMU to axle {:.3} +- {:.3} m: {}",
+        f(&c["gain"]),
+        f(&c["r_x_m"]),
+        f(&c["sigma_m"]),
+        if c["found"] == true {
+            "found"
+        } else {
+            "not found"
+        }
+    );
+    if c["found"] == true {
+        let fig = |k: &str| {
+            let g = |side: &str| {
+                lever[side][k]
+                    .as_f64()
+                    .map_or("-".into(), |x| format!("{x:.3}"))
+            };
+            format!("{k} {} -> {}", g("before"), g("after"))
+        };
+        line += &format!(
+            "; rerun with it: constraint NIS sum {:.1} -> {:.1} ({}), {}, {}",
+            f(&c["points"][0]["chi2"]),
+            f(&lever["nis_sum_after"]),
+            if lever["confirmed"] == true {
+                "confirmed"
+            } else {
+                "not confirmed"
+            },
+            fig("end_error_m"),
+            fig("truth_error_m")
+        );
+    }
+    line
+}

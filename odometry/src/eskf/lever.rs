@@ -1,0 +1,175 @@
+//! Body-frame velocity measurements at a point other than the IMU: the lever arm.
+//!
+//! A wheeled platform's non-holonomic constraint and its wheel speed describe the motion of
+//! the rear axle, not of an IMU mounted elsewhere on the rigid body. With `r_b` the vector
+//! from the IMU to that point (body frame: x forward, y left, z up; m) and `omega_b` the
+//! body's angular rate in the body frame (rad/s, counter-clockwise positive about each axis),
+//! the point moves at
+//!
+//! `v_point = v_b + omega_b x r_b`, with `v_b = R_bs q^-1 v` and `omega_b = R_bs (w - b_g)`
+//!
+//! (the rigid-body velocity transfer: Titterton and Weston, "Strapdown Inertial Navigation
+//! Technology", 2nd ed., section 10.3, lever-arm compensation; Groves, "Principles of GNSS,
+//! Inertial, and Multisensor Integrated Navigation Systems", 2nd ed., section 14.3.1, the
+//! odometer's lever arm). An IMU `l` metres ahead of the rear axle (`r_b = (-l, 0, 0)`)
+//! turning at the yaw rate `w_z` moves sideways at `w_z l` (to the left in a left turn)
+//! while the axle does not: that is what the constraint, applied at the IMU, would take for
+//! skid. `w` is the newest gyro sample the filter predicted with ([`Eskf::predict`]).
+//!
+//! The Jacobian of `v_point` with respect to the error state (the attitude error local, as
+//! in the filter): `R_bs q^-1` on `dv`, `R_bs [q^-1 v]x` on `dtheta`, and, from
+//! `d(omega_b x r_b) = -(R_bs db_g) x r_b = [r_b]x R_bs db_g`, `[r_b]x R_bs` on `db_g`. With
+//! `r_b = 0` the measurement is the IMU's body velocity, computed exactly as before.
+
+use super::*;
+
+impl Eskf {
+    /// The angular rate of the newest sample, bias removed, rad/s, sensor frame.
+    pub fn rate(&self) -> Vector3<f64> {
+        self.last.w - self.x.b_g
+    }
+
+    /// The body-frame velocity of the point `r_b` (body frame, m, from the IMU to the point),
+    /// m/s, with `r_bs` rotating sensor-frame vectors into the body frame (module
+    /// documentation); [`Self::body_velocity`] when `r_b` is zero.
+    pub fn point_velocity(&self, r_bs: &Matrix3<f64>, r_b: &Vector3<f64>) -> Vector3<f64> {
+        let v_b = self.body_velocity(r_bs);
+        if *r_b == Vector3::zeros() {
+            return v_b;
+        }
+        v_b + (r_bs * self.rate()).cross(r_b)
+    }
+
+    /// The Jacobian of [`Self::point_velocity`] with respect to the error state (module
+    /// documentation).
+    pub fn point_velocity_jacobian(
+        &self,
+        r_bs: &Matrix3<f64>,
+        r_b: &Vector3<f64>,
+    ) -> SMatrix<f64, 3, N> {
+        let r_t = self.x.q.to_rotation_matrix().into_inner().transpose();
+        let mut h = SMatrix::<f64, 3, N>::zeros();
+        h.fixed_view_mut::<3, 3>(0, V).copy_from(&(r_bs * r_t));
+        h.fixed_view_mut::<3, 3>(0, TH)
+            .copy_from(&(r_bs * skew(&(r_t * self.x.v))));
+        if *r_b != Vector3::zeros() {
+            h.fixed_view_mut::<3, 3>(0, BG)
+                .copy_from(&(skew(r_b) * r_bs));
+        }
+        h
+    }
+
+    /// [`Self::body_velocity_update_with`] at the point `r_b` (body frame, m, from the IMU):
+    /// the measurement is `z = ((1 + k) v_p.x, v_p.y, v_p.z)` with `v_p` the
+    /// [`Self::point_velocity`], 1-sigma `sigma` per component (m/s); `residual` is `z`
+    /// minus its prediction. Returns the normalized innovation squared (`None`: singular,
+    /// nothing updated).
+    pub fn point_velocity_update(
+        &mut self,
+        r_bs: &Matrix3<f64>,
+        r_b: &Vector3<f64>,
+        residual: Vector3<f64>,
+        sigma: Vector3<f64>,
+        heading: Heading,
+    ) -> Option<f64> {
+        self.propagate();
+        let before = self.point_velocity(r_bs, r_b);
+        let mut h = self.point_velocity_jacobian(r_bs, r_b);
+        // The forward row reads (1 + k) v_p.x.
+        let scale = 1.0 + self.x.k;
+        for c in 0..N {
+            h[(0, c)] *= scale;
+        }
+        h[(0, KS)] = before.x;
+        let var = Matrix3::from_diagonal(&sigma.component_mul(&sigma));
+        self.update(&h, residual, &var, heading)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A filter in a turn: moving, tilted, with biases and a scale error.
+    fn turning() -> Eskf {
+        let x = Nominal {
+            p: Vector3::new(1.0, 2.0, 0.5),
+            v: Vector3::new(3.0, -1.0, 0.2),
+            q: UnitQuaternion::from_euler_angles(0.1, -0.2, 0.7),
+            b_a: Vector3::new(0.01, -0.02, 0.03),
+            b_g: Vector3::new(0.002, -0.001, 0.003),
+            k: 0.01,
+        };
+        let first = Imu {
+            f: Vector3::new(0.3, 0.1, 9.8),
+            w: Vector3::new(0.05, -0.1, 0.4),
+        };
+        Eskf::new(
+            x,
+            Cov::identity() * 1e-2,
+            9.81,
+            super::super::tests::noise(),
+            first,
+        )
+    }
+
+    fn mounting() -> Matrix3<f64> {
+        UnitQuaternion::from_euler_angles(0.05, 0.02, -0.3)
+            .to_rotation_matrix()
+            .into_inner()
+    }
+
+    #[test]
+    fn the_jacobian_is_the_numerical_one() {
+        let kf = turning();
+        let (r_bs, r_b) = (mounting(), Vector3::new(-1.2, 0.3, 0.4));
+        let h = kf.point_velocity_jacobian(&r_bs, &r_b);
+        let eps = 1e-6;
+        for c in 0..N {
+            let mut dx = VecN::zeros();
+            dx[c] = eps;
+            let (mut plus, mut minus) = (kf.clone(), kf.clone());
+            plus.inject(&dx);
+            minus.inject(&-dx);
+            let numeric = (plus.point_velocity(&r_bs, &r_b) - minus.point_velocity(&r_bs, &r_b))
+                / (2.0 * eps);
+            let analytic = h.column(c);
+            assert!(
+                (numeric - analytic).norm() < 1e-6,
+                "column {c}: numeric {numeric:?} analytic {analytic:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_point_behind_a_left_turn_moves_right_of_the_imu() {
+        // Level, identity mounting, a pure yaw rate of 0.5 rad/s and no velocity: the axle
+        // 1.5 m behind the IMU (r_b = (-1.5, 0, 0)) moves at omega x r = (0, -0.75, 0).
+        let mut kf = turning();
+        kf.x.q = UnitQuaternion::identity();
+        kf.x.v = Vector3::zeros();
+        kf.x.b_g = Vector3::zeros();
+        kf.last.w = Vector3::new(0.0, 0.0, 0.5);
+        let v = kf.point_velocity(&Matrix3::identity(), &Vector3::new(-1.5, 0.0, 0.0));
+        assert!((v - Vector3::new(0.0, -0.75, 0.0)).norm() < 1e-12, "{v:?}");
+    }
+
+    #[test]
+    fn no_lever_arm_is_the_body_velocity_update() {
+        let (r_bs, residual) = (mounting(), Vector3::new(0.1, -0.2, 0.05));
+        let sigma = Vector3::new(0.3, 0.1, 0.1);
+        let mut a = turning();
+        let mut b = turning();
+        let nis_a = a.body_velocity_update(&r_bs, residual, sigma);
+        let nis_b = b.point_velocity_update(
+            &r_bs,
+            &Vector3::zeros(),
+            residual,
+            sigma,
+            Heading::Corrected,
+        );
+        assert_eq!(nis_a, nis_b);
+        assert_eq!(a.x, b.x);
+        assert_eq!(a.cov, b.cov);
+    }
+}
