@@ -25,6 +25,7 @@ pub mod nonholonomic;
 pub mod platform;
 pub mod profile;
 pub mod rest_noise;
+pub mod rest_scatter;
 pub mod sampled_noise;
 pub mod session;
 pub mod stage;

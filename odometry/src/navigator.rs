@@ -16,6 +16,7 @@ use crate::hints::{
     usable_from_ns,
 };
 use crate::nonholonomic::{ImuConstraint, Outcome};
+use crate::rest_scatter::RestScatter;
 use crate::sampled_noise::SampledNoise;
 use crate::stops::StopTest;
 use crate::uncalibrated::{AccelEstimate, AccelPrior};
@@ -97,6 +98,8 @@ pub(crate) struct Navigator {
     attitudes: RestAttitudes,
     /// The stream's per-sample scatter, for the prediction's noise (`cfg.sampled_noise`).
     sampled: SampledNoise,
+    /// The gyro's scatter at rest, for a wheeled platform's zero-rate update.
+    rest_scatter: RestScatter,
     /// What the updates' innovations say of the covariance (`crate::consistency`).
     consistency: Consistency,
     /// Hand-held walking's steps and updates (`cfg.walking`).
@@ -166,6 +169,7 @@ impl Navigator {
             accel_prior: None,
             attitudes: RestAttitudes::default(),
             sampled: SampledNoise::default(),
+            rest_scatter: RestScatter::default(),
             consistency: Consistency::new(cfg.consistency),
             walk: cfg.walking.map(Walk::new),
             hand: HandBound::default(),
@@ -201,6 +205,7 @@ impl Navigator {
         self.clip.copy_from(&other.clip);
         self.accel_prior = other.accel_prior;
         self.sampled = other.sampled;
+        self.rest_scatter = other.rest_scatter;
         self.consistency = other.consistency;
         self.walk = other.walk;
         self.hand = other.hand;
@@ -554,6 +559,8 @@ impl Navigator {
             } else {
                 self.hints.still = WheelsStill::default();
             }
+            let b_g = self.kf.as_ref().expect("aligned").x.b_g;
+            self.rest_scatter.push(&(m.w - b_g), dt);
             let w = &mut self.rest_window;
             w.n += 1;
             w.t_s += dt;
@@ -662,7 +669,8 @@ impl Navigator {
     /// reaches `OdometryConfig::rest_window_drift` of `sigma^2 / n`. The zero-rate update
     /// takes the mean of the window's gyro readings with the noise density over the square
     /// root of their span (the gyro bias is constant over the window: the mean of the `n`
-    /// readings is what they tell of it). Tested against updates at every sample in
+    /// readings is what they tell of it), on a wheeled platform at least the rests' measured
+    /// scatter over `sqrt(n)` (`crate::rest_scatter`). Tested against updates at every sample in
     /// `odometry/tests/rest_window.rs`.
     fn rest_updates(&mut self) {
         let w = std::mem::take(&mut self.rest_window);
@@ -676,7 +684,12 @@ impl Navigator {
         let removed = [v0.x - kf.x.v.x, v0.y - kf.x.v.y];
         self.consistency
             .rest_window(kf, w.t_ns, nis, w.t_s, removed);
-        let gyro_sigma = self.cfg.noise.gyro_noise_density / w.t_s.sqrt();
+        // A wheeled platform's rests shake as its engine does (`crate::rest_scatter`).
+        let scatter = match self.nhc {
+            Some(_) => self.rest_scatter.sd() / n.sqrt(),
+            None => 0.0,
+        };
+        let gyro_sigma = (self.cfg.noise.gyro_noise_density / w.t_s.sqrt()).max(scatter);
         kf.zero_rate(w.w_sum / n, gyro_sigma, self.cfg.zaru_gate_sigma);
         // (Hand-held walking's position is the walk's, not the filter's: nothing to revise.)
         if let Some(pending) = self.pending.as_mut().filter(|_| self.walk.is_none()) {
