@@ -669,9 +669,8 @@ impl Navigator {
     /// reaches `OdometryConfig::rest_window_drift` of `sigma^2 / n`. The zero-rate update
     /// takes the mean of the window's gyro readings with the noise density over the square
     /// root of their span (the gyro bias is constant over the window: the mean of the `n`
-    /// readings is what they tell of it), on a wheeled platform at least the rests' measured
-    /// scatter over `sqrt(n)` (`crate::rest_scatter`). Tested against updates at every sample in
-    /// `odometry/tests/rest_window.rs`.
+    /// readings is what they tell of it), on a wheeled platform at least the rests' shake over
+    /// `sqrt(n)` (`crate::rest_scatter`). Tested in `odometry/tests/rest_window.rs`.
     fn rest_updates(&mut self) {
         let w = std::mem::take(&mut self.rest_window);
         if w.n == 0 {
@@ -684,12 +683,8 @@ impl Navigator {
         let removed = [v0.x - kf.x.v.x, v0.y - kf.x.v.y];
         self.consistency
             .rest_window(kf, w.t_ns, nis, w.t_s, removed);
-        // A wheeled platform's rests shake as its engine does (`crate::rest_scatter`).
-        let scatter = match self.nhc {
-            Some(_) => self.rest_scatter.sd() / n.sqrt(),
-            None => 0.0,
-        };
-        let gyro_sigma = (self.cfg.noise.gyro_noise_density / w.t_s.sqrt()).max(scatter);
+        let shake = self.nhc.as_ref().map_or(0.0, |_| self.rest_scatter.sd());
+        let gyro_sigma = (self.cfg.noise.gyro_noise_density / w.t_s.sqrt()).max(shake / n.sqrt());
         kf.zero_rate(w.w_sum / n, gyro_sigma, self.cfg.zaru_gate_sigma);
         // (Hand-held walking's position is the walk's, not the filter's: nothing to revise.)
         if let Some(pending) = self.pending.as_mut().filter(|_| self.walk.is_none()) {
