@@ -118,7 +118,7 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
     let _ = writeln!(
         s,
         "    {}",
-        crate::diagnose_lever::text(&report["lever_arm"])
+        lever_text(&report["lever_arm"])
     );
     let names: Vec<&str> = d.selected.iter().map(|(c, _)| c.name()).collect();
     let _ = writeln!(
@@ -167,4 +167,49 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
         );
     }
     s
+}
+
+/// The lever-arm candidate's line of the text report, from its JSON
+/// (`crate::diagnose_lever::test`'s result).
+fn lever_text(lever: &Value) -> String {
+    let c = &lever["candidate"];
+    let name = "lever_arm";
+    if let Some(why) = c["untestable"].as_str() {
+        return format!("{name:<16} not testable: {why}");
+    }
+    let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+    let mut line = format!(
+        "{name:<16} score {:>10.1}  forward offset IMU to axle {:.3} +- {:.3} m: {}",
+        f(&c["gain"]),
+        f(&c["r_x_m"]),
+        f(&c["sigma_m"]),
+        if c["found"] == true {
+            "found"
+        } else {
+            "not found"
+        }
+    );
+    if c["found"] == true {
+        let fig = |k: &str| {
+            let g = |side: &str| {
+                lever[side][k]
+                    .as_f64()
+                    .map_or("-".into(), |x| format!("{x:.3}"))
+            };
+            format!("{k} {} -> {}", g("before"), g("after"))
+        };
+        line += &format!(
+            "; rerun with it: constraint NIS sum {:.1} -> {:.1} ({}), {}, {}",
+            f(&c["points"][0]["chi2"]),
+            f(&lever["nis_sum_after"]),
+            if lever["confirmed"] == true {
+                "confirmed"
+            } else {
+                "not confirmed"
+            },
+            fig("end_error_m"),
+            fig("truth_error_m")
+        );
+    }
+    line
 }
