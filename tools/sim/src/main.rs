@@ -765,7 +765,9 @@ impl Sink {
 /// `model` if it is valid, else an error naming the options that set it.
 fn checked(model: VibrationModel) -> anyhow::Result<VibrationModel> {
     model.validate().map_err(|e| {
-        anyhow::anyhow!("--vibration-floor, --engine-idle, --engine-start, --engine-idle-gyro or --road: {e}")
+        anyhow::anyhow!(
+            "--vibration-floor, --engine-idle, --engine-start, --engine-idle-gyro or --road: {e}"
+        )
     })?;
     Ok(model)
 }
