@@ -162,10 +162,13 @@ fn heading_changes(states: &[OdometryState], stops: &[(f64, f64)]) -> Vec<f64> {
 
 /// An engine that shakes the gyroscope at the car's stops (`--engine-idle-gyro 0.45`: 0.45
 /// deg/s per axis at 23 Hz and its double, zero-mean, as wid-car-06's 0.37-0.53 deg/s,
-/// tools/sim/src/vibration.rs) and stops of 20-30 s: the heading stays within BOUND_DEG over
-/// each stop. The zero-rate update with the datasheet's 0.01 deg/s/sqrt(Hz) as its sigma and
-/// its 5-sigma gate takes only the samples near the bias it holds and walks the bias state
-/// off (`odometry::rest_scatter`); with the rests' own scatter as its sigma it takes them all.
+/// tools/sim/src/vibration.rs) and stops of 20-30 s: the heading stays within `BOUND_DEG`
+/// over each stop (the truth's does not turn). The zero-rate update with the datasheet's 0.01
+/// deg/s/sqrt(Hz) as its sigma and its 5-sigma gate refuses the shaken windows, and the bias
+/// the filter holds turns the heading; with the rests' own scatter as its sigma
+/// (`odometry::rest_scatter`) it takes them. Measured: with the datasheet's sigma the heading
+/// turns 6.3 and 7.5 deg (seed 1) and 0.5 and 1.8 deg (seed 3) over the two stops; with the
+/// rests' scatter at most 0.09 deg; without the shake at most 0.36 deg either way.
 #[test]
 fn a_car_shaking_its_gyroscope_at_its_stops_keeps_its_heading() {
     /// Largest heading change over a stop, deg.
