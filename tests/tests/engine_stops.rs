@@ -171,7 +171,10 @@ fn heading_changes(states: &[OdometryState], stops: &[(f64, f64)]) -> Vec<f64> {
 /// rests' scatter at most 0.09 deg; without the shake at most 0.36 deg either way.
 #[test]
 fn a_car_shaking_its_gyroscope_at_its_stops_keeps_its_heading() {
-    /// Largest heading change over a stop, deg.
+    /// Largest heading change over a stop, deg: well above what the gyro's white noise turns
+    /// over 30 s (0.01 deg/s/sqrt(Hz) times sqrt(30 s): 0.05 deg) and the end's gyro-bias
+    /// 1-sigma over 30 s (the `--json` `gyro_bias`, 0.001 deg/s: 0.03 deg), well below
+    /// what the datasheet's sigma turns (1.8-7.5 deg over the stops that fail).
     const BOUND_DEG: f64 = 1.0;
     let dir = std::env::temp_dir().join(unique_namespace("engine-stops-gyro"));
     std::fs::create_dir_all(&dir).unwrap();
