@@ -790,6 +790,11 @@ impl Eskf {
         Vector3::from_fn(|i, _| self.cov[(BA + i, BA + i)].max(0.0).sqrt())
     }
 
+    /// 1-sigma of the gyro bias, rad/s, sensor frame, as [`Self::accel_bias_sigma`].
+    pub fn gyro_bias_sigma(&self) -> Vector3<f64> {
+        Vector3::from_fn(|i, _| self.cov[(BG + i, BG + i)].max(0.0).sqrt())
+    }
+
     /// 1-sigma of velocity, m/s, navigation frame, as [`Self::position_sigma`].
     pub fn velocity_sigma(&self) -> Vector3<f64> {
         let r = &self.reported;

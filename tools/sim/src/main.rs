@@ -84,6 +84,11 @@ enum Command {
         /// parked with the engine off).
         #[arg(long, default_value_t = 0.0)]
         engine_start: f64,
+        /// The idling engine's angular vibration at the stops after the first motion, RMS
+        /// per gyroscope axis, deg/s, at the --engine-idle frequency (0: none; wid-car-06
+        /// shows 0.37-0.53, tools/sim/src/vibration.rs).
+        #[arg(long, value_name = "DPS", default_value_t = 0.0)]
+        engine_idle_gyro: f64,
         /// A road rocking a car's body while the wheels turn: accelerometer RMS per axis,
         /// m/s^2, at 1.2 Hz (tools/sim/src/vibration.rs gives measured levels).
         #[arg(long, default_value_t = 0.0)]
@@ -760,7 +765,9 @@ impl Sink {
 /// `model` if it is valid, else an error naming the options that set it.
 fn checked(model: VibrationModel) -> anyhow::Result<VibrationModel> {
     model.validate().map_err(|e| {
-        anyhow::anyhow!("--vibration-floor, --engine-idle, --engine-start or --road: {e}")
+        anyhow::anyhow!(
+            "--vibration-floor, --engine-idle, --engine-start, --engine-idle-gyro or --road: {e}"
+        )
     })?;
     Ok(model)
 }
@@ -907,6 +914,7 @@ fn run(cli: Cli) -> Result<()> {
             vibration_floor,
             engine_idle,
             engine_start,
+            engine_idle_gyro,
             road,
             turns,
             in_place_turns,
@@ -932,6 +940,7 @@ fn run(cli: Cli) -> Result<()> {
             let model = VibrationModel::moderate(vibration)
                 .with_floor(vibration_floor[0], vibration_floor[1])
                 .with_engine_idle(engine_idle[0], engine_idle[1], engine_start)
+                .with_engine_idle_gyro(engine_idle_gyro)
                 .with_road(road);
             simulate(drive, &checked(model)?, &common, &hint_list)
         }

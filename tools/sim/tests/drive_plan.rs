@@ -344,3 +344,57 @@ fn vibration_mean_over_a_long_drive_is_zero_within_its_standard_error() {
         assert!(se < 0.01 * level, "channel {ch}: se {se}");
     }
 }
+
+#[test]
+fn an_idling_engine_shakes_the_gyroscope_at_its_stops_about_zero() {
+    // Engine off in motion (moderate(0)), 0.45 deg/s RMS per gyroscope axis at 23 Hz and 46
+    // Hz at the stops after the first motion, none before it. Over a 30 s stop at 100 Hz the
+    // sample RMS is the configured one (the sinusoids' samples, 690 and 1380 periods, average
+    // their squares to a half within 1 %), the mean is zero (no bias: within 0.005 deg/s) and
+    // the angle, the running sum of rate times dt, stays bounded: a sum of samples
+    // `a sin(k w dt + p)` stays within `a dt / sin(w dt / 2)` in magnitude (the geometric sum
+    // of the phasors), with amplitudes `a` of sqrt(2 * 0.7) and sqrt(2 * 0.3) times the RMS.
+    let rms = 0.45;
+    let model = VibrationModel::moderate(0.0)
+        .with_engine_idle(0.3, 23.0, 0.0)
+        .with_engine_idle_gyro(rms);
+    let mut vib = Vibration::new(&model, 7).unwrap();
+    let rate = 100.0;
+    let (_, before) = vib.step(0.0, rate, 0.0);
+    assert_eq!(before, [0.0; 3], "before the first motion");
+    vib.step(0.01, rate, 1.0);
+    let n = 3000;
+    let (mut sum, mut sq, mut peak) = ([0.0; 3], [0.0; 3], [0.0f64; 3]);
+    for k in 0..n {
+        let (_, g) = vib.step(0.02 + k as f64 / rate, rate, 0.0);
+        for i in 0..3 {
+            sum[i] += g[i] / rate;
+            sq[i] += g[i] * g[i] / n as f64;
+            peak[i] = peak[i].max(sum[i].abs());
+        }
+    }
+    let dt = 1.0 / rate;
+    let bound: f64 = [(1.4f64, 23.0), (0.6, 46.0)]
+        .iter()
+        .map(|(p, hz)| p.sqrt() * rms * dt / (TAU * hz * dt / 2.0).sin())
+        .sum();
+    for i in 0..3 {
+        let mean = sum[i] / (n as f64 / rate);
+        eprintln!(
+            "axis {i}: rms {}, mean {mean:e}, peak angle {} deg",
+            sq[i].sqrt(),
+            peak[i]
+        );
+        assert!(
+            (sq[i].sqrt() / rms - 1.0).abs() < 0.01,
+            "axis {i}: rms {}",
+            sq[i].sqrt()
+        );
+        assert!(mean.abs() < 0.005, "axis {i}: mean {mean} deg/s");
+        assert!(
+            peak[i] <= 1.05 * bound,
+            "axis {i}: angle {} > {bound} deg",
+            peak[i]
+        );
+    }
+}

@@ -256,6 +256,7 @@ impl Summary {
                     .collect::<Vec<_>>()
             );
             result["accel_error"] = json!(accel);
+            result["gyro_bias"] = gyro_bias_json(chain);
             result["gravity_reanchored"] = json!(reanchored);
             result["steady_vibrating_s"] = json!(vibrating_s);
             result["consistency"] = json!(consistency);
@@ -724,4 +725,18 @@ fn say_aligned(aligned_at_s: f64, align_s: f64, in_motion: Option<f64>, chain: &
             align_s
         ),
     }
+}
+
+/// The filter's gyro bias at the end, deg/s, sensor frame: what it still finds in the
+/// calibration stage's corrected rates (which read the true rate plus it), and its 1-sigma
+/// (the filter's covariance); null before an alignment.
+fn gyro_bias_json(chain: &OfflineChain) -> serde_json::Value {
+    let Some(kf) = chain.second.stage().filter() else {
+        return serde_json::Value::Null;
+    };
+    let dps = |v: Vector3<f64>| v.map(f64::to_degrees).as_slice().to_vec();
+    json!({
+        "bias_dps": dps(kf.x.b_g),
+        "sigma_dps": dps(kf.gyro_bias_sigma()),
+    })
 }
