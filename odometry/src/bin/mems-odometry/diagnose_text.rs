@@ -115,11 +115,7 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
         let _ = writeln!(s, "    {}", candidate(c));
     }
     let _ = writeln!(s, "    {}", saturation(&d.saturation));
-    let _ = writeln!(
-        s,
-        "    {}",
-        lever_text(&report["lever_arm"])
-    );
+    let _ = writeln!(s, "    {}", lever_text(&report["lever_arm"]));
     let names: Vec<&str> = d.selected.iter().map(|(c, _)| c.name()).collect();
     let _ = writeln!(
         s,
