@@ -19,26 +19,25 @@ use serde_json::Value;
 /// The IMU's distance ahead of the rear axle in the simulated drive, m.
 const AHEAD_M: f64 = 1.5;
 
-/// A 120 s drive with turns (seed 4, 200 Hz) with the IMU `ahead_m` ahead of the axle.
-fn drive(dir: &Path, ahead_m: f64) -> PathBuf {
+/// A 120 s drive with turns (seed 4, 200 Hz) with the IMU `ahead_m` ahead of the axle, and
+/// `extra` simulator options (its file named by `tag`).
+fn drive(dir: &Path, ahead_m: f64, tag: &str, extra: &[&str]) -> PathBuf {
     let lever = format!("{ahead_m},0,0");
-    simulate(
-        dir,
-        &format!("drive-{ahead_m}.mcap"),
-        &[
-            "drive",
-            "--duration",
-            "120",
-            "--turns",
-            "on",
-            "--seed",
-            "4",
-            "--rate",
-            "200",
-            "--lever-arm-m",
-            &lever,
-        ],
-    )
+    let mut args = vec![
+        "drive",
+        "--duration",
+        "120",
+        "--turns",
+        "on",
+        "--seed",
+        "4",
+        "--rate",
+        "200",
+        "--lever-arm-m",
+        &lever,
+    ];
+    args.extend_from_slice(extra);
+    simulate(dir, &format!("drive-{ahead_m}{tag}.mcap"), &args)
 }
 
 /// `mems-odometry diagnose RUN --json` with `extra` diagnose options, as the vehicle profile.
@@ -56,7 +55,7 @@ fn num(v: &Value) -> f64 {
 #[test]
 fn an_imu_ahead_of_the_axle_is_found_and_its_rerun_ends_nearer_the_truth() {
     let dir = tempfile::tempdir().unwrap();
-    let run = drive(dir.path(), AHEAD_M);
+    let run = drive(dir.path(), AHEAD_M, "", &[]);
     let d = diagnose(&run, &[]);
     let lever = &d["lever_arm"];
     let c = &lever["candidate"];
@@ -85,7 +84,7 @@ fn an_imu_ahead_of_the_axle_is_found_and_its_rerun_ends_nearer_the_truth() {
 #[test]
 fn an_imu_on_the_axle_has_no_lever_arm_and_a_zero_flag_changes_nothing() {
     let dir = tempfile::tempdir().unwrap();
-    let run = drive(dir.path(), 0.0);
+    let run = drive(dir.path(), 0.0, "", &[]);
     let d = diagnose(&run, &[]);
     let c = &d["lever_arm"]["candidate"];
     assert!(c["untestable"].is_null(), "{c:#}");
@@ -140,25 +139,7 @@ fn hinted_error(run: &Path, lever: &str) -> f64 {
 #[test]
 fn speed_hints_compared_at_the_axle_take_the_lever_arm_out() {
     let dir = tempfile::tempdir().unwrap();
-    let run = simulate(
-        dir.path(),
-        "hinted.mcap",
-        &[
-            "drive",
-            "--duration",
-            "120",
-            "--turns",
-            "on",
-            "--seed",
-            "4",
-            "--rate",
-            "200",
-            "--hints",
-            "encoders",
-            "--lever-arm-m",
-            "1.5,0,0",
-        ],
-    );
+    let run = drive(dir.path(), AHEAD_M, "-hinted", &["--hints", "encoders"]);
     let undeclared = hinted_error(&run, "0,0,0");
     let declared = hinted_error(&run, "-1.5,0,0");
     assert!(
