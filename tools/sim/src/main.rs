@@ -762,8 +762,12 @@ impl Sink {
     }
 }
 
-/// `model` if it is valid, else an error naming the options that set it.
-fn checked(model: VibrationModel) -> anyhow::Result<VibrationModel> {
+/// `model`, built on the `--vibration` `level`, if both are valid, else an error naming the
+/// options that set them.
+fn checked(level: f64, model: VibrationModel) -> anyhow::Result<VibrationModel> {
+    if !(level.is_finite() && level >= 0.0) {
+        bail!("--vibration {level}: the level must be finite and >= 0");
+    }
     model.validate().map_err(|e| {
         anyhow::anyhow!(
             "--vibration-floor, --engine-idle, --engine-start, --engine-idle-gyro or --road: {e}"
@@ -932,9 +936,6 @@ fn run(cli: Cli) -> Result<()> {
                 gravity_mps2: common.gravity,
                 ..DriveParams::new(duration)
             });
-            if !(vibration.is_finite() && vibration >= 0.0) {
-                bail!("--vibration {vibration}: the level must be finite and >= 0");
-            }
             let drive = Drive::new(&params, common.seed)?;
             let hint_list = hints.received(&drive, common.seed)?;
             let model = VibrationModel::moderate(vibration)
@@ -942,7 +943,7 @@ fn run(cli: Cli) -> Result<()> {
                 .with_engine_idle(engine_idle[0], engine_idle[1], engine_start)
                 .with_engine_idle_gyro(engine_idle_gyro)
                 .with_road(road);
-            simulate(drive, &checked(model)?, &common, &hint_list)
+            simulate(drive, &checked(vibration, model)?, &common, &hint_list)
         }
         Command::Walk {
             laps,

@@ -9,6 +9,8 @@
 //! truth. The rerun confirms the selection when its rest innovation rms is no larger; one that
 //! does not is reported, and what the selection claimed to explain counts as unexplained.
 
+mod lever;
+
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -247,7 +249,7 @@ pub fn run(args: DiagnoseArgs) -> Result<()> {
         let (b, a) = (before.innovation_rms(), r.innovation_rms());
         a.zip(b).is_none_or(|(a, b)| a <= b)
     });
-    let lever = crate::diagnose_lever::test(&args, declared, &before, dir.path(), &config, end)?;
+    let lever = lever::test(&args, declared, &before, dir.path(), &config, end)?;
     let report = json!({
         "input": args.run,
         "before": before.figures(end),

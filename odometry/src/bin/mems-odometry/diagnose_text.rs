@@ -166,7 +166,7 @@ pub fn text(input: &Path, d: &Diagnosis, report: &Value) -> String {
 }
 
 /// The lever-arm candidate's line of the text report, from its JSON
-/// (`crate::diagnose_lever::test`'s result).
+/// (`crate::diagnose::lever::test`'s result).
 fn lever_text(lever: &Value) -> String {
     let c = &lever["candidate"];
     let name = "lever_arm";

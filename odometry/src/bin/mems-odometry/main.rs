@@ -8,7 +8,6 @@
 //! reruns with those the data support.
 
 mod diagnose;
-mod diagnose_lever;
 mod diagnose_text;
 mod hint_args;
 mod load;

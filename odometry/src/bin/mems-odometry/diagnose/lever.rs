@@ -13,7 +13,7 @@ use odometry::diagnose::Settings;
 use odometry::diagnose::lever::{LeverArm, PROBE_M, Point};
 use serde_json::{Value, json};
 
-use crate::diagnose::{Declared, DiagnoseArgs, Run, offline, offline_json};
+use super::{Declared, DiagnoseArgs, Run, offline, offline_json};
 
 /// Fewest degrees of freedom of the constraint's updates the candidate needs (a second of
 /// driving at the propagation interval's rate is tens).
