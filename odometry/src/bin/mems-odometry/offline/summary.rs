@@ -541,8 +541,6 @@ pub fn report_input(read: &Read, source: &mut Source, no_gyro: Option<u64>) -> V
     segments
 }
 
-/// The mounting the speed hints use (sensor to body, roll, pitch, yaw in degrees), given or
-/// estimated; `None` while unknown.
 /// The mounting (the IMU-only constraint's, else the hints') and the declared lever arm to
 /// the axle, when one is declared and the mounting known.
 fn declared_lever(chain: &OfflineChain) -> Option<(UnitQuaternion<f64>, Vector3<f64>)> {
@@ -557,6 +555,8 @@ fn declared_lever(chain: &OfflineChain) -> Option<(UnitQuaternion<f64>, Vector3<
         .map(|q| (q, r_b))
 }
 
+/// The mounting the speed hints use (sensor to body, roll, pitch, yaw in degrees), given or
+/// estimated; `None` while unknown.
 fn hint_mounting(chain: &OfflineChain) -> Option<[f64; 3]> {
     chain.second.stage().mounting().map(|q| {
         let (r, p, y) = q.euler_angles();
