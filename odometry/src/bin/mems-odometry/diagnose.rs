@@ -23,6 +23,7 @@ use odometry::diagnose::{self, Settings, evidence::Evidence, evidence::Gatherer,
 use recording::mcap::run::RunReader;
 use serde_json::{Value, json};
 
+use crate::hint_args::parse_xyz_m;
 use crate::load::odometry_config;
 
 /// Options of `mems-odometry diagnose`.
@@ -34,7 +35,7 @@ pub struct DiagnoseArgs {
     #[arg(long)]
     calib: Option<PathBuf>,
     /// The run's true end point, m, in the navigation frame (origin and heading at alignment).
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, conflicts_with = "closed_loop")]
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_xyz_m, conflicts_with = "closed_loop")]
     end: Option<[f64; 3]>,
     /// The run ends where it aligned (end point 0,0,0).
     #[arg(long)]
@@ -50,23 +51,11 @@ pub struct DiagnoseArgs {
     /// body frame (declared: both runs use it, `offline --lever-arm`; the lever-arm
     /// candidate tests the forward offset about it).
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true,
-          value_parser = crate::hint_args::parse_lever_arm, default_value = "0,0,0")]
+          value_parser = parse_xyz_m, default_value = "0,0,0")]
     lever_arm: [f64; 3],
     /// Further `mems-odometry offline` options for both runs (after `--`: `--profile arm`).
     #[arg(last = true)]
     offline: Vec<OsString>,
-}
-
-/// Parses `X,Y,Z` (m).
-fn parse_point(text: &str) -> Result<[f64; 3], String> {
-    let v: Vec<f64> = text
-        .split(',')
-        .map(|x| x.trim().parse::<f64>().map_err(|e| format!("{x:?}: {e}")))
-        .collect::<Result<_, _>>()?;
-    match v[..] {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
-        _ => Err(format!("{text:?}: three finite numbers X,Y,Z (m) expected")),
-    }
 }
 
 /// What one offline run gave.

@@ -40,12 +40,12 @@ pub struct HintArgs {
     /// The lever arm from the IMU to the rear axle, the point the non-holonomic constraint
     /// and the wheel speed describe: `X,Y,Z` in metres, body frame (x forward, y left, z up;
     /// an IMU 1.2 m ahead of the axle is `-1.2,0,0`). Default: the IMU on the axle.
-    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = parse_lever_arm)]
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, value_parser = parse_xyz_m)]
     pub lever_arm: Option<[f64; 3]>,
 }
 
-/// Parses `X,Y,Z` (m).
-pub fn parse_lever_arm(text: &str) -> Result<[f64; 3], String> {
+/// Parses `X,Y,Z` (m): a lever arm or a point (`diagnose --end`).
+pub fn parse_xyz_m(text: &str) -> Result<[f64; 3], String> {
     let v: Vec<f64> = text
         .split(',')
         .map(|x| {
@@ -56,9 +56,7 @@ pub fn parse_lever_arm(text: &str) -> Result<[f64; 3], String> {
         .collect::<Result<_, _>>()?;
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
-        _ => Err(format!(
-            "{text:?}: three finite numbers X,Y,Z (m, body frame) expected"
-        )),
+        _ => Err(format!("{text:?}: three finite numbers X,Y,Z (m) expected")),
     }
 }
 
