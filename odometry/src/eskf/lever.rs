@@ -37,7 +37,13 @@ impl Eskf {
         if *r_b == Vector3::zeros() {
             return v_b;
         }
-        v_b + (r_bs * self.rate()).cross(r_b)
+        v_b + self.lever_velocity(r_bs, r_b)
+    }
+
+    /// The point `r_b`'s velocity relative to the IMU, `omega_b x r_b` (body frame, m/s;
+    /// module documentation), with the newest sample's rate.
+    pub fn lever_velocity(&self, r_bs: &Matrix3<f64>, r_b: &Vector3<f64>) -> Vector3<f64> {
+        (r_bs * self.rate()).cross(r_b)
     }
 
     /// The Jacobian of [`Self::point_velocity`] with respect to the error state (module

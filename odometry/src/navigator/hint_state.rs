@@ -229,7 +229,7 @@ impl Hints {
         let r_b = self.cfg.lever_arm_m;
         let mut predicted = then + self.corrections;
         if r_b != Vector3::zeros() {
-            predicted += (r_bs * kf.rate()).cross(&r_b);
+            predicted += kf.lever_velocity(&r_bs, &r_b);
         }
         let residual = Vector3::new(
             h.forward_speed_mps - (1.0 + kf.x.k) * predicted.x,
