@@ -496,6 +496,12 @@ fn normal(rng: &mut ChaCha8Rng) -> f64 {
     rng.sample(StandardNormal)
 }
 
+/// Sample times within this of each other are one instant, s: times are whole nanoseconds,
+/// reached by different float sums (`t_ns * 1e-9` for a direct read, `start + k / rate` on a
+/// filter's tick grid), which can round the same nanosecond a few 1e-17 s apart (a 4 kHz
+/// acquisition hit 0.228659896 s after 0.22865989600000003 s).
+pub const SAME_INSTANT_S: f64 = 0.5e-9;
+
 impl TriadState {
     fn power_on(params: &TriadModel, seed: u64, streams: &TriadStreams) -> Self {
         let mut rng_turn_on = stream_rng(seed, streams.turn_on);
@@ -546,13 +552,15 @@ impl TriadState {
     /// time with temperature offset `d_temp` from the reference.
     ///
     /// # Panics
-    /// If `t_s` is earlier than the previous measurement's time (a caller bug).
+    /// If `t_s` is earlier than the previous measurement's time (a caller bug) by more than
+    /// [`SAME_INSTANT_S`]; within it the two are one instant.
     fn measure(&mut self, t_s: f64, rate_hz: f64, d_temp: f64, u: [f64; 3]) -> [f64; 3] {
         assert!(
-            t_s >= self.last_t_s,
+            t_s >= self.last_t_s - SAME_INSTANT_S,
             "Sensor::measure: time went backwards ({t_s} s after {} s)",
             self.last_t_s
         );
+        let t_s = t_s.max(self.last_t_s);
         let dt_s = t_s - self.last_t_s;
         self.last_t_s = t_s;
         let p = &self.params;
@@ -633,7 +641,8 @@ impl Sensor {
     /// (which sets the white-noise std). Times must not decrease between calls.
     ///
     /// # Panics
-    /// If `t_s` is earlier than the previous call's time (a caller bug).
+    /// If `t_s` is earlier than the previous call's time (a caller bug; within
+    /// [`SAME_INSTANT_S`] the two are one instant).
     pub fn measure(
         &mut self,
         t_s: f64,

@@ -419,3 +419,16 @@ fn quantization_rounds_scales_and_flags_saturation() {
     assert_eq!(raw.accel_counts[2], 20480);
     assert_eq!(raw.gyro_counts[1], -19650);
 }
+
+/// One nanosecond reached by two float sums a few 1e-17 s apart is one instant; an earlier
+/// time beyond that is still a caller bug.
+#[test]
+fn the_same_nanosecond_rounded_twice_is_not_time_going_backwards() {
+    let mut sensor = Sensor::power_on(&SensorModel::mpu9250_datasheet(), 3).unwrap();
+    sensor.measure(0.228_659_896_000_000_03, 4000.0, [0.0, 0.0, 1.0], [0.0; 3]);
+    sensor.measure(0.228_659_896, 4000.0, [0.0, 0.0, 1.0], [0.0; 3]);
+    let earlier = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        sensor.measure(0.228_659_895, 4000.0, [0.0, 0.0, 1.0], [0.0; 3]);
+    }));
+    assert!(earlier.is_err(), "1 ns earlier must still panic");
+}
