@@ -598,8 +598,7 @@ impl CalibrationStage {
                 self.refine.accel_seen_s = 0.0;
             }
             let gyro = self.batch_gyro.then_some(learned.gyro_mean_rps);
-            self.refine.gyro_learned_in_motion =
-                gyro.is_some_and(|w| !within_zero_rate_offset(&w));
+            self.refine.gyro_learned_in_motion = gyro.is_some_and(|w| !within_zero_rate_offset(&w));
             self.refine.update(
                 learned.accel_mean_mps2,
                 gyro,

@@ -734,3 +734,42 @@ fn a_warm_state_from_another_stream_or_calibration_is_not_used() {
     assert_eq!(err.state, calib_id(&file));
     assert_eq!(err.stage, calib_id(&other));
 }
+
+#[test]
+fn a_start_up_interval_turning_beyond_the_zero_rate_offset_refines_no_gyro_bias() {
+    let file = calibration();
+    // A robot turning steadily at 30 deg/s about up from power-on (its accelerometer reads
+    // gravity alone): the detector learns the turn as its rest by assumption and calls it
+    // rest from then on.
+    let turn = [0.0, 0.0, 30.0];
+    let samples = still(&file, Vector3::z(), Vector3::zeros(), turn, 12.0, 8);
+    let (first, second) = samples.split_at(8_000);
+    let mut st = stage(&file, DetectorKind::Glrt);
+    let out = run_settled(&mut st, first);
+    assert!(st.detector().is_ready());
+    let (_, gyro_rps, refined) = st.refinement();
+    // The accelerometer is refined; the gyroscope keeps the file's bias alone.
+    assert!(refined && gyro_rps == [0.0; 3], "{gyro_rps:?}");
+    let tail = &out[out.len() - 1000..];
+    let rate = tail.iter().map(|o| o.gyro_rps[2]).sum::<f64>() / tail.len() as f64;
+    assert!(
+        (rate.to_degrees() - 30.0).abs() < 0.05,
+        "{}",
+        rate.to_degrees()
+    );
+    // A restarted process goes on not refining it.
+    let state = st.warm_state().unwrap();
+    assert!(state.gyro_learned_in_motion);
+    let mut resumed = stage(&file, DetectorKind::Glrt);
+    resumed.resume(&state).unwrap();
+    run(&mut resumed, second);
+    assert_eq!(resumed.refinement().1, [0.0; 3]);
+    // A bias within the datasheet's bound is learned as before.
+    let bias = [0.0, 0.0, 3.0];
+    let mut st = stage(&file, DetectorKind::Glrt);
+    run(
+        &mut st,
+        &still(&file, Vector3::z(), Vector3::zeros(), bias, 8.0, 9),
+    );
+    assert!((st.refinement().1[2].to_degrees() - 3.0).abs() < 0.02);
+}

@@ -556,6 +556,27 @@ mod tests {
     }
 
     #[test]
+    fn a_turn_in_the_cruise_window_is_not_learned_as_bias_about_up() {
+        // The Husky's mounting (+y up): a turn of 29 deg/s about up and small horizontal rates.
+        let f_mean = Vector3::new(0.0, 9.81, 0.0);
+        let w_mean = Vector3::new(0.01, 0.5, -0.02);
+        let w_sigma = Vector3::repeat(0.001);
+        let (mut x, mut cov) = align(f_mean, w_mean, 9.81, Vector3::repeat(0.01), w_sigma);
+        unlearn_turn_bias(&mut x, &mut cov, &f_mean);
+        assert!(
+            (x.b_g - Vector3::new(0.01, 0.0, -0.02)).norm() < 1e-15,
+            "{}",
+            x.b_g
+        );
+        let up_var = 0.001_f64.powi(2) + 5.0_f64.to_radians().powi(2);
+        assert!((cov[(BG + 1, BG + 1)] - up_var).abs() < 1e-15);
+        for (i, j) in [(0, 0), (2, 2), (0, 1), (1, 2)] {
+            let expected = if i == j { 1e-6 } else { 0.0 };
+            assert!((cov[(BG + i, BG + j)] - expected).abs() < 1e-15, "{i} {j}");
+        }
+    }
+
+    #[test]
     fn unknown_direction_is_covered_by_the_speed() {
         let q = UnitQuaternion::identity();
         let (v, cov) = initial_velocity(&q, None, 1.0, 0.05, 0.02, 1.1);
