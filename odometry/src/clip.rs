@@ -20,9 +20,15 @@
 //!    (at each side a least-squares line through up to [`NEIGHBOURS`] readings gives value and
 //!    slope), never below the reading (the range's end, with the reading's sign) and never
 //!    beyond what the profile's manoeuvre reaches (`OdometryConfig::manoeuvre`, 1-sigma
-//!    figures: a curve through steep sides of a long clip overshoots). Units are the filter's
-//!    (rad/s, rad), axes the sensor's, after the gyro correction; time from the samples'
-//!    intervals.
+//!    figures: a curve through steep sides of a long clip overshoots). Its excess over the
+//!    reading is then scaled by what the rests after the earlier clips of the same axis and
+//!    sign found of the curve's excess (`Learned`: the posterior's sum over the curve's, the
+//!    older runs' shares decaying by [`LEARN_DECAY`] per run, within a factor [`LEARN_BOUND`]
+//!    of 1): a foot's swings repeat, and the curve errs alike on like swings (with the true
+//!    rotation in place of the posterior, the scale takes the curve's rms error on the
+//!    corpus's walks from 0.44-1.03 of the hidden rotation to 0.24-0.44). Units are the
+//!    filter's (rad/s, rad), axes the sensor's, after the gyro correction; time from the
+//!    samples' intervals.
 //! 3. Each run `j` then takes one unknown `d_j`, the integral of what the prior missed (rad,
 //!    about the run's sensor axis), spread over the run in the shape of the prior's excess
 //!    (uniform where the prior found none), with the prior 1-sigma
@@ -96,6 +102,10 @@ pub const TILT_SIGMA_RAD: f64 = 0.035;
 pub const VELOCITY_SIGMA_MPS: f64 = 0.1;
 
 const SEQ: usize = NEIGHBOURS + CAPACITY;
+/// The weight a learned run keeps per later run of its axis and sign ([`Learned`]).
+pub const LEARN_DECAY: f64 = 0.8;
+/// The learned scale stays within this factor of 1 ([`Learned`]).
+pub const LEARN_BOUND: f64 = 4.0;
 /// Most Gauss-Newton steps of the solve.
 pub const GAUSS_NEWTON_STEPS: usize = 4;
 /// Measurements: tilt (2), velocity (3).
@@ -182,11 +192,47 @@ pub struct ClipStats {
     pub bridged: u64,
 }
 
-/// A run's prior and posterior 1-sigma (rad or m/s).
+/// A run's prior and posterior 1-sigma (rad or m/s), and what [`Learned`] takes from it.
 #[derive(Debug, Clone, Copy, Default)]
 struct Run {
     prior_sigma: f64,
     sigma: f64,
+    /// Its gyroscope axis (0-2) and whether it clipped at the positive end.
+    axis: usize,
+    positive: bool,
+    /// The curve's excess rotation before and after [`Learned`]'s scale, rad.
+    curve: f64,
+    scaled: f64,
+}
+
+/// How much of the curve's excess the rests found, per gyroscope axis and sign: a foot's
+/// swings repeat, so the steps before tell how far the curve through a clip's sides errs
+/// (module documentation, item 2). Sums over the reconstructed runs, each older run's share
+/// decaying by [`LEARN_DECAY`].
+#[derive(Debug, Clone, Copy, Default)]
+struct Learned {
+    /// Per axis and sign (negative, positive): the curves' excess and the posterior's, rad.
+    sums: [[(f64, f64); 2]; 3],
+}
+
+impl Learned {
+    /// The scale of the curve's excess about `axis` with sign `positive`: the posterior's
+    /// sum over the curve's, within [`LEARN_BOUND`] and its inverse; 1 before any run.
+    fn scale(&self, axis: usize, positive: bool) -> f64 {
+        let (curve, post) = self.sums[axis][usize::from(positive)];
+        if curve > 0.0 {
+            (post / curve).clamp(1.0 / LEARN_BOUND, LEARN_BOUND)
+        } else {
+            1.0
+        }
+    }
+
+    /// Takes a run with its posterior excess `post` (rad, at least zero).
+    fn add(&mut self, run: &Run, post: f64) {
+        let (curve, sum) = &mut self.sums[run.axis][usize::from(run.positive)];
+        *curve = LEARN_DECAY * *curve + run.curve;
+        *sum = LEARN_DECAY * *sum + post.max(0.0);
+    }
 }
 
 /// The motion in progress and what it needs to be redone (see the module documentation).
@@ -207,6 +253,7 @@ pub(crate) struct ClipRepair {
     before_len: usize,
     runs: [Run; MAX_RUNS],
     n_runs: usize,
+    learned: Learned,
     stats: ClipStats,
     /// The heading the reconstructed motions may have got wrong (module documentation, item 5).
     unseen: UnseenHeading,
@@ -229,6 +276,7 @@ impl Default for ClipRepair {
             before_len: 0,
             runs: [Run::default(); MAX_RUNS],
             n_runs: 0,
+            learned: Learned::default(),
             stats: ClipStats::default(),
             unseen: UnseenHeading::default(),
             heading_var: 0.0,
@@ -249,6 +297,7 @@ impl ClipRepair {
         self.before = other.before;
         self.before_len = other.before_len;
         self.runs = other.runs;
+        self.learned = other.learned;
         self.n_runs = other.n_runs;
         self.stats = other.stats;
         self.unseen = other.unseen;
@@ -414,11 +463,25 @@ impl ClipRepair {
                 *Entry::axis_mut(&mut e.fixed, axis) = v * read.signum();
             }
         }
-        let (mut excess, mut floor, mut span) = (0.0, 0.0, 0.0);
-        for e in &self.seq[a..b] {
+        let excess_of = |seq: &[Entry]| {
+            seq.iter()
+                .map(|e| (Entry::axis(&e.fixed, axis) - Entry::axis(&e.m, axis)).abs() * e.dt)
+                .sum::<f64>()
+        };
+        let curve = excess_of(&self.seq[a..b]);
+        // The curve's excess as the rests after the same foot's earlier clips found it.
+        let positive = Entry::axis(&self.seq[a].m, axis) > 0.0;
+        let scale = self.learned.scale(axis - 3, positive);
+        for e in &mut self.seq[a..b] {
             let read = Entry::axis(&e.m, axis);
-            excess += (Entry::axis(&e.fixed, axis) - read).abs() * e.dt;
-            floor += FLOOR_FRACTION * read.abs() * e.dt;
+            let fixed = Entry::axis_mut(&mut e.fixed, axis);
+            let v = (read.abs() + (*fixed - read).abs() * scale).min(reach.max(read.abs()));
+            *fixed = v * read.signum();
+        }
+        let excess = excess_of(&self.seq[a..b]);
+        let (mut floor, mut span) = (0.0, 0.0);
+        for e in &self.seq[a..b] {
+            floor += FLOOR_FRACTION * Entry::axis(&e.m, axis).abs() * e.dt;
             span += e.dt;
         }
         let run = self.n_runs;
@@ -436,6 +499,10 @@ impl ClipRepair {
         self.runs[run] = Run {
             prior_sigma: excess + floor,
             sigma: excess + floor,
+            axis: axis - 3,
+            positive,
+            curve,
+            scaled: excess,
         };
     }
 
@@ -549,6 +616,9 @@ impl ClipRepair {
         }
         for (j, run) in self.runs[..n].iter_mut().enumerate() {
             run.sigma = sigma[j] * cov[(j, j)].max(0.0).sqrt();
+            if run.curve > 0.0 {
+                self.learned.add(run, run.scaled + d[j]);
+            }
         }
     }
 
@@ -846,6 +916,33 @@ mod tests {
             "{}",
             widened(tipped, 2)
         );
+    }
+
+    /// The learned scale: 1 before any run; the posterior's excess over the curve's, older
+    /// runs decaying; bounded.
+    #[test]
+    fn the_learned_scale_is_what_the_rests_found_of_the_curve() {
+        let mut l = Learned::default();
+        assert_eq!(l.scale(1, true), 1.0);
+        let run = |curve| Run {
+            axis: 1,
+            positive: true,
+            curve,
+            ..Run::default()
+        };
+        l.add(&run(0.2), 0.1);
+        assert!((l.scale(1, true) - 0.5).abs() < 1e-12);
+        assert_eq!(l.scale(1, false), 1.0);
+        assert_eq!(l.scale(0, true), 1.0);
+        // (0.8 * 0.1 + 0.3) / (0.8 * 0.2 + 0.1)
+        l.add(&run(0.1), 0.3);
+        assert!((l.scale(1, true) - 0.38 / 0.26).abs() < 1e-12);
+        l.add(&run(0.1), 10.0);
+        assert_eq!(l.scale(1, true), LEARN_BOUND);
+        // A posterior below the reading counts as no excess: the scale's lower bound.
+        let mut l = Learned::default();
+        l.add(&run(0.2), -0.1);
+        assert_eq!(l.scale(1, true), 1.0 / LEARN_BOUND);
     }
 
     /// Turned about z (vertical when level): the rest's tilt and zero velocity cannot see the
