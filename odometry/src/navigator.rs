@@ -648,8 +648,7 @@ impl Navigator {
         }
     }
 
-    /// Redoes a clipped motion that waited for the rest this sample's motion ended, then makes
-    /// the rest window's updates at its last sample (the state before this sample's prediction).
+    /// Redoes a clipped motion waiting for the rest, then makes its updates (at its last sample).
     fn close_rest_window(&mut self) {
         self.clip
             .rest_ended(self.kf.as_mut().expect("aligned"), &self.cfg);
