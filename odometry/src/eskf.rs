@@ -555,6 +555,14 @@ impl Eskf {
         self.update_selected(V, residual, sigma * sigma)
     }
 
+    /// Position update: the true position (m, navigation frame) is `p`, measured with
+    /// variance `var` (m^2) per axis. Returns the normalized innovation squared (3 degrees of
+    /// freedom), `None` when its covariance was singular and nothing was updated.
+    pub fn position_update(&mut self, p: Vector3<f64>, var: f64) -> Option<f64> {
+        let residual = p - self.x.p;
+        self.update_selected(P, residual, var)
+    }
+
     /// Whether the velocity is consistent with rest: every component within `gate` standard
     /// deviations of zero, the standard deviation combining the velocity's own with a
     /// zero-velocity measurement's 1-sigma `sigma` (m/s). The velocity's own is that of the

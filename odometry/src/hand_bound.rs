@@ -19,6 +19,27 @@
 //! by it (its gain is `P / (P + sigma^2)`); a filter integrating freely has its velocity, and
 //! with it the accelerometer bias, held to the hand's scale, and its position then grows as a
 //! random walk of about `sigma sqrt(interval t)` instead of `b t^2 / 2`.
+//!
+//! **Within reach.** A random walk still leaves a hand that moves for minutes tens of metres
+//! off (BROAD's box, 150 s without a break: 17-18 m of 1-sigma), while a hand or an arm stays
+//! within reach of where it last rested: an adult's arm is about 0.44 of their height from
+//! shoulder to grip, 0.77 m at 1.75 m (W. T. Dempster's segment proportions as tabulated by
+//! D. A. Winter, "Biomechanics and Motor Control of Human Movement", 4th ed., Wiley 2009,
+//! table 4.1: upper arm 0.186 H, forearm 0.146 H, hand 0.108 H), and a collaborative robot
+//! arm's reach is 0.5-1.3 m (Universal Robots' UR3e, UR5e, UR10e data sheets: 500, 850,
+//! 1300 mm). So at the same instants the position (m, navigation frame) is measured as the
+//! filter's position at the last held sample (the anchor) with 1-sigma [`REACH_SIGMA_M`] per
+//! axis, once the filter's position variance has grown by more than `REACH_SIGMA_M^2` on every
+//! axis since the anchor. The anchor's own error is shared by the current position and does
+//! not shrink: the update takes the variance the drift since the anchor (`D`, per axis, the
+//! growth of the position variance since) would keep against a reach of variance `R^2`, `Pa
+//! + D R^2 / (D + R^2)` (`Pa` the anchor's variance), by a measurement of the variance that
+//! leaves it (the largest over the axes), so the position's 1-sigma never drops below the
+//! anchor's and is not taken twice from the same reach. A platform that travels (a walker, a
+//! vehicle) runs another profile; one recognized as other that travels more than a reach
+//! would be pulled back by this.
+
+use nalgebra::Vector3;
 
 use crate::eskf::Eskf;
 
@@ -28,25 +49,52 @@ pub const HAND_SPEED_SIGMA_MPS: f64 = 1.0;
 pub const HAND_BOUND_INTERVAL_S: f64 = 1.0;
 /// Motion without a rest before the first bound, s: longer than a reach (module documentation).
 pub const HAND_BOUND_AFTER_S: f64 = 5.0;
+/// 1-sigma per axis of a hand's or an arm's position about where it last rested, m (module
+/// documentation, "Within reach").
+pub const REACH_SIGMA_M: f64 = 1.0;
 
-/// The bound's state in a navigator: the times of the last bound or rest and of the last rest.
+/// The bound's state in a navigator: the times of the last bound or rest and of the last rest,
+/// and the anchor (the filter's position and its variance per axis at the last held sample,
+/// m and m^2, navigation frame).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct HandBound {
     last_ns: Option<u64>,
     held_ns: Option<u64>,
+    anchor: Option<(Vector3<f64>, Vector3<f64>)>,
+}
+
+/// The filter's position (m) and its variance per axis (m^2), as of its last propagation.
+fn position_of(kf: &Eskf) -> (Vector3<f64>, Vector3<f64>) {
+    (kf.x.p, kf.cov.fixed_view::<3, 3>(0, 0).diagonal())
+}
+
+/// The variance of a position measurement that takes the variance `pp` (m^2) of one axis to
+/// `pa + d r2 / (d + r2)`, `d = pp - pa` the growth since the anchor of variance `pa` and `r2`
+/// the reach's variance; `None` when the growth is within the reach.
+fn reach_variance(pp: f64, pa: f64, r2: f64) -> Option<f64> {
+    let d = pp - pa;
+    if d <= r2 {
+        return None;
+    }
+    let target = pa + d * r2 / (d + r2);
+    Some(target * pp / (pp - target))
 }
 
 impl HandBound {
     /// After the aligned filter's updates at `t_ns`: bounds its velocity with 1-sigma
     /// `sigma_mps` (0: off) when [`HAND_BOUND_AFTER_S`] has passed in motion since the last held
     /// sample and [`HAND_BOUND_INTERVAL_S`] since the last bound or held sample (`held`: the sample is taken as rest, or robot hints report the
-    /// motion). Returns whether it updated.
+    /// motion), and its position within [`REACH_SIGMA_M`] of the anchor when it has drifted
+    /// further (module documentation). Returns whether it updated.
     pub fn update(&mut self, kf: &mut Eskf, t_ns: u64, held: bool, sigma_mps: f64) -> bool {
         if sigma_mps <= 0.0 {
             return false;
         }
         let last = *self.last_ns.get_or_insert(t_ns);
         let held_at = *self.held_ns.get_or_insert(t_ns);
+        if held || self.anchor.is_none() {
+            self.anchor = Some(position_of(kf));
+        }
         if held {
             self.last_ns = Some(t_ns);
             self.held_ns = Some(t_ns);
@@ -57,7 +105,26 @@ impl HandBound {
             return false;
         }
         self.last_ns = Some(t_ns);
-        kf.zero_velocity(sigma_mps).is_some()
+        let speed = kf.zero_velocity(sigma_mps).is_some();
+        speed | self.within_reach(kf)
+    }
+
+    /// The position measured as the anchor's when every axis has drifted beyond the reach
+    /// since it. Returns whether it updated.
+    fn within_reach(&self, kf: &mut Eskf) -> bool {
+        let Some((anchor, anchor_var)) = self.anchor else {
+            return false;
+        };
+        let (_, var) = position_of(kf);
+        let r2 = REACH_SIGMA_M * REACH_SIGMA_M;
+        let mut measured = 0.0_f64;
+        for i in 0..3 {
+            match reach_variance(var[i], anchor_var[i], r2) {
+                Some(v) => measured = measured.max(v),
+                None => return false,
+            }
+        }
+        kf.position_update(anchor, measured).is_some()
     }
 }
 
@@ -112,6 +179,43 @@ mod tests {
         let (bounded, sigma) = drift(HAND_SPEED_SIGMA_MPS);
         assert!(bounded < 0.1 * free, "{bounded} m");
         assert!(bounded <= 3.0 * sigma, "{bounded} m, 1-sigma {sigma} m");
+    }
+
+    #[test]
+    fn the_reach_measurement_leaves_the_conditional_variance_of_anchor_plus_drift() {
+        // Independent computation: p = a + d with a ~ N(0, pa) (the anchor's error) and
+        // d ~ N(0, dv) (the drift since), observed as y = d + h with h ~ N(0, r2) (the reach);
+        // Var(p | y) is the Schur complement of the joint covariance of (p, y).
+        for (pa, dv, r2) in [(1e-6, 4.0, 1.0), (400.0, 30.0, 1.0), (2.0, 1.5, 1.0)] {
+            let joint = nalgebra::Matrix2::new(pa + dv, dv, dv, dv + r2);
+            let conditional = joint[(0, 0)] - joint[(0, 1)] * joint[(1, 0)] / joint[(1, 1)];
+            let pp = pa + dv;
+            let v = reach_variance(pp, pa, r2).expect("drifted beyond the reach");
+            // A scalar Kalman update of variance pp by a measurement of variance v.
+            let updated = pp * v / (pp + v);
+            assert!(
+                (updated - conditional).abs() <= 1e-9 * conditional,
+                "{pa} {dv} {r2}"
+            );
+            assert!(updated >= pa);
+        }
+        assert_eq!(reach_variance(1.5, 0.6, 1.0), None, "within the reach");
+    }
+
+    #[test]
+    fn a_hand_that_never_rests_stays_within_reach_of_its_anchor() {
+        // The same unseen bias: the velocity bound alone leaves a random walk of metres.
+        let (bounded, sigma) = drift(HAND_SPEED_SIGMA_MPS);
+        assert!(bounded <= 3.0 * sigma, "{bounded} m, 1-sigma {sigma} m");
+        assert!(
+            bounded < 2.0 * REACH_SIGMA_M,
+            "{bounded} m from the anchor, 1-sigma {sigma} m"
+        );
+        // The 1-sigma stays at the reach's scale: not shrunk by repeating the measurement.
+        assert!(
+            sigma > 0.5 * REACH_SIGMA_M && sigma < 3.0 * REACH_SIGMA_M,
+            "{sigma}"
+        );
     }
 
     #[test]
