@@ -23,21 +23,21 @@
 //! **Within reach.** A random walk still leaves a hand that moves for minutes tens of metres
 //! off (BROAD's box, 150 s without a break: 17-18 m of 1-sigma), while a hand or an arm stays
 //! within reach of where it last rested: an adult's arm is about 0.44 of their height from
-//! shoulder to grip, 0.77 m at 1.75 m (W. T. Dempster's segment proportions as tabulated by
-//! D. A. Winter, "Biomechanics and Motor Control of Human Movement", 4th ed., Wiley 2009,
-//! table 4.1: upper arm 0.186 H, forearm 0.146 H, hand 0.108 H), and a collaborative robot
-//! arm's reach is 0.5-1.3 m (Universal Robots' UR3e, UR5e, UR10e data sheets: 500, 850,
-//! 1300 mm). So at the same instants the position (m, navigation frame) is measured as the
+//! shoulder to grip, 0.77 m at 1.75 m (D. A. Winter, "Biomechanics and Motor Control of Human
+//! Movement", 4th ed., Wiley 2009, figure 4.1, after Drillis and Contini 1966: upper arm
+//! 0.186 H, forearm 0.146 H, hand 0.108 H), and a collaborative robot arm's reach is
+//! 0.5-1.3 m (Universal Robots' UR3e, UR5e and UR10e data sheets: 500, 850, 1300 mm). So at
+//! the velocity bound's instants the position (m, navigation frame) is measured as the
 //! filter's position at the last held sample (the anchor) with 1-sigma [`REACH_SIGMA_M`] per
 //! axis, once the filter's position variance has grown by more than `REACH_SIGMA_M^2` on every
-//! axis since the anchor. The anchor's own error is shared by the current position and does
-//! not shrink: the update takes the variance the drift since the anchor (`D`, per axis, the
-//! growth of the position variance since) would keep against a reach of variance `R^2`, `Pa
-//! + D R^2 / (D + R^2)` (`Pa` the anchor's variance), by a measurement of the variance that
-//! leaves it (the largest over the axes), so the position's 1-sigma never drops below the
-//! anchor's and is not taken twice from the same reach. A platform that travels (a walker, a
-//! vehicle) runs another profile; one recognized as other that travels more than a reach
-//! would be pulled back by this.
+//! axis since the anchor. The anchor's own error is shared by the current position, and the
+//! reach does not shrink it: with `Pa` the anchor's variance and `D` the growth since (per
+//! axis), the position `anchor + drift` observed as `drift + reach` keeps the variance
+//! `Pa + D R^2 / (D + R^2)`, and the update is a measurement of the variance that leaves
+//! exactly that (the largest over the axes). The position's 1-sigma thus never drops below
+//! the anchor's, and the next measurement waits until the drift has again grown past the
+//! reach. A platform that travels (a walker, a vehicle) runs another profile; one recognized
+//! as other that travels further than a reach would be pulled back by this.
 
 use nalgebra::Vector3;
 
