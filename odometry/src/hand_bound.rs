@@ -136,6 +136,7 @@ impl HandBound {
         let Some((anchor, anchor_var)) = self.anchor else {
             return false;
         };
+        kf.propagate();
         let (_, var) = position_of(kf);
         let r2 = REACH_SIGMA_M * REACH_SIGMA_M;
         if (0..3).all(|i| var[i] - anchor_var[i] <= r2) {
