@@ -370,7 +370,7 @@ impl Navigator {
                 }
                 let still = imu_rest && detector_ready && verdict.clipped == 0;
                 self.accumulate_cruise(t_ns, &m, d.fresh.filter(|_| still), gravity_off);
-                self.align_on_steps(&m, step.as_ref());
+                self.align_on_steps(&m, step.as_ref(), gravity_off);
             }
             emit(&self.unaligned_state(s, rest, d.sample));
             return;
