@@ -381,16 +381,19 @@ SECTIONS.append(Section("input-checks-offline", "input-checks.md", ["input-check
 def clipping(ctx):
     """docs/input-checks.md: the corpus's foot walks clipped at +-250 deg/s and at +-2 g
     (tools/real-data/perturb.py), unclipped, clipped and reconstructed at the rest, bridged
-    only, integrated as measured; and the reconstruction's prior against the truth of every
-    clipped run (tools/real-data/clip_prior.py)."""
+    only, integrated as measured; the reconstruction's prior against the truth of every
+    clipped run (tools/real-data/clip_prior.py); and the walks with their true rates flagged
+    clipped (tools/real-data/clip_oracle.py)."""
     ctx.run(["cargo", "build", "--release", "-q", "-p", "odometry"])
     only = ["--only", "xio-short-walk", "--only", "gdin-34"] if ctx.quick else []
     gyro, _ = ctx.run(["python3", "tools/real-data/perturb.py", "--gyro-dps", "250"] + only)
     accel, _ = ctx.run(["python3", "tools/real-data/perturb.py", "--accel-g", "2"] + only)
     prior, _ = ctx.run(["python3", "tools/real-data/clip_prior.py", "--gyro-dps", "250"])
+    oracle, _ = ctx.run(["python3", "tools/real-data/clip_oracle.py", "--gyro-dps", "250"] + only)
     if ctx.dry:
         return {}
-    return {"input-checks-clipping": "\n\n".join(t.strip() for t in (gyro, accel, prior))}
+    tables = (gyro, accel, prior, oracle)
+    return {"input-checks-clipping": "\n\n".join(t.strip() for t in tables)}
 
 
 SECTIONS.append(Section("input-checks-clipping", "input-checks.md", ["input-checks-clipping"], "2 min", clipping))

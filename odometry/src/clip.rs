@@ -7,35 +7,44 @@
 //! known: a curve through the neighbours alone (below) errs on the corpus's walks by about as
 //! much as the excess it reconstructs (docs/input-checks.md). The rest that ends the motion
 //! measures what it missed: gravity gives the tilt, and the foot's velocity is zero. So the
-//! motion from the first clipped sample to that rest is redone:
+//! motion from the first clipped sample to that rest's first [`REST_WINDOW_S`] (the *rest
+//! window*) is redone at the window's last sample, or where the rest ends if sooner; the
+//! rest's updates wait for it (`ClipRepair::waiting`, `ClipRepair::rest_ended`):
 //!
 //! 1. At the first sample with a gyroscope axis clipped the filter is copied as it was before
 //!    it (fixed size: no allocation); every sample from there goes into a ring of [`CAPACITY`]
 //!    samples. The states published meanwhile are the bridged ones (flagged
 //!    `odometry_flags::UNTRUSTED_INPUT`): a real-time reader is not told more than is known.
-//! 2. At the first rest sample each clipped stretch of each gyroscope axis (a *run*) gets a prior
+//! 2. At the end of the rest window each clipped stretch of each gyroscope axis (a *run*) gets a prior
 //!    reconstruction: a cubic Hermite curve through the unclipped neighbours on either side
 //!    (at each side a least-squares line through up to [`NEIGHBOURS`] readings gives value and
 //!    slope), never below the reading (the range's end, with the reading's sign) and never
 //!    beyond what the profile's manoeuvre reaches (`OdometryConfig::manoeuvre`, 1-sigma
-//!    figures: a curve through steep sides of a long clip overshoots). Units are the filter's
-//!    (rad/s, rad), axes the sensor's, after the gyro correction; time from the samples'
-//!    intervals.
+//!    figures: a curve through steep sides of a long clip overshoots). Its excess over the
+//!    reading is then scaled by what the rests after the earlier clips of the same axis and
+//!    sign found of the curve's excess (`Learned`: the posterior's sum over the curve's, the
+//!    older runs' shares decaying by [`LEARN_DECAY`] per run, within a factor [`LEARN_BOUND`]
+//!    of 1): a foot's swings repeat, and the curve errs alike on like swings (with the true
+//!    rotation in place of the posterior, the scale takes the curve's rms error on the
+//!    corpus's walks from 0.44-1.03 of the hidden rotation to 0.24-0.44). Units are the
+//!    filter's (rad/s, rad), axes the sensor's, after the gyro correction; time from the
+//!    samples' intervals.
 //! 3. Each run `j` then takes one unknown `d_j`, the integral of what the prior missed (rad,
 //!    about the run's sensor axis), spread over the run in the shape of the prior's excess
 //!    (uniform where the prior found none), with the prior 1-sigma
 //!    `|prior excess integral| + FLOOR_FRACTION |reading| T` (`T` the run's length). The rest
-//!    sample measures them: its specific force, rotated by the attitude the motion predicts,
-//!    must point up (1-sigma [`TILT_SIGMA_RAD`] each horizontal axis) and the velocity there must
-//!    be zero (1-sigma [`VELOCITY_SIGMA_MPS`] each axis). The `d_j` are the regularised
+//!    window measures them: its mean specific force, rotated by the attitude the motion
+//!    predicts at its end, must point up (1-sigma [`TILT_SIGMA_RAD`] each horizontal axis) and
+//!    the velocity at its end must be zero (1-sigma [`VELOCITY_SIGMA_MPS`] each axis). The `d_j` are the regularised
 //!    least-squares solution (up to [`GAUSS_NEWTON_STEPS`] Gauss-Newton steps, each halved
 //!    until the cost falls, the Jacobian by finite differences of [`Eskf::coast`], the nominal
-//!    state's prediction). The tilt residual is the horizontal part of the rest's specific
-//!    force, rotated into the navigation frame (z up) and normalised: zero when level.
+//!    state's prediction). The tilt residual is the horizontal part of the window's mean
+//!    specific force, rotated into the navigation frame (z up) and normalised: zero when level.
 //! 4. The filter is restored from the copy and the motion predicted again with the readings
 //!    reconstructed, sample by sample (so the specific force of the clipped interval is rotated
-//!    by the corrected attitude); each run's posterior 1-sigma of `d_j` widens the attitude
-//!    about its axis, fully correlated through the run (`Eskf::clipped`); accelerometer clips
+//!    by the corrected attitude); each run's posterior 1-sigma of `d_j` widens the tilt about
+//!    the horizontal part of its axis, fully correlated through the run (`widen_tilt`; the
+//!    heading share is item 5's, beside the filter); accelerometer clips
 //!    among the samples are bridged again (`crate::untrusted`). The rest's updates follow as
 //!    usual.
 //!
@@ -66,7 +75,7 @@ use ipc_types::raw_flags;
 use nalgebra::{SMatrix, SVector, UnitQuaternion, Vector3};
 
 use crate::config::OdometryConfig;
-use crate::eskf::{Eskf, Imu, Nominal};
+use crate::eskf::{Eskf, Imu, Nominal, TH};
 use crate::untrusted::{Untrusted, Verdict};
 
 /// Longest motion (samples, from the first clipped one to the rest) that is reconstructed.
@@ -78,13 +87,25 @@ pub const MAX_RUNS: usize = 8;
 /// Prior 1-sigma of a run's excess beyond the reconstruction, as a fraction of the reading
 /// times the run's length (added to the reconstructed excess).
 pub const FLOOR_FRACTION: f64 = 0.25;
-/// 1-sigma of the tilt the first rest sample's specific force gives, rad, each horizontal axis
-/// (1 deg: the foot settling after a heel strike).
-pub const TILT_SIGMA_RAD: f64 = 0.0175;
-/// 1-sigma of the velocity at the first rest sample, m/s, each axis.
-pub const VELOCITY_SIGMA_MPS: f64 = 0.05;
+/// The rest's first stretch whose mean specific force measures the tilt, s: the motion is
+/// redone at its last sample (or where the rest ends, if sooner). The first rest sample alone
+/// is the foot still settling from the heel strike: on the corpus's walks with their true rates
+/// (`tools/real-data/clip_oracle.py`) its specific force lies 3.5-5 deg rms per horizontal axis
+/// from the attitude those rates predict (12 deg on gdin-35), the mean of the first 0.1 s
+/// (20 samples at 200 Hz) 0.9-2.4 deg.
+pub const REST_WINDOW_S: f64 = 0.1;
+/// 1-sigma of the tilt the rest window's mean specific force gives, rad, each horizontal axis
+/// (2 deg: the scatter above).
+pub const TILT_SIGMA_RAD: f64 = 0.035;
+/// 1-sigma of the velocity at the rest window's last sample, m/s, each axis (0.1 m/s: the
+/// same walks with their true rates end the window 0.05-0.12 m/s rms per axis from zero).
+pub const VELOCITY_SIGMA_MPS: f64 = 0.1;
 
 const SEQ: usize = NEIGHBOURS + CAPACITY;
+/// The weight a learned run keeps per later run of its axis and sign ([`Learned`]).
+pub const LEARN_DECAY: f64 = 0.8;
+/// The learned scale stays within this factor of 1 ([`Learned`]).
+pub const LEARN_BOUND: f64 = 4.0;
 /// Most Gauss-Newton steps of the solve.
 pub const GAUSS_NEWTON_STEPS: usize = 4;
 /// Measurements: tilt (2), velocity (3).
@@ -171,11 +192,47 @@ pub struct ClipStats {
     pub bridged: u64,
 }
 
-/// A run's prior and posterior 1-sigma (rad or m/s).
+/// A run's prior and posterior 1-sigma (rad or m/s), and what [`Learned`] takes from it.
 #[derive(Debug, Clone, Copy, Default)]
 struct Run {
     prior_sigma: f64,
     sigma: f64,
+    /// Its gyroscope axis (0-2) and whether it clipped at the positive end.
+    axis: usize,
+    positive: bool,
+    /// The curve's excess rotation before and after [`Learned`]'s scale, rad.
+    curve: f64,
+    scaled: f64,
+}
+
+/// How much of the curve's excess the rests found, per gyroscope axis and sign: a foot's
+/// swings repeat, so the steps before tell how far the curve through a clip's sides errs
+/// (module documentation, item 2). Sums over the reconstructed runs, each older run's share
+/// decaying by [`LEARN_DECAY`].
+#[derive(Debug, Clone, Copy, Default)]
+struct Learned {
+    /// Per axis and sign (negative, positive): the curves' excess and the posterior's, rad.
+    sums: [[(f64, f64); 2]; 3],
+}
+
+impl Learned {
+    /// The scale of the curve's excess about `axis` with sign `positive`: the posterior's
+    /// sum over the curve's, within [`LEARN_BOUND`] and its inverse; 1 before any run.
+    fn scale(&self, axis: usize, positive: bool) -> f64 {
+        let (curve, post) = self.sums[axis][usize::from(positive)];
+        if curve > 0.0 {
+            (post / curve).clamp(1.0 / LEARN_BOUND, LEARN_BOUND)
+        } else {
+            1.0
+        }
+    }
+
+    /// Takes a run with its posterior excess `post` (rad, at least zero).
+    fn add(&mut self, run: &Run, post: f64) {
+        let (curve, sum) = &mut self.sums[run.axis][usize::from(run.positive)];
+        *curve = LEARN_DECAY * *curve + run.curve;
+        *sum = LEARN_DECAY * *sum + post.max(0.0);
+    }
 }
 
 /// The motion in progress and what it needs to be redone (see the module documentation).
@@ -196,11 +253,15 @@ pub(crate) struct ClipRepair {
     before_len: usize,
     runs: [Run; MAX_RUNS],
     n_runs: usize,
+    learned: Learned,
     stats: ClipStats,
     /// The heading the reconstructed motions may have got wrong (module documentation, item 5).
     unseen: UnseenHeading,
     /// The heading variance the last solve left, rad^2.
     heading_var: f64,
+    /// Rest samples recorded at the end of the motion (the rest window, [`REST_WINDOW_S`]).
+    rest_n: usize,
+    rest_s: f64,
 }
 
 impl Default for ClipRepair {
@@ -215,9 +276,12 @@ impl Default for ClipRepair {
             before_len: 0,
             runs: [Run::default(); MAX_RUNS],
             n_runs: 0,
+            learned: Learned::default(),
             stats: ClipStats::default(),
             unseen: UnseenHeading::default(),
             heading_var: 0.0,
+            rest_n: 0,
+            rest_s: 0.0,
         }
     }
 }
@@ -233,10 +297,13 @@ impl ClipRepair {
         self.before = other.before;
         self.before_len = other.before_len;
         self.runs = other.runs;
+        self.learned = other.learned;
         self.n_runs = other.n_runs;
         self.stats = other.stats;
         self.unseen = other.unseen;
         self.heading_var = other.heading_var;
+        self.rest_n = other.rest_n;
+        self.rest_s = other.rest_s;
     }
 
     /// The variance (m^2, navigation frame x, y) that the heading errors of the reconstructed
@@ -254,6 +321,13 @@ impl ClipRepair {
         self.start.is_some()
     }
 
+    /// Whether a motion waits for its rest window to be redone: the rest's updates wait too
+    /// (the motion is redone by predictions alone), until [`Self::after_predict`] has redone it
+    /// or [`Self::rest_ended`] is called.
+    pub fn waiting(&self) -> bool {
+        self.active() && self.rest_n > 0
+    }
+
     /// Called before the prediction of a sample whose clipped axes are `clipped`: the first
     /// sample of a motion with a gyroscope axis clipped copies `kf` as it stands.
     pub fn before_predict(&mut self, kf: &Eskf, clipped: u16) {
@@ -266,6 +340,7 @@ impl ClipRepair {
         self.seq[self.first..NEIGHBOURS].copy_from_slice(&self.before[..self.before_len]);
         self.len = NEIGHBOURS;
         self.spoiled = false;
+        (self.rest_n, self.rest_s) = (0, 0.0);
     }
 
     /// The filter took an update (or a gap's widening) during this sample: the motion cannot
@@ -278,8 +353,8 @@ impl ClipRepair {
 
     /// Called after the prediction (and the bridging's widening) of a sample with reading `m`,
     /// interval `dt` s and clipped axes `clipped`, `rest` when the filter takes it for rest:
-    /// records it and, at the first rest after clipped samples, redoes the motion on `kf`.
-    /// Returns whether it did.
+    /// records it and, at the end of the rest window after clipped samples, redoes the motion
+    /// on `kf`. Returns whether it did.
     pub fn after_predict(
         &mut self,
         kf: &mut Eskf,
@@ -307,9 +382,27 @@ impl ClipRepair {
             self.seq[self.len] = e;
             self.len += 1;
         }
-        if !rest && !self.spoiled {
+        if rest {
+            self.rest_n += 1;
+            self.rest_s += dt;
+        }
+        let window_open = rest && self.rest_s + 0.5 * dt < REST_WINDOW_S && self.len < SEQ;
+        if (!rest || window_open) && !self.spoiled {
             return false;
         }
+        self.redo(kf, cfg)
+    }
+
+    /// The rest that follows a motion ended before its window was full: the motion is redone
+    /// on `kf` with the rest samples recorded. Call before the rest's updates are made and
+    /// before the next sample's prediction. Returns whether it did.
+    pub fn rest_ended(&mut self, kf: &mut Eskf, cfg: &OdometryConfig) -> bool {
+        self.waiting() && self.redo(kf, cfg)
+    }
+
+    /// Redoes the motion recorded on `kf` (module documentation, items 2-4), or gives it up
+    /// when spoiled or beyond [`MAX_RUNS`]. Returns whether it did.
+    fn redo(&mut self, kf: &mut Eskf, cfg: &OdometryConfig) -> bool {
         // A spoiled motion is given up at once: the next clip may start afresh.
         let start = self.start.take().expect("a clip is pending");
         if self.spoiled || !self.reconstruct(cfg.manoeuvre.rate) {
@@ -370,11 +463,25 @@ impl ClipRepair {
                 *Entry::axis_mut(&mut e.fixed, axis) = v * read.signum();
             }
         }
-        let (mut excess, mut floor, mut span) = (0.0, 0.0, 0.0);
-        for e in &self.seq[a..b] {
+        let excess_of = |seq: &[Entry]| {
+            seq.iter()
+                .map(|e| (Entry::axis(&e.fixed, axis) - Entry::axis(&e.m, axis)).abs() * e.dt)
+                .sum::<f64>()
+        };
+        let curve = excess_of(&self.seq[a..b]);
+        // The curve's excess as the rests after the same foot's earlier clips found it.
+        let positive = Entry::axis(&self.seq[a].m, axis) > 0.0;
+        let scale = self.learned.scale(axis - 3, positive);
+        for e in &mut self.seq[a..b] {
             let read = Entry::axis(&e.m, axis);
-            excess += (Entry::axis(&e.fixed, axis) - read).abs() * e.dt;
-            floor += FLOOR_FRACTION * read.abs() * e.dt;
+            let fixed = Entry::axis_mut(&mut e.fixed, axis);
+            let v = (read.abs() + (*fixed - read).abs() * scale).min(reach.max(read.abs()));
+            *fixed = v * read.signum();
+        }
+        let excess = excess_of(&self.seq[a..b]);
+        let (mut floor, mut span) = (0.0, 0.0);
+        for e in &self.seq[a..b] {
+            floor += FLOOR_FRACTION * Entry::axis(&e.m, axis).abs() * e.dt;
             span += e.dt;
         }
         let run = self.n_runs;
@@ -392,6 +499,10 @@ impl ClipRepair {
         self.runs[run] = Run {
             prior_sigma: excess + floor,
             sigma: excess + floor,
+            axis: axis - 3,
+            positive,
+            curve,
+            scaled: excess,
         };
     }
 
@@ -420,8 +531,8 @@ impl ClipRepair {
     }
 
     /// The whitened residuals at the rest of the motion from `start` with the runs' unknowns
-    /// `d`: tilt (the rest sample's specific force, rotated, must point up) and velocity; and
-    /// the attitude there.
+    /// `d`: tilt (the rest window's mean specific force, rotated, must point up) and velocity;
+    /// and the attitude there.
     fn residuals(
         &self,
         start: &Eskf,
@@ -429,8 +540,11 @@ impl ClipRepair {
     ) -> (SVector<f64, MEAS>, UnitQuaternion<f64>) {
         let entries = &self.seq[NEIGHBOURS..self.len];
         let x: Nominal = start.coast(entries.iter().map(|e| (e.with(d), e.dt)));
-        let rest = entries.last().expect("the rest sample is recorded");
-        let up = (x.q * (rest.m.f - x.b_a)).normalize();
+        // The foot is still over the window: its mean specific force, rotated by the attitude
+        // at the window's end.
+        let window = &entries[entries.len() - self.rest_n.max(1)..];
+        let f = window.iter().fold(Vector3::zeros(), |sum, e| sum + e.m.f) / window.len() as f64;
+        let up = (x.q * (f - x.b_a)).normalize();
         let r = SVector::from([
             up.x / TILT_SIGMA_RAD,
             up.y / TILT_SIGMA_RAD,
@@ -502,6 +616,9 @@ impl ClipRepair {
         }
         for (j, run) in self.runs[..n].iter_mut().enumerate() {
             run.sigma = sigma[j] * cov[(j, j)].max(0.0).sqrt();
+            if run.curve > 0.0 {
+                self.learned.add(run, run.scaled + d[j]);
+            }
         }
     }
 
@@ -530,10 +647,31 @@ impl ClipRepair {
                 *var = sum[j].powi(2) - before.powi(2);
             }
             if var.iter().any(|v| *v > 0.0) {
-                kf.clipped(&var);
+                widen_tilt(kf, &var);
             }
         }
         self.unseen.add(self.heading_var, &kf.x.p);
+    }
+}
+
+/// Widens the attitude of `kf` for the rotation still unknown about each gyroscope axis
+/// (`var[3..6]`, rad^2, sensor frame; the accelerometer's entries are not read) by its tilt
+/// share only: the axis's horizontal part (navigation frame) takes the variance, its
+/// vertical part none. The heading that share would turn is carried beside the filter
+/// (`UnseenHeading`, module documentation, item 5); in the filter, the rest's zero-velocity
+/// updates take it for a heading they measure: the corpus's walks with their true rates,
+/// flagged clipped and widened about the whole axis, ended 0.3-30 m off where unflagged
+/// they end 0.04-4.4 m off (`tools/real-data/clip_oracle.py`).
+fn widen_tilt(kf: &mut Eskf, var: &[f64; 6]) {
+    kf.propagate();
+    let r = kf.x.q.to_rotation_matrix().into_inner();
+    for (i, var) in var[3..].iter().enumerate().filter(|(_, v)| **v > 0.0) {
+        let mut horizontal = r.column(i).into_owned();
+        horizontal.z = 0.0;
+        // Into the local attitude error's frame, as `Eskf::clipped` adds its share.
+        let local = r.transpose() * horizontal;
+        let mut th = kf.cov.fixed_view_mut::<3, 3>(TH, TH);
+        th += local * local.transpose() * *var;
     }
 }
 
@@ -632,10 +770,16 @@ mod tests {
 
     /// A sensor held level in place is turned about its axis `axis` (0 x, 2 z) by a rate pulse
     /// that peaks at 8 rad/s, clipped at 250 deg/s (4.36 rad/s), then turned back slowly
-    /// (unclipped) and left at rest; the first rest sample ends the motion. Returns the
+    /// (unclipped) and left at rest; the rest window's last sample ends the motion. Returns the
     /// repair, the filter repaired, the filter that integrated the readings as measured and
     /// the true angle at the end (rad, a few mrad from 0: the pulse's trapezoid sums).
     fn clipped_pulse(axis: usize) -> (ClipRepair, Eskf, Eskf, f64) {
+        clipped_pulse_resting(axis, REST_WINDOW_S)
+    }
+
+    /// [`clipped_pulse`] with a rest of `rest_s` seconds: shorter than the rest window, the
+    /// motion is redone where the rest ends ([`ClipRepair::rest_ended`]).
+    fn clipped_pulse_resting(axis: usize, rest_s: f64) -> (ClipRepair, Eskf, Eskf, f64) {
         let cfg = Profile::Pedestrian.odometry(OdometryConfig::mpu9250(G));
         let noise = NoiseModel {
             accel_noise_density: 1e-3,
@@ -679,7 +823,8 @@ mod tests {
             clip.after_predict(&mut repaired, &level, dt, 0, false, &cfg);
         }
         let steps = ((pulse_s + back_s) / dt).ceil() as usize + 2;
-        for k in 1..=steps {
+        let window = (rest_s / dt).round() as usize;
+        for k in 1..steps + window {
             let t = k as f64 * dt;
             let w_true = rate(t);
             angle += 0.5 * (rate(t - dt) + w_true) * dt;
@@ -693,12 +838,16 @@ mod tests {
                 f,
                 w: about * w_true.clamp(-limit, limit),
             };
-            let rest = k == steps;
+            let rest = k >= steps;
+            assert!(!clip.waiting() || rest, "waiting in motion at {k}");
             clip.before_predict(&repaired, clipped);
             repaired.predict(m, dt);
             measured.predict(m, dt);
             clip.after_predict(&mut repaired, &m, dt, clipped, rest, &cfg);
         }
+        assert_eq!(clip.waiting(), rest_s + 0.5 * dt < REST_WINDOW_S);
+        clip.rest_ended(&mut repaired, &cfg);
+        assert!(!clip.waiting());
         assert!(angle.abs() < 0.005, "{angle}");
         assert_eq!(clip.stats().reconstructed, 1);
         (clip, repaired, measured, angle)
@@ -725,6 +874,75 @@ mod tests {
             clip.unseen.s0,
             prior * prior
         );
+    }
+
+    /// A rest of 3 samples, shorter than the window: the motion waits through it and is
+    /// redone where it ends, from those samples' mean specific force, as level as the truth.
+    #[test]
+    fn a_rest_shorter_than_the_window_redoes_the_motion_where_it_ends() {
+        let (_, repaired, measured, pitch) = clipped_pulse_resting(0, 0.015);
+        let tilt = |kf: &Eskf| (kf.x.q * Vector3::z()).xy().norm();
+        assert!(tilt(&measured) > 0.3, "as measured: {}", tilt(&measured));
+        assert!(
+            (tilt(&repaired) - pitch.abs()).abs() < 0.03,
+            "repaired: {} against {pitch}",
+            tilt(&repaired)
+        );
+    }
+
+    /// The widening after a reconstruction goes to the tilt only: about a sensor axis that is
+    /// vertical nothing is added, about a horizontal one all of it, about one at 45 deg half
+    /// (the attitude covariance's trace, rad^2).
+    #[test]
+    fn the_widening_takes_the_tilt_share_of_the_axis_only() {
+        let (_, kf, _, _) = clipped_pulse(0);
+        let trace = |kf: &Eskf| kf.cov.fixed_view::<3, 3>(TH, TH).trace();
+        let widened = |q: UnitQuaternion<f64>, axis: usize| {
+            let mut k = kf.clone();
+            k.x.q = q;
+            k.propagate();
+            let before = trace(&k);
+            let mut var = [0.0; 6];
+            var[3 + axis] = 0.01;
+            widen_tilt(&mut k, &var);
+            trace(&k) - before
+        };
+        let level = UnitQuaternion::identity();
+        assert!(widened(level, 2).abs() < 1e-15, "{}", widened(level, 2));
+        assert!((widened(level, 0) - 0.01).abs() < 1e-12);
+        let tipped = UnitQuaternion::from_scaled_axis(Vector3::x() * std::f64::consts::FRAC_PI_4);
+        assert!(
+            (widened(tipped, 2) - 0.005).abs() < 1e-12,
+            "{}",
+            widened(tipped, 2)
+        );
+    }
+
+    /// The learned scale: 1 before any run; the posterior's excess over the curve's, older
+    /// runs decaying; bounded.
+    #[test]
+    fn the_learned_scale_is_what_the_rests_found_of_the_curve() {
+        let mut l = Learned::default();
+        assert_eq!(l.scale(1, true), 1.0);
+        let run = |curve| Run {
+            axis: 1,
+            positive: true,
+            curve,
+            ..Run::default()
+        };
+        l.add(&run(0.2), 0.1);
+        assert!((l.scale(1, true) - 0.5).abs() < 1e-12);
+        assert_eq!(l.scale(1, false), 1.0);
+        assert_eq!(l.scale(0, true), 1.0);
+        // (0.8 * 0.1 + 0.3) / (0.8 * 0.2 + 0.1)
+        l.add(&run(0.1), 0.3);
+        assert!((l.scale(1, true) - 0.38 / 0.26).abs() < 1e-12);
+        l.add(&run(0.1), 10.0);
+        assert_eq!(l.scale(1, true), LEARN_BOUND);
+        // A posterior below the reading counts as no excess: the scale's lower bound.
+        let mut l = Learned::default();
+        l.add(&run(0.2), -0.1);
+        assert_eq!(l.scale(1, true), 1.0 / LEARN_BOUND);
     }
 
     /// Turned about z (vertical when level): the rest's tilt and zero velocity cannot see the

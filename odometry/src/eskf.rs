@@ -555,6 +555,15 @@ impl Eskf {
         self.update_selected(V, residual, sigma * sigma)
     }
 
+    /// Position update: the true position (m, navigation frame) is `p`, measured with
+    /// independent errors of variance `var` (m^2, per axis). Returns the normalized innovation
+    /// squared (3 degrees of freedom), `None` when its covariance was singular and nothing was
+    /// updated.
+    pub fn position_update(&mut self, p: Vector3<f64>, var: Vector3<f64>) -> Option<f64> {
+        let residual = p - self.x.p;
+        self.update_selected_diag(P, residual, &var)
+    }
+
     /// Whether the velocity is consistent with rest: every component within `gate` standard
     /// deviations of zero, the standard deviation combining the velocity's own with a
     /// zero-velocity measurement's 1-sigma `sigma` (m/s). The velocity's own is that of the
@@ -666,10 +675,20 @@ impl Eskf {
     /// copied them out element by element). The zero-velocity and zero-rate updates run at
     /// every rest window. Returns the normalized innovation squared `r^T S^-1 r`.
     fn update_selected(&mut self, c: usize, residual: Vector3<f64>, var: f64) -> Option<f64> {
+        self.update_selected_diag(c, residual, &Vector3::repeat(var))
+    }
+
+    /// [`Self::update_selected`] with a variance per component.
+    fn update_selected_diag(
+        &mut self,
+        c: usize,
+        residual: Vector3<f64>,
+        var: &Vector3<f64>,
+    ) -> Option<f64> {
         self.propagate();
         let before = self.var;
         let l = SMatrix::<f64, N, 3>::from_fn(|i, j| self.cov[(i, c + j)]);
-        let s = l.fixed_rows::<3>(c) + Matrix3::identity() * var;
+        let s = l.fixed_rows::<3>(c) + Matrix3::from_diagonal(var);
         let s_inv = s.try_inverse()?;
         let m_c = SMatrix::<f64, NC, 3>::from_fn(|q, a| self.sens[(q, c + a)]);
         let nis = self.nis(&residual, &s, &m_c);

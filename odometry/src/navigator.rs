@@ -360,8 +360,7 @@ impl Navigator {
             // output still carries the turn-on bias it is about to subtract, and a filter
             // aligned on it would take that step for rotation.
             let ready = detector_ready || d.rest.is_none();
-            // An implausible sample is no reading of the rest: skipped; a clipped one is no
-            // rest.
+            // An implausible sample is no reading of the rest: skipped; a clipped one, no rest.
             if !verdict.implausible {
                 let gravity_off = s.flags & corrected_flags::GRAVITY_OFF != 0;
                 let rest = rest && ready && verdict.clipped == 0;
@@ -371,7 +370,7 @@ impl Navigator {
                 }
                 let still = imu_rest && detector_ready && verdict.clipped == 0;
                 self.accumulate_cruise(t_ns, &m, d.fresh.filter(|_| still), gravity_off);
-                self.align_on_steps(&m, step.as_ref());
+                self.align_on_steps(&m, step.as_ref(), gravity_off);
             }
             emit(&self.unaligned_state(s, rest, d.sample));
             return;
@@ -559,8 +558,8 @@ impl Navigator {
             } else {
                 self.hints.still = WheelsStill::default();
             }
-            let b_g = self.kf.as_ref().expect("aligned").x.b_g;
-            self.rest_scatter.push(&(m.w - b_g), dt);
+            let kf = self.kf.as_ref().expect("aligned");
+            self.rest_scatter.push(&(m.w - kf.x.b_g), dt);
             let w = &mut self.rest_window;
             w.n += 1;
             w.t_s += dt;
@@ -569,7 +568,7 @@ impl Navigator {
             let accel_var = self.cfg.noise.accel_noise_density.powi(2) * w.t_s;
             let quasi_static = accel_var * f64::from(w.n)
                 < self.cfg.rest_window_drift * self.zupt_sigma_mps.powi(2);
-            if self.kf.as_ref().expect("aligned").propagated() || !quasi_static {
+            if (kf.propagated() || !quasi_static) && !self.clip.waiting() {
                 self.rest_updates();
             }
             // A stationary robot's speed hint says nothing the zero-velocity update did not.
@@ -649,9 +648,10 @@ impl Navigator {
         }
     }
 
-    /// Makes the updates of a rest window that the motion of this sample ended, at the
-    /// window's last sample (the filter's state before this sample's prediction).
+    /// Redoes a clipped motion waiting for the rest, then makes its updates (at its last sample).
     fn close_rest_window(&mut self) {
+        self.clip
+            .rest_ended(self.kf.as_mut().expect("aligned"), &self.cfg);
         if self.rest_window.n == 0 {
             return;
         }

@@ -13,6 +13,9 @@
 //! - An arm (`mems-sim arm`: 1.6 s of rest, then moves with pauses of 0.3 s) aligns on its
 //!   first rest and its filter stays bounded: the end error within the reported 1-sigma's
 //!   reach and a small part of the path.
+//! - An arm that moves slowly for 20-30 s between waypoints 0.5 m apart, never resting (the
+//!   other profile, its velocity bounded at a hand's speed), ends within reach of its start:
+//!   its position is bounded by the reach, not left a random walk.
 //! - A robot cruising at 0.08 m/s on a smooth floor, with the vibration its motors make at any
 //!   speed (`--vibration-floor`), is not taken for rest.
 //! - An alignment on a first rest that the hindsight then withdraws (a start right after it)
@@ -269,6 +272,47 @@ fn an_arm_with_short_pauses_aligns_and_stays_bounded() {
         error <= 0.1 * distance && sigma <= 0.1 * distance,
         "end error {error:.3} m, 1-sigma {sigma:.3} m after {distance:.1} m: not bounded"
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn an_arm_that_never_rests_ends_within_reach() {
+    let dir = std::env::temp_dir().join(unique_namespace("short-rests-reach"));
+    std::fs::create_dir_all(&dir).unwrap();
+    for seed in ["1", "2", "3"] {
+        // Six moves of 20-30 s with pauses of 0.02 s, which no detector finds: about 150 s of
+        // motion after the first rest, the datasheet part's biases unknown to the filter.
+        let (_, v) = simulate_and_run(
+            &dir,
+            &format!("reach-{seed}"),
+            &[
+                "arm",
+                "--moves",
+                "6",
+                "--pauses",
+                "0.02,0.02",
+                "--move-s",
+                "20,30",
+                "--rate",
+                "200",
+                "--preset",
+                "datasheet",
+                "--seed",
+                seed,
+            ],
+            &["--profile", "other"],
+        );
+        let (error, sigma, distance) = end_error(&v);
+        // With the velocity bound alone seed 3 ends 6.3 m off with a 1-sigma of 3.5 m.
+        assert!(
+            error <= 2.5 && sigma <= 2.0,
+            "seed {seed}: end error {error:.3} m, 1-sigma {sigma:.3} m after {distance:.1} m"
+        );
+        assert!(
+            error <= 3.0 * sigma,
+            "seed {seed}: end error {error:.3} m beyond 3 sigma ({sigma:.3} m)"
+        );
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

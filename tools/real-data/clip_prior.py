@@ -7,8 +7,13 @@ readings, never below the range's end and never beyond 10 rad/s, the pedestrian 
 manoeuvre rate), and the run's hidden rotation (the integral of |truth| - range over the run,
 deg) compared with the reconstructed one. The unclipped recording is the truth of every clipped
 sample. Printed per recording: runs, median hidden rotation, the reconstructed/true ratio's
-10th/50th/90th percentiles, the signed sums over the recording (true, reconstructed) and the
-rms of the runs' error over the rms of their hidden rotation.
+10th/50th/90th percentiles, the signed sums over the recording (true, reconstructed), the
+rms of the runs' error over the rms of their hidden rotation, and that ratio once each run's
+reconstructed excess is scaled as clip.rs's `Learned` scales it, with the true hidden rotation
+of the earlier runs in place of what the rests found of them (per axis and sign, in time order:
+the sum of their hidden rotations over the sum of their reconstructed ones, each older run's
+share decaying by 0.8 per run, the scale within 4x of 1; 1 before the first): what that scale
+can give at best.
 
 Usage: clip_prior.py [--gyro-dps DPS] [--data DIR] [FILE.csv ...]
 (default: the corpus's foot walks; a mems-sim CSV with `--gyro-range 2000` works too)
@@ -24,6 +29,8 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 NEIGHBOURS = 3
 REACH_DPS = math.degrees(10.0)
+# clip.rs's LEARN_DECAY and LEARN_BOUND.
+LEARN_DECAY, LEARN_BOUND = 0.8, 4.0
 
 
 def read(path):
@@ -95,8 +102,10 @@ def prior(clipped, a, b, dt, limit):
 
 
 def measure(path, limit):
+    """(hidden, reconstructed, reconstructed as scaled by the learning) rotation of each run,
+    deg, in time order."""
     dt, gyro = read(path)
-    pairs = []
+    runs_found = []
     for axis in range(3):
         truth = [g[axis] for g in gyro]
         clipped = [max(-limit, min(limit, v)) for v in truth]
@@ -106,8 +115,15 @@ def measure(path, limit):
                 continue
             hidden = sum(t - c for t, c in zip(truth[a:b], clipped[a:b])) * dt
             guess = sum(r - c for r, c in zip(rec, clipped[a:b])) * dt
-            pairs.append((hidden, guess))
-    return pairs
+            runs_found.append((a, axis, clipped[a] > 0, hidden, guess))
+    runs_found.sort()
+    sums, out = {}, []
+    for _, axis, positive, hidden, guess in runs_found:
+        curve, truth_sum = sums.get((axis, positive), (0.0, 0.0))
+        scale = min(max(truth_sum / curve, 1.0 / LEARN_BOUND), LEARN_BOUND) if curve > 0 else 1.0
+        out.append((hidden, guess, guess * scale))
+        sums[(axis, positive)] = (LEARN_DECAY * curve + abs(guess), LEARN_DECAY * truth_sum + abs(hidden))
+    return out
 
 
 def percentile(values, q):
@@ -127,19 +143,21 @@ def main():
         files = [str(Path(args.data) / f"{r['id']}.csv") for r in corpus["recordings"] if r.get("platform") == "foot"]
     print(f"Clip prior against the truth, gyroscope capped at +-{args.gyro_dps:g} deg/s; rotations in deg")
     print()
-    print("| recording | runs | median hidden | reconstructed / true, p10 / p50 / p90 | sum true | sum reconstructed | rms error / rms hidden |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+    print("| recording | runs | median hidden | reconstructed / true, p10 / p50 / p90 | sum true | sum reconstructed "
+          "| rms error / rms hidden | the same, scale learned from the truth |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for f in files:
         pairs = measure(f, args.gyro_dps)
         if not pairs:
-            print(f"| {Path(f).stem} | 0 | - | - | - | - | - |")
+            print(f"| {Path(f).stem} | 0 | - | - | - | - | - | - |")
             continue
-        ratios = [g / h for h, g in pairs if abs(h) > 1e-9]
+        ratios = [g / h for h, g, _ in pairs if abs(h) > 1e-9]
         rms = lambda xs: math.sqrt(sum(x * x for x in xs) / len(xs))
-        print(f"| {Path(f).stem} | {len(pairs)} | {percentile([abs(h) for h, _ in pairs], 0.5):.1f} | "
+        print(f"| {Path(f).stem} | {len(pairs)} | {percentile([abs(h) for h, _, _ in pairs], 0.5):.1f} | "
               f"{percentile(ratios, 0.1):.2f} / {percentile(ratios, 0.5):.2f} / {percentile(ratios, 0.9):.2f} | "
-              f"{sum(h for h, _ in pairs):+.0f} | {sum(g for _, g in pairs):+.0f} | "
-              f"{rms([g - h for h, g in pairs]) / rms([h for h, _ in pairs]):.2f} |")
+              f"{sum(h for h, _, _ in pairs):+.0f} | {sum(g for _, g, _ in pairs):+.0f} | "
+              f"{rms([g - h for h, g, _ in pairs]) / rms([h for h, _, _ in pairs]):.2f} | "
+              f"{rms([s - h for h, _, s in pairs]) / rms([h for h, _, _ in pairs]):.2f} |")
     return 0
 
 

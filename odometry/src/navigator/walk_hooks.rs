@@ -58,8 +58,11 @@ impl Navigator {
     }
 
     /// Hand-held walking without a rest: aligns on the mean specific force over whole steps
-    /// (`crate::walking`), the gyro bias unknown.
-    pub(super) fn align_on_steps(&mut self, m: &Imu, step: Option<&Step>) {
+    /// (`crate::walking`), the gyro bias unknown. `gravity_off`: the calibration stage flagged
+    /// the sample `GRAVITY_OFF` (its learned rest read gravity off and its refinement has
+    /// already removed the error along gravity, so the steps' mean reads gravity right: the
+    /// part is uncalibrated all the same).
+    pub(super) fn align_on_steps(&mut self, m: &Imu, step: Option<&Step>, gravity_off: bool) {
         if self.kf.is_some() {
             return;
         }
@@ -70,7 +73,7 @@ impl Navigator {
             return;
         };
         let g = self.cfg.gravity_mps2;
-        let prior = AccelPrior::at_rest(&self.cfg, &f_mean, false);
+        let prior = AccelPrior::at_rest(&self.cfg, &f_mean, gravity_off);
         let (x, mut cov) = align(
             f_mean,
             Vector3::zeros(),

@@ -13,7 +13,7 @@
 //! Messages are taken from the file topic by topic ([`source`]) and merged by their replay time
 //! (a sample's or state's sample time, a hint's publication time: a hint goes before the first
 //! raw sample taken at or after it). Pacing follows those times against the monotonic clock,
-//! scaled by a speed factor, or is as fast as the subscribers take the messages
+//! scaled by a speed factor and counted from when the first message actually left, or is as fast as the subscribers take the messages
 //! ([`Pace::Max`]): the lossless publishers of `ipc_types::service` retry until every
 //! subscriber has room, so nothing is lost either way. A subscriber that leaves during the
 //! replay (it ends, or its process dies) is a departure, not a replay fault: the others still
@@ -32,6 +32,7 @@
 
 mod deliveries;
 mod paced;
+mod pacer;
 pub mod ports;
 pub mod progress;
 pub mod source;
@@ -46,7 +47,7 @@ use ipc_types::stop;
 use crate::deliveries::Deliveries;
 use crate::ports::Ports;
 use crate::source::{Merge, Recording, Window};
-use crate::topics::{Place, Replayable};
+use crate::topics::Replayable;
 
 /// How fast to publish.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -213,42 +214,6 @@ fn wait_for_subscribers(
 /// 1 sends far less than a buffer in it. Each removal lists every node (docs/acquisition.md:
 /// thousands of allocation calls with a few hundred nodes), hence not more often.
 pub const DEAD_NODE_CLEANUP_PERIOD: Duration = Duration::from_millis(250);
-
-/// When each message of one pass is due, and how much recorded time the pass has covered.
-#[derive(Debug, Default)]
-pub(crate) struct Pacer {
-    /// The epoch, a replay time in it and when that time was (or would have been) due.
-    anchor: Option<(u32, u64, Instant)>,
-    /// Recorded time covered by the epochs before the anchor's, ns.
-    before_ns: u64,
-    /// Recorded time covered so far, ns.
-    pub(crate) covered_ns: u64,
-}
-
-impl Pacer {
-    /// When the message at `place` is due at `speed` (pacing starts over with each epoch).
-    pub(crate) fn due(&mut self, place: Place, speed: f64) -> Instant {
-        let (_, anchor_ns, anchor) = self.place(place);
-        let offset_ns = place.time_ns.saturating_sub(anchor_ns) as f64 / speed;
-        anchor + Duration::from_nanos(offset_ns.round() as u64)
-    }
-
-    /// Notes `place` and returns the anchor of its epoch.
-    pub(crate) fn place(&mut self, place: Place) -> (u32, u64, Instant) {
-        let anchor = match self.anchor {
-            Some(a) if a.0 == place.epoch => a,
-            _ => {
-                self.before_ns = self.covered_ns;
-                let a = (place.epoch, place.time_ns, Instant::now());
-                self.anchor = Some(a);
-                a
-            }
-        };
-        let into_epoch = place.time_ns.saturating_sub(anchor.1);
-        self.covered_ns = self.covered_ns.max(self.before_ns + into_epoch);
-        anchor
-    }
-}
 
 /// Sends one pass of `messages` through `ports` with the source driver
 /// (`mems_stage::source::produce`: [`paced::Pass`] into [`paced::Published`]), counting in

@@ -9,10 +9,11 @@ use ipc_types::corrected_flags;
 use mems_stage::source::{Flow, Sink, Source};
 
 use crate::deliveries::Deliveries;
+use crate::pacer::Pacer;
 use crate::ports::Ports;
 use crate::source::Merge;
 use crate::topics::Payload;
-use crate::{Pace, Pacer, ReplayError, ReplaySummary};
+use crate::{Pace, ReplayError, ReplaySummary};
 
 /// A message and the recorded time the pass has covered with it, ns.
 #[derive(Debug, Clone, Copy)]

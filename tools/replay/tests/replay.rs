@@ -117,8 +117,10 @@ fn assert_same_but_acquired(got: &[(RawImuSample, u64)], sent: &[RawImuSample]) 
     }
 }
 
-/// At speed 2, samples 1 ms apart are published 0.5 ms apart: never early, and on average
-/// within a millisecond of their due time.
+/// At speed 2, samples 1 ms apart are published 0.5 ms apart: none before its recorded offset
+/// from the first, halved (counted from the first's publication: the pacer's clock starts
+/// after it). Only lower bounds: a loaded machine may publish any of them late (when each is
+/// due is `Pacer`'s unit tests).
 #[test]
 fn real_time_pace_follows_the_sample_times_scaled_by_speed() {
     let ns = namespace("pace");
@@ -137,26 +139,14 @@ fn real_time_pace_follows_the_sample_times_scaled_by_speed() {
     assert_eq!(summary.short_deliveries, 0);
 
     let a0 = got[0].0.stamps.acquired_ns;
-    let mut lateness_ns = Vec::new();
     for (g, _) in &got {
         let due = (g.stamps.sample_ns - sent[0].stamps.sample_ns) / 2;
         let at = g.stamps.acquired_ns - a0;
-        assert!(
-            at + 100_000 >= due,
-            "seq {} published {} us early",
-            g.seq,
-            (due - at) / 1000
-        );
-        lateness_ns.push(at.saturating_sub(due));
+        assert!(at >= due, "seq {} published {} ns early", g.seq, due - at);
     }
-    let mean_late_us = lateness_ns.iter().sum::<u64>() as f64 / lateness_ns.len() as f64 / 1e3;
-    assert!(
-        mean_late_us < 1000.0,
-        "published {mean_late_us:.0} us late on average"
-    );
     // 399 intervals of 0.5 ms.
     let elapsed = summary.elapsed.as_secs_f64();
-    assert!((0.1995..0.25).contains(&elapsed), "took {elapsed} s");
+    assert!(elapsed >= 0.1995, "took {elapsed} s");
     assert!((summary.rate_hz() - 399.0 / elapsed).abs() < 1e-6);
 }
 
@@ -179,11 +169,11 @@ fn real_time_pace_starts_over_with_a_new_session() {
     let published = |i: usize| got[i].0.stamps.acquired_ns;
     let second_span_ms = (published(399) - published(200)) as f64 / 1e6;
     assert!(
-        (199.0..230.0).contains(&second_span_ms),
+        second_span_ms >= 199.0,
         "second session spans {second_span_ms} ms"
     );
     let elapsed = summary.elapsed.as_secs_f64();
-    assert!((0.398..0.45).contains(&elapsed), "took {elapsed} s");
+    assert!(elapsed >= 0.398, "took {elapsed} s");
 }
 
 /// As fast as possible, with a subscriber slower than the publisher and more samples than its
