@@ -102,9 +102,9 @@ pub const TILT_SIGMA_RAD: f64 = 0.035;
 pub const VELOCITY_SIGMA_MPS: f64 = 0.1;
 
 const SEQ: usize = NEIGHBOURS + CAPACITY;
-/// The weight a learned run keeps per later run of its axis and sign ([`Learned`]).
+/// The weight a learned run keeps per later run of its axis and sign (`Learned`).
 pub const LEARN_DECAY: f64 = 0.8;
-/// The learned scale stays within this factor of 1 ([`Learned`]).
+/// The learned scale stays within this factor of 1 (`Learned`).
 pub const LEARN_BOUND: f64 = 4.0;
 /// Most Gauss-Newton steps of the solve.
 pub const GAUSS_NEWTON_STEPS: usize = 4;
