@@ -50,11 +50,7 @@
 //! of [`RefineConfig::memory_s`] (see [`crate::zero_state::rest_gain`]); the accelerometer's
 //! starts with a prior of [`RefineConfig::accel_prior_s`] seconds of rest for the file's value.
 //! The gyroscope's has none: a turn-on bias of 0.3-1 deg/s that no file can know is measured to
-//! 0.01 deg/s by one second of rest. The start-up interval is a rest by assumption only: when
-//! its mean rate lies beyond the part's datasheet zero-rate offset ([`ZERO_RATE_OFFSET_DPS`])
-//! on any axis, it was a turn (a robot that starts in motion), and neither it nor the rests of
-//! the detector it taught (whose reference is then motion) refine the gyroscope in this
-//! session; the accelerometer is refined as before.
+//! 0.01 deg/s by one second of rest.
 
 use ipc_types::stream::range::Clipping;
 use ipc_types::stream::{self, Continuity, Holes, Step, TimeLine};
@@ -262,19 +258,6 @@ impl Fnv1a {
     }
 }
 
-/// The largest gyroscope bias a MEMS part has before any calibration, deg/s per axis: the
-/// MPU-9250's initial zero-rate offset tolerance, +-5 deg/s at 25 C (InvenSense
-/// PS-MPU-9250A-01 rev. 1.1, table 3.1 "Gyroscope Specifications"; the BMI160's is +-3 deg/s,
-/// Bosch BST-BMI160-DS000, table 2). A mean rate beyond it is a turn, not a bias.
-pub const ZERO_RATE_OFFSET_DPS: f64 = 5.0;
-
-/// Whether a rest mean rate `w` (rad/s, file bias removed) can be a bias: within
-/// [`ZERO_RATE_OFFSET_DPS`] on every axis.
-fn within_zero_rate_offset(w: &[f64; 3]) -> bool {
-    w.iter()
-        .all(|x| x.to_degrees().abs() <= ZERO_RATE_OFFSET_DPS)
-}
-
 /// The running bias refinement (see the module documentation).
 #[derive(Debug, Clone, Copy)]
 struct Refinement {
@@ -287,10 +270,6 @@ struct Refinement {
     accel_seen_s: f64,
     /// Rest time the gyroscope bias was refined from, s.
     gyro_seen_s: f64,
-    /// Whether the start-up interval's mean rate was beyond [`ZERO_RATE_OFFSET_DPS`]: the
-    /// detector's reference was then learned in motion, its rests are not rests for the gyro,
-    /// and the gyroscope bias is not refined in this session.
-    gyro_learned_in_motion: bool,
     refined: bool,
 }
 
@@ -302,7 +281,6 @@ impl Refinement {
             gyro_rps: Vector3::zeros(),
             accel_seen_s: config.accel_prior_s,
             gyro_seen_s: 0.0,
-            gyro_learned_in_motion: false,
             refined: false,
         }
     }
@@ -318,7 +296,7 @@ impl Refinement {
         if magnitude > 0.0 {
             self.accel_mps2 += gain * (magnitude - gravity) * (c / magnitude);
         }
-        if let Some(g) = gyro.filter(|_| !self.gyro_learned_in_motion) {
+        if let Some(g) = gyro {
             let gain = rest_gain(duration_s, self.gyro_seen_s, memory);
             self.gyro_seen_s += duration_s;
             self.gyro_rps += gain * (Vector3::from(g) - self.gyro_rps);
@@ -350,10 +328,6 @@ pub struct WarmState {
     pub gyro_seen_s: f64,
     /// Whether a refinement was made.
     pub refined: bool,
-    /// Whether the detector's reference was learned in motion (the gyroscope bias is then not
-    /// refined; absent in older states: false).
-    #[serde(default)]
-    pub gyro_learned_in_motion: bool,
     /// Sample time of the stream's first sample, ns.
     pub stream_start_ns: u64,
     /// Sequence number and sample time of the last sample taken, ns.
@@ -475,7 +449,6 @@ impl CalibrationStage {
             accel_seen_s: r.accel_seen_s,
             gyro_seen_s: r.gyro_seen_s,
             refined: r.refined,
-            gyro_learned_in_motion: r.gyro_learned_in_motion,
             stream_start_ns: self.stream_start_ns.unwrap_or(last_ns),
             last_seq,
             last_ns,
@@ -502,7 +475,6 @@ impl CalibrationStage {
         r.accel_seen_s = state.accel_seen_s;
         r.gyro_seen_s = state.gyro_seen_s;
         r.refined = state.refined;
-        r.gyro_learned_in_motion = state.gyro_learned_in_motion;
         self.stream_start_ns = Some(state.stream_start_ns);
         self.last = Some((state.last_seq, state.last_ns));
         self.time.accept(state.last_ns);
@@ -598,7 +570,6 @@ impl CalibrationStage {
                 self.refine.accel_seen_s = 0.0;
             }
             let gyro = self.batch_gyro.then_some(learned.gyro_mean_rps);
-            self.refine.gyro_learned_in_motion = gyro.is_some_and(|w| !within_zero_rate_offset(&w));
             self.refine.update(
                 learned.accel_mean_mps2,
                 gyro,

@@ -14,10 +14,7 @@
 //!   indistinguishable from a horizontal accelerometer bias: it is added to the bias sigma
 //!   the alignment turns into its tilt sigma;
 //! - a turn slower than the gyro mean's own 1-sigma is not seen: the gyro bias sigma is the
-//!   rest's times `sqrt(2)` (such a turn and the noise, in quadrature);
-//! - a turn of any rate and a gyro bias about up are one mean rate: the window does not learn
-//!   the bias about up (it stays the calibration stage's, learned at rests only) and its
-//!   1-sigma there is the part's datasheet zero-rate offset.
+//!   rest's times `sqrt(2)` (such a turn and the noise, in quadrature).
 //!
 //! Frames and signs as in [`crate::hints`]: body x forward, y left, z up; `R_bs` sensor to
 //! body; navigation frame z up, heading fixed at alignment. The velocity starts from the hint's
@@ -32,9 +29,7 @@
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::config::OdometryConfig;
-use calibrate::stage::ZERO_RATE_OFFSET_DPS;
-
-use crate::eskf::{BA, BG, Cov, KS, Nominal, TH, V, align};
+use crate::eskf::{BA, Cov, KS, Nominal, TH, V, align};
 use crate::hints::{HintConfig, mounting_from};
 use crate::rest_noise::RestNoise;
 use crate::uncalibrated::AccelPrior;
@@ -201,7 +196,6 @@ pub fn cruise_start(
     let hidden = c.hidden_accel(&w_sigma);
     let bias_sigma = prior.bias_sigma_mps2.map(|s| s.hypot(hidden));
     let (mut x, mut cov) = align(c.accel.mean(), c.gyro.mean(), g, bias_sigma, w_sigma);
-    unlearn_turn_bias(&mut x, &mut cov, &c.accel.mean());
     cov[(KS, KS)] = hints.speed_scale_sigma.powi(2);
     let (speed, hint_sigma) = c.speed();
     let forward_sigma = hint_sigma
@@ -223,21 +217,6 @@ pub fn cruise_start(
         cov,
         standing_accel_sd: cfg.noise.accel_noise_density * (1.5 * rate_hz).sqrt(),
     }
-}
-
-/// Takes the cruise window's mean rate about up out of the aligned gyro bias `x.b_g` (rad/s,
-/// sensor frame; up is the window's mean specific force `f_mean`): a steady turn and a bias are
-/// one mean rate there, and a window in motion shows no rest. The bias about up stays the
-/// calibration stage's (zero in its corrected rate) with the part's datasheet zero-rate offset
-/// as its 1-sigma ([`calibrate::stage::ZERO_RATE_OFFSET_DPS`]) in `cov`, added along up to
-/// the window mean's own variance. The horizontal axes keep the window's mean: a wheeled robot
-/// does not roll or pitch steadily.
-fn unlearn_turn_bias(x: &mut Nominal, cov: &mut Cov, f_mean: &Vector3<f64>) {
-    let up = f_mean.normalize();
-    x.b_g -= up * up.dot(&x.b_g);
-    let zro = ZERO_RATE_OFFSET_DPS.to_radians();
-    let mut block = cov.fixed_view_mut::<3, 3>(BG, BG);
-    block += up * up.transpose() * (zro * zro);
 }
 
 /// The forward axis in the sensor frame from the horizontal specific force and the speed
@@ -553,27 +532,6 @@ mod tests {
         assert!(error <= 2.0 * fit.systematic_sigma_rad(), "{error} {fit:?}");
         let k_error = fit.scale.unwrap().abs();
         assert!(k_error <= 2.0 * fit.scale_sigma, "{k_error} {fit:?}");
-    }
-
-    #[test]
-    fn a_turn_in_the_cruise_window_is_not_learned_as_bias_about_up() {
-        // The Husky's mounting (+y up): a turn of 29 deg/s about up and small horizontal rates.
-        let f_mean = Vector3::new(0.0, 9.81, 0.0);
-        let w_mean = Vector3::new(0.01, 0.5, -0.02);
-        let w_sigma = Vector3::repeat(0.001);
-        let (mut x, mut cov) = align(f_mean, w_mean, 9.81, Vector3::repeat(0.01), w_sigma);
-        unlearn_turn_bias(&mut x, &mut cov, &f_mean);
-        assert!(
-            (x.b_g - Vector3::new(0.01, 0.0, -0.02)).norm() < 1e-15,
-            "{}",
-            x.b_g
-        );
-        let up_var = 0.001_f64.powi(2) + 5.0_f64.to_radians().powi(2);
-        assert!((cov[(BG + 1, BG + 1)] - up_var).abs() < 1e-15);
-        for (i, j) in [(0, 0), (2, 2), (0, 1), (1, 2)] {
-            let expected = if i == j { 1e-6 } else { 0.0 };
-            assert!((cov[(BG + i, BG + j)] - expected).abs() < 1e-15, "{i} {j}");
-        }
     }
 
     #[test]

@@ -143,27 +143,6 @@ impl Logger {
     }
 }
 
-/// The sample time (on the grid of `rate_hz`) of the fastest turn (largest angular rate, body
-/// frame, rad/s) in the first motion of `scenario` that turns, s: a start in motion in the
-/// middle of a turn, no rest before it. `None` when the scenario never turns.
-pub fn peak_turn_time(scenario: &impl Scenario, rate_hz: f64) -> Option<f64> {
-    let n = (scenario.duration_s() * rate_hz).floor() as u64;
-    let mut best: Option<(f64, f64)> = None;
-    for k in 0..=n {
-        let t = k as f64 / rate_hz;
-        let truth = scenario.truth(t);
-        let w = truth.angular_rate_rps;
-        let rate = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
-        if truth.at_rest && best.is_some() {
-            break;
-        }
-        if rate > 0.0 && best.is_none_or(|(r, _)| rate > r) {
-            best = Some((rate, t));
-        }
-    }
-    best.map(|(_, t)| t)
-}
-
 /// The sample time (on the grid of `rate_hz`) of the highest speed in the first motion of
 /// `scenario`, s: a start in motion, with no rest before it. `None` when the scenario never
 /// moves.

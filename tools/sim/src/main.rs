@@ -9,7 +9,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use ipc_types::units::{AccelRange, GyroRange, STANDARD_GRAVITY_MPS2};
 use ipc_types::{RawImuSample, RobotHint};
 use mems_sim::adc::quantize_sample;
-use mems_sim::defects::{LogDefects, Logger, peak_speed_time, peak_turn_time};
+use mems_sim::defects::{LogDefects, Logger, peak_speed_time};
 use mems_sim::dlpf::DlpfConfig;
 use mems_sim::hints::{HintParams, RestSource, drive_hints};
 use mems_sim::model::{Preset, SensorModel};
@@ -312,9 +312,8 @@ struct Common {
     /// 3600; the accelerometer gets the same A_DLPF_CFG).
     #[arg(long, default_value = "driver")]
     dlpf: DlpfChoice,
-    /// The recording starts this late into the scenario: seconds, `motion` (at the highest
-    /// speed of the first motion: a start in motion, no rest before it) or `turn` (at the
-    /// fastest rate of the first motion that turns: a start in the middle of a turn).
+    /// The recording starts this late into the scenario: seconds, or `motion` (at the highest
+    /// speed of the first motion: a start in motion, no rest before it).
     #[arg(long, default_value = "0")]
     start_at: StartAt,
     /// The accelerometer's samples lag the gyro's by this, s: each holds the specific force
@@ -383,23 +382,18 @@ impl std::str::FromStr for DlpfChoice {
 enum StartAt {
     Seconds(f64),
     Motion,
-    Turn,
 }
 
 impl std::str::FromStr for StartAt {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "motion" => return Ok(Self::Motion),
-            "turn" => return Ok(Self::Turn),
-            _ => {}
+        if s == "motion" {
+            return Ok(Self::Motion);
         }
         match s.parse::<f64>() {
             Ok(x) if x.is_finite() && x >= 0.0 => Ok(Self::Seconds(x)),
-            _ => Err(format!(
-                "expected seconds >= 0, `motion` or `turn`, got {s:?}"
-            )),
+            _ => Err(format!("expected seconds >= 0 or `motion`, got {s:?}")),
         }
     }
 }
@@ -803,8 +797,6 @@ fn simulate(
         StartAt::Seconds(s) => s,
         StartAt::Motion => peak_speed_time(&scenario, rate)
             .context("--start-at motion: the scenario never moves")?,
-        StartAt::Turn => peak_turn_time(&scenario, rate)
-            .context("--start-at turn: the scenario never turns (--turns on)")?,
     };
     let first = (start_s * rate).ceil() as u64;
     if first >= count {
@@ -834,9 +826,7 @@ fn simulate(
         mems_files::refuse_existing(&common.out, Some("--out"))?;
     }
     let mut sink = Sink::create(&common.out, !hints.is_empty())?;
-    // Hints published before the recording starts (`--start-at`) are not in it.
-    let first_ns = ns_from_s(first as f64 / rate);
-    let mut next_hint = hints.partition_point(|h| h.stamps.acquired_ns < first_ns);
+    let mut next_hint = 0;
     let (mut distance, mut saturated, mut rest, mut rows) = (0.0, 0u64, 0u64, 0u64);
     let mut last: Option<Vector3<f64>> = None;
     let mut logged = Vec::with_capacity(2);
