@@ -46,6 +46,7 @@ Usage: bench.py [--bin PATH] [--calib TOML] [--data DIR] [--only ID ...] [--json
 """
 
 import argparse
+import contextlib
 import itertools
 import json
 import math
@@ -391,6 +392,28 @@ class Runner:
             print(f"{rec['id']} {' '.join(extra)}: {'failed: ' + err if err else 'done'}", file=sys.stderr)
         self.cache[key] = row
         return row
+
+
+@contextlib.contextmanager
+def plain_and_changed(binary, data):
+    """Yields (plain, changed, directory): two quiet runners under the identity calibration,
+    one on the converted recordings in `data`, one on `directory`, a temporary directory where
+    the caller writes changed copies of them (`copy_sidecar` puts each one's sidecar there)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        calib = tmp / "identity.toml"
+        calib.write_text(identity_calibration())
+        changed = tmp / "changed"
+        changed.mkdir()
+        yield (Runner(Path(binary), calib, Path(data), 900.0, quiet=True),
+               Runner(Path(binary), calib, changed, 900.0, quiet=True), changed)
+
+
+def copy_sidecar(data, changed, rec):
+    """Copies `rec`'s sidecar from `data` into `changed`; returns its recording's file name."""
+    side = json.loads((Path(data) / f"{rec['id']}.json").read_text())
+    (Path(changed) / f"{rec['id']}.json").write_text(json.dumps(side))
+    return side.get("input", side["csv"])
 
 
 MAX_GRID = 24

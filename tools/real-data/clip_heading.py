@@ -20,7 +20,6 @@ import math
 import os
 import statistics
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -64,19 +63,11 @@ def main():
     print()
     print("| walk | steps | length error, mean / mean abs, cm | heading error, first / last quarter, deg | end error / 1-sigma, m |")
     print("| --- | --- | --- | --- | --- |")
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        calib = tmp / "identity.toml"
-        calib.write_text(bench.identity_calibration())
-        (tmp / "clipped").mkdir()
-        plain = bench.Runner(Path(args.bin), calib, Path(args.data), 900.0, quiet=True)
-        clipped = bench.Runner(Path(args.bin), calib, tmp / "clipped", 900.0, quiet=True)
+    with bench.plain_and_changed(args.bin, args.data) as (plain, clipped, clipped_dir):
         for rec in recs:
-            side = json.loads((Path(args.data) / f"{rec['id']}.json").read_text())
-            name = side.get("input", side["csv"])
-            (tmp / "clipped" / f"{rec['id']}.json").write_text(json.dumps(side))
+            name = bench.copy_sidecar(args.data, clipped_dir, rec)
             write = perturb.perturb_mcap if name.endswith(".mcap") else perturb.perturb_csv
-            write(Path(args.data) / name, tmp / "clipped" / name, clip)
+            write(Path(args.data) / name, clipped_dir / name, clip)
             extra = list(rec.get("extra_args", []))
             a, b = plain.row(rec, extra), clipped.row(rec, extra)
             if "error" in a or "error" in b:

@@ -22,7 +22,6 @@ import argparse
 import json
 import os
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -90,20 +89,11 @@ def main():
     print("| walk | rows flagged | unflagged | covered | reconstructed at the rest | covered "
           "| bridged only | covered | integrated as measured | covered |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        calib = tmp / "identity.toml"
-        calib.write_text(bench.identity_calibration())
-        flagged_dir = tmp / "flagged"
-        flagged_dir.mkdir()
-        plain = bench.Runner(Path(args.bin), calib, data, 900.0, quiet=True)
-        flagged = bench.Runner(Path(args.bin), calib, flagged_dir, 900.0, quiet=True)
+    with bench.plain_and_changed(args.bin, data) as (plain, flagged, flagged_dir):
         for rec in recs:
-            side = json.loads((data / f"{rec['id']}.json").read_text())
-            name = side.get("input", side["csv"])
+            name = bench.copy_sidecar(data, flagged_dir, rec)
             if not name.endswith(".csv"):
                 raise SystemExit(f"{rec['id']}: {name} is not a CSV recording")
-            (flagged_dir / f"{rec['id']}.json").write_text(json.dumps(side))
             rows = flag_csv(data / name, flagged_dir / name, args.gyro_dps)
             extra = list(rec.get("extra_args", []))
             cells = [cell(plain.row(rec, extra))] + [

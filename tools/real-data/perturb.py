@@ -143,18 +143,9 @@ def figures(row):
 def run_all(args, p, recordings):
     data = Path(args.data)
     rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        calib = tmp / "identity.toml"
-        calib.write_text(bench.identity_calibration())
-        changed = tmp / "perturbed"
-        changed.mkdir()
-        plain = bench.Runner(Path(args.bin), calib, data, 900.0, quiet=True)
-        perturbed = bench.Runner(Path(args.bin), calib, changed, 900.0, quiet=True)
+    with bench.plain_and_changed(args.bin, data) as (plain, perturbed, changed):
         for rec in recordings:
-            side = json.loads((data / f"{rec['id']}.json").read_text())
-            name = side.get("input", side["csv"])
-            (changed / f"{rec['id']}.json").write_text(json.dumps(side))
+            name = bench.copy_sidecar(data, changed, rec)
             write = perturb_mcap if name.endswith(".mcap") else perturb_csv
             capped = write(data / name, changed / name, p)
             extra = list(rec.get("extra_args", []))
