@@ -43,7 +43,7 @@
 //! 4. The filter is restored from the copy and the motion predicted again with the readings
 //!    reconstructed, sample by sample (so the specific force of the clipped interval is rotated
 //!    by the corrected attitude); each run's posterior 1-sigma of `d_j` widens the tilt about
-//!    the horizontal part of its axis, fully correlated through the run (`widen_tilt`; the
+//!    the horizontal part of its axis, fully correlated through the run (`Eskf::clipped_tilt`; the
 //!    heading share is item 5's, beside the filter); accelerometer clips
 //!    among the samples are bridged again (`crate::untrusted`). The rest's updates follow as
 //!    usual.
@@ -75,7 +75,7 @@ use ipc_types::raw_flags;
 use nalgebra::{SMatrix, SVector, UnitQuaternion, Vector3};
 
 use crate::config::OdometryConfig;
-use crate::eskf::{Eskf, Imu, Nominal, TH};
+use crate::eskf::{Eskf, Imu, Nominal};
 use crate::untrusted::{Untrusted, Verdict};
 
 /// Longest motion (samples, from the first clipped one to the rest) that is reconstructed.
@@ -646,32 +646,16 @@ impl ClipRepair {
                 sum[j] += run.sigma * share;
                 *var = sum[j].powi(2) - before.powi(2);
             }
+            // The tilt share only: the heading that share would turn is carried beside the
+            // filter (`UnseenHeading`, module documentation, item 5); in the filter, the rest's
+            // zero-velocity updates take it for a heading they measure: the corpus's walks with
+            // their true rates, flagged clipped and widened about the whole axis, ended 0.3-30 m
+            // off where unflagged they end 0.04-4.4 m off (`tools/real-data/clip_oracle.py`).
             if var.iter().any(|v| *v > 0.0) {
-                widen_tilt(kf, &var);
+                kf.clipped_tilt(&var);
             }
         }
         self.unseen.add(self.heading_var, &kf.x.p);
-    }
-}
-
-/// Widens the attitude of `kf` for the rotation still unknown about each gyroscope axis
-/// (`var[3..6]`, rad^2, sensor frame; the accelerometer's entries are not read) by its tilt
-/// share only: the axis's horizontal part (navigation frame) takes the variance, its
-/// vertical part none. The heading that share would turn is carried beside the filter
-/// (`UnseenHeading`, module documentation, item 5); in the filter, the rest's zero-velocity
-/// updates take it for a heading they measure: the corpus's walks with their true rates,
-/// flagged clipped and widened about the whole axis, ended 0.3-30 m off where unflagged
-/// they end 0.04-4.4 m off (`tools/real-data/clip_oracle.py`).
-fn widen_tilt(kf: &mut Eskf, var: &[f64; 6]) {
-    kf.propagate();
-    let r = kf.x.q.to_rotation_matrix().into_inner();
-    for (i, var) in var[3..].iter().enumerate().filter(|(_, v)| **v > 0.0) {
-        let mut horizontal = r.column(i).into_owned();
-        horizontal.z = 0.0;
-        // Into the local attitude error's frame, as `Eskf::clipped` adds its share.
-        let local = r.transpose() * horizontal;
-        let mut th = kf.cov.fixed_view_mut::<3, 3>(TH, TH);
-        th += local * local.transpose() * *var;
     }
 }
 
@@ -751,7 +735,7 @@ fn hermite(tau: f64, y0: f64, m0: f64, y1: f64, m1: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eskf::{NoiseModel, align};
+    use crate::eskf::{NoiseModel, TH, align};
     use crate::profile::Profile;
     use nalgebra::UnitQuaternion;
 
@@ -890,7 +874,7 @@ mod tests {
         );
     }
 
-    /// The widening after a reconstruction goes to the tilt only: about a sensor axis that is
+    /// The widening after a reconstruction (`Eskf::clipped_tilt`) goes to the tilt only: about a sensor axis that is
     /// vertical nothing is added, about a horizontal one all of it, about one at 45 deg half
     /// (the attitude covariance's trace, rad^2).
     #[test]
@@ -904,7 +888,7 @@ mod tests {
             let before = trace(&k);
             let mut var = [0.0; 6];
             var[3 + axis] = 0.01;
-            widen_tilt(&mut k, &var);
+            k.clipped_tilt(&var);
             trace(&k) - before
         };
         let level = UnitQuaternion::identity();

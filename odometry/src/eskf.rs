@@ -53,7 +53,8 @@ type VecN = SVector<f64, N>;
 /// 9 of the accelerometer's, row-major.
 pub const NC: usize = 18;
 
-const P: usize = 0;
+/// Index of the (navigation-frame) position error in the error state.
+pub const P: usize = 0;
 /// Index of the (navigation-frame) velocity error in the error state.
 pub const V: usize = 3;
 /// Index of the attitude error (navigation frame: its z is the heading's) in the error state.
@@ -544,6 +545,22 @@ impl Eskf {
             }
         }
         self.refresh_sigma();
+    }
+
+    /// As [`Eskf::clipped`] for the gyroscope axes (`var[3..6]`, rad^2, sensor frame; the
+    /// accelerometer's entries are not read), but each axis's variance widens only the tilt
+    /// about its horizontal part (navigation frame), not the heading about its vertical part.
+    pub fn clipped_tilt(&mut self, var: &[f64; 6]) {
+        self.propagate();
+        let r = self.x.q.to_rotation_matrix().into_inner();
+        for (i, var) in var[3..].iter().enumerate().filter(|(_, v)| **v > 0.0) {
+            let mut horizontal = r.column(i).into_owned();
+            horizontal.z = 0.0;
+            // Into the local attitude error's frame, where `clipped` adds its share.
+            let local = r.transpose() * horizontal;
+            let mut th = self.cov.fixed_view_mut::<3, 3>(TH, TH);
+            th += local * local.transpose() * *var;
+        }
     }
 
     /// Zero-velocity update: the true velocity is zero, measured with 1-sigma `sigma` (m/s).

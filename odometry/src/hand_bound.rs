@@ -44,7 +44,7 @@
 
 use nalgebra::Vector3;
 
-use crate::eskf::Eskf;
+use crate::eskf::{Eskf, P};
 
 /// 1-sigma per axis of a hand's or an arm's velocity about zero, m/s (module documentation).
 pub const HAND_SPEED_SIGMA_MPS: f64 = 1.0;
@@ -76,7 +76,7 @@ pub struct HandBound {
 
 /// The filter's position (m) and its variance per axis (m^2), as of its last propagation.
 fn position_of(kf: &Eskf) -> (Vector3<f64>, Vector3<f64>) {
-    (kf.x.p, kf.cov.fixed_view::<3, 3>(0, 0).diagonal())
+    (kf.x.p, kf.cov.fixed_view::<3, 3>(P, P).diagonal())
 }
 
 /// The variance of a position measurement that takes the variance `pp` (m^2) of one axis to
