@@ -123,7 +123,8 @@ fn a_segmented_run_streams_to_the_single_files_result() {
 
 /// `--out` writes the run as a live run's recording: the raw samples and hints read, one
 /// corrected sample per raw sample, a state per sample (revisions besides), each live state
-/// with its pose, and the last live state is the one the report gives. An existing file is refused
+/// with its pose, the last live state is the one the report gives and the report's track is the
+/// live states' positions every 100 ms. An existing file is refused
 /// unless `--force`.
 #[test]
 fn offline_writes_its_run_as_a_recording() {
@@ -181,6 +182,42 @@ fn offline_writes_its_run_as_a_recording() {
         .map(|v| quantum::recorded(v.as_f64().unwrap(), quantum::POSITION_M))
         .collect();
     assert_eq!(reported, end.position_m);
+    // The report's track: the aligned live states thinned to one per 100 ms of sample time
+    // from the first, times from the first sample.
+    let first_ns = raw[0].stamps.sample_ns;
+    let mut expected = Vec::new();
+    for s in live
+        .iter()
+        .filter(|s| s.flags & ipc_types::odometry_flags::ALIGNED != 0)
+    {
+        if expected
+            .last()
+            .is_none_or(|&(t, _)| s.stamps.sample_ns >= t + 100_000_000)
+        {
+            expected.push((s.stamps.sample_ns, s.position_m));
+        }
+    }
+    let track = report["track"].as_array().unwrap();
+    assert!(track.len() > 100, "{}", track.len());
+    assert_eq!(track.len(), expected.len());
+    for (point, (t_ns, p)) in track.iter().zip(&expected) {
+        let v: Vec<f64> = point
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        assert!(
+            (v[0] - (t_ns - first_ns) as f64 * 1e-9).abs() < 1e-9,
+            "{point}"
+        );
+        let recorded: Vec<f64> = v[1..]
+            .iter()
+            .map(|&x| quantum::recorded(x, quantum::POSITION_M))
+            .collect();
+        assert_eq!(recorded, p, "{point}");
+    }
+    assert_eq!(track[0][0], report["aligned_at_s"], "{report}");
 
     let refused = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
         .args(["offline", "--input"])

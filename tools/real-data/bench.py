@@ -15,7 +15,10 @@ alignment):
   that interval.
 - % of distance: end error over the true distance (our own estimated distance, marked *, where
   the source publishes none). A truth given as a track on the recording's clock (a particle
-  filter's poses, a robot's GNSS fixes) counts from the pose at our alignment, distance included.
+  filter's poses, a robot's GNSS fixes) counts from the pose at our alignment, distance included;
+  where it has no heading of its own, it is turned into our frame by the rotation that best
+  maps its first ALIGN_PATH_M metres onto our track (the JSON's `track`) at the same times, and
+  the error is then one figure, not an interval.
 - 1-sigma: sqrt((sx^2 + sy^2) / 2) of the reported position sigma (per-axis rms).
 - covered: error <= r68 = 1.515 * sqrt((sx^2 + sy^2) / 2), the radius holding 68 % of a circular
   2-D Gaussian with that per-axis sigma (r = sigma sqrt(-2 ln 0.32) = 1.5096 sigma; 1.515 is
@@ -208,6 +211,66 @@ def track_length(track, t_s, min_step=TRACK_MIN_STEP_M):
     return walked
 
 
+ALIGN_PATH_M = 10.0
+CHECK_PATH_M = 20.0
+
+
+def track_heading(truth, ours, t0, path_m):
+    """The heading change (rad) that turns the truth track's displacements from its pose at
+    our alignment (time t0, s) onto our track's at the same times, over the truth's first
+    `path_m` metres of path: the least-squares rotation in the plane, atan2(sum t x o,
+    sum t . o) (a yaw-only alignment of the first poses, as in Zhang and Scaramuzza, "A
+    Tutorial on Quantitative Trajectory Evaluation for Visual(-Inertial) Odometry", IROS 2018,
+    sec. IV: an IMU alone cannot know its heading, so only the first stretch fixes it). None
+    when either track ends before that much path or the stretch's end lies less than half of
+    it from its start (a turn on the spot tells no direction)."""
+    start = track_at(truth["track"], t0)
+    min_step = truth.get("track_min_step_m", TRACK_MIN_STEP_M)
+    ours_xy = [p[:3] for p in ours]
+    cross = dot = walked = 0.0
+    last = start
+    for q in truth["track"]:
+        if q[0] <= t0:
+            continue
+        if q[0] > ours[-1][0]:
+            return None
+        step = math.dist(q[1:3], last)
+        if step >= min_step:
+            walked += step
+            last = q[1:3]
+        t = (q[1] - start[0], q[2] - start[1])
+        o = track_at(ours_xy, q[0])
+        cross += t[0] * o[1] - t[1] * o[0]
+        dot += t[0] * o[0] + t[1] * o[1]
+        if walked >= path_m:
+            return math.atan2(cross, dot) if math.hypot(*t) >= 0.5 * path_m else None
+    return None
+
+
+def track_in_our_frame(truth, out):
+    """The truth track's end, from its pose at our alignment, turned into our frame by
+    [`track_heading`] over ALIGN_PATH_M of path; None (the distance-only truth then applies)
+    when our JSON has no track or the stretch tells no heading. The poses are paired with ours
+    by time on the recording's one clock, so unlike the footprints (paired by distance) no
+    check on a longer stretch refuses it: a heading that differs there is our own drift, which
+    the end error must show. The same over CHECK_PATH_M is reported beside it."""
+    ours, t0 = out.get("track"), out.get("aligned_at_s")
+    if not truth.get("track") or not ours or t0 is None:
+        return None
+    yaw = track_heading(truth, ours, t0, ALIGN_PATH_M)
+    if yaw is None:
+        return None
+    check = track_heading(truth, ours, t0, CHECK_PATH_M)
+    start, end = track_at(truth["track"], t0), truth["track"][-1][1:3]
+    x, y = end[0] - start[0], end[1] - start[1]
+    c, s = math.cos(yaw), math.sin(yaw)
+    return {
+        "yaw_deg": math.degrees(yaw),
+        "check_disagreement_deg": None if check is None else math.degrees(math.remainder(yaw - check, 2 * math.pi)),
+        "end_m": [c * x - s * y, s * x + c * y],
+    }
+
+
 def evaluate(side, out):
     """The row's figures from the sidecar (truth) and the odometry's JSON."""
     p = out["end_displacement_m"]
@@ -215,6 +278,7 @@ def evaluate(side, out):
     sigma_h = math.sqrt((s[0] ** 2 + s[1] ** 2) / 2)
     r68 = R68_FACTOR * sigma_h
     truth = side["truth"]
+    turned = None
     t_vec = truth.get("end_displacement_m")
     if truth.get("frame") in ("any", "nav") and t_vec is not None:
         err = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
@@ -232,6 +296,9 @@ def evaluate(side, out):
             dx, dy = end[0] - start[0], end[1] - start[1]
             c, s_ = math.cos(psi), math.sin(psi)
             t_vec = [c * dx + s_ * dy, -s_ * dx + c * dy]
+            lo = hi = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
+        elif (turned := track_in_our_frame(truth, out)) is not None:
+            t_vec = turned["end_m"]
             lo = hi = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
         else:
             t = math.dist(start, end)
@@ -272,7 +339,7 @@ def evaluate(side, out):
         "sigma_h_m": sigma_h,
         "r68_m": r68,
         "covered": covered,
-        "truth_turned": turned if truth.get("kind") == "gcp" else None,
+        "truth_turned": turned,
     }
 
 
@@ -553,7 +620,48 @@ def finite(value):
     return value
 
 
+def self_test():
+    """The track's turn into our frame on made-up tracks: ours is the truth turned by a known
+    yaw (about our alignment's pose, with our track sampled at other times than the truth's),
+    plus a slow heading drift of ours; the turn found over the first ALIGN_PATH_M must be the
+    known yaw, and the end error the drift's alone."""
+    yaw = math.radians(130.0)
+
+    def truth_xy(t):
+        # 1 m/s east, then a left arc: a path, not a line.
+        return (t, 0.0) if t < 20 else (20 + 10 * math.sin((t - 20) / 10), 10 - 10 * math.cos((t - 20) / 10))
+
+    t0 = 2.0
+    truth = {"track": [[0.1 * k, *truth_xy(0.1 * k)] for k in range(600)], "track_min_step_m": 0.1}
+    drift = math.radians(0.05)  # ours turns 0.05 deg per s on top
+
+    def ours_at(t):
+        x, y = truth_xy(t)
+        x0, y0 = truth_xy(t0)
+        a = yaw + drift * (t - t0)
+        c, s_ = math.cos(a), math.sin(a)
+        return [c * (x - x0) - s_ * (y - y0), s_ * (x - x0) + c * (y - y0)]
+
+    ours = [[t0 + 0.1 * k + 0.03, *ours_at(t0 + 0.1 * k + 0.03), 0.0] for k in range(575)]
+    got = track_heading(truth, ours, t0, ALIGN_PATH_M)
+    assert abs(math.degrees(got - yaw)) < 0.5, math.degrees(got)
+    out = {"track": ours, "aligned_at_s": t0, "end_displacement_m": ours[-1][1:3] + [0.0],
+           "sigma_m": [1.0, 1.0, 1.0]}
+    row = evaluate({"truth": truth}, out)
+    lo, hi = row["error_m"]
+    assert lo == hi, row["error_m"]
+    # The drift's share: the end turned by drift * (t_end - t0 - the stretch's mean time) about
+    # the start; bounded above by turning it by the whole drift.
+    end = math.dist(truth_xy(59.9), truth_xy(t0))
+    assert 0.0 < hi < end * drift * (59.9 - t0), (hi, end)
+    assert track_heading(truth, ours[:50], t0, ALIGN_PATH_M) is None, "ours ends before 10 m"
+    print("bench.py self-test: ok (track turned into our frame)")
+
+
 def main():
+    if "--self-test" in sys.argv[1:]:
+        self_test()
+        return
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--bin", default=str(REPO / "target" / "release" / "mems-odometry"), help="mems-odometry binary")
     p.add_argument("--calib", help="calibration TOML for every run (default: an identity calibration written to a temporary file)")
@@ -561,6 +669,7 @@ def main():
     p.add_argument("--only", action="append", metavar="ID", help="run only this recording (repeatable)")
     p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
     p.add_argument("--timeout", type=float, default=900.0, help="per-run limit, s")
+    p.add_argument("--self-test", action="store_true", help="check the track's turn into our frame on made-up tracks (no data) and exit")
     p.add_argument("--loso", action="store_true", help="also tune corpus.json's `tuning` flags per platform class, in sample and leaving each source out, and print both")
     args = p.parse_args()
 

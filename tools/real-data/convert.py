@@ -438,17 +438,43 @@ def gnss_track_truth(fixes, where):
 
 
 RTK_TRACK_MIN_STEP_M = 0.1
+# The synchronised slice's IMU samples per RTK position: 120 Hz against 10 Hz (the MoRPINet
+# README's rates).
+SYNC_SAMPLES_PER_FIX = 12
+# How closely the slice's gyro magnitudes must equal the raw samples' to be the same samples,
+# deg/s: the slice is the raw export turned into the car's axes (a rotation keeps the
+# magnitude), so they agree to rounding.
+SYNC_MATCH_DPS = 1e-6
 
 
-def rtk_ned_truth(buf, where):
+def sync_offset(samples, sync, where):
+    """The index of the converted sample (t_s, accel g, gyro deg/s) where the authors'
+    synchronised IMU slice (an N x 6 .npy: accelerometer m/s^2, gyro deg/s, in the car's axes)
+    starts: where every one of the slice's gyro magnitudes equals the raw samples' to within
+    SYNC_MATCH_DPS. ConvertError naming the file when no offset or more than one does."""
+    raw = [math.sqrt(q[4] ** 2 + q[5] ** 2 + q[6] ** 2) for q in samples]
+    ours = [math.sqrt(r[3] ** 2 + r[4] ** 2 + r[5] ** 2) for r in sync]
+    found = [off for off in range(len(raw) - len(ours) + 1)
+             if all(abs(raw[off + k] - ours[k]) <= SYNC_MATCH_DPS for k in range(len(ours)))]
+    if len(found) != 1:
+        raise ConvertError(where, None, "gyro", f"the slice's {len(ours)} gyro magnitudes match the raw samples at {len(found)} offsets, not one")
+    return found[0]
+
+
+def rtk_ned_truth(buf, where, times=None):
     """RTK positions as a .npy N x 3 array (north, east, down in m, relative to the start):
     the last position's horizontal distance from the first and the track's length over steps
-    of at least 0.1 m. The heading is not ours, so only the distance is a truth."""
+    of at least 0.1 m. With `times` (one per position, s, on the recording's clock) the track
+    too (`track`: [t_s, east, north], a right-handed plane with z up), so that bench.py can
+    measure from the position at the odometry's alignment; without, only the distance is a
+    truth (the heading is not ours)."""
     ned = read_npy(buf, where)
     if len(ned) < 2 or len(ned[0]) != 3:
         raise ConvertError(where, None, "shape", f"expected N x 3 (north, east, down) with N >= 2, got {len(ned)} x {len(ned[0]) if ned else 0}")
+    if times is not None and len(times) != len(ned):
+        raise ConvertError(where, None, "shape", f"{len(ned)} positions for {len(times)} times")
     end = [ned[-1][k] - ned[0][k] for k in range(3)]
-    return {
+    truth = {
         "kind": "rtk_endpoints",
         "frame": "unknown_heading",
         "end_displacement_m": None,
@@ -456,7 +482,15 @@ def rtk_ned_truth(buf, where):
         "end_displacement_ned_m": end,
         "positions": len(ned),
         "source": "RTK positions (north, east, down): the last minus the first; the odometry's heading is fixed at its alignment, not north, so only the distance is a truth",
-    }, _path_length([p[:2] for p in ned], RTK_TRACK_MIN_STEP_M)
+    }
+    if times is not None:
+        truth.update({
+            "kind": "rtk_track",
+            "track": [[round(t, 6), round(q[1] - ned[0][1], 4), round(q[0] - ned[0][0], 4)] for t, q in zip(times, ned)],
+            "track_min_step_m": RTK_TRACK_MIN_STEP_M,
+            "source": "RTK positions (north, east, down) on the IMU's clock: the authors' synchronised IMU slice (syncdata/imu) found in the raw export by its gyro magnitudes, 12 samples per position; bench.py measures from the position at the odometry's alignment and turns the track onto ours",
+        })
+    return truth, _path_length([p[:2] for p in ned], RTK_TRACK_MIN_STEP_M)
 
 
 def pf_pose_truth(text, where, t0_ns):
@@ -567,7 +601,15 @@ def _load_xsens_dot(rec, source, f):
 
 
 def _load_xsens_dot_rtk(rec, source, f):
-    return (*parse_xsens_dot_csv(f.text(0), f.where(0)), *rtk_ned_truth(f.raw(1), f.where(1)), None)
+    samples, notes = parse_xsens_dot_csv(f.text(0), f.where(0))
+    sync = read_npy(f.raw(2), f.where(2))
+    off = sync_offset(samples, sync, f.where(2))
+    n = len(sync) // SYNC_SAMPLES_PER_FIX
+    if off + (n - 1) * SYNC_SAMPLES_PER_FIX >= len(samples):
+        raise ConvertError(f.where(2), None, "shape", "the slice runs past the raw samples")
+    times = [samples[off + k * SYNC_SAMPLES_PER_FIX][0] for k in range(n)]
+    notes.append(f"RTK positions timed by the synchronised slice, found at sample {off} ({times[0]:.3f} s)")
+    return (samples, notes, *rtk_ned_truth(f.raw(1), f.where(1), times), None)
 
 
 def _load_broad(rec, source, f):
@@ -892,6 +934,14 @@ def _test_rtk_npy():
     _close(truth["end_distance_m"], 5.0)
     _close(walked, 5.0)
     _expect_error(lambda: rtk_ned_truth(npy_bytes([[0.0, 0.0], [1.0, 1.0]]), "n.npy"), "n.npy", "'shape'", "N x 3")
+    # Timed: the track in east/north about the first position.
+    truth, _ = rtk_ned_truth(npy_bytes([[1.0, 2.0, 0.0], [4.0, 6.0, 0.0]]), "n.npy", [10.0, 10.1])
+    assert truth["kind"] == "rtk_track" and truth["track"] == [[10.0, 0.0, 0.0], [10.1, 4.0, 3.0]], truth
+    # The slice: the raw gyro turned by 90 deg about z (magnitudes kept), starting at sample 3.
+    raw = [(0.01 * k, 0.0, 0.0, 1.0, math.sin(k), math.cos(2 * k), 0.1 * k) for k in range(40)]
+    sync = [[0.0, 0.0, 9.8, -q[5], q[4], q[6]] for q in raw[3:27]]
+    assert sync_offset(raw, sync, "s.npy") == 3
+    _expect_error(lambda: sync_offset(raw, [[0.0, 0.0, 9.8, 5.0, 5.0, 5.0]] * 4, "s.npy"), "s.npy", "'gyro'", "0 offsets")
 
 
 def self_test():

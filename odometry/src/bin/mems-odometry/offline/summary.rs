@@ -66,6 +66,10 @@ impl TruthFrame {
     }
 }
 
+/// Sample time between two points of the reported track, ns (10 Hz: a car at 30 m/s moves
+/// 3 m between them, fine enough to turn a reference track onto ours over its first metres).
+const TRACK_PERIOD_NS: u64 = 100_000_000;
+
 /// What the run's report gathers from the odometry states.
 #[derive(Default)]
 pub struct Summary {
@@ -79,6 +83,9 @@ pub struct Summary {
     /// it), or a new sensor session started; it waits for another rest.
     withdrawn: Vec<(u64, u64)>,
     rests: Vec<serde_json::Value>,
+    /// Our position every [`TRACK_PERIOD_NS`] of sample time from the alignment on: (sample
+    /// time ns, position m).
+    track: Vec<(u64, [f64; 3])>,
     frame: Option<TruthFrame>,
     rest_errors: Vec<serde_json::Value>,
     truth_distance: f64,
@@ -110,6 +117,15 @@ impl Summary {
         self.vibrating_stop += u64::from(state.flags & odometry_flags::VIBRATING_STOP != 0);
         self.nonholonomic_rejected +=
             u64::from(state.flags & odometry_flags::NONHOLONOMIC_REJECTED != 0);
+        let t_ns = state.stamps.sample_ns;
+        if state.flags & odometry_flags::ALIGNED != 0
+            && self
+                .track
+                .last()
+                .is_none_or(|&(last, _)| t_ns >= last + TRACK_PERIOD_NS)
+        {
+            self.track.push((t_ns, state.position_m));
+        }
         let new_rest = self.last.is_some_and(|l| state.rest_count > l.rest_count);
         if new_rest {
             self.rests.push(json!({
@@ -148,6 +164,7 @@ impl Summary {
             self.frame = None;
             self.truth_distance = 0.0;
             self.rests.clear();
+            self.track.clear();
             self.rest_errors.clear();
         }
     }
@@ -296,6 +313,12 @@ impl Summary {
     ) -> serde_json::Value {
         let stats = chain.second.hint_stats();
         let chain_axes = chain.second.stage().axes();
+        let first_ns = read.first_ns.unwrap_or(0);
+        let track: Vec<[f64; 4]> = self
+            .track
+            .iter()
+            .map(|&(t, [x, y, z])| [t.saturating_sub(first_ns) as f64 * 1e-9, x, y, z])
+            .collect();
         let mut result = json!({
             "end_displacement_m": end.position_m,
             "sigma_m": end.position_sigma_m,
@@ -304,6 +327,7 @@ impl Summary {
             "truth_distance_m": truth_error.map(|_| self.truth_distance),
             "rest_intervals": self.rest_errors,
             "rests": self.rests,
+            "track": track,
             "seq": end.seq,
             "aligned_at_s": aligned_at_s,
             "log_repairs": {
