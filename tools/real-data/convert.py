@@ -342,35 +342,87 @@ def local_east_north(fixes):
             for lat, lon in fixes]
 
 
-def gnss_truth(text, where):
-    """RTK GNSS log: the last fix relative to the first (local east/north) and the track length."""
+# The WID GNSS log's rows come at 100 Hz (its `Timestamp` steps 0.1 per row): the MRU-P's own
+# gyro rows correlate best with the car's IMU at 100.0-100.1 Hz of 99-101 Hz searched.
+GNSS_ROW_HZ = 100.0
+SYNC_BIN_S = 0.02  # bins of the gyro magnitudes correlated to time the GNSS log, s
+SYNC_SMOOTH_S = 0.5  # their boxcar: the two IMUs' vibration differs, their turns do not
+SYNC_MAX_LAG_S = 5.0  # the two logs start within seconds (their durations agree to 4 s)
+SYNC_MIN_R = 0.8  # the correlation below which no offset is taken
+
+
+def _smoothed_bins(times, values, n_bins):
+    """Mean of `values` per SYNC_BIN_S bin (None where a bin holds none), then a SYNC_SMOOTH_S
+    boxcar over the bins that hold some."""
+    sums, counts = [0.0] * n_bins, [0] * n_bins
+    for t, v in zip(times, values):
+        k = int(t // SYNC_BIN_S)
+        if 0 <= k < n_bins:
+            sums[k] += v
+            counts[k] += 1
+    means = [s_ / c if c else None for s_, c in zip(sums, counts)]
+    half = int(SYNC_SMOOTH_S / SYNC_BIN_S) // 2
+    out = []
+    for k in range(n_bins):
+        window = [m for m in means[max(0, k - half) : k + half + 1] if m is not None]
+        out.append(sum(window) / len(window) if means[k] is not None else None)
+    return out
+
+
+def gnss_clock_offset(samples, gnss_gyro, where):
+    """(offset s, r): the car IMU's time of the GNSS log's first row, to a bin, the lag (SYNC_BIN_S steps
+    within SYNC_MAX_LAG_S) where the GNSS unit's gyro magnitude (rows at GNSS_ROW_HZ) best
+    correlates (r) with the car samples' (t_s, accel g, gyro deg/s), both averaged per bin and
+    smoothed (a rotation between the two units does not change a magnitude). ConvertError
+    naming the file if no lag reaches SYNC_MIN_R."""
+    n_lag = int(round(SYNC_MAX_LAG_S / SYNC_BIN_S))
+    span = max(samples[-1][0], len(gnss_gyro) / GNSS_ROW_HZ) + 2 * SYNC_MAX_LAG_S
+    n_bins = int(span / SYNC_BIN_S) + 1
+    # Both series start SYNC_MAX_LAG_S into the bins so that any lag keeps them inside.
+    car = _smoothed_bins([q[0] + SYNC_MAX_LAG_S for q in samples],
+                         [math.sqrt(q[4] ** 2 + q[5] ** 2 + q[6] ** 2) for q in samples], n_bins)
+    gnss = _smoothed_bins([k / GNSS_ROW_HZ + SYNC_MAX_LAG_S for k in range(len(gnss_gyro))], gnss_gyro, n_bins)
+    best = None
+    for lag in range(-n_lag, n_lag + 1):
+        shifted = [gnss[k - lag] if 0 <= k - lag < n_bins else None for k in range(n_bins)]
+        r = navego._correlation(car, shifted)
+        if r is not None and (best is None or r > best[1]):
+            best = (lag * SYNC_BIN_S, r)
+    if best is None or best[1] < SYNC_MIN_R:
+        raise ConvertError(where, None, "Gyro_X", f"no clock offset within {SYNC_MAX_LAG_S} s correlates the two IMUs' rates (best {best})")
+    return best
+
+
+def gnss_truth(text, where, samples):
+    """RTK GNSS log: the last fix relative to the first (local east/north), the track on the
+    car samples' clock (`track`: [t_s, east, north], the rows timed by [`gnss_clock_offset`])
+    and the track's length."""
     lines = _lines(text)
     header = lines[0].split(",")
-    idx = _header_index(header, {"lat": "Lat_GNSS", "lon": "Long_GNSS"}, where, 1)
-    fixes = []
+    names = {"lat": "Lat_GNSS", "lon": "Long_GNSS", "gx": "Gyro_X", "gy": "Gyro_Y", "gz": "Gyro_Z"}
+    idx = _header_index(header, names, where, 1)
+    fixes, gyro = [], []
     for ln, cells in _rows(lines, 1, where, len(header)):
         fixes.append((number(cells[idx["lat"]], where, ln, "Lat_GNSS"), number(cells[idx["lon"]], where, ln, "Long_GNSS")))
+        gyro.append(math.sqrt(sum(number(cells[idx[k]], where, ln, names[k]) ** 2 for k in ("gx", "gy", "gz"))))
     if len(fixes) < 2:
         raise ConvertError(where, None, None, "fewer than two fixes")
+    offset, r = gnss_clock_offset(samples, gyro, where)
     points = local_east_north(fixes)
-    # Track length over points at least 0.5 m apart, so that fix noise at standstill
-    # (1e-7 degree steps) does not add length.
-    walked, last = 0.0, points[0]
-    for p in points[1:]:
-        step = math.dist(p, last)
-        if step >= 0.5:
-            walked += step
-            last = p
     end = list(points[-1])
     return {
-        "kind": "gnss_endpoints",
+        "kind": "gnss_track",
         "frame": "unknown_heading",
         "end_displacement_m": None,
         "end_distance_m": math.hypot(*end),
         "end_displacement_enu_m": end,
         "fixes": len(fixes),
-        "source": "GNSS.csv: last fix minus first fix (east, north); the odometry's heading is fixed at its alignment, not north, so only the distance is a truth",
-    }, walked
+        "clock_offset_s": round(offset, 3),
+        "clock_offset_r": round(r, 3),
+        "track": [[round(k / GNSS_ROW_HZ + offset, 4), round(e, 4), round(n, 4)] for k, (e, n) in enumerate(points)],
+        "track_min_step_m": GNSS_TRACK_MIN_STEP_M,
+        "source": "GNSS.csv (RTK, local east/north about the first fix), rows at 100 Hz on the car IMU's clock shifted by clock_offset_s (measured from the two units' gyro magnitudes, convert.py); bench.py measures from the fix at the odometry's alignment and turns the track onto ours",
+    }, _path_length(points, GNSS_TRACK_MIN_STEP_M)
 
 
 def _path_length(points, min_step):
@@ -597,7 +649,8 @@ def _load_sensorconnect(rec, source, f):
 
 
 def _load_xsens_dot(rec, source, f):
-    return (*parse_xsens_dot_csv(f.text(0), f.where(0)), *gnss_truth(f.text(1), f.where(1)), None)
+    samples, notes = parse_xsens_dot_csv(f.text(0), f.where(0))
+    return (samples, notes, *gnss_truth(f.text(1), f.where(1), samples), None)
 
 
 def _load_xsens_dot_rtk(rec, source, f):
@@ -836,11 +889,24 @@ def _test_mat_formats():
     # 0.001 degree of latitude north: an independent figure for the local tangent plane, the
     # length of a degree of latitude 111132.954 - 559.822 cos(2 phi) + 1.175 cos(4 phi) m
     # (the standard WGS-84 series), 111131.779 m at 45 N.
-    gnss = "Timestamp,Lat_GNSS,Long_GNSS\n0,45.0,10.0\n0.1,45.001,10.0\n0.2,45.001,10.0\n"
-    truth, walked = gnss_truth(gnss, "n.csv")
+    # The GNSS unit's gyro rows (100 Hz) turn as the car's samples (120 Hz) do, 0.6 s earlier on
+    # the car's clock: the track's first row is timed at 0.6 s.
+    def turning(t):
+        return 5 + 4 * math.sin(1.3 * t) + 2 * math.sin(2.9 * t + 0.05 * t * t)
+
+    car = [(k / 120, 0.0, 0.0, 1.0, turning(k / 120 - 0.6), 0.0, 0.0) for k in range(1200)]
+    rows = [f"{k / 10},{45.0 if k == 0 else 45.001},10.0,0,{turning(k / 100) * 0.6},{turning(k / 100) * 0.8}"
+            for k in range(1000)]
+    gnss = "Timestamp,Lat_GNSS,Long_GNSS,Gyro_X,Gyro_Y,Gyro_Z\n" + "\n".join(rows) + "\n"
+    truth, walked = gnss_truth(gnss, "n.csv", car)
     _close(truth["end_distance_m"], 0.001 * (111132.954 - 1.175), 1e-6)
     _close(walked, truth["end_distance_m"])
-    _expect_error(lambda: gnss_truth(gnss + "0.3,north,10\n", "n.csv"), "n.csv", "line 5", "Lat_GNSS")
+    # To a bin: the bins' mean times differ by up to one between 100 and 120 Hz rows.
+    assert abs(truth["clock_offset_s"] - 0.6) <= SYNC_BIN_S + 1e-9, truth["clock_offset_s"]
+    _close(truth["track"][1][0] - truth["track"][0][0], 0.01, 1e-9)
+    _expect_error(lambda: gnss_truth(gnss + "10,north,10,0,0,0\n", "n.csv", car), "n.csv", "line 1002", "Lat_GNSS")
+    still = [(q[0], 0.0, 0.0, 1.0, 0.0, 0.0, 0.0) for q in car]
+    _expect_error(lambda: gnss_truth(gnss, "n.csv", still), "n.csv", "Gyro_X", "no clock offset")
 
     # BROAD: column-major N x 3 arrays; opt_pos with an unseen (NaN) first row; closes within 2 mm.
     nan = float("nan")
