@@ -244,3 +244,55 @@ fn displayed<'a>(states: impl Iterator<Item = &'a OdometryState>) -> Vec<&'a Odo
         })
         .collect()
 }
+
+/// A run the session refuses midway (robot hints published far ahead of the samples they
+/// precede, more than the session's hint queue holds) ends with that refusal as the error and a
+/// non-zero exit, instead of waiting on the reader thread still streaming the rest of the file.
+#[test]
+fn a_refused_streamed_run_fails_instead_of_hanging() {
+    let dir = std::env::temp_dir().join(format!("offline-refused-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let ahead_ns = 1_000_000_000_000;
+    let messages: Vec<Message> = drive()
+        .into_iter()
+        .map(|m| match m {
+            Message::Hint(mut h) => {
+                h.stamps.sample_ns += ahead_ns;
+                h.stamps.acquired_ns += ahead_ns;
+                Message::Hint(h)
+            }
+            raw => raw,
+        })
+        .collect();
+    let hints = messages
+        .iter()
+        .filter(|m| matches!(m, Message::Hint(_)))
+        .count();
+    assert!(hints > odometry::session::HINT_QUEUE, "{hints} hints");
+    let input = dir.join("ahead.mcap");
+    write(&input, 0, &messages);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
+        .args(["offline", "--json", "--input"])
+        .arg(&input)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // A generous bound: the run takes well under a second; a hang is the failure looked for.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(300);
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if std::time::Instant::now() > deadline {
+            child.kill().unwrap();
+            panic!("mems-odometry offline still runs after 300 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(!status.success(), "{err}");
+    assert!(err.contains("hints already wait"), "{err}");
+}

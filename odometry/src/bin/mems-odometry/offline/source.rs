@@ -149,13 +149,18 @@ impl Source {
         }
     }
 
-    /// The files a streamed run was read from (after its end), each with its truncation.
+    /// The files a streamed run was read from, each with its truncation. A run stopped before
+    /// the end of its file (a refusal) closes the channel first: the reader, blocked on a full
+    /// channel, then stops and returns what it read instead of waiting for a receiver forever.
     pub fn segments(&mut self) -> Vec<SegmentRead> {
         match self {
-            Self::Stream { reader, .. } => reader
-                .take()
-                .and_then(|r| r.join().ok())
-                .unwrap_or_default(),
+            Self::Stream { reader, blocks, .. } => {
+                drop(std::mem::replace(blocks, sync_channel(0).1));
+                reader
+                    .take()
+                    .and_then(|r| r.join().ok())
+                    .unwrap_or_default()
+            }
             Self::Memory(_) => Vec::new(),
         }
     }
