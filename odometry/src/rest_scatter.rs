@@ -67,8 +67,8 @@ impl RestScatter {
         }
     }
 
-    /// The per-sample standard deviation the zero-rate update takes under `cfg`, rad/s: [`Self::sd`]
-    /// where `cfg.rest_rate_scatter` says the platform's rests may shake, else 0.
+    /// The per-sample standard deviation the zero-rate update takes under `cfg`, rad/s:
+    /// [`Self::sd`] where `cfg.rest_rate_scatter` says the platform's rests may shake, else 0.
     pub fn taken_sd(&self, cfg: &crate::config::OdometryConfig) -> f64 {
         if cfg.rest_rate_scatter {
             self.sd()

@@ -774,8 +774,8 @@ fn checked(level: f64, model: VibrationModel) -> anyhow::Result<VibrationModel> 
     }
     model.validate().map_err(|e| {
         anyhow::anyhow!(
-            "--vibration-floor, --engine-idle, --engine-start, --engine-idle-gyro, --engine-start-gyro or \
-             --road: {e}"
+            "--vibration-floor, --engine-idle, --engine-start, --engine-idle-gyro, \
+             --engine-start-gyro or --road: {e}"
         )
     })?;
     Ok(model)
