@@ -153,6 +153,10 @@ pub struct OdometryConfig {
     /// A sensor moved by a hand or an arm: 1-sigma of the velocity bound made while it moves
     /// (`crate::hand_bound`), m/s per axis. 0: off.
     pub hand_speed_sigma_mps: f64,
+    /// Whether the zero-rate update's per-sample sigma is at least the rests' own rate scatter
+    /// ([`crate::rest_scatter`]): a wheeled platform's, and any platform's before it is known
+    /// (`--profile auto` until it recognizes one).
+    pub rest_rate_scatter: bool,
 }
 
 impl OdometryConfig {
@@ -204,6 +208,7 @@ impl OdometryConfig {
             consistency: ConsistencyConfig::default(),
             walking: None,
             hand_speed_sigma_mps: 0.0,
+            rest_rate_scatter: false,
         }
     }
 

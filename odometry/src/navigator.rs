@@ -669,8 +669,8 @@ impl Navigator {
     /// reaches `OdometryConfig::rest_window_drift` of `sigma^2 / n`. The zero-rate update
     /// takes the mean of the window's gyro readings with the noise density over the square
     /// root of their span (the gyro bias is constant over the window: the mean of the `n`
-    /// readings is what they tell of it), on a wheeled platform at least the rests' shake over
-    /// `sqrt(n)` (`crate::rest_scatter`). Tested in `odometry/tests/rest_window.rs`.
+    /// readings is what they tell of it), on a wheeled or not yet recognized platform at least
+    /// the rests' shake over `sqrt(n)` (`crate::rest_scatter`; `odometry/tests/rest_window.rs`).
     fn rest_updates(&mut self) {
         let w = std::mem::take(&mut self.rest_window);
         if w.n == 0 {
@@ -683,7 +683,7 @@ impl Navigator {
         let removed = [v0.x - kf.x.v.x, v0.y - kf.x.v.y];
         self.consistency
             .rest_window(kf, w.t_ns, nis, w.t_s, removed);
-        let shake = self.nhc.as_ref().map_or(0.0, |_| self.rest_scatter.sd());
+        let shake = self.rest_scatter.taken_sd(&self.cfg);
         let gyro_sigma = (self.cfg.noise.gyro_noise_density / w.t_s.sqrt()).max(shake / n.sqrt());
         kf.zero_rate(w.w_sum / n, gyro_sigma, self.cfg.zaru_gate_sigma);
         // (Hand-held walking's position is the walk's, not the filter's: nothing to revise.)

@@ -166,6 +166,9 @@ impl Profile {
         // A wheel glides through what a detector may take for rest; a foot and a walker's
         // hand cannot (`consistency`'s false rests).
         config.consistency.false_rest_glides = !matches!(self, Self::Pedestrian | Self::Walking);
+        // A wheeled platform's rests shake with its engine or motors, and until the platform
+        // is known a rest may be a car idling (`crate::rest_scatter`).
+        config.rest_rate_scatter = matches!(self, Self::Auto | Self::Vehicle);
         if self == Self::Vehicle {
             config.imu_nonholonomic_sigma_mps = WHEELED_NONHOLONOMIC_SIGMA_MPS;
             config.rest_vibration_factor = WHEELED_REST_VIBRATION_FACTOR;

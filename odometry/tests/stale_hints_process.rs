@@ -159,9 +159,11 @@ fn serve_falls_back_when_hints_stop_and_resumes_without_a_gap() {
     }
     // The same stage in this process, fed the same way, gives the same states bit for bit.
     // The process's profile (auto, then a robot's) counts a false rest's glide in the
-    // published 1-sigma (`ConsistencyConfig::false_rest_glides`); so does this stage.
+    // published 1-sigma (`ConsistencyConfig::false_rest_glides`) and takes the rests' rate
+    // scatter in the zero-rate update (`OdometryConfig::rest_rate_scatter`); so does this stage.
     let mut cfg = OdometryConfig::mpu9250(G_MPS2);
     cfg.consistency.false_rest_glides = true;
+    cfg.rest_rate_scatter = true;
     let local = run_with_hints(cfg, HintConfig::default(), &samples, &hints).states;
     for (a, b) in states.iter().zip(&local) {
         let mut a = *a;

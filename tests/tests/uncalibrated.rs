@@ -24,6 +24,9 @@
 //! An offset of 0.15 g on x alone reads gravity within a calibrated part's 2 %: declared
 //! (`--uncalibrated`), it is run as an uncalibrated part and covered.
 //!
+//! A car standing with its engine shaking the gyroscope before the platform is known: the
+//! attitude stays put (the zero-rate update takes the rests' own scatter as its sigma).
+//!
 //! A hand-held part set down at 14 attitudes: the per-axis scale and bias its rests determine
 //! (`odometry::attitudes`), applied by the offline second pass.
 
@@ -443,4 +446,66 @@ fn a_live_part_without_a_calibration_file_is_flagged_and_its_bias_reported() {
         summary.contains("1 rest attitude") && summary.contains("no per-axis scale"),
         "mems-odometry serve's summary: {summary}"
     );
+}
+
+/// A car standing with its engine running, the uncalibrated part on its body
+/// (`mems-sim drive --engine-start 0.3 --engine-start-gyro 0.45`: 0.3 m/s^2 and 0.45 deg/s
+/// RMS per axis at 23 Hz and its double, zero-mean, as wid-car-06 standing before its drive,
+/// tools/sim/src/vibration.rs), run with no flags (`--profile auto`: the platform is not yet
+/// known). Nothing turns the car: the attitude the filter holds stays within `BOUND_DEG` from
+/// 8 s to the end of the 20 s (before, the alignment's tilt still settles: by up to 1.4 deg
+/// on seed 2 between 5 and 6 s, not this test's matter). With the datasheet's sigma the
+/// zero-rate update, gated at 5 of its 0.11 deg/s per sample against a shake of 0.45, takes
+/// only the samples near the bias it already holds and walks that bias away from the
+/// readings' zero mean; the uncalibrated prior lets the tilt follow it
+/// (`odometry::rest_scatter`), and the heading turns with it. Measured from 8 s to 19.5 s:
+/// 3.82 and 2.54 deg (seeds 1 and 2) with the datasheet's sigma, 0.16 and 0.11 deg with the
+/// rests' scatter.
+#[test]
+fn an_uncalibrated_part_on_a_standing_car_keeps_its_attitude() {
+    /// Largest change of attitude over the standing, deg: well above what the gyro's white
+    /// noise turns over 11.5 s (0.01 deg/s/sqrt(Hz) times sqrt(11.5 s): 0.03 deg), well below
+    /// what the datasheet's sigma turns.
+    const BOUND_DEG: f64 = 1.0;
+    let dir = std::env::temp_dir().join(unique_namespace("uncalibrated-standing"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let model = uncalibrated_model(&dir);
+    for seed in ["1", "2"] {
+        let csv = dir.join(format!("standing-{seed}.csv"));
+        let out = dir.join(format!("standing-{seed}.mcap"));
+        #[rustfmt::skip]
+        let sim = [
+            "drive", "--duration", "20", "--initial-rest", "20", "--rate", "125",
+            "--engine-idle", "0.3,23", "--engine-start", "0.3", "--engine-start-gyro", "0.45",
+            "--model", path_arg(&model), "--seed", seed, "--out", path_arg(&csv),
+        ];
+        run_ok("mems-sim", &sim);
+        let args = [
+            "offline",
+            "--input",
+            path_arg(&csv),
+            "--out",
+            path_arg(&out),
+        ];
+        let json = run_ok("mems-odometry", &[&args[..], &["--json"]].concat());
+        let v: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+        assert_eq!(v["accel_error"]["uncalibrated"], true, "seed {seed}: {v}");
+        let states = recording::mcap::read_all(&out).unwrap().odometry;
+        let at = |t_s: f64| {
+            states
+                .iter()
+                .filter(|s| s.flags & ipc_types::odometry_flags::REVISION == 0)
+                .find(|s| s.stamps.sample_ns as f64 * 1e-9 >= t_s)
+                .map(|s| s.attitude_wxyz)
+                .unwrap_or_else(|| panic!("seed {seed}: no state at {t_s} s"))
+        };
+        let (a, b) = (at(8.0), at(19.5));
+        let dot: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+        let turned = (2.0 * dot.abs().min(1.0).acos()).to_degrees();
+        eprintln!("seed {seed}: attitude turned {turned:.2} deg standing");
+        assert!(
+            turned < BOUND_DEG,
+            "seed {seed}: the attitude turned {turned:.2} deg while the car stood"
+        );
+    }
 }

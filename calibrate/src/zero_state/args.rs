@@ -30,7 +30,7 @@ pub struct DetectorArgs {
     #[arg(long)]
     pub shoe_factor: Option<f64>,
     /// Largest relative difference between the learned rest's specific force and local
-    /// gravity (default 0.05 with a calibration file, 0.25 without one:
+    /// gravity (default 0.05 with a calibration file, 0.39 without one:
     /// `zero_state::learn::UNCALIBRATED_GRAVITY_ERROR`).
     #[arg(long, value_name = "FRACTION")]
     pub max_gravity_error: Option<f64>,

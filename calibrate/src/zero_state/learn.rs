@@ -60,9 +60,12 @@ pub const CALIBRATED_GRAVITY_ERROR: f64 = 0.02;
 /// Largest relative difference between a rest's specific force and local gravity that an
 /// accelerometer without a calibration is learned with: a sensitivity error of up to 4 % (the
 /// MPU-6050 and MPU-9250 datasheets give +-3 %; cheap MPU-6050 boards read |g| 2-4 % low) and a
-/// zero-g offset of up to 0.2 g (the thesis's uncalibrated MPU-9250 read 0.1-0.2 g off) add to
-/// 24 %.
-pub const UNCALIBRATED_GRAVITY_ERROR: f64 = 0.25;
+/// zero-g offset of up to 0.2 g per axis (the thesis's uncalibrated MPU-9250 read 0.1-0.2 g
+/// off), whose vector, `0.2 sqrt(3)` = 0.35 g, may lie along gravity: 39 %. (With 0.2 g on one
+/// axis only, 24 %, a corpus car's part that reads 6 % off on its own, f1tenth-ds5, given 4 %
+/// and 0.15 g per axis more by `tools/real-data/perturb.py`, read 20-31 % off while it drove
+/// and was learned only at 6.4 s instead of 3.3 s.)
+pub const UNCALIBRATED_GRAVITY_ERROR: f64 = 0.39;
 
 /// Standard normal quantile of the steadiness test's false alarm (1e-3, one-sided).
 const STEADY_Z: f64 = 3.09;

@@ -89,6 +89,10 @@ enum Command {
         /// shows 0.37-0.53, tools/sim/src/vibration.rs).
         #[arg(long, value_name = "DPS", default_value_t = 0.0)]
         engine_idle_gyro: f64,
+        /// The same engine's angular vibration before the first motion, RMS per gyroscope
+        /// axis, deg/s (0: none; wid-car-06 standing at its start shows 0.36-0.49).
+        #[arg(long, value_name = "DPS", default_value_t = 0.0)]
+        engine_start_gyro: f64,
         /// A road rocking a car's body while the wheels turn: accelerometer RMS per axis,
         /// m/s^2, at 1.2 Hz (tools/sim/src/vibration.rs gives measured levels).
         #[arg(long, default_value_t = 0.0)]
@@ -770,7 +774,8 @@ fn checked(level: f64, model: VibrationModel) -> anyhow::Result<VibrationModel> 
     }
     model.validate().map_err(|e| {
         anyhow::anyhow!(
-            "--vibration-floor, --engine-idle, --engine-start, --engine-idle-gyro or --road: {e}"
+            "--vibration-floor, --engine-idle, --engine-start, --engine-idle-gyro, \
+             --engine-start-gyro or --road: {e}"
         )
     })?;
     Ok(model)
@@ -919,6 +924,7 @@ fn run(cli: Cli) -> Result<()> {
             engine_idle,
             engine_start,
             engine_idle_gyro,
+            engine_start_gyro,
             road,
             turns,
             in_place_turns,
@@ -942,6 +948,7 @@ fn run(cli: Cli) -> Result<()> {
                 .with_floor(vibration_floor[0], vibration_floor[1])
                 .with_engine_idle(engine_idle[0], engine_idle[1], engine_start)
                 .with_engine_idle_gyro(engine_idle_gyro)
+                .with_engine_start_gyro(engine_start_gyro)
                 .with_road(road);
             simulate(drive, &checked(vibration, model)?, &common, &hint_list)
         }

@@ -51,7 +51,9 @@
 //! phases of its own per axis: pure sinusoids, so zero-mean (no bias) and an angle that
 //! oscillates within twice their amplitudes over their angular frequencies of where the stop
 //! began (0.009 deg at 0.45 deg/s and 23 Hz): `mems-sim drive --engine-idle 0.3,23
-//! --engine-idle-gyro 0.45`. Sampled through the simulated part's low-pass filter
+//! --engine-idle-gyro 0.45`; before the first motion at `engine_start_gyro_rms_dps` (0 by
+//! default; wid-car-06 standing at its start, 0.36-0.49 deg/s: `--engine-start-gyro 0.45`).
+//! Sampled through the simulated part's low-pass filter
 //! (`crate::dlpf`) the shake reads less: 0.38 deg/s RMS per axis with the white noise, at
 //! 100 Hz, for 0.45 configured.
 //!
@@ -133,6 +135,10 @@ pub struct VibrationModel {
     /// gyroscope axis, deg/s (see the module documentation; 0: none).
     #[serde(default)]
     pub engine_idle_gyro_rms_dps: f64,
+    /// The same engine's angular vibration before the first motion, RMS per gyroscope axis,
+    /// deg/s (0: none; wid-car-06 standing at its start scatters 0.36-0.49 deg/s per axis).
+    #[serde(default)]
+    pub engine_start_gyro_rms_dps: f64,
     /// Accelerometer disturbance of a road rocking a car's body while the wheels turn, RMS
     /// per axis, m/s^2 (see the module documentation; 0: none).
     #[serde(default)]
@@ -169,6 +175,7 @@ impl VibrationModel {
             engine_idle_hz: default_engine_idle_hz(),
             engine_start_accel_rms_mps2: 0.0,
             engine_idle_gyro_rms_dps: 0.0,
+            engine_start_gyro_rms_dps: 0.0,
             road_accel_rms_mps2: 0.0,
         }
     }
@@ -198,6 +205,15 @@ impl VibrationModel {
     pub fn with_engine_idle_gyro(self, gyro_rms_dps: f64) -> Self {
         Self {
             engine_idle_gyro_rms_dps: gyro_rms_dps,
+            ..self
+        }
+    }
+
+    /// `self` with the engine shaking the gyroscope at `gyro_rms_dps` (deg/s RMS per axis)
+    /// before the first motion.
+    pub fn with_engine_start_gyro(self, gyro_rms_dps: f64) -> Self {
+        Self {
+            engine_start_gyro_rms_dps: gyro_rms_dps,
             ..self
         }
     }
@@ -235,6 +251,7 @@ impl VibrationModel {
             ),
             ("road_accel_rms_mps2", self.road_accel_rms_mps2),
             ("engine_idle_gyro_rms_dps", self.engine_idle_gyro_rms_dps),
+            ("engine_start_gyro_rms_dps", self.engine_start_gyro_rms_dps),
         ] {
             if !(x.is_finite() && x >= 0.0) {
                 return err(field, format!("must be finite and >= 0, got {x}"));
@@ -373,7 +390,8 @@ impl Vibration {
             m.engine_start_accel_rms_mps2,
             m.road_accel_rms_mps2,
             m.engine_idle_gyro_rms_dps,
-        ] == [0.0; 8]
+            m.engine_start_gyro_rms_dps,
+        ] == [0.0; 9]
         {
             return ([0.0; 3], [0.0; 3]);
         }
@@ -424,8 +442,11 @@ impl Vibration {
             for (out, x) in accel.iter_mut().zip(idle) {
                 *out += x;
             }
-            if self.moved {
-                let level = self.model.engine_idle_gyro_rms_dps;
+            let level = match self.moved {
+                true => self.model.engine_idle_gyro_rms_dps,
+                false => self.model.engine_start_gyro_rms_dps,
+            };
+            if level > 0.0 {
                 let idle = self.engine_idle(t_s, level, &self.engine_gyro_phases);
                 for (out, x) in gyro.iter_mut().zip(idle) {
                     *out += x;

@@ -41,7 +41,7 @@ use hooks::Watch;
 pub struct ServeArgs {
     /// Calibration file (TOML) written by `mems-calibrate fit`. Without it, the identity at
     /// standard gravity: a part taken as it reads, whose error along gravity the bias
-    /// refinement removes at rest (an uncalibrated part's rest may read gravity up to 25 % off,
+    /// refinement removes at rest (an uncalibrated part's rest may read gravity up to 39 % off,
     /// `calibrate::zero_state::learn::UNCALIBRATED_GRAVITY_ERROR`).
     #[arg(long)]
     calib: Option<PathBuf>,
