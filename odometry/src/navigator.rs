@@ -58,8 +58,7 @@ pub(crate) struct Navigator {
     learned: Option<Learned>,
     /// The cruise window gathered while unaligned ([`crate::cruise`]).
     cruise: CruiseWindow,
-    /// The mean hint speed of the cruise window the filter aligned on, m/s; `None` when it
-    /// aligned at rest (or not yet).
+    /// Mean hint speed of the cruise window aligned on, m/s; `None`: aligned at rest or not yet.
     aligned_in_motion: Option<f64>,
     /// 1-sigma of one sample's zero-velocity update, m/s: the configured one, widened by the
     /// square root of the alignment rest's accelerometer mean-variance factor when
@@ -580,6 +579,7 @@ impl Navigator {
                 // An update the reconstruction's predictions would not redo.
                 self.clip.spoil();
             }
+            let unknown = self.direction_unknown();
             let kf = self.kf.as_mut().expect("aligned");
             let hints = &mut self.hints;
             // Turns a refined mounting made ([`Hints::remount`]), for `body_before`.
@@ -598,7 +598,7 @@ impl Navigator {
                     )
                 {
                     match hints.remount(&fit, t_ns) {
-                        None => hints.restart_velocity(kf, &h),
+                        None => hints.restart_velocity(kf, &h, unknown),
                         Some(turn) => body_turn = turn * body_turn,
                     }
                     hints.scale_from_fit(kf, &fit, t_ns);
@@ -618,7 +618,7 @@ impl Navigator {
             }
             if let Some(nhc) = self.nhc.as_mut().filter(|_| !hints.speed_in_use(t_ns)) {
                 let interval = self.cfg.propagation_interval_s.max(dt);
-                match nhc.apply(kf, dt, interval) {
+                match nhc.apply(kf, dt, interval, !unknown) {
                     Some(Outcome::Rejected) => hs.flags |= odometry_flags::NONHOLONOMIC_REJECTED,
                     Some(Outcome::Applied { nis, dof }) => {
                         let nis = Some(nis).filter(|x| x.is_finite());

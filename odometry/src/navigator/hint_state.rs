@@ -188,19 +188,21 @@ impl Hints {
         Some(turn)
     }
 
-    /// With the mounting just estimated: when the filter's horizontal velocity is known worse
-    /// than the hint's speed (1-sigma per axis above it: the IMU alone integrated since a start
-    /// in motion), restarts the velocity from the hint along the body's forward axis, as a
+    /// With the mounting just estimated: when the filter's horizontal velocity has no
+    /// direction (`direction_unknown`, [`super::Navigator::direction_unknown`]) or is known
+    /// worse than the hint's speed (1-sigma per axis above it: the IMU alone integrated since
+    /// the alignment), restarts the velocity from the hint along the body's forward axis, as a
     /// cruise alignment with a known mounting does ([`crate::cruise::initial_velocity`]). An
     /// update linearized about a velocity that far off turns the attitude instead (on the
-    /// F1TENTH car of docs/real-data.md, by 90 degrees after 30 s on the IMU alone).
-    pub(super) fn restart_velocity(&self, kf: &mut Eskf, h: &RobotHint) {
+    /// F1TENTH car of docs/real-data.md, by 90 degrees after 30 s on the IMU alone; on the
+    /// comma2k19 car, whose speed had grown past the cruise start's 1-sigma, by 40 degrees).
+    pub(super) fn restart_velocity(&self, kf: &mut Eskf, h: &RobotHint, direction_unknown: bool) {
         let Some(r_bs) = self.r_bs else {
             return;
         };
         let speed = h.forward_speed_mps;
         let horizontal_var = 0.5 * (kf.cov[(V, V)] + kf.cov[(V + 1, V + 1)]);
-        if horizontal_var.sqrt() <= speed.abs() {
+        if !direction_unknown && horizontal_var.sqrt() <= speed.abs() {
             return;
         }
         let forward_sigma = h
@@ -393,6 +395,17 @@ impl Hints {
 }
 
 impl super::Navigator {
+    /// Whether the filter's horizontal velocity carries no direction: it aligned on a cruise
+    /// without a mounting ([`crate::cruise::initial_velocity`]: zero, with the window's largest
+    /// speed as its 1-sigma per axis), and neither a rest (a zero-velocity update) nor the
+    /// forward axis ([`Hints::restart_velocity`]) has given it one since. Its integral over
+    /// time is then no path: the IMU-only non-holonomic constraint does not estimate its
+    /// mounting from it (`crate::nonholonomic::ImuConstraint::apply`), and the first trusted
+    /// forward axis restarts it whatever its 1-sigma has become.
+    pub(super) fn direction_unknown(&self) -> bool {
+        self.aligned_in_motion.is_some() && self.rest_count == 0 && self.hints.r_bs.is_none()
+    }
+
     /// Whether the aligned filter takes this sample as rest (decided before its prediction).
     #[inline]
     pub(super) fn rest_decision(&self, d: &HintDecision, imu_rest: bool) -> bool {
