@@ -81,15 +81,13 @@ pub(crate) struct Navigator {
     imu_decided: bool,
     /// The IMU-only non-holonomic constraint (wheeled platforms).
     nhc: Option<ImuConstraint>,
-    /// Standard deviation of the specific force's norm over the alignment rest (the root of
-    /// the three axes' variances summed), m/s^2.
+    /// Standard deviation of the specific force's norm over the alignment rest, m/s^2.
     standing_accel_sd: f64,
     /// The low-frequency test of a wheeled platform's stops (`crate::stops`).
     stops: StopTest,
     /// Clipped and implausible stretches in progress.
     untrusted: Untrusted,
-    /// The clipped motion being gathered for its reconstruction (boxed: about 170 kB,
-    /// allocated in [`Navigator::new`]).
+    /// The clipped motion gathered for its reconstruction (boxed, 170 kB, made in `new`).
     clip: Box<ClipRepair>,
     /// The accelerometer prior the filter aligned with.
     accel_prior: Option<AccelPrior>,
@@ -135,6 +133,7 @@ impl Navigator {
                 along: [0.0; 2],
                 history: Ring::new(velocity_capacity),
                 still: WheelsStill::default(),
+                wait: crate::handover::WaitPath::default(),
                 corrections: Vector3::zeros(),
                 applied: 0,
                 disagreements: 0,
@@ -588,6 +587,7 @@ impl Navigator {
             if hints.cfg.mounting_from_turns {
                 hints.forward.sample(&m.f, &m.w, &reference);
             }
+            hints.wait_step(kf, dt, t_ns, unknown);
             while let Some(h) = hints.speed.pop() {
                 if hints.cfg.mounting_from_turns
                     && let Some(fit) = hints.forward.hint(
