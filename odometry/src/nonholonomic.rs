@@ -378,7 +378,7 @@ mod tests {
         let mut kf = Eskf::new(x, cov, 9.81, noise, first);
         let up = q.inverse_transform_vector(&Vector3::z());
         let mut nhc = ImuConstraint::new(0.05, Some(UnitQuaternion::identity()));
-        let outcome = nhc.apply(&mut kf, 0.01, 1.0);
+        let outcome = nhc.apply(&mut kf, 0.01, 1.0, true);
         assert!(
             matches!(outcome, Some(Outcome::Applied { .. })),
             "{outcome:?}"
