@@ -252,7 +252,9 @@ impl Hints {
         };
         let yaw = self.latest_fit.map_or(0.0, |f| f.systematic_sigma_rad());
         let sigma = distance * self.cfg.speed_scale_sigma.hypot(yaw);
-        kf.position_update(p, Vector3::repeat(sigma * sigma));
+        if sigma > 0.0 {
+            kf.position_update(p, Vector3::repeat(sigma * sigma));
+        }
     }
 
     /// Applies a speed hint as a body-velocity measurement at the hint's time; returns its
