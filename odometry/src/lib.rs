@@ -18,6 +18,7 @@ pub mod cruise;
 pub mod diagnose;
 pub mod eskf;
 pub mod hand_bound;
+pub mod handover;
 mod hindsight;
 pub mod hints;
 mod navigator;

@@ -58,8 +58,7 @@ pub(crate) struct Navigator {
     learned: Option<Learned>,
     /// The cruise window gathered while unaligned ([`crate::cruise`]).
     cruise: CruiseWindow,
-    /// The mean hint speed of the cruise window the filter aligned on, m/s; `None` when it
-    /// aligned at rest (or not yet).
+    /// Mean hint speed of the cruise window aligned on, m/s; `None`: aligned at rest or not yet.
     aligned_in_motion: Option<f64>,
     /// 1-sigma of one sample's zero-velocity update, m/s: the configured one, widened by the
     /// square root of the alignment rest's accelerometer mean-variance factor when
@@ -82,15 +81,13 @@ pub(crate) struct Navigator {
     imu_decided: bool,
     /// The IMU-only non-holonomic constraint (wheeled platforms).
     nhc: Option<ImuConstraint>,
-    /// Standard deviation of the specific force's norm over the alignment rest (the root of
-    /// the three axes' variances summed), m/s^2.
+    /// Standard deviation of the specific force's norm over the alignment rest, m/s^2.
     standing_accel_sd: f64,
     /// The low-frequency test of a wheeled platform's stops (`crate::stops`).
     stops: StopTest,
     /// Clipped and implausible stretches in progress.
     untrusted: Untrusted,
-    /// The clipped motion being gathered for its reconstruction (boxed: about 170 kB,
-    /// allocated in [`Navigator::new`]).
+    /// The clipped motion gathered for its reconstruction (boxed, 170 kB, made in `new`).
     clip: Box<ClipRepair>,
     /// The accelerometer prior the filter aligned with.
     accel_prior: Option<AccelPrior>,
@@ -136,6 +133,7 @@ impl Navigator {
                 along: [0.0; 2],
                 history: Ring::new(velocity_capacity),
                 still: WheelsStill::default(),
+                wait: crate::handover::WaitPath::default(),
                 corrections: Vector3::zeros(),
                 applied: 0,
                 disagreements: 0,
@@ -580,6 +578,7 @@ impl Navigator {
                 // An update the reconstruction's predictions would not redo.
                 self.clip.spoil();
             }
+            let unknown = self.direction_unknown();
             let kf = self.kf.as_mut().expect("aligned");
             let hints = &mut self.hints;
             // Turns a refined mounting made ([`Hints::remount`]), for `body_before`.
@@ -588,6 +587,7 @@ impl Navigator {
             if hints.cfg.mounting_from_turns {
                 hints.forward.sample(&m.f, &m.w, &reference);
             }
+            hints.wait_step(kf, dt, t_ns, unknown);
             while let Some(h) = hints.speed.pop() {
                 if hints.cfg.mounting_from_turns
                     && let Some(fit) = hints.forward.hint(
@@ -598,7 +598,7 @@ impl Navigator {
                     )
                 {
                     match hints.remount(&fit, t_ns) {
-                        None => hints.restart_velocity(kf, &h),
+                        None => hints.restart_velocity(kf, &h, unknown),
                         Some(turn) => body_turn = turn * body_turn,
                     }
                     hints.scale_from_fit(kf, &fit, t_ns);
@@ -618,7 +618,7 @@ impl Navigator {
             }
             if let Some(nhc) = self.nhc.as_mut().filter(|_| !hints.speed_in_use(t_ns)) {
                 let interval = self.cfg.propagation_interval_s.max(dt);
-                match nhc.apply(kf, dt, interval) {
+                match nhc.apply(kf, dt, interval, !unknown) {
                     Some(Outcome::Rejected) => hs.flags |= odometry_flags::NONHOLONOMIC_REJECTED,
                     Some(Outcome::Applied { nis, dof }) => {
                         let nis = Some(nis).filter(|x| x.is_finite());

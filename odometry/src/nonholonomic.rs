@@ -160,10 +160,19 @@ impl ImuConstraint {
     }
 
     /// Applies the constraint to `kf` after a covariance propagation spanning `interval_s`;
-    /// `dt_s` is the last sample's interval (for the mounting estimate, fed at every call).
-    pub fn apply(&mut self, kf: &mut Eskf, dt_s: f64, interval_s: f64) -> Option<Outcome> {
+    /// `dt_s` is the last sample's interval (for the mounting estimate, fed at every call
+    /// where `velocity_has_direction`: a filter aligned in motion without a mounting starts
+    /// its velocity at zero for want of a direction, and the displacement it integrates then
+    /// points nowhere in particular; the speed hints' forward axis is followed instead).
+    pub fn apply(
+        &mut self,
+        kf: &mut Eskf,
+        dt_s: f64,
+        interval_s: f64,
+        velocity_has_direction: bool,
+    ) -> Option<Outcome> {
         let up_s = kf.x.q.inverse_transform_vector(&Vector3::z());
-        if self.r_bs.is_none() {
+        if self.r_bs.is_none() && velocity_has_direction {
             self.estimator
                 .add(&kf.x.q.inverse_transform_vector(&kf.x.v), dt_s);
             if self.estimator.path_m() >= MOUNTING_PATH_M {
@@ -369,7 +378,7 @@ mod tests {
         let mut kf = Eskf::new(x, cov, 9.81, noise, first);
         let up = q.inverse_transform_vector(&Vector3::z());
         let mut nhc = ImuConstraint::new(0.05, Some(UnitQuaternion::identity()));
-        let outcome = nhc.apply(&mut kf, 0.01, 1.0);
+        let outcome = nhc.apply(&mut kf, 0.01, 1.0, true);
         assert!(
             matches!(outcome, Some(Outcome::Applied { .. })),
             "{outcome:?}"

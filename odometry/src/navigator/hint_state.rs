@@ -4,6 +4,7 @@
 
 use crate::cruise::{ForwardAxis, ForwardFit, Reference, horizontal_bias_sigma, initial_velocity};
 use crate::eskf::{BG, Eskf, V};
+use crate::handover::WaitPath;
 use crate::hints::{
     ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring, SCALE_CONFLICT_SIGMAS,
     ScaleTaken,
@@ -96,6 +97,8 @@ pub(super) struct Hints {
     pub(super) history: Ring<BodyVelocity>,
     /// The current rest's gyro readings while stationary hints decide it.
     pub(super) still: WheelsStill,
+    /// The path driven while the velocity has no direction ([`Self::wait_step`]).
+    pub(super) wait: WaitPath,
     /// Sum of the body-velocity changes every update has made since the mounting is known,
     /// m/s.
     pub(super) corrections: Vector3<f64>,
@@ -125,6 +128,7 @@ impl Hints {
         self.along = other.along;
         self.history.clone_from(&other.history);
         self.still = other.still;
+        self.wait = other.wait;
         self.corrections = other.corrections;
         self.applied = other.applied;
         self.disagreements = other.disagreements;
@@ -188,19 +192,21 @@ impl Hints {
         Some(turn)
     }
 
-    /// With the mounting just estimated: when the filter's horizontal velocity is known worse
-    /// than the hint's speed (1-sigma per axis above it: the IMU alone integrated since a start
-    /// in motion), restarts the velocity from the hint along the body's forward axis, as a
+    /// With the mounting just estimated: when the filter's horizontal velocity has no
+    /// direction (`direction_unknown`, [`super::Navigator::direction_unknown`]) or is known
+    /// worse than the hint's speed (1-sigma per axis above it: the IMU alone integrated since
+    /// the alignment), restarts the velocity from the hint along the body's forward axis, as a
     /// cruise alignment with a known mounting does ([`crate::cruise::initial_velocity`]). An
     /// update linearized about a velocity that far off turns the attitude instead (on the
-    /// F1TENTH car of docs/real-data.md, by 90 degrees after 30 s on the IMU alone).
-    pub(super) fn restart_velocity(&self, kf: &mut Eskf, h: &RobotHint) {
+    /// F1TENTH car of docs/real-data.md, by 90 degrees after 30 s on the IMU alone; on the
+    /// comma2k19 car, whose speed had grown past the cruise start's 1-sigma, by 40 degrees).
+    pub(super) fn restart_velocity(&self, kf: &mut Eskf, h: &RobotHint, direction_unknown: bool) {
         let Some(r_bs) = self.r_bs else {
             return;
         };
         let speed = h.forward_speed_mps;
         let horizontal_var = 0.5 * (kf.cov[(V, V)] + kf.cov[(V + 1, V + 1)]);
-        if horizontal_var.sqrt() <= speed.abs() {
+        if !direction_unknown && horizontal_var.sqrt() <= speed.abs() {
             return;
         }
         let forward_sigma = h
@@ -212,6 +218,43 @@ impl Hints {
             .hypot(speed * self.yaw_sigma_rad);
         let (v, cov) = initial_velocity(&kf.x.q, Some(&r_bs), speed, forward_sigma, lateral, speed);
         kf.restart_velocity(v, &cov);
+        if direction_unknown {
+            self.position_from_wait(kf, &r_bs);
+        }
+    }
+
+    /// A sample of `dt_s` while the velocity has no direction (`direction_unknown`,
+    /// [`super::Navigator::direction_unknown`]; nothing otherwise): adds it to the path driven
+    /// meanwhile ([`WaitPath`]) with the newest hint's speed if it is a fresh one at `t_ns`.
+    pub(super) fn wait_step(&mut self, kf: &Eskf, dt_s: f64, t_ns: u64, direction_unknown: bool) {
+        if !direction_unknown {
+            return;
+        }
+        let speed = self
+            .newest
+            .filter(|h| h.flags & hint_flags::SPEED_VALID != 0)
+            .filter(|h| t_ns.saturating_sub(h.stamps.sample_ns) <= self.max_age_ns)
+            .map(|h| h.forward_speed_mps / (1.0 + kf.x.k));
+        self.wait.add(&kf.x.p, &kf.x.q, speed, dt_s);
+    }
+
+    /// With the forward axis first trusted after a wait without a direction: the path the hints
+    /// and the attitude say was driven meanwhile ([`WaitPath`]) is a measurement of the
+    /// position, with 1-sigma per axis the distance times the speed scale's prior 1-sigma and
+    /// the fit's whole yaw 1-sigma in quadrature (the speeds' white noise averages out over the
+    /// wait). The filter's own position integrated the specific force twice from a velocity
+    /// that far off, and its conditioning on the restarted velocity assumes that velocity's
+    /// error constant over the wait: true of the start's error, not of the tilt's share.
+    fn position_from_wait(&self, kf: &mut Eskf, r_bs: &Matrix3<f64>) {
+        let forward_s = r_bs.row(0).transpose();
+        let Some((p, distance)) = self.wait.displacement(&forward_s) else {
+            return;
+        };
+        let yaw = self.latest_fit.map_or(0.0, |f| f.systematic_sigma_rad());
+        let sigma = distance * self.cfg.speed_scale_sigma.hypot(yaw);
+        if sigma > 0.0 {
+            kf.position_update(p, Vector3::repeat(sigma * sigma));
+        }
     }
 
     /// Applies a speed hint as a body-velocity measurement at the hint's time; returns its
@@ -393,14 +436,28 @@ impl Hints {
 }
 
 impl super::Navigator {
+    /// Whether the filter's horizontal velocity carries no direction: it aligned on a cruise
+    /// without a mounting ([`crate::cruise::initial_velocity`]: zero, with the window's largest
+    /// speed as its 1-sigma per axis), and neither a rest (a zero-velocity update) nor the
+    /// forward axis ([`Hints::restart_velocity`]) has given it one since. Its integral over
+    /// time is then no path: the IMU-only non-holonomic constraint does not estimate its
+    /// mounting from it (`crate::nonholonomic::ImuConstraint::apply`), and the first trusted
+    /// forward axis restarts it whatever its 1-sigma has become.
+    pub(super) fn direction_unknown(&self) -> bool {
+        self.aligned_in_motion.is_some() && self.rest_count == 0 && self.hints.r_bs.is_none()
+    }
+
     /// Whether the aligned filter takes this sample as rest (decided before its prediction).
     #[inline]
     pub(super) fn rest_decision(&self, d: &HintDecision, imu_rest: bool) -> bool {
         // The IMU's rest flag decides without a fresh hint; after hints went stale, only when
         // the velocity (at the previous sample) is consistent with rest (a detector that takes
-        // cruising for rest must not stop a robot the hints have just seen moving).
+        // cruising for rest must not stop a robot the hints have just seen moving), and never
+        // while it has no direction ([`Self::direction_unknown`]): zero, its 1-sigma the
+        // cruise's speed, it is consistent with anything.
         match d.rest {
             Some(r) => r,
+            None if d.stale && imu_rest && self.direction_unknown() => false,
             None if d.stale && imu_rest => self
                 .kf
                 .as_ref()

@@ -71,6 +71,8 @@ pub struct Case {
     pub mounting: nalgebra::UnitQuaternion<f64>,
     /// Rest at the drive's start, s (0: it starts by driving off).
     pub initial_rest_s: f64,
+    /// Range of the legs' cruise speeds, m/s (the drive's default is 0.2-1, a small robot).
+    pub cruise_speed_mps: [f64; 2],
     /// Longest motion between two rests, s (see `DriveParams::max_motion_s`).
     pub max_motion_s: f64,
     /// The part's digital low-pass filters (the default: our driver's at 200 Hz, DLPF_CFG =
@@ -101,6 +103,7 @@ impl Case {
             mounting: nalgebra::UnitQuaternion::identity(),
             initial_rest_s: DriveParams::new(600.0).initial_rest_s,
             max_motion_s: DriveParams::new(600.0).max_motion_s,
+            cruise_speed_mps: DriveParams::new(600.0).cruise_speed_mps,
             dlpf: Some(mems_sim::dlpf::DlpfConfig::driver(200.0)),
         }
     }
@@ -187,6 +190,7 @@ impl Case {
         p.mounting = self.mounting;
         p.initial_rest_s = self.initial_rest_s;
         p.max_motion_s = self.max_motion_s;
+        p.cruise_speed_mps = self.cruise_speed_mps;
         Drive::new(&p, seed).expect("valid drive parameters")
     }
 }
