@@ -351,21 +351,15 @@ SYNC_MAX_LAG_S = 5.0  # the two logs start within seconds (their durations agree
 SYNC_MIN_R = 0.8  # the correlation below which no offset is taken
 
 
-def _smoothed_bins(times, values, n_bins):
-    """Mean of `values` per SYNC_BIN_S bin (None where a bin holds none), then a SYNC_SMOOTH_S
-    boxcar over the bins that hold some."""
-    sums, counts = [0.0] * n_bins, [0] * n_bins
-    for t, v in zip(times, values):
-        k = int(t // SYNC_BIN_S)
-        if 0 <= k < n_bins:
-            sums[k] += v
-            counts[k] += 1
-    means = [s_ / c if c else None for s_, c in zip(sums, counts)]
+def _smoothed_bins(times, values, t_end):
+    """Mean of `values` per SYNC_BIN_S bin from 0 to `t_end` (navego.py's binning; None where a
+    bin holds none), then a SYNC_SMOOTH_S boxcar over the bins that hold some."""
+    means = navego._binned(values, times, t_end, SYNC_BIN_S)
     half = int(SYNC_SMOOTH_S / SYNC_BIN_S) // 2
     out = []
-    for k in range(n_bins):
-        window = [m for m in means[max(0, k - half) : k + half + 1] if m is not None]
-        out.append(sum(window) / len(window) if means[k] is not None else None)
+    for k, m in enumerate(means):
+        window = [x for x in means[max(0, k - half) : k + half + 1] if x is not None]
+        out.append(sum(window) / len(window) if m is not None else None)
     return out
 
 
@@ -377,11 +371,11 @@ def gnss_clock_offset(samples, gnss_gyro, where):
     naming the file if no lag reaches SYNC_MIN_R."""
     n_lag = int(round(SYNC_MAX_LAG_S / SYNC_BIN_S))
     span = max(samples[-1][0], len(gnss_gyro) / GNSS_ROW_HZ) + 2 * SYNC_MAX_LAG_S
-    n_bins = int(span / SYNC_BIN_S) + 1
     # Both series start SYNC_MAX_LAG_S into the bins so that any lag keeps them inside.
     car = _smoothed_bins([q[0] + SYNC_MAX_LAG_S for q in samples],
-                         [math.sqrt(q[4] ** 2 + q[5] ** 2 + q[6] ** 2) for q in samples], n_bins)
-    gnss = _smoothed_bins([k / GNSS_ROW_HZ + SYNC_MAX_LAG_S for k in range(len(gnss_gyro))], gnss_gyro, n_bins)
+                         [math.sqrt(q[4] ** 2 + q[5] ** 2 + q[6] ** 2) for q in samples], span)
+    gnss = _smoothed_bins([k / GNSS_ROW_HZ + SYNC_MAX_LAG_S for k in range(len(gnss_gyro))], gnss_gyro, span)
+    n_bins = len(car)
     best = None
     for lag in range(-n_lag, n_lag + 1):
         shifted = [gnss[k - lag] if 0 <= k - lag < n_bins else None for k in range(n_bins)]

@@ -75,15 +75,15 @@ def reference_fixes(arrays, where):
     return [(ti, la * DEG, lo * DEG) for ti, la, lo in zip(t, lat, lon)]
 
 
-def _binned(values, times, t_end):
-    """Mean of `values` per BIN_S bin from 0 to t_end (None where a bin holds none)."""
+def _binned(values, times, t_end, bin_s=BIN_S):
+    """Mean of `values` per `bin_s` bin from 0 to t_end (None where a bin holds none)."""
     sums, counts = {}, {}
     for t, v in zip(times, values):
         if v is not None and 0 <= t < t_end:
-            k = int(t // BIN_S)
+            k = int(t // bin_s)
             sums[k] = sums.get(k, 0.0) + v
             counts[k] = counts.get(k, 0) + 1
-    return [sums[k] / counts[k] if k in counts else None for k in range(int(t_end // BIN_S) + 1)]
+    return [sums[k] / counts[k] if k in counts else None for k in range(int(t_end // bin_s) + 1)]
 
 
 def imu_yaw_rate(samples_):
