@@ -483,6 +483,23 @@ def copy_sidecar(data, changed, rec):
     return side.get("input", side["csv"])
 
 
+def rewrite_csv(src, dst, header, row):
+    """Copies the canonical CSV `src` to `dst` (changed copies of a converted recording):
+    comment and blank lines as they are, the header line's cells as `header(cells, line)`
+    returns them (`line`: its 1-based number, for errors) and each sample line's as `row(cells)`
+    returns them."""
+    with open(src) as fin, open(dst, "w") as fout:
+        seen_header = False
+        for n, line in enumerate(fin, 1):
+            if line.startswith("#") or not line.strip():
+                fout.write(line)
+                continue
+            cells = line.rstrip("\n").split(",")
+            cells = row(cells) if seen_header else header(cells, n)
+            seen_header = True
+            fout.write(",".join(cells) + "\n")
+
+
 MAX_GRID = 24
 
 

@@ -41,28 +41,26 @@ def saturated_axis(i):
 def flag_csv(src, dst, limit):
     """Writes `src` to `dst` with a `flags` column marking the gyroscope axes beyond `limit`
     deg/s as clipped, values unchanged; returns the rows flagged."""
-    flagged = 0
-    with open(src) as fin, open(dst, "w") as fout:
-        header = None
-        for n, line in enumerate(fin, 1):
-            if line.startswith("#") or not line.strip():
-                fout.write(line)
-                continue
-            cells = line.rstrip("\n").split(",")
-            if header is None:
-                header = cells
-                if "flags" in header:
-                    raise SystemExit(f"{src}:{n}: already has a flags column")
-                ig = [header.index(c) for c in GYRO]
-                base = GYRO_VALID | (TEMP_VALID if "temp_c" in header else 0)
-                fout.write(",".join(cells + ["flags"]) + "\n")
-                continue
-            flags = base
-            for axis, i in enumerate(ig):
-                if abs(float(cells[i])) > limit:
-                    flags |= SATURATED | saturated_axis(3 + axis)
-            flagged += flags != base
-            fout.write(",".join(cells + [str(flags)]) + "\n")
+    ig, base, flagged = [], GYRO_VALID, 0
+
+    def header(cells, line):
+        nonlocal base
+        if "flags" in cells:
+            raise SystemExit(f"{src}:{line}: already has a flags column")
+        ig.extend(cells.index(c) for c in GYRO)
+        base |= TEMP_VALID if "temp_c" in cells else 0
+        return cells + ["flags"]
+
+    def row(cells):
+        nonlocal flagged
+        flags = base
+        for axis, i in enumerate(ig):
+            if abs(float(cells[i])) > limit:
+                flags |= SATURATED | saturated_axis(3 + axis)
+        flagged += flags != base
+        return cells + [str(flags)]
+
+    bench.rewrite_csv(src, dst, header, row)
     return flagged
 
 

@@ -88,25 +88,23 @@ class Perturbation:
 
 def perturb_csv(src, dst, p):
     """Writes `src` to `dst` perturbed by `p`; returns the rows capped."""
-    capped = 0
-    with open(src) as fin, open(dst, "w") as fout:
-        header = None
-        for line in fin:
-            if line.startswith("#") or not line.strip():
-                fout.write(line)
-                continue
-            cells = line.rstrip("\n").split(",")
-            if header is None:
-                header = cells
-                ia, ig = [header.index(c) for c in ACCEL], [header.index(c) for c in GYRO]
-                fout.write(line)
-                continue
-            accel, gyro, hit = p.apply([float(cells[i]) for i in ia], [float(cells[i]) for i in ig])
-            if p.scale != 1.0 or any(p.bias) or hit:
-                for i, v in zip(ia + ig, accel + gyro):
-                    cells[i] = repr(v)
-            capped += hit
-            fout.write(",".join(cells) + "\n")
+    ia, ig, capped = [], [], 0
+
+    def header(cells, _line):
+        ia.extend(cells.index(c) for c in ACCEL)
+        ig.extend(cells.index(c) for c in GYRO)
+        return cells
+
+    def row(cells):
+        nonlocal capped
+        accel, gyro, hit = p.apply([float(cells[i]) for i in ia], [float(cells[i]) for i in ig])
+        if p.scale != 1.0 or any(p.bias) or hit:
+            for i, v in zip(ia + ig, accel + gyro):
+                cells[i] = repr(v)
+        capped += hit
+        return cells
+
+    bench.rewrite_csv(src, dst, header, row)
     return capped
 
 
