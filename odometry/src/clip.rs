@@ -752,6 +752,11 @@ mod tests {
         assert!(line(&[(0.0, 1.0)], 0.0).is_none());
     }
 
+    /// Sine of `kf`'s tilt: the horizontal length of its sensor z axis in the navigation frame.
+    fn tilt(kf: &Eskf) -> f64 {
+        (kf.x.q * Vector3::z()).xy().norm()
+    }
+
     /// A sensor held level in place is turned about its axis `axis` (0 x, 2 z) by a rate pulse
     /// that peaks at 8 rad/s, clipped at 250 deg/s (4.36 rad/s), then turned back slowly
     /// (unclipped) and left at rest; the rest window's last sample ends the motion. Returns the
@@ -844,7 +849,6 @@ mod tests {
     #[test]
     fn the_rest_after_a_clipped_pulse_gives_back_what_it_hid() {
         let (clip, repaired, measured, pitch) = clipped_pulse(0);
-        let tilt = |kf: &Eskf| (kf.x.q * Vector3::z()).xy().norm();
         assert!(tilt(&measured) > 0.3, "as measured: {}", tilt(&measured));
         assert!(
             (tilt(&repaired) - pitch.abs()).abs() < 0.02,
@@ -865,7 +869,6 @@ mod tests {
     #[test]
     fn a_rest_shorter_than_the_window_redoes_the_motion_where_it_ends() {
         let (_, repaired, measured, pitch) = clipped_pulse_resting(0, 0.015);
-        let tilt = |kf: &Eskf| (kf.x.q * Vector3::z()).xy().norm();
         assert!(tilt(&measured) > 0.3, "as measured: {}", tilt(&measured));
         assert!(
             (tilt(&repaired) - pitch.abs()).abs() < 0.03,
