@@ -27,7 +27,9 @@
 //! unsettled: their provisional flags stand.
 //!
 //! The bias refinement (below) subtracted from a sample is the one in force when it arrives,
-//! so the refinement a batch at rest makes applies from the next sample on.
+//! so the refinement a batch at rest makes applies from the next sample on; every sample carries
+//! the accelerometer offset subtracted (`refined_accel_mps2`), so that a consumer estimating
+//! the stream's residual bias follows each change exactly.
 //!
 //! **Bias refinement at rest.** At rest the true specific force is gravity's reaction `g u`
 //! (`u` the unknown up direction in the sensor frame) and the true rate is zero. So:
@@ -693,6 +695,7 @@ impl CalibrationStage {
             temp_c: raw.temp_c,
             calib_id: self.calib_id,
             raw_flags: raw.flags | if gap { raw_flags::GAP_BEFORE } else { 0 },
+            refined_accel_mps2: da.into(),
             ..CorrectedImuSample::default()
         };
         (out, a, w)

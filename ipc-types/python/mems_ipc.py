@@ -160,11 +160,12 @@ class CorrectedImuSample(ctypes.Structure):
         ("flags", ctypes.c_uint16),
         ("raw_flags", ctypes.c_uint16),
         ("settles", ctypes.c_uint32),
+        ("refined_accel_mps2", Vec3),
     ]
 
     @staticmethod
     def type_name():
-        return "mems::CorrectedImuSample.v1"
+        return "mems::CorrectedImuSample.v2"
 
 
 class OdometryState(ctypes.Structure):

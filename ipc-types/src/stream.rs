@@ -334,16 +334,28 @@ pub enum SampleError {
 /// Checks the values of a corrected sample: finite, and within [`ACCEL_LIMIT_MPS2`] and
 /// [`GYRO_LIMIT_RPS`] (a value beyond them would drive a filter's state to infinity and NaN).
 pub fn check_corrected(s: &CorrectedImuSample) -> Result<(), SampleError> {
-    const FIELDS: [[&str; 3]; 4] = [
+    const FIELDS: [[&str; 3]; 5] = [
         ["accel_mps2[0]", "accel_mps2[1]", "accel_mps2[2]"],
         ["gyro_rps[0]", "gyro_rps[1]", "gyro_rps[2]"],
         ["zs_mean_mps2[0]", "zs_mean_mps2[1]", "zs_mean_mps2[2]"],
         ["zs_std_mps2[0]", "zs_std_mps2[1]", "zs_std_mps2[2]"],
+        [
+            "refined_accel_mps2[0]",
+            "refined_accel_mps2[1]",
+            "refined_accel_mps2[2]",
+        ],
     ];
-    let values = [&s.accel_mps2, &s.gyro_rps, &s.zs_mean_mps2, &s.zs_std_mps2];
+    let values = [
+        &s.accel_mps2,
+        &s.gyro_rps,
+        &s.zs_mean_mps2,
+        &s.zs_std_mps2,
+        &s.refined_accel_mps2,
+    ];
     let bounds = [
         ACCEL_LIMIT_MPS2,
         GYRO_LIMIT_RPS,
+        ACCEL_LIMIT_MPS2,
         ACCEL_LIMIT_MPS2,
         ACCEL_LIMIT_MPS2,
     ];

@@ -135,7 +135,7 @@ pub mod corrected_flags {
 ///
 /// Service `mems/imu/corrected`. `accel_mps2 = S^-1 (a' - b)` with the calibration `calib_id`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize, ZeroCopySend)]
-#[type_name("mems::CorrectedImuSample.v1")]
+#[type_name("mems::CorrectedImuSample.v2")]
 #[repr(C)]
 pub struct CorrectedImuSample {
     /// Per-stage timestamps copied from the raw sample, with `calibrated_ns` filled in.
@@ -165,6 +165,14 @@ pub struct CorrectedImuSample {
     /// every flag final.)
     #[serde(alias = "reserved")]
     pub settles: u32,
+    /// The accelerometer offset the calibration stage's bias refinement at rest subtracts
+    /// from `accel_mps2` beyond the calibration file's bias, m/s^2, sensor frame (zero before
+    /// its first refinement, and in recordings made before the field existed). A consumer
+    /// that estimates the stream's residual bias itself (the odometry's filter) moves its
+    /// estimate by the change of this offset: the refinement changes the stream's bias by
+    /// exactly that much.
+    #[serde(default)]
+    pub refined_accel_mps2: [f64; 3],
 }
 
 /// Bits of [`OdometryState::flags`].
@@ -416,7 +424,7 @@ mod tests {
 
     #[test]
     fn corrected_layout() {
-        assert_eq!(size_of::<CorrectedImuSample>(), 160);
+        assert_eq!(size_of::<CorrectedImuSample>(), 184);
         assert_eq!(align_of::<CorrectedImuSample>(), 8);
         assert_eq!(offset_of!(CorrectedImuSample, stamps), 0);
         assert_eq!(offset_of!(CorrectedImuSample, seq), 32);
@@ -429,6 +437,7 @@ mod tests {
         assert_eq!(offset_of!(CorrectedImuSample, flags), 152);
         assert_eq!(offset_of!(CorrectedImuSample, raw_flags), 154);
         assert_eq!(offset_of!(CorrectedImuSample, settles), 156);
+        assert_eq!(offset_of!(CorrectedImuSample, refined_accel_mps2), 160);
     }
 
     #[test]

@@ -69,7 +69,8 @@ fn facts() -> Vec<Fact> {
             calib_id,
             flags,
             raw_flags,
-            settles
+            settles,
+            refined_accel_mps2
         ]
     );
     layout_facts!(

@@ -58,7 +58,8 @@ fn python_ctypes_match_rust_layout() {
                 calib_id,
                 flags,
                 raw_flags,
-                settles
+                settles,
+                refined_accel_mps2
             ]
         ),
         rust_line!(

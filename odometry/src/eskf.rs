@@ -38,6 +38,7 @@
 
 mod increment;
 mod lever;
+mod refinement;
 mod reported;
 
 use increment::{Increment, Sensitivity, Step};
@@ -241,6 +242,9 @@ pub struct Eskf {
     reported: Reported,
     /// Factor on the process noise ([`Self::set_consistency`] with `process`), 1 by default.
     q_scale: f64,
+    /// The calibration stage's accelerometer refinement offset of the last sample, m/s^2,
+    /// sensor frame (module `refinement`).
+    refined: Option<Vector3<f64>>,
 }
 
 /// Skew-symmetric matrix: `skew(a) * b == a.cross(&b)`.
@@ -267,6 +271,7 @@ impl Eskf {
             sampled_sd: (0.0, 0.0),
             reported: Reported::default(),
             q_scale: 1.0,
+            refined: None,
         }
         .with_sigma()
     }

@@ -76,8 +76,7 @@ pub(crate) struct Navigator {
     at_rest: bool,
     rest_count: u32,
     distance_m: f64,
-    /// Whether the last sample's rest decision was the IMU's zero-state flag (no fresh hint
-    /// with a rest source).
+    /// Whether the IMU's zero-state flag made the last rest decision (no fresh rest hint).
     imu_decided: bool,
     /// The IMU-only non-holonomic constraint (wheeled platforms).
     nhc: Option<ImuConstraint>,
@@ -174,8 +173,7 @@ impl Navigator {
         }
     }
 
-    /// Makes this navigator a copy of `other` (built with the same configuration), reusing
-    /// its own storage: nothing is allocated.
+    /// Makes this navigator a copy of `other` (built alike), in its own storage: no allocation.
     pub fn copy_from(&mut self, other: &Self) {
         self.cfg = other.cfg;
         self.hints.copy_from(&other.hints);
@@ -257,8 +255,7 @@ impl Navigator {
         self.hints.cfg.lever_arm_m
     }
 
-    /// The IMU-to-body mounting (sensor to body), configured or estimated; `None` while it is
-    /// being estimated.
+    /// The IMU-to-body mounting (sensor to body), configured or estimated (`None`: not yet).
     pub fn mounting(&self) -> Option<UnitQuaternion<f64>> {
         self.hints.r_bs.map(|r| {
             UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r))
@@ -387,6 +384,10 @@ impl Navigator {
         let clipped = if reconstruct { verdict.clipped } else { 0 };
         self.clip
             .before_predict(self.kf.as_ref().expect("aligned"), clipped);
+        self.kf
+            .as_mut()
+            .expect("aligned")
+            .follow_refinement(s.refined_accel_mps2);
         let moved = self.predict(m, dt, gap, &mut d.sample);
         let kf = self.kf.as_mut().expect("aligned");
         if self.untrusted.widen(kf, &m, dt, verdict, &self.cfg) {
@@ -458,8 +459,7 @@ impl Navigator {
         }
     }
 
-    /// The aligned filter's prediction over `dt` (widened across a gap); returns the
-    /// horizontal distance it moved, m.
+    /// The aligned filter's prediction over `dt` (widened across a gap): metres moved.
     #[inline]
     fn predict(&mut self, m: Imu, dt: f64, gap: bool, hs: &mut HintSample) -> f64 {
         let kf = self.kf.as_mut().expect("aligned");

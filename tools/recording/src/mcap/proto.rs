@@ -117,6 +117,8 @@ pub struct CorrectedImuSample {
     pub zs_mean_mps2: Vec<f32>,
     #[prost(float, repeated, tag = 16)]
     pub zs_std_mps2: Vec<f32>,
+    #[prost(float, repeated, tag = 17)]
+    pub refined_accel_mps2: Vec<f32>,
 }
 
 /// [`ipc_types::OdometryState`]: `float`s under new tags (15-21); older recordings hold
@@ -300,6 +302,7 @@ const MESSAGES: &[Table] = {
                 ("temp_c", 14, OptF32),
                 ("zs_mean_mps2", 15, F32s),
                 ("zs_std_mps2", 16, F32s),
+                ("refined_accel_mps2", 17, F32s),
             ],
             reserved: &[(3, 7)],
         },
@@ -653,6 +656,7 @@ mod tests {
             flags: 1,
             raw_flags: 1,
             settles: 1,
+            refined_accel_mps2: ones(1.0),
             ..Default::default()
         };
         let mut p = CorrectedImuSample::default();

@@ -244,6 +244,11 @@ impl Topic for CorrectedImuSample {
         p.temp_c = Some(proto::quantize(self.temp_c, quantum::TEMP_C));
         proto::fill_f32(&mut p.zs_mean_mps2, &self.zs_mean_mps2, quantum::ACCEL_MPS2);
         proto::fill_f32(&mut p.zs_std_mps2, &self.zs_std_mps2, quantum::ACCEL_MPS2);
+        proto::fill_f32(
+            &mut p.refined_accel_mps2,
+            &self.refined_accel_mps2,
+            quantum::ACCEL_MPS2,
+        );
         p.calib_id = self.calib_id;
         p.flags = self.flags.into();
         p.raw_flags = self.raw_flags.into();
@@ -263,6 +268,7 @@ impl Topic for CorrectedImuSample {
             flags: proto::narrow("flags", p.flags)?,
             raw_flags: proto::narrow("raw_flags", p.raw_flags)?,
             settles: p.settles,
+            refined_accel_mps2: refined("refined_accel_mps2", &p.refined_accel_mps2)?,
         })
     }
 
@@ -274,6 +280,9 @@ impl Topic for CorrectedImuSample {
             temp_c: quantum::recorded(self.temp_c, TEMP_C),
             zs_mean_mps2: self.zs_mean_mps2.map(|x| quantum::recorded(x, ACCEL_MPS2)),
             zs_std_mps2: self.zs_std_mps2.map(|x| quantum::recorded(x, ACCEL_MPS2)),
+            refined_accel_mps2: self
+                .refined_accel_mps2
+                .map(|x| quantum::recorded(x, ACCEL_MPS2)),
             ..*self
         }
     }
@@ -321,6 +330,13 @@ impl Topic for CorrectedImuSample {
                         u32::MAX.into(),
                     ),
                 ),
+                (
+                    "refined_accel_mps2",
+                    vector(
+                        3,
+                        number("Accelerometer offset the bias refinement subtracts, m/s^2."),
+                    ),
+                ),
             ],
         )
     }
@@ -336,8 +352,18 @@ impl Topic for CorrectedImuSample {
             .chain(&self.gyro_rps)
             .chain([&self.temp_c])
             .chain(&self.zs_mean_mps2)
-            .chain(&self.zs_std_mps2);
+            .chain(&self.zs_std_mps2)
+            .chain(&self.refined_accel_mps2);
         values.all(|v| v.is_finite())
+    }
+}
+
+/// A refinement offset as recorded: absent (a recording made before the field existed) is
+/// zero, as the sample's default.
+fn refined(field: &str, v: &[f32]) -> std::result::Result<[f64; 3], String> {
+    match v {
+        [] => Ok([0.0; 3]),
+        _ => proto::array_f32(field, v, &[]),
     }
 }
 
