@@ -1,0 +1,231 @@
+"""PHIL's TurtleBot runs under motion capture (PHIL-MQP/phil, `recorded_sensor_data/
+turtlebot_mocap_3_17/trial_N/`; Worcester Polytechnic Institute, "Position Hallucination and
+Indoor Localization", 2018): a TurtleBot 2 (Kobuki base) carrying a Kauai Labs navX-MXP read by
+a RoboRIO, driven under a Vicon system.
+
+Files, per trial:
+- `rio-data-*.csv`: the RoboRIO's log, a header row then one row per read (about 50 Hz).
+  `raw_accel_x..z` are the navX's raw accelerometer in g (+1.01 g on z at rest: specific
+  force, z up) and `raw_gyro_x..z` its raw gyroscope in deg/s (steps of 2000/32768 deg/s, the
+  +-2000 deg/s range); `fpga time` is the RoboRIO's clock in s. The encoder and motor columns
+  are zeros on the TurtleBot (its wheels are the Kobuki's, logged apart on another clock).
+- `turtlebot_mocap_3_17 N.csv`: the Vicon export: `Objects`, the rate (100 Hz), the object
+  names (`Global Angle NAME:NAME`, six columns each), the header `Frame,Sub Frame,RX,RY,RZ,
+  TX,TY,TZ,...` and the units (rad, mm), then one row per frame. RX..RZ are the object's
+  orientation as a rotation vector (axis times angle, rad); TX..TZ its position in mm. A frame
+  where the object was not seen has empty cells and is skipped.
+
+The two logs are cut to about the same span but not stamped on one clock. The offset is
+measured, as navego.py does for the rovers: the lag (within MAX_LAG_S, LAG_STEP_S steps) that
+best correlates the IMU's yaw rate about its start-up up axis with the Vicon object's yaw rate
+(its rotation vector's heading, differenced over +-DIFF_S), both averaged over BIN_S bins. A
+best correlation below MIN_R refuses the trial. The same fit's slope (gyro over Vicon) checks
+the gyroscope's units and sign; on the six trials it is 0.99-1.00 at r >= 0.998 and lag 0 to
+0.05 s. The samples pass through unchanged.
+
+The Vicon object's axes are not the navX's (the object is the markers' frame), so the truth is
+the track's positions only (`frame`: unknown_heading), which bench.py turns onto ours.
+"""
+
+import math
+
+import navego
+from containers import ConvertError
+
+BIN_S = 0.25  # yaw-rate bins for the clock offset, s (the Vicon heading is smooth at 100 Hz)
+DIFF_S = 0.05  # the Vicon yaw rate is the heading's central difference over +-DIFF_S, s
+LAG_STEP_S = 0.05  # step of the offsets searched, s
+MAX_LAG_S = 5.0  # the offsets searched, s
+MIN_R = 0.9  # the correlation below which no offset is taken
+TRACK_MIN_STEP_M = 0.01  # the truth's track length counts steps of at least this much (Vicon noise is ~0.1 mm)
+RIO_COLUMNS = ("raw_accel_x", "raw_accel_y", "raw_accel_z", "raw_gyro_x", "raw_gyro_y", "raw_gyro_z", "fpga time")
+
+
+def _number(cell, where, line, field):
+    try:
+        v = float(cell)
+    except ValueError:
+        raise ConvertError(where, line, field, f"not a number: {cell!r}") from None
+    if not math.isfinite(v):
+        raise ConvertError(where, line, field, f"not finite: {cell!r}")
+    return v
+
+
+def rio_samples(text, where):
+    """(samples, notes): (t_s from the first row, accel g, gyro deg/s) from the RoboRIO log."""
+    lines = text.splitlines()
+    if not lines:
+        raise ConvertError(where, 1, None, "empty file")
+    header = [h.strip() for h in lines[0].split(",")]
+    missing = [c for c in RIO_COLUMNS if c not in header]
+    if missing:
+        raise ConvertError(where, 1, missing[0], "column missing from the header")
+    idx = [header.index(c) for c in RIO_COLUMNS]
+    samples, t0 = [], None
+    for n, line in enumerate(lines[1:], start=2):
+        if not line.strip():
+            continue
+        cells = line.split(",")
+        if len(cells) != len(header):
+            raise ConvertError(where, n, None, f"{len(cells)} cells, the header has {len(header)}")
+        v = [_number(cells[i], where, n, c) for i, c in zip(idx, RIO_COLUMNS)]
+        t0 = v[6] if t0 is None else t0
+        samples.append((v[6] - t0, *v[:6]))
+    if len(samples) < 2:
+        raise ConvertError(where, None, None, "fewer than two rows")
+    return samples, [f"{where}: navX raw accelerometer (g) and gyroscope (deg/s), time 'fpga time' (s) from its first row"]
+
+
+def yaw_of_rotation_vector(rx, ry, rz):
+    """Heading (rad, counter-clockwise about z) of the body x axis turned by the rotation vector
+    (axis times angle, rad): atan2(R[1][0], R[0][0]) of the Rodrigues matrix."""
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if angle < 1e-12:
+        return 0.0
+    x, y, z = rx / angle, ry / angle, rz / angle
+    c, s = math.cos(angle), math.sin(angle)
+    return math.atan2(y * x * (1 - c) + z * s, c + x * x * (1 - c))
+
+
+def vicon_track(text, where, name):
+    """[(t_s from the first frame, x m, y m, heading rad unwrapped)] of object `name`."""
+    lines = text.splitlines()
+    if len(lines) < 6 or lines[0].strip().rstrip(",") != "Objects":
+        raise ConvertError(where, 1, None, "not a Vicon object export (first line 'Objects')")
+    rate = _number(lines[1].split(",")[0], where, 2, "rate")
+    names = lines[2].split(",")
+    col = next((i for i, c in enumerate(names) if c.strip().endswith(f"{name}:{name}")), None)
+    if col is None:
+        raise ConvertError(where, 3, name, "object not among the export's objects")
+    if [c.strip() for c in lines[3].split(",")[col:col + 6]] != ["RX", "RY", "RZ", "TX", "TY", "TZ"]:
+        raise ConvertError(where, 4, name, "expected the columns RX,RY,RZ,TX,TY,TZ")
+    track, first, missing = [], None, 0
+    for n, line in enumerate(lines[5:], start=6):
+        cells = line.split(",")
+        if not line.strip():
+            continue
+        if len(cells) < col + 6:
+            raise ConvertError(where, n, name, f"{len(cells)} cells, the object's columns end at {col + 6}")
+        if any(not c.strip() for c in cells[col:col + 6]):
+            missing += 1
+            continue
+        frame = _number(cells[0], where, n, "Frame")
+        first = frame if first is None else first
+        rx, ry, rz, tx, ty, _ = (_number(c, where, n, h) for c, h in zip(cells[col:col + 6], ("RX", "RY", "RZ", "TX", "TY", "TZ")))
+        heading = yaw_of_rotation_vector(rx, ry, rz)
+        if track:
+            heading = track[-1][3] + math.remainder(heading - track[-1][3], 2 * math.pi)
+        track.append(((frame - first) / rate, tx / 1000.0, ty / 1000.0, heading))
+    if len(track) < 2:
+        raise ConvertError(where, None, name, "fewer than two frames with the object seen")
+    return track, missing
+
+
+def _yaw_rate(track):
+    times, rates, j = [], [], 0
+    for i, q in enumerate(track):
+        while track[j][0] < q[0] - DIFF_S:
+            j += 1
+        k = next((k for k in range(i, len(track)) if track[k][0] >= q[0] + DIFF_S), None)
+        if k is None:
+            break
+        times.append(q[0])
+        rates.append((track[k][3] - track[j][3]) / (track[k][0] - track[j][0]))
+    return times, rates
+
+
+def clock_offset(samples, track, where):
+    """(offset s, r, slope): IMU time = Vicon time + offset, the lag where the binned yaw rates
+    correlate best (r), and that fit's slope, gyro over Vicon. A ConvertError below MIN_R."""
+    t_end = max(samples[-1][0], track[-1][0]) + MAX_LAG_S
+    it, ir = navego.imu_yaw_rate(samples)
+    imu = navego._binned(ir, it, t_end, BIN_S)
+    vt, vr = _yaw_rate(track)
+    best = None
+    steps = int(round(MAX_LAG_S / LAG_STEP_S))
+    for k in range(-steps, steps + 1):
+        ref = navego._binned(vr, [t + k * LAG_STEP_S for t in vt], t_end, BIN_S)
+        r = navego._correlation(imu, ref)
+        if r is not None and (best is None or r > best[1]):
+            best = (round(k * LAG_STEP_S, 6), r, ref)
+    if best is None or best[1] < MIN_R:
+        raise ConvertError(where, None, "RZ", f"no clock offset within {MAX_LAG_S} s correlates the yaw rates "
+                                              f"(best r {None if best is None else round(best[1], 3)})")
+    pairs = [(x, y) for x, y in zip(imu, best[2]) if x is not None and y is not None]
+    mx, my = sum(p[0] for p in pairs) / len(pairs), sum(p[1] for p in pairs) / len(pairs)
+    slope = sum((x - mx) * (y - my) for x, y in pairs) / sum((y - my) ** 2 for _, y in pairs)
+    return best[0], best[1], slope
+
+
+def track_truth(track, offset, r, slope):
+    """The truth: the Vicon track on the IMU's clock (`track`: [t_s, x, y]) and the last pose's
+    distance from the first; the heading is the markers' not ours, so bench.py turns it."""
+    end = [track[-1][1] - track[0][1], track[-1][2] - track[0][2]]
+    return {
+        "kind": "mocap_track",
+        "frame": "unknown_heading",
+        "end_displacement_m": None,
+        "end_distance_m": math.hypot(*end),
+        "end_displacement_vicon_m": end,
+        "poses": len(track),
+        "clock_offset_s": offset,
+        "clock_offset_r": round(r, 4),
+        "gyro_over_vicon_yaw_rate": round(slope, 4),
+        "track": [[round(t + offset, 4), round(x, 5), round(y, 5)] for t, x, y, _ in track],
+        "track_min_step_m": TRACK_MIN_STEP_M,
+        "source": "the Vicon export's phil_turtlebot object (TX, TY in mm) on the IMU's clock shifted by clock_offset_s "
+                  "(measured from the yaw rates, phil_mqp.py); bench.py measures from the pose at the odometry's alignment "
+                  "to the last; the markers' heading is not ours, so the track is turned onto ours",
+    }
+
+
+def _vicon_text(frames, name="phil_turtlebot"):
+    head = ["Objects", "100", ",,Global Angle tag:tag,,,,,,Global Angle %s:%s,,,,," % (name, name),
+            "Frame,Sub Frame" + ",RX,RY,RZ,TX,TY,TZ" * 2, ",," + "rad,rad,rad,mm,mm,mm," * 2]
+    return "\n".join(head + frames) + "\n"
+
+
+def self_test():
+    """A robot circling counter-clockwise at 30 deg/s with the Vicon log starting 0.4 s after
+    the IMU's: units, the offset and slope, the truth; malformed input names the line."""
+    def heading(t):
+        return math.radians(30.0) * max(0.0, t - 2.0)
+
+    rio = ["raw_accel_x,raw_accel_y,raw_accel_z,raw_gyro_x,raw_gyro_y,raw_gyro_z,yaw,fpga time,navx time"]
+    for i in range(50 * 30):
+        t = i / 50
+        rate = (30.0 + 10.0 * math.sin(t)) if t >= 2.0 else 0.0
+        rio.append(f"0,0,1,0,0,{rate},0,{100.0 + t},{i}")
+    samples, _ = rio_samples("\n".join(rio), "r.csv")
+    assert samples[0][0] == 0.0 and abs(samples[100][6] - (30.0 + 10.0 * math.sin(2.0))) < 1e-9, samples[100]
+    frames, h = [], 0.0
+    for i in range(100 * 28):
+        t = 0.4 + i / 100  # the Vicon clock: 0 at IMU time 0.4 s
+        h += math.radians(30.0 + 10.0 * math.sin(t)) / 100 if t >= 2.0 else 0.0
+        x, y = 0.5 * math.sin(h), 0.5 - 0.5 * math.cos(h)
+        cells = ["", "", "", "", "", ""] if i == 7 else [0, 0, math.remainder(h, 2 * math.pi), 1000 * x, 1000 * y, 100]
+        frames.append(",".join(str(c) for c in [i + 1, 0, 0, 0, 0, 1, 2, 3] + cells))
+    track, missing = vicon_track(_vicon_text(frames), "v.csv", "phil_turtlebot")
+    assert missing == 1 and len(track) == 100 * 28 - 1, (missing, len(track))
+    assert abs(yaw_of_rotation_vector(0.0, 0.0, 2.5) - 2.5) < 1e-12
+    assert abs(yaw_of_rotation_vector(0.0, 0.0, -3.5) - math.remainder(-3.5, 2 * math.pi)) < 1e-12
+    assert abs(yaw_of_rotation_vector(math.pi, 0.0, 0.0)) < 1e-12  # upside down about x: x still ahead
+    offset, r, slope = clock_offset(samples, track, "v.csv")
+    assert abs(offset - 0.4) < 1e-9 and r > 0.99 and abs(slope - 1.0) < 0.02, (offset, r, slope)
+    truth = track_truth(track, offset, r, slope)
+    assert truth["track"][0][0] == 0.4 and abs(truth["end_distance_m"] - math.hypot(*truth["end_displacement_vicon_m"])) < 1e-12
+    bad = list(frames)
+    bad[3] = bad[3].replace(",100", ",1O0", 1)
+    try:
+        vicon_track(_vicon_text(bad), "b.csv", "phil_turtlebot")
+    except ConvertError as e:
+        assert "b.csv" in str(e) and "line 9" in str(e) and "TZ" in str(e), str(e)
+    else:
+        raise AssertionError("no error for a malformed cell")
+    try:
+        rio_samples(rio[0].replace("raw_gyro_z", "gz") + "\n1,2,3,4,5,6,7,8,9", "h.csv")
+    except ConvertError as e:
+        assert "h.csv" in str(e) and "raw_gyro_z" in str(e), str(e)
+    else:
+        raise AssertionError("no error for a missing column")
+    return "phil_turtlebot_vicon"
