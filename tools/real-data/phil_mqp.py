@@ -38,6 +38,9 @@ LAG_STEP_S = 0.05  # step of the offsets searched, s
 MAX_LAG_S = 5.0  # the offsets searched, s
 MIN_R = 0.9  # the correlation below which no offset is taken
 TRACK_MIN_STEP_M = 0.01  # the truth's track length counts steps of at least this much (Vicon noise is ~0.1 mm)
+SPEED_WINDOW_S = 0.2  # the wheel speeds are tick differences over this much time, s
+METRES_PER_TICK = 0.002436916871363930187454 * 0.035  # Kobuki wheel: rad per tick times radius, m
+WHEEL_BASE_M = 0.23  # Kobuki wheel to wheel, m
 RIO_COLUMNS = ("raw_accel_x", "raw_accel_y", "raw_accel_z", "raw_gyro_x", "raw_gyro_y", "raw_gyro_z", "fpga time")
 
 
@@ -121,7 +124,8 @@ def vicon_track(text, where, name):
     return track, missing
 
 
-def _yaw_rate(track):
+def vicon_yaw_rate(track):
+    """(times, rad/s): the Vicon heading's central difference over +-DIFF_S."""
     times, rates, j = [], [], 0
     for i, q in enumerate(track):
         while track[j][0] < q[0] - DIFF_S:
@@ -134,13 +138,15 @@ def _yaw_rate(track):
     return times, rates
 
 
-def clock_offset(samples, track, where):
-    """(offset s, r, slope): IMU time = Vicon time + offset, the lag where the binned yaw rates
-    correlate best (r), and that fit's slope, gyro over Vicon. A ConvertError below MIN_R."""
-    t_end = max(samples[-1][0], track[-1][0]) + MAX_LAG_S
+def clock_offset(samples, yaw_rates, where, field):
+    """(offset s, r, slope): IMU time = other time + offset, the lag where the binned yaw rates
+    (`yaw_rates`: (times, rad/s) on the other clock, the Vicon's or the Kobuki's) correlate
+    best with the IMU's (r), and that fit's slope, gyro over other. A ConvertError naming
+    `field` below MIN_R."""
+    vt, vr = yaw_rates
+    t_end = max(samples[-1][0], vt[-1]) + MAX_LAG_S
     it, ir = navego.imu_yaw_rate(samples)
     imu = navego._binned(ir, it, t_end, BIN_S)
-    vt, vr = _yaw_rate(track)
     best = None
     steps = int(round(MAX_LAG_S / LAG_STEP_S))
     for k in range(-steps, steps + 1):
@@ -149,12 +155,62 @@ def clock_offset(samples, track, where):
         if r is not None and (best is None or r > best[1]):
             best = (round(k * LAG_STEP_S, 6), r, ref)
     if best is None or best[1] < MIN_R:
-        raise ConvertError(where, None, "RZ", f"no clock offset within {MAX_LAG_S} s correlates the yaw rates "
+        raise ConvertError(where, None, field, f"no clock offset within {MAX_LAG_S} s correlates the yaw rates "
                                               f"(best r {None if best is None else round(best[1], 3)})")
     pairs = [(x, y) for x, y in zip(imu, best[2]) if x is not None and y is not None]
     mx, my = sum(p[0] for p in pairs) / len(pairs), sum(p[1] for p in pairs) / len(pairs)
     slope = sum((x - mx) * (y - my) for x, y in pairs) / sum((y - my) ** 2 for _, y in pairs)
     return best[0], best[1], slope
+
+
+def kobuki_ticks(text, where):
+    """[(t_s from the first row, left ticks, right ticks)] of kobuki_data_*.csv (header
+    left_ticks,right_ticks,time_s,time_ns; the Kobuki's 16-bit wheel encoder counts, logged
+    on the Kobuki computer's Unix clock), the counts unwrapped."""
+    lines = text.splitlines()
+    if not lines or [h.strip() for h in lines[0].split(",")] != ["left_ticks", "right_ticks", "time_s", "time_ns"]:
+        raise ConvertError(where, 1, None, "expected the header left_ticks,right_ticks,time_s,time_ns")
+    rows, t0 = [], None
+    for n, line in enumerate(lines[1:], start=2):
+        if not line.strip():
+            continue
+        cells = line.split(",")
+        if len(cells) != 4:
+            raise ConvertError(where, n, None, f"{len(cells)} cells, expected 4")
+        v = [_number(c, where, n, h) for c, h in zip(cells, ("left_ticks", "right_ticks", "time_s", "time_ns"))]
+        if not all(0 <= x < 65536 for x in v[:2]):
+            raise ConvertError(where, n, "left_ticks" if not 0 <= v[0] < 65536 else "right_ticks", "not a 16-bit count")
+        t = v[2] + v[3] * 1e-9
+        t0 = t if t0 is None else t0
+        if rows:
+            v[0] = rows[-1][1] + (v[0] - rows[-1][1] + 32768) % 65536 - 32768
+            v[1] = rows[-1][2] + (v[1] - rows[-1][2] + 32768) % 65536 - 32768
+            if t <= t0 + rows[-1][0]:
+                raise ConvertError(where, n, "time_ns", "time does not increase")
+        rows.append((t - t0, v[0], v[1]))
+    if len(rows) < 2:
+        raise ConvertError(where, None, None, "fewer than two rows")
+    return rows
+
+
+def kobuki_odometry(ticks):
+    """[(t_s, forward speed m/s, yaw rate rad/s)] of the base from the wheel ticks, each the
+    difference over the last SPEED_WINDOW_S (the log repeats counts between the base's
+    updates), timed at the window's middle. Differential drive: v = (dl + dr) / 2,
+    w = (dr - dl) / WHEEL_BASE_M, with METRES_PER_TICK and WHEEL_BASE_M from the Kobuki's
+    driver (kobuki-base/kobuki_core@dd80596db8f60adc529f58f209a144587e5a0e6e,
+    src/driver/diff_drive.cpp: tick_to_rad 0.002436916871363930187454, wheel radius 0.035 m,
+    bias 0.23 m)."""
+    rows, j = [], 0
+    for t, left, right in ticks:
+        while ticks[j + 1][0] <= t - SPEED_WINDOW_S:
+            j += 1
+        t_a, l_a, r_a = ticks[j]
+        if t - t_a < SPEED_WINDOW_S:
+            continue
+        dl, dr = (left - l_a) * METRES_PER_TICK, (right - r_a) * METRES_PER_TICK
+        rows.append(((t + t_a) / 2, (dl + dr) / 2 / (t - t_a), (dr - dl) / WHEEL_BASE_M / (t - t_a)))
+    return rows
 
 
 def track_truth(track, offset, r, slope):
@@ -210,10 +266,26 @@ def self_test():
     assert abs(yaw_of_rotation_vector(0.0, 0.0, 2.5) - 2.5) < 1e-12
     assert abs(yaw_of_rotation_vector(0.0, 0.0, -3.5) - math.remainder(-3.5, 2 * math.pi)) < 1e-12
     assert abs(yaw_of_rotation_vector(math.pi, 0.0, 0.0)) < 1e-12  # upside down about x: x still ahead
-    offset, r, slope = clock_offset(samples, track, "v.csv")
+    offset, r, slope = clock_offset(samples, vicon_yaw_rate(track), "v.csv", "RZ")
     assert abs(offset - 0.4) < 1e-9 and r > 0.99 and abs(slope - 1.0) < 0.02, (offset, r, slope)
     truth = track_truth(track, offset, r, slope)
     assert truth["track"][0][0] == 0.4 and abs(truth["end_distance_m"] - math.hypot(*truth["end_displacement_vicon_m"])) < 1e-12
+    # The Kobuki turning on the spot at 0.1 rad/s, its left count wrapping below 0.
+    step = 0.1 * WHEEL_BASE_M / 2 / 50 / METRES_PER_TICK  # ticks per 20 ms row on each wheel
+    kob = ["left_ticks,right_ticks,time_s,time_ns"]
+    for i in range(200):
+        t_ns = 1521299413_000000000 + 20_000_000 * i
+        kob.append(f"{int(round(300 - step * i)) % 65536},{int(round(100 + step * i))},{t_ns // 10**9},{t_ns % 10**9}")
+    ticks = kobuki_ticks("\n".join(kob), "k.csv")
+    assert ticks[-1][1] < 0 and abs(ticks[-1][0] - 3.98) < 1e-6, ticks[-1]
+    odom = kobuki_odometry(ticks)
+    assert abs(odom[0][0] - 0.1) < 1e-6 and all(abs(v) < 0.005 and abs(w - 0.1) < 0.005 for _, v, w in odom), odom[:3]
+    try:
+        kobuki_ticks("\n".join(kob[:5] + [kob[5].replace(",", ",7000", 1)]), "k.csv")
+    except ConvertError as e:
+        assert "k.csv" in str(e) and "line 6" in str(e) and "right_ticks" in str(e), str(e)
+    else:
+        raise AssertionError("no error for a count over 16 bits")
     bad = list(frames)
     bad[3] = bad[3].replace(",100", ",1O0", 1)
     try:
