@@ -722,8 +722,13 @@ def _load_phil(rec, source, f):
                  f"{k_off:+.2f} s (yaw-rate correlation r = {k_r:.4f}, gyro/wheels slope {k_slope:.3f}); speed valid, 1-sigma "
                  f"{ODOM_SPEED_SIGMA_MPS} m/s; stationary (encoders) after {ODOM_STATIONARY_AFTER_S} s below {ODOM_STILL_MPS} m/s")
     hints = odometry_hints([(t + k_off, v, w) for t, v, w in odom if t + k_off >= 0.0])
+    travel = phil_mqp.travel_yaw_on_object(track, [(t + k_off - offset, v, w) for t, v, w in odom])
+    notes.append("direction of travel minus the Vicon object's heading while driving straight: " +
+                 ("no straight stretch" if travel is None else f"{travel[0]:.1f} deg (median of {travel[1]})"))
     distance = _path_length([q[1:3] for q in track], phil_mqp.TRACK_MIN_STEP_M)
-    return samples, notes, phil_mqp.track_truth(track, offset, r, slope), distance, hints
+    truth = phil_mqp.track_truth(track, offset, r, slope, source["body_yaw_on_vicon_object_deg"])
+    truth["sensor_yaw_on_body_deg"] = source["sensor_yaw_on_body_deg"]
+    return samples, notes, truth, distance, hints
 
 
 LOADERS = {

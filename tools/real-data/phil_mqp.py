@@ -23,8 +23,11 @@ best correlation below MIN_R refuses the trial. The same fit's slope (gyro over 
 the gyroscope's units and sign; on the six trials it is 0.99-1.00 at r >= 0.998 and lag 0 to
 0.05 s. The samples pass through unchanged.
 
-The Vicon object's axes are not the navX's (the object is the markers' frame), so the truth is
-the track's positions only (`frame`: unknown_heading), which bench.py turns onto ours.
+The Vicon object is the markers' frame, neither the base's nor the navX's. The base's heading is
+the object's plus a constant (corpus.json's `body_yaw_on_vicon_object_deg`: the direction of
+travel against the object's heading where the wheels say the base drives straight,
+`travel_yaw_on_object`, which the conversion's notes give per run), and the navX's yaw on the
+base (`sensor_yaw_on_body_deg`) turns that into our heading at the alignment (bench.py).
 """
 
 import math
@@ -213,9 +216,29 @@ def kobuki_odometry(ticks):
     return rows
 
 
-def track_truth(track, offset, r, slope):
-    """The truth: the Vicon track on the IMU's clock (`track`: [t_s, x, y]) and the last pose's
-    distance from the first; the heading is the markers' not ours, so bench.py turns it."""
+def travel_yaw_on_object(track, odom, min_speed=0.1, max_yaw_rate=0.05):
+    """(median deg, count): the direction of travel (the Vicon track's chord over +-0.1 s)
+    minus the object's heading, where the wheels (`odom` on the Vicon's clock) say the base
+    drives straight ahead (faster than `min_speed` m/s, turning slower than `max_yaw_rate`
+    rad/s); None without such a stretch. It checks the body heading the truth uses."""
+    yaws, j = [], 0
+    for i in range(10, len(track) - 10, 5):
+        t = track[i][0]
+        while j + 1 < len(odom) and odom[j + 1][0] <= t:
+            j += 1
+        _, v, w = odom[j]
+        (_, x0, y0, _), (_, x1, y1, _) = track[i - 10], track[i + 10]
+        if v > min_speed and abs(w) < max_yaw_rate and math.hypot(x1 - x0, y1 - y0) > 0.02:
+            yaws.append(math.degrees(math.remainder(math.atan2(y1 - y0, x1 - x0) - track[i][3], 2 * math.pi)))
+    if not yaws:
+        return None
+    yaws.sort()
+    return yaws[len(yaws) // 2], len(yaws)
+
+
+def track_truth(track, offset, r, slope, body_yaw_deg):
+    """The truth: the Vicon track on the IMU's clock (`track`: [t_s, x, y, the base's heading:
+    the object's plus `body_yaw_deg`]) and the last pose's distance from the first."""
     end = [track[-1][1] - track[0][1], track[-1][2] - track[0][2]]
     return {
         "kind": "mocap_track",
@@ -227,11 +250,14 @@ def track_truth(track, offset, r, slope):
         "clock_offset_s": offset,
         "clock_offset_r": round(r, 4),
         "gyro_over_vicon_yaw_rate": round(slope, 4),
-        "track": [[round(t + offset, 4), round(x, 5), round(y, 5)] for t, x, y, _ in track],
+        "body_yaw_on_vicon_object_deg": body_yaw_deg,
+        "track": [[round(t + offset, 4), round(x, 5), round(y, 5), round(h + math.radians(body_yaw_deg), 5)]
+                  for t, x, y, h in track],
         "track_min_step_m": TRACK_MIN_STEP_M,
         "source": "the Vicon export's phil_turtlebot object (TX, TY in mm) on the IMU's clock shifted by clock_offset_s "
-                  "(measured from the yaw rates, phil_mqp.py); bench.py measures from the pose at the odometry's alignment "
-                  "to the last; the markers' heading is not ours, so the track is turned onto ours",
+                  "(measured from the yaw rates, phil_mqp.py), with the base's heading (the object's plus "
+                  "body_yaw_on_vicon_object_deg); bench.py measures from the pose at the odometry's alignment to the last "
+                  "and turns it into our frame by the base's heading there plus the navX's yaw on the base",
     }
 
 
@@ -268,7 +294,13 @@ def self_test():
     assert abs(yaw_of_rotation_vector(math.pi, 0.0, 0.0)) < 1e-12  # upside down about x: x still ahead
     offset, r, slope = clock_offset(samples, vicon_yaw_rate(track), "v.csv", "RZ")
     assert abs(offset - 0.4) < 1e-9 and r > 0.99 and abs(slope - 1.0) < 0.02, (offset, r, slope)
-    truth = track_truth(track, offset, r, slope)
+    truth = track_truth(track, offset, r, slope, 90.0)
+    assert abs(truth["track"][500][3] - track[500][3] - math.pi / 2) < 1e-4, truth["track"][500]
+    # Driving straight along +x with the markers' x axis 30 degrees left of the travel: -30.
+    line = [(i / 100, 0.005 * i, 0.0, math.radians(30.0)) for i in range(300)]
+    yaw, n = travel_yaw_on_object(line, [(0.0, 0.5, 0.0)])
+    assert abs(yaw + 30.0) < 1e-9 and n == 56, (yaw, n)
+    assert travel_yaw_on_object(line, [(0.0, 0.5, 0.2)]) is None
     assert truth["track"][0][0] == 0.4 and abs(truth["end_distance_m"] - math.hypot(*truth["end_displacement_vicon_m"])) < 1e-12
     # The Kobuki turning on the spot at 0.1 rad/s, its left count wrapping below 0.
     step = 0.1 * WHEEL_BASE_M / 2 / 50 / METRES_PER_TICK  # ticks per 20 ms row on each wheel
