@@ -711,24 +711,10 @@ def _load_navego(rec, source, f):
 
 
 def _load_phil(rec, source, f):
-    samples, notes = phil_mqp.rio_samples(f.text(0), f.where(0))
-    track, missing = phil_mqp.vicon_track(f.text(1), f.where(1), source["vicon_object"])
-    offset, r, slope = phil_mqp.clock_offset(samples, phil_mqp.vicon_yaw_rate(track), f.where(1), "RZ")
-    notes.append(f"Vicon clock offset {offset:+.2f} s (yaw-rate correlation r = {r:.4f}, gyro/Vicon slope {slope:.3f}, "
-                 f"phil_mqp.clock_offset); {missing} frames without the object skipped")
-    odom = phil_mqp.kobuki_odometry(phil_mqp.kobuki_ticks(f.text(2), f.where(2)))
-    k_off, k_r, k_slope = phil_mqp.clock_offset(samples, ([q[0] for q in odom], [q[2] for q in odom]), f.where(2), "time_ns")
-    notes.append(f"robot hints from the Kobuki's wheel ticks ({phil_mqp.SPEED_WINDOW_S} s differences), clock offset "
-                 f"{k_off:+.2f} s (yaw-rate correlation r = {k_r:.4f}, gyro/wheels slope {k_slope:.3f}); speed valid, 1-sigma "
-                 f"{ODOM_SPEED_SIGMA_MPS} m/s; stationary (encoders) after {ODOM_STATIONARY_AFTER_S} s below {ODOM_STILL_MPS} m/s")
-    hints = odometry_hints([(t + k_off, v, w) for t, v, w in odom if t + k_off >= 0.0])
-    travel = phil_mqp.travel_yaw_on_object(track, [(t + k_off - offset, v, w) for t, v, w in odom])
-    notes.append("direction of travel minus the Vicon object's heading while driving straight: " +
-                 ("no straight stretch" if travel is None else f"{travel[0]:.1f} deg (median of {travel[1]})"))
-    distance = _path_length([q[1:3] for q in track], phil_mqp.TRACK_MIN_STEP_M)
-    truth = phil_mqp.track_truth(track, offset, r, slope, source["body_yaw_on_vicon_object_deg"])
-    truth["sensor_yaw_on_body_deg"] = source["sensor_yaw_on_body_deg"]
-    return samples, notes, truth, distance, hints
+    samples, notes, truth, track, odom = phil_mqp.recording([f.text(i) for i in range(3)], [f.where(i) for i in range(3)], source)
+    notes.append(f"robot hints: speed valid, 1-sigma {ODOM_SPEED_SIGMA_MPS} m/s; stationary (encoders) after "
+                 f"{ODOM_STATIONARY_AFTER_S} s below {ODOM_STILL_MPS} m/s")
+    return samples, notes, truth, _path_length([q[1:3] for q in track], phil_mqp.TRACK_MIN_STEP_M), odometry_hints(odom)
 
 
 LOADERS = {

@@ -15,13 +15,17 @@ Files, per trial:
   orientation as a rotation vector (axis times angle, rad); TX..TZ its position in mm. A frame
   where the object was not seen has empty cells and is skipped.
 
-The two logs are cut to about the same span but not stamped on one clock. The offset is
+- `kobuki_data_*.csv`: the Kobuki's 16-bit wheel encoder counts (`left_ticks`, `right_ticks`)
+  with `time_s`, `time_ns` on the Kobuki computer's Unix clock, about 42 Hz.
+
+The three logs are cut to about the same span but stamped on three clocks. Each offset is
 measured, as navego.py does for the rovers: the lag (within MAX_LAG_S, LAG_STEP_S steps) that
 best correlates the IMU's yaw rate about its start-up up axis with the Vicon object's yaw rate
-(its rotation vector's heading, differenced over +-DIFF_S), both averaged over BIN_S bins. A
-best correlation below MIN_R refuses the trial. The same fit's slope (gyro over Vicon) checks
-the gyroscope's units and sign; on the six trials it is 0.99-1.00 at r >= 0.998 and lag 0 to
-0.05 s. The samples pass through unchanged.
+(its rotation vector's heading, differenced over +-DIFF_S) or the wheels' (their differential
+speed over the wheel base), averaged over BIN_S bins. A best correlation below MIN_R refuses
+the run. The same fit's slope (gyro over Vicon) checks the gyroscope's units and sign: on the
+five runs taken it is 0.994-1.004 at r >= 0.998 (trial 6, which turns 9 degrees in all,
+correlates at r = 0.88 and is refused). The samples pass through unchanged.
 
 The Vicon object is the markers' frame, neither the base's nor the navX's. The base's heading is
 the object's plus a constant (corpus.json's `body_yaw_on_vicon_object_deg`: the direction of
@@ -40,7 +44,7 @@ DIFF_S = 0.05  # the Vicon yaw rate is the heading's central difference over +-D
 LAG_STEP_S = 0.05  # step of the offsets searched, s
 MAX_LAG_S = 5.0  # the offsets searched, s
 MIN_R = 0.9  # the correlation below which no offset is taken
-TRACK_MIN_STEP_M = 0.01  # the truth's track length counts steps of at least this much (Vicon noise is ~0.1 mm)
+TRACK_MIN_STEP_M = 0.01  # the truth's track length counts steps of at least this much (Vicon noise at rest: under 0.1 mm)
 SPEED_WINDOW_S = 0.2  # the wheel speeds are tick differences over this much time, s
 METRES_PER_TICK = 0.002436916871363930187454 * 0.035  # Kobuki wheel: rad per tick times radius, m
 WHEEL_BASE_M = 0.23  # Kobuki wheel to wheel, m
@@ -259,6 +263,27 @@ def track_truth(track, offset, r, slope, body_yaw_deg):
                   "body_yaw_on_vicon_object_deg); bench.py measures from the pose at the odometry's alignment to the last "
                   "and turns it into our frame by the base's heading there plus the navX's yaw on the base",
     }
+
+
+def recording(texts, wheres, source):
+    """(samples, notes, truth, Vicon track, wheel odometry rows on the IMU's clock) of one run
+    from its RoboRIO log, Vicon export and Kobuki log (`texts`, named by `wheres`); `source` is
+    its corpus.json source (the Vicon object's name, the base's yaw on it, the navX's on the base)."""
+    samples, notes = rio_samples(texts[0], wheres[0])
+    track, missing = vicon_track(texts[1], wheres[1], source["vicon_object"])
+    offset, r, slope = clock_offset(samples, vicon_yaw_rate(track), wheres[1], "RZ")
+    notes.append(f"Vicon clock offset {offset:+.2f} s (yaw-rate correlation r = {r:.4f}, gyro/Vicon slope {slope:.3f}); "
+                 f"{missing} frames without the object skipped")
+    odom = kobuki_odometry(kobuki_ticks(texts[2], wheres[2]))
+    k_off, k_r, k_slope = clock_offset(samples, ([q[0] for q in odom], [q[2] for q in odom]), wheres[2], "time_ns")
+    notes.append(f"wheel speeds from the Kobuki's ticks ({SPEED_WINDOW_S} s differences), clock offset {k_off:+.2f} s "
+                 f"(yaw-rate correlation r = {k_r:.4f}, gyro/wheels slope {k_slope:.3f})")
+    travel = travel_yaw_on_object(track, [(t + k_off - offset, v, w) for t, v, w in odom])
+    notes.append("direction of travel minus the Vicon object's heading while driving straight: " +
+                 ("no straight stretch" if travel is None else f"{travel[0]:.1f} deg (median of {travel[1]})"))
+    truth = track_truth(track, offset, r, slope, source["body_yaw_on_vicon_object_deg"])
+    truth["sensor_yaw_on_body_deg"] = source["sensor_yaw_on_body_deg"]
+    return samples, notes, truth, track, [(t + k_off, v, w) for t, v, w in odom if t + k_off >= 0.0]
 
 
 def _vicon_text(frames, name="phil_turtlebot"):
