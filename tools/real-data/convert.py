@@ -35,6 +35,7 @@ from pathlib import Path
 import comma2k19
 import containers
 import navego
+import phil_mqp
 import tyrex_attitude
 from containers import (HINT_TOPIC, MCAP_T0_NS, RAW_TOPIC, ConvertError, bag_bytes, bag_messages, decode_imu,
                         decode_navsatfix, decode_odometry, imu_message, mat_bytes, mat_matrix, mcap_bytes,
@@ -709,11 +710,19 @@ def _load_navego(rec, source, f):
     return samples, notes, navego.track_truth(track, offset, r), distance, None
 
 
+def _load_phil(rec, source, f):
+    samples, notes, truth, track, odom = phil_mqp.recording([f.text(i) for i in range(3)], [f.where(i) for i in range(3)], source)
+    notes.append(f"robot hints: speed valid, 1-sigma {ODOM_SPEED_SIGMA_MPS} m/s; stationary (encoders) after "
+                 f"{ODOM_STATIONARY_AFTER_S} s below {ODOM_STILL_MPS} m/s")
+    return samples, notes, truth, _path_length([q[1:3] for q in track], phil_mqp.TRACK_MIN_STEP_M), odometry_hints(odom)
+
+
 LOADERS = {
     "xio_csv": _load_xio, "openshoe_txt": _load_openshoe, "sensorconnect_csv": _load_sensorconnect,
     "xsens_dot_csv": _load_xsens_dot, "xsens_dot_rtk_npy": _load_xsens_dot_rtk, "broad_mat": _load_broad,
     "vesc_f1tenth_csv": _load_vesc, "ros1_bag_robot": _load_ros_bag, "comma2k19_npy": _load_comma2k19,
     "tyrex_android_qtm": _load_tyrex, "tyrex_ios_qtm": _load_tyrex, "navego_planetary_mat": _load_navego,
+    "phil_turtlebot_vicon": _load_phil,
 }
 
 
@@ -1012,7 +1021,8 @@ def self_test():
     _test_vesc_and_mcap()
     _test_ros_bag()
     _test_rtk_npy()
-    checked = [comma2k19.self_test(), tyrex_attitude.self_test(), navego.self_test(local_east_north), *containers.self_test()]
+    checked = [comma2k19.self_test(), tyrex_attitude.self_test(), navego.self_test(local_east_north), phil_mqp.self_test(),
+               *containers.self_test()]
     print("convert.py self-test: ok (xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv, broad_mat, vesc_f1tenth_csv, "
           "ros1_bag_robot, xsens_dot_rtk_npy, MAT v5 GCP, GNSS, MCAP with hints, " + ", ".join(checked) + ")")
     return 0
