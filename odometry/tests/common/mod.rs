@@ -509,6 +509,15 @@ pub fn drive_with_encoder_hints(
     case: &Case,
     seed: u64,
 ) -> (Vec<(RawImuSample, Truth)>, Vec<RobotHint>) {
+    drive_with_hints(case, seed, &HintParams::new(RestSource::Encoders))
+}
+
+/// [`drive_with_encoder_hints`] with the hint stream's parameters `params`.
+pub fn drive_with_hints(
+    case: &Case,
+    seed: u64,
+    params: &HintParams,
+) -> (Vec<(RawImuSample, Truth)>, Vec<RobotHint>) {
     let mut sim = Simulation::new(case, seed);
     sim.session();
     let mut raw = Vec::new();
@@ -521,7 +530,7 @@ pub fn drive_with_encoder_hints(
     });
     let t0_ns = raw[0].0.stamps.sample_ns;
     let hints = case
-        .hints(seed, &HintParams::new(RestSource::Encoders))
+        .hints(seed, params)
         .hints
         .into_iter()
         .map(|mut h| {
