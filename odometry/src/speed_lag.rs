@@ -12,9 +12,12 @@
 //! learnt from the speed's changes (`crate::eskf`), errors that grow with the acceleration
 //! are the ones the scale takes up. So each speed hint's forward variance gets `T^2 a^2` with
 //! `T` the hints' own period: a time uncertainty turned into a measurement uncertainty through
-//! the measurement's rate of change, as for the timing jitter of a sampled signal (IEEE Std
-//! 1057-2017, "Standard for Digitizing Waveform Recorders", section 4.9: the error is the
-//! signal's slope times the time error).
+//! the measurement's rate of change, as for the aperture jitter of a sampled signal (W. Kester,
+//! "Aperture Time, Aperture Jitter, Aperture Delay Time - Removing the Confusion", Analog
+//! Devices tutorial MT-007, 2009: the error is the signal's slope times the time error).
+//! White hint by hint, this still takes an offset that lasts a whole speed change for
+//! independent errors; the offset as a state of the filter (M. Li and A. I. Mourikis,
+//! "Online temporal calibration for camera-IMU systems", IJRR 33(7), 2014) would not.
 //!
 //! The acceleration is the hints' own, their speed's change over the two latest periods; its
 //! squared estimate has the changes' white noise taken out (its expected share,
