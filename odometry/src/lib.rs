@@ -29,6 +29,7 @@ pub mod rest_noise;
 pub mod rest_scatter;
 pub mod sampled_noise;
 pub mod session;
+pub mod speed_lag;
 pub mod stage;
 pub mod steps;
 pub mod stops;

@@ -8,13 +8,10 @@ use crate::attitudes::RestAttitudes;
 use crate::clip::{ClipRepair, ClipStats};
 use crate::config::OdometryConfig;
 use crate::consistency::{Consistency, ConsistencyReport, Kind};
-use crate::cruise::{CruiseWindow, ForwardAxis, MIN_SPEED_MPS, cruise_start};
+use crate::cruise::{CruiseWindow, MIN_SPEED_MPS, cruise_start};
 use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
 use crate::hand_bound::HandBound;
-use crate::hints::{
-    ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring, has_rest_source,
-    usable_from_ns,
-};
+use crate::hints::{ForwardAxisReport, HintConfig, HintStats, has_rest_source, usable_from_ns};
 use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::rest_scatter::RestScatter;
 use crate::sampled_noise::SampledNoise;
@@ -33,7 +30,7 @@ mod learning;
 mod records;
 mod walk_hooks;
 mod wheeled;
-use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, SPEED_QUEUE, WheelsStill};
+use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, WheelsStill};
 use learning::{Learned, LearningWindow};
 use records::{AlignSums, HistoryEntry, PendingRevision, RestWindow};
 
@@ -113,31 +110,7 @@ impl Navigator {
         let velocity_capacity = (hints.max_age_s * cfg.max_rate_hz).ceil() as usize + 2;
         Self {
             cfg,
-            hints: Hints {
-                cfg: hints,
-                delivery_ns: (hints.delivery_s * 1e9).round() as u64,
-                max_age_ns: (hints.max_age_s * 1e9).round() as u64,
-                waiting: Ring::new(hints.capacity),
-                newest: None,
-                speed: Ring::new(SPEED_QUEUE),
-                newest_used: None,
-                r_bs: hints.mounting.map(|q| q.to_rotation_matrix().into_inner()),
-                yaw_sigma_rad: 0.0,
-                estimator: MountingEstimator::default(),
-                forward: ForwardAxis::default(),
-                mounting_at_ns: None,
-                latest_fit: None,
-                scale_taken: None,
-                systematic: [0.0; 2],
-                along: [0.0; 2],
-                history: Ring::new(velocity_capacity),
-                still: WheelsStill::default(),
-                wait: crate::handover::WaitPath::default(),
-                corrections: Vector3::zeros(),
-                applied: 0,
-                disagreements: 0,
-                stats: HintStats::default(),
-            },
+            hints: Hints::new(hints, velocity_capacity),
             align: AlignSums::default(),
             learning: LearningWindow::new(cfg.learned_rest_s, cfg.max_rate_hz),
             learned: None,

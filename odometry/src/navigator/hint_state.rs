@@ -9,6 +9,7 @@ use crate::hints::{
     ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring, SCALE_CONFLICT_SIGMAS,
     ScaleTaken,
 };
+use crate::speed_lag::LagNoise;
 use ipc_types::{RobotHint, hint_flags, odometry_flags};
 use nalgebra::{Matrix3, Vector3};
 
@@ -105,9 +106,42 @@ pub(super) struct Hints {
     pub(super) applied: u32,
     pub(super) disagreements: u32,
     pub(super) stats: HintStats,
+    /// The speed hints' unknown time as speed noise ([`LagNoise`]).
+    pub(super) lag: LagNoise,
 }
 
 impl Hints {
+    /// The hint state of a navigator with the (validated) configuration `cfg`, its velocity
+    /// history holding `velocity_capacity` samples.
+    pub(super) fn new(cfg: HintConfig, velocity_capacity: usize) -> Self {
+        Self {
+            cfg,
+            delivery_ns: (cfg.delivery_s * 1e9).round() as u64,
+            max_age_ns: (cfg.max_age_s * 1e9).round() as u64,
+            waiting: Ring::new(cfg.capacity),
+            newest: None,
+            speed: Ring::new(SPEED_QUEUE),
+            newest_used: None,
+            r_bs: cfg.mounting.map(|q| q.to_rotation_matrix().into_inner()),
+            yaw_sigma_rad: 0.0,
+            estimator: MountingEstimator::default(),
+            forward: ForwardAxis::default(),
+            mounting_at_ns: None,
+            latest_fit: None,
+            scale_taken: None,
+            systematic: [0.0; 2],
+            along: [0.0; 2],
+            history: Ring::new(velocity_capacity),
+            still: WheelsStill::default(),
+            wait: WaitPath::default(),
+            corrections: Vector3::zeros(),
+            applied: 0,
+            disagreements: 0,
+            stats: HintStats::default(),
+            lag: LagNoise::default(),
+        }
+    }
+
     /// Makes this a copy of `other`, reusing the rings' storage (see [`Navigator::copy_from`]).
     pub(super) fn copy_from(&mut self, other: &Self) {
         self.cfg = other.cfg;
@@ -133,6 +167,7 @@ impl Hints {
         self.applied = other.applied;
         self.disagreements = other.disagreements;
         self.stats = other.stats;
+        self.lag = other.lag;
     }
 
     /// The body velocity minus corrections at `t_ns`, interpolated between the stored samples
@@ -262,6 +297,12 @@ impl Hints {
     /// when it cannot be applied (mounting unknown, or the hint stale at `t_ns` or older than
     /// the velocity history).
     pub(super) fn apply_speed(&mut self, kf: &mut Eskf, h: &RobotHint, t_ns: u64) -> Option<f64> {
+        let lag_var = self.lag.variance(
+            h.stamps.sample_ns,
+            h.forward_speed_mps,
+            h.forward_speed_sigma_mps,
+            self.max_age_ns,
+        );
         let r_bs = self.r_bs?;
         if t_ns.saturating_sub(h.stamps.sample_ns) > self.max_age_ns {
             return None;
@@ -286,7 +327,11 @@ impl Hints {
             &r_bs,
             &r_b,
             residual,
-            Vector3::new(h.forward_speed_sigma_mps, lateral, nh),
+            Vector3::new(
+                (h.forward_speed_sigma_mps.powi(2) + lag_var).sqrt(),
+                lateral,
+                nh,
+            ),
             self.cfg.speed_heading,
         );
         Some(nis.unwrap_or(f64::NAN))

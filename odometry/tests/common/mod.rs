@@ -75,6 +75,8 @@ pub struct Case {
     pub cruise_speed_mps: [f64; 2],
     /// Longest motion between two rests, s (see `DriveParams::max_motion_s`).
     pub max_motion_s: f64,
+    /// Peak acceleration of every speed change, m/s^2 (the drive's default is 0.5).
+    pub peak_accel_mps2: f64,
     /// The part's digital low-pass filters (the default: our driver's at 200 Hz, DLPF_CFG =
     /// A_DLPF_CFG = 2, see `mems_sim::dlpf::DlpfConfig::driver`; `None`: white samples, which
     /// no MPU-9250 produces).
@@ -103,6 +105,7 @@ impl Case {
             mounting: nalgebra::UnitQuaternion::identity(),
             initial_rest_s: DriveParams::new(600.0).initial_rest_s,
             max_motion_s: DriveParams::new(600.0).max_motion_s,
+            peak_accel_mps2: DriveParams::new(600.0).peak_accel_mps2,
             cruise_speed_mps: DriveParams::new(600.0).cruise_speed_mps,
             dlpf: Some(mems_sim::dlpf::DlpfConfig::driver(200.0)),
         }
@@ -191,6 +194,7 @@ impl Case {
         p.initial_rest_s = self.initial_rest_s;
         p.max_motion_s = self.max_motion_s;
         p.cruise_speed_mps = self.cruise_speed_mps;
+        p.peak_accel_mps2 = self.peak_accel_mps2;
         Drive::new(&p, seed).expect("valid drive parameters")
     }
 }
@@ -509,6 +513,15 @@ pub fn drive_with_encoder_hints(
     case: &Case,
     seed: u64,
 ) -> (Vec<(RawImuSample, Truth)>, Vec<RobotHint>) {
+    drive_with_hints(case, seed, &HintParams::new(RestSource::Encoders))
+}
+
+/// [`drive_with_encoder_hints`] with the hint stream's parameters `params`.
+pub fn drive_with_hints(
+    case: &Case,
+    seed: u64,
+    params: &HintParams,
+) -> (Vec<(RawImuSample, Truth)>, Vec<RobotHint>) {
     let mut sim = Simulation::new(case, seed);
     sim.session();
     let mut raw = Vec::new();
@@ -521,7 +534,7 @@ pub fn drive_with_encoder_hints(
     });
     let t0_ns = raw[0].0.stamps.sample_ns;
     let hints = case
-        .hints(seed, &HintParams::new(RestSource::Encoders))
+        .hints(seed, params)
         .hints
         .into_iter()
         .map(|mut h| {
