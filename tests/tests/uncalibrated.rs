@@ -518,9 +518,10 @@ fn an_uncalibrated_part_on_a_standing_car_keeps_its_attitude() {
 /// beyond its 1-sigma's gate (`navigator::wheeled::REST_GATE_SIGMA`), which refused the stop
 /// to the end: the velocity kept growing while the car stood, and the position ran 3.0 and
 /// 6.4 km over the last 20 s. A stop quiet below 2 Hz for `stops::CERTAIN_S` is a rest
-/// however wrong the velocity: a rest starts within the final stop (at most 1 s before
-/// it: the detector's window holds the braking), and over its last 20 s the position moves
-/// less than a car creeping at 1 m/s would (14.1 and 3.0 m with the rule).
+/// however wrong the velocity: the velocity is reset (`certain_stop_velocity_resets` in the
+/// JSON), a rest starts within the final stop (at most 1 s before it: the detector's window
+/// holds the braking), and over its last 20 s the position moves less than a car creeping at
+/// 1 m/s would (14.1 and 3.0 m with the rule).
 #[test]
 fn an_uncalibrated_part_on_a_car_rests_at_its_final_stop() {
     /// Largest movement of the position over the final stop's last `HELD_S`, m.
@@ -546,6 +547,10 @@ fn an_uncalibrated_part_on_a_car_rests_at_its_final_stop() {
         );
         let v: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
         assert_eq!(v["accel_error"]["uncalibrated"], true, "seed {seed}");
+        let resets = v["wheeled"]["certain_stop_velocity_resets"]
+            .as_u64()
+            .unwrap();
+        assert!(resets > 0, "seed {seed}: {}", v["wheeled"]);
         let (start, end) = *integration_tests::truth_rests(&csv).last().unwrap();
         assert!(
             end - start > HELD_S,

@@ -120,6 +120,9 @@ impl Navigator {
             return;
         }
         let sigma = self.zupt_sigma_mps;
+        if let Some(nhc) = self.nhc.as_mut() {
+            nhc.velocity_resets += 1;
+        }
         if let Some(kf) = self.kf.as_mut() {
             kf.reset_velocity(
                 nalgebra::Vector3::zeros(),
