@@ -514,14 +514,16 @@ fn an_uncalibrated_part_on_a_standing_car_keeps_its_attitude() {
 /// `engine_stops.rs`: `--engine-idle 0.3,23 --engine-start 0.15`, a road that rocks it at
 /// 1.2 Hz, `--road 0.1 --vibration 3`) drives 200 s between stops of 20-30 s and ends
 /// standing; `mems-odometry offline` runs it with no flags. The uncalibrated part's bias
-/// leaves the filter's velocity far off when the car stops (tens of m/s on seeds 6 and 9),
-/// beyond its 1-sigma's gate (`navigator::wheeled::REST_GATE_SIGMA`), which refused the stop
-/// to the end: the velocity kept growing while the car stood, and the position ran 3.0 and
+/// leaves the filter's velocity far off when the car stops, beyond its 1-sigma's gate
+/// (`navigator::wheeled::REST_GATE_SIGMA`), which refused the final stop to the end on
+/// seeds 6 and 9: the velocity kept growing while the car stood, and the position ran 3.0 and
 /// 6.4 km over the last 20 s. A stop quiet below 2 Hz for `stops::CERTAIN_S` is a rest
-/// however wrong the velocity: the velocity is reset (`certain_stop_velocity_resets` in the
-/// JSON), a rest starts within the final stop (at most 1 s before it: the detector's window
-/// holds the braking), and over its last 20 s the position moves less than a car creeping at
-/// 1 m/s would (14.1 and 3.0 m with the rule).
+/// however wrong the velocity (seed 6: the velocity is reset, `certain_stop_velocity_resets`
+/// in the JSON; on seed 9 the stop taken only after a window's length of quiet,
+/// `navigator::wheeled::STOP_QUIET_S`, leaves the velocity within the gate): a rest starts
+/// within the final stop (at most 1 s before it: the detector's window holds the braking),
+/// and over its last 20 s the position moves less than a car creeping at 1 m/s would (14.6
+/// and 0.1 m).
 #[test]
 fn an_uncalibrated_part_on_a_car_rests_at_its_final_stop() {
     /// Largest movement of the position over the final stop's last `HELD_S`, m.
@@ -530,6 +532,7 @@ fn an_uncalibrated_part_on_a_car_rests_at_its_final_stop() {
     let dir = std::env::temp_dir().join(unique_namespace("uncalibrated-car-stop"));
     std::fs::create_dir_all(&dir).unwrap();
     let model = uncalibrated_model(&dir);
+    let mut resets = 0;
     for seed in ["6", "9"] {
         let csv = dir.join(format!("car-{seed}.csv"));
         #[rustfmt::skip]
@@ -547,10 +550,9 @@ fn an_uncalibrated_part_on_a_car_rests_at_its_final_stop() {
         );
         let v: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
         assert_eq!(v["accel_error"]["uncalibrated"], true, "seed {seed}");
-        let resets = v["wheeled"]["certain_stop_velocity_resets"]
+        resets += v["wheeled"]["certain_stop_velocity_resets"]
             .as_u64()
             .unwrap();
-        assert!(resets > 0, "seed {seed}: {}", v["wheeled"]);
         let (start, end) = *integration_tests::truth_rests(&csv).last().unwrap();
         assert!(
             end - start > HELD_S,
@@ -587,5 +589,6 @@ fn an_uncalibrated_part_on_a_car_rests_at_its_final_stop() {
              final stop, the car standing"
         );
     }
+    assert!(resets > 0, "no velocity reset at a certain stop");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -7,7 +7,7 @@ use ipc_types::{hint_flags, odometry_flags};
 use crate::config::OdometryConfig;
 use crate::eskf::Imu;
 use crate::nonholonomic::ImuConstraint;
-use crate::stops::PushFlags;
+use crate::stops::{BLOCK_S, PushFlags, WINDOW_BLOCKS};
 
 use super::Navigator;
 use super::hint_state::{HintDecision, HintSample};
@@ -18,6 +18,15 @@ use super::hint_state::{HintDecision, HintSample};
 /// (docs/detectors.md, "Short rests", seed 1) had its real stops refused while the filter held
 /// its speed far off, and drove on for kilometres.
 pub const REST_GATE_SIGMA: f64 = 5.0;
+
+/// A quiet window the detector calls motion is a stop only once the windows have been quiet
+/// for this long without a break, s: one window's length, so that the stop's first sample
+/// lies in no window with motion in it. A car's braking ends smoothly, its deceleration steady
+/// below 2 Hz and so no spread: on wid-car-06 with an uncalibrated part's errors added
+/// (docs/real-data.md) one quiet window while it still crept at 0.3-0.5 m/s was taken for a
+/// stop, and its zero-velocity updates read the deceleration as a tilt and bias error and
+/// moved the position 75 m back.
+pub const STOP_QUIET_S: f64 = WINDOW_BLOCKS as f64 * BLOCK_S;
 
 impl Navigator {
     /// Whether the IMU-only constraint runs with no speed measurement at this sample: a
@@ -85,7 +94,7 @@ impl Navigator {
             return false;
         }
         let told = quiet == Some(true) && self.stops.driving_told() && self.engine_running();
-        let stop = !imu_rest && detector_ready && told;
+        let stop = !imu_rest && detector_ready && told && self.stops.quiet_for_s() >= STOP_QUIET_S;
         if !(imu_rest || stop) {
             return false;
         }
