@@ -42,9 +42,11 @@
 //! different from its standing and the detector finds them (a simulated robot standing in
 //! its sensor's noise alone, docs/odometry.md's wheeled-sim drives, took cruising at 1-2 m/s
 //! for stops without this). The navigator
-//! (`navigator::wheeled`) takes a quiet window the detector calls motion as a stop when the
-//! filter's velocity does not contradict it (flagged `VIBRATING_STOP`), and refuses a rest the
-//! detector flags in a window that is not quiet (flagged `REST_VIBRATING`).
+//! (`navigator::wheeled`) takes a quiet window the detector calls motion as a stop once the
+//! windows have been quiet for a window's length ([`StopTest::quiet_for_s`]) and when the
+//! filter's velocity does not contradict it (flagged `VIBRATING_STOP`), whatever the velocity
+//! once they have been quiet for [`CERTAIN_S`], and refuses a rest the detector flags in a
+//! window that is not quiet (flagged `REST_VIBRATING`).
 
 use nalgebra::Vector3;
 
