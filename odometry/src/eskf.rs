@@ -639,6 +639,16 @@ impl Eskf {
             self.cov -= gain * p_xv.transpose();
             self.cov = (self.cov + self.cov.transpose()) * 0.5;
         }
+        self.reset_velocity(v, cov_v);
+    }
+
+    /// Sets the velocity to `v` (m/s, navigation frame) with covariance `cov_v`, uncorrelated
+    /// with the other states, whose means and covariance stay as they are: for a velocity
+    /// known wrong beyond what its covariance says (a certain stop,
+    /// `crate::stops::CERTAIN_S`), whose covariance with the position then says nothing of
+    /// the position's error either.
+    pub fn reset_velocity(&mut self, v: Vector3<f64>, cov_v: &Matrix3<f64>) {
+        self.propagate();
         self.x.v = v;
         for i in 0..N {
             for j in V..V + 3 {

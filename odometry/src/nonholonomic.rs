@@ -98,6 +98,9 @@ pub struct ImuConstraint {
     pub applied: u64,
     /// Updates rejected by the gate.
     pub rejected: u64,
+    /// Velocities reset at a certain stop (`stops::CERTAIN_S`): the filter held the velocity
+    /// beyond the rest gate while the platform stood (`navigator::wheeled`).
+    pub velocity_resets: u64,
 }
 
 /// What one call did.
@@ -132,6 +135,7 @@ impl ImuConstraint {
             nis_sum: [0.0; 2],
             applied: 0,
             rejected: 0,
+            velocity_resets: 0,
         }
     }
 

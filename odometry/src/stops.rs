@@ -42,9 +42,11 @@
 //! different from its standing and the detector finds them (a simulated robot standing in
 //! its sensor's noise alone, docs/odometry.md's wheeled-sim drives, took cruising at 1-2 m/s
 //! for stops without this). The navigator
-//! (`navigator::wheeled`) takes a quiet window the detector calls motion as a stop when the
-//! filter's velocity does not contradict it (flagged `VIBRATING_STOP`), and refuses a rest the
-//! detector flags in a window that is not quiet (flagged `REST_VIBRATING`).
+//! (`navigator::wheeled`) takes a quiet window the detector calls motion as a stop once the
+//! windows have been quiet for a window's length ([`StopTest::quiet_for_s`]) and when the
+//! filter's velocity does not contradict it (flagged `VIBRATING_STOP`), whatever the velocity
+//! once they have been quiet for [`CERTAIN_S`], and refuses a rest the detector flags in a
+//! window that is not quiet (flagged `REST_VIBRATING`).
 
 use nalgebra::Vector3;
 
@@ -69,6 +71,11 @@ pub const MIN_DRIVING_S: f64 = 30.0;
 /// wid-car-06 drives 43 s with 1 quiet window in 40 at most (the one at 40 s, 2.5 mg below
 /// 2 Hz).
 pub const QUIET_DRIVING_SHARE: f64 = 0.1;
+/// Quiet for this long without a break, a stop is certain, s: the filter's velocity no longer
+/// decides ([`StopTest::quiet_for_s`]). The corpus's two engine cars (wid-car-06 and -10, a
+/// 2 Hz decision of 1 s windows) drive with at most 0.5 s of quiet in a row (wid-car-06
+/// creeping to its stop at 0.3-0.5 m/s by its GNSS), and stand quiet for 1.8-44 s.
+pub const CERTAIN_S: f64 = 2.0;
 /// A window whose mean rate is further than this from the standing one turns, rad/s
 /// (0.5 deg/s): a car in a steady turn turns at degrees a second (5 m/s on a 50 m radius:
 /// 5.7 deg/s), a gyroscope's bias moves by hundredths of a degree a second between rests.
@@ -177,6 +184,8 @@ pub struct StopTest {
     window: Option<Spread>,
     /// Windows wholly in motion, and how many of them were quiet.
     driving: [u32; 2],
+    /// How long the windows have been quiet without a break, s.
+    quiet_s: f64,
 }
 
 impl StopTest {
@@ -241,6 +250,11 @@ impl StopTest {
             gyro_mean: Vector3::new(mean(3), mean(4), mean(5)),
         };
         self.window = Some(spread);
+        let block_s = self.ring[(self.next + WINDOW_BLOCKS - 1) % WINDOW_BLOCKS].duration_s;
+        self.quiet_s = match self.quiet() {
+            Some(true) => self.quiet_s + block_s,
+            _ => 0.0,
+        };
         let undecided = f64::from(self.driving[0]) * BLOCK_S < MIN_DRIVING_S;
         if undecided
             && self.ring.iter().all(|b| b.moving)
@@ -284,6 +298,12 @@ impl StopTest {
     pub fn driving_told(&self) -> bool {
         let [n, quiet] = self.driving.map(f64::from);
         n * BLOCK_S >= MIN_DRIVING_S && quiet <= QUIET_DRIVING_SHARE * n
+    }
+
+    /// How long the windows have been quiet without a break, s (counted in blocks: the first
+    /// quiet window counts its newest block).
+    pub fn quiet_for_s(&self) -> f64 {
+        self.quiet_s
     }
 
     /// Whether the last window is quiet (module documentation); `None` before a reference
@@ -354,6 +374,21 @@ mod tests {
         // Decided once: rough driving after that does not change it.
         run(&mut smooth, 40.0, false, body);
         assert!(!smooth.driving_told());
+    }
+
+    #[test]
+    fn quiet_is_counted_without_a_break() {
+        let body = |t: f64| 0.05 * (2.0 * std::f64::consts::PI * t).sin();
+        let mut test = StopTest::default();
+        run(&mut test, 3.0, true, |_| 0.0);
+        run(&mut test, 3.0, false, body);
+        assert_eq!(test.quiet_for_s(), 0.0);
+        // The body mode leaves the 1 s window within a second of stopping.
+        run(&mut test, 4.0, false, |_| 0.0);
+        let quiet = test.quiet_for_s();
+        assert!((2.5..=4.0).contains(&quiet), "{quiet}");
+        run(&mut test, 1.0, false, body);
+        assert_eq!(test.quiet_for_s(), 0.0);
     }
 
     #[test]

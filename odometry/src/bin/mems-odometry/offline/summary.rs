@@ -229,6 +229,16 @@ impl Summary {
                 self.vibrating_stop
             );
         }
+        let resets = chain
+            .second
+            .imu_constraint()
+            .map_or(0, |n| n.velocity_resets);
+        if resets > 0 {
+            tracing::info!(
+                "velocity reset to zero {resets} time(s) at a stop quiet below 2 Hz for 2 s: the \
+                 filter held it beyond the rest gate (the velocity, not the stop, was wrong)"
+            );
+        }
         let axes = chain.second.stage().axes();
         if axes.disagree() {
             tracing::warn!(
@@ -374,6 +384,7 @@ impl Summary {
             "rest_vibrating_states": self.rest_vibrating,
             "rest_moving_states": self.rest_moving,
             "vibrating_stop_states": self.vibrating_stop,
+            "certain_stop_velocity_resets": nhc.velocity_resets,
             "nonholonomic_rejected_states": self.nonholonomic_rejected,
         })
     }
