@@ -220,25 +220,7 @@ impl Summary {
         if let Some(a) = &accel {
             tracing::info!("{a}");
         }
-        let vibrating_s = chain.first.detector().vibrating_s();
-        if vibrating_s > 0.0 {
-            tracing::info!(
-                "the detector found {vibrating_s:.1} s steady but vibrating above its rest's noise \
-                 (no acceleration or turn it could see): taken for motion, not rest, but for \
-                 {} samples the odometry took as stops (quiet below 2 Hz, flagged VIBRATING_STOP)",
-                self.vibrating_stop
-            );
-        }
-        let resets = chain
-            .second
-            .imu_constraint()
-            .map_or(0, |n| n.velocity_resets);
-        if resets > 0 {
-            tracing::info!(
-                "velocity reset to zero {resets} time(s) at a stop quiet below 2 Hz for 2 s: the \
-                 filter held it beyond the rest gate (the velocity, not the stop, was wrong)"
-            );
-        }
+        let vibrating_s = self.say_stops(chain);
         let axes = chain.second.stage().axes();
         if axes.disagree() {
             tracing::warn!(
@@ -292,6 +274,32 @@ impl Summary {
             self.print(&end, truth_error);
         }
         Ok(())
+    }
+
+    /// Says on stderr how long the detector found the platform steady but vibrating, how many
+    /// of those samples the odometry took as stops, and how often a certain stop reset the
+    /// velocity; returns the vibrating time, s.
+    fn say_stops(&self, chain: &OfflineChain) -> f64 {
+        let vibrating_s = chain.first.detector().vibrating_s();
+        if vibrating_s > 0.0 {
+            tracing::info!(
+                "the detector found {vibrating_s:.1} s steady but vibrating above its rest's noise \
+                 (no acceleration or turn it could see): taken for motion, not rest, but for \
+                 {} samples the odometry took as stops (quiet below 2 Hz, flagged VIBRATING_STOP)",
+                self.vibrating_stop
+            );
+        }
+        let resets = chain
+            .second
+            .imu_constraint()
+            .map_or(0, |n| n.velocity_resets);
+        if resets > 0 {
+            tracing::info!(
+                "velocity reset to zero {resets} time(s) at a stop quiet below 2 Hz for 2 s: the \
+                 filter held it beyond the rest gate (the velocity, not the stop, was wrong)"
+            );
+        }
+        vibrating_s
     }
 
     /// The alignments withdrawn, (aligned, withdrawn) in s from the first sample, each said on
