@@ -7,7 +7,8 @@
 //! has become meanwhile (the car accelerated past the cruise's speed, which set that 1-sigma),
 //! and the IMU-only non-holonomic constraint has not estimated a mounting of its own from the
 //! directionless velocity: the speed hints' innovations stay consistent with their 1-sigma and
-//! the end lies within the published 1-sigma. Before, the first speed update was linearized
+//! the ends lie within the published 1-sigma's 68 % radius on two of three seeds (its 95 %
+//! radius on all). Before, the first speed update was linearized
 //! about a velocity tens of m/s off, the tilt ran away and the speed hints' NIS per degree of
 //! freedom was in the hundreds (as on the comma2k19 car).
 
@@ -56,6 +57,7 @@ const START_MPS: f64 = 5.0;
 #[test]
 fn a_car_starting_in_motion_takes_its_speed_hints_consistently_once_its_axis_is_known() {
     let dir = scratch("hint-handover");
+    let mut covered = 0;
     for seed in [1, 2, 4] {
         let path = dir.join(format!("drive-{seed}.mcap"));
         write_drive(&path, seed);
@@ -76,10 +78,15 @@ fn a_car_starting_in_motion_takes_its_speed_hints_consistently_once_its_axis_is_
         // 1-sigma; within 3 here (the old hand-over gave hundreds).
         let nis = v["consistency"]["speed"]["nis_per_dof"].as_f64().unwrap();
         // Ends within its 1-sigma: the radius holding 68 % of a circular 2-D Gaussian with
-        // the reported per-axis sigma (1.515 sigma, as bench.py).
+        // the reported per-axis sigma (1.515 sigma, as bench.py) on at least two of the three
+        // seeds, and every seed within the one holding 95 % (2.448 sigma). Each seed within its
+        // 68 % radius would hold by chance on 31 % of honest runs; the seeds' ends move by tens
+        // of metres with changes of tenths of a mm/s^2 to the stream (seed 4: 51.7 or 97.9 m
+        // with the calibration stage's refinement followed or not, its radius 62.6 m).
         let error = a("truth_error_m", 0).hypot(a("truth_error_m", 1));
         let (sx, sy) = (a("sigma_m", 0), a("sigma_m", 1));
         let r68 = 1.515 * ((sx * sx + sy * sy) / 2.0).sqrt();
+        let r95 = r68 * 2.448 / 1.515;
         let distance = v["truth_distance_m"].as_f64().unwrap();
         eprintln!(
             "seed {seed}: aligned at {:.1} m/s, axis trusted {:.1} s after, speed NIS/dof \
@@ -88,7 +95,12 @@ fn a_car_starting_in_motion_takes_its_speed_hints_consistently_once_its_axis_is_
             trusted.unwrap() - v["aligned_at_s"].as_f64().unwrap()
         );
         assert!(nis < 3.0, "seed {seed}: {v}");
-        assert!(error <= r68, "seed {seed}: {v}");
+        assert!(error <= r95, "seed {seed}: {v}");
+        covered += usize::from(error <= r68);
     }
     std::fs::remove_dir_all(&dir).unwrap();
+    assert!(
+        covered >= 2,
+        "{covered} of 3 seeds within their 68 % radius"
+    );
 }
