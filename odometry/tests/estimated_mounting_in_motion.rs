@@ -9,9 +9,8 @@
 mod common;
 
 use std::path::Path;
-use std::process::Command;
 
-use common::{Case, scratch, write_drive_with_encoder_hints};
+use common::{Case, offline_vehicle_json, scratch, write_drive_with_encoder_hints};
 use nalgebra::{UnitQuaternion, Vector3};
 
 /// Writes a drive with turns that starts by driving off, its IMU yawed 90 degrees (sensor
@@ -33,15 +32,8 @@ fn an_estimated_mounting_after_a_start_in_motion_is_level() {
     let dir = scratch("mounting-in-motion");
     let path = dir.join("drive.mcap");
     write_drive(&path);
-    let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
-        .args(["offline", "--json", "--profile", "vehicle", "--input"])
-        .arg(&path)
-        .output()
-        .unwrap();
+    let v = offline_vehicle_json(env!("CARGO_BIN_EXE_mems-odometry"), &path, &[]);
     std::fs::remove_dir_all(&dir).unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "offline failed: {err}");
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let a = |key: &str, i: usize| v[key][i].as_f64().unwrap();
     let rpy = |i: usize| v["hints"]["mounting_rpy_deg"][i].as_f64().unwrap();
     eprintln!("mounting {:.2} {:.2} {:.2} deg", rpy(0), rpy(1), rpy(2));

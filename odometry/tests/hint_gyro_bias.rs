@@ -9,9 +9,9 @@
 
 mod common;
 
-use std::process::Command;
-
-use common::{Case, drive_with_encoder_hints, scratch, write_drive_with_hints};
+use common::{
+    Case, drive_with_encoder_hints, offline_vehicle_json, scratch, write_drive_with_hints,
+};
 
 /// The bias shift about the sensor's z axis (up: the IMU lies level on the robot), deg/s.
 const SHIFT_DPS: f64 = 0.5;
@@ -60,23 +60,12 @@ fn a_stop_the_wheels_report_refutes_a_gyro_bias_that_moved() {
     let dir = scratch("hint-gyro-bias");
     let path = dir.join("drive.mcap");
     write_drive_with_hints(&path, &raw, hints);
-    let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
-        .args([
-            "offline",
-            "--json",
-            "--profile",
-            "vehicle",
-            "--mount",
-            "0,0,0",
-        ])
-        .arg("--input")
-        .arg(&path)
-        .output()
-        .unwrap();
+    let v = offline_vehicle_json(
+        env!("CARGO_BIN_EXE_mems-odometry"),
+        &path,
+        &["--mount", "0,0,0"],
+    );
     std::fs::remove_dir_all(&dir).unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "offline failed: {err}");
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let refuted = v["hints"]["gyro_bias_refuted"].as_u64().unwrap();
     let e = |i: usize| v["truth_error_m"][i].as_f64().unwrap();
     let s = |i: usize| v["sigma_m"][i].as_f64().unwrap();

@@ -15,9 +15,10 @@
 mod common;
 
 use std::path::Path;
-use std::process::Command;
 
-use common::{Case, drive_with_encoder_hints, scratch, write_drive_with_hints};
+use common::{
+    Case, drive_with_encoder_hints, offline_vehicle_json, scratch, write_drive_with_hints,
+};
 use nalgebra::{UnitQuaternion, Vector3};
 
 /// Writes a drive with turns at 8-15 m/s, its IMU rolled 180 degrees on the car (sensor x
@@ -61,14 +62,7 @@ fn a_car_starting_in_motion_takes_its_speed_hints_consistently_once_its_axis_is_
     for seed in [1, 2, 4] {
         let path = dir.join(format!("drive-{seed}.mcap"));
         write_drive(&path, seed);
-        let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
-            .args(["offline", "--json", "--profile", "vehicle", "--input"])
-            .arg(&path)
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(out.status.success(), "offline failed: {err}");
-        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let v = offline_vehicle_json(env!("CARGO_BIN_EXE_mems-odometry"), &path, &[]);
         let a = |key: &str, i: usize| v[key][i].as_f64().unwrap();
         let speed = v["aligned_in_motion"]["speed_mps"].as_f64();
         assert!(speed.is_some_and(|s| s > 5.0), "not aligned in motion: {v}");

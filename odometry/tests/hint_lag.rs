@@ -12,9 +12,7 @@
 
 mod common;
 
-use std::process::Command;
-
-use common::{Case, drive_with_hints, scratch, write_drive_with_hints};
+use common::{Case, drive_with_hints, offline_vehicle_json, scratch, write_drive_with_hints};
 use mems_sim::hints::{HintParams, RestSource};
 
 /// How much earlier than the motion's the hints' stamps are, ns.
@@ -51,23 +49,12 @@ fn hints_leading_the_imu_do_not_go_into_the_speed_scale() {
     let dir = scratch("hint-lag");
     let path = dir.join("drive.mcap");
     write_drive_with_hints(&path, &raw, hints);
-    let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
-        .args([
-            "offline",
-            "--json",
-            "--profile",
-            "vehicle",
-            "--mount",
-            "0,0,0",
-        ])
-        .arg("--input")
-        .arg(&path)
-        .output()
-        .unwrap();
+    let v = offline_vehicle_json(
+        env!("CARGO_BIN_EXE_mems-odometry"),
+        &path,
+        &["--mount", "0,0,0"],
+    );
     std::fs::remove_dir_all(&dir).unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "offline failed: {err}");
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let scale = &v["hints"]["speed_scale"];
     let (k, sigma) = (
         scale["k"].as_f64().unwrap(),

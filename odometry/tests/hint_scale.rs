@@ -8,9 +8,9 @@
 
 mod common;
 
-use std::process::Command;
-
-use common::{Case, drive_with_encoder_hints, scratch, write_drive_with_hints};
+use common::{
+    Case, drive_with_encoder_hints, offline_vehicle_json, scratch, write_drive_with_hints,
+};
 use mems_sim::hints::{HintParams, RestSource};
 use nalgebra::{UnitQuaternion, Vector3};
 
@@ -44,15 +44,8 @@ fn hints_reading_a_third_high_get_their_scale_and_a_covering_sigma() {
     let dir = scratch("hint-scale");
     let path = dir.join("drive.mcap");
     write_drive_with_hints(&path, &raw, hints);
-    let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
-        .args(["offline", "--json", "--profile", "vehicle", "--input"])
-        .arg(&path)
-        .output()
-        .unwrap();
+    let v = offline_vehicle_json(env!("CARGO_BIN_EXE_mems-odometry"), &path, &[]);
     std::fs::remove_dir_all(&dir).unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "offline failed: {err}");
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     // The forward-axis fit's scale, from the specific force against the hints' changes and
     // turns, covers the truth with its 1-sigma (its floor-slope share keeps that 1-sigma above
     // the 2 % prior here, so the filter is not handed it: `scale_taken` stays null).

@@ -554,6 +554,22 @@ pub fn write_drive_with_encoder_hints(path: &std::path::Path, case: &Case, seed:
     write_drive_with_hints(path, &raw, hints);
 }
 
+/// Runs `bin offline --json --profile vehicle ARGS --input PATH` (`bin` the mems-odometry
+/// binary, `env!("CARGO_BIN_EXE_mems-odometry")`, which only a test crate knows), asserts that
+/// it succeeded (its stderr in the message) and returns its JSON.
+pub fn offline_vehicle_json(bin: &str, path: &std::path::Path, args: &[&str]) -> serde_json::Value {
+    let out = std::process::Command::new(bin)
+        .args(["offline", "--json", "--profile", "vehicle"])
+        .args(args)
+        .arg("--input")
+        .arg(path)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "offline failed: {err}");
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
 /// Writes raw samples with their truth and the hints `hints` to the MCAP file `path`, as
 /// [`write_drive_with_encoder_hints`] does (for hints changed after they were made).
 pub fn write_drive_with_hints(
