@@ -124,6 +124,21 @@ def _correlation(xs, ys):
     return sxy / math.sqrt(sxx * syy) if sxx > 0 and syy > 0 else None
 
 
+def best_lag(imu, ref_times, ref_rates, t_end, max_lag_s, step_s, bin_s=BIN_S):
+    """(lag s, r, the reference binned at that lag) where the reference rates (`ref_times`,
+    `ref_rates` on its own clock), shifted by the lag and averaged over `bin_s` bins, best
+    correlate (r) with the binned IMU rates `imu`; lags in `step_s` steps within `max_lag_s`.
+    None if no lag gives a correlation."""
+    best = None
+    steps = int(round(max_lag_s / step_s))
+    for k in range(-steps, steps + 1):
+        ref = _binned(ref_rates, [t + k * step_s for t in ref_times], t_end, bin_s)
+        r = _correlation(imu, ref)
+        if r is not None and (best is None or r > best[1]):
+            best = (k * step_s, r, ref)
+    return best
+
+
 def clock_offset(samples_, track, where):
     """(offset s, r): IMU time = reference time + offset, the lag (LAG_STEP_S steps within
     MAX_LAG_S) where the IMU's yaw rate about its start-up up axis, averaged over BIN_S bins,
@@ -133,16 +148,11 @@ def clock_offset(samples_, track, where):
     it, ir = imu_yaw_rate(samples_)
     imu = _binned(ir, it, t_end)
     rt, rr = track_yaw_rate(track)
-    best = None
-    for k in range(-int(MAX_LAG_S / LAG_STEP_S), int(MAX_LAG_S / LAG_STEP_S) + 1):
-        ref = _binned(rr, [t + k * LAG_STEP_S for t in rt], t_end)
-        r = _correlation(imu, ref)
-        if r is not None and (best is None or r > best[1]):
-            best = (k * LAG_STEP_S, r)
+    best = best_lag(imu, rt, rr, t_end, MAX_LAG_S, LAG_STEP_S)
     if best is None or best[1] < MIN_R:
         raise ConvertError(where, None, "gnss_planetary_r.t",
-                           f"no clock offset within {MAX_LAG_S} s correlates the yaw rates (best {best})")
-    return best
+                           f"no clock offset within {MAX_LAG_S} s correlates the yaw rates (best {best and best[:2]})")
+    return best[:2]
 
 
 def track_truth(track, offset, r):

@@ -154,20 +154,14 @@ def clock_offset(samples, yaw_rates, where, field):
     t_end = max(samples[-1][0], vt[-1]) + MAX_LAG_S
     it, ir = navego.imu_yaw_rate(samples)
     imu = navego._binned(ir, it, t_end, BIN_S)
-    best = None
-    steps = int(round(MAX_LAG_S / LAG_STEP_S))
-    for k in range(-steps, steps + 1):
-        ref = navego._binned(vr, [t + k * LAG_STEP_S for t in vt], t_end, BIN_S)
-        r = navego._correlation(imu, ref)
-        if r is not None and (best is None or r > best[1]):
-            best = (round(k * LAG_STEP_S, 6), r, ref)
+    best = navego.best_lag(imu, vt, vr, t_end, MAX_LAG_S, LAG_STEP_S, BIN_S)
     if best is None or best[1] < MIN_R:
         raise ConvertError(where, None, field, f"no clock offset within {MAX_LAG_S} s correlates the yaw rates "
                                               f"(best r {None if best is None else round(best[1], 3)})")
     pairs = [(x, y) for x, y in zip(imu, best[2]) if x is not None and y is not None]
     mx, my = sum(p[0] for p in pairs) / len(pairs), sum(p[1] for p in pairs) / len(pairs)
     slope = sum((x - mx) * (y - my) for x, y in pairs) / sum((y - my) ** 2 for _, y in pairs)
-    return best[0], best[1], slope
+    return round(best[0], 6), best[1], slope
 
 
 def kobuki_ticks(text, where):
