@@ -9,9 +9,7 @@
 
 mod common;
 
-use common::{
-    Case, drive_with_encoder_hints, offline_vehicle_json, scratch, write_drive_with_hints,
-};
+use common::{Case, drive_with_encoder_hints, offline_drive_with_hints};
 
 /// The bias shift about the sensor's z axis (up: the IMU lies level on the robot), deg/s.
 const SHIFT_DPS: f64 = 0.5;
@@ -57,15 +55,13 @@ fn a_stop_the_wheels_report_refutes_a_gyro_bias_that_moved() {
         }
         f64::hypot(ex, ey)
     };
-    let dir = scratch("hint-gyro-bias");
-    let path = dir.join("drive.mcap");
-    write_drive_with_hints(&path, &raw, hints);
-    let v = offline_vehicle_json(
+    let v = offline_drive_with_hints(
         env!("CARGO_BIN_EXE_mems-odometry"),
-        &path,
+        "hint-gyro-bias",
+        &raw,
+        hints,
         &["--mount", "0,0,0"],
     );
-    std::fs::remove_dir_all(&dir).unwrap();
     let refuted = v["hints"]["gyro_bias_refuted"].as_u64().unwrap();
     let e = |i: usize| v["truth_error_m"][i].as_f64().unwrap();
     let s = |i: usize| v["sigma_m"][i].as_f64().unwrap();

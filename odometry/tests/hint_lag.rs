@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::{Case, drive_with_hints, offline_vehicle_json, scratch, write_drive_with_hints};
+use common::{Case, drive_with_hints, offline_drive_with_hints};
 use mems_sim::hints::{HintParams, RestSource};
 
 /// How much earlier than the motion's the hints' stamps are, ns.
@@ -46,15 +46,13 @@ fn hints_leading_the_imu_do_not_go_into_the_speed_scale() {
             h
         })
         .collect();
-    let dir = scratch("hint-lag");
-    let path = dir.join("drive.mcap");
-    write_drive_with_hints(&path, &raw, hints);
-    let v = offline_vehicle_json(
+    let v = offline_drive_with_hints(
         env!("CARGO_BIN_EXE_mems-odometry"),
-        &path,
+        "hint-lag",
+        &raw,
+        hints,
         &["--mount", "0,0,0"],
     );
-    std::fs::remove_dir_all(&dir).unwrap();
     let scale = &v["hints"]["speed_scale"];
     let (k, sigma) = (
         scale["k"].as_f64().unwrap(),

@@ -8,9 +8,7 @@
 
 mod common;
 
-use common::{
-    Case, drive_with_encoder_hints, offline_vehicle_json, scratch, write_drive_with_hints,
-};
+use common::{Case, drive_with_encoder_hints, offline_drive_with_hints};
 use mems_sim::hints::{HintParams, RestSource};
 use nalgebra::{UnitQuaternion, Vector3};
 
@@ -41,11 +39,13 @@ fn hints_reading_a_third_high_get_their_scale_and_a_covering_sigma() {
         .hints(seed, &HintParams::new(RestSource::Encoders))
         .speed_scale;
     let k_true = GAIN * (1.0 + drawn) - 1.0;
-    let dir = scratch("hint-scale");
-    let path = dir.join("drive.mcap");
-    write_drive_with_hints(&path, &raw, hints);
-    let v = offline_vehicle_json(env!("CARGO_BIN_EXE_mems-odometry"), &path, &[]);
-    std::fs::remove_dir_all(&dir).unwrap();
+    let v = offline_drive_with_hints(
+        env!("CARGO_BIN_EXE_mems-odometry"),
+        "hint-scale",
+        &raw,
+        hints,
+        &[],
+    );
     // The forward-axis fit's scale, from the specific force against the hints' changes and
     // turns, covers the truth with its 1-sigma (its floor-slope share keeps that 1-sigma above
     // the 2 % prior here, so the filter is not handed it: `scale_taken` stays null).

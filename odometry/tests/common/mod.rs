@@ -570,6 +570,24 @@ pub fn offline_vehicle_json(bin: &str, path: &std::path::Path, args: &[&str]) ->
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// Writes the drive `raw` and its `hints` ([`write_drive_with_hints`]) into the scratch
+/// directory `name`, runs [`offline_vehicle_json`] on the file with `args`, removes the
+/// directory and returns the JSON.
+pub fn offline_drive_with_hints(
+    bin: &str,
+    name: &str,
+    raw: &[(RawImuSample, Truth)],
+    hints: Vec<RobotHint>,
+    args: &[&str],
+) -> serde_json::Value {
+    let dir = scratch(name);
+    let path = dir.join("drive.mcap");
+    write_drive_with_hints(&path, raw, hints);
+    let v = offline_vehicle_json(bin, &path, args);
+    std::fs::remove_dir_all(&dir).unwrap();
+    v
+}
+
 /// Writes raw samples with their truth and the hints `hints` to the MCAP file `path`, as
 /// [`write_drive_with_encoder_hints`] does (for hints changed after they were made).
 pub fn write_drive_with_hints(
