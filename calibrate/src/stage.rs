@@ -696,6 +696,7 @@ impl CalibrationStage {
             calib_id: self.calib_id,
             raw_flags: raw.flags | if gap { raw_flags::GAP_BEFORE } else { 0 },
             refined_accel_mps2: da.into(),
+            refined_gyro_rps: if has_gyro { dw.into() } else { [0.0; 3] },
             ..CorrectedImuSample::default()
         };
         (out, a, w)

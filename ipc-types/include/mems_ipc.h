@@ -18,7 +18,7 @@
 #define MEMS_SERVICE_HINT "mems/robot/hint"
 
 #define MEMS_TYPE_NAME_RAW "mems::RawImuSample.v1"
-#define MEMS_TYPE_NAME_CORRECTED "mems::CorrectedImuSample.v2"
+#define MEMS_TYPE_NAME_CORRECTED "mems::CorrectedImuSample.v3"
 #define MEMS_TYPE_NAME_ODOMETRY "mems::OdometryState.v2"
 #define MEMS_TYPE_NAME_HINT "mems::RobotHint.v1"
 
@@ -103,6 +103,7 @@ typedef struct mems_corrected_imu_sample {
     uint16_t raw_flags;
     uint32_t settles; /* provisional samples before this one that it settles */
     double refined_accel_mps2[3]; /* offset the stage's bias refinement subtracts, m/s^2 */
+    double refined_gyro_rps[3]; /* gyroscope bias the same refinement subtracts, rad/s */
 } mems_corrected_imu_sample;
 
 /* Odometry state, navigation frame (z up), 1-sigma per axis. */

@@ -161,11 +161,12 @@ class CorrectedImuSample(ctypes.Structure):
         ("raw_flags", ctypes.c_uint16),
         ("settles", ctypes.c_uint32),
         ("refined_accel_mps2", Vec3),
+        ("refined_gyro_rps", Vec3),
     ]
 
     @staticmethod
     def type_name():
-        return "mems::CorrectedImuSample.v2"
+        return "mems::CorrectedImuSample.v3"
 
 
 class OdometryState(ctypes.Structure):

@@ -334,7 +334,7 @@ pub enum SampleError {
 /// Checks the values of a corrected sample: finite, and within [`ACCEL_LIMIT_MPS2`] and
 /// [`GYRO_LIMIT_RPS`] (a value beyond them would drive a filter's state to infinity and NaN).
 pub fn check_corrected(s: &CorrectedImuSample) -> Result<(), SampleError> {
-    const FIELDS: [[&str; 3]; 5] = [
+    const FIELDS: [[&str; 3]; 6] = [
         ["accel_mps2[0]", "accel_mps2[1]", "accel_mps2[2]"],
         ["gyro_rps[0]", "gyro_rps[1]", "gyro_rps[2]"],
         ["zs_mean_mps2[0]", "zs_mean_mps2[1]", "zs_mean_mps2[2]"],
@@ -344,6 +344,11 @@ pub fn check_corrected(s: &CorrectedImuSample) -> Result<(), SampleError> {
             "refined_accel_mps2[1]",
             "refined_accel_mps2[2]",
         ],
+        [
+            "refined_gyro_rps[0]",
+            "refined_gyro_rps[1]",
+            "refined_gyro_rps[2]",
+        ],
     ];
     let values = [
         &s.accel_mps2,
@@ -351,6 +356,7 @@ pub fn check_corrected(s: &CorrectedImuSample) -> Result<(), SampleError> {
         &s.zs_mean_mps2,
         &s.zs_std_mps2,
         &s.refined_accel_mps2,
+        &s.refined_gyro_rps,
     ];
     let bounds = [
         ACCEL_LIMIT_MPS2,
@@ -358,6 +364,7 @@ pub fn check_corrected(s: &CorrectedImuSample) -> Result<(), SampleError> {
         ACCEL_LIMIT_MPS2,
         ACCEL_LIMIT_MPS2,
         ACCEL_LIMIT_MPS2,
+        GYRO_LIMIT_RPS,
     ];
     for ((v, f), limit) in values.into_iter().zip(&FIELDS).zip(bounds) {
         limits::check_axes(v, f, limit).map_err(|bad| SampleError::Value { seq: s.seq, bad })?;

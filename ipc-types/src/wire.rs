@@ -135,7 +135,7 @@ pub mod corrected_flags {
 ///
 /// Service `mems/imu/corrected`. `accel_mps2 = S^-1 (a' - b)` with the calibration `calib_id`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize, ZeroCopySend)]
-#[type_name("mems::CorrectedImuSample.v2")]
+#[type_name("mems::CorrectedImuSample.v3")]
 #[repr(C)]
 pub struct CorrectedImuSample {
     /// Per-stage timestamps copied from the raw sample, with `calibrated_ns` filled in.
@@ -173,6 +173,12 @@ pub struct CorrectedImuSample {
     /// exactly that much.
     #[serde(default)]
     pub refined_accel_mps2: [f64; 3],
+    /// The gyroscope bias the same refinement subtracts from `gyro_rps` beyond the
+    /// calibration file's, rad/s, sensor frame (zero before its first refinement, and in
+    /// recordings made before the field existed). A consumer that estimates the stream's
+    /// residual rate bias itself can tell the refinement's changes from its own.
+    #[serde(default)]
+    pub refined_gyro_rps: [f64; 3],
 }
 
 /// Bits of [`OdometryState::flags`].
@@ -424,7 +430,7 @@ mod tests {
 
     #[test]
     fn corrected_layout() {
-        assert_eq!(size_of::<CorrectedImuSample>(), 184);
+        assert_eq!(size_of::<CorrectedImuSample>(), 208);
         assert_eq!(align_of::<CorrectedImuSample>(), 8);
         assert_eq!(offset_of!(CorrectedImuSample, stamps), 0);
         assert_eq!(offset_of!(CorrectedImuSample, seq), 32);
@@ -438,6 +444,7 @@ mod tests {
         assert_eq!(offset_of!(CorrectedImuSample, raw_flags), 154);
         assert_eq!(offset_of!(CorrectedImuSample, settles), 156);
         assert_eq!(offset_of!(CorrectedImuSample, refined_accel_mps2), 160);
+        assert_eq!(offset_of!(CorrectedImuSample, refined_gyro_rps), 184);
     }
 
     #[test]

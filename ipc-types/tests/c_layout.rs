@@ -70,7 +70,8 @@ fn facts() -> Vec<Fact> {
             flags,
             raw_flags,
             settles,
-            refined_accel_mps2
+            refined_accel_mps2,
+            refined_gyro_rps
         ]
     );
     layout_facts!(

@@ -59,7 +59,8 @@ fn python_ctypes_match_rust_layout() {
                 flags,
                 raw_flags,
                 settles,
-                refined_accel_mps2
+                refined_accel_mps2,
+                refined_gyro_rps
             ]
         ),
         rust_line!(

@@ -242,9 +242,9 @@ pub struct Eskf {
     reported: Reported,
     /// Factor on the process noise ([`Self::set_consistency`] with `process`), 1 by default.
     q_scale: f64,
-    /// The calibration stage's accelerometer refinement offset of the last sample, m/s^2,
-    /// sensor frame (module `refinement`).
-    refined: Option<Vector3<f64>>,
+    /// The calibration stage's refinement of the last sample: accelerometer offset (m/s^2)
+    /// and gyroscope bias (rad/s), sensor frame (module `refinement`).
+    refined: Option<(Vector3<f64>, Vector3<f64>)>,
 }
 
 /// Skew-symmetric matrix: `skew(a) * b == a.cross(&b)`.

@@ -357,10 +357,14 @@ impl Navigator {
         let clipped = if reconstruct { verdict.clipped } else { 0 };
         self.clip
             .before_predict(self.kf.as_ref().expect("aligned"), clipped);
-        self.kf
-            .as_mut()
-            .expect("aligned")
-            .follow_refinement(s.refined_accel_mps2);
+        // A rest refused as vibration: the stage's gyroscope refinement there measured motion.
+        let refused = d.sample.flags & odometry_flags::REST_VIBRATING != 0;
+        let w = self.cfg.gyro_correction * Vector3::from(s.refined_gyro_rps);
+        self.kf.as_mut().expect("aligned").follow_refinement(
+            s.refined_accel_mps2,
+            w.into(),
+            refused,
+        );
         let moved = self.predict(m, dt, gap, &mut d.sample);
         let kf = self.kf.as_mut().expect("aligned");
         if self.untrusted.widen(kf, &m, dt, verdict, &self.cfg) {

@@ -79,6 +79,7 @@ fn corrected_from(raw: &RawImuSample) -> CorrectedImuSample {
         raw_flags: raw.flags,
         settles: 0,
         refined_accel_mps2: [0.001, -0.002, 0.003],
+        refined_gyro_rps: [0.0001, -0.0002, 0.0003],
     }
 }
 

@@ -80,11 +80,13 @@ fn an_older_f64_recording_reads_bit_for_bit() {
         );
     }
     assert_eq!(python["mems/imu/raw"], values(&contents.raw));
-    // The older layout had no refinement offset: ours reads it as zero.
+    // The older layout had no refinement offsets: ours reads them as zero.
     let mut corrected = values(&contents.corrected);
     for sample in corrected.as_array_mut().unwrap() {
-        let offset = sample.as_object_mut().unwrap().remove("refined_accel_mps2");
-        assert_eq!(offset, Some(serde_json::json!([0.0, 0.0, 0.0])));
+        for field in ["refined_accel_mps2", "refined_gyro_rps"] {
+            let offset = sample.as_object_mut().unwrap().remove(field);
+            assert_eq!(offset, Some(serde_json::json!([0.0, 0.0, 0.0])), "{field}");
+        }
     }
     assert_eq!(python["mems/imu/corrected"], corrected);
     assert_eq!(python["mems/odometry/state"], values(&contents.odometry));

@@ -119,6 +119,8 @@ pub struct CorrectedImuSample {
     pub zs_std_mps2: Vec<f32>,
     #[prost(float, repeated, tag = 17)]
     pub refined_accel_mps2: Vec<f32>,
+    #[prost(float, repeated, tag = 18)]
+    pub refined_gyro_rps: Vec<f32>,
 }
 
 /// [`ipc_types::OdometryState`]: `float`s under new tags (15-21); older recordings hold
@@ -303,6 +305,7 @@ const MESSAGES: &[Table] = {
                 ("zs_mean_mps2", 15, F32s),
                 ("zs_std_mps2", 16, F32s),
                 ("refined_accel_mps2", 17, F32s),
+                ("refined_gyro_rps", 18, F32s),
             ],
             reserved: &[(3, 7)],
         },
@@ -657,6 +660,7 @@ mod tests {
             raw_flags: 1,
             settles: 1,
             refined_accel_mps2: ones(1.0),
+            refined_gyro_rps: ones(1.0),
             ..Default::default()
         };
         let mut p = CorrectedImuSample::default();

@@ -43,6 +43,7 @@ fn corrected(rng: &mut ChaCha8Rng) -> CorrectedImuSample {
         raw_flags: rng.random(),
         settles: rng.random(),
         refined_accel_mps2: [(); 3].map(|_| finite(rng)),
+        refined_gyro_rps: [(); 3].map(|_| finite(rng)),
     }
 }
 
@@ -154,6 +155,7 @@ fn round_trip(encoding: MessageEncoding) {
         assert_eq!(bits(&a.accel_mps2), bits(&b.accel_mps2));
         assert_eq!(bits(&a.zs_std_mps2), bits(&b.zs_std_mps2));
         assert_eq!(bits(&a.refined_accel_mps2), bits(&b.refined_accel_mps2));
+        assert_eq!(bits(&a.refined_gyro_rps), bits(&b.refined_gyro_rps));
     }
     for (a, b) in contents.odometry.iter().zip(&odometry) {
         assert_eq!(bits(&a.position_m), bits(&b.position_m));

@@ -249,6 +249,11 @@ impl Topic for CorrectedImuSample {
             &self.refined_accel_mps2,
             quantum::ACCEL_MPS2,
         );
+        proto::fill_f32(
+            &mut p.refined_gyro_rps,
+            &self.refined_gyro_rps,
+            quantum::GYRO_RPS,
+        );
         p.calib_id = self.calib_id;
         p.flags = self.flags.into();
         p.raw_flags = self.raw_flags.into();
@@ -269,6 +274,7 @@ impl Topic for CorrectedImuSample {
             raw_flags: proto::narrow("raw_flags", p.raw_flags)?,
             settles: p.settles,
             refined_accel_mps2: refined("refined_accel_mps2", &p.refined_accel_mps2)?,
+            refined_gyro_rps: refined("refined_gyro_rps", &p.refined_gyro_rps)?,
         })
     }
 
@@ -283,6 +289,9 @@ impl Topic for CorrectedImuSample {
             refined_accel_mps2: self
                 .refined_accel_mps2
                 .map(|x| quantum::recorded(x, ACCEL_MPS2)),
+            refined_gyro_rps: self
+                .refined_gyro_rps
+                .map(|x| quantum::recorded(x, GYRO_RPS)),
             ..*self
         }
     }
@@ -337,6 +346,13 @@ impl Topic for CorrectedImuSample {
                         number("Accelerometer offset the bias refinement subtracts, m/s^2."),
                     ),
                 ),
+                (
+                    "refined_gyro_rps",
+                    vector(
+                        3,
+                        number("Gyroscope bias the bias refinement subtracts, rad/s."),
+                    ),
+                ),
             ],
         )
     }
@@ -353,7 +369,8 @@ impl Topic for CorrectedImuSample {
             .chain([&self.temp_c])
             .chain(&self.zs_mean_mps2)
             .chain(&self.zs_std_mps2)
-            .chain(&self.refined_accel_mps2);
+            .chain(&self.refined_accel_mps2)
+            .chain(&self.refined_gyro_rps);
         values.all(|v| v.is_finite())
     }
 }
