@@ -372,11 +372,11 @@ fn a_slow_cruise_on_a_smooth_floor_is_not_rest() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// A drive whose first rest (1.5 s) ends as the vehicle profile's filter aligns on it (its
-/// second of alignment: the last half second of learning and the half second of rest flags
-/// after it): the settled flags take the rest flags away, the filter waits for the next rest,
-/// and the summary measures from there (before, it kept the first alignment's truth frame:
-/// every rest 1.8-2.0 m off on such a drive).
+/// A drive whose first rest (1 s) is all the vehicle profile's learning takes: its filter
+/// aligns on the learning window and the rest flags after it as the robot starts off (its
+/// second of alignment), the settled flags take the rest flags away, the filter waits for the
+/// next rest, and the summary measures from there (before, it kept the first alignment's truth
+/// frame: every rest 1.8-2.0 m off on such a drive).
 #[test]
 fn a_withdrawn_alignment_is_reported_and_not_counted_from() {
     let dir = std::env::temp_dir().join(unique_namespace("short-rests-withdrawn"));
@@ -389,7 +389,7 @@ fn a_withdrawn_alignment_is_reported_and_not_counted_from() {
             "--duration",
             "30",
             "--initial-rest",
-            "1.5",
+            "1.0",
             "--rests",
             "1,2",
             "--legs",
