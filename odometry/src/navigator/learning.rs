@@ -30,15 +30,8 @@
 //!
 //! The verdict's sample is the first with `BIAS_REFINED` (the samples of its batch before it
 //! are flagged `DETECTOR_READY` once settled, but not refined). A stream that starts ready
-//! (SHOE, which learns nothing; a resumed calibration state) keeps nothing here.
-//!
-//! With speed hints the rest is the hints' (`navigator::HINT_ALIGN_S`: a second of it), and
-//! the learning window counts toward it as well, but a sample a fresh hint says moving is no
-//! part of it (the window is emptied there, as at a clipped sample): the learner judged the
-//! window still and the encoders agree. Without it a first rest that the learning takes most
-//! of never aligns: the PHIL TurtleBot runs of docs/real-data.md (encoders stationary for
-//! 1.6-1.7 s at the start, a 1 s learning that ends 1.2 s in at 50 Hz) aligned only at the
-//! ends of trials 2 and 3, 47-51 s in.
+//! (SHOE, which learns nothing; a resumed calibration state) keeps nothing here, nor does a
+//! filter with speed hints (its rest alignment takes a second, `navigator::HINT_ALIGN_S`).
 
 use super::Navigator;
 use super::records::AlignSums;
@@ -91,7 +84,7 @@ impl LearningWindow {
     }
 
     /// Takes the unaligned filter's sample `m` at `t_ns` (`usable`: neither clipped nor
-    /// implausible, nor said moving by a fresh hint; `ready`, `refined`: its `DETECTOR_READY` and `BIAS_REFINED` flags;
+    /// implausible; `ready`, `refined`: its `DETECTOR_READY` and `BIAS_REFINED` flags;
     /// `zs_mean`: its detector window's mean, m/s^2). Returns the alignment sums of the
     /// learned window, in the refined terms, at the learned verdict's sample; `None` before
     /// and after it. `learned_rest_s` 0 keeps nothing.
@@ -170,9 +163,8 @@ impl LearningWindow {
 
 impl Navigator {
     /// Keeps the alignment sums of the calibration stage's learning window at its learned
-    /// verdict's sample `s` (`navigator::learning`), for the rest flagged after it to add to
-    /// (`usable`: neither clipped nor said moving by a fresh hint); whether this was that
-    /// sample.
+    /// verdict's sample `s` (`navigator::learning`; not with speed hints), for the rest
+    /// flagged after it to add to; whether this was that sample.
     pub(super) fn seed_alignment(
         &mut self,
         s: &CorrectedImuSample,
@@ -182,7 +174,10 @@ impl Navigator {
     ) -> bool {
         let ready = s.flags & corrected_flags::DETECTOR_READY != 0;
         let refined = s.flags & corrected_flags::BIAS_REFINED != 0;
-        let learned_rest_s = self.cfg.learned_rest_s;
+        let learned_rest_s = match self.hints.newest {
+            Some(_) => 0.0,
+            None => self.cfg.learned_rest_s,
+        };
         let zs_mean = Vector3::from(s.zs_mean_mps2);
         let t_ns = s.stamps.sample_ns;
         let flags = (usable, ready, refined);
