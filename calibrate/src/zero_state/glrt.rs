@@ -58,11 +58,11 @@
 //! [`REANCHOR_S`] the window's magnitude becomes the reference's too. A long window needs
 //! this most: its mean holds the magnitude to a fraction of what a short one allows (a 2 s
 //! window at 120 Hz, a fourth of the 0.5 s window's variance), so an offset the short window
-//! passes makes every later rest motion to it. The MoRPINet car `morpinet-g-dot4` of the
-//! real-data corpus, with `--glrt-window-s 2.0`, found no rest after 76 s of its 175 s, with
-//! 50 s of rest to come, and ended 213 % of its distance off. What this gives up as well is a
-//! steady vertical acceleration held 2 s with no vibration (an elevator's ride is steady
-//! speed, its accelerations shorter).
+//! passes makes every later rest motion to it: without this, the MoRPINet car
+//! `morpinet-g-dot4` of the real-data corpus, with `--glrt-window-s 2.0`, finds no rest after
+//! 76 s of its 175 s, with 50 s of rest to come, and ends 213 % of its distance off. What this
+//! gives up as well is a steady vertical acceleration held 2 s with no vibration (an
+//! elevator's ride is steady speed, its accelerations shorter).
 //!
 //! - [`GlrtStatistic::Split`] (default): rest iff each is below its `1 - a/2` chi-squared
 //!   quantile. The mean part (6 degrees of freedom) is what catches steady acceleration, turns
