@@ -215,8 +215,9 @@ fn base_config(
         }
     }
     base.rest_updates = !args.no_zupt;
-    // The alignment's share of the learning window lies within it (`--learn-s`).
-    base.learned_rest_s = calibrate::zero_state::ROBOT_LEARN_S.min(detector.learn.duration_s);
+    // The alignment may stand on the whole learning window (`--learn-s`): the learner judged
+    // all of it still.
+    base.learned_rest_s = detector.learn.duration_s;
     base.consistency.scaling = args.innovation_scaling;
     if let Some(k) = args.weinberg_k {
         if !(k.is_finite() && k > 0.0) {
