@@ -174,8 +174,12 @@ def tilt_errors(states, samples):
 
 
 def parts_of(rec_id, binary, data, extra):
-    side = json.loads((data / f"{rec_id}.json").read_text())
-    track = side["truth"]["track"]
+    side_path = data / f"{rec_id}.json"
+    side = json.loads(side_path.read_text())
+    track = side["truth"].get("track")
+    if not track or len(track[0]) < 4:
+        sys.exit(f"{side_path}: field truth.track: no track with a heading (t_s, x, y, heading) "
+                 f"to split against (truth kind {side['truth'].get('kind')!r})")
     with tempfile.TemporaryDirectory() as tmp:
         calib = Path(tmp) / "identity.toml"
         calib.write_text(bench.identity_calibration())
@@ -186,6 +190,8 @@ def parts_of(rec_id, binary, data, extra):
         result = json.loads([l for l in proc.stdout.splitlines() if l.startswith("{")][-1])
         states, samples = read_run(mcap)
     t_a = result["aligned_at_s"]
+    if t_a is None or len(states) < 2:
+        sys.exit(f"{rec_id}: the odometry never aligned ({' '.join(cmd)}): nothing to split")
     h_a = bench.heading_at(track, t_a)
     c, s = math.cos(h_a), math.sin(h_a)
     start = bench.track_at(track, t_a)
