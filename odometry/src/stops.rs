@@ -337,6 +337,11 @@ mod tests {
         }
     }
 
+    /// A 1 Hz body mode of 0.05 m/s^2 (5 mg): a road's undulations through the suspension.
+    fn body_mode(t: f64) -> f64 {
+        0.05 * (2.0 * std::f64::consts::PI * t).sin()
+    }
+
     #[test]
     fn an_engine_tone_is_quiet_and_a_body_mode_is_not() {
         let mut test = StopTest::default();
@@ -350,21 +355,17 @@ mod tests {
             0.5 * (46.0 * std::f64::consts::PI * t).sin()
         });
         assert_eq!(test.quiet(), Some(true));
-        // A 1 Hz body mode of 0.05 m/s^2 (5 mg).
-        run(&mut test, 2.0, false, |t| {
-            0.05 * (2.0 * std::f64::consts::PI * t).sin()
-        });
+        run(&mut test, 2.0, false, body_mode);
         assert_eq!(test.quiet(), Some(false));
     }
 
     #[test]
     fn driving_is_told_from_stops_only_when_it_is_not_quiet() {
-        let body = |t: f64| 0.05 * (2.0 * std::f64::consts::PI * t).sin();
         let mut rough = StopTest::default();
         run(&mut rough, 3.0, true, |_| 0.0);
-        run(&mut rough, 20.0, false, body);
+        run(&mut rough, 20.0, false, body_mode);
         assert!(!rough.driving_told(), "20 s of driving is too little");
-        run(&mut rough, 12.0, false, body);
+        run(&mut rough, 12.0, false, body_mode);
         assert!(rough.driving_told());
         // A smooth road: as quiet as standing.
         let mut smooth = StopTest::default();
@@ -372,22 +373,21 @@ mod tests {
         run(&mut smooth, 40.0, false, |_| 0.0);
         assert!(!smooth.driving_told());
         // Decided once: rough driving after that does not change it.
-        run(&mut smooth, 40.0, false, body);
+        run(&mut smooth, 40.0, false, body_mode);
         assert!(!smooth.driving_told());
     }
 
     #[test]
     fn quiet_is_counted_without_a_break() {
-        let body = |t: f64| 0.05 * (2.0 * std::f64::consts::PI * t).sin();
         let mut test = StopTest::default();
         run(&mut test, 3.0, true, |_| 0.0);
-        run(&mut test, 3.0, false, body);
+        run(&mut test, 3.0, false, body_mode);
         assert_eq!(test.quiet_for_s(), 0.0);
         // The body mode leaves the 1 s window within a second of stopping.
         run(&mut test, 4.0, false, |_| 0.0);
         let quiet = test.quiet_for_s();
         assert!((2.5..=4.0).contains(&quiet), "{quiet}");
-        run(&mut test, 1.0, false, body);
+        run(&mut test, 1.0, false, body_mode);
         assert_eq!(test.quiet_for_s(), 0.0);
     }
 
