@@ -18,7 +18,9 @@
 //!   `1 - r` for means with lag-1 correlation `r`, near 0 for a trend), is at least
 //!   `1 - 3.09 / sqrt(k) - max_batch_correlation` (`k` batches; 3.09 sigma is a 1e-3 false
 //!   alarm for independent means, `max_batch_correlation` allows noise correlated across batch
-//!   boundaries).
+//!   boundaries). With the default 0.35 that limit is at most 0 for fewer than 23 batches: a
+//!   window that short (half a second below 920 Hz) passes whatever its `R` (docs/detectors.md,
+//!   "What a short learning cannot refuse").
 //!
 //!   Before either, no batch mean may lie more than [`MAX_OUTLIER_SIGMA`] robust standard
 //!   deviations (1.4826 times the median absolute deviation, at least the white-noise scatter
