@@ -28,6 +28,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 mod hint_state;
 mod learning;
 mod records;
+mod wait_revision;
 mod walk_hooks;
 mod wheeled;
 use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, WheelsStill};
@@ -387,6 +388,7 @@ impl Navigator {
             self.record(&state);
         }
         emit(&state);
+        self.republish_wait(emit);
 
         if let Some(pending) = self.pending
             && rest
@@ -902,6 +904,10 @@ impl Navigator {
                 state.attitude_wxyz[3],
             )),
             distance_m: state.distance_m,
+            wait: self
+                .direction_unknown()
+                .then(|| self.hints.wait.mark())
+                .flatten(),
         });
     }
 
@@ -945,23 +951,7 @@ impl Navigator {
                     .estimator
                     .add(&h.q.inverse_transform_vector(&v), dt);
             }
-            let g_s = h.q.inverse() * Vector3::new(0.0, 0.0, g);
-            emit(&OdometryState {
-                stamps: h.stamps,
-                seq: h.seq,
-                position_m: p.into(),
-                position_sigma_m: h.sigma_p.into(),
-                velocity_mps: v.into(),
-                velocity_sigma_mps: h.sigma_v.into(),
-                gravity_sensor_mps2: g_s.into(),
-                attitude_wxyz: [h.q.w, h.q.i, h.q.j, h.q.k],
-                distance_m: h.distance_m,
-                flags: odometry_flags::ALIGNED | odometry_flags::REVISION,
-                reserved16: 0,
-                rest_count: self.rest_count,
-                hints_applied: self.hints.applied,
-                hint_disagreements: self.hints.disagreements,
-            });
+            emit(&h.revision(&p, &v, g, self.counts()));
         }
         self.history.clear();
         if estimating && self.hints.estimator.path_m() >= self.hints.cfg.mounting_min_path_m {
