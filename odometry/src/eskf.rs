@@ -650,33 +650,14 @@ impl Eskf {
     pub fn reset_velocity(&mut self, v: Vector3<f64>, cov_v: &Matrix3<f64>) {
         self.propagate();
         self.x.v = v;
-        self.reset_block(V, cov_v);
-        self.reported.v = Vector3::zeros();
-        self.refresh_sigma();
-    }
-
-    /// Sets the position to `p` (m, navigation frame) with covariance `cov_p`, uncorrelated
-    /// with the other states, as [`Self::reset_velocity`] does the velocity: for a position
-    /// measured by other means than the filter's integral, which was no path (a velocity
-    /// without direction, `crate::handover`), so that its covariance with the biases and the
-    /// attitude built meanwhile says nothing of the new position's error.
-    pub fn reset_position(&mut self, p: Vector3<f64>, cov_p: &Matrix3<f64>) {
-        self.propagate();
-        self.x.p = p;
-        self.reset_block(P, cov_p);
-        self.reported.p = Vector3::zeros();
-        self.refresh_sigma();
-    }
-
-    /// The covariance block of the three states from `at` set to `cov`, uncorrelated with the
-    /// others.
-    fn reset_block(&mut self, at: usize, cov: &Matrix3<f64>) {
         for i in 0..N {
-            for j in at..at + 3 {
+            for j in V..V + 3 {
                 (self.cov[(i, j)], self.cov[(j, i)]) = (0.0, 0.0);
             }
         }
-        self.cov.fixed_view_mut::<3, 3>(at, at).copy_from(cov);
+        self.cov.fixed_view_mut::<3, 3>(V, V).copy_from(cov_v);
+        self.reported.v = Vector3::zeros();
+        self.refresh_sigma();
     }
 
     /// The velocity in the robot's body frame, m/s: `R_bs q^-1 v`, with `r_bs` rotating

@@ -284,17 +284,13 @@ impl Hints {
     }
 
     /// With the forward axis first trusted after a wait without a direction: the path the hints
-    /// and the attitude say was driven meanwhile ([`WaitPath`]) replaces the position
-    /// (`Eskf::reset_position`), with 1-sigma per axis the distance times the speed scale's
-    /// prior 1-sigma and the fit's whole yaw 1-sigma in quadrature (the speeds' white noise
-    /// averages out over the wait). The filter's own position integrated the specific force
-    /// twice from a velocity tens of m/s off: no path, and its covariance with the biases and
-    /// the tilt built meanwhile is no statement about the path's error. Taken as a measurement
-    /// of that position instead, the wait path left those correlations in place, and the speed
-    /// updates that followed moved the position sideways by tens of metres as they learned the
-    /// accelerometer bias (the comma2k19 car of docs/real-data.md: 30 deg off the car's straight
-    /// path over the 4 s after the axis was trusted). The path's states are then due to be
-    /// published again ([`Self::wait_revision`]).
+    /// and the attitude say was driven meanwhile ([`WaitPath`]) is a measurement of the
+    /// position, with 1-sigma per axis the distance times the speed scale's prior 1-sigma and
+    /// the fit's whole yaw 1-sigma in quadrature (the speeds' white noise averages out over the
+    /// wait). The filter's own position integrated the specific force twice from a velocity
+    /// that far off, and its conditioning on the restarted velocity assumes that velocity's
+    /// error constant over the wait: true of the start's error, not of the tilt's share.
+    /// The path's states are then due to be published again ([`Self::wait_revision`]).
     fn position_from_wait(&mut self, kf: &mut Eskf, r_bs: &Matrix3<f64>) {
         let forward_s = r_bs.row(0).transpose();
         let Some((p, distance)) = self.wait.displacement(&forward_s) else {
@@ -304,7 +300,7 @@ impl Hints {
         let relative = self.cfg.speed_scale_sigma.hypot(yaw);
         let sigma = distance * relative;
         if sigma > 0.0 {
-            kf.reset_position(p, &Matrix3::from_diagonal_element(sigma * sigma));
+            kf.position_update(p, Vector3::repeat(sigma * sigma));
         }
         self.wait_revision = self.wait.revision(&forward_s, &kf.x.p, relative);
     }
