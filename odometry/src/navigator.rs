@@ -388,8 +388,14 @@ impl Navigator {
             self.record(&state);
         }
         emit(&state);
-        self.republish_wait(emit);
+        self.revisions_due(t_ns, rest, emit);
+    }
 
+    /// Publishes the revisions due after the state of the sample at `t_ns` (`rest`: taken as
+    /// rest): the wait's once the forward axis ended it ([`Self::republish_wait`]), and the
+    /// last motion's once the rest after it has lasted `revision_delay_s`.
+    fn revisions_due(&mut self, t_ns: u64, rest: bool, emit: &mut impl FnMut(&OdometryState)) {
+        self.republish_wait(emit);
         if let Some(pending) = self.pending
             && rest
             && (t_ns - pending.end_ns) as f64 * 1e-9 >= self.cfg.revision_delay_s
