@@ -28,6 +28,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 mod hint_state;
 mod learning;
 mod records;
+mod wait_revision;
 mod walk_hooks;
 mod wheeled;
 use hint_state::{BodyVelocity, HintDecision, HintSample, Hints, WheelsStill};
@@ -387,7 +388,14 @@ impl Navigator {
             self.record(&state);
         }
         emit(&state);
+        self.revisions_due(t_ns, rest, emit);
+    }
 
+    /// Publishes the revisions due after the state of the sample at `t_ns` (`rest`: taken as
+    /// rest): the wait's once the forward axis ended it ([`Self::republish_wait`]), and the
+    /// last motion's once the rest after it has lasted `revision_delay_s`.
+    fn revisions_due(&mut self, t_ns: u64, rest: bool, emit: &mut impl FnMut(&OdometryState)) {
+        self.republish_wait(emit);
         if let Some(pending) = self.pending
             && rest
             && (t_ns - pending.end_ns) as f64 * 1e-9 >= self.cfg.revision_delay_s
@@ -902,6 +910,10 @@ impl Navigator {
                 state.attitude_wxyz[3],
             )),
             distance_m: state.distance_m,
+            wait: self
+                .direction_unknown()
+                .then(|| self.hints.wait.mark())
+                .flatten(),
         });
     }
 
@@ -945,23 +957,7 @@ impl Navigator {
                     .estimator
                     .add(&h.q.inverse_transform_vector(&v), dt);
             }
-            let g_s = h.q.inverse() * Vector3::new(0.0, 0.0, g);
-            emit(&OdometryState {
-                stamps: h.stamps,
-                seq: h.seq,
-                position_m: p.into(),
-                position_sigma_m: h.sigma_p.into(),
-                velocity_mps: v.into(),
-                velocity_sigma_mps: h.sigma_v.into(),
-                gravity_sensor_mps2: g_s.into(),
-                attitude_wxyz: [h.q.w, h.q.i, h.q.j, h.q.k],
-                distance_m: h.distance_m,
-                flags: odometry_flags::ALIGNED | odometry_flags::REVISION,
-                reserved16: 0,
-                rest_count: self.rest_count,
-                hints_applied: self.hints.applied,
-                hint_disagreements: self.hints.disagreements,
-            });
+            emit(&h.revision(&p, &v, g, self.counts()));
         }
         self.history.clear();
         if estimating && self.hints.estimator.path_m() >= self.hints.cfg.mounting_min_path_m {

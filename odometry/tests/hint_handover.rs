@@ -14,46 +14,7 @@
 
 mod common;
 
-use std::path::Path;
-
-use common::{
-    Case, drive_with_encoder_hints, offline_vehicle_json, scratch, write_drive_with_hints,
-};
-use nalgebra::{UnitQuaternion, Vector3};
-
-/// Writes a drive with turns at 8-15 m/s, its IMU rolled 180 degrees on the car (sensor x
-/// forward, y right, z down), and its encoder hints, to `path`: the simulated 150 s from the
-/// first sample at [`START_MPS`] on (the car accelerating from its start at 0.5 m/s^2, the
-/// simulator's peak), so that the recording starts in motion.
-fn write_drive(path: &Path, seed: u64) {
-    let case = Case {
-        duration_s: 150.0,
-        rate_hz: 100.0,
-        turns: true,
-        vibration: 0.0,
-        initial_rest_s: 0.0,
-        cruise_speed_mps: [8.0, 15.0],
-        leg_s: [3.0, 8.0],
-        max_motion_s: 400.0,
-        mounting: UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 180f64.to_radians()),
-        ..Case::straight()
-    };
-    let (raw, hints) = drive_with_encoder_hints(&case, seed);
-    let speed = |v: &[f64; 3]| v[0].hypot(v[1]);
-    let first = raw
-        .iter()
-        .position(|(_, t)| speed(&t.velocity_mps) >= START_MPS)
-        .expect("the car reaches its start speed");
-    let t0_ns = raw[first].0.stamps.sample_ns;
-    let hints = hints
-        .into_iter()
-        .filter(|h| h.stamps.sample_ns >= t0_ns)
-        .collect();
-    write_drive_with_hints(path, &raw[first..], hints);
-}
-
-/// The car's speed at the recording's first sample, m/s.
-const START_MPS: f64 = 5.0;
+use common::{car_started_in_motion, offline_vehicle_json, scratch, write_drive_with_hints};
 
 #[test]
 fn a_car_starting_in_motion_takes_its_speed_hints_consistently_once_its_axis_is_known() {
@@ -61,7 +22,8 @@ fn a_car_starting_in_motion_takes_its_speed_hints_consistently_once_its_axis_is_
     let mut covered = 0;
     for seed in [1, 2, 4] {
         let path = dir.join(format!("drive-{seed}.mcap"));
-        write_drive(&path, seed);
+        let (raw, hints) = car_started_in_motion(seed);
+        write_drive_with_hints(&path, &raw, hints);
         let v = offline_vehicle_json(env!("CARGO_BIN_EXE_mems-odometry"), &path, &[]);
         let a = |key: &str, i: usize| v[key][i].as_f64().unwrap();
         let speed = v["aligned_in_motion"]["speed_mps"].as_f64();

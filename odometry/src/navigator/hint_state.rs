@@ -4,7 +4,7 @@
 
 use crate::cruise::{ForwardAxis, ForwardFit, Reference, horizontal_bias_sigma, initial_velocity};
 use crate::eskf::{BG, Eskf, V};
-use crate::handover::WaitPath;
+use crate::handover::{WaitPath, WaitRevision};
 use crate::hints::{
     ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring, SCALE_CONFLICT_SIGMAS,
     ScaleTaken,
@@ -100,6 +100,9 @@ pub(super) struct Hints {
     pub(super) still: WheelsStill,
     /// The path driven while the velocity has no direction ([`Self::wait_step`]).
     pub(super) wait: WaitPath,
+    /// That path with its direction, once the forward axis is known, until its states are
+    /// published again (`Navigator::republish_wait`).
+    pub(super) wait_revision: Option<WaitRevision>,
     /// Sum of the body-velocity changes every update has made since the mounting is known,
     /// m/s.
     pub(super) corrections: Vector3<f64>,
@@ -134,6 +137,7 @@ impl Hints {
             history: Ring::new(velocity_capacity),
             still: WheelsStill::default(),
             wait: WaitPath::default(),
+            wait_revision: None,
             corrections: Vector3::zeros(),
             applied: 0,
             disagreements: 0,
@@ -163,6 +167,7 @@ impl Hints {
         self.history.clone_from(&other.history);
         self.still = other.still;
         self.wait = other.wait;
+        self.wait_revision = other.wait_revision;
         self.corrections = other.corrections;
         self.applied = other.applied;
         self.disagreements = other.disagreements;
@@ -235,7 +240,12 @@ impl Hints {
     /// update linearized about a velocity that far off turns the attitude instead (on the
     /// F1TENTH car of docs/real-data.md, by 90 degrees after 30 s on the IMU alone; on the
     /// comma2k19 car, whose speed had grown past the cruise start's 1-sigma, by 40 degrees).
-    pub(super) fn restart_velocity(&self, kf: &mut Eskf, h: &RobotHint, direction_unknown: bool) {
+    pub(super) fn restart_velocity(
+        &mut self,
+        kf: &mut Eskf,
+        h: &RobotHint,
+        direction_unknown: bool,
+    ) {
         let Some(r_bs) = self.r_bs else {
             return;
         };
@@ -280,16 +290,19 @@ impl Hints {
     /// wait). The filter's own position integrated the specific force twice from a velocity
     /// that far off, and its conditioning on the restarted velocity assumes that velocity's
     /// error constant over the wait: true of the start's error, not of the tilt's share.
-    fn position_from_wait(&self, kf: &mut Eskf, r_bs: &Matrix3<f64>) {
+    /// The path's states are then due to be published again ([`Self::wait_revision`]).
+    fn position_from_wait(&mut self, kf: &mut Eskf, r_bs: &Matrix3<f64>) {
         let forward_s = r_bs.row(0).transpose();
         let Some((p, distance)) = self.wait.displacement(&forward_s) else {
             return;
         };
         let yaw = self.latest_fit.map_or(0.0, |f| f.systematic_sigma_rad());
-        let sigma = distance * self.cfg.speed_scale_sigma.hypot(yaw);
+        let relative = self.cfg.speed_scale_sigma.hypot(yaw);
+        let sigma = distance * relative;
         if sigma > 0.0 {
             kf.position_update(p, Vector3::repeat(sigma * sigma));
         }
+        self.wait_revision = self.wait.revision(&forward_s, &kf.x.p, relative);
     }
 
     /// Applies a speed hint as a body-velocity measurement at the hint's time; returns its

@@ -1,8 +1,9 @@
 //! The navigator's bookkeeping records: the motion history's entries, the alignment's sums,
 //! a pending revision and the rest window still to be updated.
 
+use crate::handover::WaitMark;
 use crate::rest_noise::RestNoise;
-use ipc_types::Stamps;
+use ipc_types::{OdometryState, Stamps, odometry_flags};
 use nalgebra::{UnitQuaternion, Vector3};
 
 /// One decimated state of the motion history, kept for the revision at the next rest.
@@ -17,6 +18,48 @@ pub(super) struct HistoryEntry {
     pub(super) sigma_v: Vector3<f64>,
     pub(super) q: UnitQuaternion<f64>,
     pub(super) distance_m: f64,
+    /// The wait path's sums at this state while the velocity had no direction
+    /// (`crate::handover`).
+    pub(super) wait: Option<WaitMark>,
+}
+
+/// The counters a revised state carries (the navigator's at the revision).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Counts {
+    pub(super) rest_count: u32,
+    pub(super) hints_applied: u32,
+    pub(super) hint_disagreements: u32,
+}
+
+impl HistoryEntry {
+    /// This state published again with position `p` and velocity `v` (m, m/s, navigation
+    /// frame), flagged `REVISION`; `g` gravity, m/s^2.
+    pub(super) fn revision(
+        &self,
+        p: &Vector3<f64>,
+        v: &Vector3<f64>,
+        g: f64,
+        counts: Counts,
+    ) -> OdometryState {
+        let g_s = self.q.inverse() * Vector3::new(0.0, 0.0, g);
+        let q = self.q;
+        OdometryState {
+            stamps: self.stamps,
+            seq: self.seq,
+            position_m: (*p).into(),
+            position_sigma_m: self.sigma_p.into(),
+            velocity_mps: (*v).into(),
+            velocity_sigma_mps: self.sigma_v.into(),
+            gravity_sensor_mps2: g_s.into(),
+            attitude_wxyz: [q.w, q.i, q.j, q.k],
+            distance_m: self.distance_m,
+            flags: odometry_flags::ALIGNED | odometry_flags::REVISION,
+            reserved16: 0,
+            rest_count: counts.rest_count,
+            hints_applied: counts.hints_applied,
+            hint_disagreements: counts.hint_disagreements,
+        }
+    }
 }
 
 /// What the alignment rest has gathered so far.

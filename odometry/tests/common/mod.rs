@@ -554,6 +554,43 @@ pub fn write_drive_with_encoder_hints(path: &std::path::Path, case: &Case, seed:
     write_drive_with_hints(path, &raw, hints);
 }
 
+/// A drive with turns at 8-15 m/s, its IMU rolled 180 degrees on the car (sensor x forward,
+/// y right, z down, as the comma2k19 phone of docs/real-data.md), and its encoder hints: the
+/// simulated 150 s from the first sample at [`CAR_START_MPS`] on (the car accelerating from its
+/// start at 0.5 m/s^2, the simulator's peak), so that the recording starts in motion.
+pub fn car_started_in_motion(seed: u64) -> (Vec<(RawImuSample, Truth)>, Vec<RobotHint>) {
+    let case = Case {
+        duration_s: 150.0,
+        rate_hz: 100.0,
+        turns: true,
+        vibration: 0.0,
+        initial_rest_s: 0.0,
+        cruise_speed_mps: [8.0, 15.0],
+        leg_s: [3.0, 8.0],
+        max_motion_s: 400.0,
+        mounting: nalgebra::UnitQuaternion::from_axis_angle(
+            &Vector3::x_axis(),
+            180f64.to_radians(),
+        ),
+        ..Case::straight()
+    };
+    let (raw, hints) = drive_with_encoder_hints(&case, seed);
+    let speed = |v: &[f64; 3]| v[0].hypot(v[1]);
+    let first = raw
+        .iter()
+        .position(|(_, t)| speed(&t.velocity_mps) >= CAR_START_MPS)
+        .expect("the car reaches its start speed");
+    let t0_ns = raw[first].0.stamps.sample_ns;
+    let hints = hints
+        .into_iter()
+        .filter(|h| h.stamps.sample_ns >= t0_ns)
+        .collect();
+    (raw[first..].to_vec(), hints)
+}
+
+/// The speed of [`car_started_in_motion`] at the recording's first sample, m/s.
+pub const CAR_START_MPS: f64 = 5.0;
+
 /// Runs `bin offline --json --profile vehicle ARGS --input PATH` (`bin` the mems-odometry
 /// binary, `env!("CARGO_BIN_EXE_mems-odometry")`, which only a test crate knows), asserts that
 /// it succeeded (its stderr in the message) and returns its JSON.

@@ -279,11 +279,13 @@ fn pass(
     let ran =
         mems_stage::offline::run_with(&mut chain, &mut feed, Feed::next_input, &mut |feed, o| {
             feed.write(o);
-            if let Either::Second(s) = o
-                && s.flags & odometry_flags::REVISION == 0
-            {
-                progress.inc(1);
-                summary.state(*s, &mut feed.truth);
+            if let Either::Second(s) = o {
+                if s.flags & odometry_flags::REVISION == 0 {
+                    progress.inc(1);
+                    summary.state(*s, &mut feed.truth);
+                } else {
+                    summary.revise(s);
+                }
             }
         });
     progress.finish_and_clear();

@@ -84,8 +84,10 @@ pub struct Summary {
     withdrawn: Vec<(u64, u64)>,
     rests: Vec<serde_json::Value>,
     /// Our position every [`TRACK_PERIOD_NS`] of sample time from the alignment on: (sample
-    /// time ns, position m).
+    /// time ns, position m), as last published ([`Self::revise`]).
     track: Vec<(u64, [f64; 3])>,
+    /// The previous revised state's sample time (ns) and position (m).
+    last_revision: Option<(u64, [f64; 3])>,
     frame: Option<TruthFrame>,
     rest_errors: Vec<serde_json::Value>,
     truth_distance: f64,
@@ -154,6 +156,28 @@ impl Summary {
             }
         }
         self.last = Some(state);
+    }
+
+    /// Takes a revised state (`REVISION`): the track's points after the previous revised
+    /// state and up to this one take the position the two give at their time (linear in
+    /// time), when the two are at most [`TRACK_PERIOD_NS`] apart (revisions come in time
+    /// order over a stretch, at least as often as the track's points); so the track is the
+    /// final history, the last state published for each time.
+    pub fn revise(&mut self, state: &OdometryState) {
+        let (t, p) = (state.stamps.sample_ns, state.position_m);
+        if state.flags & odometry_flags::ALIGNED == 0 {
+            self.last_revision = None;
+            return;
+        }
+        let (t0, p0) = match self.last_revision.replace((t, p)) {
+            Some((t0, p0)) if t0 < t && t - t0 <= TRACK_PERIOD_NS => (t0, p0),
+            _ => (t.saturating_sub(1), p),
+        };
+        let from = self.track.partition_point(|&(tk, _)| tk <= t0);
+        for (tk, pk) in self.track[from..].iter_mut().take_while(|(tk, _)| *tk <= t) {
+            let f = (*tk - t0) as f64 / (t - t0) as f64;
+            *pk = std::array::from_fn(|i| p0[i] + (p[i] - p0[i]) * f);
+        }
     }
 
     /// An unaligned state at `t_ns`: an alignment before it was withdrawn, and what was
