@@ -569,41 +569,6 @@ fn a_lost_gravity_reference_is_measured_anew_but_a_vibrating_acceleration_is_not
     assert!(rest_fraction(&after) > 0.9, "{}", rest_fraction(&after));
 }
 
-/// A rest whose specific force reads a magnitude the gravity reference no longer holds (an
-/// accelerometer bias moved along gravity between rests: temperature, or an uncalibrated
-/// part's offset at another tilt) is measured anew once the sensor has been still by every
-/// other test for `REANCHOR_S`, and is rest from then on: a detector whose window is long
-/// (here 2 s, whose mean holds gravity's magnitude to 0.2 mm/s^2) otherwise never rests again.
-/// A vertical acceleration that vibrates stays motion.
-#[test]
-fn a_rest_whose_gravity_magnitude_moved_is_measured_anew() {
-    use calibrate::zero_state::glrt::REANCHOR_S;
-    let mut c = DetectorConfig::new(DetectorKind::Glrt, G);
-    c.glrt.window_s = 2.0;
-    let mut det = ZeroStateDetector::new(c);
-    let mut synth = Synth::new(16);
-    synth.feed(&mut det, 5.0, [0.0; 3], [0.0; 3], 1.0);
-    assert!(det.is_ready());
-    // Moving, then at rest with the magnitude 20 mm/s^2 (2 mg) above the learned one.
-    let moved = [0.0, 0.0, 0.02];
-    synth.feed(&mut det, 2.0, [0.3, 0.0, 0.0], [0.0; 3], 3.0);
-    let first = synth.feed(&mut det, 2.0, moved, [0.0; 3], 1.0);
-    assert_eq!(rest_fraction(&first), 0.0, "2 mg off the learned magnitude");
-    assert_eq!(det.gravity_reanchored(), 0);
-    let later = synth.feed(&mut det, REANCHOR_S + 1.0, moved, [0.0; 3], 1.0);
-    assert_eq!(det.gravity_reanchored(), 1);
-    let rest = synth.feed(&mut det, 2.0, moved, [0.0; 3], 1.0);
-    assert!(rest_fraction(&rest) > 0.95, "{}", rest_fraction(&rest));
-    assert!(rest_fraction(&later) > 0.0);
-    // The reference now holds the new magnitude.
-    let (accel, _) = det.references().unwrap();
-    assert!((accel[2] - G - moved[2]).abs() < 2e-3, "{accel:?}");
-    // A vertical acceleration that vibrates is no rest, however long.
-    let lift = synth.feed(&mut det, 5.0, [0.0, 0.0, 0.3], [0.0; 3], 3.0);
-    assert_eq!(rest_fraction(&lift[10..]), 0.0);
-    assert_eq!(det.gravity_reanchored(), 1);
-}
-
 /// Feeds `tilt` and `rate` in steps of 0.1 s until `det` has measured its gravity reference
 /// anew once (at most 3 s); returns the time that took, s.
 fn until_reanchored(

@@ -52,17 +52,6 @@
 //! becomes the reference, with the window mean's own uncertainty, and the window is a rest.
 //! A steady horizontal acceleration that long with no vibration and no turn is what this
 //! gives up; a slow cruise at constant speed was never told from rest by the mean test anyway.
-//! The magnitude is lost the same way: a window still by the scatter and the gyroscope that
-//! fails on gravity's magnitude too (an accelerometer bias moved along gravity between rests,
-//! an uncalibrated part's offset read at another tilt) counts as well, and after
-//! [`REANCHOR_S`] the window's magnitude becomes the reference's too. A long window needs
-//! this most: its mean holds the magnitude to a fraction of what a short one allows (a 2 s
-//! window at 120 Hz, a fourth of the 0.5 s window's variance), so an offset the short window
-//! passes makes every later rest motion to it: without this, the MoRPINet car
-//! `morpinet-g-dot4` of the real-data corpus, with `--glrt-window-s 2.0`, finds no rest after
-//! 76 s of its 175 s, with 50 s of rest to come, and ends 213 % of its distance off. What this
-//! gives up as well is a steady vertical acceleration held 2 s with no vibration (an
-//! elevator's ride is steady speed, its accelerations shorter).
 //!
 //! - [`GlrtStatistic::Split`] (default): rest iff each is below its `1 - a/2` chi-squared
 //!   quantile. The mean part (6 degrees of freedom) is what catches steady acceleration, turns
@@ -214,15 +203,6 @@ impl BatchSums {
 /// lost"): four windows of the default 0.5 s, longer than a vehicle's gentle start keeps its
 /// vibration under the noise, shorter than a hand-held sensor's pause.
 pub const REANCHOR_S: f64 = 2.0;
-
-/// What of the gravity reference a window still by every other test failed on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Lost {
-    /// Its direction across gravity alone.
-    Direction,
-    /// Its magnitude (and perhaps its direction).
-    Magnitude,
-}
 
 /// The learned GLRT: references, noise, thresholds and the window ring.
 #[derive(Debug, Clone)]
@@ -566,20 +546,12 @@ impl GlrtRule {
             GlrtStatistic::Split => steady && t_scatter <= self.scatter_quantile,
             GlrtStatistic::Combined => t_mean + t_scatter <= self.combined_quantile,
         };
-        // Still by the scatter and the gyroscope, failing on the gravity reference alone: its
-        // direction across gravity, or its magnitude too (the gyroscope's part of `T_mean` has
-        // 3 degrees of freedom, as the steadiness test).
-        let still = self.channels == 6 && full && !quiet && t_scatter <= self.scatter_quantile;
-        let lost = if !still {
-            None
-        } else if t_mean - t_across <= self.still_quantile {
-            Some(Lost::Direction)
-        } else if t_mean - t_across - t_along <= self.steady_quantile {
-            Some(Lost::Magnitude)
-        } else {
-            None
-        };
-        let rest = (quiet && full) || self.reanchor(lost, accel, &mean, &var);
+        let still_but_direction = self.channels == 6
+            && full
+            && !quiet
+            && t_scatter <= self.scatter_quantile
+            && t_mean - t_across <= self.still_quantile;
+        let rest = (quiet && full) || self.reanchor(still_but_direction, accel, &mean, &var);
         self.rest_run = if rest { self.rest_run + 1 } else { 0 };
         Decision {
             rest,
@@ -589,23 +561,22 @@ impl GlrtRule {
         }
     }
 
-    /// Counts the time windows have been still but for the gravity reference (`lost`: what of
-    /// it the window failed on), with the window mean `mean` (its variance `var` per axis)
-    /// steady: a vehicle's braking tail changes its specific force as it slows, a lost
-    /// reference's rest does not. After [`REANCHOR_S`] of it the gravity reference is taken as
-    /// lost and measured anew (the window's direction, and its magnitude when the last window
-    /// failed on that too) and the window is a rest.
+    /// Counts the time windows have been still but for the direction across gravity, with the
+    /// window mean `mean` (its variance `var` per axis) steady: a vehicle's braking tail
+    /// changes its specific force as it slows, a lost reference's rest does not. After
+    /// [`REANCHOR_S`] of it the gravity reference is taken as lost and measured anew (the
+    /// window's direction) and the window is a rest.
     fn reanchor(
         &mut self,
-        lost: Option<Lost>,
+        still_but_direction: bool,
         accel: &WindowStats,
         mean: &[f64; 6],
         var: &[f64; 6],
     ) -> bool {
-        let Some(lost) = lost else {
+        if !still_but_direction {
             self.lost_s = 0.0;
             return false;
-        };
+        }
         let m = Vector3::new(mean[0], mean[1], mean[2]);
         // Two window means' difference: twice one mean's variance.
         let moved = (0..3)
@@ -622,20 +593,12 @@ impl GlrtRule {
         self.lost_s = 0.0;
         self.reanchored += 1;
         // The window's direction is the new reference (a step of any size: the rest update's
-        // linear step would leave part of a large one), with the window mean's own
-        // uncertainty across it; gravity's magnitude as it was, or the window's when that was
-        // lost too, with the window mean's own uncertainty along it.
-        let u = m.normalize();
-        let magnitude = match lost {
-            Lost::Direction => self.gravity().norm(),
-            Lost::Magnitude => {
-                self.along_var = (0..3).map(|i| u[i] * u[i] * var[i]).sum();
-                m.norm()
-            }
-        };
-        self.reference[..3].copy_from_slice((u * magnitude).as_slice());
+        // linear step would leave part of a large one), gravity's magnitude as it was, with
+        // the window mean's own uncertainty across it.
+        let g = m.normalize() * self.gravity().norm();
+        self.reference[..3].copy_from_slice(g.as_slice());
         self.across_var = (var[0] + var[1] + var[2]) / 3.0;
-        self.rest_dir = u;
+        self.rest_dir = m.normalize();
         true
     }
 
