@@ -55,11 +55,19 @@ fn simulate_and_run(
 /// The stop-and-go robot of docs/detectors.md, "Short rests" (a first rest of 1 s, then rests
 /// of 1-2 s between legs of 2-4 s at 0.2-0.5 m/s, 200 Hz) at `seed`, with `extra` arguments.
 fn stop_and_go<'a>(seed: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
-    let mut args = vec![
+    let mut args = drive_args("120", "1", seed);
+    args.extend_from_slice(extra);
+    args
+}
+
+/// `mems-sim drive`'s arguments for that robot over `duration` s with a first rest of
+/// `initial_rest` s, at `seed`.
+fn drive_args<'a>(duration: &'a str, initial_rest: &'a str, seed: &'a str) -> Vec<&'a str> {
+    vec![
         "--duration",
-        "120",
+        duration,
         "--initial-rest",
-        "1",
+        initial_rest,
         "--rests",
         "1,2",
         "--legs",
@@ -72,9 +80,7 @@ fn stop_and_go<'a>(seed: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
         "200",
         "--seed",
         seed,
-    ];
-    args.extend_from_slice(extra);
-    args
+    ]
 }
 
 /// Alignments the summary reports withdrawn.
@@ -384,25 +390,7 @@ fn the_vehicle_profile_aligns_on_a_first_rest_half_a_second_longer_than_its_lear
     let (truth, v) = simulate_and_run(
         &dir,
         "vehicle",
-        &[
-            "drive",
-            "--duration",
-            "30",
-            "--initial-rest",
-            "1.5",
-            "--rests",
-            "1,2",
-            "--legs",
-            "2,4",
-            "--max-motion",
-            "10",
-            "--cruise",
-            "0.2,0.5",
-            "--rate",
-            "200",
-            "--seed",
-            "2",
-        ],
+        &[&["drive"][..], &drive_args("30", "1.5", "2")].concat(),
         &["--profile", "vehicle"],
     );
     std::fs::remove_dir_all(&dir).unwrap();
@@ -435,25 +423,7 @@ fn a_withdrawn_alignment_is_reported_and_not_counted_from() {
     let (truth, v) = simulate_and_run(
         &dir,
         "withdrawn",
-        &[
-            "drive",
-            "--duration",
-            "30",
-            "--initial-rest",
-            "1.0",
-            "--rests",
-            "1,2",
-            "--legs",
-            "2,4",
-            "--max-motion",
-            "10",
-            "--cruise",
-            "0.2,0.5",
-            "--rate",
-            "200",
-            "--seed",
-            "2",
-        ],
+        &[&["drive"][..], &drive_args("30", "1.0", "2")].concat(),
         &["--profile", "vehicle"],
     );
     let withdrawn = v["alignments_withdrawn"].as_array().unwrap();

@@ -65,6 +65,22 @@ REPO = HERE.parent.parent
 R68_FACTOR = 1.515
 
 
+def ids_cli(description, argv):
+    """The command line of a per-recording tool of this folder: `[--bin PATH] [--data DIR] ID
+    ... [-- ARGS]`, the arguments after `--` passed on to `mems-odometry offline`. Returns
+    (parsed arguments, extra arguments)."""
+    extra = []
+    if "--" in argv:
+        i = argv.index("--")
+        argv, extra = argv[:i], argv[i + 1:]
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--bin", type=Path, default=REPO / "target/release/mems-odometry")
+    ap.add_argument("--data", type=Path,
+                    default=Path(os.environ.get("MEMS_REAL_DATA", "/work/real-data")))
+    ap.add_argument("ids", nargs="+")
+    return ap.parse_args(argv), extra
+
+
 def identity_calibration(gravity_mps2=9.80665):
     """An identity accelerometer calibration file (bias 0, S = I, zero covariance) in the
     format of calibrate/src/calibfile.rs, for recordings that come with no calibration."""

@@ -20,10 +20,8 @@ rms of x, y) and the error at each tenth of the run.
 
 Usage: error_budget.py [--bin PATH] [--data DIR] ID ... [-- offline flags]
 """
-import argparse
 import json
 import math
-import os
 import subprocess
 import sys
 import tempfile
@@ -138,17 +136,7 @@ def budget(rec_id, binary, data, extra):
 
 
 def main():
-    argv = sys.argv[1:]
-    extra = []
-    if "--" in argv:
-        i = argv.index("--")
-        argv, extra = argv[:i], argv[i + 1:]
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--bin", type=Path, default=bench.REPO / "target/release/mems-odometry")
-    ap.add_argument("--data", type=Path,
-                    default=Path(os.environ.get("MEMS_REAL_DATA", "/work/real-data")))
-    ap.add_argument("ids", nargs="+")
-    args = ap.parse_args(argv)
+    args, extra = bench.ids_cli(__doc__.splitlines()[0], sys.argv[1:])
     for rec_id in args.ids:
         budget(rec_id, args.bin, args.data, extra)
 

@@ -28,10 +28,8 @@ Their sums add up to the end error exactly. Also per walk:
 Usage: handheld_parts.py [--bin PATH] [--data DIR] ID ... [-- offline flags]
        handheld_parts.py --self-test
 """
-import argparse
 import json
 import math
-import os
 import statistics
 import subprocess
 import sys
@@ -313,16 +311,7 @@ def main():
     if argv == ["--self-test"]:
         self_test()
         return
-    extra = []
-    if "--" in argv:
-        i = argv.index("--")
-        argv, extra = argv[:i], argv[i + 1:]
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--bin", type=Path, default=bench.REPO / "target/release/mems-odometry")
-    ap.add_argument("--data", type=Path,
-                    default=Path(os.environ.get("MEMS_REAL_DATA", "/work/real-data")))
-    ap.add_argument("ids", nargs="+")
-    args = ap.parse_args(argv)
+    args, extra = bench.ids_cli(__doc__.splitlines()[0], argv)
     print_table([parts_of(rec_id, args.bin, args.data, extra) for rec_id in args.ids])
 
 
