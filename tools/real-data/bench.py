@@ -192,6 +192,28 @@ def footprints_in_our_frame(truth, rests):
 TRACK_MIN_STEP_M = 0.1
 
 
+def wrap(a):
+    """The angle `a` (rad) wrapped into [-pi, pi)."""
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def split_step(d, t, e, min_m):
+    """One step of our track, `d` (dx, dy, m), against the truth's over the same time, `t`,
+    with our heading `e` (rad) off the truth's there: the share of `d - t` that is distance,
+    the step's length error along the truth's direction, and the share that is heading, our
+    step turned by `e` against the truth's direction at our length. Returns (distance,
+    heading), each (dx, dy) in m; zeros for a truth step not longer than `min_m` (no
+    direction). What is left, `d - t - distance - heading`, is the direction's own error."""
+    tn = math.hypot(*t)
+    if tn <= min_m:
+        return (0.0, 0.0), (0.0, 0.0)
+    dn = math.hypot(*d)
+    u = (t[0] / tn, t[1] / tn)
+    distance = ((dn - tn) * u[0], (dn - tn) * u[1])
+    ru = (math.cos(e) * u[0] - math.sin(e) * u[1], math.sin(e) * u[0] + math.cos(e) * u[1])
+    return distance, (dn * (ru[0] - u[0]), dn * (ru[1] - u[1]))
+
+
 def heading_at(track, t_s):
     """The track's heading (rad, its 4th column) at the last pose at or before t_s."""
     best = track[0]

@@ -60,10 +60,6 @@ def states(path):
     return out
 
 
-def wrap(a):
-    return (a + math.pi) % (2 * math.pi) - math.pi
-
-
 def budget(rec_id, binary, data, extra):
     side = json.loads((data / f"{rec_id}.json").read_text())
     track = side["truth"]["track"]
@@ -103,16 +99,10 @@ def budget(rec_id, binary, data, extra):
         dn, tn = math.hypot(*d), math.hypot(*t)
         ours_len += dn
         truth_len += tn
-        e = wrap((r[3] - yaw0) - (bench.heading_at(track, r[0]) - h_a))
+        e = bench.wrap((r[3] - yaw0) - (bench.heading_at(track, r[0]) - h_a))
         yaw_err2 += e * e
         n += 1
-        if tn > 1e-6:
-            u = (t[0] / tn, t[1] / tn)
-            a = ((dn - tn) * u[0], (dn - tn) * u[1])
-            ru = (math.cos(e) * u[0] - math.sin(e) * u[1], math.sin(e) * u[0] + math.cos(e) * u[1])
-            h = (dn * (ru[0] - u[0]), dn * (ru[1] - u[1]))
-        else:
-            a = h = (0.0, 0.0)
+        a, h = bench.split_step(d, t, e, 1e-6)
         for i in range(2):
             along[i] += a[i]
             heading[i] += h[i]

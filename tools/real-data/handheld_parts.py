@@ -48,10 +48,6 @@ ALIGNED = 1 << 1  # odometry_flags::ALIGNED
 ZERO_STATE = 1 << 0  # corrected_flags::ZERO_STATE: the detector's rest verdict
 
 
-def wrap(a):
-    return (a + math.pi) % (2 * math.pi) - math.pi
-
-
 def rotation(q):
     """The rotation matrix (rows) of the unit quaternion (w, x, y, z), sensor to navigation."""
     w, x, y, z = q
@@ -105,14 +101,8 @@ def split(ours, truth):
             for i in range(2):
                 parts["standing"][i] += d[i] - t[i]
             continue
-        e = wrap((b[2] - ours[0][2]) - (q[2] - truth[0][2]))
-        if tn > 1e-9:
-            u = (t[0] / tn, t[1] / tn)
-            dist = ((dn - tn) * u[0], (dn - tn) * u[1])
-            ru = (math.cos(e) * u[0] - math.sin(e) * u[1], math.sin(e) * u[0] + math.cos(e) * u[1])
-            head = (dn * (ru[0] - u[0]), dn * (ru[1] - u[1]))
-        else:
-            dist = head = (0.0, 0.0)
+        e = bench.wrap((b[2] - ours[0][2]) - (q[2] - truth[0][2]))
+        dist, head = bench.split_step(d, t, e, 1e-9)
         for i in range(2):
             parts["distance"][i] += dist[i]
             parts["heading"][i] += head[i]
@@ -212,7 +202,7 @@ def parts_of(rec_id, binary, data, extra):
     for a, b in zip(samples, samples[1:]):
         if a[4] and b[0] > a[0]:
             ha, hb = bench.heading_at(track, a[0]), bench.heading_at(track, b[0] + 0.1)
-            rest_rates.append(abs(math.degrees(wrap(hb - ha)) / (b[0] + 0.1 - a[0])))
+            rest_rates.append(abs(math.degrees(bench.wrap(hb - ha)) / (b[0] + 0.1 - a[0])))
     return {
         "id": rec_id, "pct": bench_row["pct_of_distance"][1], "error_m": bench_row["error_m"][1],
         "covered": bench_row["covered"], "parts": p, "tilt_median_deg": statistics.median(tilt),
@@ -254,7 +244,7 @@ def self_test():
     for psi, a_deg, beta in [(0.3, 0, 0.2), (-2.5, 70, 1.4), (1.0, 200, 1.5707), (3.0, 10, 2.5)]:
         a = (math.cos(math.radians(a_deg)), math.sin(math.radians(a_deg)), 0.0)
         yaw = smallest_turn_yaw(mul(quat((0, 0, 1), psi), quat(a, beta)))
-        assert abs(wrap(yaw - psi)) < 1e-9, (psi, a_deg, beta, yaw)
+        assert abs(bench.wrap(yaw - psi)) < 1e-9, (psi, a_deg, beta, yaw)
     assert smallest_turn_yaw(quat((1, 0, 0), math.pi)) is None
 
     # A walk round a square, 0.5 m per increment, the track's yaw turning with it.
