@@ -8,7 +8,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-use common::{Case, drive_with_encoder_hints, scratch};
+use common::{Case, drive_with_encoder_hints, offline_json, scratch};
 use ipc_types::{OdometryState, RawImuSample, RobotHint};
 use recording::Truth;
 use recording::mcap::{EventKind, RecorderEvent, Writer, quantum};
@@ -76,15 +76,7 @@ fn write(path: &Path, segment: u64, messages: &[Message]) {
 }
 
 fn offline(input: &Path, extra: &[&str]) -> serde_json::Value {
-    let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
-        .args(["offline", "--json", "--input"])
-        .arg(input)
-        .args(extra)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "offline failed: {err}");
-    serde_json::from_slice(&out.stdout).unwrap()
+    offline_json(env!("CARGO_BIN_EXE_mems-odometry"), input, extra)
 }
 
 #[test]

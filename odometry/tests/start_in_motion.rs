@@ -18,15 +18,7 @@ use common::{Case, scratch, write_drive_with_encoder_hints};
 /// Writes a drive with turns that starts by driving off, and its encoder hints (on the
 /// samples' clock, recorded at their publication), to `path`.
 fn write_drive(path: &Path) {
-    let case = Case {
-        duration_s: 150.0,
-        rate_hz: 100.0,
-        turns: true,
-        vibration: 0.0,
-        initial_rest_s: 0.0,
-        ..Case::straight()
-    };
-    write_drive_with_encoder_hints(path, &case, 5);
+    write_drive_with_encoder_hints(path, &Case::driving_off(), 5);
 }
 
 /// `mems-odometry offline --json --input PATH ARGS`: its JSON result and stderr.

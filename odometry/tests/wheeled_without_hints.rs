@@ -11,9 +11,8 @@
 mod common;
 
 use std::path::Path;
-use std::process::Command;
 
-use common::{Case, Simulation};
+use common::{Case, Simulation, offline_json};
 use ipc_types::odometry_flags;
 use recording::Truth;
 
@@ -43,14 +42,7 @@ fn write_drive(case: &Case, seed: u64, path: &Path) -> f64 {
 
 /// `mems-odometry offline --input PATH --json ARGS`: its JSON result.
 fn offline(path: &Path, args: &[&str]) -> serde_json::Value {
-    let out = Command::new(env!("CARGO_BIN_EXE_mems-odometry"))
-        .args(["offline", "--input", path.to_str().unwrap(), "--json"])
-        .args(args)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "offline failed: {stderr}");
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}: {stderr}"))
+    offline_json(env!("CARGO_BIN_EXE_mems-odometry"), path, args)
 }
 
 fn horizontal(v: &serde_json::Value, key: &str) -> (f64, f64) {

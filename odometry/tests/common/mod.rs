@@ -111,6 +111,19 @@ impl Case {
         }
     }
 
+    /// A 150 s drive with turns at 100 Hz that starts by driving off: no initial rest and no
+    /// vibration (a straight leg at constant speed is then as still to the IMU as a rest).
+    pub fn driving_off() -> Self {
+        Self {
+            duration_s: 150.0,
+            rate_hz: 100.0,
+            turns: true,
+            vibration: 0.0,
+            initial_rest_s: 0.0,
+            ..Self::straight()
+        }
+    }
+
     /// The sensor model of this case.
     pub fn model(&self) -> SensorModel {
         let mut m = SensorModel::mpu9250_calibrated();
@@ -560,11 +573,6 @@ pub fn write_drive_with_encoder_hints(path: &std::path::Path, case: &Case, seed:
 /// start at 0.5 m/s^2, the simulator's peak), so that the recording starts in motion.
 pub fn car_started_in_motion(seed: u64) -> (Vec<(RawImuSample, Truth)>, Vec<RobotHint>) {
     let case = Case {
-        duration_s: 150.0,
-        rate_hz: 100.0,
-        turns: true,
-        vibration: 0.0,
-        initial_rest_s: 0.0,
         cruise_speed_mps: [8.0, 15.0],
         leg_s: [3.0, 8.0],
         max_motion_s: 400.0,
@@ -572,7 +580,7 @@ pub fn car_started_in_motion(seed: u64) -> (Vec<(RawImuSample, Truth)>, Vec<Robo
             &Vector3::x_axis(),
             180f64.to_radians(),
         ),
-        ..Case::straight()
+        ..Case::driving_off()
     };
     let (raw, hints) = drive_with_encoder_hints(&case, seed);
     let speed = |v: &[f64; 3]| v[0].hypot(v[1]);
@@ -591,12 +599,12 @@ pub fn car_started_in_motion(seed: u64) -> (Vec<(RawImuSample, Truth)>, Vec<Robo
 /// The speed of [`car_started_in_motion`] at the recording's first sample, m/s.
 pub const CAR_START_MPS: f64 = 5.0;
 
-/// Runs `bin offline --json --profile vehicle ARGS --input PATH` (`bin` the mems-odometry
-/// binary, `env!("CARGO_BIN_EXE_mems-odometry")`, which only a test crate knows), asserts that
-/// it succeeded (its stderr in the message) and returns its JSON.
-pub fn offline_vehicle_json(bin: &str, path: &std::path::Path, args: &[&str]) -> serde_json::Value {
+/// Runs `bin offline --json ARGS --input PATH` (`bin` the mems-odometry binary,
+/// `env!("CARGO_BIN_EXE_mems-odometry")`, which only a test crate knows), asserts that it
+/// succeeded (its stderr in the message) and returns its JSON.
+pub fn offline_json(bin: &str, path: &std::path::Path, args: &[&str]) -> serde_json::Value {
     let out = std::process::Command::new(bin)
-        .args(["offline", "--json", "--profile", "vehicle"])
+        .args(["offline", "--json"])
         .args(args)
         .arg("--input")
         .arg(path)
@@ -604,7 +612,12 @@ pub fn offline_vehicle_json(bin: &str, path: &std::path::Path, args: &[&str]) ->
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "offline failed: {err}");
-    serde_json::from_slice(&out.stdout).unwrap()
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}: {err}"))
+}
+
+/// [`offline_json`] with `--profile vehicle`.
+pub fn offline_vehicle_json(bin: &str, path: &std::path::Path, args: &[&str]) -> serde_json::Value {
+    offline_json(bin, path, &[&["--profile", "vehicle"], args].concat())
 }
 
 /// Writes the drive `raw` and its `hints` ([`write_drive_with_hints`]) into the scratch
