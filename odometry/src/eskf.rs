@@ -43,6 +43,7 @@ mod reported;
 
 use increment::{Increment, Sensitivity, Step};
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
+pub use refinement::{Refinement, RefinementMean};
 use reported::Reported;
 
 /// Error-state dimension.
@@ -244,7 +245,7 @@ pub struct Eskf {
     q_scale: f64,
     /// The calibration stage's refinement of the last sample: accelerometer offset (m/s^2)
     /// and gyroscope bias (rad/s), sensor frame (module `refinement`).
-    refined: Option<(Vector3<f64>, Vector3<f64>)>,
+    refined: Option<Refinement>,
 }
 
 /// Skew-symmetric matrix: `skew(a) * b == a.cross(&b)`.

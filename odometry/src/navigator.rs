@@ -9,7 +9,7 @@ use crate::clip::{ClipRepair, ClipStats};
 use crate::config::OdometryConfig;
 use crate::consistency::{Consistency, ConsistencyReport, Kind};
 use crate::cruise::{CruiseWindow, MIN_SPEED_MPS, cruise_start};
-use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, align};
+use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, Refinement, align};
 use crate::hand_bound::HandBound;
 use crate::hints::{ForwardAxisReport, HintConfig, HintStats, has_rest_source, usable_from_ns};
 use crate::nonholonomic::{ImuConstraint, Outcome};
@@ -67,6 +67,8 @@ pub(crate) struct Navigator {
     rest_window: RestWindow,
     /// Time (ns), sequence number and measurement of the previous sample.
     last: Option<(u64, u64, Imu)>,
+    /// The calibration stage's refinement of the current sample.
+    refinement: Refinement,
     history: Vec<HistoryEntry>,
     history_overflowed: bool,
     motion_start_ns: Option<u64>,
@@ -121,6 +123,7 @@ impl Navigator {
             kf: None,
             rest_window: RestWindow::default(),
             last: None,
+            refinement: Refinement::default(),
             history: Vec::with_capacity(capacity),
             history_overflowed: false,
             motion_start_ns: None,
@@ -306,6 +309,10 @@ impl Navigator {
         };
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
         self.sampled.push(t_ns, &m.f, &m.w);
+        self.refinement = Refinement {
+            accel: Vector3::from(s.refined_accel_mps2),
+            gyro: self.cfg.gyro_correction * Vector3::from(s.refined_gyro_rps),
+        };
         let prev = self
             .last
             .replace((t_ns, s.seq, m))
@@ -360,12 +367,10 @@ impl Navigator {
             .before_predict(self.kf.as_ref().expect("aligned"), clipped);
         // A rest refused as vibration: the stage's gyroscope refinement there measured motion.
         let refused = d.sample.flags & odometry_flags::REST_VIBRATING != 0;
-        let w = self.cfg.gyro_correction * Vector3::from(s.refined_gyro_rps);
-        self.kf.as_mut().expect("aligned").follow_refinement(
-            s.refined_accel_mps2,
-            w.into(),
-            refused,
-        );
+        self.kf
+            .as_mut()
+            .expect("aligned")
+            .follow_refinement(self.refinement, refused);
         let moved = self.predict(m, dt, gap, &mut d.sample);
         let kf = self.kf.as_mut().expect("aligned");
         if self.untrusted.widen(kf, &m, dt, verdict, &self.cfg) {
@@ -737,20 +742,23 @@ impl Navigator {
             Some(_) => 0.0,
             None => self.hints.cfg.speed_scale_sigma.powi(2),
         };
-        self.start_filter(x, cov, prior, f_mean, m);
+        let refined = a.refined.mean().unwrap_or(self.refinement);
+        self.start_filter(x, cov, prior, (f_mean, refined), m);
         self.at_rest = true;
     }
 
     /// Starts the filter at `x`, `cov` (an alignment at rest or in motion) with the
-    /// accelerometer prior `prior` and the window's mean specific force `f_mean`.
+    /// accelerometer prior `prior`, the window's mean specific force and the calibration
+    /// stage's refinement that mean carries (`window`).
     fn start_filter(
         &mut self,
         x: Nominal,
         cov: Cov,
         prior: AccelPrior,
-        f_mean: Vector3<f64>,
+        window: (Vector3<f64>, Refinement),
         m: &Imu,
     ) {
+        let (f_mean, refined) = window;
         let consider = ConsiderModel {
             gyro: self.cfg.gyro_correction_sigma,
             accel: prior.consider,
@@ -758,6 +766,7 @@ impl Navigator {
         self.kf = Some(
             Eskf::new(x, cov, self.cfg.gravity_mps2, prior.noise(&self.cfg), *m)
                 .with_consider(consider, f_mean)
+                .with_refinement(refined)
                 .with_propagation_interval(self.cfg.propagation_interval_s),
         );
         self.accel_prior = Some(prior);
@@ -791,6 +800,7 @@ impl Navigator {
             h.forward_speed_sigma_mps,
         );
         c.gravity_off |= gravity_off;
+        c.refined.push(self.refinement);
         let span_s = c.span_s(t_ns);
         if span_s < self.cfg.align_s || c.accel.len() < 2 {
             return;
@@ -816,7 +826,8 @@ impl Navigator {
             self.hints.r_bs,
             &prior,
         );
-        self.start_filter(start.x, start.cov, prior, c.accel.mean(), m);
+        let refined = c.refined.mean().unwrap_or(self.refinement);
+        self.start_filter(start.x, start.cov, prior, (c.accel.mean(), refined), m);
         self.standing_accel_sd = start.standing_accel_sd;
         self.zupt_sigma_mps = self.cfg.zupt_sigma_mps;
         self.aligned_in_motion = Some(c.speed().0);

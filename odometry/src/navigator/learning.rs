@@ -35,7 +35,7 @@
 
 use super::Navigator;
 use super::records::AlignSums;
-use crate::eskf::Imu;
+use crate::eskf::{Imu, RefinementMean};
 use crate::hints::Ring;
 use calibrate::zero_state::BATCH_LEN;
 use ipc_types::{CorrectedImuSample, corrected_flags};
@@ -184,8 +184,10 @@ impl Navigator {
         let Some(sums) = self.learning.take(t_ns, m, flags, zs_mean, learned_rest_s) else {
             return false;
         };
+        // The kept samples are in the verdict sample's refined terms.
         let sums = AlignSums {
             gravity_off,
+            refined: RefinementMean::repeated(self.refinement, sums.accel.len()),
             ..sums
         };
         self.learned = Some(Learned {
@@ -247,6 +249,7 @@ impl Navigator {
             }
             a.accel.push(m.f);
             a.gyro.push(m.w);
+            a.refined.push(self.refinement);
             a.gravity_off |= gravity_off;
         }
         self.try_align(t_ns, m);

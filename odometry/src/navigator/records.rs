@@ -1,6 +1,7 @@
 //! The navigator's bookkeeping records: the motion history's entries, the alignment's sums,
 //! a pending revision and the rest window still to be updated.
 
+use crate::eskf::RefinementMean;
 use crate::handover::WaitMark;
 use crate::rest_noise::RestNoise;
 use ipc_types::{OdometryState, Stamps, odometry_flags};
@@ -71,6 +72,8 @@ pub(super) struct AlignSums {
     pub(super) gravity_off: bool,
     pub(super) accel: RestNoise,
     pub(super) gyro: RestNoise,
+    /// The calibration stage's refinement the samples carry (`crate::eskf::Refinement`).
+    pub(super) refined: RefinementMean,
 }
 
 /// What happens to the motion history after a motion interval has ended.

@@ -85,7 +85,8 @@ impl Navigator {
         for i in 0..3 {
             cov[(V + i, V + i)] = ALIGN_VELOCITY_SIGMA_MPS.powi(2);
         }
-        self.start_filter(x, cov, prior, f_mean, m);
+        // A stride mean keeps no refinement: the current sample's is taken.
+        self.start_filter(x, cov, prior, (f_mean, self.refinement), m);
         self.zupt_sigma_mps = self.cfg.zupt_sigma_mps;
         self.at_rest = false;
     }
