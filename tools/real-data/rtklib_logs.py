@@ -170,7 +170,7 @@ def recording(texts, wheres, local_east_north):
     fixes = [(t + lag, s[1], s[2], s[4] ** 2) for t, s in zip((q[0] for q in track), sols)]
     q = [s[3] for s in sols]
     notes.append(f"samples timed by the tag file (start {t0_gpst:.3f} s GPST, IMU ticks scaled by {scale:.6f}); "
-                 f"fx,fy,fz g and wx,wy,wz deg/s as logged")
+                 f"ax, ay, az (g) and gx, gy, gz (deg/s) as logged")
     notes.append(f"solution: {q.count(POS_FIX)} fixed and {q.count(POS_FLOAT)} float RTK epochs kept, {other} others "
                  f"dropped; on the IMU clock {lag:+.3f} s after the tag's timing (yaw-rate correlation r = {r:.3f}, "
                  f"IMU rate / track rate {slope:.3f})")
