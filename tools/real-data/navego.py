@@ -139,6 +139,23 @@ def best_lag(imu, ref_times, ref_rates, t_end, max_lag_s, step_s, bin_s=BIN_S):
     return best
 
 
+def yaw_rate_lag(samples_, track, bin_s, step_s, max_lag_s):
+    """(lag s, r, slope), or (None, None, None) where no lag correlates: IMU time = track time
+    + lag (steps of `step_s` within `max_lag_s`) where the IMU's yaw rate about its start-up up
+    axis, averaged over `bin_s` bins, best correlates (r) with the track's heading rate; slope
+    is the IMU rate over the track's at that lag (least squares through 0), near 1 when the
+    gyro is in deg/s about a right-handed frame."""
+    t_end = max(samples_[-1][0], track[-1][0]) + max_lag_s
+    it, ir = imu_yaw_rate(samples_)
+    imu = _binned(ir, it, t_end, bin_s)
+    rt, rr = track_yaw_rate(track)
+    best = best_lag(imu, rt, rr, t_end, max_lag_s, step_s, bin_s)
+    if best is None:
+        return None, None, None
+    pairs = [(a, b) for a, b in zip(imu, best[2]) if a is not None and b is not None]
+    return best[0], best[1], sum(a * b for a, b in pairs) / sum(b * b for _, b in pairs)
+
+
 def clock_offset(samples_, track, where):
     """(offset s, r): IMU time = reference time + offset, the lag (LAG_STEP_S steps within
     MAX_LAG_S) where the IMU's yaw rate about its start-up up axis, averaged over BIN_S bins,

@@ -136,22 +136,6 @@ def read_pos(text, where):
     return out, other
 
 
-def clock_lag(samples_, track):
-    """(lag s, r, slope): IMU time = solution time (on the tag's clock) + lag, where the IMU's
-    yaw rate about its start-up up axis best correlates with the track's heading rate; slope
-    is the IMU rate over the track's at that lag (least squares through 0)."""
-    t_end = max(samples_[-1][0], track[-1][0]) + MAX_LAG_S
-    it, ir = navego.imu_yaw_rate(samples_)
-    imu = navego._binned(ir, it, t_end, LAG_BIN_S)
-    rt, rr = navego.track_yaw_rate(track)
-    best = navego.best_lag(imu, rt, rr, t_end, MAX_LAG_S, LAG_STEP_S, LAG_BIN_S)
-    if best is None:
-        return None, None, None
-    pairs = [(a, b) for a, b in zip(imu, best[2]) if a is not None and b is not None]
-    slope = sum(a * b for a, b in pairs) / sum(b * b for _, b in pairs)
-    return best[0], best[1], slope
-
-
 def recording(texts, wheres, local_east_north):
     """(samples, notes, fixes on the IMU clock [(t_s, latitude, longitude, east variance
     m^2)], timing) from the IMU stream, its time tags (bytes) and the solution file; the
@@ -162,7 +146,7 @@ def recording(texts, wheres, local_east_north):
     sols, other = read_pos(texts[2], wheres[2])
     points = local_east_north([s[1:3] for s in sols])
     track = [(s[0] - t0_gpst, e, n) for s, (e, n) in zip(sols, points)]
-    lag, r, slope = clock_lag(out, track)
+    lag, r, slope = navego.yaw_rate_lag(out, track, LAG_BIN_S, LAG_STEP_S, MAX_LAG_S)
     if r is None or r < MIN_R or not SLOPE_RANGE[0] <= slope <= SLOPE_RANGE[1]:
         raise ConvertError(wheres[2], None, "GPST", f"the IMU's yaw rate does not follow the track's heading rate "
                            f"within {MAX_LAG_S} s (lag {lag}, r {r}, slope {slope}): not on the tag's clock, or "
