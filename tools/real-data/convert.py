@@ -37,6 +37,7 @@ import containers
 import navego
 import phil_mqp
 import rtklib_logs
+import tumvi
 import tyrex_attitude
 from containers import (HINT_TOPIC, MCAP_T0_NS, RAW_TOPIC, ConvertError, bag_bytes, bag_messages, decode_imu,
                         decode_navsatfix, decode_odometry, imu_message, mat_bytes, mat_matrix, mcap_bytes,
@@ -724,6 +725,10 @@ def _load_rtklib(rec, source, f):
     return samples, notes, truth, distance, None
 
 
+def _load_tumvi(rec, source, f):
+    return (*tumvi.recording([f.text(0), f.text(1)], [f.where(0), f.where(1)]), None)
+
+
 def _load_phil(rec, source, f):
     samples, notes, truth, track, odom = phil_mqp.recording([f.text(i) for i in range(3)], [f.where(i) for i in range(3)], source)
     notes.append(f"robot hints: speed valid, 1-sigma {ODOM_SPEED_SIGMA_MPS} m/s; stationary (encoders) after "
@@ -737,6 +742,7 @@ LOADERS = {
     "vesc_f1tenth_csv": _load_vesc, "ros1_bag_robot": _load_ros_bag, "comma2k19_npy": _load_comma2k19,
     "tyrex_android_qtm": _load_tyrex, "tyrex_ios_qtm": _load_tyrex, "navego_planetary_mat": _load_navego,
     "phil_turtlebot_vicon": _load_phil, "rtklib_imu_csv": _load_rtklib,
+    "tumvi_room_csv": _load_tumvi,
 }
 
 
@@ -1036,7 +1042,7 @@ def self_test():
     _test_ros_bag()
     _test_rtk_npy()
     checked = [comma2k19.self_test(), tyrex_attitude.self_test(), navego.self_test(local_east_north), phil_mqp.self_test(),
-               rtklib_logs.self_test(local_east_north), *containers.self_test()]
+               rtklib_logs.self_test(local_east_north), tumvi.self_test(), *containers.self_test()]
     print("convert.py self-test: ok (xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv, broad_mat, vesc_f1tenth_csv, "
           "ros1_bag_robot, xsens_dot_rtk_npy, MAT v5 GCP, GNSS, MCAP with hints, " + ", ".join(checked) + ")")
     return 0
