@@ -164,15 +164,11 @@ def clock_offset(samples_, track, where):
     MAX_LAG_S) where the IMU's yaw rate about its start-up up axis, averaged over BIN_S bins,
     best correlates (r) with the track's heading rate (a constant gyro bias does not change r).
     A ConvertError if no lag correlates at r >= MIN_R."""
-    t_end = max(samples_[-1][0], track[-1][0]) + MAX_LAG_S
-    it, ir = imu_yaw_rate(samples_)
-    imu = _binned(ir, it, t_end)
-    rt, rr = track_yaw_rate(track)
-    best = best_lag(imu, rt, rr, t_end, MAX_LAG_S, LAG_STEP_S)
-    if best is None or best[1] < MIN_R:
+    lag, r, _ = yaw_rate_lag(samples_, track, BIN_S, LAG_STEP_S, MAX_LAG_S)
+    if r is None or r < MIN_R:
         raise ConvertError(where, None, "gnss_planetary_r.t",
-                           f"no clock offset within {MAX_LAG_S} s correlates the yaw rates (best {best and best[:2]})")
-    return best[:2]
+                           f"no clock offset within {MAX_LAG_S} s correlates the yaw rates (best {lag}, r {r})")
+    return lag, r
 
 
 def track_truth(track, offset, r):
