@@ -36,6 +36,8 @@ import comma2k19
 import containers
 import navego
 import phil_mqp
+import rtklib_logs
+import tumvi
 import tyrex_attitude
 from containers import (HINT_TOPIC, MCAP_T0_NS, RAW_TOPIC, ConvertError, bag_bytes, bag_messages, decode_imu,
                         decode_navsatfix, decode_odometry, imu_message, mat_bytes, mat_matrix, mcap_bytes,
@@ -460,12 +462,17 @@ def broad_truth(arrays, where):
 GNSS_TRACK_MIN_STEP_M = 0.5
 
 
-def gnss_track_truth(fixes, where):
+GNSS_TRACK_SOURCE = ("GNSS fixes (sensor_msgs/NavSatFix) on the recording's clock, local east/north: bench.py measures "
+                     "from the fix at the odometry's alignment to the last; the heading is not ours, so only distances are a truth")
+
+
+def gnss_track_truth(fixes, where, source=GNSS_TRACK_SOURCE):
     """A robot's own GNSS fixes (t_s on the recording's clock, latitude, longitude, east-east
     covariance m^2): the track in local east/north metres (`track`: [t_s, east, north]) so that
     bench.py can measure from the fix where the odometry aligned, the last fix's distance from
     the first, and the track's length over steps of at least 0.5 m (fix noise at rest adds
-    none). Our heading is not north, so only distances are a truth."""
+    none). Our heading is not north, so only distances are a truth. `source` says where the
+    fixes come from."""
     if len(fixes) < 2:
         raise ConvertError(where, None, None, "fewer than two fixes")
     points = local_east_north([(lat, lon) for _, lat, lon, _ in fixes])
@@ -480,7 +487,7 @@ def gnss_track_truth(fixes, where):
         "fix_sigma_east_median_m": sigmas[len(sigmas) // 2],
         "track": [[round(t, 6), round(e, 4), round(n, 4)] for (t, *_), (e, n) in zip(fixes, points)],
         "track_min_step_m": GNSS_TRACK_MIN_STEP_M,
-        "source": "GNSS fixes (sensor_msgs/NavSatFix) on the recording's clock, local east/north: bench.py measures from the fix at the odometry's alignment to the last; the heading is not ours, so only distances are a truth",
+        "source": source,
     }, _path_length(points, GNSS_TRACK_MIN_STEP_M)
 
 
@@ -710,6 +717,18 @@ def _load_navego(rec, source, f):
     return samples, notes, navego.track_truth(track, offset, r), distance, None
 
 
+def _load_rtklib(rec, source, f):
+    texts = [f.text(0), f.raw(1), f.text(2)]
+    samples, notes, fixes, timing = rtklib_logs.recording(texts, [f.where(i) for i in range(3)], local_east_north)
+    truth, distance = gnss_track_truth(fixes, f.where(2), rtklib_logs.TRUTH_SOURCE)
+    truth.update(timing)
+    return samples, notes, truth, distance, None
+
+
+def _load_tumvi(rec, source, f):
+    return (*tumvi.recording([f.text(0), f.text(1)], [f.where(0), f.where(1)]), None)
+
+
 def _load_phil(rec, source, f):
     samples, notes, truth, track, odom = phil_mqp.recording([f.text(i) for i in range(3)], [f.where(i) for i in range(3)], source)
     notes.append(f"robot hints: speed valid, 1-sigma {ODOM_SPEED_SIGMA_MPS} m/s; stationary (encoders) after "
@@ -722,7 +741,8 @@ LOADERS = {
     "xsens_dot_csv": _load_xsens_dot, "xsens_dot_rtk_npy": _load_xsens_dot_rtk, "broad_mat": _load_broad,
     "vesc_f1tenth_csv": _load_vesc, "ros1_bag_robot": _load_ros_bag, "comma2k19_npy": _load_comma2k19,
     "tyrex_android_qtm": _load_tyrex, "tyrex_ios_qtm": _load_tyrex, "navego_planetary_mat": _load_navego,
-    "phil_turtlebot_vicon": _load_phil,
+    "phil_turtlebot_vicon": _load_phil, "rtklib_imu_csv": _load_rtklib,
+    "tumvi_room_csv": _load_tumvi,
 }
 
 
@@ -1022,7 +1042,7 @@ def self_test():
     _test_ros_bag()
     _test_rtk_npy()
     checked = [comma2k19.self_test(), tyrex_attitude.self_test(), navego.self_test(local_east_north), phil_mqp.self_test(),
-               *containers.self_test()]
+               rtklib_logs.self_test(local_east_north), tumvi.self_test(), *containers.self_test()]
     print("convert.py self-test: ok (xio_csv, openshoe_txt, sensorconnect_csv, xsens_dot_csv, broad_mat, vesc_f1tenth_csv, "
           "ros1_bag_robot, xsens_dot_rtk_npy, MAT v5 GCP, GNSS, MCAP with hints, " + ", ".join(checked) + ")")
     return 0

@@ -139,20 +139,36 @@ def best_lag(imu, ref_times, ref_rates, t_end, max_lag_s, step_s, bin_s=BIN_S):
     return best
 
 
+def rate_lag(imu_times, imu_rates, ref_times, ref_rates, bin_s, step_s, max_lag_s):
+    """(lag s, r, slope), or (None, None, None) where no lag correlates: IMU time = reference
+    time + lag (steps of `step_s` within `max_lag_s`) where the IMU's rates, averaged over `bin_s`
+    bins from time 0, best correlate (r) with the reference's; slope is the IMU's rate over the
+    reference's at that lag (least squares through 0), near 1 when both are in the same unit."""
+    t_end = max(imu_times[-1], ref_times[-1]) + max_lag_s
+    imu = _binned(imu_rates, imu_times, t_end, bin_s)
+    best = best_lag(imu, ref_times, ref_rates, t_end, max_lag_s, step_s, bin_s)
+    if best is None:
+        return None, None, None
+    pairs = [(a, b) for a, b in zip(imu, best[2]) if a is not None and b is not None]
+    return best[0], best[1], sum(a * b for a, b in pairs) / sum(b * b for _, b in pairs)
+
+
+def yaw_rate_lag(samples_, track, bin_s, step_s, max_lag_s):
+    """[`rate_lag`] of the IMU's yaw rate about its start-up up axis against the track's heading
+    rate (rad/s both): a slope near 1 when the gyro is in deg/s about a right-handed frame."""
+    return rate_lag(*imu_yaw_rate(samples_), *track_yaw_rate(track), bin_s, step_s, max_lag_s)
+
+
 def clock_offset(samples_, track, where):
     """(offset s, r): IMU time = reference time + offset, the lag (LAG_STEP_S steps within
     MAX_LAG_S) where the IMU's yaw rate about its start-up up axis, averaged over BIN_S bins,
     best correlates (r) with the track's heading rate (a constant gyro bias does not change r).
     A ConvertError if no lag correlates at r >= MIN_R."""
-    t_end = max(samples_[-1][0], track[-1][0]) + MAX_LAG_S
-    it, ir = imu_yaw_rate(samples_)
-    imu = _binned(ir, it, t_end)
-    rt, rr = track_yaw_rate(track)
-    best = best_lag(imu, rt, rr, t_end, MAX_LAG_S, LAG_STEP_S)
-    if best is None or best[1] < MIN_R:
+    lag, r, _ = yaw_rate_lag(samples_, track, BIN_S, LAG_STEP_S, MAX_LAG_S)
+    if r is None or r < MIN_R:
         raise ConvertError(where, None, "gnss_planetary_r.t",
-                           f"no clock offset within {MAX_LAG_S} s correlates the yaw rates (best {best and best[:2]})")
-    return best[:2]
+                           f"no clock offset within {MAX_LAG_S} s correlates the yaw rates (best {lag}, r {r})")
+    return lag, r
 
 
 def track_truth(track, offset, r):
