@@ -55,6 +55,14 @@ use crate::hints::{MountingEstimator, mounting_from};
 
 /// Path of driving the mounting estimate gathers before the lateral constraint starts, m.
 pub const MOUNTING_PATH_M: f64 = 2.0;
+/// Largest distance from the IMU to the rear axle the straight-driving mounting allows for, m:
+/// a car's dashboard or roof unit sits 1-2.5 m ahead of it. Turning at `w` rad/s the IMU moves
+/// sideways at `w r` (`omega x r`), so a displacement gathered while turning points off the
+/// forward axis by `atan(w r / v)`: a car pulling out of a parking space at 1 m/s and
+/// 20 deg/s with its IMU on the roof 1.5 m ahead, by 28 deg.
+pub const LEVER_ARM_BOUND_M: f64 = 2.0;
+/// The straight-driving mounting gathers where that angle stays within this, rad (2 deg).
+pub const STRAIGHT_ANGLE_RAD: f64 = 0.035;
 /// Residuals beyond this many standard deviations are rejected.
 pub const GATE_SIGMA: f64 = 5.0;
 /// 1-sigma given to the unconstrained forward component, m/s (no information).
@@ -84,7 +92,12 @@ pub struct ImuConstraint {
     /// 1-sigma of `r_bs`'s yaw when it follows the speed hints' forward axis, rad (0
     /// otherwise): a yaw off by that much puts that fraction of the forward speed sideways.
     yaw_sigma_rad: f64,
+    /// The displacement of the first drive, turns included.
     estimator: MountingEstimator,
+    /// The displacement of straight driving (where the lever arm cannot turn it,
+    /// [`LEVER_ARM_BOUND_M`]), which replaces the first drive's mounting once it has
+    /// [`MOUNTING_PATH_M`]; `None` once it has, or once the mounting is given or followed.
+    straight: Option<MountingEstimator>,
     /// The along-track drift's share of the published 1-sigma.
     along: AlongTrack,
     /// The stops' along-track acceleration errors: sum of squares (m/s^2)^2 and count.
@@ -129,6 +142,7 @@ impl ImuConstraint {
             given: mounting.is_some(),
             yaw_sigma_rad: 0.0,
             estimator: MountingEstimator::default(),
+            straight: mounting.is_none().then(MountingEstimator::default),
             along: AlongTrack::default(),
             stops: [0.0; 2],
             lever_arm_m: Vector3::zeros(),
@@ -160,6 +174,7 @@ impl ImuConstraint {
         if !self.given {
             self.r_bs = Some(mounting.to_rotation_matrix().into_inner());
             self.yaw_sigma_rad = yaw_sigma_rad;
+            self.straight = None;
         }
     }
 
@@ -176,15 +191,8 @@ impl ImuConstraint {
         velocity_has_direction: bool,
     ) -> Option<Outcome> {
         let up_s = kf.x.q.inverse_transform_vector(&Vector3::z());
-        if self.r_bs.is_none() && velocity_has_direction {
-            self.estimator
-                .add(&kf.x.q.inverse_transform_vector(&kf.x.v), dt_s);
-            if self.estimator.path_m() >= MOUNTING_PATH_M {
-                self.r_bs = self
-                    .estimator
-                    .mounting(&up_s)
-                    .map(|q| q.to_rotation_matrix().into_inner());
-            }
+        if velocity_has_direction {
+            self.estimate_mounting(kf, &up_s, dt_s);
         }
         if !kf.propagated() || interval_s <= 0.0 {
             return None;
@@ -219,6 +227,32 @@ impl ImuConstraint {
 }
 
 impl ImuConstraint {
+    /// Gathers the filter's sensor-frame velocity over `dt_s` into the mounting estimates
+    /// (module documentation), `up_s` the filter's up direction in the sensor frame.
+    fn estimate_mounting(&mut self, kf: &Eskf, up_s: &Vector3<f64>, dt_s: f64) {
+        let v_s = kf.x.q.inverse_transform_vector(&kf.x.v);
+        let from = |e: &MountingEstimator| {
+            (e.path_m() >= MOUNTING_PATH_M)
+                .then(|| e.mounting(up_s))
+                .flatten()
+                .map(|q| q.to_rotation_matrix().into_inner())
+        };
+        if self.r_bs.is_none() {
+            self.estimator.add(&v_s, dt_s);
+            self.r_bs = from(&self.estimator);
+        }
+        let turn = kf.rate().dot(up_s).abs() * LEVER_ARM_BOUND_M;
+        if let Some(straight) = self.straight.as_mut()
+            && turn <= v_s.norm() * STRAIGHT_ANGLE_RAD.tan()
+        {
+            straight.add(&v_s, dt_s);
+            if let Some(r) = from(straight) {
+                self.r_bs = Some(r);
+                self.straight = None;
+            }
+        }
+    }
+
     /// Adds `dt_s` of motion without speed to the along-track drift ([`AlongTrack`]) and
     /// widens `kf`'s published 1-sigma by what it grew.
     pub fn drift_along_track(&mut self, kf: &mut Eskf, dt_s: f64) {
