@@ -29,7 +29,7 @@
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::config::OdometryConfig;
-use crate::eskf::{BA, Cov, KS, Nominal, RefinementMean, TH, V, align};
+use crate::eskf::{BA, Cov, KS, Nominal, TH, V, align};
 use crate::hints::{HintConfig, mounting_from};
 use crate::rest_noise::RestNoise;
 use crate::uncalibrated::AccelPrior;
@@ -74,8 +74,6 @@ pub struct CruiseWindow {
     /// A sample of the window was flagged `GRAVITY_OFF` (the calibration stage found the part
     /// reading gravity off: `crate::uncalibrated`).
     pub gravity_off: bool,
-    /// The calibration stage's refinement its samples carry (`crate::eskf::Refinement`).
-    pub refined: RefinementMean,
 }
 
 impl CruiseWindow {
