@@ -68,7 +68,9 @@
 //! other pose reads (the simulated arm of docs/diagnosis.md, a 6 mg bias at poses up to 90 deg
 //! apart, whose magnitude measured anew at two poses then found 17 of its 25 rests). With a
 //! calibrated part's 6.1 mm/s^2 the bound is 63 mm/s^2 (6.5 mg): a steady acceleration within
-//! it held 2 s with no vibration and no turn is what this gives up.
+//! it held 2 s with no vibration and no turn is what this gives up. An uncalibrated part's
+//! 0.1 g ([`GlrtConfig::uncalibrated_accel_bias_sigma_mps2`]) gives 10 m/s^2: the stillness
+//! tests alone, as its offset may read gravity up to 1 g differently between attitudes.
 //!
 //! - [`GlrtStatistic::Split`] (default): rest iff each is below its `1 - a/2` chi-squared
 //!   quantile. The mean part (6 degrees of freedom) is what catches steady acceleration, turns
@@ -665,7 +667,7 @@ impl GlrtRule {
     /// accelerometer bias is [`GlrtConfig::accel_bias_sigma_mps2`] per axis, m/s^2: twice
     /// [`BIAS_BOUND_SIGMAS`] of it on each axis (`|b|` at most `3 sqrt(3)` sigma; between two
     /// attitudes the magnitude moves by `(u2 - u1) . b`, at most `2 |b|`). 63 mm/s^2 for a
-    /// calibrated part's 6.1 mm/s^2.
+    /// calibrated part's 6.1 mm/s^2, 10 m/s^2 for an uncalibrated part's 0.1 g.
     fn bias_bound(&self) -> f64 {
         2.0 * BIAS_BOUND_SIGMAS * 3f64.sqrt() * self.accel_bias_sigma_mps2
     }
