@@ -438,6 +438,20 @@ fn feed_tilting(
     tilt: impl Fn(f64) -> f64,
     rate: impl Fn(f64) -> f64,
 ) -> Vec<Verdict> {
+    feed_biased(det, rng, k, (rate_hz, seconds), tilt, rate, [0.0; 3])
+}
+
+/// [`feed_tilting`] (`at`: its rate, Hz, and duration, s) with an accelerometer bias `bias`
+/// (m/s^2, sensor frame, added to every sample).
+fn feed_biased(
+    det: &mut ZeroStateDetector,
+    rng: &mut ChaCha8Rng,
+    k: &mut u64,
+    (rate_hz, seconds): (f64, f64),
+    tilt: impl Fn(f64) -> f64,
+    rate: impl Fn(f64) -> f64,
+    bias: [f64; 3],
+) -> Vec<Verdict> {
     let na = Normal::new(0.0, ACCEL_SIGMA).unwrap();
     let ng = Normal::new(0.0, GYRO_SIGMA).unwrap();
     let mut out = Vec::new();
@@ -446,9 +460,9 @@ fn feed_tilting(
         *k += 1;
         let phi = tilt(t);
         let a = [
-            na.sample(rng),
-            G * phi.sin() + na.sample(rng),
-            G * phi.cos() + na.sample(rng),
+            bias[0] + na.sample(rng),
+            bias[1] + G * phi.sin() + na.sample(rng),
+            bias[2] + G * phi.cos() + na.sample(rng),
         ];
         let w = [
             GYRO_BIAS[0] + rate(t) + ng.sample(rng),
@@ -567,6 +581,118 @@ fn a_lost_gravity_reference_is_measured_anew_but_a_vibrating_acceleration_is_not
     assert!(waited <= 2.0, "measured anew {waited} s later");
     let after = feed_tilting(&mut det, &mut rng, &mut k, RATE_HZ, 1.0, tilt, rate);
     assert!(rest_fraction(&after) > 0.9, "{}", rest_fraction(&after));
+}
+
+/// A rest whose specific force reads a magnitude the gravity reference does not hold (an
+/// accelerometer bias read at another attitude, or moved by temperature) is a rest once the
+/// sensor has been still by the scatter and the gyroscope for `REANCHOR_S`, and for as long as
+/// it stays so: a detector whose window is long (here 2 s, whose mean holds gravity's
+/// magnitude to 0.2 mm/s^2) otherwise never rests again. The reference's magnitude is not
+/// moved by it. A magnitude beyond what a calibrated part's bias reads (10 mg) and a vertical
+/// acceleration that vibrates stay motion.
+#[test]
+fn a_rest_whose_gravity_magnitude_moved_is_rest_after_reanchor_s() {
+    use calibrate::zero_state::glrt::REANCHOR_S;
+    let mut c = DetectorConfig::new(DetectorKind::Glrt, G);
+    c.glrt.window_s = 2.0;
+    let mut det = ZeroStateDetector::new(c);
+    let mut synth = Synth::new(16);
+    synth.feed(&mut det, 5.0, [0.0; 3], [0.0; 3], 1.0);
+    assert!(det.is_ready());
+    let magnitude = |det: &ZeroStateDetector| {
+        let (accel, _) = det.references().unwrap();
+        accel.iter().map(|a| a * a).sum::<f64>().sqrt()
+    };
+    let learned = magnitude(&det);
+    // Moving, then at rest with the magnitude 20 mm/s^2 (2 mg) above the learned one.
+    let moved = [0.0, 0.0, 0.02];
+    synth.feed(&mut det, 2.0, [0.3, 0.0, 0.0], [0.0; 3], 3.0);
+    let first = synth.feed(&mut det, 2.0, moved, [0.0; 3], 1.0);
+    assert_eq!(rest_fraction(&first), 0.0, "2 mg off the learned magnitude");
+    assert_eq!(det.gravity_held(), 0);
+    let later = synth.feed(&mut det, REANCHOR_S + 1.0, moved, [0.0; 3], 1.0);
+    assert_eq!(det.gravity_held(), 1);
+    assert!(rest_fraction(&later) > 0.0);
+    let rest = synth.feed(&mut det, 10.0, moved, [0.0; 3], 1.0);
+    assert!(rest_fraction(&rest) > 0.95, "{}", rest_fraction(&rest));
+    assert_eq!(det.gravity_held(), 1, "one rest, held");
+    assert_eq!(det.gravity_reanchored(), 0);
+    // The reference keeps its magnitude.
+    assert!(
+        (magnitude(&det) - learned).abs() < 1e-9,
+        "{learned} -> {}",
+        magnitude(&det)
+    );
+    // Beyond a calibrated part's bias bound (63 mm/s^2), a steady vertical acceleration of
+    // 0.1 m/s^2 with no vibration and no turn is no rest, however long.
+    synth.feed(&mut det, 1.0, [0.3, 0.0, 0.0], [0.0; 3], 3.0);
+    let beyond = synth.feed(&mut det, 6.0, [0.0, 0.0, 0.1], [0.0; 3], 1.0);
+    assert_eq!(rest_fraction(&beyond), 0.0);
+    // A vertical acceleration that vibrates is no rest either.
+    let lift = synth.feed(&mut det, 5.0, [0.0, 0.0, 0.03], [0.0; 3], 3.0);
+    assert_eq!(rest_fraction(&lift), 0.0);
+    assert_eq!(det.gravity_held(), 1);
+}
+
+/// An arm whose accelerometer carries a 6 mg bias (as the simulated arm of docs/diagnosis.md)
+/// rests at poses up to 90 deg from the start, 3 s each: each pose reads gravity's magnitude
+/// up to 50 mm/s^2 off (the bias along gravity there), beyond the 0.5 s window's noise, so it
+/// is rest only once held `REANCHOR_S`; and between poses, at the start attitude again, it is
+/// rest at once: the poses did not drag the reference's magnitude off.
+#[test]
+fn an_arms_biased_poses_do_not_move_the_magnitude_reference_off() {
+    use calibrate::zero_state::glrt::REANCHOR_S;
+    let bias = [0.059, -0.049, 0.0];
+    let mut det = ZeroStateDetector::new(DetectorConfig::new(DetectorKind::Glrt, G));
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    let mut k = 0;
+    let level = |_t: f64| 0.0;
+    feed_biased(
+        &mut det,
+        &mut rng,
+        &mut k,
+        (RATE_HZ, 5.0),
+        level,
+        level,
+        bias,
+    );
+    assert!(det.is_ready());
+    let magnitude = |det: &ZeroStateDetector| {
+        let (accel, _) = det.references().unwrap();
+        accel.iter().map(|a| a * a).sum::<f64>().sqrt()
+    };
+    let learned = magnitude(&det);
+    for (i, deg) in [90.0f64, -60.0, 45.0, -90.0].into_iter().enumerate() {
+        // Over 1 s to the pose (the gyroscope sees it), 3 s there, over 1 s back, 1 s level.
+        let t0 = k as f64 / RATE_HZ;
+        let end = deg.to_radians();
+        let tilt = move |t: f64| end * ((t - t0).clamp(0.0, 1.0) - (t - t0 - 4.0).clamp(0.0, 1.0));
+        let rate = move |t: f64| {
+            let s = t - t0;
+            if (0.0..1.0).contains(&s) {
+                end
+            } else if (4.0..5.0).contains(&s) {
+                -end
+            } else {
+                0.0
+            }
+        };
+        let at = |s: f64| (RATE_HZ, s);
+        feed_biased(&mut det, &mut rng, &mut k, at(1.0), tilt, rate, bias);
+        let pose = feed_biased(&mut det, &mut rng, &mut k, at(3.0), tilt, rate, bias);
+        // The window's first 0.5 s, then REANCHOR_S: no rest before, rest after.
+        let held = ((0.5 + REANCHOR_S) * RATE_HZ) as usize / BATCH_LEN;
+        assert_eq!(rest_fraction(&pose[..held - 2]), 0.0, "pose {deg} deg");
+        assert!(rest_fraction(&pose[held + 1..]) > 0.9, "pose {deg} deg");
+        assert_eq!(det.gravity_held(), i as u64 + 1, "pose {deg} deg");
+        feed_biased(&mut det, &mut rng, &mut k, at(1.0), tilt, rate, bias);
+        let back = feed_biased(&mut det, &mut rng, &mut k, at(1.0), tilt, rate, bias);
+        let f = rest_fraction(&back[back.len() / 2..]);
+        assert!(f > 0.9, "back from {deg} deg: rest fraction {f}");
+    }
+    let drift = magnitude(&det) - learned;
+    assert!(drift.abs() < 2e-3, "the magnitude moved {drift} m/s^2");
+    assert_eq!(det.gravity_reanchored(), 0);
 }
 
 /// Feeds `tilt` and `rate` in steps of 0.1 s until `det` has measured its gravity reference

@@ -341,7 +341,7 @@ impl Navigator {
                 let gravity_off = s.flags & corrected_flags::GRAVITY_OFF != 0;
                 let rest = rest && ready && verdict.clipped == 0;
                 self.gather_attitude(&m, rest);
-                if !self.seed_alignment(s, &m, verdict.clipped == 0, gravity_off) {
+                if !self.seed_alignment(s, &m, verdict.clipped == 0, d.rest, gravity_off) {
                     self.accumulate_alignment(t_ns, &m, rest, gravity_off);
                 }
                 let still = imu_rest && detector_ready && verdict.clipped == 0;

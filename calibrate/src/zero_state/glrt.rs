@@ -53,6 +53,25 @@
 //! A steady horizontal acceleration that long with no vibration and no turn is what this
 //! gives up; a slow cruise at constant speed was never told from rest by the mean test anyway.
 //!
+//! **A magnitude the reference does not hold.** A part's accelerometer bias `b` (fixed in the
+//! sensor frame) reads gravity's magnitude as `|g u + b| ~ g + u . b` (`u` gravity's direction
+//! in the sensor frame), so between two attitudes the magnitude at rest moves by
+//! `(u2 - u1) . b`, up to `2 |b|`; a long window's mean holds the magnitude to a fraction of
+//! what a short one allows (a 2 s window at 120 Hz, a fourth of the 0.5 s window's variance),
+//! so a rest at another attitude can fail on the magnitude alone. A window still by the
+//! scatter and the gyroscope whose mean specific force lies within a bias bound
+//! (`GlrtRule::bias_bound`) of the reference (`2 |b|` with `|b|` three sigmas of
+//! [`GlrtConfig::accel_bias_sigma_mps2`] on each axis, plus the difference's own noise) is
+//! counted as well, and after [`REANCHOR_S`] of it, steady, it is a rest for as long as it
+//! stays so. The reference learns nothing from such a rest (the gyroscope bias does): a
+//! biased part at another pose would drag it, magnitude and direction, away from what every
+//! other pose reads (the simulated arm of docs/diagnosis.md, a 6 mg bias at poses up to 90 deg
+//! apart, whose magnitude measured anew at two poses then found 17 of its 25 rests). With a
+//! calibrated part's 6.1 mm/s^2 the bound is 63 mm/s^2 (6.5 mg): a steady acceleration within
+//! it held 2 s with no vibration and no turn is what this gives up. An uncalibrated part's
+//! 0.1 g ([`GlrtConfig::uncalibrated_accel_bias_sigma_mps2`]) gives 10 m/s^2: the stillness
+//! tests alone, as its offset may read gravity up to 1 g differently between attitudes.
+//!
 //! - [`GlrtStatistic::Split`] (default): rest iff each is below its `1 - a/2` chi-squared
 //!   quantile. The mean part (6 degrees of freedom) is what catches steady acceleration, turns
 //!   and the low-frequency (wheel) part of vibration; the scatter part catches vibration.
@@ -204,6 +223,18 @@ impl BatchSums {
 /// vibration under the noise, shorter than a hand-held sensor's pause.
 pub const REANCHOR_S: f64 = 2.0;
 
+/// What of the gravity reference a window still by the scatter and the gyroscope failed on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Lost {
+    /// Its direction across gravity alone.
+    Direction,
+    /// Its magnitude (and perhaps its direction), within [`GlrtRule::bias_bound`].
+    Magnitude,
+}
+
+/// Sigmas of the accelerometer bias per axis that [`GlrtRule::bias_bound`] allows for.
+const BIAS_BOUND_SIGMAS: f64 = 3.0;
+
 /// The learned GLRT: references, noise, thresholds and the window ring.
 #[derive(Debug, Clone)]
 pub(crate) struct GlrtRule {
@@ -247,8 +278,14 @@ pub(crate) struct GlrtRule {
     accel_bias_sigma_mps2: f64,
     /// Consecutive rest decisions up to the last batch.
     rest_run: usize,
-    /// Time the windows have been still by every test but the direction across gravity, s.
+    /// Time the windows have been still by the scatter and the gyroscope but failing on the
+    /// gravity reference (its direction, or its magnitude within [`Self::bias_bound`]), s.
     lost_s: f64,
+    /// The last window is a rest held against a magnitude the reference does not hold: its
+    /// rest update leaves the gravity reference as it was.
+    holding: bool,
+    /// Rests held so since the start.
+    held: u64,
     /// The window mean (m/s^2) where that began: the specific force must hold steady.
     lost_from: Vector3<f64>,
     /// Gravity references taken as lost and measured anew.
@@ -334,6 +371,8 @@ impl GlrtRule {
             accel_bias_sigma_mps2: config.accel_bias_sigma_mps2,
             rest_run: 0,
             lost_s: 0.0,
+            holding: false,
+            held: 0,
             lost_from: Vector3::zeros(),
             reanchored: 0,
             mean_quantile: 0.0,
@@ -546,12 +585,23 @@ impl GlrtRule {
             GlrtStatistic::Split => steady && t_scatter <= self.scatter_quantile,
             GlrtStatistic::Combined => t_mean + t_scatter <= self.combined_quantile,
         };
-        let still_but_direction = self.channels == 6
-            && full
-            && !quiet
-            && t_scatter <= self.scatter_quantile
-            && t_mean - t_across <= self.still_quantile;
-        let rest = (quiet && full) || self.reanchor(still_but_direction, accel, &mean, &var);
+        // Still by the scatter and the gyroscope, failing on the gravity reference alone: its
+        // direction across gravity, or its magnitude (the gyroscope's part of `T_mean` has 3
+        // degrees of freedom, as the steadiness test) by no more than a biased part reads.
+        let still = self.channels == 6 && full && !quiet && t_scatter <= self.scatter_quantile;
+        let lost = if !still {
+            None
+        } else if t_mean - t_across <= self.still_quantile {
+            Some(Lost::Direction)
+        } else if t_mean - t_across - t_along <= self.steady_quantile
+            && self.within_bias_bound(&mean, &var)
+        {
+            Some(Lost::Magnitude)
+        } else {
+            None
+        };
+        self.holding = false;
+        let rest = (quiet && full) || self.reanchor(lost, accel, &mean, &var);
         self.rest_run = if rest { self.rest_run + 1 } else { 0 };
         Decision {
             rest,
@@ -561,22 +611,24 @@ impl GlrtRule {
         }
     }
 
-    /// Counts the time windows have been still but for the direction across gravity, with the
-    /// window mean `mean` (its variance `var` per axis) steady: a vehicle's braking tail
-    /// changes its specific force as it slows, a lost reference's rest does not. After
-    /// [`REANCHOR_S`] of it the gravity reference is taken as lost and measured anew (the
-    /// window's direction) and the window is a rest.
+    /// Counts the time windows have been still but for the gravity reference (`lost`: what of
+    /// it the window failed on), with the window mean `mean` (its variance `var` per axis)
+    /// steady: a vehicle's braking tail changes its specific force as it slows, a lost
+    /// reference's rest does not. After [`REANCHOR_S`] of it the window is a rest: one that
+    /// failed across gravity alone takes the gravity reference's direction as lost and
+    /// measures it anew (the window's); one that failed on the magnitude stays a rest for as
+    /// long as it stays so, and the reference is left as it was ([`Self::holding`]).
     fn reanchor(
         &mut self,
-        still_but_direction: bool,
+        lost: Option<Lost>,
         accel: &WindowStats,
         mean: &[f64; 6],
         var: &[f64; 6],
     ) -> bool {
-        if !still_but_direction {
+        let Some(lost) = lost else {
             self.lost_s = 0.0;
             return false;
-        }
+        };
         let m = Vector3::new(mean[0], mean[1], mean[2]);
         // Two window means' difference: twice one mean's variance.
         let moved = (0..3)
@@ -586,9 +638,18 @@ impl GlrtRule {
             self.lost_from = m;
             self.lost_s = 0.0;
         }
+        let before = self.lost_s;
         self.lost_s += super::batch_duration_s(accel);
         if self.lost_s < REANCHOR_S {
             return false;
+        }
+        if lost == Lost::Magnitude {
+            // Held, as long as it stays so; the reference is left as it was.
+            self.holding = true;
+            if before < REANCHOR_S {
+                self.held += 1;
+            }
+            return true;
         }
         self.lost_s = 0.0;
         self.reanchored += 1;
@@ -602,9 +663,42 @@ impl GlrtRule {
         true
     }
 
+    /// How far a rest's specific force may read from the gravity reference for a part whose
+    /// accelerometer bias is [`GlrtConfig::accel_bias_sigma_mps2`] per axis, m/s^2: twice
+    /// [`BIAS_BOUND_SIGMAS`] of it on each axis (`|b|` at most `3 sqrt(3)` sigma; between two
+    /// attitudes the magnitude moves by `(u2 - u1) . b`, at most `2 |b|`). 63 mm/s^2 for a
+    /// calibrated part's 6.1 mm/s^2, 10 m/s^2 for an uncalibrated part's 0.1 g.
+    fn bias_bound(&self) -> f64 {
+        2.0 * BIAS_BOUND_SIGMAS * 3f64.sqrt() * self.accel_bias_sigma_mps2
+    }
+
+    /// Whether the window mean `mean` (its variance `var` per axis) lies within
+    /// [`Self::bias_bound`] of the gravity reference: its magnitude, plus three sigmas of the
+    /// mean's own noise along gravity and of the reference's magnitude, and the whole vector,
+    /// plus three sigmas of the mean's noise and the reference's uncertainty across gravity. A
+    /// biased part at rest at another attitude reads `g u2 + b` where the carried reference is
+    /// `g u2 + R b` (`R` the turn since the reference held `b`): `(I - R) b` apart, at most
+    /// `2 |b|`, along gravity and across it; a steady horizontal acceleration `a` is `a` apart.
+    fn within_bias_bound(&self, mean: &[f64; 6], var: &[f64; 6]) -> bool {
+        let reference = self.gravity();
+        let u = reference.normalize();
+        let m = Vector3::new(mean[0], mean[1], mean[2]);
+        let along_sigma =
+            ((0..3).map(|i| u[i] * u[i] * var[i]).sum::<f64>() + self.along_var_now()).sqrt();
+        let sigma = (var[0] + var[1] + var[2] + 2.0 * self.across_var_now()).sqrt();
+        (m.norm() - reference.norm()).abs() <= self.bias_bound() + 3.0 * along_sigma
+            && (m - reference).norm() <= self.bias_bound() + 3.0 * sigma
+    }
+
     /// Gravity references taken as lost and measured anew since the start.
     pub fn reanchored(&self) -> u64 {
         self.reanchored
+    }
+
+    /// Rests held against a magnitude the reference does not hold since the start (each
+    /// counted once, when it begins).
+    pub fn held(&self) -> u64 {
+        self.held
     }
 
     /// The accelerometer's part of `T_mean` (3 degrees of freedom), along gravity (1) and
@@ -628,10 +722,23 @@ impl GlrtRule {
         (along * along / var_along, across / var_across)
     }
 
-    /// Keeps gravity and the gyroscope bias current with a rest batch: the gyroscope bias and
-    /// gravity's magnitude as running means of gain `gain`, gravity's direction with the gain
-    /// of a Kalman update on what the gyroscope left uncertain (at least `gain`).
+    /// Keeps gravity and the gyroscope bias current with a rest batch: the gyroscope bias as a
+    /// running mean of gain `gain`, and gravity ([`Self::update_gravity`]) unless the rest is
+    /// held against a magnitude the reference does not hold ([`Self::holding`]).
     pub fn update(&mut self, accel: &WindowStats, gyro: &WindowStats, gain: f64) {
+        if !self.holding {
+            self.update_gravity(accel, gain);
+        }
+        for i in 3..6 {
+            self.reference[i] += gain * (gyro.mean[i - 3] - self.reference[i]);
+        }
+        self.pool_rest();
+    }
+
+    /// Keeps gravity current with a rest batch: its magnitude as a running mean of gain
+    /// `gain`, its direction with the gain of a Kalman update on what the gyroscope left
+    /// uncertain (at least `gain`).
+    fn update_gravity(&mut self, accel: &WindowStats, gain: f64) {
         let reference = self.gravity();
         let u = reference.normalize();
         let d = Vector3::from_fn(|i, _| accel.mean[i] - reference[i]);
@@ -659,10 +766,6 @@ impl GlrtRule {
         self.moving_s = 0.0;
         self.turned_rad = Vector3::zeros();
         self.rest_dir = g.normalize();
-        for i in 3..6 {
-            self.reference[i] += gain * (gyro.mean[i - 3] - self.reference[i]);
-        }
-        self.pool_rest();
     }
 
     /// Gives the window's storage back (for the next session).

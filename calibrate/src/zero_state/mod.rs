@@ -429,6 +429,15 @@ impl ZeroStateDetector {
         }
     }
 
+    /// How often the GLRT held a rest against a gravity magnitude its reference does not hold
+    /// (`glrt`'s "A magnitude the reference does not hold"); 0 for the other rules.
+    pub fn gravity_held(&self) -> u64 {
+        match &self.rule {
+            Some(Rule::Glrt(r)) => r.held(),
+            _ => 0,
+        }
+    }
+
     /// Time the detector found steady but vibrating, s ([`Verdict::vibrating`]): motion that
     /// only vibration told from rest.
     pub fn vibrating_s(&self) -> f64 {

@@ -30,8 +30,17 @@
 //!
 //! The verdict's sample is the first with `BIAS_REFINED` (the samples of its batch before it
 //! are flagged `DETECTOR_READY` once settled, but not refined). A stream that starts ready
-//! (SHOE, which learns nothing; a resumed calibration state) keeps nothing here, nor does a
-//! filter with speed hints (its rest alignment takes a second, `navigator::HINT_ALIGN_S`).
+//! (SHOE, which learns nothing; a resumed calibration state) keeps nothing here.
+//!
+//! With speed hints the rest is the hints' (`navigator::HINT_ALIGN_S`: a second of it), and
+//! the learning window counts toward it only where a fresh hint said stationary at each of
+//! its samples (a sample without one empties the window, as a clipped one does): the learner
+//! judged the window still and the encoders agree. A robot that creeps off from its first
+//! sample is still to the IMU too; its hints' cruise alignment starts it
+//! (`odometry/tests/start_in_motion.rs`). Without the learning window a first rest that the
+//! learning takes most of never aligned: the PHIL TurtleBot runs
+//! of docs/real-data.md (encoders stationary for 1.6-1.7 s at the start, a 1 s learning that
+//! ends 1.2 s in at 50 Hz) aligned only at the ends of trials 2 and 3, 47-51 s in.
 
 use super::Navigator;
 use super::records::AlignSums;
@@ -163,21 +172,22 @@ impl LearningWindow {
 
 impl Navigator {
     /// Keeps the alignment sums of the calibration stage's learning window at its learned
-    /// verdict's sample `s` (`navigator::learning`; not with speed hints), for the rest
-    /// flagged after it to add to; whether this was that sample.
+    /// verdict's sample `s` (`navigator::learning`; `usable`: not clipped; `hint_rest`: what
+    /// a fresh hint says of rest, if any), for the rest flagged after it to add to; whether
+    /// this was that sample.
     pub(super) fn seed_alignment(
         &mut self,
         s: &CorrectedImuSample,
         m: &Imu,
         usable: bool,
+        hint_rest: Option<bool>,
         gravity_off: bool,
     ) -> bool {
+        // With speed hints, only a sample a fresh hint says stationary is part of the rest.
+        let usable = usable && (self.hints.newest.is_none() || hint_rest == Some(true));
         let ready = s.flags & corrected_flags::DETECTOR_READY != 0;
         let refined = s.flags & corrected_flags::BIAS_REFINED != 0;
-        let learned_rest_s = match self.hints.newest {
-            Some(_) => 0.0,
-            None => self.cfg.learned_rest_s,
-        };
+        let learned_rest_s = self.cfg.learned_rest_s;
         let zs_mean = Vector3::from(s.zs_mean_mps2);
         let t_ns = s.stamps.sample_ns;
         let flags = (usable, ready, refined);

@@ -18,8 +18,8 @@ pub fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
     tracing::info!(
         "accepted {}, published {}, at rest {}, refused {refused}, gaps {}, \
          stream restarts {}, learning restarts {learn_restarts}, detector ready {}, gravity \
-         reference lost and measured anew {}, refined {refined} (accel {:.4?} m/s^2, gyro \
-         {:.5?} rad/s)",
+         reference lost and measured anew {}, rests held against a gravity magnitude it does \
+         not hold {}, refined {refined} (accel {:.4?} m/s^2, gyro {:.5?} rad/s)",
         s.accepted,
         s.released,
         s.rest,
@@ -27,6 +27,7 @@ pub fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
         s.restarts,
         stage.detector().is_ready(),
         stage.detector().gravity_reanchored(),
+        stage.detector().gravity_held(),
         accel,
         gyro
     );

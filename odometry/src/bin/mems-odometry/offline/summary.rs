@@ -261,6 +261,13 @@ impl Summary {
                 calibrate::zero_state::glrt::REANCHOR_S
             );
         }
+        let held = chain.first.detector().gravity_held();
+        if held > 0 {
+            tracing::info!(
+                "{input}: the rest detector held {held} rests whose gravity magnitude its                  reference does not hold, within an accelerometer bias's reach, after {} s                  still by the scatter and the gyroscope",
+                calibrate::zero_state::glrt::REANCHOR_S
+            );
+        }
         let consistency = chain.second.stage().consistency();
         tracing::info!("{consistency}");
         let walking = chain.second.walking_stats();
@@ -291,6 +298,7 @@ impl Summary {
             result["accel_error"] = json!(accel);
             result["gyro_bias"] = gyro_bias_json(chain);
             result["gravity_reanchored"] = json!(reanchored);
+            result["gravity_held"] = json!(held);
             result["steady_vibrating_s"] = json!(vibrating_s);
             result["consistency"] = json!(consistency);
             println!("{result}");
