@@ -313,11 +313,11 @@ pub struct UncalibratedAccel {
 }
 
 /// Tilt change between two rests the refined bias's random walk is sized by, degrees
-/// ([`UncalibratedAccel::refined_bias_walk_mps3`]): the largest measured between successive
+/// ([`UncalibratedAccel::refined_bias_walk_mps3`]): a car stopping on grades of up to 5 deg
+/// either way (`mems-sim drive --max-slope-deg 5`), about twice the rms between successive
 /// rests of the corpus's robots, cars and hand-held recordings (`python3
-/// tools/real-data/rest_tilts.py`: 22 pairs, median 0.44 deg, rms 1.60 deg, largest 5.07 deg,
-/// a MoRPINet RC car), as a car stopping on grades of up to 5 deg either way (`mems-sim drive
-/// --max-slope-deg 5`). The walk is not the part's own bias drift (a calibrated MPU-9250's
+/// tools/real-data/rest_tilts.py`: 43 pairs, median 0.67 deg, rms 2.40 deg, largest 8.40 deg,
+/// the RTKLIB car stopping on a hill). The walk is not the part's own bias drift (a calibrated MPU-9250's
 /// is `noise.accel_bias_random_walk`, two orders smaller) but what the stage's refinement moves
 /// the bias by between rests at different tilts. Sized by the rms (1.6 deg: 0.0036) the
 /// simulated sloped drive ends at the edge of its 1-sigma's 68 % radius (0.595 m against
