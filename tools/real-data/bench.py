@@ -60,6 +60,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import containers
+
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent.parent
 R68_FACTOR = 1.515
@@ -239,14 +241,7 @@ def track_length(track, t_s, min_step=TRACK_MIN_STEP_M):
     """The track's length from time t_s to its end, over steps of at least `min_step` m (the
     truth's `track_min_step_m` where it has one: 0.5 m for GNSS fixes; else 0.1 m, as
     convert.py measures the particle filter's whole track)."""
-    points = [track_at(track, t_s)] + [q[1:3] for q in track if q[0] > t_s]
-    walked, last = 0.0, points[0]
-    for q in points[1:]:
-        step = math.dist(q, last)
-        if step >= min_step:
-            walked += step
-            last = q
-    return walked
+    return containers.path_length([track_at(track, t_s)] + [q[1:3] for q in track if q[0] > t_s], min_step)
 
 
 ALIGN_PATH_M = 10.0

@@ -25,7 +25,7 @@ library only.
 
 import math
 
-from containers import ConvertError
+from containers import ConvertError, path_length
 
 G0 = 9.80665  # m/s^2 per g
 DEG = 180.0 / math.pi
@@ -113,11 +113,7 @@ def pose_track_truth(times, positions, t0, wheres):
     for t, p in zip(ts, pos):
         d = [p[k] - pos[0][k] for k in range(3)]
         track.append([round(t - t0, 6), round(_dot(east, d), 4), round(_dot(north, d), 4)])
-    walked, last = 0.0, track[0][1:3]
-    for row in track[1:]:
-        if math.dist(row[1:3], last) >= POSE_TRACK_MIN_STEP_M:
-            walked += math.dist(row[1:3], last)
-            last = row[1:3]
+    walked = path_length([row[1:3] for row in track], POSE_TRACK_MIN_STEP_M)
     return {
         "kind": "pose_track",
         "frame": "unknown_heading",

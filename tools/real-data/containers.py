@@ -28,6 +28,18 @@ class ConvertError(Exception):
         super().__init__(": ".join(parts) + ": " + message)
 
 
+def path_length(points, min_step):
+    """Length of a track over points (x, y in m) at least `min_step` m apart: noise at rest
+    adds none."""
+    walked, last = 0.0, points[0]
+    for q in points[1:]:
+        step = math.dist(q, last)
+        if step >= min_step:
+            walked += step
+            last = q
+    return walked
+
+
 # ---------------------------------------------------------------------------------------------
 # MAT-file level 5 (MATLAB 5.0 format, "MAT-File Format", MathWorks, 2013; sections 1-3):
 # a 128-byte header, then data elements of (type u32, byte count u32, data padded to 8 bytes),

@@ -419,18 +419,7 @@ def gnss_truth(text, where, samples):
         "track": [[round(k / GNSS_ROW_HZ + offset, 4), round(e, 4), round(n, 4)] for k, (e, n) in enumerate(points)],
         "track_min_step_m": GNSS_TRACK_MIN_STEP_M,
         "source": "GNSS.csv (RTK, local east/north about the first fix), rows at 100 Hz on the car IMU's clock shifted by clock_offset_s (measured from the two units' gyro magnitudes, convert.py); bench.py measures from the fix at the odometry's alignment and turns the track onto ours",
-    }, _path_length(points, GNSS_TRACK_MIN_STEP_M)
-
-
-def _path_length(points, min_step):
-    """Length of a track over points at least `min_step` apart (noise at rest adds none)."""
-    walked, last = 0.0, points[0]
-    for q in points[1:]:
-        step = math.dist(q, last)
-        if step >= min_step:
-            walked += step
-            last = q
-    return walked
+    }, containers.path_length(points, GNSS_TRACK_MIN_STEP_M)
 
 
 def broad_truth(arrays, where):
@@ -456,7 +445,7 @@ def broad_truth(arrays, where):
         "positions_seen": len(seen),
         "positions_missing": len(pos) - len(seen),
         "source": "opt_pos (OptiTrack, m): the last seen position minus the first; the box rests in the same place at both ends (offset in tolerance_m)",
-    }, _path_length([p[:2] for p in seen], 0.01)
+    }, containers.path_length([p[:2] for p in seen], 0.01)
 
 
 GNSS_TRACK_MIN_STEP_M = 0.5
@@ -488,7 +477,7 @@ def gnss_track_truth(fixes, where, source=GNSS_TRACK_SOURCE):
         "track": [[round(t, 6), round(e, 4), round(n, 4)] for (t, *_), (e, n) in zip(fixes, points)],
         "track_min_step_m": GNSS_TRACK_MIN_STEP_M,
         "source": source,
-    }, _path_length(points, GNSS_TRACK_MIN_STEP_M)
+    }, containers.path_length(points, GNSS_TRACK_MIN_STEP_M)
 
 
 RTK_TRACK_MIN_STEP_M = 0.1
@@ -544,7 +533,7 @@ def rtk_ned_truth(buf, where, times=None):
             "track_min_step_m": RTK_TRACK_MIN_STEP_M,
             "source": "RTK positions (north, east, down) on the IMU's clock: the authors' synchronised IMU slice (syncdata/imu) found in the raw export by its gyro magnitudes, 12 samples per position; bench.py measures from the position at the odometry's alignment and turns the track onto ours",
         })
-    return truth, _path_length([p[:2] for p in ned], RTK_TRACK_MIN_STEP_M)
+    return truth, containers.path_length([p[:2] for p in ned], RTK_TRACK_MIN_STEP_M)
 
 
 def pf_pose_truth(text, where, t0_ns):
@@ -570,7 +559,7 @@ def pf_pose_truth(text, where, t0_ns):
         "poses": len(points),
         "track": [[round((ns - t0_ns) * 1e-9, 6), v["x"], v["y"], 2 * math.atan2(v["qz"], v["qw"])] for ns, v in rows],
         "source": "pfPoseData.csv: the particle filter's last pose minus its first (map frame, lidar on a known map); the odometry's heading is fixed at its alignment, so only the distance is a truth",
-    }, _path_length(points, 0.1)
+    }, containers.path_length(points, 0.1)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -713,7 +702,7 @@ def _load_navego(rec, source, f):
     track = [(t, e, n) for (t, _, _), (e, n) in zip(fixes, local_east_north([q[1:] for q in fixes]))]
     offset, r = navego.clock_offset(samples, track, f.where(1))
     notes.append(f"reference clock offset {offset:+.1f} s (yaw-rate correlation r = {r:.2f}, navego.clock_offset)")
-    distance = _path_length([q[1:] for q in track], navego.TRACK_MIN_STEP_M)
+    distance = containers.path_length([q[1:] for q in track], navego.TRACK_MIN_STEP_M)
     return samples, notes, navego.track_truth(track, offset, r), distance, None
 
 
@@ -733,7 +722,7 @@ def _load_phil(rec, source, f):
     samples, notes, truth, track, odom = phil_mqp.recording([f.text(i) for i in range(3)], [f.where(i) for i in range(3)], source)
     notes.append(f"robot hints: speed valid, 1-sigma {ODOM_SPEED_SIGMA_MPS} m/s; stationary (encoders) after "
                  f"{ODOM_STATIONARY_AFTER_S} s below {ODOM_STILL_MPS} m/s")
-    return samples, notes, truth, _path_length([q[1:3] for q in track], phil_mqp.TRACK_MIN_STEP_M), odometry_hints(odom)
+    return samples, notes, truth, containers.path_length([q[1:3] for q in track], phil_mqp.TRACK_MIN_STEP_M), odometry_hints(odom)
 
 
 LOADERS = {

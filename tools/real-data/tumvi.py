@@ -26,7 +26,7 @@ track are then kept on the stamps as they are. Python standard library only.
 import math
 
 import navego
-from containers import ConvertError
+from containers import ConvertError, path_length
 
 G0 = 9.80665  # m/s^2 per g
 DEG = 180.0 / math.pi
@@ -109,11 +109,7 @@ def recording(texts, wheres):
         raise ConvertError(wheres[1], None, "Time", f"the motion capture's rotation rate does not follow the gyro's "
                            f"(lag {lag}, r {r}, slope {slope}): not on the IMU's clock, or the gyro is not in rad/s")
     track = [[round(p[0] - t0, 6), p[1], p[2]] for p in poses if 0.0 <= p[0] - t0 <= out[-1][0]]
-    walked, last = 0.0, track[0][1:3]
-    for row in track[1:]:
-        if math.dist(row[1:3], last) >= TRACK_MIN_STEP_M:
-            walked += math.dist(row[1:3], last)
-            last = row[1:3]
+    walked = path_length([row[1:3] for row in track], TRACK_MIN_STEP_M)
     end = [track[-1][1] - track[0][1], track[-1][2] - track[0][2]]
     truth = {
         "kind": "mocap_track",

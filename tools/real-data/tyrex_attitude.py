@@ -23,7 +23,7 @@ markers were not seen. Python standard library only.
 
 import math
 
-from containers import ConvertError
+from containers import ConvertError, path_length
 
 G0 = 9.80665  # m/s^2 per g
 DEG = 180.0 / math.pi
@@ -184,11 +184,7 @@ def mocap_track_truth(arrays, offset_s, start_s, duration_s, where):
         track.append([round(t, 6), round(p[0] / 1000, 5), round(p[1] / 1000, 5), round(_aligned_heading(c), 6)])
     if len(track) < 2:
         raise ConvertError(where, None, "RigidBodies.Positions", "fewer than two seen positions within the recording")
-    walked, last = 0.0, track[0][1:3]
-    for row in track[1:]:
-        if math.dist(row[1:3], last) >= MOCAP_TRACK_MIN_STEP_M:
-            walked += math.dist(row[1:3], last)
-            last = row[1:3]
+    walked = path_length([row[1:3] for row in track], MOCAP_TRACK_MIN_STEP_M)
     end = [track[-1][1] - track[0][1], track[-1][2] - track[0][2]]
     return {
         "kind": "mocap_track",
