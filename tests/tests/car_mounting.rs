@@ -71,6 +71,18 @@ fn error_and_sigma(v: &serde_json::Value) -> (f64, f64) {
     (error, sigma)
 }
 
+/// The body's forward axis in the sensor frame (`R_bs^T x`) of the mounting `rpy_deg` (roll,
+/// pitch, yaw of the rotation from the sensor frame to the body frame, degrees).
+fn forward_axis(rpy_deg: [f64; 3]) -> nalgebra::Vector3<f64> {
+    let [r, p, y] = rpy_deg.map(f64::to_radians);
+    nalgebra::UnitQuaternion::from_euler_angles(r, p, y).inverse() * nalgebra::Vector3::x()
+}
+
+/// The estimated mounting of an offline run's JSON, degrees.
+fn mounting_deg(v: &serde_json::Value) -> [f64; 3] {
+    [0, 1, 2].map(|i| v["wheeled"]["mounting_rpy_deg"][i].as_f64().unwrap())
+}
+
 /// The angle between two directions, either sign (a constraint cannot tell forward from
 /// reverse), degrees.
 fn axis_angle_deg(a: &nalgebra::Vector3<f64>, b: &nalgebra::Vector3<f64>) -> f64 {
@@ -84,14 +96,9 @@ fn axis_angle_deg(a: &nalgebra::Vector3<f64>, b: &nalgebra::Vector3<f64>) -> f64
 
 #[test]
 fn a_car_with_a_pitched_and_yawed_imu_gets_its_mounting_and_a_covering_sigma() {
-    use nalgebra::{UnitQuaternion, Vector3};
     let dir = std::env::temp_dir().join(unique_namespace("car-mounting"));
     std::fs::create_dir_all(&dir).unwrap();
-    let rpy = |d: [f64; 3]| {
-        UnitQuaternion::from_euler_angles(d[0].to_radians(), d[1].to_radians(), d[2].to_radians())
-    };
-    // The body's forward axis in the sensor frame: R_bs^T x.
-    let truth = rpy(MOUNT_DEG).inverse() * Vector3::x();
+    let truth = forward_axis(MOUNT_DEG);
     let (mut covered, mut worst) = (0, 0.0f64);
     for seed in 1..=3 {
         let v = car(&dir, seed);
@@ -101,12 +108,10 @@ fn a_car_with_a_pitched_and_yawed_imu_gets_its_mounting_and_a_covering_sigma() {
             wheeled["nonholonomic_updates"].as_u64().unwrap() > 1000,
             "{wheeled}"
         );
-        let got: Vec<f64> = (0..3)
-            .map(|i| wheeled["mounting_rpy_deg"][i].as_f64().unwrap())
-            .collect();
-        let forward = rpy([got[0], got[1], got[2]]).inverse() * Vector3::x();
+        let got = mounting_deg(&v);
+        let forward = forward_axis(got);
         // Pitch: the forward axis's angle out of the sensor's x-y plane, either sign.
-        let pitch = |f: &Vector3<f64>| (f.z / f.norm()).asin().to_degrees().abs();
+        let pitch = |f: &nalgebra::Vector3<f64>| (f.z / f.norm()).asin().to_degrees().abs();
         let pitch_error = (pitch(&forward) - pitch(&truth)).abs();
         let angle = axis_angle_deg(&forward, &truth);
         let (error, sigma) = error_and_sigma(&v);
@@ -137,11 +142,9 @@ fn a_car_with_a_pitched_and_yawed_imu_gets_its_mounting_and_a_covering_sigma() {
 /// then.)
 #[test]
 fn a_mounting_from_a_drive_that_starts_turning_is_replaced_by_straight_driving() {
-    use nalgebra::{UnitQuaternion, Vector3};
     let dir = std::env::temp_dir().join(unique_namespace("lever-mounting"));
     std::fs::create_dir_all(&dir).unwrap();
-    let yaw = |deg: f64| UnitQuaternion::from_euler_angles(0.0, 0.0, deg.to_radians());
-    let truth = yaw(30.0).inverse() * Vector3::x();
+    let truth = forward_axis([0.0, 0.0, 30.0]);
     for seed in ["2", "5"] {
         let csv = simulate(
             &dir,
@@ -169,17 +172,8 @@ fn a_mounting_from_a_drive_that_starts_turning_is_replaced_by_straight_driving()
             &["offline", "--input", path_arg(&csv), "--json"],
         );
         let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
-        let got: Vec<f64> = (0..3)
-            .map(|i| v["wheeled"]["mounting_rpy_deg"][i].as_f64().unwrap())
-            .collect();
-        let forward = UnitQuaternion::from_euler_angles(
-            got[0].to_radians(),
-            got[1].to_radians(),
-            got[2].to_radians(),
-        )
-        .inverse()
-            * Vector3::x();
-        let angle = axis_angle_deg(&forward, &truth);
+        let got = mounting_deg(&v);
+        let angle = axis_angle_deg(&forward_axis(got), &truth);
         eprintln!("seed {seed}: mounting {got:.2?} deg, forward axis {angle:.2} deg off");
         assert!(angle < 3.0, "seed {seed}: forward axis {angle} deg off");
     }
