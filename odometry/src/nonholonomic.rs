@@ -8,8 +8,13 @@
 //! drive: body z is the gravity-up direction in the sensor frame, body x the direction of the
 //! sensor-frame displacement over the first [`MOUNTING_PATH_M`] of driving (the filter's own
 //! velocity, unrevised: the first metres after a rest drift least). Until then only the
-//! vertical velocity is constrained. The constraint says nothing about the sign of the
-//! forward axis, so a drive that starts in reverse estimates the same mounting.
+//! vertical velocity is constrained. Turning, an IMU off the turning axis moves sideways, so a
+//! drive that begins in a turn (a car pulling out of a parking space) points that displacement
+//! off the forward axis: the displacement over the first [`MOUNTING_PATH_M`] of straight
+//! driving ([`LEVER_ARM_BOUND_M`], [`STRAIGHT_ANGLE_RAD`]) replaces it once gathered. The first
+//! drive's estimate is kept until then, as platforms that rarely drive straight need the
+//! lateral constraint. The constraint says nothing about the sign of the forward axis, so a
+//! drive that starts in reverse estimates the same mounting.
 //!
 //! The constraint holds at the rear axle, which the lever arm `r_b` (body frame, m, from the
 //! IMU to the axle; [`ImuConstraint::with_lever_arm`], zero by default) locates: the velocity
