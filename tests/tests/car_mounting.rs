@@ -137,9 +137,9 @@ fn a_car_with_a_pitched_and_yawed_imu_gets_its_mounting_and_a_covering_sigma() {
 /// The IMU yawed 30 deg and 1.5 m ahead of (and 0.5 m above) the turning axis, turns on the
 /// spot before half of the motions: on seeds 2 and 5 the first drive's mounting came out
 /// 23 and 15 deg off (the sideways motion of the IMU while turning); the straight driving's is
-/// within 3 deg. (On seeds 1, 3 and 7 the straight driving's estimate stays off as well, 10-40
-/// deg: the lateral constraint along the first axis has turned the filter's velocity onto it by
-/// then.)
+/// within 3 deg. (On seeds 1, 3 and 7 it stays 10-40 deg off: the straight driving's
+/// displacement is the filter's own velocity, which the lateral constraint has held along the
+/// first axis since its first 2 m.)
 #[test]
 fn a_mounting_from_a_drive_that_starts_turning_is_replaced_by_straight_driving() {
     let dir = std::env::temp_dir().join(unique_namespace("lever-mounting"));
