@@ -11,7 +11,10 @@ use crate::consistency::{Consistency, ConsistencyReport, Kind};
 use crate::cruise::{CruiseWindow, MIN_SPEED_MPS, cruise_start};
 use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, Refinement, align};
 use crate::hand_bound::HandBound;
-use crate::hints::{ForwardAxisReport, HintConfig, HintStats, has_rest_source, usable_from_ns};
+use crate::hints::{
+    ForwardAxisReport, HintConfig, HintStats, has_rest_source, turns_while_stationary,
+    usable_from_ns,
+};
 use crate::nonholonomic::{ImuConstraint, Outcome};
 use crate::rest_scatter::RestScatter;
 use crate::sampled_noise::SampledNoise;
@@ -427,7 +430,7 @@ impl Navigator {
             .newest
             .filter(|h| t_ns.saturating_sub(h.stamps.sample_ns) <= self.hints.max_age_ns);
         let rest = fresh
-            .filter(has_rest_source)
+            .filter(|h| has_rest_source(h) && !turns_while_stationary(h))
             .map(|h| h.flags & hint_flags::STATIONARY != 0);
         self.imu_decided = rest.is_none();
         let mut sample = HintSample::default();
