@@ -60,6 +60,25 @@ pub fn path_arg(p: &std::path::Path) -> &str {
     p.to_str().expect("UTF-8 path")
 }
 
+/// `mems-sim` arguments of a small robot with wheel encoders (speed hints) at 50 Hz, 60 s of
+/// driving with turns and turns on the spot, its IMU yawed 78 deg on the base (seed not given).
+pub const SPINNING_ROBOT: [&str; 14] = [
+    "drive",
+    "--duration",
+    "60",
+    "--turns",
+    "on",
+    "--in-place-turns",
+    "on",
+    "--hints",
+    "encoders",
+    "--mount-deg",
+    "0,0,78",
+    "--rate",
+    "50",
+    "--seed",
+];
+
 /// Runs `mems-sim ARGS --out DIR/FILE` (the file's extension picks CSV or MCAP) and returns
 /// the recording's path.
 pub fn simulate(dir: &std::path::Path, file: &str, args: &[&str]) -> PathBuf {

@@ -7,7 +7,7 @@
 //! ended 23.6 m off after 14.6 m. The run ends within 1 m of the truth and inside the 68 %
 //! radius of its 1-sigma.
 
-use integration_tests::{path_arg, run_ok, simulate, unique_namespace};
+use integration_tests::{SPINNING_ROBOT, path_arg, run_ok, simulate, unique_namespace};
 
 /// Radius holding 68 % of a circular 2-D Gaussian, per-axis sigmas (bench.py's `R68_FACTOR`).
 const R68_FACTOR: f64 = 1.515;
@@ -16,27 +16,7 @@ const R68_FACTOR: f64 = 1.515;
 fn a_turn_on_the_spot_the_encoders_call_stationary_keeps_the_heading() {
     let dir = std::env::temp_dir().join(unique_namespace("turn-on-the-spot"));
     std::fs::create_dir_all(&dir).unwrap();
-    let drive = simulate(
-        &dir,
-        "drive.mcap",
-        &[
-            "drive",
-            "--duration",
-            "60",
-            "--turns",
-            "on",
-            "--in-place-turns",
-            "on",
-            "--hints",
-            "encoders",
-            "--mount-deg",
-            "0,0,78",
-            "--rate",
-            "50",
-            "--seed",
-            "2",
-        ],
-    );
+    let drive = simulate(&dir, "drive.mcap", &[&SPINNING_ROBOT[..], &["2"]].concat());
     let out = run_ok(
         "mems-odometry",
         &["offline", "--input", path_arg(&drive), "--json"],

@@ -30,7 +30,7 @@
 //! A hand-held part set down at 14 attitudes: the per-axis scale and bias its rests determine
 //! (`odometry::attitudes`), applied by the offline second pass.
 
-use integration_tests::{Proc, path_arg, run_ok, unique_namespace};
+use integration_tests::{Proc, SPINNING_ROBOT, path_arg, run_ok, unique_namespace};
 use ipc_types::{CorrectedImuSample, corrected_flags, service};
 use std::path::Path;
 use std::time::Duration;
@@ -172,23 +172,7 @@ fn an_uncalibrated_part_on_a_hinted_robot_estimates_a_level_mounting() {
     let dir = std::env::temp_dir().join(unique_namespace("uncalibrated-hinted"));
     std::fs::create_dir_all(&dir).unwrap();
     for seed in ["1", "3"] {
-        let drive = [
-            "drive",
-            "--duration",
-            "60",
-            "--turns",
-            "on",
-            "--in-place-turns",
-            "on",
-            "--hints",
-            "encoders",
-            "--mount-deg",
-            "0,0,78",
-            "--rate",
-            "50",
-            "--seed",
-            seed,
-        ];
+        let drive = [&SPINNING_ROBOT[..], &[seed]].concat();
         let run = compare(&dir, &format!("hinted-drive-{seed}"), &drive, 0.04);
         let rpy = &run["hints"]["mounting_rpy_deg"];
         for (axis, i) in [("roll", 0), ("pitch", 1)] {
