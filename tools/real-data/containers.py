@@ -40,6 +40,27 @@ def path_length(points, min_step):
     return walked
 
 
+def room_track_truth(track, min_step, source, **details):
+    """A motion-capture truth over `track` ([t_s, x, y, ...] rows in the room's frame, m) and
+    its path length over steps of at least `min_step` m: the last pose's distance from the
+    first, the room's heading not ours (only distances are a truth). `details` go in after
+    the pose count."""
+    end = [track[-1][1] - track[0][1], track[-1][2] - track[0][2]]
+    truth = {
+        "kind": "mocap_track",
+        "frame": "unknown_heading",
+        "end_displacement_m": None,
+        "end_distance_m": math.hypot(*end),
+        "end_displacement_room_m": end,
+        "poses": len(track),
+        **details,
+        "track": track,
+        "track_min_step_m": min_step,
+        "source": source,
+    }
+    return truth, path_length([row[1:3] for row in track], min_step)
+
+
 # ---------------------------------------------------------------------------------------------
 # MAT-file level 5 (MATLAB 5.0 format, "MAT-File Format", MathWorks, 2013; sections 1-3):
 # a 128-byte header, then data elements of (type u32, byte count u32, data padded to 8 bytes),

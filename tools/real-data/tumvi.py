@@ -26,7 +26,7 @@ track are then kept on the stamps as they are. Python standard library only.
 import math
 
 import navego
-from containers import ConvertError, path_length
+from containers import ConvertError, room_track_truth
 
 G0 = 9.80665  # m/s^2 per g
 DEG = 180.0 / math.pi
@@ -109,24 +109,12 @@ def recording(texts, wheres):
         raise ConvertError(wheres[1], None, "Time", f"the motion capture's rotation rate does not follow the gyro's "
                            f"(lag {lag}, r {r}, slope {slope}): not on the IMU's clock, or the gyro is not in rad/s")
     track = [[round(p[0] - t0, 6), p[1], p[2]] for p in poses if 0.0 <= p[0] - t0 <= out[-1][0]]
-    walked = path_length([row[1:3] for row in track], TRACK_MIN_STEP_M)
-    end = [track[-1][1] - track[0][1], track[-1][2] - track[0][2]]
-    truth = {
-        "kind": "mocap_track",
-        "frame": "unknown_heading",
-        "end_displacement_m": None,
-        "end_distance_m": math.hypot(*end),
-        "end_displacement_room_m": end,
-        "poses": len(track),
-        "rate_check_lag_s": lag,
-        "rate_check_r": round(r, 4),
-        "rate_check_slope": round(slope, 4),
-        "track": track,
-        "track_min_step_m": TRACK_MIN_STEP_M,
-        "source": "the rig's motion-capture positions (the data set's pose topic, m, z up) on the IMU's clock (the bag's "
-                  "stamps; the rotation rates' lag is checked near 0): bench.py measures from the pose at the odometry's "
-                  "alignment to the last; the room's heading is not ours, so only distances are a truth",
-    }
+    truth, walked = room_track_truth(
+        track, TRACK_MIN_STEP_M,
+        "the rig's motion-capture positions (the data set's pose topic, m, z up) on the IMU's clock (the bag's "
+        "stamps; the rotation rates' lag is checked near 0): bench.py measures from the pose at the odometry's "
+        "alignment to the last; the room's heading is not ours, so only distances are a truth",
+        rate_check_lag_s=lag, rate_check_r=round(r, 4), rate_check_slope=round(slope, 4))
     notes = [f"Time s from {t0:.6f}; angular_velocity rad/s -> deg/s, linear_acceleration m/s^2 -> g (/9.80665)",
              f"motion capture on the IMU's stamps: rotation-rate magnitudes agree at lag {lag:+.2f} s, r = {r:.3f}, "
              f"gyro / motion capture {slope:.3f}"]

@@ -23,7 +23,7 @@ markers were not seen. Python standard library only.
 
 import math
 
-from containers import ConvertError, path_length
+from containers import ConvertError, room_track_truth
 
 G0 = 9.80665  # m/s^2 per g
 DEG = 180.0 / math.pi
@@ -184,21 +184,11 @@ def mocap_track_truth(arrays, offset_s, start_s, duration_s, where):
         track.append([round(t, 6), round(p[0] / 1000, 5), round(p[1] / 1000, 5), round(_aligned_heading(c), 6)])
     if len(track) < 2:
         raise ConvertError(where, None, "RigidBodies.Positions", "fewer than two seen positions within the recording")
-    walked = path_length([row[1:3] for row in track], MOCAP_TRACK_MIN_STEP_M)
-    end = [track[-1][1] - track[0][1], track[-1][2] - track[0][2]]
-    return {
-        "kind": "mocap_track",
-        "frame": "unknown_heading",
-        "end_displacement_m": None,
-        "end_distance_m": math.hypot(*end),
-        "end_displacement_room_m": end,
-        "poses": len(track),
-        "poses_hidden": hidden,
-        "track": track,
-        "track_min_step_m": MOCAP_TRACK_MIN_STEP_M,
-        "source": "Qualisys rigid body of the phone's handler (mm -> m, room frame, z up) on the samples' clock by timeAlignment.txt, with the heading "
-                  "the odometry's alignment would give the phone there: bench.py counts from the pose at the odometry's alignment and turns the truth into its frame",
-    }, walked
+    return room_track_truth(
+        track, MOCAP_TRACK_MIN_STEP_M,
+        "Qualisys rigid body of the phone's handler (mm -> m, room frame, z up) on the samples' clock by timeAlignment.txt, with the heading "
+        "the odometry's alignment would give the phone there: bench.py counts from the pose at the odometry's alignment and turns the truth into its frame",
+        poses_hidden=hidden)
 
 
 def self_test():
