@@ -35,4 +35,5 @@ pub mod steps;
 pub mod stops;
 pub mod uncalibrated;
 mod untrusted;
+pub mod velocity_axis;
 pub mod walking;

@@ -540,6 +540,9 @@ impl Navigator {
                 uncorrected: v_b - hints.corrections,
             });
         }
+        if rest {
+            self.hints.velocity_axis.restart();
+        }
         if rest && self.cfg.rest_updates {
             if hs.flags & odometry_flags::HINT_STATIONARY != 0 {
                 let kf = self.kf.as_mut().expect("aligned");
@@ -581,15 +584,21 @@ impl Navigator {
                 hints.forward.sample(&m.f, &m.w, &reference);
             }
             hints.wait_step(kf, dt, t_ns, unknown);
+            hints.velocity_step(kf, dt, t_ns, unknown);
             while let Some(h) = hints.speed.pop() {
-                if hints.cfg.mounting_from_turns
-                    && let Some(fit) = hints.forward.hint(
-                        h.stamps.sample_ns,
-                        h.forward_speed_mps,
-                        h.forward_speed_sigma_mps,
-                        &reference,
-                    )
-                {
+                let turns = hints
+                    .cfg
+                    .mounting_from_turns
+                    .then(|| {
+                        hints.forward.hint(
+                            h.stamps.sample_ns,
+                            h.forward_speed_mps,
+                            h.forward_speed_sigma_mps,
+                            &reference,
+                        )
+                    })
+                    .flatten();
+                if let Some(fit) = hints.fit_to_take(turns, kf) {
                     match hints.remount(&fit, t_ns) {
                         None => hints.restart_velocity(kf, &h, unknown),
                         Some(turn) => body_turn = turn * body_turn,

@@ -10,6 +10,7 @@ use crate::hints::{
     ScaleTaken,
 };
 use crate::speed_lag::LagNoise;
+use crate::velocity_axis::{VelocityAxis, fuse};
 use ipc_types::{RobotHint, hint_flags, odometry_flags};
 use nalgebra::{Matrix3, Vector3};
 
@@ -79,6 +80,10 @@ pub(super) struct Hints {
     pub(super) estimator: MountingEstimator,
     /// The forward axis from the speed hints' changes (mounting not given).
     pub(super) forward: ForwardAxis,
+    /// The forward axis from the path the filter integrates (mounting not given), and its
+    /// trusted estimate, which later speed-change fits are fused with.
+    pub(super) velocity_axis: VelocityAxis,
+    pub(super) path_fit: Option<ForwardFit>,
     /// Time the forward axis was first trusted, ns (sample clock).
     pub(super) mounting_at_ns: Option<u64>,
     /// The latest trusted forward-axis fit.
@@ -129,6 +134,8 @@ impl Hints {
             yaw_sigma_rad: 0.0,
             estimator: MountingEstimator::default(),
             forward: ForwardAxis::default(),
+            velocity_axis: VelocityAxis::default(),
+            path_fit: None,
             mounting_at_ns: None,
             latest_fit: None,
             scale_taken: None,
@@ -159,6 +166,8 @@ impl Hints {
         self.yaw_sigma_rad = other.yaw_sigma_rad;
         self.estimator = other.estimator;
         self.forward = other.forward;
+        self.velocity_axis = other.velocity_axis;
+        self.path_fit = other.path_fit;
         self.mounting_at_ns = other.mounting_at_ns;
         self.latest_fit = other.latest_fit;
         self.scale_taken = other.scale_taken;
@@ -208,6 +217,70 @@ impl Hints {
                 h.flags & hint_flags::SPEED_VALID != 0
                     && t_ns.saturating_sub(h.stamps.sample_ns) <= self.max_age_ns
             })
+    }
+
+    /// The mounting to take from the speed-change fit `turns` (if one was trusted at this hint)
+    /// and the path's ([`Self::path_fit`]): the fit fused with the path's estimate once there is
+    /// one ([`crate::velocity_axis::fuse`]), else whichever there is.
+    pub(super) fn fit_to_take(
+        &mut self,
+        turns: Option<ForwardFit>,
+        kf: &Eskf,
+    ) -> Option<ForwardFit> {
+        let path = self.path_fit.or_else(|| self.velocity_fit(kf));
+        match (turns, path) {
+            (Some(t), Some(p)) => Some(fuse(&t, &p)),
+            (Some(t), None) => Some(t),
+            (None, p) if self.r_bs.is_none() => p,
+            (None, _) => None,
+        }
+    }
+
+    /// A sample of `dt_s` in motion at `t_ns` (after its prediction) while no mounting is
+    /// known: the filter's velocity joins the motion's path against the fresh speed hint's
+    /// distance ([`VelocityAxis`]); a velocity with no direction or no fresh speed hint starts
+    /// the path anew.
+    pub(super) fn velocity_step(
+        &mut self,
+        kf: &Eskf,
+        dt_s: f64,
+        t_ns: u64,
+        direction_unknown: bool,
+    ) {
+        if self.r_bs.is_some() || !self.cfg.mounting_from_turns {
+            return;
+        }
+        let fresh = self.newest.filter(|h| {
+            h.flags & hint_flags::SPEED_VALID != 0
+                && t_ns.saturating_sub(h.stamps.sample_ns) <= self.max_age_ns
+        });
+        let Some(h) = fresh.filter(|_| !direction_unknown) else {
+            self.velocity_axis.restart();
+            return;
+        };
+        let v_s = kf.x.q.inverse_transform_vector(&kf.x.v);
+        let v_sigma = (0.5 * (kf.cov[(V, V)] + kf.cov[(V + 1, V + 1)])).sqrt();
+        let (speed, sigma) = (h.forward_speed_mps, h.forward_speed_sigma_mps);
+        self.velocity_axis.step(&v_s, v_sigma, speed, sigma, dt_s);
+    }
+
+    /// The forward axis from the motion's path ([`VelocityAxis`]) while no mounting is known:
+    /// the fit to take, once trusted (its speed scale unknown).
+    fn velocity_fit(&mut self, kf: &Eskf) -> Option<ForwardFit> {
+        if self.r_bs.is_some() || !self.cfg.mounting_from_turns {
+            return None;
+        }
+        let up_s = kf.x.q.inverse_transform_vector(&Vector3::z());
+        let (mounting, sigma_rad) = self.velocity_axis.mounting(&up_s)?;
+        let fit = ForwardFit {
+            mounting,
+            sigma_rad,
+            bias_sigma_rad: 0.0,
+            scale: None,
+            scale_sigma: f64::INFINITY,
+        };
+        self.path_fit = Some(fit);
+        Some(fit)
     }
 
     /// Takes the forward-axis fit `fit` at `t_ns` as the mounting; returns `None` for the first
