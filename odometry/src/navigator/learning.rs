@@ -28,6 +28,10 @@
 //!   verdict's sample carries its batch's mean after the refinement (`zs_mean_mps2`), so the
 //!   offset it moved is that batch's mean as emitted minus that, subtracted from every sample.
 //!
+//! The refinement the sums carry (`AlignSums::refined`, which the filter follows the stage's
+//! refinement from: `crate::eskf::Eskf::with_refinement`) is therefore the one the samples left
+//! with plus those two shifts, not the verdict sample's own, which carries none yet.
+//!
 //! The verdict's sample is the first with `BIAS_REFINED` (the samples of its batch before it
 //! are flagged `DETECTOR_READY` once settled, but not refined). A stream that starts ready
 //! (SHOE, which learns nothing; a resumed calibration state) keeps nothing here.
