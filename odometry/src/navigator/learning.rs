@@ -28,6 +28,10 @@
 //!   verdict's sample carries its batch's mean after the refinement (`zs_mean_mps2`), so the
 //!   offset it moved is that batch's mean as emitted minus that, subtracted from every sample.
 //!
+//! The refinement the sums carry (`AlignSums::refined`, which the filter follows the stage's
+//! refinement from: `crate::eskf::Eskf::with_refinement`) is therefore the one the samples left
+//! with plus those two shifts, not the verdict sample's own, which carries none yet.
+//!
 //! The verdict's sample is the first with `BIAS_REFINED` (the samples of its batch before it
 //! are flagged `DETECTOR_READY` once settled, but not refined). A stream that starts ready
 //! (SHOE, which learns nothing; a resumed calibration state) keeps nothing here.
@@ -44,7 +48,7 @@
 
 use super::Navigator;
 use super::records::AlignSums;
-use crate::eskf::{Imu, RefinementMean};
+use crate::eskf::{Imu, Refinement, RefinementMean};
 use crate::hints::Ring;
 use calibrate::zero_state::BATCH_LEN;
 use ipc_types::{CorrectedImuSample, corrected_flags};
@@ -94,15 +98,16 @@ impl LearningWindow {
 
     /// Takes the unaligned filter's sample `m` at `t_ns` (`usable`: neither clipped nor
     /// implausible; `ready`, `refined`: its `DETECTOR_READY` and `BIAS_REFINED` flags;
-    /// `zs_mean`: its detector window's mean, m/s^2). Returns the alignment sums of the
-    /// learned window, in the refined terms, at the learned verdict's sample; `None` before
-    /// and after it. `learned_rest_s` 0 keeps nothing.
+    /// `zs_mean`: its detector window's mean, m/s^2; `carried`: the stage's refinement it
+    /// carries, the window's before the verdict's first refinement). Returns the alignment
+    /// sums of the learned window, in the refined terms, at the learned verdict's sample;
+    /// `None` before and after it. `learned_rest_s` 0 keeps nothing.
     pub(super) fn take(
         &mut self,
         t_ns: u64,
         m: &Imu,
         flags: (bool, bool, bool),
-        zs_mean: Vector3<f64>,
+        (zs_mean, carried): (Vector3<f64>, Refinement),
         learned_rest_s: f64,
     ) -> Option<AlignSums> {
         let (usable, ready, refined) = flags;
@@ -125,14 +130,23 @@ impl LearningWindow {
             self.ready_kept += usize::from(ready);
             return None;
         }
-        let sums = self.sums(learned_rest_s, zs_mean);
+        let sums = self.sums(learned_rest_s, zs_mean, carried);
         self.clear();
         sums
     }
 
     /// The alignment sums of the kept samples of the last `learned_rest_s` (the newest the
-    /// verdict's), refined (module documentation).
-    fn sums(&self, learned_rest_s: f64, zs_mean: Vector3<f64>) -> Option<AlignSums> {
+    /// verdict's), refined (module documentation), `carried` the stage's refinement they
+    /// carried as emitted. Their [`AlignSums::refined`] is `carried` plus what the sums
+    /// subtract from them: the accelerometer's shift and the gyroscope's window mean, so that
+    /// the filter aligned on them follows the stage's refinement from the terms they are in
+    /// (`eskf::Eskf::with_refinement`).
+    fn sums(
+        &self,
+        learned_rest_s: f64,
+        zs_mean: Vector3<f64>,
+        carried: Refinement,
+    ) -> Option<AlignSums> {
         let last = *self.kept.newest(0)?;
         let dt_ns = last.t_ns - self.kept.newest(1)?.t_ns;
         // The learner's window of `n` samples spans `n - 1` intervals.
@@ -161,6 +175,11 @@ impl LearningWindow {
             sums.accel.push(k.f - accel_shift);
             sums.gyro.push(k.w - gyro_mean);
         }
+        let refined = Refinement {
+            accel: carried.accel + accel_shift,
+            gyro: carried.gyro + gyro_mean,
+        };
+        sums.refined = RefinementMean::repeated(refined, n as u64);
         Some(sums)
     }
 
@@ -191,13 +210,12 @@ impl Navigator {
         let zs_mean = Vector3::from(s.zs_mean_mps2);
         let t_ns = s.stamps.sample_ns;
         let flags = (usable, ready, refined);
-        let Some(sums) = self.learning.take(t_ns, m, flags, zs_mean, learned_rest_s) else {
+        let window = (zs_mean, self.refinement);
+        let Some(sums) = self.learning.take(t_ns, m, flags, window, learned_rest_s) else {
             return false;
         };
-        // The kept samples are in the verdict sample's refined terms.
         let sums = AlignSums {
             gravity_off,
-            refined: RefinementMean::repeated(self.refinement, sums.accel.len()),
             ..sums
         };
         self.learned = Some(Learned {
