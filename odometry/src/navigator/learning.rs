@@ -25,8 +25,13 @@
 //!   subtracted; the alignment's gyro bias is then zero with the variance of that mean, which
 //!   is what is left of the bias after the refinement;
 //! - accelerometer (m/s^2, sensor frame): the refinement moves the offset along gravity; the
-//!   verdict's sample carries its batch's mean after the refinement (`zs_mean_mps2`), so the
-//!   offset it moved is that batch's mean as emitted minus that, subtracted from every sample.
+//!   verdict's sample carries the offset it subtracts (`refined_accel_mps2`; the samples
+//!   before it left with none), and that offset is subtracted from every kept sample. (Taken
+//!   as the difference of a batch's mean as emitted and the verdict's detector mean, it
+//!   carried the difference between the two means as well: where the last kept batch was not
+//!   the verdict's, and with an engine shaking every sample by 0.4 m/s^2, wid-car-06 of
+//!   docs/real-data.md aligned 0.03 m/s^2 off along gravity with a GLRT window of 1 s, its
+//!   vertical velocity ran off at that rate and the car ended 266 m off after 177 m.)
 //!
 //! The verdict's sample is the first with `BIAS_REFINED` (the samples of its batch before it
 //! are flagged `DETECTOR_READY` once settled, but not refined). A stream that starts ready
@@ -94,7 +99,7 @@ impl LearningWindow {
 
     /// Takes the unaligned filter's sample `m` at `t_ns` (`usable`: neither clipped nor
     /// implausible; `ready`, `refined`: its `DETECTOR_READY` and `BIAS_REFINED` flags;
-    /// `zs_mean`: its detector window's mean, m/s^2). Returns the alignment sums of the
+    /// `refined_accel`: the accelerometer offset its refinement subtracts, m/s^2). Returns the alignment sums of the
     /// learned window, in the refined terms, at the learned verdict's sample; `None` before
     /// and after it. `learned_rest_s` 0 keeps nothing.
     pub(super) fn take(
@@ -102,7 +107,7 @@ impl LearningWindow {
         t_ns: u64,
         m: &Imu,
         flags: (bool, bool, bool),
-        zs_mean: Vector3<f64>,
+        refined_accel: Vector3<f64>,
         learned_rest_s: f64,
     ) -> Option<AlignSums> {
         let (usable, ready, refined) = flags;
@@ -125,14 +130,14 @@ impl LearningWindow {
             self.ready_kept += usize::from(ready);
             return None;
         }
-        let sums = self.sums(learned_rest_s, zs_mean);
+        let sums = self.sums(learned_rest_s, refined_accel);
         self.clear();
         sums
     }
 
     /// The alignment sums of the kept samples of the last `learned_rest_s` (the newest the
     /// verdict's), refined (module documentation).
-    fn sums(&self, learned_rest_s: f64, zs_mean: Vector3<f64>) -> Option<AlignSums> {
+    fn sums(&self, learned_rest_s: f64, refined_accel: Vector3<f64>) -> Option<AlignSums> {
         let last = *self.kept.newest(0)?;
         let dt_ns = last.t_ns - self.kept.newest(1)?.t_ns;
         // The learner's window of `n` samples spans `n - 1` intervals.
@@ -144,12 +149,6 @@ impl LearningWindow {
             return None;
         }
         let window = || (0..n).rev().filter_map(|i| self.kept.newest(i));
-        let batch = n.min(BATCH_LEN);
-        let batch_mean = (0..batch)
-            .filter_map(|i| self.kept.newest(i))
-            .fold(Vector3::zeros(), |acc, k| acc + k.f)
-            / batch as f64;
-        let accel_shift = batch_mean - zs_mean;
         let gyro_mean = window().fold(Vector3::zeros(), |acc, k| acc + k.w) / n as f64;
         let mut sums = AlignSums::default();
         for (i, k) in window().enumerate() {
@@ -158,7 +157,7 @@ impl LearningWindow {
                 // intervals), and a quarter of one for the jitter of the times.
                 sums.t0_ns = k.t_ns.saturating_sub(dt_ns + dt_ns / 4);
             }
-            sums.accel.push(k.f - accel_shift);
+            sums.accel.push(k.f - refined_accel);
             sums.gyro.push(k.w - gyro_mean);
         }
         Some(sums)
@@ -188,10 +187,10 @@ impl Navigator {
         let ready = s.flags & corrected_flags::DETECTOR_READY != 0;
         let refined = s.flags & corrected_flags::BIAS_REFINED != 0;
         let learned_rest_s = self.cfg.learned_rest_s;
-        let zs_mean = Vector3::from(s.zs_mean_mps2);
         let t_ns = s.stamps.sample_ns;
         let flags = (usable, ready, refined);
-        let Some(sums) = self.learning.take(t_ns, m, flags, zs_mean, learned_rest_s) else {
+        let offset = self.refinement.accel;
+        let Some(sums) = self.learning.take(t_ns, m, flags, offset, learned_rest_s) else {
             return false;
         };
         // The kept samples are in the verdict sample's refined terms.
