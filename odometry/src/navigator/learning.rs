@@ -99,9 +99,10 @@ impl LearningWindow {
 
     /// Takes the unaligned filter's sample `m` at `t_ns` (`usable`: neither clipped nor
     /// implausible; `ready`, `refined`: its `DETECTOR_READY` and `BIAS_REFINED` flags;
-    /// `refined_accel`: the accelerometer offset its refinement subtracts, m/s^2). Returns the alignment sums of the
-    /// learned window, in the refined terms, at the learned verdict's sample; `None` before
-    /// and after it. `learned_rest_s` 0 keeps nothing.
+    /// `refined_accel`: the accelerometer offset its refinement subtracts, m/s^2, sensor
+    /// frame). Returns the alignment sums of the learned window, in the refined terms, at the
+    /// learned verdict's sample; `None` before and after it. `learned_rest_s` 0 keeps
+    /// nothing.
     pub(super) fn take(
         &mut self,
         t_ns: u64,
