@@ -24,13 +24,23 @@
 //!   refinement subtracts the learned window's mean rate, so the window's own mean is
 //!   subtracted; the alignment's gyro bias is then zero with the variance of that mean, which
 //!   is what is left of the bias after the refinement;
-//! - accelerometer (m/s^2, sensor frame): the refinement moves the offset along gravity; the
-//!   verdict's sample carries its batch's mean after the refinement (`zs_mean_mps2`), so the
-//!   offset it moved is that batch's mean as emitted minus that, subtracted from every sample.
+//! - accelerometer (m/s^2, sensor frame): the refinement moves the offset along gravity. The
+//!   kept samples left the stage with the refinement the verdict's sample carries (none yet:
+//!   the stage corrected its batch before the verdict), so they are kept as they left, and the
+//!   filter aligned on them follows the stage's first refinement from there
+//!   (`crate::eskf::Eskf::with_refinement`). (Shifted by the difference of a batch's mean as
+//!   emitted and the verdict's detector mean, they carried the difference between the two
+//!   means as well: where the last kept batch was not the verdict's, and with an engine
+//!   shaking every sample by 0.4 m/s^2, wid-car-06 of docs/real-data.md aligned 0.03 m/s^2 off
+//!   along gravity with a GLRT window of 1 s, its vertical velocity ran off at that rate and the
+//!   car ended 266 m off after 177 m; with the uncalibrated perturbation of docs/real-data.md,
+//!   the shift was the stage's first refinement itself, 2.1 m/s^2 on rtklib-walk-0827, and the
+//!   filter, told the samples carried none, took that refinement again for a change of its
+//!   bias: 154.9 m off.)
 //!
 //! The refinement the sums carry (`AlignSums::refined`, which the filter follows the stage's
-//! refinement from: `crate::eskf::Eskf::with_refinement`) is therefore the one the samples left
-//! with plus those two shifts, not the verdict sample's own, which carries none yet.
+//! refinement from) is therefore the verdict's, plus the window's mean rate the gyroscope's
+//! samples had taken away.
 //!
 //! The verdict's sample is the first with `BIAS_REFINED` (the samples of its batch before it
 //! are flagged `DETECTOR_READY` once settled, but not refined). A stream that starts ready
@@ -98,16 +108,15 @@ impl LearningWindow {
 
     /// Takes the unaligned filter's sample `m` at `t_ns` (`usable`: neither clipped nor
     /// implausible; `ready`, `refined`: its `DETECTOR_READY` and `BIAS_REFINED` flags;
-    /// `zs_mean`: its detector window's mean, m/s^2; `carried`: the stage's refinement it
-    /// carries, the window's before the verdict's first refinement). Returns the alignment
-    /// sums of the learned window, in the refined terms, at the learned verdict's sample;
-    /// `None` before and after it. `learned_rest_s` 0 keeps nothing.
+    /// `carried`: the stage's refinement it carries). Returns the alignment sums of the
+    /// learned window, in the refined terms, at the learned verdict's sample; `None` before
+    /// and after it. `learned_rest_s` 0 keeps nothing.
     pub(super) fn take(
         &mut self,
         t_ns: u64,
         m: &Imu,
         flags: (bool, bool, bool),
-        (zs_mean, carried): (Vector3<f64>, Refinement),
+        carried: Refinement,
         learned_rest_s: f64,
     ) -> Option<AlignSums> {
         let (usable, ready, refined) = flags;
@@ -130,23 +139,15 @@ impl LearningWindow {
             self.ready_kept += usize::from(ready);
             return None;
         }
-        let sums = self.sums(learned_rest_s, zs_mean, carried);
+        let sums = self.sums(learned_rest_s, carried);
         self.clear();
         sums
     }
 
     /// The alignment sums of the kept samples of the last `learned_rest_s` (the newest the
-    /// verdict's), refined (module documentation), `carried` the stage's refinement they
-    /// carried as emitted. Their [`AlignSums::refined`] is `carried` plus what the sums
-    /// subtract from them: the accelerometer's shift and the gyroscope's window mean, so that
-    /// the filter aligned on them follows the stage's refinement from the terms they are in
-    /// (`eskf::Eskf::with_refinement`).
-    fn sums(
-        &self,
-        learned_rest_s: f64,
-        zs_mean: Vector3<f64>,
-        carried: Refinement,
-    ) -> Option<AlignSums> {
+    /// verdict's), refined, with the refinement they carry (module documentation; `carried`:
+    /// the verdict's).
+    fn sums(&self, learned_rest_s: f64, carried: Refinement) -> Option<AlignSums> {
         let last = *self.kept.newest(0)?;
         let dt_ns = last.t_ns - self.kept.newest(1)?.t_ns;
         // The learner's window of `n` samples spans `n - 1` intervals.
@@ -158,12 +159,6 @@ impl LearningWindow {
             return None;
         }
         let window = || (0..n).rev().filter_map(|i| self.kept.newest(i));
-        let batch = n.min(BATCH_LEN);
-        let batch_mean = (0..batch)
-            .filter_map(|i| self.kept.newest(i))
-            .fold(Vector3::zeros(), |acc, k| acc + k.f)
-            / batch as f64;
-        let accel_shift = batch_mean - zs_mean;
         let gyro_mean = window().fold(Vector3::zeros(), |acc, k| acc + k.w) / n as f64;
         let mut sums = AlignSums::default();
         for (i, k) in window().enumerate() {
@@ -172,11 +167,11 @@ impl LearningWindow {
                 // intervals), and a quarter of one for the jitter of the times.
                 sums.t0_ns = k.t_ns.saturating_sub(dt_ns + dt_ns / 4);
             }
-            sums.accel.push(k.f - accel_shift);
+            sums.accel.push(k.f);
             sums.gyro.push(k.w - gyro_mean);
         }
         let refined = Refinement {
-            accel: carried.accel + accel_shift,
+            accel: carried.accel,
             gyro: carried.gyro + gyro_mean,
         };
         sums.refined = RefinementMean::repeated(refined, n as u64);
@@ -207,11 +202,10 @@ impl Navigator {
         let ready = s.flags & corrected_flags::DETECTOR_READY != 0;
         let refined = s.flags & corrected_flags::BIAS_REFINED != 0;
         let learned_rest_s = self.cfg.learned_rest_s;
-        let zs_mean = Vector3::from(s.zs_mean_mps2);
         let t_ns = s.stamps.sample_ns;
         let flags = (usable, ready, refined);
-        let window = (zs_mean, self.refinement);
-        let Some(sums) = self.learning.take(t_ns, m, flags, window, learned_rest_s) else {
+        let carried = self.refinement;
+        let Some(sums) = self.learning.take(t_ns, m, flags, carried, learned_rest_s) else {
             return false;
         };
         let sums = AlignSums {
