@@ -226,14 +226,14 @@ fn an_uncalibrated_part_driven_on_slopes_is_covered_by_its_1_sigma() {
 /// aligns on the learning window and the short rest flagged after it together
 /// (`odometry::navigator::learning`). The calibration stage's first refinement removes the
 /// uncalibrated part's error along gravity (about 2.1 m/s^2 here) from the samples after the
-/// learned verdict; the learning window's samples are put in those terms by the alignment, and
-/// the refinement they are taken to carry must be that one too, or the filter's first follow of
-/// the refinement (`eskf::Eskf::follow_refinement`) moves its bias by the difference and
-/// integrates it as vertical acceleration. Taken as the refinement of the verdict's own sample
-/// (none yet), seed 4 ended 24.4 m off vertically with a vertical 1-sigma of 0.28 m, its
-/// horizontal 1-sigma 19.5 m; now 0.22 m vertically. (The corpus's hand-held walk with the
-/// same perturbation, rtklib-walk-0827 of docs/real-data.md, aligned that way and climbed at
-/// 1.7 m/s^2: 155 m off, now 8.5 m.)
+/// learned verdict; the learning window's accelerometer samples left before it, as did the
+/// verdict's own sample, and the refinement the alignment takes them to carry must be the one
+/// they left with, or the filter's first follow of the refinement
+/// (`eskf::Eskf::follow_refinement`) moves its bias by the difference and integrates it as
+/// vertical acceleration. With the samples shifted by that refinement while taken to carry
+/// none, seed 4 ended 24.4 m off vertically with a vertical 1-sigma of 0.28 m, its horizontal
+/// 1-sigma 19.5 m. (The corpus's hand-held walk with the same perturbation, rtklib-walk-0827
+/// of docs/real-data.md, aligned that way climbed at 1.7 m/s^2 and ended 155 m off.)
 #[test]
 fn an_uncalibrated_part_aligned_on_its_learning_window_follows_the_refinement_from_it() {
     let dir = std::env::temp_dir().join(unique_namespace("uncalibrated-learned"));
