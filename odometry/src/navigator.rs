@@ -586,24 +586,8 @@ impl Navigator {
             hints.wait_step(kf, dt, t_ns, unknown);
             hints.velocity_step(kf, dt, t_ns, unknown);
             while let Some(h) = hints.speed.pop() {
-                let turns = hints
-                    .cfg
-                    .mounting_from_turns
-                    .then(|| {
-                        hints.forward.hint(
-                            h.stamps.sample_ns,
-                            h.forward_speed_mps,
-                            h.forward_speed_sigma_mps,
-                            &reference,
-                        )
-                    })
-                    .flatten();
-                if let Some(fit) = hints.fit_to_take(turns, kf) {
-                    match hints.remount(&fit, t_ns) {
-                        None => hints.restart_velocity(kf, &h, unknown),
-                        Some(turn) => body_turn = turn * body_turn,
-                    }
-                    hints.scale_from_fit(kf, &fit, t_ns);
+                if let Some((fit, turn)) = hints.mount_from(kf, &h, &reference, t_ns, unknown) {
+                    body_turn = turn * body_turn;
                     if let Some(nhc) = self.nhc.as_mut() {
                         nhc.follow(fit.mounting, fit.sigma_rad);
                     }

@@ -219,14 +219,40 @@ impl Hints {
             })
     }
 
+    /// What the speed hint `h` at `t_ns` (before its update) brings to an estimated mounting
+    /// (no `--mount`): the speed-change fit's interval closed with the filter's `reference`,
+    /// and the mounting taken from it or the path ([`Self::fit_to_take`]); the first restarts
+    /// the velocity ([`Self::restart_velocity`]), a later one turns the stored body velocities.
+    /// Returns the fit taken and the turn of the body frame it made (identity for the first).
+    pub(super) fn mount_from(
+        &mut self,
+        kf: &mut Eskf,
+        h: &RobotHint,
+        reference: &Reference,
+        t_ns: u64,
+        direction_unknown: bool,
+    ) -> Option<(ForwardFit, Matrix3<f64>)> {
+        let turns = self.cfg.mounting_from_turns.then(|| {
+            let (speed, sigma) = (h.forward_speed_mps, h.forward_speed_sigma_mps);
+            self.forward
+                .hint(h.stamps.sample_ns, speed, sigma, reference)
+        });
+        let fit = self.fit_to_take(turns.flatten(), kf)?;
+        let turn = match self.remount(&fit, t_ns) {
+            None => {
+                self.restart_velocity(kf, h, direction_unknown);
+                Matrix3::identity()
+            }
+            Some(turn) => turn,
+        };
+        self.scale_from_fit(kf, &fit, t_ns);
+        Some((fit, turn))
+    }
+
     /// The mounting to take from the speed-change fit `turns` (if one was trusted at this hint)
     /// and the path's ([`Self::path_fit`]): the fit fused with the path's estimate once there is
     /// one ([`crate::velocity_axis::fuse`]), else whichever there is.
-    pub(super) fn fit_to_take(
-        &mut self,
-        turns: Option<ForwardFit>,
-        kf: &Eskf,
-    ) -> Option<ForwardFit> {
+    fn fit_to_take(&mut self, turns: Option<ForwardFit>, kf: &Eskf) -> Option<ForwardFit> {
         let path = self.path_fit.or_else(|| self.velocity_fit(kf));
         match (turns, path) {
             (Some(t), Some(p)) => Some(fuse(&t, &p)),
