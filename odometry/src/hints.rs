@@ -122,12 +122,38 @@ pub struct ScaleTaken {
     pub taken: (f64, f64),
 }
 
+/// Where an estimated forward axis came from (no `--mount`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AxisSource {
+    /// The speed hints' changes and turns against the specific force
+    /// (`odometry::cruise::ForwardAxis`).
+    SpeedChanges,
+    /// The path the filter integrated from a rest against the hints' distance
+    /// (`odometry::velocity_axis`).
+    Path,
+    /// Both, fused by their inverse variances (`odometry::velocity_axis::fuse`).
+    Fused,
+}
+
+impl AxisSource {
+    /// The name reports use: `speed_changes`, `path` or `fused`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::SpeedChanges => "speed_changes",
+            Self::Path => "path",
+            Self::Fused => "fused",
+        }
+    }
+}
+
 /// What the forward axis estimated from the speed hints gave (`odometry::cruise::
-/// ForwardAxis`), for reports.
+/// ForwardAxis`, `odometry::velocity_axis`), for reports.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ForwardAxisReport {
     /// When it was first trusted, ns (sample clock).
     pub trusted_at_ns: u64,
+    /// Where the latest mounting came from.
+    pub source: AxisSource,
     /// The latest fit's yaw 1-sigma from its residuals (the fit's noise), rad.
     pub yaw_sigma_rad: f64,
     /// The latest fit's whole yaw 1-sigma, the reference's horizontal bias included, rad: what

@@ -46,6 +46,9 @@ fn a_slow_robot_takes_its_forward_axis_from_the_path_of_its_first_seconds() {
             case.initial_rest_s
         );
         assert!(trusted_s < case.initial_rest_s + FIT_LEAST_S, "{v}");
+        // The path gave it; a later speed-change fit is fused with it.
+        let source = forward["source"].as_str().unwrap();
+        assert!(["path", "fused"].contains(&source), "{v}");
         assert!((yaw - 90.0).abs() < 3.0 * sigma.max(0.5), "{v}");
         assert!(v["hints"]["speed_updates"].as_u64().unwrap() > 0, "{v}");
         assert!(error < 0.05 * distance, "{v}");

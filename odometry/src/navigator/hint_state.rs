@@ -6,8 +6,8 @@ use crate::cruise::{ForwardAxis, ForwardFit, Reference, horizontal_bias_sigma, i
 use crate::eskf::{BG, Eskf, V};
 use crate::handover::{WaitPath, WaitRevision};
 use crate::hints::{
-    ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring, SCALE_CONFLICT_SIGMAS,
-    ScaleTaken,
+    AxisSource, ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring,
+    SCALE_CONFLICT_SIGMAS, ScaleTaken,
 };
 use crate::speed_lag::LagNoise;
 use crate::velocity_axis::{VelocityAxis, fuse};
@@ -86,8 +86,9 @@ pub(super) struct Hints {
     pub(super) path_fit: Option<ForwardFit>,
     /// Time the forward axis was first trusted, ns (sample clock).
     pub(super) mounting_at_ns: Option<u64>,
-    /// The latest trusted forward-axis fit.
+    /// The latest trusted forward-axis fit, and where it came from.
     pub(super) latest_fit: Option<ForwardFit>,
+    pub(super) axis_source: Option<AxisSource>,
     /// What the filter took from the first trusted fit's speed scale.
     pub(super) scale_taken: Option<ScaleTaken>,
     /// The estimated mounting's yaw error carried as a systematic position error: `sum
@@ -138,6 +139,7 @@ impl Hints {
             path_fit: None,
             mounting_at_ns: None,
             latest_fit: None,
+            axis_source: None,
             scale_taken: None,
             systematic: [0.0; 2],
             along: [0.0; 2],
@@ -170,6 +172,7 @@ impl Hints {
         self.path_fit = other.path_fit;
         self.mounting_at_ns = other.mounting_at_ns;
         self.latest_fit = other.latest_fit;
+        self.axis_source = other.axis_source;
         self.scale_taken = other.scale_taken;
         self.systematic = other.systematic;
         self.along = other.along;
@@ -237,7 +240,8 @@ impl Hints {
             self.forward
                 .hint(h.stamps.sample_ns, speed, sigma, reference)
         });
-        let fit = self.fit_to_take(turns.flatten(), kf)?;
+        let (fit, source) = self.fit_to_take(turns.flatten(), kf)?;
+        self.axis_source = Some(source);
         let turn = match self.remount(&fit, t_ns) {
             None => {
                 self.restart_velocity(kf, h, direction_unknown);
@@ -252,12 +256,16 @@ impl Hints {
     /// The mounting to take from the speed-change fit `turns` (if one was trusted at this hint)
     /// and the path's ([`Self::path_fit`]): the fit fused with the path's estimate once there is
     /// one ([`crate::velocity_axis::fuse`]), else whichever there is.
-    fn fit_to_take(&mut self, turns: Option<ForwardFit>, kf: &Eskf) -> Option<ForwardFit> {
+    fn fit_to_take(
+        &mut self,
+        turns: Option<ForwardFit>,
+        kf: &Eskf,
+    ) -> Option<(ForwardFit, AxisSource)> {
         let path = self.path_fit.or_else(|| self.velocity_fit(kf));
         match (turns, path) {
-            (Some(t), Some(p)) => Some(fuse(&t, &p)),
-            (Some(t), None) => Some(t),
-            (None, p) if self.r_bs.is_none() => p,
+            (Some(t), Some(p)) => Some((fuse(&t, &p), AxisSource::Fused)),
+            (Some(t), None) => Some((t, AxisSource::SpeedChanges)),
+            (None, Some(p)) if self.r_bs.is_none() => Some((p, AxisSource::Path)),
             (None, _) => None,
         }
     }
@@ -584,6 +592,7 @@ impl Hints {
         let (t, fit) = (self.mounting_at_ns?, self.latest_fit?);
         Some(ForwardAxisReport {
             trusted_at_ns: t,
+            source: self.axis_source?,
             yaw_sigma_rad: fit.sigma_rad,
             yaw_systematic_sigma_rad: fit.systematic_sigma_rad(),
             scale_fit: fit.scale.map(|k| (k, fit.scale_sigma)),

@@ -661,6 +661,7 @@ fn forward_axis_json(chain: &OfflineChain, first_ns: u64) -> serde_json::Value {
     });
     json!({
         "trusted_at_s": f.trusted_at_ns.saturating_sub(first_ns) as f64 * 1e-9,
+        "source": f.source.name(),
         "yaw_sigma_deg": f.yaw_sigma_rad.to_degrees(),
         "yaw_systematic_sigma_deg": f.yaw_systematic_sigma_rad.to_degrees(),
         "scale_fit": f.scale_fit.map(|(k, s)| json!({"k": k, "sigma": s})),
