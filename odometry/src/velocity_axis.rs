@@ -1,16 +1,16 @@
 //! The forward axis from the path the filter integrates while its velocity is still well
 //! known: a wheeled robot that does not skid moves along its forward axis, so in the sensor
 //! frame its velocity points along that axis whatever it turns (`v_s = R_bs^T (v, 0, 0)`),
-//! and the sensor-frame displacement of a motion, `sum q^-1 v dt`, points along it too, as
-//! long as the speed hints' distance over the same samples (signed: a robot may reverse).
-//! From a rest the filter knows its velocity to a few centimetres per second for a second or
+//! and the sensor-frame displacement of a motion, `sum q^-1 v dt`, points along it too, signed
+//! by the speed hints' distance over the same samples (a robot may reverse). From a rest the filter knows its velocity to a few centimetres per second for a second or
 //! two; the displacement's direction is then known within degrees.
 //!
 //! The speed-change fit ([`crate::cruise::ForwardAxis`]) needs the accelerations to stand
 //! out of what the floor's slope and the body's tilt leave in the horizontal specific force;
 //! at a small robot's 0.1-0.2 m/s they do not (the corpus's TurtleBot, docs/hints.md), while
 //! the path's direction is known within degrees a couple of seconds after a start. Both feed
-//! one mounting: the first trusted gives it, a later one replaces it only when known better.
+//! one mounting: the first trusted gives it, and each later speed-change fit is fused with the
+//! path's estimate ([`fuse`]).
 //!
 //! A displacement, not the velocity at each hint: a body rocking on its wheels or suspension
 //! moves the velocity's direction by its swing's speed over the robot's (on a simulated robot
@@ -21,9 +21,7 @@
 
 use nalgebra::{UnitQuaternion, Vector3};
 
-use crate::cruise::ForwardFit;
-
-use crate::cruise::{FORWARD_MAX_SIGMA_RAD, MIN_SPEED_MPS};
+use crate::cruise::{FORWARD_MAX_SIGMA_RAD, ForwardFit, MIN_SPEED_MPS};
 use crate::hints::mounting_from;
 
 /// The least distance the speed hints must count in a motion before its direction is
