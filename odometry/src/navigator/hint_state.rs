@@ -215,11 +215,21 @@ impl Hints {
     /// the same lateral velocity error for new information several times per hint, and with
     /// the heading kept ([`crate::eskf::Heading`]) turned the gyro bias about up instead.
     pub(super) fn speed_in_use(&self, t_ns: u64) -> bool {
-        self.r_bs.is_some()
-            && self.newest.is_some_and(|h| {
-                h.flags & hint_flags::SPEED_VALID != 0
-                    && t_ns.saturating_sub(h.stamps.sample_ns) <= self.max_age_ns
-            })
+        self.r_bs.is_some() && self.fresh_speed(t_ns).is_some()
+    }
+
+    /// The newest delivered hint if it carries a speed and is fresh at `t_ns`.
+    fn fresh_speed(&self, t_ns: u64) -> Option<RobotHint> {
+        self.newest.filter(|h| {
+            h.flags & hint_flags::SPEED_VALID != 0
+                && t_ns.saturating_sub(h.stamps.sample_ns) <= self.max_age_ns
+        })
+    }
+
+    /// Whether the mounting is still to be estimated from the path ([`VelocityAxis`]): none
+    /// given nor estimated yet.
+    fn path_wanted(&self) -> bool {
+        self.r_bs.is_none() && self.cfg.mounting_from_turns
     }
 
     /// What the speed hint `h` at `t_ns` (before its update) brings to an estimated mounting
@@ -281,19 +291,15 @@ impl Hints {
         t_ns: u64,
         direction_unknown: bool,
     ) {
-        if self.r_bs.is_some() || !self.cfg.mounting_from_turns {
+        if !self.path_wanted() {
             return;
         }
-        let fresh = self.newest.filter(|h| {
-            h.flags & hint_flags::SPEED_VALID != 0
-                && t_ns.saturating_sub(h.stamps.sample_ns) <= self.max_age_ns
-        });
-        let Some(h) = fresh.filter(|_| !direction_unknown) else {
+        let Some(h) = self.fresh_speed(t_ns).filter(|_| !direction_unknown) else {
             self.velocity_axis.restart();
             return;
         };
         let v_s = kf.x.q.inverse_transform_vector(&kf.x.v);
-        let v_sigma = (0.5 * (kf.cov[(V, V)] + kf.cov[(V + 1, V + 1)])).sqrt();
+        let v_sigma = horizontal_velocity_var(kf).sqrt();
         let (speed, sigma) = (h.forward_speed_mps, h.forward_speed_sigma_mps);
         self.velocity_axis.step(&v_s, v_sigma, speed, sigma, dt_s);
     }
@@ -301,7 +307,7 @@ impl Hints {
     /// The forward axis from the motion's path ([`VelocityAxis`]) while no mounting is known:
     /// the fit to take, once trusted (its speed scale unknown).
     fn velocity_fit(&mut self, kf: &Eskf) -> Option<ForwardFit> {
-        if self.r_bs.is_some() || !self.cfg.mounting_from_turns {
+        if !self.path_wanted() {
             return None;
         }
         let up_s = kf.x.q.inverse_transform_vector(&Vector3::z());
@@ -357,8 +363,7 @@ impl Hints {
             return;
         };
         let speed = h.forward_speed_mps;
-        let horizontal_var = 0.5 * (kf.cov[(V, V)] + kf.cov[(V + 1, V + 1)]);
-        if !direction_unknown && horizontal_var.sqrt() <= speed.abs() {
+        if !direction_unknown && horizontal_velocity_var(kf).sqrt() <= speed.abs() {
             return;
         }
         let forward_sigma = h
@@ -599,6 +604,11 @@ impl Hints {
             scale_taken: self.scale_taken,
         })
     }
+}
+
+/// The filter's velocity variance per horizontal axis (navigation frame), (m/s)^2.
+fn horizontal_velocity_var(kf: &Eskf) -> f64 {
+    0.5 * (kf.cov[(V, V)] + kf.cov[(V + 1, V + 1)])
 }
 
 impl super::Navigator {
