@@ -246,6 +246,9 @@ pub struct Eskf {
     /// The calibration stage's refinement of the last sample: accelerometer offset (m/s^2)
     /// and gyroscope bias (rad/s), sensor frame (module `refinement`).
     refined: Option<Refinement>,
+    /// `refined` is an alignment window's mean ([`Self::with_refinement`]): the next
+    /// [`Self::follow_refinement`] follows the gyroscope's change as well.
+    refined_window: bool,
 }
 
 /// Skew-symmetric matrix: `skew(a) * b == a.cross(&b)`.
@@ -273,6 +276,7 @@ impl Eskf {
             reported: Reported::default(),
             q_scale: 1.0,
             refined: None,
+            refined_window: false,
         }
         .with_sigma()
     }
