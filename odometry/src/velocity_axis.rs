@@ -120,8 +120,8 @@ pub const COARSE_WAIT_M: f64 = 1.0;
 /// else the coarse estimate with the least 1-sigma (at most [`COARSE_MAX_SIGMA_RAD`]), held
 /// back until the speed hints have counted [`COARSE_WAIT_M`] since the first one.
 ///
-/// A coarse estimate's 1-sigma is honest (within 1.7 sigmas of the truth at its first trust on
-/// eleven simulated TurtleBot starts and the corpus's five TurtleBot runs, docs/hints.md), but
+/// A coarse estimate's 1-sigma is honest (within 1.8 of its 1-sigmas of the truth at its first
+/// trust on eleven simulated TurtleBot starts and on the corpus's TurtleBot, docs/hints.md), but
 /// a mounting 10-20 degrees off turns the whole track by that much, and the speed-change fit
 /// fused with it later ([`fuse`]) leaves much of that error: the fit, when it comes, is the
 /// better start. A robot whose fit never comes (the corpus's TurtleBot) takes the coarse axis
