@@ -81,6 +81,15 @@ impl VelocityAxis {
     /// distances agreeing within [`AGREEMENT_SIGMAS`], the 1-sigma at most
     /// [`FORWARD_MAX_SIGMA_RAD`].
     pub fn mounting(&self, up_s: &Vector3<f64>) -> Option<(UnitQuaternion<f64>, f64)> {
+        self.mounting_within(up_s, FORWARD_MAX_SIGMA_RAD)
+    }
+
+    /// [`Self::mounting`] with the 1-sigma at most `max_sigma_rad`.
+    fn mounting_within(
+        &self,
+        up_s: &Vector3<f64>,
+        max_sigma_rad: f64,
+    ) -> Option<(UnitQuaternion<f64>, f64)> {
         let horizontal = self.displacement - up_s * up_s.dot(&self.displacement);
         let (ours, hinted) = (horizontal.norm(), self.distance.abs());
         let combined = self.displacement_sigma.hypot(self.distance_sigma);
@@ -88,7 +97,7 @@ impl VelocityAxis {
             return None;
         }
         let sigma = self.displacement_sigma / ours.min(hinted);
-        if sigma > FORWARD_MAX_SIGMA_RAD {
+        if sigma > max_sigma_rad {
             return None;
         }
         Some((
@@ -98,11 +107,81 @@ impl VelocityAxis {
     }
 }
 
+/// The largest 1-sigma of a coarse path axis ([`PathAxis`]), rad: 20 degrees.
+pub const COARSE_MAX_SIGMA_RAD: f64 = 0.35;
+
+/// How far the speed hints must count after the first coarse path axis before it is taken,
+/// m: the speed-change fit's least excitation
+/// ([`crate::cruise::FORWARD_MIN_INTERVALS`] intervals of [`crate::cruise::FORWARD_INTERVAL_S`], 3 s) at a third of a metre per second, a small robot's top speed.
+pub const COARSE_WAIT_M: f64 = 1.0;
+
+/// The forward axis from the path over the motions before a mounting is known: each
+/// motion's [`VelocityAxis`], taken once its 1-sigma is at most [`FORWARD_MAX_SIGMA_RAD`];
+/// else the coarse estimate with the least 1-sigma (at most [`COARSE_MAX_SIGMA_RAD`]), held
+/// back until the speed hints have counted [`COARSE_WAIT_M`] since the first one.
+///
+/// A coarse estimate's 1-sigma is honest (within 1.8 of its 1-sigmas of the truth at its first
+/// trust on eleven simulated TurtleBot starts and on the corpus's TurtleBot, docs/hints.md), but
+/// a mounting 10-20 degrees off turns the whole track by that much, and the speed-change fit
+/// fused with it later ([`fuse`]) leaves much of that error: the fit, when it comes, is the
+/// better start. A robot whose fit never comes (the corpus's TurtleBot) takes the coarse axis
+/// rather than none.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PathAxis {
+    /// The current motion's path.
+    motion: VelocityAxis,
+    /// The coarse estimate with the least 1-sigma so far: the mounting and its yaw 1-sigma, rad.
+    coarse: Option<(UnitQuaternion<f64>, f64)>,
+    /// The speed hints' unsigned distance since the first coarse estimate, m.
+    since_coarse_m: f64,
+}
+
+impl PathAxis {
+    /// A rest, a stale hint or an unknown velocity: the next motion starts anew (a coarse
+    /// estimate is kept).
+    pub fn restart(&mut self) {
+        self.motion.restart();
+    }
+
+    /// [`VelocityAxis::step`], and the distance since a coarse estimate.
+    pub fn step(
+        &mut self,
+        v_s: &Vector3<f64>,
+        v_sigma: f64,
+        speed: f64,
+        speed_sigma: f64,
+        dt: f64,
+    ) {
+        self.motion.step(v_s, v_sigma, speed, speed_sigma, dt);
+        if self.coarse.is_some() {
+            self.since_coarse_m += speed.abs() * dt;
+        }
+    }
+
+    /// The mounting and its yaw 1-sigma (rad) with `up_s` the filter's up in the sensor frame:
+    /// the motion's once trusted, else the coarse one once waited for (see [`PathAxis`]).
+    pub fn mounting(&mut self, up_s: &Vector3<f64>) -> Option<(UnitQuaternion<f64>, f64)> {
+        let found = self.motion.mounting_within(up_s, COARSE_MAX_SIGMA_RAD);
+        if let Some((q, sigma)) = found {
+            if sigma <= FORWARD_MAX_SIGMA_RAD {
+                return found;
+            }
+            if self.coarse.is_none_or(|(_, s)| sigma < s) {
+                self.coarse = Some((q, sigma));
+            }
+        }
+        if self.since_coarse_m >= COARSE_WAIT_M {
+            return self.coarse;
+        }
+        None
+    }
+}
+
 /// Two independent estimates of one forward axis fused: the speed-change fit `turns` and the
 /// path's `path` ([`VelocityAxis`]), their yaws about `turns`'s up averaged with the inverse
 /// variances of their whole 1-sigmas ([`ForwardFit::systematic_sigma_rad`]), the 1-sigma
 /// the inverse of the summed inverse variances; the speed scale is the fit's (the path tells
-/// none). Small angles: both are trusted within [`FORWARD_MAX_SIGMA_RAD`].
+/// none). Small angles: both are trusted within [`COARSE_MAX_SIGMA_RAD`].
 pub fn fuse(turns: &ForwardFit, path: &ForwardFit) -> ForwardFit {
     let (w_t, w_p) = (
         turns.systematic_sigma_rad().powi(-2),
@@ -183,6 +262,41 @@ mod tests {
         assert!(axis.mounting(&up).is_some());
         axis.restart();
         assert!(axis.mounting(&up).is_none());
+    }
+
+    #[test]
+    fn a_coarse_path_waits_for_the_speed_change_fit() {
+        let up = Vector3::z();
+        let forward = Vector3::new(0.0, -1.0, 0.0);
+        // 0.2 m/s with 1-sigma 0.03 m/s per axis: 0.03 / 0.2 rad, 8.6 degrees; with 0.05 m/s,
+        // 0.25 rad, 14.3 degrees, coarse.
+        let drive = |axis: &mut PathAxis, steps: u32, sigma: f64| {
+            for _ in 0..steps {
+                axis.step(&(forward * 0.2), sigma, 0.2, 0.01, 0.02);
+            }
+        };
+        let mut fine = PathAxis::default();
+        drive(&mut fine, 50, 0.03);
+        let (_, sigma) = fine.mounting(&up).expect("trusted at once");
+        assert!((sigma - 0.15).abs() < 1e-9, "{sigma}");
+        let mut coarse = PathAxis::default();
+        drive(&mut coarse, 50, 0.05);
+        assert!(coarse.mounting(&up).is_none());
+        // A rest: the coarse estimate is kept, the hints' distance counted on.
+        coarse.restart();
+        drive(&mut coarse, 240, 0.5);
+        assert!(
+            coarse.mounting(&up).is_none(),
+            "0.96 m since the coarse one"
+        );
+        drive(&mut coarse, 20, 0.5);
+        let (q, sigma) = coarse.mounting(&up).expect("1.04 m since the coarse one");
+        assert!((sigma - 0.25).abs() < 1e-9, "{sigma}");
+        assert!((forward_of(&q) - forward).norm() < 1e-9, "{q:?}");
+        // Beyond the coarse bound: never.
+        let mut poor = PathAxis::default();
+        drive(&mut poor, 300, 0.1);
+        assert!(poor.mounting(&up).is_none());
     }
 
     #[test]

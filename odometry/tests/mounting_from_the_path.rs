@@ -54,3 +54,62 @@ fn a_slow_robot_takes_its_forward_axis_from_the_path_of_its_first_seconds() {
         assert!(error < 0.05 * distance, "{v}");
     }
 }
+
+/// The corpus's TurtleBot starts gently and then keeps its speed: 0.05 m/s^2 to 0.15-0.2 m/s
+/// after 2 s of rest, legs of 15-20 s. From such a start the path's direction is known to
+/// 10-20 degrees only (the filter's velocity 1-sigma grows about as fast as the distance),
+/// and with so few speed changes the speed-change fit may not come: the coarse path axis is
+/// then taken once the hints have counted `odometry::velocity_axis::COARSE_WAIT_M` since it,
+/// and the speed hints apply from there on (on seed 2 the fit never comes: without the coarse
+/// axis no speed hint applied). Asserted for each drive: the forward axis trusted, its yaw
+/// within three of its 1-sigmas of the truth, speed hints applied, and the end within three
+/// of its published 1-sigmas per axis and within 30 % of the distance (a 17-degree axis turns
+/// the track by as much; the IMU-only constraint with its own mounting ends 3-4 times the
+/// distance off on the corpus's TurtleBot).
+#[test]
+fn a_gentle_start_takes_a_coarse_path_axis_when_the_fit_does_not_come() {
+    let mut failures = Vec::new();
+    for seed in [1, 2, 3] {
+        let dir = scratch("mounting-from-a-gentle-start");
+        let path = dir.join("drive.mcap");
+        let case = Case {
+            duration_s: 40.0,
+            rate_hz: 50.0,
+            turns: true,
+            initial_rest_s: 2.0,
+            cruise_speed_mps: [0.15, 0.2],
+            peak_accel_mps2: 0.05,
+            leg_s: [15.0, 20.0],
+            max_motion_s: 40.0,
+            mounting: UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 90f64.to_radians()),
+            dlpf: None,
+            ..Case::straight()
+        };
+        write_drive_with_encoder_hints(&path, &case, seed);
+        let v = offline_vehicle_json(env!("CARGO_BIN_EXE_mems-odometry"), &path, &[]);
+        std::fs::remove_dir_all(&dir).unwrap();
+        let forward = &v["hints"]["forward_axis"];
+        let a = |key: &str, i: usize| v[key][i].as_f64().unwrap();
+        let error = a("truth_error_m", 0).hypot(a("truth_error_m", 1));
+        let sigma_m = a("sigma_m", 0).hypot(a("sigma_m", 1)) / 2f64.sqrt();
+        let distance = v["truth_distance_m"].as_f64().unwrap();
+        let yaw = v["hints"]["mounting_rpy_deg"][2]
+            .as_f64()
+            .unwrap_or(f64::NAN);
+        let sigma = forward["yaw_systematic_sigma_deg"]
+            .as_f64()
+            .unwrap_or(f64::NAN);
+        eprintln!(
+            "seed {seed}: forward axis {forward}, yaw {yaw:.2} deg; end error {error:.3} m \
+             (1-sigma per axis {sigma_m:.3} m) after {distance:.2} m"
+        );
+        let ok = (yaw - 90.0).abs() < 3.0 * sigma
+            && v["hints"]["speed_updates"].as_u64().unwrap() > 0
+            && error < 0.3 * distance
+            && error < 3.0 * sigma_m;
+        if !ok {
+            failures.push(seed);
+        }
+    }
+    assert!(failures.is_empty(), "seeds {failures:?} (above)");
+}

@@ -10,7 +10,7 @@ use crate::hints::{
     SCALE_CONFLICT_SIGMAS, ScaleTaken,
 };
 use crate::speed_lag::LagNoise;
-use crate::velocity_axis::{VelocityAxis, fuse};
+use crate::velocity_axis::{PathAxis, fuse};
 use ipc_types::{RobotHint, hint_flags, odometry_flags};
 use nalgebra::{Matrix3, Vector3};
 
@@ -82,7 +82,7 @@ pub(super) struct Hints {
     pub(super) forward: ForwardAxis,
     /// The forward axis from the path the filter integrates (mounting not given), and its
     /// trusted estimate, which later speed-change fits are fused with.
-    pub(super) velocity_axis: VelocityAxis,
+    pub(super) velocity_axis: PathAxis,
     pub(super) path_fit: Option<ForwardFit>,
     /// Time the forward axis was first trusted, ns (sample clock).
     pub(super) mounting_at_ns: Option<u64>,
@@ -135,7 +135,7 @@ impl Hints {
             yaw_sigma_rad: 0.0,
             estimator: MountingEstimator::default(),
             forward: ForwardAxis::default(),
-            velocity_axis: VelocityAxis::default(),
+            velocity_axis: PathAxis::default(),
             path_fit: None,
             mounting_at_ns: None,
             latest_fit: None,
@@ -226,7 +226,7 @@ impl Hints {
         })
     }
 
-    /// Whether the mounting is still to be estimated from the path ([`VelocityAxis`]): none
+    /// Whether the mounting is still to be estimated from the path ([`PathAxis`]): none
     /// given nor estimated yet.
     fn path_wanted(&self) -> bool {
         self.r_bs.is_none() && self.cfg.mounting_from_turns
@@ -282,8 +282,8 @@ impl Hints {
 
     /// A sample of `dt_s` in motion at `t_ns` (after its prediction) while no mounting is
     /// known: the filter's velocity joins the motion's path against the fresh speed hint's
-    /// distance ([`VelocityAxis`]); a velocity with no direction or no fresh speed hint starts
-    /// the path anew.
+    /// distance ([`PathAxis`]); a velocity with no direction or no fresh speed hint starts the
+    /// motion's path anew.
     pub(super) fn velocity_step(
         &mut self,
         kf: &Eskf,
@@ -304,7 +304,7 @@ impl Hints {
         self.velocity_axis.step(&v_s, v_sigma, speed, sigma, dt_s);
     }
 
-    /// The forward axis from the motion's path ([`VelocityAxis`]) while no mounting is known:
+    /// The forward axis from the path ([`PathAxis`]) while no mounting is known:
     /// the fit to take, once trusted (its speed scale unknown).
     fn velocity_fit(&mut self, kf: &Eskf) -> Option<ForwardFit> {
         if !self.path_wanted() {
