@@ -281,6 +281,40 @@ fn a_window_much_noisier_than_the_measured_noise_is_not_learned() {
     }
 }
 
+/// A sensor that turns steadily about gravity from its first sample (a robot driving off in a
+/// curve) looks still to every steadiness test; at 40 deg/s, beyond any MEMS gyroscope's
+/// zero-rate offset, it is refused as a turn, naming its rate (the bias, 0.34 deg/s, with it)
+/// and the flag, and the rest
+/// after it is learned, with its own bias. Widened past the turn, the turn is learned as bias.
+#[test]
+fn a_steady_turn_faster_than_a_zero_rate_offset_is_not_learned() {
+    let turn = [0.0, 0.0, 40f64.to_radians()];
+    let mut det = detector(DetectorKind::Glrt);
+    let mut synth = Synth::new(11);
+    synth.feed(&mut det, 6.0, [0.0; 3], turn, 1.0);
+    assert!(!det.is_ready());
+    let why = det.learn_rejections().1.unwrap();
+    assert!(
+        matches!(why, LearnRejection::Turning { channel: 2, .. }),
+        "{why:?}"
+    );
+    let message = why.to_string();
+    assert!(
+        message.contains("+40.3 deg/s") && message.contains("--max-gyro-offset-dps"),
+        "{message}"
+    );
+    synth.feed(&mut det, 5.5, [0.0; 3], [0.0; 3], 1.0);
+    assert!(det.is_ready());
+    let (_, bias) = det.references().unwrap();
+    assert!((bias[2] - GYRO_BIAS[2]).abs() < 4.0 * GYRO_SIGMA / 5000f64.sqrt());
+    let mut config = config(DetectorKind::Glrt);
+    config.learn.max_gyro_offset_rps = 45f64.to_radians();
+    let mut det = ZeroStateDetector::new(config);
+    Synth::new(11).feed(&mut det, 5.5, [0.0; 3], turn, 1.0);
+    let (_, bias) = det.references().unwrap();
+    assert!((bias[2] - GYRO_BIAS[2] - turn[2]).abs() < 1e-3, "{bias:?}");
+}
+
 #[test]
 fn a_gap_empties_the_glrt_window_but_keeps_what_was_learned() {
     let (mut det, mut synth) = learned(DetectorKind::Glrt, 8);

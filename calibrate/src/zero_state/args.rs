@@ -40,6 +40,11 @@ pub struct DetectorArgs {
     /// never that still).
     #[arg(long, value_name = "MPS2")]
     pub max_rest_accel_sigma: Option<f64>,
+    /// Largest mean rate on any gyroscope axis the learned rest may show, deg/s (default 30:
+    /// `zero_state::learn::MAX_GYRO_OFFSET_DPS`, the largest zero-rate offset of a cheap MEMS
+    /// gyroscope; a faster steady rate is a turn).
+    #[arg(long, value_name = "DPS")]
+    pub max_gyro_offset_dps: Option<f64>,
     /// The GLRT's allowance for the zero-g offset of a part whose learned rest reads gravity
     /// more than 2 % off, 1-sigma per axis, m/s^2, turned with the gravity reference through
     /// turns and tilts (default 0.1 g; `mems-odometry`'s walking profile keeps a calibrated
@@ -88,6 +93,9 @@ impl DetectorArgs {
         if let Some(s) = self.max_rest_accel_sigma {
             config.learn.max_accel_sigma_mps2 = Some(positive("max-rest-accel-sigma", s)?);
         }
+        if let Some(r) = self.max_gyro_offset_dps {
+            config.learn.max_gyro_offset_rps = positive("max-gyro-offset-dps", r)?.to_radians();
+        }
         if let Some(s) = self.glrt_uncalibrated_offset_mps2 {
             config.glrt.uncalibrated_accel_bias_sigma_mps2 =
                 positive("glrt-uncalibrated-offset-mps2", s)?;
@@ -110,6 +118,7 @@ mod tests {
             glrt_window_s: Some(0.25),
             learn_s: Some(2.5),
             max_rest_accel_sigma: Some(0.15),
+            max_gyro_offset_dps: Some(45.0),
             glrt_uncalibrated_offset_mps2: Some(0.0061),
             uncalibrated: true,
             ..DetectorArgs::default()
@@ -119,6 +128,7 @@ mod tests {
         assert_eq!(c.glrt.window_s, 0.25);
         assert_eq!(c.learn.duration_s, 2.5);
         assert_eq!(c.learn.max_accel_sigma_mps2, Some(0.15));
+        assert_eq!(c.learn.max_gyro_offset_rps, 45f64.to_radians());
         assert_eq!(c.glrt.uncalibrated_accel_bias_sigma_mps2, 0.0061);
         assert!(c.offset_unknown && !default.offset_unknown);
         for (args, name) in [
@@ -149,6 +159,13 @@ mod tests {
                     ..Default::default()
                 },
                 "--max-rest-accel-sigma",
+            ),
+            (
+                DetectorArgs {
+                    max_gyro_offset_dps: Some(0.0),
+                    ..Default::default()
+                },
+                "--max-gyro-offset-dps",
             ),
             (
                 DetectorArgs {

@@ -8,6 +8,8 @@
 //! - the mean specific force must have the magnitude of local gravity (within
 //!   `max_gravity_error`: 5 % for a calibrated accelerometer, [`UNCALIBRATED_GRAVITY_ERROR`]
 //!   for one without a calibration, `--max-gravity-error` either way);
+//! - the gyroscope's mean rate must lie within a MEMS part's zero-rate offset on every axis
+//!   ([`MAX_GYRO_OFFSET_DPS`], `--max-gyro-offset-dps`): a faster steady rate is a turn;
 //! - the batch means must be *steady*. Their scatter against what the within-batch noise
 //!   predicts, `R = var(batch mean) n / sigma^2`, is 1 for white noise. A real sensor's own
 //!   low-pass filter (the MPU-9250's DLPF, other IMUs' internal filters) correlates successive
@@ -33,9 +35,9 @@
 //! carried to the longer window). Correlated samples also make a batch's within-batch sum of
 //! squares scatter more than `chi2(n - 1)`: its effective degrees of freedom, `2 E[ss]^2 /
 //! var(ss)` over the learned batches (at most `n - 1`), go with the reference for the GLRT's
-//! scatter test. A sensor that cruises steadily on a smooth floor, or turns at
-//! a constant rate about gravity, passes every check: no accelerometer or gyroscope test can
-//! tell that from rest.
+//! scatter test. A sensor that cruises steadily on a smooth floor, or turns at a constant
+//! rate about gravity slower than [`MAX_GYRO_OFFSET_DPS`], passes every check: no
+//! accelerometer or gyroscope test can tell that from rest.
 
 use crate::window::WindowStats;
 
@@ -100,7 +102,19 @@ pub struct LearnConfig {
     /// learning window about its mean) a rest shows, m/s^2, whatever the sensor: `None` for no
     /// such ceiling (see [`REST_ACCEL_SIGMA_MPS2`]).
     pub max_accel_sigma_mps2: Option<f64>,
+    /// Largest magnitude of the gyroscope's mean rate on any axis a rest may show, rad/s
+    /// (default [`MAX_GYRO_OFFSET_DPS`]).
+    pub max_gyro_offset_rps: f64,
 }
+
+/// The largest zero-rate offset of a cheap MEMS gyroscope, deg/s: the LSM9DS1's typical
+/// zero-rate level at its +-2000 deg/s range (ST DocID025715 rev 3, table 3, `G_TyOff`),
+/// above the MPU-6050's initial tolerance of +-20 deg/s (PS-MPU-6000A-00 rev 3.4, table 6.1)
+/// and the MPU-9250's +-5 deg/s (PS-MPU-9250A-01 rev 1.1, table 3.1). A window whose mean
+/// rate lies beyond it on some axis turns steadily (a robot that starts driving in a curve:
+/// the F1TENTH car of docs/real-data.md learned 44-53 deg/s about up that way), which the
+/// steadiness tests cannot see; taken for rest, the turn became the stage's gyroscope bias.
+pub const MAX_GYRO_OFFSET_DPS: f64 = 30.0;
 
 /// A ceiling on the per-sample accelerometer noise of a rest whatever the part, m/s^2 (15 mg):
 /// above the white noise of the project's and the corpus's parts at any rate they run at (a
@@ -128,6 +142,7 @@ impl LearnConfig {
             max_batch_correlation: 0.35,
             max_noise_ratio: 1.5,
             max_accel_sigma_mps2: None,
+            max_gyro_offset_rps: MAX_GYRO_OFFSET_DPS.to_radians(),
         }
     }
 }
@@ -222,6 +237,16 @@ pub enum LearnRejection {
         /// The largest allowed, m/s^2.
         limit_mps2: f64,
     },
+    /// The gyroscope's axis `channel` turns steadily faster than a part's zero-rate offset
+    /// ([`LearnConfig::max_gyro_offset_rps`]).
+    Turning {
+        /// The axis (0-2: x, y, z).
+        channel: usize,
+        /// Its mean rate over the window, deg/s.
+        rate_dps: f64,
+        /// The largest allowed, deg/s.
+        limit_dps: f64,
+    },
     /// A gap in the data interrupted learning.
     Interrupted,
 }
@@ -281,6 +306,17 @@ impl std::fmt::Display for LearnRejection {
                 "{} scatters {sigma_mps2:.3} m/s^2 about its mean (a rest at most {limit_mps2} \
                  m/s^2): the sensor is carried, not at rest",
                 CHANNELS[*channel]
+            ),
+            Self::Turning {
+                channel,
+                rate_dps,
+                limit_dps,
+            } => write!(
+                f,
+                "{} reads {rate_dps:+.1} deg/s on average, beyond a MEMS gyroscope's zero-rate \
+                 offset (at most {limit_dps:.0} deg/s: --max-gyro-offset-dps widens that): a \
+                 steady turn, not a rest",
+                CHANNELS[*channel + 3]
             ),
             Self::Interrupted => write!(f, "a gap in the data interrupted learning"),
         }
@@ -465,6 +501,14 @@ impl StaticLearner {
         let mut batch_dof = [n - 1.0; 6];
         for c in 0..6 {
             (mean[c], correlation[c], batch_dof[c]) = self.channel(c, sigma[c])?;
+        }
+        let limit = self.config.max_gyro_offset_rps;
+        if let Some(channel) = (0..3).find(|c| mean[c + 3].abs() > limit) {
+            return Err(LearnRejection::Turning {
+                channel,
+                rate_dps: mean[channel + 3].to_degrees(),
+                limit_dps: limit.to_degrees(),
+            });
         }
         let part = |a: &[f64; 6], off: usize| [a[off], a[off + 1], a[off + 2]];
         Ok(StaticReference {
