@@ -142,8 +142,9 @@ fn a_car_idling_at_its_stops_rests_there() {
 /// of the creep off the start, which the longer GLRT windows still flag rest, raised it: with
 /// `--glrt-window-s 1 --learn-s 0.5` and `--glrt-window-s 2 --learn-s 2` no stop of either
 /// seed had a rest, rests started while the car cruised, and the car ended 94.6-341.1 m off
-/// (seed 1) and 145.6-155.3 m (seed 3) against 24.2 and 2.6 m with the defaults; with the
-/// median every stop rests, and 97.6-112.8 and 8.4-14.2 m.
+/// (seed 1) and 145.6-155.3 m (seed 3). With the median every stop rests, and the car ends
+/// 97.6-112.6 m (seed 1) and 8.2-14.2 m (seed 3) off with the two flag pairs, 24.3 and 1.0 m
+/// with the defaults (`car_csv`'s `mems-sim drive`, then `mems-odometry offline --json`).
 #[test]
 fn a_car_idling_at_its_stops_rests_there_with_any_glrt_window() {
     let dir = std::env::temp_dir().join(unique_namespace("engine-stops-windows"));
