@@ -15,24 +15,39 @@ use nalgebra::{UnitQuaternion, Vector3};
 /// The speed-change fit's least excitation: six intervals of 0.5 s in motion, s.
 const FIT_LEAST_S: f64 = 3.0;
 
+/// A 40 s drive at 50 Hz with turns, the IMU yawed 90 degrees on the robot and white samples,
+/// with `case`'s other settings.
+fn yawed_robot(case: Case) -> Case {
+    Case {
+        duration_s: 40.0,
+        rate_hz: 50.0,
+        turns: true,
+        mounting: UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 90f64.to_radians()),
+        dlpf: None,
+        ..case
+    }
+}
+
+/// `mems-odometry offline` (vehicle profile, no `--mount`) on `case`'s drive at `seed` with
+/// encoder hints, written to a scratch directory `tag`: the JSON summary.
+fn run(tag: &str, case: &Case, seed: u64) -> serde_json::Value {
+    let dir = scratch(tag);
+    let path = dir.join("drive.mcap");
+    write_drive_with_encoder_hints(&path, case, seed);
+    let v = offline_vehicle_json(env!("CARGO_BIN_EXE_mems-odometry"), &path, &[]);
+    std::fs::remove_dir_all(&dir).unwrap();
+    v
+}
+
 #[test]
 fn a_slow_robot_takes_its_forward_axis_from_the_path_of_its_first_seconds() {
     for seed in [1, 2] {
-        let dir = scratch("mounting-from-the-path");
-        let path = dir.join("drive.mcap");
-        let case = Case {
-            duration_s: 40.0,
-            rate_hz: 50.0,
-            turns: true,
+        let case = yawed_robot(Case {
             initial_rest_s: 3.0,
             cruise_speed_mps: [0.15, 0.25],
-            mounting: UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 90f64.to_radians()),
-            dlpf: None,
             ..Case::straight()
-        };
-        write_drive_with_encoder_hints(&path, &case, seed);
-        let v = offline_vehicle_json(env!("CARGO_BIN_EXE_mems-odometry"), &path, &[]);
-        std::fs::remove_dir_all(&dir).unwrap();
+        });
+        let v = run("mounting-from-the-path", &case, seed);
         let forward = &v["hints"]["forward_axis"];
         let trusted_s = forward["trusted_at_s"].as_f64().unwrap();
         let yaw = v["hints"]["mounting_rpy_deg"][2].as_f64().unwrap();
@@ -70,24 +85,15 @@ fn a_slow_robot_takes_its_forward_axis_from_the_path_of_its_first_seconds() {
 fn a_gentle_start_takes_a_coarse_path_axis_when_the_fit_does_not_come() {
     let mut failures = Vec::new();
     for seed in [1, 2, 3] {
-        let dir = scratch("mounting-from-a-gentle-start");
-        let path = dir.join("drive.mcap");
-        let case = Case {
-            duration_s: 40.0,
-            rate_hz: 50.0,
-            turns: true,
+        let case = yawed_robot(Case {
             initial_rest_s: 2.0,
             cruise_speed_mps: [0.15, 0.2],
             peak_accel_mps2: 0.05,
             leg_s: [15.0, 20.0],
             max_motion_s: 40.0,
-            mounting: UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 90f64.to_radians()),
-            dlpf: None,
             ..Case::straight()
-        };
-        write_drive_with_encoder_hints(&path, &case, seed);
-        let v = offline_vehicle_json(env!("CARGO_BIN_EXE_mems-odometry"), &path, &[]);
-        std::fs::remove_dir_all(&dir).unwrap();
+        });
+        let v = run("mounting-from-a-gentle-start", &case, seed);
         let forward = &v["hints"]["forward_axis"];
         let a = |key: &str, i: usize| v[key][i].as_f64().unwrap();
         let error = a("truth_error_m", 0).hypot(a("truth_error_m", 1));
