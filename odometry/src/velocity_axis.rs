@@ -78,14 +78,8 @@ impl VelocityAxis {
 
     /// The mounting and its yaw 1-sigma (rad) with `up_s` the filter's up in the sensor frame,
     /// once trusted: at least [`MIN_DISTANCE_M`] counted, the filter's and the hints'
-    /// distances agreeing within [`AGREEMENT_SIGMAS`], the 1-sigma at most
-    /// [`FORWARD_MAX_SIGMA_RAD`].
-    pub fn mounting(&self, up_s: &Vector3<f64>) -> Option<(UnitQuaternion<f64>, f64)> {
-        self.mounting_within(up_s, FORWARD_MAX_SIGMA_RAD)
-    }
-
-    /// [`Self::mounting`] with the 1-sigma at most `max_sigma_rad`.
-    fn mounting_within(
+    /// distances agreeing within [`AGREEMENT_SIGMAS`], the 1-sigma at most `max_sigma_rad`.
+    pub fn mounting(
         &self,
         up_s: &Vector3<f64>,
         max_sigma_rad: f64,
@@ -161,7 +155,7 @@ impl PathAxis {
     /// The mounting and its yaw 1-sigma (rad) with `up_s` the filter's up in the sensor frame:
     /// the motion's once trusted, else the coarse one once waited for (see [`PathAxis`]).
     pub fn mounting(&mut self, up_s: &Vector3<f64>) -> Option<(UnitQuaternion<f64>, f64)> {
-        let found = self.motion.mounting_within(up_s, COARSE_MAX_SIGMA_RAD);
+        let found = self.motion.mounting(up_s, COARSE_MAX_SIGMA_RAD);
         if let Some((q, sigma)) = found {
             if sigma <= FORWARD_MAX_SIGMA_RAD {
                 return found;
@@ -231,18 +225,25 @@ mod tests {
         // 0.2 m/s for 0.4 s: 0.08 m, short of the least distance.
         assert!(
             drive(20, 0.2, Vector3::zeros(), 0.01)
-                .mounting(&up)
+                .mounting(&up, FORWARD_MAX_SIGMA_RAD)
                 .is_none()
         );
         // 0.01 m/s across 0.2 m/s for 2 s: 2.9 degrees; 1-sigma 0.02 m / 0.4 m.
         let err = Vector3::new(0.01, 0.0, 0.0);
-        let (q, sigma) = drive(100, 0.2, err, 0.01).mounting(&up).expect("trusted");
+        let (q, sigma) = drive(100, 0.2, err, 0.01)
+            .mounting(&up, FORWARD_MAX_SIGMA_RAD)
+            .expect("trusted");
         let expected = (Vector3::new(0.0, -1.0, 0.0) + err / 0.2).normalize();
         assert!((forward_of(&q) - expected).norm() < 1e-9, "{q:?}");
         assert!((sigma - 0.05).abs() < 1e-9, "{sigma}");
         // Reversing: the path runs along +y, the wheels say backwards, the axis is -y.
         let back = drive(100, -0.2, Vector3::zeros(), 0.01);
-        let f = forward_of(&back.mounting(&up).expect("trusted").0);
+        let f = forward_of(
+            &back
+                .mounting(&up, FORWARD_MAX_SIGMA_RAD)
+                .expect("trusted")
+                .0,
+        );
         assert!((f - Vector3::new(0.0, -1.0, 0.0)).norm() < 1e-9, "{f}");
     }
 
@@ -252,16 +253,20 @@ mod tests {
         // 1-sigma 0.05 m/s at 0.2 m/s: 14 degrees, above the bound.
         assert!(
             drive(200, 0.2, Vector3::zeros(), 0.05)
-                .mounting(&up)
+                .mounting(&up, FORWARD_MAX_SIGMA_RAD)
                 .is_none()
         );
         // The filter drives 0.5 m/s where the wheels say 0.2: not the robot's path.
         let err = Vector3::new(0.0, -0.3, 0.0);
-        assert!(drive(200, 0.2, err, 0.01).mounting(&up).is_none());
+        assert!(
+            drive(200, 0.2, err, 0.01)
+                .mounting(&up, FORWARD_MAX_SIGMA_RAD)
+                .is_none()
+        );
         let mut axis = drive(200, 0.2, Vector3::zeros(), 0.01);
-        assert!(axis.mounting(&up).is_some());
+        assert!(axis.mounting(&up, FORWARD_MAX_SIGMA_RAD).is_some());
         axis.restart();
-        assert!(axis.mounting(&up).is_none());
+        assert!(axis.mounting(&up, FORWARD_MAX_SIGMA_RAD).is_none());
     }
 
     #[test]
