@@ -665,6 +665,26 @@ impl Eskf {
         self.refresh_sigma();
     }
 
+    /// Sets the position to `p` (m, navigation frame) with independent errors of variance
+    /// `var` (m^2 per axis), uncorrelated with the other states, whose means and covariance
+    /// stay as they are: for a position the filter's own covariance claims to know far better
+    /// than it does (integrated from a velocity without direction, then conditioned on a
+    /// restarted one as if its error had been constant, [`Self::restart_velocity`]), so that a
+    /// measurement of it would barely move it.
+    pub fn reset_position(&mut self, p: Vector3<f64>, var: Vector3<f64>) {
+        self.propagate();
+        self.x.p = p;
+        for i in 0..N {
+            for j in P..P + 3 {
+                (self.cov[(i, j)], self.cov[(j, i)]) = (0.0, 0.0);
+            }
+        }
+        self.cov
+            .fixed_view_mut::<3, 3>(P, P)
+            .copy_from(&Matrix3::from_diagonal(&var));
+        self.refresh_sigma();
+    }
+
     /// The velocity in the robot's body frame, m/s: `R_bs q^-1 v`, with `r_bs` rotating
     /// sensor-frame vectors into the body frame (x forward, y left, z up).
     pub fn body_velocity(&self, r_bs: &Matrix3<f64>) -> Vector3<f64> {

@@ -72,6 +72,46 @@ fn selected_update_is_the_general_update() {
     assert_relative_eq!(a.x.b_g, b.x.b_g, epsilon = 1e-15);
 }
 
+/// A position reset takes the given position and per-axis variance, uncorrelated with every
+/// other state, and leaves the other states' means and covariance entries as they were.
+#[test]
+fn a_position_reset_decorrelates_the_position() {
+    let x = Nominal {
+        p: Vector3::new(1.0, 2.0, 3.0),
+        v: Vector3::new(0.1, -0.2, 0.05),
+        q: UnitQuaternion::from_scaled_axis(Vector3::new(0.1, 0.2, 0.3)),
+        b_a: Vector3::new(0.01, 0.02, -0.01),
+        b_g: Vector3::new(1e-3, -2e-3, 3e-3),
+        k: 0.01,
+    };
+    let first = Imu {
+        f: Vector3::new(0.1, 0.2, 9.8),
+        w: Vector3::zeros(),
+    };
+    let mut kf = Eskf::new(x, full_cov(), G, noise(), first);
+    let before = kf.cov;
+    let (p, var) = (
+        Vector3::new(-40.0, 7.0, 0.5),
+        Vector3::new(100.0, 121.0, 4.0),
+    );
+    kf.reset_position(p, var);
+    assert_eq!(kf.x.p, p);
+    assert_eq!(
+        (kf.x.v, kf.x.q, kf.x.b_a, kf.x.b_g),
+        (x.v, x.q, x.b_a, x.b_g)
+    );
+    for i in 0..N {
+        for j in 0..N {
+            let expected = match (P..P + 3).contains(&i) || (P..P + 3).contains(&j) {
+                true if i == j => var[i - P],
+                true => 0.0,
+                false => before[(i, j)],
+            };
+            assert_eq!(kf.cov[(i, j)], expected, "({i}, {j})");
+        }
+    }
+}
+
 /// The scale measurement through the one update is the scalar Kalman update it replaced
 /// (gain `P e / (P_kk + R)`), to rounding.
 #[test]

@@ -411,9 +411,8 @@ impl Hints {
         let yaw = self.latest_fit.map_or(0.0, |f| f.systematic_sigma_rad());
         let relative = self.cfg.speed_scale_sigma.hypot(yaw);
         let sigma = distance * relative;
-        if sigma > 0.0 {
-            kf.position_update(p, Vector3::repeat(sigma * sigma));
-        }
+        let var = kf.position_sigma().map(|s| s * s) + Vector3::repeat(sigma * sigma);
+        kf.reset_position(p, var);
         self.wait_revision = self.wait.revision(&forward_s, &kf.x.p, relative);
     }
 
