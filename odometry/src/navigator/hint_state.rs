@@ -3,7 +3,7 @@
 //! [`crate::stage`] for the behaviour, [`crate::hints`] for frames and times).
 
 use crate::cruise::{ForwardAxis, ForwardFit, Reference, horizontal_bias_sigma, initial_velocity};
-use crate::eskf::{BG, Eskf, V};
+use crate::eskf::{BG, Eskf, P, V};
 use crate::handover::{WaitPath, WaitRevision};
 use crate::hints::{
     AxisSource, ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring,
@@ -396,12 +396,15 @@ impl Hints {
     }
 
     /// With the forward axis first trusted after a wait without a direction: the path the hints
-    /// and the attitude say was driven meanwhile ([`WaitPath`]) is a measurement of the
-    /// position, with 1-sigma per axis the distance times the speed scale's prior 1-sigma and
-    /// the fit's whole yaw 1-sigma in quadrature (the speeds' white noise averages out over the
-    /// wait). The filter's own position integrated the specific force twice from a velocity
-    /// that far off, and its conditioning on the restarted velocity assumes that velocity's
-    /// error constant over the wait: true of the start's error, not of the tilt's share.
+    /// and the attitude say was driven meanwhile ([`WaitPath`]) becomes the position
+    /// ([`Eskf::reset_position`]), its variance per axis the filter's own plus the distance
+    /// times the speed scale's prior 1-sigma and the fit's whole yaw 1-sigma in quadrature,
+    /// squared (the speeds' white noise averages out over the wait). The filter's own position
+    /// integrated the specific force twice from a velocity that far off, and its conditioning
+    /// on the restarted velocity assumes that velocity's error constant over the wait (true of
+    /// the start's error, not of the tilt's share) and leaves it a 1-sigma of metres: a
+    /// measurement with the path's 1-sigma would barely move it (the comma2k19 car of
+    /// docs/real-data.md: 57 m from the path, 1-sigma 1.5-2.6 m, after 107 m).
     /// The path's states are then due to be published again ([`Self::wait_revision`]).
     fn position_from_wait(&mut self, kf: &mut Eskf, r_bs: &Matrix3<f64>) {
         let forward_s = r_bs.row(0).transpose();
@@ -411,7 +414,9 @@ impl Hints {
         let yaw = self.latest_fit.map_or(0.0, |f| f.systematic_sigma_rad());
         let relative = self.cfg.speed_scale_sigma.hypot(yaw);
         let sigma = distance * relative;
-        let var = kf.position_sigma().map(|s| s * s) + Vector3::repeat(sigma * sigma);
+        kf.propagate();
+        let own = Vector3::from_fn(|i, _| kf.cov[(P + i, P + i)]);
+        let var = own + Vector3::repeat(sigma * sigma);
         kf.reset_position(p, var);
         self.wait_revision = self.wait.revision(&forward_s, &kf.x.p, relative);
     }
