@@ -35,8 +35,9 @@ fn full_cov() -> Cov {
     a * a.transpose() * 1e-3 + Cov::identity() * 1e-4
 }
 
-#[test]
-fn selected_update_is_the_general_update() {
+/// A filter whose every state is non-zero, on the dense covariance [`full_cov`], its first
+/// sample reading near gravity with the rate `w` (rad/s).
+fn busy_filter(w: Vector3<f64>) -> Eskf {
     let x = Nominal {
         p: Vector3::new(1.0, 2.0, 3.0),
         v: Vector3::new(0.1, -0.2, 0.05),
@@ -47,9 +48,14 @@ fn selected_update_is_the_general_update() {
     };
     let first = Imu {
         f: Vector3::new(0.1, 0.2, 9.8),
-        w: Vector3::new(0.01, 0.02, -0.03),
+        w,
     };
-    let mut a = Eskf::new(x, full_cov(), G, noise(), first);
+    Eskf::new(x, full_cov(), G, noise(), first)
+}
+
+#[test]
+fn selected_update_is_the_general_update() {
+    let mut a = busy_filter(Vector3::new(0.01, 0.02, -0.03));
     a.sens = Sensitivity::from_fn(|j, i| ((i * 5 + j) as f64).cos());
     let mut b = a.clone();
     for c in [V, BG] {
@@ -76,20 +82,8 @@ fn selected_update_is_the_general_update() {
 /// other state, and leaves the other states' means and covariance entries as they were.
 #[test]
 fn a_position_reset_decorrelates_the_position() {
-    let x = Nominal {
-        p: Vector3::new(1.0, 2.0, 3.0),
-        v: Vector3::new(0.1, -0.2, 0.05),
-        q: UnitQuaternion::from_scaled_axis(Vector3::new(0.1, 0.2, 0.3)),
-        b_a: Vector3::new(0.01, 0.02, -0.01),
-        b_g: Vector3::new(1e-3, -2e-3, 3e-3),
-        k: 0.01,
-    };
-    let first = Imu {
-        f: Vector3::new(0.1, 0.2, 9.8),
-        w: Vector3::zeros(),
-    };
-    let mut kf = Eskf::new(x, full_cov(), G, noise(), first);
-    let before = kf.cov;
+    let mut kf = busy_filter(Vector3::zeros());
+    let (x, before) = (kf.x, kf.cov);
     let (p, var) = (
         Vector3::new(-40.0, 7.0, 0.5),
         Vector3::new(100.0, 121.0, 4.0),
