@@ -60,6 +60,13 @@ pub fn path_arg(p: &std::path::Path) -> &str {
     p.to_str().expect("UTF-8 path")
 }
 
+/// `mems-odometry offline --input INPUT --json FLAGS` run to completion: its JSON summary.
+pub fn offline_json(input: &std::path::Path, flags: &[&str]) -> serde_json::Value {
+    let args = [&["offline", "--input", path_arg(input), "--json"], flags].concat();
+    let out = run_ok("mems-odometry", &args);
+    serde_json::from_str(out.trim()).expect("offline --json prints one JSON document")
+}
+
 /// `mems-sim` arguments of a small robot with wheel encoders (speed hints) at 50 Hz, 60 s of
 /// driving with turns and turns on the spot, its IMU yawed 78 deg on the base (seed not given).
 pub const SPINNING_ROBOT: [&str; 14] = [

@@ -19,7 +19,7 @@
 //! arm moved sideways, and the mounting taken from it is replaced once straight driving has
 //! gathered its own (`odometry::nonholonomic::LEVER_ARM_BOUND_M`).
 
-use integration_tests::{path_arg, run_ok, simulate, unique_namespace};
+use integration_tests::{offline_json, simulate, unique_namespace};
 
 /// The IMU's mounting on the car, sensor to body: roll, pitch, yaw in degrees.
 const MOUNT_DEG: [f64; 3] = [0.0, 2.0, 5.0];
@@ -56,11 +56,7 @@ fn car(dir: &std::path::Path, seed: u64) -> serde_json::Value {
             &seed,
         ],
     );
-    let out = run_ok(
-        "mems-odometry",
-        &["offline", "--input", path_arg(&csv), "--json"],
-    );
-    serde_json::from_str(out.trim()).unwrap()
+    offline_json(&csv, &[])
 }
 
 /// The horizontal end error and the per-axis rms 1-sigma, m.
@@ -167,11 +163,7 @@ fn a_mounting_from_a_drive_that_starts_turning_is_replaced_by_straight_driving()
                 seed,
             ],
         );
-        let out = run_ok(
-            "mems-odometry",
-            &["offline", "--input", path_arg(&csv), "--json"],
-        );
-        let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+        let v = offline_json(&csv, &[]);
         let got = mounting_deg(&v);
         let angle = axis_angle_deg(&forward_axis(got), &truth);
         eprintln!("seed {seed}: mounting {got:.2?} deg, forward axis {angle:.2} deg off");

@@ -21,21 +21,14 @@
 
 use std::path::PathBuf;
 
-use integration_tests::{path_arg, run_ok, simulate, truth_rests, unique_namespace};
+use integration_tests::{offline_json, path_arg, run_ok, simulate, truth_rests, unique_namespace};
 use ipc_types::{OdometryState, odometry_flags};
 
 /// The car of the module documentation with seed `seed` and `extra` arguments, run through
 /// `mems-odometry offline --json`: the truth's rests and the summary.
 fn car(dir: &std::path::Path, seed: u64, extra: &[&str]) -> (Vec<(f64, f64)>, serde_json::Value) {
     let csv = car_csv(dir, seed, "3,8", extra);
-    (truth_rests(&csv), offline(&csv, &[]))
-}
-
-/// `mems-odometry offline --json` on `csv` with `flags`: the summary.
-fn offline(csv: &std::path::Path, flags: &[&str]) -> serde_json::Value {
-    let args = [&["offline", "--input", path_arg(csv), "--json"], flags].concat();
-    let out = run_ok("mems-odometry", &args);
-    serde_json::from_str(out.trim()).unwrap()
+    (truth_rests(&csv), offline_json(&csv, &[]))
 }
 
 /// The car of the module documentation with seed `seed`, stops of `rests` s (`MIN,MAX`) and
@@ -156,7 +149,7 @@ fn a_car_idling_at_its_stops_rests_there_with_any_glrt_window() {
             ["--glrt-window-s", "1", "--learn-s", "0.5"],
             ["--glrt-window-s", "2", "--learn-s", "2"],
         ] {
-            let v = offline(&csv, &flags);
+            let v = offline_json(&csv, &flags);
             rests_at_the_stops_only(&format!("seed {seed}, {}", flags.join(" ")), &truth, &v);
         }
     }

@@ -13,7 +13,7 @@
 //! bias a second time: 1.29, 1.85, 2.20 and 0.51 m off after 15-40 m on seeds 1-4 (5.85 m in
 //! all), against 0.06, 0.46, 0.16 and 0.21 m (0.89 m).
 
-use integration_tests::{path_arg, run_ok, simulate};
+use integration_tests::{offline_json, simulate};
 
 #[test]
 fn a_first_rest_that_spans_the_stages_first_refinement_keeps_the_gyro_bias_once() {
@@ -39,11 +39,7 @@ fn a_first_rest_that_spans_the_stages_first_refinement_keeps_the_gyro_bias_once(
                 seed,
             ],
         );
-        let out = run_ok(
-            "mems-odometry",
-            &["offline", "--input", path_arg(&run), "--json"],
-        );
-        let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+        let v = offline_json(&run, &[]);
         let e = |k: &str, i: usize| v[k][i].as_f64().unwrap();
         let error = e("truth_error_m", 0).hypot(e("truth_error_m", 1));
         // The radius holding 68 % of a circular 2-D Gaussian with the reported per-axis sigma

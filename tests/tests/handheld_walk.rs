@@ -6,17 +6,8 @@
 //! that starts mid-walk, in the circle's steady turn, ends within its 1-sigma too: the
 //! calibration stage does not learn the turn as the gyro's bias.
 
-use integration_tests::{path_arg, run_ok, simulate, unique_namespace};
+use integration_tests::{offline_json, path_arg, run_ok, simulate, unique_namespace};
 use serde_json::Value;
-
-/// `mems-odometry offline --json ARGS` on `input`.
-fn offline(input: &std::path::Path, args: &[&str]) -> Value {
-    let json = run_ok(
-        "mems-odometry",
-        &[&["offline", "--input", path_arg(input), "--json"][..], args].concat(),
-    );
-    serde_json::from_str(json.trim()).unwrap()
-}
 
 /// Horizontal norm of a JSON triple.
 fn horizontal(v: &Value) -> f64 {
@@ -33,7 +24,7 @@ fn a_hand_held_walk_is_recognized_and_its_steps_dead_reckoned() {
             &format!("walk-{seed}.mcap"),
             &["handheld", "--laps", "2", "--rate", "100", "--seed", seed],
         );
-        let v = offline(&walk, &[]);
+        let v = offline_json(&walk, &[]);
         assert_eq!(v["profile"]["profile"], "walking", "{}", v["profile"]);
         assert_eq!(v["profile"]["platform"]["platform"], "walking");
         // 2 laps of 8 pi m at 0.8 m/s with a second of ramps: 63.8 s of walking at 1.7
@@ -60,11 +51,11 @@ fn a_hand_held_walk_is_recognized_and_its_steps_dead_reckoned() {
     }
     // `--profile NAME` overrides: the other profile runs no dead reckoning.
     let walk = dir.join("walk-1.mcap");
-    let v = offline(&walk, &["--profile", "other"]);
+    let v = offline_json(&walk, &["--profile", "other"]);
     assert_eq!(v["profile"]["profile"], "other");
     assert!(v["walking"].is_null(), "{}", v["walking"]);
     // And `--profile walking` on it runs it, with a given step-length constant.
-    let v = offline(&walk, &["--profile", "walking", "--weinberg-k", "0.4"]);
+    let v = offline_json(&walk, &["--profile", "walking", "--weinberg-k", "0.4"]);
     assert_eq!(v["walking"]["weinberg_k"], 0.4);
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -96,7 +87,7 @@ fn a_hand_held_walk_that_starts_mid_turn_ends_within_its_1_sigma() {
                 "10",
             ],
         );
-        let v = offline(&walk, &[]);
+        let v = offline_json(&walk, &[]);
         assert_eq!(v["profile"]["profile"], "walking", "{}", v["profile"]);
         assert_eq!(v["walking"]["aligned_on_steps"], true, "{}", v["walking"]);
         let error = horizontal(&v["truth_error_m"]);
@@ -171,7 +162,7 @@ fn a_phone_gyro_drifting_in_the_hand_is_no_accelerometer_bias() {
                 path_arg(&model),
             ],
         );
-        let v = offline(&walk, &[]);
+        let v = offline_json(&walk, &[]);
         assert_eq!(v["profile"]["profile"], "walking", "{}", v["profile"]);
         let nis = v["walking"]["step_nis_per_dof"].as_f64().unwrap();
         assert!(nis <= 2.0, "seed {seed}: step NIS per dof {nis}");

@@ -5,19 +5,14 @@
 //! arm through orientations, held 6 s each, is neither (profile other). The choice and its
 //! figures are in the `--json` result.
 
-use integration_tests::{path_arg, run_ok, simulate, unique_namespace};
+use integration_tests::{offline_json, path_arg, simulate, unique_namespace};
 
 /// Writes `mems-sim ARGS --rate 100 --seed 2 --out DIR/NAME.mcap` and returns what
 /// `mems-odometry offline --json` says of its profile.
 fn profile_of(dir: &std::path::Path, name: &str, args: &[&str]) -> serde_json::Value {
     let common = ["--rate", "100", "--seed", "2"];
     let out = simulate(dir, &format!("{name}.mcap"), &[args, &common[..]].concat());
-    let json = run_ok(
-        "mems-odometry",
-        &["offline", "--input", path_arg(&out), "--json"],
-    );
-    let v: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
-    v["profile"].clone()
+    offline_json(&out, &[])["profile"].clone()
 }
 
 #[test]

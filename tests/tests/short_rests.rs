@@ -24,7 +24,7 @@
 //! - A car whose stops are on slopes of up to 5 degrees (it pitches while it brakes) has a rest
 //!   flagged at every stop: the rest test does not compare with the start's gravity direction.
 
-use integration_tests::{path_arg, run_ok, simulate, truth_rests, unique_namespace};
+use integration_tests::{offline_json, simulate, truth_rests, unique_namespace};
 
 /// `mems-sim drive` with `args` into `dir/name.csv`, then `mems-odometry offline --json` on it:
 /// the truth's rests and the summary.
@@ -45,11 +45,7 @@ fn simulate_and_run(
     offline: &[&str],
 ) -> (Vec<(f64, f64)>, serde_json::Value) {
     let csv = simulate(dir, &format!("{name}.csv"), args);
-    let out = run_ok(
-        "mems-odometry",
-        &[&["offline", "--input", path_arg(&csv), "--json"], offline].concat(),
-    );
-    (truth_rests(&csv), serde_json::from_str(out.trim()).unwrap())
+    (truth_rests(&csv), offline_json(&csv, offline))
 }
 
 /// The stop-and-go robot of docs/detectors.md, "Short rests" (a first rest of 1 s, then rests

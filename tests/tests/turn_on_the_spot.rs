@@ -7,7 +7,7 @@
 //! ended 23.6 m off after 14.6 m. The run ends within 1 m of the truth and inside the 68 %
 //! radius of its 1-sigma.
 
-use integration_tests::{SPINNING_ROBOT, path_arg, run_ok, simulate, unique_namespace};
+use integration_tests::{SPINNING_ROBOT, offline_json, simulate, unique_namespace};
 
 /// Radius holding 68 % of a circular 2-D Gaussian, per-axis sigmas (bench.py's `R68_FACTOR`).
 const R68_FACTOR: f64 = 1.515;
@@ -17,12 +17,8 @@ fn a_turn_on_the_spot_the_encoders_call_stationary_keeps_the_heading() {
     let dir = std::env::temp_dir().join(unique_namespace("turn-on-the-spot"));
     std::fs::create_dir_all(&dir).unwrap();
     let drive = simulate(&dir, "drive.mcap", &[&SPINNING_ROBOT[..], &["2"]].concat());
-    let out = run_ok(
-        "mems-odometry",
-        &["offline", "--input", path_arg(&drive), "--json"],
-    );
+    let v = offline_json(&drive, &[]);
     std::fs::remove_dir_all(&dir).unwrap();
-    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
     let a = |key: &str, i: usize| v[key][i].as_f64().unwrap();
     let error = a("truth_error_m", 0).hypot(a("truth_error_m", 1));
     let sigma = ((a("sigma_m", 0).powi(2) + a("sigma_m", 1).powi(2)) / 2.0).sqrt();

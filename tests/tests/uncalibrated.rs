@@ -34,7 +34,7 @@
 //! learning window and follows the calibration stage's refinement from the terms it put those
 //! samples in.
 
-use integration_tests::{Proc, SPINNING_ROBOT, path_arg, run_ok, unique_namespace};
+use integration_tests::{Proc, SPINNING_ROBOT, offline_json, path_arg, run_ok, unique_namespace};
 use ipc_types::{CorrectedImuSample, corrected_flags, service};
 use std::path::Path;
 use std::time::Duration;
@@ -61,11 +61,7 @@ fn uncalibrated_model(dir: &Path) -> std::path::PathBuf {
 /// Horizontal end error and per-axis rms horizontal 1-sigma (m) of an offline run, its JSON
 /// and the distance travelled (truth, m).
 fn run(input: &Path) -> (f64, f64, serde_json::Value, f64) {
-    let out = run_ok(
-        "mems-odometry",
-        &["offline", "--input", path_arg(input), "--json"],
-    );
-    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    let v = offline_json(input, &[]);
     let e = |i: usize| v["truth_error_m"][i].as_f64().unwrap();
     let s = |i: usize| v["sigma_m"][i].as_f64().unwrap();
     let sigma = ((s(0) * s(0) + s(1) * s(1)) / 2.0).sqrt();
@@ -325,13 +321,10 @@ fn an_offset_across_gravity_declared_uncalibrated_is_covered() {
             path_arg(&csv),
         ],
     );
-    let offline = |extra: &[&str]| {
-        let mut args = vec!["offline", "--input", path_arg(&csv), "--json"];
-        args.extend_from_slice(extra);
-        let out = run_ok("mems-odometry", &args);
-        serde_json::from_str::<serde_json::Value>(out.trim()).unwrap()
-    };
-    let (taken, declared) = (offline(&[]), offline(&["--uncalibrated"]));
+    let (taken, declared) = (
+        offline_json(&csv, &[]),
+        offline_json(&csv, &["--uncalibrated"]),
+    );
     std::fs::remove_dir_all(&dir).unwrap();
     let horizontal = |v: &serde_json::Value, key: &str| {
         let c = |i: usize| v[key][i].as_f64().unwrap();
@@ -651,11 +644,7 @@ fn an_uncalibrated_part_on_a_car_rests_at_its_final_stop() {
             "--model", path_arg(&model), "--seed", seed, "--out", path_arg(&csv),
         ];
         run_ok("mems-sim", &sim);
-        let json = run_ok(
-            "mems-odometry",
-            &["offline", "--input", path_arg(&csv), "--json"],
-        );
-        let v: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+        let v = offline_json(&csv, &[]);
         assert_eq!(v["accel_error"]["uncalibrated"], true, "seed {seed}");
         resets += v["wheeled"]["certain_stop_velocity_resets"]
             .as_u64()
