@@ -208,6 +208,14 @@ impl ImuConstraint {
             None => (up_only(&up_s)?, FREE_MPS, Vector3::zeros()),
         };
         let v_b = kf.point_velocity(&r_bs, &r_b);
+        // Without a forward axis the velocity may have no direction yet (aligned in motion):
+        // the linearization's left-out variance keeps its error from being read as tilt
+        // (docs/odometry.md, "Wheeled without hints: the non-holonomic constraint").
+        let sigma = if self.r_bs.is_none() {
+            sigma.hypot(kf.body_velocity_second_order_variance(&r_bs).z.sqrt())
+        } else {
+            sigma
+        };
         let lateral = lateral.hypot(v_b.x * self.yaw_sigma_rad);
         let sigma_v = kf.filter_velocity_sigma().norm();
         let gate = |s: f64| GATE_SIGMA * s.hypot(sigma_v);
@@ -439,5 +447,47 @@ mod tests {
         let up = Vector3::new(0.1, -0.2, 0.97).normalize();
         let r = up_only(&up).unwrap();
         assert!((r * up - Vector3::z()).norm() < 1e-12);
+    }
+
+    /// A filter aligned in motion whose velocity has no direction yet (a horizontal 1-sigma
+    /// of 20 m/s about a mean of 15 m/s) and a vertical velocity of 0.8 m/s: linearized about
+    /// the mean, the vertical constraint reads that as a pitch of atan(0.8 / 15), 3 deg, and
+    /// took 2.1 deg of it; its second-order variance (the velocity's direction unknown) keeps
+    /// the tilt within 1 deg.
+    #[test]
+    fn a_velocity_without_direction_is_not_read_as_tilt() {
+        use crate::eskf::{Cov, Imu, Nominal, TH, V};
+        let x = Nominal {
+            p: Vector3::zeros(),
+            v: Vector3::new(15.0, 0.0, 0.8),
+            q: UnitQuaternion::identity(),
+            b_a: Vector3::zeros(),
+            b_g: Vector3::zeros(),
+            k: 0.0,
+        };
+        let mut cov = Cov::identity() * 1e-6;
+        for (i, sigma) in [20.0, 20.0, 0.5].iter().enumerate() {
+            cov[(V + i, V + i)] = sigma * sigma;
+        }
+        for (i, sigma_deg) in [3.0f64, 3.0, 20.0].iter().enumerate() {
+            cov[(TH + i, TH + i)] = sigma_deg.to_radians().powi(2);
+        }
+        let first = Imu {
+            f: Vector3::new(0.0, 0.0, 9.81),
+            w: Vector3::zeros(),
+        };
+        let noise = crate::config::OdometryConfig::mpu9250(9.81).noise;
+        let mut kf = Eskf::new(x, cov, 9.81, noise, first);
+        let mut nhc = ImuConstraint::new(0.02, None);
+        let outcome = nhc.apply(&mut kf, 0.01, 1.0, false);
+        assert!(
+            matches!(outcome, Some(Outcome::Applied { .. })),
+            "{outcome:?}"
+        );
+        let tilt =
+            kf.x.q
+                .inverse_transform_vector(&Vector3::z())
+                .angle(&Vector3::z());
+        assert!(tilt.to_degrees() < 1.0, "{}", tilt.to_degrees());
     }
 }
