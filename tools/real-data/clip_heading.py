@@ -3,7 +3,12 @@
 with every gyroscope column capped at +-DPS deg/s (perturb.py's clipping, the reconstruction at
 the rests on), and the two runs' rests (`mems-odometry offline --json`'s `rests`, matched by
 time) compared step by step: a step is the horizontal move from one rest to the next, kept where
-the unclipped step is at least 0.3 m. Printed per walk: steps matched, the clipped steps' length
+the unclipped step is at least 0.3 m. Each rest's position is the `track`'s (every 0.1 s) first
+at least SETTLE_S after the rest's first sample, in both runs at the same time: a rest's own
+`position_m` is its first sample's, and after a clipped motion that is the bridged state the
+reconstruction replaces at the end of the rest window (odometry/src/clip.rs, `REST_WINDOW_S`,
+0.1 s), so steps measured there are the bridging's (the xio walks' came out 36-37 cm short),
+not what the run keeps. Printed per walk: steps matched, the clipped steps' length
 error (mean and mean absolute, cm), the heading error of the clipped path (the direction of the
 clipped step less the unclipped one's, deg: median over the first and the last quarter of the
 steps) and the end error / 1-sigma of the clipped run (m, bench.py's).
@@ -27,24 +32,39 @@ import bench  # noqa: E402
 import perturb  # noqa: E402
 
 MIN_STEP_M = 0.3
+# After a rest's first sample, s: past clip.rs's rest window (0.1 s), where a clipped motion is
+# redone.
+SETTLE_S = 0.15
+
+
+def settled(track, t):
+    """The horizontal position of `track` (rows t s, x, y, z m) at its first row at least
+    SETTLE_S after `t`, None past its end."""
+    for row in track:
+        if row[0] >= t + SETTLE_S:
+            return row[1:3]
+    return None
 
 
 def steps(clean, clipped):
-    """(heading error deg, length error m) of each matched step."""
-    by_t = {round(r["t_s"], 2): r for r in clean}
+    """(heading error deg, length error m) of each matched step of the runs `clean` and
+    `clipped` (`mems-odometry offline --json` outputs)."""
+    by_t = {round(r["t_s"], 2): r for r in clean["rests"]}
     out, prev = [], None
-    for r in clipped:
+    for r in clipped["rests"]:
         c = by_t.get(round(r["t_s"], 2))
         if c is None:
             continue
+        here = (settled(clipped["track"], r["t_s"]), settled(clean["track"], r["t_s"]))
+        if None in here:
+            break
         if prev is not None:
-            (pk, pc) = prev
-            sk = [a - b for a, b in zip(r["position_m"][:2], pk["position_m"][:2])]
-            sc = [a - b for a, b in zip(c["position_m"][:2], pc["position_m"][:2])]
+            sk = [a - b for a, b in zip(here[0], prev[0])]
+            sc = [a - b for a, b in zip(here[1], prev[1])]
             if math.hypot(*sc) >= MIN_STEP_M:
                 turn = math.degrees(math.atan2(sk[1], sk[0]) - math.atan2(sc[1], sc[0]))
                 out.append(((turn + 180) % 360 - 180, math.hypot(*sk) - math.hypot(*sc)))
-        prev = (r, c)
+        prev = here
     return out
 
 
@@ -73,7 +93,7 @@ def main():
             if "error" in a or "error" in b:
                 print(f"| {rec['id']} | failed: {a.get('error') or b.get('error')} | | | |")
                 continue
-            st = steps(a["odometry"]["rests"], b["odometry"]["rests"])
+            st = steps(a["odometry"], b["odometry"])
             q = max(1, len(st) // 4)
             head = [h for h, _ in st]
             lengths = [dl for _, dl in st]
