@@ -44,7 +44,8 @@
 //!   [`crate::zero_state::learn::CALIBRATED_GRAVITY_ERROR`] off (an uncalibrated part), or any
 //!   learned rest of a part declared uncalibrated
 //!   ([`crate::zero_state::DetectorConfig::uncalibrated`]), is taken with no prior, and every
-//!   sample after it is flagged `GRAVITY_OFF`.
+//!   sample after it is flagged `GRAVITY_OFF`; a declared part's are flagged from the first,
+//!   whether or not its detector learns a rest (SHOE learns none).
 //!
 //! Only a detector whose rest means still refines ([`crate::zero_state::DetectorKind::rest_is_still`]:
 //! not SHOE, whose stances roll). Both are running means over rest time (the learning interval
@@ -589,10 +590,13 @@ impl CalibrationStage {
         let config = self.detector.config();
         self.carried = Carried {
             ready: v.ready,
-            gravity_off: self
-                .detector
-                .reference()
-                .is_some_and(|r| config.uncalibrated(&r)),
+            // A part declared uncalibrated is flagged whether or not its detector learns a
+            // reference (the stance detector of a foot learns none).
+            gravity_off: config.offset_unknown
+                || self
+                    .detector
+                    .reference()
+                    .is_some_and(|r| config.uncalibrated(&r)),
             rest: v.rest,
             zs_mean_mps2: std::array::from_fn(|i| {
                 v.decided_mean_mps2[i] - self.refine.accel_mps2[i]
@@ -796,7 +800,8 @@ impl Stage for CalibrationStage {
 #[derive(Debug, Clone, Copy, Default)]
 struct Carried {
     ready: bool,
-    /// The learned rest read gravity off (`corrected_flags::GRAVITY_OFF`).
+    /// The learned rest read gravity off, or the part was declared uncalibrated
+    /// (`corrected_flags::GRAVITY_OFF`).
     gravity_off: bool,
     rest: bool,
     zs_mean_mps2: [f64; 3],

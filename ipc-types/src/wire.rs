@@ -126,7 +126,8 @@ pub mod corrected_flags {
     pub const IMPLAUSIBLE: u16 = 1 << 7;
     /// The rest the detector learned from read gravity's magnitude further off than a
     /// calibrated accelerometer does (`calibrate::zero_state::learn::CALIBRATED_GRAVITY_ERROR`):
-    /// the part is uncalibrated. The stage's bias refinement removes the error along gravity
+    /// the part is uncalibrated; or the part was declared uncalibrated (`--uncalibrated`),
+    /// whatever its detector learned. The stage's bias refinement removes the error along gravity
     /// from the samples; the odometry widens its accelerometer prior (`odometry::uncalibrated`).
     pub const GRAVITY_OFF: u16 = 1 << 8;
 }
