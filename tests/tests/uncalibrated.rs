@@ -35,7 +35,9 @@
 //! learning window and follows the calibration stage's refinement from the terms it put those
 //! samples in.
 
-use integration_tests::{Proc, SPINNING_ROBOT, offline_json, path_arg, run_ok, unique_namespace};
+use integration_tests::{
+    Proc, SPINNING_ROBOT, offline_json, path_arg, run_ok, simulate, unique_namespace,
+};
 use ipc_types::{CorrectedImuSample, corrected_flags, service};
 use std::path::Path;
 use std::time::Duration;
@@ -327,26 +329,28 @@ fn an_offset_across_gravity_declared_uncalibrated_is_covered() {
         offline_json(&csv, &["--uncalibrated"]),
     );
     std::fs::remove_dir_all(&dir).unwrap();
-    let horizontal = |v: &serde_json::Value, key: &str| {
-        let c = |i: usize| v[key][i].as_f64().unwrap();
-        (c(0), c(1))
-    };
     let gravity_error = taken["accel_error"]["gravity_error"].as_f64().unwrap();
     assert!(
         gravity_error.abs() < 0.02,
         "gravity read {gravity_error} off"
     );
     assert_eq!(taken["accel_error"]["uncalibrated"], false);
+    assert_declared_and_covered(&declared, "x offset");
+}
+
+/// Asserts that the run `declared` (`--uncalibrated`, described by `what`) took its part for
+/// uncalibrated, flagged it, and ended within the 68 % radius of its horizontal 1-sigma.
+fn assert_declared_and_covered(declared: &serde_json::Value, what: &str) {
     let accel = &declared["accel_error"];
-    eprintln!("x offset, declared: {accel}");
+    eprintln!("{what}, declared: {accel}");
     assert_eq!(accel["uncalibrated"], true, "{accel}");
     assert_eq!(accel["flagged"], true, "{accel}");
-    let (ex, ey) = horizontal(&declared, "truth_error_m");
-    let (sx, sy) = horizontal(&declared, "sigma_m");
-    let (error, sigma) = (ex.hypot(ey), ((sx * sx + sy * sy) / 2.0).sqrt());
+    let c = |key: &str, i: usize| declared[key][i].as_f64().unwrap();
+    let error = c("truth_error_m", 0).hypot(c("truth_error_m", 1));
+    let sigma = ((c("sigma_m", 0).powi(2) + c("sigma_m", 1).powi(2)) / 2.0).sqrt();
     assert!(
         error <= R68_FACTOR * sigma,
-        "declared: error {error:.3} m outside the 68 % radius of its 1-sigma {sigma:.3} m"
+        "{what}, declared: error {error:.3} m outside the 68 % radius of its 1-sigma {sigma:.3} m"
     );
 }
 
@@ -362,41 +366,13 @@ fn an_offset_declared_uncalibrated_on_a_foot_is_taken_as_uncalibrated() {
     let dir = std::env::temp_dir().join(unique_namespace("uncalibrated-foot"));
     std::fs::create_dir_all(&dir).unwrap();
     let model = x_offset_model(&dir);
-    let csv = dir.join("foot-x-offset.csv");
-    run_ok(
-        "mems-sim",
-        &[
-            "walk",
-            "--laps",
-            "1",
-            "--rate",
-            "200",
-            "--seed",
-            "3",
-            "--accel-range",
-            "16",
-            "--gyro-range",
-            "2000",
-            "--model",
-            path_arg(&model),
-            "--out",
-            path_arg(&csv),
-        ],
-    );
+    let walk = "walk --laps 1 --rate 200 --seed 3 --accel-range 16 --gyro-range 2000 --model";
+    let args: Vec<&str> = walk.split(' ').chain([path_arg(&model)]).collect();
+    let csv = simulate(&dir, "foot-x-offset.csv", &args);
     let declared = offline_json(&csv, &["--uncalibrated"]);
     std::fs::remove_dir_all(&dir).unwrap();
     assert_eq!(declared["profile"]["profile"], "pedestrian");
-    let accel = &declared["accel_error"];
-    eprintln!("foot x offset, declared: {accel}");
-    assert_eq!(accel["uncalibrated"], true, "{accel}");
-    assert_eq!(accel["flagged"], true, "{accel}");
-    let c = |key: &str, i: usize| declared[key][i].as_f64().unwrap();
-    let error = c("truth_error_m", 0).hypot(c("truth_error_m", 1));
-    let sigma = ((c("sigma_m", 0).powi(2) + c("sigma_m", 1).powi(2)) / 2.0).sqrt();
-    assert!(
-        error <= R68_FACTOR * sigma,
-        "declared: error {error:.3} m outside the 68 % radius of its 1-sigma {sigma:.3} m"
-    );
+    assert_declared_and_covered(&declared, "foot x offset");
 }
 
 /// A hand-held sensor's errors: a different scale and bias on each axis, no cross-axis
