@@ -413,3 +413,17 @@ def uncalibrated(ctx):
 
 
 SECTIONS.append(Section("real-data-uncalibrated", "real-data.md", ["real-data-uncalibrated"], "4 min", uncalibrated))
+
+
+def luck(ctx):
+    """docs/real-data.md: every corpus row clean and with white noise far below its part's
+    added, over five seeds (tools/real-data/luck.py): how much of each row is luck."""
+    ctx.run(["cargo", "build", "--release", "-q", "-p", "odometry"])
+    only = ["--only", "xio-short-walk", "--only", "gdin-34"] if ctx.quick else []
+    out, _ = ctx.run(["python3", "tools/real-data/luck.py", "--seeds", "5"] + only)
+    if ctx.dry:
+        return {}
+    return {"real-data-luck": out.strip()}
+
+
+SECTIONS.append(Section("real-data-luck", "real-data.md", ["real-data-luck"], "2 min", luck))

@@ -61,6 +61,11 @@ class Perturbation:
     def clips(self):
         return self.accel_g is not None or self.gyro_dps is not None
 
+    @property
+    def rescales(self):
+        """Whether every sample's values change (not only the clipped ones)."""
+        return self.scale != 1.0 or any(self.bias)
+
     def apply(self, accel, gyro):
         """The perturbed (accel g, gyro deg/s) and whether a value was capped."""
         accel = [self.scale * a + b for a, b in zip(accel, self.bias)]
@@ -98,7 +103,7 @@ def perturb_csv(src, dst, p):
     def row(cells):
         nonlocal capped
         accel, gyro, hit = p.apply([float(cells[i]) for i in ia], [float(cells[i]) for i in ig])
-        if p.scale != 1.0 or any(p.bias) or hit:
+        if p.rescales or hit:
             for i, v in zip(ia + ig, accel + gyro):
                 cells[i] = repr(v)
         capped += hit
