@@ -8,7 +8,9 @@
 //! drive: body z is the gravity-up direction in the sensor frame, body x the direction of the
 //! sensor-frame displacement over the first [`MOUNTING_PATH_M`] of driving (the filter's own
 //! velocity, unrevised: the first metres after a rest drift least). Until then only the
-//! vertical velocity is constrained. Turning, an IMU off the turning axis moves sideways, so a
+//! vertical velocity is constrained, and not even that while the velocity has no direction (a
+//! filter aligned in motion, waiting for the speed hints' forward axis): linearized about such
+//! a velocity the vertical constraint turns the tilt (docs/odometry.md). Turning, an IMU off the turning axis moves sideways, so a
 //! drive that begins in a turn (a car pulling out of a parking space) points that displacement
 //! off the forward axis: the displacement over the first [`MOUNTING_PATH_M`] of straight
 //! driving ([`LEVER_ARM_BOUND_M`], [`STRAIGHT_ANGLE_RAD`]) replaces it once gathered. The first
@@ -187,7 +189,8 @@ impl ImuConstraint {
     /// `dt_s` is the last sample's interval (for the mounting estimate, fed at every call
     /// where `velocity_has_direction`: a filter aligned in motion without a mounting starts
     /// its velocity at zero for want of a direction, and the displacement it integrates then
-    /// points nowhere in particular; the speed hints' forward axis is followed instead).
+    /// points nowhere in particular; the speed hints' forward axis is followed instead, and
+    /// until the mounting comes the constraint is not applied: `None`).
     pub fn apply(
         &mut self,
         kf: &mut Eskf,
@@ -203,14 +206,19 @@ impl ImuConstraint {
             return None;
         }
         let sigma = self.sigma_mps * (1.0 / interval_s).sqrt();
+        // Aligned in motion without a mounting, the velocity has no direction yet: linearized
+        // about it, even the vertical constraint turns the tilt (module documentation).
+        if self.r_bs.is_none() && !velocity_has_direction {
+            return None;
+        }
         let (r_bs, lateral, r_b) = match self.r_bs {
             Some(r) => (r, sigma, self.lever_arm_m),
             None => (up_only(&up_s)?, FREE_MPS, Vector3::zeros()),
         };
         let v_b = kf.point_velocity(&r_bs, &r_b);
-        // Without a forward axis the velocity may have no direction yet (aligned in motion):
-        // the linearization's left-out variance keeps its error from being read as tilt
-        // (docs/odometry.md, "Wheeled without hints: the non-holonomic constraint").
+        // Without a forward axis the velocity is uncertain across the body (the first metres
+        // of a drive): the linearization's left-out variance keeps its error from being read
+        // as tilt (docs/odometry.md, "Wheeled without hints: the non-holonomic constraint").
         let sigma = if self.r_bs.is_none() {
             sigma.hypot(kf.body_velocity_second_order_variance(&r_bs).z.sqrt())
         } else {
@@ -449,13 +457,13 @@ mod tests {
         assert!((r * up - Vector3::z()).norm() < 1e-12);
     }
 
-    /// A filter aligned in motion whose velocity has no direction yet (a horizontal 1-sigma
-    /// of 20 m/s about a mean of 15 m/s) and a vertical velocity of 0.8 m/s: linearized about
-    /// the mean, the vertical constraint reads that as a pitch of atan(0.8 / 15), 3 deg, and
-    /// took 2.1 deg of it; its second-order variance (the velocity's direction unknown) keeps
-    /// the tilt within 1 deg.
+    /// A filter whose velocity is uncertain across the body (a horizontal 1-sigma of 20 m/s
+    /// about a mean of 15 m/s) and a vertical velocity of 0.8 m/s: linearized about the mean,
+    /// the vertical constraint reads that as a pitch of atan(0.8 / 15), 3 deg, and took 2.1
+    /// deg of it; its second-order variance keeps the tilt within 1 deg. With no direction at
+    /// all (aligned in motion, no mounting) it is not applied.
     #[test]
-    fn a_velocity_without_direction_is_not_read_as_tilt() {
+    fn an_uncertain_velocity_is_not_read_as_tilt() {
         use crate::eskf::{Cov, Imu, Nominal, TH, V};
         let x = Nominal {
             p: Vector3::zeros(),
@@ -479,7 +487,10 @@ mod tests {
         let noise = crate::config::OdometryConfig::mpu9250(9.81).noise;
         let mut kf = Eskf::new(x, cov, 9.81, noise, first);
         let mut nhc = ImuConstraint::new(0.02, None);
-        let outcome = nhc.apply(&mut kf, 0.01, 1.0, false);
+        let before = kf.x;
+        assert_eq!(nhc.apply(&mut kf, 0.01, 1.0, false), None);
+        assert_eq!(kf.x.q, before.q);
+        let outcome = nhc.apply(&mut kf, 0.01, 1.0, true);
         assert!(
             matches!(outcome, Some(Outcome::Applied { .. })),
             "{outcome:?}"
