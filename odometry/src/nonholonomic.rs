@@ -10,10 +10,11 @@
 //! velocity, unrevised: the first metres after a rest drift least). Until then only the
 //! vertical velocity is constrained, and not even that while the velocity has no direction (a
 //! filter aligned in motion, waiting for the speed hints' forward axis): linearized about such
-//! a velocity the vertical constraint turns the tilt (docs/odometry.md). Turning, an IMU off the turning axis moves sideways, so a
-//! drive that begins in a turn (a car pulling out of a parking space) points that displacement
-//! off the forward axis: the displacement over the first [`MOUNTING_PATH_M`] of straight
-//! driving ([`LEVER_ARM_BOUND_M`], [`STRAIGHT_ANGLE_RAD`]) replaces it once gathered. The first
+//! a velocity the vertical constraint turns the tilt (docs/odometry.md). Turning, an IMU off
+//! the turning axis moves sideways, so a drive that begins in a turn (a car pulling out of a
+//! parking space) points that displacement off the forward axis: the displacement over the
+//! first [`MOUNTING_PATH_M`] of straight driving ([`LEVER_ARM_BOUND_M`],
+//! [`STRAIGHT_ANGLE_RAD`]) replaces it once gathered. The first
 //! drive's estimate is kept until then, as platforms that rarely drive straight need the
 //! lateral constraint. The constraint says nothing about the sign of the forward axis, so a
 //! drive that starts in reverse estimates the same mounting.
@@ -205,12 +206,12 @@ impl ImuConstraint {
         if !kf.propagated() || interval_s <= 0.0 {
             return None;
         }
-        let sigma = self.sigma_mps * (1.0 / interval_s).sqrt();
         // Aligned in motion without a mounting, the velocity has no direction yet: linearized
         // about it, even the vertical constraint turns the tilt (module documentation).
         if self.r_bs.is_none() && !velocity_has_direction {
             return None;
         }
+        let sigma = self.sigma_mps * (1.0 / interval_s).sqrt();
         let (r_bs, lateral, r_b) = match self.r_bs {
             Some(r) => (r, sigma, self.lever_arm_m),
             None => (up_only(&up_s)?, FREE_MPS, Vector3::zeros()),

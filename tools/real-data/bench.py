@@ -495,6 +495,15 @@ class Runner:
 
 
 @contextlib.contextmanager
+def add_run_args(p):
+    """The flags of every script that runs the corpus: the binary, the converted data, the
+    recordings to run and JSON output."""
+    p.add_argument("--bin", default=str(REPO / "target" / "release" / "mems-odometry"), help="mems-odometry binary")
+    p.add_argument("--data", default=os.environ.get("MEMS_REAL_DATA", "/work/real-data"), help="converted data (default $MEMS_REAL_DATA or /work/real-data)")
+    p.add_argument("--only", action="append", metavar="ID", help="run only this recording (repeatable)")
+    p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
+
+
 def plain_and_changed(binary, data):
     """Yields (plain, changed, directory): two quiet runners under the identity calibration,
     one on the converted recordings in `data`, one on `directory`, a temporary directory where
@@ -713,11 +722,8 @@ def main():
         self_test()
         return
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--bin", default=str(REPO / "target" / "release" / "mems-odometry"), help="mems-odometry binary")
+    add_run_args(p)
     p.add_argument("--calib", help="calibration TOML for every run (default: an identity calibration written to a temporary file)")
-    p.add_argument("--data", default=os.environ.get("MEMS_REAL_DATA", "/work/real-data"), help="converted data (default $MEMS_REAL_DATA or /work/real-data)")
-    p.add_argument("--only", action="append", metavar="ID", help="run only this recording (repeatable)")
-    p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
     p.add_argument("--timeout", type=float, default=900.0, help="per-run limit, s")
     p.add_argument("--self-test", action="store_true", help="check the track's turn into our frame on made-up tracks (no data) and exit")
     p.add_argument("--loso", action="store_true", help="also tune corpus.json's `tuning` flags per platform class, in sample and leaving each source out, and print both")

@@ -18,7 +18,6 @@ Usage: luck.py [--seeds N] [--accel-ug U] [--gyro-mdps M] [--bin PATH] [--data D
 
 import argparse
 import json
-import os
 import random
 import statistics
 import sys
@@ -132,10 +131,7 @@ def main():
     p.add_argument("--seeds", type=int, default=5)
     p.add_argument("--accel-ug", type=float, default=100.0, help="accelerometer noise, micro-g per sample")
     p.add_argument("--gyro-mdps", type=float, default=10.0, help="gyroscope noise, milli-deg/s per sample")
-    p.add_argument("--bin", default=str(bench.REPO / "target" / "release" / "mems-odometry"))
-    p.add_argument("--data", default=os.environ.get("MEMS_REAL_DATA", "/work/real-data"))
-    p.add_argument("--only", action="append", metavar="ID")
-    p.add_argument("--json", action="store_true")
+    bench.add_run_args(p)
     p.add_argument("--self-test", action="store_true", help="check the noise on inline samples (no data) and exit")
     args = p.parse_args()
     if args.self_test:

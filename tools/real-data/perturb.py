@@ -31,7 +31,6 @@ Usage: perturb.py [--gyro-dps DPS] [--accel-g G] [--accel-scale S] [--accel-bias
 
 import argparse
 import json
-import os
 import struct
 import sys
 import tempfile
@@ -279,10 +278,7 @@ def main():
     p.add_argument("--accel-g", type=float, help="clip the accelerometer at +-G g")
     p.add_argument("--accel-scale", type=float, help="accelerometer scale error, fraction (0.04: 4 %% high)")
     p.add_argument("--accel-bias-g", help="accelerometer bias, g: one value for every axis or x,y,z")
-    p.add_argument("--bin", default=str(bench.REPO / "target" / "release" / "mems-odometry"))
-    p.add_argument("--data", default=os.environ.get("MEMS_REAL_DATA", "/work/real-data"))
-    p.add_argument("--only", action="append", metavar="ID")
-    p.add_argument("--json", action="store_true")
+    bench.add_run_args(p)
     p.add_argument("--self-test", action="store_true", help="check the CSV and MCAP perturbation on inline samples (no data) and exit")
     args = p.parse_args()
     if args.self_test:
