@@ -206,34 +206,33 @@ impl ImuConstraint {
         if !kf.propagated() || interval_s <= 0.0 {
             return None;
         }
-        // Aligned in motion without a mounting, the velocity has no direction yet: linearized
-        // about it, even the vertical constraint turns the tilt (module documentation).
-        if self.r_bs.is_none() && !velocity_has_direction {
-            return None;
-        }
         let sigma = self.sigma_mps * (1.0 / interval_s).sqrt();
-        let (r_bs, lateral, r_b) = match self.r_bs {
-            Some(r) => (r, sigma, self.lever_arm_m),
-            None => (up_only(&up_s)?, FREE_MPS, Vector3::zeros()),
+        let (r_bs, lateral, vertical, r_b) = match self.r_bs {
+            Some(r) => (r, sigma, sigma, self.lever_arm_m),
+            // Aligned in motion without a mounting, the velocity has no direction yet:
+            // linearized about it, even the vertical constraint turns the tilt (module
+            // documentation).
+            None if !velocity_has_direction => return None,
+            // Without a forward axis the velocity is uncertain across the body (the first
+            // metres of a drive): the linearization's left-out variance keeps its error from
+            // being read as tilt (docs/odometry.md, "Wheeled without hints: the
+            // non-holonomic constraint").
+            None => {
+                let r = up_only(&up_s)?;
+                let second = kf.body_velocity_second_order_variance(&r).z;
+                (r, FREE_MPS, sigma.hypot(second.sqrt()), Vector3::zeros())
+            }
         };
         let v_b = kf.point_velocity(&r_bs, &r_b);
-        // Without a forward axis the velocity is uncertain across the body (the first metres
-        // of a drive): the linearization's left-out variance keeps its error from being read
-        // as tilt (docs/odometry.md, "Wheeled without hints: the non-holonomic constraint").
-        let sigma = if self.r_bs.is_none() {
-            sigma.hypot(kf.body_velocity_second_order_variance(&r_bs).z.sqrt())
-        } else {
-            sigma
-        };
         let lateral = lateral.hypot(v_b.x * self.yaw_sigma_rad);
         let sigma_v = kf.filter_velocity_sigma().norm();
         let gate = |s: f64| GATE_SIGMA * s.hypot(sigma_v);
-        if v_b.z.abs() > gate(sigma) || (lateral < FREE_MPS && v_b.y.abs() > gate(lateral)) {
+        if v_b.z.abs() > gate(vertical) || (lateral < FREE_MPS && v_b.y.abs() > gate(lateral)) {
             self.rejected += 1;
             return Some(Outcome::Rejected);
         }
         let residual = Vector3::new(0.0, -v_b.y, -v_b.z);
-        let sigmas = Vector3::new(FREE_MPS, lateral, sigma);
+        let sigmas = Vector3::new(FREE_MPS, lateral, vertical);
         let nis = kf.point_velocity_update(&r_bs, &r_b, residual, sigmas, Heading::Kept);
         self.applied += 1;
         let dof = if lateral < FREE_MPS { 2.0 } else { 1.0 };

@@ -71,9 +71,9 @@ impl Eskf {
     /// in the sensor frame, `R` the attitude, the attitude error local). Its variance for
     /// jointly Gaussian errors is `tr(B_k^T P_tt B_k P_vv) + tr((B_k P_vt)^2)` (Isserlis'
     /// theorem; the Gaussian second-order filter's term, Gelb 1974, section 6.1). It matters
-    /// where the velocity is uncertain across the body axis and the tilt is not exact: a
-    /// filter aligned in motion whose velocity has no direction yet, where the linearization
-    /// about its velocity would read the vertical velocity as tilt.
+    /// where the velocity is uncertain across the body axis and the tilt is not exact (the
+    /// first metres of a drive before a mounting is known), where the linearization about
+    /// the velocity would read the vertical velocity as tilt.
     pub fn body_velocity_second_order_variance(&self, r_bs: &Matrix3<f64>) -> Vector3<f64> {
         let r_t = self.x.q.to_rotation_matrix().into_inner().transpose();
         let p_tt = self.cov.fixed_view::<3, 3>(TH, TH);
