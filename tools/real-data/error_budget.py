@@ -40,6 +40,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
@@ -85,30 +86,15 @@ def body_axes(raw, t_a, yaw_deg):
     """Forward and left in the sensor frame (unit 3-vectors): up from the mean specific force
     over the alignment's last ALIGN_REST_S, forward the sensor's x levelled and turned by
     -yaw_deg about up (the sensor's yaw on the body, counter-clockwise), left = up x forward."""
-    rest = [f for t, f in raw if t_a - ALIGN_REST_S <= t <= t_a]
-    up = [sum(f[i] for f in rest) / len(rest) for i in range(3)]
-    up = scaled(up, 1 / norm(up))
-    ex = scaled([1.0 - up[0] * up[0], -up[0] * up[1], -up[0] * up[2]], 1.0)
-    ex = scaled(ex, 1 / norm(ex))
-    ey = cross(up, ex)
+    rest = np.array([f for t, f in raw if t_a - ALIGN_REST_S <= t <= t_a])
+    up = rest.mean(axis=0)
+    up /= np.linalg.norm(up)
+    ex = np.array([1.0, 0.0, 0.0]) - up[0] * up
+    ex /= np.linalg.norm(ex)
+    ey = np.cross(up, ex)
     c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
-    forward = [c * a - s * b for a, b in zip(ex, ey)]
-    return up, forward, cross(up, forward)
-
-
-def norm(v):
-    """Euclidean length of a 3-vector."""
-    return math.sqrt(sum(a * a for a in v))
-
-
-def scaled(v, k):
-    """The 3-vector v times k."""
-    return [a * k for a in v]
-
-
-def cross(a, b):
-    """The cross product a x b of two 3-vectors."""
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    forward = c * ex - s * ey
+    return up, forward, np.cross(up, forward)
 
 
 def bin_means(samples, t_a, count):
