@@ -494,7 +494,6 @@ class Runner:
         return row
 
 
-@contextlib.contextmanager
 def add_run_args(p):
     """The flags of every script that runs the corpus: the binary, the converted data, the
     recordings to run and JSON output."""
@@ -504,6 +503,7 @@ def add_run_args(p):
     p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
 
 
+@contextlib.contextmanager
 def plain_and_changed(binary, data):
     """Yields (plain, changed, directory): two quiet runners under the identity calibration,
     one on the converted recordings in `data`, one on `directory`, a temporary directory where

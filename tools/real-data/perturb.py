@@ -33,7 +33,6 @@ import argparse
 import json
 import struct
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -247,7 +246,9 @@ def self_test():
     def close(got, want):
         return all(abs(a - b) < 1e-9 for a, b in zip(got, want))
 
-    with tempfile.TemporaryDirectory() as tmp:
+    # The changed-copies directory the corpus runs write into (bench.plain_and_changed, entered
+    # as they enter it; no run is made).
+    with bench.plain_and_changed("mems-odometry", ".") as (_, _, tmp):
         src, dst = Path(tmp) / "in.csv", Path(tmp) / "out.csv"
         src.write_text("# test\nt_s," + ",".join(ACCEL + GYRO) + "\n"
                        + "".join(",".join(map(repr, row)) + "\n" for row in samples))
