@@ -19,6 +19,11 @@ alignment):
   where it has no heading of its own, it is turned into our frame by the rotation that best
   maps its first ALIGN_PATH_M metres onto our track (the JSON's `track`) at the same times, and
   the error is then one figure, not an interval.
+- ours / true distance: the path our run reports (the JSON's `distance_m`: the track's length,
+  or a walk's summed steps) over the true distance, where the source gives one. A closed loop's
+  end error rewards a run that goes nowhere: one that counts no step of a walk ends where the
+  walk began, as the walk does (a step-counting rule that dropped most of the hand-held walks'
+  steps halved their median end error): the ratio shows it.
 - 1-sigma: sqrt((sx^2 + sy^2) / 2) of the reported position sigma (per-axis rms).
 - covered: error <= r68 = 1.515 * sqrt((sx^2 + sy^2) / 2), the radius holding 68 % of a circular
   2-D Gaussian with that per-axis sigma (r = sigma sqrt(-2 ln 0.32) = 1.5096 sigma; 1.515 is
@@ -26,8 +31,8 @@ alignment):
   end is not, `?` otherwise.
 
 Summaries are per platform class (corpus.json: foot, wheeled, vehicle, handheld, arm): runs
-that gave a position, 1-sigma coverage, and the median % of distance (upper end of the
-interval where the truth is a distance only).
+that gave a position, 1-sigma coverage, the median % of distance (upper end of the interval
+where the truth is a distance only) and the median of ours / true distance with its range.
 
 Leave one source out (`--loso`): corpus.json's `tuning` section lists the `mems-odometry
 offline` flags whose values were (or would be) chosen on the corpus, each with its candidate
@@ -361,10 +366,12 @@ def evaluate(side, out):
     else:
         covered = "?"
     pct = (lambda e: 100.0 * e / distance if distance else None)
+    ours = out.get("distance_m")
     return {
         "end_displacement_m": p,
         "sigma_m": s,
-        "estimated_distance_m": out.get("distance_m"),
+        "estimated_distance_m": ours,
+        "distance_ratio": ours / distance if distance and not ours_distance and ours is not None else None,
         "error_m": [lo, hi],
         "distance_m": distance,
         "distance_is_estimate": ours_distance,
@@ -386,7 +393,7 @@ def fmt_range(lo, hi, digits):
 
 def table(rows):
     head = ["recording", "IMU", "platform", "duration (s)", "distance (m)", "end error (m)",
-            "% of distance", "1-sigma (m)", "r68 (m)", "covered", "authors' result"]
+            "% of distance", "ours / true distance", "1-sigma (m)", "r68 (m)", "covered", "authors' result"]
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         side = r.get("sidecar") or {}
@@ -396,7 +403,7 @@ def table(rows):
         if r.get("error"):
             dist = side.get("distance_m")
             base.append(f"{dist:.1f}" if dist else "-")
-            out.append("| " + " | ".join(base + [f"failed: {r['error']}", "", "", "", "",
+            out.append("| " + " | ".join(base + [f"failed: {r['error']}", "", "", "", "", "",
                                                 side.get("authors_result") or "-"]) + " |")
             continue
         e = r["result"]
@@ -405,6 +412,7 @@ def table(rows):
         out.append("| " + " | ".join(base + [
             dist, fmt_range(*e["error_m"], 3),
             fmt_range(pct[0], pct[1], 2) if pct[0] is not None else "-",
+            f"{e['distance_ratio']:.2f}" if e.get("distance_ratio") is not None else "-",
             f"{e['sigma_h_m']:.3f}", f"{e['r68_m']:.3f}", e["covered"],
             side.get("authors_result") or "-"]) + " |")
     return "\n".join(out)
@@ -449,9 +457,12 @@ def summary(rows):
         cov = sum(1 for r in ok if r["result"]["covered"] == "yes")
         sources = sorted({r["sidecar"]["source"]["repo"] for r in group if r.get("sidecar")})
         med = statistics.median(pct_upper(r) for r in group)
+        ratios = [r["result"]["distance_ratio"] for r in ok if r["result"].get("distance_ratio") is not None]
+        ratio = (f"; ours / true distance median {statistics.median(ratios):.2f} ({min(ratios):.2f}-"
+                 f"{max(ratios):.2f}, {len(ratios)} runs)" if ratios else "")
         lines.append(f"{platform}: {len(ok)} of {len(group)} runs gave a position, {cov} covered; median % of "
                      f"distance (upper end; failed or unmeasured runs infinite): {fmt_pct(med)}; "
-                     f"{len(sources)} source{'s' if len(sources) != 1 else ''}")
+                     f"{len(sources)} source{'s' if len(sources) != 1 else ''}{ratio}")
     return lines
 
 
