@@ -23,7 +23,7 @@ alignment):
   or a walk's summed steps) over the true distance, where the source gives one. A closed loop's
   end error rewards a run that goes nowhere: one that counts no step of a walk ends where the
   walk began, as the walk does (a step-counting rule that dropped most of the hand-held walks'
-  steps halved their median end error): the ratio shows it.
+  steps more than halved their median end error): the ratio shows it.
 - 1-sigma: sqrt((sx^2 + sy^2) / 2) of the reported position sigma (per-axis rms).
 - covered: error <= r68 = 1.515 * sqrt((sx^2 + sy^2) / 2), the radius holding 68 % of a circular
   2-D Gaussian with that per-axis sigma (r = sigma sqrt(-2 ln 0.32) = 1.5096 sigma; 1.515 is
