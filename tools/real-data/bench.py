@@ -505,6 +505,14 @@ class Runner:
         return row
 
 
+def corpus_recordings(only, platform=None):
+    """corpus.json's recordings, those with an id in `only` when it names any, and of
+    `platform` when given."""
+    corpus = json.loads((HERE / "corpus.json").read_text())
+    return [r for r in corpus["recordings"]
+            if (platform is None or r.get("platform") == platform) and (not only or r["id"] in only)]
+
+
 def add_run_args(p):
     """The flags of every script that runs the corpus: the binary, the converted data, the
     recordings to run and JSON output."""

@@ -20,7 +20,6 @@ Usage: clip_heading.py [--gyro-dps DPS] [--bin PATH] [--data DIR] [--only ID ...
 """
 
 import argparse
-import json
 import math
 import os
 import statistics
@@ -77,8 +76,7 @@ def main():
     args = p.parse_args()
     clip = perturb.Perturbation(argparse.Namespace(accel_scale=None, accel_bias_g=None, accel_g=None,
                                                    gyro_dps=args.gyro_dps))
-    corpus = json.loads((Path(__file__).resolve().parent / "corpus.json").read_text())
-    recs = [r for r in corpus["recordings"] if r.get("platform") == "foot" and (not args.only or r["id"] in args.only)]
+    recs = bench.corpus_recordings(args.only, "foot")
     print(f"Foot walks with the gyroscope clipped at +-{args.gyro_dps:g} deg/s against the same walks unclipped, step by step")
     print()
     print("| walk | steps | length error, mean / mean abs, cm | heading error, first / last quarter, deg | end error / 1-sigma, m |")

@@ -19,7 +19,6 @@ Usage: clip_oracle.py [--gyro-dps DPS] [--bin PATH] [--data DIR] [--only ID ...]
 """
 
 import argparse
-import json
 import os
 import sys
 from pathlib import Path
@@ -78,8 +77,7 @@ def main():
     p.add_argument("--data", default=os.environ.get("MEMS_REAL_DATA", "/work/real-data"))
     p.add_argument("--only", action="append", default=[])
     args = p.parse_args()
-    corpus = json.loads((HERE / "corpus.json").read_text())
-    recs = [r for r in corpus["recordings"] if r.get("platform") == "foot" and (not args.only or r["id"] in args.only)]
+    recs = bench.corpus_recordings(args.only, "foot")
     data = Path(args.data)
     print(f"Foot walks with their true rates, flagged clipped beyond +-{args.gyro_dps:g} deg/s (gyro); "
           "horizontal end error / 1-sigma, m")

@@ -139,8 +139,7 @@ def main():
         return 0
     if args.seeds < 1:
         p.error("--seeds must be at least 1")
-    corpus = json.loads((bench.HERE / "corpus.json").read_text())
-    recordings = [r for r in corpus["recordings"] if not args.only or r["id"] in args.only]
+    recordings = bench.corpus_recordings(args.only)
     out = run(args, recordings)
     if args.json:
         json.dump(out, sys.stdout, indent=1)

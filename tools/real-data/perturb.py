@@ -288,10 +288,7 @@ def main():
     perturbation = Perturbation(args)
     if not perturbation.describe():
         p.error("nothing to perturb: give --gyro-dps, --accel-g, --accel-scale or --accel-bias-g")
-    corpus = json.loads((bench.HERE / "corpus.json").read_text())
-    recordings = [r for r in corpus["recordings"]
-                  if (not perturbation.clips or r.get("platform") == "foot")
-                  and (not args.only or r["id"] in args.only)]
+    recordings = bench.corpus_recordings(args.only, "foot" if perturbation.clips else None)
     rows = run_all(args, perturbation, recordings)
     if args.json:
         json.dump(rows, sys.stdout, indent=1)
