@@ -47,7 +47,7 @@ pub use refinement::{Refinement, RefinementMean};
 use reported::Reported;
 
 /// Error-state dimension.
-pub const N: usize = 16;
+pub const N: usize = 17;
 /// Error-state covariance.
 pub type Cov = SMatrix<f64, N, N>;
 type VecN = SVector<f64, N>;
@@ -67,6 +67,11 @@ pub const BA: usize = 9;
 pub const BG: usize = 12;
 /// Index of the wheel-speed scale error in the error state.
 pub const KS: usize = 15;
+/// Index of the estimated mounting's yaw error in the error state, rad about body up: the
+/// error of a mounting the non-holonomic constraint estimated from the drive
+/// (`crate::nonholonomic`), whose prior that estimate sets ([`Eskf::restart_mounting`]); zero
+/// variance, and no effect, otherwise.
+pub const MY: usize = 16;
 
 /// Whether a velocity update may turn the heading (and its rate, the gyro bias about up).
 ///
@@ -201,6 +206,9 @@ pub struct Nominal {
     pub b_g: Vector3<f64>,
     /// Scale error of the wheel-speed source, fraction (it reads `(1 + k)` times the truth).
     pub k: f64,
+    /// Correction to an estimated mounting's yaw since it was taken, rad about body up
+    /// (counter-clockwise): the mounting in use is `R_z(m) R_bs` ([`Eskf::mounted`]).
+    pub m: f64,
 }
 
 /// One IMU measurement in SI units, sensor frame.
@@ -378,6 +386,26 @@ impl Eskf {
             self.cov[(j, i)] *= f;
             self.cov[(i, j)] *= f;
         }
+    }
+
+    /// Starts the mounting-yaw state ([`MY`]) at a newly estimated mounting: correction zero,
+    /// 1-sigma `sigma_rad`, uncorrelated with the other states (the estimate is new).
+    pub fn restart_mounting(&mut self, sigma_rad: f64) {
+        self.x.m = 0.0;
+        self.cov.column_mut(MY).fill(0.0);
+        self.cov.row_mut(MY).fill(0.0);
+        self.cov[(MY, MY)] = sigma_rad * sigma_rad;
+    }
+
+    /// The estimated mounting `r_bs` (sensor to body) turned by the mounting-yaw correction:
+    /// `R_z(m) r_bs`, the mounting in use.
+    pub fn mounted(&self, r_bs: &Matrix3<f64>) -> Matrix3<f64> {
+        nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), self.x.m).into_inner() * r_bs
+    }
+
+    /// The mounting-yaw correction and its 1-sigma, rad.
+    pub fn mounting_yaw(&self) -> (f64, f64) {
+        (self.x.m, self.cov[(MY, MY)].max(0.0).sqrt())
     }
 
     /// The wheel-speed scale error and its 1-sigma, fraction.
@@ -833,6 +861,7 @@ impl Eskf {
         self.x.b_a += dx.fixed_rows::<3>(BA);
         self.x.b_g += dx.fixed_rows::<3>(BG);
         self.x.k += dx[KS];
+        self.x.m += dx[MY];
         self.refresh_sigma();
     }
 
@@ -913,6 +942,7 @@ pub fn align(
         b_a,
         b_g: w_mean,
         k: 0.0,
+        m: 0.0,
     };
 
     // Horizontal bias uncertainty (sensor frame), with the vertical component removed: that part

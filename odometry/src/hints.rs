@@ -510,19 +510,28 @@ pub fn mounting_from(forward_s: &Vector3<f64>, up_s: &Vector3<f64>) -> Option<Un
 /// removed most of the velocity drift), and uses the result once [`HintConfig::
 /// mounting_min_path_m`] of path has been gathered. It assumes the robot drives forward until
 /// then; a reversing leg would point the estimate backwards.
+///
+/// The direction's 1-sigma ([`Self::yaw_sigma_rad`]) is the displacement's across the path
+/// over its horizontal length (small angles), the displacement's taken as the sum of the
+/// velocities' 1-sigmas given with them times their intervals: a velocity's error drifts, one
+/// error over the path, so the 1-sigmas add rather than add in quadrature.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct MountingEstimator {
     /// Sensor-frame displacement gathered, m.
     sum_s: Vector3<f64>,
     /// Path length gathered, m.
     path_m: f64,
+    /// 1-sigma of the displacement across the path, m.
+    across_m: f64,
 }
 
 impl MountingEstimator {
-    /// Adds a velocity `v_s` (m/s, sensor frame) held for `dt_s` seconds.
-    pub fn add(&mut self, v_s: &Vector3<f64>, dt_s: f64) {
+    /// Adds a velocity `v_s` (m/s, sensor frame) held for `dt_s` seconds, with its 1-sigma
+    /// across the path `sigma_mps` (m/s; 0 where no 1-sigma is asked of the estimate).
+    pub fn add(&mut self, v_s: &Vector3<f64>, sigma_mps: f64, dt_s: f64) {
         self.sum_s += v_s * dt_s;
         self.path_m += v_s.norm() * dt_s;
+        self.across_m += sigma_mps * dt_s;
     }
 
     /// Path length gathered so far, m.
@@ -533,6 +542,18 @@ impl MountingEstimator {
     /// The mounting, from the displacement so far and the up direction `up_s` (sensor frame).
     pub fn mounting(&self, up_s: &Vector3<f64>) -> Option<UnitQuaternion<f64>> {
         mounting_from(&self.sum_s, up_s)
+    }
+
+    /// 1-sigma of the mounting's yaw, rad, `up_s` the up direction (sensor frame): the
+    /// displacement's 1-sigma across the path over its horizontal length (the type's
+    /// documentation); infinite before any horizontal displacement.
+    pub fn yaw_sigma_rad(&self, up_s: &Vector3<f64>) -> f64 {
+        let horizontal = (self.sum_s - up_s * up_s.dot(&self.sum_s)).norm();
+        if horizontal > 0.0 {
+            self.across_m / horizontal
+        } else {
+            f64::INFINITY
+        }
     }
 }
 

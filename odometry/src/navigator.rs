@@ -968,9 +968,10 @@ impl Navigator {
                 // The revised velocity in the sensor frame, held until the next stored state.
                 let next_ns = self.history.get(i + 1).map_or(pending.end_ns, |n| n.t_ns);
                 let dt = next_ns.saturating_sub(h.t_ns) as f64 * 1e-9;
+                // Revised at the rest: no 1-sigma is asked of this estimate.
                 self.hints
                     .estimator
-                    .add(&h.q.inverse_transform_vector(&v), dt);
+                    .add(&h.q.inverse_transform_vector(&v), 0.0, dt);
             }
             emit(&h.revision(&p, &v, g, self.counts()));
         }

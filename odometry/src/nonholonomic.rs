@@ -19,6 +19,17 @@
 //! lateral constraint. The constraint says nothing about the sign of the forward axis, so a
 //! drive that starts in reverse estimates the same mounting.
 //!
+//! An estimated mounting is not exact: its yaw is off by what the filter's velocity drifted
+//! across the path while it was gathered, and by what a lever arm up to
+//! [`LEVER_ARM_BOUND_M`] moved the IMU sideways while the platform turned
+//! ([`crate::hints::MountingEstimator::yaw_sigma_rad`]). A yaw error `dm` puts `v dm` of the
+//! forward speed sideways, and while the platform turns at `w` the constraint's updates read
+//! it as a turn of the velocity at `w dm` that the gyro did not see. So the yaw's error is a
+//! state of the filter ([`crate::eskf::MY`], prior that 1-sigma, no process noise: the IMU
+//! is fixed to the body), which the constraint's updates estimate with the rest
+//! ([`Eskf::mounted_velocity_update`]); a given mounting, or one followed from the speed
+//! hints (their own 1-sigma widens the lateral constraint), is taken as it is.
+//!
 //! The constraint holds at the rear axle, which the lever arm `r_b` (body frame, m, from the
 //! IMU to the axle; [`ImuConstraint::with_lever_arm`], zero by default) locates: the velocity
 //! constrained is the axle's, `v_b + omega_b x r_b` ([`Eskf::point_velocity`]). Until the
@@ -71,6 +82,12 @@ pub const MOUNTING_PATH_M: f64 = 2.0;
 pub const LEVER_ARM_BOUND_M: f64 = 2.0;
 /// The straight-driving mounting gathers where that angle stays within this, rad (2 deg).
 pub const STRAIGHT_ANGLE_RAD: f64 = 0.035;
+/// Largest 1-sigma the mounting-yaw state starts with, rad (11.5 deg): the update's
+/// linearization in the yaw error (`sin dm = dm`, `cos dm = 1`) stays within 8 % out to two
+/// of them (`cos 0.4 = 0.92`). An estimate the filter's velocity knows worse (a slow rover's
+/// first metres) starts there: better than taking it as exact, as the constraint did before
+/// it had the state.
+pub const MAX_MOUNTING_YAW_SIGMA_RAD: f64 = 0.2;
 /// Residuals beyond this many standard deviations are rejected.
 pub const GATE_SIGMA: f64 = 5.0;
 /// 1-sigma given to the unconstrained forward component, m/s (no information).
@@ -97,6 +114,9 @@ pub struct ImuConstraint {
     r_bs: Option<Matrix3<f64>>,
     /// Whether `r_bs` was given.
     given: bool,
+    /// Whether `r_bs` is this constraint's own estimate, whose yaw error the filter carries
+    /// ([`Eskf::mounted`]), and the filter's correction to it at the last update, rad.
+    estimated: Option<f64>,
     /// 1-sigma of `r_bs`'s yaw when it follows the speed hints' forward axis, rad (0
     /// otherwise): a yaw off by that much puts that fraction of the forward speed sideways.
     yaw_sigma_rad: f64,
@@ -148,6 +168,7 @@ impl ImuConstraint {
             sigma_mps,
             r_bs: mounting.map(|q| q.to_rotation_matrix().into_inner()),
             given: mounting.is_some(),
+            estimated: None,
             yaw_sigma_rad: 0.0,
             estimator: MountingEstimator::default(),
             straight: mounting.is_none().then(MountingEstimator::default),
@@ -167,10 +188,14 @@ impl ImuConstraint {
         self
     }
 
-    /// The mounting in use (given or estimated), `None` while estimating.
+    /// The mounting in use (given, followed, or estimated with the filter's correction at
+    /// the last update), `None` while estimating.
     pub fn mounting(&self) -> Option<UnitQuaternion<f64>> {
         self.r_bs.map(|r| {
-            UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r))
+            let q = UnitQuaternion::from_rotation_matrix(
+                &nalgebra::Rotation3::from_matrix_unchecked(r),
+            );
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.estimated.unwrap_or(0.0)) * q
         })
     }
 
@@ -181,6 +206,7 @@ impl ImuConstraint {
     pub fn follow(&mut self, mounting: UnitQuaternion<f64>, yaw_sigma_rad: f64) {
         if !self.given {
             self.r_bs = Some(mounting.to_rotation_matrix().into_inner());
+            self.estimated = None;
             self.yaw_sigma_rad = yaw_sigma_rad;
             self.straight = None;
         }
@@ -208,6 +234,7 @@ impl ImuConstraint {
         }
         let sigma = self.sigma_mps * (1.0 / interval_s).sqrt();
         let (r_bs, lateral, vertical, r_b) = match self.r_bs {
+            Some(r) if self.estimated.is_some() => (kf.mounted(&r), sigma, sigma, self.lever_arm_m),
             Some(r) => (r, sigma, sigma, self.lever_arm_m),
             // Aligned in motion without a mounting, the velocity has no direction yet:
             // linearized about it, even the vertical constraint turns the tilt (module
@@ -233,7 +260,13 @@ impl ImuConstraint {
         }
         let residual = Vector3::new(0.0, -v_b.y, -v_b.z);
         let sigmas = Vector3::new(FREE_MPS, lateral, vertical);
-        let nis = kf.point_velocity_update(&r_bs, &r_b, residual, sigmas, Heading::Kept);
+        let nis = if self.estimated.is_some() {
+            let nis = kf.mounted_velocity_update(&r_bs, &r_b, residual, sigmas, Heading::Kept);
+            self.estimated = Some(kf.mounting_yaw().0);
+            nis
+        } else {
+            kf.point_velocity_update(&r_bs, &r_b, residual, sigmas, Heading::Kept)
+        };
         self.applied += 1;
         let dof = if lateral < FREE_MPS { 2.0 } else { 1.0 };
         if let Some(x) = nis.filter(|x| x.is_finite()) {
@@ -249,28 +282,39 @@ impl ImuConstraint {
 
 impl ImuConstraint {
     /// Gathers the filter's sensor-frame velocity over `dt_s` into the mounting estimates
-    /// (module documentation), `up_s` the filter's up direction in the sensor frame.
-    fn estimate_mounting(&mut self, kf: &Eskf, up_s: &Vector3<f64>, dt_s: f64) {
+    /// (module documentation), `up_s` the filter's up direction in the sensor frame; a new
+    /// estimate restarts the filter's mounting-yaw state with its 1-sigma.
+    fn estimate_mounting(&mut self, kf: &mut Eskf, up_s: &Vector3<f64>, dt_s: f64) {
         let v_s = kf.x.q.inverse_transform_vector(&kf.x.v);
+        // Across the path: the velocity's horizontal 1-sigma (per axis) and the sideways
+        // speed of an IMU up to the lever-arm bound off the turning axis.
+        let v_sigma = kf.filter_velocity_sigma().xy().norm() * std::f64::consts::FRAC_1_SQRT_2;
+        let turn = kf.rate().dot(up_s).abs() * LEVER_ARM_BOUND_M;
+        let across = v_sigma.hypot(turn);
         let from = |e: &MountingEstimator| {
             (e.path_m() >= MOUNTING_PATH_M)
                 .then(|| e.mounting(up_s))
                 .flatten()
-                .map(|q| q.to_rotation_matrix().into_inner())
+                .map(|q| (q.to_rotation_matrix().into_inner(), e.yaw_sigma_rad(up_s)))
         };
+        let mut estimate = None;
         if self.r_bs.is_none() {
-            self.estimator.add(&v_s, dt_s);
-            self.r_bs = from(&self.estimator);
+            self.estimator.add(&v_s, across, dt_s);
+            estimate = from(&self.estimator);
         }
-        let turn = kf.rate().dot(up_s).abs() * LEVER_ARM_BOUND_M;
         if let Some(straight) = self.straight.as_mut()
             && turn <= v_s.norm() * STRAIGHT_ANGLE_RAD.tan()
         {
-            straight.add(&v_s, dt_s);
-            if let Some(r) = from(straight) {
-                self.r_bs = Some(r);
+            straight.add(&v_s, across, dt_s);
+            if let Some(found) = from(straight) {
+                estimate = Some(found);
                 self.straight = None;
             }
+        }
+        if let Some((r, sigma)) = estimate {
+            self.r_bs = Some(r);
+            kf.restart_mounting(sigma.min(MAX_MOUNTING_YAW_SIGMA_RAD));
+            self.estimated = Some(0.0);
         }
     }
 
@@ -426,6 +470,7 @@ mod tests {
             b_a: Vector3::zeros(),
             b_g: Vector3::zeros(),
             k: 0.0,
+            m: 0.0,
         };
         let a = Cov::from_fn(|i, j| ((5 * i + 2 * j) as f64).cos());
         let cov = a * a.transpose() * 1e-3 + Cov::identity() * 1e-4;
@@ -472,6 +517,7 @@ mod tests {
             b_a: Vector3::zeros(),
             b_g: Vector3::zeros(),
             k: 0.0,
+            m: 0.0,
         };
         let mut cov = Cov::identity() * 1e-6;
         for (i, sigma) in [20.0, 20.0, 0.5].iter().enumerate() {

@@ -24,6 +24,13 @@ alignment):
   end error rewards a run that goes nowhere: one that counts no step of a walk ends where the
   walk began, as the walk does (a step-counting rule that dropped most of the hand-held walks'
   steps more than halved their median end error): the ratio shows it.
+- track error: where the truth is a track on the recording's clock, the root mean square over
+  our track's poses (the JSON's `track`) of the horizontal distance to the truth's pose at the
+  same time, both from our alignment and the truth turned into our frame as for the end error
+  (the absolute trajectory error of Zhang and Scaramuzza, IROS 2018, sec. IV, with that
+  yaw-only alignment), as % of the true distance. An end error says where a run stopped; a
+  run whose heading spun ends near its start on a loop, as the truth does, and only its track
+  shows it.
 - 1-sigma: sqrt((sx^2 + sy^2) / 2) of the reported position sigma (per-axis rms).
 - covered: error <= r68 = 1.515 * sqrt((sx^2 + sy^2) / 2), the radius holding 68 % of a circular
   2-D Gaussian with that per-axis sigma (r = sigma sqrt(-2 ln 0.32) = 1.5096 sigma; 1.515 is
@@ -32,7 +39,8 @@ alignment):
 
 Summaries are per platform class (corpus.json: foot, wheeled, vehicle, handheld, arm): runs
 that gave a position, 1-sigma coverage, the median % of distance (upper end of the interval
-where the truth is a distance only) and the median of ours / true distance with its range.
+where the truth is a distance only), the median of ours / true distance with its range, and
+the median track error over the runs that have one.
 
 Leave one source out (`--loso`): corpus.json's `tuning` section lists the `mems-odometry
 offline` flags whose values were (or would be) chosen on the corpus, each with its candidate
@@ -54,6 +62,7 @@ Usage: bench.py [--bin PATH] [--calib TOML] [--data DIR] [--only ID ...] [--json
 """
 
 import argparse
+import bisect
 import contextlib
 import itertools
 import json
@@ -309,6 +318,54 @@ def track_in_our_frame(truth, out):
     }
 
 
+def into_our_frame(truth, out):
+    """The map of the truth track's (x, y) into our frame (from its pose at our alignment),
+    or None where the truth tells no heading: turned by the body's heading there plus the
+    IMU's yaw on the body where the sidecar gives both (our heading is the sensor's x axis at
+    alignment, eskf::align: the smallest turn of the measured up onto z), else by
+    [`track_heading`] over ALIGN_PATH_M of path."""
+    t0 = out.get("aligned_at_s")
+    if not truth.get("track") or t0 is None:
+        return None
+    start = track_at(truth["track"], t0)
+    yaw_on_body = truth.get("sensor_yaw_on_body_deg")
+    if yaw_on_body is not None and len(truth["track"][0]) > 3:
+        psi = heading_at(truth["track"], t0) + math.radians(yaw_on_body)
+        c, s = math.cos(psi), math.sin(psi)
+        return lambda q: (c * (q[0] - start[0]) + s * (q[1] - start[1]),
+                          -s * (q[0] - start[0]) + c * (q[1] - start[1]))
+    if not out.get("track"):
+        return None
+    yaw = track_heading(truth, out["track"], t0, ALIGN_PATH_M)
+    if yaw is None:
+        return None
+    c, s = math.cos(yaw), math.sin(yaw)
+    return lambda q: (c * (q[0] - start[0]) - s * (q[1] - start[1]),
+                      s * (q[0] - start[0]) + c * (q[1] - start[1]))
+
+
+def track_error(truth, out):
+    """The track error (module documentation), m: rms over our track's poses within the
+    truth's time span of the horizontal distance to the truth's pose at the same time (linear
+    between its poses), in our frame; None without a truth track in our frame."""
+    to_ours = into_our_frame(truth, out)
+    if to_ours is None:
+        return None
+    poses = truth["track"]
+    times = [q[0] for q in poses]
+    sum_sq, n = 0.0, 0
+    for t, x, y, *_ in out["track"]:
+        i = bisect.bisect_left(times, t)
+        if i == 0 or i == len(times):
+            continue
+        a, b = poses[i - 1], poses[i]
+        f = (t - a[0]) / (b[0] - a[0])
+        tx, ty = to_ours((a[1] + f * (b[1] - a[1]), a[2] + f * (b[2] - a[2])))
+        sum_sq += (x - tx) ** 2 + (y - ty) ** 2
+        n += 1
+    return math.sqrt(sum_sq / n) if n else None
+
+
 def evaluate(side, out):
     """The row's figures from the sidecar (truth) and the odometry's JSON."""
     p = out["end_displacement_m"]
@@ -326,14 +383,8 @@ def evaluate(side, out):
         # truth counts from the pose where the odometry aligned, as our position does.
         start = track_at(truth["track"], out["aligned_at_s"])
         end = truth["track"][-1][1:3]
-        yaw_on_body = truth.get("sensor_yaw_on_body_deg")
-        if yaw_on_body is not None and len(truth["track"][0]) > 3:
-            # Our heading is the sensor's x axis at alignment (eskf::align: the smallest turn
-            # of the measured up onto z), which is the car's heading plus the IMU's yaw on it.
-            psi = heading_at(truth["track"], out["aligned_at_s"]) + math.radians(yaw_on_body)
-            dx, dy = end[0] - start[0], end[1] - start[1]
-            c, s_ = math.cos(psi), math.sin(psi)
-            t_vec = [c * dx + s_ * dy, -s_ * dx + c * dy]
+        if truth.get("sensor_yaw_on_body_deg") is not None and len(truth["track"][0]) > 3:
+            t_vec = list(into_our_frame(truth, out)(end))
             lo = hi = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
         elif (turned := track_in_our_frame(truth, out)) is not None:
             t_vec = turned["end_m"]
@@ -367,9 +418,12 @@ def evaluate(side, out):
         covered = "?"
     pct = (lambda e: 100.0 * e / distance if distance else None)
     ours = out.get("distance_m")
+    track_rms = track_error(truth, out)
     return {
         "end_displacement_m": p,
         "sigma_m": s,
+        "track_rms_m": track_rms,
+        "track_rms_pct": pct(track_rms) if track_rms is not None else None,
         "estimated_distance_m": ours,
         "distance_ratio": ours / distance if distance and not ours_distance and ours is not None else None,
         "error_m": [lo, hi],
@@ -393,7 +447,8 @@ def fmt_range(lo, hi, digits):
 
 def table(rows):
     head = ["recording", "IMU", "platform", "duration (s)", "distance (m)", "end error (m)",
-            "% of distance", "ours / true distance", "1-sigma (m)", "r68 (m)", "covered", "authors' result"]
+            "% of distance", "track error, % of distance", "ours / true distance", "1-sigma (m)", "r68 (m)",
+            "covered", "authors' result"]
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         side = r.get("sidecar") or {}
@@ -403,7 +458,7 @@ def table(rows):
         if r.get("error"):
             dist = side.get("distance_m")
             base.append(f"{dist:.1f}" if dist else "-")
-            out.append("| " + " | ".join(base + [f"failed: {r['error']}", "", "", "", "", "",
+            out.append("| " + " | ".join(base + [f"failed: {r['error']}", "", "", "", "", "", "",
                                                 side.get("authors_result") or "-"]) + " |")
             continue
         e = r["result"]
@@ -412,6 +467,7 @@ def table(rows):
         out.append("| " + " | ".join(base + [
             dist, fmt_range(*e["error_m"], 3),
             fmt_range(pct[0], pct[1], 2) if pct[0] is not None else "-",
+            f"{e['track_rms_pct']:.2f}" if e.get("track_rms_pct") is not None else "-",
             f"{e['distance_ratio']:.2f}" if e.get("distance_ratio") is not None else "-",
             f"{e['sigma_h_m']:.3f}", f"{e['r68_m']:.3f}", e["covered"],
             side.get("authors_result") or "-"]) + " |")
@@ -460,9 +516,12 @@ def summary(rows):
         ratios = [r["result"]["distance_ratio"] for r in ok if r["result"].get("distance_ratio") is not None]
         ratio = (f"; ours / true distance median {statistics.median(ratios):.2f} ({min(ratios):.2f}-"
                  f"{max(ratios):.2f}, {len(ratios)} runs)" if ratios else "")
+        tracks = [r["result"]["track_rms_pct"] for r in ok if r["result"].get("track_rms_pct") is not None]
+        track = (f"; track error median {statistics.median(tracks):.2f} % ({len(tracks)} runs)"
+                 if tracks else "")
         lines.append(f"{platform}: {len(ok)} of {len(group)} runs gave a position, {cov} covered; median % of "
                      f"distance (upper end; failed or unmeasured runs infinite): {fmt_pct(med)}; "
-                     f"{len(sources)} source{'s' if len(sources) != 1 else ''}{ratio}")
+                     f"{len(sources)} source{'s' if len(sources) != 1 else ''}{ratio}{track}")
     return lines
 
 
@@ -733,7 +792,16 @@ def self_test():
     end = math.dist(truth_xy(59.9), truth_xy(t0))
     assert 0.0 < hi < end * drift * (59.9 - t0), (hi, end)
     assert track_heading(truth, ours[:50], t0, ALIGN_PATH_M) is None, "ours ends before 10 m"
-    print("bench.py self-test: ok (track turned into our frame)")
+    # The track error: each of our poses is the truth's turned about the start by the drift
+    # accumulated since t0 less what the found yaw took, so it lies a chord away from it.
+    chords = []
+    for t, *_ in ours:
+        if t < 59.9:
+            r = math.dist(truth_xy(t), truth_xy(t0))
+            chords.append(2 * r * math.sin(abs(yaw + drift * (t - t0) - got) / 2))
+    expected = math.sqrt(sum(c * c for c in chords) / len(chords))
+    assert abs(row["track_rms_m"] - expected) < 1e-3 * expected + 1e-3, (row["track_rms_m"], expected)
+    print("bench.py self-test: ok (track turned into our frame, track error)")
 
 
 def main():

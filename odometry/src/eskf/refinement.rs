@@ -132,6 +132,7 @@ mod tests {
             b_a: bias,
             b_g: Vector3::zeros(),
             k: 0.0,
+            m: 0.0,
         };
         let kf = Eskf::new(
             x,

@@ -45,6 +45,7 @@ fn busy_filter(w: Vector3<f64>) -> Eskf {
         b_a: Vector3::new(0.01, 0.02, -0.01),
         b_g: Vector3::new(1e-3, -2e-3, 3e-3),
         k: 0.01,
+        m: 0.0,
     };
     let first = Imu {
         f: Vector3::new(0.1, 0.2, 9.8),
@@ -117,6 +118,7 @@ fn scale_measurement_is_the_scalar_update() {
         b_a: Vector3::zeros(),
         b_g: Vector3::zeros(),
         k: 0.05,
+        m: 0.0,
     };
     let first = Imu {
         f: Vector3::new(0.0, 0.0, 9.8),
@@ -146,6 +148,7 @@ fn a_kept_heading_stays_put() {
         b_a: Vector3::zeros(),
         b_g: Vector3::zeros(),
         k: 0.0,
+        m: 0.0,
     };
     let first = Imu {
         f: tilt.inverse() * Vector3::new(0.0, 0.0, 9.8),
