@@ -27,8 +27,10 @@
 //! it as a turn of the velocity at `w dm` that the gyro did not see. So the yaw's error is a
 //! state of the filter ([`crate::eskf::MY`], prior that 1-sigma, no process noise: the IMU
 //! is fixed to the body), which the constraint's updates estimate with the rest
-//! ([`Eskf::mounted_velocity_update`]); a given mounting, or one followed from the speed
-//! hints (their own 1-sigma widens the lateral constraint), is taken as it is.
+//! ([`Eskf::mounted_velocity_update`]) on straight driving: turning, an IMU off the turning
+//! axis moves sideways at `w r`, which a yaw error mimics, so there the yaw's uncertainty is
+//! counted as the constraint's noise and its estimate stays. A given mounting, or one followed
+//! from the speed hints (their own 1-sigma widens the lateral constraint), is taken as it is.
 //!
 //! The constraint holds at the rear axle, which the lever arm `r_b` (body frame, m, from the
 //! IMU to the axle; [`ImuConstraint::with_lever_arm`], zero by default) locates: the velocity
@@ -261,7 +263,13 @@ impl ImuConstraint {
         let residual = Vector3::new(0.0, -v_b.y, -v_b.z);
         let sigmas = Vector3::new(FREE_MPS, lateral, vertical);
         let nis = if self.estimated.is_some() {
-            let nis = kf.mounted_velocity_update(&r_bs, &r_b, residual, sigmas, Heading::Kept);
+            // Turning, an IMU off the turning axis moves sideways at `w r`, which a yaw error
+            // mimics (`v dm`): the yaw is learned on straight driving alone, as the
+            // straight-driving mounting is gathered.
+            let turn = kf.rate().dot(&up_s).abs() * LEVER_ARM_BOUND_M;
+            let straight = turn <= v_b.x.abs() * STRAIGHT_ANGLE_RAD.tan();
+            let nis =
+                kf.mounted_velocity_update(&r_bs, &r_b, residual, sigmas, Heading::Kept, straight);
             self.estimated = Some(kf.mounting_yaw().0);
             nis
         } else {

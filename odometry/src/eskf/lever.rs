@@ -23,6 +23,19 @@
 
 use super::*;
 
+/// What a velocity update does with the mounting-yaw state [`MY`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum MountingYaw {
+    /// The mounting is taken as exact: the state is not in the measurement.
+    Exact,
+    /// The state is in the measurement and estimated.
+    Learned,
+    /// The state's uncertainty is counted as the measurement's noise (`c c^T sigma_m^2`, `c`
+    /// its [`Eskf::mounting_yaw_column`]), its estimate and covariances kept: a consider
+    /// treatment that leaves out its correlation with the other states.
+    Considered,
+}
+
 impl Eskf {
     /// The angular rate of the newest sample, bias removed, rad/s, sensor frame.
     pub fn rate(&self) -> Vector3<f64> {
@@ -100,12 +113,13 @@ impl Eskf {
         sigma: Vector3<f64>,
         heading: Heading,
     ) -> Option<f64> {
-        self.velocity_update_at(r_bs, r_b, residual, sigma, heading, false)
+        self.velocity_update_at(r_bs, r_b, residual, sigma, heading, MountingYaw::Exact)
     }
 
     /// [`Self::point_velocity_update`] with an estimated mounting whose yaw error is the state
     /// [`MY`]: `r_bs` is the mounting in use ([`Self::mounted`]), and the update reaches the
-    /// state through [`Self::mounting_yaw_column`].
+    /// state through [`Self::mounting_yaw_column`], estimating it where `learn`, else only
+    /// counting its uncertainty as the measurement's noise (`MountingYaw::Considered`).
     pub fn mounted_velocity_update(
         &mut self,
         r_bs: &Matrix3<f64>,
@@ -113,8 +127,14 @@ impl Eskf {
         residual: Vector3<f64>,
         sigma: Vector3<f64>,
         heading: Heading,
+        learn: bool,
     ) -> Option<f64> {
-        self.velocity_update_at(r_bs, r_b, residual, sigma, heading, true)
+        let yaw = if learn {
+            MountingYaw::Learned
+        } else {
+            MountingYaw::Considered
+        };
+        self.velocity_update_at(r_bs, r_b, residual, sigma, heading, yaw)
     }
 
     /// The derivative of [`Self::point_velocity`] with respect to the mounting's yaw (rad
@@ -133,13 +153,19 @@ impl Eskf {
         residual: Vector3<f64>,
         sigma: Vector3<f64>,
         heading: Heading,
-        mounting_yaw: bool,
+        yaw: MountingYaw,
     ) -> Option<f64> {
         self.propagate();
         let before = self.point_velocity(r_bs, r_b);
         let mut h = self.point_velocity_jacobian(r_bs, r_b);
-        if mounting_yaw {
-            h.set_column(MY, &self.mounting_yaw_column(r_bs, r_b));
+        let mut var = Matrix3::from_diagonal(&sigma.component_mul(&sigma));
+        match yaw {
+            MountingYaw::Exact => {}
+            MountingYaw::Learned => h.set_column(MY, &self.mounting_yaw_column(r_bs, r_b)),
+            MountingYaw::Considered => {
+                let column = self.mounting_yaw_column(r_bs, r_b);
+                var += column * column.transpose() * self.cov[(MY, MY)].max(0.0);
+            }
         }
         // The forward row reads (1 + k) v_p.x.
         let scale = 1.0 + self.x.k;
@@ -147,7 +173,6 @@ impl Eskf {
             h[(0, c)] *= scale;
         }
         h[(0, KS)] = before.x;
-        let var = Matrix3::from_diagonal(&sigma.component_mul(&sigma));
         self.update(&h, residual, &var, heading)
     }
 }
@@ -227,7 +252,8 @@ mod tests {
     /// to 1 mm/s, given a mounting 0.1 rad off in yaw: the constraint's zero lateral velocity
     /// is then `2 sin 0.1` off. With the yaw a state (1-sigma 0.2 rad) the update explains it
     /// (normalized innovation squared 0.25) by the yaw, which ends within 0.01 rad of the
-    /// truth, and leaves the velocity; taken as exact, nothing explains it (100).
+    /// truth, and leaves the velocity; taken as exact, nothing explains it (100); considered
+    /// (a turn, `crate::nonholonomic`), it explains it and stays.
     #[test]
     fn a_mounting_off_in_yaw_is_learned_not_read_as_velocity() {
         let level = || {
@@ -250,8 +276,9 @@ mod tests {
         let r = learned.mounted(&off);
         let v_b = learned.point_velocity(&r, &Vector3::zeros());
         let residual = Vector3::new(0.0, -v_b.y, -v_b.z);
+        let mut considered = learned.clone();
         let nis = learned
-            .mounted_velocity_update(&r, &Vector3::zeros(), residual, sigma, Heading::Kept)
+            .mounted_velocity_update(&r, &Vector3::zeros(), residual, sigma, Heading::Kept, true)
             .unwrap();
         assert!((nis - 0.25).abs() < 0.02, "{nis}");
         assert!((learned.x.m + 0.1).abs() < 0.01, "{}", learned.x.m);
@@ -266,6 +293,14 @@ mod tests {
             .unwrap();
         assert!(nis > 90.0, "{nis}");
         assert_eq!(exact.x.m, 0.0);
+        // Considered, the yaw's uncertainty explains the residual as well, and neither the yaw
+        // nor its variance moves.
+        let nis = considered
+            .mounted_velocity_update(&r, &Vector3::zeros(), residual, sigma, Heading::Kept, false)
+            .unwrap();
+        assert!((nis - 0.25).abs() < 0.02, "{nis}");
+        let (m, sigma_m) = considered.mounting_yaw();
+        assert!(m == 0.0 && (sigma_m - 0.2).abs() < 1e-12, "{m} {sigma_m}");
     }
 
     #[test]
