@@ -42,6 +42,7 @@ mod refinement;
 mod reported;
 
 use increment::{Increment, Sensitivity, Step};
+pub use lever::MountingYaw;
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 pub use refinement::{Refinement, RefinementMean};
 use reported::Reported;
@@ -747,7 +748,14 @@ impl Eskf {
         sigma: Vector3<f64>,
         heading: Heading,
     ) -> Option<f64> {
-        self.point_velocity_update(r_bs, &Vector3::zeros(), residual, sigma, heading)
+        self.point_velocity_update(
+            r_bs,
+            &Vector3::zeros(),
+            residual,
+            sigma,
+            heading,
+            MountingYaw::Exact,
+        )
     }
 
     /// The measurement of [`Self::update`] with `H` selecting the three error-state components

@@ -574,6 +574,27 @@ mod tests {
         assert!(mounting_from(&Vector3::zeros(), &up_s).is_none());
     }
 
+    /// 0.5 m/s along the sensor's -y for 4 s, each second's velocity known to 0.01 m/s across
+    /// the path: 2 m with 0.04 m of drift across it, 0.02 rad; the first second alone, 0.02 rad
+    /// as well (0.01 m over 0.5 m); a vertical component counts in neither.
+    #[test]
+    fn the_estimated_yaw_carries_the_drift_across_the_path() {
+        let up = Vector3::z();
+        let mut e = MountingEstimator::default();
+        assert_eq!(e.yaw_sigma_rad(&up), f64::INFINITY);
+        e.add(&Vector3::new(0.0, -0.5, 0.3), 0.01, 1.0);
+        assert_relative_eq!(e.yaw_sigma_rad(&up), 0.02, epsilon = 1e-12);
+        for _ in 0..3 {
+            e.add(&Vector3::new(0.0, -0.5, 0.0), 0.01, 1.0);
+        }
+        assert_relative_eq!(e.yaw_sigma_rad(&up), 0.02, epsilon = 1e-12);
+        let forward = e
+            .mounting(&up)
+            .unwrap()
+            .inverse_transform_vector(&Vector3::x());
+        assert_relative_eq!(forward, Vector3::new(0.0, -1.0, 0.0), epsilon = 1e-12);
+    }
+
     #[test]
     fn ring_overwrites_its_oldest_value_when_full() {
         let mut r = Ring::<u32>::new(3);

@@ -27,7 +27,7 @@
 //! it as a turn of the velocity at `w dm` that the gyro did not see. So the yaw's error is a
 //! state of the filter ([`crate::eskf::MY`], prior that 1-sigma, no process noise: the IMU
 //! is fixed to the body), which the constraint's updates estimate with the rest
-//! ([`Eskf::mounted_velocity_update`]) on straight driving: turning, an IMU off the turning
+//! ([`Eskf::point_velocity_update`], [`MountingYaw`]) on straight driving: turning, an IMU off the turning
 //! axis moves sideways at `w r`, which a yaw error mimics, so there the yaw's uncertainty is
 //! counted as the constraint's noise and its estimate stays. A given mounting, or one followed
 //! from the speed hints (their own 1-sigma widens the lateral constraint), is taken as it is.
@@ -71,7 +71,7 @@
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
-use crate::eskf::{Eskf, Heading};
+use crate::eskf::{Eskf, Heading, MountingYaw};
 use crate::hints::{MountingEstimator, mounting_from};
 
 /// Path of driving the mounting estimate gathers before the lateral constraint starts, m.
@@ -262,19 +262,23 @@ impl ImuConstraint {
         }
         let residual = Vector3::new(0.0, -v_b.y, -v_b.z);
         let sigmas = Vector3::new(FREE_MPS, lateral, vertical);
-        let nis = if self.estimated.is_some() {
+        let yaw = if self.estimated.is_some() {
             // Turning, an IMU off the turning axis moves sideways at `w r`, which a yaw error
             // mimics (`v dm`): the yaw is learned on straight driving alone, as the
             // straight-driving mounting is gathered.
             let turn = kf.rate().dot(&up_s).abs() * LEVER_ARM_BOUND_M;
-            let straight = turn <= v_b.x.abs() * STRAIGHT_ANGLE_RAD.tan();
-            let nis =
-                kf.mounted_velocity_update(&r_bs, &r_b, residual, sigmas, Heading::Kept, straight);
-            self.estimated = Some(kf.mounting_yaw().0);
-            nis
+            if turn <= v_b.x.abs() * STRAIGHT_ANGLE_RAD.tan() {
+                MountingYaw::Learned
+            } else {
+                MountingYaw::Considered
+            }
         } else {
-            kf.point_velocity_update(&r_bs, &r_b, residual, sigmas, Heading::Kept)
+            MountingYaw::Exact
         };
+        let nis = kf.point_velocity_update(&r_bs, &r_b, residual, sigmas, Heading::Kept, yaw);
+        if self.estimated.is_some() {
+            self.estimated = Some(kf.mounting_yaw().0);
+        }
         self.applied += 1;
         let dof = if lateral < FREE_MPS { 2.0 } else { 1.0 };
         if let Some(x) = nis.filter(|x| x.is_finite()) {

@@ -25,7 +25,7 @@ use super::*;
 
 /// What a velocity update does with the mounting-yaw state [`MY`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum MountingYaw {
+pub enum MountingYaw {
     /// The mounting is taken as exact: the state is not in the measurement.
     Exact,
     /// The state is in the measurement and estimated.
@@ -100,43 +100,6 @@ impl Eskf {
         })
     }
 
-    /// [`Self::body_velocity_update_with`] at the point `r_b` (body frame, m, from the IMU):
-    /// the measurement is `z = ((1 + k) v_p.x, v_p.y, v_p.z)` with `v_p` the
-    /// [`Self::point_velocity`], 1-sigma `sigma` per component (m/s); `residual` is `z`
-    /// minus its prediction. Returns the normalized innovation squared (`None`: singular,
-    /// nothing updated).
-    pub fn point_velocity_update(
-        &mut self,
-        r_bs: &Matrix3<f64>,
-        r_b: &Vector3<f64>,
-        residual: Vector3<f64>,
-        sigma: Vector3<f64>,
-        heading: Heading,
-    ) -> Option<f64> {
-        self.velocity_update_at(r_bs, r_b, residual, sigma, heading, MountingYaw::Exact)
-    }
-
-    /// [`Self::point_velocity_update`] with an estimated mounting whose yaw error is the state
-    /// [`MY`]: `r_bs` is the mounting in use ([`Self::mounted`]), and the update reaches the
-    /// state through [`Self::mounting_yaw_column`], estimating it where `learn`, else only
-    /// counting its uncertainty as the measurement's noise (`MountingYaw::Considered`).
-    pub fn mounted_velocity_update(
-        &mut self,
-        r_bs: &Matrix3<f64>,
-        r_b: &Vector3<f64>,
-        residual: Vector3<f64>,
-        sigma: Vector3<f64>,
-        heading: Heading,
-        learn: bool,
-    ) -> Option<f64> {
-        let yaw = if learn {
-            MountingYaw::Learned
-        } else {
-            MountingYaw::Considered
-        };
-        self.velocity_update_at(r_bs, r_b, residual, sigma, heading, yaw)
-    }
-
     /// The derivative of [`Self::point_velocity`] with respect to the mounting's yaw (rad
     /// about body up), `r_bs` the mounting in use: turning the body frame by `dm` turns both
     /// the body velocity and the rate, `z x v_b + (z x omega_b) x r_b`.
@@ -146,7 +109,15 @@ impl Eskf {
         z.cross(&self.body_velocity(r_bs)) + z.cross(&omega_b).cross(r_b)
     }
 
-    fn velocity_update_at(
+    /// [`Self::body_velocity_update_with`] at the point `r_b` (body frame, m, from the IMU):
+    /// the measurement is `z = ((1 + k) v_p.x, v_p.y, v_p.z)` with `v_p` the
+    /// [`Self::point_velocity`], 1-sigma `sigma` per component (m/s); `residual` is `z`
+    /// minus its prediction. With an estimated mounting whose yaw error is the state [`MY`]
+    /// (`yaw` other than [`MountingYaw::Exact`]), `r_bs` is the mounting in use
+    /// ([`Self::mounted`]) and the update reaches the state through
+    /// [`Self::mounting_yaw_column`]. Returns the normalized innovation squared (`None`:
+    /// singular, nothing updated).
+    pub fn point_velocity_update(
         &mut self,
         r_bs: &Matrix3<f64>,
         r_b: &Vector3<f64>,
@@ -278,7 +249,14 @@ mod tests {
         let residual = Vector3::new(0.0, -v_b.y, -v_b.z);
         let mut considered = learned.clone();
         let nis = learned
-            .mounted_velocity_update(&r, &Vector3::zeros(), residual, sigma, Heading::Kept, true)
+            .point_velocity_update(
+                &r,
+                &Vector3::zeros(),
+                residual,
+                sigma,
+                Heading::Kept,
+                MountingYaw::Learned,
+            )
             .unwrap();
         assert!((nis - 0.25).abs() < 0.02, "{nis}");
         assert!((learned.x.m + 0.1).abs() < 0.01, "{}", learned.x.m);
@@ -289,14 +267,28 @@ mod tests {
         );
         let mut exact = level();
         let nis = exact
-            .point_velocity_update(&off, &Vector3::zeros(), residual, sigma, Heading::Kept)
+            .point_velocity_update(
+                &off,
+                &Vector3::zeros(),
+                residual,
+                sigma,
+                Heading::Kept,
+                MountingYaw::Exact,
+            )
             .unwrap();
         assert!(nis > 90.0, "{nis}");
         assert_eq!(exact.x.m, 0.0);
         // Considered, the yaw's uncertainty explains the residual as well, and neither the yaw
         // nor its variance moves.
         let nis = considered
-            .mounted_velocity_update(&r, &Vector3::zeros(), residual, sigma, Heading::Kept, false)
+            .point_velocity_update(
+                &r,
+                &Vector3::zeros(),
+                residual,
+                sigma,
+                Heading::Kept,
+                MountingYaw::Considered,
+            )
             .unwrap();
         assert!((nis - 0.25).abs() < 0.02, "{nis}");
         let (m, sigma_m) = considered.mounting_yaw();
@@ -329,6 +321,7 @@ mod tests {
             residual,
             sigma,
             Heading::Corrected,
+            MountingYaw::Exact,
         );
         assert_eq!(nis_a, nis_b);
         assert_eq!(a.x, b.x);

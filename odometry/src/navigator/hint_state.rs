@@ -3,7 +3,7 @@
 //! [`crate::stage`] for the behaviour, [`crate::hints`] for frames and times).
 
 use crate::cruise::{ForwardAxis, ForwardFit, Reference, horizontal_bias_sigma, initial_velocity};
-use crate::eskf::{BG, Eskf, P, V};
+use crate::eskf::{BG, Eskf, MountingYaw, P, V};
 use crate::handover::{WaitPath, WaitRevision};
 use crate::hints::{
     AxisSource, ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring,
@@ -462,6 +462,7 @@ impl Hints {
                 nh,
             ),
             self.cfg.speed_heading,
+            MountingYaw::Exact,
         );
         Some(nis.unwrap_or(f64::NAN))
     }
