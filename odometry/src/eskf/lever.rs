@@ -247,17 +247,13 @@ mod tests {
         let r = learned.mounted(&off);
         let v_b = learned.point_velocity(&r, &Vector3::zeros());
         let residual = Vector3::new(0.0, -v_b.y, -v_b.z);
+        let update = |kf: &mut Eskf, r: &Matrix3<f64>, yaw: MountingYaw| {
+            let zero = Vector3::zeros();
+            kf.point_velocity_update(r, &zero, residual, sigma, Heading::Kept, yaw)
+                .unwrap()
+        };
         let mut considered = learned.clone();
-        let nis = learned
-            .point_velocity_update(
-                &r,
-                &Vector3::zeros(),
-                residual,
-                sigma,
-                Heading::Kept,
-                MountingYaw::Learned,
-            )
-            .unwrap();
+        let nis = update(&mut learned, &r, MountingYaw::Learned);
         assert!((nis - 0.25).abs() < 0.02, "{nis}");
         assert!((learned.x.m + 0.1).abs() < 0.01, "{}", learned.x.m);
         assert!(
@@ -266,30 +262,12 @@ mod tests {
             learned.x.v
         );
         let mut exact = level();
-        let nis = exact
-            .point_velocity_update(
-                &off,
-                &Vector3::zeros(),
-                residual,
-                sigma,
-                Heading::Kept,
-                MountingYaw::Exact,
-            )
-            .unwrap();
+        let nis = update(&mut exact, &off, MountingYaw::Exact);
         assert!(nis > 90.0, "{nis}");
         assert_eq!(exact.x.m, 0.0);
         // Considered, the yaw's uncertainty explains the residual as well, and neither the yaw
         // nor its variance moves.
-        let nis = considered
-            .point_velocity_update(
-                &r,
-                &Vector3::zeros(),
-                residual,
-                sigma,
-                Heading::Kept,
-                MountingYaw::Considered,
-            )
-            .unwrap();
+        let nis = update(&mut considered, &r, MountingYaw::Considered);
         assert!((nis - 0.25).abs() < 0.02, "{nis}");
         let (m, sigma_m) = considered.mounting_yaw();
         assert!(m == 0.0 && (sigma_m - 0.2).abs() < 1e-12, "{m} {sigma_m}");
