@@ -56,7 +56,7 @@
 //! 0.01 deg/s by one second of rest.
 
 use ipc_types::stream::range::Clipping;
-use ipc_types::stream::{self, Continuity, Holes, Step, TimeLine};
+use ipc_types::stream::{self, Continuity, Freezes, Holes, Step, TimeLine};
 use ipc_types::{CorrectedImuSample, RawImuSample, corrected_flags, limits, raw_flags};
 use mems_stage::Stage;
 use nalgebra::Vector3;
@@ -188,6 +188,9 @@ pub struct StageStats {
     pub restarts: u64,
     /// Holes in the time line that nothing marked ([`ipc_types::stream`]), each a gap too.
     pub holes: Holes,
+    /// Runs of samples repeating one reading for longer than a hole (a sensor that stopped
+    /// updating, [`Freezes`]), each counted once it ends; the samples pass on unchanged.
+    pub frozen: Holes,
     /// Samples with an axis at the end of its range (`raw_flags::SATURATED`, passed on as
     /// `corrected_flags::CLIPPED`), per axis.
     pub clipped: Clipping,
@@ -381,6 +384,8 @@ pub struct CalibrationStage {
     last: Option<(u64, u64)>,
     /// The stream's time line (its nominal period and holes, [`ipc_types::stream`]).
     time: TimeLine,
+    /// Runs of repeated readings ([`StageStats::frozen`]).
+    freezes: Freezes,
     /// Whether `last` comes from [`CalibrationStage::resume`] and no sample has confirmed it.
     resumed: bool,
     /// Whether the previous sample was dropped for a time step beyond the bound.
@@ -422,6 +427,7 @@ impl CalibrationStage {
             carried: Carried::default(),
             last: None,
             time: TimeLine::default(),
+            freezes: Freezes::default(),
             resumed: false,
             jumped: false,
             stats: StageStats::default(),
@@ -611,6 +617,20 @@ impl CalibrationStage {
     /// Returns how `raw` continues the stream (a gap: samples are missing before it, marked
     /// or a hole in the time line).
     #[inline]
+    /// Follows the runs of repeated readings ([`StageStats::frozen`]): a gap or a new session
+    /// ends the current one.
+    fn watch_freezes(&mut self, raw: &RawImuSample, has_gyro: bool, continuity: Continuity) {
+        if continuity != Continuity::Next {
+            self.freezes.end(&self.time);
+        }
+        let g = if has_gyro { raw.gyro_dps } else { [0.0; 3] };
+        let a = raw.accel_g;
+        let values = [a[0], a[1], a[2], g[0], g[1], g[2]];
+        self.freezes
+            .push(&self.time, raw.seq, raw.stamps.sample_ns, values);
+        self.stats.frozen = self.freezes.frozen;
+    }
+
     fn sequence(&mut self, raw: &RawImuSample) -> Result<Continuity, StageError> {
         let t_ns = raw.stamps.sample_ns;
         if std::mem::take(&mut self.resumed)
@@ -760,6 +780,7 @@ impl Stage for CalibrationStage {
         let continuity = self.sequence(raw)?;
         let gap = continuity == Continuity::Gap;
         let hole = gap && matches!(self.time.step(raw.stamps.sample_ns), Step::Hole { .. });
+        self.watch_freezes(raw, has_gyro, continuity);
         self.last = Some((raw.seq, raw.stamps.sample_ns));
         self.time.accept(raw.stamps.sample_ns);
         self.stats.accepted += 1;
@@ -793,6 +814,8 @@ impl Stage for CalibrationStage {
     fn finish(&mut self, _emit: &mut impl FnMut(&CorrectedImuSample)) {
         self.cut_batch();
         self.detector.interrupt();
+        self.freezes.end(&self.time);
+        self.stats.frozen = self.freezes.frozen;
     }
 }
 

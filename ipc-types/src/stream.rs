@@ -230,6 +230,49 @@ impl Holes {
     }
 }
 
+/// Runs of raw samples that repeat the sample before them on every valid axis (accelerometer
+/// and, where valid, gyroscope values exactly) for longer than a hole ([`TimeLine::is_hole`]):
+/// a sensor that stopped updating while its reader went on reading it. A repeat or two is a
+/// reader polling faster than the sensor updates, a zero-order hold (`calibrate::repair`
+/// counts those and leaves them); a run as long as a hole is not: the corpus's TurtleBot (a
+/// navX read by a RoboRIO) repeats one reading for 1.0 s while the robot turns by about 55
+/// deg (docs/real-data.md, "Data the odometry must handle"). Counted as [`Holes`] (each run
+/// once it ends, its length from its first sample to its last repeat, at its last repeat's
+/// sequence number and time); the samples are not changed.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Freezes {
+    /// The current run: the values it repeats, its first sample's time (ns) and its last
+    /// repeat's sequence number and time (ns).
+    run: Option<([f64; 6], u64, u64, u64)>,
+    /// The runs longer than a hole that have ended.
+    pub frozen: Holes,
+}
+
+impl Freezes {
+    /// Takes the next raw sample (`seq`, `t_ns`, `values`: accelerometer then gyroscope, the
+    /// gyroscope's zero where it is not valid) on the time line `line` (its period decides
+    /// what is as long as a hole).
+    pub fn push(&mut self, line: &TimeLine, seq: u64, t_ns: u64, values: [f64; 6]) {
+        if let Some(run) = self.run.as_mut().filter(|r| r.0 == values) {
+            (run.2, run.3) = (seq, t_ns);
+            return;
+        }
+        self.end(line);
+        self.run = Some((values, t_ns, seq, t_ns));
+    }
+
+    /// Ends the current run (the stream's end, a gap, a new session): counted when as long as
+    /// a hole on `line`.
+    pub fn end(&mut self, line: &TimeLine) {
+        if let Some((_, start, seq, last)) = self.run.take() {
+            let dt_ns = last.saturating_sub(start);
+            if dt_ns > 0 && line.is_hole(dt_ns) {
+                self.frozen.record(seq, last, dt_ns);
+            }
+        }
+    }
+}
+
 /// Measures the holes of a whole stream of sample times (`(seq, t_ns)` in order); steps that
 /// do not increase or go beyond [`limits::MAX_STEP_NS`] are the readers' to refuse and are
 /// skipped here.
@@ -408,6 +451,44 @@ mod tests {
         assert!((l.dt_ns as f64 * 1e-9 - 3.012).abs() < 0.002, "{l:?}");
         let line = holes.describe(0).unwrap();
         assert!(line.contains("seq 300"), "{line}");
+    }
+
+    /// 50 Hz (the period learned from the first steps): runs of 2 and 3 repeats at rest are
+    /// holds, not counted; a reading repeated from 3.64 s to 4.64 s (the TurtleBot's frozen
+    /// second) is one run of 1.0 s, at its last repeat; a run still going at the stream's end
+    /// counts once ended.
+    #[test]
+    fn a_reading_that_stops_changing_for_a_hole_is_counted() {
+        let mut line = TimeLine::default();
+        let mut freezes = Freezes::default();
+        let value = |k: u64| [k as f64 * 1e-3, 0.0, 1.0, 0.1, -0.2, 0.3];
+        let feed = |line: &mut TimeLine, freezes: &mut Freezes, k: u64, v: [f64; 6]| {
+            let t_ns = k * 20_000_000;
+            freezes.push(line, k, t_ns, v);
+            line.accept(t_ns);
+        };
+        for k in 0..300u64 {
+            let v = match k {
+                40..=42 => value(40),
+                100..=101 => value(100),
+                182..=232 => value(182),
+                _ => value(k),
+            };
+            feed(&mut line, &mut freezes, k, v);
+        }
+        assert_eq!(freezes.frozen.count, 1, "{:?}", freezes.frozen);
+        let run = freezes.frozen.longest.unwrap();
+        assert_eq!(
+            (run.seq, run.t_ns, run.dt_ns),
+            (232, 4_640_000_000, 1_000_000_000)
+        );
+        for k in 300..320u64 {
+            feed(&mut line, &mut freezes, k, value(300));
+        }
+        assert_eq!(freezes.frozen.count, 1);
+        freezes.end(&line);
+        assert_eq!(freezes.frozen.count, 2);
+        assert_eq!(freezes.frozen.total_ns, 1_380_000_000);
     }
 
     #[test]

@@ -5,7 +5,9 @@
 //! error stays within 3 sigma on every axis; a hole of 30 s is beyond what the odometry bridges
 //! (`Manoeuvre::bridge_limit_s`, 6.28 s for a ground robot) and the run is refused with the
 //! file's line and the time. `mems-info` shows the hole of the raw samples that the offline
-//! run wrote to its `--out` recording.
+//! run wrote to its `--out` recording. A sensor that stops updating while it is read (rows
+//! that repeat one reading for longer than a hole) is warned on stderr and counted in the JSON
+//! result (`input_frozen`); two repeated rows (a reader polling faster than the sensor) are not.
 
 use std::path::Path;
 use std::process::Command;
@@ -125,5 +127,77 @@ fn holes_are_bridged_with_an_honest_sigma_or_refused_naming_line_and_time() {
         let dt = holes["longest"]["dt_ns"].as_f64().unwrap() * 1e-9;
         assert!((dt - length_s).abs() < 0.01, "{what}: mems-info {holes}");
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The simulated drive `csv` written as an MCAP recording at `dst`, the samples whose time lies
+/// within each `(start_s, length_s)` repeating the first of them (accelerometer, gyroscope,
+/// temperature and counts): a sensor that stopped updating while its reader went on. (A text
+/// recording's reader drops rows that repeat the one before, a log repair, so the stretch would
+/// reach the odometry as a hole.)
+fn freeze(csv: &Path, dst: &Path, stretches: &[(f64, f64)]) {
+    let samples = recording::load_raw(csv).unwrap().samples;
+    let t0 = samples[0].stamps.sample_ns;
+    let mut w = recording::mcap::Writer::create(dst).unwrap();
+    let raw = w.add_channel::<ipc_types::RawImuSample>().unwrap();
+    let mut held: Option<ipc_types::RawImuSample> = None;
+    for s in &samples {
+        let t = (s.stamps.sample_ns - t0) as f64 * 1e-9;
+        let mut out = *s;
+        match stretches.iter().any(|&(a, l)| t >= a && t < a + l) {
+            true => {
+                let h = held.get_or_insert(*s);
+                (out.accel_g, out.gyro_dps, out.temp_c) = (h.accel_g, h.gyro_dps, h.temp_c);
+                (out.accel_counts, out.gyro_counts) = (h.accel_counts, h.gyro_counts);
+                out.temp_counts = h.temp_counts;
+            }
+            false => held = None,
+        }
+        w.write(raw, &out, out.stamps.sample_ns).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn a_sensor_that_stops_updating_is_warned_and_counted() {
+    let dir = std::env::temp_dir().join(unique_namespace("frozen"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let drive = simulate(
+        &dir,
+        "drive.csv",
+        &["drive", "--duration", "60", "--rate", "200", "--seed", "3"],
+    );
+    let calib = identity_calibration();
+    let run = |input: &Path| {
+        let out = Command::new(bin("mems-odometry"))
+            .args(["offline", "--json", "--calib", path_arg(&calib), "--input"])
+            .arg(input)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{stderr}");
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        (v, stderr)
+    };
+    let clean = dir.join("clean.mcap");
+    freeze(&drive, &clean, &[]);
+    let (v, stderr) = run(&clean);
+    assert_eq!(v["input_frozen"]["count"], 0, "{}", v["input_frozen"]);
+    assert!(!stderr.contains("repeating one reading"), "{stderr}");
+    // Three samples (10 ms at 200 Hz) held at 12 s, while moving: a hold, not counted; 1.5 s
+    // from 20 s: one run, warned with its length and time.
+    let frozen = dir.join("frozen.mcap");
+    freeze(&drive, &frozen, &[(12.0, 0.011), (20.0, 1.5)]);
+    let (v, stderr) = run(&frozen);
+    assert_eq!(v["input_frozen"]["count"], 1, "{}", v["input_frozen"]);
+    let length = v["input_frozen"]["longest"]["length_s"].as_f64().unwrap();
+    assert!((length - 1.495).abs() < 0.003, "{}", v["input_frozen"]);
+    let t = v["input_frozen"]["longest"]["t_s"].as_f64().unwrap();
+    assert!((t - 21.495).abs() < 0.003, "{}", v["input_frozen"]);
+    assert!(
+        stderr.contains("frozen.mcap: 1 run of samples repeating one reading")
+            && stderr.contains("the longest 1.495 s"),
+        "{stderr}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

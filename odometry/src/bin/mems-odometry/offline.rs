@@ -313,6 +313,7 @@ fn pass(
     if read.holes.count == 0 {
         read.holes = chain.first.stats().holes;
     }
+    read.frozen = chain.first.stats().frozen;
     let no_gyro = chain.second.stats().first_no_gyro_seq;
     read.segments = summary::report_input(&read, &mut feed.source, no_gyro);
     let t0 = read.first_ns.unwrap_or(0);

@@ -34,6 +34,16 @@ pub fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
     if let Some(holes) = s.holes.describe(0) {
         tracing::warn!("{holes}; each bridged as a gap (GAP_BEFORE and HOLE_BEFORE)");
     }
+    if let Some(l) = s.frozen.longest {
+        tracing::warn!(
+            "{} run(s) of samples repeating one reading on every axis for longer than a hole \
+             (the longest {:.3} s, ending at seq {}): the sensor stopped updating while it was \
+             read; passed on as measured",
+            s.frozen.count,
+            l.dt_ns as f64 * 1e-9,
+            l.seq
+        );
+    }
     if s.clipped.samples > 0 {
         tracing::warn!(
             "clipped {} samples at the end of their range ({}); marked CLIPPED",

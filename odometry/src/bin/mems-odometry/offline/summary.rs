@@ -386,6 +386,7 @@ impl Summary {
             },
             "input_damage": damage_json(&read.segments),
             "input_holes": holes_json(&read.holes, read.first_ns.unwrap_or(0)),
+            "input_frozen": holes_json(&read.frozen, read.first_ns.unwrap_or(0)),
             "axes_check": axes_json(&chain_axes, read.first_ns.unwrap_or(0)),
             "hints": {
                 "in_recording": read.hints_seen,
@@ -469,6 +470,9 @@ pub struct Read<'a> {
     /// Holes in the time line that nothing marked: the text reader's (with lines), else the
     /// calibration stage's (after the run: [`report_input`]).
     pub holes: Holes,
+    /// Runs of samples repeating one reading for longer than a hole: the calibration stage's
+    /// (`StageStats::frozen`, after the run).
+    pub frozen: Holes,
     /// The files of a streamed run, with their truncations and damaged records (after the
     /// run: [`report_input`]).
     pub segments: Vec<SegmentRead>,
@@ -495,6 +499,7 @@ impl<'a> Read<'a> {
             hints_seen: feed.arrival.hints(),
             hints_late: feed.arrival.late_hints(),
             holes: repairs.holes,
+            frozen: Holes::default(),
             repairs,
             align_s,
             segments: Vec::new(),
@@ -595,6 +600,21 @@ pub fn report_input(read: &Read, source: &mut Source, no_gyro: Option<u64>) -> V
         tracing::warn!(
             "{input}: {holes}; each bridged as a gap: the 1-sigma grows across it as over an \
              unobserved interval (docs/input-checks.md)"
+        );
+    }
+    if let Some(l) = read.frozen.longest {
+        let t0 = read.first_ns.unwrap_or(0);
+        tracing::warn!(
+            "{input}: {} run{} of samples repeating one reading on every axis for longer than \
+             a hole ({:.3} s in all; the longest {:.3} s, ending at seq {}, t {:.3} s): the \
+             sensor stopped updating while it was read; integrated as measured, so what it did \
+             meanwhile is missing from the position (docs/input-checks.md)",
+            read.frozen.count,
+            if read.frozen.count == 1 { "" } else { "s" },
+            read.frozen.total_ns as f64 * 1e-9,
+            l.dt_ns as f64 * 1e-9,
+            l.seq,
+            l.t_ns.saturating_sub(t0) as f64 * 1e-9
         );
     }
     if read.hints_late > 0 {
