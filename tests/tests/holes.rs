@@ -9,7 +9,7 @@
 //! that repeat one reading for longer than a hole) is warned on stderr and counted in the JSON
 //! result (`input_frozen`); two repeated rows (a reader polling faster than the sensor) are not.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use integration_tests::{bin, identity_calibration, path_arg, run_ok, simulate, unique_namespace};
@@ -32,6 +32,27 @@ fn cut(src: &Path, dst: &Path, start_s: f64, length_s: f64) {
     std::fs::write(dst, out).unwrap();
 }
 
+/// A scratch directory named for `tag`, a simulated drive of `seconds` at 200 Hz in it
+/// (canonical CSV, seed 3) and the identity calibration.
+fn simulated_drive(tag: &str, seconds: &str) -> (PathBuf, PathBuf, PathBuf) {
+    let dir = std::env::temp_dir().join(unique_namespace(tag));
+    std::fs::create_dir_all(&dir).unwrap();
+    let drive = simulate(
+        &dir,
+        "drive.csv",
+        &[
+            "drive",
+            "--duration",
+            seconds,
+            "--rate",
+            "200",
+            "--seed",
+            "3",
+        ],
+    );
+    (dir, drive, identity_calibration())
+}
+
 /// The line (1-based) of the first row at or after `t_s`.
 fn line_at(src: &Path, t_s: f64) -> usize {
     let text = std::fs::read_to_string(src).unwrap();
@@ -46,14 +67,7 @@ fn line_at(src: &Path, t_s: f64) -> usize {
 
 #[test]
 fn holes_are_bridged_with_an_honest_sigma_or_refused_naming_line_and_time() {
-    let dir = std::env::temp_dir().join(unique_namespace("holes"));
-    std::fs::create_dir_all(&dir).unwrap();
-    let drive = simulate(
-        &dir,
-        "drive.csv",
-        &["drive", "--duration", "120", "--rate", "200", "--seed", "3"],
-    );
-    let calib = identity_calibration();
+    let (dir, drive, calib) = simulated_drive("holes", "120");
     // The drive rests 0-10 s, 37.7-39.2 s, 69.2-86.6 s and from 105.9 s; it moves between.
     for (start_s, length_s) in [
         (72.0, 3.0),
@@ -160,14 +174,7 @@ fn freeze(csv: &Path, dst: &Path, stretches: &[(f64, f64)]) {
 
 #[test]
 fn a_sensor_that_stops_updating_is_warned_and_counted() {
-    let dir = std::env::temp_dir().join(unique_namespace("frozen"));
-    std::fs::create_dir_all(&dir).unwrap();
-    let drive = simulate(
-        &dir,
-        "drive.csv",
-        &["drive", "--duration", "60", "--rate", "200", "--seed", "3"],
-    );
-    let calib = identity_calibration();
+    let (dir, drive, calib) = simulated_drive("frozen", "60");
     let run = |input: &Path| {
         let out = Command::new(bin("mems-odometry"))
             .args(["offline", "--json", "--calib", path_arg(&calib), "--input"])
