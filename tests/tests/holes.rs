@@ -7,7 +7,8 @@
 //! file's line and the time. `mems-info` shows the hole of the raw samples that the offline
 //! run wrote to its `--out` recording. A sensor that stops updating while it is read (rows
 //! that repeat one reading for longer than a hole) is warned on stderr and counted in the JSON
-//! result (`input_frozen`); two repeated rows (a reader polling faster than the sensor) are not.
+//! result (`input_frozen`), and `mems-info` counts it in the raw samples (`raw.frozen`); three
+//! repeated samples (a reader polling faster than the sensor) are not.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -206,5 +207,14 @@ fn a_sensor_that_stops_updating_is_warned_and_counted() {
             && stderr.contains("the longest 1.495 s"),
         "{stderr}"
     );
+    // mems-info finds the same run in the recording's raw samples, and none in the clean one.
+    for (file, count, length_s) in [(&clean, 0, 0.0), (&frozen, 1, 1.495)] {
+        let info = run_ok("mems-info", &["--json", path_arg(file)]);
+        let info: serde_json::Value = serde_json::from_str(info.trim()).unwrap();
+        let frozen = &info["raw"]["frozen"];
+        assert_eq!(frozen["count"], count, "{info}");
+        let dt = frozen["longest"]["dt_ns"].as_f64().unwrap_or(0.0) * 1e-9;
+        assert!((dt - length_s).abs() < 0.003, "{frozen}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use ipc_types::stream::range::Clipping;
-use ipc_types::stream::{Holes, Step, TimeLine};
+use ipc_types::stream::{Freezes, Holes, Step, TimeLine};
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint};
 use ipc_types::{corrected_flags, odometry_flags, raw_flags, service};
 use recording::mcap::run::{Message, RunReader};
@@ -113,6 +113,10 @@ pub struct RawInfo {
     /// period (`ipc_types::stream`): count, total and the longest, with the seq and sample time
     /// of the sample after it.
     pub holes: Holes,
+    /// Runs of samples repeating one reading on every axis for longer than a hole
+    /// (`ipc_types::stream::Freezes`: a sensor that stopped updating while it was read), with
+    /// the seq and sample time of each run's last repeat.
+    pub frozen: Holes,
 }
 
 /// The recorder's events, by kind.
@@ -184,6 +188,8 @@ struct Fields {
     undelivered: Option<u32>,
     calib_id: Option<u64>,
     stamps: Option<SampleTime>,
+    accel_g: Option<[f64; 3]>,
+    gyro_dps: Option<[f64; 3]>,
 }
 
 #[derive(Deserialize)]
@@ -212,6 +218,8 @@ impl Fields {
                 lost_before: Some(m.lost_before),
                 undelivered: Some(m.undelivered),
                 stamps: stamps(m.stamps),
+                accel_g: Some(m.accel_g),
+                gyro_dps: Some(m.gyro_dps),
                 ..Self::default()
             }
         } else if let Some(m) = message.decode::<CorrectedImuSample>() {
@@ -284,6 +292,8 @@ struct RawTrack {
     longest: (u64, f64),
     /// The current session's time line.
     time: TimeLine,
+    /// The current session's runs of repeated readings ([`RawInfo::frozen`]).
+    freezes: Freezes,
 }
 
 impl RawTrack {
@@ -307,6 +317,15 @@ impl RawTrack {
         {
             self.info.holes.record(f.seq.unwrap_or(0), t, dt_ns);
         }
+        if marked {
+            self.freezes.end(&self.time);
+        }
+        if let Some(a) = f.accel_g {
+            let g = f.gyro_dps.filter(|_| flags & raw_flags::GYRO_VALID != 0);
+            let g = g.unwrap_or([0.0; 3]);
+            let values = [a[0], a[1], a[2], g[0], g[1], g[2]];
+            self.freezes.push(&self.time, f.seq.unwrap_or(0), t, values);
+        }
         self.time.accept(t);
         self.session = Some(match self.session {
             Some((first, _, n)) => (first, t, n + 1),
@@ -316,6 +335,8 @@ impl RawTrack {
 
     /// Ends the current session: its undelivered count, and its rate if it is the longest.
     fn close_session(&mut self) {
+        self.freezes.end(&self.time);
+        self.info.frozen = self.freezes.frozen;
         self.info.undelivered += std::mem::take(&mut self.session_undelivered);
         if let Some((first, last, n)) = self.session.take()
             && n > self.longest.0
@@ -575,6 +596,16 @@ impl RunInfo {
                 "holes:     {}",
                 holes.unwrap_or_else(|| "0 (no unmarked hole in the sample times)".into())
             );
+            if let Some(l) = r.frozen.longest {
+                let _ = writeln!(
+                    s,
+                    "frozen:    {} run(s) of samples repeating one reading for longer than a \
+                     hole (the longest {:.3} s, ending at seq {}): the sensor stopped updating",
+                    r.frozen.count,
+                    l.dt_ns as f64 * 1e-9,
+                    l.seq
+                );
+            }
         }
         let e = &self.events;
         let _ = writeln!(
