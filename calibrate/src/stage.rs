@@ -500,7 +500,10 @@ impl CalibrationStage {
 
     /// Counters since the stage was created.
     pub fn stats(&self) -> StageStats {
-        self.stats
+        StageStats {
+            frozen: self.freezes.frozen,
+            ..self.stats
+        }
     }
 
     /// Number of provisional samples emitted in the current batch, which its verdict will
@@ -623,12 +626,9 @@ impl CalibrationStage {
         if continuity != Continuity::Next {
             self.freezes.end(&self.time);
         }
-        let g = if has_gyro { raw.gyro_dps } else { [0.0; 3] };
-        let a = raw.accel_g;
-        let values = [a[0], a[1], a[2], g[0], g[1], g[2]];
+        let gyro = has_gyro.then_some(raw.gyro_dps);
         self.freezes
-            .push(&self.time, raw.seq, raw.stamps.sample_ns, values);
-        self.stats.frozen = self.freezes.frozen;
+            .push(&self.time, raw.seq, raw.stamps.sample_ns, raw.accel_g, gyro);
     }
 
     fn sequence(&mut self, raw: &RawImuSample) -> Result<Continuity, StageError> {
@@ -815,7 +815,6 @@ impl Stage for CalibrationStage {
         self.cut_batch();
         self.detector.interrupt();
         self.freezes.end(&self.time);
-        self.stats.frozen = self.freezes.frozen;
     }
 }
 

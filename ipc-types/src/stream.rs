@@ -249,16 +249,43 @@ pub struct Freezes {
 }
 
 impl Freezes {
-    /// Takes the next raw sample (`seq`, `t_ns`, `values`: accelerometer then gyroscope, the
-    /// gyroscope's zero where it is not valid) on the time line `line` (its period decides
-    /// what is as long as a hole).
-    pub fn push(&mut self, line: &TimeLine, seq: u64, t_ns: u64, values: [f64; 6]) {
+    /// Takes the next raw sample (`seq`, `t_ns`, its accelerometer values `accel_g` and its
+    /// gyroscope's `gyro_dps` where valid) on the time line `line` (its period decides what is
+    /// as long as a hole).
+    pub fn push(
+        &mut self,
+        line: &TimeLine,
+        seq: u64,
+        t_ns: u64,
+        accel_g: [f64; 3],
+        gyro_dps: Option<[f64; 3]>,
+    ) {
+        let [a0, a1, a2] = accel_g;
+        let [g0, g1, g2] = gyro_dps.unwrap_or([0.0; 3]);
+        let values = [a0, a1, a2, g0, g1, g2];
         if let Some(run) = self.run.as_mut().filter(|r| r.0 == values) {
             (run.2, run.3) = (seq, t_ns);
             return;
         }
         self.end(line);
         self.run = Some((values, t_ns, seq, t_ns));
+    }
+
+    /// One line for a report of the runs `frozen` counted, e.g. `1 run of samples repeating
+    /// one reading on every axis for longer than a hole (1.013 s in all; the longest 1.013 s,
+    /// ending at seq 169, t 3.650 s)`; `None` without runs. `t0_ns` is the stream's start.
+    pub fn describe(frozen: &Holes, t0_ns: u64) -> Option<String> {
+        let l = frozen.longest?;
+        Some(format!(
+            "{} run{} of samples repeating one reading on every axis for longer than a hole \
+             ({:.3} s in all; the longest {:.3} s, ending at seq {}, t {:.3} s)",
+            frozen.count,
+            if frozen.count == 1 { "" } else { "s" },
+            frozen.total_ns as f64 * 1e-9,
+            l.dt_ns as f64 * 1e-9,
+            l.seq,
+            l.t_ns.saturating_sub(t0_ns) as f64 * 1e-9
+        ))
     }
 
     /// Ends the current run (the stream's end, a gap, a new session): counted when as long as
@@ -461,10 +488,10 @@ mod tests {
     fn a_reading_that_stops_changing_for_a_hole_is_counted() {
         let mut line = TimeLine::default();
         let mut freezes = Freezes::default();
-        let value = |k: u64| [k as f64 * 1e-3, 0.0, 1.0, 0.1, -0.2, 0.3];
-        let feed = |line: &mut TimeLine, freezes: &mut Freezes, k: u64, v: [f64; 6]| {
+        let value = |k: u64| [k as f64 * 1e-3, 0.0, 1.0];
+        let feed = |line: &mut TimeLine, freezes: &mut Freezes, k: u64, a: [f64; 3]| {
             let t_ns = k * 20_000_000;
-            freezes.push(line, k, t_ns, v);
+            freezes.push(line, k, t_ns, a, Some([0.1, -0.2, 0.3]));
             line.accept(t_ns);
         };
         for k in 0..300u64 {

@@ -107,6 +107,18 @@ pub const MIN_MOTION_S: f64 = 5.0;
 /// shown over the motion, root mean square (module documentation).
 pub const SPEED_FACTOR: f64 = 1.0;
 
+/// The sideways speed an IMU up to [`LEVER_ARM_BOUND_M`] off the turning axis may have at the
+/// filter's rate about up (`up_s`, sensor frame), m/s: `|w_up| r`.
+fn sideways_bound(kf: &Eskf, up_s: &Vector3<f64>) -> f64 {
+    kf.rate().dot(up_s).abs() * LEVER_ARM_BOUND_M
+}
+
+/// Whether a platform at `speed` (m/s) drives straight: the lever arm's sideways speed
+/// `sideways` ([`sideways_bound`], m/s) turns its velocity by at most [`STRAIGHT_ANGLE_RAD`].
+fn drives_straight(sideways: f64, speed: f64) -> bool {
+    sideways <= speed * STRAIGHT_ANGLE_RAD.tan()
+}
+
 /// The IMU-only constraint's state.
 #[derive(Debug, Clone, Copy)]
 pub struct ImuConstraint {
@@ -266,8 +278,7 @@ impl ImuConstraint {
             // Turning, an IMU off the turning axis moves sideways at `w r`, which a yaw error
             // mimics (`v dm`): the yaw is learned on straight driving alone, as the
             // straight-driving mounting is gathered.
-            let turn = kf.rate().dot(&up_s).abs() * LEVER_ARM_BOUND_M;
-            if turn <= v_b.x.abs() * STRAIGHT_ANGLE_RAD.tan() {
+            if drives_straight(sideways_bound(kf, &up_s), v_b.x.abs()) {
                 MountingYaw::Learned
             } else {
                 MountingYaw::Considered
@@ -301,7 +312,7 @@ impl ImuConstraint {
         // Across the path: the velocity's horizontal 1-sigma (per axis) and the sideways
         // speed of an IMU up to the lever-arm bound off the turning axis.
         let v_sigma = kf.filter_velocity_sigma().xy().norm() * std::f64::consts::FRAC_1_SQRT_2;
-        let turn = kf.rate().dot(up_s).abs() * LEVER_ARM_BOUND_M;
+        let turn = sideways_bound(kf, up_s);
         let across = v_sigma.hypot(turn);
         let from = |e: &MountingEstimator| {
             (e.path_m() >= MOUNTING_PATH_M)
@@ -315,7 +326,7 @@ impl ImuConstraint {
             estimate = from(&self.estimator);
         }
         if let Some(straight) = self.straight.as_mut()
-            && turn <= v_s.norm() * STRAIGHT_ANGLE_RAD.tan()
+            && drives_straight(turn, v_s.norm())
         {
             straight.add(&v_s, across, dt_s);
             if let Some(found) = from(straight) {

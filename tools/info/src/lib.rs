@@ -321,10 +321,9 @@ impl RawTrack {
             self.freezes.end(&self.time);
         }
         if let Some(a) = f.accel_g {
-            let g = f.gyro_dps.filter(|_| flags & raw_flags::GYRO_VALID != 0);
-            let g = g.unwrap_or([0.0; 3]);
-            let values = [a[0], a[1], a[2], g[0], g[1], g[2]];
-            self.freezes.push(&self.time, f.seq.unwrap_or(0), t, values);
+            let gyro = f.gyro_dps.filter(|_| flags & raw_flags::GYRO_VALID != 0);
+            self.freezes
+                .push(&self.time, f.seq.unwrap_or(0), t, a, gyro);
         }
         self.time.accept(t);
         self.session = Some(match self.session {
@@ -596,15 +595,8 @@ impl RunInfo {
                 "holes:     {}",
                 holes.unwrap_or_else(|| "0 (no unmarked hole in the sample times)".into())
             );
-            if let Some(l) = r.frozen.longest {
-                let _ = writeln!(
-                    s,
-                    "frozen:    {} run(s) of samples repeating one reading for longer than a \
-                     hole (the longest {:.3} s, ending at seq {}): the sensor stopped updating",
-                    r.frozen.count,
-                    l.dt_ns as f64 * 1e-9,
-                    l.seq
-                );
+            if let Some(frozen) = Freezes::describe(&r.frozen, self.start_ns.unwrap_or(0)) {
+                let _ = writeln!(s, "frozen:    {frozen}: the sensor stopped updating");
             }
         }
         let e = &self.events;

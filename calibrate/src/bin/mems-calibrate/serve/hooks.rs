@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use alloc_count::steady::SteadyState;
 use anyhow::Result;
 use calibrate::stage::{CalibrationStage, WarmState};
+use ipc_types::stream::Freezes;
 use mems_stage::live::Hooks;
 
 /// The summary on stderr: the stage's counts, what it learned and refined, and the
@@ -34,14 +35,9 @@ pub fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
     if let Some(holes) = s.holes.describe(0) {
         tracing::warn!("{holes}; each bridged as a gap (GAP_BEFORE and HOLE_BEFORE)");
     }
-    if let Some(l) = s.frozen.longest {
+    if let Some(frozen) = Freezes::describe(&s.frozen, 0) {
         tracing::warn!(
-            "{} run(s) of samples repeating one reading on every axis for longer than a hole \
-             (the longest {:.3} s, ending at seq {}): the sensor stopped updating while it was \
-             read; passed on as measured",
-            s.frozen.count,
-            l.dt_ns as f64 * 1e-9,
-            l.seq
+            "{frozen}: the sensor stopped updating while it was read; passed on as measured"
         );
     }
     if s.clipped.samples > 0 {

@@ -17,7 +17,7 @@ use std::path::Path;
 use anyhow::{Result, bail};
 use calibrate::stage::CalibrationStage;
 use calibrate::zero_state::{DetectorKind, StaticReference};
-use ipc_types::stream::Holes;
+use ipc_types::stream::{Freezes, Holes};
 use ipc_types::{OdometryState, odometry_flags};
 use mems_stage::Chain;
 use mems_stage::offline::Stop;
@@ -602,19 +602,11 @@ pub fn report_input(read: &Read, source: &mut Source, no_gyro: Option<u64>) -> V
              unobserved interval (docs/input-checks.md)"
         );
     }
-    if let Some(l) = read.frozen.longest {
-        let t0 = read.first_ns.unwrap_or(0);
+    if let Some(frozen) = Freezes::describe(&read.frozen, read.first_ns.unwrap_or(0)) {
         tracing::warn!(
-            "{input}: {} run{} of samples repeating one reading on every axis for longer than \
-             a hole ({:.3} s in all; the longest {:.3} s, ending at seq {}, t {:.3} s): the \
-             sensor stopped updating while it was read; integrated as measured, so what it did \
-             meanwhile is missing from the position (docs/input-checks.md)",
-            read.frozen.count,
-            if read.frozen.count == 1 { "" } else { "s" },
-            read.frozen.total_ns as f64 * 1e-9,
-            l.dt_ns as f64 * 1e-9,
-            l.seq,
-            l.t_ns.saturating_sub(t0) as f64 * 1e-9
+            "{input}: {frozen}: the sensor stopped updating while it was read; integrated as \
+             measured, so what it did meanwhile is missing from the position \
+             (docs/input-checks.md)"
         );
     }
     if read.hints_late > 0 {
