@@ -308,14 +308,20 @@ def track_in_our_frame(truth, out):
     if yaw is None:
         return None
     check = track_heading(truth, ours, t0, CHECK_PATH_M)
-    start, end = track_at(truth["track"], t0), truth["track"][-1][1:3]
-    x, y = end[0] - start[0], end[1] - start[1]
-    c, s = math.cos(yaw), math.sin(yaw)
+    to_ours = turned(track_at(truth["track"], t0), yaw)
     return {
         "yaw_deg": math.degrees(yaw),
         "check_disagreement_deg": None if check is None else math.degrees(math.remainder(yaw - check, 2 * math.pi)),
-        "end_m": [c * x - s * y, s * x + c * y],
+        "end_m": list(to_ours(truth["track"][-1][1:3])),
     }
+
+
+def turned(start, yaw):
+    """The map of a truth (x, y) into our frame: from `start`, turned by `yaw` (rad,
+    counter-clockwise)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return lambda q: (c * (q[0] - start[0]) - s * (q[1] - start[1]),
+                      s * (q[0] - start[0]) + c * (q[1] - start[1]))
 
 
 def into_our_frame(truth, out):
@@ -330,25 +336,17 @@ def into_our_frame(truth, out):
     start = track_at(truth["track"], t0)
     yaw_on_body = truth.get("sensor_yaw_on_body_deg")
     if yaw_on_body is not None and len(truth["track"][0]) > 3:
-        psi = heading_at(truth["track"], t0) + math.radians(yaw_on_body)
-        c, s = math.cos(psi), math.sin(psi)
-        return lambda q: (c * (q[0] - start[0]) + s * (q[1] - start[1]),
-                          -s * (q[0] - start[0]) + c * (q[1] - start[1]))
+        return turned(start, -(heading_at(truth["track"], t0) + math.radians(yaw_on_body)))
     if not out.get("track"):
         return None
     yaw = track_heading(truth, out["track"], t0, ALIGN_PATH_M)
-    if yaw is None:
-        return None
-    c, s = math.cos(yaw), math.sin(yaw)
-    return lambda q: (c * (q[0] - start[0]) - s * (q[1] - start[1]),
-                      s * (q[0] - start[0]) + c * (q[1] - start[1]))
+    return None if yaw is None else turned(start, yaw)
 
 
-def track_error(truth, out):
+def track_error(truth, out, to_ours):
     """The track error (module documentation), m: rms over our track's poses within the
     truth's time span of the horizontal distance to the truth's pose at the same time (linear
-    between its poses), in our frame; None without a truth track in our frame."""
-    to_ours = into_our_frame(truth, out)
+    between its poses), in our frame by `to_ours` ([`into_our_frame`]); None without it."""
     if to_ours is None:
         return None
     poses = truth["track"]
@@ -373,7 +371,8 @@ def evaluate(side, out):
     sigma_h = math.sqrt((s[0] ** 2 + s[1] ** 2) / 2)
     r68 = R68_FACTOR * sigma_h
     truth = side["truth"]
-    turned = None
+    turned_end = None
+    to_ours = into_our_frame(truth, out)
     t_vec = truth.get("end_displacement_m")
     if truth.get("frame") in ("any", "nav") and t_vec is not None:
         err = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
@@ -384,17 +383,17 @@ def evaluate(side, out):
         start = track_at(truth["track"], out["aligned_at_s"])
         end = truth["track"][-1][1:3]
         if truth.get("sensor_yaw_on_body_deg") is not None and len(truth["track"][0]) > 3:
-            t_vec = list(into_our_frame(truth, out)(end))
+            t_vec = list(to_ours(end))
             lo = hi = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
-        elif (turned := track_in_our_frame(truth, out)) is not None:
-            t_vec = turned["end_m"]
+        elif (turned_end := track_in_our_frame(truth, out)) is not None:
+            t_vec = turned_end["end_m"]
             lo = hi = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
         else:
             t = math.dist(start, end)
             ours = math.hypot(p[0], p[1])
             lo, hi = abs(ours - t), ours + t
-    elif (turned := footprints_in_our_frame(truth, out.get("rests", []))) is not None:
-        t_vec = turned["end_m"]
+    elif (turned_end := footprints_in_our_frame(truth, out.get("rests", []))) is not None:
+        t_vec = turned_end["end_m"]
         err = math.hypot(p[0] - t_vec[0], p[1] - t_vec[1])
         lo = hi = err
     else:
@@ -418,7 +417,7 @@ def evaluate(side, out):
         covered = "?"
     pct = (lambda e: 100.0 * e / distance if distance else None)
     ours = out.get("distance_m")
-    track_rms = track_error(truth, out)
+    track_rms = track_error(truth, out, to_ours)
     return {
         "end_displacement_m": p,
         "sigma_m": s,
@@ -433,7 +432,7 @@ def evaluate(side, out):
         "sigma_h_m": sigma_h,
         "r68_m": r68,
         "covered": covered,
-        "truth_turned": turned,
+        "truth_turned": turned_end,
     }
 
 
