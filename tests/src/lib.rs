@@ -94,6 +94,16 @@ pub fn simulate(dir: &std::path::Path, file: &str, args: &[&str]) -> PathBuf {
     out
 }
 
+/// A scratch directory for `tag` (in the system's temporary directory, named as
+/// [`unique_namespace`] names services) and [`simulate`] run in it: the directory and the
+/// recording's path.
+pub fn simulate_in_scratch(tag: &str, file: &str, args: &[&str]) -> (PathBuf, PathBuf) {
+    let dir = std::env::temp_dir().join(unique_namespace(tag));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = simulate(&dir, file, args);
+    (dir, out)
+}
+
 /// Times (s) of the truth's rests in a `mems-sim` CSV: `(start, end)` of each run of rows with
 /// `truth_rest` set.
 pub fn truth_rests(csv: &std::path::Path) -> Vec<(f64, f64)> {

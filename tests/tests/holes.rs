@@ -13,7 +13,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use integration_tests::{bin, identity_calibration, path_arg, run_ok, simulate, unique_namespace};
+use integration_tests::{bin, identity_calibration, path_arg, run_ok, simulate_in_scratch};
 
 /// `src` without the rows whose time lies strictly within `start_s` .. `start_s + length_s`.
 fn cut(src: &Path, dst: &Path, start_s: f64, length_s: f64) {
@@ -36,21 +36,16 @@ fn cut(src: &Path, dst: &Path, start_s: f64, length_s: f64) {
 /// A scratch directory named for `tag`, a simulated drive of `seconds` at 200 Hz in it
 /// (canonical CSV, seed 3) and the identity calibration.
 fn simulated_drive(tag: &str, seconds: &str) -> (PathBuf, PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(unique_namespace(tag));
-    std::fs::create_dir_all(&dir).unwrap();
-    let drive = simulate(
-        &dir,
-        "drive.csv",
-        &[
-            "drive",
-            "--duration",
-            seconds,
-            "--rate",
-            "200",
-            "--seed",
-            "3",
-        ],
-    );
+    let args = [
+        "drive",
+        "--duration",
+        seconds,
+        "--rate",
+        "200",
+        "--seed",
+        "3",
+    ];
+    let (dir, drive) = simulate_in_scratch(tag, "drive.csv", &args);
     (dir, drive, identity_calibration())
 }
 

@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::process::Command;
 
-use integration_tests::{bin, identity_calibration, simulate, unique_namespace};
+use integration_tests::{bin, identity_calibration, simulate_in_scratch};
 
 /// `src` with the header names `a` and `b` exchanged (the data rows as they are).
 fn swap_header(src: &Path, dst: &Path, a: &str, b: &str) {
@@ -40,10 +40,8 @@ fn offline(csv: &Path) -> (serde_json::Value, String) {
 
 #[test]
 fn swapped_accelerometer_columns_are_reported() {
-    let dir = std::env::temp_dir().join(unique_namespace("swapped-axes"));
-    std::fs::create_dir_all(&dir).unwrap();
-    let drive = simulate(
-        &dir,
+    let (dir, drive) = simulate_in_scratch(
+        "swapped-axes",
         "drive.csv",
         &[
             "drive",

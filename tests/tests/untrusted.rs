@@ -16,7 +16,9 @@
 use std::path::Path;
 use std::process::Command;
 
-use integration_tests::{bin, identity_calibration, path_arg, run_ok, simulate, unique_namespace};
+use integration_tests::{
+    bin, identity_calibration, path_arg, run_ok, simulate, simulate_in_scratch, unique_namespace,
+};
 
 /// `mems-odometry offline --json` on `input` with `args`: the JSON result and stderr.
 fn offline(input: &Path, args: &[&str]) -> (serde_json::Value, String) {
@@ -180,10 +182,8 @@ fn a_walk_clipped_at_250_dps_is_flagged_counted_and_reconstructed() {
 
 #[test]
 fn a_range_is_inferred_from_a_logger_file_without_flags() {
-    let dir = std::env::temp_dir().join(unique_namespace("inferred-range"));
-    std::fs::create_dir_all(&dir).unwrap();
-    let walk = simulate(
-        &dir,
+    let (dir, walk) = simulate_in_scratch(
+        "inferred-range",
         "walk.csv",
         &[
             "walk",
