@@ -277,7 +277,7 @@ pub struct ForwardAxis {
 
 /// A trusted forward-axis fit ([`ForwardAxis`]): the mounting it gives, its yaw 1-sigma, and
 /// the speed hints' scale error it shows.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ForwardFit {
     /// The mounting (sensor to body).
     pub mounting: UnitQuaternion<f64>,

@@ -19,6 +19,7 @@
 //! as a hint reaches the odometry process within `delivery_s` of its publication (plus the
 //! calibration stage's own latency, by which every sample arrives late).
 
+use crate::cruise::ForwardFit;
 use crate::eskf::Heading;
 use ipc_types::{RobotHint, hint_flags};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
@@ -45,6 +46,12 @@ pub struct HintConfig {
     /// specific force against the speed hints' changes and turns
     /// ([`crate::cruise::ForwardAxis`]), which needs no known velocity (a start in motion).
     pub mounting_from_turns: bool,
+    /// The forward-axis fit an earlier pass over the same recording ended with (offline: the
+    /// speed hints need the mounting from their first, and the end's estimate is the best):
+    /// taken as the mounting from the start, its yaw 1-sigmas and speed scale carried as if
+    /// just fitted, the IMU-only constraint following it. It overrides `mounting`, and
+    /// `mounting_from_turns` must be `false` with it, as with a given mounting.
+    pub mounting_fit: Option<ForwardFit>,
     /// Path length of forward driving the mounting estimate gathers before it is used, m.
     pub mounting_min_path_m: f64,
     /// 1-sigma of the non-holonomic constraint (zero lateral and vertical body velocity), m/s;
@@ -86,6 +93,7 @@ impl Default for HintConfig {
             mounting: Some(UnitQuaternion::identity()),
             imu_mounting: None,
             mounting_from_turns: false,
+            mounting_fit: None,
             mounting_min_path_m: 3.0,
             nonholonomic_sigma_mps: 0.02,
             speed_scale_sigma: 0.02,
@@ -133,6 +141,8 @@ pub enum AxisSource {
     Path,
     /// Both, fused by their inverse variances (`odometry::velocity_axis::fuse`).
     Fused,
+    /// An earlier pass over the same recording ([`HintConfig::mounting_fit`]).
+    FirstPass,
 }
 
 impl AxisSource {
@@ -142,6 +152,7 @@ impl AxisSource {
             Self::SpeedChanges => "speed_changes",
             Self::Path => "path",
             Self::Fused => "fused",
+            Self::FirstPass => "first_pass",
         }
     }
 }
@@ -154,13 +165,10 @@ pub struct ForwardAxisReport {
     pub trusted_at_ns: u64,
     /// Where the latest mounting came from.
     pub source: AxisSource,
-    /// The latest fit's yaw 1-sigma from its residuals (the fit's noise), rad.
-    pub yaw_sigma_rad: f64,
-    /// The latest fit's whole yaw 1-sigma, the reference's horizontal bias included, rad: what
-    /// the published position 1-sigma carries as a systematic error.
-    pub yaw_systematic_sigma_rad: f64,
-    /// The latest fit's speed scale error and its 1-sigma (`None`: hints too noisy for it).
-    pub scale_fit: Option<(f64, f64)>,
+    /// The latest fit: its mounting, its yaw 1-sigmas (the fit's noise, and the whole one the
+    /// published position 1-sigma carries, [`ForwardFit::systematic_sigma_rad`]) and its speed
+    /// scale error.
+    pub fit: ForwardFit,
     /// What the filter took from the fit's scale once observable (`None`: not yet).
     pub scale_taken: Option<ScaleTaken>,
 }
@@ -196,6 +204,12 @@ impl HintConfig {
             });
         }
         positive("mounting_min_path_m", self.mounting_min_path_m)?;
+        if self.mounting_fit.is_some() && self.mounting_from_turns {
+            return Err(HintConfigError {
+                field: "mounting_from_turns",
+                reason: "must be false with an earlier pass's mounting_fit".into(),
+            });
+        }
         positive("nonholonomic_sigma_mps", self.nonholonomic_sigma_mps)?;
         positive("speed_scale_sigma", self.speed_scale_sigma)?;
         positive("fallback_zupt_gate_sigma", self.fallback_zupt_gate_sigma)?;
@@ -634,6 +648,24 @@ mod tests {
         let mut c = Ring::<u32>::new(2);
         c.clone_from(&a);
         assert_eq!((c.len(), c.front(), c.newest(0)), (3, Some(&4), Some(&6)));
+    }
+
+    #[test]
+    fn an_earlier_pass_fit_with_a_fit_of_its_own_is_refused() {
+        let fit = ForwardFit {
+            mounting: UnitQuaternion::identity(),
+            sigma_rad: 0.1,
+            bias_sigma_rad: 0.0,
+            scale: None,
+            scale_sigma: f64::INFINITY,
+        };
+        let mut cfg = HintConfig {
+            mounting_fit: Some(fit),
+            ..HintConfig::default()
+        };
+        assert_eq!(cfg.validate(), Ok(()));
+        cfg.mounting_from_turns = true;
+        assert_eq!(cfg.validate().unwrap_err().field, "mounting_from_turns");
     }
 
     #[test]

@@ -135,10 +135,8 @@ impl Navigator {
             rest_count: 0,
             distance_m: 0.0,
             imu_decided: true,
-            nhc: (cfg.imu_nonholonomic_sigma_mps > 0.0).then(|| {
-                ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)
-                    .with_lever_arm(hints.lever_arm_m)
-            }),
+            nhc: (cfg.imu_nonholonomic_sigma_mps > 0.0)
+                .then(|| wheeled::imu_constraint(&cfg, &hints)),
             standing_accel_sd: 0.0,
             stops: StopTest::default(),
             untrusted: Untrusted::default(),

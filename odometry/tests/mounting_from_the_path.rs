@@ -6,10 +6,15 @@
 //! (`odometry::cruise::ForwardAxis`) needs at least six intervals of 0.5 s of motion. On the
 //! corpus's TurtleBot the fit was never trusted on four of five runs (docs/hints.md), and
 //! those runs took no speed hint at all.
+//!
+//! Offline, the run is then made a second time with that axis from the start
+//! (`HintConfig::mounting_fit`): the JSON reports when the first pass trusted it, and
+//! `from_start`.
 
 mod common;
 
 use common::{Case, offline_vehicle_json, scratch, write_drive_with_encoder_hints};
+use ipc_types::odometry_flags;
 use nalgebra::{UnitQuaternion, Vector3};
 
 /// The speed-change fit's least excitation: six intervals of 0.5 s in motion, s.
@@ -78,9 +83,10 @@ fn a_slow_robot_takes_its_forward_axis_from_the_path_of_its_first_seconds() {
 /// and the speed hints apply from there on (on seed 2 the fit never comes: without the coarse
 /// axis no speed hint applied). Asserted for each drive: the forward axis trusted, its yaw
 /// within three of its 1-sigmas of the truth, speed hints applied, and the end within three
-/// of its published 1-sigmas per axis and within 30 % of the distance (a 17-degree axis turns
-/// the track by as much; the IMU-only constraint with its own mounting ends 3-4 times the
-/// distance off on the corpus's TurtleBot).
+/// of its published 1-sigmas per axis and within 35 % of the distance (the second pass takes
+/// the axis from the start, and seed 2's, 17 degrees off, turns the whole track by 30 %; the
+/// IMU-only constraint with its own mounting ends 3-4 times the distance off on the corpus's
+/// TurtleBot).
 #[test]
 fn a_gentle_start_takes_a_coarse_path_axis_when_the_fit_does_not_come() {
     let mut failures = Vec::new();
@@ -111,11 +117,56 @@ fn a_gentle_start_takes_a_coarse_path_axis_when_the_fit_does_not_come() {
         );
         let ok = (yaw - 90.0).abs() < 3.0 * sigma
             && v["hints"]["speed_updates"].as_u64().unwrap() > 0
-            && error < 0.3 * distance
+            && error < 0.35 * distance
             && error < 3.0 * sigma_m;
         if !ok {
             failures.push(seed);
         }
     }
     assert!(failures.is_empty(), "seeds {failures:?} (above)");
+}
+
+/// Offline, the slow robot's second pass takes the first pass's axis from the start: its
+/// states (`--out`, read back) carry speed updates (`HINT_SPEED`) from before the first pass
+/// trusted the axis, the JSON says so (`from_start`, the first pass's time and source), and
+/// the end stays within three of its published 1-sigmas per axis.
+#[test]
+fn offline_takes_the_first_pass_axis_from_the_start() {
+    let case = yawed_robot(Case {
+        initial_rest_s: 3.0,
+        cruise_speed_mps: [0.15, 0.25],
+        ..Case::straight()
+    });
+    let dir = scratch("mounting-from-the-start");
+    let (path, out) = (dir.join("drive.mcap"), dir.join("states.mcap"));
+    write_drive_with_encoder_hints(&path, &case, 1);
+    let out_arg = out.to_str().unwrap();
+    let v = offline_vehicle_json(
+        env!("CARGO_BIN_EXE_mems-odometry"),
+        &path,
+        &["--out", out_arg],
+    );
+    let states = recording::mcap::read_all(&out).unwrap().odometry;
+    std::fs::remove_dir_all(&dir).unwrap();
+    let forward = &v["hints"]["forward_axis"];
+    assert_eq!(forward["from_start"], true, "{v}");
+    assert!(
+        ["path", "fused"].contains(&forward["source"].as_str().unwrap()),
+        "{v}"
+    );
+    let first_ns = states.first().unwrap().stamps.sample_ns;
+    let trusted_s = forward["trusted_at_s"].as_f64().unwrap();
+    let first_speed_s = states
+        .iter()
+        .find(|s| s.flags & odometry_flags::HINT_SPEED != 0)
+        .map(|s| (s.stamps.sample_ns - first_ns) as f64 * 1e-9)
+        .unwrap();
+    eprintln!(
+        "first pass trusted the axis at {trusted_s:.2} s; speed updates from {first_speed_s:.2} s"
+    );
+    assert!(first_speed_s < trusted_s - 0.5, "{v}");
+    let a = |key: &str, i: usize| v[key][i].as_f64().unwrap();
+    for i in 0..2 {
+        assert!(a("truth_error_m", i).abs() < 3.0 * a("sigma_m", i), "{v}");
+    }
 }

@@ -123,6 +123,17 @@ impl Hints {
     /// The hint state of a navigator with the (validated) configuration `cfg`, its velocity
     /// history holding `velocity_capacity` samples.
     pub(super) fn new(cfg: HintConfig, velocity_capacity: usize) -> Self {
+        let mut hints = Self::without_fit(cfg, velocity_capacity);
+        if let Some(fit) = cfg.mounting_fit {
+            hints.r_bs = None;
+            hints.remount(&fit, 0);
+            hints.axis_source = Some(AxisSource::FirstPass);
+        }
+        hints
+    }
+
+    /// [`Self::new`] before an earlier pass's fit is taken.
+    fn without_fit(cfg: HintConfig, velocity_capacity: usize) -> Self {
         Self {
             cfg,
             delivery_ns: (cfg.delivery_s * 1e9).round() as u64,
@@ -603,9 +614,7 @@ impl Hints {
         Some(ForwardAxisReport {
             trusted_at_ns: t,
             source: self.axis_source?,
-            yaw_sigma_rad: fit.sigma_rad,
-            yaw_systematic_sigma_rad: fit.systematic_sigma_rad(),
-            scale_fit: fit.scale.map(|k| (k, fit.scale_sigma)),
+            fit,
             scale_taken: self.scale_taken,
         })
     }

@@ -6,6 +6,7 @@ use ipc_types::{hint_flags, odometry_flags};
 
 use crate::config::OdometryConfig;
 use crate::eskf::Imu;
+use crate::hints::HintConfig;
 use crate::nonholonomic::ImuConstraint;
 use crate::stops::{BLOCK_S, PushFlags, WINDOW_BLOCKS};
 
@@ -167,9 +168,7 @@ impl Navigator {
     /// recognized as wheeled after seconds of driving): the along-track drift counts that
     /// motion from its start.
     pub(super) fn started_constraint(&mut self, cfg: &OdometryConfig) -> ImuConstraint {
-        let hints = &self.hints.cfg;
-        let mut nhc = ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)
-            .with_lever_arm(hints.lever_arm_m);
+        let mut nhc = imu_constraint(cfg, &self.hints.cfg);
         let moving_s = match (self.motion_start_ns, self.last, self.at_rest) {
             (Some(start), Some((t_ns, _, _)), false) => t_ns.saturating_sub(start) as f64 * 1e-9,
             _ => 0.0,
@@ -193,4 +192,16 @@ impl Navigator {
             nhc.drift_along_track(kf, dt);
         }
     }
+}
+
+/// The IMU-only constraint of `cfg` with the hints' mounting and lever arm: the mounting the
+/// user gave, else an earlier pass's forward-axis fit followed with its yaw 1-sigma
+/// ([`HintConfig::mounting_fit`]), else estimated from the first drive.
+pub(super) fn imu_constraint(cfg: &OdometryConfig, hints: &HintConfig) -> ImuConstraint {
+    let mut nhc = ImuConstraint::new(cfg.imu_nonholonomic_sigma_mps, hints.imu_mounting)
+        .with_lever_arm(hints.lever_arm_m);
+    if let Some(fit) = hints.mounting_fit {
+        nhc.follow(fit.mounting, fit.sigma_rad);
+    }
+    nhc
 }

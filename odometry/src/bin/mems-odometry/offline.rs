@@ -21,9 +21,11 @@ use ipc_types::odometry_flags;
 use mems_stage::{Chain, Either};
 use odometry::consistency::Scaling;
 use odometry::diagnose::lag::LagShift;
+use odometry::hints::ForwardAxisReport;
 use odometry::profile::Profile;
 use odometry::session::{NoGyro, OdometrySession};
 use odometry::uncalibrated::AccelEstimate;
+use odometry::velocity_axis::COARSE_MAX_SIGMA_RAD;
 
 use crate::load::odometry_config;
 use crate::out::Out;
@@ -93,6 +95,12 @@ pub struct OfflineArgs {
 /// sigma, or fail (never align, say), the first estimate was not one, and the recording is run
 /// once more as the first run was, that result standing.
 ///
+/// A calibrated part whose speed hints' forward axis (the IMU's mounting) was estimated, no
+/// `--mount` given, to a whole yaw 1-sigma of at most 20 deg ([`Pass::First`]), is run a
+/// second time with the first run's last fit taken from the start
+/// (`odometry::hints::HintConfig::mounting_fit`: its yaw 1-sigmas and speed scale carried):
+/// live, the hints wait for it, and what the platform drove meanwhile on the IMU alone is lost.
+///
 /// A first run that never aligned although its GLRT was ready, with a calibration file that
 /// has no fit of the part's accelerometer and a learned rest that read gravity like a
 /// calibrated part's, is made again with the part declared uncalibrated (`--uncalibrated`):
@@ -114,11 +122,17 @@ pub fn run(args: OfflineArgs) -> Result<()> {
         }
         other => other?,
     };
-    let Some(Early {
-        estimate: first, ..
-    }) = early
-    else {
-        return Ok(());
+    let first = match early {
+        None => return Ok(()),
+        Some(Early::Mounting(axis)) => {
+            tracing::info!(
+                "first pass: the speed hints' forward axis at {}; running the recording again \
+                 with it from the first hint",
+                summary::describe_fit(&axis.fit)
+            );
+            return pass(&args, &choice, &file, detector, Pass::Mounted(&axis)).map(|_| ());
+        }
+        Some(Early::Accel { estimate, .. }) => estimate,
     };
     let removed = match &first.per_axis {
         Some(fit) => {
@@ -137,12 +151,14 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     };
     match pass(&args, &choice, &removed, detector, Pass::Second(&first)) {
         Ok(None) => return Ok(()),
-        Ok(Some(second)) => tracing::warn!(
-            "second pass: {}: further than {:.2} m/s^2 from the first pass's, which is no \
-             estimate; the result is the first pass's",
-            second.estimate,
-            second.limit_mps2
+        Ok(Some(Early::Accel {
+            estimate,
+            limit_mps2,
+        })) => tracing::warn!(
+            "second pass: {estimate}: further than {limit_mps2:.2} m/s^2 from the first pass's, \
+             which is no estimate; the result is the first pass's"
         ),
+        Ok(Some(Early::Mounting(_))) => unreachable!("only a first pass ends for its mounting"),
         // The samples with that bias removed are no recording of this part (a first pass that
         // diverged can estimate tens of m/s^2): the same evidence.
         Err(e) => tracing::warn!(
@@ -153,11 +169,16 @@ pub fn run(args: OfflineArgs) -> Result<()> {
     pass(&args, &choice, &file, detector, Pass::Only).map(|_| ())
 }
 
-/// A run that ended early: what the filter estimated of the accelerometer, and how far the
-/// bias may move between passes (the run's configured `uncalibrated.bias_sigma_mps2`, m/s^2).
-struct Early {
-    estimate: AccelEstimate,
-    limit_mps2: f64,
+/// A run that ended early, and what for.
+enum Early {
+    /// What the filter estimated of the accelerometer, and how far the bias may move between
+    /// passes (the run's configured `uncalibrated.bias_sigma_mps2`, m/s^2).
+    Accel {
+        estimate: AccelEstimate,
+        limit_mps2: f64,
+    },
+    /// The speed hints' forward axis the run ended with (a mounting not given).
+    Mounting(ForwardAxisReport),
 }
 
 /// A first run that never aligned while its part, with no fit in its calibration file, was
@@ -170,31 +191,50 @@ struct NotAligned(String);
 /// Which run of the recording [`pass`] makes.
 #[derive(Clone, Copy)]
 enum Pass<'a> {
-    /// The first: it ends early, with the accelerometer's estimate, when that is uncalibrated.
+    /// The first: it ends early, with the accelerometer's estimate, when that is uncalibrated,
+    /// else with the speed hints' forward axis, when one was estimated and its whole yaw
+    /// 1-sigma is within the least the live rule takes a path's axis with
+    /// (`odometry::velocity_axis::COARSE_MAX_SIGMA_RAD`, 20 deg): from the start, a worse one
+    /// would turn the whole track by more than a third of its distance.
     First,
     /// The second, with the first's estimated bias removed (or its per-axis fit applied): it
     /// ends early, with its estimate,
     /// when that moved the bias further than the uncalibrated prior's sigma.
     Second(&'a AccelEstimate),
+    /// The second of a calibrated part, with the first's forward-axis fit from the start.
+    Mounted(&'a ForwardAxisReport),
     /// The only one whose result stands whatever it estimates.
     Only,
 }
 
 impl Pass<'_> {
-    /// Whether the run ends early with `estimate` instead of reporting.
+    /// Why the run ends early instead of reporting, if it does: the accelerometer's
+    /// `estimate`, or the forward-axis `fit`.
     fn ends_early(
         self,
-        estimate: &AccelEstimate,
+        estimate: Option<AccelEstimate>,
+        axis: Option<ForwardAxisReport>,
         config: &odometry::config::OdometryConfig,
-    ) -> bool {
+    ) -> Option<Early> {
+        let limit_mps2 = config.uncalibrated.bias_sigma_mps2;
+        let accel = |estimate| Early::Accel {
+            estimate,
+            limit_mps2,
+        };
         match self {
-            Self::First => estimate.uncalibrated,
+            Self::First => match estimate {
+                Some(e) if e.uncalibrated => Some(accel(e)),
+                _ => axis
+                    .filter(|a| a.fit.systematic_sigma_rad() <= COARSE_MAX_SIGMA_RAD)
+                    .map(Early::Mounting),
+            },
             Self::Second(first) => {
-                let limit = config.uncalibrated.bias_sigma_mps2;
                 let removed = first.per_axis.map_or(first.bias_mps2, |f| f.bias_mps2);
-                (0..3).any(|i| (estimate.bias_mps2[i] - removed[i]).abs() > limit)
+                estimate
+                    .filter(|e| (0..3).any(|i| (e.bias_mps2[i] - removed[i]).abs() > limit_mps2))
+                    .map(accel)
             }
-            Self::Only => false,
+            Self::Mounted(_) | Self::Only => None,
         }
     }
 }
@@ -249,7 +289,11 @@ fn pass(
     let base = base_config(args, file, &detector, which)?;
     let calibration = CalibrationStage::new(file, detector, RefineConfig::default())
         .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
-    let hints = args.hints.config()?;
+    let mut hints = args.hints.config()?;
+    if let Pass::Mounted(axis) = which {
+        hints.mounting_fit = Some(axis.fit);
+        hints.mounting_from_turns = false;
+    }
     let (config, session) = match choice.profile {
         Profile::Auto => (
             Profile::Auto.odometry(base),
@@ -302,18 +346,22 @@ fn pass(
         ))
         .into());
     }
-    let estimate = chain.second.stage().accel_estimate();
-    if let Some(e) = estimate.filter(|e| ran.is_ok() && which.ends_early(e, &config)) {
-        return Ok(Some(Early {
-            estimate: e,
-            limit_mps2: config.uncalibrated.bias_sigma_mps2,
-        }));
+    let stage = chain.second.stage();
+    let early = ran
+        .is_ok()
+        .then(|| which.ends_early(stage.accel_estimate(), stage.forward_axis(), &config))
+        .flatten();
+    if early.is_some() {
+        return Ok(early);
     }
     let mut read = Read::new(&args.input, &feed, repairs, config.align_s, *choice);
     if read.holes.count == 0 {
         read.holes = chain.first.stats().holes;
     }
     read.frozen = chain.first.stats().frozen;
+    if let Pass::Mounted(axis) = which {
+        read.first_pass_axis = Some(*axis);
+    }
     let no_gyro = chain.second.stats().first_no_gyro_seq;
     read.segments = summary::report_input(&read, &mut feed.source, no_gyro);
     let t0 = read.first_ns.unwrap_or(0);

@@ -24,6 +24,7 @@ use mems_stage::offline::Stop;
 use nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
 use odometry::arrival::HINT_WINDOW_NS;
 use odometry::axes::AxesReport;
+use odometry::hints::ForwardAxisReport;
 use odometry::session::OdometrySession;
 use recording::mcap::SegmentRead;
 use recording::{LogRepairs, Truth};
@@ -396,7 +397,7 @@ impl Summary {
                 "speed_updates": stats.speed_updates,
                 "gyro_bias_refuted": stats.gyro_bias_refuted,
                 "mounting_rpy_deg": hint_mounting(chain),
-                "forward_axis": forward_axis_json(chain, read.first_ns.unwrap_or(0)),
+                "forward_axis": forward_axis_json(chain, read),
                 "speed_scale": speed_scale_json(chain),
             },
         });
@@ -412,10 +413,7 @@ impl Summary {
         let Some(nhc) = session.imu_constraint() else {
             return serde_json::Value::Null;
         };
-        let mounting = nhc.mounting().map(|q| {
-            let (r, p, y) = q.euler_angles();
-            [r.to_degrees(), p.to_degrees(), y.to_degrees()]
-        });
+        let mounting = nhc.mounting().map(|q| rpy_deg(&q));
         json!({
             "nonholonomic_updates": nhc.applied,
             "nonholonomic_rejected": nhc.rejected,
@@ -481,6 +479,8 @@ pub struct Read<'a> {
     /// The ranges, clipped and implausible samples (after the run: `super::trust::json`), an
     /// object whose fields go into the JSON result.
     pub trust: serde_json::Value,
+    /// The first pass's forward axis, where this run took its fit from the start.
+    pub first_pass_axis: Option<ForwardAxisReport>,
 }
 
 impl<'a> Read<'a> {
@@ -505,6 +505,7 @@ impl<'a> Read<'a> {
             segments: Vec::new(),
             choice,
             trust: serde_json::Value::Null,
+            first_pass_axis: None,
         }
     }
 }
@@ -645,21 +646,40 @@ fn declared_lever(chain: &OfflineChain) -> Option<(UnitQuaternion<f64>, Vector3<
 /// The mounting the speed hints use (sensor to body, roll, pitch, yaw in degrees), given or
 /// estimated; `None` while unknown.
 fn hint_mounting(chain: &OfflineChain) -> Option<[f64; 3]> {
-    chain.second.stage().mounting().map(|q| {
-        let (r, p, y) = q.euler_angles();
-        [r.to_degrees(), p.to_degrees(), y.to_degrees()]
-    })
+    chain.second.stage().mounting().map(|q| rpy_deg(&q))
+}
+
+/// Roll, pitch and yaw of a mounting, degrees.
+fn rpy_deg(q: &UnitQuaternion<f64>) -> [f64; 3] {
+    let (r, p, y) = q.euler_angles();
+    [r.to_degrees(), p.to_degrees(), y.to_degrees()]
+}
+
+/// A forward-axis fit in words: its mounting's roll, pitch and yaw and its yaw 1-sigmas.
+pub fn describe_fit(fit: &odometry::cruise::ForwardFit) -> String {
+    let [r, p, y] = rpy_deg(&fit.mounting);
+    format!(
+        "roll {r:.1}, pitch {p:.1}, yaw {y:.1} deg (sensor to body; yaw 1-sigma {:.1} deg, \
+         {:.1} with the reference's bias)",
+        fit.sigma_rad.to_degrees(),
+        fit.systematic_sigma_rad().to_degrees()
+    )
 }
 
 /// When the forward axis estimated from the speed hints was first trusted (s from the first
 /// sample), its latest yaw 1-sigma (deg: the fit's noise, and with the reference's bias, the
 /// systematic one the position 1-sigma carries), its speed scale and what the filter took of
 /// it once observable (fractions: the hints read `1 + k` times the speed); `null` when it was
-/// given or never estimated.
-fn forward_axis_json(chain: &OfflineChain, first_ns: u64) -> serde_json::Value {
-    let Some(f) = chain.second.stage().forward_axis() else {
+/// given or never estimated. A run that took the first pass's fit from the start reports
+/// when and from what that pass trusted it, and `from_start` true.
+fn forward_axis_json(chain: &OfflineChain, read: &Read) -> serde_json::Value {
+    let Some(mut f) = chain.second.stage().forward_axis() else {
         return serde_json::Value::Null;
     };
+    let first_ns = read.first_ns.unwrap_or(0);
+    if let Some(first) = read.first_pass_axis {
+        (f.trusted_at_ns, f.source) = (first.trusted_at_ns, first.source);
+    }
     let taken = f.scale_taken.map(|t| {
         json!({
             "at_s": t.at_ns.saturating_sub(first_ns) as f64 * 1e-9,
@@ -674,9 +694,10 @@ fn forward_axis_json(chain: &OfflineChain, first_ns: u64) -> serde_json::Value {
     json!({
         "trusted_at_s": f.trusted_at_ns.saturating_sub(first_ns) as f64 * 1e-9,
         "source": f.source.name(),
-        "yaw_sigma_deg": f.yaw_sigma_rad.to_degrees(),
-        "yaw_systematic_sigma_deg": f.yaw_systematic_sigma_rad.to_degrees(),
-        "scale_fit": f.scale_fit.map(|(k, s)| json!({"k": k, "sigma": s})),
+        "from_start": read.first_pass_axis.is_some(),
+        "yaw_sigma_deg": f.fit.sigma_rad.to_degrees(),
+        "yaw_systematic_sigma_deg": f.fit.systematic_sigma_rad().to_degrees(),
+        "scale_fit": f.fit.scale.map(|k| json!({"k": k, "sigma": f.fit.scale_sigma})),
         "scale_taken": taken,
     })
 }
