@@ -30,7 +30,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::config::OdometryConfig;
 use crate::eskf::{BA, Cov, KS, Nominal, TH, V, align};
-use crate::hints::{HintConfig, mounting_from};
+use crate::hints::{ForwardFit, HintConfig, mounting_from};
 use crate::rest_noise::RestNoise;
 use crate::uncalibrated::AccelPrior;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
@@ -273,34 +273,6 @@ pub struct ForwardAxis {
     b_sum: (f64, f64),
     /// The hints' own noise's share of `sum |B|^2` (their speed 1-sigmas through `ds/dt`).
     bb_noise: f64,
-}
-
-/// A trusted forward-axis fit ([`ForwardAxis`]): the mounting it gives, its yaw 1-sigma, and
-/// the speed hints' scale error it shows.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ForwardFit {
-    /// The mounting (sensor to body).
-    pub mounting: UnitQuaternion<f64>,
-    /// 1-sigma of its yaw, rad (from the residual variance's upper confidence bound): the
-    /// fit's noise.
-    pub sigma_rad: f64,
-    /// 1-sigma of its yaw that a horizontal specific-force bias left by the reference (its
-    /// tilt, accelerometer bias and the floor's slope) may have aliased into the fit, rad: a
-    /// systematic error, common to every later speed hint.
-    pub bias_sigma_rad: f64,
-    /// The speed hints' scale error `k` (they read `1 + k` times the speed the specific force
-    /// shows: `1 / |F| - 1`), fraction; `None` while the hints' own noise is half the
-    /// excitation or more.
-    pub scale: Option<f64>,
-    /// 1-sigma of `scale`, fraction: the fit's noise and the bias's share, in quadrature.
-    pub scale_sigma: f64,
-}
-
-impl ForwardFit {
-    /// The yaw's whole 1-sigma, rad: the fit's noise and the bias's share, in quadrature.
-    pub fn systematic_sigma_rad(&self) -> f64 {
-        self.sigma_rad.hypot(self.bias_sigma_rad)
-    }
 }
 
 /// What [`ForwardAxis`] takes from the filter, once, at the first sample after alignment:

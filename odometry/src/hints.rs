@@ -19,7 +19,6 @@
 //! as a hint reaches the odometry process within `delivery_s` of its publication (plus the
 //! calibration stage's own latency, by which every sample arrives late).
 
-use crate::cruise::ForwardFit;
 use crate::eskf::Heading;
 use ipc_types::{RobotHint, hint_flags};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
@@ -113,8 +112,8 @@ impl Default for HintConfig {
 pub const SCALE_CONFLICT_SIGMAS: f64 = 3.0;
 
 /// The filter's speed scale checked against the forward-axis fit's once the fit's is
-/// observable (its 1-sigma below [`HintConfig::speed_scale_sigma`]; `odometry::cruise::
-/// ForwardFit`; fractions: the hints read `1 + k` times the speed).
+/// observable (its 1-sigma below [`HintConfig::speed_scale_sigma`]; [`ForwardFit`];
+/// fractions: the hints read `1 + k` times the speed).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ScaleTaken {
     /// When, ns (sample clock).
@@ -154,6 +153,35 @@ impl AxisSource {
             Self::Fused => "fused",
             Self::FirstPass => "first_pass",
         }
+    }
+}
+
+/// A trusted forward-axis fit (`crate::cruise::ForwardAxis`, `crate::velocity_axis`): the
+/// mounting it gives, its yaw 1-sigma, and
+/// the speed hints' scale error it shows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForwardFit {
+    /// The mounting (sensor to body).
+    pub mounting: UnitQuaternion<f64>,
+    /// 1-sigma of its yaw, rad (from the residual variance's upper confidence bound): the
+    /// fit's noise.
+    pub sigma_rad: f64,
+    /// 1-sigma of its yaw that a horizontal specific-force bias left by the reference (its
+    /// tilt, accelerometer bias and the floor's slope) may have aliased into the fit, rad: a
+    /// systematic error, common to every later speed hint.
+    pub bias_sigma_rad: f64,
+    /// The speed hints' scale error `k` (they read `1 + k` times the speed the specific force
+    /// shows: `1 / |F| - 1`), fraction; `None` while the hints' own noise is half the
+    /// excitation or more.
+    pub scale: Option<f64>,
+    /// 1-sigma of `scale`, fraction: the fit's noise and the bias's share, in quadrature.
+    pub scale_sigma: f64,
+}
+
+impl ForwardFit {
+    /// The yaw's whole 1-sigma, rad: the fit's noise and the bias's share, in quadrature.
+    pub fn systematic_sigma_rad(&self) -> f64 {
+        self.sigma_rad.hypot(self.bias_sigma_rad)
     }
 }
 

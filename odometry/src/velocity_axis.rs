@@ -21,7 +21,8 @@
 
 use nalgebra::{UnitQuaternion, Vector3};
 
-use crate::cruise::{FORWARD_MAX_SIGMA_RAD, ForwardFit, MIN_SPEED_MPS};
+use crate::cruise::{FORWARD_MAX_SIGMA_RAD, MIN_SPEED_MPS};
+use crate::hints::ForwardFit;
 use crate::hints::mounting_from;
 
 /// The least distance the speed hints must count in a motion before its direction is

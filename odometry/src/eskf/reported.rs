@@ -34,7 +34,7 @@ pub struct Reported {
     /// the state, so no update (none measures position) shrinks it.
     pub hidden: Vector3<f64>,
     /// Position variance of a systematic error the filter does not hold as a state (an
-    /// estimated mounting's yaw, [`crate::cruise::ForwardFit`]), m^2 per axis: set whole by
+    /// estimated mounting's yaw, [`crate::hints::ForwardFit`]), m^2 per axis: set whole by
     /// its owner, never grown or shrunk here.
     pub systematic: Vector3<f64>,
 }

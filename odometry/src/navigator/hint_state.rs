@@ -2,11 +2,11 @@
 //! speed hints still to apply and the body-velocity history they are applied against (see
 //! [`crate::stage`] for the behaviour, [`crate::hints`] for frames and times).
 
-use crate::cruise::{ForwardAxis, ForwardFit, Reference, horizontal_bias_sigma, initial_velocity};
+use crate::cruise::{ForwardAxis, Reference, horizontal_bias_sigma, initial_velocity};
 use crate::eskf::{BG, Eskf, MountingYaw, P, V};
 use crate::handover::{WaitPath, WaitRevision};
 use crate::hints::{
-    AxisSource, ForwardAxisReport, HintConfig, HintStats, MountingEstimator, Ring,
+    AxisSource, ForwardAxisReport, ForwardFit, HintConfig, HintStats, MountingEstimator, Ring,
     SCALE_CONFLICT_SIGMAS, ScaleTaken,
 };
 use crate::speed_lag::LagNoise;

@@ -275,6 +275,17 @@ fn base_config(
     Ok(base)
 }
 
+/// The hints' configuration of `args` for the run `which`: a [`Pass::Mounted`] takes the first
+/// run's forward-axis fit from the start.
+fn hint_config(args: &OfflineArgs, which: Pass<'_>) -> Result<odometry::hints::HintConfig> {
+    let mut hints = args.hints.config()?;
+    if let Pass::Mounted(axis) = which {
+        hints.mounting_fit = Some(axis.fit);
+        hints.mounting_from_turns = false;
+    }
+    Ok(hints)
+}
+
 /// One run of the pipeline over the recording with the calibration `file` (see [`Pass`]).
 /// Returns what the filter estimated of the accelerometer, without printing or writing
 /// anything, when the run ends early; else prints the result and writes `--out`.
@@ -289,11 +300,7 @@ fn pass(
     let base = base_config(args, file, &detector, which)?;
     let calibration = CalibrationStage::new(file, detector, RefineConfig::default())
         .map_err(|e| anyhow!("{}: {e}", args.stage.calib_name()))?;
-    let mut hints = args.hints.config()?;
-    if let Pass::Mounted(axis) = which {
-        hints.mounting_fit = Some(axis.fit);
-        hints.mounting_from_turns = false;
-    }
+    let hints = hint_config(args, which)?;
     let (config, session) = match choice.profile {
         Profile::Auto => (
             Profile::Auto.odometry(base),

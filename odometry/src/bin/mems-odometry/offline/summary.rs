@@ -656,7 +656,7 @@ fn rpy_deg(q: &UnitQuaternion<f64>) -> [f64; 3] {
 }
 
 /// A forward-axis fit in words: its mounting's roll, pitch and yaw and its yaw 1-sigmas.
-pub fn describe_fit(fit: &odometry::cruise::ForwardFit) -> String {
+pub fn describe_fit(fit: &odometry::hints::ForwardFit) -> String {
     let [r, p, y] = rpy_deg(&fit.mounting);
     format!(
         "roll {r:.1}, pitch {p:.1}, yaw {y:.1} deg (sensor to body; yaw 1-sigma {:.1} deg, \
