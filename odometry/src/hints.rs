@@ -157,8 +157,7 @@ impl AxisSource {
 }
 
 /// A trusted forward-axis fit (`crate::cruise::ForwardAxis`, `crate::velocity_axis`): the
-/// mounting it gives, its yaw 1-sigma, and
-/// the speed hints' scale error it shows.
+/// mounting it gives, its yaw 1-sigma, and the speed hints' scale error it shows.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ForwardFit {
     /// The mounting (sensor to body).

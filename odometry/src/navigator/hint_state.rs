@@ -121,7 +121,9 @@ pub(super) struct Hints {
 
 impl Hints {
     /// The hint state of a navigator with the (validated) configuration `cfg`, its velocity
-    /// history holding `velocity_capacity` samples.
+    /// history holding `velocity_capacity` samples. An earlier pass's fit
+    /// ([`HintConfig::mounting_fit`]) is taken as the first fit (no mounting before it, so
+    /// nothing to turn), trusted from the start.
     pub(super) fn new(cfg: HintConfig, velocity_capacity: usize) -> Self {
         let mut hints = Self::without_fit(cfg, velocity_capacity);
         if let Some(fit) = cfg.mounting_fit {
