@@ -22,8 +22,7 @@
 use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::cruise::{FORWARD_MAX_SIGMA_RAD, MIN_SPEED_MPS};
-use crate::hints::ForwardFit;
-use crate::hints::mounting_from;
+use crate::hints::{ForwardFit, mounting_from};
 
 /// The least distance the speed hints must count in a motion before its direction is
 /// trusted, m: a second at the slowest speed the cruise logic counts as motion
