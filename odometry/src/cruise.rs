@@ -14,7 +14,14 @@
 //!   indistinguishable from a horizontal accelerometer bias: it is added to the bias sigma
 //!   the alignment turns into its tilt sigma;
 //! - a turn slower than the gyro mean's own 1-sigma is not seen: the gyro bias sigma is the
-//!   rest's times `sqrt(2)` (such a turn and the noise, in quadrature).
+//!   rest's times `sqrt(2)` (such a turn and the noise, in quadrature);
+//! - a mean rate beyond a MEMS gyro's turn-on bias on any axis ([`MAX_TURN_ON_BIAS_RPS`]) is a
+//!   turn the detector did not see (its noise learned in motion, on a robot that drove off at
+//!   once), not a bias ([`CruiseWindow::turning`]): the gyro bias starts at zero with the
+//!   turn-on bias as its 1-sigma, and the turn's centripetal acceleration is taken out of the
+//!   mean specific force before it gives the tilt ([`centripetal`]). Its error (the bias's
+//!   share of the rate, the speed band's, and without a mounting the direction's) joins what
+//!   the window hides.
 //!
 //! Frames and signs as in [`crate::hints`]: body x forward, y left, z up; `R_bs` sensor to
 //! body; navigation frame z up, heading fixed at alignment. The velocity starts from the hint's
@@ -29,7 +36,7 @@
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::config::OdometryConfig;
-use crate::eskf::{BA, Cov, KS, Nominal, TH, V, align};
+use crate::eskf::{BA, Cov, KS, Nominal, Refinement, RefinementMean, TH, V, align};
 use crate::hints::{ForwardFit, HintConfig, mounting_from};
 use crate::rest_noise::RestNoise;
 use crate::uncalibrated::AccelPrior;
@@ -42,6 +49,13 @@ pub const STEADY_MPS: f64 = 0.15;
 /// Largest least-squares slope of the hint speeds over a cruise window, m/s^2 (an
 /// acceleration hidden in the mean specific force tilts the alignment by `a / g`: 0.9 deg).
 pub const MAX_ACCEL_MPS2: f64 = 0.15;
+/// Largest gyro bias a cruise window's mean rate is taken for, per axis, rad/s (5 deg/s): the
+/// MPU-9250's initial zero-rate output tolerance at 25 C (InvenSense PS-MPU-9250A-01 rev. 1.0,
+/// table 1, "Initial ZRO Tolerance": +-5 deg/s). A larger mean is a turn: on the F1TENTH cars
+/// of docs/real-data.md, whose BMI160 reads -0.4 deg/s about up standing, windows taken in
+/// turns the detector flagged still read -30 and -68 deg/s, and the filters' headings spun by
+/// as much.
+pub const MAX_TURN_ON_BIAS_RPS: f64 = 5.0 * core::f64::consts::PI / 180.0;
 /// Intervals the forward-axis estimate gathers before use, the least excitation it takes (3 s
 /// at one per half second; the 1-sigma's upper confidence bound, [`ForwardAxis`], covers what
 /// few intervals leave unknown).
@@ -71,16 +85,31 @@ pub struct CruiseWindow {
     /// speeds m/s): `n`, `t`, `t^2`, `s`, `t s`; and the hint 1-sigmas' sum.
     sums: [f64; 5],
     sigma_sum: f64,
+    /// Sum of the hint speed times the rate, m/s * rad/s, sensor frame: the centripetal
+    /// acceleration's `w x v` summed, but for the forward axis ([`centripetal`]).
+    speed_rate: Vector3<f64>,
+    /// The calibration stage's refinements made in motion that the samples carry (their mean
+    /// is added back where the window is a turn: [`CruiseWindow::turning`]).
+    motion: RefinementMean,
     /// A sample of the window was flagged `GRAVITY_OFF` (the calibration stage found the part
     /// reading gravity off: `crate::uncalibrated`).
     pub gravity_off: bool,
 }
 
 impl CruiseWindow {
-    /// Adds a sample with the hint speed `speed` (1-sigma `sigma`); a speed outside the
+    /// Adds a sample (specific force `f`, rate `w`, carrying the stage's refinements made in
+    /// motion `motion`) with the hint speed `speed` (1-sigma `sigma`); a speed outside the
     /// window's band (its smallest and largest speed at most [`STEADY_MPS`] or six hint
     /// 1-sigmas apart: the hints' own noise) starts a new window with it.
-    pub fn push(&mut self, t_ns: u64, f: &Vector3<f64>, w: &Vector3<f64>, speed: f64, sigma: f64) {
+    pub fn push(
+        &mut self,
+        t_ns: u64,
+        f: &Vector3<f64>,
+        w: &Vector3<f64>,
+        motion: &Refinement,
+        speed: f64,
+        sigma: f64,
+    ) {
         let band = STEADY_MPS.max(6.0 * sigma);
         let steady = speed.max(self.speed_max) - speed.min(self.speed_min) <= band;
         if self.accel.is_empty() || !steady {
@@ -100,6 +129,15 @@ impl CruiseWindow {
             *sum += x;
         }
         self.sigma_sum += sigma;
+        self.speed_rate += (w + motion.gyro) * speed;
+        self.motion.push(*motion);
+    }
+
+    /// The mean specific force (m/s^2) and rate (rad/s) without the stage's refinements made
+    /// in motion.
+    fn unrefined(&self) -> (Vector3<f64>, Vector3<f64>) {
+        let m = self.motion.mean().unwrap_or_default();
+        (self.accel.mean() + m.accel, self.gyro.mean() + m.gyro)
     }
 
     /// The window's span at `t_ns`, s.
@@ -130,11 +168,17 @@ impl CruiseWindow {
         self.slope().is_some_and(|(a, _)| a.abs() <= MAX_ACCEL_MPS2)
     }
 
+    /// Whether the window's mean rate, without the stage's refinements made in motion, exceeds
+    /// [`MAX_TURN_ON_BIAS_RPS`] on an axis: a turn, not a bias (module documentation).
+    pub fn turning(&self) -> bool {
+        self.unrefined().1.amax() > MAX_TURN_ON_BIAS_RPS
+    }
+
     /// The acceleration the window may hide, m/s^2: along the road its speed slope plus that
-    /// slope's 1-sigma, across it the largest speed times the rate `w_sigma`.
-    pub fn hidden_accel(&self, w_sigma: &Vector3<f64>) -> f64 {
+    /// slope's 1-sigma, across it the largest speed times the rate `w` (rad/s).
+    pub fn hidden_accel(&self, w: &Vector3<f64>) -> f64 {
         let along = self.slope().map_or(0.0, |(a, s)| a.abs() + s);
-        along.hypot(self.speed_max * w_sigma.norm())
+        along.hypot(self.speed_max * w.norm())
     }
 }
 
@@ -180,7 +224,9 @@ pub struct CruiseStart {
 
 /// The initial state and covariance from the cruise window `c` of `span_s` seconds (see the
 /// module documentation for what is assumed and how the sigmas carry it), with the mounting
-/// `r_bs` when known and the accelerometer bias prior of `prior` (as at a rest).
+/// `r_bs` when known and the accelerometer bias prior of `prior` (as at a rest); `motion` is
+/// the stage's refinement made in motion that the stream carries from here (a turning
+/// window's biases are put in its terms).
 pub fn cruise_start(
     c: &CruiseWindow,
     span_s: f64,
@@ -188,14 +234,32 @@ pub fn cruise_start(
     hints: &HintConfig,
     r_bs: Option<Matrix3<f64>>,
     prior: &AccelPrior,
+    motion: &Refinement,
 ) -> CruiseStart {
     let n = c.accel.len() as f64;
-    // A turn as slow as the mean's own 1-sigma is not seen: in quadrature with it.
-    let w_sigma = (c.gyro.mean_variance(cfg.effective_samples) * 2.0).map(f64::sqrt);
     let g = cfg.gravity_mps2;
-    let hidden = c.hidden_accel(&w_sigma);
+    let turning = c.turning();
+    let (f_up, w_bias, w_sigma, hidden) = if turning {
+        // The bias is the part's turn-on bias, a bound taken as uniform (GUM, JCGM 100:2008,
+        // 4.3.7), and the whole mean rate turns the velocity.
+        let turn_on = MAX_TURN_ON_BIAS_RPS / 3f64.sqrt();
+        let (a_c, a_c_sigma) = centripetal(c, r_bs.as_ref(), turn_on, g);
+        let hidden = c.hidden_accel(&Vector3::zeros()).hypot(a_c_sigma);
+        let w_sigma = Vector3::repeat(turn_on);
+        (c.unrefined().0 - a_c, Vector3::zeros(), w_sigma, hidden)
+    } else {
+        // A turn as slow as the mean's own 1-sigma is not seen: in quadrature with it.
+        let w_sigma = (c.gyro.mean_variance(cfg.effective_samples) * 2.0).map(f64::sqrt);
+        let hidden = c.hidden_accel(&w_sigma);
+        (c.accel.mean(), c.gyro.mean(), w_sigma, hidden)
+    };
     let bias_sigma = prior.bias_sigma_mps2.map(|s| s.hypot(hidden));
-    let (mut x, mut cov) = align(c.accel.mean(), c.gyro.mean(), g, bias_sigma, w_sigma);
+    let (mut x, mut cov) = align(f_up, w_bias, g, bias_sigma, w_sigma);
+    if turning {
+        // Aligned without the stage's refinements made in motion; the stream carries them.
+        x.b_a -= motion.accel;
+        x.b_g -= motion.gyro;
+    }
     cov[(KS, KS)] = hints.speed_scale_sigma.powi(2);
     let (speed, hint_sigma) = c.speed();
     let forward_sigma = hint_sigma
@@ -216,6 +280,41 @@ pub fn cruise_start(
         x,
         cov,
         standing_accel_sd: cfg.noise.accel_noise_density * (1.5 * rate_hz).sqrt(),
+    }
+}
+
+/// The mean centripetal acceleration of the turning window `c` and its 1-sigma, m/s^2, sensor
+/// frame. A platform turning at `w` while it moves at `v = s x_f` (`x_f` its forward axis)
+/// feels `w x v` besides gravity; the window's mean is `(mean of s w) x x_f` (the speed within
+/// its band). With the mounting `r_bs` known, `x_f` is its first row. Without it, a wheeled
+/// platform turns about up, so the acceleration is perpendicular to the mean rate, of magnitude
+/// `|mean of s w|`, and it points along the part of the mean specific force perpendicular to
+/// the rate: gravity's share there, up to `g` times the angle a bias of `turn_on_rps` (1-sigma)
+/// tilts the rate from up, turns it, and that error (at most the acceleration's twice) is
+/// carried. Both carry the bias's share of the rate times the largest speed and the speed
+/// band times the rate.
+pub fn centripetal(
+    c: &CruiseWindow,
+    r_bs: Option<&Matrix3<f64>>,
+    turn_on_rps: f64,
+    g: f64,
+) -> (Vector3<f64>, f64) {
+    let n = c.accel.len().max(1) as f64;
+    let sw = c.speed_rate / n;
+    let (f, w) = c.unrefined();
+    let common =
+        (c.speed_max * turn_on_rps * 3f64.sqrt()).hypot((c.speed_max - c.speed_min) * w.norm());
+    match r_bs {
+        Some(r_bs) => (sw.cross(&r_bs.row(0).transpose()), common),
+        None => {
+            let w_hat = w.normalize();
+            let across = f - w_hat * f.dot(&w_hat);
+            let a_c = across
+                .try_normalize(1e-9)
+                .map_or(Vector3::zeros(), |d| d * sw.norm());
+            let leak = (g * turn_on_rps / w.norm()).min(2.0 * sw.norm());
+            (a_c, common.hypot(leak))
+        }
     }
 }
 
@@ -515,5 +614,59 @@ mod tests {
         let r_bs = Matrix3::identity();
         let (v, cov) = initial_velocity(&q, Some(&r_bs), 1.0, 0.05, 0.02, 1.1);
         assert!((v - Vector3::x()).norm() < 1e-12 && (cov[(0, 0)].sqrt() - 0.05).abs() < 1e-12);
+    }
+
+    /// A window of 1 s at 25 Hz, driving at 1.4 m/s in a steady turn of 60 deg/s about up, the
+    /// sensor tilted 4 deg and yawed 90 deg on the body (the F1TENTH car's VESC), no bias: what
+    /// the accelerometer reads is gravity and the centripetal `w x v`, computed here from the
+    /// body's kinematics.
+    fn turning_window() -> (CruiseWindow, Matrix3<f64>, Vector3<f64>) {
+        let r_bs = (UnitQuaternion::from_euler_angles(0.04, 0.05, 0.0)
+            * UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2))
+        .to_rotation_matrix()
+        .into_inner();
+        let (speed, yaw_rate) = (1.4, 60f64.to_radians());
+        // Body frame: up z, forward x; the centripetal points left (+y) in a left turn.
+        let f_b = Vector3::new(0.0, speed * yaw_rate, 9.81);
+        let w_b = Vector3::new(0.0, 0.0, yaw_rate);
+        let (f_s, w_s) = (r_bs.transpose() * f_b, r_bs.transpose() * w_b);
+        let mut c = CruiseWindow::default();
+        for k in 0..26u64 {
+            c.push(
+                k * 40_000_000,
+                &f_s,
+                &w_s,
+                &Refinement::default(),
+                speed,
+                0.02,
+            );
+        }
+        (c, r_bs, r_bs.transpose() * Vector3::z())
+    }
+
+    #[test]
+    fn a_turning_window_takes_the_centripetal_out_of_the_tilt() {
+        use crate::eskf::BG;
+        let (c, r_bs, up_s) = turning_window();
+        assert!(c.turning());
+        let cfg = OdometryConfig::mpu9250(9.81);
+        let prior = AccelPrior::at_rest(&cfg, &c.accel.mean(), false);
+        let hints = HintConfig::default();
+        // The tilt the plain mean would give: the centripetal, 1.47 m/s^2, tilts it 8.5 deg.
+        let plain = c.accel.mean().angle(&up_s).to_degrees();
+        assert!(plain > 8.0, "{plain}");
+        for (r_bs, within_deg) in [(Some(r_bs), 0.01), (None, 0.01)] {
+            let start = cruise_start(&c, 1.0, &cfg, &hints, r_bs, &prior, &Refinement::default());
+            let up = start.x.q.inverse_transform_vector(&Vector3::z());
+            let off = up.angle(&up_s).to_degrees();
+            assert!(
+                off < within_deg,
+                "mounting {}: up {off} deg off",
+                r_bs.is_some()
+            );
+            assert_eq!(start.x.b_g, Vector3::zeros());
+            let turn_on = MAX_TURN_ON_BIAS_RPS / 3f64.sqrt();
+            assert!((start.cov[(BG, BG)].sqrt() - turn_on).abs() < 1e-12);
+        }
     }
 }

@@ -72,6 +72,10 @@ pub(crate) struct Navigator {
     last: Option<(u64, u64, Imu)>,
     /// The calibration stage's refinement of the current sample.
     refinement: Refinement,
+    /// The share of `refinement` the stage made while a fresh speed hint said the robot moved,
+    /// until the filter aligned: the stage averaged a moving platform there (its detector
+    /// learned its noise in motion), no bias ([`Self::take_refinement`]).
+    motion_refinement: Refinement,
     history: Vec<HistoryEntry>,
     history_overflowed: bool,
     motion_start_ns: Option<u64>,
@@ -127,6 +131,7 @@ impl Navigator {
             rest_window: RestWindow::default(),
             last: None,
             refinement: Refinement::default(),
+            motion_refinement: Refinement::default(),
             history: Vec::with_capacity(capacity),
             history_overflowed: false,
             motion_start_ns: None,
@@ -164,6 +169,8 @@ impl Navigator {
         self.kf.clone_from(&other.kf);
         self.rest_window = other.rest_window;
         self.last = other.last;
+        self.refinement = other.refinement;
+        self.motion_refinement = other.motion_refinement;
         self.history.clone_from(&other.history);
         self.history_overflowed = other.history_overflowed;
         self.motion_start_ns = other.motion_start_ns;
@@ -310,10 +317,6 @@ impl Navigator {
         };
         let imu_rest = s.flags & corrected_flags::ZERO_STATE != 0;
         self.sampled.push(t_ns, &m.f, &m.w);
-        self.refinement = Refinement {
-            accel: Vector3::from(s.refined_accel_mps2),
-            gyro: self.cfg.gyro_correction * Vector3::from(s.refined_gyro_rps),
-        };
         let prev = self
             .last
             .replace((t_ns, s.seq, m))
@@ -324,6 +327,8 @@ impl Navigator {
         let prev_ns = prev.map(|((t, _), _)| t);
         let detector_ready = s.flags & corrected_flags::DETECTOR_READY != 0;
         let mut d = self.hint_decision(t_ns, imu_rest, detector_ready);
+        let hint_moving = d.rest == Some(false);
+        self.take_refinement(s, hint_moving);
         // Hand-held walking: the quiet instants between steps are no rests.
         let (step, walking) = self.walk_step(t_ns, &m, verdict.implausible);
         let imu_rest = imu_rest && !walking;
@@ -366,8 +371,9 @@ impl Navigator {
         let clipped = if reconstruct { verdict.clipped } else { 0 };
         self.clip
             .before_predict(self.kf.as_ref().expect("aligned"), clipped);
-        // A rest refused as vibration: the stage's gyroscope refinement there measured motion.
-        let refused = d.sample.flags & odometry_flags::REST_VIBRATING != 0;
+        // A rest refused as vibration, or one a fresh hint says the robot drove through: the
+        // stage's gyroscope refinement there measured motion.
+        let refused = d.sample.flags & odometry_flags::REST_VIBRATING != 0 || hint_moving;
         self.kf
             .as_mut()
             .expect("aligned")
@@ -408,6 +414,21 @@ impl Navigator {
         {
             self.republish(pending, emit);
         }
+    }
+
+    /// Takes the calibration stage's refinement of the sample `s`; before the filter aligns,
+    /// its change while a fresh hint says the robot moves (`hint_moving`) is added to
+    /// [`Self::motion_refinement`] (after, the filter follows it, [`Eskf::follow_refinement`]).
+    fn take_refinement(&mut self, s: &CorrectedImuSample, hint_moving: bool) {
+        let r = Refinement {
+            accel: Vector3::from(s.refined_accel_mps2),
+            gyro: self.cfg.gyro_correction * Vector3::from(s.refined_gyro_rps),
+        };
+        if hint_moving && self.kf.is_none() {
+            self.motion_refinement.accel += r.accel - self.refinement.accel;
+            self.motion_refinement.gyro += r.gyro - self.refinement.gyro;
+        }
+        self.refinement = r;
     }
 
     /// Gathers a rest sample's specific force by attitude (`crate::attitudes`; no allocation).
@@ -764,6 +785,7 @@ impl Navigator {
                 .with_propagation_interval(self.cfg.propagation_interval_s),
         );
         self.accel_prior = Some(prior);
+        self.motion_refinement = Refinement::default();
     }
 
     /// Gathers the cruise window of an unaligned filter ([`crate::cruise`]; `fresh` is the fresh
@@ -790,6 +812,7 @@ impl Navigator {
             t_ns,
             &m.f,
             &m.w,
+            &self.motion_refinement,
             h.forward_speed_mps,
             h.forward_speed_sigma_mps,
         );
@@ -818,6 +841,7 @@ impl Navigator {
             &self.hints.cfg,
             self.hints.r_bs,
             &prior,
+            &self.motion_refinement,
         );
         // The stage's refinement over a cruise it took for rest averaged a moving platform's
         // specific force, no bias: the filter follows it from here, not from the window's mean
