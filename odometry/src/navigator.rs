@@ -8,7 +8,7 @@ use crate::attitudes::RestAttitudes;
 use crate::clip::{ClipRepair, ClipStats};
 use crate::config::OdometryConfig;
 use crate::consistency::{Consistency, ConsistencyReport, Kind};
-use crate::cruise::{CruiseWindow, MIN_SPEED_MPS, cruise_start};
+use crate::cruise::{CruiseWindow, MAX_TURN_ON_BIAS_RPS, MIN_SPEED_MPS, cruise_start};
 use crate::eskf::{ConsiderModel, Cov, Eskf, Imu, KS, Nominal, Refinement, align};
 use crate::hand_bound::HandBound;
 use crate::hints::{
@@ -74,7 +74,8 @@ pub(crate) struct Navigator {
     refinement: Refinement,
     /// The share of `refinement` the stage made while a fresh speed hint said the robot moved,
     /// until the filter aligned: the stage averaged a moving platform there (its detector
-    /// learned its noise in motion), no bias ([`Self::take_refinement`]).
+    /// learned its noise in motion), no bias ([`Self::take_refinement`]); a cruise window that
+    /// turns leaves it out ([`crate::cruise::CruiseWindow::turning`]).
     motion_refinement: Refinement,
     history: Vec<HistoryEntry>,
     history_overflowed: bool,
@@ -371,9 +372,12 @@ impl Navigator {
         let clipped = if reconstruct { verdict.clipped } else { 0 };
         self.clip
             .before_predict(self.kf.as_ref().expect("aligned"), clipped);
-        // A rest refused as vibration, or one a fresh hint says the robot drove through: the
-        // stage's gyroscope refinement there measured motion.
-        let refused = d.sample.flags & odometry_flags::REST_VIBRATING != 0 || hint_moving;
+        // A rest refused as vibration, or one a fresh hint says the robot drove through while
+        // the rate before the stage's refinement was beyond a gyro's turn-on bias: the stage's
+        // gyroscope refinement there measured motion.
+        let turned = (m.w + self.refinement.gyro).amax() > MAX_TURN_ON_BIAS_RPS;
+        let refused =
+            d.sample.flags & odometry_flags::REST_VIBRATING != 0 || (hint_moving && turned);
         self.kf
             .as_mut()
             .expect("aligned")
