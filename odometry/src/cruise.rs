@@ -51,10 +51,10 @@ pub const STEADY_MPS: f64 = 0.15;
 pub const MAX_ACCEL_MPS2: f64 = 0.15;
 /// Largest gyro bias a cruise window's mean rate is taken for, per axis, rad/s (5 deg/s): the
 /// MPU-9250's initial zero-rate output tolerance at 25 C (InvenSense PS-MPU-9250A-01 rev. 1.0,
-/// table 1, "Initial ZRO Tolerance": +-5 deg/s). A larger mean is a turn: on the F1TENTH cars
-/// of docs/real-data.md, whose BMI160 reads -0.4 deg/s about up standing, windows taken in
-/// turns the detector flagged still read -30 and -68 deg/s, and the filters' headings spun by
-/// as much.
+/// table 1, "Initial ZRO Tolerance": +-5 deg/s). A larger mean is a turn: on the F1TENTH car
+/// of docs/real-data.md (f1tenth-ds5), whose BMI160 reads -0.4 deg/s about up standing, a
+/// window taken in a turn the detector flagged still read -55 deg/s (raw), and the filter that
+/// took it for bias turned its heading at 65 deg/s against the gyro's.
 pub const MAX_TURN_ON_BIAS_RPS: f64 = 5.0 * core::f64::consts::PI / 180.0;
 /// Intervals the forward-axis estimate gathers before use, the least excitation it takes (3 s
 /// at one per half second; the 1-sigma's upper confidence bound, [`ForwardAxis`], covers what
