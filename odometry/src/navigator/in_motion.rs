@@ -14,7 +14,8 @@ use nalgebra::Vector3;
 impl Navigator {
     /// Takes the calibration stage's refinement of the sample `s`; before the filter aligns,
     /// its change while a fresh hint says the robot moves (`hint_moving`) is added to
-    /// [`Self::motion_refinement`] (after, the filter follows it, [`Eskf::follow_refinement`]).
+    /// [`Self::motion_refinement`] (after, [`Self::refinement_measured_motion`] says whether
+    /// the filter follows it, `crate::eskf::Eskf::follow_refinement`).
     pub(super) fn take_refinement(&mut self, s: &CorrectedImuSample, hint_moving: bool) {
         let r = Refinement {
             accel: Vector3::from(s.refined_accel_mps2),
