@@ -56,6 +56,18 @@ pub const MAX_ACCEL_MPS2: f64 = 0.15;
 /// window taken in a turn the detector flagged still read -55 deg/s (raw), and the filter that
 /// took it for bias turned its heading at 65 deg/s against the gyro's.
 pub const MAX_TURN_ON_BIAS_RPS: f64 = 5.0 * core::f64::consts::PI / 180.0;
+
+/// Whether the rate `w` (rad/s, without the calibration stage's refinements) exceeds
+/// [`MAX_TURN_ON_BIAS_RPS`] on an axis: a turn, not a bias.
+pub fn beyond_turn_on_bias(w: &Vector3<f64>) -> bool {
+    w.amax() > MAX_TURN_ON_BIAS_RPS
+}
+
+/// 1-sigma of a gyro's turn-on bias, rad/s: [`MAX_TURN_ON_BIAS_RPS`] as a uniform bound (GUM,
+/// JCGM 100:2008, 4.3.7).
+pub fn turn_on_bias_sigma_rps() -> f64 {
+    MAX_TURN_ON_BIAS_RPS / 3f64.sqrt()
+}
 /// Intervals the forward-axis estimate gathers before use, the least excitation it takes (3 s
 /// at one per half second; the 1-sigma's upper confidence bound, [`ForwardAxis`], covers what
 /// few intervals leave unknown).
@@ -171,7 +183,7 @@ impl CruiseWindow {
     /// Whether the window's mean rate, without the stage's refinements made in motion, exceeds
     /// [`MAX_TURN_ON_BIAS_RPS`] on an axis: a turn, not a bias (module documentation).
     pub fn turning(&self) -> bool {
-        self.unrefined().1.amax() > MAX_TURN_ON_BIAS_RPS
+        beyond_turn_on_bias(&self.unrefined().1)
     }
 
     /// The acceleration the window may hide, m/s^2: along the road its speed slope plus that
@@ -240,12 +252,10 @@ pub fn cruise_start(
     let g = cfg.gravity_mps2;
     let turning = c.turning();
     let (f_up, w_bias, w_sigma, hidden) = if turning {
-        // The bias is the part's turn-on bias, a bound taken as uniform (GUM, JCGM 100:2008,
-        // 4.3.7), and the whole mean rate turns the velocity.
-        let turn_on = MAX_TURN_ON_BIAS_RPS / 3f64.sqrt();
-        let (a_c, a_c_sigma) = centripetal(c, r_bs.as_ref(), turn_on, g);
+        // The bias is the part's turn-on bias, and the whole mean rate turns the velocity.
+        let (a_c, a_c_sigma) = centripetal(c, r_bs.as_ref(), g);
         let hidden = c.hidden_accel(&Vector3::zeros()).hypot(a_c_sigma);
-        let w_sigma = Vector3::repeat(turn_on);
+        let w_sigma = Vector3::repeat(turn_on_bias_sigma_rps());
         (c.unrefined().0 - a_c, Vector3::zeros(), w_sigma, hidden)
     } else {
         // A turn as slow as the mean's own 1-sigma is not seen: in quadrature with it.
@@ -289,21 +299,15 @@ pub fn cruise_start(
 /// its band). With the mounting `r_bs` known, `x_f` is its first row. Without it, a wheeled
 /// platform turns about up, so the acceleration is perpendicular to the mean rate, of magnitude
 /// `|mean of s w|`, and it points along the part of the mean specific force perpendicular to
-/// the rate: gravity's share there, up to `g` times the angle a bias of `turn_on_rps` (1-sigma)
-/// tilts the rate from up, turns it, and that error (at most the acceleration's twice) is
-/// carried. Both carry the bias's share of the rate times the largest speed and the speed
-/// band times the rate.
-pub fn centripetal(
-    c: &CruiseWindow,
-    r_bs: Option<&Matrix3<f64>>,
-    turn_on_rps: f64,
-    g: f64,
-) -> (Vector3<f64>, f64) {
+/// the rate: gravity's share there, up to `g` times the angle a turn-on bias (its 1-sigma,
+/// [`turn_on_bias_sigma_rps`]) tilts the rate from up, turns it, and that error (at most the
+/// acceleration's twice) is carried. Both carry the bias's share of the rate (at most
+/// [`MAX_TURN_ON_BIAS_RPS`]) times the largest speed and the speed band times the rate.
+pub fn centripetal(c: &CruiseWindow, r_bs: Option<&Matrix3<f64>>, g: f64) -> (Vector3<f64>, f64) {
     let n = c.accel.len().max(1) as f64;
     let sw = c.speed_rate / n;
     let (f, w) = c.unrefined();
-    let common =
-        (c.speed_max * turn_on_rps * 3f64.sqrt()).hypot((c.speed_max - c.speed_min) * w.norm());
+    let common = (c.speed_max * MAX_TURN_ON_BIAS_RPS).hypot((c.speed_max - c.speed_min) * w.norm());
     match r_bs {
         Some(r_bs) => (sw.cross(&r_bs.row(0).transpose()), common),
         None => {
@@ -312,7 +316,7 @@ pub fn centripetal(
             let a_c = across
                 .try_normalize(1e-9)
                 .map_or(Vector3::zeros(), |d| d * sw.norm());
-            let leak = (g * turn_on_rps / w.norm()).min(2.0 * sw.norm());
+            let leak = (g * turn_on_bias_sigma_rps() / w.norm()).min(2.0 * sw.norm());
             (a_c, common.hypot(leak))
         }
     }
@@ -665,8 +669,7 @@ mod tests {
                 r_bs.is_some()
             );
             assert_eq!(start.x.b_g, Vector3::zeros());
-            let turn_on = MAX_TURN_ON_BIAS_RPS / 3f64.sqrt();
-            assert!((start.cov[(BG, BG)].sqrt() - turn_on).abs() < 1e-12);
+            assert!((start.cov[(BG, BG)].sqrt() - turn_on_bias_sigma_rps()).abs() < 1e-12);
         }
     }
 }

@@ -4,7 +4,7 @@
 
 use super::Navigator;
 use super::hint_state::HintSample;
-use crate::cruise::{CruiseWindow, MAX_TURN_ON_BIAS_RPS, MIN_SPEED_MPS, cruise_start};
+use crate::cruise::{CruiseWindow, MIN_SPEED_MPS, beyond_turn_on_bias, cruise_start};
 use crate::eskf::{Imu, Refinement};
 use crate::hints::has_rest_source;
 use crate::uncalibrated::AccelPrior;
@@ -37,7 +37,7 @@ impl Navigator {
         hs: &HintSample,
         hint_moving: bool,
     ) -> bool {
-        let turned = (m.w + self.refinement.gyro).amax() > MAX_TURN_ON_BIAS_RPS;
+        let turned = beyond_turn_on_bias(&(m.w + self.refinement.gyro));
         hs.flags & odometry_flags::REST_VIBRATING != 0 || (hint_moving && turned)
     }
 
