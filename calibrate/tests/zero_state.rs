@@ -528,6 +528,47 @@ fn a_half_second_rest_is_enough_to_learn_and_rest_follows_at_once() {
     assert_eq!(rest_fraction(&moving[3..]), 0.0);
 }
 
+/// A robot's detector under a longer learning (`--learn-s 5`) does not wait for a rest that
+/// long, which a robot that stops for 2 s never gives: it is ready from its first half second,
+/// and learns again from the first 5 s of rest no noisier than that. A first half second
+/// learned while the robot drove off (its vibration, 4x a rest's noise) is replaced by the
+/// rest that comes later; a steady cruise, which passes every learning check but is noisier
+/// than the first rest, is not taken over it.
+#[test]
+fn a_longer_learning_starts_from_its_first_half_second_and_learns_again_at_a_quiet_rest() {
+    let mut c = DetectorConfig::robot(G);
+    c.learn.duration_s = 5.0;
+    let mut det = ZeroStateDetector::new(c);
+    let mut synth = Synth::new(21);
+    let v = synth.feed(&mut det, 0.5, [0.0; 3], [0.0; 3], 4.0);
+    assert!(det.is_ready(), "{:?}", det.learn_rejections());
+    assert_eq!(v.last().unwrap().learned.unwrap().batches, 25);
+    synth.feed(&mut det, 3.0, [0.3, 0.0, 0.0], [0.0; 3], 4.0);
+    let rest = synth.feed(&mut det, 6.0, [0.0; 3], [0.0; 3], 1.0);
+    let again = det.relearned().expect("learned again");
+    let start_s = again.t_start_ns as f64 * 1e-9;
+    assert!((3.5..3.6).contains(&start_s), "{start_s}");
+    assert!(again.duration_s >= 5.0, "{}", again.duration_s);
+    let sigma = again.accel_sigma_mps2[0];
+    assert!((sigma / ACCEL_SIGMA - 1.0).abs() < 0.1, "{sigma}");
+    // The verdict of the batch that ends the window is rest, and carries no first learning.
+    let last = rest.iter().rposition(|v| v.rest).unwrap();
+    assert!(rest[last].learned.is_none());
+    assert_eq!(det.reference().unwrap().accel_sigma_mps2, again.accel_sigma_mps2);
+    // Without the longer learning nothing is learned again.
+    let mut det = ZeroStateDetector::new(DetectorConfig::robot(G));
+    let mut synth = Synth::new(21);
+    synth.feed(&mut det, 0.5, [0.0; 3], [0.0; 3], 4.0);
+    synth.feed(&mut det, 9.0, [0.0; 3], [0.0; 3], 1.0);
+    assert!(det.is_ready() && det.relearned().is_none());
+    // A rest first, then a long steady cruise: the cruise passes as a window, but is noisier.
+    let mut det = ZeroStateDetector::new(c);
+    let mut synth = Synth::new(22);
+    synth.feed(&mut det, 0.5, [0.0; 3], [0.0; 3], 1.0);
+    synth.feed(&mut det, 8.0, [0.0; 3], [0.0; 3], 4.0);
+    assert!(det.is_ready() && det.relearned().is_none());
+}
+
 #[test]
 fn a_rest_after_a_tilt_is_rest_and_a_tilt_the_gyro_did_not_see_is_not() {
     for (seen, what) in [

@@ -125,6 +125,7 @@ impl Profile {
             Self::Vehicle => {
                 let mut config = DetectorConfig::robot(gravity_mps2);
                 config.learn.duration_s = VEHICLE_LEARN_S;
+                config.learn.first_s = Some(VEHICLE_LEARN_S);
                 config
             }
             Self::Other => {

@@ -20,9 +20,17 @@ pub struct DetectorArgs {
     /// Length of the start-up rest the detector learns its thresholds from, s (default: the
     /// process's, 0.5 for `mems-calibrate serve` and `mems-odometry`'s auto and other profiles,
     /// 1 for its vehicle profile; the first rest of this length anywhere in the data, at least
-    /// two batches of 20 samples).
+    /// two batches of 20 samples). Longer than a robot's half second, the robot's detector
+    /// starts from its first half second of rest and learns again at the first rest of this
+    /// length that is no noisier.
     #[arg(long)]
     pub learn_s: Option<f64>,
+    /// The first window the robot's detector builds its rule from, s, when `--learn-s` is
+    /// longer (default: the process's, 0.5 for the robot's detector, 1 for `mems-odometry`'s
+    /// vehicle profile): the detector learns again at the first rest of `--learn-s` that is
+    /// no noisier. As long as `--learn-s`, the detector waits for that rest.
+    #[arg(long, value_name = "SECONDS")]
+    pub learn_first_s: Option<f64>,
     /// SHOE detector: the fixed threshold (default OpenShoe's 3e4).
     #[arg(long)]
     pub shoe_gamma: Option<f64>,
@@ -78,6 +86,9 @@ impl DetectorArgs {
         if let Some(s) = self.learn_s {
             config.learn.duration_s = positive("learn-s", s)?;
         }
+        if let Some(s) = self.learn_first_s {
+            config.learn.first_s = Some(positive("learn-first-s", s)?);
+        }
         if let Some(gamma) = self.shoe_gamma {
             config.shoe.gamma = positive("shoe-gamma", gamma)?;
         }
@@ -117,6 +128,7 @@ mod tests {
             detector: Some(DetectorKind::GlrtAccel),
             glrt_window_s: Some(0.25),
             learn_s: Some(2.5),
+            learn_first_s: Some(0.5),
             max_rest_accel_sigma: Some(0.15),
             max_gyro_offset_dps: Some(45.0),
             glrt_uncalibrated_offset_mps2: Some(0.0061),
@@ -127,6 +139,8 @@ mod tests {
         assert_eq!(c.kind, DetectorKind::GlrtAccel);
         assert_eq!(c.glrt.window_s, 0.25);
         assert_eq!(c.learn.duration_s, 2.5);
+        assert_eq!(c.learn.first_window_s(), 0.5);
+        assert!(c.learn.learns_again() && !default.learn.learns_again());
         assert_eq!(c.learn.max_accel_sigma_mps2, Some(0.15));
         assert_eq!(c.learn.max_gyro_offset_rps, 45f64.to_radians());
         assert_eq!(c.glrt.uncalibrated_accel_bias_sigma_mps2, 0.0061);
@@ -138,6 +152,13 @@ mod tests {
                     ..Default::default()
                 },
                 "--learn-s",
+            ),
+            (
+                DetectorArgs {
+                    learn_first_s: Some(-1.0),
+                    ..Default::default()
+                },
+                "--learn-first-s",
             ),
             (
                 DetectorArgs {

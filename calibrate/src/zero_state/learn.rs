@@ -82,6 +82,11 @@ pub const MAX_OUTLIER_SIGMA: f64 = 6.0;
 pub struct LearnConfig {
     /// Length of the static interval learned from, s.
     pub duration_s: f64,
+    /// A shorter first interval, s, when the rule should not wait for `duration_s` of rest:
+    /// the rule is built from the first window of this length that passes, and built again
+    /// from the first window of `duration_s` that passes and is no noisier
+    /// (`super::ZeroStateDetector`, "learning again"). `None`: `duration_s` alone.
+    pub first_s: Option<f64>,
     /// Local gravity, m/s^2 (from the calibration file).
     pub gravity_mps2: f64,
     /// Largest relative difference between the learned specific force's magnitude and local
@@ -136,6 +141,7 @@ impl LearnConfig {
     pub fn new(gravity_mps2: f64) -> Self {
         Self {
             duration_s: 5.0,
+            first_s: None,
             gravity_mps2,
             max_gravity_error: 0.05,
             max_correlation: 3.0,
@@ -143,6 +149,26 @@ impl LearnConfig {
             max_noise_ratio: 1.5,
             max_accel_sigma_mps2: None,
             max_gyro_offset_rps: MAX_GYRO_OFFSET_DPS.to_radians(),
+        }
+    }
+
+    /// The interval the rule is first built from, s: `first_s` when shorter than
+    /// `duration_s`, else `duration_s`.
+    pub fn first_window_s(&self) -> f64 {
+        self.first_s.map_or(self.duration_s, |f| f.min(self.duration_s))
+    }
+
+    /// Whether the rule is built again from a longer rest after its first window.
+    pub fn learns_again(&self) -> bool {
+        self.first_window_s() < self.duration_s
+    }
+
+    /// This configuration for its first window alone.
+    pub fn first(self) -> Self {
+        Self {
+            duration_s: self.first_window_s(),
+            first_s: None,
+            ..self
         }
     }
 }
@@ -181,6 +207,14 @@ pub struct StaticReference {
 }
 
 impl StaticReference {
+    /// Whether this rest is no noisier than `other`: the summed per-sample variance of its
+    /// accelerometer axes, and of its gyroscope axes, at most `other`'s.
+    pub fn no_noisier_than(&self, other: &StaticReference) -> bool {
+        let power = |s: &[f64; 3]| s.iter().map(|x| x * x).sum::<f64>();
+        power(&self.accel_sigma_mps2) <= power(&other.accel_sigma_mps2)
+            && power(&self.gyro_sigma_rps) <= power(&other.gyro_sigma_rps)
+    }
+
     /// The stream's sample rate over the learned interval, Hz.
     pub fn rate_hz(&self) -> f64 {
         (self.batches * super::BATCH_LEN) as f64 / self.duration_s

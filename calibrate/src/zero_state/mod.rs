@@ -12,6 +12,16 @@
 //! 3. keep their references current from the batches they call rest (running means with a
 //!    memory of `memory_s` seconds of rest, see [`rest_gain`]).
 //!
+//! **Learning again.** A detector whose first window is shorter than its learning
+//! (`learn.first_s` below `learn.duration_s`: a robot's half second under `--learn-s 5`) does
+//! not wait for a rest as long as the learning, which a robot that stops for 2 s never gives:
+//! it builds its rule from the first window of `first_s`, and keeps looking for a window of
+//! `duration_s` that passes the same checks. The first one that is no noisier than what the
+//! rule stands on ([`StaticReference::no_noisier_than`]) builds the rule again, once: a first
+//! window learned while the robot drove (the F1TENTH car of docs/real-data.md drives off at
+//! once) is replaced by the rest that comes later, and a long steady cruise, which passes
+//! every check but is noisier than a rest, is not taken over a rest.
+//!
 //! With the calibration file's noise parameters ([`NoiseFloor`], set by the calibration stage
 //! from the `[noise]` table), the learned per-sample noise of each channel is raised to the
 //! sensor's measured noise where it came out lower: a few seconds of learning can catch a
@@ -260,10 +270,13 @@ pub const ROBOT_NOISE_PRIOR_S: f64 = 5.0;
 impl DetectorConfig {
     /// A wheeled robot's or vehicle's detector, live (`mems-calibrate serve`) and offline
     /// (`mems-odometry`'s vehicle profile) alike: the GLRT learning from [`ROBOT_LEARN_S`]
-    /// with a prior of [`ROBOT_NOISE_PRIOR_S`], the rest as [`DetectorConfig::new`].
+    /// with a prior of [`ROBOT_NOISE_PRIOR_S`], the rest as [`DetectorConfig::new`]. A longer
+    /// learning (`--learn-s`) still builds its first rule from [`ROBOT_LEARN_S`] and learns
+    /// again when its rest comes (the module's "Learning again").
     pub fn robot(gravity_mps2: f64) -> Self {
         let mut config = Self::new(DetectorKind::Glrt, gravity_mps2);
         config.learn.duration_s = ROBOT_LEARN_S;
+        config.learn.first_s = Some(ROBOT_LEARN_S);
         config.noise_prior_s = ROBOT_NOISE_PRIOR_S;
         config
     }
@@ -313,6 +326,11 @@ pub struct ZeroStateDetector {
     accel: WindowAccumulator,
     gyro: WindowAccumulator,
     learner: StaticLearner,
+    /// The learner of the longer window when the detector learns again
+    /// ([`LearnConfig::learns_again`]), and whether it still looks for it.
+    relearner: Option<(StaticLearner, bool)>,
+    /// The reference the rule was built again from, if it was.
+    relearned: Option<StaticReference>,
     rule: Option<Rule>,
     /// What the rule was built from (learned, or resumed).
     learned: Option<StaticReference>,
@@ -374,7 +392,10 @@ impl ZeroStateDetector {
             config,
             accel: WindowAccumulator::new(window),
             gyro: WindowAccumulator::new(window),
-            learner: StaticLearner::new(config.learn, config.noise),
+            learner: StaticLearner::new(config.learn.first(), config.noise),
+            relearner: (!shoe && config.learn.learns_again())
+                .then(|| (StaticLearner::new(config.learn, config.noise), true)),
+            relearned: None,
             rule: shoe
                 .then(|| Rule::Shoe(shoe::ShoeRule::new(config.shoe, config.learn.gravity_mps2))),
             learned: None,
@@ -392,6 +413,12 @@ impl ZeroStateDetector {
     /// Whether the thresholds are learned.
     pub fn is_ready(&self) -> bool {
         self.rule.is_some()
+    }
+
+    /// The reference the rule was built again from, from a longer rest than its first
+    /// window's (the module's "Learning again"), if it was.
+    pub fn relearned(&self) -> Option<StaticReference> {
+        self.relearned
     }
 
     /// How many start-up learning attempts were discarded, and why the last one was.
@@ -456,7 +483,10 @@ impl ZeroStateDetector {
         if self.config.kind != DetectorKind::Shoe {
             // Nothing learned here is part of the resumed rest.
             self.learner.clear();
-            self.install(*reference);
+            if let Some((relearner, _)) = self.relearner.as_mut() {
+                relearner.clear();
+            }
+            self.install(*reference, false);
             self.rest_s = rest_seen_s;
         }
     }
@@ -467,8 +497,9 @@ impl ZeroStateDetector {
         self.config.noise_prior_s * learned.rate_hz() / BATCH_LEN as f64
     }
 
-    /// Makes `reference` (after the noise floor) the rule's.
-    fn install(&mut self, learned: StaticReference) -> StaticReference {
+    /// Makes `reference` (after the noise floor) the rule's; `again`: learned by the longer
+    /// window's learner, whose batches seed the rule.
+    fn install(&mut self, learned: StaticReference, again: bool) -> StaticReference {
         let reference = self.config.noise.map_or(learned, |f| f.apply(learned));
         self.rest_s = reference.duration_s;
         let ring = match self.rule.take() {
@@ -496,8 +527,12 @@ impl ZeroStateDetector {
                     uncalibrated,
                 );
                 // The batches just learned from (none when resumed) are a rest already.
+                let learner = match self.relearner.as_ref() {
+                    Some((relearner, _)) if again => relearner,
+                    _ => &self.learner,
+                };
                 rule.seed(
-                    self.learner
+                    learner
                         .window()
                         .map(|(n, mean, ss)| glrt::BatchSums::from_parts(n, mean, ss)),
                 );
@@ -525,10 +560,16 @@ impl ZeroStateDetector {
             decided_std_mps2: accel.std,
             ..Verdict::default()
         };
+        if self.learn_again(&accel, &gyro) {
+            // The batch ends the window the rule was built again from, which seeded it: a rest.
+            verdict.ready = true;
+            verdict.rest = true;
+            return Some(verdict);
+        }
         let Some(rule) = self.rule.as_mut() else {
             if let Some(learned) = self.learner.push(&accel, &gyro) {
                 verdict.ready = true;
-                verdict.learned = Some(self.install(learned));
+                verdict.learned = Some(self.install(learned, false));
             }
             return Some(verdict);
         };
@@ -558,6 +599,26 @@ impl ZeroStateDetector {
         Some(verdict)
     }
 
+    /// Gives the batch to the longer window's learner while it looks; builds the rule again
+    /// from its first window that passes and is no noisier than the rule's reference (the
+    /// module's "Learning again"); whether it did. Before the first rule, the first window
+    /// builds it.
+    fn learn_again(&mut self, accel: &WindowStats, gyro: &WindowStats) -> bool {
+        let Some((relearner, looking @ true)) = self.relearner.as_mut() else {
+            return false;
+        };
+        let Some(long) = relearner.push(accel, gyro) else {
+            return false;
+        };
+        if !self.learned.is_some_and(|r| long.no_noisier_than(&r)) {
+            return false;
+        }
+        *looking = false;
+        self.relearned = Some(long);
+        self.install(long, true);
+        true
+    }
+
     /// A gap in the data: the partial batch is dropped (its samples get no verdict), the
     /// GLRT's window is emptied and learning in progress starts again; learned references stay.
     pub fn interrupt(&mut self) {
@@ -569,6 +630,9 @@ impl ZeroStateDetector {
             Some(Rule::Yu(_)) => {}
             None => self.learner.restart(),
         }
+        if let Some((relearner, _)) = self.relearner.as_mut() {
+            relearner.restart();
+        }
     }
 
     /// Forgets everything learned (a new sensor session): back to start-up learning. Allocates
@@ -577,6 +641,11 @@ impl ZeroStateDetector {
         self.accel.reset();
         self.gyro.reset();
         self.learner.clear();
+        if let Some((relearner, looking)) = self.relearner.as_mut() {
+            relearner.clear();
+            *looking = true;
+        }
+        self.relearned = None;
         self.learned = None;
         self.rest_s = 0.0;
         self.vibrating_s = 0.0;

@@ -112,9 +112,12 @@ fn detector_args(cli: &Cli) -> Vec<String> {
         ]);
     }
     if cli.profile == odometry::profile::Profile::Vehicle && cli.detector.is_none() {
+        let learn_s = odometry::profile::VEHICLE_LEARN_S.to_string();
         args.extend([
             "--learn-s".into(),
-            odometry::profile::VEHICLE_LEARN_S.to_string(),
+            learn_s.clone(),
+            "--learn-first-s".into(),
+            learn_s,
         ]);
     }
     if cli.profile == odometry::profile::Profile::Walking && cli.detector.is_none() {

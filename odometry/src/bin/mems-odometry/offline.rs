@@ -255,9 +255,10 @@ fn base_config(
         }
     }
     base.rest_updates = !args.no_zupt;
-    // The alignment may stand on the whole learning window (`--learn-s`): the learner judged
-    // all of it still.
-    base.learned_rest_s = detector.learn.duration_s;
+    // The alignment may stand on the whole first learning window (`--learn-s`, at most the
+    // robot's half second when it learns again from a longer rest): the learner judged all of
+    // it still.
+    base.learned_rest_s = detector.learn.first_window_s();
     base.consistency.scaling = args.innovation_scaling;
     if let Some(k) = args.weinberg_k {
         if !(k.is_finite() && k > 0.0) {

@@ -262,6 +262,15 @@ impl Summary {
                 calibrate::zero_state::glrt::REANCHOR_S
             );
         }
+        let relearned = chain.first.detector().relearned().map(|r| {
+            let start_s = r.t_start_ns.saturating_sub(read.first_ns.unwrap_or(0)) as f64 * 1e-9;
+            tracing::info!(
+                "the rest detector learned again from {:.1} s of rest from {start_s:.2} s into \
+                 the recording (no noisier than its first window; --learn-s)",
+                r.duration_s
+            );
+            json!({ "start_s": start_s, "duration_s": r.duration_s })
+        });
         let held = chain.first.detector().gravity_held();
         if held > 0 {
             tracing::info!(
@@ -300,6 +309,7 @@ impl Summary {
             result["gyro_bias"] = gyro_bias_json(chain);
             result["gravity_reanchored"] = json!(reanchored);
             result["gravity_held"] = json!(held);
+            result["detector_learned_again"] = json!(relearned);
             result["steady_vibrating_s"] = json!(vibrating_s);
             result["consistency"] = json!(consistency);
             println!("{result}");
@@ -734,7 +744,7 @@ fn is_glrt(kind: DetectorKind) -> bool {
 pub fn why_never_aligned(calibration: &CalibrationStage, align_s: f64) -> String {
     let detector = calibration.detector();
     let kind = detector.config().kind.name();
-    let learn_s = detector.config().learn.duration_s;
+    let learn_s = detector.config().learn.first_window_s();
     if detector.is_ready() {
         let learned = detector
             .reference()
