@@ -554,7 +554,10 @@ fn a_longer_learning_starts_from_its_first_half_second_and_learns_again_at_a_qui
     // The verdict of the batch that ends the window is rest, and carries no first learning.
     let last = rest.iter().rposition(|v| v.rest).unwrap();
     assert!(rest[last].learned.is_none());
-    assert_eq!(det.reference().unwrap().accel_sigma_mps2, again.accel_sigma_mps2);
+    assert_eq!(
+        det.reference().unwrap().accel_sigma_mps2,
+        again.accel_sigma_mps2
+    );
     // Without the longer learning nothing is learned again.
     let mut det = ZeroStateDetector::new(DetectorConfig::robot(G));
     let mut synth = Synth::new(21);

@@ -3,7 +3,8 @@
 //! drive with truth and encoder hints: the filter aligns on that rest, the learning window
 //! included (the learner judged it still, the encoders said stationary), instead of waiting
 //! for a later rest or a cruise. The real TurtleBot runs of docs/real-data.md (first rests of
-//! 1.6-1.7 s by their encoders) aligned only at their end with `--learn-s 1` that way.
+//! 1.6-1.7 s by their encoders) aligned only at their end with `--learn-s 1 --learn-first-s 1`
+//! that way.
 
 mod common;
 
@@ -12,8 +13,9 @@ use common::{Case, drive_with_encoder_hints, offline_drive_with_hints};
 #[test]
 fn a_robot_with_hints_aligns_on_a_first_rest_its_learning_takes_most_of() {
     // 1.2 s of rest (the encoders say stationary for 0.4-0.5 s more while the robot creeps
-    // off), then legs of 2-6 s: the detector learns from 1 s of rest (`--learn-s 1`) and a
-    // filter with speed hints aligns on at least 1 s of it.
+    // off), then legs of 2-6 s: the detector learns from 1 s of rest before its first rule
+    // (`--learn-s 1 --learn-first-s 1`) and a filter with speed hints aligns on at least 1 s
+    // of it.
     for seed in [3, 4] {
         let case = Case {
             duration_s: 60.0,
@@ -28,7 +30,7 @@ fn a_robot_with_hints_aligns_on_a_first_rest_its_learning_takes_most_of() {
             "hint-first-rest",
             &raw,
             hints,
-            &["--learn-s", "1", "--mount", "0,0,0"],
+            &["--learn-s", "1", "--learn-first-s", "1", "--mount", "0,0,0"],
         );
         let aligned_at = v["aligned_at_s"].as_f64().unwrap();
         // At rest (not on a cruise), at the end of the first rest (the encoders' stationary

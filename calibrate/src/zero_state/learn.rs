@@ -155,7 +155,8 @@ impl LearnConfig {
     /// The interval the rule is first built from, s: `first_s` when shorter than
     /// `duration_s`, else `duration_s`.
     pub fn first_window_s(&self) -> f64 {
-        self.first_s.map_or(self.duration_s, |f| f.min(self.duration_s))
+        self.first_s
+            .map_or(self.duration_s, |f| f.min(self.duration_s))
     }
 
     /// Whether the rule is built again from a longer rest after its first window.

@@ -187,6 +187,8 @@ impl Launcher<'_> {
                 self.calib,
                 "--learn-s",
                 "2",
+                "--learn-first-s",
+                "2",
                 "--state",
                 self.state,
             ],

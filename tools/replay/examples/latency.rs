@@ -43,8 +43,9 @@ use ipc_types::{OdometryState, RawImuSample, Stamps, odometry_flags, service};
 use serde_json::{Value, json};
 use std::ops::ControlFlow;
 
-/// Warm-up of the pipeline's drive: the calibration stage learns for `LEARN_S`, the odometry
-/// aligns on the next second of rest; the states timed are the aligned ones after it.
+/// Warm-up of the pipeline's drive: the calibration stage learns for `LEARN_S` before its first
+/// rule (`--learn-first-s`), the odometry aligns on the next second of rest; the states timed
+/// are the aligned ones after it.
 const LEARN_S: &str = "2";
 /// Rest at the start of the drive, s: learning (`LEARN_S`), the detector's window and the
 /// alignment fit in it with room (the stage aligns 4.6 s in). With 4 s it aligned in the
@@ -430,7 +431,15 @@ fn start(
             .spawn()
             .with_context(|| format!("cannot start {name}"))
     };
-    let mut calibrate_args = vec!["serve", "--calib", calib, "--learn-s", LEARN_S];
+    let mut calibrate_args = vec![
+        "serve",
+        "--calib",
+        calib,
+        "--learn-s",
+        LEARN_S,
+        "--learn-first-s",
+        LEARN_S,
+    ];
     calibrate_args.extend(stage_args(rate_hz));
     let stages = vec![
         (

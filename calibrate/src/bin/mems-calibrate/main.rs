@@ -40,7 +40,8 @@ struct Cli {
 enum Command {
     /// Subscribe to raw samples, calibrate them, detect rest, refine the bias at rest and
     /// publish corrected samples, until SIGINT/SIGTERM.
-    Serve(serve::ServeArgs),
+    // Boxed: the serve options outweigh the other variant by far.
+    Serve(Box<serve::ServeArgs>),
     /// An offline subcommand (fit, diagnose, allan, gyrocal): run by mems-calibrate-offline.
     #[command(external_subcommand)]
     Offline(Vec<OsString>),
