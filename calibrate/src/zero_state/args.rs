@@ -22,13 +22,14 @@ pub struct DetectorArgs {
     /// 1 for its vehicle profile; the first rest of this length anywhere in the data, at least
     /// two batches of 20 samples). Longer than a robot's half second, the robot's detector
     /// starts from its first half second of rest and learns again at the first rest of this
-    /// length that is no noisier.
+    /// length that is much quieter than what it stands on (a first half second learned while
+    /// the robot drove).
     #[arg(long)]
     pub learn_s: Option<f64>,
     /// The first window the robot's detector builds its rule from, s, when `--learn-s` is
     /// longer (default: the process's, 0.5 for the robot's detector, 1 for `mems-odometry`'s
     /// vehicle profile): the detector learns again at the first rest of `--learn-s` that is
-    /// no noisier. As long as `--learn-s`, the detector waits for that rest.
+    /// much quieter. As long as `--learn-s`, the detector waits for that rest.
     #[arg(long, value_name = "SECONDS")]
     pub learn_first_s: Option<f64>,
     /// SHOE detector: the fixed threshold (default OpenShoe's 3e4).

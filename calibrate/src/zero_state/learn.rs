@@ -84,7 +84,7 @@ pub struct LearnConfig {
     pub duration_s: f64,
     /// A shorter first interval, s, when the rule should not wait for `duration_s` of rest:
     /// the rule is built from the first window of this length that passes, and built again
-    /// from the first window of `duration_s` that passes and is no noisier
+    /// from the first window of `duration_s` that passes and is much quieter
     /// (`super::ZeroStateDetector`, "learning again"). `None`: `duration_s` alone.
     pub first_s: Option<f64>,
     /// Local gravity, m/s^2 (from the calibration file).
@@ -208,12 +208,9 @@ pub struct StaticReference {
 }
 
 impl StaticReference {
-    /// Whether this rest is no noisier than `other`: the summed per-sample variance of its
-    /// accelerometer axes, and of its gyroscope axes, at most `other`'s.
-    pub fn no_noisier_than(&self, other: &StaticReference) -> bool {
-        let power = |s: &[f64; 3]| s.iter().map(|x| x * x).sum::<f64>();
-        power(&self.accel_sigma_mps2) <= power(&other.accel_sigma_mps2)
-            && power(&self.gyro_sigma_rps) <= power(&other.gyro_sigma_rps)
+    /// The accelerometer's per-sample noise, summed over the axes, (m/s^2)^2.
+    pub fn accel_noise_var(&self) -> f64 {
+        self.accel_sigma_mps2.iter().map(|s| s * s).sum()
     }
 
     /// The stream's sample rate over the learned interval, Hz.

@@ -16,11 +16,13 @@
 //! (`learn.first_s` below `learn.duration_s`: a robot's half second under `--learn-s 5`) does
 //! not wait for a rest as long as the learning, which a robot that stops for 2 s never gives:
 //! it builds its rule from the first window of `first_s`, and keeps looking for a window of
-//! `duration_s` that passes the same checks. The first one that is no noisier than what the
-//! rule stands on ([`StaticReference::no_noisier_than`]) builds the rule again, once: a first
-//! window learned while the robot drove (the F1TENTH car of docs/real-data.md drives off at
-//! once) is replaced by the rest that comes later, and a long steady cruise, which passes
-//! every check but is noisier than a rest, is not taken over a rest.
+//! `duration_s` that passes the same checks. The first one whose accelerometer noise is at
+//! most [`RELEARN_NOISE_RATIO`] of what the first window learned builds the rule again, once:
+//! a first window learned while the robot drove (the F1TENTH car of docs/real-data.md drives
+//! off at once) is replaced by the rest that comes later. A rest like the first window is not
+//! (the rule has pooled its noise over the rests since, which a window of a few seconds would
+//! throw away), nor is a long steady cruise, which passes every check but is noisier than a
+//! rest.
 //!
 //! With the calibration file's noise parameters ([`NoiseFloor`], set by the calibration stage
 //! from the `[noise]` table), the learned per-sample noise of each channel is raised to the
@@ -257,6 +259,17 @@ impl DetectorConfig {
 /// At a rate where half a second is less than two batches (below 80 Hz) the learning takes
 /// two batches (1 s at 40 Hz).
 pub const ROBOT_LEARN_S: f64 = 0.5;
+
+/// Largest ratio of a longer learning window's accelerometer noise (per-sample standard
+/// deviation, root of the summed variance of the axes) to the first window's for the window
+/// to replace the rule's reference (the module's "Learning again"): half. A first window learned
+/// in motion carries its vibration, several times a rest's noise (a car idling: 50-90 mg
+/// against a part's 5-10 mg); a rest like the rule's comes out within a few tens of percent
+/// of it even from the fewest samples a window holds (2 batches of 20: 40 samples per axis,
+/// the summed variance's standard error 13 %). Replacing on any quieter window (ratio 1) took
+/// wid-car-06 of docs/real-data.md from 1.9 % to 181 % of its distance with `--learn-s 1`: a
+/// second of its idling at 18 s replaced the noise pooled over its 15 s parked.
+pub const RELEARN_NOISE_RATIO: f64 = 0.5;
 
 /// Rest the part's noise counts for in a robot's detector beyond its half second of learning, s
 /// ([`DetectorConfig::noise_prior_s`]): the 5 s of learning it replaces. Without it, the F
@@ -600,7 +613,7 @@ impl ZeroStateDetector {
     }
 
     /// Gives the batch to the longer window's learner while it looks; builds the rule again
-    /// from its first window that passes and is no noisier than the rule's reference (the
+    /// from its first window that passes and is much quieter than the first window (the
     /// module's "Learning again"); whether it did. Before the first rule, the first window
     /// builds it.
     fn learn_again(&mut self, accel: &WindowStats, gyro: &WindowStats) -> bool {
@@ -610,7 +623,10 @@ impl ZeroStateDetector {
         let Some(long) = relearner.push(accel, gyro) else {
             return false;
         };
-        if !self.learned.is_some_and(|r| long.no_noisier_than(&r)) {
+        let Some(first) = self.learned else {
+            return false;
+        };
+        if long.accel_noise_var() > RELEARN_NOISE_RATIO.powi(2) * first.accel_noise_var() {
             return false;
         }
         *looking = false;

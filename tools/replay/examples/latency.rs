@@ -431,15 +431,8 @@ fn start(
             .spawn()
             .with_context(|| format!("cannot start {name}"))
     };
-    let mut calibrate_args = vec![
-        "serve",
-        "--calib",
-        calib,
-        "--learn-s",
-        LEARN_S,
-        "--learn-first-s",
-        LEARN_S,
-    ];
+    let mut calibrate_args = vec!["serve", "--calib", calib, "--learn-s", LEARN_S];
+    calibrate_args.extend(["--learn-first-s", LEARN_S]);
     calibrate_args.extend(stage_args(rate_hz));
     let stages = vec![
         (

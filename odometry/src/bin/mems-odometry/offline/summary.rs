@@ -262,15 +262,7 @@ impl Summary {
                 calibrate::zero_state::glrt::REANCHOR_S
             );
         }
-        let relearned = chain.first.detector().relearned().map(|r| {
-            let start_s = r.t_start_ns.saturating_sub(read.first_ns.unwrap_or(0)) as f64 * 1e-9;
-            tracing::info!(
-                "the rest detector learned again from {:.1} s of rest from {start_s:.2} s into \
-                 the recording (no noisier than its first window; --learn-s)",
-                r.duration_s
-            );
-            json!({ "start_s": start_s, "duration_s": r.duration_s })
-        });
+        let relearned = say_learned_again(chain, read);
         let held = chain.first.detector().gravity_held();
         if held > 0 {
             tracing::info!(
@@ -822,6 +814,21 @@ fn stopped<R: std::fmt::Display>(
 
 /// Says on stderr when and on what the odometry aligned: a rest of `align_s` seconds, whole
 /// steps of a walk, or a cruise at the hints' speed `in_motion` (m/s).
+/// Says on stderr where the rest detector learned again from a longer rest (`--learn-s`), if
+/// it did; returns that rest's start (s into the recording) and length as JSON, or null.
+fn say_learned_again(chain: &OfflineChain, read: &Read) -> serde_json::Value {
+    let Some(r) = chain.first.detector().relearned() else {
+        return serde_json::Value::Null;
+    };
+    let start_s = r.t_start_ns.saturating_sub(read.first_ns.unwrap_or(0)) as f64 * 1e-9;
+    tracing::info!(
+        "the rest detector learned again from {:.1} s of rest from {start_s:.2} s into the \
+         recording (much quieter than what its first window learned; --learn-s)",
+        r.duration_s
+    );
+    json!({ "start_s": start_s, "duration_s": r.duration_s })
+}
+
 fn say_aligned(aligned_at_s: f64, align_s: f64, in_motion: Option<f64>, chain: &OfflineChain) {
     let on_steps = chain
         .second
