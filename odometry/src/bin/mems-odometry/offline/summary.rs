@@ -266,7 +266,9 @@ impl Summary {
         let held = chain.first.detector().gravity_held();
         if held > 0 {
             tracing::info!(
-                "{input}: the rest detector held {held} rests whose gravity magnitude its                  reference does not hold, within an accelerometer bias's reach, after {} s                  still by the scatter and the gyroscope",
+                "{input}: the rest detector held {held} rests whose gravity magnitude its \
+                 reference does not hold, within an accelerometer bias's reach, after {} s \
+                 still by the scatter and the gyroscope",
                 calibrate::zero_state::glrt::REANCHOR_S
             );
         }
