@@ -138,6 +138,8 @@ fn absurd_live_samples_are_dropped_counted_and_the_odometry_stays_finite() {
             &ns,
             "--learn-s",
             "1",
+            "--learn-first-s",
+            "1",
         ],
         &cal_log,
     );

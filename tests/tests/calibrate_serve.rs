@@ -53,6 +53,8 @@ fn serve_corrects_every_raw_sample_once_in_order_and_survives_restarts() {
             &ns,
             "--learn-s",
             "1",
+            "--learn-first-s",
+            "1",
         ],
     );
     std::thread::sleep(Duration::from_millis(700));

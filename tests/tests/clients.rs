@@ -191,6 +191,8 @@ fn rust_and_python_hint_publishers_are_applied_by_live_odometry() {
                 calib,
                 "--learn-s",
                 "1",
+                "--learn-first-s",
+                "1",
                 "--namespace",
                 &ns,
             ],

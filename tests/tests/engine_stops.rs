@@ -146,8 +146,15 @@ fn a_car_idling_at_its_stops_rests_there_with_any_glrt_window() {
         let csv = car_csv(&dir, seed, "3,8", &["--road", "0.1", "--vibration", "3"]);
         let truth = truth_rests(&csv);
         for flags in [
-            ["--glrt-window-s", "1", "--learn-s", "0.5"],
-            ["--glrt-window-s", "2", "--learn-s", "2"],
+            &["--glrt-window-s", "1", "--learn-s", "0.5"][..],
+            &[
+                "--glrt-window-s",
+                "2",
+                "--learn-s",
+                "2",
+                "--learn-first-s",
+                "2",
+            ],
         ] {
             let v = offline_json(&csv, &flags);
             rests_at_the_stops_only(&format!("seed {seed}, {}", flags.join(" ")), &truth, &v);

@@ -124,7 +124,15 @@ fn live_processes_allocate_nothing_per_sample_in_steady_state() {
     let calibrate = start(
         &dir,
         "mems-calibrate",
-        &["serve", "--calib", calib, "--learn-s", "2"],
+        &[
+            "serve",
+            "--calib",
+            calib,
+            "--learn-s",
+            "2",
+            "--learn-first-s",
+            "2",
+        ],
         &ns,
     );
     // The recorder and the calibration stage subscribe to the raw samples.

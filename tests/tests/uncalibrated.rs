@@ -505,7 +505,15 @@ fn a_live_part_without_a_calibration_file_is_flagged_and_its_bias_reported() {
     let odometry = Proc::spawn_logged("mems-odometry", &["serve", "--namespace", &ns], &log);
     let serve = Proc::spawn(
         "mems-calibrate",
-        &["serve", "--namespace", &ns, "--learn-s", "1"],
+        &[
+            "serve",
+            "--namespace",
+            &ns,
+            "--learn-s",
+            "1",
+            "--learn-first-s",
+            "1",
+        ],
     );
     std::thread::sleep(Duration::from_millis(700));
     let acquire = Proc::spawn(

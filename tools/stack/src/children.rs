@@ -217,7 +217,15 @@ mod tests {
         let vehicle = detector(&["--profile", "vehicle"]);
         assert_eq!(
             vehicle,
-            ["--detector", "glrt", "--learn-s", "1"].map(String::from)
+            [
+                "--detector",
+                "glrt",
+                "--learn-s",
+                "1",
+                "--learn-first-s",
+                "1"
+            ]
+            .map(String::from)
         );
         // A walker's hand: no window that shakes is learned as rest (a steady turn), and the
         // calibrated allowance for an uncalibrated part's offset, as offline.
