@@ -156,7 +156,7 @@ fn a_car_idling_at_its_stops_rests_there_with_any_glrt_window() {
                 "2",
             ],
         ] {
-            let v = offline_json(&csv, &flags);
+            let v = offline_json(&csv, flags);
             rests_at_the_stops_only(&format!("seed {seed}, {}", flags.join(" ")), &truth, &v);
         }
     }

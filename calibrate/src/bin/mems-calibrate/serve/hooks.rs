@@ -32,6 +32,13 @@ pub fn report(stage: &CalibrationStage, refused: u64, steady: &SteadyState) {
         accel,
         gyro
     );
+    if let Some(r) = stage.detector().relearned() {
+        tracing::info!(
+            "the detector learned again from {:.1} s of rest (--learn-s), at most half as noisy \
+             as its first window",
+            r.duration_s
+        );
+    }
     if let Some(holes) = s.holes.describe(0) {
         tracing::warn!("{holes}; each bridged as a gap (GAP_BEFORE and HOLE_BEFORE)");
     }
