@@ -201,9 +201,14 @@ impl OdometrySession {
             return;
         };
         if s.raw_flags & raw_flags::GYRO_VALID != 0 {
+            // The calibrated sample before the calibration stage's refinement at rest, as the
+            // offline whole-recording classifier reads it: a detector that learned its rest
+            // while the robot moved refines the robot's turning into the gyro bias (the corpus's
+            // f1tenth-ds1: 20-35 deg/s about up), and the rotation's statistics lose it.
             let g = auto.base.gravity_mps2;
-            let accel_g = s.accel_mps2.map(|a| a / g);
-            let gyro_dps = s.gyro_rps.map(f64::to_degrees);
+            let accel_g = std::array::from_fn(|i| (s.accel_mps2[i] + s.refined_accel_mps2[i]) / g);
+            let gyro_dps =
+                std::array::from_fn(|i| (s.gyro_rps[i] + s.refined_gyro_rps[i]).to_degrees());
             auto.classifier.push(s.stamps.sample_ns, accel_g, gyro_dps);
         }
         if auto.classifier.moving_s() < AUTO_DECIDE_MOVING_S {
