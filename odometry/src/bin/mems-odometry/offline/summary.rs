@@ -814,8 +814,6 @@ fn stopped<R: std::fmt::Display>(
     }
 }
 
-/// Says on stderr when and on what the odometry aligned: a rest of `align_s` seconds, whole
-/// steps of a walk, or a cruise at the hints' speed `in_motion` (m/s).
 /// Says on stderr where the rest detector learned again from a longer rest (`--learn-s`), if
 /// it did; returns that rest's start (s into the recording) and length as JSON, or null.
 fn say_learned_again(chain: &OfflineChain, read: &Read) -> serde_json::Value {
@@ -831,6 +829,8 @@ fn say_learned_again(chain: &OfflineChain, read: &Read) -> serde_json::Value {
     json!({ "start_s": start_s, "duration_s": r.duration_s })
 }
 
+/// Says on stderr when and on what the odometry aligned: a rest of `align_s` seconds, whole
+/// steps of a walk, or a cruise at the hints' speed `in_motion` (m/s).
 fn say_aligned(aligned_at_s: f64, align_s: f64, in_motion: Option<f64>, chain: &OfflineChain) {
     let on_steps = chain
         .second
