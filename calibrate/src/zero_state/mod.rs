@@ -340,8 +340,8 @@ pub struct ZeroStateDetector {
     gyro: WindowAccumulator,
     learner: StaticLearner,
     /// The learner of the longer window when the detector learns again
-    /// ([`LearnConfig::learns_again`]), and whether it still looks for it.
-    relearner: Option<(StaticLearner, bool)>,
+    /// ([`LearnConfig::learns_again`]); it looks until `relearned` is set.
+    relearner: Option<StaticLearner>,
     /// The reference the rule was built again from, if it was.
     relearned: Option<StaticReference>,
     rule: Option<Rule>,
@@ -407,7 +407,7 @@ impl ZeroStateDetector {
             gyro: WindowAccumulator::new(window),
             learner: StaticLearner::new(config.learn.first(), config.noise),
             relearner: (!shoe && config.learn.learns_again())
-                .then(|| (StaticLearner::new(config.learn, config.noise), true)),
+                .then(|| StaticLearner::new(config.learn, config.noise)),
             relearned: None,
             rule: shoe
                 .then(|| Rule::Shoe(shoe::ShoeRule::new(config.shoe, config.learn.gravity_mps2))),
@@ -496,7 +496,7 @@ impl ZeroStateDetector {
         if self.config.kind != DetectorKind::Shoe {
             // Nothing learned here is part of the resumed rest.
             self.learner.clear();
-            if let Some((relearner, _)) = self.relearner.as_mut() {
+            if let Some(relearner) = self.relearner.as_mut() {
                 relearner.clear();
             }
             self.install(*reference, false);
@@ -541,7 +541,7 @@ impl ZeroStateDetector {
                 );
                 // The batches just learned from (none when resumed) are a rest already.
                 let learner = match self.relearner.as_ref() {
-                    Some((relearner, _)) if again => relearner,
+                    Some(relearner) if again => relearner,
                     _ => &self.learner,
                 };
                 rule.seed(
@@ -617,7 +617,7 @@ impl ZeroStateDetector {
     /// module's "Learning again"); whether it did. Before the first rule, the first window
     /// builds it.
     fn learn_again(&mut self, accel: &WindowStats, gyro: &WindowStats) -> bool {
-        let Some((relearner, looking @ true)) = self.relearner.as_mut() else {
+        let Some(relearner) = self.relearner.as_mut().filter(|_| self.relearned.is_none()) else {
             return false;
         };
         let Some(long) = relearner.push(accel, gyro) else {
@@ -629,7 +629,6 @@ impl ZeroStateDetector {
         if long.accel_noise_var() > RELEARN_NOISE_RATIO.powi(2) * first.accel_noise_var() {
             return false;
         }
-        *looking = false;
         self.relearned = Some(long);
         self.install(long, true);
         true
@@ -646,7 +645,7 @@ impl ZeroStateDetector {
             Some(Rule::Yu(_)) => {}
             None => self.learner.restart(),
         }
-        if let Some((relearner, _)) = self.relearner.as_mut() {
+        if let Some(relearner) = self.relearner.as_mut() {
             relearner.restart();
         }
     }
@@ -657,9 +656,8 @@ impl ZeroStateDetector {
         self.accel.reset();
         self.gyro.reset();
         self.learner.clear();
-        if let Some((relearner, looking)) = self.relearner.as_mut() {
+        if let Some(relearner) = self.relearner.as_mut() {
             relearner.clear();
-            *looking = true;
         }
         self.relearned = None;
         self.learned = None;
