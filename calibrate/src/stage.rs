@@ -614,12 +614,6 @@ impl CalibrationStage {
         };
     }
 
-    /// Places `raw` in the stream by the stream contract ([`stream::continuity`]): a resumed
-    /// state that `raw` does not continue, a sequence that starts again or a confirmed time
-    /// jump start a new session; a time that does not increase or a first jump is refused.
-    /// Returns how `raw` continues the stream (a gap: samples are missing before it, marked
-    /// or a hole in the time line).
-    #[inline]
     /// Follows the runs of repeated readings ([`StageStats::frozen`]): a gap or a new session
     /// ends the current one.
     fn watch_freezes(&mut self, raw: &RawImuSample, has_gyro: bool, continuity: Continuity) {
@@ -631,6 +625,12 @@ impl CalibrationStage {
             .push(&self.time, raw.seq, raw.stamps.sample_ns, raw.accel_g, gyro);
     }
 
+    /// Places `raw` in the stream by the stream contract ([`stream::continuity`]): a resumed
+    /// state that `raw` does not continue, a sequence that starts again or a confirmed time
+    /// jump start a new session; a time that does not increase or a first jump is refused.
+    /// Returns how `raw` continues the stream (a gap: samples are missing before it, marked
+    /// or a hole in the time line).
+    #[inline]
     fn sequence(&mut self, raw: &RawImuSample) -> Result<Continuity, StageError> {
         let t_ns = raw.stamps.sample_ns;
         if std::mem::take(&mut self.resumed)
