@@ -25,19 +25,23 @@
 //! 2 deg/s tilt; hand-held 0.45-0.67 share):
 //! - foot: share >= [`FOOT_MIN_SHARE`] about an axis at least [`FOOT_MIN_AXIS_DEG`] from `g`,
 //!   tilt rate >= [`FOOT_MIN_TILT_DPS`] and impacts/min >= [`FOOT_MIN_IMPACTS_PER_MIN`];
-//! - wheeled: tilt rate <= [`WHEELED_MAX_TILT_DPS`] without impacts, or share >=
-//!   [`WHEELED_MIN_SHARE`] about an axis within [`WHEELED_MAX_AXIS_DEG`] of `g` (turning about
-//!   gravity);
+//! - wheeled: not carried (below), and tilt rate <= [`WHEELED_MAX_TILT_DPS`] without impacts,
+//!   or share >= [`WHEELED_MIN_SHARE`] about an axis within [`WHEELED_MAX_AXIS_DEG`] of `g`
+//!   (turning about gravity);
 //! - *gait steps per minute*: steps of [`crate::steps`] in a walking cadence per moving minute,
 //!   their mean amplitude (m/s^2), and the *still share*, the share of the windows that are not
 //!   moving;
-//! - walking (a sensor in a walker's hand): not a foot, gait steps/min >=
+//! - *carried* (by a walking person): not a foot, gait steps/min >=
 //!   [`WALK_MIN_STEPS_PER_MIN`], mean step amplitude <= [`WALK_MAX_STEP_MPS2`] and impacts/min
-//!   <= [`WALK_MAX_IMPACTS_PER_MIN`] (no heel strike, no shaking), principal-axis share < [`WALK_MAX_SHARE`], still share <= [`WALK_MAX_STILL_SHARE`] (the hand is never still
-//!   while its carrier walks) and tilt rate > [`WHEELED_MAX_TILT_DPS`] (a hand turns the
-//!   sensor). (A walker who stands for more than a tenth of the recording is not recognized:
-//!   BROAD's box moved slowly by hand without breaks, broad-11-slow, shows the steps and
-//!   amplitudes of a phone held up while walking, and only its 21 % of rest tells it apart.)
+//!   <= [`WALK_MAX_IMPACTS_PER_MIN`] (no heel strike, no shaking), principal-axis share <
+//!   [`WALK_MAX_SHARE`] and tilt rate > [`WHEELED_MAX_TILT_DPS`] (a hand turns the sensor);
+//! - walking (a sensor in a walker's hand): carried, with a still share <=
+//!   [`WALK_MAX_STILL_SHARE`] (the hand is never still while its carrier walks). A carried
+//!   sensor still for more than a tenth of the recording is other, never wheeled: BROAD's box
+//!   moved slowly by hand without breaks, broad-11-slow, shows the steps and amplitudes of a
+//!   phone held up while walking, and only its 21 % of rest tells it apart; rtklibexplorer's
+//!   walk (an IMU and a GNSS receiver carried through a backyard's tight turns, 13 % still)
+//!   turns about gravity with a share of 0.89, which the wheeled rule alone takes for a car.
 //!   On the corpus the Tyrex phone walks reach 11-90 gait steps/min of 0.4-1.8 m/s^2,
 //!   a share of 0.51-0.87, at most 1 % still windows, 11-40 deg/s; BROAD's hand-moved box
 //!   rests on a table for 36-51 % of its windows; the cars tilt by 2 deg/s; the F1TENTH car's
@@ -313,14 +317,18 @@ fn classify(f: &Features) -> Platform {
     {
         return Platform::Foot;
     }
-    if f.gait_steps_per_min >= WALK_MIN_STEPS_PER_MIN
+    let carried = f.gait_steps_per_min >= WALK_MIN_STEPS_PER_MIN
         && f.step_amplitude_mps2 <= WALK_MAX_STEP_MPS2
         && f.impacts_per_min <= WALK_MAX_IMPACTS_PER_MIN
         && f.principal_share < WALK_MAX_SHARE
-        && f.still_share <= WALK_MAX_STILL_SHARE
-        && f.tilt_rate_dps > WHEELED_MAX_TILT_DPS
-    {
-        return Platform::Walking;
+        && f.tilt_rate_dps > WHEELED_MAX_TILT_DPS;
+    if carried {
+        // Still for more than a tenth: a carrier who stands or sets the sensor down, not
+        // the walking mode's; but a person's, not a wheeled platform's.
+        return match f.still_share <= WALK_MAX_STILL_SHARE {
+            true => Platform::Walking,
+            false => Platform::Other,
+        };
     }
     let level = f.tilt_rate_dps <= WHEELED_MAX_TILT_DPS && f.impacts_per_min == 0.0;
     let turning =
@@ -386,7 +394,7 @@ mod tests {
     }
 
     #[test]
-    fn a_hand_bouncing_at_a_walking_cadence_is_a_walk_unless_it_rests_long() {
+    fn a_hand_bouncing_at_a_walking_cadence_is_a_walk_unless_it_rests_long_and_never_wheeled() {
         let mut c = Classifier::default();
         feed(&mut c, 60.0, |t| hand(t, 1.7));
         let f = c.features();
@@ -403,6 +411,28 @@ mod tests {
         });
         let f = c.features();
         assert!(f.still_share > 0.3, "{f:?}");
+        assert_eq!(f.platform, Platform::Other, "{f:?}");
+        // A walker turning about gravity all along (share 0.85-0.9 about up) who stands for
+        // 8 s of 60: carried, so other, not a car turning.
+        let turning_walker = |t: f64| {
+            let (a, w) = hand(t, 1.7);
+            (
+                [a[0], a[1], a[2]],
+                [w[0] * 16.0 / 30.0, 0.0, 40.0 * (0.3 * t).sin()],
+            )
+        };
+        let mut c = Classifier::default();
+        feed(&mut c, 60.0, |t| match t < 8.0 {
+            true => ([0.0, 0.0, 1.0], [0.05, -0.05, 0.0]),
+            false => turning_walker(t),
+        });
+        let f = c.features();
+        assert!((0.1..0.2).contains(&f.still_share), "{f:?}");
+        assert!(
+            (WHEELED_MIN_SHARE..WALK_MAX_SHARE).contains(&f.principal_share),
+            "{f:?}"
+        );
+        assert!(f.principal_axis_deg < WHEELED_MAX_AXIS_DEG, "{f:?}");
         assert_eq!(f.platform, Platform::Other, "{f:?}");
         // A bounce at 0.5 Hz is no cadence.
         let mut c = Classifier::default();
