@@ -416,10 +416,7 @@ mod tests {
         // 8 s of 60: carried, so other, not a car turning.
         let turning_walker = |t: f64| {
             let (a, w) = hand(t, 1.7);
-            (
-                [a[0], a[1], a[2]],
-                [w[0] * 16.0 / 30.0, 0.0, 40.0 * (0.3 * t).sin()],
-            )
+            (a, [w[0] * 16.0 / 30.0, 0.0, 40.0 * (0.3 * t).sin()])
         };
         let mut c = Classifier::default();
         feed(&mut c, 60.0, |t| match t < 8.0 {
