@@ -107,7 +107,8 @@ pub enum Platform {
     Foot,
     /// Wheeled robot, cart or road vehicle.
     Wheeled,
-    /// Anything else: an arm, a hand-held box, or too little motion to tell.
+    /// Anything else: an arm, a hand-held box, a sensor carried by a walker who stands for
+    /// more than a tenth of the time, or too little motion to tell.
     Other,
     /// A sensor in the hand of a walker.
     Walking,
