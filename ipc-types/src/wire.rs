@@ -344,6 +344,11 @@ pub trait Message: Copy + core::fmt::Debug + ZeroCopySend + Serialize + 'static 
     fn is_revision(&self) -> bool {
         false
     }
+    /// Samples the source lost immediately before this one and said so (a raw sample's
+    /// `lost_before`: a FIFO overflow at the sensor); 0 for the stages' messages.
+    fn lost_at_source(&self) -> u64 {
+        0
+    }
 }
 
 impl Message for RawImuSample {
@@ -355,6 +360,9 @@ impl Message for RawImuSample {
     }
     fn published_ns(&self) -> u64 {
         self.stamps.acquired_ns
+    }
+    fn lost_at_source(&self) -> u64 {
+        u64::from(self.lost_before)
     }
 }
 

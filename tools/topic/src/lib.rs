@@ -8,6 +8,7 @@ use serde::Serialize;
 pub struct TopicStats {
     received: u64,
     lost: u64,
+    lost_at_source: u64,
     duplicated: u64,
     non_monotonic: u64,
     next_seq: Option<u64>,
@@ -47,10 +48,16 @@ pub struct Report {
     pub received: u64,
     /// Sequence numbers skipped (never received).
     pub lost: u64,
+    /// Samples the source lost before publishing and flagged (raw samples' `lost_before`):
+    /// not lost on the service, but missing from the sample grid.
+    pub lost_at_source: u64,
     /// Messages whose sequence number was not above the last one (revisions excluded).
     pub duplicated: u64,
     /// Rate of sample times, Hz: (n - 1) / (last sample time - first sample time).
     pub rate_hz: f64,
+    /// Rate of the source's sample grid, Hz: as `rate_hz`, the samples lost at the source
+    /// counted in.
+    pub source_rate_hz: f64,
     /// Receive time minus the publishing stage's own stamp.
     pub latency_us: LatencyUs,
     /// Spacing of sample times.
@@ -71,6 +78,7 @@ impl TopicStats {
         Self {
             received: 0,
             lost: 0,
+            lost_at_source: 0,
             duplicated: 0,
             non_monotonic: 0,
             next_seq: None,
@@ -120,6 +128,12 @@ impl TopicStats {
         self.last_sample_ns = Some(self.last_sample_ns.map_or(sample_ns, |l| l.max(sample_ns)));
     }
 
+    /// Counts `n` samples the source lost before the last message and flagged
+    /// ([`ipc_types::Message::lost_at_source`]).
+    pub fn lost_at_source(&mut self, n: u64) {
+        self.lost_at_source += n;
+    }
+
     /// The summary so far.
     pub fn report(&self) -> Report {
         let span_ns = match (self.first_sample_ns, self.last_sample_ns) {
@@ -136,15 +150,17 @@ impl TopicStats {
                 us(self.latency_ns.value_at_quantile(q))
             }
         };
+        let rate = |n: u64| match span_ns > 0.0 {
+            true => n.saturating_sub(1) as f64 / span_ns * 1e9,
+            false => 0.0,
+        };
         Report {
             received: self.received,
             lost: self.lost,
+            lost_at_source: self.lost_at_source,
             duplicated: self.duplicated,
-            rate_hz: if span_ns > 0.0 {
-                (in_order.saturating_sub(1)) as f64 / span_ns * 1e9
-            } else {
-                0.0
-            },
+            rate_hz: rate(in_order),
+            source_rate_hz: rate(in_order + self.lost_at_source),
             latency_us: LatencyUs {
                 p50: pct(0.5),
                 p99: pct(0.99),
@@ -190,8 +206,13 @@ mod tests {
         assert_eq!(r.lost, 2);
         assert_eq!(r.duplicated, 1);
         assert_eq!(r.non_monotonic, 1);
-        // 5 in-order messages over 6 ms of sample time.
+        // 5 in-order messages over 6 ms of sample time; the source lost none.
         assert!((r.rate_hz - 4.0 / 0.006).abs() < 1e-9);
+        assert_eq!((r.lost_at_source, r.source_rate_hz), (0, r.rate_hz));
+        // Two lost at the sensor and flagged: the grid's rate counts them.
+        s.lost_at_source(2);
+        let r = s.report();
+        assert!((r.source_rate_hz - 6.0 / 0.006).abs() < 1e-9, "{r:?}");
         assert!((r.sample_period_us.max - 3000.0).abs() < 1.0);
         assert!((r.sample_period_us.min - 1000.0).abs() < 1.0);
         assert!((r.latency_us.max - 5.0).abs() < 0.01);

@@ -96,6 +96,7 @@ fn run<T: Message>(args: &Args, echo: bool) -> Result<()> {
                 now,
                 msg.is_revision(),
             );
+            stats.lost_at_source(msg.lost_at_source());
             if echo {
                 if args.json {
                     println!("{}", serde_json::to_string(msg)?);
