@@ -12,6 +12,9 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo};
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -130,18 +133,55 @@ pub fn open<T: core::fmt::Debug + ZeroCopySend>(
     let service_name: ServiceName = name
         .try_into()
         .map_err(|e| ServiceError(format!("invalid service name {name:?}: {e:?}")))?;
-    let service = node
-        .service_builder(&service_name)
-        .publish_subscribe::<T>()
-        .enable_safe_overflow(false)
-        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
-        .history_size(0)
-        .max_publishers(MAX_PUBLISHERS)
-        .max_subscribers(MAX_SUBSCRIBERS)
-        .max_nodes(MAX_NODES)
-        .open_or_create()
-        .map_err(|e| ServiceError(format!("cannot open service {name:?}: {e:?}")))?;
-    Ok(service)
+    patiently(&format!("service {name:?}"), pubsub_in_flux, || {
+        node.service_builder(&service_name)
+            .publish_subscribe::<T>()
+            .enable_safe_overflow(false)
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .history_size(0)
+            .max_publishers(MAX_PUBLISHERS)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+    })
+}
+
+/// How long opening a service keeps trying while iceoryx2 finds it half made or half removed
+/// by another process. iceoryx2 itself gives up after its `creation_timeout` (1 s by default,
+/// `service/builder/mod.rs`, `open_or_create`): on a loaded machine a creator that is not
+/// scheduled for a second would otherwise stop every process started beside it.
+pub const OPEN_PATIENCE: Duration = Duration::from_secs(30);
+
+/// Calls `attempt` until it succeeds, fails with an error `in_flux` does not call transient,
+/// or [`OPEN_PATIENCE`] has passed; the error names `what`.
+pub(crate) fn patiently<T, E: core::fmt::Debug>(
+    what: &str,
+    in_flux: impl Fn(&E) -> bool,
+    mut attempt: impl FnMut() -> Result<T, E>,
+) -> Result<T, ServiceError> {
+    let start = Instant::now();
+    loop {
+        match attempt() {
+            Ok(value) => return Ok(value),
+            Err(e) if in_flux(&e) && start.elapsed() < OPEN_PATIENCE => {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            Err(e) => return Err(ServiceError(format!("cannot open {what}: {e:?}"))),
+        }
+    }
+}
+
+/// Whether a publish-subscribe open-or-create failed only because another process was
+/// creating or removing the service at that moment (or a signal interrupted the wait).
+fn pubsub_in_flux(e: &PublishSubscribeOpenOrCreateError) -> bool {
+    use PublishSubscribeOpenError as Open;
+    matches!(
+        e,
+        PublishSubscribeOpenOrCreateError::SystemInFlux
+            | PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                Open::HangsInCreation | Open::IsMarkedForDestruction | Open::Interrupt
+            )
+    )
 }
 
 /// How long a publisher waits for one subscriber's full buffer before it gives that sample
@@ -343,6 +383,42 @@ mod tests {
         assert_eq!(full_name("", RAW), "mems/imu/raw");
         assert_eq!(full_name("t1/", ODOMETRY), "t1/mems/odometry/state");
         assert_eq!(namespace(Some("x")), "x");
+    }
+
+    /// Opening retries iceoryx2's transient failures (a service another process is creating or
+    /// removing) and returns at once on any other, naming the service.
+    #[test]
+    fn opening_waits_out_a_service_in_flux_only() {
+        let mut attempts = 0;
+        let opened = patiently("service \"s\"", pubsub_in_flux, || {
+            attempts += 1;
+            match attempts {
+                1 => Err(PublishSubscribeOpenOrCreateError::SystemInFlux),
+                2 => Err(
+                    PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                        PublishSubscribeOpenError::HangsInCreation,
+                    ),
+                ),
+                _ => Ok(attempts),
+            }
+        });
+        assert_eq!(opened, Ok(3));
+        let mut attempts = 0;
+        let refused: Result<(), _> = patiently("service \"s\"", pubsub_in_flux, || {
+            attempts += 1;
+            Err(
+                PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                    PublishSubscribeOpenError::IncompatibleTypes,
+                ),
+            )
+        });
+        assert_eq!(attempts, 1);
+        let message = refused.unwrap_err().0;
+        assert!(
+            message.starts_with("cannot open service \"s\": ")
+                && message.contains("IncompatibleTypes"),
+            "{message}"
+        );
     }
 
     /// A real service in one process: a burst larger than iceoryx2's default buffer (2) is

@@ -22,7 +22,8 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
 use iceoryx2_cal::reactor::{Reactor, ReactorBuilder, ReactorWaitError};
 
-use crate::service::{MAX_NODES, MAX_SUBSCRIBERS, ServiceError};
+use crate::service::{MAX_NODES, MAX_SUBSCRIBERS, ServiceError, patiently};
+use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
 
 /// Notifiers per event service: the data service's publishers and the robot controllers that
 /// publish hints.
@@ -46,13 +47,28 @@ pub fn open_event(
     let service_name: ServiceName = name
         .try_into()
         .map_err(|e| ServiceError(format!("invalid service name {name:?}: {e:?}")))?;
-    node.service_builder(&service_name)
-        .event()
-        .max_notifiers(MAX_NOTIFIERS)
-        .max_listeners(MAX_SUBSCRIBERS)
-        .max_nodes(MAX_NODES)
-        .open_or_create()
-        .map_err(|e| ServiceError(format!("cannot open event service {name:?}: {e:?}")))
+    patiently(&format!("event service {name:?}"), event_in_flux, || {
+        node.service_builder(&service_name)
+            .event()
+            .max_notifiers(MAX_NOTIFIERS)
+            .max_listeners(MAX_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+    })
+}
+
+/// Whether an event open-or-create failed only because another process was creating or
+/// removing the service at that moment (or a signal interrupted the wait).
+fn event_in_flux(e: &EventOpenOrCreateError) -> bool {
+    matches!(
+        e,
+        EventOpenOrCreateError::SystemInFlux
+            | EventOpenOrCreateError::EventOpenError(
+                EventOpenError::HangsInCreation
+                    | EventOpenError::IsMarkedForDestruction
+                    | EventOpenError::Interrupt
+            )
+    )
 }
 
 /// The event a woken [`Output`] notifies when it is dropped: its publisher leaves cleanly,

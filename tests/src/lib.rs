@@ -207,6 +207,17 @@ impl Proc {
         self.child.as_ref().expect("running").id()
     }
 
+    /// The exit status if the process has exited (reaping it), else `None`.
+    pub fn exited(&mut self) -> Option<ExitStatus> {
+        let child = self.child.as_mut().expect("running");
+        child.try_wait().expect("try_wait")
+    }
+
+    /// The name it was started under.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
     /// Sends `signal` (e.g. `libc::SIGTERM`).
     pub fn signal(&self, signal: i32) {
         // SAFETY: kill(2) with a pid we own; no memory is involved.

@@ -51,7 +51,7 @@ fn stops_every_process(tag: &str, signals: &[i32]) {
         args.extend_from_slice(extra);
         Proc::spawn(exe, &args)
     };
-    let procs = vec![
+    let mut procs = vec![
         serve("mems-calibrate", &[]),
         serve("mems-odometry", &[]),
         serve("mems-odometry", &["--spin"]),
@@ -77,9 +77,14 @@ fn stops_every_process(tag: &str, signals: &[i32]) {
             ],
         ),
     ];
-    // A process has installed its handlers before it creates its first port.
-    for p in &procs {
-        wait_until(START, &format!("the ports of process {}", p.pid()), || {
+    // A process has installed its handlers before it creates its first port. One that exits
+    // first has failed to start (its stderr, above, says why).
+    for p in &mut procs {
+        let what = format!("the ports of {} (process {})", p.name(), p.pid());
+        wait_until(START, &what, || {
+            if let Some(status) = p.exited() {
+                panic!("{} exited ({status}) before it created a port", p.name());
+            }
             nodes_of(p.pid()).iter().any(|n| !n.port_ids.is_empty())
         });
     }
