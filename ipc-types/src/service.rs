@@ -421,6 +421,45 @@ mod tests {
         );
     }
 
+    /// A service whose creator stopped half way for longer than iceoryx2's 1 s
+    /// `creation_timeout` (its static config still at the permissions it is written with:
+    /// owner read-write, iceoryx2-cal's `static_storage/file.rs`, `INIT_PERMISSIONS`) is
+    /// opened once that creator is gone, not refused as hanging in creation.
+    #[test]
+    fn a_service_hanging_in_creation_is_waited_for() {
+        use std::os::unix::fs::PermissionsExt;
+        let name = full_name(&format!("unit-hang-{}", std::process::id()), RAW);
+        let node = node().unwrap();
+        let dir =
+            std::path::PathBuf::from(Config::global_config().global.service_dir().to_string());
+        // Created once to find its static config (the file that names it), then dropped,
+        // which removes it.
+        let file = {
+            let _service = open::<RawImuSample>(&node, &name).unwrap();
+            std::fs::read_dir(&dir)
+                .unwrap()
+                .filter_map(|e| Some(e.ok()?.path()))
+                .find(|p| {
+                    p.extension().is_some_and(|x| x == "service")
+                        && std::fs::read_to_string(p).is_ok_and(|s| s.contains(&name))
+                })
+                .expect("the service's static config")
+        };
+        assert!(!file.exists(), "{} left behind", file.display());
+        std::fs::write(&file, b"").unwrap();
+        std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let creator_gone = std::thread::spawn({
+            let file = file.clone();
+            move || {
+                std::thread::sleep(Duration::from_millis(2500));
+                std::fs::remove_file(file).unwrap();
+            }
+        });
+        let opened = open::<RawImuSample>(&node, &name);
+        creator_gone.join().unwrap();
+        assert!(opened.is_ok(), "{:?}", opened.err());
+    }
+
     /// A real service in one process: a burst larger than iceoryx2's default buffer (2) is
     /// delivered whole, in order, because the service is lossless.
     #[test]
