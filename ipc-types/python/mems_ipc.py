@@ -10,6 +10,7 @@ z up), 1-sigma per axis.
 """
 
 import ctypes
+import time
 
 SERVICE_RAW = "mems/imu/raw"
 SERVICE_CORRECTED = "mems/imu/corrected"
@@ -75,13 +76,36 @@ def service_name(base, namespace=""):
     return f"{ns}/{base}" if ns else base
 
 
+# How long opening a service keeps trying while iceoryx2 finds it half made or half removed by
+# another process, s (ipc_types::service::OPEN_PATIENCE): iceoryx2 alone gives up after its 1 s
+# creation_timeout, which a loaded machine's creator can outlast.
+OPEN_PATIENCE_S = 30.0
+# The open-or-create failures that say only that: the Python package raises them with the Rust
+# error's Debug text (PublishSubscribeOpenError(HangsInCreation), ...) and no variant to test.
+_IN_FLUX = ("SystemInFlux", "HangsInCreation", "IsMarkedForDestruction", "Interrupt")
+
+
+def _patiently(open_or_create, error):
+    """Calls ``open_or_create`` until it succeeds, raises something other than an ``error``
+    whose text names a failure in ``_IN_FLUX``, or ``OPEN_PATIENCE_S`` has passed."""
+    deadline = time.monotonic() + OPEN_PATIENCE_S
+    while True:
+        try:
+            return open_or_create()
+        except error as e:
+            if not any(word in str(e) for word in _IN_FLUX) or time.monotonic() >= deadline:
+                raise
+            time.sleep(0.01)
+
+
 def open_service(node, name, payload):
     """Opens (or creates) publish-subscribe service ``name`` carrying ``payload`` with the
-    project's lossless settings (needs the iceoryx2 Python package)."""
+    project's lossless settings (needs the iceoryx2 Python package); waits out another
+    process's creation or removal of it as ipc_types::service::open does."""
     import iceoryx2 as iox2
 
-    return (
-        node.service_builder(iox2.ServiceName.new(name))
+    return _patiently(
+        lambda: node.service_builder(iox2.ServiceName.new(name))
         .publish_subscribe(payload)
         .enable_safe_overflow(False)
         .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
@@ -89,7 +113,8 @@ def open_service(node, name, payload):
         .max_publishers(MAX_PUBLISHERS)
         .max_subscribers(MAX_SUBSCRIBERS)
         .max_nodes(MAX_NODES)
-        .open_or_create()
+        .open_or_create(),
+        iox2.PublishSubscribeOpenOrCreateError,
     )
 
 
@@ -98,13 +123,14 @@ def open_event(node, name):
     settings of ipc_types::wake::open_event: its publishers notify it after each send."""
     import iceoryx2 as iox2
 
-    return (
-        node.service_builder(iox2.ServiceName.new(name))
+    return _patiently(
+        lambda: node.service_builder(iox2.ServiceName.new(name))
         .event()
         .max_notifiers(MAX_NOTIFIERS)
         .max_listeners(MAX_SUBSCRIBERS)
         .max_nodes(MAX_NODES)
-        .open_or_create()
+        .open_or_create(),
+        iox2.EventOpenOrCreateError,
     )
 
 

@@ -2,11 +2,12 @@
 //! struct's size, alignment and field offsets and its type name, and each must equal Rust's.
 
 mod flag_list;
+mod python_run;
 
 use core::mem::{align_of, offset_of, size_of};
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::{CorrectedImuSample, OdometryState, RawImuSample, RobotHint, Stamps};
-use std::process::Command;
+use python_run::run_python;
 
 /// `name size align type_name field:offset ...` for one type, as the Python script prints it.
 macro_rules! rust_line {
@@ -107,7 +108,7 @@ for t in mems_ipc.ALL_TYPES:
     fields = " ".join(f"{n}:{getattr(t, n).offset}" for n, _ in t._fields_)
     print(t.__name__, ctypes.sizeof(t), ctypes.alignment(t), t.type_name(), fields)
 "#;
-    let stdout = run_python(script);
+    let stdout = run_python(script, &[]);
     let lines: Vec<&str> = stdout.lines().collect();
     assert_eq!(lines, expected);
 }
@@ -124,27 +125,11 @@ for name in sorted(dir(mems_ipc)):
     if name.split("_")[0] in ("RAW", "CORRECTED", "ODOMETRY", "HINT") and isinstance(getattr(mems_ipc, name), int):
         print(name, getattr(mems_ipc, name))
 "#;
-    let stdout = run_python(script);
+    let stdout = run_python(script, &[]);
     let mut expected: Vec<String> = flag_list::all()
         .iter()
         .map(|(name, value)| format!("{name} {value}"))
         .collect();
     expected.sort();
     assert_eq!(stdout.lines().collect::<Vec<_>>(), expected);
-}
-
-/// Runs `script` with python3, the package's `python/` directory as its first argument; its
-/// standard output.
-fn run_python(script: &str) -> String {
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/python");
-    let out = Command::new("python3")
-        .args(["-c", script, dir])
-        .output()
-        .expect("python3 must be installed");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
 }
